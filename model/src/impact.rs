@@ -1,0 +1,139 @@
+//! The first impact (MODEL.md section 4; paper eq. 12, 13 and Fig. 13-16).
+//!
+//! Two contacts of radius `r` load fully plastically at pressure `p`: the contact force grows as
+//! `pi r p d` with the approach `d`, so loading is a spring `k_c = pi r p` driven by the static force,
+//! `m d'' = F_s - k_c d`, `d(0) = 0`, `d'(0) = u`. Unloading is elastic (Hertz).
+
+use std::f64::consts::PI;
+
+/// Plastic contact stiffness `k_c = pi r p`.
+pub fn contact_stiffness(contact_radius_m: f64, pressure_pa: f64) -> f64 {
+    PI * contact_radius_m * pressure_pa
+}
+
+/// Loading of one impact: mass `m` meeting contact stiffness `k_c` at speed `u` under static force `F_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Impact {
+    pub mass_kg: f64,
+    pub contact_stiffness_n_per_m: f64,
+    pub static_force_n: f64,
+    pub impact_speed_m_s: f64,
+}
+
+impl Impact {
+    /// `u sqrt(k_c m) = u w_c m`, the momentum-like term shared by the force and the loading time.
+    fn scaled_momentum(&self) -> f64 {
+        self.impact_speed_m_s * self.contact_stiffness_n_per_m.sqrt() * self.mass_kg.sqrt()
+    }
+
+    /// Peak force (Fig. 15, linear in `u`): `F_max = F_s + sqrt(F_s^2 + k_c m u^2)`, the force at
+    /// maximum approach, where `1/2 m u^2 + F_s d = 1/2 k_c d^2`. `hypot` keeps the squares finite.
+    pub fn peak_force_n(&self) -> f64 {
+        self.static_force_n + self.static_force_n.hypot(self.scaled_momentum())
+    }
+
+    /// Loading time to maximum approach (eq. 12): `t_load = (pi - atan2(u w_c m, F_s)) / w_c`, which
+    /// is `pi / (2 w_c)` when `F_s = 0`.
+    pub fn loading_time_s(&self) -> f64 {
+        let omega_c = (self.contact_stiffness_n_per_m / self.mass_kg).sqrt();
+        (PI - self.scaled_momentum().atan2(self.static_force_n)) / omega_c
+    }
+
+    /// Elastic (Hertz) unloading time (eq. 13): `t_unload = 1.8395 m e u / F_max`, the Hertzian
+    /// half-period of a rebound at speed `e u` from peak force `F_max`.
+    pub fn unloading_time_s(&self, restitution: f64, peak_force_n: f64) -> f64 {
+        1.8395 * self.mass_kg * restitution * self.impact_speed_m_s / peak_force_n
+    }
+
+    /// Impact duration `t_load + t_unload`, with the peak force it needs; `(F_max, duration)`.
+    pub fn peak_force_and_duration(&self, restitution: f64) -> (f64, f64) {
+        let peak = self.peak_force_n();
+        (
+            peak,
+            self.loading_time_s() + self.unloading_time_s(restitution, peak),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    const M: f64 = 1.593e-5 / (0.03 * 0.03);
+
+    fn rig(static_force_n: f64, u: f64) -> Impact {
+        Impact {
+            mass_kg: M,
+            contact_stiffness_n_per_m: contact_stiffness(7.7e-3, 2e8),
+            static_force_n,
+            impact_speed_m_s: u,
+        }
+    }
+
+    #[test]
+    fn peak_force_balances_kinetic_and_static_work_against_the_contact_spring() {
+        let impact = rig(0.344, 0.224);
+        let f = impact.peak_force_n();
+        let d = f / impact.contact_stiffness_n_per_m;
+        let kc = impact.contact_stiffness_n_per_m;
+        assert_relative_eq!(
+            0.5 * kc * d * d,
+            0.5 * M * 0.224 * 0.224 + 0.344 * d,
+            max_relative = 1e-13
+        );
+    }
+
+    #[test]
+    fn peak_force_of_the_default_rig_is_about_66_n() {
+        // MODEL.md section 8: about 66 N at 0.344 N (paper 60 N); validation 65.8902365177217.
+        assert_relative_eq!(
+            rig(0.344, 0.223_985_471_683_820_85).peak_force_n(),
+            65.890_236_517_721_7,
+            max_relative = 1e-13
+        );
+    }
+
+    #[test]
+    fn loading_time_is_a_quarter_period_without_static_force() {
+        let impact = rig(0.0, 0.3);
+        let omega_c = (impact.contact_stiffness_n_per_m / M).sqrt();
+        assert_relative_eq!(
+            impact.loading_time_s(),
+            std::f64::consts::FRAC_PI_2 / omega_c,
+            max_relative = 1e-15
+        );
+        assert_relative_eq!(
+            impact.peak_force_n(),
+            (impact.contact_stiffness_n_per_m * M).sqrt() * 0.3,
+            max_relative = 1e-15
+        );
+    }
+
+    #[test]
+    fn peak_force_is_linear_in_speed_when_static_force_is_small() {
+        let (f1, f2) = (rig(1e-9, 0.2).peak_force_n(), rig(1e-9, 0.4).peak_force_n());
+        assert_relative_eq!(f2, 2.0 * f1, max_relative = 1e-9);
+    }
+
+    #[test]
+    fn impact_stays_finite_for_extreme_constants() {
+        for (m, kc, fs, u) in [
+            (1e-30, 1e60, 1e30, 1e30),
+            (1e30, 1e-60, 0.0, 1e-30),
+            (1e-30, 1e-60, 1e-30, 1e4),
+        ] {
+            let impact = Impact {
+                mass_kg: m,
+                contact_stiffness_n_per_m: kc,
+                static_force_n: fs,
+                impact_speed_m_s: u,
+            };
+            let (f, t) = impact.peak_force_and_duration(0.5);
+            assert!(
+                f.is_finite() && f > 0.0 && t.is_finite() && t > 0.0,
+                "{m} {kc} {fs} {u}: {f} {t}"
+            );
+        }
+    }
+}

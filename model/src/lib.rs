@@ -1,0 +1,25 @@
+//! The physics of bouncewear: McBride & Sharkh (1992), "Electrical contact phenomena during impact",
+//! as specified in `MODEL.md`. Pure computation: no IO, no async, no database.
+//!
+//! | MODEL.md | what | where |
+//! |---|---|---|
+//! | 1 (eq. 1-4) | effective mass and stiffness, impact velocity, flight time, peak gap | [`mechanism`] |
+//! | 2 (eq. 5-8, 18) | kappa, the restitution solver, its approximation | [`restitution`] |
+//! | 3 | ending the bounce sequence | [`operation`] |
+//! | 4 (eq. 12, 13) | peak force, impact duration | [`impact`] |
+//! | 5 (eq. 16) | arcing, pre-arc, softening, arc energy, electrical restitution | [`arc`] |
+//! | 8, 9 | defaults, validation | [`scenario`] |
+
+pub mod arc;
+pub mod error;
+pub mod impact;
+pub mod mechanism;
+pub mod operation;
+pub mod restitution;
+pub mod scenario;
+
+pub use error::{FieldError, InvalidInput, Pointer};
+pub use operation::{
+    Bounce, Conditions, Fidelity, Needs, Operation, Outcome, Simulation, simulate,
+};
+pub use scenario::{Scenario, ScenarioSpec};

@@ -1,0 +1,352 @@
+//! One make operation: the first impact and the bounce sequence that follows it
+//! (MODEL.md sections 3-5 and 7).
+
+use crate::arc::{Arc, ArcRestitution, softened_kappa};
+use crate::impact::{Impact, contact_stiffness};
+use crate::mechanism::{Flight, effective_mass, effective_stiffness, impact_velocity};
+use crate::restitution::{self, KappaLaw, LOWER_BOUND_FACTOR};
+use crate::scenario::Scenario;
+use serde::{Deserialize, Serialize};
+
+/// How the model is evaluated (MODEL.md section 7).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Fidelity {
+    /// Eq. 7 solved to a few ulps, exact flight (eq. 3).
+    #[default]
+    Exact,
+    /// The paper's approximations: eq. 18 for `e`, constant-force flight (eq. 4) whenever `F_s > 0`.
+    ClosedForm,
+}
+
+impl Fidelity {
+    pub const ALL: [Fidelity; 2] = [Fidelity::Exact, Fidelity::ClosedForm];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Fidelity::Exact => "exact",
+            Fidelity::ClosedForm => "closed_form",
+        }
+    }
+}
+
+/// The operating conditions Monte Carlo scatter may replace per device or per operation; everything
+/// else comes from the scenario. (Radius and pressure are arguments of [`Operation::run`] because wear
+/// changes them from one operation to the next.)
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Conditions {
+    pub drop_height_m: f64,
+    pub static_force_n: f64,
+    pub impact_velocity_m_s: Option<f64>,
+    pub current_a: f64,
+    pub breakdown_field_v_per_m: f64,
+}
+
+impl Conditions {
+    pub fn nominal(scenario: &Scenario) -> Self {
+        let spec = scenario.spec();
+        Self {
+            drop_height_m: spec.mechanism.drop_height_m,
+            static_force_n: spec.mechanism.static_force_n,
+            impact_velocity_m_s: spec.mechanism.impact_velocity_m_s,
+            current_a: spec.circuit.current_a,
+            breakdown_field_v_per_m: spec.material.breakdown_field_v_per_m,
+        }
+    }
+}
+
+/// Which optional parts of an operation to compute: skip what no metric asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Needs {
+    /// First-impact peak force and duration (section 4).
+    pub impact: bool,
+}
+
+impl Needs {
+    pub const ALL: Needs = Needs { impact: true };
+}
+
+/// What one operation produced (CONTRACT.md `simulate`, without the bounce list).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Outcome {
+    pub impact_velocity_m_s: f64,
+    /// Unsoftened kappa of eq. 8 at this operation's radius and pressure.
+    pub kappa: f64,
+    /// First impact's coefficient of restitution (after pre-arc softening).
+    pub e1: f64,
+    pub first_bounce_s: f64,
+    pub total_bounce_s: f64,
+    pub bounce_count: u32,
+    pub pre_arc_s: f64,
+    pub arc_energy_j: f64,
+    pub peak_force_n: f64,
+    pub impact_duration_s: f64,
+    /// The sequence reached `max_bounces` with another bounce to come.
+    pub truncated: bool,
+}
+
+/// One bounce: the flight after a separation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Bounce {
+    pub separation_velocity_m_s: f64,
+    pub duration_s: f64,
+    pub peak_gap_m: f64,
+    pub arc_energy_j: f64,
+}
+
+/// The full `simulate` output: the outcome and its bounces.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Simulation {
+    #[serde(flatten)]
+    pub outcome: Outcome,
+    pub bounces: Vec<Bounce>,
+}
+
+/// The model of a make operation under fixed conditions, with everything that does not depend on
+/// the surface state worked out once.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Operation {
+    fidelity: Fidelity,
+    mass_kg: f64,
+    static_force_n: f64,
+    flight: Flight,
+    /// Constant-force flight (eq. 4) instead of eq. 3: closed form with `F_s > 0`.
+    constant_force_flight: bool,
+    impact_velocity_m_s: f64,
+    kappa_law: KappaLaw,
+    arc: Option<Arc>,
+    arc_restitution: ArcRestitution,
+    /// `2 eps / m`: the squared speed an impact's energy loss removes.
+    loss_speed_sq: f64,
+    /// The separation speed whose flight just reaches `min_separation_m`; slower flights end the sequence.
+    min_bounce_speed: f64,
+    max_bounces: u32,
+}
+
+impl Operation {
+    /// The nominal operation of a scenario.
+    pub fn nominal(scenario: &Scenario, fidelity: Fidelity) -> Self {
+        Self::new(scenario, &Conditions::nominal(scenario), fidelity)
+    }
+
+    pub fn new(scenario: &Scenario, conditions: &Conditions, fidelity: Fidelity) -> Self {
+        let spec = scenario.spec();
+        let (mech, mat) = (&spec.mechanism, &spec.material);
+        let mass_kg = effective_mass(mech.inertia_kg_m2, mech.contact_arm_m);
+        let stiffness = effective_stiffness(
+            mech.spring_stiffness_n_per_m,
+            mech.spring_arm_m,
+            mech.contact_arm_m,
+        );
+        let static_force_n = conditions.static_force_n;
+        let constant_force_flight = fidelity == Fidelity::ClosedForm && static_force_n > 0.0;
+        // g(v) is increasing in v, and the flight that peaks at g_min is the drop from height g_min
+        // (eq. 2 with H = g_min): comparing speeds is comparing gaps, without a gap per flight.
+        let gap_stiffness = if constant_force_flight {
+            0.0
+        } else {
+            stiffness
+        };
+        let min_bounce_speed = impact_velocity(
+            mass_kg,
+            gap_stiffness,
+            static_force_n,
+            spec.losses.min_separation_m,
+        );
+        Self {
+            fidelity,
+            mass_kg,
+            static_force_n,
+            flight: Flight::new(mass_kg, stiffness, static_force_n),
+            constant_force_flight,
+            impact_velocity_m_s: conditions.impact_velocity_m_s.unwrap_or_else(|| {
+                impact_velocity(mass_kg, stiffness, static_force_n, conditions.drop_height_m)
+            }),
+            kappa_law: KappaLaw {
+                reference_kappa: mat.kappa.unwrap_or_else(|| {
+                    restitution::kappa(
+                        mat.dynamic_yield_pressure_pa,
+                        mat.contact_radius_m,
+                        mat.youngs_modulus_pa,
+                        mass_kg,
+                    )
+                }),
+                reference_radius_m: mat.contact_radius_m,
+                reference_pressure_pa: mat.dynamic_yield_pressure_pa,
+            },
+            arc: Arc::strike(
+                spec.circuit.supply_voltage_v,
+                conditions.current_a,
+                mat.min_arc_voltage_v,
+                mat.min_arc_current_a,
+                conditions.breakdown_field_v_per_m,
+                mat.softening_energy_j,
+            ),
+            arc_restitution: ArcRestitution {
+                a: mat.arc_restitution.a,
+                b_s_per_m: mat.arc_restitution.b_s_per_m,
+            },
+            loss_speed_sq: 2.0 * spec.losses.impact_energy_loss_j / mass_kg,
+            min_bounce_speed,
+            max_bounces: spec.losses.max_bounces,
+        }
+    }
+
+    pub fn impact_velocity_m_s(&self) -> f64 {
+        self.impact_velocity_m_s
+    }
+
+    pub fn kappa_law(&self) -> &KappaLaw {
+        &self.kappa_law
+    }
+
+    pub fn arcs(&self) -> bool {
+        self.arc.is_some()
+    }
+
+    /// Runs one operation on a surface of radius `radius_m` and pressure `pressure_pa`.
+    ///
+    /// Allocates nothing; the bounces are pushed to `bounces` when it is given.
+    pub fn run(
+        &self,
+        radius_m: f64,
+        pressure_pa: f64,
+        needs: Needs,
+        mut bounces: Option<&mut Vec<Bounce>>,
+    ) -> Outcome {
+        let u = self.impact_velocity_m_s;
+        let kappa = self.kappa_law.at(radius_m, pressure_pa);
+        let mut out = Outcome {
+            impact_velocity_m_s: u,
+            kappa,
+            ..Outcome::default()
+        };
+        if u <= 0.0 {
+            return out;
+        }
+
+        // Pre-impact arc softens the surface for the first impact (section 5).
+        let (kappa_1, pressure_1) = match &self.arc {
+            Some(arc) => {
+                out.pre_arc_s = arc.pre_arc_duration_s(u);
+                out.arc_energy_j = arc.energy_j(out.pre_arc_s);
+                let ratio = arc.softening_ratio(out.arc_energy_j);
+                (softened_kappa(kappa, ratio), pressure_pa * ratio)
+            }
+            None => (kappa, pressure_pa),
+        };
+        out.e1 = self.restitution(u, kappa_1);
+        if needs.impact {
+            let impact = Impact {
+                mass_kg: self.mass_kg,
+                contact_stiffness_n_per_m: contact_stiffness(radius_m, pressure_1),
+                static_force_n: self.static_force_n,
+                impact_speed_m_s: u,
+            };
+            (out.peak_force_n, out.impact_duration_s) = impact.peak_force_and_duration(out.e1);
+        }
+
+        let mut v = self.separation_speed(out.e1, u);
+        while v > 0.0 && v >= self.min_bounce_speed {
+            if out.bounce_count == self.max_bounces {
+                out.truncated = true;
+                break;
+            }
+            let duration_s = self.flight_time_s(v);
+            out.bounce_count += 1;
+            out.total_bounce_s += duration_s;
+            if out.bounce_count == 1 {
+                out.first_bounce_s = duration_s;
+            }
+            let arc_energy_j = self
+                .arc
+                .as_ref()
+                .map_or(0.0, |arc| arc.energy_j(duration_s));
+            out.arc_energy_j += arc_energy_j;
+            if let Some(list) = bounces.as_deref_mut() {
+                list.push(Bounce {
+                    separation_velocity_m_s: v,
+                    duration_s,
+                    peak_gap_m: self.peak_gap_m(v),
+                    arc_energy_j,
+                });
+            }
+            let e = if self.arc.is_some() {
+                self.arc_restitution(v, kappa_1)
+            } else {
+                self.restitution(v, kappa)
+            };
+            v = self.separation_speed(e, v);
+        }
+        out
+    }
+
+    /// The full `simulate` output at this operation's nominal radius and pressure.
+    pub fn simulate(&self) -> Simulation {
+        let mut bounces = Vec::new();
+        let law = self.kappa_law;
+        let outcome = self.run(
+            law.reference_radius_m,
+            law.reference_pressure_pa,
+            Needs::ALL,
+            Some(&mut bounces),
+        );
+        Simulation { outcome, bounces }
+    }
+
+    /// `e(u, kappa)` at this fidelity: eq. 7 or eq. 18.
+    #[inline]
+    fn restitution(&self, u: f64, kappa: f64) -> f64 {
+        let eps0 = restitution::scaled_speed(u, kappa);
+        match self.fidelity {
+            Fidelity::Exact => restitution::restitution_scaled(eps0),
+            Fidelity::ClosedForm => eps0.min(1.0),
+        }
+    }
+
+    /// Eq. 16 after an arcing bounce: `min(e(v; kappa_1), max(0, a + b v))`. Eq. 7 is solved only when
+    /// the linear law is above its cheap lower bound `min(1, (5/8)^(3/8) eps0)`; otherwise the linear
+    /// law is the minimum. The result is identical either way.
+    #[inline]
+    fn arc_restitution(&self, v: f64, kappa_1: f64) -> f64 {
+        let linear = self.arc_restitution.linear(v);
+        let eps0 = restitution::scaled_speed(v, kappa_1);
+        if self.fidelity == Fidelity::Exact && linear <= (LOWER_BOUND_FACTOR * eps0).min(1.0) {
+            return linear;
+        }
+        linear.min(self.restitution(v, kappa_1))
+    }
+
+    /// Speed after an impact that returns `e` of the speed and loses `eps` (section 3):
+    /// `v' = sqrt(max(0, (e v)^2 - 2 eps / m))`.
+    #[inline]
+    fn separation_speed(&self, e: f64, v: f64) -> f64 {
+        let rebound = e * v;
+        if self.loss_speed_sq == 0.0 {
+            return rebound;
+        }
+        (rebound * rebound - self.loss_speed_sq).max(0.0).sqrt()
+    }
+
+    #[inline]
+    fn flight_time_s(&self, v: f64) -> f64 {
+        if self.constant_force_flight {
+            self.flight.constant_force_time_s(v)
+        } else {
+            self.flight.exact_time_s(v)
+        }
+    }
+
+    fn peak_gap_m(&self, v: f64) -> f64 {
+        if self.constant_force_flight {
+            self.flight.constant_force_peak_gap_m(v)
+        } else {
+            self.flight.exact_peak_gap_m(v)
+        }
+    }
+}
+
+/// `simulate` of CONTRACT.md: one operation of a scenario at the given fidelity, with every bounce.
+pub fn simulate(scenario: &Scenario, fidelity: Fidelity) -> Simulation {
+    Operation::nominal(scenario, fidelity).simulate()
+}

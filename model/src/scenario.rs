@@ -1,0 +1,501 @@
+//! The scenario of one make operation (MODEL.md sections 8 and 9; CONTRACT.md "Scenario").
+//!
+//! [`ScenarioSpec`] is what a user writes: serde types where every field is optional and takes the
+//! paper's rig (AgNi 80/20) as default, unknown fields rejected. [`Scenario`] is a spec that passed
+//! every rule of MODEL.md section 9; it can only be built by [`Scenario::new`], so the hot loop never
+//! re-validates.
+
+use crate::error::{FieldError, InvalidInput, Pointer};
+use serde::{Deserialize, Serialize};
+
+/// Every positive physical quantity must lie in `[MIN_MAGNITUDE, MAX_MAGNITUDE]` (and a non-negative
+/// one may also be 0). Within this range no product or quotient the model forms leaves f64's range,
+/// so a valid scenario always yields finite outputs.
+pub const MIN_MAGNITUDE: f64 = 1e-30;
+/// See [`MIN_MAGNITUDE`].
+pub const MAX_MAGNITUDE: f64 = 1e30;
+/// The largest `max_bounces` a scenario may ask for.
+pub const MAX_BOUNCES_LIMIT: u32 = 10_000;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ScenarioSpec {
+    pub mechanism: MechanismSpec,
+    pub material: MaterialSpec,
+    pub circuit: CircuitSpec,
+    pub losses: LossesSpec,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MechanismSpec {
+    pub inertia_kg_m2: f64,
+    pub spring_stiffness_n_per_m: f64,
+    pub spring_arm_m: f64,
+    pub contact_arm_m: f64,
+    pub static_force_n: f64,
+    pub drop_height_m: f64,
+    /// Overrides eq. 2 when given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub impact_velocity_m_s: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MaterialSpec {
+    pub youngs_modulus_pa: f64,
+    pub dynamic_yield_pressure_pa: f64,
+    pub contact_radius_m: f64,
+    /// Overrides eq. 8 at the nominal radius and pressure when given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub kappa: Option<f64>,
+    pub worn_radius_m: f64,
+    pub roughening_energy_j: f64,
+    pub erosion_kg_per_j: f64,
+    pub density_kg_m3: f64,
+    pub min_arc_voltage_v: f64,
+    pub min_arc_current_a: f64,
+    pub breakdown_field_v_per_m: f64,
+    pub softening_energy_j: f64,
+    pub arc_restitution: ArcRestitutionSpec,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ArcRestitutionSpec {
+    pub a: f64,
+    pub b_s_per_m: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CircuitSpec {
+    pub supply_voltage_v: f64,
+    pub current_a: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LossesSpec {
+    pub impact_energy_loss_j: f64,
+    pub min_separation_m: f64,
+    pub max_bounces: u32,
+}
+
+impl Default for ScenarioSpec {
+    fn default() -> Self {
+        Self {
+            mechanism: MechanismSpec::default(),
+            material: MaterialSpec::default(),
+            circuit: CircuitSpec::default(),
+            losses: LossesSpec::default(),
+        }
+    }
+}
+
+impl Default for MechanismSpec {
+    fn default() -> Self {
+        Self {
+            inertia_kg_m2: 1.593e-5,
+            spring_stiffness_n_per_m: 200.0,
+            spring_arm_m: 0.03,
+            contact_arm_m: 0.03,
+            static_force_n: 0.344,
+            drop_height_m: 1e-3,
+            impact_velocity_m_s: None,
+        }
+    }
+}
+
+impl Default for MaterialSpec {
+    fn default() -> Self {
+        Self {
+            youngs_modulus_pa: 1.0e11,
+            dynamic_yield_pressure_pa: 2.0e8,
+            contact_radius_m: 7.7e-3,
+            kappa: None,
+            worn_radius_m: 0.711e-3,
+            roughening_energy_j: 500.0,
+            erosion_kg_per_j: 2e-9,
+            density_kg_m3: 9950.0,
+            min_arc_voltage_v: 12.0,
+            min_arc_current_a: 0.4,
+            breakdown_field_v_per_m: 1e8,
+            softening_energy_j: 6.2e-4,
+            arc_restitution: ArcRestitutionSpec::default(),
+        }
+    }
+}
+
+impl Default for ArcRestitutionSpec {
+    fn default() -> Self {
+        Self {
+            a: 0.235,
+            b_s_per_m: 0.371,
+        }
+    }
+}
+
+impl Default for LossesSpec {
+    fn default() -> Self {
+        Self {
+            impact_energy_loss_j: 1e-6,
+            min_separation_m: 1e-7,
+            max_bounces: 64,
+        }
+    }
+}
+
+/// A scenario that satisfies every rule of MODEL.md section 9.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(transparent)]
+pub struct Scenario(ScenarioSpec);
+
+impl Scenario {
+    /// Checks every rule before any computation; all failures are reported, each naming its field as a
+    /// JSON pointer below `root` (`""` for a scenario document, `"/scenario"` inside a job).
+    pub fn new(spec: ScenarioSpec, root: &Pointer) -> Result<Self, InvalidInput> {
+        let mut errors = Vec::new();
+        check_spec(&spec, root, &mut errors);
+        if errors.is_empty() {
+            Ok(Self(spec))
+        } else {
+            Err(InvalidInput::new(errors))
+        }
+    }
+
+    /// Parses and validates a scenario document (JSON text).
+    pub fn from_json(text: &str) -> Result<Self, InvalidInput> {
+        let spec: ScenarioSpec = crate::error::from_json(text, &[])?;
+        Self::new(spec, &Pointer::root())
+    }
+
+    pub fn spec(&self) -> &ScenarioSpec {
+        &self.0
+    }
+}
+
+impl Default for Scenario {
+    fn default() -> Self {
+        Self(ScenarioSpec::default())
+    }
+}
+
+/// Which rule a number must satisfy.
+#[derive(Clone, Copy)]
+enum Rule {
+    Positive,
+    NonNegative,
+    Finite,
+}
+
+fn check_number(errors: &mut Vec<FieldError>, pointer: Pointer, value: f64, rule: Rule) {
+    let detail = if !value.is_finite() {
+        Some("must be a finite number".to_owned())
+    } else {
+        match rule {
+            Rule::Positive if value <= 0.0 => Some(format!("must be positive, got {value}")),
+            Rule::NonNegative if value < 0.0 => Some(format!("must be non-negative, got {value}")),
+            Rule::Positive | Rule::NonNegative
+                if value != 0.0 && !(MIN_MAGNITUDE..=MAX_MAGNITUDE).contains(&value) =>
+            {
+                Some(format!(
+                    "must lie between {MIN_MAGNITUDE:e} and {MAX_MAGNITUDE:e} (the supported range), got {value:e}"
+                ))
+            }
+            Rule::Finite if value.abs() > MAX_MAGNITUDE => Some(format!(
+                "must lie between -{MAX_MAGNITUDE:e} and {MAX_MAGNITUDE:e}, got {value:e}"
+            )),
+            _ => None,
+        }
+    };
+    if let Some(detail) = detail {
+        errors.push(FieldError {
+            pointer: pointer.to_string(),
+            detail,
+        });
+    }
+}
+
+fn check_spec(spec: &ScenarioSpec, root: &Pointer, errors: &mut Vec<FieldError>) {
+    use Rule::{Finite, NonNegative, Positive};
+    let mech = &spec.mechanism;
+    let at = root.child("mechanism");
+    for (field, value, rule) in [
+        ("inertia_kg_m2", mech.inertia_kg_m2, Positive),
+        (
+            "spring_stiffness_n_per_m",
+            mech.spring_stiffness_n_per_m,
+            NonNegative,
+        ),
+        ("spring_arm_m", mech.spring_arm_m, Positive),
+        ("contact_arm_m", mech.contact_arm_m, Positive),
+        ("static_force_n", mech.static_force_n, NonNegative),
+        ("drop_height_m", mech.drop_height_m, NonNegative),
+    ] {
+        check_number(errors, at.child(field), value, rule);
+    }
+    if let Some(u) = mech.impact_velocity_m_s {
+        check_number(errors, at.child("impact_velocity_m_s"), u, NonNegative);
+    }
+    if mech.static_force_n == 0.0 && mech.spring_stiffness_n_per_m == 0.0 {
+        errors.push(FieldError {
+            pointer: at.child("static_force_n").to_string(),
+            detail:
+                "must be positive when spring_stiffness_n_per_m is 0 (nothing would return the arm)"
+                    .to_owned(),
+        });
+    }
+
+    let mat = &spec.material;
+    let at = root.child("material");
+    for (field, value, rule) in [
+        ("youngs_modulus_pa", mat.youngs_modulus_pa, Positive),
+        (
+            "dynamic_yield_pressure_pa",
+            mat.dynamic_yield_pressure_pa,
+            Positive,
+        ),
+        ("contact_radius_m", mat.contact_radius_m, Positive),
+        ("worn_radius_m", mat.worn_radius_m, Positive),
+        ("roughening_energy_j", mat.roughening_energy_j, Positive),
+        ("erosion_kg_per_j", mat.erosion_kg_per_j, NonNegative),
+        ("density_kg_m3", mat.density_kg_m3, Positive),
+        ("min_arc_voltage_v", mat.min_arc_voltage_v, NonNegative),
+        ("min_arc_current_a", mat.min_arc_current_a, NonNegative),
+        (
+            "breakdown_field_v_per_m",
+            mat.breakdown_field_v_per_m,
+            Positive,
+        ),
+        ("softening_energy_j", mat.softening_energy_j, Positive),
+    ] {
+        check_number(errors, at.child(field), value, rule);
+    }
+    if let Some(kappa) = mat.kappa {
+        check_number(errors, at.child("kappa"), kappa, Positive);
+    }
+    if mat.contact_radius_m > 0.0 && mat.worn_radius_m > mat.contact_radius_m {
+        errors.push(FieldError {
+            pointer: at.child("worn_radius_m").to_string(),
+            detail: format!(
+                "must not exceed contact_radius_m ({} m), got {} m",
+                mat.contact_radius_m, mat.worn_radius_m
+            ),
+        });
+    }
+    let at_law = at.child("arc_restitution");
+    check_number(errors, at_law.child("a"), mat.arc_restitution.a, Finite);
+    check_number(
+        errors,
+        at_law.child("b_s_per_m"),
+        mat.arc_restitution.b_s_per_m,
+        Finite,
+    );
+
+    let at = root.child("circuit");
+    check_number(
+        errors,
+        at.child("supply_voltage_v"),
+        spec.circuit.supply_voltage_v,
+        NonNegative,
+    );
+    check_number(
+        errors,
+        at.child("current_a"),
+        spec.circuit.current_a,
+        NonNegative,
+    );
+
+    let losses = &spec.losses;
+    let at = root.child("losses");
+    check_number(
+        errors,
+        at.child("impact_energy_loss_j"),
+        losses.impact_energy_loss_j,
+        NonNegative,
+    );
+    check_number(
+        errors,
+        at.child("min_separation_m"),
+        losses.min_separation_m,
+        NonNegative,
+    );
+    if !(1..=MAX_BOUNCES_LIMIT).contains(&losses.max_bounces) {
+        errors.push(FieldError {
+            pointer: at.child("max_bounces").to_string(),
+            detail: format!(
+                "must be from 1 to {MAX_BOUNCES_LIMIT}, got {}",
+                losses.max_bounces
+            ),
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pointers(text: &str) -> Vec<String> {
+        match Scenario::from_json(text) {
+            Ok(_) => Vec::new(),
+            Err(invalid) => invalid.errors().iter().map(|e| e.pointer.clone()).collect(),
+        }
+    }
+
+    #[test]
+    fn empty_document_is_the_papers_rig() {
+        assert_eq!(Scenario::from_json("{}").unwrap(), Scenario::default());
+    }
+
+    #[test]
+    fn every_rule_of_section_9_names_its_field() {
+        let cases = [
+            (
+                r#"{"mechanism":{"inertia_kg_m2":0}}"#,
+                "/mechanism/inertia_kg_m2",
+            ),
+            (
+                r#"{"mechanism":{"spring_stiffness_n_per_m":-1}}"#,
+                "/mechanism/spring_stiffness_n_per_m",
+            ),
+            (
+                r#"{"mechanism":{"spring_arm_m":-0.1}}"#,
+                "/mechanism/spring_arm_m",
+            ),
+            (
+                r#"{"mechanism":{"contact_arm_m":0}}"#,
+                "/mechanism/contact_arm_m",
+            ),
+            (
+                r#"{"mechanism":{"static_force_n":-0.1}}"#,
+                "/mechanism/static_force_n",
+            ),
+            (
+                r#"{"mechanism":{"drop_height_m":-1e-3}}"#,
+                "/mechanism/drop_height_m",
+            ),
+            (
+                r#"{"mechanism":{"impact_velocity_m_s":-1}}"#,
+                "/mechanism/impact_velocity_m_s",
+            ),
+            (
+                r#"{"mechanism":{"static_force_n":0,"spring_stiffness_n_per_m":0}}"#,
+                "/mechanism/static_force_n",
+            ),
+            (
+                r#"{"material":{"youngs_modulus_pa":0}}"#,
+                "/material/youngs_modulus_pa",
+            ),
+            (
+                r#"{"material":{"dynamic_yield_pressure_pa":-2e8}}"#,
+                "/material/dynamic_yield_pressure_pa",
+            ),
+            (
+                r#"{"material":{"contact_radius_m":0}}"#,
+                "/material/contact_radius_m",
+            ),
+            (r#"{"material":{"kappa":0}}"#, "/material/kappa"),
+            (
+                r#"{"material":{"worn_radius_m":0.1}}"#,
+                "/material/worn_radius_m",
+            ),
+            (
+                r#"{"material":{"roughening_energy_j":0}}"#,
+                "/material/roughening_energy_j",
+            ),
+            (
+                r#"{"material":{"erosion_kg_per_j":-1}}"#,
+                "/material/erosion_kg_per_j",
+            ),
+            (
+                r#"{"material":{"density_kg_m3":0}}"#,
+                "/material/density_kg_m3",
+            ),
+            (
+                r#"{"material":{"min_arc_voltage_v":-12}}"#,
+                "/material/min_arc_voltage_v",
+            ),
+            (
+                r#"{"material":{"min_arc_current_a":-1}}"#,
+                "/material/min_arc_current_a",
+            ),
+            (
+                r#"{"material":{"breakdown_field_v_per_m":0}}"#,
+                "/material/breakdown_field_v_per_m",
+            ),
+            (
+                r#"{"material":{"softening_energy_j":0}}"#,
+                "/material/softening_energy_j",
+            ),
+            (
+                r#"{"material":{"arc_restitution":{"a":1e300}}}"#,
+                "/material/arc_restitution/a",
+            ),
+            (
+                r#"{"circuit":{"supply_voltage_v":-48}}"#,
+                "/circuit/supply_voltage_v",
+            ),
+            (r#"{"circuit":{"current_a":-15}}"#, "/circuit/current_a"),
+            (
+                r#"{"losses":{"impact_energy_loss_j":-1e-6}}"#,
+                "/losses/impact_energy_loss_j",
+            ),
+            (
+                r#"{"losses":{"min_separation_m":-1}}"#,
+                "/losses/min_separation_m",
+            ),
+            (r#"{"losses":{"max_bounces":0}}"#, "/losses/max_bounces"),
+            (r#"{"losses":{"max_bounces":10001}}"#, "/losses/max_bounces"),
+            (
+                r#"{"mechanism":{"inertia_kg_m2":1e-40}}"#,
+                "/mechanism/inertia_kg_m2",
+            ),
+            (
+                r#"{"mechanism":{"static_force_n":1e40}}"#,
+                "/mechanism/static_force_n",
+            ),
+        ];
+        for (text, pointer) in cases {
+            assert_eq!(pointers(text), vec![pointer.to_owned()], "{text}");
+        }
+    }
+
+    #[test]
+    fn malformed_documents_name_the_field_or_position() {
+        let cases = [
+            (r#"{"mechanism":{"bogus":1}}"#, "/mechanism/bogus"),
+            (r#"{"losses":{"max_bounces":1.5}}"#, "/losses/max_bounces"),
+            (r#"{"circuit":{"current_a":"15"}}"#, "/circuit/current_a"),
+            (r#"{"circuit":[]}"#, "/circuit"),
+            (r#"{"unknown_section":{}}"#, "/unknown_section"),
+            (r#"{"mechanism":{"static_force_n":1}"#, ""),
+            ("[]", ""),
+        ];
+        for (text, pointer) in cases {
+            assert_eq!(pointers(text), vec![pointer.to_owned()], "{text}");
+        }
+    }
+
+    #[test]
+    fn all_failures_are_reported_together() {
+        let found = pointers(r#"{"mechanism":{"inertia_kg_m2":-1},"circuit":{"current_a":-1}}"#);
+        assert_eq!(found, ["/mechanism/inertia_kg_m2", "/circuit/current_a"]);
+    }
+
+    #[test]
+    fn pointers_nest_below_the_root_they_are_given() {
+        let spec = ScenarioSpec {
+            circuit: CircuitSpec {
+                supply_voltage_v: -1.0,
+                current_a: 0.0,
+            },
+            ..Default::default()
+        };
+        let err = Scenario::new(spec, &Pointer::root().child("scenario")).unwrap_err();
+        assert_eq!(
+            err.errors()[0].pointer,
+            "/scenario/circuit/supply_voltage_v"
+        );
+    }
+}

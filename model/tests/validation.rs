@@ -1,0 +1,35 @@
+//! `../shared/validation/cases.json` (copied to `tests/data/`): every field of every case at both
+//! fidelities, computed independently at 50 digits, to 1e-12 relative.
+
+#[path = "../../tests/support/json_close.rs"]
+mod json_close;
+
+use bouncewear_model::{Fidelity, Scenario, simulate};
+use serde_json::Value;
+
+fn cases() -> serde_json::Map<String, Value> {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/data/validation_cases.json"
+    );
+    let text = std::fs::read_to_string(path).expect("validation cases");
+    serde_json::from_str(&text).expect("validation cases are JSON")
+}
+
+#[test]
+fn every_validation_case_matches_to_1e_12_at_both_fidelities() {
+    let cases = cases();
+    assert_eq!(cases.len(), 6);
+    let mut failures = Vec::new();
+    for (name, case) in &cases {
+        let scenario = Scenario::from_json(&case["scenario"].to_string()).expect("valid scenario");
+        for fidelity in Fidelity::ALL {
+            let actual = serde_json::to_value(simulate(&scenario, fidelity)).unwrap();
+            for difference in json_close::json_differences(&actual, &case[fidelity.as_str()], 1e-12)
+            {
+                failures.push(format!("{name} {}: {difference}", fidelity.as_str()));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
