@@ -61,7 +61,7 @@ impl Arc {
 
 /// Kappa of the softened surface: eq. 8 scales as `p^(5/8)`, so `kappa_1 = kappa (p_1/p)^(5/8)`.
 pub fn softened_kappa(kappa: f64, softening_ratio: f64) -> f64 {
-    kappa * softening_ratio.powf(0.625)
+    kappa * crate::restitution::pow_5_8(softening_ratio)
 }
 
 /// Restitution of an impact after an arcing bounce (eq. 16, empirical):

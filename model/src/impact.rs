@@ -23,20 +23,29 @@ pub struct Impact {
 impl Impact {
     /// `u sqrt(k_c m) = u w_c m`, the momentum-like term shared by the force and the loading time.
     fn scaled_momentum(&self) -> f64 {
-        self.impact_speed_m_s * self.contact_stiffness_n_per_m.sqrt() * self.mass_kg.sqrt()
+        self.impact_speed_m_s * (self.contact_stiffness_n_per_m * self.mass_kg).sqrt()
     }
 
     /// Peak force (Fig. 15, linear in `u`): `F_max = F_s + sqrt(F_s^2 + k_c m u^2)`, the force at
-    /// maximum approach, where `1/2 m u^2 + F_s d = 1/2 k_c d^2`. `hypot` keeps the squares finite.
+    /// maximum approach, where `1/2 m u^2 + F_s d = 1/2 k_c d^2`. Within the magnitudes a valid
+    /// scenario allows (MODEL.md section 9) the squares stay far inside f64's range.
     pub fn peak_force_n(&self) -> f64 {
-        self.static_force_n + self.static_force_n.hypot(self.scaled_momentum())
+        let fs = self.static_force_n;
+        let x = self.scaled_momentum();
+        fs + (fs * fs + x * x).sqrt()
     }
 
     /// Loading time to maximum approach (eq. 12): `t_load = (pi - atan2(u w_c m, F_s)) / w_c`, which
-    /// is `pi / (2 w_c)` when `F_s = 0`.
+    /// is `pi / (2 w_c)` when `F_s = 0`. For `u > 0` this is `(pi/2 + atan(F_s / (u w_c m))) / w_c`.
     pub fn loading_time_s(&self) -> f64 {
-        let omega_c = (self.contact_stiffness_n_per_m / self.mass_kg).sqrt();
-        (PI - self.scaled_momentum().atan2(self.static_force_n)) / omega_c
+        let root_km = (self.contact_stiffness_n_per_m * self.mass_kg).sqrt();
+        let angle = if self.impact_speed_m_s > 0.0 {
+            std::f64::consts::FRAC_PI_2
+                + (self.static_force_n / (self.impact_speed_m_s * root_km)).atan()
+        } else {
+            PI
+        };
+        angle * self.mass_kg / root_km
     }
 
     /// Elastic (Hertz) unloading time (eq. 13): `t_unload = 1.8395 m e u / F_max`, the Hertzian

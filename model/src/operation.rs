@@ -235,7 +235,10 @@ impl Operation {
             }
             None => (kappa, pressure_pa),
         };
-        out.e1 = self.restitution(u, kappa_1);
+        out.e1 = match self.fidelity {
+            Fidelity::Exact => restitution::restitution(u, kappa_1),
+            Fidelity::ClosedForm => restitution::restitution_closed_form(u, kappa_1),
+        };
         if needs.impact {
             let impact = Impact {
                 mass_kg: self.mass_kg,
@@ -246,7 +249,10 @@ impl Operation {
             (out.peak_force_n, out.impact_duration_s) = impact.peak_force_and_duration(out.e1);
         }
 
-        let mut v = self.separation_speed(out.e1, u);
+        // The loop carries squared speeds: an impact multiplies v^2 by e^2 and removes 2 eps / m.
+        let rebound = out.e1 * u;
+        let mut v = self.separation_speed(rebound * rebound);
+        let (kappa_sq, kappa_1_sq) = (kappa * kappa, kappa_1 * kappa_1);
         while v > 0.0 && v >= self.min_bounce_speed {
             if out.bounce_count == self.max_bounces {
                 out.truncated = true;
@@ -271,12 +277,12 @@ impl Operation {
                     arc_energy_j,
                 });
             }
-            let e = if self.arc.is_some() {
-                self.arc_restitution(v, kappa_1)
+            let rebound_sq = if self.arc.is_some() {
+                self.arc_restitution_squared(v, kappa_1_sq) * (v * v)
             } else {
-                self.restitution(v, kappa)
+                self.rebound_squared(v, kappa_sq)
             };
-            v = self.separation_speed(e, v);
+            v = self.separation_speed(rebound_sq);
         }
         out
     }
@@ -294,38 +300,40 @@ impl Operation {
         Simulation { outcome, bounces }
     }
 
-    /// `e(u, kappa)` at this fidelity: eq. 7 or eq. 18.
+    /// The squared rebound speed `(e v)^2` of an impact at speed `v` at this fidelity (eq. 7 or
+    /// eq. 18), from `kappa^2`. Eq. 18 needs no division: `(e v)^2 = min(v^2, kappa^2 v sqrt(v))`.
     #[inline]
-    fn restitution(&self, u: f64, kappa: f64) -> f64 {
-        let eps0 = restitution::scaled_speed(u, kappa);
+    fn rebound_squared(&self, v: f64, kappa_sq: f64) -> f64 {
+        let v_sq = v * v;
         match self.fidelity {
-            Fidelity::Exact => restitution::restitution_scaled(eps0),
-            Fidelity::ClosedForm => eps0.min(1.0),
+            Fidelity::Exact => restitution::restitution_squared_scaled(kappa_sq / v.sqrt()) * v_sq,
+            Fidelity::ClosedForm => (kappa_sq * v * v.sqrt()).min(v_sq),
         }
     }
 
-    /// Eq. 16 after an arcing bounce: `min(e(v; kappa_1), max(0, a + b v))`. Eq. 7 is solved only when
-    /// the linear law is above its cheap lower bound `min(1, (5/8)^(3/8) eps0)`; otherwise the linear
-    /// law is the minimum. The result is identical either way.
+    /// Eq. 16 after an arcing bounce, squared: `min(e(v; kappa_1), max(0, a + b v))^2`. Eq. 7 is solved
+    /// only when the linear law is above its cheap lower bound `min(1, (5/8)^(3/8) eps0)`; otherwise
+    /// the linear law is the minimum. The result is identical either way.
     #[inline]
-    fn arc_restitution(&self, v: f64, kappa_1: f64) -> f64 {
+    fn arc_restitution_squared(&self, v: f64, kappa_1_sq: f64) -> f64 {
         let linear = self.arc_restitution.linear(v);
-        let eps0 = restitution::scaled_speed(v, kappa_1);
-        if self.fidelity == Fidelity::Exact && linear <= (LOWER_BOUND_FACTOR * eps0).min(1.0) {
-            return linear;
+        let linear_sq = linear * linear;
+        let eps0_sq = kappa_1_sq / v.sqrt();
+        if linear_sq <= (LOWER_BOUND_FACTOR * LOWER_BOUND_FACTOR * eps0_sq).min(1.0) {
+            return linear_sq;
         }
-        linear.min(self.restitution(v, kappa_1))
+        let mechanical_sq = match self.fidelity {
+            Fidelity::Exact => restitution::restitution_squared_scaled(eps0_sq),
+            Fidelity::ClosedForm => eps0_sq.min(1.0),
+        };
+        linear_sq.min(mechanical_sq)
     }
 
-    /// Speed after an impact that returns `e` of the speed and loses `eps` (section 3):
-    /// `v' = sqrt(max(0, (e v)^2 - 2 eps / m))`.
+    /// Speed after an impact from the squared rebound speed `(e v)^2`, less the energy `eps` every
+    /// impact loses (section 3): `v' = sqrt(max(0, (e v)^2 - 2 eps / m))`.
     #[inline]
-    fn separation_speed(&self, e: f64, v: f64) -> f64 {
-        let rebound = e * v;
-        if self.loss_speed_sq == 0.0 {
-            return rebound;
-        }
-        (rebound * rebound - self.loss_speed_sq).max(0.0).sqrt()
+    fn separation_speed(&self, rebound_sq: f64) -> f64 {
+        (rebound_sq - self.loss_speed_sq).max(0.0).sqrt()
     }
 
     #[inline]

@@ -17,7 +17,7 @@ pub const MAX_MAGNITUDE: f64 = 1e30;
 /// The largest `max_bounces` a scenario may ask for.
 pub const MAX_BOUNCES_LIMIT: u32 = 10_000;
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ScenarioSpec {
     pub mechanism: MechanismSpec,
@@ -82,17 +82,6 @@ pub struct LossesSpec {
     pub max_bounces: u32,
 }
 
-impl Default for ScenarioSpec {
-    fn default() -> Self {
-        Self {
-            mechanism: MechanismSpec::default(),
-            material: MaterialSpec::default(),
-            circuit: CircuitSpec::default(),
-            losses: LossesSpec::default(),
-        }
-    }
-}
-
 impl Default for MechanismSpec {
     fn default() -> Self {
         Self {
@@ -147,7 +136,8 @@ impl Default for LossesSpec {
 }
 
 /// A scenario that satisfies every rule of MODEL.md section 9.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// The default is the paper's rig, which is valid.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
 #[serde(transparent)]
 pub struct Scenario(ScenarioSpec);
 
@@ -172,12 +162,6 @@ impl Scenario {
 
     pub fn spec(&self) -> &ScenarioSpec {
         &self.0
-    }
-}
-
-impl Default for Scenario {
-    fn default() -> Self {
-        Self(ScenarioSpec::default())
     }
 }
 

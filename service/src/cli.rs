@@ -1,0 +1,119 @@
+//! Command line: `bouncewear simulate | run | bench | serve`.
+//!
+//! Bad input exits with code 2 and one line on stderr naming the field (a JSON pointer) and the rule.
+
+use bouncewear_model::{Fidelity, InvalidInput, Scenario, simulate};
+use clap::{Parser, Subcommand, ValueEnum};
+use std::io::{Read, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "bouncewear",
+    version,
+    about = "Monte Carlo wear simulation of bouncing electrical contacts (McBride & Sharkh 1992)"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Simulate one make operation of a scenario and print its bounces as JSON.
+    Simulate {
+        /// Model fidelity: eq. 7 and exact flight, or the paper's closed-form approximations.
+        #[arg(long, value_enum, default_value_t = FidelityArg::Exact)]
+        fidelity: FidelityArg,
+        /// Scenario JSON file; `-` or nothing reads standard input.
+        #[arg(default_value = "-")]
+        file: PathBuf,
+    },
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum FidelityArg {
+    Exact,
+    #[value(name = "closed_form")]
+    ClosedForm,
+}
+
+impl From<FidelityArg> for Fidelity {
+    fn from(arg: FidelityArg) -> Self {
+        match arg {
+            FidelityArg::Exact => Fidelity::Exact,
+            FidelityArg::ClosedForm => Fidelity::ClosedForm,
+        }
+    }
+}
+
+/// Why a command failed, and so which exit code it gets.
+#[derive(Debug, thiserror::Error)]
+pub enum CliError {
+    /// The user's document breaks a rule: exit 2.
+    #[error("invalid input: {0}")]
+    Invalid(#[from] InvalidInput),
+    /// A file could not be read or written: exit 2 too, it is the user's path.
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    /// Anything else: exit 1.
+    #[error("{0}")]
+    Failed(String),
+}
+
+impl CliError {
+    fn exit_code(&self) -> ExitCode {
+        match self {
+            CliError::Invalid(_) | CliError::Io { .. } => ExitCode::from(2),
+            CliError::Failed(_) => ExitCode::FAILURE,
+        }
+    }
+}
+
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("bouncewear: {error}");
+            error.exit_code()
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<(), CliError> {
+    match cli.command {
+        Command::Simulate { fidelity, file } => {
+            let scenario = Scenario::from_json(&read_input(&file)?)?;
+            print_json(&simulate(&scenario, fidelity.into()))
+        }
+    }
+}
+
+/// Reads a file, or standard input for `-`.
+pub fn read_input(path: &PathBuf) -> Result<String, CliError> {
+    let mut text = String::new();
+    let result = if path.as_os_str() == "-" {
+        std::io::stdin().read_to_string(&mut text).map(|_| ())
+    } else {
+        std::fs::read_to_string(path).map(|read| text = read)
+    };
+    result.map_err(|source| CliError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    Ok(text)
+}
+
+fn print_json(value: &impl serde::Serialize) -> Result<(), CliError> {
+    let mut out = std::io::stdout().lock();
+    serde_json::to_writer_pretty(&mut out, value).map_err(|e| CliError::Failed(e.to_string()))?;
+    writeln!(out).map_err(|source| CliError::Io {
+        path: "<stdout>".into(),
+        source,
+    })
+}

@@ -1,0 +1,4 @@
+//! The `bouncewear` binary: command line and (later) the HTTP service, a thin shell around
+//! [`bouncewear_model`].
+
+pub mod cli;
