@@ -120,9 +120,130 @@ fn simulate_rejects_a_missing_file_and_an_unknown_fidelity() {
 
 #[test]
 fn every_subcommand_has_help() {
-    for args in [&["--help"][..], &["simulate", "--help"]] {
+    for args in [&["--help"][..], &["simulate", "--help"], &["run", "--help"]] {
         let output = bouncewear(args, "");
         assert!(output.status.success(), "{args:?}");
         assert!(String::from_utf8(output.stdout).unwrap().contains("Usage"));
     }
+}
+
+fn write_temp(name: &str, contents: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("bouncewear-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, contents).unwrap();
+    path
+}
+
+fn run_job(path: &std::path::Path, threads: &str) -> Value {
+    let output = bouncewear(&["run", path.to_str().unwrap(), "--threads", threads], "");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).unwrap()
+}
+
+#[test]
+fn run_is_bit_identical_for_threads_1_2_3_and_on_a_rerun() {
+    let job = serde_json::json!({
+        "devices": 40, "operations": 30, "seed": 2024,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "scatter": [
+            {"parameter": "contact_radius_m", "per": "device", "distribution": {"kind": "uniform", "min": 6e-3, "max": 9e-3}},
+            {"parameter": "dynamic_yield_pressure_pa", "per": "device", "distribution": {"kind": "lognormal", "median": 2e8, "sigma": 0.1}},
+            {"parameter": "impact_velocity_m_s", "per": "operation", "distribution": {"kind": "triangular", "min": 0.15, "mode": 0.22, "max": 0.3}}
+        ]
+    });
+    let path = write_temp("determinism.json", &job.to_string());
+    let reference = run_job(&path, "1");
+    for threads in ["2", "3", "1"] {
+        let again = run_job(&path, threads);
+        assert_eq!(
+            again["operations"], reference["operations"],
+            "threads {threads}"
+        );
+        assert_eq!(again["devices"], reference["devices"], "threads {threads}");
+    }
+}
+
+/// A one-device job without scatter is `simulate` repeated, with the radius of MODEL.md section 6
+/// worked out by hand from the arc energy of the operations before.
+#[test]
+fn one_device_job_equals_repeated_simulate_with_the_worn_radius() {
+    let operations = 1000;
+    let job = serde_json::json!({
+        "devices": 1, "operations": operations, "bin_operations": 1, "seed": 1,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "metrics": ["kappa", "e1", "total_bounce_s", "bounce_count", "arc_energy_j", "peak_force_n", "final_radius_m"]
+    });
+    let result = run_job(&write_temp("one-device.json", &job.to_string()), "2");
+    let (r0, r_inf, w_r) = (7.7e-3_f64, 0.711e-3_f64, 500.0_f64);
+    let mut cumulative = 0.0;
+    for (j, op) in (0..operations).enumerate() {
+        let radius = r_inf + (r0 - r_inf) * (-cumulative / w_r).exp();
+        // Only every 37th operation through the binary, to keep the test fast; the energy sum needs all.
+        let scenario = serde_json::json!({
+            "circuit": {"supply_voltage_v": 48, "current_a": 15},
+            "material": {"contact_radius_m": radius, "dynamic_yield_pressure_pa": 2e8}
+        });
+        let expected_energy = if j % 37 == 0 || j + 1 == operations {
+            let output = bouncewear(&["simulate"], &scenario.to_string());
+            let expected: Value = serde_json::from_slice(&output.stdout).unwrap();
+            for metric in [
+                "kappa",
+                "e1",
+                "total_bounce_s",
+                "bounce_count",
+                "arc_energy_j",
+                "peak_force_n",
+            ] {
+                let bin = &result["operations"][metric][op];
+                assert_eq!(bin["n"], 1);
+                let (got, want) = (
+                    bin["mean"].as_f64().unwrap(),
+                    expected[metric].as_f64().unwrap(),
+                );
+                assert!(
+                    (got - want).abs() <= 1e-9 * want.abs(),
+                    "operation {op} {metric}: {got} vs {want}"
+                );
+            }
+            expected["arc_energy_j"].as_f64().unwrap()
+        } else {
+            result["operations"]["arc_energy_j"][op]["mean"]
+                .as_f64()
+                .unwrap()
+        };
+        cumulative += expected_energy;
+    }
+    let final_radius = r_inf + (r0 - r_inf) * (-cumulative / w_r).exp();
+    let reported = result["devices"]["final_radius_m"]["mean"]
+        .as_f64()
+        .unwrap();
+    assert!((reported - final_radius).abs() <= 1e-9 * final_radius);
+}
+
+#[test]
+fn run_rejects_bad_jobs_naming_the_field() {
+    for (job, pointer) in [
+        (r#"{"devices": 0}"#, "/devices"),
+        (
+            r#"{"scatter": [{"parameter": "contact_radius_m", "per": "device", "distribution": {"kind": "normal", "mean": 7e-3, "sd": 1e-3}}]}"#,
+            "/scatter/0/distribution/min",
+        ),
+        (
+            r#"{"scenario": {"losses": {"max_bounces": 0}}}"#,
+            "/scenario/losses/max_bounces",
+        ),
+        (r#"{"devices": "many"}"#, "/devices"),
+        (r#"{"devices": 1"#, "malformed JSON"),
+    ] {
+        let path = write_temp("bad.json", job);
+        let line = rejected(&["run", path.to_str().unwrap()], "");
+        assert!(line.contains(pointer), "{job}: {line}");
+    }
+    let line = rejected(&["run", "-", "--threads", "0"], "{}");
+    assert!(line.contains("--threads"), "{line}");
 }

@@ -8,15 +8,22 @@
 //! | 3 | ending the bounce sequence | [`operation`] |
 //! | 4 (eq. 12, 13) | peak force, impact duration | [`impact`] |
 //! | 5 (eq. 16) | arcing, pre-arc, softening, arc energy, electrical restitution | [`arc`] |
+//! | 6 | wear over an endurance test | [`wear`] |
 //! | 8, 9 | defaults, validation | [`scenario`] |
+//!
+//! The Monte Carlo engine (jobs, scatter, parallel streams) is [`montecarlo`]; its mergeable summaries
+//! and confidence intervals are [`stats`].
 
 pub mod arc;
 pub mod error;
 pub mod impact;
 pub mod mechanism;
+pub mod montecarlo;
 pub mod operation;
 pub mod restitution;
 pub mod scenario;
+pub mod stats;
+pub mod wear;
 
 pub use error::{FieldError, InvalidInput, Pointer};
 pub use operation::{

@@ -123,45 +123,35 @@ pub struct Operation {
     max_bounces: u32,
 }
 
-impl Operation {
-    /// The nominal operation of a scenario.
-    pub fn nominal(scenario: &Scenario, fidelity: Fidelity) -> Self {
-        Self::new(scenario, &Conditions::nominal(scenario), fidelity)
-    }
+/// What a scenario fixes for all its operations (mechanism, material, losses), worked out once;
+/// [`Setup::operation`] then applies the conditions of one device or operation cheaply.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Setup {
+    mass_kg: f64,
+    stiffness_n_per_m: f64,
+    kappa_law: KappaLaw,
+    supply_voltage_v: f64,
+    min_arc_voltage_v: f64,
+    min_arc_current_a: f64,
+    softening_energy_j: f64,
+    arc_restitution: ArcRestitution,
+    loss_speed_sq: f64,
+    min_separation_m: f64,
+    max_bounces: u32,
+}
 
-    pub fn new(scenario: &Scenario, conditions: &Conditions, fidelity: Fidelity) -> Self {
+impl Setup {
+    pub fn new(scenario: &Scenario) -> Self {
         let spec = scenario.spec();
         let (mech, mat) = (&spec.mechanism, &spec.material);
         let mass_kg = effective_mass(mech.inertia_kg_m2, mech.contact_arm_m);
-        let stiffness = effective_stiffness(
-            mech.spring_stiffness_n_per_m,
-            mech.spring_arm_m,
-            mech.contact_arm_m,
-        );
-        let static_force_n = conditions.static_force_n;
-        let constant_force_flight = fidelity == Fidelity::ClosedForm && static_force_n > 0.0;
-        // g(v) is increasing in v, and the flight that peaks at g_min is the drop from height g_min
-        // (eq. 2 with H = g_min): comparing speeds is comparing gaps, without a gap per flight.
-        let gap_stiffness = if constant_force_flight {
-            0.0
-        } else {
-            stiffness
-        };
-        let min_bounce_speed = impact_velocity(
-            mass_kg,
-            gap_stiffness,
-            static_force_n,
-            spec.losses.min_separation_m,
-        );
         Self {
-            fidelity,
             mass_kg,
-            static_force_n,
-            flight: Flight::new(mass_kg, stiffness, static_force_n),
-            constant_force_flight,
-            impact_velocity_m_s: conditions.impact_velocity_m_s.unwrap_or_else(|| {
-                impact_velocity(mass_kg, stiffness, static_force_n, conditions.drop_height_m)
-            }),
+            stiffness_n_per_m: effective_stiffness(
+                mech.spring_stiffness_n_per_m,
+                mech.spring_arm_m,
+                mech.contact_arm_m,
+            ),
             kappa_law: KappaLaw {
                 reference_kappa: mat.kappa.unwrap_or_else(|| {
                     restitution::kappa(
@@ -174,22 +164,82 @@ impl Operation {
                 reference_radius_m: mat.contact_radius_m,
                 reference_pressure_pa: mat.dynamic_yield_pressure_pa,
             },
-            arc: Arc::strike(
-                spec.circuit.supply_voltage_v,
-                conditions.current_a,
-                mat.min_arc_voltage_v,
-                mat.min_arc_current_a,
-                conditions.breakdown_field_v_per_m,
-                mat.softening_energy_j,
-            ),
+            supply_voltage_v: spec.circuit.supply_voltage_v,
+            min_arc_voltage_v: mat.min_arc_voltage_v,
+            min_arc_current_a: mat.min_arc_current_a,
+            softening_energy_j: mat.softening_energy_j,
             arc_restitution: ArcRestitution {
                 a: mat.arc_restitution.a,
                 b_s_per_m: mat.arc_restitution.b_s_per_m,
             },
             loss_speed_sq: 2.0 * spec.losses.impact_energy_loss_j / mass_kg,
-            min_bounce_speed,
+            min_separation_m: spec.losses.min_separation_m,
             max_bounces: spec.losses.max_bounces,
         }
+    }
+
+    pub fn kappa_law(&self) -> &KappaLaw {
+        &self.kappa_law
+    }
+
+    /// The operation under the given conditions.
+    pub fn operation(&self, conditions: &Conditions, fidelity: Fidelity) -> Operation {
+        let static_force_n = conditions.static_force_n;
+        let constant_force_flight = fidelity == Fidelity::ClosedForm && static_force_n > 0.0;
+        // g(v) is increasing in v, and the flight that peaks at g_min is the drop from height g_min
+        // (eq. 2 with H = g_min): comparing speeds is comparing gaps, without a gap per flight.
+        let gap_stiffness = if constant_force_flight {
+            0.0
+        } else {
+            self.stiffness_n_per_m
+        };
+        Operation {
+            fidelity,
+            mass_kg: self.mass_kg,
+            static_force_n,
+            flight: Flight::new(self.mass_kg, self.stiffness_n_per_m, static_force_n),
+            constant_force_flight,
+            impact_velocity_m_s: conditions.impact_velocity_m_s.unwrap_or_else(|| {
+                impact_velocity(
+                    self.mass_kg,
+                    self.stiffness_n_per_m,
+                    static_force_n,
+                    conditions.drop_height_m,
+                )
+            }),
+            kappa_law: self.kappa_law,
+            arc: Arc::strike(
+                self.supply_voltage_v,
+                conditions.current_a,
+                self.min_arc_voltage_v,
+                self.min_arc_current_a,
+                conditions.breakdown_field_v_per_m,
+                self.softening_energy_j,
+            ),
+            arc_restitution: self.arc_restitution,
+            loss_speed_sq: self.loss_speed_sq,
+            min_bounce_speed: impact_velocity(
+                self.mass_kg,
+                gap_stiffness,
+                static_force_n,
+                self.min_separation_m,
+            ),
+            max_bounces: self.max_bounces,
+        }
+    }
+}
+
+impl Operation {
+    /// The nominal operation of a scenario.
+    pub fn nominal(scenario: &Scenario, fidelity: Fidelity) -> Self {
+        Setup::new(scenario).operation(&Conditions::nominal(scenario), fidelity)
+    }
+
+    /// The same operation at another impact velocity (per-operation velocity scatter), without
+    /// rebuilding anything else.
+    pub fn with_impact_velocity(mut self, impact_velocity_m_s: f64) -> Self {
+        self.impact_velocity_m_s = impact_velocity_m_s;
+        self
     }
 
     pub fn impact_velocity_m_s(&self) -> f64 {

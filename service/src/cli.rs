@@ -2,8 +2,11 @@
 //!
 //! Bad input exits with code 2 and one line on stderr naming the field (a JSON pointer) and the rule.
 
+use crate::progress::ProgressBar;
+use bouncewear_model::montecarlo::{Job, run_job};
 use bouncewear_model::{Fidelity, InvalidInput, Scenario, simulate};
 use clap::{Parser, Subcommand, ValueEnum};
+use rand::RngExt;
 use std::io::{Read, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -29,6 +32,14 @@ enum Command {
         /// Scenario JSON file; `-` or nothing reads standard input.
         #[arg(default_value = "-")]
         file: PathBuf,
+    },
+    /// Run a Monte Carlo endurance job and print its Result as JSON.
+    Run {
+        /// Job JSON file; `-` reads standard input.
+        file: PathBuf,
+        /// Worker threads (default: one per core). Results are identical for any count.
+        #[arg(long)]
+        threads: Option<usize>,
     },
 }
 
@@ -91,7 +102,38 @@ fn run(cli: Cli) -> Result<(), CliError> {
             let scenario = Scenario::from_json(&read_input(&file)?)?;
             print_json(&simulate(&scenario, fidelity.into()))
         }
+        Command::Run { file, threads } => {
+            let job = Job::from_json(&read_input(&file)?, draw_seed)?;
+            let pool = thread_pool(threads)?;
+            let progress = ProgressBar::for_stderr();
+            let result = pool.install(|| run_job(&job, &progress));
+            progress.finish();
+            print_json(&result.map_err(|cancelled| CliError::Failed(cancelled.to_string()))?)
+        }
     }
+}
+
+/// A seed for a job that does not give one: from the operating system's entropy, reported in the result.
+pub fn draw_seed() -> u64 {
+    rand::rng().random()
+}
+
+/// A rayon pool of `threads` workers (all cores by default); compute never runs on async workers.
+pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool, CliError> {
+    let mut builder =
+        rayon::ThreadPoolBuilder::new().thread_name(|i| format!("bouncewear-compute-{i}"));
+    if let Some(threads) = threads {
+        if threads == 0 {
+            return Err(CliError::Invalid(InvalidInput::single(
+                &bouncewear_model::Pointer::root(),
+                "--threads must be at least 1",
+            )));
+        }
+        builder = builder.num_threads(threads);
+    }
+    builder
+        .build()
+        .map_err(|e| CliError::Failed(format!("cannot start worker threads: {e}")))
 }
 
 /// Reads a file, or standard input for `-`.

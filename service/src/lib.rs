@@ -2,3 +2,4 @@
 //! [`bouncewear_model`].
 
 pub mod cli;
+pub mod progress;

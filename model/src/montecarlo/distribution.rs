@@ -1,0 +1,556 @@
+//! Scatter distributions (CONTRACT.md "Job", `D`): validation against the parameter they feed,
+//! random draws (rand_distr) and inverse CDFs (for Latin hypercube sampling).
+
+use crate::error::{FieldError, Pointer};
+use rand::RngExt;
+use rand::distr::{Distribution as _, Open01};
+use rand_distr::{LogNormal, Normal, Triangular, Weibull};
+use serde::{Deserialize, Serialize};
+
+/// Truncated normals are drawn by rejection; validation requires at least this acceptance
+/// probability, so that [`MAX_REJECTIONS`] failures in a row have probability below
+/// `0.95^1000 = 5e-23` (the draw is then clamped into the window, which never happens in practice).
+pub const MIN_ACCEPTANCE: f64 = 0.05;
+/// See [`MIN_ACCEPTANCE`].
+pub const MAX_REJECTIONS: u32 = 1000;
+
+/// A distribution as the user writes it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum DistributionSpec {
+    Fixed {
+        value: f64,
+    },
+    Normal {
+        mean: f64,
+        sd: f64,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        min: Option<f64>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        max: Option<f64>,
+    },
+    Lognormal {
+        median: f64,
+        sigma: f64,
+    },
+    Uniform {
+        min: f64,
+        max: f64,
+    },
+    Triangular {
+        min: f64,
+        mode: f64,
+        max: f64,
+    },
+    Weibull {
+        scale: f64,
+        shape: f64,
+    },
+}
+
+/// The values a parameter may take: above `lower` (or at it, when `inclusive`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Domain {
+    pub lower: f64,
+    pub inclusive: bool,
+}
+
+impl Domain {
+    pub const POSITIVE: Domain = Domain {
+        lower: 0.0,
+        inclusive: false,
+    };
+    pub const NON_NEGATIVE: Domain = Domain {
+        lower: 0.0,
+        inclusive: true,
+    };
+
+    pub fn contains(&self, x: f64) -> bool {
+        x.is_finite() && (x > self.lower || (self.inclusive && x == self.lower))
+    }
+
+    fn describe(&self) -> String {
+        match (self.lower, self.inclusive) {
+            (0.0, false) => "positive".to_owned(),
+            (0.0, true) => "non-negative".to_owned(),
+            (lower, true) => format!("at least {lower}"),
+            (lower, false) => format!("above {lower}"),
+        }
+    }
+}
+
+/// A validated distribution, ready to draw from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Distribution {
+    Fixed(f64),
+    Normal {
+        normal: Normal<f64>,
+        mean: f64,
+        sd: f64,
+        min: f64,
+        max: f64,
+        cdf_min: f64,
+        cdf_max: f64,
+    },
+    Lognormal {
+        lognormal: LogNormal<f64>,
+        median: f64,
+        sigma: f64,
+    },
+    Uniform {
+        min: f64,
+        max: f64,
+    },
+    Triangular {
+        triangular: Triangular<f64>,
+        min: f64,
+        mode: f64,
+        max: f64,
+    },
+    Weibull {
+        weibull: Weibull<f64>,
+        scale: f64,
+        shape: f64,
+    },
+}
+
+impl Distribution {
+    /// Checks that every value the distribution can produce lies in `domain`, naming the field at fault.
+    pub fn new(
+        spec: &DistributionSpec,
+        domain: Domain,
+        at: &Pointer,
+    ) -> Result<Self, Vec<FieldError>> {
+        let mut faults = Faults {
+            at,
+            errors: Vec::new(),
+        };
+        let distribution = match *spec {
+            DistributionSpec::Fixed { value } => {
+                faults.lowest_in("value", value, domain);
+                Distribution::Fixed(value)
+            }
+            DistributionSpec::Normal { mean, sd, min, max } => {
+                let (lo, hi) = (
+                    min.unwrap_or(f64::NEG_INFINITY),
+                    max.unwrap_or(f64::INFINITY),
+                );
+                if !mean.is_finite() {
+                    faults.fail("mean", "must be a finite number".into());
+                }
+                faults.positive("sd", sd);
+                match min {
+                    None => faults.fail(
+                        "min",
+                        format!(
+                            "is required: an untruncated normal can produce values that are not {}",
+                            domain.describe()
+                        ),
+                    ),
+                    Some(lo) => faults.lowest_in("min", lo, domain),
+                }
+                if max.is_some() {
+                    faults.max_above_min(hi, lo);
+                }
+                let (cdf_min, cdf_max) = (
+                    standard_normal_cdf((lo - mean) / sd),
+                    standard_normal_cdf((hi - mean) / sd),
+                );
+                if faults.errors.is_empty()
+                    && (cdf_max - cdf_min < MIN_ACCEPTANCE || cdf_max.is_nan() || cdf_min.is_nan())
+                {
+                    faults.fail(
+                        "min",
+                        format!(
+                            "the window [min, max] keeps only {:.3e} of the normal's mass; at least {MIN_ACCEPTANCE} is needed",
+                            cdf_max - cdf_min
+                        ),
+                    );
+                }
+                match Normal::new(mean, sd) {
+                    Ok(normal) if faults.errors.is_empty() => Distribution::Normal {
+                        normal,
+                        mean,
+                        sd,
+                        min: lo,
+                        max: hi,
+                        cdf_min,
+                        cdf_max,
+                    },
+                    _ => return Err(faults.errors),
+                }
+            }
+            DistributionSpec::Lognormal { median, sigma } => {
+                faults.positive("median", median);
+                faults.positive("sigma", sigma);
+                faults.reaches_zero("lognormal", domain);
+                match LogNormal::new(median.ln(), sigma) {
+                    Ok(lognormal) if faults.errors.is_empty() => Distribution::Lognormal {
+                        lognormal,
+                        median,
+                        sigma,
+                    },
+                    _ => return Err(faults.errors),
+                }
+            }
+            DistributionSpec::Uniform { min, max } => {
+                faults.lowest_in("min", min, domain);
+                faults.max_above_min(max, min);
+                Distribution::Uniform { min, max }
+            }
+            DistributionSpec::Triangular { min, mode, max } => {
+                faults.lowest_in("min", min, domain);
+                faults.max_above_min(max, min);
+                if !(mode >= min && mode <= max) {
+                    faults.fail("mode", format!("must lie in [min, max], got {mode}"));
+                }
+                match Triangular::new(min, max, mode) {
+                    Ok(triangular) if faults.errors.is_empty() => Distribution::Triangular {
+                        triangular,
+                        min,
+                        mode,
+                        max,
+                    },
+                    _ => return Err(faults.errors),
+                }
+            }
+            DistributionSpec::Weibull { scale, shape } => {
+                faults.positive("scale", scale);
+                faults.positive("shape", shape);
+                faults.reaches_zero("Weibull", domain);
+                match Weibull::new(scale, shape) {
+                    Ok(weibull) if faults.errors.is_empty() => Distribution::Weibull {
+                        weibull,
+                        scale,
+                        shape,
+                    },
+                    _ => return Err(faults.errors),
+                }
+            }
+        };
+        if faults.errors.is_empty() {
+            Ok(distribution)
+        } else {
+            Err(faults.errors)
+        }
+    }
+
+    /// One random draw.
+    #[inline]
+    pub fn sample<R: rand::Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+        match self {
+            Distribution::Fixed(value) => *value,
+            Distribution::Normal {
+                normal, min, max, ..
+            } => {
+                for _ in 0..MAX_REJECTIONS {
+                    let x = normal.sample(rng);
+                    if x >= *min && x <= *max {
+                        return x;
+                    }
+                }
+                normal.sample(rng).clamp(*min, *max)
+            }
+            Distribution::Lognormal { lognormal, .. } => lognormal.sample(rng),
+            Distribution::Uniform { min, max } => min + (max - min) * rng.random::<f64>(),
+            Distribution::Triangular { triangular, .. } => triangular.sample(rng),
+            Distribution::Weibull { weibull, .. } => weibull.sample(rng),
+        }
+    }
+
+    /// The value at probability `u` in (0, 1): the inverse CDF, for stratified (LHS) draws.
+    /// A truncated normal is inverted inside its window, so no rejection is needed.
+    pub fn quantile(&self, u: f64) -> f64 {
+        match *self {
+            Distribution::Fixed(value) => value,
+            Distribution::Normal {
+                mean,
+                sd,
+                min,
+                max,
+                cdf_min,
+                cdf_max,
+                ..
+            } => (mean + sd * standard_normal_quantile(cdf_min + u * (cdf_max - cdf_min)))
+                .clamp(min, max),
+            Distribution::Lognormal { median, sigma, .. } => {
+                median * (sigma * standard_normal_quantile(u)).exp()
+            }
+            Distribution::Uniform { min, max } => min + u * (max - min),
+            Distribution::Triangular { min, mode, max, .. } => {
+                let split = (mode - min) / (max - min);
+                if u < split {
+                    min + (u * (max - min) * (mode - min)).sqrt()
+                } else {
+                    max - ((1.0 - u) * (max - min) * (max - mode)).sqrt()
+                }
+            }
+            Distribution::Weibull { scale, shape, .. } => scale * (-(-u).ln_1p()).powf(1.0 / shape),
+        }
+    }
+
+    /// A draw at a random point of stratum `stratum` of `strata` equal-probability strata.
+    pub fn stratified<R: rand::Rng + ?Sized>(&self, stratum: u32, strata: u32, rng: &mut R) -> f64 {
+        let offset: f64 = rng.sample(Open01);
+        self.quantile((f64::from(stratum) + offset) / f64::from(strata))
+    }
+}
+
+/// The errors found in one distribution, each below its pointer.
+struct Faults<'a> {
+    at: &'a Pointer,
+    errors: Vec<FieldError>,
+}
+
+impl Faults<'_> {
+    fn fail(&mut self, field: &str, detail: String) {
+        self.errors.push(FieldError {
+            pointer: self.at.child(field).to_string(),
+            detail,
+        });
+    }
+
+    fn positive(&mut self, field: &str, value: f64) {
+        if !(value.is_finite() && value > 0.0) {
+            self.fail(field, format!("must be positive, got {value}"));
+        }
+    }
+
+    /// The lowest value the distribution can produce must be in the parameter's domain.
+    fn lowest_in(&mut self, field: &str, value: f64, domain: Domain) {
+        if !domain.contains(value) {
+            self.fail(
+                field,
+                format!(
+                    "must be {} for this parameter, got {value}",
+                    domain.describe()
+                ),
+            );
+        }
+    }
+
+    fn max_above_min(&mut self, max: f64, min: f64) {
+        if !(max.is_finite() && max > min) {
+            self.fail("max", format!("must be finite and above min, got {max}"));
+        }
+    }
+
+    /// A distribution whose support reaches down to 0 needs a domain that does too.
+    fn reaches_zero(&mut self, kind: &str, domain: Domain) {
+        if domain.lower > 0.0 {
+            self.fail(
+                "kind",
+                format!(
+                    "a {kind} reaches down to 0; this parameter must be {}",
+                    domain.describe()
+                ),
+            );
+        }
+    }
+}
+
+/// `Phi(x)`, the standard normal CDF, from libm's `erfc` (accurate in both tails).
+pub fn standard_normal_cdf(x: f64) -> f64 {
+    0.5 * libm::erfc(-x / std::f64::consts::SQRT_2)
+}
+
+/// `Phi^-1(p)` for `p` in (0, 1): Abramowitz & Stegun 26.2.23 (error below 4.5e-4) as a start, then
+/// Halley steps on the smaller tail, where `Phi` has full relative accuracy. Each step roughly
+/// triples the correct digits, so three leave the result at the rounding level.
+pub fn standard_normal_quantile(p: f64) -> f64 {
+    if p <= 0.0 {
+        return f64::NEG_INFINITY;
+    }
+    if p >= 1.0 {
+        return f64::INFINITY;
+    }
+    let tail = p.min(1.0 - p);
+    let t = (-2.0 * tail.ln()).sqrt();
+    let mut x = -(t
+        - (2.515_517 + t * (0.802_853 + t * 0.010_328))
+            / (1.0 + t * (1.432_788 + t * (0.189_269 + t * 0.001_308))));
+    for _ in 0..3 {
+        let density = (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt();
+        if density == 0.0 {
+            break;
+        }
+        let ratio = (standard_normal_cdf(x) - tail) / density;
+        x -= ratio / (1.0 + 0.5 * x * ratio);
+    }
+    if p > 0.5 { -x } else { x }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    fn parse(json: &str) -> DistributionSpec {
+        serde_json::from_str(json).unwrap()
+    }
+
+    fn pointers(json: &str, domain: Domain) -> Vec<String> {
+        match Distribution::new(&parse(json), domain, &Pointer::root().child("d")) {
+            Ok(_) => Vec::new(),
+            Err(errors) => errors.into_iter().map(|e| e.pointer).collect(),
+        }
+    }
+
+    #[test]
+    fn normal_quantile_matches_known_values() {
+        // Independent values (scipy.stats.norm.ppf, scipy 1.x).
+        for (p, x) in [
+            (0.975, 1.959_963_984_540_054),
+            (0.5, 0.0),
+            (0.1, -1.281_551_565_544_600_5),
+            (1e-10, -6.361_340_902_404_056),
+            (1e-300, -37.047_096_299_361_2),
+        ] {
+            let got = standard_normal_quantile(p);
+            assert!(
+                (got - x).abs() <= 1e-12 * x.abs().max(1.0),
+                "p = {p}: {got} vs {x}"
+            );
+        }
+        assert_relative_eq!(
+            standard_normal_cdf(1.959_963_984_540_054),
+            0.975,
+            max_relative = 1e-15
+        );
+    }
+
+    #[test]
+    fn a_distribution_that_can_leave_the_domain_is_rejected_naming_the_field() {
+        let (positive, non_negative) = (Domain::POSITIVE, Domain::NON_NEGATIVE);
+        let above = Domain {
+            lower: 1e-3,
+            inclusive: true,
+        };
+        let cases = [
+            (r#"{"kind":"normal","mean":1,"sd":0.1}"#, positive, "/d/min"),
+            (
+                r#"{"kind":"normal","mean":1,"sd":0.1,"min":0}"#,
+                positive,
+                "/d/min",
+            ),
+            (
+                r#"{"kind":"normal","mean":1,"sd":0.1,"min":2}"#,
+                positive,
+                "/d/min",
+            ),
+            (
+                r#"{"kind":"normal","mean":1,"sd":0,"min":0.5}"#,
+                positive,
+                "/d/sd",
+            ),
+            (
+                r#"{"kind":"normal","mean":1,"sd":1,"min":0.5,"max":0.4}"#,
+                positive,
+                "/d/max",
+            ),
+            (r#"{"kind":"uniform","min":-1,"max":1}"#, positive, "/d/min"),
+            (r#"{"kind":"uniform","min":1,"max":1}"#, positive, "/d/max"),
+            (
+                r#"{"kind":"triangular","min":1,"mode":3,"max":2}"#,
+                positive,
+                "/d/mode",
+            ),
+            (
+                r#"{"kind":"lognormal","median":-1,"sigma":0.1}"#,
+                positive,
+                "/d/median",
+            ),
+            (
+                r#"{"kind":"lognormal","median":1,"sigma":0}"#,
+                positive,
+                "/d/sigma",
+            ),
+            (
+                r#"{"kind":"weibull","scale":1,"shape":-2}"#,
+                positive,
+                "/d/shape",
+            ),
+            (r#"{"kind":"fixed","value":0}"#, positive, "/d/value"),
+            (
+                r#"{"kind":"lognormal","median":1,"sigma":0.1}"#,
+                above,
+                "/d/kind",
+            ),
+            (
+                r#"{"kind":"weibull","scale":1,"shape":2}"#,
+                above,
+                "/d/kind",
+            ),
+        ];
+        for (json, domain, pointer) in cases {
+            assert_eq!(pointers(json, domain), [pointer], "{json}");
+        }
+        assert!(
+            pointers(
+                r#"{"kind":"normal","mean":1,"sd":0.1,"min":0}"#,
+                non_negative
+            )
+            .is_empty()
+        );
+    }
+
+    #[test]
+    fn unknown_kinds_and_fields_do_not_parse() {
+        assert!(serde_json::from_str::<DistributionSpec>(r#"{"kind":"cauchy","x0":1}"#).is_err());
+        assert!(
+            serde_json::from_str::<DistributionSpec>(r#"{"kind":"fixed","value":1,"sd":2}"#)
+                .is_err()
+        );
+    }
+
+    #[test]
+    fn draws_stay_in_the_truncation_window_and_have_the_right_mean() {
+        let spec = parse(r#"{"kind":"normal","mean":1,"sd":1,"min":0.5,"max":3}"#);
+        let d = Distribution::new(&spec, Domain::POSITIVE, &Pointer::root()).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let n = 200_000;
+        let draws: Vec<f64> = (0..n).map(|_| d.sample(&mut rng)).collect();
+        assert!(draws.iter().all(|x| (0.5..=3.0).contains(x)));
+        // E[X | a < X < b] = mu + sd (phi(a') - phi(b')) / (Phi(b') - Phi(a'))
+        let phi = |x: f64| (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt();
+        let (a, b) = (-0.5, 2.0);
+        let expected = 1.0 + (phi(a) - phi(b)) / (standard_normal_cdf(b) - standard_normal_cdf(a));
+        let mean = draws.iter().sum::<f64>() / f64::from(n);
+        assert!((mean - expected).abs() < 0.005, "{mean} vs {expected}");
+    }
+
+    #[test]
+    fn quantile_inverts_each_cdf() {
+        let cases = [
+            (r#"{"kind":"uniform","min":2,"max":4}"#, 0.25, 2.5),
+            (
+                r#"{"kind":"triangular","min":0,"mode":1,"max":2}"#,
+                0.125,
+                0.5,
+            ),
+            (
+                r#"{"kind":"triangular","min":0,"mode":1,"max":2}"#,
+                0.875,
+                1.5,
+            ),
+            (r#"{"kind":"lognormal","median":2,"sigma":0.5}"#, 0.5, 2.0),
+            (
+                r#"{"kind":"weibull","scale":3,"shape":2}"#,
+                1.0 - (-1.0f64).exp(),
+                3.0,
+            ),
+            (
+                r#"{"kind":"normal","mean":5,"sd":2,"min":0}"#,
+                0.5,
+                5.0 + 2.0 * 0.007_782_739_908_188_287,
+            ),
+        ];
+        for (json, u, x) in cases {
+            let d =
+                Distribution::new(&parse(json), Domain::NON_NEGATIVE, &Pointer::root()).unwrap();
+            assert_relative_eq!(d.quantile(u), x, max_relative = 1e-9);
+        }
+    }
+}

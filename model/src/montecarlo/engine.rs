@@ -1,0 +1,371 @@
+//! Runs a [`Job`]: devices in parallel, each on its own random stream, merged in a fixed order.
+//!
+//! Determinism: device `d` draws from ChaCha8 seeded with the job seed on stream `d`, whatever thread
+//! runs it. Each batch of devices is cut into `G` contiguous chunks (at most [`GROUPS`]); chunk `g` runs
+//! its devices in index order into its own accumulators and is merged into group `g` in batch order.
+//! Nothing depends on the number of threads, so results are bit-identical for any `--threads`.
+//!
+//! Independence: a device's operations share its scatter and wear state, so they are not independent
+//! samples; groups of devices are. Confidence intervals come from the spread between the groups
+//! (see [`crate::stats`]).
+
+use super::job::{Job, Parameter, Per, SamplerKind, Scatter};
+use super::metric::{DeviceMetric, Metric};
+use crate::operation::{Conditions, Needs, Setup};
+use crate::stats::Accumulator;
+use crate::wear::WearLaw;
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+/// The most groups (independent units for confidence intervals) a summary is built from.
+pub const GROUPS: u64 = 32;
+
+/// LHS permutations draw from streams at and above this; device streams are below it.
+const LHS_STREAM_BASE: u64 = 1 << 63;
+
+/// What the engine reports while it runs, and how it is stopped.
+pub trait Observer: Sync {
+    /// Called from worker threads as devices finish; keep it cheap.
+    fn progress(&self, _operations_done: u64, _operations_total: u64) {}
+    /// Checked before every device: cooperative cancellation.
+    fn cancelled(&self) -> bool {
+        false
+    }
+}
+
+/// An observer that ignores progress and never cancels.
+pub struct Silent;
+impl Observer for Silent {}
+
+/// A cancellation flag and a progress callback.
+pub struct Watch<'a, F: Fn(u64, u64) + Sync> {
+    pub cancel: &'a AtomicBool,
+    pub on_progress: F,
+}
+
+impl<F: Fn(u64, u64) + Sync> Observer for Watch<'_, F> {
+    fn progress(&self, done: u64, total: u64) {
+        (self.on_progress)(done, total);
+    }
+    fn cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+}
+
+/// The run was cancelled through its [`Observer`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("the job was cancelled")]
+pub struct Cancelled;
+
+/// Accumulators of every requested metric for one group of devices: operation metrics by
+/// `[bin][metric]`, then device metrics.
+#[derive(Debug, Clone)]
+pub struct GroupStats {
+    pub operations: Vec<Accumulator>,
+    pub devices: Vec<Accumulator>,
+}
+
+impl GroupStats {
+    fn new(job: &Job) -> Self {
+        let limit = |metric| job.limits.get(&metric).copied();
+        let per_bin: Vec<Option<f64>> = job
+            .operation_metrics
+            .iter()
+            .map(|m| limit(Metric::Operation(*m)))
+            .collect();
+        let bins = usize::try_from(job.bins()).expect("bins fit in memory");
+        Self {
+            operations: (0..bins)
+                .flat_map(|_| per_bin.iter().map(|l| Accumulator::new(*l)))
+                .collect(),
+            devices: job
+                .device_metrics
+                .iter()
+                .map(|m| Accumulator::new(limit(Metric::Device(*m))))
+                .collect(),
+        }
+    }
+
+    fn merge(&mut self, other: &GroupStats) {
+        for (mine, theirs) in self.operations.iter_mut().zip(&other.operations) {
+            mine.merge(theirs);
+        }
+        for (mine, theirs) in self.devices.iter_mut().zip(&other.devices) {
+            mine.merge(theirs);
+        }
+    }
+}
+
+/// Everything a run produced before it is summarised: one [`GroupStats`] per group.
+#[derive(Debug, Clone)]
+pub struct Tally {
+    pub groups: Vec<GroupStats>,
+    pub devices: u64,
+}
+
+/// Parameters of one device or operation that scatter can replace.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Draws {
+    radius_m: f64,
+    pressure_pa: f64,
+    conditions: Conditions,
+}
+
+impl Draws {
+    fn set(&mut self, parameter: Parameter, value: f64) {
+        match parameter {
+            Parameter::ContactRadius => self.radius_m = value,
+            Parameter::DynamicYieldPressure => self.pressure_pa = value,
+            Parameter::ImpactVelocity => self.conditions.impact_velocity_m_s = Some(value),
+            Parameter::DropHeight => self.conditions.drop_height_m = value,
+            Parameter::StaticForce => self.conditions.static_force_n = value,
+            Parameter::Current => self.conditions.current_a = value,
+            Parameter::BreakdownField => self.conditions.breakdown_field_v_per_m = value,
+        }
+    }
+}
+
+/// The job worked out for the hot loop.
+struct Plan<'a> {
+    job: &'a Job,
+    setup: Setup,
+    wear: WearLaw,
+    nominal: Draws,
+    device_scatter: Vec<&'a Scatter>,
+    operation_scatter: Vec<&'a Scatter>,
+    /// Per-operation scatter touches only the velocity, radius or pressure: no operation rebuild.
+    cheap_operation_scatter: bool,
+    needs: Needs,
+    /// Wear changes the radius only if an arc can burn and a later operation exists.
+    track_wear: bool,
+}
+
+impl<'a> Plan<'a> {
+    fn new(job: &'a Job) -> Self {
+        let scenario = &job.scenario;
+        let spec = scenario.spec();
+        let setup = Setup::new(scenario);
+        let nominal = Draws {
+            radius_m: spec.material.contact_radius_m,
+            pressure_pa: spec.material.dynamic_yield_pressure_pa,
+            conditions: Conditions::nominal(scenario),
+        };
+        let (device_scatter, operation_scatter): (Vec<_>, Vec<_>) =
+            job.scatter.iter().partition(|s| s.per == Per::Device);
+        let cheap_operation_scatter = operation_scatter.iter().all(|s| {
+            matches!(
+                s.parameter,
+                Parameter::ImpactVelocity
+                    | Parameter::ContactRadius
+                    | Parameter::DynamicYieldPressure
+            )
+        });
+        let current_scattered = job
+            .scatter
+            .iter()
+            .any(|s| s.parameter == Parameter::Current);
+        let can_arc = setup
+            .operation(&nominal.conditions, job.spec.fidelity)
+            .arcs()
+            || current_scattered;
+        Self {
+            job,
+            setup,
+            wear: WearLaw::new(scenario),
+            nominal,
+            device_scatter,
+            operation_scatter,
+            cheap_operation_scatter,
+            needs: Needs {
+                impact: job.operation_metrics.iter().any(|m| m.needs_impact()),
+            },
+            track_wear: can_arc && job.spec.operations > 1,
+        }
+    }
+
+    /// Runs device `device` (its stream), with its LHS strata if any, into `stats`.
+    fn run_device(
+        &self,
+        device: u64,
+        strata: Option<(&[Vec<u32>], usize)>,
+        stats: &mut GroupStats,
+    ) {
+        let job = self.job;
+        let mut rng = ChaCha8Rng::seed_from_u64(job.seed);
+        rng.set_stream(device);
+        let mut draws = self.nominal;
+        for (k, scatter) in self.device_scatter.iter().enumerate() {
+            let value = match strata {
+                Some((permutations, local)) => {
+                    let strata_count =
+                        u32::try_from(permutations[k].len()).expect("batch fits u32");
+                    scatter
+                        .distribution
+                        .stratified(permutations[k][local], strata_count, &mut rng)
+                }
+                None => scatter.distribution.sample(&mut rng),
+            };
+            draws.set(scatter.parameter, value);
+        }
+        let fidelity = job.spec.fidelity;
+        let device_operation = self.setup.operation(&draws.conditions, fidelity);
+        let metrics = &job.operation_metrics;
+        let mut cumulative_arc_energy_j = 0.0;
+        let operations = job.spec.operations;
+        let bins = usize::try_from(job.bins()).expect("bins fit in memory");
+        for bin_index in 0..bins {
+            let start = job.bin_operations * bin_index as u64;
+            let end = (start + job.bin_operations).min(operations);
+            let bin =
+                &mut stats.operations[bin_index * metrics.len()..(bin_index + 1) * metrics.len()];
+            for _ in start..end {
+                let (operation, radius_m, pressure_pa) = if self.operation_scatter.is_empty() {
+                    (device_operation, draws.radius_m, draws.pressure_pa)
+                } else {
+                    let mut op_draws = draws;
+                    for scatter in &self.operation_scatter {
+                        op_draws.set(scatter.parameter, scatter.distribution.sample(&mut rng));
+                    }
+                    let operation = if self.cheap_operation_scatter {
+                        match op_draws.conditions.impact_velocity_m_s {
+                            Some(u) => device_operation.with_impact_velocity(u),
+                            None => device_operation,
+                        }
+                    } else {
+                        self.setup.operation(&op_draws.conditions, fidelity)
+                    };
+                    (operation, op_draws.radius_m, op_draws.pressure_pa)
+                };
+                let radius_m = if self.track_wear && cumulative_arc_energy_j > 0.0 {
+                    self.wear.radius_m(radius_m, cumulative_arc_energy_j)
+                } else {
+                    radius_m
+                };
+                let outcome = operation.run(radius_m, pressure_pa, self.needs, None);
+                for (accumulator, metric) in bin.iter_mut().zip(metrics) {
+                    accumulator.push(metric.value(&outcome));
+                }
+                cumulative_arc_energy_j += outcome.arc_energy_j;
+            }
+        }
+        for (accumulator, metric) in stats.devices.iter_mut().zip(&job.device_metrics) {
+            accumulator.push(self.device_metric(*metric, &draws, cumulative_arc_energy_j));
+        }
+    }
+
+    fn device_metric(
+        &self,
+        metric: DeviceMetric,
+        draws: &Draws,
+        cumulative_arc_energy_j: f64,
+    ) -> f64 {
+        let final_radius_m = || {
+            if cumulative_arc_energy_j > 0.0 {
+                self.wear.radius_m(draws.radius_m, cumulative_arc_energy_j)
+            } else {
+                draws.radius_m
+            }
+        };
+        match metric {
+            DeviceMetric::CumulativeArcEnergy => cumulative_arc_energy_j,
+            DeviceMetric::ErodedMass => self.wear.eroded_mass_kg(cumulative_arc_energy_j),
+            DeviceMetric::FinalRadius => final_radius_m(),
+            DeviceMetric::FinalKappa => self
+                .setup
+                .kappa_law()
+                .at(final_radius_m(), draws.pressure_pa),
+        }
+    }
+
+    /// LHS permutations of one batch: one per device-level parameter, from the batch's own stream.
+    fn lhs_permutations(&self, batch: u64, size: u64) -> Vec<Vec<u32>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(self.job.seed);
+        rng.set_stream(LHS_STREAM_BASE | batch);
+        let size = u32::try_from(size).expect("an LHS batch has fewer than 2^32 devices");
+        self.device_scatter
+            .iter()
+            .map(|_| {
+                let mut permutation: Vec<u32> = (0..size).collect();
+                permutation.shuffle(&mut rng);
+                permutation
+            })
+            .collect()
+    }
+
+    /// Runs devices `first..first + size` as batch `batch`, one chunk per group, in parallel.
+    fn run_batch(
+        &self,
+        batch: u64,
+        first: u64,
+        size: u64,
+        observer: &dyn Observer,
+        done: &AtomicU64,
+        total: u64,
+    ) -> Result<Vec<GroupStats>, Cancelled> {
+        let groups = GROUPS.min(size);
+        let permutations = (self.job.spec.sampler == SamplerKind::Lhs
+            && !self.device_scatter.is_empty())
+        .then(|| self.lhs_permutations(batch, size));
+        let operations = self.job.spec.operations;
+        (0..groups)
+            .into_par_iter()
+            .map(|group| {
+                let mut stats = GroupStats::new(self.job);
+                let (start, end) = (size * group / groups, size * (group + 1) / groups);
+                for local in start..end {
+                    if observer.cancelled() {
+                        return Err(Cancelled);
+                    }
+                    let local_index = usize::try_from(local).expect("batch fits in memory");
+                    self.run_device(
+                        first + local,
+                        permutations.as_deref().map(|p| (p, local_index)),
+                        &mut stats,
+                    );
+                    observer.progress(
+                        done.fetch_add(operations, Ordering::Relaxed) + operations,
+                        total,
+                    );
+                }
+                Ok(stats)
+            })
+            .collect()
+    }
+}
+
+/// Runs the job on the current rayon pool: the first batch of `devices`, then, with a precision
+/// target, more batches of the same size until `accept` says the target is met or `max_devices` ran.
+pub fn run(
+    job: &Job,
+    observer: &dyn Observer,
+    mut accept: impl FnMut(&Tally) -> bool,
+) -> Result<Tally, Cancelled> {
+    let plan = Plan::new(job);
+    let batch_size = job.spec.devices;
+    let max_devices = job.precision.as_ref().map_or(batch_size, |p| p.max_devices);
+    let done = AtomicU64::new(0);
+    let mut tally = Tally {
+        groups: Vec::new(),
+        devices: 0,
+    };
+    for batch in 0.. {
+        let size = batch_size.min(max_devices - tally.devices);
+        let total = (tally.devices + size) * job.spec.operations;
+        let stats = plan.run_batch(batch, tally.devices, size, observer, &done, total)?;
+        if tally.groups.is_empty() {
+            tally.groups = stats;
+        } else {
+            for (group, stats) in tally.groups.iter_mut().zip(&stats) {
+                group.merge(stats);
+            }
+        }
+        tally.devices += size;
+        if tally.devices >= max_devices || accept(&tally) {
+            break;
+        }
+    }
+    Ok(tally)
+}

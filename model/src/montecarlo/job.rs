@@ -1,0 +1,446 @@
+//! The job of CONTRACT.md: what a user submits ([`JobSpec`]) and what passed every rule ([`Job`]).
+
+use super::distribution::{Distribution, DistributionSpec, Domain};
+use super::metric::{DeviceMetric, Metric, OperationMetric};
+use crate::error::{FieldError, InvalidInput, Pointer};
+use crate::operation::Fidelity;
+use crate::scenario::{Scenario, ScenarioSpec};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// The most operation bins a job may ask for: memory is bins x metrics x groups x sketch.
+pub const MAX_BINS: u64 = 1000;
+/// The most devices (including precision batches) and operations per device.
+pub const MAX_DEVICES: u64 = 100_000_000;
+/// See [`MAX_DEVICES`].
+pub const MAX_OPERATIONS: u64 = 100_000_000;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JobSpec {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    #[serde(default)]
+    pub scenario: ScenarioSpec,
+    #[serde(default)]
+    pub fidelity: Fidelity,
+    #[serde(default = "default_count")]
+    pub devices: u64,
+    #[serde(default = "default_count")]
+    pub operations: u64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bin_operations: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    #[serde(default)]
+    pub sampler: SamplerKind,
+    #[serde(default)]
+    pub scatter: Vec<ScatterSpec>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub metrics: Option<Vec<String>>,
+    #[serde(default)]
+    pub limits: BTreeMap<String, f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub precision: Option<PrecisionSpec>,
+}
+
+fn default_count() -> u64 {
+    1000
+}
+
+impl Default for JobSpec {
+    fn default() -> Self {
+        Self {
+            name: None,
+            scenario: ScenarioSpec::default(),
+            fidelity: Fidelity::default(),
+            devices: default_count(),
+            operations: default_count(),
+            bin_operations: None,
+            seed: None,
+            sampler: SamplerKind::default(),
+            scatter: Vec::new(),
+            metrics: None,
+            limits: BTreeMap::new(),
+            precision: None,
+        }
+    }
+}
+
+/// How device-level scatter is drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SamplerKind {
+    /// Independent draws from each device's stream.
+    #[default]
+    Random,
+    /// Latin hypercube: each batch of devices covers every equal-probability stratum of every
+    /// device-level parameter once.
+    Lhs,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScatterSpec {
+    pub parameter: Parameter,
+    pub per: Per,
+    pub distribution: DistributionSpec,
+}
+
+/// The scenario values scatter may replace.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Parameter {
+    /// The new-contact radius `r0` (MODEL.md section 6).
+    #[serde(rename = "contact_radius_m")]
+    ContactRadius,
+    #[serde(rename = "dynamic_yield_pressure_pa")]
+    DynamicYieldPressure,
+    #[serde(rename = "impact_velocity_m_s")]
+    ImpactVelocity,
+    #[serde(rename = "drop_height_m")]
+    DropHeight,
+    #[serde(rename = "static_force_n")]
+    StaticForce,
+    #[serde(rename = "current_a")]
+    Current,
+    #[serde(rename = "breakdown_field_v_per_m")]
+    BreakdownField,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Per {
+    Device,
+    Operation,
+}
+
+/// Run device batches until the 95 % CI half-width of `statistic` of `metric` (last bin) is at most
+/// `relative_half_width` of its value, or `max_devices` have run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PrecisionSpec {
+    pub metric: String,
+    #[serde(default = "default_statistic")]
+    pub statistic: String,
+    pub relative_half_width: f64,
+    pub max_devices: u64,
+}
+
+fn default_statistic() -> String {
+    "p95".to_owned()
+}
+
+/// One validated scatter entry.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scatter {
+    pub parameter: Parameter,
+    pub per: Per,
+    pub distribution: Distribution,
+}
+
+/// The statistic a precision target is set on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Statistic {
+    Mean,
+    Quantile(&'static str),
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Precision {
+    pub metric: OperationMetric,
+    pub statistic: Statistic,
+    pub relative_half_width: f64,
+    pub max_devices: u64,
+}
+
+/// A job that passed every rule: defaults filled in, seed fixed, distributions ready.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Job {
+    pub spec: JobSpec,
+    pub scenario: Scenario,
+    pub seed: u64,
+    pub bin_operations: u64,
+    pub scatter: Vec<Scatter>,
+    pub operation_metrics: Vec<OperationMetric>,
+    pub device_metrics: Vec<DeviceMetric>,
+    pub limits: BTreeMap<Metric, f64>,
+    pub precision: Option<Precision>,
+}
+
+impl Job {
+    /// Parses and validates a job document; a missing seed is drawn by `draw_seed`.
+    pub fn from_json(text: &str, draw_seed: impl FnOnce() -> u64) -> Result<Self, InvalidInput> {
+        let spec: JobSpec = crate::error::from_json(text, &["/scatter", "/metrics"])?;
+        Self::new(spec, draw_seed)
+    }
+
+    /// Checks every rule before any computation, reporting every field at fault.
+    pub fn new(mut spec: JobSpec, draw_seed: impl FnOnce() -> u64) -> Result<Self, InvalidInput> {
+        let root = Pointer::root();
+        let mut errors = Vec::new();
+        let scenario = Scenario::new(spec.scenario.clone(), &root.child("scenario"));
+        if let Err(invalid) = &scenario {
+            errors.extend_from_slice(invalid.errors());
+        }
+        let mut count = |field: &str, value: u64, max: u64| {
+            if !(1..=max).contains(&value) {
+                errors.push(FieldError {
+                    pointer: root.child(field).to_string(),
+                    detail: format!("must be from 1 to {max}, got {value}"),
+                });
+            }
+        };
+        count("devices", spec.devices, MAX_DEVICES);
+        count("operations", spec.operations, MAX_OPERATIONS);
+        let bin_operations = spec.bin_operations.unwrap_or((spec.operations / 10).max(1));
+        if bin_operations == 0 || bin_operations > spec.operations.max(1) {
+            errors.push(FieldError {
+                pointer: root.child("bin_operations").to_string(),
+                detail: format!(
+                    "must be from 1 to operations ({}), got {bin_operations}",
+                    spec.operations
+                ),
+            });
+        } else if spec.operations.div_ceil(bin_operations) > MAX_BINS {
+            errors.push(FieldError {
+                pointer: root.child("bin_operations").to_string(),
+                detail: format!(
+                    "gives {} bins of operations; at most {MAX_BINS} are allowed",
+                    spec.operations.div_ceil(bin_operations)
+                ),
+            });
+        }
+
+        let scatter = match &scenario {
+            Ok(scenario) => {
+                check_scatter(&spec.scatter, scenario, &root.child("scatter"), &mut errors)
+            }
+            Err(_) => Vec::new(),
+        };
+
+        let metrics = match &spec.metrics {
+            None => OperationMetric::ALL
+                .map(Metric::Operation)
+                .into_iter()
+                .chain(DeviceMetric::ALL.map(Metric::Device))
+                .collect(),
+            Some(names) => {
+                let mut metrics: Vec<Metric> = Vec::new();
+                for (i, name) in names.iter().enumerate() {
+                    match parse_metric(name, &root.child("metrics").child(i), &mut errors) {
+                        Some(metric) if metrics.contains(&metric) => errors.push(FieldError {
+                            pointer: root.child("metrics").child(i).to_string(),
+                            detail: format!("`{name}` is listed twice"),
+                        }),
+                        Some(metric) => metrics.push(metric),
+                        None => {}
+                    }
+                }
+                if names.is_empty() {
+                    errors.push(FieldError {
+                        pointer: root.child("metrics").to_string(),
+                        detail: "must name at least one metric (or be left out for all)".to_owned(),
+                    });
+                }
+                metrics
+            }
+        };
+
+        let mut limits = BTreeMap::new();
+        for (name, &limit) in &spec.limits {
+            let at = root.child("limits").child(name);
+            if let Some(metric) = parse_metric(name, &at, &mut errors) {
+                if !limit.is_finite() {
+                    errors.push(FieldError {
+                        pointer: at.to_string(),
+                        detail: "must be a finite number".to_owned(),
+                    });
+                } else if !metrics.contains(&metric) {
+                    errors.push(FieldError {
+                        pointer: at.to_string(),
+                        detail: format!("`{name}` is not among the job's metrics"),
+                    });
+                } else {
+                    limits.insert(metric, limit);
+                }
+            }
+        }
+
+        let precision = spec
+            .precision
+            .as_ref()
+            .and_then(|p| check_precision(p, &spec, &metrics, &mut errors));
+
+        if !errors.is_empty() {
+            return Err(InvalidInput::new(errors));
+        }
+        let seed = *spec.seed.get_or_insert_with(draw_seed);
+        spec.bin_operations = Some(bin_operations);
+        let (operation_metrics, device_metrics) = split_metrics(&metrics);
+        Ok(Self {
+            scenario: scenario.expect("no errors"),
+            spec,
+            seed,
+            bin_operations,
+            scatter,
+            operation_metrics,
+            device_metrics,
+            limits,
+            precision,
+        })
+    }
+
+    /// The number of operation bins.
+    pub fn bins(&self) -> u64 {
+        self.spec.operations.div_ceil(self.bin_operations)
+    }
+}
+
+fn split_metrics(metrics: &[Metric]) -> (Vec<OperationMetric>, Vec<DeviceMetric>) {
+    let operation = metrics.iter().filter_map(|m| {
+        if let Metric::Operation(m) = m {
+            Some(*m)
+        } else {
+            None
+        }
+    });
+    let device = metrics.iter().filter_map(|m| {
+        if let Metric::Device(m) = m {
+            Some(*m)
+        } else {
+            None
+        }
+    });
+    (operation.collect(), device.collect())
+}
+
+fn parse_metric(name: &str, at: &Pointer, errors: &mut Vec<FieldError>) -> Option<Metric> {
+    let metric = Metric::parse(name);
+    if metric.is_none() {
+        errors.push(FieldError {
+            pointer: at.to_string(),
+            detail: format!("unknown metric `{name}`; known: {}", Metric::all_names()),
+        });
+    }
+    metric
+}
+
+/// The values each parameter may take in this scenario (MODEL.md section 9).
+fn domain(parameter: Parameter, scenario: &Scenario) -> Domain {
+    let spec = scenario.spec();
+    match parameter {
+        // r0 must stay at or above the worn radius r_inf.
+        Parameter::ContactRadius => Domain {
+            lower: spec.material.worn_radius_m,
+            inclusive: true,
+        },
+        Parameter::DynamicYieldPressure | Parameter::BreakdownField => Domain::POSITIVE,
+        // Without a spring, a zero static force would never return the arm.
+        Parameter::StaticForce if spec.mechanism.spring_stiffness_n_per_m == 0.0 => {
+            Domain::POSITIVE
+        }
+        Parameter::ImpactVelocity
+        | Parameter::DropHeight
+        | Parameter::StaticForce
+        | Parameter::Current => Domain::NON_NEGATIVE,
+    }
+}
+
+fn check_scatter(
+    specs: &[ScatterSpec],
+    scenario: &Scenario,
+    at: &Pointer,
+    errors: &mut Vec<FieldError>,
+) -> Vec<Scatter> {
+    let mut scatter: Vec<Scatter> = Vec::new();
+    for (i, spec) in specs.iter().enumerate() {
+        let at = at.child(i);
+        if specs[..i].iter().any(|s| s.parameter == spec.parameter) {
+            errors.push(FieldError {
+                pointer: at.child("parameter").to_string(),
+                detail: "is scattered twice; give each parameter one distribution".to_owned(),
+            });
+            continue;
+        }
+        match Distribution::new(
+            &spec.distribution,
+            domain(spec.parameter, scenario),
+            &at.child("distribution"),
+        ) {
+            Ok(distribution) => scatter.push(Scatter {
+                parameter: spec.parameter,
+                per: spec.per,
+                distribution,
+            }),
+            Err(found) => errors.extend(found),
+        }
+    }
+    scatter
+}
+
+fn check_precision(
+    spec: &PrecisionSpec,
+    job: &JobSpec,
+    metrics: &[Metric],
+    errors: &mut Vec<FieldError>,
+) -> Option<Precision> {
+    let at = Pointer::root().child("precision");
+    let before = errors.len();
+    let metric = match Metric::parse(&spec.metric) {
+        Some(Metric::Operation(metric)) if metrics.contains(&Metric::Operation(metric)) => {
+            Some(metric)
+        }
+        _ => {
+            errors.push(FieldError {
+                pointer: at.child("metric").to_string(),
+                detail: format!(
+                    "must be one of the job's operation metrics, got `{}`",
+                    spec.metric
+                ),
+            });
+            None
+        }
+    };
+    let statistic = if spec.statistic == "mean" {
+        Some(Statistic::Mean)
+    } else if let Some((name, _)) = crate::stats::QUANTILES
+        .iter()
+        .find(|(name, _)| *name == spec.statistic)
+    {
+        Some(Statistic::Quantile(name))
+    } else {
+        errors.push(FieldError {
+            pointer: at.child("statistic").to_string(),
+            detail: format!(
+                "must be `mean` or one of p01 p05 p10 p25 p50 p75 p90 p95 p99, got `{}`",
+                spec.statistic
+            ),
+        });
+        None
+    };
+    if !(spec.relative_half_width > 0.0 && spec.relative_half_width < 1.0) {
+        errors.push(FieldError {
+            pointer: at.child("relative_half_width").to_string(),
+            detail: format!(
+                "must be above 0 and below 1, got {}",
+                spec.relative_half_width
+            ),
+        });
+    }
+    if !(job.devices..=MAX_DEVICES).contains(&spec.max_devices) {
+        errors.push(FieldError {
+            pointer: at.child("max_devices").to_string(),
+            detail: format!(
+                "must be from devices ({}) to {MAX_DEVICES}, got {}",
+                job.devices, spec.max_devices
+            ),
+        });
+    }
+    (errors.len() == before).then(|| Precision {
+        metric: metric.expect("checked"),
+        statistic: statistic.expect("checked"),
+        relative_half_width: spec.relative_half_width,
+        max_devices: spec.max_devices,
+    })
+}

@@ -1,0 +1,152 @@
+//! The metrics a job can summarise (CONTRACT.md "Job"): per operation, and per device at the end.
+
+use crate::operation::Outcome;
+use serde::{Deserialize, Serialize};
+
+/// A per-operation metric: one field of [`Outcome`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum OperationMetric {
+    #[serde(rename = "impact_velocity_m_s")]
+    ImpactVelocity,
+    #[serde(rename = "kappa")]
+    Kappa,
+    #[serde(rename = "e1")]
+    E1,
+    #[serde(rename = "first_bounce_s")]
+    FirstBounce,
+    #[serde(rename = "total_bounce_s")]
+    TotalBounce,
+    #[serde(rename = "bounce_count")]
+    BounceCount,
+    #[serde(rename = "pre_arc_s")]
+    PreArc,
+    #[serde(rename = "arc_energy_j")]
+    ArcEnergy,
+    #[serde(rename = "peak_force_n")]
+    PeakForce,
+    #[serde(rename = "impact_duration_s")]
+    ImpactDuration,
+}
+
+impl OperationMetric {
+    pub const ALL: [OperationMetric; 10] = [
+        Self::ImpactVelocity,
+        Self::Kappa,
+        Self::E1,
+        Self::FirstBounce,
+        Self::TotalBounce,
+        Self::BounceCount,
+        Self::PreArc,
+        Self::ArcEnergy,
+        Self::PeakForce,
+        Self::ImpactDuration,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::ImpactVelocity => "impact_velocity_m_s",
+            Self::Kappa => "kappa",
+            Self::E1 => "e1",
+            Self::FirstBounce => "first_bounce_s",
+            Self::TotalBounce => "total_bounce_s",
+            Self::BounceCount => "bounce_count",
+            Self::PreArc => "pre_arc_s",
+            Self::ArcEnergy => "arc_energy_j",
+            Self::PeakForce => "peak_force_n",
+            Self::ImpactDuration => "impact_duration_s",
+        }
+    }
+
+    #[inline]
+    pub fn value(self, outcome: &Outcome) -> f64 {
+        match self {
+            Self::ImpactVelocity => outcome.impact_velocity_m_s,
+            Self::Kappa => outcome.kappa,
+            Self::E1 => outcome.e1,
+            Self::FirstBounce => outcome.first_bounce_s,
+            Self::TotalBounce => outcome.total_bounce_s,
+            Self::BounceCount => f64::from(outcome.bounce_count),
+            Self::PreArc => outcome.pre_arc_s,
+            Self::ArcEnergy => outcome.arc_energy_j,
+            Self::PeakForce => outcome.peak_force_n,
+            Self::ImpactDuration => outcome.impact_duration_s,
+        }
+    }
+
+    /// Whether every value is a whole number (its quantiles are reported as whole numbers too).
+    pub fn is_integer(self) -> bool {
+        self == Self::BounceCount
+    }
+
+    /// Whether the metric needs the first-impact phase (section 4).
+    pub fn needs_impact(self) -> bool {
+        matches!(self, Self::PeakForce | Self::ImpactDuration)
+    }
+}
+
+/// A per-device metric, taken at the end of the test.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum DeviceMetric {
+    #[serde(rename = "cumulative_arc_energy_j")]
+    CumulativeArcEnergy,
+    #[serde(rename = "eroded_mass_kg")]
+    ErodedMass,
+    #[serde(rename = "final_radius_m")]
+    FinalRadius,
+    #[serde(rename = "final_kappa")]
+    FinalKappa,
+}
+
+impl DeviceMetric {
+    pub const ALL: [DeviceMetric; 4] = [
+        Self::CumulativeArcEnergy,
+        Self::ErodedMass,
+        Self::FinalRadius,
+        Self::FinalKappa,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::CumulativeArcEnergy => "cumulative_arc_energy_j",
+            Self::ErodedMass => "eroded_mass_kg",
+            Self::FinalRadius => "final_radius_m",
+            Self::FinalKappa => "final_kappa",
+        }
+    }
+}
+
+/// Any metric, by its contract name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Metric {
+    Operation(OperationMetric),
+    Device(DeviceMetric),
+}
+
+impl Metric {
+    pub fn parse(name: &str) -> Option<Self> {
+        OperationMetric::ALL
+            .into_iter()
+            .find(|m| m.name() == name)
+            .map(Metric::Operation)
+            .or_else(|| {
+                DeviceMetric::ALL
+                    .into_iter()
+                    .find(|m| m.name() == name)
+                    .map(Metric::Device)
+            })
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Metric::Operation(m) => m.name(),
+            Metric::Device(m) => m.name(),
+        }
+    }
+
+    /// Every name, for error messages.
+    pub fn all_names() -> String {
+        let operation = OperationMetric::ALL.iter().map(|m| m.name());
+        let device = DeviceMetric::ALL.iter().map(|m| m.name());
+        operation.chain(device).collect::<Vec<_>>().join(", ")
+    }
+}

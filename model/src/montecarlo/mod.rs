@@ -1,0 +1,217 @@
+//! Monte Carlo endurance tests (CONTRACT.md "Job" and "Result"): `N` devices with scattered
+//! parameters through `M` make operations each, the surface of each wearing with its cumulative arc
+//! energy (MODEL.md section 6), summarised per bin of operations with honest confidence intervals.
+
+pub mod distribution;
+pub mod engine;
+pub mod job;
+pub mod metric;
+
+pub use engine::{Cancelled, Observer, Silent, Tally, Watch};
+pub use job::{Job, JobSpec};
+pub use metric::{DeviceMetric, Metric, OperationMetric};
+
+use crate::stats::{Accumulator, Summary, summarize};
+use job::Statistic;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// The generator every draw comes from, recorded in each result.
+pub const GENERATOR: &str = "ChaCha8Rng (rand_chacha) seeded by seed_from_u64(seed); device d draws from stream d, LHS batch b permutes on stream 2^63 + b";
+
+/// Versions of the crates that fix the random numbers, recorded in each result (checked against
+/// Cargo.lock by a test).
+pub const RANDOM_CRATES: [(&str, &str); 3] = [
+    ("rand", "0.10.3"),
+    ("rand_chacha", "0.10.0"),
+    ("rand_distr", "0.6.0"),
+];
+
+/// One bin of operations: its summary and the operations it covers (`op_end` exclusive).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Bin {
+    #[serde(flatten)]
+    pub summary: Summary,
+    pub op_start: u64,
+    pub op_end: u64,
+}
+
+/// Whether the precision target was met, and with how many devices.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PrecisionReport {
+    pub metric: String,
+    pub statistic: String,
+    pub target_relative_half_width: f64,
+    pub achieved_relative_half_width: f64,
+    pub met: bool,
+    pub devices: u64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Timing {
+    pub wall_s: f64,
+    pub operations_per_s: f64,
+}
+
+/// The Result of CONTRACT.md.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct JobResult {
+    /// The job with every default filled in, its seed, the generator and crate versions.
+    pub job: serde_json::Value,
+    pub operations: BTreeMap<String, Vec<Bin>>,
+    pub devices: BTreeMap<String, Summary>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub precision: Option<PrecisionReport>,
+    pub timing: Timing,
+}
+
+/// Runs a job on the current rayon pool and summarises it.
+pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, Cancelled> {
+    let started = Instant::now();
+    let tally = engine::run(job, observer, |tally| {
+        job.precision
+            .as_ref()
+            .is_some_and(|p| precision_half_width(job, tally, p) <= p.relative_half_width)
+    })?;
+    let wall_s = started.elapsed().as_secs_f64();
+    let operations_run = tally.devices * job.spec.operations;
+    Ok(JobResult {
+        job: resolved_job(job, tally.devices),
+        operations: summarize_operations(job, &tally),
+        devices: summarize_devices(job, &tally),
+        precision: job.precision.as_ref().map(|p| {
+            let achieved = precision_half_width(job, &tally, p);
+            PrecisionReport {
+                metric: p.metric.name().to_owned(),
+                statistic: statistic_name(p.statistic).to_owned(),
+                target_relative_half_width: p.relative_half_width,
+                achieved_relative_half_width: achieved,
+                met: achieved <= p.relative_half_width,
+                devices: tally.devices,
+            }
+        }),
+        timing: Timing {
+            wall_s,
+            operations_per_s: operations_run as f64 / wall_s.max(1e-9),
+        },
+    })
+}
+
+fn statistic_name(statistic: Statistic) -> &'static str {
+    match statistic {
+        Statistic::Mean => "mean",
+        Statistic::Quantile(name) => name,
+    }
+}
+
+/// The groups' accumulators of one (bin, metric), in group order.
+fn operation_groups(job: &Job, tally: &Tally, bin: usize, metric: usize) -> Vec<Accumulator> {
+    let index = bin * job.operation_metrics.len() + metric;
+    tally
+        .groups
+        .iter()
+        .map(|g| g.operations[index].clone())
+        .collect()
+}
+
+fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> {
+    let bins = usize::try_from(job.bins()).expect("bins fit in memory");
+    job.operation_metrics
+        .iter()
+        .enumerate()
+        .map(|(m, metric)| {
+            let summaries = (0..bins)
+                .map(|b| {
+                    let op_start = job.bin_operations * b as u64;
+                    let mut summary = summarize(&operation_groups(job, tally, b, m));
+                    if metric.is_integer() {
+                        round_quantiles(&mut summary);
+                    }
+                    Bin {
+                        summary,
+                        op_start,
+                        op_end: (op_start + job.bin_operations).min(job.spec.operations),
+                    }
+                })
+                .collect();
+            (metric.name().to_owned(), summaries)
+        })
+        .collect()
+}
+
+/// The sketch reports a bucket midpoint (within 0.2 %); for a whole-number metric below 256 each bucket
+/// holds one whole number, so the nearest whole number is the exact sample quantile.
+fn round_quantiles(summary: &mut Summary) {
+    for quantile in summary.quantiles.values_mut() {
+        quantile.value = quantile.value.round();
+        quantile.ci95 = [quantile.ci95[0].floor(), quantile.ci95[1].ceil()];
+    }
+}
+
+fn summarize_devices(job: &Job, tally: &Tally) -> BTreeMap<String, Summary> {
+    job.device_metrics
+        .iter()
+        .enumerate()
+        .map(|(m, metric)| {
+            let groups: Vec<Accumulator> =
+                tally.groups.iter().map(|g| g.devices[m].clone()).collect();
+            (metric.name().to_owned(), summarize(&groups))
+        })
+        .collect()
+}
+
+/// The relative 95 % CI half-width of the precision statistic in the last bin (infinite when the
+/// statistic is 0 and the interval is not).
+fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) -> f64 {
+    let metric = job
+        .operation_metrics
+        .iter()
+        .position(|m| *m == precision.metric)
+        .expect("validated");
+    let last_bin = usize::try_from(job.bins() - 1).expect("bins fit in memory");
+    let summary = summarize(&operation_groups(job, tally, last_bin, metric));
+    let (value, [lo, hi]) = match precision.statistic {
+        Statistic::Mean => (summary.mean, summary.mean_ci95),
+        Statistic::Quantile(name) => {
+            let quantile = &summary.quantiles[name];
+            (quantile.value, quantile.ci95)
+        }
+    };
+    let half_width = 0.5 * (hi - lo);
+    if half_width == 0.0 {
+        0.0
+    } else {
+        half_width / value.abs()
+    }
+}
+
+fn resolved_job(job: &Job, devices_run: u64) -> serde_json::Value {
+    let mut spec = job.spec.clone();
+    spec.scenario = job.scenario.spec().clone();
+    spec.metrics = Some(
+        job.operation_metrics
+            .iter()
+            .map(|m| m.name())
+            .chain(job.device_metrics.iter().map(|m| m.name()))
+            .map(str::to_owned)
+            .collect(),
+    );
+    let mut value = serde_json::to_value(&spec).expect("a job serialises");
+    let object = value.as_object_mut().expect("a job is an object");
+    object.insert("devices_run".into(), devices_run.into());
+    object.insert("generator".into(), GENERATOR.into());
+    object.insert(
+        "versions".into(),
+        RANDOM_CRATES
+            .iter()
+            .map(|(name, version)| ((*name).to_owned(), serde_json::Value::from(*version)))
+            .chain([(
+                "bouncewear-model".to_owned(),
+                env!("CARGO_PKG_VERSION").into(),
+            )])
+            .collect::<serde_json::Map<_, _>>()
+            .into(),
+    );
+    value
+}

@@ -1,0 +1,82 @@
+//! Mergeable, deterministic summaries of Monte Carlo results (the contract's `SUMMARY`).
+//!
+//! A job pushes tens of millions of values per second per core, one [`Accumulator`] per
+//! (metric, bin, group). Memory does not grow with the number of values and a push costs a handful
+//! of nanoseconds: no logarithm and no division, only integer work on the IEEE bit pattern
+//! ([`Sketch`]) and a few additions. [`summarize`] merges the groups of one (metric, bin) into the
+//! [`Summary`] that is serialised into the result.
+//!
+//! Groups are the independent unit: the operations of one device are correlated (wear carries from
+//! one operation to the next), so each group holds a fixed set of devices and the confidence
+//! intervals are built from the spread between groups (batch means for the mean, Woodruff for
+//! quantiles, a design effect for exceedance), not from `n`.
+//!
+//! Determinism: integer counts do not depend on order; float sums do, so the caller fixes the order
+//! of pushes and merges and gets the same summary to the bit.
+//!
+//! | module | what |
+//! |---|---|
+//! | [`sketch`] | log-linear bucket histogram from the f64 bit pattern; quantiles within 0.2 % |
+//! | [`accumulator`] | count, min, max, shifted sums, exceedance count, sketch |
+//! | [`intervals`] | Student t 0.975 quantile, Wilson score interval |
+//! | [`summary`] | the serialised `SUMMARY` and [`summarize`] |
+
+pub mod accumulator;
+pub mod intervals;
+pub mod sketch;
+pub mod summary;
+
+pub use accumulator::Accumulator;
+pub use intervals::{Z_975, student_t_975, wilson_interval};
+pub use sketch::Sketch;
+pub use summary::{Exceedance, HISTOGRAM_BINS, Histogram, QuantileSummary, Summary, summarize};
+
+/// The reported quantiles: the key in `SUMMARY.quantiles` and the level `q` (see
+/// [`sketch::rank`] for the definition).
+pub const QUANTILES: [(&str, f64); 9] = [
+    ("p01", 0.01),
+    ("p05", 0.05),
+    ("p10", 0.10),
+    ("p25", 0.25),
+    ("p50", 0.50),
+    ("p75", 0.75),
+    ("p90", 0.90),
+    ("p95", 0.95),
+    ("p99", 0.99),
+];
+
+#[cfg(test)]
+pub(crate) mod test_util {
+    /// splitmix64: a tiny deterministic generator, enough for test data.
+    pub struct SplitMix(pub u64);
+
+    impl SplitMix {
+        pub fn next_u64(&mut self) -> u64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^ (z >> 31)
+        }
+
+        /// Uniform on [0, 1) with 53 random bits.
+        pub fn uniform(&mut self) -> f64 {
+            (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+        }
+
+        /// Standard normal by Box-Muller (one of the pair).
+        pub fn normal(&mut self) -> f64 {
+            let u1 = 1.0 - self.uniform();
+            let u2 = self.uniform();
+            (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+        }
+    }
+
+    /// The exact quantile of the same definition as the sketch: the value of rank
+    /// [`super::sketch::rank`] in sorted order.
+    pub fn exact_quantile(values: &[f64], q: f64) -> f64 {
+        let mut sorted = values.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        sorted[(super::sketch::rank(q, sorted.len() as u64) - 1) as usize]
+    }
+}

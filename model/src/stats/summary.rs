@@ -1,0 +1,519 @@
+//! The contract's `SUMMARY` and how it is built from the groups of one (metric, bin).
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use super::QUANTILES;
+use super::accumulator::Accumulator;
+use super::intervals::{Z_975, student_t_975, wilson_interval};
+
+/// Number of equal-width histogram bins between the exact min and max.
+pub const HISTOGRAM_BINS: usize = 20;
+
+/// One quantile: its value and a 95 % confidence interval.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+pub struct QuantileSummary {
+    pub value: f64,
+    pub ci95: [f64; 2],
+}
+
+/// [`HISTOGRAM_BINS`] equal-width bins over the exact `[min, max]`: bin `i` is
+/// `[edges[i], edges[i + 1])`, the last one closed, and `edges.len() == counts.len() + 1`.
+/// `edges[0] = min` and `edges[20] = max` exactly, `edges[i] = min + (max - min) i / 20` rounded
+/// once. If `min == max` there is one bin `[min, min]` holding every value (with `n = 0`:
+/// `edges [0, 0], counts [0]`).
+///
+/// Counts come from the sketch, not the values: each bucket's whole count goes to the bin holding
+/// its midpoint (clamped to `[min, max]`), exact zeros to the bin holding 0. So the counts sum to
+/// `n` exactly, and every value is binned as if moved to its bucket's midpoint, at most 0.2 % of
+/// the value away (half the 0.4 % bucket width): only values that close to an edge can land in the
+/// neighbouring bin.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+pub struct Histogram {
+    pub edges: Vec<f64>,
+    pub counts: Vec<u64>,
+}
+
+/// Probability of a value strictly above `limit`, with a 95 % confidence interval.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+pub struct Exceedance {
+    pub limit: f64,
+    pub probability: f64,
+    pub ci95: [f64; 2],
+}
+
+/// The contract's `SUMMARY` of one metric over one bin of operations (or over devices). Every
+/// number is finite.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+pub struct Summary {
+    pub n: u64,
+    pub mean: f64,
+    pub mean_ci95: [f64; 2],
+    /// Sample standard deviation (`n - 1`); 0 for `n < 2`.
+    pub sd: f64,
+    pub min: f64,
+    pub max: f64,
+    /// Keyed `p01`, `p05`, `p10`, `p25`, `p50`, `p75`, `p90`, `p95`, `p99` (see [`QUANTILES`]).
+    pub quantiles: BTreeMap<String, QuantileSummary>,
+    pub histogram: Histogram,
+    /// Present only for a metric with a configured limit.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub exceedance: Option<Exceedance>,
+}
+
+/// Summarises the groups of one (metric, bin): merges them, in slice order, for the point values
+/// and uses their spread for the intervals. The groups must all have the same limit (the
+/// exceedance limit is taken from them; no groups means no limit).
+///
+/// Point values, from all values together: `n`, `mean`, `sd` (sample, `n - 1`), exact `min` and
+/// `max`, the quantiles of [`Accumulator::quantile`] (within 0.2 %), the [`Histogram`] and the
+/// exact exceedance probability `p = #(x > limit) / n`.
+///
+/// Intervals treat each non-empty group as one independent observation (the operations of one
+/// device are correlated, the groups are not); `G'` is the number of non-empty groups and
+/// `t = t_{0.975, G'-1}` ([`student_t_975`]):
+/// - `mean_ci95`: batch means, `mean +- t * sd(group means) / sqrt(G')`. Groups hold equal numbers
+///   of values by construction, so the unweighted spread of their means is the right one (and the
+///   mean of the group means is the overall mean).
+/// - each quantile's `ci95`: Woodruff's interval for clustered samples. The share of values at or
+///   below the estimate, `F(value)`, is a mean of indicators, so its clustered variance comes from
+///   the groups' shares as a ratio estimator, `V = G'/(G'-1) sum_g (c_g - F n_g)^2 / n^2`; the
+///   interval `q +- t sqrt(V)` in probability is mapped back through the overall quantile function.
+///   Unlike the spread of group quantiles (sectioning), this stays honest when a group holds few
+///   values (a group's p95 of four values is its maximum).
+/// - both are clipped to `[min, max]`, where the true values lie.
+/// - `exceedance.ci95`: Wilson ([`wilson_interval`]) with the design effect of the clustering:
+///   `n_eff = p (1 - p) / V`, `V = s^2(group proportions) / G'` (the batch-means variance of `p`),
+///   capped at `n`; `n_eff = n` when `p` is 0 or 1 or `V = 0` (no spread seen: the groups behave
+///   as if independent, and Wilson still gives a non-empty interval).
+///
+/// With `G' < 2` the spread between groups cannot be estimated, so every interval is the
+/// degenerate `[value, value]`: the caller should use enough groups. With `n = 0` every number is
+/// 0, the quantiles and intervals too, and the histogram is `edges [0, 0], counts [0]`.
+///
+/// # Panics
+/// If the groups have different limits.
+pub fn summarize(groups: &[Accumulator]) -> Summary {
+    let limit = groups.first().and_then(Accumulator::limit);
+    let mut all = Accumulator::new(limit);
+    groups.iter().for_each(|group| all.merge(group));
+    let (min, max) = (all.min(), all.max());
+    let clip = |[lo, hi]: [f64; 2]| [lo.max(min), hi.min(max)];
+
+    let filled: Vec<&Accumulator> = groups.iter().filter(|g| g.count() > 0).collect();
+
+    let mean = all.mean();
+    let group_means: Vec<f64> = filled.iter().map(|g| g.mean()).collect();
+    let mean_ci95 = clip(batch_interval(mean, &group_means));
+
+    let levels = QUANTILES.map(|(_, q)| q);
+    let values = all.quantiles(&levels);
+    let quantiles = QUANTILES
+        .iter()
+        .zip(values)
+        .map(|(&(key, q), value)| {
+            let ci95 = clip(woodruff_interval(&all, &filled, q, value));
+            (key.to_string(), QuantileSummary { value, ci95 })
+        })
+        .collect();
+
+    let exceedance = limit.map(|limit| {
+        let n = all.count();
+        let probability = proportion(all.count_above(), n);
+        let ci95 = if filled.len() < 2 {
+            [probability, probability]
+        } else {
+            let shares: Vec<f64> = filled
+                .iter()
+                .map(|g| proportion(g.count_above(), g.count()))
+                .collect();
+            let var = sample_variance(&shares) / shares.len() as f64;
+            let n = n as f64;
+            let n_eff = if probability == 0.0 || probability == 1.0 || var == 0.0 {
+                n
+            } else {
+                (probability * (1.0 - probability) / var).min(n)
+            };
+            wilson_interval(probability, n_eff, Z_975)
+        };
+        Exceedance {
+            limit,
+            probability,
+            ci95,
+        }
+    });
+
+    Summary {
+        n: all.count(),
+        mean,
+        mean_ci95,
+        sd: all.sd(),
+        min,
+        max,
+        quantiles,
+        histogram: histogram(&all),
+        exceedance,
+    }
+}
+
+/// `above / n`, 0 when `n = 0`.
+fn proportion(above: u64, n: u64) -> f64 {
+    if n == 0 { 0.0 } else { above as f64 / n as f64 }
+}
+
+/// Sample variance (`n - 1`) by two passes; 0 for fewer than two values.
+fn sample_variance(values: &[f64]) -> f64 {
+    if values.len() < 2 {
+        return 0.0;
+    }
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    values.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0)
+}
+
+/// Woodruff's interval for the quantile `value` at level `q` (see [`summarize`]): the clustered
+/// standard error of the share at or below `value`, mapped back through the overall quantiles.
+/// Values are compared at bucket resolution, consistent with how `value` itself was found.
+fn woodruff_interval(all: &Accumulator, groups: &[&Accumulator], q: f64, value: f64) -> [f64; 2] {
+    let g = groups.len();
+    if g < 2 {
+        return [value, value];
+    }
+    let at_or_below = |acc: &Accumulator| -> f64 {
+        acc.sketch()
+            .buckets()
+            .take_while(|&(midpoint, _)| midpoint <= value)
+            .map(|(_, count)| count as f64)
+            .sum()
+    };
+    let n = all.count() as f64;
+    let share = at_or_below(all) / n;
+    let squares: f64 = groups
+        .iter()
+        .map(|group| {
+            let residual = at_or_below(group) - share * group.count() as f64;
+            residual * residual
+        })
+        .sum();
+    let variance = g as f64 / (g as f64 - 1.0) * squares / (n * n);
+    let half = student_t_975(g as u64 - 1) * variance.sqrt();
+    let at = |level: f64| all.quantile(level.clamp(0.0, 1.0));
+    [at(q - half), at(q + half)]
+}
+
+/// Batch-means interval from one statistic per independent group (`G` of them):
+/// `centre +- t_{0.975, G-1} * sd(per_group) / sqrt(G)`, or `[centre, centre]` for `G < 2`.
+fn batch_interval(centre: f64, per_group: &[f64]) -> [f64; 2] {
+    let g = per_group.len();
+    if g < 2 {
+        return [centre, centre];
+    }
+    let half = student_t_975(g as u64 - 1) * (sample_variance(per_group) / g as f64).sqrt();
+    [centre - half, centre + half]
+}
+
+/// The [`Histogram`] of all values, from the sketch's buckets.
+fn histogram(all: &Accumulator) -> Histogram {
+    let n = all.count();
+    let (min, max) = (all.min(), all.max());
+    if n == 0 || min == max {
+        return Histogram {
+            edges: vec![min, max],
+            counts: vec![n],
+        };
+    }
+    let range = max - min;
+    let bins = HISTOGRAM_BINS as f64;
+    let mut edges: Vec<f64> = (0..HISTOGRAM_BINS)
+        .map(|i| min + range * (i as f64 / bins))
+        .collect();
+    edges.push(max);
+    let mut counts = vec![0; HISTOGRAM_BINS];
+    for (value, count) in all.sketch().buckets() {
+        let position = (value.clamp(min, max) - min) / range * bins;
+        // Non-negative since value >= min; min() keeps the maximum in the last, closed bin.
+        let bin = (position as usize).min(HISTOGRAM_BINS - 1);
+        counts[bin] += count;
+    }
+    Histogram { edges, counts }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::stats::test_util::{SplitMix, exact_quantile};
+
+    fn accumulate(values: impl IntoIterator<Item = f64>, limit: Option<f64>) -> Accumulator {
+        let mut acc = Accumulator::new(limit);
+        values.into_iter().for_each(|x| acc.push(x));
+        acc
+    }
+
+    fn all_finite(s: &Summary) -> bool {
+        let mut numbers = vec![s.mean, s.sd, s.min, s.max, s.mean_ci95[0], s.mean_ci95[1]];
+        for q in s.quantiles.values() {
+            numbers.extend([q.value, q.ci95[0], q.ci95[1]]);
+        }
+        numbers.extend(&s.histogram.edges);
+        if let Some(e) = &s.exceedance {
+            numbers.extend([e.limit, e.probability, e.ci95[0], e.ci95[1]]);
+        }
+        numbers.iter().all(|x| x.is_finite())
+    }
+
+    fn assert_json_close(a: &serde_json::Value, b: &serde_json::Value) {
+        use serde_json::Value;
+        match (a, b) {
+            (Value::Number(x), Value::Number(y)) => {
+                let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+                assert!((x - y).abs() <= 1e-15 * x.abs().max(y.abs()), "{x} vs {y}");
+            }
+            (Value::Array(x), Value::Array(y)) => {
+                assert_eq!(x.len(), y.len());
+                x.iter().zip(y).for_each(|(x, y)| assert_json_close(x, y));
+            }
+            (Value::Object(x), Value::Object(y)) => {
+                assert!(x.keys().eq(y.keys()));
+                x.values()
+                    .zip(y.values())
+                    .for_each(|(x, y)| assert_json_close(x, y));
+            }
+            _ => assert_eq!(a, b),
+        }
+    }
+
+    #[test]
+    fn no_values_gives_finite_zeros() {
+        for groups in [vec![], vec![Accumulator::new(Some(1.0)); 4]] {
+            let s = summarize(&groups);
+            assert_eq!(s.n, 0);
+            assert!(all_finite(&s));
+            assert_eq!([s.mean, s.sd, s.min, s.max], [0.0; 4]);
+            assert_eq!(s.mean_ci95, [0.0; 2]);
+            assert_eq!(s.quantiles.len(), 9);
+            assert!(
+                s.quantiles
+                    .values()
+                    .all(|q| q.value == 0.0 && q.ci95 == [0.0; 2])
+            );
+            assert_eq!(s.histogram.edges, vec![0.0, 0.0]);
+            assert_eq!(s.histogram.counts, vec![0]);
+            let json = serde_json::to_value(&s).unwrap();
+            assert_eq!(json["exceedance"].is_object(), !groups.is_empty());
+            if let Some(e) = &s.exceedance {
+                assert_eq!((e.probability, e.ci95), (0.0, [0.0; 2]));
+            }
+        }
+    }
+
+    #[test]
+    fn one_group_gives_degenerate_intervals() {
+        let mut rng = SplitMix(21);
+        let group = accumulate((0..1000).map(|_| rng.uniform()), Some(0.9));
+        let s = summarize(std::slice::from_ref(&group));
+        assert!(all_finite(&s));
+        assert_eq!(s.n, 1000);
+        assert_eq!(s.mean_ci95, [s.mean; 2]);
+        for q in s.quantiles.values() {
+            assert_eq!(q.ci95, [q.value; 2]);
+        }
+        let e = s.exceedance.as_ref().unwrap();
+        assert_eq!(e.ci95, [e.probability; 2]);
+        assert_eq!(e.probability, group.count_above() as f64 / 1000.0);
+        // Empty groups do not count towards G'.
+        let mut groups = vec![Accumulator::new(Some(0.9)); 3];
+        groups[1] = group;
+        assert_eq!(summarize(&groups), s);
+    }
+
+    #[test]
+    fn one_value() {
+        let s = summarize(&[accumulate([3.5], None), Accumulator::new(None)]);
+        assert!(all_finite(&s));
+        assert_eq!((s.n, s.mean, s.sd, s.min, s.max), (1, 3.5, 0.0, 3.5, 3.5));
+        assert!(s.quantiles.values().all(|q| q.value == 3.5));
+        assert_eq!(s.histogram.edges, vec![3.5, 3.5]);
+        assert_eq!(s.histogram.counts, vec![1]);
+        assert_eq!(s.exceedance, None);
+    }
+
+    #[test]
+    fn point_values_come_from_all_groups() {
+        let mut rng = SplitMix(22);
+        let values: Vec<f64> = (0..8000).map(|_| (rng.normal() * 0.3).exp()).collect();
+        let groups: Vec<Accumulator> = values
+            .chunks(1000)
+            .map(|c| accumulate(c.iter().copied(), Some(1.5)))
+            .collect();
+        let s = summarize(&groups);
+        assert!(all_finite(&s));
+        assert_eq!(s.n, 8000);
+        let keys: Vec<&str> = s.quantiles.keys().map(String::as_str).collect();
+        assert_eq!(keys, QUANTILES.map(|(k, _)| k));
+        for (key, q) in QUANTILES {
+            let exact = exact_quantile(&values, q);
+            let summary = &s.quantiles[key];
+            assert!(((summary.value - exact) / exact).abs() < 0.005, "{key}");
+            assert!(summary.ci95[0] <= summary.value && summary.value <= summary.ci95[1]);
+            assert!(s.min <= summary.ci95[0] && summary.ci95[1] <= s.max);
+        }
+        let above = values.iter().filter(|&&x| x > 1.5).count();
+        let e = s.exceedance.as_ref().unwrap();
+        assert_eq!(e.probability, above as f64 / 8000.0);
+        assert!(e.ci95[0] < e.probability && e.probability < e.ci95[1]);
+        assert!(s.mean_ci95[0] < s.mean && s.mean < s.mean_ci95[1]);
+        // serde_json parses floats to within an ulp unless its `float_roundtrip` feature is on.
+        let json = serde_json::to_string(&s).unwrap();
+        let back: Summary = serde_json::from_str(&json).unwrap();
+        assert_json_close(
+            &serde_json::to_value(&back).unwrap(),
+            &serde_json::to_value(&s).unwrap(),
+        );
+    }
+
+    #[test]
+    fn json_has_the_contract_shape() {
+        let s = summarize(&[accumulate([1.0, 2.0], None), accumulate([3.0, 0.0], None)]);
+        let json = serde_json::to_value(&s).unwrap();
+        let mut keys: Vec<&str> = json
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(String::as_str)
+            .collect();
+        keys.sort_unstable();
+        assert_eq!(
+            keys,
+            [
+                "histogram",
+                "max",
+                "mean",
+                "mean_ci95",
+                "min",
+                "n",
+                "quantiles",
+                "sd"
+            ]
+        );
+        assert_eq!(json["n"], 4);
+        assert_eq!(
+            json["quantiles"]["p50"]["ci95"].as_array().unwrap().len(),
+            2
+        );
+        assert_eq!(json["histogram"]["edges"].as_array().unwrap().len(), 21);
+    }
+
+    #[test]
+    fn histogram_counts_sum_to_n() {
+        let mut rng = SplitMix(23);
+        let values: Vec<f64> = (0..10_000)
+            .map(|_| {
+                if rng.uniform() < 0.3 {
+                    0.0
+                } else {
+                    rng.normal()
+                }
+            })
+            .collect();
+        let s = summarize(&[accumulate(values.iter().copied(), None)]);
+        let h = &s.histogram;
+        assert_eq!(h.edges.len(), HISTOGRAM_BINS + 1);
+        assert_eq!(h.counts.len(), HISTOGRAM_BINS);
+        assert_eq!((h.edges[0], h.edges[HISTOGRAM_BINS]), (s.min, s.max));
+        assert!(h.edges.windows(2).all(|w| w[0] < w[1]));
+        assert_eq!(h.counts.iter().sum::<u64>(), 10_000);
+        // Each bin holds the values inside it, up to those within a bucket width of its edges.
+        let moved = |x: f64| x.abs() / 256.0 + 1e-12;
+        for (i, &count) in h.counts.iter().enumerate() {
+            let (lo, hi) = (h.edges[i], h.edges[i + 1]);
+            let surely = values
+                .iter()
+                .filter(|&&x| x - moved(x) > lo && x + moved(x) < hi);
+            let maybe = values
+                .iter()
+                .filter(|&&x| x + moved(x) >= lo && x - moved(x) <= hi);
+            let (surely, maybe) = (surely.count() as u64, maybe.count() as u64);
+            assert!(
+                surely <= count && count <= maybe,
+                "bin {i}: {surely} <= {count} <= {maybe}"
+            );
+        }
+        let zero_bin = h.edges.iter().rposition(|&e| e <= 0.0).unwrap();
+        let zeros = values.iter().filter(|&&x| x == 0.0).count() as u64;
+        assert!(h.counts[zero_bin] >= zeros);
+    }
+
+    #[test]
+    fn wide_range_is_finite() {
+        let s = summarize(&[
+            accumulate([-1e150, 0.0], None),
+            accumulate([1e150, 2.0], None),
+        ]);
+        assert!(all_finite(&s));
+        assert_eq!(s.histogram.counts.iter().sum::<u64>(), 4);
+        assert_eq!(s.histogram.counts[0], 1);
+        assert_eq!(s.histogram.counts[10], 2);
+        assert_eq!(s.histogram.counts[19], 1);
+    }
+
+    /// How often the intervals of `reps` simulated jobs cover the truth: returns the coverage of the
+    /// mean, the median and the exceedance probability.
+    fn coverage(
+        reps: usize,
+        groups: usize,
+        devices: usize,
+        operations: usize,
+        device_sd: f64,
+    ) -> [f64; 3] {
+        // Value = device offset + operation noise, total variance 1 + device_sd^2: the true
+        // distribution is normal with mean 0, median 0, and P(x > 1) = 1 - Phi(1 / sqrt(1 + sd^2)).
+        let limit = (1.0 + device_sd * device_sd).sqrt();
+        let p_true = 0.158_655_253_931_457_05;
+        let mut rng = SplitMix(24);
+        let mut hits = [0usize; 3];
+        for _ in 0..reps {
+            let accumulators: Vec<Accumulator> = (0..groups)
+                .map(|_| {
+                    let mut acc = Accumulator::new(Some(limit));
+                    for _ in 0..devices {
+                        let offset = device_sd * rng.normal();
+                        (0..operations).for_each(|_| acc.push(offset + rng.normal()));
+                    }
+                    acc
+                })
+                .collect();
+            let s = summarize(&accumulators);
+            let e = s.exceedance.unwrap();
+            let covers = |[lo, hi]: [f64; 2], truth: f64| usize::from(lo <= truth && truth <= hi);
+            hits[0] += covers(s.mean_ci95, 0.0);
+            hits[1] += covers(s.quantiles["p50"].ci95, 0.0);
+            hits[2] += covers(e.ci95, p_true);
+        }
+        hits.map(|h| h as f64 / reps as f64)
+    }
+
+    #[test]
+    fn intervals_cover_iid_data() {
+        let [mean, median, exceedance] = coverage(200, 32, 50, 1, 0.0);
+        assert!((0.90..=0.99).contains(&mean), "mean {mean}");
+        assert!((0.88..=0.99).contains(&median), "median {median}");
+        assert!(
+            (0.90..=0.99).contains(&exceedance),
+            "exceedance {exceedance}"
+        );
+    }
+
+    #[test]
+    fn intervals_cover_clustered_data() {
+        // Strongly correlated operations within a device: an interval from n alone would cover far
+        // less than 95 %; the group spread keeps it honest.
+        let [mean, median, exceedance] = coverage(200, 16, 4, 25, 1.5);
+        assert!((0.88..=0.99).contains(&mean), "mean {mean}");
+        assert!((0.88..=0.99).contains(&median), "median {median}");
+        assert!(
+            (0.88..=0.99).contains(&exceedance),
+            "exceedance {exceedance}"
+        );
+    }
+}
