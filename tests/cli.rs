@@ -120,7 +120,12 @@ fn simulate_rejects_a_missing_file_and_an_unknown_fidelity() {
 
 #[test]
 fn every_subcommand_has_help() {
-    for args in [&["--help"][..], &["simulate", "--help"], &["run", "--help"]] {
+    for args in [
+        &["--help"][..],
+        &["simulate", "--help"],
+        &["run", "--help"],
+        &["bench", "--help"],
+    ] {
         let output = bouncewear(args, "");
         assert!(output.status.success(), "{args:?}");
         assert!(String::from_utf8(output.stdout).unwrap().contains("Usage"));
@@ -246,4 +251,52 @@ fn run_rejects_bad_jobs_naming_the_field() {
     }
     let line = rejected(&["run", "-", "--threads", "0"], "{}");
     assert!(line.contains("--threads"), "{line}");
+}
+
+#[test]
+fn bench_quick_writes_the_report_in_all_three_forms() {
+    let out = std::env::temp_dir().join(format!("bouncewear-bench-{}", std::process::id()));
+    let output = bouncewear(&["bench", "--quick", "--out", out.to_str().unwrap()], "");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let tiers = report["tiers"].as_array().unwrap();
+    assert_eq!(tiers.len(), 2);
+    for tier in tiers {
+        assert!(tier["ns_per_op"].as_f64().unwrap() > 0.0);
+        assert_eq!(tier["max_rel_error"].as_object().unwrap().len(), 10);
+    }
+    assert!(
+        tiers[0]["max_rel_error"]["total_bounce_s"]
+            .as_f64()
+            .unwrap()
+            < 1e-12,
+        "exact tier is exact"
+    );
+    assert!(
+        tiers[1]["median_rel_error"]["total_bounce_s"]
+            .as_f64()
+            .unwrap()
+            > 1e-3,
+        "closed form is not"
+    );
+    let sampling = report["sampling"].as_array().unwrap();
+    assert!(
+        sampling.iter().any(|s| s["sampler"] == "lhs")
+            && sampling.iter().any(|s| s["sampler"] == "random")
+    );
+    assert!(
+        std::fs::read_to_string(out.join("report.svg"))
+            .unwrap()
+            .starts_with("<svg")
+    );
+    assert!(
+        std::fs::read_to_string(out.join("report.md"))
+            .unwrap()
+            .contains("| exact |")
+    );
 }

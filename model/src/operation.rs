@@ -235,11 +235,10 @@ impl Operation {
         Setup::new(scenario).operation(&Conditions::nominal(scenario), fidelity)
     }
 
-    /// The same operation at another impact velocity (per-operation velocity scatter), without
-    /// rebuilding anything else.
-    pub fn with_impact_velocity(mut self, impact_velocity_m_s: f64) -> Self {
+    /// Changes the impact velocity (per-operation velocity scatter) in place, without rebuilding
+    /// or copying anything else.
+    pub fn set_impact_velocity(&mut self, impact_velocity_m_s: f64) {
         self.impact_velocity_m_s = impact_velocity_m_s;
-        self
     }
 
     pub fn impact_velocity_m_s(&self) -> f64 {

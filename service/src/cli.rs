@@ -41,6 +41,18 @@ enum Command {
         #[arg(long)]
         threads: Option<usize>,
     },
+    /// Measure speed against error and write report.json, report.md and report.svg.
+    Bench {
+        /// A smaller run that finishes in well under two minutes.
+        #[arg(long)]
+        quick: bool,
+        /// Where to write the report.
+        #[arg(long, default_value = "bench-report")]
+        out: PathBuf,
+        /// Worker threads (default: one per core).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -109,6 +121,15 @@ fn run(cli: Cli) -> Result<(), CliError> {
             let result = pool.install(|| run_job(&job, &progress));
             progress.finish();
             print_json(&result.map_err(|cancelled| CliError::Failed(cancelled.to_string()))?)
+        }
+        Command::Bench {
+            quick,
+            out,
+            threads,
+        } => {
+            let report = thread_pool(threads)?.install(|| crate::bench::bench(&out, quick))?;
+            eprintln!("bouncewear: wrote {}/report.{{json,md,svg}}", out.display());
+            print_json(&report)
         }
     }
 }

@@ -211,7 +211,7 @@ impl<'a> Plan<'a> {
             draws.set(scatter.parameter, value);
         }
         let fidelity = job.spec.fidelity;
-        let device_operation = self.setup.operation(&draws.conditions, fidelity);
+        let mut operation = self.setup.operation(&draws.conditions, fidelity);
         let metrics = &job.operation_metrics;
         let mut cumulative_arc_energy_j = 0.0;
         let operations = job.spec.operations;
@@ -222,22 +222,19 @@ impl<'a> Plan<'a> {
             let bin =
                 &mut stats.operations[bin_index * metrics.len()..(bin_index + 1) * metrics.len()];
             for _ in start..end {
-                let (operation, radius_m, pressure_pa) = if self.operation_scatter.is_empty() {
-                    (device_operation, draws.radius_m, draws.pressure_pa)
+                let (radius_m, pressure_pa) = if self.operation_scatter.is_empty() {
+                    (draws.radius_m, draws.pressure_pa)
                 } else {
                     let mut op_draws = draws;
                     for scatter in &self.operation_scatter {
                         op_draws.set(scatter.parameter, scatter.distribution.sample(&mut rng));
                     }
-                    let operation = if self.cheap_operation_scatter {
-                        match op_draws.conditions.impact_velocity_m_s {
-                            Some(u) => device_operation.with_impact_velocity(u),
-                            None => device_operation,
-                        }
-                    } else {
-                        self.setup.operation(&op_draws.conditions, fidelity)
-                    };
-                    (operation, op_draws.radius_m, op_draws.pressure_pa)
+                    if !self.cheap_operation_scatter {
+                        operation = self.setup.operation(&op_draws.conditions, fidelity);
+                    } else if let Some(u) = op_draws.conditions.impact_velocity_m_s {
+                        operation.set_impact_velocity(u);
+                    }
+                    (op_draws.radius_m, op_draws.pressure_pa)
                 };
                 let radius_m = if self.track_wear && cumulative_arc_energy_j > 0.0 {
                     self.wear.radius_m(radius_m, cumulative_arc_energy_j)
