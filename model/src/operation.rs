@@ -9,6 +9,7 @@ use crate::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 
 /// How the model is evaluated (MODEL.md section 7).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Fidelity {
@@ -67,6 +68,7 @@ impl Needs {
 }
 
 /// What one operation produced (CONTRACT.md `simulate`, without the bounce list).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Outcome {
     pub impact_velocity_m_s: f64,
@@ -86,6 +88,7 @@ pub struct Outcome {
 }
 
 /// One bounce: the flight after a separation.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Bounce {
     pub separation_velocity_m_s: f64,
@@ -95,6 +98,7 @@ pub struct Bounce {
 }
 
 /// The full `simulate` output: the outcome and its bounces.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Simulation {
     #[serde(flatten)]

@@ -17,6 +17,7 @@ pub const MAX_MAGNITUDE: f64 = 1e30;
 /// The largest `max_bounces` a scenario may ask for.
 pub const MAX_BOUNCES_LIMIT: u32 = 10_000;
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ScenarioSpec {
@@ -26,6 +27,7 @@ pub struct ScenarioSpec {
     pub losses: LossesSpec,
 }
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MechanismSpec {
@@ -40,6 +42,7 @@ pub struct MechanismSpec {
     pub impact_velocity_m_s: Option<f64>,
 }
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MaterialSpec {
@@ -60,6 +63,7 @@ pub struct MaterialSpec {
     pub arc_restitution: ArcRestitutionSpec,
 }
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ArcRestitutionSpec {
@@ -67,6 +71,7 @@ pub struct ArcRestitutionSpec {
     pub b_s_per_m: f64,
 }
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CircuitSpec {
@@ -74,6 +79,7 @@ pub struct CircuitSpec {
     pub current_a: f64,
 }
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LossesSpec {

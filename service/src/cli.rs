@@ -41,6 +41,8 @@ enum Command {
         #[arg(long)]
         threads: Option<usize>,
     },
+    /// Serve the HTTP API, with the job queue in an embedded SQLite database.
+    Serve(crate::config::ServeConfig),
     /// Measure speed against error and write report.json, report.md and report.svg.
     Bench {
         /// A smaller run that finishes in well under two minutes.
@@ -121,6 +123,14 @@ fn run(cli: Cli) -> Result<(), CliError> {
             let result = pool.install(|| run_job(&job, &progress));
             progress.finish();
             print_json(&result.map_err(|cancelled| CliError::Failed(cancelled.to_string()))?)
+        }
+        Command::Serve(config) => {
+            let runtime = tokio::runtime::Builder::new_multi_thread()
+                .enable_all()
+                .thread_name("bouncewear-async")
+                .build()
+                .map_err(|e| CliError::Failed(format!("cannot start the async runtime: {e}")))?;
+            runtime.block_on(crate::app::serve(config))
         }
         Command::Bench {
             quick,

@@ -1,6 +1,13 @@
-//! The `bouncewear` binary: command line and (later) the HTTP service, a thin shell around
+//! The `bouncewear` binary: the command line and the HTTP service, a thin shell around
 //! [`bouncewear_model`].
 
+pub mod api;
+pub mod app;
 pub mod bench;
 pub mod cli;
+pub mod config;
+pub mod errors;
 pub mod progress;
+pub mod store;
+pub mod telemetry;
+pub mod worker;

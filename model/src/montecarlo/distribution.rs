@@ -15,6 +15,7 @@ pub const MIN_ACCEPTANCE: f64 = 0.05;
 pub const MAX_REJECTIONS: u32 = 1000;
 
 /// A distribution as the user writes it.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum DistributionSpec {

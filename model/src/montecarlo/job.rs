@@ -15,6 +15,7 @@ pub const MAX_DEVICES: u64 = 100_000_000;
 /// See [`MAX_DEVICES`].
 pub const MAX_OPERATIONS: u64 = 100_000_000;
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct JobSpec {
@@ -68,6 +69,7 @@ impl Default for JobSpec {
 }
 
 /// How device-level scatter is drawn.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SamplerKind {
@@ -79,6 +81,7 @@ pub enum SamplerKind {
     Lhs,
 }
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScatterSpec {
@@ -88,6 +91,7 @@ pub struct ScatterSpec {
 }
 
 /// The scenario values scatter may replace.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Parameter {
@@ -108,6 +112,7 @@ pub enum Parameter {
     BreakdownField,
 }
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Per {
@@ -117,6 +122,7 @@ pub enum Per {
 
 /// Run device batches until the 95 % CI half-width of `statistic` of `metric` (last bin) is at most
 /// `relative_half_width` of its value, or `max_devices` have run.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PrecisionSpec {

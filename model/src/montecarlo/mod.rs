@@ -29,6 +29,7 @@ pub const RANDOM_CRATES: [(&str, &str); 3] = [
 ];
 
 /// One bin of operations: its summary and the operations it covers (`op_end` exclusive).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Bin {
     #[serde(flatten)]
@@ -38,6 +39,7 @@ pub struct Bin {
 }
 
 /// Whether the precision target was met, and with how many devices.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PrecisionReport {
     pub metric: String,
@@ -48,6 +50,7 @@ pub struct PrecisionReport {
     pub devices: u64,
 }
 
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Timing {
     pub wall_s: f64,
@@ -55,9 +58,11 @@ pub struct Timing {
 }
 
 /// The Result of CONTRACT.md.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct JobResult {
     /// The job with every default filled in, its seed, the generator and crate versions.
+    #[cfg_attr(feature = "openapi", schema(value_type = Object))]
     pub job: serde_json::Value,
     pub operations: BTreeMap<String, Vec<Bin>>,
     pub devices: BTreeMap<String, Summary>,

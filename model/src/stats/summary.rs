@@ -12,6 +12,7 @@ use super::intervals::{Z_975, student_t_975, wilson_interval};
 pub const HISTOGRAM_BINS: usize = 20;
 
 /// One quantile: its value and a 95 % confidence interval.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
 pub struct QuantileSummary {
     pub value: f64,
@@ -29,6 +30,7 @@ pub struct QuantileSummary {
 /// `n` exactly, and every value is binned as if moved to its bucket's midpoint, at most 0.2 % of
 /// the value away (half the 0.4 % bucket width): only values that close to an edge can land in the
 /// neighbouring bin.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
 pub struct Histogram {
     pub edges: Vec<f64>,
@@ -36,6 +38,7 @@ pub struct Histogram {
 }
 
 /// Probability of a value strictly above `limit`, with a 95 % confidence interval.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
 pub struct Exceedance {
     pub limit: f64,
@@ -45,6 +48,7 @@ pub struct Exceedance {
 
 /// The contract's `SUMMARY` of one metric over one bin of operations (or over devices). Every
 /// number is finite.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
 pub struct Summary {
     pub n: u64,

@@ -1,0 +1,545 @@
+//! `/v1/jobs`: submit, list, inspect, cancel, results, distributions and live progress.
+
+use super::{AppState, JsonText, Owner};
+use crate::errors::{ApiError, Problem};
+use crate::store::{Cancel, JobRecord, JobStatus, NewJob, now_ms};
+use axum::extract::rejection::QueryRejection;
+use axum::extract::{Path, Query, State};
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::{Extension, Json};
+use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
+use bouncewear_model::stats::{QUANTILES, Summary};
+use bouncewear_model::{InvalidInput, Pointer};
+use futures_util::stream::Stream;
+use serde::{Deserialize, Serialize};
+use std::convert::Infallible;
+use std::fmt::Write as _;
+use std::time::Duration;
+use utoipa::{IntoParams, ToSchema};
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(submit_job, list_jobs))
+        .routes(routes!(get_job, cancel_job))
+        .routes(routes!(get_result))
+        .routes(routes!(get_distribution))
+        .routes(routes!(job_events))
+}
+
+/// A job as the API shows it.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct JobResource {
+    pub id: String,
+    pub name: Option<String>,
+    pub status: JobStatus,
+    pub progress: Progress,
+    /// RFC 3339.
+    pub created_at: String,
+    pub started_at: Option<String>,
+    pub finished_at: Option<String>,
+    pub error: Option<String>,
+    /// The seed the job runs with (drawn at submission when the job did not give one).
+    pub seed: u64,
+    pub links: Links,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, ToSchema)]
+pub struct Progress {
+    pub operations_done: u64,
+    pub operations_total: u64,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct Links {
+    #[serde(rename = "self")]
+    pub this: String,
+    pub result: String,
+    pub events: String,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct JobList {
+    /// Newest first.
+    pub jobs: Vec<JobResource>,
+    /// Pass as `cursor` for the next page; absent on the last page.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub next_cursor: Option<String>,
+}
+
+fn rfc3339(ms: i64) -> String {
+    chrono::DateTime::from_timestamp_millis(ms)
+        .unwrap_or_default()
+        .to_rfc3339_opts(chrono::SecondsFormat::Millis, true)
+}
+
+impl JobResource {
+    pub fn from_record(record: &JobRecord) -> Self {
+        let seed = serde_json::from_str::<JobSpec>(&record.spec)
+            .ok()
+            .and_then(|spec| spec.seed)
+            .unwrap_or(0);
+        let this = format!("/v1/jobs/{}", record.id);
+        JobResource {
+            id: record.id.clone(),
+            name: record.name.clone(),
+            status: record.status,
+            progress: Progress {
+                operations_done: record.operations_done,
+                operations_total: record.operations_total.max(record.operations_done),
+            },
+            created_at: rfc3339(record.created_at),
+            started_at: record.started_at.map(rfc3339),
+            finished_at: record.finished_at.map(rfc3339),
+            error: record.error.clone(),
+            seed,
+            links: Links {
+                result: format!("{this}/result"),
+                events: format!("{this}/events"),
+                this,
+            },
+        }
+    }
+}
+
+/// Operations a job may run: devices (or the precision target's `max_devices`) x operations.
+fn job_size(job: &Job) -> (u64, Pointer) {
+    let root = Pointer::root();
+    match &job.precision {
+        Some(p) => (
+            p.max_devices.saturating_mul(job.spec.operations),
+            root.child("precision").child("max_devices"),
+        ),
+        None => (
+            job.spec.devices.saturating_mul(job.spec.operations),
+            root.child("devices"),
+        ),
+    }
+}
+
+const PROBLEM: &str = "application/problem+json";
+
+/// Submit a Monte Carlo job; it is queued durably before the response is sent.
+#[utoipa::path(
+    post, path = "/v1/jobs", tag = "jobs",
+    request_body(content = JobSpec, description = "The job of CONTRACT.md", content_type = "application/json"),
+    responses(
+        (status = 202, description = "Queued", body = JobResource, headers(("Location" = String, description = "The job's URL"))),
+        (status = 400, description = "Malformed JSON", body = Problem, content_type = PROBLEM),
+        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        (status = 413, description = "Body too large", body = Problem, content_type = PROBLEM),
+        (status = 415, description = "Body is not JSON", body = Problem, content_type = PROBLEM),
+        (status = 422, description = "A field breaks a rule, or the job is too large", body = Problem, content_type = PROBLEM),
+        (status = 429, description = "The queue is full; see Retry-After", body = Problem, content_type = PROBLEM),
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn submit_job(
+    State(state): State<AppState>,
+    Extension(Owner(owner)): Extension<Owner>,
+    JsonText(body): JsonText,
+) -> Result<Response, ApiError> {
+    let job = Job::from_json(&body, crate::cli::draw_seed)?;
+    let (size, pointer) = job_size(&job);
+    if size > state.config.max_job_operations {
+        return Err(ApiError::Invalid(InvalidInput::single(
+            &pointer,
+            format!(
+                "the job would run {size} operations; this server allows {}",
+                state.config.max_job_operations
+            ),
+        )));
+    }
+    let spec =
+        serde_json::to_string(&job.spec).map_err(|e| crate::errors::Internal(e.to_string()))?;
+    let new = NewJob {
+        id: uuid::Uuid::new_v4().to_string(),
+        owner,
+        name: job.spec.name.clone(),
+        spec,
+        operations_total: job.spec.devices.saturating_mul(job.spec.operations),
+        created_at: now_ms(),
+    };
+    let record = state
+        .store
+        .insert_job(new, state.config.max_queued)
+        .await?
+        .ok_or(ApiError::QueueFull(state.config.max_queued))?;
+    state.wake.notify_one();
+    metrics::counter!("bouncewear_jobs_submitted_total").increment(1);
+    let resource = JobResource::from_record(&record);
+    let location = HeaderValue::from_str(&resource.links.this)
+        .map_err(|e| crate::errors::Internal(e.to_string()))?;
+    Ok((
+        StatusCode::ACCEPTED,
+        [(header::LOCATION, location)],
+        Json(resource),
+    )
+        .into_response())
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct ListQuery {
+    /// Page size, 1 to 100 (default 20).
+    pub limit: Option<u32>,
+    /// `next_cursor` of the previous page.
+    pub cursor: Option<String>,
+}
+
+/// List your jobs, newest first, with cursor paging.
+#[utoipa::path(
+    get, path = "/v1/jobs", tag = "jobs", params(ListQuery),
+    responses(
+        (status = 200, description = "A page of jobs", body = JobList),
+        (status = 400, description = "Bad limit or cursor", body = Problem, content_type = PROBLEM),
+        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn list_jobs(
+    State(state): State<AppState>,
+    Extension(Owner(owner)): Extension<Owner>,
+    query: Result<Query<ListQuery>, QueryRejection>,
+) -> Result<Json<JobList>, ApiError> {
+    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let limit = query.limit.unwrap_or(20);
+    if !(1..=100).contains(&limit) {
+        return Err(ApiError::BadRequest(format!(
+            "limit must be from 1 to 100, got {limit}"
+        )));
+    }
+    let before = match query.cursor.as_deref() {
+        None => None,
+        Some(cursor) => Some(
+            cursor
+                .parse::<i64>()
+                .ok()
+                .filter(|seq| *seq > 0)
+                .ok_or_else(|| {
+                    ApiError::BadRequest(format!("cursor `{cursor}` is not one this server gave"))
+                })?,
+        ),
+    };
+    let records = state.store.jobs(&owner, before, limit).await?;
+    let next_cursor = (records.len() == limit as usize)
+        .then(|| records.last().map(|r| r.seq.to_string()))
+        .flatten();
+    Ok(Json(JobList {
+        jobs: records.iter().map(JobResource::from_record).collect(),
+        next_cursor,
+    }))
+}
+
+async fn find(state: &AppState, owner: &str, id: &str) -> Result<JobRecord, ApiError> {
+    state
+        .store
+        .job(owner, id)
+        .await?
+        .ok_or_else(|| ApiError::NotFound(format!("no job {id}")))
+}
+
+/// A job's status and progress.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The job", body = JobResource),
+        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        (status = 404, description = "No such job (for this key)", body = Problem, content_type = PROBLEM),
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn get_job(
+    State(state): State<AppState>,
+    Extension(Owner(owner)): Extension<Owner>,
+    Path(id): Path<String>,
+) -> Result<Json<JobResource>, ApiError> {
+    Ok(Json(JobResource::from_record(
+        &find(&state, &owner, &id).await?,
+    )))
+}
+
+/// Cancel a queued or running job.
+#[utoipa::path(
+    delete, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "Cancelled", body = JobResource),
+        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        (status = 404, description = "No such job (for this key)", body = Problem, content_type = PROBLEM),
+        (status = 409, description = "The job already ended", body = Problem, content_type = PROBLEM),
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn cancel_job(
+    State(state): State<AppState>,
+    Extension(Owner(owner)): Extension<Owner>,
+    Path(id): Path<String>,
+) -> Result<Json<JobResource>, ApiError> {
+    match state.store.cancel(&owner, &id, now_ms()).await? {
+        Cancel::Cancelled(record) => {
+            metrics::counter!("bouncewear_jobs_finished_total", "status" => "cancelled")
+                .increment(1);
+            Ok(Json(JobResource::from_record(&record)))
+        }
+        Cancel::AlreadyFinished(record) => Err(ApiError::Conflict(format!(
+            "job {id} already ended: {}",
+            record.status.as_str()
+        ))),
+        Cancel::NotFound => Err(ApiError::NotFound(format!("no job {id}"))),
+    }
+}
+
+async fn succeeded(state: &AppState, owner: &str, id: &str) -> Result<JobRecord, ApiError> {
+    let record = find(state, owner, id).await?;
+    if record.status != JobStatus::Succeeded {
+        return Err(ApiError::Conflict(format!(
+            "job {id} is {}; results exist once it succeeds",
+            record.status.as_str()
+        )));
+    }
+    Ok(record)
+}
+
+/// The Result of CONTRACT.md (409 until the job succeeded).
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The result", body = JobResult),
+        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        (status = 404, description = "No such job (for this key)", body = Problem, content_type = PROBLEM),
+        (status = 409, description = "Not succeeded (yet)", body = Problem, content_type = PROBLEM),
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn get_result(
+    State(state): State<AppState>,
+    Extension(Owner(owner)): Extension<Owner>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    succeeded(&state, &owner, &id).await?;
+    let result =
+        state.store.result(&id).await?.ok_or_else(|| {
+            crate::errors::Internal(format!("job {id} succeeded without a result"))
+        })?;
+    Ok(([(header::CONTENT_TYPE, "application/json")], result).into_response())
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct DistributionQuery {
+    /// First operation of interest (bins ending after it are returned).
+    pub op_start: Option<u64>,
+    /// End of the range, exclusive (bins starting before it are returned).
+    pub op_end: Option<u64>,
+    /// `json` (default) or `csv`.
+    pub format: Option<Format>,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    Json,
+    Csv,
+}
+
+/// One stored bin: its SUMMARY and the operations it covers.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct DistributionBin {
+    #[serde(flatten)]
+    pub summary: Summary,
+    pub op_start: u64,
+    pub op_end: u64,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct Distribution {
+    pub job_id: String,
+    pub metric: String,
+    /// `operation` (one bin per `bin_operations`) or `device` (one summary at the end of the test).
+    pub kind: String,
+    pub bins: Vec<DistributionBin>,
+}
+
+/// One metric's bins, as JSON or CSV, optionally for a range of operations.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/distributions/{metric}", tag = "jobs",
+    params(("id" = String, Path, description = "Job id"), ("metric" = String, Path, description = "An operation or device metric"), DistributionQuery),
+    responses(
+        (status = 200, description = "The bins", body = Distribution, content_type = "application/json"),
+        (status = 400, description = "Bad query", body = Problem, content_type = PROBLEM),
+        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        (status = 404, description = "No such job, or the job has no such metric", body = Problem, content_type = PROBLEM),
+        (status = 409, description = "Not succeeded (yet)", body = Problem, content_type = PROBLEM),
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn get_distribution(
+    State(state): State<AppState>,
+    Extension(Owner(owner)): Extension<Owner>,
+    Path((id, metric)): Path<(String, String)>,
+    query: Result<Query<DistributionQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let (op_start, op_end) = (
+        query.op_start.unwrap_or(0),
+        query.op_end.unwrap_or(u64::MAX),
+    );
+    if op_start >= op_end {
+        return Err(ApiError::BadRequest(format!(
+            "op_start ({op_start}) must be below op_end ({op_end})"
+        )));
+    }
+    let record = succeeded(&state, &owner, &id).await?;
+    if Metric::parse(&metric).is_none() {
+        return Err(ApiError::NotFound(format!(
+            "no metric `{metric}`; known: {}",
+            Metric::all_names()
+        )));
+    }
+    let rows = state
+        .store
+        .distribution(&record.id, &metric, op_start, op_end)
+        .await?;
+    let kind = rows.first().map(|r| r.kind.clone());
+    let bins = rows
+        .into_iter()
+        .map(|row| {
+            let summary = serde_json::from_str(&row.summary)
+                .map_err(|e| crate::errors::Internal(e.to_string()))?;
+            Ok(DistributionBin {
+                summary,
+                op_start: row.op_start,
+                op_end: row.op_end,
+            })
+        })
+        .collect::<Result<Vec<_>, ApiError>>()?;
+    let Some(kind) = kind else {
+        return Err(ApiError::NotFound(format!(
+            "job {id} has no bins of `{metric}` in that range (was the metric requested?)"
+        )));
+    };
+    match query.format.unwrap_or(Format::Json) {
+        Format::Json => Ok(Json(Distribution {
+            job_id: record.id,
+            metric,
+            kind,
+            bins,
+        })
+        .into_response()),
+        Format::Csv => Ok((
+            [(header::CONTENT_TYPE, "text/csv; charset=utf-8")],
+            to_csv(&bins),
+        )
+            .into_response()),
+    }
+}
+
+/// One row per bin: range, moments, intervals and every quantile.
+fn to_csv(bins: &[DistributionBin]) -> String {
+    let mut csv = String::from("op_start,op_end,n,mean,mean_ci95_lo,mean_ci95_hi,sd,min,max");
+    for (name, _) in QUANTILES {
+        let _ = write!(csv, ",{name},{name}_ci95_lo,{name}_ci95_hi");
+    }
+    csv.push_str(",exceedance_limit,exceedance_probability\n");
+    for bin in bins {
+        let s = &bin.summary;
+        let _ = write!(
+            csv,
+            "{},{},{},{},{},{},{},{},{}",
+            bin.op_start,
+            bin.op_end,
+            s.n,
+            s.mean,
+            s.mean_ci95[0],
+            s.mean_ci95[1],
+            s.sd,
+            s.min,
+            s.max
+        );
+        for (name, _) in QUANTILES {
+            let q = &s.quantiles[name];
+            let _ = write!(csv, ",{},{},{}", q.value, q.ci95[0], q.ci95[1]);
+        }
+        match &s.exceedance {
+            Some(e) => {
+                let _ = writeln!(csv, ",{},{}", e.limit, e.probability);
+            }
+            None => csv.push_str(",,\n"),
+        }
+    }
+    csv
+}
+
+/// How often the event stream looks at the job.
+const EVENT_POLL: Duration = Duration::from_millis(200);
+
+/// Server-Sent Events: `progress` events while the job runs, then one `status` event when it ends.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "An event stream: `progress` (data: Progress) and a final `status` (data: JobResource)", content_type = "text/event-stream", body = String),
+        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        (status = 404, description = "No such job (for this key)", body = Problem, content_type = PROBLEM),
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn job_events(
+    State(state): State<AppState>,
+    Extension(Owner(owner)): Extension<Owner>,
+    Path(id): Path<String>,
+) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
+    let first = find(&state, &owner, &id).await?;
+    struct Watcher {
+        state: AppState,
+        owner: String,
+        id: String,
+        last: Option<(JobStatus, u64)>,
+        pending: Option<JobRecord>,
+        ended: bool,
+    }
+    let watcher = Watcher {
+        state,
+        owner,
+        id,
+        last: None,
+        pending: Some(first),
+        ended: false,
+    };
+    let stream = futures_util::stream::unfold(watcher, |mut w| async move {
+        loop {
+            if w.ended || *w.state.shutdown.borrow() {
+                return None;
+            }
+            let record = match w.pending.take() {
+                Some(record) => record,
+                None => {
+                    tokio::time::sleep(EVENT_POLL).await;
+                    match w.state.store.job(&w.owner, &w.id).await {
+                        Ok(Some(record)) => record,
+                        _ => return None,
+                    }
+                }
+            };
+            let seen = (record.status, record.operations_done);
+            if record.status.is_terminal() {
+                w.ended = true;
+                let data =
+                    serde_json::to_string(&JobResource::from_record(&record)).unwrap_or_default();
+                return Some((Ok(Event::default().event("status").data(data)), w));
+            }
+            if w.last != Some(seen) {
+                w.last = Some(seen);
+                let progress = JobResource::from_record(&record).progress;
+                let data = serde_json::json!({"status": record.status, "operations_done": progress.operations_done, "operations_total": progress.operations_total});
+                return Some((
+                    Ok(Event::default().event("progress").data(data.to_string())),
+                    w,
+                ));
+            }
+        }
+    });
+    Ok(Sse::new(stream).keep_alive(KeepAlive::default()))
+}

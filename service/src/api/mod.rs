@@ -1,0 +1,158 @@
+//! The HTTP API of CONTRACT.md, one module per resource. Routes and their OpenAPI description come
+//! from the same `#[utoipa::path]` handlers, so they cannot drift apart.
+
+pub mod jobs;
+pub mod simulate;
+pub mod system;
+
+use crate::config::ServeConfig;
+use crate::errors::ApiError;
+use crate::store::Store;
+use axum::body::Bytes;
+use axum::extract::{FromRequest, Request, State};
+use axum::http::header;
+use axum::middleware::Next;
+use axum::response::Response;
+use metrics_exporter_prometheus::PrometheusHandle;
+use sha2::{Digest, Sha256};
+use std::collections::HashSet;
+use std::sync::Arc;
+use tokio::sync::Notify;
+use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+use utoipa::{Modify, OpenApi};
+use utoipa_axum::router::OpenApiRouter;
+
+#[derive(Clone)]
+pub struct AppState {
+    pub store: Arc<dyn Store>,
+    pub config: Arc<ServeConfig>,
+    /// SHA-256 (hex) of every accepted API key: keys themselves are never kept.
+    pub key_hashes: Arc<HashSet<String>>,
+    /// Wakes an idle worker when a job is submitted.
+    pub wake: Arc<Notify>,
+    pub metrics: PrometheusHandle,
+    /// Turns true at shutdown: event streams end so the server can drain.
+    pub shutdown: tokio::sync::watch::Receiver<bool>,
+}
+
+#[derive(OpenApi)]
+#[openapi(
+    info(title = "bouncewear", description = "Monte Carlo wear simulation of bouncing electrical contacts (McBride & Sharkh 1992). The contract is CONTRACT.md; the physics MODEL.md."),
+    modifiers(&BearerAuth),
+    tags((name = "jobs", description = "Monte Carlo endurance jobs on a durable queue"), (name = "simulate", description = "One make operation"), (name = "system", description = "Health, metrics, documentation"))
+)]
+struct ApiDoc;
+
+struct BearerAuth;
+
+impl Modify for BearerAuth {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        let components = openapi.components.get_or_insert_with(Default::default);
+        components.add_security_scheme(
+            "api_key",
+            SecurityScheme::Http(
+                HttpBuilder::new()
+                    .scheme(HttpAuthScheme::Bearer)
+                    .description(Some("Required when the server has API keys"))
+                    .build(),
+            ),
+        );
+    }
+}
+
+/// Every route, with the OpenAPI document built from the same handlers.
+pub fn router(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
+    let v1 = OpenApiRouter::new()
+        .merge(jobs::router())
+        .merge(simulate::router())
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            authenticate,
+        ));
+    let (router, openapi) = OpenApiRouter::with_openapi(ApiDoc::openapi())
+        .merge(v1)
+        .merge(system::router())
+        .split_for_parts();
+    (router.with_state(state), openapi)
+}
+
+/// The caller's identity: the hash of its API key, or `""` on a server without keys.
+#[derive(Debug, Clone)]
+pub struct Owner(pub String);
+
+pub fn hash_key(key: &str) -> String {
+    Sha256::digest(key.as_bytes())
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// With API keys configured, every /v1 call needs `Authorization: Bearer KEY`; jobs belong to the key.
+async fn authenticate(
+    State(state): State<AppState>,
+    mut request: Request,
+    next: Next,
+) -> Result<Response, ApiError> {
+    let owner = if state.key_hashes.is_empty() {
+        String::new()
+    } else {
+        let presented = request
+            .headers()
+            .get(header::AUTHORIZATION)
+            .and_then(|value| value.to_str().ok())
+            .and_then(|value| {
+                value
+                    .strip_prefix("Bearer ")
+                    .or_else(|| value.strip_prefix("bearer "))
+            })
+            .map(str::trim)
+            .ok_or(ApiError::Unauthorized)?;
+        let hash = hash_key(presented);
+        if !state.key_hashes.contains(&hash) {
+            return Err(ApiError::Unauthorized);
+        }
+        hash
+    };
+    request.extensions_mut().insert(Owner(owner));
+    Ok(next.run(request).await)
+}
+
+/// A JSON request body as text: `application/json` (415 otherwise), at most `max_body_bytes` (413),
+/// UTF-8 (400). Parsing is left to the model, whose errors name the field.
+pub struct JsonText(pub String);
+
+impl FromRequest<AppState> for JsonText {
+    type Rejection = ApiError;
+
+    async fn from_request(request: Request, state: &AppState) -> Result<Self, ApiError> {
+        let content_type = request
+            .headers()
+            .get(header::CONTENT_TYPE)
+            .and_then(|v| v.to_str().ok())
+            .unwrap_or("");
+        let essence = content_type
+            .split(';')
+            .next()
+            .unwrap_or("")
+            .trim()
+            .to_ascii_lowercase();
+        if !(essence == "application/json"
+            || (essence.starts_with("application/") && essence.ends_with("+json")))
+        {
+            return Err(ApiError::UnsupportedMediaType);
+        }
+        let limit = state.config.max_body_bytes;
+        let bytes = Bytes::from_request(request, state)
+            .await
+            .map_err(|rejection| {
+                if rejection.status() == axum::http::StatusCode::PAYLOAD_TOO_LARGE {
+                    ApiError::TooLarge(limit)
+                } else {
+                    ApiError::BadRequest(rejection.body_text())
+                }
+            })?;
+        String::from_utf8(bytes.to_vec())
+            .map(JsonText)
+            .map_err(|_| ApiError::BadRequest("the request body is not UTF-8".to_owned()))
+    }
+}

@@ -1,0 +1,50 @@
+//! `POST /v1/simulate`: one make operation, as `bouncewear simulate` prints it.
+
+use super::{AppState, JsonText};
+use crate::errors::{ApiError, Problem};
+use axum::Json;
+use axum::extract::Query;
+use axum::extract::rejection::QueryRejection;
+use bouncewear_model::{Fidelity, Scenario, ScenarioSpec, Simulation, simulate};
+use serde::Deserialize;
+use utoipa::IntoParams;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new().routes(routes!(simulate_operation))
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct SimulateQuery {
+    /// `exact` (default) or `closed_form`.
+    pub fidelity: Option<Fidelity>,
+}
+
+/// Simulate one make operation of a scenario.
+#[utoipa::path(
+    post, path = "/v1/simulate", tag = "simulate",
+    params(SimulateQuery),
+    request_body(content = ScenarioSpec, description = "A scenario; every field optional (MODEL.md section 8)", content_type = "application/json"),
+    responses(
+        (status = 200, description = "The operation and its bounces", body = Simulation),
+        (status = 400, description = "Malformed JSON or query", body = Problem, content_type = "application/problem+json"),
+        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
+        (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A field breaks a rule; `errors` names each by JSON pointer", body = Problem, content_type = "application/problem+json"),
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn simulate_operation(
+    query: Result<Query<SimulateQuery>, QueryRejection>,
+    JsonText(body): JsonText,
+) -> Result<Json<Simulation>, ApiError> {
+    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let scenario = Scenario::from_json(&body)?;
+    Ok(Json(simulate(
+        &scenario,
+        query.fidelity.unwrap_or_default(),
+    )))
+}

@@ -1,0 +1,75 @@
+//! Health, Prometheus metrics, the OpenAPI document and its docs UI (RapiDoc, vendored).
+
+use super::AppState;
+use crate::errors::{ApiError, Problem};
+use axum::Json;
+use axum::extract::State;
+use axum::http::header;
+use axum::response::{Html, IntoResponse};
+use serde::Serialize;
+use utoipa::ToSchema;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(healthz))
+        .routes(routes!(prometheus_metrics))
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct Health {
+    pub status: &'static str,
+    pub database: &'static str,
+    pub version: &'static str,
+}
+
+/// Liveness and database reachability.
+#[utoipa::path(
+    get, path = "/healthz", tag = "system",
+    responses((status = 200, description = "Healthy", body = Health), (status = 500, description = "The database is unreachable", body = Problem, content_type = "application/problem+json"))
+)]
+pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ApiError> {
+    state.store.ping().await?;
+    Ok(Json(Health {
+        status: "ok",
+        database: "ok",
+        version: env!("CARGO_PKG_VERSION"),
+    }))
+}
+
+/// Prometheus metrics: requests, queue depth, jobs and simulated operations.
+#[utoipa::path(
+    get, path = "/metrics", tag = "system",
+    responses((status = 200, description = "Prometheus text format", body = String, content_type = "text/plain"))
+)]
+pub async fn prometheus_metrics(State(state): State<AppState>) -> impl IntoResponse {
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        state.metrics.render(),
+    )
+}
+
+const RAPIDOC: &str = include_str!("../../assets/rapidoc-min.js");
+
+pub async fn docs() -> Html<&'static str> {
+    Html(concat!(
+        "<!doctype html><html><head><meta charset=\"utf-8\"><title>bouncewear API</title>",
+        "<script type=\"module\" src=\"/docs/rapidoc-min.js\"></script></head><body>",
+        "<rapi-doc spec-url=\"/openapi.json\" render-style=\"read\" show-header=\"false\" allow-try=\"true\"></rapi-doc>",
+        "</body></html>"
+    ))
+}
+
+pub async fn docs_script() -> impl IntoResponse {
+    (
+        [
+            (
+                header::CONTENT_TYPE,
+                "application/javascript; charset=utf-8",
+            ),
+            (header::CACHE_CONTROL, "public, max-age=86400"),
+        ],
+        RAPIDOC,
+    )
+}

@@ -1,0 +1,50 @@
+//! `bouncewear serve` configuration: flags, each with an environment variable.
+
+use clap::Args;
+use std::net::SocketAddr;
+use std::time::Duration;
+
+#[derive(Debug, Clone, Args)]
+pub struct ServeConfig {
+    /// Address to listen on; port 0 picks a free port (printed at start-up).
+    #[arg(long, env = "BOUNCEWEAR_BIND", default_value = "127.0.0.1:8080")]
+    pub bind: SocketAddr,
+    /// SQLite database URL; the file is created if missing.
+    #[arg(
+        long,
+        env = "BOUNCEWEAR_DATABASE",
+        default_value = "sqlite://bouncewear.db"
+    )]
+    pub database: String,
+    /// Jobs run at the same time (each uses all compute threads).
+    #[arg(long, env = "BOUNCEWEAR_WORKERS", default_value_t = 1)]
+    pub workers: usize,
+    /// Compute threads (default: one per core). Compute never runs on the async runtime.
+    #[arg(long, env = "BOUNCEWEAR_COMPUTE_THREADS")]
+    pub compute_threads: Option<usize>,
+    /// API keys, comma-separated; with keys, every /v1 call needs `Authorization: Bearer KEY`.
+    #[arg(long = "api-key", env = "BOUNCEWEAR_API_KEYS", value_delimiter = ',')]
+    pub api_keys: Vec<String>,
+    /// Queued jobs at most; further submissions get 429 with Retry-After.
+    #[arg(long, env = "BOUNCEWEAR_MAX_QUEUED", default_value_t = 1000)]
+    pub max_queued: u64,
+    /// Largest job, in operations (devices x operations, with max_devices for a precision target).
+    #[arg(
+        long,
+        env = "BOUNCEWEAR_MAX_JOB_OPERATIONS",
+        default_value_t = 2_000_000_000
+    )]
+    pub max_job_operations: u64,
+    /// Largest request body, in bytes.
+    #[arg(long, env = "BOUNCEWEAR_MAX_BODY_BYTES", default_value_t = 1 << 20)]
+    pub max_body_bytes: usize,
+    /// How long a claimed job stays leased without a heartbeat before another worker may take it.
+    #[arg(long, env = "BOUNCEWEAR_LEASE_SECONDS", default_value_t = 30.0)]
+    pub lease_seconds: f64,
+}
+
+impl ServeConfig {
+    pub fn lease(&self) -> Duration {
+        Duration::from_secs_f64(self.lease_seconds.max(0.5))
+    }
+}

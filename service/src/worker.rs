@@ -1,0 +1,222 @@
+//! The durable job queue's workers: claim a job with a lease, run it on the compute pool (never on
+//! the async runtime), heartbeat with the fencing attempt number, and write the result only while the
+//! attempt still holds the job.
+//!
+//! A job interrupted by a crash or kill keeps its lease until it expires; then any worker (this
+//! instance after a restart, or another) claims it again and reruns it from the start. The seed was
+//! fixed at submission, so the result is identical to an uninterrupted run. On a graceful shutdown the
+//! running job is stopped and handed back to the queue at once.
+
+use crate::store::{Claim, Lease, NewDistribution, Store, now_ms};
+use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Watch, run_job};
+use std::panic::AssertUnwindSafe;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
+use tokio::sync::{Notify, oneshot, watch};
+use tokio::task::JoinHandle;
+
+/// Progress and the lease are written at most this often per running job.
+const HEARTBEAT_MAX_PERIOD: Duration = Duration::from_millis(500);
+/// An idle worker looks for expired leases at least this often.
+const IDLE_POLL: Duration = Duration::from_millis(500);
+
+pub struct Workers {
+    pub store: Arc<dyn Store>,
+    pub compute: Arc<rayon::ThreadPool>,
+    pub lease: Duration,
+    pub instance: String,
+    /// Notified on every submission, so an idle worker starts at once.
+    pub wake: Arc<Notify>,
+}
+
+impl Workers {
+    /// Starts `count` worker loops; they stop, handing running jobs back, when `shutdown` turns true.
+    pub fn spawn(
+        self: Arc<Self>,
+        count: usize,
+        shutdown: watch::Receiver<bool>,
+    ) -> Vec<JoinHandle<()>> {
+        (0..count)
+            .map(|slot| {
+                let workers = Arc::clone(&self);
+                let shutdown = shutdown.clone();
+                tokio::spawn(async move { workers.work(slot, shutdown).await })
+            })
+            .collect()
+    }
+
+    async fn work(&self, slot: usize, mut shutdown: watch::Receiver<bool>) {
+        let worker = format!("{}/{slot}", self.instance);
+        let lease_ms = i64::try_from(self.lease.as_millis()).unwrap_or(i64::MAX);
+        while !*shutdown.borrow() {
+            match self.store.claim(&worker, now_ms(), lease_ms).await {
+                Ok(Some(claim)) => self.run(claim, lease_ms, &mut shutdown).await,
+                Ok(None) => {
+                    tokio::select! {
+                        () = self.wake.notified() => {}
+                        () = tokio::time::sleep(IDLE_POLL) => {}
+                        _ = shutdown.changed() => {}
+                    }
+                }
+                Err(error) => {
+                    tracing::error!(%error, "claiming a job failed");
+                    tokio::time::sleep(IDLE_POLL).await;
+                }
+            }
+        }
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %claim.id, attempt = claim.attempt))]
+    async fn run(&self, claim: Claim, lease_ms: i64, shutdown: &mut watch::Receiver<bool>) {
+        let job = match Job::from_json(&claim.spec, || 0) {
+            Ok(job) => job,
+            Err(invalid) => {
+                let error = format!("the stored job no longer validates: {invalid}");
+                let _ = self
+                    .store
+                    .fail(&claim.id, claim.attempt, now_ms(), &error)
+                    .await;
+                return;
+            }
+        };
+        tracing::info!(operations = claim.operations_total, "job started");
+        let cancel = Arc::new(AtomicBool::new(false));
+        let done = Arc::new(AtomicU64::new(0));
+        let (sender, mut finished) = oneshot::channel();
+        {
+            let (cancel, done) = (Arc::clone(&cancel), Arc::clone(&done));
+            self.compute.spawn(move || {
+                let observer = Watch {
+                    cancel: &cancel,
+                    on_progress: |d, _| done.store(d, Ordering::Relaxed),
+                };
+                let _ = sender.send(std::panic::catch_unwind(AssertUnwindSafe(|| {
+                    run_job(&job, &observer)
+                })));
+            });
+        }
+        let period = (self.lease / 3).min(HEARTBEAT_MAX_PERIOD);
+        let mut heartbeat = tokio::time::interval(period);
+        let mut stopping = false;
+        let outcome = loop {
+            tokio::select! {
+                outcome = &mut finished => break outcome,
+                _ = heartbeat.tick() => {
+                    let progress = done.load(Ordering::Relaxed);
+                    match self.store.heartbeat(&claim.id, claim.attempt, now_ms(), lease_ms, progress).await {
+                        Ok(Lease::Held) => {}
+                        Ok(lease @ (Lease::Cancelled | Lease::Lost)) => {
+                            tracing::info!(?lease, "stopping: the job is no longer ours to run");
+                            cancel.store(true, Ordering::Relaxed);
+                        }
+                        Err(error) => tracing::warn!(%error, "heartbeat failed; the lease may expire"),
+                    }
+                }
+                _ = shutdown.changed(), if !stopping => {
+                    stopping = true;
+                    cancel.store(true, Ordering::Relaxed);
+                }
+            }
+        };
+        match outcome {
+            Ok(Ok(Ok(result))) => self.succeed(&claim, &result).await,
+            Ok(Ok(Err(Cancelled))) if stopping => {
+                match self.store.release(&claim.id, claim.attempt).await {
+                    Ok(_) => tracing::info!("handed back to the queue for shutdown"),
+                    Err(error) => {
+                        tracing::error!(%error, "could not hand the job back; its lease will expire")
+                    }
+                }
+            }
+            Ok(Ok(Err(Cancelled))) => tracing::info!("job stopped (cancelled or taken over)"),
+            Ok(Err(_)) | Err(_) => {
+                tracing::error!("the simulation panicked");
+                let _ = self
+                    .store
+                    .fail(
+                        &claim.id,
+                        claim.attempt,
+                        now_ms(),
+                        "internal error: the simulation panicked",
+                    )
+                    .await;
+                metrics::counter!("bouncewear_jobs_finished_total", "status" => "failed")
+                    .increment(1);
+            }
+        }
+    }
+
+    async fn succeed(&self, claim: &Claim, result: &JobResult) {
+        let text = match serde_json::to_string(result) {
+            Ok(text) => text,
+            Err(error) => {
+                let _ = self
+                    .store
+                    .fail(
+                        &claim.id,
+                        claim.attempt,
+                        now_ms(),
+                        &format!("internal error: {error}"),
+                    )
+                    .await;
+                return;
+            }
+        };
+        match self
+            .store
+            .succeed(
+                &claim.id,
+                claim.attempt,
+                now_ms(),
+                &text,
+                &distribution_rows(result),
+            )
+            .await
+        {
+            Ok(true) => {
+                let operations = result.job["devices_run"].as_u64().unwrap_or(0)
+                    * result.job["operations"].as_u64().unwrap_or(0);
+                metrics::counter!("bouncewear_jobs_finished_total", "status" => "succeeded")
+                    .increment(1);
+                metrics::counter!("bouncewear_operations_simulated_total").increment(operations);
+                tracing::info!(wall_s = result.timing.wall_s, "job succeeded");
+            }
+            Ok(false) => {
+                tracing::info!("result discarded: the job was cancelled or taken over meanwhile")
+            }
+            Err(error) => {
+                tracing::error!(%error, "storing the result failed; the lease will expire and the job rerun")
+            }
+        }
+    }
+}
+
+/// The rows of the `distributions` table: every bin of every operation metric, and the device metrics.
+pub fn distribution_rows(result: &JobResult) -> Vec<NewDistribution> {
+    let operations = result.job["operations"].as_u64().unwrap_or(0);
+    let bins = result.operations.iter().flat_map(|(metric, bins)| {
+        bins.iter()
+            .enumerate()
+            .map(move |(index, bin)| NewDistribution {
+                metric: metric.clone(),
+                kind: "operation",
+                bin: i64::try_from(index).unwrap_or(i64::MAX),
+                op_start: bin.op_start,
+                op_end: bin.op_end,
+                summary: bin.summary.clone(),
+            })
+    });
+    let devices = result
+        .devices
+        .iter()
+        .map(|(metric, summary)| NewDistribution {
+            metric: metric.clone(),
+            kind: "device",
+            bin: 0,
+            op_start: 0,
+            op_end: operations,
+            summary: summary.clone(),
+        });
+    bins.chain(devices).collect()
+}
