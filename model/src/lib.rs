@@ -17,6 +17,7 @@
 pub mod arc;
 pub mod error;
 pub mod impact;
+pub mod life;
 pub mod mechanism;
 pub mod montecarlo;
 pub mod operation;

@@ -1,0 +1,1139 @@
+//! Life analysis of operations to failure: a two-parameter Weibull fitted by maximum likelihood
+//! with right censoring, its B1 and B10 lives, and the Kaplan-Meier reliability curve.
+//!
+//! The input is one `(time, failed)` pair per device: `time` is its life in operations (a device
+//! that first fails a criterion at operation index `j` has life `j + 1`), `failed` is `true` when
+//! the failure was observed and `false` when the device was right-censored (still good when it left
+//! the test, after `time` operations). Times must be finite and positive; they need not be whole.
+//!
+//! All bounds are two-sided 95 % ([`Z_975`]):
+//!
+//! | quantity | estimate | bounds |
+//! |---|---|---|
+//! | Weibull `beta`, `eta` | MLE, profile equation in `beta` ([`fit_weibull`]) | Fisher matrix, log-transformed Wald |
+//! | `B_p` | `eta (-ln(1 - p))^(1/beta)` ([`b_life`]) | delta method on `ln B_p`, same covariance |
+//! | `R(t)` | Kaplan-Meier ([`kaplan_meier`]) | Greenwood variance, log-log transformed |
+//!
+//! Every number in the serialised results is finite: what cannot be computed is `None`.
+
+use crate::stats::Z_975;
+use serde::{Deserialize, Serialize};
+
+/// Why a Weibull fit (or any analysis) could not be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LifeError {
+    /// Times are operations to failure: a zero, negative or non-finite time is a caller's bug.
+    #[error("observation {index} has time {time}: times must be finite and positive")]
+    InvalidTime { index: usize, time: f64 },
+    /// Nothing to fit.
+    #[error("no observations")]
+    Empty,
+    /// Every device survived: the likelihood grows without bound as `eta` grows.
+    #[error("no failures: all {censored} devices are right-censored")]
+    NoFailures { censored: usize },
+    /// All failures at one time. Then either no device outlived it and the likelihood grows without
+    /// bound as `beta` grows, or `beta` is fixed by where the censoring falls rather than by the
+    /// spread of the failures: a 2-parameter fit needs two distinct failure times.
+    #[error("all {failures} failures at the same time {time}: need two distinct failure times")]
+    SingleFailureTime { failures: usize, time: f64 },
+    /// A guard against overflow in a pathological data set; not expected for operation counts.
+    #[error("the Weibull fit is not finite (beta {beta}, eta {eta})")]
+    NotFinite { beta: f64, eta: f64 },
+}
+
+/// A fitted two-parameter Weibull, `F(t) = 1 - exp(-(t/eta)^beta)`.
+///
+/// Bounds are Fisher-matrix bounds: the observed information (minus the Hessian of the log
+/// likelihood) at the MLE in `(ln eta, ln beta)`, inverted to [`Weibull::covariance_ln`], then
+/// log-transformed Wald bounds `x exp(-+ z se(ln x))`, which stay positive. Because the score is
+/// zero at the MLE, this is the same as inverting the information in `(eta, beta)` and using
+/// `se(ln x) = se(x) / x`, as Weibull++, Minitab and Python's `reliability` do.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Weibull {
+    /// Shape.
+    pub beta: f64,
+    /// Scale (characteristic life, `F(eta) = 1 - 1/e`), operations.
+    pub eta: f64,
+    /// 95 % bounds on `beta`, `[lower, upper]`.
+    pub beta_ci95: [f64; 2],
+    /// 95 % bounds on `eta`, `[lower, upper]`.
+    pub eta_ci95: [f64; 2],
+    /// `ln L` at the MLE, with the density in `1/operations` (comparable with Minitab's).
+    pub log_likelihood: f64,
+    /// Observed failures `r`.
+    pub failures: usize,
+    /// Right-censored devices.
+    pub censored: usize,
+    /// Asymptotic covariance of `(ln eta, ln beta)`, in that order.
+    pub covariance_ln: [[f64; 2]; 2],
+}
+
+/// `B_p`: the life by which a fraction `p` of the devices has failed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BLife {
+    /// Fraction failed, in `(0, 1)`.
+    pub p: f64,
+    /// `B_p = eta (-ln(1 - p))^(1/beta)`, operations.
+    pub value: f64,
+    /// 95 % bounds `[lower, upper]` by the delta method on `ln B_p` ([`b_life`]).
+    pub ci95: [f64; 2],
+}
+
+/// One step of the Kaplan-Meier curve, at a distinct failure time. `R(t)` is 1 before the first
+/// step and holds its value from one step to the next.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct KaplanMeierPoint {
+    /// The failure time `t_j`, operations.
+    pub time: f64,
+    /// `R(t_j)`, just after the failures at `t_j`.
+    pub reliability: f64,
+    /// 95 % Greenwood bounds, log-log transformed, `[lower, upper]`; `None` once `R` reaches 0,
+    /// where the Greenwood variance is undefined.
+    pub ci95: Option<[f64; 2]>,
+    /// `n_j`: devices with time `>= t_j` (censored at `t_j` count: they were at risk).
+    pub at_risk: usize,
+    /// `d_j`: failures at `t_j`.
+    pub failures: usize,
+}
+
+/// Everything [`analyse`] reports for one set of lives.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LifeAnalysis {
+    /// Observed failures.
+    pub failures: usize,
+    /// Right-censored devices.
+    pub censored: usize,
+    /// The Weibull fit; `None` when it cannot be made, and then `weibull_error` says why.
+    pub weibull: Option<Weibull>,
+    /// Why there is no Weibull fit.
+    pub weibull_error: Option<String>,
+    /// `B1` from the fit.
+    pub b1: Option<BLife>,
+    /// `B10` from the fit.
+    pub b10: Option<BLife>,
+    /// The Kaplan-Meier steps; empty if there are no failures or the times are invalid.
+    pub kaplan_meier: Vec<KaplanMeierPoint>,
+}
+
+/// The Weibull fit, B1, B10 and the Kaplan-Meier curve of `data` (`(time, failed)` pairs, see the
+/// module documentation). Never panics; an input the fit cannot use gives `weibull: None` with the
+/// reason, and invalid times also leave the Kaplan-Meier curve empty.
+pub fn analyse(data: &[(f64, bool)]) -> LifeAnalysis {
+    let failures = data.iter().filter(|&&(_, failed)| failed).count();
+    let (weibull, weibull_error) = match fit_weibull(data) {
+        Ok(w) => (Some(w), None),
+        Err(e) => (None, Some(e.to_string())),
+    };
+    LifeAnalysis {
+        failures,
+        censored: data.len() - failures,
+        b1: weibull.as_ref().and_then(|w| b_life(w, 0.01)),
+        b10: weibull.as_ref().and_then(|w| b_life(w, 0.10)),
+        weibull,
+        weibull_error,
+        kaplan_meier: kaplan_meier(data).unwrap_or_default(),
+    }
+}
+
+/// Checks that every time is finite and positive.
+fn validate(data: &[(f64, bool)]) -> Result<(), LifeError> {
+    match data.iter().position(|&(t, _)| !(t.is_finite() && t > 0.0)) {
+        Some(index) => Err(LifeError::InvalidTime {
+            index,
+            time: data[index].0,
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Maximum-likelihood two-parameter Weibull with right censoring.
+///
+/// `ln L = sum_failures [ln beta - beta ln eta + (beta - 1) ln t_i - (t_i/eta)^beta]
+///        - sum_censored (t_j/eta)^beta`.
+///
+/// Setting `d ln L / d eta = 0` gives `eta(beta) = (sum_all t^beta / r)^(1/beta)`; substituted
+/// into `d ln L / d beta = 0` this leaves one equation in `beta` (`profile_score`) whose
+/// left side decreases strictly, so its root is unique; it is bracketed and solved by Newton's
+/// method safeguarded by bisection (`solve_shape`). Times enter only as `ln(t / t_max)`, so
+/// `t^beta` never overflows whatever `beta` and the scale of the times.
+///
+/// Needs at least one failure and two distinct failure times ([`LifeError`]). Bounds: see
+/// [`Weibull`].
+pub fn fit_weibull(data: &[(f64, bool)]) -> Result<Weibull, LifeError> {
+    validate(data)?;
+    if data.is_empty() {
+        return Err(LifeError::Empty);
+    }
+    let failures = data.iter().filter(|&&(_, failed)| failed).count();
+    let censored = data.len() - failures;
+    let mut failure_times = data.iter().filter(|&&(_, failed)| failed).map(|&(t, _)| t);
+    let Some(first) = failure_times.next() else {
+        return Err(LifeError::NoFailures { censored });
+    };
+    if failure_times.all(|t| t == first) {
+        return Err(LifeError::SingleFailureTime {
+            failures,
+            time: first,
+        });
+    }
+
+    let ln_t_max = data
+        .iter()
+        .map(|&(t, _)| t.ln())
+        .fold(f64::NEG_INFINITY, f64::max);
+    let scaled: Vec<(f64, bool)> = data.iter().map(|&(t, f)| (t.ln() - ln_t_max, f)).collect();
+    let beta = solve_shape(&scaled, failures);
+    let ln_eta = ln_t_max + ln_scale_given_shape(&scaled, failures, beta);
+    let eta = ln_eta.exp();
+
+    let covariance_ln = invert_2x2(observed_information(data, ln_eta, beta));
+    let weibull = Weibull {
+        beta,
+        eta,
+        beta_ci95: log_wald_interval(beta, covariance_ln[1][1].sqrt()),
+        eta_ci95: log_wald_interval(eta, covariance_ln[0][0].sqrt()),
+        log_likelihood: weibull_log_likelihood(data, beta, eta),
+        failures,
+        censored,
+        covariance_ln,
+    };
+    if weibull_is_finite(&weibull) {
+        Ok(weibull)
+    } else {
+        Err(LifeError::NotFinite { beta, eta })
+    }
+}
+
+/// Whether every number of the fit is finite and the variances positive.
+fn weibull_is_finite(w: &Weibull) -> bool {
+    let c = w.covariance_ln;
+    [w.beta, w.eta, w.log_likelihood, c[0][1], c[1][0]]
+        .into_iter()
+        .chain(w.beta_ci95)
+        .chain(w.eta_ci95)
+        .all(f64::is_finite)
+        && c[0][0].is_finite()
+        && c[1][1].is_finite()
+        && c[0][0] > 0.0
+        && c[1][1] > 0.0
+}
+
+/// The Weibull log likelihood with right censoring (see [`fit_weibull`]), with `(t/eta)^beta`
+/// evaluated as `exp(beta (ln t - ln eta))`.
+pub fn weibull_log_likelihood(data: &[(f64, bool)], beta: f64, eta: f64) -> f64 {
+    let (ln_beta, ln_eta) = (beta.ln(), eta.ln());
+    data.iter()
+        .map(|&(t, failed)| {
+            let ln_t = t.ln();
+            let cumulative_hazard = (beta * (ln_t - ln_eta)).exp();
+            if failed {
+                ln_beta - beta * ln_eta + (beta - 1.0) * ln_t - cumulative_hazard
+            } else {
+                -cumulative_hazard
+            }
+        })
+        .sum()
+}
+
+/// The profile score `g(beta) = (1/r) d ln L_p / d beta` and its derivative, with `s_i = ln(t_i /
+/// t_max)` and weights `w_i = e^(beta s_i)` over all devices:
+///
+/// `g = 1/beta + mean_failures(s) - m`, `g' = -1/beta^2 - v`,
+///
+/// where `m = sum w s / sum w` and `v = sum w (s - m)^2 / sum w` are the weighted mean and
+/// variance of `s`. `g' < 0`, so `g` has at most one root. `m` is a ratio, so scaling the times
+/// by `t_max` changes nothing, and `w <= 1` with `w = 1` at `t_max` keeps `sum w >= 1`.
+fn profile_score(scaled: &[(f64, bool)], failures: usize, beta: f64) -> (f64, f64) {
+    let (mut weight_sum, mut weighted_s) = (0.0, 0.0);
+    for &(s, _) in scaled {
+        let w = (beta * s).exp();
+        weight_sum += w;
+        weighted_s += w * s;
+    }
+    let mean = weighted_s / weight_sum;
+    let variance = scaled
+        .iter()
+        .map(|&(s, _)| (beta * s).exp() * (s - mean).powi(2))
+        .sum::<f64>()
+        / weight_sum;
+    let mean_failures = mean_failure_log_time(scaled, failures);
+    (
+        1.0 / beta + mean_failures - mean,
+        -1.0 / (beta * beta) - variance,
+    )
+}
+
+/// `mean_failures(s)`, the mean of `s_i = ln(t_i / t_max)` over the failures: negative as soon as
+/// one failure time is below `t_max`.
+fn mean_failure_log_time(scaled: &[(f64, bool)], failures: usize) -> f64 {
+    scaled
+        .iter()
+        .filter(|&&(_, f)| f)
+        .map(|&(s, _)| s)
+        .sum::<f64>()
+        / failures as f64
+}
+
+/// The root of [`profile_score`].
+///
+/// Bracket: since `m <= 0`, `g(beta) >= 1/beta + mean_failures(s)`, which is `>= 0` at
+/// `beta_lo = -1/mean_failures(s)`; the upper end doubles from there until `g < 0`, which happens
+/// because `g -> mean_failures(s) < 0` as `beta -> inf` (`m -> 0`). Newton steps that leave the
+/// bracket are replaced by bisection of the bracket in `ln beta` (the bracket can span many
+/// octaves). Stops when a step or the bracket is at the resolution of `f64`.
+fn solve_shape(scaled: &[(f64, bool)], failures: usize) -> f64 {
+    const MAX_ITERATIONS: usize = 200;
+    let mut lo = -1.0 / mean_failure_log_time(scaled, failures);
+    let mut hi = 2.0 * lo;
+    while hi.is_finite() && profile_score(scaled, failures, hi).0 >= 0.0 {
+        lo = hi;
+        hi *= 2.0;
+    }
+    let mut beta = lo;
+    for _ in 0..MAX_ITERATIONS {
+        let (g, dg) = profile_score(scaled, failures, beta);
+        if g == 0.0 {
+            break;
+        }
+        if g > 0.0 {
+            lo = beta;
+        } else {
+            hi = beta;
+        }
+        let newton = beta - g / dg;
+        let next = if newton > lo && newton < hi {
+            newton
+        } else {
+            (lo * hi).sqrt()
+        };
+        let converged =
+            (next - beta).abs() <= 4.0 * f64::EPSILON * next || hi - lo <= 4.0 * f64::EPSILON * hi;
+        beta = next;
+        if converged {
+            break;
+        }
+    }
+    beta
+}
+
+/// `ln(eta(beta) / t_max) = ln(sum_all (t/t_max)^beta / r) / beta`, the scale that maximises the
+/// likelihood for a given shape.
+fn ln_scale_given_shape(scaled: &[(f64, bool)], failures: usize, beta: f64) -> f64 {
+    let weight_sum: f64 = scaled.iter().map(|&(s, _)| (beta * s).exp()).sum();
+    (weight_sum / failures as f64).ln() / beta
+}
+
+/// Observed information, `-Hessian of ln L`, in `(u, v) = (ln eta, ln beta)`.
+///
+/// With `z_i = beta (ln t_i - u)` and `x_i = e^(z_i) = (t_i/eta)^beta`, `ln L = r v + sum_f z_i -
+/// sum_f ln t_i - sum_all x_i`, and `dz/du = -beta`, `dz/dv = z`, so
+///
+/// `I_uu = beta^2 sum x`, `I_uv = beta (r - sum x z - sum x)`, `I_vv = sum x z^2 + sum x z -
+/// sum_f z`.
+fn observed_information(data: &[(f64, bool)], ln_eta: f64, beta: f64) -> [[f64; 2]; 2] {
+    let (mut sum_x, mut sum_xz, mut sum_xzz, mut sum_failure_z, mut r) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for &(t, failed) in data {
+        let z = beta * (t.ln() - ln_eta);
+        let x = z.exp();
+        sum_x += x;
+        sum_xz += x * z;
+        sum_xzz += x * z * z;
+        if failed {
+            sum_failure_z += z;
+            r += 1.0;
+        }
+    }
+    let uv = beta * (r - sum_xz - sum_x);
+    [
+        [beta * beta * sum_x, uv],
+        [uv, sum_xzz + sum_xz - sum_failure_z],
+    ]
+}
+
+/// The inverse of a symmetric 2x2 matrix, `[[d, -b], [-b, a]] / (a d - b^2)`.
+fn invert_2x2(m: [[f64; 2]; 2]) -> [[f64; 2]; 2] {
+    let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+    [
+        [m[1][1] / det, -m[0][1] / det],
+        [-m[1][0] / det, m[0][0] / det],
+    ]
+}
+
+/// Log-transformed Wald bounds `[x e^(-z se), x e^(z se)]`, `se` the standard error of `ln x`.
+fn log_wald_interval(x: f64, se_ln: f64) -> [f64; 2] {
+    [x * (-Z_975 * se_ln).exp(), x * (Z_975 * se_ln).exp()]
+}
+
+/// `B_p = eta (-ln(1 - p))^(1/beta)` with 95 % bounds by the delta method on
+/// `ln B_p = u + k e^(-v)`, `(u, v) = (ln eta, ln beta)`, `k = ln(-ln(1 - p))`:
+///
+/// `Var(ln B_p) = C_uu - 2 (k/beta) C_uv + (k/beta)^2 C_vv`, bounds `B_p e^(-+ z sqrt(Var))`
+///
+/// (the bounds on time of Weibull++ and `reliability`). `None` if `p` is not in `(0, 1)` or a
+/// number would not be finite.
+pub fn b_life(weibull: &Weibull, p: f64) -> Option<BLife> {
+    if !(p > 0.0 && p < 1.0) {
+        return None;
+    }
+    let k_over_beta = (-(-p).ln_1p()).ln() / weibull.beta;
+    let value = weibull.eta * k_over_beta.exp();
+    let ci95 = log_wald_interval(
+        value,
+        b_life_ln_variance(&weibull.covariance_ln, k_over_beta).sqrt(),
+    );
+    (value.is_finite() && ci95.iter().all(|b| b.is_finite())).then_some(BLife { p, value, ci95 })
+}
+
+/// `Var(ln B_p)` from the covariance of `(ln eta, ln beta)`: the gradient of `ln B_p` is
+/// `(1, -k/beta)`.
+fn b_life_ln_variance(c: &[[f64; 2]; 2], k_over_beta: f64) -> f64 {
+    c[0][0] - 2.0 * k_over_beta * c[0][1] + k_over_beta * k_over_beta * c[1][1]
+}
+
+/// The Kaplan-Meier estimate `R(t) = prod_{t_j <= t} (1 - d_j / n_j)`, one point per distinct
+/// failure time `t_j`, with `d_j` failures among `n_j` at risk. At a time shared by failures and
+/// censorings the failures come first: a device censored at `t_j` was still at risk at `t_j`.
+///
+/// Bounds: Greenwood's `sigma^2 = sum_{t_j <= t} d_j / (n_j (n_j - d_j))`
+/// (`greenwood_term`), log-log transformed (`log_log_interval`). Empty data or data without
+/// failures give no points; only an invalid time is an error.
+pub fn kaplan_meier(data: &[(f64, bool)]) -> Result<Vec<KaplanMeierPoint>, LifeError> {
+    validate(data)?;
+    let mut sorted = data.to_vec();
+    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut points = Vec::new();
+    let (mut reliability, mut greenwood) = (1.0, 0.0);
+    let mut start = 0;
+    while start < sorted.len() {
+        let time = sorted[start].0;
+        let end = start + sorted[start..].partition_point(|&(t, _)| t == time);
+        let failures = sorted[start..end].iter().filter(|&&(_, f)| f).count();
+        let at_risk = sorted.len() - start;
+        if failures > 0 {
+            reliability *= 1.0 - failures as f64 / at_risk as f64;
+            greenwood += greenwood_term(at_risk, failures);
+            points.push(KaplanMeierPoint {
+                time,
+                reliability,
+                ci95: log_log_interval(reliability, greenwood),
+                at_risk,
+                failures,
+            });
+        }
+        start = end;
+    }
+    Ok(points)
+}
+
+/// Greenwood's term `d / (n (n - d))`; infinite when all at risk fail (`R` drops to 0).
+fn greenwood_term(at_risk: usize, failures: usize) -> f64 {
+    let (n, d) = (at_risk as f64, failures as f64);
+    d / (n * (n - d))
+}
+
+/// Log-log transformed bounds on `R` (Kalbfleisch & Prentice 1980; Klein & Moeschberger 2003,
+/// eq. 4.3.2): Wald bounds on `ln(-ln R)`, with `se = sigma / |ln R|` by the delta method, mapped
+/// back as `[R^(e^(z se)), R^(e^(-z se))]`. Unlike plain Greenwood bounds they stay in `[0, 1]`
+/// (the clamp only absorbs rounding). `None` when `R` is 0 or 1 or `sigma^2` is not finite.
+fn log_log_interval(reliability: f64, greenwood: f64) -> Option<[f64; 2]> {
+    if !(reliability > 0.0 && reliability < 1.0 && greenwood.is_finite()) {
+        return None;
+    }
+    let se = greenwood.sqrt() / reliability.ln().abs();
+    let lower = reliability.powf((Z_975 * se).exp());
+    let upper = reliability.powf((-Z_975 * se).exp());
+    Some([lower.clamp(0.0, 1.0), upper.clamp(0.0, 1.0)])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use proptest::prelude::*;
+    use std::collections::BTreeMap;
+
+    /// splitmix64, bit-identical to `SplitMix` in `tools/weibull_reference.py`.
+    struct SplitMix(u64);
+
+    impl SplitMix {
+        fn next_u64(&mut self) -> u64 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^ (z >> 31)
+        }
+
+        /// In `[0, 1)`: the top 53 bits.
+        fn uniform(&mut self) -> f64 {
+            (self.next_u64() >> 11) as f64 * 2f64.powi(-53)
+        }
+
+        /// A Weibull(beta, eta) draw by inversion, `eta (-ln(1 - u))^(1/beta)`.
+        fn weibull(&mut self, beta: f64, eta: f64) -> f64 {
+            let u = self.uniform();
+            eta * (-(-u).ln_1p()).powf(1.0 / beta)
+        }
+
+        /// Operations to failure: the floor of a Weibull draw, plus one.
+        fn weibull_life(&mut self, beta: f64, eta: f64) -> f64 {
+            self.weibull(beta, eta).floor() + 1.0
+        }
+    }
+
+    /// `n` devices, each censored at `end` operations if it has not failed by then.
+    fn type_one(seed: u64, n: usize, beta: f64, eta: f64, end: f64) -> Vec<(f64, bool)> {
+        let mut rng = SplitMix(seed);
+        (0..n)
+            .map(|_| {
+                let life = rng.weibull_life(beta, eta);
+                if life <= end {
+                    (life, true)
+                } else {
+                    (end, false)
+                }
+            })
+            .collect()
+    }
+
+    /// `n` devices, each withdrawn at its own uniform time in `1..=horizon`.
+    fn random_withdrawal(
+        seed: u64,
+        n: usize,
+        beta: f64,
+        eta: f64,
+        horizon: f64,
+    ) -> Vec<(f64, bool)> {
+        let mut rng = SplitMix(seed);
+        (0..n)
+            .map(|_| {
+                let life = rng.weibull_life(beta, eta);
+                let withdrawn = (rng.uniform() * horizon).floor() + 1.0;
+                if life <= withdrawn {
+                    (life, true)
+                } else {
+                    (withdrawn, false)
+                }
+            })
+            .collect()
+    }
+
+    fn complete() -> Vec<(f64, bool)> {
+        type_one(1, 20, 2.5, 1000.0, f64::INFINITY)
+    }
+
+    fn heavy_censoring() -> Vec<(f64, bool)> {
+        type_one(2, 60, 1.5, 50_000.0, 25_000.0)
+    }
+
+    fn small() -> Vec<(f64, bool)> {
+        vec![
+            (120.0, true),
+            (190.0, true),
+            (250.0, false),
+            (310.0, true),
+            (400.0, false),
+        ]
+    }
+
+    fn large() -> Vec<(f64, bool)> {
+        random_withdrawal(4, 500, 0.8, 2.0e5, 6.0e5)
+    }
+
+    fn wide_span() -> Vec<(f64, bool)> {
+        type_one(5, 40, 0.25, 4000.0, 1.0e6)
+    }
+
+    /// What `tools/weibull_reference.py` printed for one data set.
+    struct Reference {
+        name: &'static str,
+        data: fn() -> Vec<(f64, bool)>,
+        n: usize,
+        failures: usize,
+        sum_times: f64,
+        min_time: f64,
+        max_time: f64,
+        scipy: Scipy,
+        reliability: Reliability,
+    }
+
+    /// `scipy.stats.weibull_min.fit` on `CensoredData`, covariance from a central-difference
+    /// Hessian; B-life as `(value, [lower, upper])`.
+    struct Scipy {
+        beta: f64,
+        eta: f64,
+        log_likelihood: f64,
+        beta_ci95: [f64; 2],
+        eta_ci95: [f64; 2],
+        covariance_ln: [[f64; 2]; 2],
+        b1: (f64, [f64; 2]),
+        b10: (f64, [f64; 2]),
+    }
+
+    /// `reliability.Fitters.Fit_Weibull_2P(method='MLE', CI=0.95)` (reliability 0.9.0), raw.
+    struct Reliability {
+        beta: f64,
+        alpha: f64,
+        log_likelihood: f64,
+        beta_ci95: [f64; 2],
+        alpha_ci95: [f64; 2],
+        alpha_se: f64,
+        beta_se: f64,
+        cov_alpha_beta: f64,
+        b1: (f64, [f64; 2]),
+        b10: (f64, [f64; 2]),
+    }
+
+    const REFERENCES: [Reference; 5] = [
+        Reference {
+            name: "complete",
+            data: complete,
+            n: 20,
+            failures: 20,
+            sum_times: 20008.0,
+            min_time: 507.0,
+            max_time: 1659.0,
+            scipy: Scipy {
+                beta: 3.9639673687867,
+                eta: 1102.1967638778578,
+                log_likelihood: -140.42463967661558,
+                beta_ci95: [2.8674919855313723, 5.47971446130964],
+                eta_ci95: [980.3593877238411, 1239.175879289924],
+                covariance_ln: [
+                    [0.0035721022978107255, 0.0032627876705785992],
+                    [0.0032627876705785997, 0.02729467445501239],
+                ],
+                b1: (345.35377654347246, [224.88592067170376, 530.3543708587789]),
+                b10: (624.7519618889904, [487.29410776199586, 800.9844725534423]),
+            },
+            reliability: Reliability {
+                beta: 3.9639673575453918,
+                alpha: 1102.1967667100967,
+                log_likelihood: -140.42463967661558,
+                beta_ci95: [2.8674919733068704, 5.479714453590846],
+                alpha_ci95: [980.3593895014255, 1239.1758834115035],
+                alpha_se: 65.875068428791,
+                beta_se: 0.6548910132023907,
+                cov_alpha_beta: 14.255351125976231,
+                b1: (345.3537762943429, [224.8859215865292, 530.3543679361534]),
+                b10: (624.7519624885581, [487.29411061307246, 800.9844694044077]),
+            },
+        },
+        Reference {
+            name: "heavy_censoring",
+            data: heavy_censoring,
+            n: 60,
+            failures: 15,
+            sum_times: 1353027.0,
+            min_time: 2042.0,
+            max_time: 25000.0,
+            scipy: Scipy {
+                beta: 1.4143867002635877,
+                eta: 61047.73022587697,
+                log_likelihood: -185.30204213525252,
+                beta_ci95: [0.8630676470719515, 2.317882896745572],
+                eta_ci95: [34025.92857555738, 109528.98338852766],
+                covariance_ln: [
+                    [0.08894512646240482, -0.05943707785067833],
+                    [-0.05943707785067833, 0.06351616126693449],
+                ],
+                b1: (2361.4066734014027, [711.992430010618, 7831.883096146851]),
+                b10: (12436.066153566098, [7676.182515743552, 20147.480998358154]),
+            },
+            reliability: Reliability {
+                beta: 1.4143866596662327,
+                alpha: 61047.73429495677,
+                log_likelihood: -185.30204213525246,
+                beta_ci95: [0.8630675267270447, 2.3178830868867597],
+                alpha_ci95: [34025.92418850887, 109529.0121114845],
+                alpha_se: 18206.680627674814,
+                beta_se: 0.3564596449530344,
+                cov_alpha_beta: -5132.104065582245,
+                b1: (2361.406610351799, [711.9922754499895, 7831.884378083887]),
+                b10: (12436.06641454653, [7676.18256602772, 20147.48171199935]),
+            },
+        },
+        Reference {
+            name: "small",
+            data: small,
+            n: 5,
+            failures: 3,
+            sum_times: 1270.0,
+            min_time: 120.0,
+            max_time: 400.0,
+            scipy: Scipy {
+                beta: 2.0944117793905623,
+                eta: 348.71209251644666,
+                log_likelihood: -20.305726478337526,
+                beta_ci95: [0.804737869549853, 5.45091869990368],
+                eta_ci95: [200.72767777759216, 605.7964941034825],
+                covariance_ln: [
+                    [0.07940538217800439, -0.02852214854199328],
+                    [-0.02852214854199328, 0.23816840028352682],
+                ],
+                b1: (38.77806128425291, [4.949862032074883, 303.7939294511886]),
+                b10: (119.07861863790266, [41.212265574829466, 344.0654673780267]),
+            },
+            reliability: Reliability {
+                beta: 2.0944121234388535,
+                alpha: 348.7120804589425,
+                log_likelihood: -20.30572647833759,
+                beta_ci95: [0.8047380292339992, 5.4509194091188355],
+                alpha_ci95: [200.72769343657328, 605.7964049511071],
+                alpha_se: 98.26341980795117,
+                beta_se: 1.022125439304849,
+                cov_alpha_beta: -20.83104539754254,
+                b1: (38.77807393455958, [4.949865413360567, 303.7939201367599]),
+                b10: (119.07863553805764, [41.21227804954121, 344.06546089396267]),
+            },
+        },
+        Reference {
+            name: "large",
+            data: large,
+            n: 500,
+            failures: 316,
+            sum_times: 69866057.0,
+            min_time: 118.0,
+            max_time: 594786.0,
+            scipy: Scipy {
+                beta: 0.7992103834504496,
+                eta: 226470.31822790494,
+                log_likelihood: -4192.044725343882,
+                beta_ci95: [0.7292239452599673, 0.8759136903921959],
+                eta_ci95: [197080.14814852335, 260243.38585130504],
+                covariance_ln: [
+                    [0.005029845836135561, -0.00040614745069315883],
+                    [-0.00040614745069315883, 0.002186279244661311],
+                ],
+                b1: (716.5882988343354, [422.30411277342193, 1215.9455105799393]),
+                b10: (13556.62746885968, [10269.37944242298, 17896.1298839766]),
+            },
+            reliability: Reliability {
+                beta: 0.7992103746775637,
+                alpha: 226470.3275972285,
+                log_likelihood: -4192.044725343882,
+                beta_ci95: [0.7292239357777033, 0.8759136825521927],
+                alpha_ci95: [197080.15488114336, 260243.39849401705],
+                alpha_se: 16061.594894858003,
+                beta_se: 0.037369211861818366,
+                cov_alpha_beta: -73.51174517144248,
+                b1: (716.5882832050162, [422.30410507047606, 1215.9454797177925]),
+                b10: (13556.627610701204, [10269.379650165096, 17896.129896441376]),
+            },
+        },
+        Reference {
+            name: "wide_span",
+            data: wide_span,
+            n: 40,
+            failures: 38,
+            sum_times: 4570596.0,
+            min_time: 1.0,
+            max_time: 1000000.0,
+            scipy: Scipy {
+                beta: 0.23012118509504015,
+                eta: 7328.204918132431,
+                log_likelihood: -351.96879224695886,
+                beta_ci95: [0.17977144422717053, 0.2945727006711227],
+                eta_ci95: [1740.2793702938036, 30858.60134805481],
+                covariance_ln: [
+                    [0.5380606853414602, 0.025547423818218007],
+                    [0.025547423818218, 0.015871411539965016],
+                ],
+                b1: (
+                    1.5254586962077675e-05,
+                    [6.175461726047117e-08, 0.0037681785380045078],
+                ),
+                b10: (
+                    0.4149623859729942,
+                    [0.018083541450544537, 9.522127191917656],
+                ),
+            },
+            reliability: Reliability {
+                beta: 0.2301211865051179,
+                alpha: 7328.2054578594,
+                log_likelihood: -351.96879224695886,
+                beta_ci95: [0.17977143904189619, 0.29457271277770536],
+                alpha_ci95: [1740.2771768123876, 30858.644788392674],
+                alpha_se: 5375.435686623401,
+                beta_se: 0.028991083216078767,
+                cov_alpha_beta: 43.08263282635685,
+                b1: (
+                    1.5254589954127227e-05,
+                    [6.175452638135857e-08, 0.003768185561517091],
+                ),
+                b10: (
+                    0.4149624414004433,
+                    [0.018083517029703254, 9.522142594838046],
+                ),
+            },
+        },
+    ];
+
+    /// Records `|got / want - 1|` under `quantity` and returns it.
+    fn relative_difference(
+        worst: &mut BTreeMap<&'static str, f64>,
+        quantity: &'static str,
+        got: f64,
+        want: f64,
+    ) -> f64 {
+        let d = (got / want - 1.0).abs();
+        let entry = worst.entry(quantity).or_insert(0.0);
+        *entry = entry.max(d);
+        d
+    }
+
+    #[test]
+    fn reference_data_sets_are_those_of_the_python_script() {
+        for r in &REFERENCES {
+            let data = (r.data)();
+            assert_eq!(data.len(), r.n, "{}", r.name);
+            assert_eq!(
+                data.iter().filter(|d| d.1).count(),
+                r.failures,
+                "{}",
+                r.name
+            );
+            assert_eq!(
+                data.iter().map(|d| d.0).sum::<f64>(),
+                r.sum_times,
+                "{}",
+                r.name
+            );
+            assert_eq!(
+                data.iter().map(|d| d.0).fold(f64::INFINITY, f64::min),
+                r.min_time
+            );
+            assert_eq!(data.iter().map(|d| d.0).fold(0.0, f64::max), r.max_time);
+        }
+    }
+
+    #[test]
+    fn fit_agrees_with_scipy_and_reliability() {
+        const TOLERANCE: f64 = 1e-4;
+        let mut worst = BTreeMap::new();
+        for r in &REFERENCES {
+            let data = (r.data)();
+            let w = fit_weibull(&data).unwrap();
+            let b1 = b_life(&w, 0.01).unwrap();
+            let b10 = b_life(&w, 0.10).unwrap();
+            let c = w.covariance_ln;
+            let scale = (c[0][0] * c[1][1]).sqrt();
+            let s = &r.scipy;
+            let checks = [
+                ("scipy beta", w.beta, s.beta),
+                ("scipy eta", w.eta, s.eta),
+                ("scipy log_likelihood", w.log_likelihood, s.log_likelihood),
+                ("scipy beta_ci95", w.beta_ci95[0], s.beta_ci95[0]),
+                ("scipy beta_ci95", w.beta_ci95[1], s.beta_ci95[1]),
+                ("scipy eta_ci95", w.eta_ci95[0], s.eta_ci95[0]),
+                ("scipy eta_ci95", w.eta_ci95[1], s.eta_ci95[1]),
+                ("scipy var ln eta", c[0][0], s.covariance_ln[0][0]),
+                ("scipy var ln beta", c[1][1], s.covariance_ln[1][1]),
+                ("scipy b1", b1.value, s.b1.0),
+                ("scipy b1 ci95", b1.ci95[0], s.b1.1[0]),
+                ("scipy b1 ci95", b1.ci95[1], s.b1.1[1]),
+                ("scipy b10", b10.value, s.b10.0),
+                ("scipy b10 ci95", b10.ci95[0], s.b10.1[0]),
+                ("scipy b10 ci95", b10.ci95[1], s.b10.1[1]),
+            ];
+            let q = &r.reliability;
+            let reliability_checks = [
+                ("reliability beta", w.beta, q.beta),
+                ("reliability eta", w.eta, q.alpha),
+                (
+                    "reliability log_likelihood",
+                    w.log_likelihood,
+                    q.log_likelihood,
+                ),
+                ("reliability beta_ci95", w.beta_ci95[0], q.beta_ci95[0]),
+                ("reliability beta_ci95", w.beta_ci95[1], q.beta_ci95[1]),
+                ("reliability eta_ci95", w.eta_ci95[0], q.alpha_ci95[0]),
+                ("reliability eta_ci95", w.eta_ci95[1], q.alpha_ci95[1]),
+                (
+                    "reliability var ln eta",
+                    c[0][0],
+                    (q.alpha_se / q.alpha).powi(2),
+                ),
+                (
+                    "reliability var ln beta",
+                    c[1][1],
+                    (q.beta_se / q.beta).powi(2),
+                ),
+                ("reliability b1", b1.value, q.b1.0),
+                ("reliability b1 ci95", b1.ci95[0], q.b1.1[0]),
+                ("reliability b1 ci95", b1.ci95[1], q.b1.1[1]),
+                ("reliability b10", b10.value, q.b10.0),
+                ("reliability b10 ci95", b10.ci95[0], q.b10.1[0]),
+                ("reliability b10 ci95", b10.ci95[1], q.b10.1[1]),
+            ];
+            for (quantity, got, want) in checks.into_iter().chain(reliability_checks) {
+                let d = relative_difference(&mut worst, quantity, got, want);
+                assert!(
+                    d <= TOLERANCE,
+                    "{}: {quantity} {got} vs {want} ({d:e})",
+                    r.name
+                );
+            }
+            // The covariance can be near 0: compare it on the scale of the standard errors.
+            let covariances = [
+                ("scipy cov ln", s.covariance_ln[0][1]),
+                ("reliability cov ln", q.cov_alpha_beta / (q.alpha * q.beta)),
+            ];
+            for (quantity, want) in covariances {
+                let d = (c[0][1] - want).abs() / scale;
+                let entry = worst.entry(quantity).or_insert(0.0);
+                *entry = f64::max(*entry, d);
+                assert!(
+                    d <= TOLERANCE,
+                    "{}: {quantity} {} vs {want} ({d:e})",
+                    r.name,
+                    c[0][1]
+                );
+            }
+        }
+        for (quantity, d) in &worst {
+            println!("max relative difference, {quantity}: {d:.1e}");
+        }
+    }
+
+    #[test]
+    fn the_fit_is_a_maximum_of_the_likelihood() {
+        for r in &REFERENCES {
+            let data = (r.data)();
+            let w = fit_weibull(&data).unwrap();
+            for (db, de) in [
+                (1e-6, 0.0),
+                (-1e-6, 0.0),
+                (0.0, 1e-6),
+                (0.0, -1e-6),
+                (1e-6, 1e-6),
+            ] {
+                let perturbed =
+                    weibull_log_likelihood(&data, w.beta * (1.0 + db), w.eta * (1.0 + de));
+                assert!(perturbed <= w.log_likelihood, "{}", r.name);
+            }
+        }
+    }
+
+    /// 6-MP arm of Freireich et al. (1963), Klein & Moeschberger (2003) table 4.1A; `+` marks
+    /// censoring. Log-log bounds as printed by R's `survfit(..., conf.type = "log-log")`.
+    #[test]
+    fn kaplan_meier_matches_the_textbook_six_mp_example() {
+        let failed = [6, 6, 6, 7, 10, 13, 16, 22, 23].map(|t| (f64::from(t), true));
+        let censored =
+            [6, 9, 10, 11, 17, 19, 20, 25, 32, 32, 34, 35].map(|t| (f64::from(t), false));
+        let data: Vec<_> = censored.into_iter().chain(failed).collect();
+        let points = kaplan_meier(&data).unwrap();
+        // (t, n, d, R exact, Greenwood standard error of R, log-log bounds)
+        let expected = [
+            (6.0, 21, 3, 18.0 / 21.0, 0.0764, [0.620, 0.952]),
+            (
+                7.0,
+                17,
+                1,
+                18.0 / 21.0 * 16.0 / 17.0,
+                0.0869,
+                [0.563, 0.923],
+            ),
+            (10.0, 15, 1, 0.752_941_176_470_588_2, 0.0963, [0.503, 0.889]),
+            (13.0, 12, 1, 0.690_196_078_431_372_5, 0.1068, [0.432, 0.849]),
+            (16.0, 11, 1, 0.627_450_980_392_156_8, 0.1141, [0.368, 0.805]),
+            (22.0, 7, 1, 0.537_815_126_050_420_2, 0.1282, [0.268, 0.747]),
+            (23.0, 6, 1, 0.448_179_271_708_683_5, 0.1346, [0.188, 0.680]),
+        ];
+        assert_eq!(points.len(), expected.len());
+        let mut greenwood = 0.0;
+        for (p, (t, n, d, reliability, se, ci)) in points.iter().zip(expected) {
+            assert_eq!((p.time, p.at_risk, p.failures), (t, n, d));
+            assert_relative_eq!(p.reliability, reliability, max_relative = 1e-12);
+            greenwood += d as f64 / (n as f64 * (n - d) as f64);
+            assert!(
+                (p.reliability * greenwood.sqrt() - se).abs() < 5e-5,
+                "se at {t}"
+            );
+            let [lo, hi] = p.ci95.unwrap();
+            assert!(
+                (lo - ci[0]).abs() < 5e-4 && (hi - ci[1]).abs() < 5e-4,
+                "{lo} {hi} at {t}"
+            );
+        }
+    }
+
+    #[test]
+    fn kaplan_meier_counts_failures_before_censorings_at_a_tie() {
+        let points = kaplan_meier(&[(5.0, false), (5.0, true), (8.0, true)]).unwrap();
+        assert_eq!((points[0].at_risk, points[0].failures), (3, 1));
+        assert_relative_eq!(points[0].reliability, 2.0 / 3.0);
+        assert_eq!((points[1].time, points[1].at_risk), (8.0, 1));
+        assert_eq!(points[1].reliability, 0.0);
+        assert_eq!(points[1].ci95, None);
+    }
+
+    #[test]
+    fn errors_say_why_there_is_no_fit() {
+        assert_eq!(fit_weibull(&[]), Err(LifeError::Empty));
+        assert_eq!(
+            fit_weibull(&[(10.0, false), (20.0, false)]),
+            Err(LifeError::NoFailures { censored: 2 })
+        );
+        assert_eq!(
+            fit_weibull(&[(10.0, true), (20.0, false)]),
+            Err(LifeError::SingleFailureTime {
+                failures: 1,
+                time: 10.0
+            })
+        );
+        assert_eq!(
+            fit_weibull(&[(10.0, true), (10.0, true), (5.0, false)]),
+            Err(LifeError::SingleFailureTime {
+                failures: 2,
+                time: 10.0
+            })
+        );
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let data = [(1.0, true), (2.0, true), (bad, false)];
+            assert!(matches!(
+                fit_weibull(&data),
+                Err(LifeError::InvalidTime { index: 2, .. })
+            ));
+            assert!(matches!(
+                kaplan_meier(&data),
+                Err(LifeError::InvalidTime { index: 2, .. })
+            ));
+        }
+        assert_eq!(kaplan_meier(&[]), Ok(vec![]));
+    }
+
+    #[test]
+    fn b_life_is_the_weibull_quantile() {
+        let w = fit_weibull(&small()).unwrap();
+        for p in [0.01, 0.1, 0.5, 0.9] {
+            let b = b_life(&w, p).unwrap();
+            let cdf = 1.0 - (-(b.value / w.eta).powf(w.beta)).exp();
+            assert_relative_eq!(cdf, p, max_relative = 1e-12);
+            assert!(b.ci95[0] < b.value && b.value < b.ci95[1]);
+        }
+        assert_eq!(b_life(&w, 0.0), None);
+        assert_eq!(b_life(&w, 1.0), None);
+        assert_eq!(b_life(&w, f64::NAN), None);
+    }
+
+    /// Every number in `a` is finite, and what `analyse` promises about its parts holds.
+    fn assert_well_formed(a: &LifeAnalysis) {
+        assert_eq!(a.weibull.is_some(), a.weibull_error.is_none());
+        if let Some(w) = &a.weibull {
+            assert!(weibull_is_finite(w), "{w:?}");
+            assert!(w.beta_ci95[0] <= w.beta && w.beta <= w.beta_ci95[1]);
+            assert!(w.eta_ci95[0] <= w.eta && w.eta <= w.eta_ci95[1]);
+        }
+        for b in a.b1.iter().chain(&a.b10) {
+            assert!(b.value.is_finite() && b.ci95.iter().all(|x| x.is_finite()));
+            assert!(b.ci95[0] <= b.value && b.value <= b.ci95[1]);
+        }
+        let mut previous = 1.0;
+        for p in &a.kaplan_meier {
+            assert!(p.time.is_finite() && (0.0..=previous).contains(&p.reliability));
+            if let Some([lo, hi]) = p.ci95 {
+                assert!(0.0 <= lo && lo <= p.reliability && p.reliability <= hi && hi <= 1.0);
+            }
+            previous = p.reliability;
+        }
+        let json = serde_json::to_string(a).unwrap();
+        assert_eq!(serde_json::from_str::<LifeAnalysis>(&json).unwrap(), *a);
+    }
+
+    #[test]
+    fn odd_inputs_give_finite_results() {
+        let cases = [
+            ("empty", vec![], false),
+            ("all censored", vec![(100.0, false); 7], false),
+            (
+                "one failure",
+                vec![(3.0, true), (100.0, false), (100.0, false)],
+                false,
+            ),
+            ("identical times", vec![(42.0, true); 10], false),
+            (
+                "identical times, censored too",
+                vec![(42.0, true), (42.0, false)],
+                false,
+            ),
+            (
+                "two failures, one time apart",
+                vec![(1e9, true), (1e9 + 1.0, true)],
+                true,
+            ),
+            (
+                "one ulp apart",
+                vec![(1.0, true), (1.0 + f64::EPSILON, true)],
+                true,
+            ),
+            (
+                "1e-3 to 1e9",
+                vec![
+                    (1e-3, true),
+                    (1.0, true),
+                    (1e3, false),
+                    (1e6, true),
+                    (1e9, true),
+                    (1e9, false),
+                ],
+                true,
+            ),
+            ("invalid", vec![(1.0, true), (f64::NAN, true)], false),
+        ];
+        for (name, data, fits) in cases {
+            let a = analyse(&data);
+            assert_eq!(a.weibull.is_some(), fits, "{name}: {:?}", a.weibull_error);
+            assert_well_formed(&a);
+        }
+    }
+
+    #[test]
+    fn the_shape_is_found_up_to_beta_200() {
+        let data = type_one(7, 200, 200.0, 1.0e9, f64::INFINITY);
+        let w = fit_weibull(&data).unwrap();
+        let se = w.covariance_ln[1][1].sqrt();
+        assert!((w.beta / 200.0).ln().abs() < 5.0 * se, "{w:?}");
+    }
+
+    proptest! {
+        #[test]
+        fn the_fit_recovers_known_parameters(
+            seed in any::<u64>(),
+            beta in 0.3f64..8.0,
+            ln_eta in 0.0f64..20.0,
+            censored_fraction in 0.0f64..0.6,
+        ) {
+            let eta = ln_eta.exp();
+            // Type I censoring at the (1 - censored_fraction) quantile.
+            let end = eta * (-censored_fraction.ln()).powf(1.0 / beta);
+            let mut rng = SplitMix(seed);
+            let data: Vec<_> = (0..2000)
+                .map(|_| {
+                    let t = rng.weibull(beta, eta);
+                    if t <= end { (t, true) } else { (end, false) }
+                })
+                .collect();
+            let w = fit_weibull(&data).unwrap();
+            let (se_ln_eta, se_ln_beta) = (w.covariance_ln[0][0].sqrt(), w.covariance_ln[1][1].sqrt());
+            prop_assert!((w.beta / beta).ln().abs() < 5.0 * se_ln_beta, "{w:?}");
+            prop_assert!((w.eta / eta).ln().abs() < 5.0 * se_ln_eta, "{w:?}");
+        }
+
+        #[test]
+        fn any_data_gives_a_well_formed_analysis(
+            data in prop::collection::vec((-3.0f64..9.0, any::<bool>(), 0u8..4), 0..40),
+        ) {
+            // Times 10^e from 1e-3 to 1e9, e rounded to 0-3 decimals so that ties are common.
+            let data: Vec<(f64, bool)> = data
+                .into_iter()
+                .map(|(e, failed, decimals)| {
+                    let step = 10f64.powi(-i32::from(decimals));
+                    (10f64.powf((e / step).round() * step), failed)
+                })
+                .collect();
+            assert_well_formed(&analyse(&data));
+        }
+    }
+}
