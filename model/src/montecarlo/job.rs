@@ -26,8 +26,10 @@ pub struct JobSpec {
     #[serde(default)]
     pub fidelity: Fidelity,
     #[serde(default = "default_count")]
+    #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 100_000_000))]
     pub devices: u64,
     #[serde(default = "default_count")]
+    #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 100_000_000))]
     pub operations: u64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bin_operations: Option<u64>,

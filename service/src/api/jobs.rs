@@ -185,8 +185,10 @@ pub async fn submit_job(
 #[into_params(parameter_in = Query)]
 pub struct ListQuery {
     /// Page size, 1 to 100 (default 20).
+    #[param(minimum = 1, maximum = 100)]
     pub limit: Option<u32>,
     /// `next_cursor` of the previous page.
+    #[param(pattern = "^[1-9][0-9]{0,18}$")]
     pub cursor: Option<String>,
 }
 
@@ -335,6 +337,7 @@ pub struct DistributionQuery {
     /// End of the range, exclusive (bins starting before it are returned).
     pub op_end: Option<u64>,
     /// `json` (default) or `csv`.
+    #[param(inline)]
     pub format: Option<Format>,
 }
 
@@ -473,6 +476,16 @@ fn to_csv(bins: &[DistributionBin]) -> String {
     csv
 }
 
+/// One Server-Sent Event as a client parses it; `data` is a JSON document.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ServerSentEvent {
+    /// `progress` or `status`.
+    pub event: Option<String>,
+    pub data: String,
+    pub id: Option<String>,
+    pub retry: Option<u64>,
+}
+
 /// How often the event stream looks at the job.
 const EVENT_POLL: Duration = Duration::from_millis(200);
 
@@ -480,7 +493,7 @@ const EVENT_POLL: Duration = Duration::from_millis(200);
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
-        (status = 200, description = "An event stream: `progress` (data: Progress) and a final `status` (data: JobResource)", content_type = "text/event-stream", body = String),
+        (status = 200, description = "An event stream: `progress` events (data: status, operations_done, operations_total) while the job runs, then one `status` event (data: the JobResource) when it ends", content_type = "text/event-stream", body = ServerSentEvent),
         (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
         (status = 404, description = "No such job (for this key)", body = Problem, content_type = PROBLEM),
     ),

@@ -19,6 +19,7 @@ pub fn router() -> OpenApiRouter<AppState> {
 #[into_params(parameter_in = Query)]
 pub struct SimulateQuery {
     /// `exact` (default) or `closed_form`.
+    #[param(inline)]
     pub fidelity: Option<Fidelity>,
 }
 

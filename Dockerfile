@@ -1,0 +1,16 @@
+# bouncewear: the HTTP service with its SQLite database on a volume.
+FROM rust:1.95-bookworm AS build
+WORKDIR /src
+COPY . .
+RUN cargo build --release --locked --bin bouncewear
+
+FROM debian:bookworm-slim
+RUN useradd --system --home /data bouncewear && mkdir -p /data && chown bouncewear /data
+COPY --from=build /src/target/release/bouncewear /usr/local/bin/bouncewear
+USER bouncewear
+VOLUME /data
+EXPOSE 8080
+ENV BOUNCEWEAR_BIND=0.0.0.0:8080 \
+    BOUNCEWEAR_DATABASE=sqlite:///data/bouncewear.db
+HEALTHCHECK --interval=30s --timeout=3s CMD ["bouncewear", "--version"]
+ENTRYPOINT ["bouncewear", "serve"]

@@ -1,0 +1,99 @@
+#!/usr/bin/env python3
+"""HTTP benchmarks of `bouncewear serve` (standard library only).
+
+    target/release/bouncewear serve --bind 127.0.0.1:8080 --database sqlite:///tmp/bench.db &
+    python3 tools/http_bench.py http://127.0.0.1:8080
+
+1. Submit to result: a 100 devices x 100 operations job, POST until the Result is fetched, 50 times.
+2. GET latency under load: 16 client threads GET /v1/jobs/{id} for 10 s while a 100-million-operation
+   job keeps the compute threads busy.
+"""
+import http.client
+import json
+import statistics
+import sys
+import threading
+import time
+from urllib.parse import urlparse
+
+
+def connection(base):
+    url = urlparse(base)
+    return http.client.HTTPConnection(url.hostname, url.port, timeout=60)
+
+
+def request(conn, method, path, body=None):
+    headers = {"content-type": "application/json"} if body is not None else {}
+    conn.request(method, path, body=None if body is None else json.dumps(body), headers=headers)
+    response = conn.getresponse()
+    return response.status, response.read()
+
+
+def submit_to_result(base, runs=50):
+    conn = connection(base)
+    times = []
+    for seed in range(runs):
+        started = time.perf_counter()
+        status, body = request(conn, "POST", "/v1/jobs", {"devices": 100, "operations": 100, "seed": seed})
+        assert status == 202, body
+        job = json.loads(body)["id"]
+        while True:
+            status, body = request(conn, "GET", f"/v1/jobs/{job}/result")
+            if status == 200:
+                break
+            assert status == 409, body
+            time.sleep(0.001)
+        times.append(time.perf_counter() - started)
+    return times
+
+
+def get_under_load(base, seconds=10.0, clients=16):
+    conn = connection(base)
+    status, body = request(conn, "POST", "/v1/jobs", {"devices": 20000, "operations": 5000, "seed": 1,
+                                                      "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}}})
+    assert status == 202, body
+    job = json.loads(body)["id"]
+    while json.loads(request(conn, "GET", f"/v1/jobs/{job}")[1])["status"] != "running":
+        time.sleep(0.01)
+    latencies, errors, stop = [], [], time.perf_counter() + seconds
+    lock = threading.Lock()
+
+    def client():
+        own, c = [], connection(base)
+        while time.perf_counter() < stop:
+            started = time.perf_counter()
+            status, _ = request(c, "GET", f"/v1/jobs/{job}")
+            own.append(time.perf_counter() - started)
+            if status != 200:
+                errors.append(status)
+        with lock:
+            latencies.extend(own)
+
+    threads = [threading.Thread(target=client) for _ in range(clients)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    still_running = json.loads(request(conn, "GET", f"/v1/jobs/{job}")[1])["status"] == "running"
+    request(conn, "DELETE", f"/v1/jobs/{job}")
+    return latencies, errors, still_running
+
+
+def quantile(values, q):
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
+def main():
+    base = sys.argv[1] if len(sys.argv) > 1 else "http://127.0.0.1:8080"
+    times = submit_to_result(base)
+    print(f"submit to result, 100 x 100 job, {len(times)} runs: median {1e3 * statistics.median(times):.1f} ms, "
+          f"p90 {1e3 * quantile(times, 0.9):.1f} ms, max {1e3 * max(times):.1f} ms")
+    latencies, errors, busy = get_under_load(base)
+    print(f"GET /v1/jobs/{{id}} under load (16 clients, 10 s, a 100 M-operation job running: {busy}): "
+          f"{len(latencies) / 10:.0f} requests/s, p50 {1e3 * quantile(latencies, 0.5):.2f} ms, "
+          f"p99 {1e3 * quantile(latencies, 0.99):.2f} ms, max {1e3 * max(latencies):.1f} ms, errors {len(errors)}")
+
+
+if __name__ == "__main__":
+    main()
