@@ -358,3 +358,74 @@ fn confidence_intervals_cover_the_truth_over_200_seeds() {
         "{coverage:?}"
     );
 }
+
+#[test]
+fn a_device_fails_at_the_first_operation_that_meets_a_criterion() {
+    // One device without scatter: its e1 falls as it wears; the life must be the first operation
+    // whose e1 (seen in the one-operation bins) is below the limit.
+    let limit = 0.33;
+    let result = run(&job(json!({
+        "devices": 1, "operations": 400, "bin_operations": 1, "seed": 1, "scenario": arcing(),
+        "metrics": ["e1"], "failure": {"e1": {"below": limit}}
+    })));
+    let first_below = result.operations["e1"]
+        .iter()
+        .position(|bin| bin.summary.mean < limit)
+        .expect("e1 falls below the limit");
+    let life = result.life.expect("life analysis");
+    assert_eq!((life.failures, life.censored), (1, 0));
+    assert_eq!(
+        life.devices[0].operations_to_failure,
+        first_below as u64 + 1
+    );
+    assert!(
+        life.analysis.weibull.is_none(),
+        "one failure time cannot fix a Weibull"
+    );
+}
+
+#[test]
+fn scattered_devices_give_a_weibull_life_with_censoring() {
+    let mut doc = scattered(300, 1000, 5);
+    doc["metrics"] = json!(["total_bounce_s"]);
+    doc["failure"] = json!({"eroded_mass_kg": {"above": 2e-6}});
+    let life = run(&job(doc)).life.unwrap();
+    assert_eq!(life.failures + life.censored, 300);
+    assert!(
+        life.failures > 100 && life.censored > 10,
+        "{} failures, {} censored",
+        life.failures,
+        life.censored
+    );
+    assert!(
+        life.devices
+            .iter()
+            .all(|d| !d.censored || d.operations_to_failure == 1000),
+        "censored at the end of the test"
+    );
+    assert!(life.devices.windows(2).all(|w| w[0].device < w[1].device));
+    let weibull = life.analysis.weibull.clone().expect("a fit");
+    assert!(
+        weibull.beta > 1.0 && weibull.eta > 500.0 && weibull.eta < 2000.0,
+        "{weibull:?}"
+    );
+    let b10 = life.analysis.b10.clone().unwrap();
+    assert!(b10.ci95[0] < b10.value && b10.value < b10.ci95[1]);
+}
+
+#[test]
+fn failure_criteria_are_validated() {
+    for (failure, pointer) in [
+        (json!({"bogus": {"above": 1}}), "/failure/bogus"),
+        (json!({"e1": {"above": 1, "below": 0}}), "/failure/e1"),
+        (json!({"e1": {}}), "/failure/e1"),
+        (json!({"e1": {"over": 1}}), "/failure/e1/over"),
+    ] {
+        let found = pointers(json!({"failure": failure}));
+        assert_eq!(
+            found.first().map(String::as_str),
+            Some(pointer),
+            "{failure}"
+        );
+    }
+}

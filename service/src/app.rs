@@ -89,7 +89,14 @@ pub async fn serve(config: ServeConfig) -> Result<(), CliError> {
         instance: format!("{}-{}", std::process::id(), uuid::Uuid::new_v4().simple()),
         wake,
     });
-    let handles = workers.spawn(config.workers.max(1), shutdown.clone());
+    let scheduler = tokio::spawn(crate::scheduler::run(
+        Arc::clone(&store),
+        config.max_queued,
+        Arc::clone(&workers.wake),
+        shutdown.clone(),
+    ));
+    // `--workers 0` makes an API-only instance that leaves the queue to others.
+    let handles = workers.spawn(config.workers, shutdown.clone());
     tokio::spawn(report_queue_depth(Arc::clone(&store)));
     tokio::spawn(async move {
         wait_for_signal().await;
@@ -103,6 +110,7 @@ pub async fn serve(config: ServeConfig) -> Result<(), CliError> {
         })
         .await
         .map_err(|e| failed("server")(&e))?;
+    let _ = scheduler.await;
     for handle in handles {
         if tokio::time::timeout(Duration::from_secs(30), handle)
             .await

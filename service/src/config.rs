@@ -16,7 +16,7 @@ pub struct ServeConfig {
         default_value = "sqlite://bouncewear.db"
     )]
     pub database: String,
-    /// Jobs run at the same time (each uses all compute threads).
+    /// Jobs run at the same time (each uses all compute threads); 0 serves the API without running jobs.
     #[arg(long, env = "BOUNCEWEAR_WORKERS", default_value_t = 1)]
     pub workers: usize,
     /// Compute threads (default: one per core). Compute never runs on the async runtime.

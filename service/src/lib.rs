@@ -8,6 +8,8 @@ pub mod cli;
 pub mod config;
 pub mod errors;
 pub mod progress;
+pub mod schedule;
+pub mod scheduler;
 pub mod store;
 pub mod telemetry;
 pub mod worker;

@@ -171,6 +171,7 @@ impl Workers {
                 now_ms(),
                 &text,
                 &distribution_rows(result),
+                result.life.as_ref().map_or(&[][..], |life| &life.devices),
             )
             .await
         {

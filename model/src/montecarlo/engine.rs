@@ -11,7 +11,7 @@
 
 use super::job::{Job, Parameter, Per, SamplerKind, Scatter};
 use super::metric::{DeviceMetric, Metric};
-use crate::operation::{Conditions, Needs, Setup};
+use crate::operation::{Conditions, Needs, Outcome, Setup};
 use crate::stats::Accumulator;
 use crate::wear::WearLaw;
 use rand::SeedableRng;
@@ -66,6 +66,17 @@ pub struct Cancelled;
 pub struct GroupStats {
     pub operations: Vec<Accumulator>,
     pub devices: Vec<Accumulator>,
+    /// With failure criteria: each device's life, in device order.
+    pub lives: Vec<DeviceLife>,
+}
+
+/// When one device failed (or that it survived the test: censored at the last operation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct DeviceLife {
+    pub device: u64,
+    /// Operations run up to and including the failing one (all of them when censored).
+    pub operations_to_failure: u64,
+    pub censored: bool,
 }
 
 impl GroupStats {
@@ -86,6 +97,7 @@ impl GroupStats {
                 .iter()
                 .map(|m| Accumulator::new(limit(Metric::Device(*m))))
                 .collect(),
+            lives: Vec::new(),
         }
     }
 
@@ -96,6 +108,7 @@ impl GroupStats {
         for (mine, theirs) in self.devices.iter_mut().zip(&other.devices) {
             mine.merge(theirs);
         }
+        self.lives.extend_from_slice(&other.lives);
     }
 }
 
@@ -180,7 +193,11 @@ impl<'a> Plan<'a> {
             operation_scatter,
             cheap_operation_scatter,
             needs: Needs {
-                impact: job.operation_metrics.iter().any(|m| m.needs_impact()),
+                impact: job.operation_metrics.iter().any(|m| m.needs_impact())
+                    || job
+                        .failure
+                        .iter()
+                        .any(|(m, _)| matches!(m, Metric::Operation(m) if m.needs_impact())),
             },
             track_wear: can_arc && job.spec.operations > 1,
         }
@@ -214,6 +231,7 @@ impl<'a> Plan<'a> {
         let mut operation = self.setup.operation(&draws.conditions, fidelity);
         let metrics = &job.operation_metrics;
         let mut cumulative_arc_energy_j = 0.0;
+        let mut failed_at = None;
         let operations = job.spec.operations;
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
         for bin_index in 0..bins {
@@ -221,7 +239,7 @@ impl<'a> Plan<'a> {
             let end = (start + job.bin_operations).min(operations);
             let bin =
                 &mut stats.operations[bin_index * metrics.len()..(bin_index + 1) * metrics.len()];
-            for _ in start..end {
+            for op in start..end {
                 let (radius_m, pressure_pa) = if self.operation_scatter.is_empty() {
                     (draws.radius_m, draws.pressure_pa)
                 } else {
@@ -246,11 +264,35 @@ impl<'a> Plan<'a> {
                     accumulator.push(metric.value(&outcome));
                 }
                 cumulative_arc_energy_j += outcome.arc_energy_j;
+                if failed_at.is_none() && self.fails(&outcome, &draws, cumulative_arc_energy_j) {
+                    failed_at = Some(op + 1);
+                }
             }
         }
         for (accumulator, metric) in stats.devices.iter_mut().zip(&job.device_metrics) {
             accumulator.push(self.device_metric(*metric, &draws, cumulative_arc_energy_j));
         }
+        if !job.failure.is_empty() {
+            stats.lives.push(DeviceLife {
+                device,
+                operations_to_failure: failed_at.unwrap_or(operations),
+                censored: failed_at.is_none(),
+            });
+        }
+    }
+
+    /// Whether any failure criterion is met by this operation or by the device's state after it.
+    #[inline]
+    fn fails(&self, outcome: &Outcome, draws: &Draws, cumulative_arc_energy_j: f64) -> bool {
+        self.job.failure.iter().any(|(metric, criterion)| {
+            let value = match metric {
+                Metric::Operation(metric) => metric.value(outcome),
+                Metric::Device(metric) => {
+                    self.device_metric(*metric, draws, cumulative_arc_energy_j)
+                }
+            };
+            criterion.fails(value)
+        })
     }
 
     fn device_metric(

@@ -45,6 +45,9 @@ pub struct JobSpec {
     pub limits: BTreeMap<String, f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub precision: Option<PrecisionSpec>,
+    /// Failure criteria: a device fails at the first operation where any is met (life analysis).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub failure: BTreeMap<String, CriterionSpec>,
 }
 
 fn default_count() -> u64 {
@@ -66,6 +69,7 @@ impl Default for JobSpec {
             metrics: None,
             limits: BTreeMap::new(),
             precision: None,
+            failure: BTreeMap::new(),
         }
     }
 }
@@ -139,6 +143,36 @@ fn default_statistic() -> String {
     "p95".to_owned()
 }
 
+/// A failure criterion on one metric: exactly one of `above` or `below`.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CriterionSpec {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub above: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub below: Option<f64>,
+}
+
+/// When a device fails: a metric strictly above or below a threshold. Operation metrics are checked
+/// at every operation; device metrics (`cumulative_arc_energy_j`, `eroded_mass_kg`, `final_radius_m`,
+/// `final_kappa`) on the device's running state after every operation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Criterion {
+    Above(f64),
+    Below(f64),
+}
+
+impl Criterion {
+    #[inline]
+    pub fn fails(self, value: f64) -> bool {
+        match self {
+            Criterion::Above(limit) => value > limit,
+            Criterion::Below(limit) => value < limit,
+        }
+    }
+}
+
 /// One validated scatter entry.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scatter {
@@ -174,6 +208,7 @@ pub struct Job {
     pub device_metrics: Vec<DeviceMetric>,
     pub limits: BTreeMap<Metric, f64>,
     pub precision: Option<Precision>,
+    pub failure: Vec<(Metric, Criterion)>,
 }
 
 impl Job {
@@ -279,6 +314,7 @@ impl Job {
             .precision
             .as_ref()
             .and_then(|p| check_precision(p, &spec, &metrics, &mut errors));
+        let failure = check_failure(&spec.failure, &root.child("failure"), &mut errors);
 
         if !errors.is_empty() {
             return Err(InvalidInput::new(errors));
@@ -296,6 +332,7 @@ impl Job {
             device_metrics,
             limits,
             precision,
+            failure,
         })
     }
 
@@ -385,6 +422,46 @@ fn check_scatter(
         }
     }
     scatter
+}
+
+fn check_failure(
+    specs: &BTreeMap<String, CriterionSpec>,
+    at: &Pointer,
+    errors: &mut Vec<FieldError>,
+) -> Vec<(Metric, Criterion)> {
+    let mut failure = Vec::new();
+    for (name, spec) in specs {
+        let at = at.child(name);
+        let Some(metric) = parse_metric(name, &at, errors) else {
+            continue;
+        };
+        let criterion = match (spec.above, spec.below) {
+            (Some(limit), None) => Criterion::Above(limit),
+            (None, Some(limit)) => Criterion::Below(limit),
+            _ => {
+                errors.push(FieldError {
+                    pointer: at.to_string(),
+                    detail: "must give exactly one of `above` or `below`".to_owned(),
+                });
+                continue;
+            }
+        };
+        let (Criterion::Above(limit) | Criterion::Below(limit)) = criterion;
+        if !limit.is_finite() {
+            let field = if spec.above.is_some() {
+                "above"
+            } else {
+                "below"
+            };
+            errors.push(FieldError {
+                pointer: at.child(field).to_string(),
+                detail: "must be a finite number".to_owned(),
+            });
+            continue;
+        }
+        failure.push((metric, criterion));
+    }
+    failure
 }
 
 fn check_precision(

@@ -7,7 +7,7 @@ pub mod engine;
 pub mod job;
 pub mod metric;
 
-pub use engine::{Cancelled, Observer, Silent, Tally, Watch};
+pub use engine::{Cancelled, DeviceLife, Observer, Silent, Tally, Watch};
 pub use job::{Job, JobSpec};
 pub use metric::{DeviceMetric, Metric, OperationMetric};
 
@@ -68,7 +68,26 @@ pub struct JobResult {
     pub devices: BTreeMap<String, Summary>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub precision: Option<PrecisionReport>,
+    /// With failure criteria: the life analysis of the devices' operations to failure.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub life: Option<LifeReport>,
     pub timing: Timing,
+}
+
+/// Life analysis of a job with failure criteria (MODEL.md has no failure model: the user's criteria
+/// define failure, and each device's first failing operation is its life).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LifeReport {
+    pub criteria: BTreeMap<String, job::CriterionSpec>,
+    pub failures: u64,
+    pub censored: u64,
+    #[cfg_attr(feature = "openapi", schema(value_type = Object))]
+    pub analysis: crate::life::LifeAnalysis,
+    /// Every device's life, in device order (not part of the Result JSON: the service serves it
+    /// as CSV).
+    #[serde(skip)]
+    pub devices: Vec<DeviceLife>,
 }
 
 /// Runs a job on the current rayon pool and summarises it.
@@ -96,10 +115,35 @@ pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, Cancelle
                 devices: tally.devices,
             }
         }),
+        life: life_report(job, &tally),
         timing: Timing {
             wall_s,
             operations_per_s: operations_run as f64 / wall_s.max(1e-9),
         },
+    })
+}
+
+fn life_report(job: &Job, tally: &Tally) -> Option<LifeReport> {
+    if job.failure.is_empty() {
+        return None;
+    }
+    let mut devices: Vec<DeviceLife> = tally
+        .groups
+        .iter()
+        .flat_map(|g| g.lives.iter().copied())
+        .collect();
+    devices.sort_by_key(|life| life.device);
+    let data: Vec<(f64, bool)> = devices
+        .iter()
+        .map(|d| (d.operations_to_failure as f64, !d.censored))
+        .collect();
+    let failures = devices.iter().filter(|d| !d.censored).count() as u64;
+    Some(LifeReport {
+        criteria: job.spec.failure.clone(),
+        failures,
+        censored: devices.len() as u64 - failures,
+        analysis: crate::life::analyse(&data),
+        devices,
     })
 }
 

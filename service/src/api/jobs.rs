@@ -28,6 +28,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(get_result))
         .routes(routes!(get_distribution))
         .routes(routes!(job_events))
+        .routes(routes!(get_life))
 }
 
 /// A job as the API shows it.
@@ -70,7 +71,7 @@ pub struct JobList {
     pub next_cursor: Option<String>,
 }
 
-fn rfc3339(ms: i64) -> String {
+pub fn rfc3339(ms: i64) -> String {
     chrono::DateTime::from_timestamp_millis(ms)
         .unwrap_or_default()
         .to_rfc3339_opts(chrono::SecondsFormat::Millis, true)
@@ -294,7 +295,7 @@ pub async fn cancel_job(
     }
 }
 
-async fn succeeded(state: &AppState, owner: &str, id: &str) -> Result<JobRecord, ApiError> {
+pub async fn succeeded(state: &AppState, owner: &str, id: &str) -> Result<JobRecord, ApiError> {
     let record = find(state, owner, id).await?;
     if record.status != JobStatus::Succeeded {
         return Err(ApiError::Conflict(format!(
@@ -484,6 +485,70 @@ pub struct ServerSentEvent {
     pub data: String,
     pub id: Option<String>,
     pub retry: Option<u64>,
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct LifeQuery {
+    /// `json` (default): the analysis; `csv`: one row per device, `device,operations_to_failure,censored`.
+    #[param(inline)]
+    pub format: Option<Format>,
+}
+
+/// Life analysis of a job with failure criteria: Weibull (maximum likelihood with right censoring,
+/// Fisher-matrix bounds), B1 and B10 life, Kaplan-Meier reliability; or each device's life as CSV.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/life", tag = "jobs", params(("id" = String, Path, description = "Job id"), LifeQuery),
+    responses(
+        (status = 200, description = "The life analysis (JSON), or per-device lives (CSV)", body = bouncewear_model::montecarlo::LifeReport),
+        (status = 400, description = "Bad query", body = Problem, content_type = PROBLEM),
+        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        (status = 404, description = "No such job, or it has no failure criteria", body = Problem, content_type = PROBLEM),
+        (status = 409, description = "Not succeeded (yet)", body = Problem, content_type = PROBLEM),
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn get_life(
+    State(state): State<AppState>,
+    Extension(Owner(owner)): Extension<Owner>,
+    Path(id): Path<String>,
+    query: Result<Query<LifeQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    succeeded(&state, &owner, &id).await?;
+    let result = stored_result(&state, &id).await?;
+    let Some(life) = result.life else {
+        return Err(ApiError::NotFound(format!(
+            "job {id} has no failure criteria, so no life analysis"
+        )));
+    };
+    match query.format.unwrap_or(Format::Json) {
+        Format::Json => Ok(Json(life).into_response()),
+        Format::Csv => {
+            let mut csv = String::from("device,operations_to_failure,censored\n");
+            for device in state.store.lives(&id).await? {
+                let _ = writeln!(
+                    csv,
+                    "{},{},{}",
+                    device.device, device.operations_to_failure, device.censored
+                );
+            }
+            Ok(([(header::CONTENT_TYPE, "text/csv; charset=utf-8")], csv).into_response())
+        }
+    }
+}
+
+/// The stored Result of a succeeded job, parsed.
+pub async fn stored_result(state: &AppState, id: &str) -> Result<JobResult, ApiError> {
+    let text =
+        state.store.result(id).await?.ok_or_else(|| {
+            crate::errors::Internal(format!("job {id} succeeded without a result"))
+        })?;
+    serde_json::from_str(&text).map_err(|e| {
+        ApiError::Internal(crate::errors::Internal(format!(
+            "stored result of {id}: {e}"
+        )))
+    })
 }
 
 /// How often the event stream looks at the job.

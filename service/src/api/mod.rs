@@ -2,6 +2,7 @@
 //! from the same `#[utoipa::path]` handlers, so they cannot drift apart.
 
 pub mod jobs;
+pub mod schedules;
 pub mod simulate;
 pub mod system;
 
@@ -39,7 +40,7 @@ pub struct AppState {
 #[openapi(
     info(title = "bouncewear", description = "Monte Carlo wear simulation of bouncing electrical contacts (McBride & Sharkh 1992). The contract is CONTRACT.md; the physics MODEL.md."),
     modifiers(&BearerAuth),
-    tags((name = "jobs", description = "Monte Carlo endurance jobs on a durable queue"), (name = "simulate", description = "One make operation"), (name = "system", description = "Health, metrics, documentation"))
+    tags((name = "jobs", description = "Monte Carlo endurance jobs on a durable queue"), (name = "schedules", description = "Nightly runs of a job template and their trend"), (name = "simulate", description = "One make operation"), (name = "system", description = "Health, metrics, documentation"))
 )]
 struct ApiDoc;
 
@@ -64,6 +65,7 @@ impl Modify for BearerAuth {
 pub fn router(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
     let v1 = OpenApiRouter::new()
         .merge(jobs::router())
+        .merge(schedules::router())
         .merge(simulate::router())
         .layer(axum::middleware::from_fn_with_state(
             state.clone(),

@@ -129,6 +129,42 @@ pub struct NewDistribution {
     pub summary: bouncewear_model::stats::Summary,
 }
 
+/// A schedule as stored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScheduleRecord {
+    pub id: String,
+    pub owner: String,
+    pub name: String,
+    pub cron: String,
+    pub time_zone: String,
+    /// The job template, as JSON.
+    pub template: String,
+    /// The statistics the trend follows, as a JSON list.
+    pub statistics: String,
+    pub enabled: bool,
+    pub next_run_at: Option<i64>,
+    pub created_at: i64,
+    pub updated_at: i64,
+}
+
+/// One run of a schedule, with its job's status.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunRecord {
+    pub scheduled_for: i64,
+    pub job_id: String,
+    pub manual: bool,
+    pub status: JobStatus,
+}
+
+/// What creating a scheduled run did.
+#[derive(Debug, Clone)]
+pub enum NewRun {
+    Created(JobRecord),
+    /// That (schedule, due time) already has its job: another loop or instance made it.
+    AlreadyExists,
+    QueueFull,
+}
+
 #[async_trait]
 pub trait Store: Send + Sync + 'static {
     /// Inserts a queued job unless `max_queued` jobs are already queued (then `None`).
@@ -162,7 +198,36 @@ pub trait Store: Send + Sync + 'static {
         now: i64,
         result: &str,
         rows: &[NewDistribution],
+        lives: &[bouncewear_model::montecarlo::DeviceLife],
     ) -> StoreResult<bool>;
+    /// Each device's life, in device order.
+    async fn lives(&self, id: &str) -> StoreResult<Vec<bouncewear_model::montecarlo::DeviceLife>>;
+    async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()>;
+    async fn schedule(&self, owner: &str, id: &str) -> StoreResult<Option<ScheduleRecord>>;
+    async fn schedules(&self, owner: &str) -> StoreResult<Vec<ScheduleRecord>>;
+    /// Replaces a schedule's definition; `false` if there is no such schedule.
+    async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<bool>;
+    async fn delete_schedule(&self, owner: &str, id: &str) -> StoreResult<bool>;
+    /// Enabled schedules of every owner whose next run is due at `now`.
+    async fn due_schedules(&self, now: i64) -> StoreResult<Vec<ScheduleRecord>>;
+    /// Creates the job of one (schedule, due time) unless it exists, in one transaction.
+    async fn create_run(
+        &self,
+        schedule_id: &str,
+        scheduled_for: i64,
+        manual: bool,
+        job: NewJob,
+        max_queued: u64,
+    ) -> StoreResult<NewRun>;
+    /// Moves `next_run_at` from `from` to `to`, unless another loop already moved it.
+    async fn advance_schedule(
+        &self,
+        id: &str,
+        from: Option<i64>,
+        to: Option<i64>,
+    ) -> StoreResult<bool>;
+    /// The latest runs, newest first.
+    async fn runs(&self, schedule_id: &str, limit: u32) -> StoreResult<Vec<RunRecord>>;
     async fn fail(&self, id: &str, attempt: i64, now: i64, error: &str) -> StoreResult<bool>;
     /// Hands a running job back to the queue (graceful shutdown).
     async fn release(&self, id: &str, attempt: i64) -> StoreResult<bool>;

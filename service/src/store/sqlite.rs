@@ -4,11 +4,12 @@
 //! on `busy_timeout` instead of failing with "database is locked"), and a pool of readers.
 
 use super::{
-    Cancel, Claim, DistributionRow, JobRecord, JobStatus, Lease, NewDistribution, NewJob, Store,
-    StoreResult,
+    Cancel, Claim, DistributionRow, JobRecord, JobStatus, Lease, NewDistribution, NewJob, NewRun,
+    RunRecord, ScheduleRecord, Store, StoreResult,
 };
 use crate::errors::Internal;
 use async_trait::async_trait;
+use bouncewear_model::montecarlo::DeviceLife;
 use sqlx::Row;
 use sqlx::sqlite::{
     SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteRow,
@@ -216,6 +217,7 @@ impl Store for SqliteStore {
         now: i64,
         result: &str,
         rows: &[NewDistribution],
+        lives: &[DeviceLife],
     ) -> StoreResult<bool> {
         let mut tx = self.writer.begin().await?;
         let updated = sqlx::query(
@@ -262,8 +264,214 @@ impl Store for SqliteStore {
             .execute(&mut *tx)
             .await?;
         }
+        for life in lives {
+            sqlx::query("INSERT INTO device_lives (job_id, device, operations_to_failure, censored) VALUES (?1, ?2, ?3, ?4)")
+                .bind(id)
+                .bind(to_i64(life.device))
+                .bind(to_i64(life.operations_to_failure))
+                .bind(life.censored)
+                .execute(&mut *tx)
+                .await?;
+        }
         tx.commit().await?;
         Ok(true)
+    }
+
+    async fn lives(&self, id: &str) -> StoreResult<Vec<DeviceLife>> {
+        let rows = sqlx::query("SELECT device, operations_to_failure, censored FROM device_lives WHERE job_id = ?1 ORDER BY device")
+            .bind(id)
+            .fetch_all(&self.readers)
+            .await?;
+        rows.iter()
+            .map(|row| {
+                Ok(DeviceLife {
+                    device: row.try_get::<i64, _>("device")?.max(0) as u64,
+                    operations_to_failure: row.try_get::<i64, _>("operations_to_failure")?.max(0)
+                        as u64,
+                    censored: row.try_get("censored")?,
+                })
+            })
+            .collect::<Result<_, sqlx::Error>>()
+            .map_err(Internal::from)
+    }
+
+    async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
+        sqlx::query(
+            "INSERT INTO schedules (id, owner, name, cron, time_zone, template, statistics, enabled, next_run_at, created_at, updated_at) \
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)",
+        )
+        .bind(&schedule.id)
+        .bind(&schedule.owner)
+        .bind(&schedule.name)
+        .bind(&schedule.cron)
+        .bind(&schedule.time_zone)
+        .bind(&schedule.template)
+        .bind(&schedule.statistics)
+        .bind(schedule.enabled)
+        .bind(schedule.next_run_at)
+        .bind(schedule.created_at)
+        .bind(schedule.updated_at)
+        .execute(&self.writer)
+        .await?;
+        Ok(())
+    }
+
+    async fn schedule(&self, owner: &str, id: &str) -> StoreResult<Option<ScheduleRecord>> {
+        let row = sqlx::query(SELECT_SCHEDULE_BY_ID)
+            .bind(id)
+            .bind(owner)
+            .fetch_optional(&self.writer)
+            .await?;
+        Ok(row.as_ref().map(schedule_from_row).transpose()?)
+    }
+
+    async fn schedules(&self, owner: &str) -> StoreResult<Vec<ScheduleRecord>> {
+        let rows = sqlx::query(
+            "SELECT id, owner, name, cron, time_zone, template, statistics, enabled, next_run_at, created_at, updated_at \
+             FROM schedules WHERE owner = ?1 ORDER BY seq",
+        )
+        .bind(owner)
+        .fetch_all(&self.readers)
+        .await?;
+        Ok(rows
+            .iter()
+            .map(schedule_from_row)
+            .collect::<Result<_, _>>()?)
+    }
+
+    async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<bool> {
+        let updated = sqlx::query(
+            "UPDATE schedules SET name = ?3, cron = ?4, time_zone = ?5, template = ?6, statistics = ?7, enabled = ?8, \
+             next_run_at = ?9, updated_at = ?10 WHERE id = ?1 AND owner = ?2",
+        )
+        .bind(&schedule.id)
+        .bind(&schedule.owner)
+        .bind(&schedule.name)
+        .bind(&schedule.cron)
+        .bind(&schedule.time_zone)
+        .bind(&schedule.template)
+        .bind(&schedule.statistics)
+        .bind(schedule.enabled)
+        .bind(schedule.next_run_at)
+        .bind(schedule.updated_at)
+        .execute(&self.writer)
+        .await?;
+        Ok(updated.rows_affected() == 1)
+    }
+
+    async fn delete_schedule(&self, owner: &str, id: &str) -> StoreResult<bool> {
+        let deleted = sqlx::query("DELETE FROM schedules WHERE id = ?1 AND owner = ?2")
+            .bind(id)
+            .bind(owner)
+            .execute(&self.writer)
+            .await?;
+        Ok(deleted.rows_affected() == 1)
+    }
+
+    async fn due_schedules(&self, now: i64) -> StoreResult<Vec<ScheduleRecord>> {
+        let rows = sqlx::query(
+            "SELECT id, owner, name, cron, time_zone, template, statistics, enabled, next_run_at, created_at, updated_at \
+             FROM schedules WHERE enabled = 1 AND next_run_at <= ?1 ORDER BY next_run_at",
+        )
+        .bind(now)
+        .fetch_all(&self.writer)
+        .await?;
+        Ok(rows
+            .iter()
+            .map(schedule_from_row)
+            .collect::<Result<_, _>>()?)
+    }
+
+    async fn create_run(
+        &self,
+        schedule_id: &str,
+        scheduled_for: i64,
+        manual: bool,
+        job: NewJob,
+        max_queued: u64,
+    ) -> StoreResult<NewRun> {
+        let mut tx = self.writer.begin().await?;
+        // Claim the (schedule, due time) slot first: the primary key decides who runs this night.
+        let claimed = sqlx::query(
+            "INSERT OR IGNORE INTO schedule_runs (schedule_id, scheduled_for, job_id, manual) VALUES (?1, ?2, ?3, ?4)",
+        )
+        .bind(schedule_id)
+        .bind(scheduled_for)
+        .bind(&job.id)
+        .bind(manual)
+        .execute(&mut *tx)
+        .await?;
+        if claimed.rows_affected() == 0 {
+            tx.rollback().await?;
+            return Ok(NewRun::AlreadyExists);
+        }
+        let inserted = sqlx::query(
+            "INSERT INTO jobs (id, owner, name, spec, status, operations_total, created_at) \
+             SELECT ?1, ?2, ?3, ?4, 'queued', ?5, ?6 \
+             WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < ?7",
+        )
+        .bind(&job.id)
+        .bind(&job.owner)
+        .bind(&job.name)
+        .bind(&job.spec)
+        .bind(to_i64(job.operations_total))
+        .bind(job.created_at)
+        .bind(to_i64(max_queued))
+        .execute(&mut *tx)
+        .await?;
+        if inserted.rows_affected() == 0 {
+            tx.rollback().await?;
+            return Ok(NewRun::QueueFull);
+        }
+        let row = sqlx::query(SELECT_JOB)
+            .bind(&job.id)
+            .bind(&job.owner)
+            .fetch_one(&mut *tx)
+            .await?;
+        let record = job_from_row(&row)?;
+        tx.commit().await?;
+        Ok(NewRun::Created(record))
+    }
+
+    async fn advance_schedule(
+        &self,
+        id: &str,
+        from: Option<i64>,
+        to: Option<i64>,
+    ) -> StoreResult<bool> {
+        let updated = sqlx::query(
+            "UPDATE schedules SET next_run_at = ?3 WHERE id = ?1 AND next_run_at IS ?2",
+        )
+        .bind(id)
+        .bind(from)
+        .bind(to)
+        .execute(&self.writer)
+        .await?;
+        Ok(updated.rows_affected() == 1)
+    }
+
+    async fn runs(&self, schedule_id: &str, limit: u32) -> StoreResult<Vec<RunRecord>> {
+        let rows = sqlx::query(
+            "SELECT r.scheduled_for, r.job_id, r.manual, j.status FROM schedule_runs r JOIN jobs j ON j.id = r.job_id \
+             WHERE r.schedule_id = ?1 ORDER BY r.scheduled_for DESC LIMIT ?2",
+        )
+        .bind(schedule_id)
+        .bind(i64::from(limit))
+        .fetch_all(&self.readers)
+        .await?;
+        rows.iter()
+            .map(|row| {
+                let status: String = row.try_get("status")?;
+                Ok(RunRecord {
+                    scheduled_for: row.try_get("scheduled_for")?,
+                    job_id: row.try_get("job_id")?,
+                    manual: row.try_get("manual")?,
+                    status: JobStatus::parse(&status)
+                        .ok_or_else(|| sqlx::Error::Decode(format!("status {status}").into()))?,
+                })
+            })
+            .collect::<Result<_, sqlx::Error>>()
+            .map_err(Internal::from)
     }
 
     async fn fail(&self, id: &str, attempt: i64, now: i64, error: &str) -> StoreResult<bool> {
@@ -359,6 +567,25 @@ impl Store for SqliteStore {
         sqlx::query("SELECT 1").execute(&self.readers).await?;
         Ok(())
     }
+}
+
+const SELECT_SCHEDULE_BY_ID: &str = "SELECT id, owner, name, cron, time_zone, template, statistics, enabled, next_run_at, \
+     created_at, updated_at FROM schedules WHERE id = ?1 AND owner = ?2";
+
+fn schedule_from_row(row: &SqliteRow) -> Result<ScheduleRecord, sqlx::Error> {
+    Ok(ScheduleRecord {
+        id: row.try_get("id")?,
+        owner: row.try_get("owner")?,
+        name: row.try_get("name")?,
+        cron: row.try_get("cron")?,
+        time_zone: row.try_get("time_zone")?,
+        template: row.try_get("template")?,
+        statistics: row.try_get("statistics")?,
+        enabled: row.try_get("enabled")?,
+        next_run_at: row.try_get("next_run_at")?,
+        created_at: row.try_get("created_at")?,
+        updated_at: row.try_get("updated_at")?,
+    })
 }
 
 const SELECT_JOB: &str = "SELECT seq, id, owner, name, spec, status, operations_done, operations_total, attempt, error, \
