@@ -698,3 +698,182 @@ fn sigterm_hands_a_running_job_back_to_the_queue() {
     );
     delete(&server.url(&format!("/v1/jobs/{id}")));
 }
+
+fn put(url: &str, body: &str) -> Reply {
+    reply(
+        agent()
+            .put(url)
+            .header("content-type", "application/json")
+            .send(body),
+    )
+}
+
+fn wearing_template(supply_voltage_v: f64) -> Value {
+    json!({
+        "devices": 60, "operations": 300, "seed": 11,
+        "scenario": {"circuit": {"supply_voltage_v": supply_voltage_v, "current_a": 15}},
+        "scatter": [{"parameter": "contact_radius_m", "per": "device", "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 1.5e-3, "min": 1e-3}}],
+        "failure": {"e1": {"below": 0.33}}
+    })
+}
+
+#[test]
+fn schedules_run_now_and_report_a_trend_with_drift_flags() {
+    let server = Server::start(&temp_db("schedules"), &[]);
+    let schedules = server.url("/v1/schedules");
+    let body = json!({"name": "nightly wear", "cron": "0 3 * * *", "time_zone": "Europe/Berlin",
+                      "template": wearing_template(48.0), "statistics": ["operations.total_bounce_s.p95", "life.b10"]});
+    let created = post(&schedules, &body.to_string(), None);
+    assert_eq!(created.status, 201, "{}", created.body);
+    let schedule = created.json();
+    let id = schedule["id"].as_str().unwrap().to_owned();
+    assert_eq!(
+        created.headers.get("location").unwrap().to_str().unwrap(),
+        format!("/v1/schedules/{id}")
+    );
+    assert!(schedule["next_run_at"].as_str().unwrap().ends_with('Z'));
+    assert_eq!(
+        get(&schedules, None).json()["schedules"]
+            .as_array()
+            .unwrap()
+            .len(),
+        1
+    );
+
+    let run_now = |server: &Server| {
+        let reply = post(&server.url(&format!("/v1/schedules/{id}/run")), "", None);
+        assert_eq!(reply.status, 202, "{}", reply.body);
+        let job = reply.json()["id"].as_str().unwrap().to_owned();
+        wait_for(server, &job, "succeeded", Duration::from_secs(60));
+    };
+    run_now(&server);
+    run_now(&server);
+    // The same template and seed: the same numbers, so no drift.
+    let trend = get(&server.url(&format!("/v1/schedules/{id}/runs")), None).json();
+    let runs = trend["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    for run in runs {
+        assert_eq!(run["manual"], true);
+        for statistic in ["operations.total_bounce_s.p95", "life.b10"] {
+            let value = &run["values"][statistic];
+            assert!(value["value"].as_f64().unwrap() > 0.0, "{statistic}: {run}");
+            assert_eq!(value["drift"], false);
+        }
+    }
+    // A much higher supply voltage changes the wear: the next night leaves the interval.
+    let changed = json!({"name": "nightly wear", "cron": "0 3 * * *", "time_zone": "Europe/Berlin",
+                         "template": wearing_template(120.0), "statistics": ["operations.total_bounce_s.p95", "life.b10"]});
+    assert_eq!(
+        put(
+            &server.url(&format!("/v1/schedules/{id}")),
+            &changed.to_string()
+        )
+        .status,
+        200
+    );
+    run_now(&server);
+    let trend = get(&server.url(&format!("/v1/schedules/{id}/runs")), None).json();
+    let last = trend["runs"].as_array().unwrap().last().unwrap().clone();
+    assert_eq!(
+        last["values"]["operations.total_bounce_s.p95"]["drift"], true,
+        "{last}"
+    );
+    let svg = get(
+        &server.url(&format!("/v1/schedules/{id}/plots/trend.svg")),
+        None,
+    );
+    assert_eq!(svg.status, 200);
+    assert!(svg.body.starts_with("<svg"));
+
+    assert_eq!(
+        reply(
+            agent()
+                .delete(&server.url(&format!("/v1/schedules/{id}")))
+                .call()
+        )
+        .status,
+        204
+    );
+    assert_problem(&get(&server.url(&format!("/v1/schedules/{id}")), None), 404);
+}
+
+#[test]
+fn bad_schedules_name_their_field() {
+    let server = Server::start(&temp_db("bad-schedules"), &[]);
+    let schedules = server.url("/v1/schedules");
+    for (body, pointer) in [
+        (
+            json!({"name": "x", "cron": "every night", "template": {}}),
+            "/cron",
+        ),
+        (
+            json!({"name": "x", "cron": "0 3 * * *", "time_zone": "Mars/Olympus", "template": {}}),
+            "/time_zone",
+        ),
+        (
+            json!({"name": "x", "cron": "0 3 * * *", "template": {"devices": 0}}),
+            "/template/devices",
+        ),
+        (
+            json!({"name": "x", "cron": "0 3 * * *", "template": {}, "statistics": ["operations.e1.p42"]}),
+            "/statistics/0",
+        ),
+        (
+            json!({"name": "", "cron": "0 3 * * *", "template": {}}),
+            "/name",
+        ),
+        (json!({"cron": "0 3 * * *", "template": {}}), "malformed"),
+    ] {
+        let reply = post(&schedules, &body.to_string(), None);
+        assert!(
+            reply.status == 422 || reply.status == 400,
+            "{body}: {}",
+            reply.body
+        );
+        assert!(
+            reply.body.contains(pointer) || reply.status == 422,
+            "{body}: {}",
+            reply.body
+        );
+        if reply.status == 422 && pointer.starts_with('/') {
+            let problem = reply.json();
+            assert!(
+                problem["errors"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|e| e["pointer"] == pointer),
+                "{body}: {problem}"
+            );
+        }
+    }
+}
+
+#[test]
+fn life_analysis_is_served_as_json_and_per_device_csv() {
+    let server = Server::start(&temp_db("life"), &[]);
+    let id = submit(&server, &wearing_template(48.0));
+    wait_for(&server, &id, "succeeded", Duration::from_secs(60));
+    let life = get(&server.url(&format!("/v1/jobs/{id}/life")), None);
+    assert_eq!(life.status, 200, "{}", life.body);
+    let life = life.json();
+    assert_eq!(
+        life["failures"].as_u64().unwrap() + life["censored"].as_u64().unwrap(),
+        60
+    );
+    assert!(life["analysis"]["weibull"]["beta"].as_f64().unwrap() > 0.0);
+    assert!(life["analysis"]["b10"]["ci95"].is_array());
+    let csv = get(&server.url(&format!("/v1/jobs/{id}/life?format=csv")), None);
+    let rows: Vec<&str> = csv.body.lines().collect();
+    assert_eq!(rows[0], "device,operations_to_failure,censored");
+    assert_eq!(rows.len(), 61);
+    assert!(rows[1].starts_with("0,"));
+    let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
+    assert_eq!(result["life"], life, "the Result carries the same life");
+    let plain = submit(&server, &json!({"devices": 1, "operations": 1, "seed": 1}));
+    wait_for(&server, &plain, "succeeded", Duration::from_secs(20));
+    assert_problem(
+        &get(&server.url(&format!("/v1/jobs/{plain}/life")), None),
+        404,
+    );
+}

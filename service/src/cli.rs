@@ -40,6 +40,10 @@ enum Command {
         /// Worker threads (default: one per core). Results are identical for any count.
         #[arg(long)]
         threads: Option<usize>,
+        /// Also write the plots as SVG files into this directory: for every operation metric its
+        /// wear curve (`bands-METRIC.svg`) and histograms (`histograms-METRIC.svg`), and `weibull.svg`.
+        #[arg(long)]
+        plots: Option<PathBuf>,
     },
     /// Serve the HTTP API, with the job queue in an embedded SQLite database.
     Serve(crate::config::ServeConfig),
@@ -116,13 +120,21 @@ fn run(cli: Cli) -> Result<(), CliError> {
             let scenario = Scenario::from_json(&read_input(&file)?)?;
             print_json(&simulate(&scenario, fidelity.into()))
         }
-        Command::Run { file, threads } => {
+        Command::Run {
+            file,
+            threads,
+            plots,
+        } => {
             let job = Job::from_json(&read_input(&file)?, draw_seed)?;
             let pool = thread_pool(threads)?;
             let progress = ProgressBar::for_stderr();
             let result = pool.install(|| run_job(&job, &progress));
             progress.finish();
-            print_json(&result.map_err(|cancelled| CliError::Failed(cancelled.to_string()))?)
+            let result = result.map_err(|cancelled| CliError::Failed(cancelled.to_string()))?;
+            if let Some(dir) = plots {
+                write_plots(&result, &dir)?;
+            }
+            print_json(&result)
         }
         Command::Serve(config) => {
             let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -142,6 +154,37 @@ fn run(cli: Cli) -> Result<(), CliError> {
             print_json(&report)
         }
     }
+}
+
+/// The dashboard's plots of a result, as SVG files.
+fn write_plots(
+    result: &bouncewear_model::montecarlo::JobResult,
+    dir: &std::path::Path,
+) -> Result<(), CliError> {
+    let io = |path: &std::path::Path| {
+        let path = path.display().to_string();
+        move |source| CliError::Io { path, source }
+    };
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let mut files = Vec::new();
+    for metric in result.operations.keys() {
+        for kind in ["bands", "histograms"] {
+            let svg = crate::api::plots::job_svg(result, &format!("{kind}.svg"), metric)
+                .map_err(|e| CliError::Failed(e.to_string()))?;
+            files.push((format!("{kind}-{metric}.svg"), svg));
+        }
+    }
+    if let Some(life) = &result.life {
+        files.push((
+            "weibull.svg".to_owned(),
+            crate::plots::weibull_svg(&life.analysis),
+        ));
+    }
+    for (name, svg) in files {
+        let path = dir.join(name);
+        std::fs::write(&path, svg).map_err(io(&path))?;
+    }
+    Ok(())
 }
 
 /// A seed for a job that does not give one: from the operating system's entropy, reported in the result.

@@ -7,6 +7,7 @@ pub mod bench;
 pub mod cli;
 pub mod config;
 pub mod errors;
+pub mod plots;
 pub mod progress;
 pub mod schedule;
 pub mod scheduler;

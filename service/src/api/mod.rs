@@ -2,6 +2,7 @@
 //! from the same `#[utoipa::path]` handlers, so they cannot drift apart.
 
 pub mod jobs;
+pub mod plots;
 pub mod schedules;
 pub mod simulate;
 pub mod system;
@@ -66,6 +67,7 @@ pub fn router(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
     let v1 = OpenApiRouter::new()
         .merge(jobs::router())
         .merge(schedules::router())
+        .merge(plots::router())
         .merge(simulate::router())
         .layer(axum::middleware::from_fn_with_state(
             state.clone(),

@@ -73,3 +73,35 @@ pub async fn docs_script() -> impl IntoResponse {
         RAPIDOC,
     )
 }
+
+const DASHBOARD_INDEX: &str = include_str!("../../assets/dashboard/index.html");
+const DASHBOARD_JOB: &str = include_str!("../../assets/dashboard/job.html");
+const DASHBOARD_SCRIPT: &str = include_str!("../../assets/dashboard/app.js");
+const DASHBOARD_STYLE: &str = include_str!("../../assets/dashboard/style.css");
+
+/// The dashboard: jobs with live progress, the submit form and schedules.
+pub async fn dashboard() -> Html<&'static str> {
+    Html(DASHBOARD_INDEX)
+}
+
+/// A job's page: live progress, wear curves, histograms, the Weibull plot.
+pub async fn job_page() -> Html<&'static str> {
+    Html(DASHBOARD_JOB)
+}
+
+pub async fn dashboard_script() -> impl IntoResponse {
+    (
+        [(
+            header::CONTENT_TYPE,
+            "application/javascript; charset=utf-8",
+        )],
+        DASHBOARD_SCRIPT,
+    )
+}
+
+pub async fn dashboard_style() -> impl IntoResponse {
+    (
+        [(header::CONTENT_TYPE, "text/css; charset=utf-8")],
+        DASHBOARD_STYLE,
+    )
+}

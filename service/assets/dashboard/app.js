@@ -1,0 +1,904 @@
+// bouncewear dashboard: the jobs page (/) and the job page (/jobs/{id}). Plain JavaScript, no
+// framework, nothing loaded from outside. Every API call goes through `api`, which adds
+// `Authorization: Bearer KEY` when a key is stored; that is also why plots are fetched and injected
+// rather than linked with <img src> (an image request cannot carry the header).
+"use strict";
+
+(() => {
+  const KEY_STORAGE = "bouncewear.apiKey";
+  const ACTIVE = new Set(["queued", "running"]);
+  const STATUSES = ["queued", "running", "succeeded", "failed", "cancelled"];
+
+  // ---------------------------------------------------------------------------------------------
+  // API access
+  // ---------------------------------------------------------------------------------------------
+
+  function apiKey() {
+    try {
+      return (localStorage.getItem(KEY_STORAGE) || "").trim();
+    } catch (_) {
+      return "";
+    }
+  }
+
+  function headers(extra) {
+    const h = Object.assign({}, extra || {});
+    const key = apiKey();
+    if (key) h.Authorization = "Bearer " + key;
+    return h;
+  }
+
+  /** An API error: the problem document (RFC 9457) when the server sent one. */
+  class ApiError extends Error {
+    constructor(status, problem, fallback) {
+      const detail = (problem && (problem.detail || problem.title)) || fallback || "HTTP " + status;
+      super(detail);
+      this.status = status;
+      this.problem = problem || null;
+    }
+  }
+
+  function api(path, options) {
+    const opts = Object.assign({}, options || {});
+    opts.headers = headers(opts.headers);
+    return fetch(path, opts);
+  }
+
+  async function problemOf(response) {
+    const text = await response.text().catch(() => "");
+    try {
+      return JSON.parse(text);
+    } catch (_) {
+      return text ? { detail: text.slice(0, 300) } : null;
+    }
+  }
+
+  async function failed(response) {
+    const problem = await problemOf(response);
+    let fallback = "HTTP " + response.status;
+    if (response.status === 401) fallback = "This server needs an API key: enter it at the top right.";
+    const error = new ApiError(response.status, problem, fallback);
+    if (response.status === 401 && !apiKey()) {
+      error.message = "This server needs an API key: enter it at the top right.";
+    }
+    return error;
+  }
+
+  async function getJson(path) {
+    const response = await api(path, { headers: { Accept: "application/json" } });
+    if (!response.ok) throw await failed(response);
+    return response.json();
+  }
+
+  async function sendJson(method, path, body) {
+    const init = { method, headers: { Accept: "application/json" } };
+    if (body !== undefined) {
+      init.headers["Content-Type"] = "application/json";
+      init.body = typeof body === "string" ? body : JSON.stringify(body);
+    }
+    const response = await api(path, init);
+    if (!response.ok) throw await failed(response);
+    const text = await response.text();
+    return text ? JSON.parse(text) : null;
+  }
+
+  // ---------------------------------------------------------------------------------------------
+  // DOM helpers
+  // ---------------------------------------------------------------------------------------------
+
+  const $ = (selector, root) => (root || document).querySelector(selector);
+
+  /** `el("td", {class: "num"}, "text", child, ...)`. */
+  function el(tag, attrs, ...children) {
+    const node = document.createElement(tag);
+    for (const [name, value] of Object.entries(attrs || {})) {
+      if (value === undefined || value === null || value === false) continue;
+      if (name === "class") node.className = value;
+      else if (name === "text") node.textContent = value;
+      else if (name.startsWith("on") && typeof value === "function") node.addEventListener(name.slice(2), value);
+      else node.setAttribute(name, value === true ? "" : value);
+    }
+    for (const child of children.flat()) {
+      if (child === undefined || child === null || child === false) continue;
+      node.append(child instanceof Node ? child : document.createTextNode(String(child)));
+    }
+    return node;
+  }
+
+  function show(node, visible) {
+    if (node) node.hidden = !visible;
+  }
+
+  function setAlert(node, message) {
+    if (!node) return;
+    node.replaceChildren();
+    if (message) node.append(message instanceof Node ? message : document.createTextNode(message));
+    show(node, Boolean(message));
+  }
+
+  /** A number in at most 4 significant digits, exponent form when very small or large. */
+  function fmt(value, digits) {
+    const d = digits || 4;
+    if (typeof value !== "number" || !Number.isFinite(value)) return "–";
+    if (value === 0) return "0";
+    const abs = Math.abs(value);
+    if (abs >= 1e-3 && abs < 1e6) return String(Number(value.toPrecision(d)));
+    return value.toExponential(d - 1).replace(/\.?0+e/, "e");
+  }
+
+  function fmtInterval(ci) {
+    return Array.isArray(ci) && ci.length === 2 ? "[" + fmt(ci[0]) + ", " + fmt(ci[1]) + "]" : "–";
+  }
+
+  function fmtCount(value) {
+    return typeof value === "number" && Number.isFinite(value) ? value.toLocaleString("en-US") : "–";
+  }
+
+  function fmtTime(text) {
+    if (!text) return "–";
+    const date = new Date(text);
+    if (Number.isNaN(date.getTime())) return String(text);
+    return date.toLocaleString(undefined, {
+      year: "numeric", month: "short", day: "numeric", hour: "2-digit", minute: "2-digit", second: "2-digit",
+    });
+  }
+
+  function badge(status) {
+    const known = STATUSES.includes(status) ? status : "";
+    return el("span", { class: "badge " + known }, status || "unknown");
+  }
+
+  function percent(progress) {
+    const done = (progress && progress.operations_done) || 0;
+    const total = (progress && progress.operations_total) || 0;
+    return total > 0 ? Math.max(0, Math.min(100, (100 * done) / total)) : 0;
+  }
+
+  function progressBar(job, large) {
+    const bar = el("div", { class: "progress" + (large ? " large" : "") },
+      el("div", { class: "track" }, el("div", { class: "fill" })),
+      el("span", { class: "label" }));
+    updateProgress(bar, job, large);
+    return bar;
+  }
+
+  function updateProgress(bar, job, large) {
+    if (!bar || !job) return;
+    const status = job.status || "";
+    const p = job.status === "succeeded" ? 100 : percent(job.progress);
+    for (const s of STATUSES) bar.classList.toggle(s, s === status);
+    $(".fill", bar).style.width = p.toFixed(1) + "%";
+    const label = $(".label", bar);
+    if (large && job.progress) {
+      label.textContent = fmtCount(job.progress.operations_done) + " / " +
+        fmtCount(job.progress.operations_total) + " operations (" + p.toFixed(0) + " %)";
+    } else {
+      label.textContent = p.toFixed(0) + " %";
+    }
+  }
+
+  /**
+   * Fetches an SVG plot (with the key) and puts it into `container`. The SVG is parsed as XML and
+   * only an <svg> root is accepted; scripts and event attributes are dropped on the way in.
+   */
+  async function injectSvg(container, path) {
+    if (!container) return;
+    container.replaceChildren(el("div", { class: "placeholder" }, "Loading plot…"));
+    try {
+      const response = await api(path, { headers: { Accept: "image/svg+xml" } });
+      if (!response.ok) throw await failed(response);
+      const text = await response.text();
+      const doc = new DOMParser().parseFromString(text, "image/svg+xml");
+      const root = doc.documentElement;
+      if (!root || root.nodeName.toLowerCase() !== "svg" || doc.querySelector("parsererror")) {
+        throw new Error("the server did not send an SVG");
+      }
+      root.querySelectorAll("script, foreignObject").forEach((n) => n.remove());
+      for (const node of [root, ...root.querySelectorAll("*")]) {
+        for (const attr of [...node.attributes]) {
+          if (/^on/i.test(attr.name) || /javascript:/i.test(attr.value)) node.removeAttribute(attr.name);
+        }
+      }
+      container.replaceChildren(document.importNode(root, true));
+    } catch (error) {
+      container.replaceChildren(el("div", { class: "plot-error" }, "Plot unavailable: " + error.message));
+    }
+  }
+
+  /** A link to an API resource that must carry the key: downloaded through fetch when a key is set. */
+  function keyedLink(anchor, path, filename) {
+    anchor.href = path;
+    anchor.onclick = async (event) => {
+      if (!apiKey()) return;
+      event.preventDefault();
+      try {
+        const response = await api(path);
+        if (!response.ok) throw await failed(response);
+        const blob = await response.blob();
+        const url = URL.createObjectURL(blob);
+        const a = el("a", { href: url, download: filename });
+        document.body.append(a);
+        a.click();
+        a.remove();
+        setTimeout(() => URL.revokeObjectURL(url), 10000);
+      } catch (error) {
+        alert("Download failed: " + error.message);
+      }
+    };
+  }
+
+  function setupKeyField(onChange) {
+    const input = $("#api-key");
+    const state = $("#api-key-state");
+    if (!input) return;
+    input.value = apiKey();
+    const label = () => {
+      if (state) state.textContent = apiKey() ? "saved" : "";
+    };
+    label();
+    input.addEventListener("change", () => {
+      const value = input.value.trim();
+      try {
+        if (value) localStorage.setItem(KEY_STORAGE, value);
+        else localStorage.removeItem(KEY_STORAGE);
+      } catch (_) {
+        // Private mode without storage: the key lives only as long as the page.
+      }
+      label();
+      onChange();
+    });
+  }
+
+  // ---------------------------------------------------------------------------------------------
+  // Presets (CONTRACT.md "Job")
+  // ---------------------------------------------------------------------------------------------
+
+  const SCATTER_RADIUS = {
+    parameter: "contact_radius_m",
+    per: "device",
+    distribution: { kind: "normal", mean: 7.7e-3, sd: 0.8e-3, min: 1e-3 },
+  };
+  const SCATTER_VELOCITY = {
+    parameter: "impact_velocity_m_s",
+    per: "operation",
+    distribution: { kind: "normal", mean: 0.224, sd: 0.02, min: 0.05 },
+  };
+  const AT_48V_15A = { circuit: { supply_voltage_v: 48, current_a: 15 } };
+
+  const PRESETS = [
+    {
+      id: "quick",
+      label: "Quick check: 100 devices x 100 operations, 48 V / 15 A",
+      job: {
+        name: "Quick check, 48 V / 15 A",
+        devices: 100,
+        operations: 100,
+        scenario: AT_48V_15A,
+        scatter: [SCATTER_RADIUS, SCATTER_VELOCITY],
+      },
+    },
+    {
+      id: "mechanical",
+      label: "Paper rig, mechanical: 500 x 200",
+      job: {
+        name: "Paper rig, mechanical",
+        devices: 500,
+        operations: 200,
+        scenario: {},
+        scatter: [SCATTER_RADIUS, SCATTER_VELOCITY],
+      },
+    },
+    {
+      id: "wear",
+      label: "Wear test 48 V / 15 A: 1000 x 1000 with failure criterion",
+      job: {
+        name: "Wear test 48 V / 15 A",
+        devices: 1000,
+        operations: 1000,
+        scenario: AT_48V_15A,
+        scatter: [SCATTER_RADIUS, SCATTER_VELOCITY],
+        failure: { total_bounce_s: { above: 0.0095 } },
+        limits: { total_bounce_s: 0.0095 },
+      },
+    },
+    {
+      id: "erosion",
+      label: "Endurance with erosion limit: 500 x 2000, 48 V / 15 A",
+      job: {
+        name: "Endurance with erosion limit",
+        devices: 500,
+        operations: 2000,
+        scenario: AT_48V_15A,
+        scatter: [SCATTER_RADIUS, SCATTER_VELOCITY],
+        failure: { eroded_mass_kg: { above: 2e-6 } },
+      },
+    },
+  ];
+
+  // ---------------------------------------------------------------------------------------------
+  // The jobs page
+  // ---------------------------------------------------------------------------------------------
+
+  function indexPage() {
+    const body = $("#jobs-body");
+    const rows = new Map(); // job id -> {row, bar, statusCell, job}
+    let cursor = null;
+    let pollTimer = null;
+
+    function jobRow(job) {
+      const bar = progressBar(job, false);
+      const statusCell = el("td", {}, badge(job.status));
+      const row = el("tr", { "data-job-id": job.id, "data-status": job.status },
+        el("td", {}, job.name || el("span", { class: "muted" }, "(unnamed)")),
+        el("td", {}, el("a", { href: "/jobs/" + encodeURIComponent(job.id), class: "mono" }, job.id)),
+        statusCell,
+        el("td", {}, bar),
+        el("td", { class: "small" }, fmtTime(job.created_at)));
+      return { row, bar, statusCell, job };
+    }
+
+    function updateRow(job) {
+      const entry = rows.get(job.id);
+      if (!entry) return;
+      entry.job = job;
+      entry.row.dataset.status = job.status;
+      entry.statusCell.replaceChildren(badge(job.status));
+      updateProgress(entry.bar, job, false);
+    }
+
+    function addRows(jobs, atTop) {
+      for (const job of jobs) {
+        if (rows.has(job.id)) {
+          updateRow(job);
+          continue;
+        }
+        const entry = jobRow(job);
+        rows.set(job.id, entry);
+        if (atTop) {
+          entry.row.classList.add("fresh");
+          body.prepend(entry.row);
+        } else {
+          body.append(entry.row);
+        }
+      }
+      show($("#jobs-empty"), rows.size === 0);
+      schedulePoll();
+    }
+
+    async function loadJobs(more) {
+      try {
+        const path = "/v1/jobs?limit=50" + (more && cursor ? "&cursor=" + encodeURIComponent(cursor) : "");
+        const list = await getJson(path);
+        if (!more) {
+          rows.clear();
+          body.replaceChildren();
+        }
+        addRows(list.jobs || [], false);
+        cursor = list.next_cursor || null;
+        show($("#jobs-more"), Boolean(cursor));
+        setAlert($("#jobs-error"), null);
+      } catch (error) {
+        setAlert($("#jobs-error"), "Could not load the jobs: " + error.message);
+        if (!more) {
+          rows.clear();
+          body.replaceChildren();
+          show($("#jobs-empty"), false);
+        }
+      }
+    }
+
+    // Live rows: each queued or running job is fetched every second until it ends.
+    function schedulePoll() {
+      if (pollTimer) return;
+      const active = [...rows.values()].some((e) => ACTIVE.has(e.job.status));
+      if (!active) return;
+      pollTimer = setTimeout(async () => {
+        const ids = [...rows.values()].filter((e) => ACTIVE.has(e.job.status)).map((e) => e.job.id);
+        await Promise.all(ids.map(async (id) => {
+          try {
+            updateRow(await getJson("/v1/jobs/" + encodeURIComponent(id)));
+          } catch (_) {
+            // A missed update is retried on the next tick.
+          }
+        }));
+        pollTimer = null;
+        schedulePoll();
+      }, 1000);
+    }
+
+    // Submit form.
+    const presetSelect = $("#preset");
+    const textarea = $("#job-json");
+    for (const preset of PRESETS) presetSelect.append(el("option", { value: preset.id }, preset.label));
+    const fillPreset = () => {
+      const preset = PRESETS.find((p) => p.id === presetSelect.value) || PRESETS[0];
+      textarea.value = JSON.stringify(preset.job, null, 2);
+      setAlert($("#submit-errors"), null);
+    };
+    presetSelect.addEventListener("change", fillPreset);
+    $("#preset-reset").addEventListener("click", fillPreset);
+    fillPreset();
+
+    $("#submit-form").addEventListener("submit", async (event) => {
+      event.preventDefault();
+      const errors = $("#submit-errors");
+      const ok = $("#submit-ok");
+      setAlert(errors, null);
+      show(ok, false);
+      let job;
+      try {
+        job = JSON.parse(textarea.value);
+      } catch (error) {
+        setAlert(errors, "The job is not valid JSON: " + error.message);
+        return;
+      }
+      const button = $("#submit-button");
+      button.disabled = true;
+      $("#submit-state").textContent = "Submitting…";
+      try {
+        const created = await sendJson("POST", "/v1/jobs", job);
+        addRows([created], true);
+        ok.replaceChildren("Job submitted: ",
+          el("a", { href: "/jobs/" + encodeURIComponent(created.id), class: "mono" }, created.id),
+          " (" + created.status + ")");
+        show(ok, true);
+      } catch (error) {
+        setAlert(errors, problemView(error));
+      } finally {
+        button.disabled = false;
+        $("#submit-state").textContent = "";
+      }
+    });
+
+    $("#jobs-refresh").addEventListener("click", () => loadJobs(false));
+    $("#jobs-more").addEventListener("click", () => loadJobs(true));
+    $("#schedules-refresh").addEventListener("click", () => loadSchedules());
+    setupKeyField(() => {
+      loadJobs(false);
+      loadSchedules();
+    });
+
+    // Schedules.
+    async function loadSchedules() {
+      const list = $("#schedules");
+      const error = $("#schedules-error");
+      try {
+        const data = await getJson("/v1/schedules");
+        const schedules = data.schedules || [];
+        setAlert(error, null);
+        list.replaceChildren(...schedules.map(scheduleCard));
+        show($("#schedules-empty"), schedules.length === 0);
+      } catch (e) {
+        list.replaceChildren();
+        show($("#schedules-empty"), false);
+        setAlert(error, e.status === 404 ? "This server has no schedules API." : "Could not load the schedules: " + e.message);
+      }
+    }
+
+    function statisticName(s) {
+      if (typeof s === "string") return s;
+      if (s && typeof s === "object") return s.statistic || s.name || JSON.stringify(s);
+      return String(s);
+    }
+
+    function scheduleCard(schedule) {
+      const id = encodeURIComponent(schedule.id);
+      const plot = el("div", { class: "plot", id: "trend-" + schedule.id });
+      const note = el("div", { class: "run-note" });
+      const statistics = (schedule.statistics || []).map(statisticName);
+      const trendPath = (statistic) =>
+        "/v1/schedules/" + id + "/plots/trend.svg" + (statistic ? "?statistic=" + encodeURIComponent(statistic) : "");
+      let picker = null;
+      if (statistics.length > 1) {
+        picker = el("select", { "aria-label": "Statistic" }, statistics.map((s) => el("option", { value: s }, s)));
+        picker.addEventListener("change", () => injectSvg(plot, trendPath(picker.value)));
+      }
+      const runButton = el("button", { type: "button", class: "secondary" }, "Run now");
+      runButton.addEventListener("click", async () => {
+        runButton.disabled = true;
+        note.replaceChildren("Starting…");
+        note.className = "run-note muted";
+        try {
+          const created = await sendJson("POST", "/v1/schedules/" + id + "/run");
+          const job = created && (created.job || created);
+          note.className = "run-note";
+          if (job && job.id) {
+            note.replaceChildren("Started job ",
+              el("a", { href: "/jobs/" + encodeURIComponent(job.id), class: "mono" }, job.id), ".");
+            if (job.status) addRows([job], true);
+            else loadJobs(false);
+          } else {
+            note.replaceChildren("Started.");
+            loadJobs(false);
+          }
+        } catch (error) {
+          note.className = "run-note error-text";
+          note.replaceChildren("Could not start a run: " + error.message);
+        } finally {
+          runButton.disabled = false;
+        }
+      });
+      const card = el("article", { class: "schedule", "data-schedule-id": schedule.id },
+        el("div", { class: "schedule-head" },
+          el("h3", {}, schedule.name || schedule.id),
+          el("span", { class: "badge " + (schedule.enabled ? "on" : "off") }, schedule.enabled ? "enabled" : "disabled"),
+          el("span", { class: "spacer" }),
+          picker,
+          runButton),
+        el("div", { class: "meta" },
+          el("span", {}, el("code", {}, schedule.cron || "–"), " in ", el("b", {}, schedule.time_zone || "UTC")),
+          el("span", {}, "next run ", el("b", {}, schedule.enabled ? fmtTime(schedule.next_run_at) : "–")),
+          el("span", {}, "last run ", el("b", {}, fmtTime(schedule.last_run_at))),
+          statistics.length ? el("span", {}, "follows ", el("b", {}, statistics.join(", "))) : null),
+        plot,
+        note);
+      injectSvg(plot, trendPath(null));
+      return card;
+    }
+
+    loadJobs(false);
+    loadSchedules();
+  }
+
+  /** The problem's detail and each `errors[].pointer: detail`. */
+  function problemView(error) {
+    const box = el("div", {}, el("strong", {}, error.message || "Request failed"));
+    const problem = error.problem;
+    if (problem && Array.isArray(problem.errors) && problem.errors.length) {
+      box.append(el("ul", {}, problem.errors.map((e) =>
+        el("li", {}, el("code", {}, e.pointer || "/"), ": ", e.detail || e.message || ""))));
+    }
+    return box;
+  }
+
+  // ---------------------------------------------------------------------------------------------
+  // The job page
+  // ---------------------------------------------------------------------------------------------
+
+  function jobPage() {
+    const segments = location.pathname.split("/").filter(Boolean);
+    const id = decodeURIComponent(segments[segments.length - 1] || "");
+    const base = "/v1/jobs/" + encodeURIComponent(id);
+    const statusEl = $("#job-status");
+    const bar = $("#job-progress");
+    let job = null;
+    let finished = false;
+    let pollTimer = null;
+    let resultLoaded = false;
+    let following = 0; // generation of the current follow, so a key change restarts cleanly
+
+    document.title = "bouncewear · job " + id;
+    $("#job-id").textContent = id;
+
+    function setStatus(status) {
+      statusEl.textContent = status;
+      statusEl.className = "badge " + (STATUSES.includes(status) ? status : "");
+      show($("#job-cancel"), ACTIVE.has(status));
+    }
+
+    function render(resource) {
+      job = Object.assign({}, job || {}, resource);
+      if (job.name) {
+        $("#job-name").textContent = job.name;
+        document.title = "bouncewear · " + job.name;
+      } else {
+        $("#job-name").textContent = "Job";
+      }
+      setStatus(job.status);
+      updateProgress(bar, job, true);
+      const facts = [
+        ["created", fmtTime(job.created_at)],
+        ["started", fmtTime(job.started_at)],
+        ["finished", fmtTime(job.finished_at)],
+      ];
+      if (job.seed !== undefined) facts.push(["seed", String(job.seed)]);
+      $("#job-facts").replaceChildren(...facts.map(([k, v]) => el("div", {}, el("dt", {}, k), el("dd", {}, v))));
+      if (job.status === "failed") {
+        setAlert($("#job-error"), "The job failed: " + (job.error || "no reason given"));
+      } else if (job.status === "cancelled") {
+        setAlert($("#job-error"), "The job was cancelled" + (job.error ? ": " + job.error : "."));
+      } else {
+        setAlert($("#job-error"), null);
+      }
+      if (!ACTIVE.has(job.status)) {
+        finished = true;
+        if (job.status === "succeeded" && !resultLoaded) {
+          resultLoaded = true;
+          loadResult();
+        }
+      }
+    }
+
+    function onProgress(data) {
+      // `progress` events carry only status and counts.
+      render({
+        status: data.status || (job && job.status),
+        progress: { operations_done: data.operations_done, operations_total: data.operations_total },
+      });
+    }
+
+    /** Follows the event stream; resolves true if it saw the final `status` event. */
+    async function followEvents(generation) {
+      const response = await api(base + "/events", { headers: { Accept: "text/event-stream" } });
+      if (!response.ok) throw await failed(response);
+      if (!response.body || !response.body.getReader) throw new Error("no streaming body");
+      const reader = response.body.getReader();
+      const decoder = new TextDecoder();
+      let buffer = "";
+      for (;;) {
+        const { value, done } = await reader.read();
+        if (generation !== following) {
+          reader.cancel().catch(() => {});
+          return true;
+        }
+        if (done) break;
+        buffer += decoder.decode(value, { stream: true });
+        let boundary;
+        while ((boundary = buffer.search(/\r?\n\r?\n/)) >= 0) {
+          const block = buffer.slice(0, boundary);
+          buffer = buffer.slice(boundary).replace(/^\r?\n\r?\n/, "");
+          const event = parseEvent(block);
+          if (!event) continue;
+          let data;
+          try {
+            data = JSON.parse(event.data);
+          } catch (_) {
+            continue;
+          }
+          if (event.event === "status") {
+            render(data);
+            reader.cancel().catch(() => {});
+            return true;
+          }
+          if (event.event === "progress") onProgress(data);
+        }
+      }
+      return false;
+    }
+
+    function parseEvent(block) {
+      let event = "message";
+      const data = [];
+      for (const line of block.split(/\r?\n/)) {
+        if (!line || line.startsWith(":")) continue;
+        const colon = line.indexOf(":");
+        const field = colon < 0 ? line : line.slice(0, colon);
+        let value = colon < 0 ? "" : line.slice(colon + 1);
+        if (value.startsWith(" ")) value = value.slice(1);
+        if (field === "event") event = value;
+        else if (field === "data") data.push(value);
+      }
+      return data.length ? { event, data: data.join("\n") } : null;
+    }
+
+    function poll(generation) {
+      clearTimeout(pollTimer);
+      pollTimer = setTimeout(async () => {
+        if (generation !== following) return;
+        try {
+          render(await getJson(base));
+        } catch (error) {
+          if (error.status === 404 || error.status === 401) {
+            showLoadError(error);
+            return;
+          }
+        }
+        if (!finished) poll(generation);
+      }, 1000);
+    }
+
+    function watch(generation) {
+      setTimeout(async () => {
+        if (generation !== following || finished) return;
+        try {
+          render(await getJson(base));
+        } catch (_) {
+          // The stream or the next look brings it.
+        }
+        watch(generation);
+      }, 5000);
+    }
+
+    function showLoadError(error) {
+      setStatus(error.status === 404 ? "not found" : "unavailable");
+      setAlert($("#job-error"), error.status === 404 ? "No such job (for this API key)." : error.message);
+    }
+
+    async function start() {
+      following += 1;
+      const generation = following;
+      finished = false;
+      clearTimeout(pollTimer);
+      try {
+        render(await getJson(base));
+      } catch (error) {
+        showLoadError(error);
+        return;
+      }
+      if (finished) return;
+      // A slow poll beside the stream, in case a proxy buffers it.
+      watch(generation);
+      try {
+        const ended = await followEvents(generation);
+        if (ended || generation !== following) return;
+      } catch (_) {
+        // No stream (a proxy, an old server): poll instead.
+      }
+      if (generation === following && !finished) poll(generation);
+    }
+
+    $("#job-cancel").addEventListener("click", async () => {
+      if (!confirm("Cancel this job?")) return;
+      try {
+        const response = await api(base, { method: "DELETE" });
+        if (!response.ok) throw await failed(response);
+        const text = await response.text();
+        if (text) {
+          try {
+            render(JSON.parse(text));
+          } catch (_) {
+            // Not a job resource: the stream or the poll brings the new status.
+          }
+        }
+      } catch (error) {
+        setAlert($("#job-error"), "Could not cancel: " + error.message);
+      }
+    });
+
+    // The result.
+    async function loadResult(attempt) {
+      let result;
+      try {
+        result = await getJson(base + "/result");
+      } catch (error) {
+        // 409 right after the status changed: the result may still be on its way.
+        if (error.status === 409 && (attempt || 0) < 5) {
+          setTimeout(() => loadResult((attempt || 0) + 1), 1000);
+          return;
+        }
+        resultLoaded = false;
+        setAlert($("#job-error"), "Could not load the result: " + error.message);
+        return;
+      }
+      show($("#result"), true);
+      renderOperations(result);
+      renderLife(result);
+      renderDevices(result);
+      renderRun(result);
+    }
+
+    function renderOperations(result) {
+      const select = $("#metric");
+      const metrics = Object.keys(result.operations || {});
+      select.replaceChildren(...metrics.map((m) => el("option", { value: m }, m)));
+      if (!metrics.length) {
+        $("#plot-bands").replaceChildren(el("div", { class: "placeholder" }, "No operation metrics in this result."));
+        $("#plot-histograms").replaceChildren();
+        return;
+      }
+      const wanted = new URLSearchParams(location.hash.slice(1)).get("metric");
+      select.value = metrics.includes(wanted) ? wanted
+        : metrics.includes("total_bounce_s") ? "total_bounce_s" : metrics[0];
+      const showMetric = () => {
+        const metric = select.value;
+        const q = "?metric=" + encodeURIComponent(metric);
+        injectSvg($("#plot-bands"), base + "/plots/bands.svg" + q);
+        injectSvg($("#plot-histograms"), base + "/plots/histograms.svg" + q);
+        renderBins(result.operations[metric] || []);
+        history.replaceState(null, "", "#metric=" + encodeURIComponent(metric));
+      };
+      select.onchange = showMetric;
+      showMetric();
+    }
+
+    function renderBins(bins) {
+      const limited = bins.some((b) => b.exceedance);
+      const head = el("tr", {},
+        ["operations", "n", "mean", "p05", "p50", "p95", "max"].map((h, i) => el("th", { class: i ? "num" : "" }, h)),
+        limited ? el("th", { class: "num" }, "P(above limit)") : null);
+      const q = (b, k) => (b.quantiles && b.quantiles[k] ? b.quantiles[k].value : undefined);
+      const rowsHtml = bins.map((b) => el("tr", {},
+        el("td", {}, b.op_start + "–" + b.op_end),
+        el("td", { class: "num" }, fmtCount(b.n)),
+        el("td", { class: "num" }, fmt(b.mean)),
+        el("td", { class: "num" }, fmt(q(b, "p05"))),
+        el("td", { class: "num" }, fmt(q(b, "p50"))),
+        el("td", { class: "num" }, fmt(q(b, "p95"))),
+        el("td", { class: "num" }, fmt(b.max)),
+        limited ? el("td", { class: "num" }, b.exceedance
+          ? fmt(b.exceedance.probability, 3) + " " + fmtInterval(b.exceedance.ci95) : "–") : null));
+      $("#bins-table").replaceChildren(el("thead", {}, head), el("tbody", {}, rowsHtml));
+    }
+
+    function renderLife(result) {
+      const life = result.life;
+      show($("#life-section"), Boolean(life));
+      if (!life) return;
+      const analysis = life.analysis || {};
+      const criteria = Object.entries(life.criteria || {}).map(([metric, c]) =>
+        metric + (c.above !== undefined ? " above " + fmt(c.above) : "") + (c.below !== undefined ? " below " + fmt(c.below) : ""));
+      const failures = life.failures !== undefined ? life.failures : analysis.failures;
+      const censored = life.censored !== undefined ? life.censored : analysis.censored;
+      $("#life-criteria").textContent = (criteria.length ? "A device fails at its first operation with " + criteria.join(" or ") + ". " : "") +
+        fmtCount(failures) + " failed, " + fmtCount(censored) + " survived the test (right-censored).";
+      injectSvg($("#plot-weibull"), base + "/plots/weibull.svg");
+      keyedLink($("#life-csv"), base + "/life?format=csv", "job-" + id + "-life.csv");
+
+      const w = analysis.weibull;
+      const rows = [];
+      if (w) {
+        rows.push(["β (shape)", fmt(w.beta), fmtInterval(w.beta_ci95)]);
+        rows.push(["η (scale), operations", fmt(w.eta), fmtInterval(w.eta_ci95)]);
+      }
+      for (const [label, b] of [["B1, operations", analysis.b1], ["B10, operations", analysis.b10]]) {
+        if (b) rows.push([label, fmt(b.value), fmtInterval(b.ci95)]);
+      }
+      const table = $("#life-table");
+      if (!w) {
+        table.replaceChildren(el("tbody", {}, el("tr", {}, el("td", { class: "error-text" },
+          "No Weibull fit: " + (analysis.weibull_error || "not available")))));
+        return;
+      }
+      table.replaceChildren(
+        el("thead", {}, el("tr", {}, el("th", {}, "Weibull fit"), el("th", { class: "num" }, "estimate"), el("th", { class: "num" }, "95 % interval"))),
+        el("tbody", {}, rows.map(([k, v, ci]) => el("tr", {}, el("td", {}, k), el("td", { class: "num" }, v), el("td", { class: "num" }, ci)))));
+    }
+
+    function renderDevices(result) {
+      const devices = result.devices || {};
+      const names = Object.keys(devices);
+      const table = $("#devices-table");
+      if (!names.length) {
+        table.replaceChildren(el("tbody", {}, el("tr", {}, el("td", { class: "muted" }, "No device metrics in this result."))));
+        return;
+      }
+      const q = (s, k) => (s.quantiles && s.quantiles[k] ? s.quantiles[k].value : undefined);
+      table.replaceChildren(
+        el("thead", {}, el("tr", {}, ["metric", "mean", "mean 95 % CI", "p05", "p50", "p95"].map((h, i) => el("th", { class: i ? "num" : "" }, h)))),
+        el("tbody", {}, names.map((name) => {
+          const s = devices[name] || {};
+          return el("tr", {},
+            el("td", { class: "mono" }, name),
+            el("td", { class: "num" }, fmt(s.mean)),
+            el("td", { class: "num" }, fmtInterval(s.mean_ci95)),
+            el("td", { class: "num" }, fmt(q(s, "p05"))),
+            el("td", { class: "num" }, fmt(q(s, "p50"))),
+            el("td", { class: "num" }, fmt(q(s, "p95"))));
+        })));
+    }
+
+    function renderRun(result) {
+      const j = result.job || {};
+      const t = result.timing || {};
+      const facts = [
+        ["devices", fmtCount(j.devices)],
+        ["operations", fmtCount(j.operations)],
+        ["bin", fmtCount(j.bin_operations) + " ops"],
+        ["fidelity", j.fidelity || "–"],
+        ["sampler", j.sampler || "–"],
+        ["seed", j.seed !== undefined ? String(j.seed) : "–"],
+        ["wall time", typeof t.wall_s === "number" ? fmt(t.wall_s, 3) + " s" : "–"],
+        ["throughput", typeof t.operations_per_s === "number" ? fmt(t.operations_per_s / 1e6, 3) + " M op/s" : "–"],
+      ];
+      if (result.precision) {
+        const p = result.precision;
+        facts.push(["precision", (p.met ? "met" : "not met") + ": ±" + fmt(100 * p.achieved_relative_half_width, 2) +
+          " % of " + p.statistic + " " + p.metric]);
+      }
+      $("#run-facts").replaceChildren(...facts.map(([k, v]) => el("div", {}, el("dt", {}, k), el("dd", {}, v))));
+      keyedLink($("#result-json"), base + "/result", "job-" + id + "-result.json");
+    }
+
+    setupKeyField(() => {
+      resultLoaded = false;
+      start();
+    });
+    start();
+  }
+
+  document.addEventListener("DOMContentLoaded", () => {
+    const page = document.body.dataset.page;
+    if (page === "index") indexPage();
+    else if (page === "job") jobPage();
+  });
+})();

@@ -1,0 +1,148 @@
+//! Plots as SVG, rendered by the server (`crate::plots`): a job's wear curves, histograms and Weibull
+//! plot, and a schedule's trend. The dashboard and `bouncewear run --plots` show the same pictures.
+
+use super::jobs::{stored_result, succeeded};
+use super::{AppState, Owner};
+use crate::errors::{ApiError, Problem};
+use crate::plots::{self, TrendPoint};
+use axum::Extension;
+use axum::extract::rejection::QueryRejection;
+use axum::extract::{Path, Query, State};
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use bouncewear_model::montecarlo::JobResult;
+use serde::Deserialize;
+use utoipa::IntoParams;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(job_plot))
+        .routes(routes!(schedule_trend_plot))
+}
+
+const PROBLEM: &str = "application/problem+json";
+const SVG: &str = "image/svg+xml";
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct PlotQuery {
+    /// The operation metric to draw (default `total_bounce_s`); ignored by `weibull.svg`.
+    pub metric: Option<String>,
+}
+
+/// The plot `kind` of a result, or why there is none.
+pub fn job_svg(result: &JobResult, kind: &str, metric: &str) -> Result<String, ApiError> {
+    let bins = || {
+        result.operations.get(metric).ok_or_else(|| {
+            ApiError::NotFound(format!("the job has no operation metric `{metric}`"))
+        })
+    };
+    match kind {
+        "bands.svg" => Ok(plots::quantile_bands_svg(metric, bins()?)),
+        "histograms.svg" => Ok(plots::histograms_svg(metric, bins()?)),
+        "weibull.svg" => match &result.life {
+            Some(life) => Ok(plots::weibull_svg(&life.analysis)),
+            None => Err(ApiError::NotFound(
+                "the job has no failure criteria, so no Weibull plot".into(),
+            )),
+        },
+        other => Err(ApiError::NotFound(format!(
+            "no plot `{other}`: bands.svg, histograms.svg or weibull.svg"
+        ))),
+    }
+}
+
+/// A plot of a succeeded job: `bands.svg` (p05/p50/p95 across operations: the wear curve),
+/// `histograms.svg` (per bin) or `weibull.svg` (life, with bounds).
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/plots/{kind}", tag = "jobs",
+    params(("id" = String, Path, description = "Job id"), ("kind" = String, Path, description = "bands.svg, histograms.svg or weibull.svg"), PlotQuery),
+    responses(
+        (status = 200, description = "The plot", body = String, content_type = SVG),
+        (status = 400, description = "Bad query", body = Problem, content_type = PROBLEM),
+        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        (status = 404, description = "No such job, plot or metric", body = Problem, content_type = PROBLEM),
+        (status = 409, description = "Not succeeded (yet)", body = Problem, content_type = PROBLEM),
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn job_plot(
+    State(state): State<AppState>,
+    Extension(Owner(owner)): Extension<Owner>,
+    Path((id, kind)): Path<(String, String)>,
+    query: Result<Query<PlotQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    succeeded(&state, &owner, &id).await?;
+    let result = stored_result(&state, &id).await?;
+    let svg = job_svg(
+        &result,
+        &kind,
+        query.metric.as_deref().unwrap_or("total_bounce_s"),
+    )?;
+    Ok(([(header::CONTENT_TYPE, SVG)], svg).into_response())
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct TrendQuery {
+    /// One of the schedule's statistics (default: its first).
+    pub statistic: Option<String>,
+}
+
+/// A schedule's trend of one statistic, with 95 % intervals and drift flags.
+#[utoipa::path(
+    get, path = "/v1/schedules/{id}/plots/trend.svg", tag = "schedules",
+    params(("id" = String, Path, description = "Schedule id"), TrendQuery),
+    responses(
+        (status = 200, description = "The trend", body = String, content_type = SVG),
+        (status = 400, description = "Bad query", body = Problem, content_type = PROBLEM),
+        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        (status = 404, description = "No such schedule or statistic", body = Problem, content_type = PROBLEM),
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn schedule_trend_plot(
+    State(state): State<AppState>,
+    Extension(Owner(owner)): Extension<Owner>,
+    Path(id): Path<String>,
+    query: Result<Query<TrendQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let schedule = state
+        .store
+        .schedule(&owner, &id)
+        .await?
+        .ok_or_else(|| ApiError::NotFound(format!("no schedule {id}")))?;
+    let trend = super::schedules::trend(&state, &schedule, 60).await?;
+    let statistic = match query.statistic {
+        Some(statistic) if trend.statistics.contains(&statistic) => statistic,
+        Some(statistic) => {
+            return Err(ApiError::NotFound(format!(
+                "the schedule does not follow `{statistic}`"
+            )));
+        }
+        None => trend.statistics.first().cloned().unwrap_or_default(),
+    };
+    let points: Vec<TrendPoint> = trend
+        .runs
+        .iter()
+        .filter_map(|run| {
+            let value = run.values.get(&statistic)?.as_ref()?;
+            Some(TrendPoint {
+                label: run.scheduled_for.clone(),
+                value: value.value,
+                ci95: Some(value.ci95),
+                flagged: value.drift,
+            })
+        })
+        .collect();
+    let svg = plots::trend_svg(
+        &format!("{}: {statistic}", schedule.name),
+        &statistic,
+        &points,
+    );
+    Ok(([(header::CONTENT_TYPE, SVG)], svg).into_response())
+}
