@@ -187,9 +187,11 @@ fn write_plots(
     Ok(())
 }
 
-/// A seed for a job that does not give one: from the operating system's entropy, reported in the result.
+/// A seed for a job that does not give one: from the operating system's entropy, reported in the
+/// result. Below 2^53, so that every JSON client (JavaScript's numbers included) reads it exactly;
+/// a user may still give any u64.
 pub fn draw_seed() -> u64 {
-    rand::rng().random()
+    rand::rng().random::<u64>() >> 11
 }
 
 /// A rayon pool of `threads` workers (all cores by default); compute never runs on async workers.
