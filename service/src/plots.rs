@@ -370,8 +370,14 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
         let f = 1.0 - p.reliability;
         p.time.is_finite() && p.time > 0.0 && f > 0.0 && f < 1.0
     };
-    let points: Vec<&KaplanMeierPoint> = life.kaplan_meier.iter().filter(usable).collect();
-    let omitted = life.kaplan_meier.len() - points.len();
+    let usable_points: Vec<&KaplanMeierPoint> = life.kaplan_meier.iter().filter(usable).collect();
+    let omitted = life.kaplan_meier.len() - usable_points.len();
+    // One step per distinct failure time can mean tens of thousands: draw an even selection.
+    const MAX_POINTS: usize = 1500;
+    let points: Vec<&KaplanMeierPoint> = pick_evenly(usable_points.len(), MAX_POINTS)
+        .into_iter()
+        .map(|i| usable_points[i])
+        .collect();
 
     // y range: 1 % to 99 % at least, widened to the points (within 0.01 % and 99.99 %).
     let (y_min_cap, y_max_cap) = (weibull_y(1e-4), weibull_y(1.0 - 1e-4));
@@ -587,6 +593,13 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
     if omitted > 0 {
         notes.push(format!("{omitted} point(s) at F = 100 % not shown"));
     }
+    if points.len() < usable_points.len() {
+        notes.push(format!(
+            "{} of {} Kaplan\u{2013}Meier points shown, evenly spaced",
+            points.len(),
+            usable_points.len()
+        ));
+    }
     let box_w = notes
         .iter()
         .map(|s| text_width(s, 12.0))
@@ -665,7 +678,7 @@ pub struct TrendPoint {
 /// with a ring; x labels rotated and thinned when there are many.
 pub fn trend_svg(title: &str, y_label: &str, points: &[TrendPoint]) -> String {
     if points.is_empty() {
-        return message_svg(title, "No runs yet.");
+        return message_svg(title, "No run has a value yet.");
     }
     let n = points.len();
     let rotate = n > 8 || points.iter().any(|p| p.label.chars().count() > 12);
@@ -1857,6 +1870,17 @@ mod tests {
     }
 
     #[test]
+    fn weibull_plot_thins_many_points() {
+        let data: Vec<(f64, bool)> = (1..=5000).map(|t| (f64::from(t), t % 2 == 0)).collect();
+        let life = life_of(&data);
+        assert!(life.kaplan_meier.len() > 2000);
+        let svg = weibull_svg(&life);
+        check(&svg);
+        assert!(svg.contains("1500 of "));
+        assert!(svg.matches("<circle").count() < 1600);
+    }
+
+    #[test]
     fn weibull_plot_without_a_fit() {
         let none = life_of(&[(100.0, false), (100.0, false)]);
         assert!(none.weibull.is_none());
@@ -1950,7 +1974,7 @@ mod tests {
     #[test]
     fn trend_of_degenerate_points() {
         check(&trend_svg("Empty", "x", &[]));
-        assert!(trend_svg("Empty", "x", &[]).contains("No runs yet"));
+        assert!(trend_svg("Empty", "x", &[]).contains("No run has a value yet"));
         let flat: Vec<TrendPoint> = (0..3)
             .map(|_| TrendPoint {
                 label: String::new(),

@@ -64,10 +64,24 @@
     return error;
   }
 
+  /**
+   * JSON.parse that keeps `seed` exact: seeds are u64 and above 2^53 a JS number would round them,
+   * so an unsafe one becomes its source text (Chrome 114+ gives revivers the source; elsewhere it
+   * is taken from the text when the text holds one seed only).
+   */
+  function parseJson(text) {
+    return JSON.parse(text, function (key, value, context) {
+      if (key !== "seed" || typeof value !== "number" || Number.isSafeInteger(value)) return value;
+      if (context && typeof context.source === "string") return context.source;
+      const seeds = [...text.matchAll(/"seed"\s*:\s*(\d+)/g)];
+      return seeds.length === 1 ? seeds[0][1] : value;
+    });
+  }
+
   async function getJson(path) {
     const response = await api(path, { headers: { Accept: "application/json" } });
     if (!response.ok) throw await failed(response);
-    return response.json();
+    return parseJson(await response.text());
   }
 
   async function sendJson(method, path, body) {
@@ -79,7 +93,7 @@
     const response = await api(path, init);
     if (!response.ok) throw await failed(response);
     const text = await response.text();
-    return text ? JSON.parse(text) : null;
+    return text ? parseJson(text) : null;
   }
 
   // ---------------------------------------------------------------------------------------------
@@ -330,10 +344,10 @@
       const statusCell = el("td", {}, badge(job.status));
       const row = el("tr", { "data-job-id": job.id, "data-status": job.status },
         el("td", {}, job.name || el("span", { class: "muted" }, "(unnamed)")),
-        el("td", {}, el("a", { href: "/jobs/" + encodeURIComponent(job.id), class: "mono" }, job.id)),
+        el("td", { class: "nowrap" }, el("a", { href: "/jobs/" + encodeURIComponent(job.id), class: "mono" }, job.id)),
         statusCell,
         el("td", {}, bar),
-        el("td", { class: "small" }, fmtTime(job.created_at)));
+        el("td", { class: "small nowrap" }, fmtTime(job.created_at)));
       return { row, bar, statusCell, job };
     }
 
@@ -425,9 +439,8 @@
       const ok = $("#submit-ok");
       setAlert(errors, null);
       show(ok, false);
-      let job;
       try {
-        job = JSON.parse(textarea.value);
+        JSON.parse(textarea.value);
       } catch (error) {
         setAlert(errors, "The job is not valid JSON: " + error.message);
         return;
@@ -436,7 +449,8 @@
       button.disabled = true;
       $("#submit-state").textContent = "Submitting…";
       try {
-        const created = await sendJson("POST", "/v1/jobs", job);
+        // The text as typed, not re-serialised: a seed above 2^53 must reach the server exactly.
+        const created = await sendJson("POST", "/v1/jobs", textarea.value);
         addRows([created], true);
         ok.replaceChildren("Job submitted: ",
           el("a", { href: "/jobs/" + encodeURIComponent(created.id), class: "mono" }, created.id),
@@ -493,6 +507,19 @@
         picker = el("select", { "aria-label": "Statistic" }, statistics.map((s) => el("option", { value: s }, s)));
         picker.addEventListener("change", () => injectSvg(plot, trendPath(picker.value)));
       }
+      const redraw = () => injectSvg(plot, trendPath(picker ? picker.value : null));
+      // Once a run started here ends, its point joins the trend.
+      const redrawWhenDone = (jobId) => {
+        setTimeout(async () => {
+          try {
+            const job = await getJson("/v1/jobs/" + encodeURIComponent(jobId));
+            if (ACTIVE.has(job.status)) redrawWhenDone(jobId);
+            else redraw();
+          } catch (_) {
+            // Gone or no access: nothing to wait for.
+          }
+        }, 2000);
+      };
       const runButton = el("button", { type: "button", class: "secondary" }, "Run now");
       runButton.addEventListener("click", async () => {
         runButton.disabled = true;
@@ -507,6 +534,7 @@
               el("a", { href: "/jobs/" + encodeURIComponent(job.id), class: "mono" }, job.id), ".");
             if (job.status) addRows([job], true);
             else loadJobs(false);
+            redrawWhenDone(job.id);
           } else {
             note.replaceChildren("Started.");
             loadJobs(false);
@@ -532,7 +560,7 @@
           statistics.length ? el("span", {}, "follows ", el("b", {}, statistics.join(", "))) : null),
         plot,
         note);
-      injectSvg(plot, trendPath(null));
+      redraw();
       return card;
     }
 
@@ -641,7 +669,7 @@
           if (!event) continue;
           let data;
           try {
-            data = JSON.parse(event.data);
+            data = parseJson(event.data);
           } catch (_) {
             continue;
           }
@@ -735,7 +763,7 @@
         const text = await response.text();
         if (text) {
           try {
-            render(JSON.parse(text));
+            render(parseJson(text));
           } catch (_) {
             // Not a job resource: the stream or the poll brings the new status.
           }
