@@ -311,7 +311,7 @@
         operations: 1000,
         scenario: AT_48V_15A,
         scatter: [SCATTER_RADIUS, SCATTER_VELOCITY],
-        failure: { total_bounce_s: { above: 0.0095 } },
+        failure: { e1: { below: 0.3 } },
         limits: { total_bounce_s: 0.0095 },
       },
     },
@@ -333,11 +333,85 @@
   // The jobs page
   // ---------------------------------------------------------------------------------------------
 
+  function parseEvent(block) {
+    let event = "message";
+    const data = [];
+    for (const line of block.split(/\r?\n/)) {
+      if (!line || line.startsWith(":")) continue;
+      const colon = line.indexOf(":");
+      const field = colon < 0 ? line : line.slice(0, colon);
+      let value = colon < 0 ? "" : line.slice(colon + 1);
+      if (value.startsWith(" ")) value = value.slice(1);
+      if (field === "event") event = value;
+      else if (field === "data") data.push(value);
+    }
+    return data.length ? { event, data: data.join("\n") } : null;
+  }
+
+  /**
+   * Follows `GET /v1/jobs/{id}/events` with fetch (EventSource cannot send the key header), calling
+   * onEvent(name, data) for each event; resolves after the final `status` event or when the stream ends.
+   */
+  async function streamEvents(id, onEvent) {
+    const response = await api("/v1/jobs/" + encodeURIComponent(id) + "/events", {
+      headers: { Accept: "text/event-stream" },
+    });
+    if (!response.ok || !response.body || !response.body.getReader) throw new Error("no event stream");
+    const reader = response.body.getReader();
+    const decoder = new TextDecoder();
+    let buffer = "";
+    for (;;) {
+      const { value, done } = await reader.read();
+      if (done) return;
+      buffer += decoder.decode(value, { stream: true });
+      let boundary;
+      while ((boundary = buffer.search(/\r?\n\r?\n/)) >= 0) {
+        const block = buffer.slice(0, boundary);
+        buffer = buffer.slice(boundary).replace(/^\r?\n\r?\n/, "");
+        const event = parseEvent(block);
+        if (!event) continue;
+        let data;
+        try {
+          data = parseJson(event.data);
+        } catch (_) {
+          continue;
+        }
+        onEvent(event.event, data);
+        if (event.event === "status") {
+          reader.cancel().catch(() => {});
+          return;
+        }
+      }
+    }
+  }
+
   function indexPage() {
     const body = $("#jobs-body");
     const rows = new Map(); // job id -> {row, bar, statusCell, job}
     let cursor = null;
     let pollTimer = null;
+    const streaming = new Set(); // ids of jobs followed over Server-Sent Events
+
+    // Live rows: each queued or running job follows its event stream; polling is the fallback.
+    function follow(job) {
+      if (!ACTIVE.has(job.status) || streaming.has(job.id)) return;
+      streaming.add(job.id);
+      streamEvents(job.id, (name, data) => {
+        const entry = rows.get(job.id);
+        if (!entry) return;
+        if (name === "status") {
+          updateRow(data);
+        } else {
+          const progress = { operations_done: data.operations_done, operations_total: data.operations_total };
+          updateRow(Object.assign({}, entry.job, { status: data.status || entry.job.status, progress }));
+        }
+      })
+        .catch(() => {})
+        .finally(() => {
+          streaming.delete(job.id);
+          schedulePoll();
+        });
+    }
 
     function jobRow(job) {
       const bar = progressBar(job, false);
@@ -368,6 +442,7 @@
         }
         const entry = jobRow(job);
         rows.set(job.id, entry);
+        follow(job);
         if (atTop) {
           entry.row.classList.add("fresh");
           body.prepend(entry.row);
@@ -401,13 +476,13 @@
       }
     }
 
-    // Live rows: each queued or running job is fetched every second until it ends.
+    // Fallback: an active job whose stream ended early (a proxy, an error) is fetched every second.
     function schedulePoll() {
       if (pollTimer) return;
-      const active = [...rows.values()].some((e) => ACTIVE.has(e.job.status));
-      if (!active) return;
+      const polled = (e) => ACTIVE.has(e.job.status) && !streaming.has(e.job.id);
+      if (![...rows.values()].some(polled)) return;
       pollTimer = setTimeout(async () => {
-        const ids = [...rows.values()].filter((e) => ACTIVE.has(e.job.status)).map((e) => e.job.id);
+        const ids = [...rows.values()].filter(polled).map((e) => e.job.id);
         await Promise.all(ids.map(async (id) => {
           try {
             updateRow(await getJson("/v1/jobs/" + encodeURIComponent(id)));
@@ -684,20 +759,6 @@
       return false;
     }
 
-    function parseEvent(block) {
-      let event = "message";
-      const data = [];
-      for (const line of block.split(/\r?\n/)) {
-        if (!line || line.startsWith(":")) continue;
-        const colon = line.indexOf(":");
-        const field = colon < 0 ? line : line.slice(0, colon);
-        let value = colon < 0 ? "" : line.slice(colon + 1);
-        if (value.startsWith(" ")) value = value.slice(1);
-        if (field === "event") event = value;
-        else if (field === "data") data.push(value);
-      }
-      return data.length ? { event, data: data.join("\n") } : null;
-    }
 
     function poll(generation) {
       clearTimeout(pollTimer);
