@@ -350,19 +350,25 @@
 
   /**
    * Follows `GET /v1/jobs/{id}/events` with fetch (EventSource cannot send the key header), calling
-   * onEvent(name, data) for each event; resolves after the final `status` event or when the stream ends.
+   * onEvent(name, data) for each event while wanted() holds. Resolves true after the final `status`
+   * event (or when no longer wanted), false when the stream ends without one.
    */
-  async function streamEvents(id, onEvent) {
+  async function streamEvents(id, onEvent, wanted = () => true) {
     const response = await api("/v1/jobs/" + encodeURIComponent(id) + "/events", {
       headers: { Accept: "text/event-stream" },
     });
-    if (!response.ok || !response.body || !response.body.getReader) throw new Error("no event stream");
+    if (!response.ok) throw await failed(response);
+    if (!response.body || !response.body.getReader) throw new Error("no streaming body");
     const reader = response.body.getReader();
     const decoder = new TextDecoder();
     let buffer = "";
     for (;;) {
       const { value, done } = await reader.read();
-      if (done) return;
+      if (!wanted()) {
+        reader.cancel().catch(() => {});
+        return true;
+      }
+      if (done) return false;
       buffer += decoder.decode(value, { stream: true });
       let boundary;
       while ((boundary = buffer.search(/\r?\n\r?\n/)) >= 0) {
@@ -379,7 +385,7 @@
         onEvent(event.event, data);
         if (event.event === "status") {
           reader.cancel().catch(() => {});
-          return;
+          return true;
         }
       }
     }
@@ -721,44 +727,16 @@
     }
 
     /** Follows the event stream; resolves true if it saw the final `status` event. */
-    async function followEvents(generation) {
-      const response = await api(base + "/events", { headers: { Accept: "text/event-stream" } });
-      if (!response.ok) throw await failed(response);
-      if (!response.body || !response.body.getReader) throw new Error("no streaming body");
-      const reader = response.body.getReader();
-      const decoder = new TextDecoder();
-      let buffer = "";
-      for (;;) {
-        const { value, done } = await reader.read();
-        if (generation !== following) {
-          reader.cancel().catch(() => {});
-          return true;
-        }
-        if (done) break;
-        buffer += decoder.decode(value, { stream: true });
-        let boundary;
-        while ((boundary = buffer.search(/\r?\n\r?\n/)) >= 0) {
-          const block = buffer.slice(0, boundary);
-          buffer = buffer.slice(boundary).replace(/^\r?\n\r?\n/, "");
-          const event = parseEvent(block);
-          if (!event) continue;
-          let data;
-          try {
-            data = parseJson(event.data);
-          } catch (_) {
-            continue;
-          }
-          if (event.event === "status") {
-            render(data);
-            reader.cancel().catch(() => {});
-            return true;
-          }
-          if (event.event === "progress") onProgress(data);
-        }
-      }
-      return false;
+    function followEvents(generation) {
+      return streamEvents(
+        id,
+        (name, data) => {
+          if (name === "status") render(data);
+          else if (name === "progress") onProgress(data);
+        },
+        () => generation === following,
+      );
     }
-
 
     function poll(generation) {
       clearTimeout(pollTimer);
