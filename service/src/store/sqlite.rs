@@ -65,6 +65,33 @@ fn job_from_row(row: &SqliteRow) -> Result<JobRecord, sqlx::Error> {
     })
 }
 
+/// Inserts a queued job unless `max_queued` jobs are already queued. One statement: the queue
+/// bound and the insert cannot race.
+async fn insert_queued<'e, E>(
+    executor: E,
+    job: &NewJob,
+    max_queued: u64,
+) -> Result<bool, sqlx::Error>
+where
+    E: sqlx::Executor<'e, Database = sqlx::Sqlite>,
+{
+    let inserted = sqlx::query(
+        "INSERT INTO jobs (id, owner, name, spec, status, operations_total, created_at) \
+         SELECT ?1, ?2, ?3, ?4, 'queued', ?5, ?6 \
+         WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < ?7",
+    )
+    .bind(&job.id)
+    .bind(&job.owner)
+    .bind(&job.name)
+    .bind(&job.spec)
+    .bind(to_i64(job.operations_total))
+    .bind(job.created_at)
+    .bind(to_i64(max_queued))
+    .execute(executor)
+    .await?;
+    Ok(inserted.rows_affected() == 1)
+}
+
 fn to_i64(value: u64) -> i64 {
     i64::try_from(value).unwrap_or(i64::MAX)
 }
@@ -72,22 +99,7 @@ fn to_i64(value: u64) -> i64 {
 #[async_trait]
 impl Store for SqliteStore {
     async fn insert_job(&self, job: NewJob, max_queued: u64) -> StoreResult<Option<JobRecord>> {
-        // One statement: the queue bound and the insert cannot race.
-        let inserted = sqlx::query(
-            "INSERT INTO jobs (id, owner, name, spec, status, operations_total, created_at) \
-             SELECT ?1, ?2, ?3, ?4, 'queued', ?5, ?6 \
-             WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < ?7",
-        )
-        .bind(&job.id)
-        .bind(&job.owner)
-        .bind(&job.name)
-        .bind(&job.spec)
-        .bind(to_i64(job.operations_total))
-        .bind(job.created_at)
-        .bind(to_i64(max_queued))
-        .execute(&self.writer)
-        .await?;
-        if inserted.rows_affected() == 0 {
+        if !insert_queued(&self.writer, &job, max_queued).await? {
             return Ok(None);
         }
         // Read back through the writer: a reader may not see the commit yet.
@@ -405,21 +417,7 @@ impl Store for SqliteStore {
             tx.rollback().await?;
             return Ok(NewRun::AlreadyExists);
         }
-        let inserted = sqlx::query(
-            "INSERT INTO jobs (id, owner, name, spec, status, operations_total, created_at) \
-             SELECT ?1, ?2, ?3, ?4, 'queued', ?5, ?6 \
-             WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < ?7",
-        )
-        .bind(&job.id)
-        .bind(&job.owner)
-        .bind(&job.name)
-        .bind(&job.spec)
-        .bind(to_i64(job.operations_total))
-        .bind(job.created_at)
-        .bind(to_i64(max_queued))
-        .execute(&mut *tx)
-        .await?;
-        if inserted.rows_affected() == 0 {
+        if !insert_queued(&mut *tx, &job, max_queued).await? {
             tx.rollback().await?;
             return Ok(NewRun::QueueFull);
         }
