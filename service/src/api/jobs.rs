@@ -71,6 +71,16 @@ pub struct JobList {
     pub next_cursor: Option<String>,
 }
 
+impl Progress {
+    /// A precision target can run more operations than first planned: the total never trails the count.
+    pub fn of(record: &JobRecord) -> Self {
+        Progress {
+            operations_done: record.operations_done,
+            operations_total: record.operations_total.max(record.operations_done),
+        }
+    }
+}
+
 pub fn rfc3339(ms: i64) -> String {
     chrono::DateTime::from_timestamp_millis(ms)
         .unwrap_or_default()
@@ -88,10 +98,7 @@ impl JobResource {
             id: record.id.clone(),
             name: record.name.clone(),
             status: record.status,
-            progress: Progress {
-                operations_done: record.operations_done,
-                operations_total: record.operations_total.max(record.operations_done),
-            },
+            progress: Progress::of(record),
             created_at: rfc3339(record.created_at),
             started_at: record.started_at.map(rfc3339),
             finished_at: record.finished_at.map(rfc3339),
@@ -610,7 +617,7 @@ pub async fn job_events(
             }
             if w.last != Some(seen) {
                 w.last = Some(seen);
-                let progress = JobResource::from_record(&record).progress;
+                let progress = Progress::of(&record);
                 let data = serde_json::json!({"status": record.status, "operations_done": progress.operations_done, "operations_total": progress.operations_total});
                 return Some((
                     Ok(Event::default().event("progress").data(data.to_string())),
