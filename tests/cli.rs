@@ -1,4 +1,5 @@
-//! The `bouncewear` binary through its outside contract (CONTRACT.md "Build and binary", "Scenario").
+//! The `bouncewear` binary through its outside contract (docs/contract.md "Build and binary",
+//! "Scenario").
 
 #[path = "support/json_close.rs"]
 mod json_close;
@@ -173,8 +174,8 @@ fn run_is_bit_identical_for_threads_1_2_3_and_on_a_rerun() {
     }
 }
 
-/// A one-device job without scatter is `simulate` repeated, with the radius of MODEL.md section 6
-/// worked out by hand from the arc energy of the operations before.
+/// A one-device job without scatter is `simulate` repeated, with the radius of docs/model.md
+/// section 6 worked out by hand from the arc energy of the operations before.
 #[test]
 fn one_device_job_equals_repeated_simulate_with_the_worn_radius() {
     let operations = 1000;

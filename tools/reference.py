@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
-"""Independent 50-digit evaluation of MODEL.md sections 1-5 (mpmath), for accuracy checks.
+"""Independent 50-digit evaluation of docs/model.md sections 1-5 (mpmath), for accuracy checks.
 
-    python3 tools/reference.py check            # reproduce ../shared/validation/cases.json
+    python3 tools/reference.py check            # reproduce tests/data/validation_cases.json
     python3 tools/reference.py spread > tests/data/reference_spread.json
 
-Written from MODEL.md alone, sharing no code or algorithm with the Rust model: eq. 7 is solved by
-bisection on s = e^2 in s^2 = q (1 - 3s/8)^(3/2), flights use atan2 and sqrt(d^2 + x^2) - d at
-50 digits, where cancellation does not matter.
+Written from the model's specification (docs/model.md) alone, sharing no code or algorithm with the
+Rust model: eq. 7 is solved by bisection on s = e^2 in s^2 = q (1 - 3s/8)^(3/2), flights use atan2
+and sqrt(d^2 + x^2) - d at 50 digits, where cancellation does not matter.
 """
 import json
 import random

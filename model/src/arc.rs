@@ -1,4 +1,5 @@
-//! Arcing while the contacts are open (MODEL.md section 5; paper Section IV, Fig. 8-10, eq. 16).
+//! Arcing while the contacts are open (docs/model.md section 5; paper Section IV, Fig. 8-10 and
+//! eq. 16).
 //!
 //! A DC supply `V_s` drives a resistive load at steady current `I_0`. While the gap is open an arc
 //! burns at the material's minimum arc voltage `V_min`, so the load sees `V_s - V_min` and the arc
@@ -114,8 +115,9 @@ mod tests {
 
     #[test]
     fn pre_arc_at_01_m_s_lowers_e1_to_064_of_its_mechanical_value() {
-        // MODEL.md section 8: softening_energy_j is calibrated on this (paper: 0.5 -> 0.32), in the
-        // paper's own terms, eq. 18, where e is proportional to kappa. Eq. 7 saturates a little: 0.66.
+        // docs/model.md section 8: softening_energy_j is calibrated on this (paper: 0.5 -> 0.32),
+        // in the paper's own terms, eq. 18, where e is proportional to kappa. Eq. 7 saturates a
+        // little: 0.66.
         use crate::restitution::{restitution, restitution_closed_form};
         let arc = rig_arc(48.0, 15.0).unwrap();
         let pre_arc_energy = arc.energy_j(arc.pre_arc_duration_s(0.1));

@@ -1,4 +1,4 @@
-//! The first impact (MODEL.md section 4; paper eq. 12, 13 and Fig. 13-16).
+//! The first impact (docs/model.md section 4; paper eq. 12, 13 and Fig. 13-16).
 //!
 //! Two contacts of radius `r` load fully plastically at pressure `p`: the contact force grows as
 //! `pi r p d` with the approach `d`, so loading is a spring `k_c = pi r p` driven by the static force,
@@ -28,7 +28,7 @@ impl Impact {
 
     /// Peak force (Fig. 15, linear in `u`): `F_max = F_s + sqrt(F_s^2 + k_c m u^2)`, the force at
     /// maximum approach, where `1/2 m u^2 + F_s d = 1/2 k_c d^2`. Within the magnitudes a valid
-    /// scenario allows (MODEL.md section 9) the squares stay far inside f64's range.
+    /// scenario allows (docs/model.md section 9) the squares stay far inside f64's range.
     pub fn peak_force_n(&self) -> f64 {
         let fs = self.static_force_n;
         let x = self.scaled_momentum();
@@ -95,7 +95,7 @@ mod tests {
 
     #[test]
     fn peak_force_of_the_default_rig_is_about_66_n() {
-        // MODEL.md section 8: about 66 N at 0.344 N (paper 60 N); validation 65.8902365177217.
+        // docs/model.md section 8: about 66 N at 0.344 N (paper 60 N); validation 65.8902365177217.
         assert_relative_eq!(
             rig(0.344, 0.223_985_471_683_820_85).peak_force_n(),
             65.890_236_517_721_7,

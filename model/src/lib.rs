@@ -1,7 +1,7 @@
 //! The physics of bouncewear: McBride & Sharkh (1992), "Electrical contact phenomena during impact",
-//! as specified in `MODEL.md`. Pure computation: no IO, no async, no database.
+//! as specified in `docs/model.md`. Pure computation: no IO, no async, no database.
 //!
-//! | MODEL.md | what | where |
+//! | docs/model.md section | what | where |
 //! |---|---|---|
 //! | 1 (eq. 1-4) | effective mass and stiffness, impact velocity, flight time, peak gap | [`mechanism`] |
 //! | 2 (eq. 5-8, 18) | kappa, the restitution solver, its approximation | [`restitution`] |

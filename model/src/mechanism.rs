@@ -1,4 +1,4 @@
-//! The pivoting contact arm (MODEL.md section 1; paper eq. 1-4).
+//! The pivoting contact arm (docs/model.md section 1; paper eq. 1-4).
 //!
 //! Everything is referred to the contact point: the arm's inertia becomes an effective mass and the
 //! return spring an effective stiffness, so that free flight with gap `x > 0` obeys

@@ -1,5 +1,5 @@
 //! One make operation: the first impact and the bounce sequence that follows it
-//! (MODEL.md sections 3-5 and 7).
+//! (docs/model.md sections 3-5 and 7).
 
 use crate::arc::{Arc, ArcRestitution, softened_kappa};
 use crate::impact::{Impact, contact_stiffness};
@@ -8,7 +8,7 @@ use crate::restitution::{self, KappaLaw, LOWER_BOUND_FACTOR};
 use crate::scenario::Scenario;
 use serde::{Deserialize, Serialize};
 
-/// How the model is evaluated (MODEL.md section 7).
+/// How the model is evaluated (docs/model.md section 7).
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -67,7 +67,8 @@ impl Needs {
     pub const ALL: Needs = Needs { impact: true };
 }
 
-/// What one operation produced (CONTRACT.md `simulate`, without the bounce list).
+/// What one operation produced: the `simulate` output of docs/contract.md "Scenario", without the
+/// bounce list.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Outcome {
@@ -407,7 +408,8 @@ impl Operation {
     }
 }
 
-/// `simulate` of CONTRACT.md: one operation of a scenario at the given fidelity, with every bounce.
+/// `simulate` of docs/contract.md "Scenario": one operation of a scenario at the given fidelity,
+/// with every bounce.
 pub fn simulate(scenario: &Scenario, fidelity: Fidelity) -> Simulation {
     Operation::nominal(scenario, fidelity).simulate()
 }

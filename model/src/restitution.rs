@@ -1,4 +1,4 @@
-//! Coefficient of restitution (MODEL.md section 2; paper eq. 5-8 and 18).
+//! Coefficient of restitution (docs/model.md section 2; paper eq. 5-8 and 18).
 //!
 //! Eq. 7, `u^2 e^8 = kappa^8 (1 - 3e^2/8)^3`, depends on `u` and `kappa` only through the *scaled
 //! speed* `eps0 = kappa u^(-1/4)` (the paper's eq. 18 approximation of `e` itself):
@@ -180,7 +180,7 @@ mod tests {
 
     #[test]
     fn paper_check_value_kappa_0363_at_04_m_s() {
-        // MODEL.md section 2: kappa = 0.363, u = 0.4 m/s gives e = 0.4435 (paper measured 0.45).
+        // docs/model.md section 2: kappa = 0.363, u = 0.4 m/s gives e = 0.4435 (paper: 0.45).
         assert_relative_eq!(
             restitution(0.4, 0.363),
             0.443_518_694_104_026_7,
@@ -287,7 +287,7 @@ mod tests {
 
     #[test]
     fn kappa_of_the_default_rig() {
-        // MODEL.md section 8: kappa = 0.3625 (validation: 0.3624518675972019)
+        // docs/model.md section 8: kappa = 0.3625 (validation: 0.3624518675972019)
         let m = 1.593e-5 / (0.03 * 0.03);
         assert_relative_eq!(
             kappa(2e8, 7.7e-3, 1e11, m),

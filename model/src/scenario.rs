@@ -1,9 +1,9 @@
-//! The scenario of one make operation (MODEL.md sections 8 and 9; CONTRACT.md "Scenario").
+//! The scenario of one make operation: docs/model.md sections 8 and 9, docs/contract.md "Scenario".
 //!
 //! [`ScenarioSpec`] is what a user writes: serde types where every field is optional and takes the
 //! paper's rig (AgNi 80/20) as default, unknown fields rejected. [`Scenario`] is a spec that passed
-//! every rule of MODEL.md section 9; it can only be built by [`Scenario::new`], so the hot loop never
-//! re-validates.
+//! every rule of docs/model.md section 9; it can only be built by [`Scenario::new`], so the hot
+//! loop never re-validates.
 
 use crate::error::{FieldError, InvalidInput, Pointer};
 use serde::{Deserialize, Serialize};
@@ -141,7 +141,7 @@ impl Default for LossesSpec {
     }
 }
 
-/// A scenario that satisfies every rule of MODEL.md section 9.
+/// A scenario that satisfies every rule of docs/model.md section 9.
 /// The default is the paper's rig, which is valid.
 #[derive(Debug, Clone, PartialEq, Default, Serialize)]
 #[serde(transparent)]

@@ -1,4 +1,4 @@
-//! A device's surface across an endurance test (MODEL.md section 6).
+//! A device's surface across an endurance test (docs/model.md section 6).
 //!
 //! Arc energy roughens the surface: the effective contact radius falls from the new-contact radius
 //! `r0` towards the worn radius `r_inf` as the cumulative arc energy `W` grows, which lowers kappa

@@ -1,4 +1,4 @@
-//! One make operation: analytic limits, the invariants of MODEL.md section 3, and the hard inputs.
+//! One make operation: analytic limits, the invariants of docs/model.md section 3, hard inputs.
 
 use approx::assert_relative_eq;
 use bouncewear_model::mechanism::{Flight, effective_mass};
@@ -75,9 +75,9 @@ fn default_rig_has_seven_bounces_totalling_about_29_ms() {
     let [exact, closed_form] = both(&Scenario::default());
     assert_eq!(exact.outcome.bounce_count, 7);
     assert!((exact.outcome.total_bounce_s - 0.029).abs() < 0.001);
-    // MODEL.md section 7: at 0.344 N the constant-force flight overestimates the first bounce by
-    // about 11 % (12 % at the exact separation speed); eq. 18's larger e1 adds 4 % more, 16 % in all
-    // (the independent validation values agree).
+    // docs/model.md section 7: at 0.344 N the constant-force flight overestimates the first bounce
+    // by about 11 % (12 % at the exact separation speed); eq. 18's larger e1 adds 4 % more, 16 % in
+    // all (the independent validation values agree).
     let flight = Flight::new(M, 200.0, 0.344);
     let v1 = exact.bounces[0].separation_velocity_m_s;
     let flight_over = flight.constant_force_time_s(v1) / flight.exact_time_s(v1) - 1.0;

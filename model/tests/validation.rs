@@ -1,5 +1,6 @@
-//! `../shared/validation/cases.json` (copied to `tests/data/`): every field of every case at both
-//! fidelities, computed independently at 50 digits, to 1e-12 relative.
+//! The worked validation cases in `tests/data/validation_cases.json`, computed independently at 50
+//! digits (see `tests/data/README.md`): every field of every case at both fidelities, to 1e-12
+//! relative.
 
 #[path = "../../tests/support/json_close.rs"]
 mod json_close;

@@ -1,4 +1,4 @@
-//! Scatter distributions (CONTRACT.md "Job", `D`): validation against the parameter they feed,
+//! Scatter distributions (docs/contract.md "Job", `D`): validation against the parameter they feed,
 //! random draws (rand_distr) and inverse CDFs (for Latin hypercube sampling).
 
 use crate::error::{FieldError, Pointer};

@@ -1,4 +1,5 @@
-//! The job of CONTRACT.md: what a user submits ([`JobSpec`]) and what passed every rule ([`Job`]).
+//! The job of docs/contract.md "Job": what a user submits ([`JobSpec`]) and what passed every rule
+//! ([`Job`]).
 
 use super::distribution::{Distribution, DistributionSpec, Domain};
 use super::metric::{DeviceMetric, Metric, OperationMetric};
@@ -101,7 +102,7 @@ pub struct ScatterSpec {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Parameter {
-    /// The new-contact radius `r0` (MODEL.md section 6).
+    /// The new-contact radius `r0` (docs/model.md section 6).
     #[serde(rename = "contact_radius_m")]
     ContactRadius,
     #[serde(rename = "dynamic_yield_pressure_pa")]
@@ -371,7 +372,7 @@ fn parse_metric(name: &str, at: &Pointer, errors: &mut Vec<FieldError>) -> Optio
     metric
 }
 
-/// The values each parameter may take in this scenario (MODEL.md section 9).
+/// The values each parameter may take in this scenario (docs/model.md section 9).
 fn domain(parameter: Parameter, scenario: &Scenario) -> Domain {
     let spec = scenario.spec();
     match parameter {

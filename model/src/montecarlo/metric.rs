@@ -1,4 +1,4 @@
-//! The metrics a job can summarise (CONTRACT.md "Job"): per operation, and per device at the end.
+//! Metrics a job can summarise (docs/contract.md "Job"): per operation, and per device at the end.
 
 use crate::operation::Outcome;
 use serde::{Deserialize, Serialize};

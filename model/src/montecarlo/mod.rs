@@ -1,6 +1,7 @@
-//! Monte Carlo endurance tests (CONTRACT.md "Job" and "Result"): `N` devices with scattered
+//! Monte Carlo endurance tests (docs/contract.md "Job" and "Result"): `N` devices with scattered
 //! parameters through `M` make operations each, the surface of each wearing with its cumulative arc
-//! energy (MODEL.md section 6), summarised per bin of operations with honest confidence intervals.
+//! energy (docs/model.md section 6), summarised per bin of operations with honest confidence
+//! intervals.
 
 pub mod distribution;
 pub mod engine;
@@ -57,7 +58,7 @@ pub struct Timing {
     pub operations_per_s: f64,
 }
 
-/// The Result of CONTRACT.md.
+/// The Result of docs/contract.md "Result".
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct JobResult {
@@ -74,8 +75,8 @@ pub struct JobResult {
     pub timing: Timing,
 }
 
-/// Life analysis of a job with failure criteria (MODEL.md has no failure model: the user's criteria
-/// define failure, and each device's first failing operation is its life).
+/// Life analysis of a job with failure criteria (docs/model.md has no failure model: the user's
+/// criteria define failure, and each device's first failing operation is its life).
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LifeReport {
