@@ -1,129 +1,205 @@
-//! `bouncewear serve`: builds the store, the workers and the router, serves until SIGINT or SIGTERM,
-//! then stops accepting, hands running jobs back to the queue and exits.
+//! Start-up: [`Application::build`] opens the store, binds the listener (port 0 picks a free one,
+//! which tests use) and assembles every route in one router; [`Application::run_until_stopped`]
+//! serves, runs the workers and the scheduler, and when the shutdown future resolves stops
+//! accepting, hands running jobs back to the queue and returns.
 
+use crate::api::error::ApiError;
 use crate::api::{self, AppState};
-use crate::cli::CliError;
+use crate::compute::{PoolError, thread_pool};
 use crate::config::ServeConfig;
-use crate::errors::ApiError;
+use crate::domain::{Owner, UnixMs};
 use crate::store::sqlite::SqliteStore;
-use crate::store::{Store, now_ms};
+use crate::store::{Store, StoreError};
 use crate::telemetry;
 use crate::worker::Workers;
 use axum::extract::DefaultBodyLimit;
 use axum::http::Request;
 use axum::routing::get;
-use metrics_exporter_prometheus::PrometheusBuilder;
+use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle};
 use std::collections::HashSet;
-use std::sync::Arc;
+use std::future::Future;
+use std::net::SocketAddr;
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
+use tokio::net::TcpListener;
 use tokio::sync::{Notify, watch};
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
 use tower_http::trace::TraceLayer;
 
-pub async fn serve(config: ServeConfig) -> Result<(), CliError> {
-    telemetry::init_logging();
-    let api_keys: Vec<&String> = config
-        .api_keys
-        .iter()
-        .filter(|k| !k.trim().is_empty())
-        .collect();
-    if api_keys.is_empty() && !config.bind.ip().is_loopback() {
-        return Err(CliError::Invalid(bouncewear_model::InvalidInput::single(
-            &bouncewear_model::Pointer::root(),
-            format!(
-                "--bind {} is not a loopback address: configure --api-key (or BOUNCEWEAR_API_KEYS) first",
-                config.bind
-            ),
-        )));
-    }
-    let failed = |what: &str| {
-        let what = what.to_owned();
-        move |error: &dyn std::fmt::Display| CliError::Failed(format!("{what}: {error}"))
-    };
-    let metrics = PrometheusBuilder::new()
-        .install_recorder()
-        .map_err(|e| failed("metrics")(&e))?;
-    let store: Arc<dyn Store> = Arc::new(
-        SqliteStore::open(&config.database)
-            .await
-            .map_err(|e| failed("database")(&e))?,
-    );
-    let reclaimed = store
-        .reclaim_expired(now_ms())
-        .await
-        .map_err(|e| failed("database")(&e))?;
-    if reclaimed > 0 {
-        tracing::info!(reclaimed, "jobs whose lease expired are back in the queue");
-    }
-    let compute = Arc::new(crate::cli::thread_pool(config.compute_threads)?);
-    let (shutdown_sender, shutdown) = watch::channel(false);
-    let wake = Arc::new(Notify::new());
-    let state = AppState {
-        store: Arc::clone(&store),
-        config: Arc::new(config.clone()),
-        key_hashes: Arc::new(
-            api_keys
-                .iter()
-                .map(|k| api::hash_key(k.trim()))
-                .collect::<HashSet<_>>(),
-        ),
-        wake: Arc::clone(&wake),
-        metrics,
-        shutdown: shutdown.clone(),
-    };
-    let router = build_router(state);
-
-    let listener = tokio::net::TcpListener::bind(config.bind)
-        .await
-        .map_err(|e| failed("bind")(&e))?;
-    let address = listener.local_addr().map_err(|e| failed("bind")(&e))?;
-    // Tests and scripts read the port from this line.
-    println!("bouncewear listening on http://{address}");
-    tracing::info!(%address, database = %config.database, workers = config.workers, "serving");
-
-    let workers = Arc::new(Workers {
-        store: Arc::clone(&store),
-        compute,
-        lease: config.lease(),
-        instance: format!("{}-{}", std::process::id(), uuid::Uuid::new_v4().simple()),
-        wake,
-    });
-    let scheduler = tokio::spawn(crate::scheduler::run(
-        Arc::clone(&store),
-        config.max_queued,
-        Arc::clone(&workers.wake),
-        shutdown.clone(),
-    ));
-    // `--workers 0` makes an API-only instance that leaves the queue to others.
-    let handles = workers.spawn(config.workers, shutdown.clone());
-    tokio::spawn(report_queue_depth(Arc::clone(&store)));
-    tokio::spawn(async move {
-        wait_for_signal().await;
-        tracing::info!("shutting down: no new requests, running jobs go back to the queue");
-        let _ = shutdown_sender.send(true);
-    });
-    let mut stopped = shutdown.clone();
-    axum::serve(listener, router)
-        .with_graceful_shutdown(async move {
-            let _ = stopped.wait_for(|stop| *stop).await;
-        })
-        .await
-        .map_err(|e| failed("server")(&e))?;
-    let _ = scheduler.await;
-    for handle in handles {
-        if tokio::time::timeout(Duration::from_secs(30), handle)
-            .await
-            .is_err()
-        {
-            tracing::warn!("a worker did not stop in time; its lease will expire");
-        }
-    }
-    Ok(())
+/// Why the service could not start (or stopped serving).
+#[derive(Debug, thiserror::Error)]
+pub enum StartupError {
+    #[error(
+        "--bind {0} is not a loopback address: configure --api-key (or BOUNCEWEAR_API_KEYS) first"
+    )]
+    PublicWithoutKeys(SocketAddr),
+    #[error("database: {0}")]
+    Database(#[from] StoreError),
+    #[error("compute threads: {0}")]
+    Compute(#[from] PoolError),
+    #[error("bind {address}: {source}")]
+    Bind {
+        address: SocketAddr,
+        source: std::io::Error,
+    },
+    #[error("server: {0}")]
+    Serve(std::io::Error),
 }
 
-/// The API router with the docs, fallbacks and the cross-cutting layers.
-pub fn build_router(state: AppState) -> axum::Router {
+/// A built service: bound, with its store open, not yet serving.
+pub struct Application {
+    listener: TcpListener,
+    address: SocketAddr,
+    router: axum::Router,
+    state: AppState,
+    workers: Arc<Workers>,
+    shutdown_sender: watch::Sender<bool>,
+}
+
+impl Application {
+    pub async fn build(config: ServeConfig) -> Result<Self, StartupError> {
+        let key_owners: HashSet<Owner> = config
+            .api_keys
+            .iter()
+            .map(|key| key.trim())
+            .filter(|key| !key.is_empty())
+            .map(Owner::of_key)
+            .collect();
+        if key_owners.is_empty() && !config.bind.ip().is_loopback() {
+            return Err(StartupError::PublicWithoutKeys(config.bind));
+        }
+        let store: Arc<dyn Store> = Arc::new(SqliteStore::open(&config.database).await?);
+        let reclaimed = store.reclaim_expired(UnixMs::now()).await?;
+        if reclaimed > 0 {
+            tracing::info!(reclaimed, "jobs whose lease expired are back in the queue");
+        }
+        let compute = Arc::new(thread_pool(config.compute_threads)?);
+        let listener =
+            TcpListener::bind(config.bind)
+                .await
+                .map_err(|source| StartupError::Bind {
+                    address: config.bind,
+                    source,
+                })?;
+        let address = listener.local_addr().map_err(|source| StartupError::Bind {
+            address: config.bind,
+            source,
+        })?;
+        let (shutdown_sender, shutdown) = watch::channel(false);
+        let wake = Arc::new(Notify::new());
+        let workers = Arc::new(Workers {
+            store: Arc::clone(&store),
+            compute,
+            lease: config.lease(),
+            instance: format!("{}-{}", std::process::id(), uuid::Uuid::new_v4().simple()),
+            wake: Arc::clone(&wake),
+        });
+        let state = AppState {
+            store,
+            config: Arc::new(config),
+            key_owners: Arc::new(key_owners),
+            wake,
+            metrics: prometheus(),
+            shutdown,
+        };
+        Ok(Self {
+            listener,
+            address,
+            router: router(state.clone()),
+            state,
+            workers,
+            shutdown_sender,
+        })
+    }
+
+    /// Where the service listens (the real port when the configuration asked for port 0).
+    pub fn address(&self) -> SocketAddr {
+        self.address
+    }
+
+    /// Serves until `shutdown` resolves, then drains: event streams end, the scheduler stops, and
+    /// workers hand their running jobs back to the queue.
+    pub async fn run_until_stopped(
+        self,
+        shutdown: impl Future<Output = ()> + Send + 'static,
+    ) -> Result<(), StartupError> {
+        let Self {
+            listener,
+            address,
+            router,
+            state,
+            workers,
+            shutdown_sender,
+        } = self;
+        let config = &state.config;
+        tracing::info!(%address, database = %config.database, workers = config.workers, "serving");
+        let stopping = state.shutdown.clone();
+        let scheduler = tokio::spawn(crate::scheduler::run(
+            Arc::clone(&state.store),
+            config.max_queued,
+            Arc::clone(&state.wake),
+            stopping.clone(),
+        ));
+        // `--workers 0` makes an API-only instance that leaves the queue to others.
+        let handles = workers.spawn(config.workers, stopping.clone());
+        let reporter = tokio::spawn(report_queue_depth(
+            Arc::clone(&state.store),
+            state.metrics.clone(),
+        ));
+        tokio::spawn(async move {
+            shutdown.await;
+            tracing::info!("shutting down: no new requests, running jobs go back to the queue");
+            let _ = shutdown_sender.send(true);
+        });
+        let mut stopped = stopping;
+        let served = axum::serve(listener, router)
+            .with_graceful_shutdown(async move {
+                let _ = stopped.wait_for(|stop| *stop).await;
+            })
+            .await;
+        reporter.abort();
+        let _ = scheduler.await;
+        for handle in handles {
+            if tokio::time::timeout(Duration::from_secs(30), handle)
+                .await
+                .is_err()
+            {
+                tracing::warn!("a worker did not stop in time; its lease will expire");
+            }
+        }
+        served.map_err(StartupError::Serve)
+    }
+}
+
+/// `bouncewear serve`: the application until SIGINT or SIGTERM.
+pub async fn serve(config: ServeConfig) -> Result<(), StartupError> {
+    telemetry::init_logging();
+    let application = Application::build(config).await?;
+    // Tests and scripts read the port from this line.
+    println!("bouncewear listening on http://{}", application.address());
+    application.run_until_stopped(wait_for_signal()).await
+}
+
+/// The Prometheus registry. `metrics`' macros record into one process-wide recorder, so every
+/// application in a process (several, in tests) shares this one handle to it.
+fn prometheus() -> PrometheusHandle {
+    static HANDLE: OnceLock<PrometheusHandle> = OnceLock::new();
+    HANDLE
+        .get_or_init(|| {
+            let recorder = PrometheusBuilder::new().build_recorder();
+            let handle = recorder.handle();
+            if metrics::set_global_recorder(recorder).is_err() {
+                tracing::warn!("another metrics recorder is installed; /metrics will be empty");
+            }
+            handle
+        })
+        .clone()
+}
+
+/// Every route: the API with its OpenAPI document, the docs UI, the dashboard, the fallbacks, and
+/// the cross-cutting layers.
+fn router(state: AppState) -> axum::Router {
     let max_body = state.config.max_body_bytes;
     let (router, openapi) = api::router(state);
     let openapi = Arc::new(openapi);
@@ -140,7 +216,7 @@ pub fn build_router(state: AppState) -> axum::Router {
         .layer(DefaultBodyLimit::max(max_body))
         .layer(axum::middleware::from_fn(telemetry::record_request))
         .layer(CatchPanicLayer::custom(|_| {
-            axum::response::IntoResponse::into_response(ApiError::Internal(crate::errors::Internal("a handler panicked".into())))
+            axum::response::IntoResponse::into_response(ApiError::Internal(api::error::Internal("a handler panicked".into())))
         }))
         .layer(TraceLayer::new_for_http().make_span_with(|request: &Request<_>| {
             let request_id = request.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
@@ -150,10 +226,12 @@ pub fn build_router(state: AppState) -> axum::Router {
         .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
 }
 
-async fn report_queue_depth(store: Arc<dyn Store>) {
+async fn report_queue_depth(store: Arc<dyn Store>, metrics: PrometheusHandle) {
     let mut tick = tokio::time::interval(Duration::from_secs(1));
     loop {
         tick.tick().await;
+        // Without the exporter's own upkeep thread, histograms are drained here.
+        metrics.run_upkeep();
         if let Ok((queued, running)) = store.queue_depth().await {
             metrics::gauge!("bouncewear_jobs_queued").set(queued as f64);
             metrics::gauge!("bouncewear_jobs_running").set(running as f64);

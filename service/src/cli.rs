@@ -2,11 +2,13 @@
 //!
 //! Bad input exits with code 2 and one line on stderr naming the field (a JSON pointer) and the rule.
 
+use crate::app::StartupError;
+use crate::compute::PoolError;
+use crate::domain::draw_seed;
 use crate::progress::ProgressBar;
 use bouncewear_model::montecarlo::{Job, run_job};
 use bouncewear_model::{Fidelity, InvalidInput, Scenario, simulate};
 use clap::{Parser, Subcommand, ValueEnum};
-use rand::RngExt;
 use std::io::{Read, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -89,6 +91,9 @@ pub enum CliError {
         path: String,
         source: std::io::Error,
     },
+    /// `serve` could not start: exit 2 when its configuration is at fault, 1 otherwise.
+    #[error(transparent)]
+    Startup(#[from] StartupError),
     /// Anything else: exit 1.
     #[error("{0}")]
     Failed(String),
@@ -97,8 +102,24 @@ pub enum CliError {
 impl CliError {
     fn exit_code(&self) -> ExitCode {
         match self {
-            CliError::Invalid(_) | CliError::Io { .. } => ExitCode::from(2),
-            CliError::Failed(_) => ExitCode::FAILURE,
+            CliError::Invalid(_)
+            | CliError::Io { .. }
+            | CliError::Startup(
+                StartupError::PublicWithoutKeys(_) | StartupError::Compute(PoolError::NoThreads),
+            ) => ExitCode::from(2),
+            CliError::Startup(_) | CliError::Failed(_) => ExitCode::FAILURE,
+        }
+    }
+}
+
+impl From<PoolError> for CliError {
+    fn from(error: PoolError) -> Self {
+        match error {
+            PoolError::NoThreads => CliError::Invalid(InvalidInput::single(
+                &bouncewear_model::Pointer::root(),
+                "--threads must be at least 1",
+            )),
+            PoolError::Build(_) => CliError::Failed(error.to_string()),
         }
     }
 }
@@ -142,7 +163,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 .thread_name("bouncewear-async")
                 .build()
                 .map_err(|e| CliError::Failed(format!("cannot start the async runtime: {e}")))?;
-            runtime.block_on(crate::app::serve(config))
+            Ok(runtime.block_on(crate::app::serve(config))?)
         }
         Command::Bench {
             quick,
@@ -187,29 +208,9 @@ fn write_plots(
     Ok(())
 }
 
-/// A seed for a job that does not give one: from the operating system's entropy, reported in the
-/// result. Below 2^53, so that every JSON client (JavaScript's numbers included) reads it exactly;
-/// a user may still give any u64.
-pub fn draw_seed() -> u64 {
-    rand::rng().random::<u64>() >> 11
-}
-
-/// A rayon pool of `threads` workers (all cores by default); compute never runs on async workers.
-pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool, CliError> {
-    let mut builder =
-        rayon::ThreadPoolBuilder::new().thread_name(|i| format!("bouncewear-compute-{i}"));
-    if let Some(threads) = threads {
-        if threads == 0 {
-            return Err(CliError::Invalid(InvalidInput::single(
-                &bouncewear_model::Pointer::root(),
-                "--threads must be at least 1",
-            )));
-        }
-        builder = builder.num_threads(threads);
-    }
-    builder
-        .build()
-        .map_err(|e| CliError::Failed(format!("cannot start worker threads: {e}")))
+/// A rayon pool of `threads` workers (all cores by default).
+fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool, CliError> {
+    Ok(crate::compute::thread_pool(threads)?)
 }
 
 /// Reads a file, or standard input for `-`.

@@ -3,11 +3,8 @@
 //! night once, not three times), and its next run moves past now. The (schedule, due time) primary
 //! key makes the job unique across restarts and across instances sharing the database.
 
-use crate::api::jobs::rfc3339;
-use crate::schedule::Timetable;
-use crate::store::{NewJob, NewRun, ScheduleRecord, Store, StoreResult};
-use bouncewear_model::InvalidInput;
-use bouncewear_model::montecarlo::Job;
+use crate::domain::{Timetable, UnixMs};
+use crate::store::{NewRun, RunSlot, Store, StoreResult};
 use chrono::{DateTime, Utc};
 use std::sync::Arc;
 use std::time::Duration;
@@ -40,25 +37,31 @@ pub async fn run(
 /// One pass over the due schedules at `now`; returns how many jobs it created.
 pub async fn tick(store: &dyn Store, max_queued: u64, now: DateTime<Utc>) -> StoreResult<usize> {
     let mut created = 0;
-    for schedule in store.due_schedules(now.timestamp_millis()).await? {
-        let Ok(timetable) = Timetable::parse(&schedule.cron, &schedule.time_zone) else {
+    for schedule in store.due_schedules(UnixMs::from_datetime(now)).await? {
+        let definition = &schedule.definition;
+        let Ok(timetable) = Timetable::parse(&definition.cron, &definition.time_zone) else {
             tracing::error!(schedule = %schedule.id, "stored schedule no longer parses; skipped");
             continue;
         };
-        let Some(due) = timetable.latest_at_or_before(now) else {
+        let Some(due) = timetable
+            .latest_at_or_before(now)
+            .map(UnixMs::from_datetime)
+        else {
             continue;
         };
-        let job = match job_from_template(&schedule, due, now) {
+        let job = match definition.job_at(schedule.owner.clone(), due, UnixMs::from_datetime(now)) {
             Ok(job) => job,
             Err(invalid) => {
                 tracing::error!(schedule = %schedule.id, %invalid, "stored template no longer validates; skipped");
                 continue;
             }
         };
-        match store
-            .create_run(&schedule.id, due.timestamp_millis(), false, job, max_queued)
-            .await?
-        {
+        let slot = RunSlot {
+            schedule: &schedule.id,
+            scheduled_for: due,
+            manual: false,
+        };
+        match store.create_run(slot, job, max_queued).await? {
             NewRun::Created(_) => created += 1,
             NewRun::AlreadyExists => {}
             NewRun::QueueFull => {
@@ -66,7 +69,7 @@ pub async fn tick(store: &dyn Store, max_queued: u64, now: DateTime<Utc>) -> Sto
                 continue;
             }
         }
-        let next = timetable.next_after(now).map(|t| t.timestamp_millis());
+        let next = timetable.next_after(now).map(UnixMs::from_datetime);
         store
             .advance_schedule(&schedule.id, schedule.next_run_at, next)
             .await?;
@@ -74,34 +77,12 @@ pub async fn tick(store: &dyn Store, max_queued: u64, now: DateTime<Utc>) -> Sto
     Ok(created)
 }
 
-/// The job a schedule runs at `due`: its template (a seed is drawn for each run when the template has
-/// none), named after the schedule and the due time.
-pub fn job_from_template(
-    schedule: &ScheduleRecord,
-    due: DateTime<Utc>,
-    now: DateTime<Utc>,
-) -> Result<NewJob, InvalidInput> {
-    let job = Job::from_json(&schedule.template, crate::cli::draw_seed)?;
-    let spec = serde_json::to_string(&job.spec)
-        .map_err(|e| InvalidInput::single(&bouncewear_model::Pointer::root(), e.to_string()))?;
-    Ok(NewJob {
-        id: uuid::Uuid::new_v4().to_string(),
-        owner: schedule.owner.clone(),
-        name: Some(format!(
-            "{} @ {}",
-            schedule.name,
-            rfc3339(due.timestamp_millis())
-        )),
-        spec,
-        operations_total: job.spec.devices.saturating_mul(job.spec.operations),
-        created_at: now.timestamp_millis(),
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::domain::{Owner, ScheduleDefinition, ScheduleId};
     use crate::store::sqlite::SqliteStore;
+    use crate::store::{JobQueue, ScheduleRecord, Schedules};
 
     fn utc(text: &str) -> DateTime<Utc> {
         DateTime::parse_from_rfc3339(text)
@@ -127,18 +108,25 @@ mod tests {
 
     fn nightly(id: &str, next_run_at: DateTime<Utc>) -> ScheduleRecord {
         ScheduleRecord {
-            id: id.to_owned(),
-            owner: String::new(),
-            name: format!("nightly {id}"),
-            cron: "0 3 * * *".to_owned(),
-            time_zone: "UTC".to_owned(),
-            template: r#"{"devices": 2, "operations": 2, "seed": 1}"#.to_owned(),
-            statistics: r#"["operations.total_bounce_s.p95"]"#.to_owned(),
-            enabled: true,
-            next_run_at: Some(next_run_at.timestamp_millis()),
-            created_at: 0,
-            updated_at: 0,
+            id: ScheduleId::from(id),
+            owner: Owner::anonymous(),
+            definition: ScheduleDefinition {
+                name: format!("nightly {id}"),
+                cron: "0 3 * * *".to_owned(),
+                time_zone: "UTC".to_owned(),
+                template: serde_json::from_str(r#"{"devices": 2, "operations": 2, "seed": 1}"#)
+                    .unwrap(),
+                statistics: vec!["operations.total_bounce_s.p95".parse().unwrap()],
+                enabled: true,
+            },
+            next_run_at: Some(UnixMs::from_datetime(next_run_at)),
+            created_at: UnixMs(0),
+            updated_at: UnixMs(0),
         }
+    }
+
+    fn schedule_id(id: &str) -> ScheduleId {
+        ScheduleId::from(id)
     }
 
     #[tokio::test]
@@ -156,16 +144,19 @@ mod tests {
             0,
             "a restart the same morning adds nothing"
         );
-        let runs = store.runs("s1", 10).await.unwrap();
+        let runs = store.runs(&schedule_id("s1"), 10).await.unwrap();
         assert_eq!(runs.len(), 1);
         assert_eq!(
             runs[0].scheduled_for,
-            utc("2026-11-22T03:00:00Z").timestamp_millis()
+            UnixMs::from_datetime(utc("2026-11-22T03:00:00Z"))
         );
-        let schedule = store.schedule("", "s1").await.unwrap().unwrap();
+        let schedule = store
+            .schedule(&Owner::anonymous(), &schedule_id("s1"))
+            .await
+            .unwrap();
         assert_eq!(
             schedule.next_run_at,
-            Some(utc("2026-11-23T03:00:00Z").timestamp_millis())
+            Some(UnixMs::from_datetime(utc("2026-11-23T03:00:00Z")))
         );
         // the next night runs at its time, once
         assert_eq!(
@@ -174,7 +165,7 @@ mod tests {
                 .unwrap(),
             1
         );
-        assert_eq!(store.runs("s1", 10).await.unwrap().len(), 2);
+        assert_eq!(store.runs(&schedule_id("s1"), 10).await.unwrap().len(), 2);
     }
 
     #[tokio::test]
@@ -200,7 +191,14 @@ mod tests {
         let (queued, _) = first.queue_depth().await.unwrap();
         assert_eq!(queued, 10, "no job without its run row either");
         for i in 0..10 {
-            assert_eq!(first.runs(&format!("s{i}"), 10).await.unwrap().len(), 1);
+            assert_eq!(
+                first
+                    .runs(&schedule_id(&format!("s{i}")), 10)
+                    .await
+                    .unwrap()
+                    .len(),
+                1
+            );
         }
     }
 
@@ -215,7 +213,7 @@ mod tests {
         assert_eq!(tick(&store, 0, now).await.unwrap(), 0);
         assert_eq!(
             store
-                .due_schedules(now.timestamp_millis())
+                .due_schedules(UnixMs::from_datetime(now))
                 .await
                 .unwrap()
                 .len(),

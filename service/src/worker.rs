@@ -7,7 +7,8 @@
 //! fixed at submission, so the result is identical to an uninterrupted run. On a graceful shutdown the
 //! running job is stopped and handed back to the queue at once.
 
-use crate::store::{Claim, Lease, NewDistribution, Store, now_ms};
+use crate::domain::UnixMs;
+use crate::store::{Claim, Fence, Lease, LeaseTerms, Store};
 use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Watch, run_job};
 use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
@@ -46,12 +47,19 @@ impl Workers {
             .collect()
     }
 
+    /// The lease a claim or heartbeat asks for, from now.
+    fn lease_terms(&self) -> LeaseTerms {
+        LeaseTerms {
+            now: UnixMs::now(),
+            duration_ms: i64::try_from(self.lease.as_millis()).unwrap_or(i64::MAX),
+        }
+    }
+
     async fn work(&self, slot: usize, mut shutdown: watch::Receiver<bool>) {
         let worker = format!("{}/{slot}", self.instance);
-        let lease_ms = i64::try_from(self.lease.as_millis()).unwrap_or(i64::MAX);
         while !*shutdown.borrow() {
-            match self.store.claim(&worker, now_ms(), lease_ms).await {
-                Ok(Some(claim)) => self.run(claim, lease_ms, &mut shutdown).await,
+            match self.store.claim(&worker, self.lease_terms()).await {
+                Ok(Some(claim)) => self.run(claim, &mut shutdown).await,
                 Ok(None) => {
                     tokio::select! {
                         () = self.wake.notified() => {}
@@ -67,17 +75,24 @@ impl Workers {
         }
     }
 
-    #[tracing::instrument(skip_all, fields(job = %claim.id, attempt = claim.attempt))]
-    async fn run(&self, claim: Claim, lease_ms: i64, shutdown: &mut watch::Receiver<bool>) {
-        let job = match Job::from_json(&claim.spec, || 0) {
+    /// Ends the claim's job as failed, with the reason; a failure to write it leaves the lease to
+    /// expire, and the job to be rerun.
+    async fn fail(&self, fence: &Fence, reason: &str) {
+        tracing::error!(reason, "job failed");
+        metrics::counter!("bouncewear_jobs_finished_total", "status" => "failed").increment(1);
+        if let Err(error) = self.store.fail(fence, UnixMs::now(), reason).await {
+            tracing::error!(%error, "could not mark the job failed; its lease will expire");
+        }
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %claim.fence.job, attempt = claim.fence.attempt.0))]
+    async fn run(&self, claim: Claim, shutdown: &mut watch::Receiver<bool>) {
+        let fence = &claim.fence;
+        let job = match Job::new(claim.spec, || 0) {
             Ok(job) => job,
             Err(invalid) => {
-                let error = format!("the stored job no longer validates: {invalid}");
-                let _ = self
-                    .store
-                    .fail(&claim.id, claim.attempt, now_ms(), &error)
-                    .await;
-                return;
+                let reason = format!("the stored job no longer validates: {invalid}");
+                return self.fail(fence, &reason).await;
             }
         };
         tracing::info!(operations = claim.operations_total, "job started");
@@ -104,7 +119,7 @@ impl Workers {
                 outcome = &mut finished => break outcome,
                 _ = heartbeat.tick() => {
                     let progress = done.load(Ordering::Relaxed);
-                    match self.store.heartbeat(&claim.id, claim.attempt, now_ms(), lease_ms, progress).await {
+                    match self.store.heartbeat(fence, self.lease_terms(), progress).await {
                         Ok(Lease::Held) => {}
                         Ok(lease @ (Lease::Cancelled | Lease::Lost)) => {
                             tracing::info!(?lease, "stopping: the job is no longer ours to run");
@@ -120,61 +135,23 @@ impl Workers {
             }
         };
         match outcome {
-            Ok(Ok(Ok(result))) => self.succeed(&claim, &result).await,
-            Ok(Ok(Err(Cancelled))) if stopping => {
-                match self.store.release(&claim.id, claim.attempt).await {
-                    Ok(_) => tracing::info!("handed back to the queue for shutdown"),
-                    Err(error) => {
-                        tracing::error!(%error, "could not hand the job back; its lease will expire")
-                    }
+            Ok(Ok(Ok(result))) => self.succeed(fence, &result).await,
+            Ok(Ok(Err(Cancelled))) if stopping => match self.store.release(fence).await {
+                Ok(_) => tracing::info!("handed back to the queue for shutdown"),
+                Err(error) => {
+                    tracing::error!(%error, "could not hand the job back; its lease will expire")
                 }
-            }
+            },
             Ok(Ok(Err(Cancelled))) => tracing::info!("job stopped (cancelled or taken over)"),
             Ok(Err(_)) | Err(_) => {
-                tracing::error!("the simulation panicked");
-                let _ = self
-                    .store
-                    .fail(
-                        &claim.id,
-                        claim.attempt,
-                        now_ms(),
-                        "internal error: the simulation panicked",
-                    )
-                    .await;
-                metrics::counter!("bouncewear_jobs_finished_total", "status" => "failed")
-                    .increment(1);
+                self.fail(fence, "internal error: the simulation panicked")
+                    .await
             }
         }
     }
 
-    async fn succeed(&self, claim: &Claim, result: &JobResult) {
-        let text = match serde_json::to_string(result) {
-            Ok(text) => text,
-            Err(error) => {
-                let _ = self
-                    .store
-                    .fail(
-                        &claim.id,
-                        claim.attempt,
-                        now_ms(),
-                        &format!("internal error: {error}"),
-                    )
-                    .await;
-                return;
-            }
-        };
-        match self
-            .store
-            .succeed(
-                &claim.id,
-                claim.attempt,
-                now_ms(),
-                &text,
-                &distribution_rows(result),
-                result.life.as_ref().map_or(&[][..], |life| &life.devices),
-            )
-            .await
-        {
+    async fn succeed(&self, fence: &Fence, result: &JobResult) {
+        match self.store.succeed(fence, UnixMs::now(), result).await {
             Ok(true) => {
                 let operations = result.job["devices_run"].as_u64().unwrap_or(0)
                     * result.job["operations"].as_u64().unwrap_or(0);
@@ -191,33 +168,4 @@ impl Workers {
             }
         }
     }
-}
-
-/// The rows of the `distributions` table: every bin of every operation metric, and the device metrics.
-pub fn distribution_rows(result: &JobResult) -> Vec<NewDistribution> {
-    let operations = result.job["operations"].as_u64().unwrap_or(0);
-    let bins = result.operations.iter().flat_map(|(metric, bins)| {
-        bins.iter()
-            .enumerate()
-            .map(move |(index, bin)| NewDistribution {
-                metric: metric.clone(),
-                kind: "operation",
-                bin: i64::try_from(index).unwrap_or(i64::MAX),
-                op_start: bin.op_start,
-                op_end: bin.op_end,
-                summary: bin.summary.clone(),
-            })
-    });
-    let devices = result
-        .devices
-        .iter()
-        .map(|(metric, summary)| NewDistribution {
-            metric: metric.clone(),
-            kind: "device",
-            bin: 0,
-            op_start: 0,
-            op_end: operations,
-            summary: summary.clone(),
-        });
-    bins.chain(devices).collect()
 }

@@ -1,8 +1,9 @@
 //! `/v1/jobs`: submit, list, inspect, cancel, results, distributions and live progress.
 
-use super::{AppState, JsonText, Owner};
-use crate::errors::{ApiError, Problem};
-use crate::store::{Cancel, JobRecord, JobStatus, NewJob, now_ms};
+use super::error::{ApiError, Internal, Problem};
+use super::{AppState, JsonText};
+use crate::domain::{JobId, JobStatus, Owner, QueuedJob, UnixMs, draw_seed};
+use crate::store::{JobRecord, Operations, Page};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::{HeaderValue, StatusCode, header};
@@ -81,29 +82,19 @@ impl Progress {
     }
 }
 
-pub fn rfc3339(ms: i64) -> String {
-    chrono::DateTime::from_timestamp_millis(ms)
-        .unwrap_or_default()
-        .to_rfc3339_opts(chrono::SecondsFormat::Millis, true)
-}
-
 impl JobResource {
     pub fn from_record(record: &JobRecord) -> Self {
-        let seed = serde_json::from_str::<JobSpec>(&record.spec)
-            .ok()
-            .and_then(|spec| spec.seed)
-            .unwrap_or(0);
         let this = format!("/v1/jobs/{}", record.id);
         JobResource {
-            id: record.id.clone(),
+            id: record.id.to_string(),
             name: record.name.clone(),
             status: record.status,
             progress: Progress::of(record),
-            created_at: rfc3339(record.created_at),
-            started_at: record.started_at.map(rfc3339),
-            finished_at: record.finished_at.map(rfc3339),
+            created_at: record.created_at.to_rfc3339(),
+            started_at: record.started_at.map(UnixMs::to_rfc3339),
+            finished_at: record.finished_at.map(UnixMs::to_rfc3339),
             error: record.error.clone(),
-            seed,
+            seed: record.seed,
             links: Links {
                 result: format!("{this}/result"),
                 events: format!("{this}/events"),
@@ -133,7 +124,7 @@ const PROBLEM: &str = "application/problem+json";
 /// Submit a Monte Carlo job; it is queued durably before the response is sent.
 #[utoipa::path(
     post, path = "/v1/jobs", tag = "jobs",
-    request_body(content = JobSpec, description = "The job of CONTRACT.md", content_type = "application/json"),
+    request_body(content = JobSpec, description = "The job of docs/contract.md", content_type = "application/json"),
     responses(
         (status = 202, description = "Queued", body = JobResource, headers(("Location" = String, description = "The job's URL"))),
         (status = 400, description = "Malformed JSON", body = Problem, content_type = PROBLEM),
@@ -147,10 +138,10 @@ const PROBLEM: &str = "application/problem+json";
 )]
 pub async fn submit_job(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
+    Extension(owner): Extension<Owner>,
     JsonText(body): JsonText,
 ) -> Result<Response, ApiError> {
-    let job = Job::from_json(&body, crate::cli::draw_seed)?;
+    let job = Job::from_json(&body, draw_seed)?;
     let (size, pointer) = job_size(&job);
     if size > state.config.max_job_operations {
         return Err(ApiError::Invalid(InvalidInput::single(
@@ -161,16 +152,7 @@ pub async fn submit_job(
             ),
         )));
     }
-    let spec =
-        serde_json::to_string(&job.spec).map_err(|e| crate::errors::Internal(e.to_string()))?;
-    let new = NewJob {
-        id: uuid::Uuid::new_v4().to_string(),
-        owner,
-        name: job.spec.name.clone(),
-        spec,
-        operations_total: job.spec.devices.saturating_mul(job.spec.operations),
-        created_at: now_ms(),
-    };
+    let new = QueuedJob::new(&job, owner, job.spec.name.clone(), UnixMs::now());
     let record = state
         .store
         .insert_job(new, state.config.max_queued)
@@ -179,8 +161,8 @@ pub async fn submit_job(
     state.wake.notify_one();
     metrics::counter!("bouncewear_jobs_submitted_total").increment(1);
     let resource = JobResource::from_record(&record);
-    let location = HeaderValue::from_str(&resource.links.this)
-        .map_err(|e| crate::errors::Internal(e.to_string()))?;
+    let location =
+        HeaderValue::from_str(&resource.links.this).map_err(|e| Internal(e.to_string()))?;
     Ok((
         StatusCode::ACCEPTED,
         [(header::LOCATION, location)],
@@ -212,7 +194,7 @@ pub struct ListQuery {
 )]
 pub async fn list_jobs(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
+    Extension(owner): Extension<Owner>,
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<JobList>, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
@@ -234,7 +216,7 @@ pub async fn list_jobs(
                 })?,
         ),
     };
-    let records = state.store.jobs(&owner, before, limit).await?;
+    let records = state.store.jobs(&owner, Page { before, limit }).await?;
     let next_cursor = (records.len() == limit as usize)
         .then(|| records.last().map(|r| r.seq.to_string()))
         .flatten();
@@ -242,14 +224,6 @@ pub async fn list_jobs(
         jobs: records.iter().map(JobResource::from_record).collect(),
         next_cursor,
     }))
-}
-
-async fn find(state: &AppState, owner: &str, id: &str) -> Result<JobRecord, ApiError> {
-    state
-        .store
-        .job(owner, id)
-        .await?
-        .ok_or_else(|| ApiError::NotFound(format!("no job {id}")))
 }
 
 /// A job's status and progress.
@@ -264,12 +238,11 @@ async fn find(state: &AppState, owner: &str, id: &str) -> Result<JobRecord, ApiE
 )]
 pub async fn get_job(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path(id): Path<String>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<JobId>,
 ) -> Result<Json<JobResource>, ApiError> {
-    Ok(Json(JobResource::from_record(
-        &find(&state, &owner, &id).await?,
-    )))
+    let record = state.store.job(&owner, &id).await?;
+    Ok(Json(JobResource::from_record(&record)))
 }
 
 /// Cancel a queued or running job.
@@ -285,25 +258,17 @@ pub async fn get_job(
 )]
 pub async fn cancel_job(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path(id): Path<String>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<JobId>,
 ) -> Result<Json<JobResource>, ApiError> {
-    match state.store.cancel(&owner, &id, now_ms()).await? {
-        Cancel::Cancelled(record) => {
-            metrics::counter!("bouncewear_jobs_finished_total", "status" => "cancelled")
-                .increment(1);
-            Ok(Json(JobResource::from_record(&record)))
-        }
-        Cancel::AlreadyFinished(record) => Err(ApiError::Conflict(format!(
-            "job {id} already ended: {}",
-            record.status.as_str()
-        ))),
-        Cancel::NotFound => Err(ApiError::NotFound(format!("no job {id}"))),
-    }
+    let record = state.store.cancel(&owner, &id, UnixMs::now()).await?;
+    metrics::counter!("bouncewear_jobs_finished_total", "status" => "cancelled").increment(1);
+    Ok(Json(JobResource::from_record(&record)))
 }
 
-pub async fn succeeded(state: &AppState, owner: &str, id: &str) -> Result<JobRecord, ApiError> {
-    let record = find(state, owner, id).await?;
+/// The job, if it succeeded: results exist only then (409 before).
+pub async fn succeeded(state: &AppState, owner: &Owner, id: &JobId) -> Result<JobRecord, ApiError> {
+    let record = state.store.job(owner, id).await?;
     if record.status != JobStatus::Succeeded {
         return Err(ApiError::Conflict(format!(
             "job {id} is {}; results exist once it succeeds",
@@ -313,7 +278,7 @@ pub async fn succeeded(state: &AppState, owner: &str, id: &str) -> Result<JobRec
     Ok(record)
 }
 
-/// The Result of CONTRACT.md (409 until the job succeeded).
+/// The Result of docs/contract.md (409 until the job succeeded).
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
@@ -326,14 +291,15 @@ pub async fn succeeded(state: &AppState, owner: &str, id: &str) -> Result<JobRec
 )]
 pub async fn get_result(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path(id): Path<String>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<JobId>,
 ) -> Result<Response, ApiError> {
     succeeded(&state, &owner, &id).await?;
-    let result =
-        state.store.result(&id).await?.ok_or_else(|| {
-            crate::errors::Internal(format!("job {id} succeeded without a result"))
-        })?;
+    let result = state
+        .store
+        .result_json(&id)
+        .await?
+        .ok_or_else(|| without_result(&id))?;
     Ok(([(header::CONTENT_TYPE, "application/json")], result).into_response())
 }
 
@@ -389,8 +355,8 @@ pub struct Distribution {
 )]
 pub async fn get_distribution(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path((id, metric)): Path<(String, String)>,
+    Extension(owner): Extension<Owner>,
+    Path((id, metric)): Path<(JobId, String)>,
     query: Result<Query<DistributionQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
@@ -410,23 +376,20 @@ pub async fn get_distribution(
             Metric::all_names()
         )));
     }
-    let rows = state
-        .store
-        .distribution(&record.id, &metric, op_start, op_end)
-        .await?;
+    let range = Operations {
+        start: op_start,
+        end: op_end,
+    };
+    let rows = state.store.distribution(&record.id, &metric, range).await?;
     let kind = rows.first().map(|r| r.kind.clone());
-    let bins = rows
+    let bins: Vec<DistributionBin> = rows
         .into_iter()
-        .map(|row| {
-            let summary = serde_json::from_str(&row.summary)
-                .map_err(|e| crate::errors::Internal(e.to_string()))?;
-            Ok(DistributionBin {
-                summary,
-                op_start: row.op_start,
-                op_end: row.op_end,
-            })
+        .map(|row| DistributionBin {
+            summary: row.summary,
+            op_start: row.op_start,
+            op_end: row.op_end,
         })
-        .collect::<Result<Vec<_>, ApiError>>()?;
+        .collect();
     let Some(kind) = kind else {
         return Err(ApiError::NotFound(format!(
             "job {id} has no bins of `{metric}` in that range (was the metric requested?)"
@@ -434,7 +397,7 @@ pub async fn get_distribution(
     };
     match query.format.unwrap_or(Format::Json) {
         Format::Json => Ok(Json(Distribution {
-            job_id: record.id,
+            job_id: record.id.to_string(),
             metric,
             kind,
             bins,
@@ -517,8 +480,8 @@ pub struct LifeQuery {
 )]
 pub async fn get_life(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path(id): Path<String>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<JobId>,
     query: Result<Query<LifeQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
@@ -546,16 +509,16 @@ pub async fn get_life(
 }
 
 /// The stored Result of a succeeded job, parsed.
-pub async fn stored_result(state: &AppState, id: &str) -> Result<JobResult, ApiError> {
-    let text =
-        state.store.result(id).await?.ok_or_else(|| {
-            crate::errors::Internal(format!("job {id} succeeded without a result"))
-        })?;
-    serde_json::from_str(&text).map_err(|e| {
-        ApiError::Internal(crate::errors::Internal(format!(
-            "stored result of {id}: {e}"
-        )))
-    })
+pub async fn stored_result(state: &AppState, id: &JobId) -> Result<JobResult, ApiError> {
+    state
+        .store
+        .result(id)
+        .await?
+        .ok_or_else(|| without_result(id))
+}
+
+fn without_result(id: &JobId) -> ApiError {
+    ApiError::Internal(Internal(format!("job {id} succeeded without a result")))
 }
 
 /// How often the event stream looks at the job.
@@ -573,14 +536,14 @@ const EVENT_POLL: Duration = Duration::from_millis(200);
 )]
 pub async fn job_events(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path(id): Path<String>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<JobId>,
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
-    let first = find(&state, &owner, &id).await?;
+    let first = state.store.job(&owner, &id).await?;
     struct Watcher {
         state: AppState,
-        owner: String,
-        id: String,
+        owner: Owner,
+        id: JobId,
         last: Option<(JobStatus, u64)>,
         pending: Option<JobRecord>,
         ended: bool,
@@ -603,8 +566,8 @@ pub async fn job_events(
                 None => {
                     tokio::time::sleep(EVENT_POLL).await;
                     match w.state.store.job(&w.owner, &w.id).await {
-                        Ok(Some(record)) => record,
-                        _ => return None,
+                        Ok(record) => record,
+                        Err(_) => return None,
                     }
                 }
             };

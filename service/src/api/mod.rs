@@ -1,6 +1,8 @@
-//! The HTTP API of CONTRACT.md, one module per resource. Routes and their OpenAPI description come
-//! from the same `#[utoipa::path]` handlers, so they cannot drift apart.
+//! The HTTP API of docs/contract.md, one module per resource. Routes and their OpenAPI description
+//! come from the same `#[utoipa::path]` handlers, so they cannot drift apart. Handlers speak HTTP
+//! only: the rules are the domain's, the storage the store's.
 
+pub mod error;
 pub mod jobs;
 pub mod plots;
 pub mod schedules;
@@ -8,15 +10,15 @@ pub mod simulate;
 pub mod system;
 
 use crate::config::ServeConfig;
-use crate::errors::ApiError;
+use crate::domain::Owner;
 use crate::store::Store;
 use axum::body::Bytes;
 use axum::extract::{FromRequest, Request, State};
 use axum::http::header;
 use axum::middleware::Next;
 use axum::response::Response;
+use error::ApiError;
 use metrics_exporter_prometheus::PrometheusHandle;
-use sha2::{Digest, Sha256};
 use std::collections::HashSet;
 use std::sync::Arc;
 use tokio::sync::Notify;
@@ -28,8 +30,8 @@ use utoipa_axum::router::OpenApiRouter;
 pub struct AppState {
     pub store: Arc<dyn Store>,
     pub config: Arc<ServeConfig>,
-    /// SHA-256 (hex) of every accepted API key: keys themselves are never kept.
-    pub key_hashes: Arc<HashSet<String>>,
+    /// The owner (the SHA-256) of every accepted API key: keys themselves are never kept.
+    pub key_owners: Arc<HashSet<Owner>>,
     /// Wakes an idle worker when a job is submitted.
     pub wake: Arc<Notify>,
     pub metrics: PrometheusHandle,
@@ -39,7 +41,7 @@ pub struct AppState {
 
 #[derive(OpenApi)]
 #[openapi(
-    info(title = "bouncewear", description = "Monte Carlo wear simulation of bouncing electrical contacts (McBride & Sharkh 1992). The contract is CONTRACT.md; the physics MODEL.md."),
+    info(title = "bouncewear", description = "Monte Carlo wear simulation of bouncing electrical contacts (McBride & Sharkh 1992). The contract is docs/contract.md; the physics docs/model.md."),
     modifiers(&BearerAuth),
     tags((name = "jobs", description = "Monte Carlo endurance jobs on a durable queue"), (name = "schedules", description = "Nightly runs of a job template and their trend"), (name = "simulate", description = "One make operation"), (name = "system", description = "Health, metrics, documentation"))
 )]
@@ -80,25 +82,14 @@ pub fn router(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
     (router.with_state(state), openapi)
 }
 
-/// The caller's identity: the hash of its API key, or `""` on a server without keys.
-#[derive(Debug, Clone)]
-pub struct Owner(pub String);
-
-pub fn hash_key(key: &str) -> String {
-    Sha256::digest(key.as_bytes())
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
-}
-
 /// With API keys configured, every /v1 call needs `Authorization: Bearer KEY`; jobs belong to the key.
 async fn authenticate(
     State(state): State<AppState>,
     mut request: Request,
     next: Next,
 ) -> Result<Response, ApiError> {
-    let owner = if state.key_hashes.is_empty() {
-        String::new()
+    let owner = if state.key_owners.is_empty() {
+        Owner::anonymous()
     } else {
         let presented = request
             .headers()
@@ -111,13 +102,13 @@ async fn authenticate(
             })
             .map(str::trim)
             .ok_or(ApiError::Unauthorized)?;
-        let hash = hash_key(presented);
-        if !state.key_hashes.contains(&hash) {
+        let owner = Owner::of_key(presented);
+        if !state.key_owners.contains(&owner) {
             return Err(ApiError::Unauthorized);
         }
-        hash
+        owner
     };
-    request.extensions_mut().insert(Owner(owner));
+    request.extensions_mut().insert(owner);
     Ok(next.run(request).await)
 }
 

@@ -1,9 +1,11 @@
 //! Plots as SVG, rendered by the server (`crate::plots`): a job's wear curves, histograms and Weibull
 //! plot, and a schedule's trend. The dashboard and `bouncewear run --plots` show the same pictures.
 
+use super::AppState;
+use super::error::{ApiError, Problem};
 use super::jobs::{stored_result, succeeded};
-use super::{AppState, Owner};
-use crate::errors::{ApiError, Problem};
+use super::schedules::schedule_trend;
+use crate::domain::{JobId, Owner, ScheduleId};
 use crate::plots::{self, TrendPoint};
 use axum::Extension;
 use axum::extract::rejection::QueryRejection;
@@ -70,8 +72,8 @@ pub fn job_svg(result: &JobResult, kind: &str, metric: &str) -> Result<String, A
 )]
 pub async fn job_plot(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path((id, kind)): Path<(String, String)>,
+    Extension(owner): Extension<Owner>,
+    Path((id, kind)): Path<(JobId, String)>,
     query: Result<Query<PlotQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
@@ -106,17 +108,13 @@ pub struct TrendQuery {
 )]
 pub async fn schedule_trend_plot(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path(id): Path<String>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<ScheduleId>,
     query: Result<Query<TrendQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
-    let schedule = state
-        .store
-        .schedule(&owner, &id)
-        .await?
-        .ok_or_else(|| ApiError::NotFound(format!("no schedule {id}")))?;
-    let trend = super::schedules::trend(&state, &schedule, 60).await?;
+    let schedule = state.store.schedule(&owner, &id).await?;
+    let trend = schedule_trend(&state, &schedule, 60).await?;
     let statistic = match query.statistic {
         Some(statistic) if trend.statistics.contains(&statistic) => statistic,
         Some(statistic) => {
@@ -140,7 +138,7 @@ pub async fn schedule_trend_plot(
         })
         .collect();
     let svg = plots::trend_svg(
-        &format!("{}: {statistic}", schedule.name),
+        &format!("{}: {statistic}", schedule.definition.name),
         &statistic,
         &points,
     );

@@ -1,17 +1,18 @@
 //! `/v1/schedules`: nightly (or any cron) runs of a job template, and their trend.
 
-use super::jobs::{JobResource, rfc3339};
-use super::{AppState, JsonText, Owner};
-use crate::errors::{ApiError, Problem};
-use crate::schedule::{Statistic, Timetable, TrendValue, flag_drift};
-use crate::store::{NewRun, ScheduleRecord, now_ms};
+use super::error::{ApiError, Problem};
+use super::jobs::{JobResource, stored_result};
+use super::{AppState, JsonText};
+use crate::domain::trend::trend;
+use crate::domain::{
+    JobStatus, Owner, ScheduleId, ScheduleSpec, TrendValue, UnixMs, ValidSchedule,
+};
+use crate::store::{NewRun, RunSlot, ScheduleRecord};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
-use bouncewear_model::montecarlo::{Job, JobSpec};
-use bouncewear_model::{FieldError, InvalidInput, Pointer};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use utoipa::{IntoParams, ToSchema};
@@ -27,28 +28,6 @@ pub fn router() -> OpenApiRouter<AppState> {
 }
 
 const PROBLEM: &str = "application/problem+json";
-const DEFAULT_STATISTIC: &str = "operations.total_bounce_s.p95";
-
-/// A schedule as a client writes it.
-#[derive(Debug, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct ScheduleSpec {
-    pub name: String,
-    /// Cron expression: 5 fields (minute hour day month weekday), or 6 with seconds first.
-    pub cron: String,
-    /// IANA time zone the cron expression is read in (default `UTC`).
-    #[serde(default)]
-    pub time_zone: Option<String>,
-    /// The job each run submits (CONTRACT.md "Job"). Without a `seed`, every run draws its own.
-    pub template: JobSpec,
-    /// Statistics the trend follows, e.g. `operations.total_bounce_s.p95` (last bin),
-    /// `devices.eroded_mass_kg.mean`, `life.b10` (default: `operations.total_bounce_s.p95`).
-    #[serde(default)]
-    pub statistics: Option<Vec<String>>,
-    #[serde(default)]
-    pub enabled: Option<bool>,
-}
-
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ScheduleResource {
     pub id: String,
@@ -71,123 +50,22 @@ pub struct ScheduleList {
     pub schedules: Vec<ScheduleResource>,
 }
 
-/// A schedule document that passed every rule: the parts of a [`ScheduleRecord`] a client sets.
-struct ValidSchedule {
-    name: String,
-    cron: String,
-    time_zone: String,
-    template: String,
-    statistics: String,
-    enabled: bool,
-    next_run_at: Option<i64>,
-}
-
-impl ValidSchedule {
-    fn into_record(
-        self,
-        id: String,
-        owner: String,
-        created_at: i64,
-        updated_at: i64,
-    ) -> ScheduleRecord {
-        ScheduleRecord {
-            id,
-            owner,
-            name: self.name,
-            cron: self.cron,
-            time_zone: self.time_zone,
-            template: self.template,
-            statistics: self.statistics,
-            enabled: self.enabled,
-            next_run_at: self.next_run_at,
-            created_at,
-            updated_at,
-        }
+/// The stored form of a valid schedule document, due next after `now`.
+fn record(
+    valid: ValidSchedule,
+    id: ScheduleId,
+    owner: Owner,
+    created_at: UnixMs,
+    now: UnixMs,
+) -> ScheduleRecord {
+    ScheduleRecord {
+        next_run_at: valid.next_run_after(now),
+        definition: valid.into_definition(),
+        id,
+        owner,
+        created_at,
+        updated_at: now,
     }
-}
-
-/// Validates a schedule document, naming every field at fault.
-fn validate(body: &str, max_job_operations: u64) -> Result<ValidSchedule, ApiError> {
-    let spec: ScheduleSpec = bouncewear_model::error::from_json(
-        body,
-        &["/statistics", "/template/scatter", "/template/metrics"],
-    )?;
-    let root = Pointer::root();
-    let mut errors = Vec::new();
-    if spec.name.trim().is_empty() || spec.name.len() > 200 {
-        errors.push(FieldError {
-            pointer: "/name".into(),
-            detail: "must be 1 to 200 characters".into(),
-        });
-    }
-    let time_zone = spec.time_zone.clone().unwrap_or_else(|| "UTC".to_owned());
-    let timetable = Timetable::parse(&spec.cron, &time_zone)
-        .map_err(|(field, detail)| {
-            errors.push(FieldError {
-                pointer: root.child(field).to_string(),
-                detail,
-            })
-        })
-        .ok();
-    let template = serde_json::to_string(&spec.template)
-        .map_err(|e| crate::errors::Internal(e.to_string()))?;
-    match Job::from_json(&template, || 0) {
-        Ok(job) => {
-            let size = job
-                .precision
-                .as_ref()
-                .map_or(job.spec.devices, |p| p.max_devices)
-                .saturating_mul(job.spec.operations);
-            if size > max_job_operations {
-                errors.push(FieldError {
-                    pointer: "/template/devices".into(),
-                    detail: format!("each run would run {size} operations; this server allows {max_job_operations}"),
-                });
-            }
-        }
-        Err(invalid) => errors.extend(invalid.errors().iter().map(|e| FieldError {
-            pointer: format!("/template{}", e.pointer),
-            detail: e.detail.clone(),
-        })),
-    }
-    let statistics = spec
-        .statistics
-        .clone()
-        .unwrap_or_else(|| vec![DEFAULT_STATISTIC.to_owned()]);
-    if statistics.is_empty() {
-        errors.push(FieldError {
-            pointer: "/statistics".into(),
-            detail: "must name at least one statistic".into(),
-        });
-    }
-    for (i, statistic) in statistics.iter().enumerate() {
-        if let Err(detail) = Statistic::check(statistic) {
-            errors.push(FieldError {
-                pointer: root.child("statistics").child(i).to_string(),
-                detail,
-            });
-        }
-    }
-    if !errors.is_empty() {
-        return Err(ApiError::Invalid(InvalidInput::new(errors)));
-    }
-    let enabled = spec.enabled.unwrap_or(true);
-    let next_run_at = match (enabled, timetable) {
-        (true, Some(timetable)) => timetable
-            .next_after(chrono::Utc::now())
-            .map(|t| t.timestamp_millis()),
-        _ => None,
-    };
-    Ok(ValidSchedule {
-        name: spec.name.trim().to_owned(),
-        cron: spec.cron,
-        time_zone,
-        template,
-        statistics: serde_json::to_string(&statistics)
-            .map_err(|e| crate::errors::Internal(e.to_string()))?,
-        enabled,
-        next_run_at,
-    })
 }
 
 async fn resource(state: &AppState, record: &ScheduleRecord) -> Result<ScheduleResource, ApiError> {
@@ -196,28 +74,25 @@ async fn resource(state: &AppState, record: &ScheduleRecord) -> Result<ScheduleR
         .runs(&record.id, 1)
         .await?
         .first()
-        .map(|run| rfc3339(run.scheduled_for));
+        .map(|run| run.scheduled_for.to_rfc3339());
+    let definition = &record.definition;
     Ok(ScheduleResource {
-        id: record.id.clone(),
-        name: record.name.clone(),
-        cron: record.cron.clone(),
-        time_zone: record.time_zone.clone(),
-        enabled: record.enabled,
-        template: serde_json::from_str(&record.template).unwrap_or_default(),
-        statistics: serde_json::from_str(&record.statistics).unwrap_or_default(),
-        next_run_at: record.next_run_at.map(rfc3339),
+        id: record.id.to_string(),
+        name: definition.name.clone(),
+        cron: definition.cron.clone(),
+        time_zone: definition.time_zone.clone(),
+        enabled: definition.enabled,
+        template: serde_json::to_value(&definition.template).unwrap_or_default(),
+        statistics: definition
+            .statistics
+            .iter()
+            .map(ToString::to_string)
+            .collect(),
+        next_run_at: record.next_run_at.map(UnixMs::to_rfc3339),
         last_run_at: last,
-        created_at: rfc3339(record.created_at),
-        updated_at: rfc3339(record.updated_at),
+        created_at: record.created_at.to_rfc3339(),
+        updated_at: record.updated_at.to_rfc3339(),
     })
-}
-
-async fn find(state: &AppState, owner: &str, id: &str) -> Result<ScheduleRecord, ApiError> {
-    state
-        .store
-        .schedule(owner, id)
-        .await?
-        .ok_or_else(|| ApiError::NotFound(format!("no schedule {id}")))
 }
 
 /// Create a schedule.
@@ -236,19 +111,15 @@ async fn find(state: &AppState, owner: &str, id: &str) -> Result<ScheduleRecord,
 )]
 pub async fn create_schedule(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
+    Extension(owner): Extension<Owner>,
     JsonText(body): JsonText,
 ) -> Result<Response, ApiError> {
-    let now = now_ms();
-    let record = validate(&body, state.config.max_job_operations)?.into_record(
-        uuid::Uuid::new_v4().to_string(),
-        owner,
-        now,
-        now,
-    );
+    let valid = ValidSchedule::parse(&body, state.config.max_job_operations)?;
+    let now = UnixMs::now();
+    let record = record(valid, ScheduleId::generate(), owner, now, now);
     state.store.insert_schedule(&record).await?;
     let location = HeaderValue::from_str(&format!("/v1/schedules/{}", record.id))
-        .map_err(|e| crate::errors::Internal(e.to_string()))?;
+        .map_err(|e| super::error::Internal(e.to_string()))?;
     Ok((
         StatusCode::CREATED,
         [(header::LOCATION, location)],
@@ -268,7 +139,7 @@ pub async fn create_schedule(
 )]
 pub async fn list_schedules(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
+    Extension(owner): Extension<Owner>,
 ) -> Result<Json<ScheduleList>, ApiError> {
     let mut schedules = Vec::new();
     for record in state.store.schedules(&owner).await? {
@@ -289,10 +160,10 @@ pub async fn list_schedules(
 )]
 pub async fn get_schedule(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path(id): Path<String>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<ScheduleId>,
 ) -> Result<Json<ScheduleResource>, ApiError> {
-    let record = find(&state, &owner, &id).await?;
+    let record = state.store.schedule(&owner, &id).await?;
     Ok(Json(resource(&state, &record).await?))
 }
 
@@ -313,20 +184,14 @@ pub async fn get_schedule(
 )]
 pub async fn replace_schedule(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path(id): Path<String>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<ScheduleId>,
     JsonText(body): JsonText,
 ) -> Result<Json<ScheduleResource>, ApiError> {
-    let existing = find(&state, &owner, &id).await?;
-    let record = validate(&body, state.config.max_job_operations)?.into_record(
-        existing.id,
-        existing.owner,
-        existing.created_at,
-        now_ms(),
-    );
-    if !state.store.update_schedule(&record).await? {
-        return Err(ApiError::NotFound(format!("no schedule {id}")));
-    }
+    let existing = state.store.schedule(&owner, &id).await?;
+    let valid = ValidSchedule::parse(&body, state.config.max_job_operations)?;
+    let record = record(valid, id, owner, existing.created_at, UnixMs::now());
+    state.store.update_schedule(&record).await?;
     Ok(Json(resource(&state, &record).await?))
 }
 
@@ -342,14 +207,11 @@ pub async fn replace_schedule(
 )]
 pub async fn delete_schedule(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path(id): Path<String>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<ScheduleId>,
 ) -> Result<StatusCode, ApiError> {
-    if state.store.delete_schedule(&owner, &id).await? {
-        Ok(StatusCode::NO_CONTENT)
-    } else {
-        Err(ApiError::NotFound(format!("no schedule {id}")))
-    }
+    state.store.delete_schedule(&owner, &id).await?;
+    Ok(StatusCode::NO_CONTENT)
 }
 
 /// Run a schedule now, outside its timetable.
@@ -365,25 +227,26 @@ pub async fn delete_schedule(
 )]
 pub async fn run_schedule_now(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path(id): Path<String>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<ScheduleId>,
 ) -> Result<Response, ApiError> {
-    let schedule = find(&state, &owner, &id).await?;
-    let now = chrono::Utc::now();
+    let schedule = state.store.schedule(&owner, &id).await?;
+    let now = UnixMs::now();
     // A manual run is keyed by its own time; two in the same millisecond take the next one.
     for offset in 0..16 {
-        let at = now + chrono::Duration::milliseconds(offset);
-        let job = crate::scheduler::job_from_template(&schedule, at, now)
-            .map_err(|e| crate::errors::Internal(e.to_string()))?;
+        let at = now.plus_ms(offset);
+        let job = schedule
+            .definition
+            .job_at(owner.clone(), at, now)
+            .map_err(|e| super::error::Internal(e.to_string()))?;
+        let slot = RunSlot {
+            schedule: &schedule.id,
+            scheduled_for: at,
+            manual: true,
+        };
         match state
             .store
-            .create_run(
-                &schedule.id,
-                at.timestamp_millis(),
-                true,
-                job,
-                state.config.max_queued,
-            )
+            .create_run(slot, job, state.config.max_queued)
             .await?
         {
             NewRun::Created(record) => {
@@ -416,7 +279,7 @@ pub struct Run {
     /// RFC 3339: the due time (or the request time of a manual run).
     pub scheduled_for: String,
     pub job_id: String,
-    pub status: crate::store::JobStatus,
+    pub status: JobStatus,
     pub manual: bool,
     /// Each statistic's value, its 95 % interval, and whether it left the previous run's interval;
     /// null until the job succeeded or when the result lacks the statistic.
@@ -445,8 +308,8 @@ pub struct Trend {
 )]
 pub async fn schedule_runs(
     State(state): State<AppState>,
-    Extension(Owner(owner)): Extension<Owner>,
-    Path(id): Path<String>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<ScheduleId>,
     query: Result<Query<RunsQuery>, QueryRejection>,
 ) -> Result<Json<Trend>, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
@@ -456,59 +319,40 @@ pub async fn schedule_runs(
             "limit must be from 1 to 366, got {limit}"
         )));
     }
-    Ok(Json(
-        trend(&state, &find(&state, &owner, &id).await?, limit).await?,
-    ))
+    let schedule = state.store.schedule(&owner, &id).await?;
+    Ok(Json(schedule_trend(&state, &schedule, limit).await?))
 }
 
 /// The trend of a schedule's runs, oldest first.
-pub async fn trend(
+pub async fn schedule_trend(
     state: &AppState,
     schedule: &ScheduleRecord,
     limit: u32,
 ) -> Result<Trend, ApiError> {
-    let statistics: Vec<String> = serde_json::from_str(&schedule.statistics).unwrap_or_default();
     let mut runs = state.store.runs(&schedule.id, limit).await?;
     runs.reverse();
     let mut results = Vec::with_capacity(runs.len());
     for run in &runs {
         results.push(match run.status {
-            crate::store::JobStatus::Succeeded => {
-                Some(super::jobs::stored_result(state, &run.job_id).await?)
-            }
+            JobStatus::Succeeded => Some(stored_result(state, &run.job_id).await?),
             _ => None,
         });
     }
-    let columns: Vec<Vec<Option<TrendValue>>> = statistics
-        .iter()
-        .map(|name| {
-            let statistic = Statistic(name.clone());
-            flag_drift(
-                &results
-                    .iter()
-                    .map(|r| r.as_ref().and_then(|r| statistic.read(r)))
-                    .collect::<Vec<_>>(),
-            )
-        })
-        .collect();
+    let statistics = &schedule.definition.statistics;
     let runs = runs
         .iter()
-        .enumerate()
-        .map(|(i, run)| Run {
-            scheduled_for: rfc3339(run.scheduled_for),
-            job_id: run.job_id.clone(),
+        .zip(trend(statistics, &results))
+        .map(|(run, values)| Run {
+            scheduled_for: run.scheduled_for.to_rfc3339(),
+            job_id: run.job_id.to_string(),
             status: run.status,
             manual: run.manual,
-            values: statistics
-                .iter()
-                .zip(&columns)
-                .map(|(name, column)| (name.clone(), column[i].clone()))
-                .collect(),
+            values,
         })
         .collect();
     Ok(Trend {
-        schedule_id: schedule.id.clone(),
-        statistics,
+        schedule_id: schedule.id.to_string(),
+        statistics: statistics.iter().map(ToString::to_string).collect(),
         runs,
     })
 }

@@ -1,7 +1,7 @@
 //! `POST /v1/simulate`: one make operation, as `bouncewear simulate` prints it.
 
+use super::error::{ApiError, Problem};
 use super::{AppState, JsonText};
-use crate::errors::{ApiError, Problem};
 use axum::Json;
 use axum::extract::Query;
 use axum::extract::rejection::QueryRejection;
@@ -27,7 +27,7 @@ pub struct SimulateQuery {
 #[utoipa::path(
     post, path = "/v1/simulate", tag = "simulate",
     params(SimulateQuery),
-    request_body(content = ScenarioSpec, description = "A scenario; every field optional (MODEL.md section 8)", content_type = "application/json"),
+    request_body(content = ScenarioSpec, description = "A scenario; every field optional (docs/model.md section 8)", content_type = "application/json"),
     responses(
         (status = 200, description = "The operation and its bounces", body = Simulation),
         (status = 400, description = "Malformed JSON or query", body = Problem, content_type = "application/problem+json"),

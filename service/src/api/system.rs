@@ -1,7 +1,7 @@
 //! Health, Prometheus metrics, the OpenAPI document and its docs UI (RapiDoc, vendored).
 
 use super::AppState;
-use crate::errors::{ApiError, Problem};
+use super::error::{ApiError, Problem};
 use axum::Json;
 use axum::extract::State;
 use axum::http::header;

@@ -1,91 +1,101 @@
-//! Storage behind a trait, so that a second backend can be added without touching handlers or
-//! workers. [`sqlite::SqliteStore`] is the one backend today.
+//! Storage in its own language: typed ids and times in, typed records and [`StoreError`] out, no
+//! JSON strings for callers to parse again. The traits are split by concern (the job queue, results,
+//! schedules); [`Store`] is all three, so that a backend is one `impl` per trait and the handlers,
+//! workers and scheduler never see SQL. [`sqlite::SqliteStore`] is the backend today; its SQL and
+//! migrations (`migrations/sqlite/`) are its own, so that another backend can sit beside it.
 
 pub mod sqlite;
 
-use crate::errors::Internal;
+use crate::domain::{
+    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, UnixMs,
+};
 use async_trait::async_trait;
-use serde::{Deserialize, Serialize};
-use utoipa::ToSchema;
+use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
+use bouncewear_model::stats::Summary;
 
-pub type StoreResult<T> = Result<T, Internal>;
+pub type StoreResult<T> = Result<T, StoreError>;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum JobStatus {
-    Queued,
-    Running,
-    Succeeded,
-    Failed,
-    Cancelled,
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// No such thing for this owner (another owner's things do not exist for the caller).
+    #[error("no {kind} {id}")]
+    NotFound { kind: &'static str, id: String },
+    /// The request contradicts the stored state, e.g. cancelling a job that already ended.
+    #[error("{0}")]
+    Conflict(String),
+    #[error("database: {0}")]
+    Database(#[from] sqlx::Error),
+    #[error("migration: {0}")]
+    Migration(#[from] sqlx::migrate::MigrateError),
+    /// A stored document no longer reads as its type (written by another version, or damaged).
+    #[error("stored {what} cannot be read: {detail}")]
+    Corrupt { what: &'static str, detail: String },
 }
 
-impl JobStatus {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            JobStatus::Queued => "queued",
-            JobStatus::Running => "running",
-            JobStatus::Succeeded => "succeeded",
-            JobStatus::Failed => "failed",
-            JobStatus::Cancelled => "cancelled",
+impl StoreError {
+    pub(crate) fn job_not_found(id: &JobId) -> Self {
+        Self::NotFound {
+            kind: "job",
+            id: id.to_string(),
         }
     }
 
-    pub fn parse(text: &str) -> Option<Self> {
-        [
-            Self::Queued,
-            Self::Running,
-            Self::Succeeded,
-            Self::Failed,
-            Self::Cancelled,
-        ]
-        .into_iter()
-        .find(|s| s.as_str() == text)
-    }
-
-    pub fn is_terminal(self) -> bool {
-        matches!(
-            self,
-            JobStatus::Succeeded | JobStatus::Failed | JobStatus::Cancelled
-        )
+    pub(crate) fn schedule_not_found(id: &ScheduleId) -> Self {
+        Self::NotFound {
+            kind: "schedule",
+            id: id.to_string(),
+        }
     }
 }
 
-/// A job as stored. Times are Unix milliseconds.
+/// A job as stored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct JobRecord {
+    /// Submission order: the paging cursor.
     pub seq: i64,
-    pub id: String,
-    pub owner: String,
+    pub id: JobId,
+    pub owner: Owner,
     pub name: Option<String>,
-    /// The validated job, seed fixed, as JSON.
-    pub spec: String,
+    /// The seed the job runs with, fixed at submission.
+    pub seed: u64,
     pub status: JobStatus,
     pub operations_done: u64,
     pub operations_total: u64,
-    pub attempt: i64,
+    pub attempt: Attempt,
     pub error: Option<String>,
-    pub created_at: i64,
-    pub started_at: Option<i64>,
-    pub finished_at: Option<i64>,
+    pub created_at: UnixMs,
+    pub started_at: Option<UnixMs>,
+    pub finished_at: Option<UnixMs>,
 }
 
-#[derive(Debug, Clone)]
-pub struct NewJob {
-    pub id: String,
-    pub owner: String,
-    pub name: Option<String>,
-    pub spec: String,
-    pub operations_total: u64,
-    pub created_at: i64,
+/// One page of a newest-first listing: the rows below the cursor `before` (a `seq`).
+#[derive(Debug, Clone, Copy)]
+pub struct Page {
+    pub before: Option<i64>,
+    pub limit: u32,
 }
 
-/// A job a worker has leased, with the fencing attempt number every later write must carry.
+/// The claim a worker holds on a job: every write of that claim carries it, and is refused once
+/// another claim replaced it (fencing).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Fence {
+    pub job: JobId,
+    pub attempt: Attempt,
+}
+
+/// A lease's terms: taken or renewed at `now`, held for `duration_ms`.
+#[derive(Debug, Clone, Copy)]
+pub struct LeaseTerms {
+    pub now: UnixMs,
+    pub duration_ms: i64,
+}
+
+/// A job a worker has leased.
 #[derive(Debug, Clone)]
 pub struct Claim {
-    pub id: String,
-    pub spec: String,
-    pub attempt: i64,
+    pub fence: Fence,
+    /// The job as validated at submission, seed fixed.
+    pub spec: JobSpec,
     pub operations_total: u64,
 }
 
@@ -100,153 +110,149 @@ pub enum Lease {
     Lost,
 }
 
-#[derive(Debug, Clone)]
-pub enum Cancel {
-    Cancelled(JobRecord),
-    AlreadyFinished(JobRecord),
-    NotFound,
-}
-
 /// One stored bin of one metric.
 #[derive(Debug, Clone)]
 pub struct DistributionRow {
+    /// `operation` (one bin of operations) or `device` (at the end of the test).
     pub kind: String,
     pub bin: i64,
     pub op_start: u64,
     pub op_end: u64,
-    /// The SUMMARY JSON.
-    pub summary: String,
+    pub summary: Summary,
 }
 
-/// Rows for the `distributions` table, from a result.
-#[derive(Debug, Clone)]
-pub struct NewDistribution {
-    pub metric: String,
-    pub kind: &'static str,
-    pub bin: i64,
-    pub op_start: u64,
-    pub op_end: u64,
-    pub summary: bouncewear_model::stats::Summary,
+/// A half-open range of operations, `[start, end)`.
+#[derive(Debug, Clone, Copy)]
+pub struct Operations {
+    pub start: u64,
+    pub end: u64,
 }
 
 /// A schedule as stored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScheduleRecord {
-    pub id: String,
-    pub owner: String,
-    pub name: String,
-    pub cron: String,
-    pub time_zone: String,
-    /// The job template, as JSON.
-    pub template: String,
-    /// The statistics the trend follows, as a JSON list.
-    pub statistics: String,
-    pub enabled: bool,
-    pub next_run_at: Option<i64>,
-    pub created_at: i64,
-    pub updated_at: i64,
+    pub id: ScheduleId,
+    pub owner: Owner,
+    pub definition: ScheduleDefinition,
+    /// The next due time; none while disabled.
+    pub next_run_at: Option<UnixMs>,
+    pub created_at: UnixMs,
+    pub updated_at: UnixMs,
 }
 
 /// One run of a schedule, with its job's status.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunRecord {
-    pub scheduled_for: i64,
-    pub job_id: String,
+    /// The due time, or the request time of a manual run.
+    pub scheduled_for: UnixMs,
+    pub job_id: JobId,
     pub manual: bool,
     pub status: JobStatus,
+}
+
+/// The (schedule, due time) slot a run takes: at most one job per slot, ever.
+#[derive(Debug, Clone, Copy)]
+pub struct RunSlot<'a> {
+    pub schedule: &'a ScheduleId,
+    pub scheduled_for: UnixMs,
+    pub manual: bool,
 }
 
 /// What creating a scheduled run did.
 #[derive(Debug, Clone)]
 pub enum NewRun {
     Created(JobRecord),
-    /// That (schedule, due time) already has its job: another loop or instance made it.
+    /// That slot already has its job: another loop or instance made it.
     AlreadyExists,
     QueueFull,
 }
 
+/// The durable job queue: submissions, leases with fencing, and the end of every job.
 #[async_trait]
-pub trait Store: Send + Sync + 'static {
+pub trait JobQueue: Send + Sync + 'static {
     /// Inserts a queued job unless `max_queued` jobs are already queued (then `None`).
-    async fn insert_job(&self, job: NewJob, max_queued: u64) -> StoreResult<Option<JobRecord>>;
-    async fn job(&self, owner: &str, id: &str) -> StoreResult<Option<JobRecord>>;
-    /// Newest first, below the cursor `before_seq`.
-    async fn jobs(
-        &self,
-        owner: &str,
-        before_seq: Option<i64>,
-        limit: u32,
-    ) -> StoreResult<Vec<JobRecord>>;
-    async fn cancel(&self, owner: &str, id: &str, now: i64) -> StoreResult<Cancel>;
+    async fn insert_job(&self, job: QueuedJob, max_queued: u64) -> StoreResult<Option<JobRecord>>;
+    async fn job(&self, owner: &Owner, id: &JobId) -> StoreResult<JobRecord>;
+    /// Newest first.
+    async fn jobs(&self, owner: &Owner, page: Page) -> StoreResult<Vec<JobRecord>>;
+    /// Cancels a queued or running job; [`StoreError::Conflict`] if it already ended.
+    async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord>;
     /// Leases the oldest queued job, or a running one whose lease expired, bumping its attempt.
-    async fn claim(&self, worker: &str, now: i64, lease_ms: i64) -> StoreResult<Option<Claim>>;
-    /// Extends the lease and records progress, if the attempt still holds the job.
+    async fn claim(&self, worker: &str, terms: LeaseTerms) -> StoreResult<Option<Claim>>;
+    /// Extends the lease and records progress, if the claim still holds the job.
     async fn heartbeat(
         &self,
-        id: &str,
-        attempt: i64,
-        now: i64,
-        lease_ms: i64,
+        fence: &Fence,
+        terms: LeaseTerms,
         operations_done: u64,
     ) -> StoreResult<Lease>;
-    /// Stores the result and its distributions and marks the job succeeded, if the attempt still
-    /// holds it; `false` otherwise (nothing written).
-    async fn succeed(
-        &self,
-        id: &str,
-        attempt: i64,
-        now: i64,
-        result: &str,
-        rows: &[NewDistribution],
-        lives: &[bouncewear_model::montecarlo::DeviceLife],
-    ) -> StoreResult<bool>;
-    /// Each device's life, in device order.
-    async fn lives(&self, id: &str) -> StoreResult<Vec<bouncewear_model::montecarlo::DeviceLife>>;
-    async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()>;
-    async fn schedule(&self, owner: &str, id: &str) -> StoreResult<Option<ScheduleRecord>>;
-    async fn schedules(&self, owner: &str) -> StoreResult<Vec<ScheduleRecord>>;
-    /// Replaces a schedule's definition; `false` if there is no such schedule.
-    async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<bool>;
-    async fn delete_schedule(&self, owner: &str, id: &str) -> StoreResult<bool>;
-    /// Enabled schedules of every owner whose next run is due at `now`.
-    async fn due_schedules(&self, now: i64) -> StoreResult<Vec<ScheduleRecord>>;
-    /// Creates the job of one (schedule, due time) unless it exists, in one transaction.
-    async fn create_run(
-        &self,
-        schedule_id: &str,
-        scheduled_for: i64,
-        manual: bool,
-        job: NewJob,
-        max_queued: u64,
-    ) -> StoreResult<NewRun>;
-    /// Moves `next_run_at` from `from` to `to`, unless another loop already moved it.
-    async fn advance_schedule(
-        &self,
-        id: &str,
-        from: Option<i64>,
-        to: Option<i64>,
-    ) -> StoreResult<bool>;
-    /// The latest runs, newest first.
-    async fn runs(&self, schedule_id: &str, limit: u32) -> StoreResult<Vec<RunRecord>>;
-    async fn fail(&self, id: &str, attempt: i64, now: i64, error: &str) -> StoreResult<bool>;
+    /// Marks the job failed with `error`, if the claim still holds it.
+    async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool>;
     /// Hands a running job back to the queue (graceful shutdown).
-    async fn release(&self, id: &str, attempt: i64) -> StoreResult<bool>;
+    async fn release(&self, fence: &Fence) -> StoreResult<bool>;
     /// Puts every running job whose lease expired back in the queue; returns how many.
-    async fn reclaim_expired(&self, now: i64) -> StoreResult<u64>;
-    async fn result(&self, id: &str) -> StoreResult<Option<String>>;
-    async fn distribution(
-        &self,
-        id: &str,
-        metric: &str,
-        op_start: u64,
-        op_end: u64,
-    ) -> StoreResult<Vec<DistributionRow>>;
+    async fn reclaim_expired(&self, now: UnixMs) -> StoreResult<u64>;
     /// `(queued, running)` job counts, for metrics.
     async fn queue_depth(&self) -> StoreResult<(u64, u64)>;
     async fn ping(&self) -> StoreResult<()>;
 }
 
-/// Milliseconds since the Unix epoch.
-pub fn now_ms() -> i64 {
-    chrono::Utc::now().timestamp_millis()
+/// What a succeeded job leaves: its Result, one row per (metric, bin), each device's life.
+#[async_trait]
+pub trait Results: Send + Sync + 'static {
+    /// Stores the result and marks the job succeeded, in one transaction, if the claim still holds
+    /// the job; `false` otherwise (nothing written).
+    async fn succeed(
+        &self,
+        fence: &Fence,
+        finished_at: UnixMs,
+        result: &JobResult,
+    ) -> StoreResult<bool>;
+    /// The Result JSON as stored, to be served as it is.
+    async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>>;
+    async fn result(&self, id: &JobId) -> StoreResult<Option<JobResult>>;
+    /// The bins of `metric` that overlap `range`, in bin order.
+    async fn distribution(
+        &self,
+        id: &JobId,
+        metric: &str,
+        range: Operations,
+    ) -> StoreResult<Vec<DistributionRow>>;
+    /// Each device's life, in device order.
+    async fn lives(&self, id: &JobId) -> StoreResult<Vec<DeviceLife>>;
 }
+
+/// Schedules and their runs.
+#[async_trait]
+pub trait Schedules: Send + Sync + 'static {
+    async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()>;
+    async fn schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<ScheduleRecord>;
+    /// Oldest first.
+    async fn schedules(&self, owner: &Owner) -> StoreResult<Vec<ScheduleRecord>>;
+    /// Replaces a schedule's definition and next run (its runs stay).
+    async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()>;
+    async fn delete_schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<()>;
+    /// Enabled schedules of every owner whose next run is due at `now`.
+    async fn due_schedules(&self, now: UnixMs) -> StoreResult<Vec<ScheduleRecord>>;
+    /// Creates the job of one slot unless the slot has one, in one transaction.
+    async fn create_run(
+        &self,
+        slot: RunSlot<'_>,
+        job: QueuedJob,
+        max_queued: u64,
+    ) -> StoreResult<NewRun>;
+    /// Moves `next_run_at` from `from` to `to`, unless another loop already moved it.
+    async fn advance_schedule(
+        &self,
+        id: &ScheduleId,
+        from: Option<UnixMs>,
+        to: Option<UnixMs>,
+    ) -> StoreResult<bool>;
+    /// The latest runs, newest first.
+    async fn runs(&self, schedule: &ScheduleId, limit: u32) -> StoreResult<Vec<RunRecord>>;
+}
+
+/// Everything the service stores.
+pub trait Store: JobQueue + Results + Schedules {}
+
+impl<T: JobQueue + Results + Schedules> Store for T {}

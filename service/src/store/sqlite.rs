@@ -2,19 +2,24 @@
 //! power cut once its 202 is sent), one writer connection (writes never race for the lock inside
 //! the process, and every write transaction starts with a write, so instances sharing the file wait
 //! on `busy_timeout` instead of failing with "database is locked"), and a pool of readers.
+//!
+//! Each table's columns and row mapping are written once, below its section heading.
 
 use super::{
-    Cancel, Claim, DistributionRow, JobRecord, JobStatus, Lease, NewDistribution, NewJob, NewRun,
-    RunRecord, ScheduleRecord, Store, StoreResult,
+    Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
+    Page, Results, RunRecord, RunSlot, ScheduleRecord, Schedules, StoreError, StoreResult,
 };
-use crate::errors::Internal;
+use crate::domain::{
+    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, UnixMs,
+};
 use async_trait::async_trait;
-use bouncewear_model::montecarlo::DeviceLife;
-use sqlx::Row;
+use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
+use sqlx::query::Query;
 use sqlx::sqlite::{
-    SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteRow,
-    SqliteSynchronous,
+    SqliteArguments, SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions,
+    SqliteRow, SqliteSynchronous,
 };
+use sqlx::{Row, Sqlite};
 use std::str::FromStr;
 use std::time::Duration;
 
@@ -25,7 +30,8 @@ pub struct SqliteStore {
 
 impl SqliteStore {
     /// Opens (creating if missing) and migrates the database at `url`.
-    pub async fn open(url: &str) -> Result<Self, Internal> {
+    #[tracing::instrument(skip_all)]
+    pub async fn open(url: &str) -> StoreResult<Self> {
         let options = SqliteConnectOptions::from_str(url)?
             .create_if_missing(true)
             .journal_mode(SqliteJournalMode::Wal)
@@ -36,7 +42,8 @@ impl SqliteStore {
             .max_connections(1)
             .connect_with(options.clone())
             .await?;
-        sqlx::migrate!("../migrations").run(&writer).await?;
+        sqlx::migrate!("../migrations/sqlite").run(&writer).await?;
+        backfill_seeds(&writer).await?;
         let readers = SqlitePoolOptions::new()
             .max_connections(4)
             .connect_with(options.read_only(true))
@@ -45,127 +52,201 @@ impl SqliteStore {
     }
 }
 
+/// Gives jobs stored before the `seed` column their seed, read from their spec (migration 0003).
+async fn backfill_seeds(writer: &SqlitePool) -> StoreResult<()> {
+    let rows = sqlx::query("SELECT seq, spec FROM jobs WHERE seed IS NULL")
+        .fetch_all(writer)
+        .await?;
+    for row in rows {
+        let spec = spec_from_json(&row.try_get::<String, _>("spec")?)?;
+        sqlx::query("UPDATE jobs SET seed = ?2 WHERE seq = ?1")
+            .bind(row.try_get::<i64, _>("seq")?)
+            .bind(seed_to_sql(spec.seed.unwrap_or(0)))
+            .execute(writer)
+            .await?;
+    }
+    Ok(())
+}
+
+/// SQLite integers are signed: counts saturate, seeds keep their bits.
+fn count_to_sql(value: u64) -> i64 {
+    i64::try_from(value).unwrap_or(i64::MAX)
+}
+
+fn count_from_sql(row: &SqliteRow, column: &str) -> Result<u64, sqlx::Error> {
+    Ok(row.try_get::<i64, _>(column)?.max(0) as u64)
+}
+
+fn seed_to_sql(seed: u64) -> i64 {
+    seed as i64
+}
+
+fn seed_from_sql(stored: i64) -> u64 {
+    stored as u64
+}
+
+fn ms(row: &SqliteRow, column: &str) -> Result<UnixMs, sqlx::Error> {
+    row.try_get(column).map(UnixMs)
+}
+
+fn optional_ms(row: &SqliteRow, column: &str) -> Result<Option<UnixMs>, sqlx::Error> {
+    Ok(row.try_get::<Option<i64>, _>(column)?.map(UnixMs))
+}
+
+fn status(row: &SqliteRow) -> Result<JobStatus, sqlx::Error> {
+    let text: String = row.try_get("status")?;
+    JobStatus::parse(&text).ok_or_else(|| sqlx::Error::Decode(format!("status {text}").into()))
+}
+
+fn spec_from_json(text: &str) -> StoreResult<JobSpec> {
+    serde_json::from_str(text).map_err(|e| corrupt("job spec", e))
+}
+
+fn to_json(what: &'static str, value: &impl serde::Serialize) -> StoreResult<String> {
+    serde_json::to_string(value).map_err(|e| corrupt(what, e))
+}
+
+fn corrupt(what: &'static str, error: impl std::fmt::Display) -> StoreError {
+    StoreError::Corrupt {
+        what,
+        detail: error.to_string(),
+    }
+}
+
+// ---- jobs ----------------------------------------------------------------------------------
+
+macro_rules! job_columns {
+    () => {
+        "seq, id, owner, name, seed, status, operations_done, operations_total, attempt, error, \
+         created_at, started_at, finished_at"
+    };
+}
+
+const SELECT_JOB: &str = concat!(
+    "SELECT ",
+    job_columns!(),
+    " FROM jobs WHERE id = ?1 AND owner = ?2"
+);
+
 fn job_from_row(row: &SqliteRow) -> Result<JobRecord, sqlx::Error> {
-    let status: String = row.try_get("status")?;
     Ok(JobRecord {
         seq: row.try_get("seq")?,
-        id: row.try_get("id")?,
-        owner: row.try_get("owner")?,
+        id: JobId::from(row.try_get::<String, _>("id")?),
+        owner: Owner::from_stored(row.try_get("owner")?),
         name: row.try_get("name")?,
-        spec: row.try_get("spec")?,
-        status: JobStatus::parse(&status)
-            .ok_or_else(|| sqlx::Error::Decode(format!("status {status}").into()))?,
-        operations_done: row.try_get::<i64, _>("operations_done")?.max(0) as u64,
-        operations_total: row.try_get::<i64, _>("operations_total")?.max(0) as u64,
-        attempt: row.try_get("attempt")?,
+        seed: seed_from_sql(row.try_get("seed")?),
+        status: status(row)?,
+        operations_done: count_from_sql(row, "operations_done")?,
+        operations_total: count_from_sql(row, "operations_total")?,
+        attempt: Attempt(row.try_get("attempt")?),
         error: row.try_get("error")?,
-        created_at: row.try_get("created_at")?,
-        started_at: row.try_get("started_at")?,
-        finished_at: row.try_get("finished_at")?,
+        created_at: ms(row, "created_at")?,
+        started_at: optional_ms(row, "started_at")?,
+        finished_at: optional_ms(row, "finished_at")?,
     })
 }
 
 /// Inserts a queued job unless `max_queued` jobs are already queued. One statement: the queue
 /// bound and the insert cannot race.
-async fn insert_queued<'e, E>(
-    executor: E,
-    job: &NewJob,
-    max_queued: u64,
-) -> Result<bool, sqlx::Error>
+async fn insert_queued<'e, E>(executor: E, job: &QueuedJob, max_queued: u64) -> StoreResult<bool>
 where
-    E: sqlx::Executor<'e, Database = sqlx::Sqlite>,
+    E: sqlx::Executor<'e, Database = Sqlite>,
 {
     let inserted = sqlx::query(
-        "INSERT INTO jobs (id, owner, name, spec, status, operations_total, created_at) \
-         SELECT ?1, ?2, ?3, ?4, 'queued', ?5, ?6 \
-         WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < ?7",
+        "INSERT INTO jobs (id, owner, name, spec, seed, status, operations_total, created_at) \
+         SELECT ?1, ?2, ?3, ?4, ?5, 'queued', ?6, ?7 \
+         WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < ?8",
     )
-    .bind(&job.id)
-    .bind(&job.owner)
+    .bind(job.id.as_str())
+    .bind(job.owner.as_str())
     .bind(&job.name)
-    .bind(&job.spec)
-    .bind(to_i64(job.operations_total))
-    .bind(job.created_at)
-    .bind(to_i64(max_queued))
+    .bind(to_json("job spec", &job.spec)?)
+    .bind(seed_to_sql(job.seed))
+    .bind(count_to_sql(job.operations_total))
+    .bind(job.created_at.0)
+    .bind(count_to_sql(max_queued))
     .execute(executor)
     .await?;
     Ok(inserted.rows_affected() == 1)
 }
 
-fn to_i64(value: u64) -> i64 {
-    i64::try_from(value).unwrap_or(i64::MAX)
+async fn select_job<'e, E>(executor: E, owner: &Owner, id: &JobId) -> StoreResult<JobRecord>
+where
+    E: sqlx::Executor<'e, Database = Sqlite>,
+{
+    let row = sqlx::query(SELECT_JOB)
+        .bind(id.as_str())
+        .bind(owner.as_str())
+        .fetch_optional(executor)
+        .await?
+        .ok_or_else(|| StoreError::job_not_found(id))?;
+    Ok(job_from_row(&row)?)
+}
+
+/// A write of one claim: only while its attempt still holds the running job.
+fn fenced<'q>(sql: &'static str, fence: &Fence) -> Query<'q, Sqlite, SqliteArguments> {
+    sqlx::query(sql)
+        .bind(fence.job.as_str())
+        .bind(fence.attempt.0)
 }
 
 #[async_trait]
-impl Store for SqliteStore {
-    async fn insert_job(&self, job: NewJob, max_queued: u64) -> StoreResult<Option<JobRecord>> {
+impl JobQueue for SqliteStore {
+    #[tracing::instrument(skip_all, fields(job = %job.id))]
+    async fn insert_job(&self, job: QueuedJob, max_queued: u64) -> StoreResult<Option<JobRecord>> {
         if !insert_queued(&self.writer, &job, max_queued).await? {
             return Ok(None);
         }
         // Read back through the writer: a reader may not see the commit yet.
-        let row = sqlx::query(SELECT_JOB)
-            .bind(&job.id)
-            .bind(&job.owner)
-            .fetch_one(&self.writer)
-            .await?;
-        Ok(Some(job_from_row(&row)?))
+        select_job(&self.writer, &job.owner, &job.id)
+            .await
+            .map(Some)
     }
 
-    async fn job(&self, owner: &str, id: &str) -> StoreResult<Option<JobRecord>> {
-        let row = sqlx::query(SELECT_JOB)
-            .bind(id)
-            .bind(owner)
-            .fetch_optional(&self.readers)
-            .await?;
-        Ok(row.as_ref().map(job_from_row).transpose()?)
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn job(&self, owner: &Owner, id: &JobId) -> StoreResult<JobRecord> {
+        select_job(&self.readers, owner, id).await
     }
 
-    async fn jobs(
-        &self,
-        owner: &str,
-        before_seq: Option<i64>,
-        limit: u32,
-    ) -> StoreResult<Vec<JobRecord>> {
-        let rows = sqlx::query(
-            "SELECT seq, id, owner, name, spec, status, operations_done, operations_total, attempt, error, \
-             created_at, started_at, finished_at FROM jobs \
-             WHERE owner = ?1 AND seq < ?2 ORDER BY seq DESC LIMIT ?3",
-        )
-        .bind(owner)
-        .bind(before_seq.unwrap_or(i64::MAX))
-        .bind(i64::from(limit))
+    #[tracing::instrument(skip_all)]
+    async fn jobs(&self, owner: &Owner, page: Page) -> StoreResult<Vec<JobRecord>> {
+        let rows = sqlx::query(concat!(
+            "SELECT ",
+            job_columns!(),
+            " FROM jobs WHERE owner = ?1 AND seq < ?2 ORDER BY seq DESC LIMIT ?3"
+        ))
+        .bind(owner.as_str())
+        .bind(page.before.unwrap_or(i64::MAX))
+        .bind(i64::from(page.limit))
         .fetch_all(&self.readers)
         .await?;
         Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)
     }
 
-    async fn cancel(&self, owner: &str, id: &str, now: i64) -> StoreResult<Cancel> {
-        let row = sqlx::query(
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord> {
+        let row = sqlx::query(concat!(
             "UPDATE jobs SET status = 'cancelled', finished_at = ?3, lease_owner = NULL, lease_until = NULL \
-             WHERE id = ?1 AND owner = ?2 AND status IN ('queued', 'running') \
-             RETURNING seq, id, owner, name, spec, status, operations_done, operations_total, attempt, error, \
-             created_at, started_at, finished_at",
-        )
-        .bind(id)
-        .bind(owner)
-        .bind(now)
+             WHERE id = ?1 AND owner = ?2 AND status IN ('queued', 'running') RETURNING ",
+            job_columns!()
+        ))
+        .bind(id.as_str())
+        .bind(owner.as_str())
+        .bind(now.0)
         .fetch_optional(&self.writer)
         .await?;
         if let Some(row) = row {
-            return Ok(Cancel::Cancelled(job_from_row(&row)?));
+            return Ok(job_from_row(&row)?);
         }
-        let row = sqlx::query(SELECT_JOB)
-            .bind(id)
-            .bind(owner)
-            .fetch_optional(&self.writer)
-            .await?;
-        Ok(match row {
-            Some(row) => Cancel::AlreadyFinished(job_from_row(&row)?),
-            None => Cancel::NotFound,
-        })
+        let ended = select_job(&self.writer, owner, id).await?;
+        Err(StoreError::Conflict(format!(
+            "job {id} already ended: {}",
+            ended.status.as_str()
+        )))
     }
 
-    async fn claim(&self, worker: &str, now: i64, lease_ms: i64) -> StoreResult<Option<Claim>> {
+    #[tracing::instrument(skip_all, fields(worker))]
+    async fn claim(&self, worker: &str, terms: LeaseTerms) -> StoreResult<Option<Claim>> {
         let row = sqlx::query(
             "UPDATE jobs SET status = 'running', attempt = attempt + 1, lease_owner = ?1, lease_until = ?2 + ?3, \
              operations_done = 0, started_at = COALESCE(started_at, ?2) \
@@ -174,45 +255,45 @@ impl Store for SqliteStore {
              RETURNING id, spec, attempt, operations_total",
         )
         .bind(worker)
-        .bind(now)
-        .bind(lease_ms)
+        .bind(terms.now.0)
+        .bind(terms.duration_ms)
         .fetch_optional(&self.writer)
         .await?;
-        Ok(match row {
-            Some(row) => Some(Claim {
-                id: row.try_get("id")?,
-                spec: row.try_get("spec")?,
-                attempt: row.try_get("attempt")?,
-                operations_total: row.try_get::<i64, _>("operations_total")?.max(0) as u64,
-            }),
-            None => None,
-        })
+        let Some(row) = row else {
+            return Ok(None);
+        };
+        Ok(Some(Claim {
+            fence: Fence {
+                job: JobId::from(row.try_get::<String, _>("id")?),
+                attempt: Attempt(row.try_get("attempt")?),
+            },
+            spec: spec_from_json(&row.try_get::<String, _>("spec")?)?,
+            operations_total: count_from_sql(&row, "operations_total")?,
+        }))
     }
 
+    #[tracing::instrument(skip_all, fields(job = %fence.job))]
     async fn heartbeat(
         &self,
-        id: &str,
-        attempt: i64,
-        now: i64,
-        lease_ms: i64,
+        fence: &Fence,
+        terms: LeaseTerms,
         operations_done: u64,
     ) -> StoreResult<Lease> {
-        let updated = sqlx::query(
+        let updated = fenced(
             "UPDATE jobs SET lease_until = ?3 + ?4, operations_done = ?5 \
              WHERE id = ?1 AND attempt = ?2 AND status = 'running'",
+            fence,
         )
-        .bind(id)
-        .bind(attempt)
-        .bind(now)
-        .bind(lease_ms)
-        .bind(to_i64(operations_done))
+        .bind(terms.now.0)
+        .bind(terms.duration_ms)
+        .bind(count_to_sql(operations_done))
         .execute(&self.writer)
         .await?;
         if updated.rows_affected() == 1 {
             return Ok(Lease::Held);
         }
         let status: Option<String> = sqlx::query_scalar("SELECT status FROM jobs WHERE id = ?1")
-            .bind(id)
+            .bind(fence.job.as_str())
             .fetch_optional(&self.writer)
             .await?;
         Ok(if status.as_deref() == Some("cancelled") {
@@ -222,35 +303,143 @@ impl Store for SqliteStore {
         })
     }
 
+    #[tracing::instrument(skip_all, fields(job = %fence.job))]
+    async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool> {
+        let updated = fenced(
+            "UPDATE jobs SET status = 'failed', finished_at = ?3, error = ?4, lease_owner = NULL, lease_until = NULL \
+             WHERE id = ?1 AND attempt = ?2 AND status = 'running'",
+            fence,
+        )
+        .bind(now.0)
+        .bind(error)
+        .execute(&self.writer)
+        .await?;
+        Ok(updated.rows_affected() == 1)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job))]
+    async fn release(&self, fence: &Fence) -> StoreResult<bool> {
+        let updated = fenced(
+            "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 \
+             WHERE id = ?1 AND attempt = ?2 AND status = 'running'",
+            fence,
+        )
+        .execute(&self.writer)
+        .await?;
+        Ok(updated.rows_affected() == 1)
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn reclaim_expired(&self, now: UnixMs) -> StoreResult<u64> {
+        let updated = sqlx::query(
+            "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 \
+             WHERE status = 'running' AND lease_until < ?1",
+        )
+        .bind(now.0)
+        .execute(&self.writer)
+        .await?;
+        Ok(updated.rows_affected())
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn queue_depth(&self) -> StoreResult<(u64, u64)> {
+        let row = sqlx::query(
+            "SELECT COALESCE(SUM(status = 'queued'), 0) AS queued, COALESCE(SUM(status = 'running'), 0) AS running FROM jobs",
+        )
+        .fetch_one(&self.readers)
+        .await?;
+        Ok((
+            count_from_sql(&row, "queued")?,
+            count_from_sql(&row, "running")?,
+        ))
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn ping(&self) -> StoreResult<()> {
+        sqlx::query("SELECT 1").execute(&self.readers).await?;
+        Ok(())
+    }
+}
+
+// ---- results, distributions, device lives --------------------------------------------------
+
+/// One `distributions` row per bin of every operation metric, and one per device metric.
+fn distribution_rows(result: &JobResult) -> impl Iterator<Item = (&str, DistributionRow)> {
+    let operations = result.job["operations"].as_u64().unwrap_or(0);
+    let bins = result.operations.iter().flat_map(|(metric, bins)| {
+        bins.iter().enumerate().map(move |(index, bin)| {
+            let row = DistributionRow {
+                kind: "operation".to_owned(),
+                bin: i64::try_from(index).unwrap_or(i64::MAX),
+                op_start: bin.op_start,
+                op_end: bin.op_end,
+                summary: bin.summary.clone(),
+            };
+            (metric.as_str(), row)
+        })
+    });
+    let devices = result.devices.iter().map(move |(metric, summary)| {
+        let row = DistributionRow {
+            kind: "device".to_owned(),
+            bin: 0,
+            op_start: 0,
+            op_end: operations,
+            summary: summary.clone(),
+        };
+        (metric.as_str(), row)
+    });
+    bins.chain(devices)
+}
+
+fn distribution_from_row(row: &SqliteRow) -> StoreResult<DistributionRow> {
+    Ok(DistributionRow {
+        kind: row.try_get("kind")?,
+        bin: row.try_get("bin")?,
+        op_start: count_from_sql(row, "op_start")?,
+        op_end: count_from_sql(row, "op_end")?,
+        summary: serde_json::from_str(&row.try_get::<String, _>("summary")?)
+            .map_err(|e| corrupt("summary", e))?,
+    })
+}
+
+fn life_from_row(row: &SqliteRow) -> Result<DeviceLife, sqlx::Error> {
+    Ok(DeviceLife {
+        device: count_from_sql(row, "device")?,
+        operations_to_failure: count_from_sql(row, "operations_to_failure")?,
+        censored: row.try_get("censored")?,
+    })
+}
+
+#[async_trait]
+impl Results for SqliteStore {
+    #[tracing::instrument(skip_all, fields(job = %fence.job))]
     async fn succeed(
         &self,
-        id: &str,
-        attempt: i64,
-        now: i64,
-        result: &str,
-        rows: &[NewDistribution],
-        lives: &[DeviceLife],
+        fence: &Fence,
+        finished_at: UnixMs,
+        result: &JobResult,
     ) -> StoreResult<bool> {
+        let text = to_json("result", result)?;
         let mut tx = self.writer.begin().await?;
-        let updated = sqlx::query(
+        let updated = fenced(
             "UPDATE jobs SET status = 'succeeded', finished_at = ?3, operations_done = operations_total, \
              lease_owner = NULL, lease_until = NULL WHERE id = ?1 AND attempt = ?2 AND status = 'running'",
+            fence,
         )
-        .bind(id)
-        .bind(attempt)
-        .bind(now)
+        .bind(finished_at.0)
         .execute(&mut *tx)
         .await?;
         if updated.rows_affected() == 0 {
             tx.rollback().await?;
             return Ok(false);
         }
+        let id = fence.job.as_str();
         sqlx::query("INSERT INTO results (job_id, result) VALUES (?1, ?2)")
             .bind(id)
-            .bind(result)
+            .bind(text)
             .execute(&mut *tx)
             .await?;
-        for row in rows {
+        for (metric, row) in distribution_rows(result) {
             let summary = &row.summary;
             let quantile = |key: &str| summary.quantiles.get(key).map_or(0.0, |q| q.value);
             sqlx::query(
@@ -258,12 +447,12 @@ impl Store for SqliteStore {
                  p05, p50, p95, exceedance, summary) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16)",
             )
             .bind(id)
-            .bind(&row.metric)
-            .bind(row.kind)
+            .bind(metric)
+            .bind(&row.kind)
             .bind(row.bin)
-            .bind(to_i64(row.op_start))
-            .bind(to_i64(row.op_end))
-            .bind(to_i64(summary.n))
+            .bind(count_to_sql(row.op_start))
+            .bind(count_to_sql(row.op_end))
+            .bind(count_to_sql(summary.n))
             .bind(summary.mean)
             .bind(summary.sd)
             .bind(summary.min)
@@ -272,15 +461,15 @@ impl Store for SqliteStore {
             .bind(quantile("p50"))
             .bind(quantile("p95"))
             .bind(summary.exceedance.as_ref().map(|e| e.probability))
-            .bind(serde_json::to_string(summary).map_err(|e| Internal(e.to_string()))?)
+            .bind(to_json("summary", summary)?)
             .execute(&mut *tx)
             .await?;
         }
-        for life in lives {
+        for life in result.life.iter().flat_map(|life| &life.devices) {
             sqlx::query("INSERT INTO device_lives (job_id, device, operations_to_failure, censored) VALUES (?1, ?2, ?3, ?4)")
                 .bind(id)
-                .bind(to_i64(life.device))
-                .bind(to_i64(life.operations_to_failure))
+                .bind(count_to_sql(life.device))
+                .bind(count_to_sql(life.operations_to_failure))
                 .bind(life.censored)
                 .execute(&mut *tx)
                 .await?;
@@ -289,128 +478,213 @@ impl Store for SqliteStore {
         Ok(true)
     }
 
-    async fn lives(&self, id: &str) -> StoreResult<Vec<DeviceLife>> {
-        let rows = sqlx::query("SELECT device, operations_to_failure, censored FROM device_lives WHERE job_id = ?1 ORDER BY device")
-            .bind(id)
-            .fetch_all(&self.readers)
-            .await?;
-        rows.iter()
-            .map(|row| {
-                Ok(DeviceLife {
-                    device: row.try_get::<i64, _>("device")?.max(0) as u64,
-                    operations_to_failure: row.try_get::<i64, _>("operations_to_failure")?.max(0)
-                        as u64,
-                    censored: row.try_get("censored")?,
-                })
-            })
-            .collect::<Result<_, sqlx::Error>>()
-            .map_err(Internal::from)
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>> {
+        Ok(
+            sqlx::query_scalar("SELECT result FROM results WHERE job_id = ?1")
+                .bind(id.as_str())
+                .fetch_optional(&self.readers)
+                .await?,
+        )
     }
 
-    async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
-        sqlx::query(
-            "INSERT INTO schedules (id, owner, name, cron, time_zone, template, statistics, enabled, next_run_at, created_at, updated_at) \
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)",
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn result(&self, id: &JobId) -> StoreResult<Option<JobResult>> {
+        self.result_json(id)
+            .await?
+            .map(|text| serde_json::from_str(&text).map_err(|e| corrupt("result", e)))
+            .transpose()
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id, metric))]
+    async fn distribution(
+        &self,
+        id: &JobId,
+        metric: &str,
+        range: Operations,
+    ) -> StoreResult<Vec<DistributionRow>> {
+        let rows = sqlx::query(
+            "SELECT kind, bin, op_start, op_end, summary FROM distributions \
+             WHERE job_id = ?1 AND metric = ?2 AND op_end > ?3 AND op_start < ?4 ORDER BY bin",
         )
-        .bind(&schedule.id)
-        .bind(&schedule.owner)
-        .bind(&schedule.name)
-        .bind(&schedule.cron)
-        .bind(&schedule.time_zone)
-        .bind(&schedule.template)
-        .bind(&schedule.statistics)
-        .bind(schedule.enabled)
-        .bind(schedule.next_run_at)
-        .bind(schedule.created_at)
-        .bind(schedule.updated_at)
-        .execute(&self.writer)
+        .bind(id.as_str())
+        .bind(metric)
+        .bind(count_to_sql(range.start))
+        .bind(count_to_sql(range.end))
+        .fetch_all(&self.readers)
         .await?;
+        rows.iter().map(distribution_from_row).collect()
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn lives(&self, id: &JobId) -> StoreResult<Vec<DeviceLife>> {
+        let rows = sqlx::query(
+            "SELECT device, operations_to_failure, censored FROM device_lives WHERE job_id = ?1 ORDER BY device",
+        )
+        .bind(id.as_str())
+        .fetch_all(&self.readers)
+        .await?;
+        Ok(rows.iter().map(life_from_row).collect::<Result<_, _>>()?)
+    }
+}
+
+// ---- schedules and their runs --------------------------------------------------------------
+
+macro_rules! schedule_columns {
+    () => {
+        "id, owner, name, cron, time_zone, template, statistics, enabled, next_run_at, created_at, updated_at"
+    };
+}
+
+fn schedule_from_row(row: &SqliteRow) -> StoreResult<ScheduleRecord> {
+    Ok(ScheduleRecord {
+        id: ScheduleId::from(row.try_get::<String, _>("id")?),
+        owner: Owner::from_stored(row.try_get("owner")?),
+        definition: ScheduleDefinition {
+            name: row.try_get("name")?,
+            cron: row.try_get("cron")?,
+            time_zone: row.try_get("time_zone")?,
+            template: spec_from_json(&row.try_get::<String, _>("template")?)?,
+            statistics: serde_json::from_str(&row.try_get::<String, _>("statistics")?)
+                .map_err(|e| corrupt("statistics", e))?,
+            enabled: row.try_get("enabled")?,
+        },
+        next_run_at: optional_ms(row, "next_run_at")?,
+        created_at: ms(row, "created_at")?,
+        updated_at: ms(row, "updated_at")?,
+    })
+}
+
+/// Binds every column of [`schedule_columns`], in its order, as `?1` to `?11`.
+fn bind_schedule<'q>(
+    query: Query<'q, Sqlite, SqliteArguments>,
+    schedule: &ScheduleRecord,
+) -> StoreResult<Query<'q, Sqlite, SqliteArguments>> {
+    let definition = &schedule.definition;
+    Ok(query
+        .bind(schedule.id.as_str())
+        .bind(schedule.owner.as_str())
+        .bind(&definition.name)
+        .bind(&definition.cron)
+        .bind(&definition.time_zone)
+        .bind(to_json("template", &definition.template)?)
+        .bind(to_json("statistics", &definition.statistics)?)
+        .bind(definition.enabled)
+        .bind(schedule.next_run_at.map(|t| t.0))
+        .bind(schedule.created_at.0)
+        .bind(schedule.updated_at.0))
+}
+
+fn run_from_row(row: &SqliteRow) -> Result<RunRecord, sqlx::Error> {
+    Ok(RunRecord {
+        scheduled_for: ms(row, "scheduled_for")?,
+        job_id: JobId::from(row.try_get::<String, _>("job_id")?),
+        manual: row.try_get("manual")?,
+        status: status(row)?,
+    })
+}
+
+#[async_trait]
+impl Schedules for SqliteStore {
+    #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
+    async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
+        let insert = sqlx::query(concat!(
+            "INSERT INTO schedules (",
+            schedule_columns!(),
+            ") VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)"
+        ));
+        bind_schedule(insert, schedule)?
+            .execute(&self.writer)
+            .await?;
         Ok(())
     }
 
-    async fn schedule(&self, owner: &str, id: &str) -> StoreResult<Option<ScheduleRecord>> {
-        let row = sqlx::query(SELECT_SCHEDULE_BY_ID)
-            .bind(id)
-            .bind(owner)
-            .fetch_optional(&self.writer)
-            .await?;
-        Ok(row.as_ref().map(schedule_from_row).transpose()?)
+    #[tracing::instrument(skip_all, fields(schedule = %id))]
+    async fn schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<ScheduleRecord> {
+        let row = sqlx::query(concat!(
+            "SELECT ",
+            schedule_columns!(),
+            " FROM schedules WHERE id = ?1 AND owner = ?2"
+        ))
+        .bind(id.as_str())
+        .bind(owner.as_str())
+        .fetch_optional(&self.writer)
+        .await?
+        .ok_or_else(|| StoreError::schedule_not_found(id))?;
+        schedule_from_row(&row)
     }
 
-    async fn schedules(&self, owner: &str) -> StoreResult<Vec<ScheduleRecord>> {
-        let rows = sqlx::query(
-            "SELECT id, owner, name, cron, time_zone, template, statistics, enabled, next_run_at, created_at, updated_at \
-             FROM schedules WHERE owner = ?1 ORDER BY seq",
-        )
-        .bind(owner)
+    #[tracing::instrument(skip_all)]
+    async fn schedules(&self, owner: &Owner) -> StoreResult<Vec<ScheduleRecord>> {
+        let rows = sqlx::query(concat!(
+            "SELECT ",
+            schedule_columns!(),
+            " FROM schedules WHERE owner = ?1 ORDER BY seq"
+        ))
+        .bind(owner.as_str())
         .fetch_all(&self.readers)
         .await?;
-        Ok(rows
-            .iter()
-            .map(schedule_from_row)
-            .collect::<Result<_, _>>()?)
+        rows.iter().map(schedule_from_row).collect()
     }
 
-    async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<bool> {
-        let updated = sqlx::query(
-            "UPDATE schedules SET name = ?3, cron = ?4, time_zone = ?5, template = ?6, statistics = ?7, enabled = ?8, \
-             next_run_at = ?9, updated_at = ?10 WHERE id = ?1 AND owner = ?2",
-        )
-        .bind(&schedule.id)
-        .bind(&schedule.owner)
-        .bind(&schedule.name)
-        .bind(&schedule.cron)
-        .bind(&schedule.time_zone)
-        .bind(&schedule.template)
-        .bind(&schedule.statistics)
-        .bind(schedule.enabled)
-        .bind(schedule.next_run_at)
-        .bind(schedule.updated_at)
-        .execute(&self.writer)
-        .await?;
-        Ok(updated.rows_affected() == 1)
-    }
-
-    async fn delete_schedule(&self, owner: &str, id: &str) -> StoreResult<bool> {
-        let deleted = sqlx::query("DELETE FROM schedules WHERE id = ?1 AND owner = ?2")
-            .bind(id)
-            .bind(owner)
+    #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
+    async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
+        // The creation time is bound as ?10 but never written: a schedule keeps it.
+        let update = sqlx::query(
+            "UPDATE schedules SET name = ?3, cron = ?4, time_zone = ?5, template = ?6, statistics = ?7, \
+             enabled = ?8, next_run_at = ?9, updated_at = ?11 WHERE id = ?1 AND owner = ?2",
+        );
+        let updated = bind_schedule(update, schedule)?
             .execute(&self.writer)
             .await?;
-        Ok(deleted.rows_affected() == 1)
+        if updated.rows_affected() == 0 {
+            return Err(StoreError::schedule_not_found(&schedule.id));
+        }
+        Ok(())
     }
 
-    async fn due_schedules(&self, now: i64) -> StoreResult<Vec<ScheduleRecord>> {
-        let rows = sqlx::query(
-            "SELECT id, owner, name, cron, time_zone, template, statistics, enabled, next_run_at, created_at, updated_at \
-             FROM schedules WHERE enabled = 1 AND next_run_at <= ?1 ORDER BY next_run_at",
-        )
-        .bind(now)
+    #[tracing::instrument(skip_all, fields(schedule = %id))]
+    async fn delete_schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<()> {
+        let deleted = sqlx::query("DELETE FROM schedules WHERE id = ?1 AND owner = ?2")
+            .bind(id.as_str())
+            .bind(owner.as_str())
+            .execute(&self.writer)
+            .await?;
+        if deleted.rows_affected() == 0 {
+            return Err(StoreError::schedule_not_found(id));
+        }
+        Ok(())
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn due_schedules(&self, now: UnixMs) -> StoreResult<Vec<ScheduleRecord>> {
+        let rows = sqlx::query(concat!(
+            "SELECT ",
+            schedule_columns!(),
+            " FROM schedules WHERE enabled = 1 AND next_run_at <= ?1 ORDER BY next_run_at"
+        ))
+        .bind(now.0)
         .fetch_all(&self.writer)
         .await?;
-        Ok(rows
-            .iter()
-            .map(schedule_from_row)
-            .collect::<Result<_, _>>()?)
+        rows.iter().map(schedule_from_row).collect()
     }
 
+    #[tracing::instrument(skip_all, fields(schedule = %slot.schedule, job = %job.id))]
     async fn create_run(
         &self,
-        schedule_id: &str,
-        scheduled_for: i64,
-        manual: bool,
-        job: NewJob,
+        slot: RunSlot<'_>,
+        job: QueuedJob,
         max_queued: u64,
     ) -> StoreResult<NewRun> {
         let mut tx = self.writer.begin().await?;
-        // Claim the (schedule, due time) slot first: the primary key decides who runs this night.
+        // Claim the slot first: the primary key decides who runs this night.
         let claimed = sqlx::query(
             "INSERT OR IGNORE INTO schedule_runs (schedule_id, scheduled_for, job_id, manual) VALUES (?1, ?2, ?3, ?4)",
         )
-        .bind(schedule_id)
-        .bind(scheduled_for)
-        .bind(&job.id)
-        .bind(manual)
+        .bind(slot.schedule.as_str())
+        .bind(slot.scheduled_for.0)
+        .bind(job.id.as_str())
+        .bind(slot.manual)
         .execute(&mut *tx)
         .await?;
         if claimed.rows_affected() == 0 {
@@ -421,170 +695,39 @@ impl Store for SqliteStore {
             tx.rollback().await?;
             return Ok(NewRun::QueueFull);
         }
-        let row = sqlx::query(SELECT_JOB)
-            .bind(&job.id)
-            .bind(&job.owner)
-            .fetch_one(&mut *tx)
-            .await?;
-        let record = job_from_row(&row)?;
+        let record = select_job(&mut *tx, &job.owner, &job.id).await?;
         tx.commit().await?;
         Ok(NewRun::Created(record))
     }
 
+    #[tracing::instrument(skip_all, fields(schedule = %id))]
     async fn advance_schedule(
         &self,
-        id: &str,
-        from: Option<i64>,
-        to: Option<i64>,
+        id: &ScheduleId,
+        from: Option<UnixMs>,
+        to: Option<UnixMs>,
     ) -> StoreResult<bool> {
         let updated = sqlx::query(
             "UPDATE schedules SET next_run_at = ?3 WHERE id = ?1 AND next_run_at IS ?2",
         )
-        .bind(id)
-        .bind(from)
-        .bind(to)
+        .bind(id.as_str())
+        .bind(from.map(|t| t.0))
+        .bind(to.map(|t| t.0))
         .execute(&self.writer)
         .await?;
         Ok(updated.rows_affected() == 1)
     }
 
-    async fn runs(&self, schedule_id: &str, limit: u32) -> StoreResult<Vec<RunRecord>> {
+    #[tracing::instrument(skip_all, fields(schedule = %schedule))]
+    async fn runs(&self, schedule: &ScheduleId, limit: u32) -> StoreResult<Vec<RunRecord>> {
         let rows = sqlx::query(
             "SELECT r.scheduled_for, r.job_id, r.manual, j.status FROM schedule_runs r JOIN jobs j ON j.id = r.job_id \
              WHERE r.schedule_id = ?1 ORDER BY r.scheduled_for DESC LIMIT ?2",
         )
-        .bind(schedule_id)
+        .bind(schedule.as_str())
         .bind(i64::from(limit))
         .fetch_all(&self.readers)
         .await?;
-        rows.iter()
-            .map(|row| {
-                let status: String = row.try_get("status")?;
-                Ok(RunRecord {
-                    scheduled_for: row.try_get("scheduled_for")?,
-                    job_id: row.try_get("job_id")?,
-                    manual: row.try_get("manual")?,
-                    status: JobStatus::parse(&status)
-                        .ok_or_else(|| sqlx::Error::Decode(format!("status {status}").into()))?,
-                })
-            })
-            .collect::<Result<_, sqlx::Error>>()
-            .map_err(Internal::from)
-    }
-
-    async fn fail(&self, id: &str, attempt: i64, now: i64, error: &str) -> StoreResult<bool> {
-        let updated = sqlx::query(
-            "UPDATE jobs SET status = 'failed', error = ?4, finished_at = ?3, lease_owner = NULL, lease_until = NULL \
-             WHERE id = ?1 AND attempt = ?2 AND status = 'running'",
-        )
-        .bind(id)
-        .bind(attempt)
-        .bind(now)
-        .bind(error)
-        .execute(&self.writer)
-        .await?;
-        Ok(updated.rows_affected() == 1)
-    }
-
-    async fn release(&self, id: &str, attempt: i64) -> StoreResult<bool> {
-        let updated = sqlx::query(
-            "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 \
-             WHERE id = ?1 AND attempt = ?2 AND status = 'running'",
-        )
-        .bind(id)
-        .bind(attempt)
-        .execute(&self.writer)
-        .await?;
-        Ok(updated.rows_affected() == 1)
-    }
-
-    async fn reclaim_expired(&self, now: i64) -> StoreResult<u64> {
-        let updated = sqlx::query(
-            "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 \
-             WHERE status = 'running' AND lease_until < ?1",
-        )
-        .bind(now)
-        .execute(&self.writer)
-        .await?;
-        Ok(updated.rows_affected())
-    }
-
-    async fn result(&self, id: &str) -> StoreResult<Option<String>> {
-        Ok(
-            sqlx::query_scalar("SELECT result FROM results WHERE job_id = ?1")
-                .bind(id)
-                .fetch_optional(&self.readers)
-                .await?,
-        )
-    }
-
-    async fn distribution(
-        &self,
-        id: &str,
-        metric: &str,
-        op_start: u64,
-        op_end: u64,
-    ) -> StoreResult<Vec<DistributionRow>> {
-        let rows = sqlx::query(
-            "SELECT kind, bin, op_start, op_end, summary FROM distributions \
-             WHERE job_id = ?1 AND metric = ?2 AND op_end > ?3 AND op_start < ?4 ORDER BY bin",
-        )
-        .bind(id)
-        .bind(metric)
-        .bind(to_i64(op_start))
-        .bind(to_i64(op_end))
-        .fetch_all(&self.readers)
-        .await?;
-        rows.iter()
-            .map(|row| {
-                Ok(DistributionRow {
-                    kind: row.try_get("kind")?,
-                    bin: row.try_get("bin")?,
-                    op_start: row.try_get::<i64, _>("op_start")?.max(0) as u64,
-                    op_end: row.try_get::<i64, _>("op_end")?.max(0) as u64,
-                    summary: row.try_get("summary")?,
-                })
-            })
-            .collect::<Result<_, sqlx::Error>>()
-            .map_err(Internal::from)
-    }
-
-    async fn queue_depth(&self) -> StoreResult<(u64, u64)> {
-        let row = sqlx::query(
-            "SELECT COALESCE(SUM(status = 'queued'), 0) AS queued, COALESCE(SUM(status = 'running'), 0) AS running FROM jobs",
-        )
-        .fetch_one(&self.readers)
-        .await?;
-        Ok((
-            row.try_get::<i64, _>("queued")?.max(0) as u64,
-            row.try_get::<i64, _>("running")?.max(0) as u64,
-        ))
-    }
-
-    async fn ping(&self) -> StoreResult<()> {
-        sqlx::query("SELECT 1").execute(&self.readers).await?;
-        Ok(())
+        Ok(rows.iter().map(run_from_row).collect::<Result<_, _>>()?)
     }
 }
-
-const SELECT_SCHEDULE_BY_ID: &str = "SELECT id, owner, name, cron, time_zone, template, statistics, enabled, next_run_at, \
-     created_at, updated_at FROM schedules WHERE id = ?1 AND owner = ?2";
-
-fn schedule_from_row(row: &SqliteRow) -> Result<ScheduleRecord, sqlx::Error> {
-    Ok(ScheduleRecord {
-        id: row.try_get("id")?,
-        owner: row.try_get("owner")?,
-        name: row.try_get("name")?,
-        cron: row.try_get("cron")?,
-        time_zone: row.try_get("time_zone")?,
-        template: row.try_get("template")?,
-        statistics: row.try_get("statistics")?,
-        enabled: row.try_get("enabled")?,
-        next_run_at: row.try_get("next_run_at")?,
-        created_at: row.try_get("created_at")?,
-        updated_at: row.try_get("updated_at")?,
-    })
-}
-
-const SELECT_JOB: &str = "SELECT seq, id, owner, name, spec, status, operations_done, operations_total, attempt, error, \
-     created_at, started_at, finished_at FROM jobs WHERE id = ?1 AND owner = ?2";

@@ -1,6 +1,7 @@
 //! Every error a client can see, as `application/problem+json` (RFC 9457), in one place.
 //! Internal errors are logged with their cause and reach the client as a bare 500.
 
+use crate::store::StoreError;
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use bouncewear_model::{FieldError, InvalidInput};
@@ -58,21 +59,15 @@ pub enum ApiError {
 #[error("{0}")]
 pub struct Internal(pub String);
 
-impl From<sqlx::Error> for Internal {
-    fn from(error: sqlx::Error) -> Self {
-        Self(format!("database: {error}"))
-    }
-}
-
-impl From<sqlx::migrate::MigrateError> for Internal {
-    fn from(error: sqlx::migrate::MigrateError) -> Self {
-        Self(format!("migration: {error}"))
-    }
-}
-
-impl From<sqlx::Error> for ApiError {
-    fn from(error: sqlx::Error) -> Self {
-        ApiError::Internal(error.into())
+/// The store's outcomes in HTTP's terms, in this one place: what the client asked for does not
+/// exist (404) or contradicts the stored state (409); anything else is ours (500, logged).
+impl From<StoreError> for ApiError {
+    fn from(error: StoreError) -> Self {
+        match error {
+            StoreError::NotFound { .. } => ApiError::NotFound(error.to_string()),
+            StoreError::Conflict(detail) => ApiError::Conflict(detail),
+            other => ApiError::Internal(Internal(other.to_string())),
+        }
     }
 }
 

@@ -1,0 +1,501 @@
+//! Schedules: a job template run on a cron expression in a time zone, the rules a schedule document
+//! must pass, and the statistics a schedule follows from run to run.
+
+use super::jobs::{QueuedJob, draw_seed};
+use super::{Owner, UnixMs};
+use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
+use bouncewear_model::stats::{QUANTILES, Summary};
+use bouncewear_model::{FieldError, InvalidInput, Pointer};
+use chrono::{DateTime, TimeZone, Utc};
+use chrono_tz::Tz;
+use croner::Cron;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
+use utoipa::ToSchema;
+
+/// What a schedule follows when the document names no statistic.
+const DEFAULT_STATISTIC: &str = "operations.total_bounce_s.p95";
+
+/// A schedule as a client writes it.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ScheduleSpec {
+    pub name: String,
+    /// Cron expression: 5 fields (minute hour day month weekday), or 6 with seconds first.
+    pub cron: String,
+    /// IANA time zone the cron expression is read in (default `UTC`).
+    #[serde(default)]
+    pub time_zone: Option<String>,
+    /// The job each run submits (docs/contract.md "Job"). Without a `seed`, every run draws its own.
+    pub template: JobSpec,
+    /// Statistics the trend follows, e.g. `operations.total_bounce_s.p95` (last bin),
+    /// `devices.eroded_mass_kg.mean`, `life.b10` (default: `operations.total_bounce_s.p95`).
+    #[serde(default)]
+    pub statistics: Option<Vec<String>>,
+    #[serde(default)]
+    pub enabled: Option<bool>,
+}
+
+/// What a schedule is, as stored: the parts a client sets, with defaults filled in.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScheduleDefinition {
+    pub name: String,
+    pub cron: String,
+    pub time_zone: String,
+    /// The job template, validated when the schedule was written.
+    pub template: JobSpec,
+    pub statistics: Vec<Statistic>,
+    pub enabled: bool,
+}
+
+impl ScheduleDefinition {
+    /// The job this schedule runs at `due`: its template (a seed is drawn for each run when the
+    /// template has none), named after the schedule and the due time.
+    pub fn job_at(
+        &self,
+        owner: Owner,
+        due: UnixMs,
+        now: UnixMs,
+    ) -> Result<QueuedJob, InvalidInput> {
+        let job = Job::new(self.template.clone(), draw_seed)?;
+        let name = format!("{} @ {}", self.name, due.to_rfc3339());
+        Ok(QueuedJob::new(&job, owner, Some(name), now))
+    }
+}
+
+/// A schedule document that passed every rule; only [`ValidSchedule::parse`] makes one.
+#[derive(Debug, Clone)]
+pub struct ValidSchedule {
+    definition: ScheduleDefinition,
+    timetable: Timetable,
+}
+
+impl ValidSchedule {
+    /// Parses and validates a schedule document, naming every field at fault. Each run of the
+    /// template must fit `max_job_operations`, the server's job size limit.
+    pub fn parse(body: &str, max_job_operations: u64) -> Result<Self, InvalidInput> {
+        let spec: ScheduleSpec = bouncewear_model::error::from_json(
+            body,
+            &["/statistics", "/template/scatter", "/template/metrics"],
+        )?;
+        let root = Pointer::root();
+        let mut errors = Vec::new();
+        if spec.name.trim().is_empty() || spec.name.len() > 200 {
+            errors.push(FieldError {
+                pointer: "/name".into(),
+                detail: "must be 1 to 200 characters".into(),
+            });
+        }
+        let time_zone = spec.time_zone.unwrap_or_else(|| "UTC".to_owned());
+        let timetable = Timetable::parse(&spec.cron, &time_zone)
+            .map_err(|(field, detail)| {
+                errors.push(FieldError {
+                    pointer: root.child(field).to_string(),
+                    detail,
+                })
+            })
+            .ok();
+        match Job::new(spec.template.clone(), || 0) {
+            Ok(job) => {
+                let size = job
+                    .precision
+                    .as_ref()
+                    .map_or(job.spec.devices, |p| p.max_devices)
+                    .saturating_mul(job.spec.operations);
+                if size > max_job_operations {
+                    errors.push(FieldError {
+                        pointer: "/template/devices".into(),
+                        detail: format!("each run would run {size} operations; this server allows {max_job_operations}"),
+                    });
+                }
+            }
+            Err(invalid) => errors.extend(invalid.errors().iter().map(|e| FieldError {
+                pointer: format!("/template{}", e.pointer),
+                detail: e.detail.clone(),
+            })),
+        }
+        let names = spec
+            .statistics
+            .unwrap_or_else(|| vec![DEFAULT_STATISTIC.to_owned()]);
+        if names.is_empty() {
+            errors.push(FieldError {
+                pointer: "/statistics".into(),
+                detail: "must name at least one statistic".into(),
+            });
+        }
+        let mut statistics = Vec::with_capacity(names.len());
+        for (i, name) in names.iter().enumerate() {
+            match name.parse::<Statistic>() {
+                Ok(statistic) => statistics.push(statistic),
+                Err(detail) => errors.push(FieldError {
+                    pointer: root.child("statistics").child(i).to_string(),
+                    detail,
+                }),
+            }
+        }
+        match timetable {
+            Some(timetable) if errors.is_empty() => Ok(Self {
+                definition: ScheduleDefinition {
+                    name: spec.name.trim().to_owned(),
+                    cron: spec.cron,
+                    time_zone,
+                    template: spec.template,
+                    statistics,
+                    enabled: spec.enabled.unwrap_or(true),
+                },
+                timetable,
+            }),
+            _ => Err(InvalidInput::new(errors)),
+        }
+    }
+
+    /// The first run after `now`; none while the schedule is disabled.
+    pub fn next_run_after(&self, now: UnixMs) -> Option<UnixMs> {
+        if !self.definition.enabled {
+            return None;
+        }
+        self.timetable
+            .next_after(now.to_datetime())
+            .map(UnixMs::from_datetime)
+    }
+
+    pub fn into_definition(self) -> ScheduleDefinition {
+        self.definition
+    }
+}
+
+/// A parsed cron expression with its time zone.
+#[derive(Debug, Clone)]
+pub struct Timetable {
+    cron: Cron,
+    time_zone: Tz,
+}
+
+impl Timetable {
+    /// Parses a cron expression (5 fields, or 6 with seconds first) and an IANA time zone name.
+    /// Errors are `(field, message)`.
+    pub fn parse(cron: &str, time_zone: &str) -> Result<Self, (&'static str, String)> {
+        let parsed =
+            Cron::from_str(cron).map_err(|e| ("cron", format!("is not a cron expression: {e}")))?;
+        let time_zone = Tz::from_str(time_zone).map_err(|_| {
+            (
+                "time_zone",
+                format!("`{time_zone}` is not an IANA time zone"),
+            )
+        })?;
+        Ok(Self {
+            cron: parsed,
+            time_zone,
+        })
+    }
+
+    /// The first due time strictly after `after`. Wall-clock times follow the time zone, DST
+    /// included: a fixed time in a spring-forward gap runs right after the gap, and a fixed time in
+    /// a fall-back overlap runs once, at its first occurrence (croner, after Vixie cron).
+    pub fn next_after(&self, after: DateTime<Utc>) -> Option<DateTime<Utc>> {
+        let local = self.time_zone.from_utc_datetime(&after.naive_utc());
+        self.cron
+            .find_next_occurrence(&local, false)
+            .ok()
+            .map(|t| t.with_timezone(&Utc))
+    }
+
+    /// The last due time at or before `now`: the one night a catch-up runs, however many were missed.
+    pub fn latest_at_or_before(&self, now: DateTime<Utc>) -> Option<DateTime<Utc>> {
+        let local = self.time_zone.from_utc_datetime(&now.naive_utc());
+        self.cron
+            .find_previous_occurrence(&local, true)
+            .ok()
+            .map(|t| t.with_timezone(&Utc))
+    }
+}
+
+/// A statistic a schedule follows from run to run, written `operations.METRIC.STAT` (last bin),
+/// `devices.METRIC.STAT` (`STAT` is `mean` or `p01`..`p99`), or `life.b1`, `life.b10`, `life.beta`,
+/// `life.eta`. Only parsing makes one, so a `Statistic` always names something a result can have.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Statistic {
+    name: String,
+    source: Source,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Source {
+    Operations(Metric, SummaryStat),
+    Devices(Metric, SummaryStat),
+    Life(LifeStat),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum SummaryStat {
+    Mean,
+    Quantile(&'static str),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LifeStat {
+    B1,
+    B10,
+    Beta,
+    Eta,
+}
+
+impl FromStr for Statistic {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        let summary_stat = |stat: &str| {
+            if stat == "mean" {
+                Some(SummaryStat::Mean)
+            } else {
+                QUANTILES
+                    .iter()
+                    .find(|(name, _)| *name == stat)
+                    .map(|(name, _)| SummaryStat::Quantile(name))
+            }
+        };
+        let parts: Vec<&str> = text.split('.').collect();
+        let source = match parts.as_slice() {
+            ["operations", metric, stat] => Metric::parse(metric)
+                .zip(summary_stat(stat))
+                .map(|(m, s)| Source::Operations(m, s)),
+            ["devices", metric, stat] => Metric::parse(metric)
+                .zip(summary_stat(stat))
+                .map(|(m, s)| Source::Devices(m, s)),
+            ["life", "b1"] => Some(Source::Life(LifeStat::B1)),
+            ["life", "b10"] => Some(Source::Life(LifeStat::B10)),
+            ["life", "beta"] => Some(Source::Life(LifeStat::Beta)),
+            ["life", "eta"] => Some(Source::Life(LifeStat::Eta)),
+            _ => None,
+        };
+        source
+            .map(|source| Self {
+                name: text.to_owned(),
+                source,
+            })
+            .ok_or_else(|| {
+                format!(
+                    "`{text}` is not a statistic: use operations.METRIC.STAT, devices.METRIC.STAT (STAT mean or p01..p99) or life.b1|b10|beta|eta"
+                )
+            })
+    }
+}
+
+impl Statistic {
+    pub fn as_str(&self) -> &str {
+        &self.name
+    }
+
+    /// The statistic's value and 95 % interval in a result, if the result has it.
+    pub fn read(&self, result: &JobResult) -> Option<(f64, [f64; 2])> {
+        let from_summary = |summary: &Summary, stat: SummaryStat| match stat {
+            SummaryStat::Mean => Some((summary.mean, summary.mean_ci95)),
+            SummaryStat::Quantile(name) => summary.quantiles.get(name).map(|q| (q.value, q.ci95)),
+        };
+        match self.source {
+            Source::Operations(metric, stat) => {
+                from_summary(&result.operations.get(metric.name())?.last()?.summary, stat)
+            }
+            Source::Devices(metric, stat) => from_summary(result.devices.get(metric.name())?, stat),
+            Source::Life(which) => {
+                let analysis = &result.life.as_ref()?.analysis;
+                match which {
+                    LifeStat::B1 => analysis.b1.as_ref().map(|b| (b.value, b.ci95)),
+                    LifeStat::B10 => analysis.b10.as_ref().map(|b| (b.value, b.ci95)),
+                    LifeStat::Beta => analysis.weibull.as_ref().map(|w| (w.beta, w.beta_ci95)),
+                    LifeStat::Eta => analysis.weibull.as_ref().map(|w| (w.eta, w.eta_ci95)),
+                }
+            }
+        }
+    }
+}
+
+impl fmt::Display for Statistic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.name)
+    }
+}
+
+impl Serialize for Statistic {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(&self.name)
+    }
+}
+
+impl<'de> Deserialize<'de> for Statistic {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        String::deserialize(deserializer)?
+            .parse()
+            .map_err(serde::de::Error::custom)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn utc(text: &str) -> DateTime<Utc> {
+        DateTime::parse_from_rfc3339(text)
+            .unwrap()
+            .with_timezone(&Utc)
+    }
+
+    #[test]
+    fn a_night_at_three_follows_new_york_across_both_dst_changes() {
+        let nightly = Timetable::parse("0 3 * * *", "America/New_York").unwrap();
+        // EST (UTC-5) before 2026-03-08, EDT (UTC-4) after; back to EST on 2026-11-01.
+        assert_eq!(
+            nightly.next_after(utc("2026-03-07T12:00:00Z")),
+            Some(utc("2026-03-08T07:00:00Z"))
+        );
+        assert_eq!(
+            nightly.next_after(utc("2026-03-06T12:00:00Z")),
+            Some(utc("2026-03-07T08:00:00Z"))
+        );
+        assert_eq!(
+            nightly.next_after(utc("2026-10-31T12:00:00Z")),
+            Some(utc("2026-11-01T08:00:00Z"))
+        );
+    }
+
+    #[test]
+    fn a_time_in_the_spring_gap_runs_after_the_gap_and_an_overlap_time_runs_once() {
+        let at_half_past_two = Timetable::parse("30 2 * * *", "Europe/Berlin").unwrap();
+        // 2026-03-29: 02:00 CET jumps to 03:00 CEST, so 02:30 does not exist; it runs at 03:00 CEST.
+        assert_eq!(
+            at_half_past_two.next_after(utc("2026-03-28T12:00:00Z")),
+            Some(utc("2026-03-29T01:00:00Z"))
+        );
+        // 2026-10-25: 03:00 CEST falls back to 02:00 CET, so 02:30 happens twice; it runs at the first.
+        let first = at_half_past_two
+            .next_after(utc("2026-10-24T12:00:00Z"))
+            .unwrap();
+        assert_eq!(first, utc("2026-10-25T00:30:00Z"));
+        assert_eq!(
+            at_half_past_two.next_after(first),
+            Some(utc("2026-10-26T01:30:00Z")),
+            "not again at 01:30Z"
+        );
+    }
+
+    #[test]
+    fn catch_up_runs_only_the_latest_missed_night() {
+        let nightly = Timetable::parse("0 3 * * *", "UTC").unwrap();
+        let now = utc("2026-11-22T08:00:00Z");
+        assert_eq!(
+            nightly.latest_at_or_before(now),
+            Some(utc("2026-11-22T03:00:00Z"))
+        );
+        assert_eq!(
+            nightly.latest_at_or_before(utc("2026-11-22T03:00:00Z")),
+            Some(utc("2026-11-22T03:00:00Z"))
+        );
+    }
+
+    #[test]
+    fn bad_cron_and_time_zone_name_their_field() {
+        assert_eq!(
+            Timetable::parse("every night", "UTC").unwrap_err().0,
+            "cron"
+        );
+        assert_eq!(
+            Timetable::parse("0 3 * * *", "Mars/Olympus").unwrap_err().0,
+            "time_zone"
+        );
+    }
+
+    #[test]
+    fn statistics_are_parsed_and_keep_their_name() {
+        for name in [
+            "operations.total_bounce_s.p95",
+            "devices.eroded_mass_kg.mean",
+            "life.b10",
+        ] {
+            assert_eq!(name.parse::<Statistic>().unwrap().as_str(), name);
+        }
+        for name in [
+            "operations.total_bounce_s.p42",
+            "operations.no_such_metric.mean",
+            "life.mtbf",
+        ] {
+            assert!(name.parse::<Statistic>().is_err(), "{name}");
+        }
+    }
+
+    #[test]
+    fn a_statistic_reads_its_value_and_interval_from_a_result() {
+        // Velocity scattered per operation, so that devices fail at different operations.
+        let job = Job::from_json(
+            r#"{"devices": 16, "operations": 50, "seed": 1,
+                "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+                "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+                  "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.04, "min": 0.05}}],
+                "failure": {"total_bounce_s": {"above": 0.013}}}"#,
+            || 1,
+        )
+        .unwrap();
+        let result =
+            bouncewear_model::montecarlo::run_job(&job, &bouncewear_model::montecarlo::Silent)
+                .unwrap();
+        let last_bin = &result.operations["total_bounce_s"].last().unwrap().summary;
+        let p95 = &last_bin.quantiles["p95"];
+        let read = |name: &str| name.parse::<Statistic>().unwrap().read(&result);
+        assert_eq!(
+            read("operations.total_bounce_s.p95"),
+            Some((p95.value, p95.ci95))
+        );
+        assert_eq!(
+            read("devices.eroded_mass_kg.mean").map(|(v, _)| v),
+            Some(result.devices["eroded_mass_kg"].mean)
+        );
+        let weibull = result
+            .life
+            .as_ref()
+            .unwrap()
+            .analysis
+            .weibull
+            .as_ref()
+            .unwrap();
+        assert_eq!(read("life.eta"), Some((weibull.eta, weibull.eta_ci95)));
+        assert_eq!(read("life.beta"), Some((weibull.beta, weibull.beta_ci95)));
+    }
+
+    #[test]
+    fn a_schedule_names_every_field_at_fault() {
+        let invalid = ValidSchedule::parse(
+            r#"{"name": " ", "cron": "every night", "template": {"devices": 0}, "statistics": ["life.mtbf"]}"#,
+            1000,
+        )
+        .unwrap_err();
+        let pointers: Vec<&str> = invalid
+            .errors()
+            .iter()
+            .map(|e| e.pointer.as_str())
+            .collect();
+        assert_eq!(
+            pointers,
+            ["/name", "/cron", "/template/devices", "/statistics/0"]
+        );
+    }
+
+    #[test]
+    fn a_disabled_schedule_has_no_next_run() {
+        let body = |enabled: bool| {
+            format!(
+                r#"{{"name": "n", "cron": "0 3 * * *", "template": {{}}, "enabled": {enabled}}}"#
+            )
+        };
+        let now = UnixMs::from_datetime(utc("2026-11-22T08:00:00Z"));
+        let next = |enabled| {
+            ValidSchedule::parse(&body(enabled), u64::MAX)
+                .unwrap()
+                .next_run_after(now)
+        };
+        assert_eq!(
+            next(true),
+            Some(UnixMs::from_datetime(utc("2026-11-23T03:00:00Z")))
+        );
+        assert_eq!(next(false), None);
+    }
+}
