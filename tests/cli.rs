@@ -1,31 +1,11 @@
 //! The `bouncewear` binary through its outside contract (docs/contract.md "Build and binary",
 //! "Scenario").
 
-#[path = "support/json_close.rs"]
-mod json_close;
+#[path = "support/mod.rs"]
+mod support;
 
 use serde_json::Value;
-use std::io::Write;
-use std::process::{Command, Output, Stdio};
-
-const BIN: &str = env!("CARGO_BIN_EXE_bouncewear");
-
-fn bouncewear(args: &[&str], stdin: &str) -> Output {
-    let mut child = Command::new(BIN)
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("bouncewear runs");
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(stdin.as_bytes())
-        .unwrap();
-    child.wait_with_output().unwrap()
-}
+use support::{bouncewear, run_job, temp_dir};
 
 /// Runs a command that must fail with exit code 2 and one stderr line; returns that line.
 fn rejected(args: &[&str], stdin: &str) -> String {
@@ -57,7 +37,8 @@ fn simulate_reproduces_every_validation_case_through_the_binary() {
                 String::from_utf8_lossy(&output.stderr)
             );
             let actual: Value = serde_json::from_slice(&output.stdout).unwrap();
-            let differences = json_close::json_differences(&actual, &case[fidelity], 1e-12);
+            let differences =
+                support::json_close::json_differences(&actual, &case[fidelity], 1e-12);
             assert!(
                 differences.is_empty(),
                 "{name} {fidelity}: {differences:#?}"
@@ -133,24 +114,6 @@ fn every_subcommand_has_help() {
     }
 }
 
-fn write_temp(name: &str, contents: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("bouncewear-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join(name);
-    std::fs::write(&path, contents).unwrap();
-    path
-}
-
-fn run_job(path: &std::path::Path, threads: &str) -> Value {
-    let output = bouncewear(&["run", path.to_str().unwrap(), "--threads", threads], "");
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    serde_json::from_slice(&output.stdout).unwrap()
-}
-
 #[test]
 fn run_is_bit_identical_for_threads_1_2_3_and_on_a_rerun() {
     let job = serde_json::json!({
@@ -162,10 +125,9 @@ fn run_is_bit_identical_for_threads_1_2_3_and_on_a_rerun() {
             {"parameter": "impact_velocity_m_s", "per": "operation", "distribution": {"kind": "triangular", "min": 0.15, "mode": 0.22, "max": 0.3}}
         ]
     });
-    let path = write_temp("determinism.json", &job.to_string());
-    let reference = run_job(&path, "1");
+    let reference = run_job(&job, &["--threads", "1"]);
     for threads in ["2", "3", "1"] {
-        let again = run_job(&path, threads);
+        let again = run_job(&job, &["--threads", threads]);
         assert_eq!(
             again["operations"], reference["operations"],
             "threads {threads}"
@@ -184,7 +146,7 @@ fn one_device_job_equals_repeated_simulate_with_the_worn_radius() {
         "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
         "metrics": ["kappa", "e1", "total_bounce_s", "bounce_count", "arc_energy_j", "peak_force_n", "final_radius_m"]
     });
-    let result = run_job(&write_temp("one-device.json", &job.to_string()), "2");
+    let result = run_job(&job, &["--threads", "2"]);
     let (r0, r_inf, w_r) = (7.7e-3_f64, 0.711e-3_f64, 500.0_f64);
     let mut cumulative = 0.0;
     for op in 0..operations {
@@ -238,7 +200,8 @@ fn run_rejects_bad_jobs_naming_the_field() {
         (r#"{"devices": "many"}"#, "/devices"),
         (r#"{"devices": 1"#, "malformed JSON"),
     ] {
-        let path = write_temp("bad.json", job);
+        let path = temp_dir("bad-job").join("bad.json");
+        std::fs::write(&path, job).unwrap();
         let line = rejected(&["run", path.to_str().unwrap()], "");
         assert!(line.contains(pointer), "{job}: {line}");
     }
@@ -248,7 +211,7 @@ fn run_rejects_bad_jobs_naming_the_field() {
 
 #[test]
 fn bench_quick_writes_the_report_in_all_three_forms() {
-    let out = std::env::temp_dir().join(format!("bouncewear-bench-{}", std::process::id()));
+    let out = temp_dir("bench");
     let output = bouncewear(&["bench", "--quick", "--out", out.to_str().unwrap()], "");
     assert!(
         output.status.success(),

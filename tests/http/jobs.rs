@@ -1,0 +1,371 @@
+//! `/v1/jobs`: submission to result, listing, cancelling, the queue bound, life, and every 4xx.
+
+use crate::support::app::{Service, TestApp};
+use crate::support::client::{agent, assert_problem, delete, get, post, reply};
+use crate::support::{run_job, scattered_job, temp_db, wearing_template};
+use serde_json::{Value, json};
+use std::io::{BufRead, BufReader};
+use std::time::Duration;
+
+#[test]
+fn a_job_goes_from_submission_to_result_with_live_progress() {
+    let server = TestApp::start(&temp_db("lifecycle"), &[]);
+    let job = scattered_job(3000, 400, 77);
+    let id = server.submit(&job);
+
+    // Server-Sent Events: progress while it runs, then the final status.
+    let mut events = agent()
+        .get(&server.url(&format!("/v1/jobs/{id}/events")))
+        .call()
+        .unwrap();
+    assert!(
+        events
+            .headers()
+            .get("content-type")
+            .unwrap()
+            .to_str()
+            .unwrap()
+            .starts_with("text/event-stream")
+    );
+    let lines: Vec<String> = BufReader::new(events.body_mut().as_reader())
+        .lines()
+        .map(Result::unwrap)
+        .collect();
+    let progress: Vec<Value> = lines
+        .windows(2)
+        .filter(|w| w[0] == "event: progress")
+        .map(|w| serde_json::from_str(w[1].trim_start_matches("data: ")).unwrap())
+        .collect();
+    assert!(!progress.is_empty(), "{lines:?}");
+    let done: Vec<u64> = progress
+        .iter()
+        .map(|p| p["operations_done"].as_u64().unwrap())
+        .collect();
+    assert!(
+        done.windows(2).all(|w| w[0] <= w[1]),
+        "progress never goes back: {done:?}"
+    );
+    let last = lines
+        .iter()
+        .position(|l| l == "event: status")
+        .expect("a final status event");
+    let final_status: Value =
+        serde_json::from_str(lines[last + 1].trim_start_matches("data: ")).unwrap();
+    assert_eq!(final_status["status"], "succeeded");
+
+    let status = get(&server.url(&format!("/v1/jobs/{id}")), None).json();
+    assert_eq!(status["progress"]["operations_done"], 3000 * 400);
+    assert_eq!(
+        (status["seed"].as_u64(), status["name"].as_str()),
+        (Some(77), Some("lifecycle"))
+    );
+    for field in ["created_at", "started_at", "finished_at"] {
+        assert!(status[field].is_string(), "{field}");
+    }
+
+    let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None);
+    assert_eq!(result.status, 200);
+    let (result, local) = (result.json(), run_job(&job, &[]));
+    assert_eq!(
+        result["operations"], local["operations"],
+        "server and CLI agree to the bit"
+    );
+    assert_eq!(result["devices"], local["devices"]);
+
+    let distribution = get(
+        &server.url(&format!(
+            "/v1/jobs/{id}/distributions/total_bounce_s?op_start=100&op_end=200"
+        )),
+        None,
+    );
+    assert_eq!(distribution.status, 200);
+    let bins = distribution.json()["bins"].as_array().unwrap().clone();
+    assert_eq!(
+        bins.len(),
+        3,
+        "bins of 40 operations overlapping [100, 200): 80-120, 120-160, 160-200"
+    );
+    assert_eq!(bins[0]["op_start"], 80);
+    assert_eq!(bins[0]["exceedance"]["limit"], 0.011);
+    let csv = get(
+        &server.url(&format!(
+            "/v1/jobs/{id}/distributions/total_bounce_s?format=csv"
+        )),
+        None,
+    );
+    assert!(csv.content_type.starts_with("text/csv"));
+    let rows: Vec<&str> = csv.body.lines().collect();
+    assert_eq!(rows.len(), 1 + 10);
+    assert!(rows[0].starts_with("op_start,op_end,n,mean"));
+    assert!(rows[1].starts_with("0,40,120000,"));
+    let device = get(
+        &server.url(&format!("/v1/jobs/{id}/distributions/final_radius_m")),
+        None,
+    )
+    .json();
+    assert_eq!(
+        (device["kind"].as_str(), device["bins"][0]["n"].as_u64()),
+        (Some("device"), Some(3000))
+    );
+}
+
+#[test]
+fn jobs_are_listed_newest_first_with_cursor_paging() {
+    let server = TestApp::start(&temp_db("paging"), &[]);
+    let ids: Vec<String> = (0..5)
+        .map(|seed| server.submit(&json!({"devices": 1, "operations": 1, "seed": seed})))
+        .collect();
+    let mut seen = Vec::new();
+    let mut cursor: Option<String> = None;
+    loop {
+        let query = cursor
+            .as_ref()
+            .map_or(String::new(), |c| format!("&cursor={c}"));
+        let page = get(&server.url(&format!("/v1/jobs?limit=2{query}")), None).json();
+        seen.extend(
+            page["jobs"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|j| j["id"].as_str().unwrap().to_owned()),
+        );
+        match page["next_cursor"].as_str() {
+            Some(next) => cursor = Some(next.to_owned()),
+            None => break,
+        }
+    }
+    let newest_first: Vec<String> = ids.into_iter().rev().collect();
+    assert_eq!(seen, newest_first);
+}
+
+#[test]
+fn cancelling_stops_a_running_job_and_only_once() {
+    let server = TestApp::start(&temp_db("cancel"), &[]);
+    let id = server.submit(&scattered_job(200_000, 1000, 1));
+    server.wait_for(&id, "running", Duration::from_secs(10));
+    let cancelled = delete(&server.url(&format!("/v1/jobs/{id}")));
+    assert_eq!(
+        (cancelled.status, cancelled.json()["status"].as_str()),
+        (200, Some("cancelled"))
+    );
+    assert_eq!(delete(&server.url(&format!("/v1/jobs/{id}"))).status, 409);
+    assert_eq!(
+        get(&server.url(&format!("/v1/jobs/{id}/result")), None).status,
+        409
+    );
+    // the worker is free again: a small job runs to the end
+    let next = server.submit(&json!({"devices": 2, "operations": 2, "seed": 1}));
+    server.wait_for(&next, "succeeded", Duration::from_secs(20));
+    assert_eq!(
+        get(&server.url(&format!("/v1/jobs/{id}")), None).json()["status"],
+        "cancelled"
+    );
+}
+
+#[test]
+fn two_hundred_concurrent_submissions_are_all_accepted_or_refused_with_429() {
+    let server = TestApp::start(&temp_db("concurrent"), &["--max-queued", "150"]);
+    let url = server.url("/v1/jobs");
+    let threads: Vec<_> = (0..200)
+        .map(|seed| {
+            let url = url.clone();
+            std::thread::spawn(move || {
+                let reply = post(
+                    &url,
+                    &json!({"devices": 1, "operations": 2000, "seed": seed}).to_string(),
+                    None,
+                );
+                let retry_after = reply.headers.get("retry-after").is_some();
+                (
+                    reply.status,
+                    retry_after,
+                    reply.json()["id"].as_str().map(str::to_owned),
+                )
+            })
+        })
+        .collect();
+    let replies: Vec<_> = threads.into_iter().map(|t| t.join().unwrap()).collect();
+    assert!(
+        replies
+            .iter()
+            .all(|(status, ..)| *status == 202 || *status == 429),
+        "{:?}",
+        replies.iter().map(|r| r.0).collect::<Vec<_>>()
+    );
+    assert!(
+        replies.iter().filter(|r| r.0 == 429).all(|r| r.1),
+        "429 carries Retry-After"
+    );
+    let mut accepted: Vec<String> = replies
+        .into_iter()
+        .filter(|r| r.0 == 202)
+        .filter_map(|r| r.2)
+        .collect();
+    assert!(accepted.len() >= 150);
+    let mut listed = Vec::new();
+    let mut cursor = String::new();
+    loop {
+        let page = get(&server.url(&format!("/v1/jobs?limit=100{cursor}")), None).json();
+        listed.extend(
+            page["jobs"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|j| j["id"].as_str().unwrap().to_owned()),
+        );
+        match page["next_cursor"].as_str() {
+            Some(next) => cursor = format!("&cursor={next}"),
+            None => break,
+        }
+    }
+    accepted.sort();
+    listed.sort();
+    assert_eq!(
+        accepted, listed,
+        "every accepted job is stored, nothing else"
+    );
+}
+
+#[test]
+fn bad_requests_get_the_right_4xx_problem() {
+    let server = TestApp::start(
+        &temp_db("bad"),
+        &[
+            "--max-body-bytes",
+            "4096",
+            "--max-job-operations",
+            "1000000",
+        ],
+    );
+    let jobs = server.url("/v1/jobs");
+    assert_problem(&post(&jobs, "{\"devices\": 1", None), 400);
+    assert_problem(&post(&jobs, "[1, 2]", None), 422);
+    assert_problem(
+        &reply(
+            agent()
+                .post(&jobs)
+                .header("content-type", "text/plain")
+                .send("{}"),
+        ),
+        415,
+    );
+    assert_problem(&reply(agent().post(&jobs).send("{}")), 415);
+    assert_problem(
+        &post(
+            &jobs,
+            &format!("{{\"name\": \"{}\"}}", "x".repeat(5000)),
+            None,
+        ),
+        413,
+    );
+    let invalid = assert_problem(
+        &post(
+            &jobs,
+            r#"{"devices": 0, "scenario": {"mechanism": {"static_force_n": -1}}}"#,
+            None,
+        ),
+        422,
+    );
+    let pointers: Vec<&str> = invalid["errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["pointer"].as_str().unwrap())
+        .collect();
+    assert!(
+        pointers.contains(&"/devices") && pointers.contains(&"/scenario/mechanism/static_force_n"),
+        "{pointers:?}"
+    );
+    let too_big = assert_problem(
+        &post(&jobs, r#"{"devices": 10000, "operations": 1000}"#, None),
+        422,
+    );
+    assert_eq!(too_big["errors"][0]["pointer"], "/devices");
+    assert_problem(
+        &post(
+            &server.url("/v1/simulate"),
+            r#"{"losses": {"max_bounces": 0}}"#,
+            None,
+        ),
+        422,
+    );
+    assert_problem(
+        &post(&server.url("/v1/simulate?fidelity=fast"), "{}", None),
+        400,
+    );
+    assert_problem(&get(&server.url("/v1/jobs/no-such-job"), None), 404);
+    assert_problem(&get(&server.url("/v1/jobs/no-such-job/result"), None), 404);
+    assert_problem(&delete(&server.url("/v1/jobs/no-such-job")), 404);
+    assert_problem(&get(&server.url("/v1/nothing-here"), None), 404);
+    assert_problem(&get(&server.url("/v1/jobs?limit=0"), None), 400);
+    assert_problem(&get(&server.url("/v1/jobs?cursor=abc"), None), 400);
+    assert_problem(
+        &reply(
+            agent()
+                .put(&jobs)
+                .header("content-type", "application/json")
+                .send("{}"),
+        ),
+        405,
+    );
+    let id = server.submit(&json!({"devices": 1, "operations": 1, "seed": 1}));
+    server.wait_for(&id, "succeeded", Duration::from_secs(20));
+    assert_problem(
+        &get(
+            &server.url(&format!("/v1/jobs/{id}/distributions/bogus")),
+            None,
+        ),
+        404,
+    );
+    assert_problem(
+        &get(
+            &server.url(&format!(
+                "/v1/jobs/{id}/distributions/e1?op_start=5&op_end=2"
+            )),
+            None,
+        ),
+        400,
+    );
+    let cancelled = server.submit(&json!({"devices": 1000, "operations": 1000, "seed": 1}));
+    delete(&server.url(&format!("/v1/jobs/{cancelled}")));
+    assert_problem(
+        &get(&server.url(&format!("/v1/jobs/{cancelled}/result")), None),
+        409,
+    );
+    assert_problem(
+        &get(
+            &server.url(&format!("/v1/jobs/{cancelled}/distributions/e1")),
+            None,
+        ),
+        409,
+    );
+}
+
+#[test]
+fn life_analysis_is_served_as_json_and_per_device_csv() {
+    let server = TestApp::start(&temp_db("life"), &[]);
+    let id = server.submit(&wearing_template(48.0));
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let life = get(&server.url(&format!("/v1/jobs/{id}/life")), None);
+    assert_eq!(life.status, 200, "{}", life.body);
+    let life = life.json();
+    assert_eq!(
+        life["failures"].as_u64().unwrap() + life["censored"].as_u64().unwrap(),
+        60
+    );
+    assert!(life["analysis"]["weibull"]["beta"].as_f64().unwrap() > 0.0);
+    assert!(life["analysis"]["b10"]["ci95"].is_array());
+    let csv = get(&server.url(&format!("/v1/jobs/{id}/life?format=csv")), None);
+    let rows: Vec<&str> = csv.body.lines().collect();
+    assert_eq!(rows[0], "device,operations_to_failure,censored");
+    assert_eq!(rows.len(), 61);
+    assert!(rows[1].starts_with("0,"));
+    let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
+    assert_eq!(result["life"], life, "the Result carries the same life");
+    let plain = server.submit(&json!({"devices": 1, "operations": 1, "seed": 1}));
+    server.wait_for(&plain, "succeeded", Duration::from_secs(20));
+    assert_problem(
+        &get(&server.url(&format!("/v1/jobs/{plain}/life")), None),
+        404,
+    );
+}

@@ -1,0 +1,10 @@
+//! The HTTP API of docs/contract.md against the real application, run in-process on a real
+//! database file and port, one module per resource.
+
+#[path = "../support/mod.rs"]
+mod support;
+
+mod jobs;
+mod schedules;
+mod simulate;
+mod system;

@@ -1,0 +1,139 @@
+//! `/v1/schedules`: runs, the trend with drift flags, and invalid schedules.
+
+use crate::support::app::{Service, TestApp};
+use crate::support::client::{agent, assert_problem, get, post, put, reply};
+use crate::support::{temp_db, wearing_template};
+use serde_json::json;
+use std::time::Duration;
+
+#[test]
+fn schedules_run_now_and_report_a_trend_with_drift_flags() {
+    let server = TestApp::start(&temp_db("schedules"), &[]);
+    let schedules = server.url("/v1/schedules");
+    let body = json!({"name": "nightly wear", "cron": "0 3 * * *", "time_zone": "Europe/Berlin",
+                      "template": wearing_template(48.0), "statistics": ["operations.total_bounce_s.p95", "life.b10"]});
+    let created = post(&schedules, &body.to_string(), None);
+    assert_eq!(created.status, 201, "{}", created.body);
+    let schedule = created.json();
+    let id = schedule["id"].as_str().unwrap().to_owned();
+    assert_eq!(
+        created.headers.get("location").unwrap().to_str().unwrap(),
+        format!("/v1/schedules/{id}")
+    );
+    assert!(schedule["next_run_at"].as_str().unwrap().ends_with('Z'));
+    assert_eq!(
+        get(&schedules, None).json()["schedules"]
+            .as_array()
+            .unwrap()
+            .len(),
+        1
+    );
+
+    let run_now = |server: &TestApp| {
+        let reply = post(&server.url(&format!("/v1/schedules/{id}/run")), "", None);
+        assert_eq!(reply.status, 202, "{}", reply.body);
+        let job = reply.json()["id"].as_str().unwrap().to_owned();
+        server.wait_for(&job, "succeeded", Duration::from_secs(60));
+    };
+    run_now(&server);
+    run_now(&server);
+    // The same template and seed: the same numbers, so no drift.
+    let trend = get(&server.url(&format!("/v1/schedules/{id}/runs")), None).json();
+    let runs = trend["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    for run in runs {
+        assert_eq!(run["manual"], true);
+        for statistic in ["operations.total_bounce_s.p95", "life.b10"] {
+            let value = &run["values"][statistic];
+            assert!(value["value"].as_f64().unwrap() > 0.0, "{statistic}: {run}");
+            assert_eq!(value["drift"], false);
+        }
+    }
+    // A much higher supply voltage changes the wear: the next night leaves the interval.
+    let changed = json!({"name": "nightly wear", "cron": "0 3 * * *", "time_zone": "Europe/Berlin",
+                         "template": wearing_template(120.0), "statistics": ["operations.total_bounce_s.p95", "life.b10"]});
+    assert_eq!(
+        put(
+            &server.url(&format!("/v1/schedules/{id}")),
+            &changed.to_string()
+        )
+        .status,
+        200
+    );
+    run_now(&server);
+    let trend = get(&server.url(&format!("/v1/schedules/{id}/runs")), None).json();
+    let last = trend["runs"].as_array().unwrap().last().unwrap().clone();
+    assert_eq!(
+        last["values"]["operations.total_bounce_s.p95"]["drift"], true,
+        "{last}"
+    );
+    let svg = get(
+        &server.url(&format!("/v1/schedules/{id}/plots/trend.svg")),
+        None,
+    );
+    assert_eq!(svg.status, 200);
+    assert!(svg.body.starts_with("<svg"));
+
+    assert_eq!(
+        reply(
+            agent()
+                .delete(&server.url(&format!("/v1/schedules/{id}")))
+                .call()
+        )
+        .status,
+        204
+    );
+    assert_problem(&get(&server.url(&format!("/v1/schedules/{id}")), None), 404);
+}
+
+#[test]
+fn bad_schedules_name_their_field() {
+    let server = TestApp::start(&temp_db("bad-schedules"), &[]);
+    let schedules = server.url("/v1/schedules");
+    for (body, pointer) in [
+        (
+            json!({"name": "x", "cron": "every night", "template": {}}),
+            "/cron",
+        ),
+        (
+            json!({"name": "x", "cron": "0 3 * * *", "time_zone": "Mars/Olympus", "template": {}}),
+            "/time_zone",
+        ),
+        (
+            json!({"name": "x", "cron": "0 3 * * *", "template": {"devices": 0}}),
+            "/template/devices",
+        ),
+        (
+            json!({"name": "x", "cron": "0 3 * * *", "template": {}, "statistics": ["operations.e1.p42"]}),
+            "/statistics/0",
+        ),
+        (
+            json!({"name": "", "cron": "0 3 * * *", "template": {}}),
+            "/name",
+        ),
+        (json!({"cron": "0 3 * * *", "template": {}}), "malformed"),
+    ] {
+        let reply = post(&schedules, &body.to_string(), None);
+        assert!(
+            reply.status == 422 || reply.status == 400,
+            "{body}: {}",
+            reply.body
+        );
+        assert!(
+            reply.body.contains(pointer) || reply.status == 422,
+            "{body}: {}",
+            reply.body
+        );
+        if reply.status == 422 && pointer.starts_with('/') {
+            let problem = reply.json();
+            assert!(
+                problem["errors"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|e| e["pointer"] == pointer),
+                "{body}: {problem}"
+            );
+        }
+    }
+}

@@ -1,0 +1,84 @@
+//! The service as a process: what only a real process shows (SIGKILL, SIGTERM, refusing to
+//! start), through the binary.
+
+#[path = "support/mod.rs"]
+mod support;
+
+use serde_json::json;
+use std::process::Command;
+use std::time::{Duration, Instant};
+use support::app::{Service, Spawned};
+use support::client::{delete, get};
+use support::{BIN, run_job, scattered_job, temp_db};
+
+#[test]
+fn a_job_killed_mid_run_finishes_after_restart_with_the_identical_result() {
+    let database = temp_db("crash");
+    let job = scattered_job(20_000, 300, 4242);
+    let server = Spawned::start(&database, &["--lease-seconds", "1"]);
+    let id = server.submit(&job);
+    let queued = server.submit(&json!({"devices": 3, "operations": 3, "seed": 5}));
+    let started = Instant::now();
+    loop {
+        let status = get(&server.url(&format!("/v1/jobs/{id}")), None).json();
+        if status["progress"]["operations_done"].as_u64().unwrap() > 0 {
+            assert_eq!(status["status"], "running");
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(20),
+            "never started: {status}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    server.kill(); // SIGKILL: no shutdown handler runs
+
+    let server = Spawned::start(&database, &["--lease-seconds", "1"]);
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    server.wait_for(&queued, "succeeded", Duration::from_secs(60));
+    let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
+    let local = run_job(&job, &[]);
+    assert_eq!(result["operations"], local["operations"]);
+    assert_eq!(result["devices"], local["devices"]);
+}
+
+#[test]
+fn sigterm_hands_a_running_job_back_to_the_queue() {
+    let database = temp_db("sigterm");
+    let server = Spawned::start(&database, &[]);
+    let id = server.submit(&scattered_job(200_000, 1000, 3));
+    server.wait_for(&id, "running", Duration::from_secs(10));
+    let pid = server.child.id();
+    let status = Command::new("kill")
+        .args(["-TERM", &pid.to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let mut server = server;
+    let exit = server.child.wait().unwrap();
+    assert!(exit.success(), "{exit:?}");
+    let server = Spawned::start(&database, &["--workers", "0"]);
+    let job = get(&server.url(&format!("/v1/jobs/{id}")), None).json();
+    assert!(
+        job["status"] == "queued" || job["status"] == "running",
+        "{job}"
+    );
+    delete(&server.url(&format!("/v1/jobs/{id}")));
+}
+
+#[test]
+fn serve_refuses_a_public_bind_without_keys() {
+    let output = Command::new(BIN)
+        .args([
+            "serve",
+            "--bind",
+            "0.0.0.0:0",
+            "--database",
+            "sqlite::memory:",
+        ])
+        .env_remove("BOUNCEWEAR_API_KEYS")
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("--api-key"));
+}

@@ -1,0 +1,173 @@
+//! The service under test: in-process ([`TestApp`], most tests) or as a child process
+//! ([`Spawned`], for what only a process can show: SIGKILL, SIGTERM, start-up refusals).
+//! Both take `bouncewear serve`'s flags, bind port 0 and use their own database.
+
+use super::BIN;
+use super::client::{get, post};
+use bouncewear::app::Application;
+use bouncewear::config::ServeConfig;
+use clap::Parser;
+use serde_json::Value;
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A running service, however it runs.
+pub trait Service {
+    /// `http://127.0.0.1:PORT`.
+    fn base(&self) -> &str;
+
+    fn url(&self, path: &str) -> String {
+        format!("{}{path}", self.base())
+    }
+
+    /// Submits a job, checks the 202 and its Location, and returns the job's id.
+    fn submit(&self, job: &Value) -> String {
+        let reply = post(&self.url("/v1/jobs"), &job.to_string(), None);
+        assert_eq!(reply.status, 202, "{}", reply.body);
+        let id = reply.json()["id"].as_str().unwrap().to_owned();
+        assert_eq!(reply.header("location"), Some(&*format!("/v1/jobs/{id}")));
+        id
+    }
+
+    /// Polls the job until it has `status`; returns the job resource.
+    fn wait_for(&self, id: &str, status: &str, timeout: Duration) -> Value {
+        let started = Instant::now();
+        loop {
+            let job = get(&self.url(&format!("/v1/jobs/{id}")), None).json();
+            if job["status"] == status {
+                return job;
+            }
+            assert!(
+                started.elapsed() < timeout,
+                "job {id} is {} after {timeout:?}",
+                job["status"]
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+/// The application on its own runtime in a thread of the test process; dropping it shuts it down
+/// as SIGTERM would (running jobs go back to the queue) and waits for that.
+pub struct TestApp {
+    base: String,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+/// `bouncewear serve`'s flags, parsed as the binary parses them.
+#[derive(Parser)]
+struct Serve {
+    #[command(flatten)]
+    config: ServeConfig,
+}
+
+impl TestApp {
+    pub fn start(database: &Path, args: &[&str]) -> Self {
+        let url = format!("sqlite://{}", database.display());
+        let flags = ["serve", "--bind", "127.0.0.1:0", "--database", &url];
+        let config = Serve::try_parse_from(flags.iter().chain(args))
+            .expect("valid flags")
+            .config;
+        let (address_sender, address) = std::sync::mpsc::channel();
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        let thread = std::thread::spawn(move || {
+            let runtime = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(2)
+                .enable_all()
+                .build()
+                .unwrap();
+            runtime.block_on(async move {
+                let application = Application::build(config)
+                    .await
+                    .expect("the service starts");
+                address_sender.send(application.address()).unwrap();
+                application
+                    .run_until_stopped(async {
+                        let _ = stopped.await;
+                    })
+                    .await
+                    .expect("the service stops cleanly");
+            });
+        });
+        let address = address.recv().expect("the service starts");
+        Self {
+            base: format!("http://{address}"),
+            stop: Some(stop),
+            thread: Some(thread),
+        }
+    }
+}
+
+impl Service for TestApp {
+    fn base(&self) -> &str {
+        &self.base
+    }
+}
+
+impl Drop for TestApp {
+    fn drop(&mut self) {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        if let Some(thread) = self.thread.take()
+            && thread.join().is_err()
+            && !std::thread::panicking()
+        {
+            panic!("the service's thread panicked");
+        }
+    }
+}
+
+/// `bouncewear serve` as a child process; killed when dropped.
+pub struct Spawned {
+    pub child: Child,
+    base: String,
+}
+
+impl Spawned {
+    pub fn start(database: &Path, args: &[&str]) -> Self {
+        let url = format!("sqlite://{}", database.display());
+        let mut child = Command::new(BIN)
+            .args(["serve", "--bind", "127.0.0.1:0", "--database", &url])
+            .args(args)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("server starts");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let base = line
+            .trim()
+            .rsplit(' ')
+            .next()
+            .expect("listening line")
+            .to_owned();
+        assert!(base.starts_with("http://127.0.0.1:"), "{line}");
+        Self { child, base }
+    }
+
+    /// SIGKILL: no shutdown handler runs.
+    pub fn kill(mut self) {
+        self.child.kill().unwrap();
+        self.child.wait().unwrap();
+    }
+}
+
+impl Service for Spawned {
+    fn base(&self) -> &str {
+        &self.base
+    }
+}
+
+impl Drop for Spawned {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}

@@ -1,0 +1,84 @@
+//! What the integration tests share: the binary, temporary files, an HTTP client, the service run
+//! in-process or as a child process, and the jobs the tests submit. Each test binary uses a part
+//! of it.
+#![allow(dead_code)]
+
+pub mod app;
+pub mod client;
+pub mod json_close;
+
+use serde_json::{Value, json};
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::{Command, Output, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+pub const BIN: &str = env!("CARGO_BIN_EXE_bouncewear");
+
+/// A fresh directory for one test, named after it.
+pub fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("bouncewear-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A database file of its own for one test.
+pub fn temp_db(name: &str) -> PathBuf {
+    temp_dir(name).join("bouncewear.db")
+}
+
+/// Runs the binary with `args`, `stdin` on its standard input.
+pub fn bouncewear(args: &[&str], stdin: &str) -> Output {
+    let mut child = Command::new(BIN)
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("bouncewear runs");
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(stdin.as_bytes())
+        .unwrap();
+    child.wait_with_output().unwrap()
+}
+
+/// `bouncewear run` of a job (from a file) with extra arguments: the Result, which must come.
+pub fn run_job(job: &Value, args: &[&str]) -> Value {
+    static RUNS: AtomicUsize = AtomicUsize::new(0);
+    let path = temp_dir(&format!("run-{}", RUNS.fetch_add(1, Ordering::Relaxed))).join("job.json");
+    std::fs::write(&path, job.to_string()).unwrap();
+    let output = bouncewear(&[&["run", path.to_str().unwrap()], args].concat(), "");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).unwrap()
+}
+
+/// A job at 48 V / 15 A with the radius scattered per device and the velocity per operation.
+pub fn scattered_job(devices: u64, operations: u64, seed: u64) -> Value {
+    json!({
+        "name": "lifecycle", "devices": devices, "operations": operations, "seed": seed,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "scatter": [
+            {"parameter": "contact_radius_m", "per": "device", "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 0.8e-3, "min": 1e-3}},
+            {"parameter": "impact_velocity_m_s", "per": "operation", "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.05}}
+        ],
+        "limits": {"total_bounce_s": 0.011}
+    })
+}
+
+/// A job whose devices wear out: they fail when e1 falls below 0.33 (a life analysis follows).
+pub fn wearing_template(supply_voltage_v: f64) -> Value {
+    json!({
+        "devices": 60, "operations": 300, "seed": 11,
+        "scenario": {"circuit": {"supply_voltage_v": supply_voltage_v, "current_a": 15}},
+        "scatter": [{"parameter": "contact_radius_m", "per": "device", "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 1.5e-3, "min": 1e-3}}],
+        "failure": {"e1": {"below": 0.33}}
+    })
+}
