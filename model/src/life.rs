@@ -11,7 +11,7 @@
 //! | quantity | estimate | bounds |
 //! |---|---|---|
 //! | Weibull `beta`, `eta` | MLE, profile equation in `beta` ([`fit_weibull`]) | Fisher matrix, log-transformed Wald |
-//! | `B_p` | `eta (-ln(1 - p))^(1/beta)` ([`b_life`]) | delta method on `ln B_p`, same covariance |
+//! | `B_p` | `eta (-ln(1 - p))^(1/beta)` ([`Weibull::quantile`]) | delta method on `ln B_p`, same covariance ([`Weibull::quantile_bounds`]) |
 //! | `R(t)` | Kaplan-Meier ([`kaplan_meier`]) | Greenwood variance, log-log transformed |
 //!
 //! Every number in the serialised results is finite: what cannot be computed is `None`.
@@ -75,7 +75,7 @@ pub struct BLife {
     pub p: f64,
     /// `B_p = eta (-ln(1 - p))^(1/beta)`, operations.
     pub value: f64,
-    /// 95 % bounds `[lower, upper]` by the delta method on `ln B_p` ([`b_life`]).
+    /// 95 % bounds `[lower, upper]` by the delta method on `ln B_p` ([`Weibull::quantile_bounds`]).
     pub ci95: [f64; 2],
 }
 
@@ -364,29 +364,72 @@ fn log_wald_interval(x: f64, se_ln: f64) -> [f64; 2] {
     [x * (-Z_975 * se_ln).exp(), x * (Z_975 * se_ln).exp()]
 }
 
-/// `B_p = eta (-ln(1 - p))^(1/beta)` with 95 % bounds by the delta method on
-/// `ln B_p = u + k e^(-v)`, `(u, v) = (ln eta, ln beta)`, `k = ln(-ln(1 - p))`:
-///
-/// `Var(ln B_p) = C_uu - 2 (k/beta) C_uv + (k/beta)^2 C_vv`, bounds `B_p e^(-+ z sqrt(Var))`
-///
-/// (the bounds on time of Weibull++ and `reliability`). `None` if `p` is not in `(0, 1)` or a
-/// number would not be finite.
-pub fn b_life(weibull: &Weibull, p: f64) -> Option<BLife> {
-    if !(p > 0.0 && p < 1.0) {
-        return None;
-    }
-    let k_over_beta = (-(-p).ln_1p()).ln() / weibull.beta;
-    let value = weibull.eta * k_over_beta.exp();
-    let ci95 = log_wald_interval(
-        value,
-        b_life_ln_variance(&weibull.covariance_ln, k_over_beta).sqrt(),
-    );
-    (value.is_finite() && ci95.iter().all(|b| b.is_finite())).then_some(BLife { p, value, ci95 })
+/// `ln(-ln(1 - p))`, the Weibull probability scale: on it `ln t_p = ln eta + y / beta` is a straight
+/// line, which is why probability plots and the bounds below use it as their variable.
+pub fn weibull_scale(p: f64) -> f64 {
+    (-(-p).ln_1p()).ln()
 }
 
-/// `Var(ln B_p)` from the covariance of `(ln eta, ln beta)`: the gradient of `ln B_p` is
-/// `(1, -k/beta)`.
-fn b_life_ln_variance(c: &[[f64; 2]; 2], k_over_beta: f64) -> f64 {
+impl Weibull {
+    /// `t_p = eta (-ln(1 - p))^(1/beta)`, the time by which a fraction `p` has failed (`B_p`).
+    /// `None` if `p` is not in `(0, 1)` or the time is not a finite positive number.
+    pub fn quantile(&self, p: f64) -> Option<f64> {
+        if !in_unit_interval(p) {
+            return None;
+        }
+        self.quantile_at_scale(weibull_scale(p))
+    }
+
+    /// 95 % bounds `[lower, upper]` on [`Weibull::quantile`], see
+    /// [`Weibull::quantile_bounds_at_scale`]; `None` if `p` is not in `(0, 1)` or a bound is not
+    /// finite.
+    pub fn quantile_bounds(&self, p: f64) -> Option<[f64; 2]> {
+        if !in_unit_interval(p) {
+            return None;
+        }
+        let bounds = self.quantile_bounds_at_scale(weibull_scale(p))?;
+        bounds.iter().all(|b| b.is_finite()).then_some(bounds)
+    }
+
+    /// The time at `y` on the [`weibull_scale`], `eta e^(y/beta)`: a plot walks along `y`, so it
+    /// should not round-trip through `p`. `None` unless finite and positive.
+    pub fn quantile_at_scale(&self, y: f64) -> Option<f64> {
+        let t = self.eta * (y / self.beta).exp();
+        (t.is_finite() && t > 0.0).then_some(t)
+    }
+
+    /// 95 % bounds on the time at `y` on the [`weibull_scale`], by the delta method on
+    /// `ln t = u + y e^(-v)`, `(u, v) = (ln eta, ln beta)`:
+    ///
+    /// `Var(ln t) = C_uu - 2 (y/beta) C_uv + (y/beta)^2 C_vv`, bounds `t e^(-+ z sqrt(Var))`
+    ///
+    /// (the bounds on time of Weibull++ and `reliability`). `None` when the time is not finite or
+    /// the variance is not usable (a covariance that is not positive definite). A bound beyond the
+    /// range of `f64` is `0` or infinite rather than `None`, so that a plot can still draw the other.
+    pub fn quantile_bounds_at_scale(&self, y: f64) -> Option<[f64; 2]> {
+        let t = self.quantile_at_scale(y)?;
+        let variance = quantile_ln_variance(&self.covariance_ln, y / self.beta);
+        (variance.is_finite() && variance >= 0.0).then(|| log_wald_interval(t, variance.sqrt()))
+    }
+}
+
+fn in_unit_interval(p: f64) -> bool {
+    p > 0.0 && p < 1.0
+}
+
+/// `B_p` and its bounds: [`Weibull::quantile`] and [`Weibull::quantile_bounds`]. `None` if `p` is
+/// not in `(0, 1)` or a number would not be finite.
+pub fn b_life(weibull: &Weibull, p: f64) -> Option<BLife> {
+    Some(BLife {
+        p,
+        value: weibull.quantile(p)?,
+        ci95: weibull.quantile_bounds(p)?,
+    })
+}
+
+/// `Var(ln t_p)` from the covariance of `(ln eta, ln beta)`: the gradient of `ln t_p` is
+/// `(1, -k/beta)` with `k` the [`weibull_scale`] of `p`.
+fn quantile_ln_variance(c: &[[f64; 2]; 2], k_over_beta: f64) -> f64 {
     c[0][0] - 2.0 * k_over_beta * c[0][1] + k_over_beta * k_over_beta * c[1][1]
 }
 
@@ -1016,6 +1059,35 @@ mod tests {
         assert_eq!(b_life(&w, 0.0), None);
         assert_eq!(b_life(&w, 1.0), None);
         assert_eq!(b_life(&w, f64::NAN), None);
+    }
+
+    #[test]
+    fn the_quantile_at_one_minus_one_over_e_is_eta() {
+        let w = fit_weibull(&small()).unwrap();
+        let p = -(-1.0f64).exp_m1();
+        assert_relative_eq!(w.quantile(p).unwrap(), w.eta, max_relative = 1e-12);
+        assert!(weibull_scale(p).abs() < 1e-15);
+    }
+
+    #[test]
+    fn quantile_bounds_are_centred_on_the_quantile_in_log_time() {
+        let w = fit_weibull(&heavy_censoring()).unwrap();
+        for p in [1e-4, 0.01, 0.5, 0.99] {
+            let t = w.quantile(p).unwrap();
+            let [lo, hi] = w.quantile_bounds(p).unwrap();
+            assert_relative_eq!((lo * hi).sqrt(), t, max_relative = 1e-12);
+        }
+        assert_eq!(w.quantile(0.0), None);
+        assert_eq!(w.quantile_bounds(1.0), None);
+    }
+
+    #[test]
+    fn quantile_bounds_need_a_positive_definite_covariance() {
+        let mut w = fit_weibull(&small()).unwrap();
+        w.covariance_ln = [[-1.0, 0.0], [0.0, -1.0]];
+        assert!(w.quantile(0.1).is_some());
+        assert_eq!(w.quantile_bounds(0.1), None);
+        assert_eq!(w.quantile_bounds_at_scale(0.0), None);
     }
 
     /// Every number in `a` is finite, and what `analyse` promises about its parts holds.
