@@ -10,7 +10,7 @@
 use std::fmt::Write as _;
 
 use bouncewear_model::life::{KaplanMeierPoint, LifeAnalysis, weibull_scale};
-use bouncewear_model::montecarlo::Bin;
+use bouncewear_model::montecarlo::{Bin, JobResult};
 
 const FONT: &str =
     "system-ui, -apple-system, 'Segoe UI', Roboto, 'Helvetica Neue', Arial, sans-serif";
@@ -26,6 +26,37 @@ const RED: &str = "#dc2626";
 // ---------------------------------------------------------------------------------------------
 // Public API
 // ---------------------------------------------------------------------------------------------
+
+/// Why a job has no plot of the kind asked for: the caller's choice of plot or metric, not a fault.
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    #[error("the job has no operation metric `{0}`")]
+    NoMetric(String),
+    #[error("the job has no failure criteria, so no Weibull plot")]
+    NoLifeAnalysis,
+    #[error("no plot `{0}`: bands.svg, histograms.svg or weibull.svg")]
+    NoSuchPlot(String),
+}
+
+/// The plot `kind` (`bands.svg`, `histograms.svg` or `weibull.svg`) of a job's result, by the
+/// file name the dashboard and `bouncewear run --plots` both use.
+pub fn job_plot(result: &JobResult, kind: &str, metric: &str) -> Result<String, PlotError> {
+    let bins = || {
+        result
+            .operations
+            .get(metric)
+            .ok_or_else(|| PlotError::NoMetric(metric.to_owned()))
+    };
+    match kind {
+        "bands.svg" => Ok(quantile_bands_svg(metric, bins()?)),
+        "histograms.svg" => Ok(histograms_svg(metric, bins()?)),
+        "weibull.svg" => match &result.life {
+            Some(life) => Ok(weibull_svg(&life.analysis)),
+            None => Err(PlotError::NoLifeAnalysis),
+        },
+        other => Err(PlotError::NoSuchPlot(other.to_owned())),
+    }
+}
 
 /// Small multiples of the histogram of `metric` in each bin of operations (at most 12 panels,
 /// evenly spaced over the bins when there are more, as the title says), on a shared x axis. Each
