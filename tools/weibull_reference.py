@@ -1,17 +1,19 @@
 #!/usr/bin/env python3
 """Independent reference for `model/src/life.rs`: two-parameter Weibull MLE with right censoring.
 
-    pip install scipy reliability        # reliability is optional
-    python3 tools/weibull_reference.py > /tmp/weibull_reference.json
+    pip install scipy reliability
+    python3 tools/weibull_reference.py            # writes tests/data/weibull_reference.json
+    python3 tools/weibull_reference.py -          # or prints it
 
-For five fixed data sets (the same splitmix64 draws as the Rust tests in `life.rs`) prints JSON with
+For five fixed data sets (the same splitmix64 draws as the Rust tests in `life.rs`) writes the JSON
+that those tests read, with
 
 * `scipy`: `scipy.stats.weibull_min.fit` on `scipy.stats.CensoredData` (scipy's own censored
   likelihood, logpdf of failures + logsf of suspensions, location fixed at 0), maximised by
   Nelder-Mead with tight tolerances; the covariance of (ln eta, ln beta) is the inverse of a
   central-difference Hessian of that same likelihood; bounds are the log-transformed Wald (Fisher
   matrix) bounds and B-life bounds the delta method on ln B_p;
-* `reliability` (if the package is installed): `Fit_Weibull_2P(method='MLE', CI=0.95,
+* `reliability` (the Rust tests need it; without the package it is `null`): `Fit_Weibull_2P(method='MLE', CI=0.95,
   optimizer='best')` (its default optimizer, TNC, stops 1.2e-3 short of the maximum in eta on
   `wide_span`), whose parameter bounds are Fisher-matrix bounds with se(ln x) = se(x)/x and whose
   bounds on time are the delta method on v = ln t = ln alpha + ln(-ln R)/beta: the same methods as
@@ -30,6 +32,7 @@ import scipy.stats as ss
 
 os.environ.setdefault("MPLBACKEND", "Agg")  # reliability imports matplotlib; no display here
 
+DEFAULT_OUTPUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "data", "weibull_reference.json")
 Z = 1.959963984540054
 MASK = (1 << 64) - 1
 
@@ -199,8 +202,13 @@ def main():
             "scipy": scipy_fit(data),
             "reliability": reliability_fit(data),
         }
-    json.dump(result, sys.stdout, indent=2)
-    sys.stdout.write("\n")
+    text = json.dumps(result, indent=2) + "\n"
+    if len(sys.argv) > 1 and sys.argv[1] == "-":
+        sys.stdout.write(text)
+    else:
+        path = sys.argv[1] if len(sys.argv) > 1 else DEFAULT_OUTPUT
+        with open(path, "w") as out:
+            out.write(text)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,7 @@
 //! | quantity | estimate | bounds |
 //! |---|---|---|
 //! | Weibull `beta`, `eta` | MLE, profile equation in `beta` ([`fit_weibull`]) | Fisher matrix, log-transformed Wald |
-//! | `B_p` | `eta (-ln(1 - p))^(1/beta)` ([`b_life`]) | delta method on `ln B_p`, same covariance |
+//! | `B_p` | `eta (-ln(1 - p))^(1/beta)` ([`Weibull::quantile`]) | delta method on `ln B_p`, same covariance ([`Weibull::quantile_bounds`]) |
 //! | `R(t)` | Kaplan-Meier ([`kaplan_meier`]) | Greenwood variance, log-log transformed |
 //!
 //! Every number in the serialised results is finite: what cannot be computed is `None`.
@@ -75,7 +75,7 @@ pub struct BLife {
     pub p: f64,
     /// `B_p = eta (-ln(1 - p))^(1/beta)`, operations.
     pub value: f64,
-    /// 95 % bounds `[lower, upper]` by the delta method on `ln B_p` ([`b_life`]).
+    /// 95 % bounds `[lower, upper]` by the delta method on `ln B_p` ([`Weibull::quantile_bounds`]).
     pub ci95: [f64; 2],
 }
 
@@ -364,29 +364,72 @@ fn log_wald_interval(x: f64, se_ln: f64) -> [f64; 2] {
     [x * (-Z_975 * se_ln).exp(), x * (Z_975 * se_ln).exp()]
 }
 
-/// `B_p = eta (-ln(1 - p))^(1/beta)` with 95 % bounds by the delta method on
-/// `ln B_p = u + k e^(-v)`, `(u, v) = (ln eta, ln beta)`, `k = ln(-ln(1 - p))`:
-///
-/// `Var(ln B_p) = C_uu - 2 (k/beta) C_uv + (k/beta)^2 C_vv`, bounds `B_p e^(-+ z sqrt(Var))`
-///
-/// (the bounds on time of Weibull++ and `reliability`). `None` if `p` is not in `(0, 1)` or a
-/// number would not be finite.
-pub fn b_life(weibull: &Weibull, p: f64) -> Option<BLife> {
-    if !(p > 0.0 && p < 1.0) {
-        return None;
-    }
-    let k_over_beta = (-(-p).ln_1p()).ln() / weibull.beta;
-    let value = weibull.eta * k_over_beta.exp();
-    let ci95 = log_wald_interval(
-        value,
-        b_life_ln_variance(&weibull.covariance_ln, k_over_beta).sqrt(),
-    );
-    (value.is_finite() && ci95.iter().all(|b| b.is_finite())).then_some(BLife { p, value, ci95 })
+/// `ln(-ln(1 - p))`, the Weibull probability scale: on it `ln t_p = ln eta + y / beta` is a straight
+/// line, which is why probability plots and the bounds below use it as their variable.
+pub fn weibull_scale(p: f64) -> f64 {
+    (-(-p).ln_1p()).ln()
 }
 
-/// `Var(ln B_p)` from the covariance of `(ln eta, ln beta)`: the gradient of `ln B_p` is
-/// `(1, -k/beta)`.
-fn b_life_ln_variance(c: &[[f64; 2]; 2], k_over_beta: f64) -> f64 {
+impl Weibull {
+    /// `t_p = eta (-ln(1 - p))^(1/beta)`, the time by which a fraction `p` has failed (`B_p`).
+    /// `None` if `p` is not in `(0, 1)` or the time is not a finite positive number.
+    pub fn quantile(&self, p: f64) -> Option<f64> {
+        if !in_unit_interval(p) {
+            return None;
+        }
+        self.quantile_at_scale(weibull_scale(p))
+    }
+
+    /// 95 % bounds `[lower, upper]` on [`Weibull::quantile`], see
+    /// [`Weibull::quantile_bounds_at_scale`]; `None` if `p` is not in `(0, 1)` or a bound is not
+    /// finite.
+    pub fn quantile_bounds(&self, p: f64) -> Option<[f64; 2]> {
+        if !in_unit_interval(p) {
+            return None;
+        }
+        let bounds = self.quantile_bounds_at_scale(weibull_scale(p))?;
+        bounds.iter().all(|b| b.is_finite()).then_some(bounds)
+    }
+
+    /// The time at `y` on the [`weibull_scale`], `eta e^(y/beta)`: a plot walks along `y`, so it
+    /// should not round-trip through `p`. `None` unless finite and positive.
+    pub fn quantile_at_scale(&self, y: f64) -> Option<f64> {
+        let t = self.eta * (y / self.beta).exp();
+        (t.is_finite() && t > 0.0).then_some(t)
+    }
+
+    /// 95 % bounds on the time at `y` on the [`weibull_scale`], by the delta method on
+    /// `ln t = u + y e^(-v)`, `(u, v) = (ln eta, ln beta)`:
+    ///
+    /// `Var(ln t) = C_uu - 2 (y/beta) C_uv + (y/beta)^2 C_vv`, bounds `t e^(-+ z sqrt(Var))`
+    ///
+    /// (the bounds on time of Weibull++ and `reliability`). `None` when the time is not finite or
+    /// the variance is not usable (a covariance that is not positive definite). A bound beyond the
+    /// range of `f64` is `0` or infinite rather than `None`, so that a plot can still draw the other.
+    pub fn quantile_bounds_at_scale(&self, y: f64) -> Option<[f64; 2]> {
+        let t = self.quantile_at_scale(y)?;
+        let variance = quantile_ln_variance(&self.covariance_ln, y / self.beta);
+        (variance.is_finite() && variance >= 0.0).then(|| log_wald_interval(t, variance.sqrt()))
+    }
+}
+
+fn in_unit_interval(p: f64) -> bool {
+    p > 0.0 && p < 1.0
+}
+
+/// `B_p` and its bounds: [`Weibull::quantile`] and [`Weibull::quantile_bounds`]. `None` if `p` is
+/// not in `(0, 1)` or a number would not be finite.
+pub fn b_life(weibull: &Weibull, p: f64) -> Option<BLife> {
+    Some(BLife {
+        p,
+        value: weibull.quantile(p)?,
+        ci95: weibull.quantile_bounds(p)?,
+    })
+}
+
+/// `Var(ln t_p)` from the covariance of `(ln eta, ln beta)`: the gradient of `ln t_p` is
+/// `(1, -k/beta)` with `k` the [`weibull_scale`] of `p`.
+fn quantile_ln_variance(c: &[[f64; 2]; 2], k_over_beta: f64) -> f64 {
     c[0][0] - 2.0 * k_over_beta * c[0][1] + k_over_beta * k_over_beta * c[1][1]
 }
 
@@ -544,10 +587,19 @@ mod tests {
         type_one(5, 40, 0.25, 4000.0, 1.0e6)
     }
 
-    /// What `tools/weibull_reference.py` printed for one data set.
+    /// What `tools/weibull_reference.py` wrote to `tests/data/weibull_reference.json`.
+    #[derive(Deserialize)]
+    struct ReferenceFile {
+        datasets: BTreeMap<String, Reference>,
+    }
+
+    /// The reference numbers of one data set.
+    #[derive(Deserialize)]
     struct Reference {
-        name: &'static str,
-        data: fn() -> Vec<(f64, bool)>,
+        #[serde(skip)]
+        name: String,
+        #[serde(skip)]
+        data: Vec<(f64, bool)>,
         n: usize,
         failures: usize,
         sum_times: f64,
@@ -558,7 +610,8 @@ mod tests {
     }
 
     /// `scipy.stats.weibull_min.fit` on `CensoredData`, covariance from a central-difference
-    /// Hessian; B-life as `(value, [lower, upper])`.
+    /// Hessian.
+    #[derive(Deserialize)]
     struct Scipy {
         beta: f64,
         eta: f64,
@@ -566,208 +619,59 @@ mod tests {
         beta_ci95: [f64; 2],
         eta_ci95: [f64; 2],
         covariance_ln: [[f64; 2]; 2],
-        b1: (f64, [f64; 2]),
-        b10: (f64, [f64; 2]),
+        b1: ReferenceBLife,
+        b10: ReferenceBLife,
     }
 
-    /// `reliability.Fitters.Fit_Weibull_2P(method='MLE', CI=0.95)` (reliability 0.9.0), raw.
+    /// `reliability.Fitters.Fit_Weibull_2P(method='MLE', CI=0.95)` (reliability 0.9.0), raw: its
+    /// `eta` is the package's `alpha`, and it gives standard errors and the covariance of
+    /// `(alpha, beta)` rather than a covariance in logs.
+    #[derive(Deserialize)]
     struct Reliability {
         beta: f64,
-        alpha: f64,
+        eta: f64,
         log_likelihood: f64,
         beta_ci95: [f64; 2],
-        alpha_ci95: [f64; 2],
+        eta_ci95: [f64; 2],
         alpha_se: f64,
         beta_se: f64,
         cov_alpha_beta: f64,
-        b1: (f64, [f64; 2]),
-        b10: (f64, [f64; 2]),
+        b1: ReferenceBLife,
+        b10: ReferenceBLife,
     }
 
-    const REFERENCES: [Reference; 5] = [
-        Reference {
-            name: "complete",
-            data: complete,
-            n: 20,
-            failures: 20,
-            sum_times: 20008.0,
-            min_time: 507.0,
-            max_time: 1659.0,
-            scipy: Scipy {
-                beta: 3.9639673687867,
-                eta: 1102.1967638778578,
-                log_likelihood: -140.42463967661558,
-                beta_ci95: [2.8674919855313723, 5.47971446130964],
-                eta_ci95: [980.3593877238411, 1239.175879289924],
-                covariance_ln: [
-                    [0.0035721022978107255, 0.0032627876705785992],
-                    [0.0032627876705785997, 0.02729467445501239],
-                ],
-                b1: (345.35377654347246, [224.88592067170376, 530.3543708587789]),
-                b10: (624.7519618889904, [487.29410776199586, 800.9844725534423]),
-            },
-            reliability: Reliability {
-                beta: 3.9639673575453918,
-                alpha: 1102.1967667100967,
-                log_likelihood: -140.42463967661558,
-                beta_ci95: [2.8674919733068704, 5.479714453590846],
-                alpha_ci95: [980.3593895014255, 1239.1758834115035],
-                alpha_se: 65.875068428791,
-                beta_se: 0.6548910132023907,
-                cov_alpha_beta: 14.255351125976231,
-                b1: (345.3537762943429, [224.8859215865292, 530.3543679361534]),
-                b10: (624.7519624885581, [487.29411061307246, 800.9844694044077]),
-            },
-        },
-        Reference {
-            name: "heavy_censoring",
-            data: heavy_censoring,
-            n: 60,
-            failures: 15,
-            sum_times: 1353027.0,
-            min_time: 2042.0,
-            max_time: 25000.0,
-            scipy: Scipy {
-                beta: 1.4143867002635877,
-                eta: 61047.73022587697,
-                log_likelihood: -185.30204213525252,
-                beta_ci95: [0.8630676470719515, 2.317882896745572],
-                eta_ci95: [34025.92857555738, 109528.98338852766],
-                covariance_ln: [
-                    [0.08894512646240482, -0.05943707785067833],
-                    [-0.05943707785067833, 0.06351616126693449],
-                ],
-                b1: (2361.4066734014027, [711.992430010618, 7831.883096146851]),
-                b10: (12436.066153566098, [7676.182515743552, 20147.480998358154]),
-            },
-            reliability: Reliability {
-                beta: 1.4143866596662327,
-                alpha: 61047.73429495677,
-                log_likelihood: -185.30204213525246,
-                beta_ci95: [0.8630675267270447, 2.3178830868867597],
-                alpha_ci95: [34025.92418850887, 109529.0121114845],
-                alpha_se: 18206.680627674814,
-                beta_se: 0.3564596449530344,
-                cov_alpha_beta: -5132.104065582245,
-                b1: (2361.406610351799, [711.9922754499895, 7831.884378083887]),
-                b10: (12436.06641454653, [7676.18256602772, 20147.48171199935]),
-            },
-        },
-        Reference {
-            name: "small",
-            data: small,
-            n: 5,
-            failures: 3,
-            sum_times: 1270.0,
-            min_time: 120.0,
-            max_time: 400.0,
-            scipy: Scipy {
-                beta: 2.0944117793905623,
-                eta: 348.71209251644666,
-                log_likelihood: -20.305726478337526,
-                beta_ci95: [0.804737869549853, 5.45091869990368],
-                eta_ci95: [200.72767777759216, 605.7964941034825],
-                covariance_ln: [
-                    [0.07940538217800439, -0.02852214854199328],
-                    [-0.02852214854199328, 0.23816840028352682],
-                ],
-                b1: (38.77806128425291, [4.949862032074883, 303.7939294511886]),
-                b10: (119.07861863790266, [41.212265574829466, 344.0654673780267]),
-            },
-            reliability: Reliability {
-                beta: 2.0944121234388535,
-                alpha: 348.7120804589425,
-                log_likelihood: -20.30572647833759,
-                beta_ci95: [0.8047380292339992, 5.4509194091188355],
-                alpha_ci95: [200.72769343657328, 605.7964049511071],
-                alpha_se: 98.26341980795117,
-                beta_se: 1.022125439304849,
-                cov_alpha_beta: -20.83104539754254,
-                b1: (38.77807393455958, [4.949865413360567, 303.7939201367599]),
-                b10: (119.07863553805764, [41.21227804954121, 344.06546089396267]),
-            },
-        },
-        Reference {
-            name: "large",
-            data: large,
-            n: 500,
-            failures: 316,
-            sum_times: 69866057.0,
-            min_time: 118.0,
-            max_time: 594786.0,
-            scipy: Scipy {
-                beta: 0.7992103834504496,
-                eta: 226470.31822790494,
-                log_likelihood: -4192.044725343882,
-                beta_ci95: [0.7292239452599673, 0.8759136903921959],
-                eta_ci95: [197080.14814852335, 260243.38585130504],
-                covariance_ln: [
-                    [0.005029845836135561, -0.00040614745069315883],
-                    [-0.00040614745069315883, 0.002186279244661311],
-                ],
-                b1: (716.5882988343354, [422.30411277342193, 1215.9455105799393]),
-                b10: (13556.62746885968, [10269.37944242298, 17896.1298839766]),
-            },
-            reliability: Reliability {
-                beta: 0.7992103746775637,
-                alpha: 226470.3275972285,
-                log_likelihood: -4192.044725343882,
-                beta_ci95: [0.7292239357777033, 0.8759136825521927],
-                alpha_ci95: [197080.15488114336, 260243.39849401705],
-                alpha_se: 16061.594894858003,
-                beta_se: 0.037369211861818366,
-                cov_alpha_beta: -73.51174517144248,
-                b1: (716.5882832050162, [422.30410507047606, 1215.9454797177925]),
-                b10: (13556.627610701204, [10269.379650165096, 17896.129896441376]),
-            },
-        },
-        Reference {
-            name: "wide_span",
-            data: wide_span,
-            n: 40,
-            failures: 38,
-            sum_times: 4570596.0,
-            min_time: 1.0,
-            max_time: 1000000.0,
-            scipy: Scipy {
-                beta: 0.23012118509504015,
-                eta: 7328.204918132431,
-                log_likelihood: -351.96879224695886,
-                beta_ci95: [0.17977144422717053, 0.2945727006711227],
-                eta_ci95: [1740.2793702938036, 30858.60134805481],
-                covariance_ln: [
-                    [0.5380606853414602, 0.025547423818218007],
-                    [0.025547423818218, 0.015871411539965016],
-                ],
-                b1: (
-                    1.5254586962077675e-05,
-                    [6.175461726047117e-08, 0.0037681785380045078],
-                ),
-                b10: (
-                    0.4149623859729942,
-                    [0.018083541450544537, 9.522127191917656],
-                ),
-            },
-            reliability: Reliability {
-                beta: 0.2301211865051179,
-                alpha: 7328.2054578594,
-                log_likelihood: -351.96879224695886,
-                beta_ci95: [0.17977143904189619, 0.29457271277770536],
-                alpha_ci95: [1740.2771768123876, 30858.644788392674],
-                alpha_se: 5375.435686623401,
-                beta_se: 0.028991083216078767,
-                cov_alpha_beta: 43.08263282635685,
-                b1: (
-                    1.5254589954127227e-05,
-                    [6.175452638135857e-08, 0.003768185561517091],
-                ),
-                b10: (
-                    0.4149624414004433,
-                    [0.018083517029703254, 9.522142594838046],
-                ),
-            },
-        },
-    ];
+    #[derive(Deserialize)]
+    struct ReferenceBLife {
+        value: f64,
+        ci95: [f64; 2],
+    }
+
+    /// The reference table with the data set each entry was computed from.
+    fn references() -> Vec<Reference> {
+        let file: ReferenceFile = serde_json::from_str(include_str!(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tests/data/weibull_reference.json"
+        )))
+        .expect("the Weibull reference table is JSON of the expected shape");
+        file.datasets
+            .into_iter()
+            .map(|(name, reference)| {
+                let data = match name.as_str() {
+                    "complete" => complete(),
+                    "heavy_censoring" => heavy_censoring(),
+                    "small" => small(),
+                    "large" => large(),
+                    "wide_span" => wide_span(),
+                    other => panic!("no data set {other} in the tests"),
+                };
+                Reference {
+                    name,
+                    data,
+                    ..reference
+                }
+            })
+            .collect()
+    }
 
     /// Records `|got / want - 1|` under `quantity` and returns it.
     fn relative_difference(
@@ -784,8 +688,9 @@ mod tests {
 
     #[test]
     fn reference_data_sets_are_those_of_the_python_script() {
-        for r in &REFERENCES {
-            let data = (r.data)();
+        assert_eq!(references().len(), 5);
+        for r in &references() {
+            let data = &r.data;
             assert_eq!(data.len(), r.n, "{}", r.name);
             assert_eq!(
                 data.iter().filter(|d| d.1).count(),
@@ -811,9 +716,9 @@ mod tests {
     fn fit_agrees_with_scipy_and_reliability() {
         const TOLERANCE: f64 = 1e-4;
         let mut worst = BTreeMap::new();
-        for r in &REFERENCES {
-            let data = (r.data)();
-            let w = fit_weibull(&data).unwrap();
+        for r in &references() {
+            let data = &r.data;
+            let w = fit_weibull(data).unwrap();
             let b1 = b_life(&w, 0.01).unwrap();
             let b10 = b_life(&w, 0.10).unwrap();
             let c = w.covariance_ln;
@@ -829,17 +734,17 @@ mod tests {
                 ("scipy eta_ci95", w.eta_ci95[1], s.eta_ci95[1]),
                 ("scipy var ln eta", c[0][0], s.covariance_ln[0][0]),
                 ("scipy var ln beta", c[1][1], s.covariance_ln[1][1]),
-                ("scipy b1", b1.value, s.b1.0),
-                ("scipy b1 ci95", b1.ci95[0], s.b1.1[0]),
-                ("scipy b1 ci95", b1.ci95[1], s.b1.1[1]),
-                ("scipy b10", b10.value, s.b10.0),
-                ("scipy b10 ci95", b10.ci95[0], s.b10.1[0]),
-                ("scipy b10 ci95", b10.ci95[1], s.b10.1[1]),
+                ("scipy b1", b1.value, s.b1.value),
+                ("scipy b1 ci95", b1.ci95[0], s.b1.ci95[0]),
+                ("scipy b1 ci95", b1.ci95[1], s.b1.ci95[1]),
+                ("scipy b10", b10.value, s.b10.value),
+                ("scipy b10 ci95", b10.ci95[0], s.b10.ci95[0]),
+                ("scipy b10 ci95", b10.ci95[1], s.b10.ci95[1]),
             ];
             let q = &r.reliability;
             let reliability_checks = [
                 ("reliability beta", w.beta, q.beta),
-                ("reliability eta", w.eta, q.alpha),
+                ("reliability eta", w.eta, q.eta),
                 (
                     "reliability log_likelihood",
                     w.log_likelihood,
@@ -847,24 +752,24 @@ mod tests {
                 ),
                 ("reliability beta_ci95", w.beta_ci95[0], q.beta_ci95[0]),
                 ("reliability beta_ci95", w.beta_ci95[1], q.beta_ci95[1]),
-                ("reliability eta_ci95", w.eta_ci95[0], q.alpha_ci95[0]),
-                ("reliability eta_ci95", w.eta_ci95[1], q.alpha_ci95[1]),
+                ("reliability eta_ci95", w.eta_ci95[0], q.eta_ci95[0]),
+                ("reliability eta_ci95", w.eta_ci95[1], q.eta_ci95[1]),
                 (
                     "reliability var ln eta",
                     c[0][0],
-                    (q.alpha_se / q.alpha).powi(2),
+                    (q.alpha_se / q.eta).powi(2),
                 ),
                 (
                     "reliability var ln beta",
                     c[1][1],
                     (q.beta_se / q.beta).powi(2),
                 ),
-                ("reliability b1", b1.value, q.b1.0),
-                ("reliability b1 ci95", b1.ci95[0], q.b1.1[0]),
-                ("reliability b1 ci95", b1.ci95[1], q.b1.1[1]),
-                ("reliability b10", b10.value, q.b10.0),
-                ("reliability b10 ci95", b10.ci95[0], q.b10.1[0]),
-                ("reliability b10 ci95", b10.ci95[1], q.b10.1[1]),
+                ("reliability b1", b1.value, q.b1.value),
+                ("reliability b1 ci95", b1.ci95[0], q.b1.ci95[0]),
+                ("reliability b1 ci95", b1.ci95[1], q.b1.ci95[1]),
+                ("reliability b10", b10.value, q.b10.value),
+                ("reliability b10 ci95", b10.ci95[0], q.b10.ci95[0]),
+                ("reliability b10 ci95", b10.ci95[1], q.b10.ci95[1]),
             ];
             for (quantity, got, want) in checks.into_iter().chain(reliability_checks) {
                 let d = relative_difference(&mut worst, quantity, got, want);
@@ -877,7 +782,7 @@ mod tests {
             // The covariance can be near 0: compare it on the scale of the standard errors.
             let covariances = [
                 ("scipy cov ln", s.covariance_ln[0][1]),
-                ("reliability cov ln", q.cov_alpha_beta / (q.alpha * q.beta)),
+                ("reliability cov ln", q.cov_alpha_beta / (q.eta * q.beta)),
             ];
             for (quantity, want) in covariances {
                 let d = (c[0][1] - want).abs() / scale;
@@ -898,9 +803,9 @@ mod tests {
 
     #[test]
     fn the_fit_is_a_maximum_of_the_likelihood() {
-        for r in &REFERENCES {
-            let data = (r.data)();
-            let w = fit_weibull(&data).unwrap();
+        for r in &references() {
+            let data = &r.data;
+            let w = fit_weibull(data).unwrap();
             for (db, de) in [
                 (1e-6, 0.0),
                 (-1e-6, 0.0),
@@ -909,7 +814,7 @@ mod tests {
                 (1e-6, 1e-6),
             ] {
                 let perturbed =
-                    weibull_log_likelihood(&data, w.beta * (1.0 + db), w.eta * (1.0 + de));
+                    weibull_log_likelihood(data, w.beta * (1.0 + db), w.eta * (1.0 + de));
                 assert!(perturbed <= w.log_likelihood, "{}", r.name);
             }
         }
@@ -1016,6 +921,35 @@ mod tests {
         assert_eq!(b_life(&w, 0.0), None);
         assert_eq!(b_life(&w, 1.0), None);
         assert_eq!(b_life(&w, f64::NAN), None);
+    }
+
+    #[test]
+    fn the_quantile_at_one_minus_one_over_e_is_eta() {
+        let w = fit_weibull(&small()).unwrap();
+        let p = -(-1.0f64).exp_m1();
+        assert_relative_eq!(w.quantile(p).unwrap(), w.eta, max_relative = 1e-12);
+        assert!(weibull_scale(p).abs() < 1e-15);
+    }
+
+    #[test]
+    fn quantile_bounds_are_centred_on_the_quantile_in_log_time() {
+        let w = fit_weibull(&heavy_censoring()).unwrap();
+        for p in [1e-4, 0.01, 0.5, 0.99] {
+            let t = w.quantile(p).unwrap();
+            let [lo, hi] = w.quantile_bounds(p).unwrap();
+            assert_relative_eq!((lo * hi).sqrt(), t, max_relative = 1e-12);
+        }
+        assert_eq!(w.quantile(0.0), None);
+        assert_eq!(w.quantile_bounds(1.0), None);
+    }
+
+    #[test]
+    fn quantile_bounds_need_a_positive_definite_covariance() {
+        let mut w = fit_weibull(&small()).unwrap();
+        w.covariance_ln = [[-1.0, 0.0], [0.0, -1.0]];
+        assert!(w.quantile(0.1).is_some());
+        assert_eq!(w.quantile_bounds(0.1), None);
+        assert_eq!(w.quantile_bounds_at_scale(0.0), None);
     }
 
     /// Every number in `a` is finite, and what `analyse` promises about its parts holds.

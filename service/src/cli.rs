@@ -190,7 +190,7 @@ fn write_plots(
     let mut files = Vec::new();
     for metric in result.operations.keys() {
         for kind in ["bands", "histograms"] {
-            let svg = crate::api::plots::job_svg(result, &format!("{kind}.svg"), metric)
+            let svg = crate::plots::job_plot(result, &format!("{kind}.svg"), metric)
                 .map_err(|e| CliError::Failed(e.to_string()))?;
             files.push((format!("{kind}-{metric}.svg"), svg));
         }

@@ -9,9 +9,8 @@
 
 use std::fmt::Write as _;
 
-use bouncewear_model::life::{KaplanMeierPoint, LifeAnalysis, Weibull};
-use bouncewear_model::montecarlo::Bin;
-use bouncewear_model::stats::Z_975;
+use bouncewear_model::life::{KaplanMeierPoint, LifeAnalysis, weibull_scale};
+use bouncewear_model::montecarlo::{Bin, JobResult};
 
 const FONT: &str =
     "system-ui, -apple-system, 'Segoe UI', Roboto, 'Helvetica Neue', Arial, sans-serif";
@@ -27,6 +26,37 @@ const RED: &str = "#dc2626";
 // ---------------------------------------------------------------------------------------------
 // Public API
 // ---------------------------------------------------------------------------------------------
+
+/// Why a job has no plot of the kind asked for: the caller's choice of plot or metric, not a fault.
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    #[error("the job has no operation metric `{0}`")]
+    NoMetric(String),
+    #[error("the job has no failure criteria, so no Weibull plot")]
+    NoLifeAnalysis,
+    #[error("no plot `{0}`: bands.svg, histograms.svg or weibull.svg")]
+    NoSuchPlot(String),
+}
+
+/// The plot `kind` (`bands.svg`, `histograms.svg` or `weibull.svg`) of a job's result, by the
+/// file name the dashboard and `bouncewear run --plots` both use.
+pub fn job_plot(result: &JobResult, kind: &str, metric: &str) -> Result<String, PlotError> {
+    let bins = || {
+        result
+            .operations
+            .get(metric)
+            .ok_or_else(|| PlotError::NoMetric(metric.to_owned()))
+    };
+    match kind {
+        "bands.svg" => Ok(quantile_bands_svg(metric, bins()?)),
+        "histograms.svg" => Ok(histograms_svg(metric, bins()?)),
+        "weibull.svg" => match &result.life {
+            Some(life) => Ok(weibull_svg(&life.analysis)),
+            None => Err(PlotError::NoLifeAnalysis),
+        },
+        other => Err(PlotError::NoSuchPlot(other.to_owned())),
+    }
+}
 
 /// Small multiples of the histogram of `metric` in each bin of operations (at most 12 panels,
 /// evenly spaced over the bins when there are more, as the title says), on a shared x axis. Each
@@ -380,11 +410,11 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
         .collect();
 
     // y range: 1 % to 99 % at least, widened to the points (within 0.01 % and 99.99 %).
-    let (y_min_cap, y_max_cap) = (weibull_y(1e-4), weibull_y(1.0 - 1e-4));
-    let mut y_lo = weibull_y(0.01);
-    let mut y_hi = weibull_y(0.99);
+    let (y_min_cap, y_max_cap) = (weibull_scale(1e-4), weibull_scale(1.0 - 1e-4));
+    let mut y_lo = weibull_scale(0.01);
+    let mut y_hi = weibull_scale(0.99);
     for p in &points {
-        let y = weibull_y(1.0 - p.reliability).clamp(y_min_cap, y_max_cap);
+        let y = weibull_scale(1.0 - p.reliability).clamp(y_min_cap, y_max_cap);
         y_lo = y_lo.min(y);
         y_hi = y_hi.max(y);
     }
@@ -400,9 +430,9 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
     }
     if let Some(w) = fit {
         let candidates = if points.is_empty() {
-            [weibull_t(w, 0.01), weibull_t(w, 0.99)]
+            [w.quantile(0.01), w.quantile(0.99)]
         } else {
-            [weibull_t(w, 0.10), Some(w.eta)]
+            [w.quantile(0.10), Some(w.eta)]
         };
         for t in candidates.into_iter().flatten() {
             t_lo = t_lo.min(t);
@@ -434,7 +464,7 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
     ];
     let mut last_label = f64::INFINITY;
     for &pc in &percents {
-        let y = weibull_y(pc / 100.0);
+        let y = weibull_scale(pc / 100.0);
         if y < y_lo || y > y_hi {
             continue;
         }
@@ -487,7 +517,9 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
             let y = y_lo + (y_hi - y_lo) * k as f64 / steps as f64;
             let inside = |lt: f64| (lt >= lx0 && lt <= lx1).then_some(lt);
             let to_px = |lt: f64| (xs.map(lt / std::f64::consts::LN_10), ys.map(y));
-            let bounds = ln_time_bounds(w, y);
+            let bounds = w
+                .quantile_bounds_at_scale(y)
+                .map(|[lo, hi]| (lo.ln(), hi.ln()));
             lower.push(bounds.and_then(|(lo, _)| inside(lo)).map(to_px));
             upper.push(bounds.and_then(|(_, hi)| inside(hi)).map(to_px));
         }
@@ -524,8 +556,8 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
                 let f_lo = (1.0 - hi).clamp(1e-4, 1.0 - 1e-4);
                 let f_hi = (1.0 - lo).clamp(1e-4, 1.0 - 1e-4);
                 let x = x_of_t(p.time);
-                let y0 = ys.map(weibull_y(f_lo).clamp(y_lo, y_hi));
-                let y1 = ys.map(weibull_y(f_hi).clamp(y_lo, y_hi));
+                let y0 = ys.map(weibull_scale(f_lo).clamp(y_lo, y_hi));
+                let y1 = ys.map(weibull_scale(f_hi).clamp(y_lo, y_hi));
                 svg.line(x, y0, x, y1, AXIS, 1.0, None);
             }
         }
@@ -533,7 +565,7 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
     let r = if points.len() > 200 { 2.2 } else { 3.2 };
     let mut dots = String::new();
     for p in &points {
-        let y = weibull_y(1.0 - p.reliability).clamp(y_lo, y_hi);
+        let y = weibull_scale(1.0 - p.reliability).clamp(y_lo, y_hi);
         let _ = write!(
             dots,
             r#"<circle cx="{}" cy="{}" r="{r}" fill="{INK}" fill-opacity="0.85"/>"#,
@@ -570,7 +602,7 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
                     fmt_sig(b.ci95[1], 4)
                 )),
                 None => {
-                    if let Some(t) = weibull_t(w, 0.10) {
+                    if let Some(t) = w.quantile(0.10) {
                         notes.push(format!("B10 = {} operations", fmt_sig(t, 4)));
                     }
                 }
@@ -844,34 +876,6 @@ fn extent(values: impl Iterator<Item = f64>) -> (f64, f64) {
             (lo.min(v), hi.max(v))
         });
     if lo <= hi { (lo, hi) } else { (0.0, 1.0) }
-}
-
-/// `ln(-ln(1 - F))`, the Weibull probability scale.
-fn weibull_y(f: f64) -> f64 {
-    (-(-f).ln_1p()).ln()
-}
-
-/// `t_p = eta (-ln(1 - p))^(1/beta)` if finite and positive.
-fn weibull_t(w: &Weibull, p: f64) -> Option<f64> {
-    let t = w.eta * (weibull_y(p) / w.beta).exp();
-    (t.is_finite() && t > 0.0).then_some(t)
-}
-
-/// Pointwise 95 % bounds on `ln t_p` at `y = ln(-ln(1 - p))`, by the delta method with the fit's
-/// covariance of `(ln eta, ln beta)`: `ln t_p = ln eta + y / beta` has the gradient
-/// `(1, -y / beta)`, so `Var = C_uu - 2 (y/beta) C_uv + (y/beta)^2 C_vv` (the B-life bounds of
-/// `bouncewear_model::life::b_life` at every `p`). `None` when the variance is not usable.
-fn ln_time_bounds(w: &Weibull, y: f64) -> Option<(f64, f64)> {
-    let c = &w.covariance_ln;
-    let g = -y / w.beta;
-    let var = c[0][0] + 2.0 * g * c[0][1] + g * g * c[1][1];
-    if !(var.is_finite() && var >= 0.0) {
-        return None;
-    }
-    let ln_t = w.eta.ln() + y / w.beta;
-    let half = Z_975 * var.sqrt();
-    let bounds = (ln_t - half, ln_t + half);
-    (bounds.0.is_finite() && bounds.1.is_finite()).then_some(bounds)
 }
 
 /// Runs of consecutive `Some` points, each with at least two points.
@@ -1922,17 +1926,6 @@ mod tests {
         life.kaplan_meier[0].time = f64::INFINITY;
         life.kaplan_meier[1].reliability = f64::NAN;
         check(&weibull_svg(&life));
-    }
-
-    #[test]
-    fn weibull_bounds_are_the_b_life_bounds() {
-        let life = life_of(&weibull_data(300, 2.0, 800.0, 1000.0));
-        let w = life.weibull.as_ref().unwrap();
-        for b in [life.b1.as_ref().unwrap(), life.b10.as_ref().unwrap()] {
-            let (lo, hi) = ln_time_bounds(w, weibull_y(b.p)).unwrap();
-            assert!((lo.exp() / b.ci95[0] - 1.0).abs() < 1e-12, "{lo} {b:?}");
-            assert!((hi.exp() / b.ci95[1] - 1.0).abs() < 1e-12, "{hi} {b:?}");
-        }
     }
 
     fn night(k: usize, value: f64, flagged: bool) -> TrendPoint {

@@ -71,6 +71,12 @@ impl From<StoreError> for ApiError {
     }
 }
 
+impl From<crate::plots::PlotError> for ApiError {
+    fn from(error: crate::plots::PlotError) -> Self {
+        ApiError::NotFound(error.to_string())
+    }
+}
+
 impl From<InvalidInput> for ApiError {
     fn from(invalid: InvalidInput) -> Self {
         if invalid.is_syntax() {

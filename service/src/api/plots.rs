@@ -12,7 +12,6 @@ use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
-use bouncewear_model::montecarlo::JobResult;
 use serde::Deserialize;
 use utoipa::IntoParams;
 use utoipa_axum::router::OpenApiRouter;
@@ -32,28 +31,6 @@ const SVG: &str = "image/svg+xml";
 pub struct PlotQuery {
     /// The operation metric to draw (default `total_bounce_s`); ignored by `weibull.svg`.
     pub metric: Option<String>,
-}
-
-/// The plot `kind` of a result, or why there is none.
-pub fn job_svg(result: &JobResult, kind: &str, metric: &str) -> Result<String, ApiError> {
-    let bins = || {
-        result.operations.get(metric).ok_or_else(|| {
-            ApiError::NotFound(format!("the job has no operation metric `{metric}`"))
-        })
-    };
-    match kind {
-        "bands.svg" => Ok(plots::quantile_bands_svg(metric, bins()?)),
-        "histograms.svg" => Ok(plots::histograms_svg(metric, bins()?)),
-        "weibull.svg" => match &result.life {
-            Some(life) => Ok(plots::weibull_svg(&life.analysis)),
-            None => Err(ApiError::NotFound(
-                "the job has no failure criteria, so no Weibull plot".into(),
-            )),
-        },
-        other => Err(ApiError::NotFound(format!(
-            "no plot `{other}`: bands.svg, histograms.svg or weibull.svg"
-        ))),
-    }
 }
 
 /// A plot of a succeeded job: `bands.svg` (p05/p50/p95 across operations: the wear curve),
@@ -79,7 +56,7 @@ pub async fn job_plot(
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
     succeeded(&state, &owner, &id).await?;
     let result = stored_result(&state, &id).await?;
-    let svg = job_svg(
+    let svg = plots::job_plot(
         &result,
         &kind,
         query.metric.as_deref().unwrap_or("total_bounce_s"),
