@@ -26,7 +26,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "worker",
         ],
     ),
-    ("api", &["config", "domain", "plots", "store"]),
+    ("api", &["config", "domain", "plots", "store", "telemetry"]),
     ("worker", &["domain", "store"]),
     ("scheduler", &["domain", "store"]),
     ("bench", &["plots"]),

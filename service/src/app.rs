@@ -3,7 +3,6 @@
 //! serves, runs the workers and the scheduler, and when the shutdown future resolves stops
 //! accepting, hands running jobs back to the queue and returns.
 
-use crate::api::error::ApiError;
 use crate::api::{self, AppState};
 use crate::compute::{PoolError, thread_pool};
 use crate::config::ServeConfig;
@@ -12,9 +11,6 @@ use crate::store::sqlite::SqliteStore;
 use crate::store::{Store, StoreError};
 use crate::telemetry;
 use crate::worker::Workers;
-use axum::extract::DefaultBodyLimit;
-use axum::http::Request;
-use axum::routing::get;
 use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle};
 use std::collections::HashSet;
 use std::future::Future;
@@ -23,9 +19,6 @@ use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 use tokio::net::TcpListener;
 use tokio::sync::{Notify, watch};
-use tower_http::catch_panic::CatchPanicLayer;
-use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
-use tower_http::trace::TraceLayer;
 
 /// Why the service could not start (or stopped serving).
 #[derive(Debug, thiserror::Error)]
@@ -106,7 +99,7 @@ impl Application {
         Ok(Self {
             listener,
             address,
-            router: router(state.clone()),
+            router: api::router(state.clone()),
             state,
             workers,
             shutdown_sender,
@@ -195,35 +188,6 @@ fn prometheus() -> PrometheusHandle {
             handle
         })
         .clone()
-}
-
-/// Every route: the API with its OpenAPI document, the docs UI, the dashboard, the fallbacks, and
-/// the cross-cutting layers.
-fn router(state: AppState) -> axum::Router {
-    let max_body = state.config.max_body_bytes;
-    let (router, openapi) = api::router(state);
-    let openapi = Arc::new(openapi);
-    router
-        .route("/openapi.json", get(move || async move { axum::Json(openapi.as_ref().clone()) }))
-        .route("/docs", get(api::system::docs))
-        .route("/docs/rapidoc-min.js", get(api::system::docs_script))
-        .route("/", get(api::system::dashboard))
-        .route("/jobs/{id}", get(api::system::job_page))
-        .route("/dashboard/app.js", get(api::system::dashboard_script))
-        .route("/dashboard/style.css", get(api::system::dashboard_style))
-        .fallback(|| async { ApiError::NotFound("no such resource".to_owned()) })
-        .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
-        .layer(DefaultBodyLimit::max(max_body))
-        .layer(axum::middleware::from_fn(telemetry::record_request))
-        .layer(CatchPanicLayer::custom(|_| {
-            axum::response::IntoResponse::into_response(ApiError::Internal(api::error::Internal("a handler panicked".into())))
-        }))
-        .layer(TraceLayer::new_for_http().make_span_with(|request: &Request<_>| {
-            let request_id = request.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
-            tracing::info_span!("request", method = %request.method(), uri = %request.uri(), request_id)
-        }))
-        .layer(PropagateRequestIdLayer::x_request_id())
-        .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
 }
 
 async fn report_queue_depth(store: Arc<dyn Store>, metrics: PrometheusHandle) {

@@ -8,6 +8,9 @@ use bouncewear_model::{FieldError, InvalidInput};
 use serde::Serialize;
 use utoipa::ToSchema;
 
+/// The media type of every error response.
+pub const PROBLEM: &str = "application/problem+json";
+
 /// An RFC 9457 problem document.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct Problem {
@@ -159,4 +162,89 @@ impl IntoResponse for ApiError {
         }
         response
     }
+}
+
+/// The problems most endpoints share, for their OpenAPI `responses(...)`: each written once.
+pub mod responses {
+    use super::Problem;
+    use utoipa::IntoResponses;
+
+    /// Every `/v1` call on a server with API keys.
+    #[derive(IntoResponses)]
+    #[response(
+        status = 401,
+        description = "Missing or unknown API key",
+        content_type = "application/problem+json"
+    )]
+    pub struct Unauthorized(pub Problem);
+
+    /// A request body that is not a valid document.
+    #[derive(IntoResponses)]
+    pub enum BodyRejected {
+        #[response(
+            status = 400,
+            description = "Malformed JSON",
+            content_type = "application/problem+json"
+        )]
+        Malformed(Problem),
+        #[response(
+            status = 413,
+            description = "Body too large",
+            content_type = "application/problem+json"
+        )]
+        TooLarge(Problem),
+        #[response(
+            status = 415,
+            description = "Body is not JSON",
+            content_type = "application/problem+json"
+        )]
+        NotJson(Problem),
+        #[response(
+            status = 422,
+            description = "A field breaks a rule; `errors` names each by JSON pointer",
+            content_type = "application/problem+json"
+        )]
+        Invalid(Problem),
+    }
+
+    #[derive(IntoResponses)]
+    #[response(
+        status = 400,
+        description = "Bad query",
+        content_type = "application/problem+json"
+    )]
+    pub struct BadQuery(pub Problem);
+
+    #[derive(IntoResponses)]
+    #[response(
+        status = 404,
+        description = "No such job (for this key)",
+        content_type = "application/problem+json"
+    )]
+    pub struct NoSuchJob(pub Problem);
+
+    #[derive(IntoResponses)]
+    #[response(
+        status = 404,
+        description = "No such schedule (for this key)",
+        content_type = "application/problem+json"
+    )]
+    pub struct NoSuchSchedule(pub Problem);
+
+    /// Results exist once a job succeeded.
+    #[derive(IntoResponses)]
+    #[response(
+        status = 409,
+        description = "Not succeeded (yet)",
+        content_type = "application/problem+json"
+    )]
+    pub struct NotSucceeded(pub Problem);
+
+    #[derive(IntoResponses)]
+    #[response(
+        status = 429,
+        description = "The queue is full; see Retry-After",
+        content_type = "application/problem+json"
+    )]
+    pub struct QueueFull(pub Problem);
 }

@@ -1,6 +1,9 @@
 //! `/v1/jobs`: submit, list, inspect, cancel, results, distributions and live progress.
 
-use super::error::{ApiError, Internal, Problem};
+use super::error::{
+    ApiError, Internal, PROBLEM, Problem,
+    responses::{BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, Unauthorized},
+};
 use super::{AppState, JsonText};
 use crate::domain::{JobId, JobStatus, Owner, QueuedJob, UnixMs, draw_seed};
 use crate::store::{JobRecord, Operations, Page};
@@ -119,20 +122,15 @@ fn job_size(job: &Job) -> (u64, Pointer) {
     }
 }
 
-const PROBLEM: &str = "application/problem+json";
-
 /// Submit a Monte Carlo job; it is queued durably before the response is sent.
 #[utoipa::path(
     post, path = "/v1/jobs", tag = "jobs",
     request_body(content = JobSpec, description = "The job of docs/contract.md", content_type = "application/json"),
     responses(
         (status = 202, description = "Queued", body = JobResource, headers(("Location" = String, description = "The job's URL"))),
-        (status = 400, description = "Malformed JSON", body = Problem, content_type = PROBLEM),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
-        (status = 413, description = "Body too large", body = Problem, content_type = PROBLEM),
-        (status = 415, description = "Body is not JSON", body = Problem, content_type = PROBLEM),
-        (status = 422, description = "A field breaks a rule, or the job is too large", body = Problem, content_type = PROBLEM),
-        (status = 429, description = "The queue is full; see Retry-After", body = Problem, content_type = PROBLEM),
+        BodyRejected,
+        Unauthorized,
+        QueueFull,
     ),
     security((), ("api_key" = []))
 )]
@@ -187,8 +185,8 @@ pub struct ListQuery {
     get, path = "/v1/jobs", tag = "jobs", params(ListQuery),
     responses(
         (status = 200, description = "A page of jobs", body = JobList),
-        (status = 400, description = "Bad limit or cursor", body = Problem, content_type = PROBLEM),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        BadQuery,
+        Unauthorized,
     ),
     security((), ("api_key" = []))
 )]
@@ -231,8 +229,8 @@ pub async fn list_jobs(
     get, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
         (status = 200, description = "The job", body = JobResource),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
-        (status = 404, description = "No such job (for this key)", body = Problem, content_type = PROBLEM),
+        Unauthorized,
+        NoSuchJob,
     ),
     security((), ("api_key" = []))
 )]
@@ -250,8 +248,8 @@ pub async fn get_job(
     delete, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
         (status = 200, description = "Cancelled", body = JobResource),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
-        (status = 404, description = "No such job (for this key)", body = Problem, content_type = PROBLEM),
+        Unauthorized,
+        NoSuchJob,
         (status = 409, description = "The job already ended", body = Problem, content_type = PROBLEM),
     ),
     security((), ("api_key" = []))
@@ -283,9 +281,9 @@ pub async fn succeeded(state: &AppState, owner: &Owner, id: &JobId) -> Result<Jo
     get, path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
         (status = 200, description = "The result", body = JobResult),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
-        (status = 404, description = "No such job (for this key)", body = Problem, content_type = PROBLEM),
-        (status = 409, description = "Not succeeded (yet)", body = Problem, content_type = PROBLEM),
+        Unauthorized,
+        NoSuchJob,
+        NotSucceeded,
     ),
     security((), ("api_key" = []))
 )]
@@ -346,10 +344,10 @@ pub struct Distribution {
     params(("id" = String, Path, description = "Job id"), ("metric" = String, Path, description = "An operation or device metric"), DistributionQuery),
     responses(
         (status = 200, description = "The bins", body = Distribution, content_type = "application/json"),
-        (status = 400, description = "Bad query", body = Problem, content_type = PROBLEM),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        BadQuery,
+        Unauthorized,
         (status = 404, description = "No such job, or the job has no such metric", body = Problem, content_type = PROBLEM),
-        (status = 409, description = "Not succeeded (yet)", body = Problem, content_type = PROBLEM),
+        NotSucceeded,
     ),
     security((), ("api_key" = []))
 )]
@@ -471,10 +469,10 @@ pub struct LifeQuery {
     get, path = "/v1/jobs/{id}/life", tag = "jobs", params(("id" = String, Path, description = "Job id"), LifeQuery),
     responses(
         (status = 200, description = "The life analysis (JSON), or per-device lives (CSV)", body = bouncewear_model::montecarlo::LifeReport),
-        (status = 400, description = "Bad query", body = Problem, content_type = PROBLEM),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        BadQuery,
+        Unauthorized,
         (status = 404, description = "No such job, or it has no failure criteria", body = Problem, content_type = PROBLEM),
-        (status = 409, description = "Not succeeded (yet)", body = Problem, content_type = PROBLEM),
+        NotSucceeded,
     ),
     security((), ("api_key" = []))
 )]
@@ -529,8 +527,8 @@ const EVENT_POLL: Duration = Duration::from_millis(200);
     get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
         (status = 200, description = "An event stream: `progress` events (data: status, operations_done, operations_total) while the job runs, then one `status` event (data: the JobResource) when it ends", content_type = "text/event-stream", body = ServerSentEvent),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
-        (status = 404, description = "No such job (for this key)", body = Problem, content_type = PROBLEM),
+        Unauthorized,
+        NoSuchJob,
     ),
     security((), ("api_key" = []))
 )]

@@ -12,16 +12,21 @@ pub mod system;
 use crate::config::ServeConfig;
 use crate::domain::Owner;
 use crate::store::Store;
+use crate::telemetry;
 use axum::body::Bytes;
-use axum::extract::{FromRequest, Request, State};
+use axum::extract::{DefaultBodyLimit, FromRequest, Request, State};
 use axum::http::header;
 use axum::middleware::Next;
-use axum::response::Response;
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
 use error::ApiError;
 use metrics_exporter_prometheus::PrometheusHandle;
 use std::collections::HashSet;
 use std::sync::Arc;
 use tokio::sync::Notify;
+use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+use tower_http::trace::TraceLayer;
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
 use utoipa::{Modify, OpenApi};
 use utoipa_axum::router::OpenApiRouter;
@@ -64,8 +69,37 @@ impl Modify for BearerAuth {
     }
 }
 
-/// Every route, with the OpenAPI document built from the same handlers.
-pub fn router(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
+/// Every route in one router: the API with its OpenAPI document (built from the same handlers),
+/// the docs UI, the dashboard, the fallbacks, and the layers every request passes.
+pub fn router(state: AppState) -> axum::Router {
+    let max_body = state.config.max_body_bytes;
+    let (router, openapi) = api_routes(state);
+    let openapi = Arc::new(openapi);
+    router
+        .route("/openapi.json", get(move || async move { axum::Json(openapi.as_ref().clone()) }))
+        .route("/docs", get(system::docs))
+        .route("/docs/rapidoc-min.js", get(system::docs_script))
+        .route("/", get(system::dashboard))
+        .route("/jobs/{id}", get(system::job_page))
+        .route("/dashboard/app.js", get(system::dashboard_script))
+        .route("/dashboard/style.css", get(system::dashboard_style))
+        .fallback(|| async { ApiError::NotFound("no such resource".to_owned()) })
+        .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
+        .layer(DefaultBodyLimit::max(max_body))
+        .layer(axum::middleware::from_fn(telemetry::record_request))
+        .layer(CatchPanicLayer::custom(|_| {
+            IntoResponse::into_response(ApiError::Internal(error::Internal("a handler panicked".into())))
+        }))
+        .layer(TraceLayer::new_for_http().make_span_with(|request: &Request<_>| {
+            let request_id = request.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
+            tracing::info_span!("request", method = %request.method(), uri = %request.uri(), request_id)
+        }))
+        .layer(PropagateRequestIdLayer::x_request_id())
+        .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
+}
+
+/// The documented routes, with the OpenAPI document built from the same handlers.
+fn api_routes(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
     let v1 = OpenApiRouter::new()
         .merge(jobs::router())
         .merge(schedules::router())

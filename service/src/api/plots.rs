@@ -2,7 +2,10 @@
 //! plot, and a schedule's trend. The dashboard and `bouncewear run --plots` show the same pictures.
 
 use super::AppState;
-use super::error::{ApiError, Problem};
+use super::error::{
+    ApiError, PROBLEM, Problem,
+    responses::{BadQuery, NotSucceeded, Unauthorized},
+};
 use super::jobs::{stored_result, succeeded};
 use super::schedules::schedule_trend;
 use crate::domain::{JobId, Owner, ScheduleId};
@@ -23,7 +26,6 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(schedule_trend_plot))
 }
 
-const PROBLEM: &str = "application/problem+json";
 const SVG: &str = "image/svg+xml";
 
 #[derive(Debug, Deserialize, IntoParams)]
@@ -40,10 +42,10 @@ pub struct PlotQuery {
     params(("id" = String, Path, description = "Job id"), ("kind" = String, Path, description = "bands.svg, histograms.svg or weibull.svg"), PlotQuery),
     responses(
         (status = 200, description = "The plot", body = String, content_type = SVG),
-        (status = 400, description = "Bad query", body = Problem, content_type = PROBLEM),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        BadQuery,
+        Unauthorized,
         (status = 404, description = "No such job, plot or metric", body = Problem, content_type = PROBLEM),
-        (status = 409, description = "Not succeeded (yet)", body = Problem, content_type = PROBLEM),
+        NotSucceeded,
     ),
     security((), ("api_key" = []))
 )]
@@ -77,8 +79,8 @@ pub struct TrendQuery {
     params(("id" = String, Path, description = "Schedule id"), TrendQuery),
     responses(
         (status = 200, description = "The trend", body = String, content_type = SVG),
-        (status = 400, description = "Bad query", body = Problem, content_type = PROBLEM),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        BadQuery,
+        Unauthorized,
         (status = 404, description = "No such schedule or statistic", body = Problem, content_type = PROBLEM),
     ),
     security((), ("api_key" = []))

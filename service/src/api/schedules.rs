@@ -1,6 +1,9 @@
 //! `/v1/schedules`: nightly (or any cron) runs of a job template, and their trend.
 
-use super::error::{ApiError, Problem};
+use super::error::{
+    ApiError,
+    responses::{BadQuery, BodyRejected, NoSuchSchedule, QueueFull, Unauthorized},
+};
 use super::jobs::{JobResource, stored_result};
 use super::{AppState, JsonText};
 use crate::domain::trend::trend;
@@ -27,7 +30,6 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(schedule_runs))
 }
 
-const PROBLEM: &str = "application/problem+json";
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ScheduleResource {
     pub id: String,
@@ -101,11 +103,8 @@ async fn resource(state: &AppState, record: &ScheduleRecord) -> Result<ScheduleR
     request_body(content = ScheduleSpec, content_type = "application/json"),
     responses(
         (status = 201, description = "Created", body = ScheduleResource, headers(("Location" = String, description = "The schedule's URL"))),
-        (status = 400, description = "Malformed JSON", body = Problem, content_type = PROBLEM),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
-        (status = 413, description = "Body too large", body = Problem, content_type = PROBLEM),
-        (status = 415, description = "Body is not JSON", body = Problem, content_type = PROBLEM),
-        (status = 422, description = "A field breaks a rule", body = Problem, content_type = PROBLEM),
+        BodyRejected,
+        Unauthorized,
     ),
     security((), ("api_key" = []))
 )]
@@ -133,7 +132,7 @@ pub async fn create_schedule(
     get, path = "/v1/schedules", tag = "schedules",
     responses(
         (status = 200, description = "Schedules", body = ScheduleList),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
+        Unauthorized,
     ),
     security((), ("api_key" = []))
 )]
@@ -153,8 +152,8 @@ pub async fn list_schedules(
     get, path = "/v1/schedules/{id}", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     responses(
         (status = 200, description = "The schedule", body = ScheduleResource),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
-        (status = 404, description = "No such schedule (for this key)", body = Problem, content_type = PROBLEM),
+        Unauthorized,
+        NoSuchSchedule,
     ),
     security((), ("api_key" = []))
 )]
@@ -173,12 +172,9 @@ pub async fn get_schedule(
     request_body(content = ScheduleSpec, content_type = "application/json"),
     responses(
         (status = 200, description = "Updated", body = ScheduleResource),
-        (status = 400, description = "Malformed JSON", body = Problem, content_type = PROBLEM),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
-        (status = 404, description = "No such schedule (for this key)", body = Problem, content_type = PROBLEM),
-        (status = 413, description = "Body too large", body = Problem, content_type = PROBLEM),
-        (status = 415, description = "Body is not JSON", body = Problem, content_type = PROBLEM),
-        (status = 422, description = "A field breaks a rule", body = Problem, content_type = PROBLEM),
+        BodyRejected,
+        Unauthorized,
+        NoSuchSchedule,
     ),
     security((), ("api_key" = []))
 )]
@@ -200,8 +196,8 @@ pub async fn replace_schedule(
     delete, path = "/v1/schedules/{id}", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     responses(
         (status = 204, description = "Deleted"),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
-        (status = 404, description = "No such schedule (for this key)", body = Problem, content_type = PROBLEM),
+        Unauthorized,
+        NoSuchSchedule,
     ),
     security((), ("api_key" = []))
 )]
@@ -219,9 +215,9 @@ pub async fn delete_schedule(
     post, path = "/v1/schedules/{id}/run", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     responses(
         (status = 202, description = "The job it queued", body = JobResource),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
-        (status = 404, description = "No such schedule (for this key)", body = Problem, content_type = PROBLEM),
-        (status = 429, description = "The queue is full; see Retry-After", body = Problem, content_type = PROBLEM),
+        Unauthorized,
+        NoSuchSchedule,
+        QueueFull,
     ),
     security((), ("api_key" = []))
 )]
@@ -300,9 +296,9 @@ pub struct Trend {
     get, path = "/v1/schedules/{id}/runs", tag = "schedules", params(("id" = String, Path, description = "Schedule id"), RunsQuery),
     responses(
         (status = 200, description = "Runs, oldest first", body = Trend),
-        (status = 400, description = "Bad query", body = Problem, content_type = PROBLEM),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = PROBLEM),
-        (status = 404, description = "No such schedule (for this key)", body = Problem, content_type = PROBLEM),
+        BadQuery,
+        Unauthorized,
+        NoSuchSchedule,
     ),
     security((), ("api_key" = []))
 )]

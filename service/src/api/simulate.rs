@@ -1,6 +1,9 @@
 //! `POST /v1/simulate`: one make operation, as `bouncewear simulate` prints it.
 
-use super::error::{ApiError, Problem};
+use super::error::{
+    ApiError,
+    responses::{BodyRejected, Unauthorized},
+};
 use super::{AppState, JsonText};
 use axum::Json;
 use axum::extract::Query;
@@ -30,11 +33,8 @@ pub struct SimulateQuery {
     request_body(content = ScenarioSpec, description = "A scenario; every field optional (docs/model.md section 8)", content_type = "application/json"),
     responses(
         (status = 200, description = "The operation and its bounces", body = Simulation),
-        (status = 400, description = "Malformed JSON or query", body = Problem, content_type = "application/problem+json"),
-        (status = 401, description = "Missing or unknown API key", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
-        (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A field breaks a rule; `errors` names each by JSON pointer", body = Problem, content_type = "application/problem+json"),
+        BodyRejected,
+        Unauthorized,
     ),
     security((), ("api_key" = []))
 )]

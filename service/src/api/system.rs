@@ -7,6 +7,7 @@ use axum::extract::State;
 use axum::http::header;
 use axum::response::{Html, IntoResponse};
 use serde::Serialize;
+use std::sync::LazyLock;
 use utoipa::ToSchema;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
@@ -74,19 +75,41 @@ pub async fn docs_script() -> impl IntoResponse {
     )
 }
 
-const DASHBOARD_INDEX: &str = include_str!("../../assets/dashboard/index.html");
-const DASHBOARD_JOB: &str = include_str!("../../assets/dashboard/job.html");
+const DASHBOARD_PAGE: &str = include_str!("../../assets/dashboard/page.html");
 const DASHBOARD_SCRIPT: &str = include_str!("../../assets/dashboard/app.js");
 const DASHBOARD_STYLE: &str = include_str!("../../assets/dashboard/style.css");
 
+/// A dashboard page: the one shell (head, top bar) around the page's own `<main>`.
+fn page(title: &str, name: &str, main: &str) -> String {
+    DASHBOARD_PAGE
+        .replace("{{title}}", title)
+        .replace("{{page}}", name)
+        .replace("{{main}}", main)
+}
+
+static INDEX_PAGE: LazyLock<String> = LazyLock::new(|| {
+    page(
+        "dashboard",
+        "index",
+        include_str!("../../assets/dashboard/index-main.html"),
+    )
+});
+static JOB_PAGE: LazyLock<String> = LazyLock::new(|| {
+    page(
+        "job",
+        "job",
+        include_str!("../../assets/dashboard/job-main.html"),
+    )
+});
+
 /// The dashboard: jobs with live progress, the submit form and schedules.
 pub async fn dashboard() -> Html<&'static str> {
-    Html(DASHBOARD_INDEX)
+    Html(INDEX_PAGE.as_str())
 }
 
 /// A job's page: live progress, wear curves, histograms, the Weibull plot.
 pub async fn job_page() -> Html<&'static str> {
-    Html(DASHBOARD_JOB)
+    Html(JOB_PAGE.as_str())
 }
 
 pub async fn dashboard_script() -> impl IntoResponse {
@@ -104,4 +127,23 @@ pub async fn dashboard_style() -> impl IntoResponse {
         [(header::CONTENT_TYPE, "text/css; charset=utf-8")],
         DASHBOARD_STYLE,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_page_is_the_shell_with_its_own_title_and_main() {
+        for (page, title, name) in [
+            (&*INDEX_PAGE, "dashboard", "index"),
+            (&*JOB_PAGE, "job", "job"),
+        ] {
+            assert!(page.starts_with("<!doctype html>"));
+            assert!(page.contains(&format!("<title>bouncewear · {title}</title>")));
+            assert!(page.contains(&format!("<body data-page=\"{name}\">")));
+            assert!(page.contains("<main>\n    <section") && page.ends_with("</html>\n"));
+            assert!(!page.contains("{{"), "every placeholder filled");
+        }
+    }
 }
