@@ -80,15 +80,10 @@ pub async fn tick(store: &dyn Store, max_queued: u64, now: DateTime<Utc>) -> Sto
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::domain::utc;
     use crate::domain::{Owner, ScheduleDefinition, ScheduleId};
     use crate::store::sqlite::SqliteStore;
     use crate::store::{JobQueue, ScheduleRecord, Schedules};
-
-    fn utc(text: &str) -> DateTime<Utc> {
-        DateTime::parse_from_rfc3339(text)
-            .unwrap()
-            .with_timezone(&Utc)
-    }
 
     async fn store_at(path: &std::path::Path) -> SqliteStore {
         SqliteStore::open(&format!("sqlite://{}", path.display()))

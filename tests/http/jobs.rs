@@ -115,25 +115,7 @@ fn jobs_are_listed_newest_first_with_cursor_paging() {
     let ids: Vec<String> = (0..5)
         .map(|seed| server.submit(&json!({"devices": 1, "operations": 1, "seed": seed})))
         .collect();
-    let mut seen = Vec::new();
-    let mut cursor: Option<String> = None;
-    loop {
-        let query = cursor
-            .as_ref()
-            .map_or(String::new(), |c| format!("&cursor={c}"));
-        let page = get(&server.url(&format!("/v1/jobs?limit=2{query}")), None).json();
-        seen.extend(
-            page["jobs"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|j| j["id"].as_str().unwrap().to_owned()),
-        );
-        match page["next_cursor"].as_str() {
-            Some(next) => cursor = Some(next.to_owned()),
-            None => break,
-        }
-    }
+    let seen = server.list_job_ids(2);
     let newest_first: Vec<String> = ids.into_iter().rev().collect();
     assert_eq!(seen, newest_first);
 }
@@ -202,22 +184,7 @@ fn two_hundred_concurrent_submissions_are_all_accepted_or_refused_with_429() {
         .filter_map(|r| r.2)
         .collect();
     assert!(accepted.len() >= 150);
-    let mut listed = Vec::new();
-    let mut cursor = String::new();
-    loop {
-        let page = get(&server.url(&format!("/v1/jobs?limit=100{cursor}")), None).json();
-        listed.extend(
-            page["jobs"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|j| j["id"].as_str().unwrap().to_owned()),
-        );
-        match page["next_cursor"].as_str() {
-            Some(next) => cursor = format!("&cursor={next}"),
-            None => break,
-        }
-    }
+    let mut listed = server.list_job_ids(100);
     accepted.sort();
     listed.sort();
     assert_eq!(

@@ -31,6 +31,22 @@ pub trait Service {
         id
     }
 
+    /// Every job's id, newest first, read page by page through `next_cursor`.
+    fn list_job_ids(&self, page_size: u32) -> Vec<String> {
+        let mut ids = Vec::new();
+        let mut cursor = String::new();
+        loop {
+            let url = self.url(&format!("/v1/jobs?limit={page_size}{cursor}"));
+            let page = get(&url, None).json();
+            let jobs = page["jobs"].as_array().unwrap();
+            ids.extend(jobs.iter().map(|j| j["id"].as_str().unwrap().to_owned()));
+            match page["next_cursor"].as_str() {
+                Some(next) => cursor = format!("&cursor={next}"),
+                None => return ids,
+            }
+        }
+    }
+
     /// Polls the job until it has `status`; returns the job resource.
     fn wait_for(&self, id: &str, status: &str, timeout: Duration) -> Value {
         let started = Instant::now();
