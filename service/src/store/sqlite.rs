@@ -731,3 +731,121 @@ impl Schedules for SqliteStore {
         Ok(rows.iter().map(run_from_row).collect::<Result<_, _>>()?)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bouncewear_model::montecarlo::Job;
+
+    async fn open(name: &str) -> (SqliteStore, String) {
+        let dir =
+            std::env::temp_dir().join(format!("bouncewear-store-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let url = format!("sqlite://{}", dir.join("store.db").display());
+        (SqliteStore::open(&url).await.unwrap(), url)
+    }
+
+    fn queued(seed: u64) -> QueuedJob {
+        let job = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || seed).unwrap();
+        QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1))
+    }
+
+    fn terms(now: i64) -> LeaseTerms {
+        LeaseTerms {
+            now: UnixMs(now),
+            duration_ms: 1000,
+        }
+    }
+
+    #[tokio::test]
+    async fn every_u64_seed_reads_back_exactly_even_for_rows_older_than_the_seed_column() {
+        let (store, url) = open("seeds").await;
+        let seeds = [0, 1 << 53, i64::MAX as u64 + 1, u64::MAX];
+        let mut ids = Vec::new();
+        for seed in seeds {
+            ids.push(
+                store
+                    .insert_job(queued(seed), 10)
+                    .await
+                    .unwrap()
+                    .unwrap()
+                    .id,
+            );
+        }
+        // Rows written before migration 0003 have no seed: the next open reads it from the spec.
+        sqlx::query("UPDATE jobs SET seed = NULL")
+            .execute(&store.writer)
+            .await
+            .unwrap();
+        drop(store);
+        let store = SqliteStore::open(&url).await.unwrap();
+        for (id, seed) in ids.iter().zip(seeds) {
+            let record = store.job(&Owner::anonymous(), id).await.unwrap();
+            assert_eq!(record.seed, seed);
+        }
+    }
+
+    #[tokio::test]
+    async fn an_unknown_job_is_not_found_and_a_second_cancel_is_a_conflict() {
+        let (store, _) = open("cancel").await;
+        let owner = Owner::anonymous();
+        let missing = store.job(&owner, &JobId::from("nope")).await.unwrap_err();
+        assert!(
+            matches!(missing, StoreError::NotFound { kind: "job", .. }),
+            "{missing}"
+        );
+        let id = store.insert_job(queued(1), 10).await.unwrap().unwrap().id;
+        let cancelled = store.cancel(&owner, &id, UnixMs(2)).await.unwrap();
+        assert_eq!(cancelled.status, JobStatus::Cancelled);
+        let again = store.cancel(&owner, &id, UnixMs(3)).await.unwrap_err();
+        assert_eq!(
+            again.to_string(),
+            format!("job {id} already ended: cancelled")
+        );
+        let other = Owner::of_key("another key");
+        assert!(matches!(
+            store.cancel(&other, &id, UnixMs(3)).await,
+            Err(StoreError::NotFound { .. })
+        ));
+    }
+
+    #[tokio::test]
+    async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor() {
+        let (store, _) = open("fence").await;
+        store.insert_job(queued(1), 10).await.unwrap();
+        let first = store.claim("a", terms(0)).await.unwrap().unwrap();
+        assert!(
+            store.claim("b", terms(500)).await.unwrap().is_none(),
+            "leased"
+        );
+        let second = store.claim("b", terms(2000)).await.unwrap().unwrap();
+        assert_eq!(second.fence.attempt, Attempt(first.fence.attempt.0 + 1));
+        assert_eq!(second.spec.seed, Some(1));
+        assert_eq!(
+            store.heartbeat(&first.fence, terms(2100), 5).await.unwrap(),
+            Lease::Lost
+        );
+        assert!(
+            !store
+                .fail(&first.fence, UnixMs(2100), "late")
+                .await
+                .unwrap()
+        );
+        assert_eq!(
+            store
+                .heartbeat(&second.fence, terms(2100), 5)
+                .await
+                .unwrap(),
+            Lease::Held
+        );
+    }
+
+    #[tokio::test]
+    async fn the_queue_bound_refuses_the_job_past_it() {
+        let (store, _) = open("bound").await;
+        assert!(store.insert_job(queued(1), 1).await.unwrap().is_some());
+        assert!(store.insert_job(queued(2), 1).await.unwrap().is_none());
+        assert_eq!(store.queue_depth().await.unwrap(), (1, 0));
+    }
+}
