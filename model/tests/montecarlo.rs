@@ -1,7 +1,8 @@
 //! The Monte Carlo engine: validation, determinism, skips that change nothing, wear, sampling,
 //! precision targets and honest confidence intervals.
 
-use bouncewear_model::montecarlo::{Job, JobResult, Silent, run_job};
+use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Silent, run_job};
+use bouncewear_model::{FieldError, Pointer};
 use serde_json::{Value, json};
 
 fn job(value: Value) -> Job {
@@ -137,14 +138,43 @@ fn every_job_rule_names_its_field() {
 }
 
 #[test]
+fn a_jobs_errors_nest_under_the_root_it_is_given() {
+    let documents = [
+        json!({
+            "devices": 0, "operations": 10, "bin_operations": 0,
+            "metrics": ["e1", "bogus"], "limits": {"final_kappa": 1},
+            "precision": {"metric": "kappa", "relative_half_width": 2, "max_devices": 2000},
+            "failure": {"e1": {}},
+            "scatter": [{"parameter": "current_a", "per": "device",
+                         "distribution": {"kind": "uniform", "min": -1, "max": 1}}]
+        }),
+        json!({"scenario": {"mechanism": {"static_force_n": -1}}}),
+    ];
+    for document in documents {
+        let at_root = Job::from_json(&document.to_string(), || 7).unwrap_err();
+        let expected: Vec<FieldError> = at_root
+            .errors()
+            .iter()
+            .map(|e| FieldError {
+                pointer: format!("/template{}", e.pointer),
+                detail: e.detail.clone(),
+            })
+            .collect();
+        let spec: JobSpec = serde_json::from_value(document).unwrap();
+        let nested = Job::new(spec, || 7, &Pointer::root().child("template")).unwrap_err();
+        assert_eq!(nested.errors(), expected);
+    }
+}
+
+#[test]
 fn defaults_are_filled_in_and_the_seed_is_reported() {
     let job = Job::from_json("{}", || 12345).unwrap();
     assert_eq!(
         (
-            job.spec.devices,
-            job.spec.operations,
-            job.bin_operations,
-            job.seed
+            job.spec().devices,
+            job.spec().operations,
+            job.bin_operations(),
+            job.seed()
         ),
         (1000, 1000, 100, 12345)
     );

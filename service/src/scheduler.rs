@@ -82,7 +82,7 @@ pub fn job_from_template(
     now: DateTime<Utc>,
 ) -> Result<NewJob, InvalidInput> {
     let job = Job::from_json(&schedule.template, crate::cli::draw_seed)?;
-    let spec = serde_json::to_string(&job.spec)
+    let spec = serde_json::to_string(job.spec())
         .map_err(|e| InvalidInput::single(&bouncewear_model::Pointer::root(), e.to_string()))?;
     Ok(NewJob {
         id: uuid::Uuid::new_v4().to_string(),
@@ -93,7 +93,7 @@ pub fn job_from_template(
             rfc3339(due.timestamp_millis())
         )),
         spec,
-        operations_total: job.spec.devices.saturating_mul(job.spec.operations),
+        operations_total: job.spec().devices.saturating_mul(job.spec().operations),
         created_at: now.timestamp_millis(),
     })
 }

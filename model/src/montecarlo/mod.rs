@@ -94,17 +94,16 @@ pub struct LifeReport {
 pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, Cancelled> {
     let started = Instant::now();
     let tally = engine::run(job, observer, |tally| {
-        job.precision
-            .as_ref()
+        job.precision()
             .is_some_and(|p| precision_half_width(job, tally, p) <= p.relative_half_width)
     })?;
     let wall_s = started.elapsed().as_secs_f64();
-    let operations_run = tally.devices * job.spec.operations;
+    let operations_run = tally.devices * job.spec().operations;
     Ok(JobResult {
         job: resolved_job(job, tally.devices),
         operations: summarize_operations(job, &tally),
         devices: summarize_devices(job, &tally),
-        precision: job.precision.as_ref().map(|p| {
+        precision: job.precision().map(|p| {
             let achieved = precision_half_width(job, &tally, p);
             PrecisionReport {
                 metric: p.metric.name().to_owned(),
@@ -124,7 +123,7 @@ pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, Cancelle
 }
 
 fn life_report(job: &Job, tally: &Tally) -> Option<LifeReport> {
-    if job.failure.is_empty() {
+    if job.failure().is_empty() {
         return None;
     }
     let mut devices: Vec<DeviceLife> = tally
@@ -139,7 +138,7 @@ fn life_report(job: &Job, tally: &Tally) -> Option<LifeReport> {
         .collect();
     let failures = devices.iter().filter(|d| !d.censored).count() as u64;
     Some(LifeReport {
-        criteria: job.spec.failure.clone(),
+        criteria: job.spec().failure.clone(),
         failures,
         censored: devices.len() as u64 - failures,
         analysis: crate::life::analyse(&data),
@@ -156,7 +155,7 @@ fn statistic_name(statistic: Statistic) -> &'static str {
 
 /// The groups' accumulators of one (bin, metric), in group order.
 fn operation_groups(job: &Job, tally: &Tally, bin: usize, metric: usize) -> Vec<Accumulator> {
-    let index = bin * job.operation_metrics.len() + metric;
+    let index = bin * job.operation_metrics().len() + metric;
     tally
         .groups
         .iter()
@@ -166,13 +165,13 @@ fn operation_groups(job: &Job, tally: &Tally, bin: usize, metric: usize) -> Vec<
 
 fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> {
     let bins = usize::try_from(job.bins()).expect("bins fit in memory");
-    job.operation_metrics
+    job.operation_metrics()
         .iter()
         .enumerate()
         .map(|(m, metric)| {
             let summaries = (0..bins)
                 .map(|b| {
-                    let op_start = job.bin_operations * b as u64;
+                    let op_start = job.bin_operations() * b as u64;
                     let mut summary = summarize(&operation_groups(job, tally, b, m));
                     if metric.is_integer() {
                         round_quantiles(&mut summary);
@@ -180,7 +179,7 @@ fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> 
                     Bin {
                         summary,
                         op_start,
-                        op_end: (op_start + job.bin_operations).min(job.spec.operations),
+                        op_end: (op_start + job.bin_operations()).min(job.spec().operations),
                     }
                 })
                 .collect();
@@ -199,7 +198,7 @@ fn round_quantiles(summary: &mut Summary) {
 }
 
 fn summarize_devices(job: &Job, tally: &Tally) -> BTreeMap<String, Summary> {
-    job.device_metrics
+    job.device_metrics()
         .iter()
         .enumerate()
         .map(|(m, metric)| {
@@ -214,7 +213,7 @@ fn summarize_devices(job: &Job, tally: &Tally) -> BTreeMap<String, Summary> {
 /// statistic is 0 and the interval is not).
 fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) -> f64 {
     let metric = job
-        .operation_metrics
+        .operation_metrics()
         .iter()
         .position(|m| *m == precision.metric)
         .expect("validated");
@@ -236,13 +235,13 @@ fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) ->
 }
 
 fn resolved_job(job: &Job, devices_run: u64) -> serde_json::Value {
-    let mut spec = job.spec.clone();
-    spec.scenario = job.scenario.spec().clone();
+    let mut spec = job.spec().clone();
+    spec.scenario = job.scenario().spec().clone();
     spec.metrics = Some(
-        job.operation_metrics
+        job.operation_metrics()
             .iter()
             .map(|m| m.name())
-            .chain(job.device_metrics.iter().map(|m| m.name()))
+            .chain(job.device_metrics().iter().map(|m| m.name()))
             .map(str::to_owned)
             .collect(),
     );

@@ -116,13 +116,13 @@ impl JobResource {
 /// Operations a job may run: devices (or the precision target's `max_devices`) x operations.
 fn job_size(job: &Job) -> (u64, Pointer) {
     let root = Pointer::root();
-    match &job.precision {
+    match job.precision() {
         Some(p) => (
-            p.max_devices.saturating_mul(job.spec.operations),
+            p.max_devices.saturating_mul(job.spec().operations),
             root.child("precision").child("max_devices"),
         ),
         None => (
-            job.spec.devices.saturating_mul(job.spec.operations),
+            job.spec().devices.saturating_mul(job.spec().operations),
             root.child("devices"),
         ),
     }
@@ -162,13 +162,13 @@ pub async fn submit_job(
         )));
     }
     let spec =
-        serde_json::to_string(&job.spec).map_err(|e| crate::errors::Internal(e.to_string()))?;
+        serde_json::to_string(job.spec()).map_err(|e| crate::errors::Internal(e.to_string()))?;
     let new = NewJob {
         id: uuid::Uuid::new_v4().to_string(),
         owner,
-        name: job.spec.name.clone(),
+        name: job.spec().name.clone(),
         spec,
-        operations_total: job.spec.devices.saturating_mul(job.spec.operations),
+        operations_total: job.spec().devices.saturating_mul(job.spec().operations),
         created_at: now_ms(),
     };
     let record = state

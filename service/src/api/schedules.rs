@@ -134,10 +134,9 @@ fn validate(body: &str, max_job_operations: u64) -> Result<ValidSchedule, ApiErr
     match Job::from_json(&template, || 0) {
         Ok(job) => {
             let size = job
-                .precision
-                .as_ref()
-                .map_or(job.spec.devices, |p| p.max_devices)
-                .saturating_mul(job.spec.operations);
+                .precision()
+                .map_or(job.spec().devices, |p| p.max_devices)
+                .saturating_mul(job.spec().operations);
             if size > max_job_operations {
                 errors.push(FieldError {
                     pointer: "/template/devices".into(),
