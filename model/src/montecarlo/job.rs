@@ -347,6 +347,32 @@ impl Job {
         self.spec.operations.div_ceil(self.bin_operations)
     }
 
+    /// The most operations the job can run: a precision target may add batches of devices up to
+    /// its `max_devices`. What a server bounds before it accepts a job.
+    pub fn max_operations(&self) -> u64 {
+        self.precision
+            .as_ref()
+            .map_or(self.spec.devices, |p| p.max_devices)
+            .saturating_mul(self.spec.operations)
+    }
+
+    /// Refuses a job that could run more than `limit` operations, naming (below `root`) the device
+    /// count that makes it that large.
+    pub fn check_size(&self, limit: u64, root: &Pointer) -> Result<(), InvalidInput> {
+        let size = self.max_operations();
+        if size <= limit {
+            return Ok(());
+        }
+        let pointer = match self.precision {
+            Some(_) => root.child("precision").child("max_devices"),
+            None => root.child("devices"),
+        };
+        Err(InvalidInput::single(
+            &pointer,
+            format!("the job would run {size} operations; this server allows {limit}"),
+        ))
+    }
+
     /// The job as submitted, with the seed and `bin_operations` filled in: what a store keeps to
     /// rerun it.
     pub fn spec(&self) -> &JobSpec {
@@ -580,4 +606,60 @@ fn check_precision(
         relative_half_width: spec.relative_half_width,
         max_devices: spec.max_devices,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn job(text: &str) -> Job {
+        Job::from_json(text, || 1).unwrap()
+    }
+
+    const PRECISE: &str = r#"{"devices": 10, "operations": 30, "precision":
+        {"metric": "e1", "relative_half_width": 0.1, "max_devices": 500}}"#;
+
+    #[test]
+    fn max_operations_is_devices_times_operations() {
+        assert_eq!(
+            job(r#"{"devices": 10, "operations": 30}"#).max_operations(),
+            300
+        );
+    }
+
+    #[test]
+    fn max_operations_with_a_precision_target_counts_its_max_devices() {
+        assert_eq!(job(PRECISE).max_operations(), 15_000);
+    }
+
+    #[test]
+    fn a_job_of_exactly_the_limit_is_accepted() {
+        let job = job(r#"{"devices": 10, "operations": 30}"#);
+        assert_eq!(job.check_size(300, &Pointer::root()), Ok(()));
+    }
+
+    #[test]
+    fn a_job_over_the_limit_names_its_devices() {
+        let job = job(r#"{"devices": 10, "operations": 30}"#);
+        assert_eq!(
+            job.check_size(299, &Pointer::root()),
+            Err(InvalidInput::single(
+                &Pointer::root().child("devices"),
+                "the job would run 300 operations; this server allows 299"
+            ))
+        );
+    }
+
+    #[test]
+    fn a_precise_job_over_the_limit_names_max_devices_below_the_root() {
+        let template = Pointer::root().child("template");
+        let error = job(PRECISE).check_size(1000, &template).unwrap_err();
+        assert_eq!(
+            error.errors(),
+            [FieldError {
+                pointer: "/template/precision/max_devices".to_owned(),
+                detail: "the job would run 15000 operations; this server allows 1000".to_owned(),
+            }]
+        );
+    }
 }

@@ -9,9 +9,9 @@ use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
+use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
 use bouncewear_model::stats::{QUANTILES, Summary};
-use bouncewear_model::{InvalidInput, Pointer};
 use futures_util::stream::Stream;
 use serde::{Deserialize, Serialize};
 use std::convert::Infallible;
@@ -113,21 +113,6 @@ impl JobResource {
     }
 }
 
-/// Operations a job may run: devices (or the precision target's `max_devices`) x operations.
-fn job_size(job: &Job) -> (u64, Pointer) {
-    let root = Pointer::root();
-    match job.precision() {
-        Some(p) => (
-            p.max_devices.saturating_mul(job.spec().operations),
-            root.child("precision").child("max_devices"),
-        ),
-        None => (
-            job.spec().devices.saturating_mul(job.spec().operations),
-            root.child("devices"),
-        ),
-    }
-}
-
 const PROBLEM: &str = "application/problem+json";
 
 /// Submit a Monte Carlo job; it is queued durably before the response is sent.
@@ -151,16 +136,7 @@ pub async fn submit_job(
     JsonText(body): JsonText,
 ) -> Result<Response, ApiError> {
     let job = Job::from_json(&body, crate::cli::draw_seed)?;
-    let (size, pointer) = job_size(&job);
-    if size > state.config.max_job_operations {
-        return Err(ApiError::Invalid(InvalidInput::single(
-            &pointer,
-            format!(
-                "the job would run {size} operations; this server allows {}",
-                state.config.max_job_operations
-            ),
-        )));
-    }
+    job.check_size(state.config.max_job_operations, &Pointer::root())?;
     let spec =
         serde_json::to_string(job.spec()).map_err(|e| crate::errors::Internal(e.to_string()))?;
     let new = NewJob {

@@ -131,23 +131,11 @@ fn validate(body: &str, max_job_operations: u64) -> Result<ValidSchedule, ApiErr
         .ok();
     let template = serde_json::to_string(&spec.template)
         .map_err(|e| crate::errors::Internal(e.to_string()))?;
-    match Job::from_json(&template, || 0) {
-        Ok(job) => {
-            let size = job
-                .precision()
-                .map_or(job.spec().devices, |p| p.max_devices)
-                .saturating_mul(job.spec().operations);
-            if size > max_job_operations {
-                errors.push(FieldError {
-                    pointer: "/template/devices".into(),
-                    detail: format!("each run would run {size} operations; this server allows {max_job_operations}"),
-                });
-            }
-        }
-        Err(invalid) => errors.extend(invalid.errors().iter().map(|e| FieldError {
-            pointer: format!("/template{}", e.pointer),
-            detail: e.detail.clone(),
-        })),
+    let at = root.child("template");
+    if let Err(invalid) = Job::new(spec.template.clone(), || 0, &at)
+        .and_then(|job| job.check_size(max_job_operations, &at))
+    {
+        errors.extend_from_slice(invalid.errors());
     }
     let statistics = spec
         .statistics
