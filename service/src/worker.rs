@@ -176,8 +176,7 @@ impl Workers {
             .await
         {
             Ok(true) => {
-                let operations = result.job["devices_run"].as_u64().unwrap_or(0)
-                    * result.job["operations"].as_u64().unwrap_or(0);
+                let operations = result.job.devices_run() * result.job.spec().operations;
                 metrics::counter!("bouncewear_jobs_finished_total", "status" => "succeeded")
                     .increment(1);
                 metrics::counter!("bouncewear_operations_simulated_total").increment(operations);
@@ -195,7 +194,7 @@ impl Workers {
 
 /// The rows of the `distributions` table: every bin of every operation metric, and the device metrics.
 pub fn distribution_rows(result: &JobResult) -> Vec<NewDistribution> {
-    let operations = result.job["operations"].as_u64().unwrap_or(0);
+    let operations = result.job.spec().operations;
     let bins = result.operations.iter().flat_map(|(metric, bins)| {
         bins.iter()
             .enumerate()

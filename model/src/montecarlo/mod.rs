@@ -62,8 +62,7 @@ pub struct Timing {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct JobResult {
     /// The job with every default filled in, its seed, the generator and crate versions.
-    #[cfg_attr(feature = "openapi", schema(value_type = Object))]
-    pub job: serde_json::Value,
+    pub job: ResolvedJob,
     pub operations: BTreeMap<String, Vec<Bin>>,
     pub devices: BTreeMap<String, Summary>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -72,6 +71,82 @@ pub struct JobResult {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub life: Option<LifeReport>,
     pub timing: Timing,
+}
+
+/// The job as it ran: everything needed to rerun it and get the same bits.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct ResolvedJob {
+    /// The JobSpec with every default filled in: its seed, `bin_operations`, the whole scenario and
+    /// the list of metrics. A plain object in the schema: JobSpec's admits no other members.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = Object))]
+    spec: JobSpec,
+    /// Devices that ran: `devices`, or more with a precision target.
+    devices_run: u64,
+    /// The random number generator and how it is seeded.
+    generator: String,
+    /// Versions of the crates that fix the random numbers, and of the model.
+    versions: BTreeMap<String, String>,
+}
+
+impl ResolvedJob {
+    fn new(job: &Job, devices_run: u64) -> Self {
+        let mut spec = job.spec().clone();
+        spec.scenario = job.scenario().spec().clone();
+        spec.metrics = Some(
+            job.operation_metrics()
+                .iter()
+                .map(|m| m.name())
+                .chain(job.device_metrics().iter().map(|m| m.name()))
+                .map(str::to_owned)
+                .collect(),
+        );
+        Self {
+            spec,
+            devices_run,
+            generator: GENERATOR.to_owned(),
+            versions: RANDOM_CRATES
+                .iter()
+                .copied()
+                .chain([("bouncewear-model", env!("CARGO_PKG_VERSION"))])
+                .map(|(name, version)| (name.to_owned(), version.to_owned()))
+                .collect(),
+        }
+    }
+
+    pub fn spec(&self) -> &JobSpec {
+        &self.spec
+    }
+
+    pub fn devices_run(&self) -> u64 {
+        self.devices_run
+    }
+
+    pub fn generator(&self) -> &str {
+        &self.generator
+    }
+
+    pub fn versions(&self) -> &BTreeMap<String, String> {
+        &self.versions
+    }
+}
+
+impl Serialize for ResolvedJob {
+    /// Through one serde_json map, which keeps its keys sorted: every key at every depth comes out
+    /// in alphabetical order, as when the job was an untyped map, so Results stay byte-identical.
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::Error;
+        let mut value = serde_json::to_value(&self.spec).map_err(S::Error::custom)?;
+        let object = value.as_object_mut().expect("a job spec is an object");
+        object.insert("devices_run".into(), self.devices_run.into());
+        object.insert("generator".into(), self.generator.clone().into());
+        object.insert(
+            "versions".into(),
+            serde_json::to_value(&self.versions).map_err(S::Error::custom)?,
+        );
+        value.serialize(serializer)
+    }
 }
 
 /// Life analysis of a job with failure criteria (MODEL.md has no failure model: the user's criteria
@@ -100,7 +175,7 @@ pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, Cancelle
     let wall_s = started.elapsed().as_secs_f64();
     let operations_run = tally.devices * job.spec().operations;
     Ok(JobResult {
-        job: resolved_job(job, tally.devices),
+        job: ResolvedJob::new(job, tally.devices),
         operations: summarize_operations(job, &tally),
         devices: summarize_devices(job, &tally),
         precision: job.precision().map(|p| {
@@ -232,34 +307,4 @@ fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) ->
     } else {
         half_width / value.abs()
     }
-}
-
-fn resolved_job(job: &Job, devices_run: u64) -> serde_json::Value {
-    let mut spec = job.spec().clone();
-    spec.scenario = job.scenario().spec().clone();
-    spec.metrics = Some(
-        job.operation_metrics()
-            .iter()
-            .map(|m| m.name())
-            .chain(job.device_metrics().iter().map(|m| m.name()))
-            .map(str::to_owned)
-            .collect(),
-    );
-    let mut value = serde_json::to_value(&spec).expect("a job serialises");
-    let object = value.as_object_mut().expect("a job is an object");
-    object.insert("devices_run".into(), devices_run.into());
-    object.insert("generator".into(), GENERATOR.into());
-    object.insert(
-        "versions".into(),
-        RANDOM_CRATES
-            .iter()
-            .map(|(name, version)| ((*name).to_owned(), serde_json::Value::from(*version)))
-            .chain([(
-                "bouncewear-model".to_owned(),
-                env!("CARGO_PKG_VERSION").into(),
-            )])
-            .collect::<serde_json::Map<_, _>>()
-            .into(),
-    );
-    value
 }
