@@ -51,17 +51,39 @@ impl fmt::Display for FieldError {
     }
 }
 
+/// Why a document cannot be used, fixed where the error is made: the fix differs (rewrite the text
+/// or change a value), and HTTP tells the two apart (400 or 422).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InputErrorKind {
+    /// The text is not JSON at all.
+    Malformed,
+    /// JSON that breaks a rule: a wrong type, an unknown field, a value out of range.
+    Rule,
+}
+
 /// A submitted document that cannot be used, with every field at fault.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub struct InvalidInput {
+    kind: InputErrorKind,
     errors: Vec<FieldError>,
 }
 
 impl InvalidInput {
-    /// At least one error; an empty list would be a bug in the caller.
+    /// Rules broken, at least one; an empty list would be a bug in the caller.
     pub fn new(errors: Vec<FieldError>) -> Self {
         debug_assert!(!errors.is_empty());
-        Self { errors }
+        Self {
+            kind: InputErrorKind::Rule,
+            errors,
+        }
+    }
+
+    /// Text that is not JSON: one error naming the whole document.
+    fn malformed(detail: String) -> Self {
+        Self {
+            kind: InputErrorKind::Malformed,
+            ..Self::single(&Pointer::root(), detail)
+        }
     }
 
     pub fn single(pointer: &Pointer, detail: impl Into<String>) -> Self {
@@ -75,9 +97,13 @@ impl InvalidInput {
         &self.errors
     }
 
+    pub fn kind(&self) -> InputErrorKind {
+        self.kind
+    }
+
     /// Whether the document was not JSON at all (as opposed to JSON that breaks a rule).
     pub fn is_syntax(&self) -> bool {
-        self.errors.len() == 1 && self.errors[0].detail.starts_with(MALFORMED)
+        self.kind == InputErrorKind::Malformed
     }
 }
 
@@ -93,8 +119,6 @@ impl fmt::Display for InvalidInput {
         Ok(())
     }
 }
-
-const MALFORMED: &str = "malformed JSON";
 
 /// Deserialises a JSON document, turning a serde failure into an [`InvalidInput`] whose pointer
 /// names the field where it happened (unknown field, wrong type, out-of-range integer) or the whole
@@ -145,7 +169,7 @@ fn invalid_from_serde(pointer: Pointer, error: &serde_json::Error) -> InvalidInp
     use serde_json::error::Category;
     match error.classify() {
         Category::Syntax | Category::Eof | Category::Io => {
-            InvalidInput::single(&Pointer::root(), format!("{MALFORMED}: {error}"))
+            InvalidInput::malformed(format!("malformed JSON: {error}"))
         }
         Category::Data => InvalidInput::single(&pointer, error.to_string()),
     }
@@ -177,5 +201,17 @@ mod tests {
     fn trailing_garbage_is_malformed() {
         let err = from_json::<serde_json::Value>("{} x", &[]).unwrap_err();
         assert!(err.is_syntax(), "{err}");
+    }
+
+    #[test]
+    fn a_wrong_type_breaks_a_rule_not_the_syntax() {
+        let err = from_json::<Vec<u64>>("[1, -1]", &[""]).unwrap_err();
+        assert_eq!(err.kind(), InputErrorKind::Rule, "{err}");
+    }
+
+    #[test]
+    fn a_rule_whose_words_start_like_a_syntax_error_is_still_a_rule() {
+        let err = InvalidInput::single(&Pointer::root(), "malformed JSON: says the rule");
+        assert!(!err.is_syntax());
     }
 }

@@ -26,7 +26,7 @@ pub mod scenario;
 pub mod stats;
 pub mod wear;
 
-pub use error::{FieldError, InvalidInput, Pointer};
+pub use error::{FieldError, InputErrorKind, InvalidInput, Pointer};
 pub use operation::{
     Bounce, Conditions, Fidelity, Needs, Operation, Outcome, Simulation, simulate,
 };

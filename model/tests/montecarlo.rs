@@ -1,7 +1,8 @@
 //! The Monte Carlo engine: validation, determinism, skips that change nothing, wear, sampling,
 //! precision targets and honest confidence intervals.
 
-use bouncewear_model::montecarlo::{Job, JobResult, Silent, run_job};
+use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Silent, run_job};
+use bouncewear_model::{FieldError, Pointer};
 use serde_json::{Value, json};
 
 fn job(value: Value) -> Job {
@@ -137,26 +138,77 @@ fn every_job_rule_names_its_field() {
 }
 
 #[test]
+fn a_jobs_errors_nest_under_the_root_it_is_given() {
+    let documents = [
+        json!({
+            "devices": 0, "operations": 10, "bin_operations": 0,
+            "metrics": ["e1", "bogus"], "limits": {"final_kappa": 1},
+            "precision": {"metric": "kappa", "relative_half_width": 2, "max_devices": 2000},
+            "failure": {"e1": {}},
+            "scatter": [{"parameter": "current_a", "per": "device",
+                         "distribution": {"kind": "uniform", "min": -1, "max": 1}}]
+        }),
+        json!({"scenario": {"mechanism": {"static_force_n": -1}}}),
+    ];
+    for document in documents {
+        let at_root = Job::from_json(&document.to_string(), || 7).unwrap_err();
+        let expected: Vec<FieldError> = at_root
+            .errors()
+            .iter()
+            .map(|e| FieldError {
+                pointer: format!("/template{}", e.pointer),
+                detail: e.detail.clone(),
+            })
+            .collect();
+        let spec: JobSpec = serde_json::from_value(document).unwrap();
+        let nested = Job::new(spec, || 7, &Pointer::root().child("template")).unwrap_err();
+        assert_eq!(nested.errors(), expected);
+    }
+}
+
+#[test]
 fn defaults_are_filled_in_and_the_seed_is_reported() {
     let job = Job::from_json("{}", || 12345).unwrap();
     assert_eq!(
         (
-            job.spec.devices,
-            job.spec.operations,
-            job.bin_operations,
-            job.seed
+            job.spec().devices,
+            job.spec().operations,
+            job.bin_operations(),
+            job.seed()
         ),
         (1000, 1000, 100, 12345)
     );
     let small = job_with(json!({"devices": 1, "operations": 5}));
     let result = run(&small);
-    assert_eq!(result.job["seed"], 12345);
-    assert_eq!(result.job["bin_operations"], 1, "max(1, 5 / 10)");
-    assert_eq!(result.job["scenario"]["mechanism"]["static_force_n"], 0.344);
+    let resolved = result.job.spec();
+    assert_eq!(resolved.seed, Some(12345));
+    assert_eq!(resolved.bin_operations, Some(1), "max(1, 5 / 10)");
+    assert_eq!(resolved.scenario.mechanism.static_force_n, 0.344);
     assert_eq!(result.operations["total_bounce_s"].len(), 5);
     assert!(
-        result.job["versions"]["rand_chacha"].is_string() && result.job["generator"].is_string()
+        result.job.versions().contains_key("rand_chacha") && !result.job.generator().is_empty()
     );
+}
+
+#[test]
+fn the_resolved_jobs_keys_are_sorted_at_every_depth() {
+    let result = run(&job_with(json!({"devices": 1, "operations": 5})));
+    let text = serde_json::to_string(&result.job).unwrap();
+    assert!(
+        text.starts_with(r#"{"bin_operations":1,"devices":1,"devices_run":1,"fidelity":"exact","generator":"#)
+            && text.contains(r#","scenario":{"circuit":{"current_a":0.0,"supply_voltage_v":0.0},"losses":{"impact_energy_loss_j":1e-6,"#),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_result_reads_back_as_it_was_written() {
+    let doc = json!({"devices": 4, "operations": 20, "metrics": ["e1", "eroded_mass_kg"],
+        "precision": {"metric": "e1", "relative_half_width": 0.5, "max_devices": 8},
+        "failure": {"e1": {"below": 0.2}}, "scenario": arcing()});
+    let text = serde_json::to_string(&run(&job_with(doc))).unwrap();
+    let read: JobResult = serde_json::from_str(&text).unwrap();
+    assert_eq!(serde_json::to_string(&read).unwrap(), text);
 }
 
 fn job_with(value: Value) -> Job {
@@ -284,7 +336,7 @@ fn precision_target_adds_device_batches_until_met() {
     assert!(report.achieved_relative_half_width <= 0.01);
     let bin = &result.operations["total_bounce_s"][0].summary;
     assert_eq!(bin.n, report.devices * 10);
-    assert_eq!(result.job["devices_run"], report.devices);
+    assert_eq!(result.job.devices_run(), report.devices);
 
     doc["precision"]["max_devices"] = json!(100);
     doc["precision"]["relative_half_width"] = json!(1e-6);

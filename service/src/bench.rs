@@ -10,7 +10,7 @@
 use crate::cli::CliError;
 use bouncewear_model::montecarlo::{Job, JobResult, OperationMetric, Silent, run_job};
 use bouncewear_model::wear::WearLaw;
-use bouncewear_model::{Fidelity, Needs, Operation, Outcome, Scenario};
+use bouncewear_model::{Fidelity, Needs, Operation, Outcome, Pointer, Scenario};
 use serde::Serialize;
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
@@ -218,9 +218,11 @@ fn sampling(quick: bool) -> Vec<Sampling> {
     let mut rows = Vec::new();
     for sampler in ["random", "lhs"] {
         for &devices in counts {
-            let mut job = reference_job(devices, 20, false, sampler, Some(&["total_bounce_s"]));
-            job.bin_operations = 20;
-            job.spec.bin_operations = Some(20);
+            let mut spec = reference_job(devices, 20, false, sampler, Some(&["total_bounce_s"]))
+                .spec()
+                .clone();
+            spec.bin_operations = Some(20);
+            let job = Job::new(spec, || 0, &Pointer::root()).expect("the reference job is valid");
             let result = run(&job);
             let p95 = &result.operations["total_bounce_s"][0].summary.quantiles["p95"];
             rows.push(Sampling {

@@ -9,6 +9,7 @@
 
 use crate::domain::UnixMs;
 use crate::store::{Claim, Fence, Lease, LeaseTerms, Store};
+use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Watch, run_job};
 use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
@@ -88,7 +89,7 @@ impl Workers {
     #[tracing::instrument(skip_all, fields(job = %claim.fence.job, attempt = claim.fence.attempt.0))]
     async fn run(&self, claim: Claim, shutdown: &mut watch::Receiver<bool>) {
         let fence = &claim.fence;
-        let job = match Job::new(claim.spec, || 0) {
+        let job = match Job::new(claim.spec, || 0, &Pointer::root()) {
             Ok(job) => job,
             Err(invalid) => {
                 let reason = format!("the stored job no longer validates: {invalid}");
@@ -153,8 +154,7 @@ impl Workers {
     async fn succeed(&self, fence: &Fence, result: &JobResult) {
         match self.store.succeed(fence, UnixMs::now(), result).await {
             Ok(true) => {
-                let operations = result.job["devices_run"].as_u64().unwrap_or(0)
-                    * result.job["operations"].as_u64().unwrap_or(0);
+                let operations = result.job.devices_run() * result.job.spec().operations;
                 metrics::counter!("bouncewear_jobs_finished_total", "status" => "succeeded")
                     .increment(1);
                 metrics::counter!("bouncewear_operations_simulated_total").increment(operations);

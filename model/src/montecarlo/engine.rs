@@ -81,9 +81,9 @@ pub struct DeviceLife {
 
 impl GroupStats {
     fn new(job: &Job) -> Self {
-        let limit = |metric| job.limits.get(&metric).copied();
+        let limit = |metric| job.limits().get(&metric).copied();
         let per_bin: Vec<Option<f64>> = job
-            .operation_metrics
+            .operation_metrics()
             .iter()
             .map(|m| limit(Metric::Operation(*m)))
             .collect();
@@ -93,7 +93,7 @@ impl GroupStats {
                 .flat_map(|_| per_bin.iter().map(|l| Accumulator::new(*l)))
                 .collect(),
             devices: job
-                .device_metrics
+                .device_metrics()
                 .iter()
                 .map(|m| Accumulator::new(limit(Metric::Device(*m))))
                 .collect(),
@@ -158,7 +158,7 @@ struct Plan<'a> {
 
 impl<'a> Plan<'a> {
     fn new(job: &'a Job) -> Self {
-        let scenario = &job.scenario;
+        let scenario = job.scenario();
         let spec = scenario.spec();
         let setup = Setup::new(scenario);
         let nominal = Draws {
@@ -167,7 +167,7 @@ impl<'a> Plan<'a> {
             conditions: Conditions::nominal(scenario),
         };
         let (device_scatter, operation_scatter): (Vec<_>, Vec<_>) =
-            job.scatter.iter().partition(|s| s.per == Per::Device);
+            job.scatter().iter().partition(|s| s.per == Per::Device);
         let cheap_operation_scatter = operation_scatter.iter().all(|s| {
             matches!(
                 s.parameter,
@@ -177,11 +177,11 @@ impl<'a> Plan<'a> {
             )
         });
         let current_scattered = job
-            .scatter
+            .scatter()
             .iter()
             .any(|s| s.parameter == Parameter::Current);
         let can_arc = setup
-            .operation(&nominal.conditions, job.spec.fidelity)
+            .operation(&nominal.conditions, job.spec().fidelity)
             .arcs()
             || current_scattered;
         Self {
@@ -193,13 +193,13 @@ impl<'a> Plan<'a> {
             operation_scatter,
             cheap_operation_scatter,
             needs: Needs {
-                impact: job.operation_metrics.iter().any(|m| m.needs_impact())
+                impact: job.operation_metrics().iter().any(|m| m.needs_impact())
                     || job
-                        .failure
+                        .failure()
                         .iter()
                         .any(|(m, _)| matches!(m, Metric::Operation(m) if m.needs_impact())),
             },
-            track_wear: can_arc && job.spec.operations > 1,
+            track_wear: can_arc && job.spec().operations > 1,
         }
     }
 
@@ -211,7 +211,7 @@ impl<'a> Plan<'a> {
         stats: &mut GroupStats,
     ) {
         let job = self.job;
-        let mut rng = ChaCha8Rng::seed_from_u64(job.seed);
+        let mut rng = ChaCha8Rng::seed_from_u64(job.seed());
         rng.set_stream(device);
         let mut draws = self.nominal;
         for (k, scatter) in self.device_scatter.iter().enumerate() {
@@ -227,16 +227,16 @@ impl<'a> Plan<'a> {
             };
             draws.set(scatter.parameter, value);
         }
-        let fidelity = job.spec.fidelity;
+        let fidelity = job.spec().fidelity;
         let mut operation = self.setup.operation(&draws.conditions, fidelity);
-        let metrics = &job.operation_metrics;
+        let metrics = job.operation_metrics();
         let mut cumulative_arc_energy_j = 0.0;
         let mut failed_at = None;
-        let operations = job.spec.operations;
+        let operations = job.spec().operations;
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
         for bin_index in 0..bins {
-            let start = job.bin_operations * bin_index as u64;
-            let end = (start + job.bin_operations).min(operations);
+            let start = job.bin_operations() * bin_index as u64;
+            let end = (start + job.bin_operations()).min(operations);
             let bin =
                 &mut stats.operations[bin_index * metrics.len()..(bin_index + 1) * metrics.len()];
             for op in start..end {
@@ -269,10 +269,10 @@ impl<'a> Plan<'a> {
                 }
             }
         }
-        for (accumulator, metric) in stats.devices.iter_mut().zip(&job.device_metrics) {
+        for (accumulator, metric) in stats.devices.iter_mut().zip(job.device_metrics()) {
             accumulator.push(self.device_metric(*metric, &draws, cumulative_arc_energy_j));
         }
-        if !job.failure.is_empty() {
+        if !job.failure().is_empty() {
             stats.lives.push(DeviceLife {
                 device,
                 operations_to_failure: failed_at.unwrap_or(operations),
@@ -284,7 +284,7 @@ impl<'a> Plan<'a> {
     /// Whether any failure criterion is met by this operation or by the device's state after it.
     #[inline]
     fn fails(&self, outcome: &Outcome, draws: &Draws, cumulative_arc_energy_j: f64) -> bool {
-        self.job.failure.iter().any(|(metric, criterion)| {
+        self.job.failure().iter().any(|(metric, criterion)| {
             let value = match metric {
                 Metric::Operation(metric) => metric.value(outcome),
                 Metric::Device(metric) => {
@@ -321,7 +321,7 @@ impl<'a> Plan<'a> {
 
     /// LHS permutations of one batch: one per device-level parameter, from the batch's own stream.
     fn lhs_permutations(&self, batch: u64, size: u64) -> Vec<Vec<u32>> {
-        let mut rng = ChaCha8Rng::seed_from_u64(self.job.seed);
+        let mut rng = ChaCha8Rng::seed_from_u64(self.job.seed());
         rng.set_stream(LHS_STREAM_BASE | batch);
         let size = u32::try_from(size).expect("an LHS batch has fewer than 2^32 devices");
         self.device_scatter
@@ -345,10 +345,10 @@ impl<'a> Plan<'a> {
         total: u64,
     ) -> Result<Vec<GroupStats>, Cancelled> {
         let groups = GROUPS.min(size);
-        let permutations = (self.job.spec.sampler == SamplerKind::Lhs
+        let permutations = (self.job.spec().sampler == SamplerKind::Lhs
             && !self.device_scatter.is_empty())
         .then(|| self.lhs_permutations(batch, size));
-        let operations = self.job.spec.operations;
+        let operations = self.job.spec().operations;
         (0..groups)
             .into_par_iter()
             .map(|group| {
@@ -383,8 +383,8 @@ pub fn run(
     mut accept: impl FnMut(&Tally) -> bool,
 ) -> Result<Tally, Cancelled> {
     let plan = Plan::new(job);
-    let batch_size = job.spec.devices;
-    let max_devices = job.precision.as_ref().map_or(batch_size, |p| p.max_devices);
+    let batch_size = job.spec().devices;
+    let max_devices = job.precision().map_or(batch_size, |p| p.max_devices);
     let done = AtomicU64::new(0);
     let mut tally = Tally {
         groups: Vec::new(),
@@ -392,7 +392,7 @@ pub fn run(
     };
     for batch in 0.. {
         let size = batch_size.min(max_devices - tally.devices);
-        let total = (tally.devices + size) * job.spec.operations;
+        let total = (tally.devices + size) * job.spec().operations;
         let stats = plan.run_batch(batch, tally.devices, size, observer, &done, total)?;
         if tally.groups.is_empty() {
             tally.groups = stats;

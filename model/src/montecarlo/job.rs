@@ -197,31 +197,37 @@ pub struct Precision {
     pub max_devices: u64,
 }
 
-/// A job that passed every rule: defaults filled in, seed fixed, distributions ready.
+/// A job that passed every rule: defaults filled in, seed fixed, distributions ready. It can only be
+/// built by [`Job::new`], so the engine never re-validates and the parts always agree with `spec`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Job {
-    pub spec: JobSpec,
-    pub scenario: Scenario,
-    pub seed: u64,
-    pub bin_operations: u64,
-    pub scatter: Vec<Scatter>,
-    pub operation_metrics: Vec<OperationMetric>,
-    pub device_metrics: Vec<DeviceMetric>,
-    pub limits: BTreeMap<Metric, f64>,
-    pub precision: Option<Precision>,
-    pub failure: Vec<(Metric, Criterion)>,
+    spec: JobSpec,
+    scenario: Scenario,
+    seed: u64,
+    bin_operations: u64,
+    scatter: Vec<Scatter>,
+    operation_metrics: Vec<OperationMetric>,
+    device_metrics: Vec<DeviceMetric>,
+    limits: BTreeMap<Metric, f64>,
+    precision: Option<Precision>,
+    failure: Vec<(Metric, Criterion)>,
 }
 
 impl Job {
     /// Parses and validates a job document; a missing seed is drawn by `draw_seed`.
     pub fn from_json(text: &str, draw_seed: impl FnOnce() -> u64) -> Result<Self, InvalidInput> {
         let spec: JobSpec = crate::error::from_json(text, &["/scatter", "/metrics"])?;
-        Self::new(spec, draw_seed)
+        Self::new(spec, draw_seed, &Pointer::root())
     }
 
-    /// Checks every rule before any computation, reporting every field at fault.
-    pub fn new(mut spec: JobSpec, draw_seed: impl FnOnce() -> u64) -> Result<Self, InvalidInput> {
-        let root = Pointer::root();
+    /// Checks every rule before any computation; all failures are reported, each naming its field as a
+    /// JSON pointer below `root` (`""` for a job document, `"/template"` inside a schedule). A missing
+    /// seed is drawn by `draw_seed`, only once the job is known to be valid.
+    pub fn new(
+        mut spec: JobSpec,
+        draw_seed: impl FnOnce() -> u64,
+        root: &Pointer,
+    ) -> Result<Self, InvalidInput> {
         let mut errors = Vec::new();
         let scenario = Scenario::new(spec.scenario.clone(), &root.child("scenario"));
         if let Err(invalid) = &scenario {
@@ -314,7 +320,7 @@ impl Job {
         let precision = spec
             .precision
             .as_ref()
-            .and_then(|p| check_precision(p, &spec, &metrics, &mut errors));
+            .and_then(|p| check_precision(p, &spec, &metrics, root, &mut errors));
         let failure = check_failure(&spec.failure, &root.child("failure"), &mut errors);
 
         if !errors.is_empty() {
@@ -340,6 +346,77 @@ impl Job {
     /// The number of operation bins.
     pub fn bins(&self) -> u64 {
         self.spec.operations.div_ceil(self.bin_operations)
+    }
+
+    /// The most operations the job can run: a precision target may add batches of devices up to
+    /// its `max_devices`. What a server bounds before it accepts a job.
+    pub fn max_operations(&self) -> u64 {
+        self.precision
+            .as_ref()
+            .map_or(self.spec.devices, |p| p.max_devices)
+            .saturating_mul(self.spec.operations)
+    }
+
+    /// Refuses a job that could run more than `limit` operations, naming (below `root`) the device
+    /// count that makes it that large.
+    pub fn check_size(&self, limit: u64, root: &Pointer) -> Result<(), InvalidInput> {
+        let size = self.max_operations();
+        if size <= limit {
+            return Ok(());
+        }
+        let pointer = match self.precision {
+            Some(_) => root.child("precision").child("max_devices"),
+            None => root.child("devices"),
+        };
+        Err(InvalidInput::single(
+            &pointer,
+            format!("the job would run {size} operations; this server allows {limit}"),
+        ))
+    }
+
+    /// The job as submitted, with the seed and `bin_operations` filled in: what a store keeps to
+    /// rerun it.
+    pub fn spec(&self) -> &JobSpec {
+        &self.spec
+    }
+
+    pub fn scenario(&self) -> &Scenario {
+        &self.scenario
+    }
+
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    pub fn bin_operations(&self) -> u64 {
+        self.bin_operations
+    }
+
+    pub fn scatter(&self) -> &[Scatter] {
+        &self.scatter
+    }
+
+    /// In the order the job lists them (all metrics when it lists none): the engine's accumulators
+    /// and the Result's `metrics` follow it.
+    pub fn operation_metrics(&self) -> &[OperationMetric] {
+        &self.operation_metrics
+    }
+
+    /// In the order the job lists them, as [`Job::operation_metrics`].
+    pub fn device_metrics(&self) -> &[DeviceMetric] {
+        &self.device_metrics
+    }
+
+    pub fn limits(&self) -> &BTreeMap<Metric, f64> {
+        &self.limits
+    }
+
+    pub fn precision(&self) -> Option<&Precision> {
+        self.precision.as_ref()
+    }
+
+    pub fn failure(&self) -> &[(Metric, Criterion)] {
+        &self.failure
     }
 }
 
@@ -469,9 +546,10 @@ fn check_precision(
     spec: &PrecisionSpec,
     job: &JobSpec,
     metrics: &[Metric],
+    root: &Pointer,
     errors: &mut Vec<FieldError>,
 ) -> Option<Precision> {
-    let at = Pointer::root().child("precision");
+    let at = root.child("precision");
     let before = errors.len();
     let metric = match Metric::parse(&spec.metric) {
         Some(Metric::Operation(metric)) if metrics.contains(&Metric::Operation(metric)) => {
@@ -529,4 +607,60 @@ fn check_precision(
         relative_half_width: spec.relative_half_width,
         max_devices: spec.max_devices,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn job(text: &str) -> Job {
+        Job::from_json(text, || 1).unwrap()
+    }
+
+    const PRECISE: &str = r#"{"devices": 10, "operations": 30, "precision":
+        {"metric": "e1", "relative_half_width": 0.1, "max_devices": 500}}"#;
+
+    #[test]
+    fn max_operations_is_devices_times_operations() {
+        assert_eq!(
+            job(r#"{"devices": 10, "operations": 30}"#).max_operations(),
+            300
+        );
+    }
+
+    #[test]
+    fn max_operations_with_a_precision_target_counts_its_max_devices() {
+        assert_eq!(job(PRECISE).max_operations(), 15_000);
+    }
+
+    #[test]
+    fn a_job_of_exactly_the_limit_is_accepted() {
+        let job = job(r#"{"devices": 10, "operations": 30}"#);
+        assert_eq!(job.check_size(300, &Pointer::root()), Ok(()));
+    }
+
+    #[test]
+    fn a_job_over_the_limit_names_its_devices() {
+        let job = job(r#"{"devices": 10, "operations": 30}"#);
+        assert_eq!(
+            job.check_size(299, &Pointer::root()),
+            Err(InvalidInput::single(
+                &Pointer::root().child("devices"),
+                "the job would run 300 operations; this server allows 299"
+            ))
+        );
+    }
+
+    #[test]
+    fn a_precise_job_over_the_limit_names_max_devices_below_the_root() {
+        let template = Pointer::root().child("template");
+        let error = job(PRECISE).check_size(1000, &template).unwrap_err();
+        assert_eq!(
+            error.errors(),
+            [FieldError {
+                pointer: "/template/precision/max_devices".to_owned(),
+                detail: "the job would run 15000 operations; this server allows 1000".to_owned(),
+            }]
+        );
+    }
 }

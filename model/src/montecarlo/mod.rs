@@ -63,8 +63,7 @@ pub struct Timing {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct JobResult {
     /// The job with every default filled in, its seed, the generator and crate versions.
-    #[cfg_attr(feature = "openapi", schema(value_type = Object))]
-    pub job: serde_json::Value,
+    pub job: ResolvedJob,
     pub operations: BTreeMap<String, Vec<Bin>>,
     pub devices: BTreeMap<String, Summary>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -73,6 +72,82 @@ pub struct JobResult {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub life: Option<LifeReport>,
     pub timing: Timing,
+}
+
+/// The job as it ran: everything needed to rerun it and get the same bits.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct ResolvedJob {
+    /// The JobSpec with every default filled in: its seed, `bin_operations`, the whole scenario and
+    /// the list of metrics. A plain object in the schema: JobSpec's admits no other members.
+    #[serde(flatten)]
+    #[cfg_attr(feature = "openapi", schema(value_type = Object))]
+    spec: JobSpec,
+    /// Devices that ran: `devices`, or more with a precision target.
+    devices_run: u64,
+    /// The random number generator and how it is seeded.
+    generator: String,
+    /// Versions of the crates that fix the random numbers, and of the model.
+    versions: BTreeMap<String, String>,
+}
+
+impl ResolvedJob {
+    fn new(job: &Job, devices_run: u64) -> Self {
+        let mut spec = job.spec().clone();
+        spec.scenario = job.scenario().spec().clone();
+        spec.metrics = Some(
+            job.operation_metrics()
+                .iter()
+                .map(|m| m.name())
+                .chain(job.device_metrics().iter().map(|m| m.name()))
+                .map(str::to_owned)
+                .collect(),
+        );
+        Self {
+            spec,
+            devices_run,
+            generator: GENERATOR.to_owned(),
+            versions: RANDOM_CRATES
+                .iter()
+                .copied()
+                .chain([("bouncewear-model", env!("CARGO_PKG_VERSION"))])
+                .map(|(name, version)| (name.to_owned(), version.to_owned()))
+                .collect(),
+        }
+    }
+
+    pub fn spec(&self) -> &JobSpec {
+        &self.spec
+    }
+
+    pub fn devices_run(&self) -> u64 {
+        self.devices_run
+    }
+
+    pub fn generator(&self) -> &str {
+        &self.generator
+    }
+
+    pub fn versions(&self) -> &BTreeMap<String, String> {
+        &self.versions
+    }
+}
+
+impl Serialize for ResolvedJob {
+    /// Through one serde_json map, which keeps its keys sorted: every key at every depth comes out
+    /// in alphabetical order, as when the job was an untyped map, so Results stay byte-identical.
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::Error;
+        let mut value = serde_json::to_value(&self.spec).map_err(S::Error::custom)?;
+        let object = value.as_object_mut().expect("a job spec is an object");
+        object.insert("devices_run".into(), self.devices_run.into());
+        object.insert("generator".into(), self.generator.clone().into());
+        object.insert(
+            "versions".into(),
+            serde_json::to_value(&self.versions).map_err(S::Error::custom)?,
+        );
+        value.serialize(serializer)
+    }
 }
 
 /// Life analysis of a job with failure criteria (docs/model.md has no failure model: the user's
@@ -95,17 +170,16 @@ pub struct LifeReport {
 pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, Cancelled> {
     let started = Instant::now();
     let tally = engine::run(job, observer, |tally| {
-        job.precision
-            .as_ref()
+        job.precision()
             .is_some_and(|p| precision_half_width(job, tally, p) <= p.relative_half_width)
     })?;
     let wall_s = started.elapsed().as_secs_f64();
-    let operations_run = tally.devices * job.spec.operations;
+    let operations_run = tally.devices * job.spec().operations;
     Ok(JobResult {
-        job: resolved_job(job, tally.devices),
+        job: ResolvedJob::new(job, tally.devices),
         operations: summarize_operations(job, &tally),
         devices: summarize_devices(job, &tally),
-        precision: job.precision.as_ref().map(|p| {
+        precision: job.precision().map(|p| {
             let achieved = precision_half_width(job, &tally, p);
             PrecisionReport {
                 metric: p.metric.name().to_owned(),
@@ -125,7 +199,7 @@ pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, Cancelle
 }
 
 fn life_report(job: &Job, tally: &Tally) -> Option<LifeReport> {
-    if job.failure.is_empty() {
+    if job.failure().is_empty() {
         return None;
     }
     let mut devices: Vec<DeviceLife> = tally
@@ -140,7 +214,7 @@ fn life_report(job: &Job, tally: &Tally) -> Option<LifeReport> {
         .collect();
     let failures = devices.iter().filter(|d| !d.censored).count() as u64;
     Some(LifeReport {
-        criteria: job.spec.failure.clone(),
+        criteria: job.spec().failure.clone(),
         failures,
         censored: devices.len() as u64 - failures,
         analysis: crate::life::analyse(&data),
@@ -157,7 +231,7 @@ fn statistic_name(statistic: Statistic) -> &'static str {
 
 /// The groups' accumulators of one (bin, metric), in group order.
 fn operation_groups(job: &Job, tally: &Tally, bin: usize, metric: usize) -> Vec<Accumulator> {
-    let index = bin * job.operation_metrics.len() + metric;
+    let index = bin * job.operation_metrics().len() + metric;
     tally
         .groups
         .iter()
@@ -167,13 +241,13 @@ fn operation_groups(job: &Job, tally: &Tally, bin: usize, metric: usize) -> Vec<
 
 fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> {
     let bins = usize::try_from(job.bins()).expect("bins fit in memory");
-    job.operation_metrics
+    job.operation_metrics()
         .iter()
         .enumerate()
         .map(|(m, metric)| {
             let summaries = (0..bins)
                 .map(|b| {
-                    let op_start = job.bin_operations * b as u64;
+                    let op_start = job.bin_operations() * b as u64;
                     let mut summary = summarize(&operation_groups(job, tally, b, m));
                     if metric.is_integer() {
                         round_quantiles(&mut summary);
@@ -181,7 +255,7 @@ fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> 
                     Bin {
                         summary,
                         op_start,
-                        op_end: (op_start + job.bin_operations).min(job.spec.operations),
+                        op_end: (op_start + job.bin_operations()).min(job.spec().operations),
                     }
                 })
                 .collect();
@@ -200,7 +274,7 @@ fn round_quantiles(summary: &mut Summary) {
 }
 
 fn summarize_devices(job: &Job, tally: &Tally) -> BTreeMap<String, Summary> {
-    job.device_metrics
+    job.device_metrics()
         .iter()
         .enumerate()
         .map(|(m, metric)| {
@@ -215,7 +289,7 @@ fn summarize_devices(job: &Job, tally: &Tally) -> BTreeMap<String, Summary> {
 /// statistic is 0 and the interval is not).
 fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) -> f64 {
     let metric = job
-        .operation_metrics
+        .operation_metrics()
         .iter()
         .position(|m| *m == precision.metric)
         .expect("validated");
@@ -234,34 +308,4 @@ fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) ->
     } else {
         half_width / value.abs()
     }
-}
-
-fn resolved_job(job: &Job, devices_run: u64) -> serde_json::Value {
-    let mut spec = job.spec.clone();
-    spec.scenario = job.scenario.spec().clone();
-    spec.metrics = Some(
-        job.operation_metrics
-            .iter()
-            .map(|m| m.name())
-            .chain(job.device_metrics.iter().map(|m| m.name()))
-            .map(str::to_owned)
-            .collect(),
-    );
-    let mut value = serde_json::to_value(&spec).expect("a job serialises");
-    let object = value.as_object_mut().expect("a job is an object");
-    object.insert("devices_run".into(), devices_run.into());
-    object.insert("generator".into(), GENERATOR.into());
-    object.insert(
-        "versions".into(),
-        RANDOM_CRATES
-            .iter()
-            .map(|(name, version)| ((*name).to_owned(), serde_json::Value::from(*version)))
-            .chain([(
-                "bouncewear-model".to_owned(),
-                env!("CARGO_PKG_VERSION").into(),
-            )])
-            .collect::<serde_json::Map<_, _>>()
-            .into(),
-    );
-    value
 }

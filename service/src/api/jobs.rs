@@ -13,9 +13,9 @@ use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
+use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
 use bouncewear_model::stats::{QUANTILES, Summary};
-use bouncewear_model::{InvalidInput, Pointer};
 use futures_util::stream::Stream;
 use serde::{Deserialize, Serialize};
 use std::convert::Infallible;
@@ -107,21 +107,6 @@ impl JobResource {
     }
 }
 
-/// Operations a job may run: devices (or the precision target's `max_devices`) x operations.
-fn job_size(job: &Job) -> (u64, Pointer) {
-    let root = Pointer::root();
-    match &job.precision {
-        Some(p) => (
-            p.max_devices.saturating_mul(job.spec.operations),
-            root.child("precision").child("max_devices"),
-        ),
-        None => (
-            job.spec.devices.saturating_mul(job.spec.operations),
-            root.child("devices"),
-        ),
-    }
-}
-
 /// Submit a Monte Carlo job; it is queued durably before the response is sent.
 #[utoipa::path(
     post, path = "/v1/jobs", tag = "jobs",
@@ -140,17 +125,8 @@ pub async fn submit_job(
     JsonText(body): JsonText,
 ) -> Result<Response, ApiError> {
     let job = Job::from_json(&body, draw_seed)?;
-    let (size, pointer) = job_size(&job);
-    if size > state.config.max_job_operations {
-        return Err(ApiError::Invalid(InvalidInput::single(
-            &pointer,
-            format!(
-                "the job would run {size} operations; this server allows {}",
-                state.config.max_job_operations
-            ),
-        )));
-    }
-    let new = QueuedJob::new(&job, owner, job.spec.name.clone(), UnixMs::now());
+    job.check_size(state.config.max_job_operations, &Pointer::root())?;
+    let new = QueuedJob::new(&job, owner, job.spec().name.clone(), UnixMs::now());
     let record = state
         .store
         .insert_job(new, state.config.max_queued)

@@ -77,9 +77,9 @@ impl QueuedJob {
             id: JobId::generate(),
             owner,
             name,
-            spec: job.spec.clone(),
-            seed: job.seed,
-            operations_total: job.spec.devices.saturating_mul(job.spec.operations),
+            spec: job.spec().clone(),
+            seed: job.seed(),
+            operations_total: job.spec().devices.saturating_mul(job.spec().operations),
             created_at,
         }
     }

@@ -58,7 +58,7 @@ impl ScheduleDefinition {
         due: UnixMs,
         now: UnixMs,
     ) -> Result<QueuedJob, InvalidInput> {
-        let job = Job::new(self.template.clone(), draw_seed)?;
+        let job = Job::new(self.template.clone(), draw_seed, &Pointer::root())?;
         let name = format!("{} @ {}", self.name, due.to_rfc3339());
         Ok(QueuedJob::new(&job, owner, Some(name), now))
     }
@@ -96,24 +96,11 @@ impl ValidSchedule {
                 })
             })
             .ok();
-        match Job::new(spec.template.clone(), || 0) {
-            Ok(job) => {
-                let size = job
-                    .precision
-                    .as_ref()
-                    .map_or(job.spec.devices, |p| p.max_devices)
-                    .saturating_mul(job.spec.operations);
-                if size > max_job_operations {
-                    errors.push(FieldError {
-                        pointer: "/template/devices".into(),
-                        detail: format!("each run would run {size} operations; this server allows {max_job_operations}"),
-                    });
-                }
-            }
-            Err(invalid) => errors.extend(invalid.errors().iter().map(|e| FieldError {
-                pointer: format!("/template{}", e.pointer),
-                detail: e.detail.clone(),
-            })),
+        let template = root.child("template");
+        let size = Job::new(spec.template.clone(), || 0, &template)
+            .and_then(|job| job.check_size(max_job_operations, &template));
+        if let Err(invalid) = size {
+            errors.extend_from_slice(invalid.errors());
         }
         let names = spec
             .statistics

@@ -365,7 +365,7 @@ impl JobQueue for SqliteStore {
 
 /// One `distributions` row per bin of every operation metric, and one per device metric.
 fn distribution_rows(result: &JobResult) -> impl Iterator<Item = (&str, DistributionRow)> {
-    let operations = result.job["operations"].as_u64().unwrap_or(0);
+    let operations = result.job.spec().operations;
     let bins = result.operations.iter().flat_map(|(metric, bins)| {
         bins.iter().enumerate().map(move |(index, bin)| {
             let row = DistributionRow {
