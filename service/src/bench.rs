@@ -7,7 +7,6 @@
 //!   counts, random against Latin hypercube.
 //! - Throughput of the reference jobs, and what each skip of unneeded work saves.
 
-use crate::cli::CliError;
 use bouncewear_model::montecarlo::{Job, JobResult, OperationMetric, Silent, run_job};
 use bouncewear_model::wear::WearLaw;
 use bouncewear_model::{Fidelity, Needs, Operation, Outcome, Scenario};
@@ -69,8 +68,19 @@ pub struct Skip {
     pub ns_per_op_skipping: f64,
 }
 
+/// Why `bench` could not finish. Every measurement runs fixed, valid jobs, so only the report's
+/// files can fail.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error("{path}: {source}")]
+    Write {
+        path: String,
+        source: std::io::Error,
+    },
+}
+
 /// Runs every measurement on the current rayon pool and writes `report.{json,md,svg}` into `out`.
-pub fn bench(out: &Path, quick: bool) -> Result<Report, CliError> {
+pub fn bench(out: &Path, quick: bool) -> Result<Report, BenchError> {
     let report = Report {
         machine: Machine {
             threads: rayon::current_num_threads(),
@@ -96,8 +106,8 @@ pub fn bench(out: &Path, quick: bool) -> Result<Report, CliError> {
     Ok(report)
 }
 
-fn io_error(path: &Path, source: std::io::Error) -> CliError {
-    CliError::Io {
+fn io_error(path: &Path, source: std::io::Error) -> BenchError {
+    BenchError::Write {
         path: path.display().to_string(),
         source,
     }
