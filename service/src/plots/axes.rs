@@ -198,6 +198,7 @@ impl LogAxis {
     }
 }
 
+/// A log-axis tick, at most 6 significant digits with nothing trailing: plain between 1e-3 and
 /// 1e6, else in exponent form (`2e7`).
 pub(super) fn fmt_tick(v: f64) -> String {
     if !v.is_finite() {
