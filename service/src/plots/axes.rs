@@ -1,7 +1,9 @@
 //! From data to pixels: scales, linear and log axes with their ticks, the plotting frame, and the
 //! drawing of grids, axis lines and legends.
 
-use super::svg::{AXIS, GRID, LABEL, SMALL, Style, Svg, log10_floor, text_width, trim_exponent};
+use super::svg::{
+    AXIS, GRID, GRID_MINOR, LABEL, SMALL, Style, Svg, log10_floor, text_width, trim_exponent,
+};
 
 /// A linear map from a data domain to pixels; a zero-width domain maps to the range's middle.
 #[derive(Clone, Copy)]
@@ -127,19 +129,26 @@ pub(super) struct LogAxis {
 }
 
 impl LogAxis {
+    /// At most 8 decades, centred on the geometric middle: beyond that a few outliers would
+    /// squeeze the values that matter into a corner.
     pub(super) fn new(lo: f64, hi: f64) -> Self {
-        let mut lo = if lo.is_finite() && lo > 0.0 { lo } else { 1.0 };
-        let mut hi = if hi.is_finite() && hi > lo {
-            hi
-        } else {
-            lo * 10.0
-        };
-        // At most 8 decades, centred on the geometric middle.
+        let (mut lo, mut hi) = positive_range(lo, hi);
         if hi / lo > 1e8 {
             let mid = (lo.log10() + hi.log10()) / 2.0;
             lo = 10f64.powf(mid - 4.0);
             hi = 10f64.powf(mid + 4.0);
         }
+        Self::ticked(lo, hi)
+    }
+
+    /// A scale of `log10` values: a log axis is linear in the exponent.
+    pub(super) fn scale(&self, r0: f64, r1: f64) -> Scale {
+        Scale::new(self.lo.log10(), self.hi.log10(), r0, r1)
+    }
+
+    /// The ticks of `[lo, hi]`, first widened to a factor of 1.2 when it is narrower: a log axis
+    /// needs some ratio to show.
+    fn ticked(mut lo: f64, mut hi: f64) -> Self {
         if hi / lo < 1.2 {
             let mid = (lo * hi).sqrt();
             lo = mid / 1.1;
@@ -196,6 +205,24 @@ impl LogAxis {
             grid,
         }
     }
+}
+
+/// `[lo, hi]` with both ends usable on a log axis: a decade from 1 when nothing is.
+fn positive_range(lo: f64, hi: f64) -> (f64, f64) {
+    let lo = if lo.is_finite() && lo > 0.0 { lo } else { 1.0 };
+    let hi = if hi.is_finite() && hi > lo {
+        hi
+    } else {
+        lo * 10.0
+    };
+    (lo, hi)
+}
+
+/// `[lo, hi]` widened by a factor that grows with its ratio, so the points at either end stay
+/// clear of the frame on a log axis.
+pub(super) fn widen_log(lo: f64, hi: f64) -> (f64, f64) {
+    let margin = (hi / lo).powf(0.06).max(1.04);
+    (lo / margin, hi * margin)
 }
 
 /// A log-axis tick, at most 6 significant digits with nothing trailing: plain between 1e-3 and
@@ -275,6 +302,21 @@ pub(super) fn draw_x_ticks(
         if k.is_multiple_of(every) {
             svg.text(x, frame.bottom() + 16.0, label, SMALL);
         }
+    }
+}
+
+/// Vertical grid lines of a log x axis (fainter between labelled values), with tick marks and
+/// labels at the labelled values.
+pub(super) fn draw_log_x_axis(svg: &mut Svg, frame: &Frame, axis: &LogAxis, xs: &Scale) {
+    for &(t, major) in &axis.grid {
+        let x = xs.map(t.log10());
+        let colour = if major { GRID } else { GRID_MINOR };
+        svg.line(x, frame.top, x, frame.bottom(), colour, 1.0, None);
+    }
+    for &t in &axis.labelled {
+        let x = xs.map(t.log10());
+        svg.line(x, frame.bottom(), x, frame.bottom() + 5.0, AXIS, 1.0, None);
+        svg.text(x, frame.bottom() + 18.0, &fmt_tick(t), SMALL);
     }
 }
 

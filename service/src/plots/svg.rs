@@ -8,6 +8,7 @@ pub(super) const FONT: &str =
 pub(super) const INK: &str = "#111827";
 pub(super) const MUTED: &str = "#4b5563";
 pub(super) const GRID: &str = "#e5e7eb";
+pub(super) const GRID_MINOR: &str = "#f3f4f6";
 pub(super) const AXIS: &str = "#9ca3af";
 pub(super) const BLUE: &str = "#2563eb";
 pub(super) const BAND: &str = "#bfdbfe";

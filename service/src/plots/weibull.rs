@@ -4,7 +4,7 @@ use std::fmt::Write as _;
 
 use bouncewear_model::life::{KaplanMeierPoint, LifeAnalysis, weibull_scale};
 
-use super::axes::{Frame, Legend, LogAxis, Scale, draw_frame_axes, fmt_tick};
+use super::axes::{Frame, Legend, LogAxis, Scale, draw_frame_axes, draw_log_x_axis, widen_log};
 use super::svg::{
     AXIS, BLUE, GRID, INK, LABEL, MUTED, RED, SMALL, Style, Svg, fmt_percent, fmt_sig, num,
     text_width, wrap,
@@ -77,14 +77,9 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
         t_lo = 1.0;
         t_hi = 1000.0;
     }
-    let margin = (t_hi / t_lo).powf(0.06).max(1.04);
-    let x_axis = LogAxis::new(t_lo / margin, t_hi * margin);
-    let xs = Scale::new(
-        x_axis.lo.log10(),
-        x_axis.hi.log10(),
-        frame.left,
-        frame.right(),
-    );
+    let (t_lo, t_hi) = widen_log(t_lo, t_hi);
+    let x_axis = LogAxis::new(t_lo, t_hi);
+    let xs = x_axis.scale(frame.left, frame.right());
     let ys = Scale::new(y_lo, y_hi, frame.bottom(), frame.top);
     let x_of_t = |t: f64| xs.map(t.log10());
 
@@ -119,23 +114,7 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
             },
         );
     }
-    for &(t, major) in &x_axis.grid {
-        let x = x_of_t(t);
-        svg.line(
-            x,
-            frame.top,
-            x,
-            frame.bottom(),
-            if major { GRID } else { "#f3f4f6" },
-            1.0,
-            None,
-        );
-    }
-    for &t in &x_axis.labelled {
-        let x = x_of_t(t);
-        svg.line(x, frame.bottom(), x, frame.bottom() + 5.0, AXIS, 1.0, None);
-        svg.text(x, frame.bottom() + 18.0, &fmt_tick(t), SMALL);
-    }
+    draw_log_x_axis(&mut svg, &frame, &x_axis, &xs);
 
     let (lx0, lx1) = (x_axis.lo.ln(), x_axis.hi.ln());
     let mut legend = Legend::new(frame.left, 48.0);
