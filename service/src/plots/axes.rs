@@ -2,7 +2,7 @@
 //! drawing of grids, axis lines and legends.
 
 use super::svg::{
-    AXIS, GRID, GRID_MINOR, LABEL, SMALL, Style, Svg, log10_floor, text_width, trim_exponent,
+    AXIS, GRID, GRID_MINOR, LABEL, MUTED, SMALL, Style, Svg, log10_floor, text_width, trim_exponent,
 };
 
 /// A linear map from a data domain to pixels; a zero-width domain maps to the range's middle.
@@ -138,6 +138,12 @@ impl LogAxis {
             lo = 10f64.powf(mid - 4.0);
             hi = 10f64.powf(mid + 4.0);
         }
+        Self::ticked(lo, hi)
+    }
+
+    /// Every decade of `[lo, hi]`, for plots whose point is how many decades apart the values are.
+    pub(super) fn whole(lo: f64, hi: f64) -> Self {
+        let (lo, hi) = positive_range(lo, hi);
         Self::ticked(lo, hi)
     }
 
@@ -320,6 +326,28 @@ pub(super) fn draw_log_x_axis(svg: &mut Svg, frame: &Frame, axis: &LogAxis, xs: 
     }
 }
 
+/// Horizontal grid lines of a log y axis (fainter between labelled values), with labels at the
+/// labelled values.
+pub(super) fn draw_log_y_grid(svg: &mut Svg, frame: &Frame, axis: &LogAxis, ys: &Scale) {
+    for &(t, major) in &axis.grid {
+        let y = ys.map(t.log10());
+        let colour = if major { GRID } else { GRID_MINOR };
+        svg.line(frame.left, y, frame.right(), y, colour, 1.0, None);
+    }
+    for &t in &axis.labelled {
+        let y = ys.map(t.log10());
+        svg.text(
+            frame.left - 6.0,
+            y + 4.0,
+            &fmt_tick(t),
+            Style {
+                anchor: "end",
+                ..SMALL
+            },
+        );
+    }
+}
+
 /// The left and bottom axis lines.
 pub(super) fn draw_frame_axes(svg: &mut Svg, frame: &Frame) {
     svg.line(
@@ -339,6 +367,20 @@ pub(super) fn draw_frame_axes(svg: &mut Svg, frame: &Frame) {
         AXIS,
         1.0,
         None,
+    );
+}
+
+/// A message in the middle of an empty frame, so a plot without points says why.
+pub(super) fn draw_no_data(svg: &mut Svg, frame: &Frame, message: &str) {
+    svg.text(
+        frame.left + frame.width / 2.0,
+        frame.top + frame.height / 2.0,
+        message,
+        Style {
+            size: 13.0,
+            fill: MUTED,
+            ..LABEL
+        },
     );
 }
 

@@ -1,5 +1,6 @@
 //! Standalone SVG plots for the dashboard: a job's per-bin histograms and wear curve, a Weibull
-//! probability plot of a life analysis, and a schedule's night-by-night trend.
+//! probability plot of a life analysis, a schedule's night-by-night trend, and the benchmark's
+//! work-precision panels.
 //!
 //! Every function returns one complete SVG document (`<svg ...>` to `</svg>\n`) with a white
 //! background, a `viewBox` and its own `width`/`height`, so it can be served as `image/svg+xml`
@@ -16,6 +17,7 @@ mod histograms;
 mod svg;
 mod trend;
 mod weibull;
+mod work_precision;
 
 use bouncewear_model::montecarlo::JobResult;
 use bouncewear_model::stats::Summary;
@@ -24,6 +26,7 @@ pub use bands::quantile_bands_svg;
 pub use histograms::histograms_svg;
 pub use trend::{TrendPoint, trend_svg};
 pub use weibull::weibull_svg;
+pub use work_precision::{Panel, Series, work_precision_svg};
 
 use svg::{GRID, LABEL, MUTED, Style, Svg};
 

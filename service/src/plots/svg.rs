@@ -14,6 +14,8 @@ pub(super) const BLUE: &str = "#2563eb";
 pub(super) const BAND: &str = "#bfdbfe";
 pub(super) const BAR: &str = "#60a5fa";
 pub(super) const RED: &str = "#dc2626";
+/// Colours for the lines of one chart, in order; blue first, as everywhere else.
+pub(super) const SERIES: [&str; 4] = [BLUE, "#d97706", "#059669", "#7c3aed"];
 
 /// `floor(log10(v))`, robust to `log10(1000) = 2.9999...`.
 pub(super) fn log10_floor(v: f64) -> f64 {

@@ -4,10 +4,12 @@ use std::fmt::Write as _;
 
 use bouncewear_model::life::{KaplanMeierPoint, LifeAnalysis, weibull_scale};
 
-use super::axes::{Frame, Legend, LogAxis, Scale, draw_frame_axes, draw_log_x_axis, widen_log};
+use super::axes::{
+    Frame, Legend, LogAxis, Scale, draw_frame_axes, draw_log_x_axis, draw_no_data, widen_log,
+};
 use super::svg::{
-    AXIS, BLUE, GRID, INK, LABEL, MUTED, RED, SMALL, Style, Svg, fmt_percent, fmt_sig, num,
-    text_width, wrap,
+    AXIS, BLUE, GRID, INK, LABEL, RED, SMALL, Style, Svg, fmt_percent, fmt_sig, num, text_width,
+    wrap,
 };
 use super::{pick_evenly, segments};
 
@@ -277,16 +279,7 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
         svg.text(bx + 10.0, by + 20.0 + 17.0 * k as f64, line, style);
     }
     if fit.is_none() && points.is_empty() {
-        svg.text(
-            frame.left + frame.width / 2.0,
-            frame.top + frame.height / 2.0,
-            "No failures to plot",
-            Style {
-                size: 13.0,
-                fill: MUTED,
-                ..LABEL
-            },
-        );
+        draw_no_data(&mut svg, &frame, "No failures to plot");
     }
 
     svg.text(
