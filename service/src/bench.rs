@@ -7,7 +7,7 @@
 //!   counts, random against Latin hypercube.
 //! - Throughput of the issue's reference jobs, and what each skip of unneeded work saves.
 
-use crate::cli::CliError;
+use crate::plots::{Panel, Series, work_precision_svg};
 use bouncewear_model::montecarlo::{Job, JobResult, OperationMetric, Silent, run_job};
 use bouncewear_model::wear::WearLaw;
 use bouncewear_model::{Fidelity, Needs, Operation, Outcome, Pointer, Scenario};
@@ -69,8 +69,19 @@ pub struct Skip {
     pub ns_per_op_skipping: f64,
 }
 
+/// Why `bench` could not finish. Every measurement runs fixed, valid jobs, so only the report's
+/// files can fail.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error("{path}: {source}")]
+    Write {
+        path: String,
+        source: std::io::Error,
+    },
+}
+
 /// Runs every measurement on the current rayon pool and writes `report.{json,md,svg}` into `out`.
-pub fn bench(out: &Path, quick: bool) -> Result<Report, CliError> {
+pub fn bench(out: &Path, quick: bool) -> Result<Report, BenchError> {
     let report = Report {
         machine: Machine {
             threads: rayon::current_num_threads(),
@@ -96,8 +107,8 @@ pub fn bench(out: &Path, quick: bool) -> Result<Report, CliError> {
     Ok(report)
 }
 
-fn io_error(path: &Path, source: std::io::Error) -> CliError {
-    CliError::Io {
+fn io_error(path: &Path, source: std::io::Error) -> BenchError {
+    BenchError::Write {
         path: path.display().to_string(),
         source,
     }
@@ -383,167 +394,45 @@ fn markdown(report: &Report) -> String {
     md
 }
 
-/// A two-panel log-log work-precision plot, drawn by hand (no plotting dependency):
-/// tiers (relative error of total bounce time, median to max, against ns per operation) and
-/// samplers (CI half-width against wall time, one line per sampler).
+/// The work-precision plot: tiers (relative error of total bounce time, median to max, against ns
+/// per operation) and samplers (CI half-width against wall time, one line per sampler).
 fn svg(report: &Report) -> String {
-    /// A named, coloured polyline of (x, y) points.
-    type Line = (String, &'static str, Vec<(f64, f64)>);
-    struct Panel {
-        x0: f64,
-        title: &'static str,
-        x_label: &'static str,
-        y_label: &'static str,
-        lines: Vec<Line>,
-    }
-    let tier_colours = ["#1f77b4", "#d62728"];
-    let panels = [
-        Panel {
-            x0: 70.0,
-            title: "Tiers: error of total_bounce_s vs time",
-            x_label: "relative error (median to max)",
-            y_label: "ns per operation",
-            lines: report
-                .tiers
-                .iter()
-                .zip(tier_colours)
-                .map(|(t, colour)| {
-                    let floor = |e: f64| e.max(1e-17);
-                    let metric = "total_bounce_s";
-                    let points = vec![
-                        (floor(t.median_rel_error[metric]), t.ns_per_op),
-                        (floor(t.max_rel_error[metric]), t.ns_per_op),
-                    ];
-                    (t.fidelity.as_str().to_owned(), colour, points)
-                })
-                .collect(),
-        },
-        Panel {
-            x0: 530.0,
-            title: "Sampling: p95 CI half-width vs wall time",
-            x_label: "relative 95 % CI half-width of p95",
-            y_label: "wall s",
-            lines: ["random", "lhs"]
-                .iter()
-                .zip(["#2ca02c", "#9467bd"])
-                .map(|(sampler, colour)| {
-                    let points = report
-                        .sampling
-                        .iter()
-                        .filter(|r| r.sampler == *sampler)
-                        .map(|r| (r.ci_half_width_rel, r.wall_s))
-                        .collect();
-                    ((*sampler).to_owned(), colour, points)
-                })
-                .collect(),
-        },
-    ];
-    let (width, height, plot_w, plot_h, top) = (960.0, 420.0, 380.0, 300.0, 40.0);
-    let mut s = format!(
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" viewBox="0 0 {width} {height}" font-family="sans-serif" font-size="11">"#
-    );
-    s.push_str(r#"<rect width="100%" height="100%" fill="white"/>"#);
-    for panel in &panels {
-        let all: Vec<(f64, f64)> = panel
-            .lines
+    const METRIC: &str = "total_bounce_s";
+    // The exact tier's error can be 0, which a log axis cannot show: it sits at 1e-17 instead,
+    // below any rounding error of an f64 near 1.
+    let floor = |e: f64| e.max(1e-17);
+    let tiers = Panel {
+        title: format!("Tiers: error of {METRIC} vs time"),
+        x_label: "relative error (median to max)".to_owned(),
+        y_label: "ns per operation".to_owned(),
+        series: report
+            .tiers
             .iter()
-            .flat_map(|l| l.2.iter().copied())
-            .filter(|(x, y)| *x > 0.0 && *y > 0.0)
-            .collect();
-        let decades = |values: Vec<f64>| {
-            let lo = values
-                .iter()
-                .copied()
-                .fold(f64::INFINITY, f64::min)
-                .log10()
-                .floor();
-            let hi = values
-                .iter()
-                .copied()
-                .fold(f64::NEG_INFINITY, f64::max)
-                .log10()
-                .ceil();
-            (lo, if hi > lo { hi } else { lo + 1.0 })
-        };
-        let (x_lo, x_hi) = decades(all.iter().map(|p| p.0).collect());
-        let (y_lo, y_hi) = decades(all.iter().map(|p| p.1).collect());
-        let px = |x: f64| panel.x0 + (x.log10() - x_lo) / (x_hi - x_lo) * plot_w;
-        let py = |y: f64| top + plot_h - (y.log10() - y_lo) / (y_hi - y_lo) * plot_h;
-        let _ = write!(
-            s,
-            r#"<text x="{}" y="22" font-size="13" font-weight="bold">{}</text>"#,
-            panel.x0, panel.title
-        );
-        let _ = write!(
-            s,
-            r##"<rect x="{}" y="{top}" width="{plot_w}" height="{plot_h}" fill="none" stroke="#444"/>"##,
-            panel.x0
-        );
-        for d in (x_lo as i32)..=(x_hi as i32) {
-            let x = panel.x0 + (f64::from(d) - x_lo) / (x_hi - x_lo) * plot_w;
-            let _ = write!(
-                s,
-                r##"<line x1="{x}" y1="{top}" x2="{x}" y2="{}" stroke="#ddd"/><text x="{x}" y="{}" text-anchor="middle">1e{d}</text>"##,
-                top + plot_h,
-                top + plot_h + 14.0
-            );
-        }
-        for d in (y_lo as i32)..=(y_hi as i32) {
-            let y = top + plot_h - (f64::from(d) - y_lo) / (y_hi - y_lo) * plot_h;
-            let _ = write!(
-                s,
-                r##"<line x1="{}" y1="{y}" x2="{}" y2="{y}" stroke="#ddd"/><text x="{}" y="{}" text-anchor="end">1e{d}</text>"##,
-                panel.x0,
-                panel.x0 + plot_w,
-                panel.x0 - 4.0,
-                y + 4.0
-            );
-        }
-        let _ = write!(
-            s,
-            r#"<text x="{}" y="{}" text-anchor="middle">{}</text>"#,
-            panel.x0 + plot_w / 2.0,
-            top + plot_h + 32.0,
-            panel.x_label
-        );
-        let _ = write!(
-            s,
-            r#"<text x="{}" y="{}" text-anchor="middle" transform="rotate(-90 {} {})">{}</text>"#,
-            panel.x0 - 48.0,
-            top + plot_h / 2.0,
-            panel.x0 - 48.0,
-            top + plot_h / 2.0,
-            panel.y_label
-        );
-        for (i, (name, colour, points)) in panel.lines.iter().enumerate() {
-            let path: Vec<String> = points
-                .iter()
-                .map(|&(x, y)| format!("{:.1},{:.1}", px(x), py(y)))
-                .collect();
-            let _ = write!(
-                s,
-                r#"<polyline points="{}" fill="none" stroke="{colour}" stroke-width="2"/>"#,
-                path.join(" ")
-            );
-            for &(x, y) in points {
-                let _ = write!(
-                    s,
-                    r#"<circle cx="{:.1}" cy="{:.1}" r="3.5" fill="{colour}"/>"#,
-                    px(x),
-                    py(y)
-                );
-            }
-            let legend_y = top + 16.0 + 16.0 * i as f64;
-            let _ = write!(
-                s,
-                r#"<rect x="{}" y="{}" width="10" height="10" fill="{colour}"/><text x="{}" y="{}">{name}</text>"#,
-                panel.x0 + plot_w - 110.0,
-                legend_y - 9.0,
-                panel.x0 + plot_w - 95.0,
-                legend_y
-            );
-        }
-    }
-    s.push_str("</svg>\n");
-    s
+            .map(|t| Series {
+                name: t.fidelity.as_str().to_owned(),
+                points: vec![
+                    (floor(t.median_rel_error[METRIC]), t.ns_per_op),
+                    (floor(t.max_rel_error[METRIC]), t.ns_per_op),
+                ],
+            })
+            .collect(),
+    };
+    let sampling = Panel {
+        title: "Sampling: p95 CI half-width vs wall time".to_owned(),
+        x_label: "relative 95 % CI half-width of p95".to_owned(),
+        y_label: "wall s".to_owned(),
+        series: ["random", "lhs"]
+            .into_iter()
+            .map(|sampler| Series {
+                name: sampler.to_owned(),
+                points: report
+                    .sampling
+                    .iter()
+                    .filter(|r| r.sampler == sampler)
+                    .map(|r| (r.ci_half_width_rel, r.wall_s))
+                    .collect(),
+            })
+            .collect(),
+    };
+    work_precision_svg("bouncewear bench: speed against error", &[tiers, sampling])
 }

@@ -3,6 +3,7 @@
 //! Bad input exits with code 2 and one line on stderr naming the field (a JSON pointer) and the rule.
 
 use crate::app::StartupError;
+use crate::bench::BenchError;
 use crate::compute::PoolError;
 use crate::domain::draw_seed;
 use crate::progress::ProgressBar;
@@ -120,6 +121,15 @@ impl From<PoolError> for CliError {
                 "--threads must be at least 1",
             )),
             PoolError::Build(_) => CliError::Failed(error.to_string()),
+        }
+    }
+}
+
+/// The report's directory is the user's path, so a file it cannot write exits 2 like any other.
+impl From<BenchError> for CliError {
+    fn from(error: BenchError) -> Self {
+        match error {
+            BenchError::Write { path, source } => CliError::Io { path, source },
         }
     }
 }

@@ -1,0 +1,203 @@
+//! The wear curve: an operation metric's quantile band, median and mean across the test.
+
+use std::fmt::Write as _;
+
+use bouncewear_model::montecarlo::Bin;
+
+use super::axes::{Frame, Legend, LinearAxis, Scale, draw_frame_axes, draw_x_ticks, draw_y_grid};
+use super::svg::{BAND, BLUE, INK, LABEL, RED, SMALL, Style, Svg, fmt_sig, points};
+use super::{extent, finite, limit_of, message_svg, pad, quantile};
+
+/// The wear curve of `metric`: per bin of operations (at the bin's midpoint), a band from p05 to
+/// p95, the median, the mean (dashed) and the limit when there is one, with a legend.
+pub fn quantile_bands_svg(metric: &str, bins: &[Bin]) -> String {
+    let title = format!("{metric}: wear curve over the test");
+    struct Row {
+        x: f64,
+        p05: Option<f64>,
+        p50: Option<f64>,
+        p95: Option<f64>,
+        mean: Option<f64>,
+    }
+    let rows: Vec<Row> = bins
+        .iter()
+        .filter(|b| b.summary.n > 0)
+        .map(|b| Row {
+            x: (b.op_start as f64 + b.op_end as f64) / 2.0,
+            p05: quantile(&b.summary, "p05"),
+            p50: quantile(&b.summary, "p50"),
+            p95: quantile(&b.summary, "p95"),
+            mean: finite(b.summary.mean),
+        })
+        .filter(|r| r.x.is_finite())
+        .collect();
+    if rows.is_empty() {
+        return message_svg(&title, "No operations to plot.");
+    }
+    let limit = bins.iter().find_map(|b| limit_of(&b.summary));
+
+    let (width, height) = (760.0, 420.0);
+    let frame = Frame {
+        left: 78.0,
+        top: 70.0,
+        width: width - 78.0 - 24.0,
+        height: height - 70.0 - 56.0,
+    };
+    let x_lo = bins
+        .iter()
+        .map(|b| b.op_start as f64)
+        .fold(f64::INFINITY, f64::min);
+    let x_hi = bins
+        .iter()
+        .map(|b| b.op_end as f64)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let x_axis = LinearAxis::new(x_lo, x_hi, 8, true);
+    let ys_values = rows
+        .iter()
+        .flat_map(|r| [r.p05, r.p50, r.p95, r.mean])
+        .chain([limit])
+        .flatten();
+    let (y_lo, y_hi) = extent(ys_values);
+    let (y_lo, y_hi) = pad(y_lo, y_hi, 0.05);
+    let y_axis = LinearAxis::new(y_lo, y_hi, 6, false);
+    let xs = Scale::new(x_axis.lo, x_axis.hi, frame.left, frame.right());
+    let ys = Scale::new(y_axis.lo, y_axis.hi, frame.bottom(), frame.top);
+
+    let mut svg = Svg::new(width, height, &title);
+    svg.title(&title, 16.0, 24.0);
+    draw_y_grid(&mut svg, &frame, &y_axis, &ys);
+    draw_x_ticks(&mut svg, &frame, &x_axis, &xs, false);
+
+    // The band: p95 forwards, p05 backwards, over the bins that have both.
+    let band: Vec<(f64, f64, f64)> = rows
+        .iter()
+        .filter_map(|r| Some((xs.map(r.x), ys.map(r.p05?), ys.map(r.p95?))))
+        .collect();
+    match band.len() {
+        0 => {}
+        1 => {
+            let (x, y05, y95) = band[0];
+            svg.rect(
+                x - 6.0,
+                y95.min(y05),
+                12.0,
+                (y05 - y95).abs().max(1.0),
+                BAND,
+                None,
+            );
+        }
+        _ => {
+            let mut pts: Vec<(f64, f64)> = band.iter().map(|&(x, _, y95)| (x, y95)).collect();
+            pts.extend(band.iter().rev().map(|&(x, y05, _)| (x, y05)));
+            let _ = write!(
+                svg.out,
+                r#"<polygon points="{}" fill="{BAND}" stroke="{BAND}" stroke-width="1"/>"#,
+                points(&pts)
+            );
+            svg.out.push('\n');
+        }
+    }
+    if let Some(limit) = limit {
+        let y = ys.map(limit);
+        svg.line(frame.left, y, frame.right(), y, RED, 1.5, Some("6 4"));
+        svg.text(
+            frame.right() - 4.0,
+            y - 5.0,
+            &format!("limit {}", fmt_sig(limit, 3)),
+            Style {
+                anchor: "end",
+                fill: RED,
+                ..SMALL
+            },
+        );
+    }
+    let median: Vec<(f64, f64)> = rows
+        .iter()
+        .filter_map(|r| Some((xs.map(r.x), ys.map(r.p50?))))
+        .collect();
+    let mean: Vec<(f64, f64)> = rows
+        .iter()
+        .filter_map(|r| Some((xs.map(r.x), ys.map(r.mean?))))
+        .collect();
+    svg.polyline(&mean, INK, 1.5, Some("6 4"));
+    svg.polyline(&median, BLUE, 2.2, None);
+    if median.len() <= 40 {
+        for &(x, y) in &median {
+            svg.circle(x, y, 3.0, BLUE, "#ffffff", 1.2);
+        }
+    }
+    draw_frame_axes(&mut svg, &frame);
+    svg.text(
+        frame.left + frame.width / 2.0,
+        height - 14.0,
+        "operation",
+        LABEL,
+    );
+    svg.text(
+        18.0,
+        frame.top + frame.height / 2.0,
+        metric,
+        Style {
+            rotate: -90.0,
+            ..LABEL
+        },
+    );
+
+    let mut legend = Legend::new(frame.left, 48.0);
+    legend.swatch(&mut svg, BAND, "p05\u{2013}p95 (90 % of operations)");
+    legend.line(&mut svg, BLUE, None, "median (p50)");
+    legend.line(&mut svg, INK, Some("6 4"), "mean");
+    if limit.is_some() {
+        legend.line(&mut svg, RED, Some("6 4"), "limit");
+    }
+    svg.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plots::fixtures::{check, summary, wear_bins};
+
+    #[test]
+    fn bands_of_a_wear_test() {
+        let bins = wear_bins(10, 100, Some(0.0095));
+        let svg = quantile_bands_svg("total_bounce_s", &bins);
+        check(&svg);
+        assert!(svg.contains("total_bounce_s: wear curve"));
+        assert!(svg.contains("<polygon"));
+        assert!(svg.contains("median (p50)"));
+        assert!(svg.contains(">mean<"));
+        assert!(svg.contains("limit 0.00950"));
+        assert!(svg.contains(">operation<"));
+        // The last bin's midpoint is inside the axis: 1000 is a tick.
+        assert!(svg.contains(">1000<"));
+    }
+
+    #[test]
+    fn bands_of_degenerate_bins() {
+        check(&quantile_bands_svg("kappa", &[]));
+        let one = wear_bins(1, 1, None);
+        check(&quantile_bands_svg("kappa", &one));
+        let flat: Vec<Bin> = (0..5)
+            .map(|b| Bin {
+                summary: summary(&[0.0; 4], None),
+                op_start: b,
+                op_end: b + 1,
+            })
+            .collect();
+        check(&quantile_bands_svg("bounce_count", &flat));
+        let big: Vec<Bin> = (0..5)
+            .map(|b| Bin {
+                summary: summary(&[1e300, -1e300], None),
+                op_start: b * 1_000_000_000,
+                op_end: (b + 1) * 1_000_000_000,
+            })
+            .collect();
+        check(&quantile_bands_svg("peak_force_n", &big));
+        let mut odd = wear_bins(3, 10, None);
+        odd[1].summary.quantiles.clear();
+        odd[2].summary.mean = f64::NAN;
+        odd[0].summary.n = 0;
+        check(&quantile_bands_svg("e1", &odd));
+    }
+}

@@ -1,0 +1,258 @@
+//! Small multiples: the distribution of an operation metric in each bin of operations.
+
+use std::fmt::Write as _;
+
+use bouncewear_model::montecarlo::Bin;
+
+use super::axes::{Frame, LinearAxis, Scale, draw_frame_axes, draw_x_ticks, draw_y_grid};
+use super::svg::{BAR, BLUE, INK, LABEL, MUTED_SMALL, RED, Style, Svg, num};
+use super::{limit_of, message_svg, pad, pick_evenly, quantile};
+
+/// Small multiples of the histogram of `metric` in each bin of operations (at most 12 panels,
+/// evenly spaced over the bins when there are more, as the title says), on a shared x axis. Each
+/// panel marks the median and, when the metric has a limit, the limit.
+pub fn histograms_svg(metric: &str, bins: &[Bin]) -> String {
+    const MAX_PANELS: usize = 12;
+    let chosen = pick_evenly(bins.len(), MAX_PANELS);
+    let title = if chosen.len() < bins.len() {
+        format!(
+            "{metric}: distribution per bin of operations ({} of {} bins, evenly spaced)",
+            chosen.len(),
+            bins.len()
+        )
+    } else {
+        format!("{metric}: distribution per bin of operations")
+    };
+    if chosen.is_empty() {
+        return message_svg(&title, "No bins of operations to plot.");
+    }
+
+    let n = chosen.len();
+    let cols = ((n as f64).sqrt().ceil() as usize).clamp(1, 4);
+    let rows = n.div_ceil(cols);
+    let (panel_w, panel_h) = (250.0, 178.0);
+    let (outer_left, outer_top, outer_bottom, outer_right) = (34.0, 66.0, 44.0, 12.0);
+    let width = outer_left + panel_w * cols as f64 + outer_right;
+    let height = outer_top + panel_h * rows as f64 + outer_bottom;
+
+    // A shared x axis, so the panels compare at a glance.
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for &i in &chosen {
+        let s = &bins[i].summary;
+        for &e in s.histogram.edges.iter().chain(limit_of(s).iter()) {
+            if e.is_finite() {
+                lo = lo.min(e);
+                hi = hi.max(e);
+            }
+        }
+    }
+    let (lo, hi) = pad(lo, hi, 0.04);
+    let x_axis = LinearAxis::new(lo, hi, 4, false);
+    let limit_shown = chosen.iter().any(|&i| limit_of(&bins[i].summary).is_some());
+
+    let mut svg = Svg::new(width, height, &title);
+    svg.title(&title, 12.0, 22.0);
+    let mut subtitle =
+        String::from("Bars: counts of operations in equal-width classes; dark line: median (p50)");
+    if limit_shown {
+        subtitle.push_str("; red dashed: limit");
+    }
+    svg.text(12.0, 42.0, &subtitle, MUTED_SMALL);
+
+    for (k, &i) in chosen.iter().enumerate() {
+        let bin = &bins[i];
+        let s = &bin.summary;
+        let (col, row) = (k % cols, k / cols);
+        let px = outer_left + panel_w * col as f64;
+        let py = outer_top + panel_h * row as f64;
+        let frame = Frame {
+            left: px + 44.0,
+            top: py + 24.0,
+            width: panel_w - 44.0 - 12.0,
+            height: panel_h - 24.0 - 32.0,
+        };
+        svg.open_g(&format!(
+            r#"class="panel" data-op-start="{}" data-op-end="{}""#,
+            bin.op_start, bin.op_end
+        ));
+        svg.text(
+            px + 8.0,
+            py + 14.0,
+            &format!("operations {}\u{2013}{}", bin.op_start, bin.op_end),
+            Style {
+                anchor: "start",
+                bold: true,
+                ..LABEL
+            },
+        );
+        svg.text(
+            frame.right(),
+            py + 14.0,
+            &format!("n = {}", s.n),
+            Style {
+                anchor: "end",
+                ..MUTED_SMALL
+            },
+        );
+
+        let count = |c: u64| c as f64;
+        let bars = s
+            .histogram
+            .counts
+            .len()
+            .min(s.histogram.edges.len().saturating_sub(1));
+        let max_count = s.histogram.counts[..bars]
+            .iter()
+            .copied()
+            .max()
+            .unwrap_or(0)
+            .max(1);
+        let y_axis = LinearAxis::new(0.0, count(max_count), 3, true);
+        let xs = Scale::new(x_axis.lo, x_axis.hi, frame.left, frame.right());
+        let ys = Scale::new(y_axis.lo, y_axis.hi, frame.bottom(), frame.top);
+        draw_y_grid(&mut svg, &frame, &y_axis, &ys);
+        draw_x_ticks(&mut svg, &frame, &x_axis, &xs, false);
+
+        let mut bars_g = String::new();
+        for b in 0..bars {
+            let c = s.histogram.counts[b];
+            let (e0, e1) = (s.histogram.edges[b], s.histogram.edges[b + 1]);
+            if c == 0 || !e0.is_finite() || !e1.is_finite() {
+                continue;
+            }
+            let (mut x0, mut x1) = (xs.map(e0.min(e1)), xs.map(e0.max(e1)));
+            if x1 - x0 < 3.0 {
+                // A class of (almost) zero width, as when every value is equal: a narrow bar
+                // centred on it.
+                let mid = (x0 + x1) / 2.0;
+                x0 = mid - 3.0;
+                x1 = mid + 3.0;
+            }
+            let y = ys.map(count(c));
+            let _ = write!(
+                bars_g,
+                r#"<rect x="{}" y="{}" width="{}" height="{}" fill="{BAR}" stroke="{BLUE}" stroke-width="0.5"/>"#,
+                num(x0),
+                num(y),
+                num(x1 - x0),
+                num(frame.bottom() - y)
+            );
+        }
+        if !bars_g.is_empty() {
+            svg.raw(&bars_g);
+        }
+        if s.n == 0 {
+            svg.text(
+                frame.left + frame.width / 2.0,
+                frame.top + frame.height / 2.0,
+                "no values",
+                MUTED_SMALL,
+            );
+        }
+        if s.n > 0
+            && let Some(p50) = quantile(s, "p50")
+        {
+            let x = xs.map(p50);
+            svg.line(x, frame.top, x, frame.bottom(), INK, 1.5, None);
+        }
+        if let Some(limit) = limit_of(s) {
+            let x = xs.map(limit);
+            svg.line(x, frame.top, x, frame.bottom(), RED, 1.5, Some("5 3"));
+        }
+        draw_frame_axes(&mut svg, &frame);
+        svg.close_g();
+    }
+
+    // Shared axis labels.
+    svg.text(
+        outer_left + panel_w * cols as f64 / 2.0,
+        height - 12.0,
+        metric,
+        LABEL,
+    );
+    svg.text(
+        14.0,
+        outer_top + panel_h * rows as f64 / 2.0,
+        "count",
+        Style {
+            rotate: -90.0,
+            ..LABEL
+        },
+    );
+    svg.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plots::fixtures::{check, summary, wear_bins};
+    use bouncewear_model::stats::Histogram;
+
+    #[test]
+    fn histograms_of_a_wear_test() {
+        let bins = wear_bins(10, 100, Some(0.0095));
+        let svg = histograms_svg("total_bounce_s", &bins);
+        check(&svg);
+        assert!(svg.contains("total_bounce_s: distribution per bin of operations"));
+        assert!(svg.contains("operations 0\u{2013}100"));
+        assert!(svg.contains("operations 900\u{2013}1000"));
+        assert_eq!(svg.matches("class=\"panel\"").count(), 10);
+        assert!(svg.contains("limit"));
+        assert!(svg.contains(">count<"));
+    }
+
+    #[test]
+    fn histograms_pick_twelve_of_many_bins() {
+        let bins = wear_bins(40, 25, None);
+        let svg = histograms_svg("e1", &bins);
+        check(&svg);
+        assert_eq!(svg.matches("class=\"panel\"").count(), 12);
+        assert!(svg.contains("12 of 40 bins, evenly spaced"));
+        assert!(svg.contains("operations 0\u{2013}25"));
+        assert!(svg.contains("operations 975\u{2013}1000"));
+        assert_eq!(pick_evenly(40, 12).len(), 12);
+        let v = pick_evenly(13, 12);
+        assert_eq!((v.len(), v[0], v[11]), (12, 0, 12));
+    }
+
+    #[test]
+    fn histograms_of_degenerate_bins() {
+        check(&histograms_svg("kappa", &[]));
+        assert!(histograms_svg("kappa", &[]).contains("No bins"));
+        let equal = Bin {
+            summary: summary(&[0.5; 10], None),
+            op_start: 0,
+            op_end: 1,
+        };
+        let empty = Bin {
+            summary: summary(&[], None),
+            op_start: 1,
+            op_end: 2,
+        };
+        let zero = Bin {
+            summary: summary(&[0.0; 3], Some(0.0)),
+            op_start: 2,
+            op_end: 3,
+        };
+        let mut broken = summary(&[1.0, 2.0], None);
+        broken.histogram = Histogram {
+            edges: vec![f64::NAN],
+            counts: vec![3, 4],
+        };
+        broken.quantiles.clear();
+        let broken = Bin {
+            summary: broken,
+            op_start: 3,
+            op_end: 4,
+        };
+        for bins in [
+            vec![equal.clone()],
+            vec![empty.clone()],
+            vec![zero.clone()],
+            vec![broken.clone()],
+            vec![equal, empty, zero, broken],
+        ] {
+            check(&histograms_svg("bounce_count", &bins));
+        }
+    }
+}

@@ -1,0 +1,418 @@
+//! The Weibull probability plot of a life analysis.
+
+use std::fmt::Write as _;
+
+use bouncewear_model::life::{KaplanMeierPoint, LifeAnalysis, weibull_scale};
+
+use super::axes::{
+    Frame, Legend, LogAxis, Scale, draw_frame_axes, draw_log_x_axis, draw_no_data, widen_log,
+};
+use super::svg::{
+    AXIS, BLUE, GRID, INK, LABEL, RED, SMALL, Style, Svg, fmt_percent, fmt_sig, num, text_width,
+    wrap,
+};
+use super::{pick_evenly, segments};
+
+/// A Weibull probability plot of `life`: Kaplan-Meier unreliability `1 - R` at each failure time,
+/// the maximum-likelihood line and its pointwise 95 % bounds on time (delta method on `ln t_p`
+/// with `covariance_ln`), on log time against `ln(-ln(1 - F))` labelled in percent. Annotated
+/// with beta, eta and B10. Without a fit, the points (if any) and `weibull_error`.
+pub fn weibull_svg(life: &LifeAnalysis) -> String {
+    let title = "Weibull probability plot: operations to failure";
+    let (width, height) = (760.0, 480.0);
+    let frame = Frame {
+        left: 70.0,
+        top: 70.0,
+        width: width - 70.0 - 28.0,
+        height: height - 70.0 - 58.0,
+    };
+    let fit = life
+        .weibull
+        .as_ref()
+        .filter(|w| w.beta.is_finite() && w.beta > 0.0 && w.eta.is_finite() && w.eta > 0.0);
+
+    // Kaplan-Meier points with 0 < F < 1: F = 1 (R = 0) has no place on the Weibull scale.
+    let usable = |p: &&KaplanMeierPoint| {
+        let f = 1.0 - p.reliability;
+        p.time.is_finite() && p.time > 0.0 && f > 0.0 && f < 1.0
+    };
+    let usable_points: Vec<&KaplanMeierPoint> = life.kaplan_meier.iter().filter(usable).collect();
+    let omitted = life.kaplan_meier.len() - usable_points.len();
+    // One step per distinct failure time can mean tens of thousands: draw an even selection.
+    const MAX_POINTS: usize = 1500;
+    let points: Vec<&KaplanMeierPoint> = pick_evenly(usable_points.len(), MAX_POINTS)
+        .into_iter()
+        .map(|i| usable_points[i])
+        .collect();
+
+    // y range: 1 % to 99 % at least, widened to the points (within 0.01 % and 99.99 %).
+    let (y_min_cap, y_max_cap) = (weibull_scale(1e-4), weibull_scale(1.0 - 1e-4));
+    let mut y_lo = weibull_scale(0.01);
+    let mut y_hi = weibull_scale(0.99);
+    for p in &points {
+        let y = weibull_scale(1.0 - p.reliability).clamp(y_min_cap, y_max_cap);
+        y_lo = y_lo.min(y);
+        y_hi = y_hi.max(y);
+    }
+    y_lo -= 0.15;
+    y_hi += 0.15;
+
+    // x range: the points, and the fit between B10 and eta; then clamped to 8 decades.
+    let mut t_lo = f64::INFINITY;
+    let mut t_hi = f64::NEG_INFINITY;
+    for p in &points {
+        t_lo = t_lo.min(p.time);
+        t_hi = t_hi.max(p.time);
+    }
+    if let Some(w) = fit {
+        let candidates = if points.is_empty() {
+            [w.quantile(0.01), w.quantile(0.99)]
+        } else {
+            [w.quantile(0.10), Some(w.eta)]
+        };
+        for t in candidates.into_iter().flatten() {
+            t_lo = t_lo.min(t);
+            t_hi = t_hi.max(t);
+        }
+    }
+    if !(t_lo.is_finite() && t_hi.is_finite() && t_lo > 0.0) {
+        t_lo = 1.0;
+        t_hi = 1000.0;
+    }
+    let (t_lo, t_hi) = widen_log(t_lo, t_hi);
+    let x_axis = LogAxis::new(t_lo, t_hi);
+    let xs = x_axis.scale(frame.left, frame.right());
+    let ys = Scale::new(y_lo, y_hi, frame.bottom(), frame.top);
+    let x_of_t = |t: f64| xs.map(t.log10());
+
+    let mut svg = Svg::new(width, height, title);
+    svg.title(title, 16.0, 24.0);
+
+    // Grid: percent lines and log-time ticks.
+    let percents = [
+        0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 30.0, 50.0, 63.2, 90.0, 99.0,
+        99.9, 99.99,
+    ];
+    let mut last_label = f64::INFINITY;
+    for &pc in &percents {
+        let y = weibull_scale(pc / 100.0);
+        if y < y_lo || y > y_hi {
+            continue;
+        }
+        let py = ys.map(y);
+        let dash = (pc == 63.2).then_some("2 3");
+        svg.line(frame.left, py, frame.right(), py, GRID, 1.0, dash);
+        if last_label - py < 13.0 {
+            continue;
+        }
+        last_label = py;
+        svg.text(
+            frame.left - 8.0,
+            py + 4.0,
+            &format!("{} %", fmt_percent(pc)),
+            Style {
+                anchor: "end",
+                ..SMALL
+            },
+        );
+    }
+    draw_log_x_axis(&mut svg, &frame, &x_axis, &xs);
+
+    let (lx0, lx1) = (x_axis.lo.ln(), x_axis.hi.ln());
+    let mut legend = Legend::new(frame.left, 48.0);
+    legend.dot(&mut svg, INK, "Kaplan\u{2013}Meier 1 \u{2212} R");
+
+    if let Some(w) = fit {
+        let (ln_eta, beta) = (w.eta.ln(), w.beta);
+        // Bounds first, under the line.
+        let steps = 120;
+        let mut lower = Vec::new();
+        let mut upper = Vec::new();
+        for k in 0..=steps {
+            let y = y_lo + (y_hi - y_lo) * k as f64 / steps as f64;
+            let inside = |lt: f64| (lt >= lx0 && lt <= lx1).then_some(lt);
+            let to_px = |lt: f64| (xs.map(lt / std::f64::consts::LN_10), ys.map(y));
+            let bounds = w
+                .quantile_bounds_at_scale(y)
+                .map(|[lo, hi]| (lo.ln(), hi.ln()));
+            lower.push(bounds.and_then(|(lo, _)| inside(lo)).map(to_px));
+            upper.push(bounds.and_then(|(_, hi)| inside(hi)).map(to_px));
+        }
+        let has_bounds = lower.iter().chain(&upper).any(Option::is_some);
+        for curve in [&lower, &upper] {
+            for segment in segments(curve) {
+                svg.polyline(&segment, BLUE, 1.2, Some("5 4"));
+            }
+        }
+        // The line ln(-ln(1-F)) = beta (ln t - ln eta), clipped to the frame.
+        let a = lx0.max(ln_eta + y_lo / beta);
+        let b = lx1.min(ln_eta + y_hi / beta);
+        if a < b {
+            let p0 = (
+                xs.map(a / std::f64::consts::LN_10),
+                ys.map(beta * (a - ln_eta)),
+            );
+            let p1 = (
+                xs.map(b / std::f64::consts::LN_10),
+                ys.map(beta * (b - ln_eta)),
+            );
+            svg.polyline(&[p0, p1], BLUE, 2.2, None);
+        }
+        legend.line(&mut svg, BLUE, None, "Weibull MLE");
+        if has_bounds {
+            legend.line(&mut svg, BLUE, Some("5 4"), "95 % bounds on time (Fisher)");
+        }
+    }
+
+    // Points, with Greenwood bounds as thin bars when there are few.
+    if points.len() <= 60 {
+        for p in &points {
+            if let Some([lo, hi]) = p.ci95 {
+                let f_lo = (1.0 - hi).clamp(1e-4, 1.0 - 1e-4);
+                let f_hi = (1.0 - lo).clamp(1e-4, 1.0 - 1e-4);
+                let x = x_of_t(p.time);
+                let y0 = ys.map(weibull_scale(f_lo).clamp(y_lo, y_hi));
+                let y1 = ys.map(weibull_scale(f_hi).clamp(y_lo, y_hi));
+                svg.line(x, y0, x, y1, AXIS, 1.0, None);
+            }
+        }
+    }
+    let r = if points.len() > 200 { 2.2 } else { 3.2 };
+    let mut dots = String::new();
+    for p in &points {
+        let y = weibull_scale(1.0 - p.reliability).clamp(y_lo, y_hi);
+        let _ = write!(
+            dots,
+            r#"<circle cx="{}" cy="{}" r="{r}" fill="{INK}" fill-opacity="0.85"/>"#,
+            num(x_of_t(p.time)),
+            num(ys.map(y))
+        );
+    }
+    if !dots.is_empty() {
+        svg.raw(&dots);
+    }
+    draw_frame_axes(&mut svg, &frame);
+
+    // Annotation box, top left (where a rising line leaves room).
+    let mut notes: Vec<String> = Vec::new();
+    match fit {
+        Some(w) => {
+            notes.push(format!(
+                "\u{3b2} = {} [{}, {}]",
+                fmt_sig(w.beta, 3),
+                fmt_sig(w.beta_ci95[0], 3),
+                fmt_sig(w.beta_ci95[1], 3)
+            ));
+            notes.push(format!(
+                "\u{3b7} = {} [{}, {}] operations",
+                fmt_sig(w.eta, 4),
+                fmt_sig(w.eta_ci95[0], 4),
+                fmt_sig(w.eta_ci95[1], 4)
+            ));
+            match &life.b10 {
+                Some(b) => notes.push(format!(
+                    "B10 = {} [{}, {}] operations",
+                    fmt_sig(b.value, 4),
+                    fmt_sig(b.ci95[0], 4),
+                    fmt_sig(b.ci95[1], 4)
+                )),
+                None => {
+                    if let Some(t) = w.quantile(0.10) {
+                        notes.push(format!("B10 = {} operations", fmt_sig(t, 4)));
+                    }
+                }
+            }
+        }
+        None => {
+            let reason = life
+                .weibull_error
+                .as_deref()
+                .unwrap_or("the fit is not available");
+            notes.push("No Weibull fit:".to_owned());
+            notes.extend(wrap(reason, 52));
+        }
+    }
+    let error_lines = if fit.is_none() { notes.len() } else { 0 };
+    notes.push(format!(
+        "{} failed, {} censored",
+        life.failures, life.censored
+    ));
+    if omitted > 0 {
+        notes.push(format!("{omitted} point(s) at F = 100 % not shown"));
+    }
+    if points.len() < usable_points.len() {
+        notes.push(format!(
+            "{} of {} Kaplan\u{2013}Meier points shown, evenly spaced",
+            points.len(),
+            usable_points.len()
+        ));
+    }
+    let box_w = notes
+        .iter()
+        .map(|s| text_width(s, 12.0))
+        .fold(0.0, f64::max)
+        + 20.0;
+    let box_h = notes.len() as f64 * 17.0 + 10.0;
+    let (bx, by) = (frame.left + 10.0, frame.top + 10.0);
+    let _ = write!(
+        svg.out,
+        r##"<rect x="{}" y="{}" width="{}" height="{}" rx="4" fill="#ffffff" fill-opacity="0.92" stroke="{GRID}"/>"##,
+        num(bx),
+        num(by),
+        num(box_w),
+        num(box_h)
+    );
+    svg.out.push('\n');
+    for (k, line) in notes.iter().enumerate() {
+        let style = if k < error_lines {
+            Style {
+                anchor: "start",
+                fill: RED,
+                ..LABEL
+            }
+        } else {
+            Style {
+                anchor: "start",
+                ..LABEL
+            }
+        };
+        svg.text(bx + 10.0, by + 20.0 + 17.0 * k as f64, line, style);
+    }
+    if fit.is_none() && points.is_empty() {
+        draw_no_data(&mut svg, &frame, "No failures to plot");
+    }
+
+    svg.text(
+        frame.left + frame.width / 2.0,
+        height - 14.0,
+        "operations to failure (log scale)",
+        LABEL,
+    );
+    svg.text(
+        16.0,
+        frame.top + frame.height / 2.0,
+        "unreliability F (Weibull scale)",
+        Style {
+            rotate: -90.0,
+            ..LABEL
+        },
+    );
+    svg.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plots::fixtures::{check, uniform};
+    use bouncewear_model::life::{BLife, analyse};
+
+    fn life_of(data: &[(f64, bool)]) -> LifeAnalysis {
+        analyse(data)
+    }
+
+    fn weibull_data(n: u64, beta: f64, eta: f64, censor_at: f64) -> Vec<(f64, bool)> {
+        (0..n)
+            .map(|k| {
+                let u = uniform(11, k).max(1e-12);
+                let t = eta * (-(1.0 - u).ln()).powf(1.0 / beta);
+                if t > censor_at {
+                    (censor_at, false)
+                } else {
+                    (t.ceil().max(1.0), true)
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn weibull_plot_of_a_fit() {
+        let life = life_of(&weibull_data(300, 2.0, 800.0, 1000.0));
+        assert!(life.weibull.is_some(), "{:?}", life.weibull_error);
+        let svg = weibull_svg(&life);
+        check(&svg);
+        for label in [
+            "1 %",
+            "5 %",
+            "10 %",
+            "20 %",
+            "50 %",
+            "90 %",
+            "99 %",
+            "\u{3b2} = ",
+            "\u{3b7} = ",
+            "B10 = ",
+            "Weibull MLE",
+            "95 % bounds",
+        ] {
+            assert!(svg.contains(label), "{label} missing");
+        }
+        assert!(svg.contains(">1000<") || svg.contains(">100<"));
+        assert!(svg.matches("<circle").count() > 20);
+    }
+
+    #[test]
+    fn weibull_plot_all_failed_and_wide() {
+        // Every device fails: the last Kaplan-Meier point has F = 1 and is left out.
+        let life = life_of(&weibull_data(50, 0.4, 1e5, f64::INFINITY));
+        let svg = weibull_svg(&life);
+        check(&svg);
+        assert!(svg.contains("at F = 100 % not shown"));
+        let life = life_of(&weibull_data(80, 12.0, 500.0, 520.0));
+        check(&weibull_svg(&life));
+    }
+
+    #[test]
+    fn weibull_plot_thins_many_points() {
+        let data: Vec<(f64, bool)> = (1..=5000).map(|t| (f64::from(t), t % 2 == 0)).collect();
+        let life = life_of(&data);
+        assert!(life.kaplan_meier.len() > 2000);
+        let svg = weibull_svg(&life);
+        check(&svg);
+        assert!(svg.contains("1500 of "));
+        assert!(svg.matches("<circle").count() < 1600);
+    }
+
+    #[test]
+    fn weibull_plot_without_a_fit() {
+        let none = life_of(&[(100.0, false), (100.0, false)]);
+        assert!(none.weibull.is_none());
+        let svg = weibull_svg(&none);
+        check(&svg);
+        assert!(svg.contains("No Weibull fit"));
+        assert!(svg.contains("no failures"));
+        assert!(svg.contains("No failures to plot"));
+
+        let single = life_of(&[(50.0, true), (50.0, true), (100.0, false)]);
+        let svg = weibull_svg(&single);
+        check(&svg);
+        assert!(svg.contains("No Weibull fit"));
+        assert!(svg.contains("<circle"));
+
+        check(&weibull_svg(&life_of(&[])));
+    }
+
+    #[test]
+    fn weibull_plot_of_odd_numbers() {
+        let mut life = life_of(&weibull_data(100, 1.5, 300.0, 400.0));
+        // A covariance that is not positive definite gives no bounds, and no NaN.
+        if let Some(w) = life.weibull.as_mut() {
+            w.covariance_ln = [[-1.0, 0.0], [0.0, -1.0]];
+        }
+        life.b10 = Some(BLife {
+            p: 0.1,
+            value: f64::NAN,
+            ci95: [f64::INFINITY, 0.0],
+        });
+        let svg = weibull_svg(&life);
+        check(&svg);
+        assert!(!svg.contains("95 % bounds"));
+        // A broken fit is treated as none.
+        if let Some(w) = life.weibull.as_mut() {
+            w.beta = f64::NAN;
+        }
+        check(&weibull_svg(&life));
+        life.kaplan_meier[0].time = f64::INFINITY;
+        life.kaplan_meier[1].reliability = f64::NAN;
+        check(&weibull_svg(&life));
+    }
+}
