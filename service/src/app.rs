@@ -7,7 +7,6 @@ use crate::api::{self, AppState};
 use crate::compute::{PoolError, thread_pool};
 use crate::config::ServeConfig;
 use crate::domain::{Owner, UnixMs};
-use crate::store::sqlite::SqliteStore;
 use crate::store::{Store, StoreError};
 use crate::telemetry;
 use crate::worker::Workers;
@@ -62,7 +61,7 @@ impl Application {
         if key_owners.is_empty() && !config.bind.ip().is_loopback() {
             return Err(StartupError::PublicWithoutKeys(config.bind));
         }
-        let store: Arc<dyn Store> = Arc::new(SqliteStore::open(&config.database).await?);
+        let store = crate::store::open(&config.database).await?;
         let reclaimed = store.reclaim_expired(UnixMs::now()).await?;
         if reclaimed > 0 {
             tracing::info!(reclaimed, "jobs whose lease expired are back in the queue");

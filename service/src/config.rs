@@ -9,7 +9,8 @@ pub struct ServeConfig {
     /// Address to listen on; port 0 picks a free port (printed at start-up).
     #[arg(long, env = "BOUNCEWEAR_BIND", default_value = "127.0.0.1:8080")]
     pub bind: SocketAddr,
-    /// SQLite database URL; the file is created if missing.
+    /// Database URL: `sqlite://FILE` (embedded; the file is created if missing) or
+    /// `postgres://USER:PASSWORD@HOST/DATABASE` (shared by instances on several machines).
     #[arg(
         long,
         env = "BOUNCEWEAR_DATABASE",

@@ -83,7 +83,7 @@ mod tests {
     use crate::domain::utc;
     use crate::domain::{Owner, ScheduleDefinition, ScheduleId};
     use crate::store::sqlite::SqliteStore;
-    use crate::store::{JobQueue, ScheduleRecord, Schedules};
+    use crate::store::{ScheduleRecord, Schedules};
 
     async fn store_at(path: &std::path::Path) -> SqliteStore {
         SqliteStore::open(&format!("sqlite://{}", path.display()))
@@ -161,40 +161,6 @@ mod tests {
             1
         );
         assert_eq!(store.runs(&schedule_id("s1"), 10).await.unwrap().len(), 2);
-    }
-
-    #[tokio::test]
-    async fn two_scheduler_loops_racing_on_one_database_never_duplicate_a_night() {
-        let path = temp_database("race");
-        let (first, second) = (store_at(&path).await, store_at(&path).await);
-        for i in 0..10 {
-            first
-                .insert_schedule(&nightly(&format!("s{i}"), utc("2026-11-21T03:00:00Z")))
-                .await
-                .unwrap();
-        }
-        let now = utc("2026-11-22T04:00:00Z");
-        let mut created = 0;
-        for _ in 0..5 {
-            let (a, b) = tokio::join!(tick(&first, 1000, now), tick(&second, 1000, now));
-            created += a.unwrap() + b.unwrap();
-        }
-        assert_eq!(
-            created, 10,
-            "one job per schedule and night, whichever loop made it"
-        );
-        let (queued, _) = first.queue_depth().await.unwrap();
-        assert_eq!(queued, 10, "no job without its run row either");
-        for i in 0..10 {
-            assert_eq!(
-                first
-                    .runs(&schedule_id(&format!("s{i}")), 10)
-                    .await
-                    .unwrap()
-                    .len(),
-                1
-            );
-        }
     }
 
     #[tokio::test]

@@ -5,6 +5,7 @@
 mod support;
 
 mod jobs;
+mod postgres;
 mod schedules;
 mod simulate;
 mod system;

@@ -81,9 +81,14 @@ struct Serve {
 }
 
 impl TestApp {
+    /// The service on a SQLite file of its own.
     pub fn start(database: &Path, args: &[&str]) -> Self {
-        let url = format!("sqlite://{}", database.display());
-        let flags = ["serve", "--bind", "127.0.0.1:0", "--database", &url];
+        Self::on(&format!("sqlite://{}", database.display()), args)
+    }
+
+    /// The service on the database at `url`, any backend.
+    pub fn on(url: &str, args: &[&str]) -> Self {
+        let flags = ["serve", "--bind", "127.0.0.1:0", "--database", url];
         let config = Serve::try_parse_from(flags.iter().chain(args))
             .expect("valid flags")
             .config;

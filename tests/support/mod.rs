@@ -6,6 +6,7 @@
 pub mod app;
 pub mod client;
 pub mod json_close;
+pub mod postgres;
 
 use serde_json::{Value, json};
 use std::io::Write;

@@ -1,9 +1,13 @@
 //! Storage in its own language: typed ids and times in, typed records and [`StoreError`] out, no
 //! JSON strings for callers to parse again. The traits are split by concern (the job queue, results,
 //! schedules); [`Store`] is all three, so that a backend is one `impl` per trait and the handlers,
-//! workers and scheduler never see SQL. [`sqlite::SqliteStore`] is the backend today; its SQL and
-//! migrations (`migrations/sqlite/`) are its own, so that another backend can sit beside it.
+//! workers and scheduler never see SQL. [`open`] picks the backend from the database URL:
+//! [`sqlite::SqliteStore`] (embedded, the default) or [`postgres::PgStore`] (several instances on
+//! several machines). Each has its own SQL and migrations (`migrations/sqlite/`,
+//! `migrations/postgres/`); the row mapping they share is in `rows.rs`.
 
+pub mod postgres;
+mod rows;
 pub mod sqlite;
 
 use crate::domain::{
@@ -12,6 +16,7 @@ use crate::domain::{
 use async_trait::async_trait;
 use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
 use bouncewear_model::stats::Summary;
+use std::sync::Arc;
 
 pub type StoreResult<T> = Result<T, StoreError>;
 
@@ -27,6 +32,11 @@ pub enum StoreError {
     Database(#[from] sqlx::Error),
     #[error("migration: {0}")]
     Migration(#[from] sqlx::migrate::MigrateError),
+    /// The database URL names no backend this build has.
+    #[error(
+        "unsupported database URL scheme `{0}`: use sqlite://FILE (embedded, the default) or postgres://USER@HOST/DATABASE"
+    )]
+    UnsupportedUrl(String),
     /// A stored document no longer reads as its type (written by another version, or damaged).
     #[error("stored {what} cannot be read: {detail}")]
     Corrupt { what: &'static str, detail: String },
@@ -210,7 +220,14 @@ pub trait Results: Send + Sync + 'static {
     ) -> StoreResult<bool>;
     /// The Result JSON as stored, to be served as it is.
     async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>>;
-    async fn result(&self, id: &JobId) -> StoreResult<Option<JobResult>>;
+
+    /// The Result, parsed.
+    async fn result(&self, id: &JobId) -> StoreResult<Option<JobResult>> {
+        self.result_json(id)
+            .await?
+            .map(|text| serde_json::from_str(&text).map_err(|e| rows::corrupt("result", e)))
+            .transpose()
+    }
     /// The bins of `metric` that overlap `range`, in bin order.
     async fn distribution(
         &self,
@@ -250,6 +267,19 @@ pub trait Schedules: Send + Sync + 'static {
     ) -> StoreResult<bool>;
     /// The latest runs, newest first.
     async fn runs(&self, schedule: &ScheduleId, limit: u32) -> StoreResult<Vec<RunRecord>>;
+}
+
+/// Opens the store a database URL names, migrating it: `sqlite:` or `postgres:` (`postgresql:`).
+pub async fn open(url: &str) -> StoreResult<Arc<dyn Store>> {
+    // Only the scheme is ever repeated back: the rest of a URL may hold a password.
+    let scheme = url.split_once(':').map_or(url, |(scheme, _)| scheme);
+    match scheme {
+        "sqlite" => Ok(Arc::new(sqlite::SqliteStore::open(url).await?)),
+        "postgres" | "postgresql" => Ok(Arc::new(postgres::PgStore::open(url).await?)),
+        _ => Err(StoreError::UnsupportedUrl(
+            scheme.chars().take(32).collect(),
+        )),
+    }
 }
 
 /// Everything the service stores.

@@ -5,19 +5,22 @@
 //!
 //! Each table's columns and row mapping are written once, below its section heading.
 
+use super::rows::{
+    bind_distribution, bind_life, bind_queued_job, bind_schedule, count_from_sql, count_to_sql,
+    distribution_from_row, distribution_rows, job_columns, job_from_row, life_from_row,
+    run_from_row, schedule_columns, schedule_from_row, seed_to_sql, spec_from_json, to_json,
+};
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
     Page, Results, RunRecord, RunSlot, ScheduleRecord, Schedules, StoreError, StoreResult,
 };
-use crate::domain::{
-    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, UnixMs,
-};
+use crate::domain::{Attempt, JobId, Owner, QueuedJob, ScheduleId, UnixMs};
 use async_trait::async_trait;
-use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
+use bouncewear_model::montecarlo::{DeviceLife, JobResult};
 use sqlx::query::Query;
 use sqlx::sqlite::{
     SqliteArguments, SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions,
-    SqliteRow, SqliteSynchronous,
+    SqliteSynchronous,
 };
 use sqlx::{Row, Sqlite};
 use std::str::FromStr;
@@ -68,59 +71,7 @@ async fn backfill_seeds(writer: &SqlitePool) -> StoreResult<()> {
     Ok(())
 }
 
-/// SQLite integers are signed: counts saturate, seeds keep their bits.
-fn count_to_sql(value: u64) -> i64 {
-    i64::try_from(value).unwrap_or(i64::MAX)
-}
-
-fn count_from_sql(row: &SqliteRow, column: &str) -> Result<u64, sqlx::Error> {
-    Ok(row.try_get::<i64, _>(column)?.max(0) as u64)
-}
-
-fn seed_to_sql(seed: u64) -> i64 {
-    seed as i64
-}
-
-fn seed_from_sql(stored: i64) -> u64 {
-    stored as u64
-}
-
-fn ms(row: &SqliteRow, column: &str) -> Result<UnixMs, sqlx::Error> {
-    row.try_get(column).map(UnixMs)
-}
-
-fn optional_ms(row: &SqliteRow, column: &str) -> Result<Option<UnixMs>, sqlx::Error> {
-    Ok(row.try_get::<Option<i64>, _>(column)?.map(UnixMs))
-}
-
-fn status(row: &SqliteRow) -> Result<JobStatus, sqlx::Error> {
-    let text: String = row.try_get("status")?;
-    JobStatus::parse(&text).ok_or_else(|| sqlx::Error::Decode(format!("status {text}").into()))
-}
-
-fn spec_from_json(text: &str) -> StoreResult<JobSpec> {
-    serde_json::from_str(text).map_err(|e| corrupt("job spec", e))
-}
-
-fn to_json(what: &'static str, value: &impl serde::Serialize) -> StoreResult<String> {
-    serde_json::to_string(value).map_err(|e| corrupt(what, e))
-}
-
-fn corrupt(what: &'static str, error: impl std::fmt::Display) -> StoreError {
-    StoreError::Corrupt {
-        what,
-        detail: error.to_string(),
-    }
-}
-
 // ---- jobs ----------------------------------------------------------------------------------
-
-macro_rules! job_columns {
-    () => {
-        "seq, id, owner, name, seed, status, operations_done, operations_total, attempt, error, \
-         created_at, started_at, finished_at"
-    };
-}
 
 const SELECT_JOB: &str = concat!(
     "SELECT ",
@@ -128,45 +79,21 @@ const SELECT_JOB: &str = concat!(
     " FROM jobs WHERE id = ?1 AND owner = ?2"
 );
 
-fn job_from_row(row: &SqliteRow) -> Result<JobRecord, sqlx::Error> {
-    Ok(JobRecord {
-        seq: row.try_get("seq")?,
-        id: JobId::from(row.try_get::<String, _>("id")?),
-        owner: Owner::from_stored(row.try_get("owner")?),
-        name: row.try_get("name")?,
-        seed: seed_from_sql(row.try_get("seed")?),
-        status: status(row)?,
-        operations_done: count_from_sql(row, "operations_done")?,
-        operations_total: count_from_sql(row, "operations_total")?,
-        attempt: Attempt(row.try_get("attempt")?),
-        error: row.try_get("error")?,
-        created_at: ms(row, "created_at")?,
-        started_at: optional_ms(row, "started_at")?,
-        finished_at: optional_ms(row, "finished_at")?,
-    })
-}
-
 /// Inserts a queued job unless `max_queued` jobs are already queued. One statement: the queue
 /// bound and the insert cannot race.
 async fn insert_queued<'e, E>(executor: E, job: &QueuedJob, max_queued: u64) -> StoreResult<bool>
 where
     E: sqlx::Executor<'e, Database = Sqlite>,
 {
-    let inserted = sqlx::query(
+    let insert = sqlx::query(
         "INSERT INTO jobs (id, owner, name, spec, seed, status, operations_total, created_at) \
          SELECT ?1, ?2, ?3, ?4, ?5, 'queued', ?6, ?7 \
          WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < ?8",
-    )
-    .bind(job.id.as_str())
-    .bind(job.owner.as_str())
-    .bind(&job.name)
-    .bind(to_json("job spec", &job.spec)?)
-    .bind(seed_to_sql(job.seed))
-    .bind(count_to_sql(job.operations_total))
-    .bind(job.created_at.0)
-    .bind(count_to_sql(max_queued))
-    .execute(executor)
-    .await?;
+    );
+    let inserted = bind_queued_job(insert, job)?
+        .bind(count_to_sql(max_queued))
+        .execute(executor)
+        .await?;
     Ok(inserted.rows_affected() == 1)
 }
 
@@ -363,53 +290,6 @@ impl JobQueue for SqliteStore {
 
 // ---- results, distributions, device lives --------------------------------------------------
 
-/// One `distributions` row per bin of every operation metric, and one per device metric.
-fn distribution_rows(result: &JobResult) -> impl Iterator<Item = (&str, DistributionRow)> {
-    let operations = result.job.spec().operations;
-    let bins = result.operations.iter().flat_map(|(metric, bins)| {
-        bins.iter().enumerate().map(move |(index, bin)| {
-            let row = DistributionRow {
-                kind: "operation".to_owned(),
-                bin: i64::try_from(index).unwrap_or(i64::MAX),
-                op_start: bin.op_start,
-                op_end: bin.op_end,
-                summary: bin.summary.clone(),
-            };
-            (metric.as_str(), row)
-        })
-    });
-    let devices = result.devices.iter().map(move |(metric, summary)| {
-        let row = DistributionRow {
-            kind: "device".to_owned(),
-            bin: 0,
-            op_start: 0,
-            op_end: operations,
-            summary: summary.clone(),
-        };
-        (metric.as_str(), row)
-    });
-    bins.chain(devices)
-}
-
-fn distribution_from_row(row: &SqliteRow) -> StoreResult<DistributionRow> {
-    Ok(DistributionRow {
-        kind: row.try_get("kind")?,
-        bin: row.try_get("bin")?,
-        op_start: count_from_sql(row, "op_start")?,
-        op_end: count_from_sql(row, "op_end")?,
-        summary: serde_json::from_str(&row.try_get::<String, _>("summary")?)
-            .map_err(|e| corrupt("summary", e))?,
-    })
-}
-
-fn life_from_row(row: &SqliteRow) -> Result<DeviceLife, sqlx::Error> {
-    Ok(DeviceLife {
-        device: count_from_sql(row, "device")?,
-        operations_to_failure: count_from_sql(row, "operations_to_failure")?,
-        censored: row.try_get("censored")?,
-    })
-}
-
 #[async_trait]
 impl Results for SqliteStore {
     #[tracing::instrument(skip_all, fields(job = %fence.job))]
@@ -433,44 +313,25 @@ impl Results for SqliteStore {
             tx.rollback().await?;
             return Ok(false);
         }
-        let id = fence.job.as_str();
         sqlx::query("INSERT INTO results (job_id, result) VALUES (?1, ?2)")
-            .bind(id)
+            .bind(fence.job.as_str())
             .bind(text)
             .execute(&mut *tx)
             .await?;
         for (metric, row) in distribution_rows(result) {
-            let summary = &row.summary;
-            let quantile = |key: &str| summary.quantiles.get(key).map_or(0.0, |q| q.value);
-            sqlx::query(
+            let insert = sqlx::query(
                 "INSERT INTO distributions (job_id, metric, kind, bin, op_start, op_end, n, mean, sd, min, max, \
                  p05, p50, p95, exceedance, summary) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16)",
-            )
-            .bind(id)
-            .bind(metric)
-            .bind(&row.kind)
-            .bind(row.bin)
-            .bind(count_to_sql(row.op_start))
-            .bind(count_to_sql(row.op_end))
-            .bind(count_to_sql(summary.n))
-            .bind(summary.mean)
-            .bind(summary.sd)
-            .bind(summary.min)
-            .bind(summary.max)
-            .bind(quantile("p05"))
-            .bind(quantile("p50"))
-            .bind(quantile("p95"))
-            .bind(summary.exceedance.as_ref().map(|e| e.probability))
-            .bind(to_json("summary", summary)?)
-            .execute(&mut *tx)
-            .await?;
+            );
+            bind_distribution(insert, &fence.job, metric, &row)?
+                .execute(&mut *tx)
+                .await?;
         }
         for life in result.life.iter().flat_map(|life| &life.devices) {
-            sqlx::query("INSERT INTO device_lives (job_id, device, operations_to_failure, censored) VALUES (?1, ?2, ?3, ?4)")
-                .bind(id)
-                .bind(count_to_sql(life.device))
-                .bind(count_to_sql(life.operations_to_failure))
-                .bind(life.censored)
+            let insert = sqlx::query(
+                "INSERT INTO device_lives (job_id, device, operations_to_failure, censored) VALUES (?1, ?2, ?3, ?4)",
+            );
+            bind_life(insert, &fence.job, life)
                 .execute(&mut *tx)
                 .await?;
         }
@@ -486,14 +347,6 @@ impl Results for SqliteStore {
                 .fetch_optional(&self.readers)
                 .await?,
         )
-    }
-
-    #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn result(&self, id: &JobId) -> StoreResult<Option<JobResult>> {
-        self.result_json(id)
-            .await?
-            .map(|text| serde_json::from_str(&text).map_err(|e| corrupt("result", e)))
-            .transpose()
     }
 
     #[tracing::instrument(skip_all, fields(job = %id, metric))]
@@ -529,60 +382,6 @@ impl Results for SqliteStore {
 }
 
 // ---- schedules and their runs --------------------------------------------------------------
-
-macro_rules! schedule_columns {
-    () => {
-        "id, owner, name, cron, time_zone, template, statistics, enabled, next_run_at, created_at, updated_at"
-    };
-}
-
-fn schedule_from_row(row: &SqliteRow) -> StoreResult<ScheduleRecord> {
-    Ok(ScheduleRecord {
-        id: ScheduleId::from(row.try_get::<String, _>("id")?),
-        owner: Owner::from_stored(row.try_get("owner")?),
-        definition: ScheduleDefinition {
-            name: row.try_get("name")?,
-            cron: row.try_get("cron")?,
-            time_zone: row.try_get("time_zone")?,
-            template: spec_from_json(&row.try_get::<String, _>("template")?)?,
-            statistics: serde_json::from_str(&row.try_get::<String, _>("statistics")?)
-                .map_err(|e| corrupt("statistics", e))?,
-            enabled: row.try_get("enabled")?,
-        },
-        next_run_at: optional_ms(row, "next_run_at")?,
-        created_at: ms(row, "created_at")?,
-        updated_at: ms(row, "updated_at")?,
-    })
-}
-
-/// Binds every column of [`schedule_columns`], in its order, as `?1` to `?11`.
-fn bind_schedule<'q>(
-    query: Query<'q, Sqlite, SqliteArguments>,
-    schedule: &ScheduleRecord,
-) -> StoreResult<Query<'q, Sqlite, SqliteArguments>> {
-    let definition = &schedule.definition;
-    Ok(query
-        .bind(schedule.id.as_str())
-        .bind(schedule.owner.as_str())
-        .bind(&definition.name)
-        .bind(&definition.cron)
-        .bind(&definition.time_zone)
-        .bind(to_json("template", &definition.template)?)
-        .bind(to_json("statistics", &definition.statistics)?)
-        .bind(definition.enabled)
-        .bind(schedule.next_run_at.map(|t| t.0))
-        .bind(schedule.created_at.0)
-        .bind(schedule.updated_at.0))
-}
-
-fn run_from_row(row: &SqliteRow) -> Result<RunRecord, sqlx::Error> {
-    Ok(RunRecord {
-        scheduled_for: ms(row, "scheduled_for")?,
-        job_id: JobId::from(row.try_get::<String, _>("job_id")?),
-        manual: row.try_get("manual")?,
-        status: status(row)?,
-    })
-}
 
 #[async_trait]
 impl Schedules for SqliteStore {
@@ -629,10 +428,9 @@ impl Schedules for SqliteStore {
 
     #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
     async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
-        // The creation time is bound as ?10 but never written: a schedule keeps it.
         let update = sqlx::query(
             "UPDATE schedules SET name = ?3, cron = ?4, time_zone = ?5, template = ?6, statistics = ?7, \
-             enabled = ?8, next_run_at = ?9, updated_at = ?11 WHERE id = ?1 AND owner = ?2",
+             enabled = ?8, next_run_at = ?9, created_at = ?10, updated_at = ?11 WHERE id = ?1 AND owner = ?2",
         );
         let updated = bind_schedule(update, schedule)?
             .execute(&self.writer)
@@ -751,13 +549,6 @@ mod tests {
         QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1))
     }
 
-    fn terms(now: i64) -> LeaseTerms {
-        LeaseTerms {
-            now: UnixMs(now),
-            duration_ms: 1000,
-        }
-    }
-
     #[tokio::test]
     async fn every_u64_seed_reads_back_exactly_even_for_rows_older_than_the_seed_column() {
         let (store, url) = open("seeds").await;
@@ -784,68 +575,5 @@ mod tests {
             let record = store.job(&Owner::anonymous(), id).await.unwrap();
             assert_eq!(record.seed, seed);
         }
-    }
-
-    #[tokio::test]
-    async fn an_unknown_job_is_not_found_and_a_second_cancel_is_a_conflict() {
-        let (store, _) = open("cancel").await;
-        let owner = Owner::anonymous();
-        let missing = store.job(&owner, &JobId::from("nope")).await.unwrap_err();
-        assert!(
-            matches!(missing, StoreError::NotFound { kind: "job", .. }),
-            "{missing}"
-        );
-        let id = store.insert_job(queued(1), 10).await.unwrap().unwrap().id;
-        let cancelled = store.cancel(&owner, &id, UnixMs(2)).await.unwrap();
-        assert_eq!(cancelled.status, JobStatus::Cancelled);
-        let again = store.cancel(&owner, &id, UnixMs(3)).await.unwrap_err();
-        assert_eq!(
-            again.to_string(),
-            format!("job {id} already ended: cancelled")
-        );
-        let other = Owner::of_key("another key");
-        assert!(matches!(
-            store.cancel(&other, &id, UnixMs(3)).await,
-            Err(StoreError::NotFound { .. })
-        ));
-    }
-
-    #[tokio::test]
-    async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor() {
-        let (store, _) = open("fence").await;
-        store.insert_job(queued(1), 10).await.unwrap();
-        let first = store.claim("a", terms(0)).await.unwrap().unwrap();
-        assert!(
-            store.claim("b", terms(500)).await.unwrap().is_none(),
-            "leased"
-        );
-        let second = store.claim("b", terms(2000)).await.unwrap().unwrap();
-        assert_eq!(second.fence.attempt, Attempt(first.fence.attempt.0 + 1));
-        assert_eq!(second.spec.seed, Some(1));
-        assert_eq!(
-            store.heartbeat(&first.fence, terms(2100), 5).await.unwrap(),
-            Lease::Lost
-        );
-        assert!(
-            !store
-                .fail(&first.fence, UnixMs(2100), "late")
-                .await
-                .unwrap()
-        );
-        assert_eq!(
-            store
-                .heartbeat(&second.fence, terms(2100), 5)
-                .await
-                .unwrap(),
-            Lease::Held
-        );
-    }
-
-    #[tokio::test]
-    async fn the_queue_bound_refuses_the_job_past_it() {
-        let (store, _) = open("bound").await;
-        assert!(store.insert_job(queued(1), 1).await.unwrap().is_some());
-        assert!(store.insert_job(queued(2), 1).await.unwrap().is_none());
-        assert_eq!(store.queue_depth().await.unwrap(), (1, 0));
     }
 }

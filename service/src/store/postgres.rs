@@ -1,0 +1,504 @@
+//! The PostgreSQL store, for instances on several machines sharing one database: a connection pool,
+//! row locks instead of SQLite's single writer (`FOR UPDATE SKIP LOCKED` lets workers claim jobs
+//! side by side without waiting on each other), and an advisory lock around the queue bound, so that
+//! concurrent submissions cannot overshoot it. The schema is `migrations/postgres/`; the row mapping
+//! is shared with SQLite (`rows.rs`).
+
+use super::rows::{
+    bind_distribution, bind_life, bind_queued_job, bind_schedule, count_from_sql, count_to_sql,
+    distribution_from_row, distribution_rows, job_columns, job_from_row, life_from_row,
+    run_from_row, schedule_columns, schedule_from_row, spec_from_json, to_json,
+};
+use super::{
+    Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
+    Page, Results, RunRecord, RunSlot, ScheduleRecord, Schedules, StoreError, StoreResult,
+};
+use crate::domain::{Attempt, JobId, Owner, QueuedJob, ScheduleId, UnixMs};
+use async_trait::async_trait;
+use bouncewear_model::montecarlo::{DeviceLife, JobResult};
+use sqlx::postgres::{PgArguments, PgConnection, PgPool, PgPoolOptions};
+use sqlx::query::Query;
+use sqlx::{Postgres, Row};
+use std::time::Duration;
+
+pub struct PgStore {
+    pool: PgPool,
+}
+
+/// The advisory lock every insert into the queue takes, so that counting the queued jobs and
+/// inserting one cannot interleave with another submission.
+const QUEUE_LOCK: i64 = 0x626f_756e_6365; // "bounce"
+
+impl PgStore {
+    /// Connects to the database at `url` and migrates it (concurrent instances wait for each
+    /// other: sqlx takes an advisory lock around migrations).
+    #[tracing::instrument(skip_all)]
+    pub async fn open(url: &str) -> StoreResult<Self> {
+        let pool = PgPoolOptions::new()
+            .max_connections(8)
+            .acquire_timeout(Duration::from_secs(30))
+            .connect(url)
+            .await?;
+        sqlx::migrate!("../migrations/postgres").run(&pool).await?;
+        Ok(Self { pool })
+    }
+}
+
+const SELECT_JOB: &str = concat!(
+    "SELECT ",
+    job_columns!(),
+    " FROM jobs WHERE id = $1 AND owner = $2"
+);
+
+/// Inserts a queued job unless `max_queued` jobs are already queued, inside the caller's
+/// transaction (which holds the queue lock until it ends).
+async fn insert_queued(
+    tx: &mut PgConnection,
+    job: &QueuedJob,
+    max_queued: u64,
+) -> StoreResult<bool> {
+    sqlx::query("SELECT pg_advisory_xact_lock($1)")
+        .bind(QUEUE_LOCK)
+        .execute(&mut *tx)
+        .await?;
+    let insert = sqlx::query(
+        "INSERT INTO jobs (id, owner, name, spec, seed, status, operations_total, created_at) \
+         SELECT $1, $2, $3, $4, $5, 'queued', $6, $7 \
+         WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < $8",
+    );
+    let inserted = bind_queued_job(insert, job)?
+        .bind(count_to_sql(max_queued))
+        .execute(&mut *tx)
+        .await?;
+    Ok(inserted.rows_affected() == 1)
+}
+
+async fn select_job<'e, E>(executor: E, owner: &Owner, id: &JobId) -> StoreResult<JobRecord>
+where
+    E: sqlx::Executor<'e, Database = Postgres>,
+{
+    let row = sqlx::query(SELECT_JOB)
+        .bind(id.as_str())
+        .bind(owner.as_str())
+        .fetch_optional(executor)
+        .await?
+        .ok_or_else(|| StoreError::job_not_found(id))?;
+    Ok(job_from_row(&row)?)
+}
+
+/// A write of one claim: only while its attempt still holds the running job.
+fn fenced<'q>(sql: &'static str, fence: &Fence) -> Query<'q, Postgres, PgArguments> {
+    sqlx::query(sql)
+        .bind(fence.job.as_str())
+        .bind(fence.attempt.0)
+}
+
+#[async_trait]
+impl JobQueue for PgStore {
+    #[tracing::instrument(skip_all, fields(job = %job.id))]
+    async fn insert_job(&self, job: QueuedJob, max_queued: u64) -> StoreResult<Option<JobRecord>> {
+        let mut tx = self.pool.begin().await?;
+        if !insert_queued(&mut tx, &job, max_queued).await? {
+            tx.rollback().await?;
+            return Ok(None);
+        }
+        let record = select_job(&mut *tx, &job.owner, &job.id).await?;
+        tx.commit().await?;
+        Ok(Some(record))
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn job(&self, owner: &Owner, id: &JobId) -> StoreResult<JobRecord> {
+        select_job(&self.pool, owner, id).await
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn jobs(&self, owner: &Owner, page: Page) -> StoreResult<Vec<JobRecord>> {
+        let rows = sqlx::query(concat!(
+            "SELECT ",
+            job_columns!(),
+            " FROM jobs WHERE owner = $1 AND seq < $2 ORDER BY seq DESC LIMIT $3"
+        ))
+        .bind(owner.as_str())
+        .bind(page.before.unwrap_or(i64::MAX))
+        .bind(i64::from(page.limit))
+        .fetch_all(&self.pool)
+        .await?;
+        Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord> {
+        let row = sqlx::query(concat!(
+            "UPDATE jobs SET status = 'cancelled', finished_at = $3, lease_owner = NULL, lease_until = NULL \
+             WHERE id = $1 AND owner = $2 AND status IN ('queued', 'running') RETURNING ",
+            job_columns!()
+        ))
+        .bind(id.as_str())
+        .bind(owner.as_str())
+        .bind(now.0)
+        .fetch_optional(&self.pool)
+        .await?;
+        if let Some(row) = row {
+            return Ok(job_from_row(&row)?);
+        }
+        let ended = select_job(&self.pool, owner, id).await?;
+        Err(StoreError::Conflict(format!(
+            "job {id} already ended: {}",
+            ended.status.as_str()
+        )))
+    }
+
+    #[tracing::instrument(skip_all, fields(worker))]
+    async fn claim(&self, worker: &str, terms: LeaseTerms) -> StoreResult<Option<Claim>> {
+        let row = sqlx::query(
+            "UPDATE jobs SET status = 'running', attempt = attempt + 1, lease_owner = $1, lease_until = $2 + $3, \
+             operations_done = 0, started_at = COALESCE(started_at, $2) \
+             WHERE seq = (SELECT seq FROM jobs WHERE status = 'queued' \
+                          OR (status = 'running' AND lease_until < $2) ORDER BY seq LIMIT 1 \
+                          FOR UPDATE SKIP LOCKED) \
+             RETURNING id, spec, attempt, operations_total",
+        )
+        .bind(worker)
+        .bind(terms.now.0)
+        .bind(terms.duration_ms)
+        .fetch_optional(&self.pool)
+        .await?;
+        let Some(row) = row else {
+            return Ok(None);
+        };
+        Ok(Some(Claim {
+            fence: Fence {
+                job: JobId::from(row.try_get::<String, _>("id")?),
+                attempt: Attempt(row.try_get("attempt")?),
+            },
+            spec: spec_from_json(&row.try_get::<String, _>("spec")?)?,
+            operations_total: count_from_sql(&row, "operations_total")?,
+        }))
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job))]
+    async fn heartbeat(
+        &self,
+        fence: &Fence,
+        terms: LeaseTerms,
+        operations_done: u64,
+    ) -> StoreResult<Lease> {
+        let updated = fenced(
+            "UPDATE jobs SET lease_until = $3 + $4, operations_done = $5 \
+             WHERE id = $1 AND attempt = $2 AND status = 'running'",
+            fence,
+        )
+        .bind(terms.now.0)
+        .bind(terms.duration_ms)
+        .bind(count_to_sql(operations_done))
+        .execute(&self.pool)
+        .await?;
+        if updated.rows_affected() == 1 {
+            return Ok(Lease::Held);
+        }
+        let status: Option<String> = sqlx::query_scalar("SELECT status FROM jobs WHERE id = $1")
+            .bind(fence.job.as_str())
+            .fetch_optional(&self.pool)
+            .await?;
+        Ok(if status.as_deref() == Some("cancelled") {
+            Lease::Cancelled
+        } else {
+            Lease::Lost
+        })
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job))]
+    async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool> {
+        let updated = fenced(
+            "UPDATE jobs SET status = 'failed', finished_at = $3, error = $4, lease_owner = NULL, lease_until = NULL \
+             WHERE id = $1 AND attempt = $2 AND status = 'running'",
+            fence,
+        )
+        .bind(now.0)
+        .bind(error)
+        .execute(&self.pool)
+        .await?;
+        Ok(updated.rows_affected() == 1)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job))]
+    async fn release(&self, fence: &Fence) -> StoreResult<bool> {
+        let updated = fenced(
+            "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 \
+             WHERE id = $1 AND attempt = $2 AND status = 'running'",
+            fence,
+        )
+        .execute(&self.pool)
+        .await?;
+        Ok(updated.rows_affected() == 1)
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn reclaim_expired(&self, now: UnixMs) -> StoreResult<u64> {
+        let updated = sqlx::query(
+            "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 \
+             WHERE status = 'running' AND lease_until < $1",
+        )
+        .bind(now.0)
+        .execute(&self.pool)
+        .await?;
+        Ok(updated.rows_affected())
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn queue_depth(&self) -> StoreResult<(u64, u64)> {
+        let row = sqlx::query(
+            "SELECT COUNT(*) FILTER (WHERE status = 'queued') AS queued, \
+             COUNT(*) FILTER (WHERE status = 'running') AS running FROM jobs",
+        )
+        .fetch_one(&self.pool)
+        .await?;
+        Ok((
+            count_from_sql(&row, "queued")?,
+            count_from_sql(&row, "running")?,
+        ))
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn ping(&self) -> StoreResult<()> {
+        sqlx::query("SELECT 1").execute(&self.pool).await?;
+        Ok(())
+    }
+}
+
+#[async_trait]
+impl Results for PgStore {
+    #[tracing::instrument(skip_all, fields(job = %fence.job))]
+    async fn succeed(
+        &self,
+        fence: &Fence,
+        finished_at: UnixMs,
+        result: &JobResult,
+    ) -> StoreResult<bool> {
+        let text = to_json("result", result)?;
+        let mut tx = self.pool.begin().await?;
+        let updated = fenced(
+            "UPDATE jobs SET status = 'succeeded', finished_at = $3, operations_done = operations_total, \
+             lease_owner = NULL, lease_until = NULL WHERE id = $1 AND attempt = $2 AND status = 'running'",
+            fence,
+        )
+        .bind(finished_at.0)
+        .execute(&mut *tx)
+        .await?;
+        if updated.rows_affected() == 0 {
+            tx.rollback().await?;
+            return Ok(false);
+        }
+        sqlx::query("INSERT INTO results (job_id, result) VALUES ($1, $2)")
+            .bind(fence.job.as_str())
+            .bind(text)
+            .execute(&mut *tx)
+            .await?;
+        for (metric, row) in distribution_rows(result) {
+            let insert = sqlx::query(
+                "INSERT INTO distributions (job_id, metric, kind, bin, op_start, op_end, n, mean, sd, min, max, \
+                 p05, p50, p95, exceedance, summary) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16)",
+            );
+            bind_distribution(insert, &fence.job, metric, &row)?
+                .execute(&mut *tx)
+                .await?;
+        }
+        for life in result.life.iter().flat_map(|life| &life.devices) {
+            let insert = sqlx::query(
+                "INSERT INTO device_lives (job_id, device, operations_to_failure, censored) VALUES ($1, $2, $3, $4)",
+            );
+            bind_life(insert, &fence.job, life)
+                .execute(&mut *tx)
+                .await?;
+        }
+        tx.commit().await?;
+        Ok(true)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>> {
+        Ok(
+            sqlx::query_scalar("SELECT result FROM results WHERE job_id = $1")
+                .bind(id.as_str())
+                .fetch_optional(&self.pool)
+                .await?,
+        )
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id, metric))]
+    async fn distribution(
+        &self,
+        id: &JobId,
+        metric: &str,
+        range: Operations,
+    ) -> StoreResult<Vec<DistributionRow>> {
+        let rows = sqlx::query(
+            "SELECT kind, bin, op_start, op_end, summary FROM distributions \
+             WHERE job_id = $1 AND metric = $2 AND op_end > $3 AND op_start < $4 ORDER BY bin",
+        )
+        .bind(id.as_str())
+        .bind(metric)
+        .bind(count_to_sql(range.start))
+        .bind(count_to_sql(range.end))
+        .fetch_all(&self.pool)
+        .await?;
+        rows.iter().map(distribution_from_row).collect()
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn lives(&self, id: &JobId) -> StoreResult<Vec<DeviceLife>> {
+        let rows = sqlx::query(
+            "SELECT device, operations_to_failure, censored FROM device_lives WHERE job_id = $1 ORDER BY device",
+        )
+        .bind(id.as_str())
+        .fetch_all(&self.pool)
+        .await?;
+        Ok(rows.iter().map(life_from_row).collect::<Result<_, _>>()?)
+    }
+}
+
+#[async_trait]
+impl Schedules for PgStore {
+    #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
+    async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
+        let insert = sqlx::query(concat!(
+            "INSERT INTO schedules (",
+            schedule_columns!(),
+            ") VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)"
+        ));
+        bind_schedule(insert, schedule)?.execute(&self.pool).await?;
+        Ok(())
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %id))]
+    async fn schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<ScheduleRecord> {
+        let row = sqlx::query(concat!(
+            "SELECT ",
+            schedule_columns!(),
+            " FROM schedules WHERE id = $1 AND owner = $2"
+        ))
+        .bind(id.as_str())
+        .bind(owner.as_str())
+        .fetch_optional(&self.pool)
+        .await?
+        .ok_or_else(|| StoreError::schedule_not_found(id))?;
+        schedule_from_row(&row)
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn schedules(&self, owner: &Owner) -> StoreResult<Vec<ScheduleRecord>> {
+        let rows = sqlx::query(concat!(
+            "SELECT ",
+            schedule_columns!(),
+            " FROM schedules WHERE owner = $1 ORDER BY seq"
+        ))
+        .bind(owner.as_str())
+        .fetch_all(&self.pool)
+        .await?;
+        rows.iter().map(schedule_from_row).collect()
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
+    async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
+        let update = sqlx::query(
+            "UPDATE schedules SET name = $3, cron = $4, time_zone = $5, template = $6, statistics = $7, \
+             enabled = $8, next_run_at = $9, created_at = $10, updated_at = $11 WHERE id = $1 AND owner = $2",
+        );
+        let updated = bind_schedule(update, schedule)?.execute(&self.pool).await?;
+        if updated.rows_affected() == 0 {
+            return Err(StoreError::schedule_not_found(&schedule.id));
+        }
+        Ok(())
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %id))]
+    async fn delete_schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<()> {
+        let deleted = sqlx::query("DELETE FROM schedules WHERE id = $1 AND owner = $2")
+            .bind(id.as_str())
+            .bind(owner.as_str())
+            .execute(&self.pool)
+            .await?;
+        if deleted.rows_affected() == 0 {
+            return Err(StoreError::schedule_not_found(id));
+        }
+        Ok(())
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn due_schedules(&self, now: UnixMs) -> StoreResult<Vec<ScheduleRecord>> {
+        let rows = sqlx::query(concat!(
+            "SELECT ",
+            schedule_columns!(),
+            " FROM schedules WHERE enabled AND next_run_at <= $1 ORDER BY next_run_at"
+        ))
+        .bind(now.0)
+        .fetch_all(&self.pool)
+        .await?;
+        rows.iter().map(schedule_from_row).collect()
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %slot.schedule, job = %job.id))]
+    async fn create_run(
+        &self,
+        slot: RunSlot<'_>,
+        job: QueuedJob,
+        max_queued: u64,
+    ) -> StoreResult<NewRun> {
+        let mut tx = self.pool.begin().await?;
+        // Claim the slot first: the primary key decides who runs this night (a concurrent claim of
+        // the same slot waits for this transaction, then finds the slot taken).
+        let claimed = sqlx::query(
+            "INSERT INTO schedule_runs (schedule_id, scheduled_for, job_id, manual) VALUES ($1, $2, $3, $4) \
+             ON CONFLICT DO NOTHING",
+        )
+        .bind(slot.schedule.as_str())
+        .bind(slot.scheduled_for.0)
+        .bind(job.id.as_str())
+        .bind(slot.manual)
+        .execute(&mut *tx)
+        .await?;
+        if claimed.rows_affected() == 0 {
+            tx.rollback().await?;
+            return Ok(NewRun::AlreadyExists);
+        }
+        if !insert_queued(&mut tx, &job, max_queued).await? {
+            tx.rollback().await?;
+            return Ok(NewRun::QueueFull);
+        }
+        let record = select_job(&mut *tx, &job.owner, &job.id).await?;
+        tx.commit().await?;
+        Ok(NewRun::Created(record))
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %id))]
+    async fn advance_schedule(
+        &self,
+        id: &ScheduleId,
+        from: Option<UnixMs>,
+        to: Option<UnixMs>,
+    ) -> StoreResult<bool> {
+        let updated = sqlx::query(
+            "UPDATE schedules SET next_run_at = $3 WHERE id = $1 AND next_run_at IS NOT DISTINCT FROM $2",
+        )
+        .bind(id.as_str())
+        .bind(from.map(|t| t.0))
+        .bind(to.map(|t| t.0))
+        .execute(&self.pool)
+        .await?;
+        Ok(updated.rows_affected() == 1)
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %schedule))]
+    async fn runs(&self, schedule: &ScheduleId, limit: u32) -> StoreResult<Vec<RunRecord>> {
+        let rows = sqlx::query(
+            "SELECT r.scheduled_for, r.job_id, r.manual, j.status FROM schedule_runs r JOIN jobs j ON j.id = r.job_id \
+             WHERE r.schedule_id = $1 ORDER BY r.scheduled_for DESC LIMIT $2",
+        )
+        .bind(schedule.as_str())
+        .bind(i64::from(limit))
+        .fetch_all(&self.pool)
+        .await?;
+        Ok(rows.iter().map(run_from_row).collect::<Result<_, _>>()?)
+    }
+}

@@ -1,0 +1,316 @@
+//! What every backend shares: the column lists, the mapping of each table's row to its record (one
+//! place per table, whatever the database), and how values are stored (counts, seeds, times, JSON).
+
+use super::{DistributionRow, JobRecord, RunRecord, ScheduleRecord, StoreError, StoreResult};
+use crate::domain::{
+    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, UnixMs,
+};
+use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
+use sqlx::postgres::PgRow;
+use sqlx::query::Query;
+use sqlx::sqlite::SqliteRow;
+use sqlx::{Database, Encode, Row, Type};
+
+/// A row of either backend, read by column name into the few types the schema uses.
+pub(crate) trait ReadRow {
+    fn int(&self, column: &str) -> Result<i64, sqlx::Error>;
+    fn maybe_int(&self, column: &str) -> Result<Option<i64>, sqlx::Error>;
+    fn text(&self, column: &str) -> Result<String, sqlx::Error>;
+    fn maybe_text(&self, column: &str) -> Result<Option<String>, sqlx::Error>;
+    fn flag(&self, column: &str) -> Result<bool, sqlx::Error>;
+}
+
+macro_rules! read_row {
+    ($row:ty) => {
+        impl ReadRow for $row {
+            fn int(&self, column: &str) -> Result<i64, sqlx::Error> {
+                self.try_get(column)
+            }
+            fn maybe_int(&self, column: &str) -> Result<Option<i64>, sqlx::Error> {
+                self.try_get(column)
+            }
+            fn text(&self, column: &str) -> Result<String, sqlx::Error> {
+                self.try_get(column)
+            }
+            fn maybe_text(&self, column: &str) -> Result<Option<String>, sqlx::Error> {
+                self.try_get(column)
+            }
+            fn flag(&self, column: &str) -> Result<bool, sqlx::Error> {
+                self.try_get(column)
+            }
+        }
+    };
+}
+
+read_row!(SqliteRow);
+read_row!(PgRow);
+
+/// SQL integers are signed 64-bit in both backends: counts saturate, seeds keep their bits (a seed
+/// of 2^63 or more reads as negative in SQL).
+pub(crate) fn count_to_sql(value: u64) -> i64 {
+    i64::try_from(value).unwrap_or(i64::MAX)
+}
+
+pub(crate) fn count_from_sql(row: &impl ReadRow, column: &str) -> Result<u64, sqlx::Error> {
+    Ok(row.int(column)?.max(0) as u64)
+}
+
+pub(crate) fn seed_to_sql(seed: u64) -> i64 {
+    seed as i64
+}
+
+pub(crate) fn seed_from_sql(stored: i64) -> u64 {
+    stored as u64
+}
+
+pub(crate) fn ms(row: &impl ReadRow, column: &str) -> Result<UnixMs, sqlx::Error> {
+    row.int(column).map(UnixMs)
+}
+
+pub(crate) fn optional_ms(row: &impl ReadRow, column: &str) -> Result<Option<UnixMs>, sqlx::Error> {
+    Ok(row.maybe_int(column)?.map(UnixMs))
+}
+
+pub(crate) fn status(row: &impl ReadRow) -> Result<JobStatus, sqlx::Error> {
+    let text = row.text("status")?;
+    JobStatus::parse(&text).ok_or_else(|| sqlx::Error::Decode(format!("status {text}").into()))
+}
+
+pub(crate) fn spec_from_json(text: &str) -> StoreResult<JobSpec> {
+    serde_json::from_str(text).map_err(|e| corrupt("job spec", e))
+}
+
+pub(crate) fn to_json(what: &'static str, value: &impl serde::Serialize) -> StoreResult<String> {
+    serde_json::to_string(value).map_err(|e| corrupt(what, e))
+}
+
+pub(crate) fn corrupt(what: &'static str, error: impl std::fmt::Display) -> StoreError {
+    StoreError::Corrupt {
+        what,
+        detail: error.to_string(),
+    }
+}
+
+/// A statement of either backend, its parameters bound one after the other.
+pub(crate) type Statement<'q, DB> = Query<'q, DB, <DB as Database>::Arguments>;
+
+// ---- jobs ----------------------------------------------------------------------------------
+
+macro_rules! job_columns {
+    () => {
+        "seq, id, owner, name, seed, status, operations_done, operations_total, attempt, error, \
+         created_at, started_at, finished_at"
+    };
+}
+
+pub(crate) use job_columns;
+
+pub(crate) fn job_from_row(row: &impl ReadRow) -> Result<JobRecord, sqlx::Error> {
+    Ok(JobRecord {
+        seq: row.int("seq")?,
+        id: JobId::from(row.text("id")?),
+        owner: Owner::from_stored(row.text("owner")?),
+        name: row.maybe_text("name")?,
+        seed: seed_from_sql(row.int("seed")?),
+        status: status(row)?,
+        operations_done: count_from_sql(row, "operations_done")?,
+        operations_total: count_from_sql(row, "operations_total")?,
+        attempt: Attempt(row.int("attempt")?),
+        error: row.maybe_text("error")?,
+        created_at: ms(row, "created_at")?,
+        started_at: optional_ms(row, "started_at")?,
+        finished_at: optional_ms(row, "finished_at")?,
+    })
+}
+
+/// Binds a new queued job's columns `id, owner, name, spec, seed, operations_total, created_at`
+/// as parameters 1 to 7.
+pub(crate) fn bind_queued_job<'q, DB>(
+    query: Statement<'q, DB>,
+    job: &QueuedJob,
+) -> StoreResult<Statement<'q, DB>>
+where
+    DB: Database,
+    for<'t> i64: Encode<'t, DB> + Type<DB>,
+    for<'t> String: Encode<'t, DB> + Type<DB>,
+    for<'t> Option<String>: Encode<'t, DB> + Type<DB>,
+{
+    Ok(query
+        .bind(job.id.to_string())
+        .bind(job.owner.as_str().to_owned())
+        .bind(job.name.clone())
+        .bind(to_json("job spec", &job.spec)?)
+        .bind(seed_to_sql(job.seed))
+        .bind(count_to_sql(job.operations_total))
+        .bind(job.created_at.0))
+}
+
+// ---- results, distributions, device lives --------------------------------------------------
+
+/// One `distributions` row per bin of every operation metric, and one per device metric.
+pub(crate) fn distribution_rows(
+    result: &JobResult,
+) -> impl Iterator<Item = (&str, DistributionRow)> {
+    let operations = result.job.spec().operations;
+    let bins = result.operations.iter().flat_map(|(metric, bins)| {
+        bins.iter().enumerate().map(move |(index, bin)| {
+            let row = DistributionRow {
+                kind: "operation".to_owned(),
+                bin: i64::try_from(index).unwrap_or(i64::MAX),
+                op_start: bin.op_start,
+                op_end: bin.op_end,
+                summary: bin.summary.clone(),
+            };
+            (metric.as_str(), row)
+        })
+    });
+    let devices = result.devices.iter().map(move |(metric, summary)| {
+        let row = DistributionRow {
+            kind: "device".to_owned(),
+            bin: 0,
+            op_start: 0,
+            op_end: operations,
+            summary: summary.clone(),
+        };
+        (metric.as_str(), row)
+    });
+    bins.chain(devices)
+}
+
+/// Binds one `distributions` row: `job_id, metric, kind, bin, op_start, op_end, n, mean, sd, min,
+/// max, p05, p50, p95, exceedance, summary` as parameters 1 to 16.
+pub(crate) fn bind_distribution<'q, DB>(
+    query: Statement<'q, DB>,
+    job: &JobId,
+    metric: &str,
+    row: &DistributionRow,
+) -> StoreResult<Statement<'q, DB>>
+where
+    DB: Database,
+    for<'t> i64: Encode<'t, DB> + Type<DB>,
+    for<'t> f64: Encode<'t, DB> + Type<DB>,
+    for<'t> Option<f64>: Encode<'t, DB> + Type<DB>,
+    for<'t> String: Encode<'t, DB> + Type<DB>,
+{
+    let summary = &row.summary;
+    let quantile = |key: &str| summary.quantiles.get(key).map_or(0.0, |q| q.value);
+    Ok(query
+        .bind(job.to_string())
+        .bind(metric.to_owned())
+        .bind(row.kind.clone())
+        .bind(row.bin)
+        .bind(count_to_sql(row.op_start))
+        .bind(count_to_sql(row.op_end))
+        .bind(count_to_sql(summary.n))
+        .bind(summary.mean)
+        .bind(summary.sd)
+        .bind(summary.min)
+        .bind(summary.max)
+        .bind(quantile("p05"))
+        .bind(quantile("p50"))
+        .bind(quantile("p95"))
+        .bind(summary.exceedance.as_ref().map(|e| e.probability))
+        .bind(to_json("summary", summary)?))
+}
+
+/// Binds one `device_lives` row: `job_id, device, operations_to_failure, censored`.
+pub(crate) fn bind_life<'q, DB>(
+    query: Statement<'q, DB>,
+    job: &JobId,
+    life: &DeviceLife,
+) -> Statement<'q, DB>
+where
+    DB: Database,
+    for<'t> i64: Encode<'t, DB> + Type<DB>,
+    for<'t> bool: Encode<'t, DB> + Type<DB>,
+    for<'t> String: Encode<'t, DB> + Type<DB>,
+{
+    query
+        .bind(job.to_string())
+        .bind(count_to_sql(life.device))
+        .bind(count_to_sql(life.operations_to_failure))
+        .bind(life.censored)
+}
+
+pub(crate) fn distribution_from_row(row: &impl ReadRow) -> StoreResult<DistributionRow> {
+    Ok(DistributionRow {
+        kind: row.text("kind")?,
+        bin: row.int("bin")?,
+        op_start: count_from_sql(row, "op_start")?,
+        op_end: count_from_sql(row, "op_end")?,
+        summary: serde_json::from_str(&row.text("summary")?).map_err(|e| corrupt("summary", e))?,
+    })
+}
+
+pub(crate) fn life_from_row(row: &impl ReadRow) -> Result<DeviceLife, sqlx::Error> {
+    Ok(DeviceLife {
+        device: count_from_sql(row, "device")?,
+        operations_to_failure: count_from_sql(row, "operations_to_failure")?,
+        censored: row.flag("censored")?,
+    })
+}
+
+// ---- schedules and their runs --------------------------------------------------------------
+
+macro_rules! schedule_columns {
+    () => {
+        "id, owner, name, cron, time_zone, template, statistics, enabled, next_run_at, created_at, updated_at"
+    };
+}
+
+pub(crate) use schedule_columns;
+
+pub(crate) fn schedule_from_row(row: &impl ReadRow) -> StoreResult<ScheduleRecord> {
+    Ok(ScheduleRecord {
+        id: ScheduleId::from(row.text("id")?),
+        owner: Owner::from_stored(row.text("owner")?),
+        definition: ScheduleDefinition {
+            name: row.text("name")?,
+            cron: row.text("cron")?,
+            time_zone: row.text("time_zone")?,
+            template: spec_from_json(&row.text("template")?)?,
+            statistics: serde_json::from_str(&row.text("statistics")?)
+                .map_err(|e| corrupt("statistics", e))?,
+            enabled: row.flag("enabled")?,
+        },
+        next_run_at: optional_ms(row, "next_run_at")?,
+        created_at: ms(row, "created_at")?,
+        updated_at: ms(row, "updated_at")?,
+    })
+}
+
+/// Binds every column of [`schedule_columns`], in its order, as parameters 1 to 11.
+pub(crate) fn bind_schedule<'q, DB>(
+    query: Statement<'q, DB>,
+    schedule: &ScheduleRecord,
+) -> StoreResult<Statement<'q, DB>>
+where
+    DB: Database,
+    for<'t> i64: Encode<'t, DB> + Type<DB>,
+    for<'t> Option<i64>: Encode<'t, DB> + Type<DB>,
+    for<'t> bool: Encode<'t, DB> + Type<DB>,
+    for<'t> String: Encode<'t, DB> + Type<DB>,
+{
+    let definition = &schedule.definition;
+    Ok(query
+        .bind(schedule.id.to_string())
+        .bind(schedule.owner.as_str().to_owned())
+        .bind(definition.name.clone())
+        .bind(definition.cron.clone())
+        .bind(definition.time_zone.clone())
+        .bind(to_json("template", &definition.template)?)
+        .bind(to_json("statistics", &definition.statistics)?)
+        .bind(definition.enabled)
+        .bind(schedule.next_run_at.map(|t| t.0))
+        .bind(schedule.created_at.0)
+        .bind(schedule.updated_at.0))
+}
+
+pub(crate) fn run_from_row(row: &impl ReadRow) -> Result<RunRecord, sqlx::Error> {
+    Ok(RunRecord {
+        scheduled_for: ms(row, "scheduled_for")?,
+        job_id: JobId::from(row.text("job_id")?),
+        manual: row.flag("manual")?,
+        status: status(row)?,
+    })
+}

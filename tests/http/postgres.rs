@@ -1,0 +1,74 @@
+//! The same API on PostgreSQL: a job's life from submission to result (bit-identical to `run`),
+//! listing, cancelling, life, and a schedule's trend, on a throwaway cluster.
+
+use crate::support::app::{Service, TestApp};
+use crate::support::client::{delete, get, post};
+use crate::support::postgres::Postgres;
+use crate::support::{run_job, scattered_job, temp_dir, wearing_template};
+use serde_json::json;
+use std::time::Duration;
+
+#[test]
+fn jobs_results_and_schedules_work_the_same_on_postgres() {
+    let Some(cluster) = Postgres::start(&temp_dir("http-postgres")) else {
+        return;
+    };
+    let server = TestApp::on(&cluster.database("service"), &[]);
+
+    let job = scattered_job(400, 100, 5);
+    let id = server.submit(&job);
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
+    let local = run_job(&job, &[]);
+    assert_eq!(result["operations"], local["operations"], "to the bit");
+    assert_eq!(result["devices"], local["devices"]);
+    let csv = get(
+        &server.url(&format!(
+            "/v1/jobs/{id}/distributions/total_bounce_s?format=csv"
+        )),
+        None,
+    );
+    assert_eq!(csv.body.lines().count(), 1 + 10);
+
+    let long = server.submit(&scattered_job(200_000, 1000, 1));
+    assert_eq!(delete(&server.url(&format!("/v1/jobs/{long}"))).status, 200);
+    assert_eq!(delete(&server.url(&format!("/v1/jobs/{long}"))).status, 409);
+    assert_eq!(server.list_job_ids(1), [long, id.clone()]);
+
+    let wearing = server.submit(&wearing_template(48.0));
+    server.wait_for(&wearing, "succeeded", Duration::from_secs(60));
+    let lives = get(
+        &server.url(&format!("/v1/jobs/{wearing}/life?format=csv")),
+        None,
+    );
+    assert_eq!(lives.body.lines().count(), 1 + 60);
+
+    let schedule = post(
+        &server.url("/v1/schedules"),
+        &json!({"name": "nightly", "cron": "0 3 * * *", "template": {"devices": 20, "operations": 20, "seed": 3}})
+            .to_string(),
+        None,
+    );
+    assert_eq!(schedule.status, 201, "{}", schedule.body);
+    let schedule = schedule.json()["id"].as_str().unwrap().to_owned();
+    for _ in 0..2 {
+        let run = post(
+            &server.url(&format!("/v1/schedules/{schedule}/run")),
+            "",
+            None,
+        );
+        assert_eq!(run.status, 202, "{}", run.body);
+        server.wait_for(
+            run.json()["id"].as_str().unwrap(),
+            "succeeded",
+            Duration::from_secs(60),
+        );
+    }
+    let trend = get(&server.url(&format!("/v1/schedules/{schedule}/runs")), None).json();
+    let runs = trend["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    assert!(
+        runs.iter()
+            .all(|run| run["values"]["operations.total_bounce_s.p95"]["drift"] == false)
+    );
+}

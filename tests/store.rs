@@ -1,0 +1,208 @@
+//! The store's promises, kept by every backend: the same checks against SQLite and against a real
+//! PostgreSQL (a throwaway cluster; skipped where PostgreSQL is not installed, required in CI).
+
+#[path = "support/mod.rs"]
+mod support;
+
+use bouncewear::domain::{Attempt, JobId, JobStatus, Owner, QueuedJob, UnixMs};
+use bouncewear::scheduler::tick;
+use bouncewear::store::{self, Lease, LeaseTerms, Store, StoreError};
+use bouncewear_model::montecarlo::Job;
+use chrono::{DateTime, Utc};
+use std::sync::Arc;
+use support::postgres::Postgres;
+use support::temp_dir;
+
+fn queued(seed: u64) -> QueuedJob {
+    let job = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || seed).unwrap();
+    QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1))
+}
+
+fn terms(now: i64) -> LeaseTerms {
+    LeaseTerms {
+        now: UnixMs(now),
+        duration_ms: 1000,
+    }
+}
+
+fn utc(text: &str) -> DateTime<Utc> {
+    DateTime::parse_from_rfc3339(text)
+        .unwrap()
+        .with_timezone(&Utc)
+}
+
+/// Every check, on fresh databases that `database(name)` names by URL.
+async fn every_promise(database: impl Fn(&str) -> String) {
+    unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(&database("cancel")).await;
+    a_claim_whose_lease_expired_is_fenced_out_by_its_successor(&database("fence")).await;
+    concurrent_submissions_never_overshoot_the_queue_bound(&database("bound")).await;
+    every_u64_seed_reads_back_exactly(&database("seeds")).await;
+    two_scheduler_loops_never_duplicate_a_night(&database("race")).await;
+}
+
+async fn unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let owner = Owner::anonymous();
+    let missing = store.job(&owner, &JobId::from("nope")).await.unwrap_err();
+    assert!(
+        matches!(missing, StoreError::NotFound { kind: "job", .. }),
+        "{missing}"
+    );
+    let id = store.insert_job(queued(1), 10).await.unwrap().unwrap().id;
+    let cancelled = store.cancel(&owner, &id, UnixMs(2)).await.unwrap();
+    assert_eq!(cancelled.status, JobStatus::Cancelled);
+    let again = store.cancel(&owner, &id, UnixMs(3)).await.unwrap_err();
+    assert_eq!(
+        again.to_string(),
+        format!("job {id} already ended: cancelled")
+    );
+    let other = Owner::of_key("another key");
+    assert!(matches!(
+        store.cancel(&other, &id, UnixMs(3)).await,
+        Err(StoreError::NotFound { .. })
+    ));
+}
+
+async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor(url: &str) {
+    let store = store::open(url).await.unwrap();
+    store.insert_job(queued(1), 10).await.unwrap();
+    let first = store.claim("a", terms(0)).await.unwrap().unwrap();
+    assert!(
+        store.claim("b", terms(500)).await.unwrap().is_none(),
+        "leased"
+    );
+    let second = store.claim("b", terms(2000)).await.unwrap().unwrap();
+    assert_eq!(second.fence.attempt, Attempt(first.fence.attempt.0 + 1));
+    assert_eq!(second.spec.seed, Some(1));
+    assert_eq!(
+        store.heartbeat(&first.fence, terms(2100), 5).await.unwrap(),
+        Lease::Lost
+    );
+    assert!(
+        !store
+            .fail(&first.fence, UnixMs(2100), "late")
+            .await
+            .unwrap()
+    );
+    assert_eq!(
+        store
+            .heartbeat(&second.fence, terms(2100), 5)
+            .await
+            .unwrap(),
+        Lease::Held
+    );
+}
+
+async fn concurrent_submissions_never_overshoot_the_queue_bound(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let submissions: Vec<_> = (0..40)
+        .map(|seed| {
+            let store = Arc::clone(&store);
+            tokio::spawn(async move { store.insert_job(queued(seed), 15).await.unwrap() })
+        })
+        .collect();
+    let mut accepted = 0;
+    for submission in submissions {
+        accepted += usize::from(submission.await.unwrap().is_some());
+    }
+    assert_eq!(accepted, 15);
+    assert_eq!(store.queue_depth().await.unwrap(), (15, 0));
+}
+
+async fn every_u64_seed_reads_back_exactly(url: &str) {
+    let store = store::open(url).await.unwrap();
+    for seed in [0, 1 << 53, i64::MAX as u64 + 1, u64::MAX] {
+        let id = store
+            .insert_job(queued(seed), 10)
+            .await
+            .unwrap()
+            .unwrap()
+            .id;
+        assert_eq!(
+            store.job(&Owner::anonymous(), &id).await.unwrap().seed,
+            seed
+        );
+    }
+}
+
+async fn two_scheduler_loops_never_duplicate_a_night(url: &str) {
+    use bouncewear::domain::{ScheduleDefinition, ScheduleId};
+    use bouncewear::store::ScheduleRecord;
+    let (first, second): (Arc<dyn Store>, Arc<dyn Store>) = (
+        store::open(url).await.unwrap(),
+        store::open(url).await.unwrap(),
+    );
+    for i in 0..10 {
+        let schedule = ScheduleRecord {
+            id: ScheduleId::from(format!("s{i}")),
+            owner: Owner::anonymous(),
+            definition: ScheduleDefinition {
+                name: format!("nightly {i}"),
+                cron: "0 3 * * *".to_owned(),
+                time_zone: "UTC".to_owned(),
+                template: serde_json::from_str(r#"{"devices": 2, "operations": 2, "seed": 1}"#)
+                    .unwrap(),
+                statistics: vec!["operations.total_bounce_s.p95".parse().unwrap()],
+                enabled: true,
+            },
+            next_run_at: Some(UnixMs::from_datetime(utc("2026-11-21T03:00:00Z"))),
+            created_at: UnixMs(0),
+            updated_at: UnixMs(0),
+        };
+        first.insert_schedule(&schedule).await.unwrap();
+    }
+    let now = utc("2026-11-22T04:00:00Z");
+    let mut created = 0;
+    for _ in 0..5 {
+        let (a, b) = tokio::join!(
+            tick(first.as_ref(), 1000, now),
+            tick(second.as_ref(), 1000, now)
+        );
+        created += a.unwrap() + b.unwrap();
+    }
+    assert_eq!(
+        created, 10,
+        "one job per schedule and night, whichever loop made it"
+    );
+    assert_eq!(
+        first.queue_depth().await.unwrap(),
+        (10, 0),
+        "no job without its run row"
+    );
+    for i in 0..10 {
+        let runs = first
+            .runs(&ScheduleId::from(format!("s{i}")), 10)
+            .await
+            .unwrap();
+        assert_eq!(runs.len(), 1);
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sqlite_keeps_every_promise() {
+    let dir = temp_dir("store-sqlite");
+    every_promise(|name| format!("sqlite://{}", dir.join(format!("{name}.db")).display())).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn postgres_keeps_every_promise() {
+    let Some(cluster) = Postgres::start(&temp_dir("store-postgres")) else {
+        return;
+    };
+    every_promise(|name| cluster.database(name)).await;
+}
+
+#[tokio::test]
+async fn an_unknown_url_scheme_names_the_supported_ones_and_never_the_password() {
+    let Err(error) = store::open("mysql://user:secret@host/db").await else {
+        panic!("mysql is not a backend");
+    };
+    let message = error.to_string();
+    assert!(
+        message.contains("`mysql`")
+            && message.contains("sqlite://")
+            && message.contains("postgres://"),
+        "{message}"
+    );
+    assert!(!message.contains("secret"), "{message}");
+}
