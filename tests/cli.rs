@@ -107,6 +107,8 @@ fn every_subcommand_has_help() {
         &["simulate", "--help"],
         &["run", "--help"],
         &["bench", "--help"],
+        &["serve", "--help"],
+        &["worker", "--help"],
     ] {
         let output = bouncewear(args, "");
         assert!(output.status.success(), "{args:?}");

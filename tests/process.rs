@@ -82,3 +82,57 @@ fn serve_refuses_a_public_bind_without_keys() {
     assert_eq!(output.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&output.stderr).contains("--api-key"));
 }
+
+#[test]
+fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sigterm() {
+    use std::io::{BufRead, BufReader};
+    use std::process::Stdio;
+    let database = temp_db("worker");
+    let server = Spawned::start(&database, &["--workers", "0"]);
+    let mut worker = Command::new(BIN)
+        .args(["worker", "--database"])
+        .arg(format!("sqlite://{}", database.display()))
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(worker.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert!(
+        line.starts_with("bouncewear worker running 1 job(s)"),
+        "{line}"
+    );
+    let job = json!({"devices": 50, "operations": 40, "seed": 8});
+    let id = server.submit(&job);
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
+    assert_eq!(result["operations"], run_job(&job, &[])["operations"]);
+    let status = Command::new("kill")
+        .args(["-TERM", &worker.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert!(worker.wait().unwrap().success());
+}
+
+#[test]
+fn a_worker_needs_at_least_one_slot_and_a_known_database_scheme() {
+    for (args, message) in [
+        (&["worker", "--workers", "0"][..], "--workers"),
+        (
+            &["worker", "--database", "mysql://u:secret@h/db"][..],
+            "postgres://",
+        ),
+    ] {
+        let output = Command::new(BIN).args(args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_ne!(output.status.code(), Some(0), "{args:?}");
+        assert!(
+            stderr.contains(message) && !stderr.contains("secret"),
+            "{args:?}: {stderr}"
+        );
+    }
+}

@@ -5,7 +5,7 @@
 
 use crate::api::{self, AppState};
 use crate::compute::{PoolError, thread_pool};
-use crate::config::ServeConfig;
+use crate::config::{ServeConfig, WorkerConfig};
 use crate::domain::{Owner, UnixMs};
 use crate::store::{Store, StoreError};
 use crate::telemetry;
@@ -37,6 +37,8 @@ pub enum StartupError {
     },
     #[error("server: {0}")]
     Serve(std::io::Error),
+    #[error("--workers must be at least 1 for a worker process")]
+    NoWorkers,
 }
 
 /// A built service: bound, with its store open, not yet serving.
@@ -61,12 +63,8 @@ impl Application {
         if key_owners.is_empty() && !config.bind.ip().is_loopback() {
             return Err(StartupError::PublicWithoutKeys(config.bind));
         }
-        let store = crate::store::open(&config.database).await?;
-        let reclaimed = store.reclaim_expired(UnixMs::now()).await?;
-        if reclaimed > 0 {
-            tracing::info!(reclaimed, "jobs whose lease expired are back in the queue");
-        }
-        let compute = Arc::new(thread_pool(config.compute_threads)?);
+        let workers = Arc::new(start_workers(&config.queue).await?);
+        let store = Arc::clone(&workers.store);
         let listener =
             TcpListener::bind(config.bind)
                 .await
@@ -79,19 +77,11 @@ impl Application {
             source,
         })?;
         let (shutdown_sender, shutdown) = watch::channel(false);
-        let wake = Arc::new(Notify::new());
-        let workers = Arc::new(Workers {
-            store: Arc::clone(&store),
-            compute,
-            lease: config.lease(),
-            instance: format!("{}-{}", std::process::id(), uuid::Uuid::new_v4().simple()),
-            wake: Arc::clone(&wake),
-        });
         let state = AppState {
             store,
             config: Arc::new(config),
             key_owners: Arc::new(key_owners),
-            wake,
+            wake: Arc::clone(&workers.wake),
             metrics: prometheus(),
             shutdown,
         };
@@ -125,7 +115,8 @@ impl Application {
             shutdown_sender,
         } = self;
         let config = &state.config;
-        tracing::info!(%address, database = %config.database, workers = config.workers, "serving");
+        let queue = &config.queue;
+        tracing::info!(%address, database = %describe(&queue.database), workers = queue.workers, "serving");
         let stopping = state.shutdown.clone();
         let scheduler = tokio::spawn(crate::scheduler::run(
             Arc::clone(&state.store),
@@ -134,7 +125,7 @@ impl Application {
             stopping.clone(),
         ));
         // `--workers 0` makes an API-only instance that leaves the queue to others.
-        let handles = workers.spawn(config.workers, stopping.clone());
+        let handles = workers.spawn(queue.workers, stopping.clone());
         let reporter = tokio::spawn(report_queue_depth(
             Arc::clone(&state.store),
             state.metrics.clone(),
@@ -152,15 +143,72 @@ impl Application {
             .await;
         reporter.abort();
         let _ = scheduler.await;
-        for handle in handles {
-            if tokio::time::timeout(Duration::from_secs(30), handle)
-                .await
-                .is_err()
-            {
-                tracing::warn!("a worker did not stop in time; its lease will expire");
-            }
-        }
+        join_workers(handles).await;
         served.map_err(StartupError::Serve)
+    }
+}
+
+/// Opens the queue's store, puts jobs whose lease expired back in the queue, and readies the
+/// workers (not yet running) with their compute pool.
+async fn start_workers(config: &WorkerConfig) -> Result<Workers, StartupError> {
+    let store = crate::store::open(&config.database).await?;
+    let reclaimed = store.reclaim_expired(UnixMs::now()).await?;
+    if reclaimed > 0 {
+        tracing::info!(reclaimed, "jobs whose lease expired are back in the queue");
+    }
+    Ok(Workers {
+        store,
+        compute: Arc::new(thread_pool(config.compute_threads)?),
+        lease: config.lease(),
+        instance: format!("{}-{}", std::process::id(), uuid::Uuid::new_v4().simple()),
+        wake: Arc::new(Notify::new()),
+    })
+}
+
+/// Waits for stopping workers, which hand their jobs back to the queue; one that takes too long
+/// leaves its lease to expire.
+async fn join_workers(handles: Vec<tokio::task::JoinHandle<()>>) {
+    for handle in handles {
+        if tokio::time::timeout(Duration::from_secs(30), handle)
+            .await
+            .is_err()
+        {
+            tracing::warn!("a worker did not stop in time; its lease will expire");
+        }
+    }
+}
+
+/// `bouncewear worker`: runs jobs from the queue until SIGINT or SIGTERM, without serving HTTP
+/// (scale jobs out across machines with several of these on one PostgreSQL database).
+pub async fn work(config: WorkerConfig) -> Result<(), StartupError> {
+    telemetry::init_logging();
+    if config.workers == 0 {
+        return Err(StartupError::NoWorkers);
+    }
+    let workers = Arc::new(start_workers(&config).await?);
+    let (stop, stopping) = watch::channel(false);
+    let handles = Arc::clone(&workers).spawn(config.workers, stopping);
+    // Tests and scripts wait for this line.
+    println!(
+        "bouncewear worker running {} job(s) at a time from {}",
+        config.workers,
+        describe(&config.database)
+    );
+    wait_for_signal().await;
+    tracing::info!("shutting down: running jobs go back to the queue");
+    let _ = stop.send(true);
+    join_workers(handles).await;
+    Ok(())
+}
+
+/// A database URL fit for logs: its scheme and where it points, never its credentials.
+fn describe(url: &str) -> String {
+    match url.split_once("://") {
+        Some((scheme, rest)) => {
+            let place = rest.rsplit_once('@').map_or(rest, |(_, place)| place);
+            format!("{scheme}://{place}")
+        }
+        None => url.to_owned(),
     }
 }
 
@@ -220,5 +268,19 @@ async fn wait_for_signal() {
     tokio::select! {
         () = interrupt => {}
         () = terminate => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::describe;
+
+    #[test]
+    fn a_database_url_is_logged_without_its_credentials() {
+        assert_eq!(
+            describe("postgres://bouncewear:secret@db:5432/bouncewear"),
+            "postgres://db:5432/bouncewear"
+        );
+        assert_eq!(describe("sqlite://bouncewear.db"), "sqlite://bouncewear.db");
     }
 }

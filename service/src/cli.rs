@@ -48,8 +48,10 @@ enum Command {
         #[arg(long)]
         plots: Option<PathBuf>,
     },
-    /// Serve the HTTP API, with the job queue in an embedded SQLite database.
+    /// Serve the HTTP API, with the job queue in an embedded SQLite database (or PostgreSQL).
     Serve(crate::config::ServeConfig),
+    /// Run jobs from the queue's database without serving HTTP: more machines for one queue.
+    Worker(crate::config::WorkerConfig),
     /// Measure speed against error and write report.json, report.md and report.svg.
     Bench {
         /// A smaller run that finishes in well under two minutes.
@@ -106,7 +108,9 @@ impl CliError {
             CliError::Invalid(_)
             | CliError::Io { .. }
             | CliError::Startup(
-                StartupError::PublicWithoutKeys(_) | StartupError::Compute(PoolError::NoThreads),
+                StartupError::PublicWithoutKeys(_)
+                | StartupError::NoWorkers
+                | StartupError::Compute(PoolError::NoThreads),
             ) => ExitCode::from(2),
             CliError::Startup(_) | CliError::Failed(_) => ExitCode::FAILURE,
         }
@@ -167,14 +171,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
             }
             print_json(&result)
         }
-        Command::Serve(config) => {
-            let runtime = tokio::runtime::Builder::new_multi_thread()
-                .enable_all()
-                .thread_name("bouncewear-async")
-                .build()
-                .map_err(|e| CliError::Failed(format!("cannot start the async runtime: {e}")))?;
-            Ok(runtime.block_on(crate::app::serve(config))?)
-        }
+        Command::Serve(config) => Ok(async_runtime()?.block_on(crate::app::serve(config))?),
+        Command::Worker(config) => Ok(async_runtime()?.block_on(crate::app::work(config))?),
         Command::Bench {
             quick,
             out,
@@ -216,6 +214,15 @@ fn write_plots(
         std::fs::write(&path, svg).map_err(io(&path))?;
     }
     Ok(())
+}
+
+/// The runtime `serve` and `worker` run on; compute has its own pool.
+fn async_runtime() -> Result<tokio::runtime::Runtime, CliError> {
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .thread_name("bouncewear-async")
+        .build()
+        .map_err(|e| CliError::Failed(format!("cannot start the async runtime: {e}")))
 }
 
 /// A rayon pool of `threads` workers (all cores by default).

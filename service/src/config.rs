@@ -1,14 +1,12 @@
-//! `bouncewear serve` configuration: flags, each with an environment variable.
+//! `bouncewear serve` and `bouncewear worker` configuration: flags, each with an environment variable.
 
 use clap::Args;
 use std::net::SocketAddr;
 use std::time::Duration;
 
+/// What every process that runs jobs needs: the queue's database and how to run its jobs.
 #[derive(Debug, Clone, Args)]
-pub struct ServeConfig {
-    /// Address to listen on; port 0 picks a free port (printed at start-up).
-    #[arg(long, env = "BOUNCEWEAR_BIND", default_value = "127.0.0.1:8080")]
-    pub bind: SocketAddr,
+pub struct WorkerConfig {
     /// Database URL: `sqlite://FILE` (embedded; the file is created if missing) or
     /// `postgres://USER:PASSWORD@HOST/DATABASE` (shared by instances on several machines).
     #[arg(
@@ -17,12 +15,28 @@ pub struct ServeConfig {
         default_value = "sqlite://bouncewear.db"
     )]
     pub database: String,
-    /// Jobs run at the same time (each uses all compute threads); 0 serves the API without running jobs.
+    /// Jobs run at the same time (each uses all compute threads); with `serve`, 0 serves the API without running jobs.
     #[arg(long, env = "BOUNCEWEAR_WORKERS", default_value_t = 1)]
     pub workers: usize,
     /// Compute threads (default: one per core). Compute never runs on the async runtime.
     #[arg(long, env = "BOUNCEWEAR_COMPUTE_THREADS")]
     pub compute_threads: Option<usize>,
+    /// How long a claimed job stays leased without a heartbeat before another worker may take it.
+    #[arg(long, env = "BOUNCEWEAR_LEASE_SECONDS", default_value_t = 30.0)]
+    pub lease_seconds: f64,
+}
+
+impl WorkerConfig {
+    pub fn lease(&self) -> Duration {
+        Duration::from_secs_f64(self.lease_seconds.max(0.5))
+    }
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct ServeConfig {
+    /// Address to listen on; port 0 picks a free port (printed at start-up).
+    #[arg(long, env = "BOUNCEWEAR_BIND", default_value = "127.0.0.1:8080")]
+    pub bind: SocketAddr,
     /// API keys, comma-separated; with keys, every /v1 call needs `Authorization: Bearer KEY`.
     #[arg(long = "api-key", env = "BOUNCEWEAR_API_KEYS", value_delimiter = ',')]
     pub api_keys: Vec<String>,
@@ -39,13 +53,6 @@ pub struct ServeConfig {
     /// Largest request body, in bytes.
     #[arg(long, env = "BOUNCEWEAR_MAX_BODY_BYTES", default_value_t = 1 << 20)]
     pub max_body_bytes: usize,
-    /// How long a claimed job stays leased without a heartbeat before another worker may take it.
-    #[arg(long, env = "BOUNCEWEAR_LEASE_SECONDS", default_value_t = 30.0)]
-    pub lease_seconds: f64,
-}
-
-impl ServeConfig {
-    pub fn lease(&self) -> Duration {
-        Duration::from_secs_f64(self.lease_seconds.max(0.5))
-    }
+    #[command(flatten)]
+    pub queue: WorkerConfig,
 }
