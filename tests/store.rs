@@ -37,6 +37,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_claim_whose_lease_expired_is_fenced_out_by_its_successor(&database("fence")).await;
     concurrent_submissions_never_overshoot_the_queue_bound(&database("bound")).await;
     every_u64_seed_reads_back_exactly(&database("seeds")).await;
+    a_job_whose_lease_keeps_expiring_fails_with_the_reason(&database("retries")).await;
     two_scheduler_loops_never_duplicate_a_night(&database("race")).await;
 }
 
@@ -66,12 +67,12 @@ async fn unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(url: &str)
 async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor(url: &str) {
     let store = store::open(url).await.unwrap();
     store.insert_job(queued(1), 10).await.unwrap();
-    let first = store.claim("a", terms(0)).await.unwrap().unwrap();
+    let first = store.claim("a", terms(0), 3).await.unwrap().unwrap();
     assert!(
-        store.claim("b", terms(500)).await.unwrap().is_none(),
+        store.claim("b", terms(500), 3).await.unwrap().is_none(),
         "leased"
     );
-    let second = store.claim("b", terms(2000)).await.unwrap().unwrap();
+    let second = store.claim("b", terms(2000), 3).await.unwrap().unwrap();
     assert_eq!(second.fence.attempt, Attempt(first.fence.attempt.0 + 1));
     assert_eq!(second.spec.seed, Some(1));
     assert_eq!(
@@ -107,6 +108,33 @@ async fn concurrent_submissions_never_overshoot_the_queue_bound(url: &str) {
     }
     assert_eq!(accepted, 15);
     assert_eq!(store.queue_depth().await.unwrap(), (15, 0));
+}
+
+async fn a_job_whose_lease_keeps_expiring_fails_with_the_reason(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let id = store.insert_job(queued(1), 10).await.unwrap().unwrap().id;
+    // Claimed at t = 0 s; every later claim finds the lease (1 s) expired: its worker died.
+    let mut attempts = 0;
+    let mut now = 0;
+    while store.claim("w", terms(now), 2).await.unwrap().is_some() {
+        attempts += 1;
+        now += 2000;
+    }
+    assert_eq!(attempts, 3, "the first run and two retries");
+    let job = store.job(&Owner::anonymous(), &id).await.unwrap();
+    assert_eq!(job.status, JobStatus::Failed);
+    let reason = job.error.unwrap();
+    assert!(reason.starts_with("gave up after 2 retries"), "{reason}");
+
+    // Start-up's reclaim counts an expired lease the same way.
+    let id = store.insert_job(queued(2), 10).await.unwrap().unwrap().id;
+    store.claim("w", terms(now), 0).await.unwrap().unwrap();
+    assert_eq!(
+        store.reclaim_expired(UnixMs(now + 2000), 0).await.unwrap(),
+        0
+    );
+    let job = store.job(&Owner::anonymous(), &id).await.unwrap();
+    assert_eq!(job.status, JobStatus::Failed);
 }
 
 async fn every_u64_seed_reads_back_exactly(url: &str) {

@@ -152,7 +152,9 @@ impl Application {
 /// workers (not yet running) with their compute pool.
 async fn start_workers(config: &WorkerConfig) -> Result<Workers, StartupError> {
     let store = crate::store::open(&config.database).await?;
-    let reclaimed = store.reclaim_expired(UnixMs::now()).await?;
+    let reclaimed = store
+        .reclaim_expired(UnixMs::now(), config.max_retries)
+        .await?;
     if reclaimed > 0 {
         tracing::info!(reclaimed, "jobs whose lease expired are back in the queue");
     }
@@ -160,6 +162,7 @@ async fn start_workers(config: &WorkerConfig) -> Result<Workers, StartupError> {
         store,
         compute: Arc::new(thread_pool(config.compute_threads)?),
         lease: config.lease(),
+        retries: config.max_retries,
         instance: format!("{}-{}", std::process::id(), uuid::Uuid::new_v4().simple()),
         wake: Arc::new(Notify::new()),
     })

@@ -24,6 +24,10 @@ pub struct WorkerConfig {
     /// How long a claimed job stays leased without a heartbeat before another worker may take it.
     #[arg(long, env = "BOUNCEWEAR_LEASE_SECONDS", default_value_t = 30.0)]
     pub lease_seconds: f64,
+    /// Times a job may be run again after its lease expired (its worker stopped or stalled); once
+    /// more and it fails with the reason, instead of being retried forever.
+    #[arg(long, env = "BOUNCEWEAR_MAX_RETRIES", default_value_t = 3)]
+    pub max_retries: u64,
 }
 
 impl WorkerConfig {

@@ -27,6 +27,8 @@ pub struct Workers {
     pub store: Arc<dyn Store>,
     pub compute: Arc<rayon::ThreadPool>,
     pub lease: Duration,
+    /// Times a job is run again after its lease expired, before it fails.
+    pub retries: u64,
     pub instance: String,
     /// Notified on every submission, so an idle worker starts at once.
     pub wake: Arc<Notify>,
@@ -59,7 +61,11 @@ impl Workers {
     async fn work(&self, slot: usize, mut shutdown: watch::Receiver<bool>) {
         let worker = format!("{}/{slot}", self.instance);
         while !*shutdown.borrow() {
-            match self.store.claim(&worker, self.lease_terms()).await {
+            match self
+                .store
+                .claim(&worker, self.lease_terms(), self.retries)
+                .await
+            {
                 Ok(Some(claim)) => self.run(claim, &mut shutdown).await,
                 Ok(None) => {
                     tokio::select! {

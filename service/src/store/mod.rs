@@ -188,7 +188,13 @@ pub trait JobQueue: Send + Sync + 'static {
     /// Cancels a queued or running job; [`StoreError::Conflict`] if it already ended.
     async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord>;
     /// Leases the oldest queued job, or a running one whose lease expired, bumping its attempt.
-    async fn claim(&self, worker: &str, terms: LeaseTerms) -> StoreResult<Option<Claim>>;
+    /// A job whose lease has already expired `retries` times fails instead, with the reason.
+    async fn claim(
+        &self,
+        worker: &str,
+        terms: LeaseTerms,
+        retries: u64,
+    ) -> StoreResult<Option<Claim>>;
     /// Extends the lease and records progress, if the claim still holds the job.
     async fn heartbeat(
         &self,
@@ -200,8 +206,9 @@ pub trait JobQueue: Send + Sync + 'static {
     async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool>;
     /// Hands a running job back to the queue (graceful shutdown).
     async fn release(&self, fence: &Fence) -> StoreResult<bool>;
-    /// Puts every running job whose lease expired back in the queue; returns how many.
-    async fn reclaim_expired(&self, now: UnixMs) -> StoreResult<u64>;
+    /// Puts every running job whose lease expired back in the queue, or fails it when its lease
+    /// has already expired `retries` times; returns how many went back.
+    async fn reclaim_expired(&self, now: UnixMs, retries: u64) -> StoreResult<u64>;
     /// `(queued, running)` job counts, for metrics.
     async fn queue_depth(&self) -> StoreResult<(u64, u64)>;
     async fn ping(&self) -> StoreResult<()>;

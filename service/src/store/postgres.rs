@@ -5,20 +5,20 @@
 //! is shared with SQLite (`rows.rs`).
 
 use super::rows::{
-    bind_distribution, bind_life, bind_queued_job, bind_schedule, count_from_sql, count_to_sql,
-    distribution_from_row, distribution_rows, job_columns, job_from_row, life_from_row,
-    run_from_row, schedule_columns, schedule_from_row, spec_from_json, to_json,
+    bind_distribution, bind_life, bind_queued_job, bind_schedule, claim_from_row, count_from_sql,
+    count_to_sql, distribution_from_row, distribution_rows, gave_up, job_columns, job_from_row,
+    life_from_row, run_from_row, schedule_columns, schedule_from_row, to_json,
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
     Page, Results, RunRecord, RunSlot, ScheduleRecord, Schedules, StoreError, StoreResult,
 };
-use crate::domain::{Attempt, JobId, Owner, QueuedJob, ScheduleId, UnixMs};
+use crate::domain::{JobId, Owner, QueuedJob, ScheduleId, UnixMs};
 use async_trait::async_trait;
 use bouncewear_model::montecarlo::{DeviceLife, JobResult};
+use sqlx::Postgres;
 use sqlx::postgres::{PgArguments, PgConnection, PgPool, PgPoolOptions};
 use sqlx::query::Query;
-use sqlx::{Postgres, Row};
 use std::time::Duration;
 
 pub struct PgStore {
@@ -93,6 +93,23 @@ fn fenced<'q>(sql: &'static str, fence: &Fence) -> Query<'q, Postgres, PgArgumen
         .bind(fence.attempt.0)
 }
 
+/// Fails every running job whose lease expired once more than `retries` allow, with the reason.
+async fn give_up_on_exhausted<'e, E>(executor: E, now: UnixMs, retries: u64) -> StoreResult<()>
+where
+    E: sqlx::Executor<'e, Database = Postgres>,
+{
+    sqlx::query(
+        "UPDATE jobs SET status = 'failed', finished_at = $1, error = $3, lease_owner = NULL, lease_until = NULL \
+         WHERE status = 'running' AND lease_until < $1 AND lost_leases >= $2",
+    )
+    .bind(now.0)
+    .bind(count_to_sql(retries))
+    .bind(gave_up(retries))
+    .execute(executor)
+    .await?;
+    Ok(())
+}
+
 #[async_trait]
 impl JobQueue for PgStore {
     #[tracing::instrument(skip_all, fields(job = %job.id))]
@@ -150,31 +167,28 @@ impl JobQueue for PgStore {
     }
 
     #[tracing::instrument(skip_all, fields(worker))]
-    async fn claim(&self, worker: &str, terms: LeaseTerms) -> StoreResult<Option<Claim>> {
+    async fn claim(
+        &self,
+        worker: &str,
+        terms: LeaseTerms,
+        retries: u64,
+    ) -> StoreResult<Option<Claim>> {
+        give_up_on_exhausted(&self.pool, terms.now, retries).await?;
         let row = sqlx::query(
             "UPDATE jobs SET status = 'running', attempt = attempt + 1, lease_owner = $1, lease_until = $2 + $3, \
-             operations_done = 0, started_at = COALESCE(started_at, $2) \
+             operations_done = 0, started_at = COALESCE(started_at, $2), lost_leases = lost_leases + CASE WHEN status = 'running' THEN 1 ELSE 0 END \
              WHERE seq = (SELECT seq FROM jobs WHERE status = 'queued' \
-                          OR (status = 'running' AND lease_until < $2) ORDER BY seq LIMIT 1 \
+                          OR (status = 'running' AND lease_until < $2 AND lost_leases < $4) ORDER BY seq LIMIT 1 \
                           FOR UPDATE SKIP LOCKED) \
              RETURNING id, spec, attempt, operations_total",
         )
         .bind(worker)
         .bind(terms.now.0)
         .bind(terms.duration_ms)
+        .bind(count_to_sql(retries))
         .fetch_optional(&self.pool)
         .await?;
-        let Some(row) = row else {
-            return Ok(None);
-        };
-        Ok(Some(Claim {
-            fence: Fence {
-                job: JobId::from(row.try_get::<String, _>("id")?),
-                attempt: Attempt(row.try_get("attempt")?),
-            },
-            spec: spec_from_json(&row.try_get::<String, _>("spec")?)?,
-            operations_total: count_from_sql(&row, "operations_total")?,
-        }))
+        row.as_ref().map(claim_from_row).transpose()
     }
 
     #[tracing::instrument(skip_all, fields(job = %fence.job))]
@@ -235,10 +249,11 @@ impl JobQueue for PgStore {
     }
 
     #[tracing::instrument(skip_all)]
-    async fn reclaim_expired(&self, now: UnixMs) -> StoreResult<u64> {
+    async fn reclaim_expired(&self, now: UnixMs, retries: u64) -> StoreResult<u64> {
+        give_up_on_exhausted(&self.pool, now, retries).await?;
         let updated = sqlx::query(
-            "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 \
-             WHERE status = 'running' AND lease_until < $1",
+            "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0, \
+             lost_leases = lost_leases + 1 WHERE status = 'running' AND lease_until < $1",
         )
         .bind(now.0)
         .execute(&self.pool)

@@ -1,7 +1,9 @@
 //! What every backend shares: the column lists, the mapping of each table's row to its record (one
 //! place per table, whatever the database), and how values are stored (counts, seeds, times, JSON).
 
-use super::{DistributionRow, JobRecord, RunRecord, ScheduleRecord, StoreError, StoreResult};
+use super::{
+    Claim, DistributionRow, Fence, JobRecord, RunRecord, ScheduleRecord, StoreError, StoreResult,
+};
 use crate::domain::{
     Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, UnixMs,
 };
@@ -121,6 +123,26 @@ pub(crate) fn job_from_row(row: &impl ReadRow) -> Result<JobRecord, sqlx::Error>
         started_at: optional_ms(row, "started_at")?,
         finished_at: optional_ms(row, "finished_at")?,
     })
+}
+
+/// A claim, from the `RETURNING id, spec, attempt, operations_total` of a claiming update.
+pub(crate) fn claim_from_row(row: &impl ReadRow) -> StoreResult<Claim> {
+    Ok(Claim {
+        fence: Fence {
+            job: JobId::from(row.text("id")?),
+            attempt: Attempt(row.int("attempt")?),
+        },
+        spec: spec_from_json(&row.text("spec")?)?,
+        operations_total: count_from_sql(row, "operations_total")?,
+    })
+}
+
+/// Why a job whose lease kept expiring failed.
+pub(crate) fn gave_up(retries: u64) -> String {
+    format!(
+        "gave up after {retries} retries: the job's lease expired {} times (its worker stopped or stalled each time)",
+        retries + 1
+    )
 }
 
 /// Binds a new queued job's columns `id, owner, name, spec, seed, operations_total, created_at`

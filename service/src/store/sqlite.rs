@@ -6,15 +6,16 @@
 //! Each table's columns and row mapping are written once, below its section heading.
 
 use super::rows::{
-    bind_distribution, bind_life, bind_queued_job, bind_schedule, count_from_sql, count_to_sql,
-    distribution_from_row, distribution_rows, job_columns, job_from_row, life_from_row,
-    run_from_row, schedule_columns, schedule_from_row, seed_to_sql, spec_from_json, to_json,
+    bind_distribution, bind_life, bind_queued_job, bind_schedule, claim_from_row, count_from_sql,
+    count_to_sql, distribution_from_row, distribution_rows, gave_up, job_columns, job_from_row,
+    life_from_row, run_from_row, schedule_columns, schedule_from_row, seed_to_sql, spec_from_json,
+    to_json,
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
     Page, Results, RunRecord, RunSlot, ScheduleRecord, Schedules, StoreError, StoreResult,
 };
-use crate::domain::{Attempt, JobId, Owner, QueuedJob, ScheduleId, UnixMs};
+use crate::domain::{JobId, Owner, QueuedJob, ScheduleId, UnixMs};
 use async_trait::async_trait;
 use bouncewear_model::montecarlo::{DeviceLife, JobResult};
 use sqlx::query::Query;
@@ -117,6 +118,23 @@ fn fenced<'q>(sql: &'static str, fence: &Fence) -> Query<'q, Sqlite, SqliteArgum
         .bind(fence.attempt.0)
 }
 
+/// Fails every running job whose lease expired once more than `retries` allow, with the reason.
+async fn give_up_on_exhausted<'e, E>(executor: E, now: UnixMs, retries: u64) -> StoreResult<()>
+where
+    E: sqlx::Executor<'e, Database = Sqlite>,
+{
+    sqlx::query(
+        "UPDATE jobs SET status = 'failed', finished_at = ?1, error = ?3, lease_owner = NULL, lease_until = NULL \
+         WHERE status = 'running' AND lease_until < ?1 AND lost_leases >= ?2",
+    )
+    .bind(now.0)
+    .bind(count_to_sql(retries))
+    .bind(gave_up(retries))
+    .execute(executor)
+    .await?;
+    Ok(())
+}
+
 #[async_trait]
 impl JobQueue for SqliteStore {
     #[tracing::instrument(skip_all, fields(job = %job.id))]
@@ -173,30 +191,27 @@ impl JobQueue for SqliteStore {
     }
 
     #[tracing::instrument(skip_all, fields(worker))]
-    async fn claim(&self, worker: &str, terms: LeaseTerms) -> StoreResult<Option<Claim>> {
+    async fn claim(
+        &self,
+        worker: &str,
+        terms: LeaseTerms,
+        retries: u64,
+    ) -> StoreResult<Option<Claim>> {
+        give_up_on_exhausted(&self.writer, terms.now, retries).await?;
         let row = sqlx::query(
             "UPDATE jobs SET status = 'running', attempt = attempt + 1, lease_owner = ?1, lease_until = ?2 + ?3, \
-             operations_done = 0, started_at = COALESCE(started_at, ?2) \
+             operations_done = 0, started_at = COALESCE(started_at, ?2), lost_leases = lost_leases + (status = 'running') \
              WHERE seq = (SELECT seq FROM jobs WHERE status = 'queued' \
-                          OR (status = 'running' AND lease_until < ?2) ORDER BY seq LIMIT 1) \
+                          OR (status = 'running' AND lease_until < ?2 AND lost_leases < ?4) ORDER BY seq LIMIT 1) \
              RETURNING id, spec, attempt, operations_total",
         )
         .bind(worker)
         .bind(terms.now.0)
         .bind(terms.duration_ms)
+        .bind(count_to_sql(retries))
         .fetch_optional(&self.writer)
         .await?;
-        let Some(row) = row else {
-            return Ok(None);
-        };
-        Ok(Some(Claim {
-            fence: Fence {
-                job: JobId::from(row.try_get::<String, _>("id")?),
-                attempt: Attempt(row.try_get("attempt")?),
-            },
-            spec: spec_from_json(&row.try_get::<String, _>("spec")?)?,
-            operations_total: count_from_sql(&row, "operations_total")?,
-        }))
+        row.as_ref().map(claim_from_row).transpose()
     }
 
     #[tracing::instrument(skip_all, fields(job = %fence.job))]
@@ -257,10 +272,11 @@ impl JobQueue for SqliteStore {
     }
 
     #[tracing::instrument(skip_all)]
-    async fn reclaim_expired(&self, now: UnixMs) -> StoreResult<u64> {
+    async fn reclaim_expired(&self, now: UnixMs, retries: u64) -> StoreResult<u64> {
+        give_up_on_exhausted(&self.writer, now, retries).await?;
         let updated = sqlx::query(
-            "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 \
-             WHERE status = 'running' AND lease_until < ?1",
+            "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0, \
+             lost_leases = lost_leases + 1 WHERE status = 'running' AND lease_until < ?1",
         )
         .bind(now.0)
         .execute(&self.writer)
