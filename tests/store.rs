@@ -218,6 +218,36 @@ async fn postgres_keeps_every_promise() {
         return;
     };
     every_promise(|name| cluster.database(name)).await;
+    postgres_announces_queued_jobs_and_their_progress(&cluster.database("events")).await;
+}
+
+/// PostgreSQL announces every change to a job: idle workers and progress streams need not poll.
+async fn postgres_announces_queued_jobs_and_their_progress(url: &str) {
+    use bouncewear::store::QueueEvent;
+    let store = store::open(url).await.unwrap();
+    let mut events = store.events().expect("PostgreSQL announces changes");
+    let id = store.insert_job(queued(1), 10).await.unwrap().unwrap().id;
+    let mut next = async || {
+        tokio::time::timeout(std::time::Duration::from_secs(10), events.recv())
+            .await
+            .expect("announced within 10 s")
+            .unwrap()
+    };
+    assert_eq!(next().await, QueueEvent::Queued);
+    assert_eq!(next().await, QueueEvent::Changed(id.clone()));
+    let claim = store.claim("w", terms(0), 3).await.unwrap().unwrap();
+    assert_eq!(next().await, QueueEvent::Changed(id.clone()));
+    store.heartbeat(&claim.fence, terms(100), 7).await.unwrap();
+    assert_eq!(next().await, QueueEvent::Changed(id));
+}
+
+#[tokio::test]
+async fn sqlite_announces_nothing_so_its_readers_poll() {
+    let dir = temp_dir("store-sqlite-events");
+    let store = store::open(&format!("sqlite://{}", dir.join("events.db").display()))
+        .await
+        .unwrap();
+    assert!(store.events().is_none());
 }
 
 #[tokio::test]

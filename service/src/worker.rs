@@ -8,14 +8,14 @@
 //! running job is stopped and handed back to the queue at once.
 
 use crate::domain::UnixMs;
-use crate::store::{Claim, Fence, Lease, LeaseTerms, Store};
+use crate::store::{Claim, Fence, Lease, LeaseTerms, QueueEvent, Store};
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Watch, run_job};
 use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
-use tokio::sync::{Notify, oneshot, watch};
+use tokio::sync::{Notify, broadcast, oneshot, watch};
 use tokio::task::JoinHandle;
 
 /// Progress and the lease are written at most this often per running job.
@@ -41,6 +41,15 @@ impl Workers {
         count: usize,
         shutdown: watch::Receiver<bool>,
     ) -> Vec<JoinHandle<()>> {
+        if count > 0
+            && let Some(events) = self.store.events()
+        {
+            tokio::spawn(wake_on_announcements(
+                events,
+                Arc::clone(&self.wake),
+                shutdown.clone(),
+            ));
+        }
         (0..count)
             .map(|slot| {
                 let workers = Arc::clone(&self);
@@ -172,6 +181,25 @@ impl Workers {
             Err(error) => {
                 tracing::error!(%error, "storing the result failed; the lease will expire and the job rerun")
             }
+        }
+    }
+}
+
+/// Wakes idle workers when the database announces a queued job (from any instance), so that a
+/// second machine starts at once rather than at its next poll.
+async fn wake_on_announcements(
+    mut events: broadcast::Receiver<QueueEvent>,
+    wake: Arc<Notify>,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    loop {
+        tokio::select! {
+            event = events.recv() => match event {
+                Ok(QueueEvent::Queued) | Err(broadcast::error::RecvError::Lagged(_)) => wake.notify_waiters(),
+                Ok(QueueEvent::Changed(_)) => {}
+                Err(broadcast::error::RecvError::Closed) => return,
+            },
+            _ = shutdown.changed() => return,
         }
     }
 }

@@ -2,10 +2,11 @@
 //! listing, cancelling, life, and a schedule's trend, on a throwaway cluster.
 
 use crate::support::app::{Service, TestApp};
-use crate::support::client::{delete, get, post};
+use crate::support::client::{agent, delete, get, post};
 use crate::support::postgres::Postgres;
 use crate::support::{run_job, scattered_job, temp_dir, wearing_template};
 use serde_json::json;
+use std::io::{BufRead, BufReader};
 use std::time::Duration;
 
 #[test]
@@ -15,9 +16,25 @@ fn jobs_results_and_schedules_work_the_same_on_postgres() {
     };
     let server = TestApp::on(&cluster.database("service"), &[]);
 
-    let job = scattered_job(400, 100, 5);
+    let job = scattered_job(2000, 200, 5);
     let id = server.submit(&job);
-    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    // The progress stream wakes on PostgreSQL's announcements and ends with the final status.
+    let mut events = agent()
+        .get(&server.url(&format!("/v1/jobs/{id}/events")))
+        .call()
+        .unwrap();
+    let lines: Vec<String> = BufReader::new(events.body_mut().as_reader())
+        .lines()
+        .map(Result::unwrap)
+        .collect();
+    let status = lines
+        .iter()
+        .position(|l| l == "event: status")
+        .expect("a status event");
+    assert!(
+        lines[status + 1].contains(r#""status":"succeeded""#),
+        "{lines:?}"
+    );
     let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
     let local = run_job(&job, &[]);
     assert_eq!(result["operations"], local["operations"], "to the bit");

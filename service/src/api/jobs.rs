@@ -6,7 +6,7 @@ use super::error::{
 };
 use super::{AppState, JsonText};
 use crate::domain::{JobId, JobStatus, Owner, QueuedJob, UnixMs, draw_seed};
-use crate::store::{JobRecord, Operations, Page};
+use crate::store::{JobRecord, Operations, Page, QueueEvent};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::{HeaderValue, StatusCode, header};
@@ -21,6 +21,7 @@ use serde::{Deserialize, Serialize};
 use std::convert::Infallible;
 use std::fmt::Write as _;
 use std::time::Duration;
+use tokio::sync::broadcast;
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
@@ -495,8 +496,33 @@ fn without_result(id: &JobId) -> ApiError {
     ApiError::Internal(Internal(format!("job {id} succeeded without a result")))
 }
 
-/// How often the event stream looks at the job.
+/// How often the event stream looks at the job when the store announces nothing.
 const EVENT_POLL: Duration = Duration::from_millis(200);
+/// With announcements (PostgreSQL), the stream looks when its job changed, and at least this often
+/// in case an announcement was missed (a dropped listening connection).
+const EVENT_FALLBACK_POLL: Duration = Duration::from_secs(2);
+
+/// Waits until it is worth looking at job `id` again: an announcement of a change to it, or the
+/// polling interval.
+async fn next_look(events: &mut Option<broadcast::Receiver<QueueEvent>>, id: &JobId) {
+    let Some(receiver) = events else {
+        return tokio::time::sleep(EVENT_POLL).await;
+    };
+    let changed = async {
+        loop {
+            match receiver.recv().await {
+                Ok(QueueEvent::Changed(changed)) if changed == *id => return true,
+                Ok(_) => {}
+                Err(broadcast::error::RecvError::Lagged(_)) => return true,
+                Err(broadcast::error::RecvError::Closed) => return false,
+            }
+        }
+    };
+    // The announcements stopped for good: poll from now on.
+    if let Ok(false) = tokio::time::timeout(EVENT_FALLBACK_POLL, changed).await {
+        *events = None;
+    }
+}
 
 /// Server-Sent Events: `progress` events while the job runs, then one `status` event when it ends.
 #[utoipa::path(
@@ -513,6 +539,8 @@ pub async fn job_events(
     Extension(owner): Extension<Owner>,
     Path(id): Path<JobId>,
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
+    // Subscribed before the first look, so no change after it goes unannounced.
+    let events = state.store.events();
     let first = state.store.job(&owner, &id).await?;
     struct Watcher {
         state: AppState,
@@ -521,8 +549,10 @@ pub async fn job_events(
         last: Option<(JobStatus, u64)>,
         pending: Option<JobRecord>,
         ended: bool,
+        events: Option<broadcast::Receiver<QueueEvent>>,
     }
     let watcher = Watcher {
+        events,
         state,
         owner,
         id,
@@ -538,7 +568,7 @@ pub async fn job_events(
             let record = match w.pending.take() {
                 Some(record) => record,
                 None => {
-                    tokio::time::sleep(EVENT_POLL).await;
+                    next_look(&mut w.events, &w.id).await;
                     match w.state.store.job(&w.owner, &w.id).await {
                         Ok(record) => record,
                         Err(_) => return None,

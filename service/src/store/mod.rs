@@ -177,6 +177,15 @@ pub enum NewRun {
     QueueFull,
 }
 
+/// A change to the queue, as the database announces it to every instance.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum QueueEvent {
+    /// A job entered the queue: idle workers should look.
+    Queued,
+    /// Something about this job changed: its progress or its status.
+    Changed(JobId),
+}
+
 /// The durable job queue: submissions, leases with fencing, and the end of every job.
 #[async_trait]
 pub trait JobQueue: Send + Sync + 'static {
@@ -211,6 +220,11 @@ pub trait JobQueue: Send + Sync + 'static {
     async fn reclaim_expired(&self, now: UnixMs, retries: u64) -> StoreResult<u64>;
     /// `(queued, running)` job counts, for metrics.
     async fn queue_depth(&self) -> StoreResult<(u64, u64)>;
+    /// Announcements of changes to the queue, where the backend makes them (PostgreSQL's
+    /// LISTEN/NOTIFY); `None` means the caller polls.
+    fn events(&self) -> Option<tokio::sync::broadcast::Receiver<QueueEvent>> {
+        None
+    }
     async fn ping(&self) -> StoreResult<()>;
 }
 

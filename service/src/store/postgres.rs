@@ -1,8 +1,9 @@
 //! The PostgreSQL store, for instances on several machines sharing one database: a connection pool,
 //! row locks instead of SQLite's single writer (`FOR UPDATE SKIP LOCKED` lets workers claim jobs
 //! side by side without waiting on each other), and an advisory lock around the queue bound, so that
-//! concurrent submissions cannot overshoot it. The schema is `migrations/postgres/`; the row mapping
-//! is shared with SQLite (`rows.rs`).
+//! concurrent submissions cannot overshoot it. Every change to a job is announced (LISTEN/NOTIFY),
+//! so idle workers and progress streams on any machine wake at once. The schema is
+//! `migrations/postgres/`; the row mapping is shared with SQLite (`rows.rs`).
 
 use super::rows::{
     bind_distribution, bind_life, bind_queued_job, bind_schedule, claim_from_row, count_from_sql,
@@ -11,19 +12,25 @@ use super::rows::{
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
-    Page, Results, RunRecord, RunSlot, ScheduleRecord, Schedules, StoreError, StoreResult,
+    Page, QueueEvent, Results, RunRecord, RunSlot, ScheduleRecord, Schedules, StoreError,
+    StoreResult,
 };
 use crate::domain::{JobId, Owner, QueuedJob, ScheduleId, UnixMs};
 use async_trait::async_trait;
 use bouncewear_model::montecarlo::{DeviceLife, JobResult};
 use sqlx::Postgres;
-use sqlx::postgres::{PgArguments, PgConnection, PgPool, PgPoolOptions};
+use sqlx::postgres::{PgArguments, PgConnection, PgListener, PgPool, PgPoolOptions};
 use sqlx::query::Query;
 use std::time::Duration;
+use tokio::sync::broadcast;
 
 pub struct PgStore {
     pool: PgPool,
+    events: broadcast::Sender<QueueEvent>,
 }
+
+/// The channel the schema's trigger announces every job change on (`migrations/postgres/0003`).
+const JOB_CHANNEL: &str = "bouncewear_jobs";
 
 /// The advisory lock every insert into the queue takes, so that counting the queued jobs and
 /// inserting one cannot interleave with another submission.
@@ -40,7 +47,32 @@ impl PgStore {
             .connect(url)
             .await?;
         sqlx::migrate!("../migrations/postgres").run(&pool).await?;
-        Ok(Self { pool })
+        let mut listener = PgListener::connect_with(&pool).await?;
+        listener.listen(JOB_CHANNEL).await?;
+        let (events, _) = broadcast::channel(1024);
+        tokio::spawn(forward_announcements(listener, events.clone()));
+        Ok(Self { pool, events })
+    }
+}
+
+/// Passes the database's announcements on to this process's subscribers. A lost connection is
+/// re-established by the listener; what was announced meanwhile is missed, which polling covers.
+async fn forward_announcements(mut listener: PgListener, events: broadcast::Sender<QueueEvent>) {
+    loop {
+        match listener.recv().await {
+            Ok(notification) => {
+                let event = match notification.payload() {
+                    "queued" => QueueEvent::Queued,
+                    id => QueueEvent::Changed(JobId::from(id)),
+                };
+                // No subscriber right now is fine: nobody is waiting.
+                let _ = events.send(event);
+            }
+            Err(error) => {
+                tracing::warn!(%error, "listening for job announcements failed; polling meanwhile");
+                tokio::time::sleep(Duration::from_secs(1)).await;
+            }
+        }
     }
 }
 
@@ -279,6 +311,10 @@ impl JobQueue for PgStore {
     async fn ping(&self) -> StoreResult<()> {
         sqlx::query("SELECT 1").execute(&self.pool).await?;
         Ok(())
+    }
+
+    fn events(&self) -> Option<broadcast::Receiver<QueueEvent>> {
+        Some(self.events.subscribe())
     }
 }
 
