@@ -1,15 +1,23 @@
-//! A throwaway PostgreSQL cluster for tests: `initdb` and `pg_ctl` in a temporary directory, on a
-//! free port on loopback, stopped when dropped. Run as the `postgres` user when the tests run as
-//! root (PostgreSQL refuses root).
+//! PostgreSQL for tests, never a mock: the server at `BOUNCEWEAR_TEST_POSTGRES_URL` when that is set
+//! (each test gets databases of its own there, dropped afterwards), or else a throwaway cluster:
+//! `initdb` and `pg_ctl` in a temporary directory, on a free port on loopback, stopped when
+//! dropped, run as the `postgres` user when the tests run as root (PostgreSQL refuses root).
 
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 pub struct Postgres {
+    /// A URL of the server with the right to create databases.
+    admin: String,
+    /// The throwaway cluster, when we started one.
+    cluster: Option<Cluster>,
+    created: std::sync::Mutex<Vec<String>>,
+}
+
+struct Cluster {
     dir: PathBuf,
     bin: PathBuf,
-    port: u16,
 }
 
 /// The directory of PostgreSQL's programs: where `pg_ctl` really is (links followed, so that
@@ -39,25 +47,35 @@ fn running_as_root() -> bool {
 }
 
 impl Postgres {
-    /// Starts a cluster, or says why it cannot: `None` when PostgreSQL is not installed, unless
+    /// The server to test against, or says why there is none: `None` when there is neither a
+    /// `BOUNCEWEAR_TEST_POSTGRES_URL` nor an installed PostgreSQL, unless
     /// `BOUNCEWEAR_REQUIRE_POSTGRES=1` (CI) makes that a failure.
     pub fn start(dir: &Path) -> Option<Self> {
+        if let Ok(admin) = std::env::var("BOUNCEWEAR_TEST_POSTGRES_URL") {
+            return Some(Self {
+                admin,
+                cluster: None,
+                created: Default::default(),
+            });
+        }
         let Some(bin) = binaries() else {
             assert!(
                 std::env::var("BOUNCEWEAR_REQUIRE_POSTGRES").as_deref() != Ok("1"),
                 "BOUNCEWEAR_REQUIRE_POSTGRES=1 but PostgreSQL is not installed"
             );
-            eprintln!("skipped: PostgreSQL is not installed (Debian: apt install postgresql)");
+            eprintln!(
+                "\n*** SKIPPED: no PostgreSQL for this test. Install it (Debian: apt install \
+                 postgresql) or set BOUNCEWEAR_TEST_POSTGRES_URL. ***\n"
+            );
             return None;
         };
         let port = TcpListener::bind("127.0.0.1:0")
             .and_then(|l| l.local_addr())
             .unwrap()
             .port();
-        let cluster = Self {
+        let cluster = Cluster {
             dir: dir.to_owned(),
             bin,
-            port,
         };
         if running_as_root() {
             let status = Command::new("chown")
@@ -99,9 +117,47 @@ impl Postgres {
                 "start",
             ],
         );
-        Some(cluster)
+        Some(Self {
+            admin: format!("postgres://postgres@127.0.0.1:{port}/postgres"),
+            cluster: Some(cluster),
+            created: Default::default(),
+        })
     }
 
+    /// A new, empty database on the server; its URL.
+    pub fn database(&self, name: &str) -> String {
+        let name = format!("bouncewear_test_{}_{name}", std::process::id());
+        admin_sql(&self.admin, format!("CREATE DATABASE \"{name}\""))
+            .expect("the test database is created");
+        self.created.lock().unwrap().push(name.clone());
+        let (server, _) = self.admin.rsplit_once('/').expect("a URL with a database");
+        format!("{server}/{name}")
+    }
+}
+
+/// One statement on the admin connection, from a thread of its own (callers may be inside an
+/// async runtime, which cannot block on another).
+fn admin_sql(admin: &str, statement: String) -> Result<(), sqlx::Error> {
+    let admin = admin.to_owned();
+    std::thread::spawn(move || {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        runtime.block_on(async {
+            use sqlx::Connection;
+            let mut connection = sqlx::PgConnection::connect(&admin).await?;
+            sqlx::query(sqlx::AssertSqlSafe(statement))
+                .execute(&mut connection)
+                .await
+                .map(drop)
+        })
+    })
+    .join()
+    .expect("the admin thread finishes")
+}
+
+impl Cluster {
     /// Runs one of PostgreSQL's programs, as the `postgres` user when we are root; it must succeed.
     fn run(&self, program: &str, args: &[&str]) {
         let output = self.output(program, args);
@@ -128,42 +184,23 @@ impl Postgres {
             .output()
             .unwrap_or_else(|e| panic!("{}: {e}", program.display()))
     }
-
-    /// A new, empty database on the cluster; its URL.
-    pub fn database(&self, name: &str) -> String {
-        let port = self.port.to_string();
-        self.run(
-            "psql",
-            &[
-                "-h",
-                "127.0.0.1",
-                "-p",
-                &port,
-                "-U",
-                "postgres",
-                "-q",
-                "-c",
-                &format!("CREATE DATABASE \"{name}\""),
-            ],
-        );
-        format!("postgres://postgres@127.0.0.1:{}/{name}", self.port)
-    }
 }
 
 impl Drop for Postgres {
     fn drop(&mut self) {
         // Never panics: a failing test is already unwinding through here.
-        let data = self.dir.join("data");
-        let _ = self.output(
-            "pg_ctl",
-            &[
-                "-D",
-                data.to_str().unwrap(),
-                "-m",
-                "immediate",
-                "-w",
-                "stop",
-            ],
-        );
+        match &self.cluster {
+            Some(cluster) => {
+                let data = cluster.dir.join("data");
+                let data = data.to_str().unwrap();
+                let _ = cluster.output("pg_ctl", &["-D", data, "-m", "immediate", "-w", "stop"]);
+            }
+            None => {
+                for name in self.created.lock().unwrap().drain(..) {
+                    let statement = format!("DROP DATABASE IF EXISTS \"{name}\" WITH (FORCE)");
+                    let _ = admin_sql(&self.admin, statement);
+                }
+            }
+        }
     }
 }
