@@ -2,7 +2,7 @@
 
 use crate::support::app::{Service, TestApp};
 use crate::support::client::{agent, assert_problem, delete, get, post, reply};
-use crate::support::{run_job, scattered_job, temp_db, wearing_template};
+use crate::support::{run_job, scattered_job, submit_concurrently, temp_db, wearing_template};
 use serde_json::{Value, json};
 use std::io::{BufRead, BufReader};
 use std::time::Duration;
@@ -147,26 +147,7 @@ fn cancelling_stops_a_running_job_and_only_once() {
 #[test]
 fn two_hundred_concurrent_submissions_are_all_accepted_or_refused_with_429() {
     let server = TestApp::start(&temp_db("concurrent"), &["--max-queued", "150"]);
-    let url = server.url("/v1/jobs");
-    let threads: Vec<_> = (0..200)
-        .map(|seed| {
-            let url = url.clone();
-            std::thread::spawn(move || {
-                let reply = post(
-                    &url,
-                    &json!({"devices": 1, "operations": 2000, "seed": seed}).to_string(),
-                    None,
-                );
-                let retry_after = reply.headers.get("retry-after").is_some();
-                (
-                    reply.status,
-                    retry_after,
-                    reply.json()["id"].as_str().map(str::to_owned),
-                )
-            })
-        })
-        .collect();
-    let replies: Vec<_> = threads.into_iter().map(|t| t.join().unwrap()).collect();
+    let replies = submit_concurrently(&[server.url("/v1/jobs")], 200);
     assert!(
         replies
             .iter()

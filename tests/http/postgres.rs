@@ -4,7 +4,7 @@
 use crate::support::app::{Service, TestApp};
 use crate::support::client::{agent, delete, get, post};
 use crate::support::postgres::Postgres;
-use crate::support::{run_job, scattered_job, temp_dir, wearing_template};
+use crate::support::{run_job, scattered_job, submit_concurrently, temp_dir, wearing_template};
 use serde_json::json;
 use std::io::{BufRead, BufReader};
 use std::time::Duration;
@@ -88,4 +88,41 @@ fn jobs_results_and_schedules_work_the_same_on_postgres() {
         runs.iter()
             .all(|run| run["values"]["operations.total_bounce_s.p95"]["drift"] == false)
     );
+}
+
+#[test]
+fn two_api_nodes_on_one_postgres_accept_or_refuse_every_submission_and_lose_none() {
+    let Some(cluster) = Postgres::start(&temp_dir("http-postgres-burst")) else {
+        return;
+    };
+    let database = cluster.database("burst");
+    let nodes = [
+        TestApp::on(&database, &["--max-queued", "150"]),
+        TestApp::on(&database, &["--max-queued", "150"]),
+    ];
+    let urls: Vec<String> = nodes.iter().map(|node| node.url("/v1/jobs")).collect();
+    let replies = submit_concurrently(&urls, 200);
+    assert!(
+        replies
+            .iter()
+            .all(|(status, ..)| *status == 202 || *status == 429),
+        "{:?}",
+        replies.iter().map(|r| r.0).collect::<Vec<_>>()
+    );
+    assert!(
+        replies.iter().filter(|r| r.0 == 429).all(|r| r.1),
+        "429 carries Retry-After"
+    );
+    let mut accepted: Vec<String> = replies.into_iter().filter_map(|r| r.2).collect();
+    assert!(accepted.len() >= 150, "{} accepted", accepted.len());
+    let mut listed = nodes[1].list_job_ids(100);
+    accepted.sort();
+    listed.sort();
+    assert_eq!(
+        accepted, listed,
+        "every accepted job is stored, nothing else"
+    );
+    for id in &accepted {
+        nodes[0].wait_for(id, "succeeded", Duration::from_secs(120));
+    }
 }

@@ -83,3 +83,21 @@ pub fn wearing_template(supply_voltage_v: f64) -> Value {
         "failure": {"e1": {"below": 0.33}}
     })
 }
+
+/// Submits `count` small jobs at once, spread over the `urls` (each a `/v1/jobs`); each reply's
+/// status, whether it carried `Retry-After`, and the job's id when accepted.
+pub fn submit_concurrently(urls: &[String], count: u64) -> Vec<(u16, bool, Option<String>)> {
+    let threads: Vec<_> = (0..count)
+        .map(|seed| {
+            let url = urls[seed as usize % urls.len()].clone();
+            std::thread::spawn(move || {
+                let job = json!({"devices": 1, "operations": 2000, "seed": seed});
+                let reply = client::post(&url, &job.to_string(), None);
+                let retry_after = reply.headers.get("retry-after").is_some();
+                let id = reply.json()["id"].as_str().map(str::to_owned);
+                (reply.status, retry_after, id)
+            })
+        })
+        .collect();
+    threads.into_iter().map(|t| t.join().unwrap()).collect()
+}
