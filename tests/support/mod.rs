@@ -84,9 +84,9 @@ pub fn wearing_template(supply_voltage_v: f64) -> Value {
     })
 }
 
-/// Submits `count` small jobs at once, spread over the `urls` (each a `/v1/jobs`); each reply's
-/// status, whether it carried `Retry-After`, and the job's id when accepted.
-pub fn submit_concurrently(urls: &[String], count: u64) -> Vec<(u16, bool, Option<String>)> {
+/// Submits `count` small jobs at once, spread over the `urls` (each a `/v1/jobs`), checks that
+/// each was accepted (202) or refused with `Retry-After` (429), and returns the accepted ids.
+pub fn submit_concurrently(urls: &[String], count: u64) -> Vec<String> {
     let threads: Vec<_> = (0..count)
         .map(|seed| {
             let url = urls[seed as usize % urls.len()].clone();
@@ -99,5 +99,16 @@ pub fn submit_concurrently(urls: &[String], count: u64) -> Vec<(u16, bool, Optio
             })
         })
         .collect();
-    threads.into_iter().map(|t| t.join().unwrap()).collect()
+    let replies: Vec<(u16, bool, Option<String>)> =
+        threads.into_iter().map(|t| t.join().unwrap()).collect();
+    let statuses: Vec<u16> = replies.iter().map(|r| r.0).collect();
+    assert!(
+        statuses.iter().all(|s| *s == 202 || *s == 429),
+        "{statuses:?}"
+    );
+    assert!(
+        replies.iter().filter(|r| r.0 == 429).all(|r| r.1),
+        "429 carries Retry-After"
+    );
+    replies.into_iter().filter_map(|r| r.2).collect()
 }
