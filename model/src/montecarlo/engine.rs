@@ -61,8 +61,9 @@ impl<F: Fn(u64, u64) + Sync> Observer for Watch<'_, F> {
 pub struct Cancelled;
 
 /// Accumulators of every requested metric for one group of devices: operation metrics by
-/// `[bin][metric]`, then device metrics.
-#[derive(Debug, Clone)]
+/// `[bin][metric]`, then device metrics. Serialisable exactly (every float by its bits), so a group
+/// run on one machine merges on another into the same numbers.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GroupStats {
     pub operations: Vec<Accumulator>,
     pub devices: Vec<Accumulator>,
@@ -334,6 +335,12 @@ impl<'a> Plan<'a> {
             .collect()
     }
 
+    /// The LHS permutations of batch `batch` of `size` devices, when the job samples that way.
+    fn batch_permutations(&self, batch: u64, size: u64) -> Option<Vec<Vec<u32>>> {
+        (self.job.spec().sampler == SamplerKind::Lhs && !self.device_scatter.is_empty())
+            .then(|| self.lhs_permutations(batch, size))
+    }
+
     /// Runs devices `first..first + size` as batch `batch`, one chunk per group, in parallel.
     fn run_batch(
         &self,
@@ -344,35 +351,87 @@ impl<'a> Plan<'a> {
         done: &AtomicU64,
         total: u64,
     ) -> Result<Vec<GroupStats>, Cancelled> {
-        let groups = GROUPS.min(size);
-        let permutations = (self.job.spec().sampler == SamplerKind::Lhs
-            && !self.device_scatter.is_empty())
-        .then(|| self.lhs_permutations(batch, size));
-        let operations = self.job.spec().operations;
-        (0..groups)
+        let permutations = self.batch_permutations(batch, size);
+        let chunk = Chunk {
+            first,
+            size,
+            permutations: permutations.as_deref(),
+        };
+        (0..GROUPS.min(size))
             .into_par_iter()
-            .map(|group| {
-                let mut stats = GroupStats::new(self.job);
-                let (start, end) = (size * group / groups, size * (group + 1) / groups);
-                for local in start..end {
-                    if observer.cancelled() {
-                        return Err(Cancelled);
-                    }
-                    let local_index = usize::try_from(local).expect("batch fits in memory");
-                    self.run_device(
-                        first + local,
-                        permutations.as_deref().map(|p| (p, local_index)),
-                        &mut stats,
-                    );
-                    observer.progress(
-                        done.fetch_add(operations, Ordering::Relaxed) + operations,
-                        total,
-                    );
-                }
-                Ok(stats)
-            })
+            .map(|group| self.run_chunk(&chunk, group, observer, done, total))
             .collect()
     }
+
+    /// Runs group `group`'s contiguous share of a batch, its devices in index order.
+    fn run_chunk(
+        &self,
+        chunk: &Chunk<'_>,
+        group: u64,
+        observer: &dyn Observer,
+        done: &AtomicU64,
+        total: u64,
+    ) -> Result<GroupStats, Cancelled> {
+        let operations = self.job.spec().operations;
+        let groups = GROUPS.min(chunk.size);
+        let mut stats = GroupStats::new(self.job);
+        let (start, end) = (
+            chunk.size * group / groups,
+            chunk.size * (group + 1) / groups,
+        );
+        for local in start..end {
+            if observer.cancelled() {
+                return Err(Cancelled);
+            }
+            let local_index = usize::try_from(local).expect("batch fits in memory");
+            self.run_device(
+                chunk.first + local,
+                chunk.permutations.map(|p| (p, local_index)),
+                &mut stats,
+            );
+            observer.progress(
+                done.fetch_add(operations, Ordering::Relaxed) + operations,
+                total,
+            );
+        }
+        Ok(stats)
+    }
+}
+
+/// One batch of devices, as its groups share it.
+struct Chunk<'a> {
+    first: u64,
+    size: u64,
+    permutations: Option<&'a [Vec<u32>]>,
+}
+
+/// The groups a job without a precision target is cut into: the unit a machine can run alone.
+pub fn group_count(job: &Job) -> u64 {
+    GROUPS.min(job.spec().devices)
+}
+
+/// Runs group `group` (below [`group_count`]) of a job without a precision target, alone: exactly
+/// the accumulators [`run`] builds for that group, so groups run anywhere and put back in order
+/// give the same Result to the bit. (A precision target decides after each whole batch, so such a
+/// job runs whole.)
+pub fn run_group(job: &Job, group: u64, observer: &dyn Observer) -> Result<GroupStats, Cancelled> {
+    assert!(
+        job.precision().is_none() && group < group_count(job),
+        "group {group} of a job with {} groups and no precision target",
+        group_count(job)
+    );
+    let plan = Plan::new(job);
+    let size = job.spec().devices;
+    let permutations = plan.batch_permutations(0, size);
+    let chunk = Chunk {
+        first: 0,
+        size,
+        permutations: permutations.as_deref(),
+    };
+    let groups = group_count(job);
+    let devices = size * (group + 1) / groups - size * group / groups;
+    let total = devices * job.spec().operations;
+    plan.run_chunk(&chunk, group, observer, &AtomicU64::new(0), total)
 }
 
 /// Runs the job on the current rayon pool: the first batch of `devices`, then, with a precision

@@ -173,14 +173,20 @@ pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, Cancelle
         job.precision()
             .is_some_and(|p| precision_half_width(job, tally, p) <= p.relative_half_width)
     })?;
-    let wall_s = started.elapsed().as_secs_f64();
+    Ok(summarize_job(job, &tally, started.elapsed().as_secs_f64()))
+}
+
+/// The Result of a run from its groups, however they were run: all at once by [`run_job`], or
+/// one by one with [`engine::run_group`] (on several machines) and put back in group order.
+/// `wall_s` is the time the run took, for the Result's timing.
+pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
     let operations_run = tally.devices * job.spec().operations;
-    Ok(JobResult {
+    JobResult {
         job: ResolvedJob::new(job, tally.devices),
-        operations: summarize_operations(job, &tally),
-        devices: summarize_devices(job, &tally),
+        operations: summarize_operations(job, tally),
+        devices: summarize_devices(job, tally),
         precision: job.precision().map(|p| {
-            let achieved = precision_half_width(job, &tally, p);
+            let achieved = precision_half_width(job, tally, p);
             PrecisionReport {
                 metric: p.metric.name().to_owned(),
                 statistic: statistic_name(p.statistic).to_owned(),
@@ -190,12 +196,12 @@ pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, Cancelle
                 devices: tally.devices,
             }
         }),
-        life: life_report(job, &tally),
+        life: life_report(job, tally),
         timing: Timing {
             wall_s,
             operations_per_s: operations_run as f64 / wall_s.max(1e-9),
         },
-    })
+    }
 }
 
 fn life_report(job: &Job, tally: &Tally) -> Option<LifeReport> {

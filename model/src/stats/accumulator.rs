@@ -12,15 +12,22 @@ use super::sketch::{Sketch, rank};
 ///
 /// Deterministic: counts, min, max and the sketch do not depend on the order of pushes and merges;
 /// the float sums do, so the caller fixes that order.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Accumulator {
+    #[serde(with = "super::bits")]
     min: f64,
+    #[serde(with = "super::bits")]
     max: f64,
+    #[serde(with = "super::bits")]
     shift: f64,
+    #[serde(with = "super::bits")]
     sum: f64,
+    #[serde(with = "super::bits")]
     sum_sq: f64,
+    #[serde(with = "super::bits::optional")]
     limit: Option<f64>,
     /// `limit`, or `+inf` without one, so the exceedance count needs no branch.
+    #[serde(with = "super::bits")]
     threshold: f64,
     above: u64,
     sketch: Sketch,

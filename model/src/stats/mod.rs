@@ -20,8 +20,12 @@
 //! | [`accumulator`] | count, min, max, shifted sums, exceedance count, sketch |
 //! | [`intervals`] | Student t 0.975 quantile, Wilson score interval |
 //! | [`summary`] | the serialised `SUMMARY` and [`summarize`] |
+//!
+//! Accumulators serialise exactly, every float by its bits (infinities included), so a group's
+//! state can cross machines and merge into the same numbers.
 
 pub mod accumulator;
+mod bits;
 pub mod intervals;
 pub mod sketch;
 pub mod summary;

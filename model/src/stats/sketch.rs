@@ -65,7 +65,7 @@ pub fn rank(q: f64, n: u64) -> u64 {
 }
 
 /// Dense counts for the keys `offset .. offset + counts.len()`.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 struct Store {
     offset: u32,
     counts: Vec<u64>,
@@ -157,7 +157,7 @@ impl Store {
 ///
 /// Values must be finite (checked in debug builds); a NaN counts as a zero and an infinity lands in
 /// a bucket whose midpoint is not a number.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Sketch {
     count: u64,
     zeros: u64,

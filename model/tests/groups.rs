@@ -1,0 +1,78 @@
+//! A job's groups run one at a time, each alone (as separate machines would run them), serialised,
+//! read back and put together in group order give the Result of running the job whole, to the bit.
+
+use bouncewear_model::montecarlo::engine::{GroupStats, group_count, run_group};
+use bouncewear_model::montecarlo::{Job, Silent, Tally, run_job, summarize_job};
+use serde_json::Value;
+
+/// The Result of running `job` group by group, every group's state through JSON and back.
+fn run_group_by_group(job: &Job) -> Value {
+    let groups: Vec<GroupStats> = (0..group_count(job))
+        .map(|group| {
+            let stats = run_group(job, group, &Silent).unwrap();
+            let text = serde_json::to_string(&stats).unwrap();
+            let back: GroupStats = serde_json::from_str(&text).unwrap();
+            assert_eq!(back, stats, "group {group} survives serialisation exactly");
+            back
+        })
+        .collect();
+    let tally = Tally {
+        groups,
+        devices: job.spec().devices,
+    };
+    without_timing(serde_json::to_value(summarize_job(job, &tally, 1.0)).unwrap())
+}
+
+fn without_timing(mut result: Value) -> Value {
+    result.as_object_mut().unwrap().remove("timing");
+    result
+}
+
+fn assert_group_by_group_is_whole(text: &str) {
+    let job = Job::from_json(text, || 0).unwrap();
+    let whole = without_timing(serde_json::to_value(run_job(&job, &Silent).unwrap()).unwrap());
+    assert_eq!(run_group_by_group(&job), whole, "{text}");
+}
+
+#[test]
+fn a_wearing_job_with_scatter_limits_and_failure_criteria() {
+    assert_group_by_group_is_whole(
+        r#"{"devices": 70, "operations": 60, "seed": 11,
+            "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+            "scatter": [
+              {"parameter": "contact_radius_m", "per": "device",
+               "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 1.5e-3, "min": 1e-3}},
+              {"parameter": "impact_velocity_m_s", "per": "operation",
+               "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.05}}],
+            "limits": {"total_bounce_s": 0.011},
+            "failure": {"e1": {"below": 0.33}}}"#,
+    );
+}
+
+#[test]
+fn a_latin_hypercube_job_whose_groups_share_one_permutation() {
+    assert_group_by_group_is_whole(
+        r#"{"devices": 45, "operations": 20, "seed": 3, "sampler": "lhs",
+            "scatter": [
+              {"parameter": "dynamic_yield_pressure_pa", "per": "device",
+               "distribution": {"kind": "lognormal", "median": 2e8, "sigma": 0.15}}]}"#,
+    );
+}
+
+#[test]
+fn fewer_devices_than_groups_and_a_metric_subset() {
+    assert_group_by_group_is_whole(
+        r#"{"devices": 5, "operations": 30, "seed": 9, "metrics": ["total_bounce_s", "bounce_count"]}"#,
+    );
+}
+
+#[test]
+fn an_empty_accumulator_keeps_its_infinite_extremes_through_json() {
+    use bouncewear_model::stats::Accumulator;
+    for limit in [None, Some(0.011)] {
+        let empty = Accumulator::new(limit);
+        let text = serde_json::to_string(&empty).unwrap();
+        let back: Accumulator = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, empty, "{text}");
+    }
+}
