@@ -212,6 +212,31 @@ fn run_rejects_bad_jobs_naming_the_field() {
 }
 
 #[test]
+fn a_reader_that_stops_early_is_not_an_error() {
+    use std::process::{Command, Stdio};
+    let dir = temp_dir("broken-pipe");
+    let job = dir.join("job.json");
+    std::fs::write(
+        &job,
+        r#"{"devices": 20, "operations": 1000, "bin_operations": 1, "seed": 1}"#,
+    )
+    .unwrap();
+    let child = Command::new(support::BIN)
+        .args(["run", job.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // `| head -0`: the reader goes away before the first line arrives.
+    let mut child = child;
+    drop(child.stdout.take());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{:?}: {stderr}", output.status);
+    assert!(!stderr.contains("Broken pipe"), "{stderr}");
+}
+
+#[test]
 fn bench_quick_writes_the_report_in_all_three_forms() {
     let out = temp_dir("bench");
     let output = bouncewear(&["bench", "--quick", "--out", out.to_str().unwrap()], "");

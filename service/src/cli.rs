@@ -245,11 +245,19 @@ pub fn read_input(path: &PathBuf) -> Result<String, CliError> {
     Ok(text)
 }
 
+/// Prints a document to stdout, buffered (a Result is thousands of lines). A reader that stops
+/// early (`| head`) is not an error: the output simply ends there.
 fn print_json(value: &impl serde::Serialize) -> Result<(), CliError> {
-    let mut out = std::io::stdout().lock();
-    serde_json::to_writer_pretty(&mut out, value).map_err(|e| CliError::Failed(e.to_string()))?;
-    writeln!(out).map_err(|source| CliError::Io {
-        path: "<stdout>".into(),
-        source,
-    })
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    let written = serde_json::to_writer_pretty(&mut out, value)
+        .map_err(std::io::Error::from)
+        .and_then(|()| writeln!(out))
+        .and_then(|()| out.flush());
+    match written {
+        Err(error) if error.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        written => written.map_err(|source| CliError::Io {
+            path: "<stdout>".into(),
+            source,
+        }),
+    }
 }

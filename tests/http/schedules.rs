@@ -33,6 +33,7 @@ fn schedules_run_now_and_report_a_trend_with_drift_flags() {
         let reply = post(&server.url(&format!("/v1/schedules/{id}/run")), "", None);
         assert_eq!(reply.status, 202, "{}", reply.body);
         let job = reply.json()["id"].as_str().unwrap().to_owned();
+        assert_eq!(reply.header("location"), Some(&*format!("/v1/jobs/{job}")));
         server.wait_for(&job, "succeeded", Duration::from_secs(60));
     };
     run_now(&server);

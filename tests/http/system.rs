@@ -1,7 +1,7 @@
 //! The OpenAPI document, docs, health and metrics, and API keys.
 
 use crate::support::app::{Service, TestApp};
-use crate::support::client::{assert_problem, get, post};
+use crate::support::client::{agent, assert_problem, get, post, reply};
 use crate::support::temp_db;
 use serde_json::json;
 
@@ -39,6 +39,25 @@ fn api_keys_are_required_and_isolate_jobs() {
     let jobs = server.url("/v1/jobs");
     assert_problem(&get(&jobs, None), 401);
     assert_problem(&get(&jobs, Some("gamma")), 401);
+    for scheme in ["bearer", "BEARER", "Bearer"] {
+        let reply = reply(
+            agent()
+                .get(&jobs)
+                .header("authorization", &format!("{scheme} alpha"))
+                .call(),
+        );
+        assert_eq!(
+            reply.status, 200,
+            "the scheme `{scheme}` is case-insensitive"
+        );
+    }
+    let basic = reply(
+        agent()
+            .get(&jobs)
+            .header("authorization", "Basic alpha")
+            .call(),
+    );
+    assert_problem(&basic, 401);
     let reply = post(
         &jobs,
         &json!({"devices": 1, "operations": 1, "seed": 9}).to_string(),

@@ -135,7 +135,12 @@ pub async fn submit_job(
         .ok_or(ApiError::QueueFull(state.config.max_queued))?;
     state.wake.notify_one();
     metrics::counter!("bouncewear_jobs_submitted_total").increment(1);
-    let resource = JobResource::from_record(&record);
+    accepted(&record)
+}
+
+/// 202 for a job that entered the queue: the job resource, and its URL in `Location`.
+pub fn accepted(record: &JobRecord) -> Result<Response, ApiError> {
+    let resource = JobResource::from_record(record);
     let location =
         HeaderValue::from_str(&resource.links.this).map_err(|e| Internal(e.to_string()))?;
     Ok((

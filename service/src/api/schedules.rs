@@ -4,7 +4,7 @@ use super::error::{
     ApiError,
     responses::{BadQuery, BodyRejected, NoSuchSchedule, QueueFull, Unauthorized},
 };
-use super::jobs::{JobResource, stored_result};
+use super::jobs::{JobResource, accepted, stored_result};
 use super::{AppState, JsonText};
 use crate::domain::trend::trend;
 use crate::domain::{
@@ -214,7 +214,7 @@ pub async fn delete_schedule(
 #[utoipa::path(
     post, path = "/v1/schedules/{id}/run", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     responses(
-        (status = 202, description = "The job it queued", body = JobResource),
+        (status = 202, description = "The job it queued", body = JobResource, headers(("Location" = String, description = "The job's URL"))),
         Unauthorized,
         NoSuchSchedule,
         QueueFull,
@@ -247,11 +247,7 @@ pub async fn run_schedule_now(
         {
             NewRun::Created(record) => {
                 state.wake.notify_one();
-                return Ok((
-                    StatusCode::ACCEPTED,
-                    Json(JobResource::from_record(&record)),
-                )
-                    .into_response());
+                return accepted(&record);
             }
             NewRun::AlreadyExists => continue,
             NewRun::QueueFull => return Err(ApiError::QueueFull(state.config.max_queued)),
