@@ -259,6 +259,18 @@ pub(super) struct Frame {
 }
 
 impl Frame {
+    /// The area of a `width` x `height` box at (`x`, `y`) inside margins `[left, top, right,
+    /// bottom]` (room for the labels around the plot).
+    pub(super) fn inset(x: f64, y: f64, width: f64, height: f64, margins: [f64; 4]) -> Self {
+        let [left, top, right, bottom] = margins;
+        Self {
+            left: x + left,
+            top: y + top,
+            width: width - left - right,
+            height: height - top - bottom,
+        }
+    }
+
     pub(super) fn right(&self) -> f64 {
         self.left + self.width
     }

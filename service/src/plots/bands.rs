@@ -37,12 +37,7 @@ pub fn quantile_bands_svg(metric: &str, bins: &[Bin]) -> String {
     let limit = bins.iter().find_map(|b| limit_of(&b.summary));
 
     let (width, height) = (760.0, 420.0);
-    let frame = Frame {
-        left: 78.0,
-        top: 70.0,
-        width: width - 78.0 - 24.0,
-        height: height - 70.0 - 56.0,
-    };
+    let frame = Frame::inset(0.0, 0.0, width, height, [78.0, 70.0, 24.0, 56.0]);
     let x_lo = bins
         .iter()
         .map(|b| b.op_start as f64)
@@ -133,15 +128,7 @@ pub fn quantile_bands_svg(metric: &str, bins: &[Bin]) -> String {
         "operation",
         LABEL,
     );
-    svg.text(
-        18.0,
-        frame.top + frame.height / 2.0,
-        metric,
-        Style {
-            rotate: -90.0,
-            ..LABEL
-        },
-    );
+    svg.y_label(18.0, frame.top + frame.height / 2.0, metric);
 
     let mut legend = Legend::new(frame.left, 48.0);
     legend.swatch(&mut svg, BAND, "p05\u{2013}p95 (90 % of operations)");

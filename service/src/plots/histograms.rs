@@ -65,12 +65,7 @@ pub fn histograms_svg(metric: &str, bins: &[Bin]) -> String {
         let (col, row) = (k % cols, k / cols);
         let px = outer_left + panel_w * col as f64;
         let py = outer_top + panel_h * row as f64;
-        let frame = Frame {
-            left: px + 44.0,
-            top: py + 24.0,
-            width: panel_w - 44.0 - 12.0,
-            height: panel_h - 24.0 - 32.0,
-        };
+        let frame = Frame::inset(px, py, panel_w, panel_h, [44.0, 24.0, 12.0, 32.0]);
         svg.open_g(&format!(
             r#"class="panel" data-op-start="{}" data-op-end="{}""#,
             bin.op_start, bin.op_end
@@ -170,15 +165,7 @@ pub fn histograms_svg(metric: &str, bins: &[Bin]) -> String {
         metric,
         LABEL,
     );
-    svg.text(
-        14.0,
-        outer_top + panel_h * rows as f64 / 2.0,
-        "count",
-        Style {
-            rotate: -90.0,
-            ..LABEL
-        },
-    );
+    svg.y_label(14.0, outer_top + panel_h * rows as f64 / 2.0, "count");
     svg.finish()
 }
 

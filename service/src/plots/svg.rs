@@ -185,6 +185,19 @@ impl Svg {
         );
     }
 
+    /// A y axis's title, written upwards, centred on (`x`, `y`).
+    pub(super) fn y_label(&mut self, x: f64, y: f64, text: &str) {
+        self.text(
+            x,
+            y,
+            text,
+            Style {
+                rotate: -90.0,
+                ..LABEL
+            },
+        );
+    }
+
     pub(super) fn text(&mut self, x: f64, y: f64, text: &str, style: Style) {
         let weight = if style.bold {
             r#" font-weight="600""#

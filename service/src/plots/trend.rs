@@ -37,12 +37,7 @@ pub fn trend_svg(title: &str, y_label: &str, points: &[TrendPoint]) -> String {
     } else {
         78.0
     };
-    let frame = Frame {
-        left,
-        top: 62.0,
-        width: width - left - 24.0,
-        height: height - 62.0 - bottom,
-    };
+    let frame = Frame::inset(0.0, 0.0, width, height, [left, 62.0, 24.0, bottom]);
     let values = points.iter().flat_map(|p| {
         let [a, b] = p.ci95.unwrap_or([p.value, p.value]);
         [p.value, a, b]
@@ -120,15 +115,7 @@ pub fn trend_svg(title: &str, y_label: &str, points: &[TrendPoint]) -> String {
     }
     draw_frame_axes(&mut svg, &frame);
     svg.text(frame.left + frame.width / 2.0, height - 10.0, "run", LABEL);
-    svg.text(
-        18.0,
-        frame.top + frame.height / 2.0,
-        y_label,
-        Style {
-            rotate: -90.0,
-            ..LABEL
-        },
-    );
+    svg.y_label(18.0, frame.top + frame.height / 2.0, y_label);
     let mut legend = Legend::new(frame.left, 46.0);
     legend.dot(&mut svg, BLUE, "value");
     if points.iter().any(|p| p.ci95.is_some()) {

@@ -20,12 +20,7 @@ use super::{pick_evenly, segments};
 pub fn weibull_svg(life: &LifeAnalysis) -> String {
     let title = "Weibull probability plot: operations to failure";
     let (width, height) = (760.0, 480.0);
-    let frame = Frame {
-        left: 70.0,
-        top: 70.0,
-        width: width - 70.0 - 28.0,
-        height: height - 70.0 - 58.0,
-    };
+    let frame = Frame::inset(0.0, 0.0, width, height, [70.0, 70.0, 28.0, 58.0]);
     let fit = life
         .weibull
         .as_ref()
@@ -288,14 +283,10 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
         "operations to failure (log scale)",
         LABEL,
     );
-    svg.text(
+    svg.y_label(
         16.0,
         frame.top + frame.height / 2.0,
         "unreliability F (Weibull scale)",
-        Style {
-            rotate: -90.0,
-            ..LABEL
-        },
     );
     svg.finish()
 }

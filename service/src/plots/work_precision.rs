@@ -39,12 +39,7 @@ pub fn work_precision_svg(title: &str, panels: &[Panel]) -> String {
     svg.title(title, 16.0, 24.0);
     for (k, panel) in panels.iter().enumerate() {
         let px = panel_w * k as f64;
-        let frame = Frame {
-            left: px + 78.0,
-            top: 92.0,
-            width: panel_w - 78.0 - 24.0,
-            height: height - 92.0 - 56.0,
-        };
+        let frame = Frame::inset(px, 0.0, panel_w, height, [78.0, 92.0, 24.0, 56.0]);
         svg.open_g(r#"class="panel""#);
         draw_panel(&mut svg, &frame, panel);
         svg.text(
@@ -63,15 +58,7 @@ pub fn work_precision_svg(title: &str, panels: &[Panel]) -> String {
             &panel.x_label,
             LABEL,
         );
-        svg.text(
-            px + 18.0,
-            frame.top + frame.height / 2.0,
-            &panel.y_label,
-            Style {
-                rotate: -90.0,
-                ..LABEL
-            },
-        );
+        svg.y_label(px + 18.0, frame.top + frame.height / 2.0, &panel.y_label);
         svg.close_g();
     }
     svg.finish()
