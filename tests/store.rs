@@ -4,9 +4,11 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bouncewear::domain::{Attempt, JobId, JobStatus, Owner, QueuedJob, UnixMs};
+use bouncewear::domain::{
+    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, UnixMs,
+};
 use bouncewear::scheduler::tick;
-use bouncewear::store::{self, Lease, LeaseTerms, Store, StoreError};
+use bouncewear::store::{self, Lease, LeaseTerms, ScheduleRecord, Store, StoreError};
 use bouncewear_model::montecarlo::Job;
 use chrono::{DateTime, Utc};
 use std::sync::Arc;
@@ -39,6 +41,8 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     every_u64_seed_reads_back_exactly(&database("seeds")).await;
     a_job_whose_lease_keeps_expiring_fails_with_the_reason(&database("retries")).await;
     two_scheduler_loops_never_duplicate_a_night(&database("race")).await;
+    missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(&database("catch-up")).await;
+    a_full_queue_leaves_the_night_due_for_the_next_tick(&database("full")).await;
 }
 
 async fn unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(url: &str) {
@@ -153,30 +157,33 @@ async fn every_u64_seed_reads_back_exactly(url: &str) {
     }
 }
 
+/// A nightly schedule (03:00 UTC) of a tiny job, next due at `next_run_at`.
+fn nightly(id: &str, next_run_at: &str) -> ScheduleRecord {
+    ScheduleRecord {
+        id: ScheduleId::from(id),
+        owner: Owner::anonymous(),
+        definition: ScheduleDefinition {
+            name: format!("nightly {id}"),
+            cron: "0 3 * * *".to_owned(),
+            time_zone: "UTC".to_owned(),
+            template: serde_json::from_str(r#"{"devices": 2, "operations": 2, "seed": 1}"#)
+                .unwrap(),
+            statistics: vec!["operations.total_bounce_s.p95".parse().unwrap()],
+            enabled: true,
+        },
+        next_run_at: Some(UnixMs::from_datetime(utc(next_run_at))),
+        created_at: UnixMs(0),
+        updated_at: UnixMs(0),
+    }
+}
+
 async fn two_scheduler_loops_never_duplicate_a_night(url: &str) {
-    use bouncewear::domain::{ScheduleDefinition, ScheduleId};
-    use bouncewear::store::ScheduleRecord;
     let (first, second): (Arc<dyn Store>, Arc<dyn Store>) = (
         store::open(url).await.unwrap(),
         store::open(url).await.unwrap(),
     );
     for i in 0..10 {
-        let schedule = ScheduleRecord {
-            id: ScheduleId::from(format!("s{i}")),
-            owner: Owner::anonymous(),
-            definition: ScheduleDefinition {
-                name: format!("nightly {i}"),
-                cron: "0 3 * * *".to_owned(),
-                time_zone: "UTC".to_owned(),
-                template: serde_json::from_str(r#"{"devices": 2, "operations": 2, "seed": 1}"#)
-                    .unwrap(),
-                statistics: vec!["operations.total_bounce_s.p95".parse().unwrap()],
-                enabled: true,
-            },
-            next_run_at: Some(UnixMs::from_datetime(utc("2026-11-21T03:00:00Z"))),
-            created_at: UnixMs(0),
-            updated_at: UnixMs(0),
-        };
+        let schedule = nightly(&format!("s{i}"), "2026-11-21T03:00:00Z");
         first.insert_schedule(&schedule).await.unwrap();
     }
     let now = utc("2026-11-22T04:00:00Z");
@@ -204,6 +211,54 @@ async fn two_scheduler_loops_never_duplicate_a_night(url: &str) {
             .unwrap();
         assert_eq!(runs.len(), 1);
     }
+}
+
+async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let id = ScheduleId::from("s1");
+    store
+        .insert_schedule(&nightly("s1", "2026-11-19T03:00:00Z"))
+        .await
+        .unwrap();
+    // The server was down for three nights; it starts at 08:00.
+    let now = utc("2026-11-22T08:00:00Z");
+    assert_eq!(tick(store.as_ref(), 100, now).await.unwrap(), 1);
+    assert_eq!(
+        tick(store.as_ref(), 100, now).await.unwrap(),
+        0,
+        "a restart the same morning adds nothing"
+    );
+    let runs = store.runs(&id, 10).await.unwrap();
+    assert_eq!(runs.len(), 1);
+    assert_eq!(
+        runs[0].scheduled_for,
+        UnixMs::from_datetime(utc("2026-11-22T03:00:00Z"))
+    );
+    let schedule = store.schedule(&Owner::anonymous(), &id).await.unwrap();
+    assert_eq!(
+        schedule.next_run_at,
+        Some(UnixMs::from_datetime(utc("2026-11-23T03:00:00Z")))
+    );
+    // The next night runs at its time, once.
+    let next_night = utc("2026-11-23T03:00:01Z");
+    assert_eq!(tick(store.as_ref(), 100, next_night).await.unwrap(), 1);
+    assert_eq!(store.runs(&id, 10).await.unwrap().len(), 2);
+}
+
+async fn a_full_queue_leaves_the_night_due_for_the_next_tick(url: &str) {
+    let store = store::open(url).await.unwrap();
+    store
+        .insert_schedule(&nightly("s1", "2026-11-22T03:00:00Z"))
+        .await
+        .unwrap();
+    let now = utc("2026-11-22T03:00:05Z");
+    assert_eq!(tick(store.as_ref(), 0, now).await.unwrap(), 0);
+    let due = store
+        .due_schedules(UnixMs::from_datetime(now))
+        .await
+        .unwrap();
+    assert_eq!(due.len(), 1, "still due");
+    assert_eq!(tick(store.as_ref(), 10, now).await.unwrap(), 1);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

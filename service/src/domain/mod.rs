@@ -12,11 +12,3 @@ pub use ids::{Attempt, JobId, Owner, ScheduleId, UnixMs};
 pub use jobs::{JobStatus, QueuedJob, draw_seed};
 pub use schedules::{ScheduleDefinition, ScheduleSpec, Statistic, Timetable, ValidSchedule};
 pub use trend::TrendValue;
-
-/// A time written in RFC 3339, for tests that read better with dates than with milliseconds.
-#[cfg(test)]
-pub(crate) fn utc(text: &str) -> chrono::DateTime<chrono::Utc> {
-    chrono::DateTime::parse_from_rfc3339(text)
-        .unwrap()
-        .with_timezone(&chrono::Utc)
-}

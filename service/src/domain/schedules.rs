@@ -321,7 +321,12 @@ impl<'de> Deserialize<'de> for Statistic {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::domain::utc;
+
+    fn utc(text: &str) -> DateTime<Utc> {
+        DateTime::parse_from_rfc3339(text)
+            .unwrap()
+            .with_timezone(&Utc)
+    }
 
     #[test]
     fn a_night_at_three_follows_new_york_across_both_dst_changes() {
