@@ -1,25 +1,31 @@
 //! A job's groups run one at a time, each alone (as separate machines would run them), serialised,
-//! read back and put together in group order give the Result of running the job whole, to the bit.
+//! read back and put together in batch and group order give the Result of running the job whole,
+//! to the bit: for a precision target too, whose batches are decided one after the other.
 
-use bouncewear_model::montecarlo::engine::{GroupStats, group_count, run_group};
-use bouncewear_model::montecarlo::{Job, Silent, Tally, run_job, summarize_job};
+use bouncewear_model::montecarlo::engine::{Batch, GroupStats, run_group};
+use bouncewear_model::montecarlo::{Job, Silent, Tally, next_batch, run_job, summarize_job};
 use serde_json::Value;
 
-/// The Result of running `job` group by group, every group's state through JSON and back.
+/// The Result of running `job` group by group, every group's state through JSON and back, in
+/// reverse group order (machines finish in any order).
 fn run_group_by_group(job: &Job) -> Value {
-    let groups: Vec<GroupStats> = (0..group_count(job))
-        .map(|group| {
-            let stats = run_group(job, group, &Silent).unwrap();
-            let text = serde_json::to_string(&stats).unwrap();
-            let back: GroupStats = serde_json::from_str(&text).unwrap();
-            assert_eq!(back, stats, "group {group} survives serialisation exactly");
-            back
-        })
-        .collect();
-    let tally = Tally {
-        groups,
-        devices: job.spec().devices,
-    };
+    let mut tally = Tally::new();
+    let mut next = Batch::of(job, 0);
+    while let Some(batch) = next {
+        let mut groups: Vec<GroupStats> = (0..batch.groups())
+            .rev()
+            .map(|group| {
+                let stats = run_group(job, batch, group, &Silent).unwrap();
+                let text = serde_json::to_string(&stats).unwrap();
+                let back: GroupStats = serde_json::from_str(&text).unwrap();
+                assert_eq!(back, stats, "group {group} survives serialisation exactly");
+                back
+            })
+            .collect();
+        groups.reverse();
+        tally.add_batch(batch, groups);
+        next = next_batch(job, &tally);
+    }
     without_timing(serde_json::to_value(summarize_job(job, &tally, 1.0)).unwrap())
 }
 
@@ -74,5 +80,48 @@ fn an_empty_accumulator_keeps_its_infinite_extremes_through_json() {
         let text = serde_json::to_string(&empty).unwrap();
         let back: Accumulator = serde_json::from_str(&text).unwrap();
         assert_eq!(back, empty, "{text}");
+    }
+}
+
+#[test]
+fn a_precision_target_adds_batches_one_after_the_other_the_last_one_cut() {
+    let text = r#"{"devices": 40, "operations": 10, "seed": 5,
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                     "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.05, "min": 0.05}}],
+        "precision": {"metric": "total_bounce_s", "relative_half_width": 0.002, "max_devices": 130}}"#;
+    let job = Job::from_json(text, || 0).unwrap();
+    let whole = run_job(&job, &Silent).unwrap();
+    assert_eq!(
+        whole.job.devices_run(),
+        130,
+        "the target is out of reach: every batch runs, the last one cut to 10 devices"
+    );
+    assert_group_by_group_is_whole(text);
+}
+
+#[test]
+fn batches_cover_the_devices_once_and_groups_cut_them_contiguously() {
+    let job = Job::from_json(
+        r#"{"devices": 50, "operations": 2,
+            "precision": {"metric": "e1", "relative_half_width": 0.1, "max_devices": 120}}"#,
+        || 0,
+    )
+    .unwrap();
+    let batches: Vec<Batch> = (0..).map_while(|i| Batch::of(&job, i)).collect();
+    assert_eq!(
+        batches
+            .iter()
+            .map(|b| (b.first, b.size))
+            .collect::<Vec<_>>(),
+        [(0, 50), (50, 50), (100, 20)]
+    );
+    for batch in batches {
+        let devices: Vec<u64> = (0..batch.groups())
+            .flat_map(|g| batch.group_devices(g))
+            .collect();
+        assert_eq!(
+            devices,
+            (batch.first..batch.first + batch.size).collect::<Vec<_>>()
+        );
     }
 }

@@ -405,33 +405,94 @@ struct Chunk<'a> {
     permutations: Option<&'a [Vec<u32>]>,
 }
 
-/// The groups a job without a precision target is cut into: the unit a machine can run alone.
-pub fn group_count(job: &Job) -> u64 {
-    GROUPS.min(job.spec().devices)
+/// The devices one batch runs: `first..first + size`. Every job runs batch 0 (its `devices`); a
+/// precision target adds batches of the same size, the last one cut to `max_devices`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Batch {
+    pub index: u64,
+    pub first: u64,
+    pub size: u64,
 }
 
-/// Runs group `group` (below [`group_count`]) of a job without a precision target, alone: exactly
-/// the accumulators [`run`] builds for that group, so groups run anywhere and put back in order
-/// give the same Result to the bit. (A precision target decides after each whole batch, so such a
-/// job runs whole.)
-pub fn run_group(job: &Job, group: u64, observer: &dyn Observer) -> Result<GroupStats, Cancelled> {
+impl Batch {
+    /// Batch `index` of `job`, or `None` when the job can never run that many devices.
+    pub fn of(job: &Job, index: u64) -> Option<Self> {
+        let size = job.spec().devices;
+        let max_devices = job.precision().map_or(size, |p| p.max_devices);
+        let first = index
+            .checked_mul(size)
+            .filter(|first| *first < max_devices)?;
+        Some(Self {
+            index,
+            first,
+            size: size.min(max_devices - first),
+        })
+    }
+
+    /// The groups the batch is cut into: the unit one machine runs alone.
+    pub fn groups(&self) -> u64 {
+        GROUPS.min(self.size)
+    }
+
+    /// The devices of group `group`: a contiguous share of the batch.
+    pub fn group_devices(&self, group: u64) -> std::ops::Range<u64> {
+        let groups = self.groups();
+        self.first + self.size * group / groups..self.first + self.size * (group + 1) / groups
+    }
+}
+
+/// Runs group `group` of `batch` alone: exactly the accumulators [`run`] builds for it, so groups
+/// run anywhere, in any order, and put back with [`Tally::add_batch`] in order give the same
+/// Result to the bit.
+pub fn run_group(
+    job: &Job,
+    batch: Batch,
+    group: u64,
+    observer: &dyn Observer,
+) -> Result<GroupStats, Cancelled> {
     assert!(
-        job.precision().is_none() && group < group_count(job),
-        "group {group} of a job with {} groups and no precision target",
-        group_count(job)
+        group < batch.groups() && Batch::of(job, batch.index) == Some(batch),
+        "group {group} of {batch:?} is not part of the job"
     );
     let plan = Plan::new(job);
-    let size = job.spec().devices;
-    let permutations = plan.batch_permutations(0, size);
+    let permutations = plan.batch_permutations(batch.index, batch.size);
     let chunk = Chunk {
-        first: 0,
-        size,
+        first: batch.first,
+        size: batch.size,
         permutations: permutations.as_deref(),
     };
-    let groups = group_count(job);
-    let devices = size * (group + 1) / groups - size * group / groups;
-    let total = devices * job.spec().operations;
+    let devices = batch.group_devices(group);
+    let total = (devices.end - devices.start) * job.spec().operations;
     plan.run_chunk(&chunk, group, observer, &AtomicU64::new(0), total)
+}
+
+impl Tally {
+    pub fn new() -> Self {
+        Self {
+            groups: Vec::new(),
+            devices: 0,
+        }
+    }
+
+    /// Adds the next batch's groups, in group order (a batch smaller than [`GROUPS`] devices has
+    /// fewer groups, merged into the first ones).
+    pub fn add_batch(&mut self, batch: Batch, groups: Vec<GroupStats>) {
+        debug_assert_eq!(batch.first, self.devices, "batches are added in order");
+        if self.groups.is_empty() {
+            self.groups = groups;
+        } else {
+            for (group, stats) in self.groups.iter_mut().zip(&groups) {
+                group.merge(stats);
+            }
+        }
+        self.devices += batch.size;
+    }
+}
+
+impl Default for Tally {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 /// Runs the job on the current rayon pool: the first batch of `devices`, then, with a precision
@@ -442,28 +503,14 @@ pub fn run(
     mut accept: impl FnMut(&Tally) -> bool,
 ) -> Result<Tally, Cancelled> {
     let plan = Plan::new(job);
-    let batch_size = job.spec().devices;
-    let max_devices = job.precision().map_or(batch_size, |p| p.max_devices);
     let done = AtomicU64::new(0);
-    let mut tally = Tally {
-        groups: Vec::new(),
-        devices: 0,
-    };
-    for batch in 0.. {
-        let size = batch_size.min(max_devices - tally.devices);
-        let total = (tally.devices + size) * job.spec().operations;
-        let stats = plan.run_batch(batch, tally.devices, size, observer, &done, total)?;
-        if tally.groups.is_empty() {
-            tally.groups = stats;
-        } else {
-            for (group, stats) in tally.groups.iter_mut().zip(&stats) {
-                group.merge(stats);
-            }
-        }
-        tally.devices += size;
-        if tally.devices >= max_devices || accept(&tally) {
-            break;
-        }
+    let mut tally = Tally::new();
+    let mut next = Batch::of(job, 0);
+    while let Some(batch) = next {
+        let total = (batch.first + batch.size) * job.spec().operations;
+        let stats = plan.run_batch(batch.index, batch.first, batch.size, observer, &done, total)?;
+        tally.add_batch(batch, stats);
+        next = Batch::of(job, batch.index + 1).filter(|_| !accept(&tally));
     }
     Ok(tally)
 }

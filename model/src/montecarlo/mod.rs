@@ -169,15 +169,27 @@ pub struct LifeReport {
 /// Runs a job on the current rayon pool and summarises it.
 pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, Cancelled> {
     let started = Instant::now();
-    let tally = engine::run(job, observer, |tally| {
-        job.precision()
-            .is_some_and(|p| precision_half_width(job, tally, p) <= p.relative_half_width)
-    })?;
+    let tally = engine::run(job, observer, |tally| precision_met(job, tally))?;
     Ok(summarize_job(job, &tally, started.elapsed().as_secs_f64()))
 }
 
+/// Whether the job's precision target is met by what `tally` holds (never, without a target).
+pub fn precision_met(job: &Job, tally: &Tally) -> bool {
+    job.precision()
+        .is_some_and(|p| precision_half_width(job, tally, p) <= p.relative_half_width)
+}
+
+/// The batch to run after the batches in `tally`, if the job needs one: its precision target is
+/// not met yet and `max_devices` not reached. What [`run_job`] decides after each batch, for a
+/// run whose groups ran elsewhere ([`engine::run_group`]).
+pub fn next_batch(job: &Job, tally: &Tally) -> Option<engine::Batch> {
+    let size = job.spec().devices;
+    engine::Batch::of(job, tally.devices.div_ceil(size)).filter(|_| !precision_met(job, tally))
+}
+
 /// The Result of a run from its groups, however they were run: all at once by [`run_job`], or
-/// one by one with [`engine::run_group`] (on several machines) and put back in group order.
+/// one by one with [`engine::run_group`] (on several machines) and put back in order with
+/// [`Tally::add_batch`].
 /// `wall_s` is the time the run took, for the Result's timing.
 pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
     let operations_run = tally.devices * job.spec().operations;
