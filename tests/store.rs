@@ -4,19 +4,31 @@
 #[path = "support/mod.rs"]
 mod support;
 
+use bouncewear::domain::shards::{Merged, merge};
 use bouncewear::domain::{
-    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, UnixMs,
+    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, ShardId, UnixMs,
 };
 use bouncewear::scheduler::tick;
 use bouncewear::store::{self, Lease, LeaseTerms, ScheduleRecord, Store, StoreError};
-use bouncewear_model::montecarlo::Job;
+use bouncewear_model::Pointer;
+use bouncewear_model::montecarlo::engine::{Batch, run_group};
+use bouncewear_model::montecarlo::{Job, Silent, run_job};
 use chrono::{DateTime, Utc};
 use std::sync::Arc;
 use support::postgres::Postgres;
 use support::temp_dir;
 
 fn queued(seed: u64) -> QueuedJob {
-    let job = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || seed).unwrap();
+    queued_job(r#"{"devices": 2, "operations": 3}"#, seed)
+}
+
+/// A job of one device: one group and its merge step.
+fn single(seed: u64) -> QueuedJob {
+    queued_job(r#"{"devices": 1, "operations": 3}"#, seed)
+}
+
+fn queued_job(text: &str, seed: u64) -> QueuedJob {
+    let job = Job::from_json(text, || seed).unwrap();
     QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1))
 }
 
@@ -37,6 +49,8 @@ fn utc(text: &str) -> DateTime<Utc> {
 async fn every_promise(database: impl Fn(&str) -> String) {
     unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(&database("cancel")).await;
     a_claim_whose_lease_expired_is_fenced_out_by_its_successor(&database("fence")).await;
+    a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(&database("shards")).await;
+    a_precision_target_queues_its_next_batch_from_the_merge(&database("batches")).await;
     concurrent_submissions_never_overshoot_the_queue_bound(&database("bound")).await;
     every_u64_seed_reads_back_exactly(&database("seeds")).await;
     a_job_whose_lease_keeps_expiring_fails_with_the_reason(&database("retries")).await;
@@ -70,15 +84,32 @@ async fn unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(url: &str)
 
 async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor(url: &str) {
     let store = store::open(url).await.unwrap();
-    store.insert_job(queued(1), 10).await.unwrap();
+    store.insert_job(single(1), 10).await.unwrap();
     let first = store.claim("a", terms(0), 3).await.unwrap().unwrap();
+    assert_eq!(first.fence.shard, ShardId::group(0, 0));
     assert!(
         store.claim("b", terms(500), 3).await.unwrap().is_none(),
-        "leased"
+        "the group is leased, and the merge waits for it"
     );
     let second = store.claim("b", terms(2000), 3).await.unwrap().unwrap();
+    assert_eq!(second.fence.shard, ShardId::group(0, 0));
     assert_eq!(second.fence.attempt, Attempt(first.fence.attempt.0 + 1));
     assert_eq!(second.spec.seed, Some(1));
+    let stats = run_group(
+        &Job::new(second.spec.clone(), || 0, &Pointer::root()).unwrap(),
+        Batch {
+            index: 0,
+            first: 0,
+            size: 1,
+        },
+        0,
+        &Silent,
+    )
+    .unwrap();
+    assert!(
+        !store.complete(&first.fence, &stats).await.unwrap(),
+        "fenced out"
+    );
     assert_eq!(
         store.heartbeat(&first.fence, terms(2100), 5).await.unwrap(),
         Lease::Lost
@@ -116,7 +147,7 @@ async fn concurrent_submissions_never_overshoot_the_queue_bound(url: &str) {
 
 async fn a_job_whose_lease_keeps_expiring_fails_with_the_reason(url: &str) {
     let store = store::open(url).await.unwrap();
-    let id = store.insert_job(queued(1), 10).await.unwrap().unwrap().id;
+    let id = store.insert_job(single(1), 10).await.unwrap().unwrap().id;
     // Claimed at t = 0 s; every later claim finds the lease (1 s) expired: its worker died.
     let mut attempts = 0;
     let mut now = 0;
@@ -128,17 +159,145 @@ async fn a_job_whose_lease_keeps_expiring_fails_with_the_reason(url: &str) {
     let job = store.job(&Owner::anonymous(), &id).await.unwrap();
     assert_eq!(job.status, JobStatus::Failed);
     let reason = job.error.unwrap();
-    assert!(reason.starts_with("gave up after 2 retries"), "{reason}");
-
-    // Start-up's reclaim counts an expired lease the same way.
-    let id = store.insert_job(queued(2), 10).await.unwrap().unwrap().id;
-    store.claim("w", terms(now), 0).await.unwrap().unwrap();
     assert_eq!(
-        store.reclaim_expired(UnixMs(now + 2000), 0).await.unwrap(),
-        0
+        reason,
+        "gave up after 2 retries: the lease of batch 0 group 0 expired 3 times (its worker stopped or stalled each time)"
     );
+
+    // A run that fails counts the same way, and the last reason is kept.
+    let id = store.insert_job(single(2), 10).await.unwrap().unwrap().id;
+    for attempt in 1..=2 {
+        let claim = store.claim("w", terms(now), 1).await.unwrap().unwrap();
+        assert_eq!(claim.fence.attempt, Attempt(attempt));
+        let reason = format!("boom {attempt}");
+        assert!(
+            store
+                .fail_attempt(&claim.fence, UnixMs(now), &reason, 1)
+                .await
+                .unwrap()
+        );
+    }
+    assert!(store.claim("w", terms(now), 1).await.unwrap().is_none());
     let job = store.job(&Owner::anonymous(), &id).await.unwrap();
     assert_eq!(job.status, JobStatus::Failed);
+    assert_eq!(
+        job.error.unwrap(),
+        "gave up after 1 retries: batch 0 group 0 failed 2 times; the last time: boom 2"
+    );
+    let shards = store.shards(&id).await.unwrap();
+    assert_eq!((shards[0].attempt, shards[0].failures), (Attempt(2), 2));
+}
+
+/// Runs every claimable shard of the store's jobs the way workers do, in claim order, until none
+/// is left; returns the shards each claim ran.
+async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
+    let mut ran = Vec::new();
+    while let Some(claim) = store.claim("w", terms(0), 3).await.unwrap() {
+        let job = Job::new(claim.spec.clone(), || 0, &Pointer::root()).unwrap();
+        let fence = &claim.fence;
+        ran.push(fence.shard);
+        match fence.shard.group {
+            Some(group) => {
+                let batch = Batch::of(&job, fence.shard.batch).unwrap();
+                let stats = run_group(&job, batch, group, &Silent).unwrap();
+                assert!(store.complete(fence, &stats).await.unwrap());
+            }
+            None => {
+                let partials = store.partials(&fence.job).await.unwrap();
+                match merge(&job, fence.shard.batch, partials, 1.0).unwrap() {
+                    Merged::Result(result) => {
+                        assert!(store.succeed(fence, UnixMs(5), &result).await.unwrap())
+                    }
+                    Merged::Next(shards) => assert!(store.add_batch(fence, &shards).await.unwrap()),
+                }
+            }
+        }
+    }
+    ran
+}
+
+fn without_timing(result: &str) -> serde_json::Value {
+    let mut result: serde_json::Value = serde_json::from_str(result).unwrap();
+    result.as_object_mut().unwrap().remove("timing");
+    result
+}
+
+async fn a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let text = r#"{"devices": 3, "operations": 40, "seed": 4,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "failure": {"e1": {"below": 0.36}}}"#;
+    let id = store
+        .insert_job(queued_job(text, 4), 10)
+        .await
+        .unwrap()
+        .unwrap()
+        .id;
+    let ran = run_every_shard(store.as_ref()).await;
+    assert_eq!(
+        ran,
+        [
+            ShardId::group(0, 0),
+            ShardId::group(0, 1),
+            ShardId::group(0, 2),
+            ShardId::merge(0)
+        ]
+    );
+    let job = store.job(&Owner::anonymous(), &id).await.unwrap();
+    assert_eq!(job.status, JobStatus::Succeeded);
+    assert_eq!((job.operations_done, job.operations_total), (120, 120));
+    let whole = run_job(&Job::from_json(text, || 0).unwrap(), &Silent).unwrap();
+    assert_eq!(
+        without_timing(&store.result_json(&id).await.unwrap().unwrap()),
+        without_timing(&serde_json::to_string(&whole).unwrap())
+    );
+    assert_eq!(store.lives(&id).await.unwrap(), whole.life.unwrap().devices);
+    assert!(
+        store.partials(&id).await.unwrap().is_empty(),
+        "accumulators go with the Result"
+    );
+    let shards = store.shards(&id).await.unwrap();
+    assert!(
+        shards
+            .iter()
+            .all(|s| s.status == "done" && s.attempt == Attempt(1))
+    );
+}
+
+async fn a_precision_target_queues_its_next_batch_from_the_merge(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let text = r#"{"devices": 40, "operations": 2, "seed": 8,
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                     "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.05, "min": 0.05}}],
+        "precision": {"metric": "e1", "relative_half_width": 1e-6, "max_devices": 100}}"#;
+    let id = store
+        .insert_job(queued_job(text, 8), 10)
+        .await
+        .unwrap()
+        .unwrap()
+        .id;
+    let ran = run_every_shard(store.as_ref()).await;
+    let whole = run_job(&Job::from_json(text, || 0).unwrap(), &Silent).unwrap();
+    assert_eq!(
+        whole.job.devices_run(),
+        100,
+        "out of reach: every batch runs"
+    );
+    let mut expected = Vec::new();
+    for (batch, groups) in [(0, 32), (1, 32), (2, 20)] {
+        expected.extend((0..groups).map(|g| ShardId::group(batch, g)));
+        expected.push(ShardId::merge(batch));
+    }
+    assert_eq!(ran, expected);
+    let job = store.job(&Owner::anonymous(), &id).await.unwrap();
+    assert_eq!(
+        (job.status, job.operations_done, job.operations_total),
+        (JobStatus::Succeeded, 200, 200)
+    );
+    assert_eq!(
+        without_timing(&store.result_json(&id).await.unwrap().unwrap()),
+        without_timing(&serde_json::to_string(&whole).unwrap())
+    );
 }
 
 async fn every_u64_seed_reads_back_exactly(url: &str) {

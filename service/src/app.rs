@@ -6,7 +6,7 @@
 use crate::api::{self, AppState};
 use crate::compute::{PoolError, thread_pool};
 use crate::config::{ServeConfig, WorkerConfig};
-use crate::domain::{Owner, UnixMs};
+use crate::domain::Owner;
 use crate::store::{Store, StoreError};
 use crate::telemetry;
 use crate::worker::Workers;
@@ -116,7 +116,8 @@ impl Application {
         } = self;
         let config = &state.config;
         let queue = &config.queue;
-        tracing::info!(%address, database = %describe(&queue.database), workers = queue.workers, "serving");
+        let slots = workers.slots(queue.workers);
+        tracing::info!(%address, database = %describe(&queue.database), workers = slots, "serving");
         let stopping = state.shutdown.clone();
         let scheduler = tokio::spawn(crate::scheduler::run(
             Arc::clone(&state.store),
@@ -125,7 +126,7 @@ impl Application {
             stopping.clone(),
         ));
         // `--workers 0` makes an API-only instance that leaves the queue to others.
-        let handles = workers.spawn(queue.workers, stopping.clone());
+        let handles = workers.spawn(slots, stopping.clone());
         let reporter = tokio::spawn(report_queue_depth(
             Arc::clone(&state.store),
             state.metrics.clone(),
@@ -148,16 +149,10 @@ impl Application {
     }
 }
 
-/// Opens the queue's store, puts jobs whose lease expired back in the queue, and readies the
-/// workers (not yet running) with their compute pool.
+/// Opens the queue's store and readies the workers (not yet running) with their compute pool.
+/// Shards whose lease expired while no worker ran are claimed again as workers start.
 async fn start_workers(config: &WorkerConfig) -> Result<Workers, StartupError> {
     let store = crate::store::open(&config.database).await?;
-    let reclaimed = store
-        .reclaim_expired(UnixMs::now(), config.max_retries)
-        .await?;
-    if reclaimed > 0 {
-        tracing::info!(reclaimed, "jobs whose lease expired are back in the queue");
-    }
     Ok(Workers {
         store,
         compute: Arc::new(thread_pool(config.compute_threads)?),
@@ -185,20 +180,20 @@ async fn join_workers(handles: Vec<tokio::task::JoinHandle<()>>) {
 /// (scale jobs out across machines with several of these on one PostgreSQL database).
 pub async fn work(config: WorkerConfig) -> Result<(), StartupError> {
     telemetry::init_logging();
-    if config.workers == 0 {
+    if config.workers == Some(0) {
         return Err(StartupError::NoWorkers);
     }
     let workers = Arc::new(start_workers(&config).await?);
+    let slots = workers.slots(config.workers);
     let (stop, stopping) = watch::channel(false);
-    let handles = Arc::clone(&workers).spawn(config.workers, stopping);
+    let handles = Arc::clone(&workers).spawn(slots, stopping);
     // Tests and scripts wait for this line.
     println!(
-        "bouncewear worker running {} job(s) at a time from {}",
-        config.workers,
+        "bouncewear worker running {slots} shard(s) at a time from {}",
         describe(&config.database)
     );
     wait_for_signal().await;
-    tracing::info!("shutting down: running jobs go back to the queue");
+    tracing::info!("shutting down: running shards go back to the queue");
     let _ = stop.send(true);
     join_workers(handles).await;
     Ok(())

@@ -15,9 +15,10 @@ pub struct WorkerConfig {
         default_value = "sqlite://bouncewear.db"
     )]
     pub database: String,
-    /// Jobs run at the same time (each uses all compute threads); with `serve`, 0 serves the API without running jobs.
-    #[arg(long, env = "BOUNCEWEAR_WORKERS", default_value_t = 1)]
-    pub workers: usize,
+    /// Shards run at the same time, each on one compute thread (default: one per compute thread);
+    /// with `serve`, 0 serves the API without running jobs.
+    #[arg(long, env = "BOUNCEWEAR_WORKERS")]
+    pub workers: Option<usize>,
     /// Compute threads (default: one per core). Compute never runs on the async runtime.
     #[arg(long, env = "BOUNCEWEAR_COMPUTE_THREADS")]
     pub compute_threads: Option<usize>,

@@ -1,16 +1,21 @@
-//! The durable job queue's workers: claim a job with a lease, run it on the compute pool (never on
-//! the async runtime), heartbeat with the fencing attempt number, and write the result only while the
-//! attempt still holds the job.
+//! The durable job queue's workers: claim a shard of a job with a lease, run it on the compute pool
+//! (never on the async runtime, one compute thread per shard), heartbeat with the fencing attempt
+//! number, and write its outcome only while the attempt still holds the shard.
 //!
-//! A job interrupted by a crash or kill keeps its lease until it expires; then any worker (this
-//! instance after a restart, or another) claims it again and reruns it from the start. The seed was
-//! fixed at submission, so the result is identical to an uninterrupted run. On a graceful shutdown the
-//! running job is stopped and handed back to the queue at once.
+//! A shard is one group of devices of one batch ([`crate::domain::shards`]): its accumulators are
+//! stored when it is done. A batch's merge step, claimable once its groups are done, puts them back
+//! in order and stores the Result (or queues a precision target's next batch). A shard interrupted
+//! by a crash or kill keeps its lease until it expires; then any worker on any machine claims it
+//! again and reruns that shard alone. Seeds are fixed at submission and each device has its own
+//! random stream, so the Result is identical to an uninterrupted run on one machine. On a graceful
+//! shutdown the running shard is stopped and handed back to the queue at once.
 
 use crate::domain::UnixMs;
+use crate::domain::shards::{Merged, merge};
 use crate::store::{Claim, Fence, Lease, LeaseTerms, QueueEvent, Store};
 use bouncewear_model::Pointer;
-use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Watch, run_job};
+use bouncewear_model::montecarlo::engine::{Batch, run_group};
+use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Observer, Watch};
 use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -18,7 +23,7 @@ use std::time::Duration;
 use tokio::sync::{Notify, broadcast, oneshot, watch};
 use tokio::task::JoinHandle;
 
-/// Progress and the lease are written at most this often per running job.
+/// Progress and the lease are written at most this often per running shard.
 const HEARTBEAT_MAX_PERIOD: Duration = Duration::from_millis(500);
 /// An idle worker looks for expired leases at least this often.
 const IDLE_POLL: Duration = Duration::from_millis(500);
@@ -27,15 +32,32 @@ pub struct Workers {
     pub store: Arc<dyn Store>,
     pub compute: Arc<rayon::ThreadPool>,
     pub lease: Duration,
-    /// Times a job is run again after its lease expired, before it fails.
+    /// Times a shard is run again after it failed or its lease expired, before its job fails.
     pub retries: u64,
     pub instance: String,
     /// Notified on every submission, so an idle worker starts at once.
     pub wake: Arc<Notify>,
 }
 
+/// How a computation under a lease ended.
+enum Ran<T> {
+    Done(T),
+    /// Stopped through the observer: `shutdown` when this process is stopping (the shard goes
+    /// back to the queue), otherwise the job ended or the lease was lost (nothing to write).
+    Stopped {
+        shutdown: bool,
+    },
+    Panicked,
+}
+
 impl Workers {
-    /// Starts `count` worker loops; they stop, handing running jobs back, when `shutdown` turns true.
+    /// The shards run at the same time: as asked, or one per compute thread.
+    pub fn slots(&self, requested: Option<usize>) -> usize {
+        requested.unwrap_or_else(|| self.compute.current_num_threads())
+    }
+
+    /// Starts `count` worker loops; they stop, handing running shards back, when `shutdown` turns
+    /// true.
     pub fn spawn(
         self: Arc<Self>,
         count: usize,
@@ -84,24 +106,14 @@ impl Workers {
                     }
                 }
                 Err(error) => {
-                    tracing::error!(%error, "claiming a job failed");
+                    tracing::error!(%error, "claiming a shard failed");
                     tokio::time::sleep(IDLE_POLL).await;
                 }
             }
         }
     }
 
-    /// Ends the claim's job as failed, with the reason; a failure to write it leaves the lease to
-    /// expire, and the job to be rerun.
-    async fn fail(&self, fence: &Fence, reason: &str) {
-        tracing::error!(reason, "job failed");
-        metrics::counter!("bouncewear_jobs_finished_total", "status" => "failed").increment(1);
-        if let Err(error) = self.store.fail(fence, UnixMs::now(), reason).await {
-            tracing::error!(%error, "could not mark the job failed; its lease will expire");
-        }
-    }
-
-    #[tracing::instrument(skip_all, fields(job = %claim.fence.job, attempt = claim.fence.attempt.0))]
+    #[tracing::instrument(skip_all, fields(job = %claim.fence.job, shard = %claim.fence.shard, attempt = claim.fence.attempt.0))]
     async fn run(&self, claim: Claim, shutdown: &mut watch::Receiver<bool>) {
         let fence = &claim.fence;
         let job = match Job::new(claim.spec, || 0, &Pointer::root()) {
@@ -111,7 +123,109 @@ impl Workers {
                 return self.fail(fence, &reason).await;
             }
         };
-        tracing::info!(operations = claim.operations_total, "job started");
+        match fence.shard.group {
+            Some(group) => self.run_group(fence, job, group, shutdown).await,
+            None => self.merge(fence, job, claim.started_at, shutdown).await,
+        }
+    }
+
+    /// Runs one group and stores its accumulators.
+    async fn run_group(
+        &self,
+        fence: &Fence,
+        job: Job,
+        group: u64,
+        shutdown: &mut watch::Receiver<bool>,
+    ) {
+        let Some(batch) = Batch::of(&job, fence.shard.batch).filter(|b| group < b.groups()) else {
+            let reason = format!("{} is not part of the job", fence.shard);
+            return self.fail(fence, &reason).await;
+        };
+        let devices = batch.group_devices(group);
+        let operations = (devices.end - devices.start) * job.spec().operations;
+        tracing::debug!(operations, "group started");
+        let ran = self
+            .under_lease(fence, shutdown, move |observer| {
+                run_group(&job, batch, group, observer)
+            })
+            .await;
+        let stats = match ran {
+            Ran::Done(stats) => stats,
+            Ran::Stopped { shutdown } => return self.stopped(fence, shutdown).await,
+            Ran::Panicked => {
+                return self
+                    .fail_attempt(fence, "internal error: the simulation panicked")
+                    .await;
+            }
+        };
+        match self.store.complete(fence, &stats).await {
+            Ok(true) => {
+                metrics::counter!("bouncewear_operations_simulated_total").increment(operations);
+                tracing::debug!("group done");
+            }
+            Ok(false) => {
+                tracing::info!("group discarded: the job ended or the shard was taken over")
+            }
+            Err(error) => {
+                tracing::error!(%error, "storing the group failed; its lease will expire and it reruns")
+            }
+        }
+    }
+
+    /// Puts the done groups back in order: the Result, or the next batch of a precision target.
+    async fn merge(
+        &self,
+        fence: &Fence,
+        job: Job,
+        started_at: UnixMs,
+        shutdown: &mut watch::Receiver<bool>,
+    ) {
+        let partials = match self.store.partials(&fence.job).await {
+            Ok(partials) => partials,
+            Err(error) => {
+                let reason = format!("reading the groups' accumulators failed: {error}");
+                return self.fail_attempt(fence, &reason).await;
+            }
+        };
+        let last = fence.shard.batch;
+        let wall_s = (UnixMs::now().0 - started_at.0).max(0) as f64 / 1000.0;
+        let ran = self
+            .under_lease(fence, shutdown, move |_| {
+                Ok(merge(&job, last, partials, wall_s))
+            })
+            .await;
+        match ran {
+            Ran::Done(Ok(Merged::Result(result))) => self.succeed(fence, &result).await,
+            Ran::Done(Ok(Merged::Next(shards))) => match self.store.add_batch(fence, &shards).await
+            {
+                Ok(true) => tracing::info!(
+                    batch = last + 1,
+                    "precision target not met: next batch queued"
+                ),
+                Ok(false) => tracing::info!(
+                    "next batch discarded: the job ended or the shard was taken over"
+                ),
+                Err(error) => {
+                    tracing::error!(%error, "queueing the next batch failed; the merge reruns")
+                }
+            },
+            Ran::Done(Err(incomplete)) => self.fail_attempt(fence, &incomplete.to_string()).await,
+            Ran::Stopped { shutdown } => self.stopped(fence, shutdown).await,
+            Ran::Panicked => {
+                self.fail_attempt(fence, "internal error: merging the groups panicked")
+                    .await
+            }
+        }
+    }
+
+    /// Runs `task` on the compute pool while heartbeating the shard's lease with its progress; the
+    /// task stops through its observer when the job ends, the lease is lost or the process stops.
+    async fn under_lease<T: Send + 'static>(
+        &self,
+        fence: &Fence,
+        shutdown: &mut watch::Receiver<bool>,
+        task: impl FnOnce(&dyn Observer) -> Result<T, Cancelled> + Send + 'static,
+    ) -> Ran<T> {
         let cancel = Arc::new(AtomicBool::new(false));
         let done = Arc::new(AtomicU64::new(0));
         let (sender, mut finished) = oneshot::channel();
@@ -123,7 +237,7 @@ impl Workers {
                     on_progress: |d, _| done.store(d, Ordering::Relaxed),
                 };
                 let _ = sender.send(std::panic::catch_unwind(AssertUnwindSafe(|| {
-                    run_job(&job, &observer)
+                    task(&observer)
                 })));
             });
         }
@@ -138,7 +252,7 @@ impl Workers {
                     match self.store.heartbeat(fence, self.lease_terms(), progress).await {
                         Ok(Lease::Held) => {}
                         Ok(lease @ (Lease::Cancelled | Lease::Lost)) => {
-                            tracing::info!(?lease, "stopping: the job is no longer ours to run");
+                            tracing::info!(?lease, "stopping: the shard is no longer ours to run");
                             cancel.store(true, Ordering::Relaxed);
                         }
                         Err(error) => tracing::warn!(%error, "heartbeat failed; the lease may expire"),
@@ -151,35 +265,65 @@ impl Workers {
             }
         };
         match outcome {
-            Ok(Ok(Ok(result))) => self.succeed(fence, &result).await,
-            Ok(Ok(Err(Cancelled))) if stopping => match self.store.release(fence).await {
-                Ok(_) => tracing::info!("handed back to the queue for shutdown"),
-                Err(error) => {
-                    tracing::error!(%error, "could not hand the job back; its lease will expire")
-                }
-            },
-            Ok(Ok(Err(Cancelled))) => tracing::info!("job stopped (cancelled or taken over)"),
-            Ok(Err(_)) | Err(_) => {
-                self.fail(fence, "internal error: the simulation panicked")
-                    .await
+            Ok(Ok(Ok(value))) => Ran::Done(value),
+            Ok(Ok(Err(Cancelled))) => Ran::Stopped { shutdown: stopping },
+            Ok(Err(_)) | Err(_) => Ran::Panicked,
+        }
+    }
+
+    /// After a stop: hands the shard back for a shutdown; otherwise there is nothing to write.
+    async fn stopped(&self, fence: &Fence, shutdown: bool) {
+        if !shutdown {
+            return tracing::info!("shard stopped (the job ended or the shard was taken over)");
+        }
+        match self.store.release(fence).await {
+            Ok(_) => tracing::info!("handed back to the queue for shutdown"),
+            Err(error) => {
+                tracing::error!(%error, "could not hand the shard back; its lease will expire")
             }
+        }
+    }
+
+    /// Ends the job as failed, with the reason (no retry can mend it); a failure to write it leaves
+    /// the lease to expire, and the shard to be rerun.
+    async fn fail(&self, fence: &Fence, reason: &str) {
+        tracing::error!(reason, "job failed");
+        match self.store.fail(fence, UnixMs::now(), reason).await {
+            Ok(true) => metrics::counter!("bouncewear_jobs_finished_total", "status" => "failed")
+                .increment(1),
+            Ok(false) => {}
+            Err(error) => {
+                tracing::error!(%error, "could not mark the job failed; its lease will expire")
+            }
+        }
+    }
+
+    /// Hands a shard whose run failed back to the queue, counting the failure towards the limit.
+    async fn fail_attempt(&self, fence: &Fence, reason: &str) {
+        tracing::error!(reason, "shard failed");
+        if let Err(error) = self
+            .store
+            .fail_attempt(fence, UnixMs::now(), reason, self.retries)
+            .await
+        {
+            tracing::error!(%error, "could not record the failure; the shard's lease will expire");
         }
     }
 
     async fn succeed(&self, fence: &Fence, result: &JobResult) {
         match self.store.succeed(fence, UnixMs::now(), result).await {
             Ok(true) => {
-                let operations = result.job.devices_run() * result.job.spec().operations;
                 metrics::counter!("bouncewear_jobs_finished_total", "status" => "succeeded")
                     .increment(1);
-                metrics::counter!("bouncewear_operations_simulated_total").increment(operations);
                 tracing::info!(wall_s = result.timing.wall_s, "job succeeded");
             }
             Ok(false) => {
-                tracing::info!("result discarded: the job was cancelled or taken over meanwhile")
+                tracing::info!(
+                    "result discarded: the job ended or the merge was taken over meanwhile"
+                )
             }
             Err(error) => {
-                tracing::error!(%error, "storing the result failed; the lease will expire and the job rerun")
+                tracing::error!(%error, "storing the result failed; the lease will expire and the merge rerun")
             }
         }
     }

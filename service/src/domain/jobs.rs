@@ -1,7 +1,7 @@
 //! The rules of a job that the model does not know: where a missing seed comes from, what a queued
 //! job holds, and the states a job goes through.
 
-use super::{JobId, Owner, UnixMs};
+use super::{JobId, Owner, ShardPlan, UnixMs, first_shards};
 use bouncewear_model::montecarlo::{Job, JobSpec};
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
@@ -68,6 +68,8 @@ pub struct QueuedJob {
     /// Devices x operations (a precision target may run more devices).
     pub operations_total: u64,
     pub created_at: UnixMs,
+    /// The shards it enters the queue with: its first batch's.
+    pub shards: Vec<ShardPlan>,
 }
 
 impl QueuedJob {
@@ -81,6 +83,7 @@ impl QueuedJob {
             seed: job.seed(),
             operations_total: job.spec().devices.saturating_mul(job.spec().operations),
             created_at,
+            shards: first_shards(job),
         }
     }
 }

@@ -1,14 +1,16 @@
 //! The service's rules, in neither HTTP's nor SQL's terms: identities and times, where a seed comes
-//! from, how a validated job enters the queue, what makes a schedule valid, and how a schedule's
+//! from, how a validated job enters the queue and is cut into shards, what makes a schedule valid, and how a schedule's
 //! trend and drift are read. The HTTP handlers, the workers and the scheduler all come here, so each
 //! rule is written once.
 
 mod ids;
 pub mod jobs;
 pub mod schedules;
+pub mod shards;
 pub mod trend;
 
 pub use ids::{Attempt, JobId, Owner, ScheduleId, UnixMs};
 pub use jobs::{JobStatus, QueuedJob, draw_seed};
 pub use schedules::{ScheduleDefinition, ScheduleSpec, Statistic, Timetable, ValidSchedule};
+pub use shards::{ShardId, ShardPlan, batch_shards, first_shards};
 pub use trend::TrendValue;

@@ -11,9 +11,11 @@ mod rows;
 pub mod sqlite;
 
 use crate::domain::{
-    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, UnixMs,
+    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, ShardId,
+    ShardPlan, UnixMs,
 };
 use async_trait::async_trait;
+use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
 use bouncewear_model::stats::Summary;
 use std::sync::Arc;
@@ -69,9 +71,9 @@ pub struct JobRecord {
     /// The seed the job runs with, fixed at submission.
     pub seed: u64,
     pub status: JobStatus,
+    /// Summed over the job's shards.
     pub operations_done: u64,
     pub operations_total: u64,
-    pub attempt: Attempt,
     pub error: Option<String>,
     pub created_at: UnixMs,
     pub started_at: Option<UnixMs>,
@@ -85,11 +87,12 @@ pub struct Page {
     pub limit: u32,
 }
 
-/// The claim a worker holds on a job: every write of that claim carries it, and is refused once
-/// another claim replaced it (fencing).
+/// The claim a worker holds on one shard of a job: every write of that claim carries it, and is
+/// refused once another claim replaced it (fencing) or the job ended.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Fence {
     pub job: JobId,
+    pub shard: ShardId,
     pub attempt: Attempt,
 }
 
@@ -100,13 +103,32 @@ pub struct LeaseTerms {
     pub duration_ms: i64,
 }
 
-/// A job a worker has leased.
+/// A shard a worker has leased.
 #[derive(Debug, Clone)]
 pub struct Claim {
     pub fence: Fence,
     /// The job as validated at submission, seed fixed.
     pub spec: JobSpec,
+    /// The shard's operations (none for a merge step).
     pub operations_total: u64,
+    /// When the job's first shard was claimed: a merge step reports the run's wall time from it.
+    pub started_at: UnixMs,
+}
+
+/// A shard as stored: where it stands, and how often it ran.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ShardRecord {
+    pub shard: ShardId,
+    /// `queued`, `running` or `done`.
+    pub status: String,
+    /// Claims so far (the fencing attempt): 1 for a shard that ran once.
+    pub attempt: Attempt,
+    /// Runs that failed or lost their lease.
+    pub failures: u64,
+    pub worker: Option<String>,
+    pub operations_done: u64,
+    pub operations_total: u64,
+    pub error: Option<String>,
 }
 
 /// What a heartbeat found.
@@ -114,9 +136,9 @@ pub struct Claim {
 pub enum Lease {
     /// The lease is still ours and was extended.
     Held,
-    /// The job was cancelled (by any instance): stop.
+    /// The job ended (cancelled by any instance, or failed by another shard): stop.
     Cancelled,
-    /// Another worker took the job over (our lease expired): stop and write nothing.
+    /// Another worker took the shard over (our lease expired): stop and write nothing.
     Lost,
 }
 
@@ -196,28 +218,45 @@ pub trait JobQueue: Send + Sync + 'static {
     async fn jobs(&self, owner: &Owner, page: Page) -> StoreResult<Vec<JobRecord>>;
     /// Cancels a queued or running job; [`StoreError::Conflict`] if it already ended.
     async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord>;
-    /// Leases the oldest queued job, or a running one whose lease expired, bumping its attempt.
-    /// A job whose lease has already expired `retries` times fails instead, with the reason.
+    /// Leases the next shard to run: of the oldest job with one, a queued shard or a running one
+    /// whose lease expired (bumping its attempt), a merge step only once its batch's groups are
+    /// done. A shard whose lease has already expired `retries` times fails its job instead, with
+    /// the reason.
     async fn claim(
         &self,
         worker: &str,
         terms: LeaseTerms,
         retries: u64,
     ) -> StoreResult<Option<Claim>>;
-    /// Extends the lease and records progress, if the claim still holds the job.
+    /// Extends the shard's lease and records its progress (the job's is the sum over its
+    /// shards), if the claim still holds it and the job still runs.
     async fn heartbeat(
         &self,
         fence: &Fence,
         terms: LeaseTerms,
         operations_done: u64,
     ) -> StoreResult<Lease>;
-    /// Marks the job failed with `error`, if the claim still holds it.
+    /// Marks a group done with its accumulators, in one transaction, if the claim still holds it.
+    async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool>;
+    /// Marks a merge step done and queues the next batch's shards, in one transaction, if the
+    /// claim still holds it (a precision target not met yet).
+    async fn add_batch(&self, fence: &Fence, shards: &[ShardPlan]) -> StoreResult<bool>;
+    /// Marks the job failed with `error` at once (a failure no retry can mend), if the claim still
+    /// holds its shard.
     async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool>;
-    /// Hands a running job back to the queue (graceful shutdown).
+    /// Hands a shard whose run failed back to the queue, counting the failure; once it failed more
+    /// than `retries` times, its job fails instead, with the reason.
+    async fn fail_attempt(
+        &self,
+        fence: &Fence,
+        now: UnixMs,
+        error: &str,
+        retries: u64,
+    ) -> StoreResult<bool>;
+    /// Hands a running shard back to the queue (graceful shutdown), without counting a failure.
     async fn release(&self, fence: &Fence) -> StoreResult<bool>;
-    /// Puts every running job whose lease expired back in the queue, or fails it when its lease
-    /// has already expired `retries` times; returns how many went back.
-    async fn reclaim_expired(&self, now: UnixMs, retries: u64) -> StoreResult<u64>;
+    /// The job's shards, in order.
+    async fn shards(&self, id: &JobId) -> StoreResult<Vec<ShardRecord>>;
     /// `(queued, running)` job counts, for metrics.
     async fn queue_depth(&self) -> StoreResult<(u64, u64)>;
     /// Announcements of changes to the queue, where the backend makes them (PostgreSQL's
@@ -231,14 +270,17 @@ pub trait JobQueue: Send + Sync + 'static {
 /// What a succeeded job leaves: its Result, one row per (metric, bin), each device's life.
 #[async_trait]
 pub trait Results: Send + Sync + 'static {
-    /// Stores the result and marks the job succeeded, in one transaction, if the claim still holds
-    /// the job; `false` otherwise (nothing written).
+    /// Stores the result, marks the merge step done and the job succeeded, and drops the groups'
+    /// accumulators, in one transaction, if the claim still holds the merge step; `false`
+    /// otherwise (nothing written).
     async fn succeed(
         &self,
         fence: &Fence,
         finished_at: UnixMs,
         result: &JobResult,
     ) -> StoreResult<bool>;
+    /// The accumulators of the job's done groups, in batch and group order.
+    async fn partials(&self, id: &JobId) -> StoreResult<Vec<(ShardId, GroupStats)>>;
     /// The Result JSON as stored, to be served as it is.
     async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>>;
 

@@ -2,11 +2,14 @@
 //! place per table, whatever the database), and how values are stored (counts, seeds, times, JSON).
 
 use super::{
-    Claim, DistributionRow, Fence, JobRecord, RunRecord, ScheduleRecord, StoreError, StoreResult,
+    Claim, DistributionRow, Fence, JobRecord, RunRecord, ScheduleRecord, ShardRecord, StoreError,
+    StoreResult,
 };
 use crate::domain::{
-    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, UnixMs,
+    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, ShardId,
+    ShardPlan, UnixMs,
 };
+use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
 use sqlx::postgres::PgRow;
 use sqlx::query::Query;
@@ -100,7 +103,7 @@ pub(crate) type Statement<'q, DB> = Query<'q, DB, <DB as Database>::Arguments>;
 
 macro_rules! job_columns {
     () => {
-        "seq, id, owner, name, seed, status, operations_done, operations_total, attempt, error, \
+        "seq, id, owner, name, seed, status, operations_done, operations_total, error, \
          created_at, started_at, finished_at"
     };
 }
@@ -117,7 +120,6 @@ pub(crate) fn job_from_row(row: &impl ReadRow) -> Result<JobRecord, sqlx::Error>
         status: status(row)?,
         operations_done: count_from_sql(row, "operations_done")?,
         operations_total: count_from_sql(row, "operations_total")?,
-        attempt: Attempt(row.int("attempt")?),
         error: row.maybe_text("error")?,
         created_at: ms(row, "created_at")?,
         started_at: optional_ms(row, "started_at")?,
@@ -125,23 +127,18 @@ pub(crate) fn job_from_row(row: &impl ReadRow) -> Result<JobRecord, sqlx::Error>
     })
 }
 
-/// A claim, from the `RETURNING id, spec, attempt, operations_total` of a claiming update.
-pub(crate) fn claim_from_row(row: &impl ReadRow) -> StoreResult<Claim> {
-    Ok(Claim {
-        fence: Fence {
-            job: JobId::from(row.text("id")?),
-            attempt: Attempt(row.int("attempt")?),
-        },
-        spec: spec_from_json(&row.text("spec")?)?,
-        operations_total: count_from_sql(row, "operations_total")?,
-    })
+/// Why a job failed when one of its shards' lease kept expiring.
+pub(crate) fn gave_up(retries: u64, shard: ShardId) -> String {
+    format!(
+        "gave up after {retries} retries: the lease of {shard} expired {} times (its worker stopped or stalled each time)",
+        retries + 1
+    )
 }
 
-/// Why a job whose lease kept expiring failed.
-pub(crate) fn gave_up(retries: u64) -> String {
+/// Why a job failed when one of its shards kept failing.
+pub(crate) fn failed_too_often(retries: u64, shard: ShardId, failures: u64, error: &str) -> String {
     format!(
-        "gave up after {retries} retries: the job's lease expired {} times (its worker stopped or stalled each time)",
-        retries + 1
+        "gave up after {retries} retries: {shard} failed {failures} times; the last time: {error}"
     )
 }
 
@@ -165,6 +162,98 @@ where
         .bind(seed_to_sql(job.seed))
         .bind(count_to_sql(job.operations_total))
         .bind(job.created_at.0))
+}
+
+// ---- shards --------------------------------------------------------------------------------
+
+/// The stored group of a shard: a merge step is group -1.
+pub(crate) fn group_to_sql(shard: ShardId) -> i64 {
+    shard.group.map_or(-1, count_to_sql)
+}
+
+pub(crate) fn shard_id_from_row(row: &impl ReadRow) -> Result<ShardId, sqlx::Error> {
+    let batch = count_from_sql(row, "batch")?;
+    let group = row.int("grp")?;
+    Ok(ShardId {
+        batch,
+        group: u64::try_from(group).ok(),
+    })
+}
+
+macro_rules! shard_columns {
+    () => {
+        "batch, grp, status, attempt, failures, lease_owner, operations_done, operations_total, error"
+    };
+}
+
+pub(crate) use shard_columns;
+
+pub(crate) fn shard_from_row(row: &impl ReadRow) -> Result<ShardRecord, sqlx::Error> {
+    Ok(ShardRecord {
+        shard: shard_id_from_row(row)?,
+        status: row.text("status")?,
+        attempt: Attempt(row.int("attempt")?),
+        failures: count_from_sql(row, "failures")?,
+        worker: row.maybe_text("lease_owner")?,
+        operations_done: count_from_sql(row, "operations_done")?,
+        operations_total: count_from_sql(row, "operations_total")?,
+        error: row.maybe_text("error")?,
+    })
+}
+
+/// Binds a queued shard's columns `job_id, batch, grp, operations_total` as parameters 1 to 4.
+pub(crate) fn bind_shard<'q, DB>(
+    query: Statement<'q, DB>,
+    job: &JobId,
+    plan: &ShardPlan,
+) -> Statement<'q, DB>
+where
+    DB: Database,
+    for<'t> i64: Encode<'t, DB> + Type<DB>,
+    for<'t> String: Encode<'t, DB> + Type<DB>,
+{
+    query
+        .bind(job.to_string())
+        .bind(count_to_sql(plan.shard.batch))
+        .bind(group_to_sql(plan.shard))
+        .bind(count_to_sql(plan.operations))
+}
+
+/// Binds a claim's fence `job_id, batch, grp, attempt` as parameters 1 to 4.
+pub(crate) fn bind_fence<'q, DB>(query: Statement<'q, DB>, fence: &Fence) -> Statement<'q, DB>
+where
+    DB: Database,
+    for<'t> i64: Encode<'t, DB> + Type<DB>,
+    for<'t> String: Encode<'t, DB> + Type<DB>,
+{
+    query
+        .bind(fence.job.to_string())
+        .bind(count_to_sql(fence.shard.batch))
+        .bind(group_to_sql(fence.shard))
+        .bind(fence.attempt.0)
+}
+
+/// A claim, from a row of the claimed shard joined with its job: `job_id, batch, grp, attempt,
+/// operations_total, spec, started_at`.
+pub(crate) fn claim_from_row(row: &impl ReadRow) -> StoreResult<Claim> {
+    Ok(Claim {
+        fence: Fence {
+            job: JobId::from(row.text("job_id")?),
+            shard: shard_id_from_row(row)?,
+            attempt: Attempt(row.int("attempt")?),
+        },
+        spec: spec_from_json(&row.text("spec")?)?,
+        operations_total: count_from_sql(row, "operations_total")?,
+        started_at: ms(row, "started_at")?,
+    })
+}
+
+/// A done group's accumulators, from a row `batch, grp, partial`.
+pub(crate) fn partial_from_row(row: &impl ReadRow) -> StoreResult<(ShardId, GroupStats)> {
+    let shard = shard_id_from_row(row)?;
+    let text = row.text("partial")?;
+    let stats = serde_json::from_str(&text).map_err(|e| corrupt("group accumulators", e))?;
+    Ok((shard, stats))
 }
 
 // ---- results, distributions, device lives --------------------------------------------------

@@ -6,24 +6,30 @@
 //! Each table's columns and row mapping are written once, below its section heading.
 
 use super::rows::{
-    bind_distribution, bind_life, bind_queued_job, bind_schedule, claim_from_row, count_from_sql,
-    count_to_sql, distribution_from_row, distribution_rows, gave_up, job_columns, job_from_row,
-    life_from_row, run_from_row, schedule_columns, schedule_from_row, seed_to_sql, spec_from_json,
-    to_json,
+    bind_distribution, bind_fence, bind_life, bind_queued_job, bind_schedule, bind_shard,
+    claim_from_row, count_from_sql, count_to_sql, distribution_from_row, distribution_rows,
+    failed_too_often, gave_up, job_columns, job_from_row, life_from_row, partial_from_row,
+    run_from_row, schedule_columns, schedule_from_row, seed_to_sql, shard_columns, shard_from_row,
+    shard_id_from_row, spec_from_json, to_json,
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
-    Page, Results, RunRecord, RunSlot, ScheduleRecord, Schedules, StoreError, StoreResult,
+    Page, Results, RunRecord, RunSlot, ScheduleRecord, Schedules, ShardRecord, StoreError,
+    StoreResult,
 };
-use crate::domain::{JobId, Owner, QueuedJob, ScheduleId, UnixMs};
+use crate::domain::{
+    JobId, Owner, QueuedJob, ScheduleId, ShardId, ShardPlan, UnixMs, first_shards,
+};
 use async_trait::async_trait;
-use bouncewear_model::montecarlo::{DeviceLife, JobResult};
+use bouncewear_model::Pointer;
+use bouncewear_model::montecarlo::engine::GroupStats;
+use bouncewear_model::montecarlo::{DeviceLife, Job, JobResult};
 use sqlx::query::Query;
 use sqlx::sqlite::{
     SqliteArguments, SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions,
     SqliteSynchronous,
 };
-use sqlx::{Row, Sqlite};
+use sqlx::{Row, Sqlite, SqliteConnection};
 use std::str::FromStr;
 use std::time::Duration;
 
@@ -48,6 +54,7 @@ impl SqliteStore {
             .await?;
         sqlx::migrate!("../migrations/sqlite").run(&writer).await?;
         backfill_seeds(&writer).await?;
+        backfill_shards(&writer).await?;
         let readers = SqlitePoolOptions::new()
             .max_connections(4)
             .connect_with(options.read_only(true))
@@ -72,6 +79,40 @@ async fn backfill_seeds(writer: &SqlitePool) -> StoreResult<()> {
     Ok(())
 }
 
+/// Cuts jobs queued or running before shards existed (migration 0005) into their first batch's
+/// shards; a job that was running starts again from its first shard.
+async fn backfill_shards(writer: &SqlitePool) -> StoreResult<()> {
+    let rows = sqlx::query(
+        "SELECT id, spec FROM jobs j WHERE status IN ('queued', 'running') \
+         AND NOT EXISTS (SELECT 1 FROM shards s WHERE s.job_id = j.id)",
+    )
+    .fetch_all(writer)
+    .await?;
+    for row in rows {
+        let id = JobId::from(row.try_get::<String, _>("id")?);
+        let spec = spec_from_json(&row.try_get::<String, _>("spec")?)?;
+        let mut tx = writer.begin().await?;
+        match Job::new(spec, || 0, &Pointer::root()) {
+            Ok(job) => {
+                sqlx::query("UPDATE jobs SET status = 'queued', operations_done = 0 WHERE id = ?1")
+                    .bind(id.as_str())
+                    .execute(&mut *tx)
+                    .await?;
+                insert_shards(&mut tx, &id, &first_shards(&job)).await?;
+            }
+            Err(invalid) => {
+                sqlx::query("UPDATE jobs SET status = 'failed', error = ?2 WHERE id = ?1")
+                    .bind(id.as_str())
+                    .bind(format!("the stored job no longer validates: {invalid}"))
+                    .execute(&mut *tx)
+                    .await?;
+            }
+        }
+        tx.commit().await?;
+    }
+    Ok(())
+}
+
 // ---- jobs ----------------------------------------------------------------------------------
 
 const SELECT_JOB: &str = concat!(
@@ -80,12 +121,13 @@ const SELECT_JOB: &str = concat!(
     " FROM jobs WHERE id = ?1 AND owner = ?2"
 );
 
-/// Inserts a queued job unless `max_queued` jobs are already queued. One statement: the queue
-/// bound and the insert cannot race.
-async fn insert_queued<'e, E>(executor: E, job: &QueuedJob, max_queued: u64) -> StoreResult<bool>
-where
-    E: sqlx::Executor<'e, Database = Sqlite>,
-{
+/// Inserts a queued job with its first shards unless `max_queued` jobs are already queued, in the
+/// caller's transaction. One statement decides: the queue bound and the insert cannot race.
+async fn insert_queued(
+    tx: &mut SqliteConnection,
+    job: &QueuedJob,
+    max_queued: u64,
+) -> StoreResult<bool> {
     let insert = sqlx::query(
         "INSERT INTO jobs (id, owner, name, spec, seed, status, operations_total, created_at) \
          SELECT ?1, ?2, ?3, ?4, ?5, 'queued', ?6, ?7 \
@@ -93,9 +135,40 @@ where
     );
     let inserted = bind_queued_job(insert, job)?
         .bind(count_to_sql(max_queued))
-        .execute(executor)
+        .execute(&mut *tx)
         .await?;
-    Ok(inserted.rows_affected() == 1)
+    if inserted.rows_affected() == 0 {
+        return Ok(false);
+    }
+    insert_shards(tx, &job.id, &job.shards).await?;
+    Ok(true)
+}
+
+async fn insert_shards(
+    tx: &mut SqliteConnection,
+    job: &JobId,
+    shards: &[ShardPlan],
+) -> StoreResult<()> {
+    for plan in shards {
+        let insert = sqlx::query(
+            "INSERT INTO shards (job_id, batch, grp, status, operations_total) VALUES (?1, ?2, ?3, 'queued', ?4)",
+        );
+        bind_shard(insert, job, plan).execute(&mut *tx).await?;
+    }
+    Ok(())
+}
+
+/// Sets the job's progress to the sum over its shards.
+async fn sum_progress(tx: &mut SqliteConnection, job: &JobId) -> StoreResult<()> {
+    sqlx::query(
+        "UPDATE jobs SET operations_done = (SELECT COALESCE(SUM(operations_done), 0) FROM shards WHERE job_id = ?1), \
+         operations_total = MAX(operations_total, (SELECT COALESCE(SUM(operations_total), 0) FROM shards WHERE job_id = ?1)) \
+         WHERE id = ?1",
+    )
+    .bind(job.as_str())
+    .execute(&mut *tx)
+    .await?;
+    Ok(())
 }
 
 async fn select_job<'e, E>(executor: E, owner: &Owner, id: &JobId) -> StoreResult<JobRecord>
@@ -111,27 +184,71 @@ where
     Ok(job_from_row(&row)?)
 }
 
-/// A write of one claim: only while its attempt still holds the running job.
-fn fenced<'q>(sql: &'static str, fence: &Fence) -> Query<'q, Sqlite, SqliteArguments> {
-    sqlx::query(sql)
-        .bind(fence.job.as_str())
-        .bind(fence.attempt.0)
+/// The condition of a write of one claim: only while its attempt still holds the running shard of
+/// a running job. The fence is parameters 1 to 4.
+macro_rules! fenced_shard {
+    () => {
+        "job_id = ?1 AND batch = ?2 AND grp = ?3 AND attempt = ?4 AND status = 'running' \
+         AND (SELECT status FROM jobs WHERE id = ?1) = 'running'"
+    };
 }
 
-/// Fails every running job whose lease expired once more than `retries` allow, with the reason.
-async fn give_up_on_exhausted<'e, E>(executor: E, now: UnixMs, retries: u64) -> StoreResult<()>
-where
-    E: sqlx::Executor<'e, Database = Sqlite>,
-{
+fn fenced<'q>(sql: &'static str, fence: &Fence) -> Query<'q, Sqlite, SqliteArguments> {
+    bind_fence(sqlx::query(sql), fence)
+}
+
+/// Marks the claim's shard done, if the claim still holds it.
+async fn finish_shard(tx: &mut SqliteConnection, fence: &Fence) -> StoreResult<bool> {
+    let updated = fenced(
+        concat!(
+            "UPDATE shards SET status = 'done', lease_owner = NULL, lease_until = NULL WHERE ",
+            fenced_shard!()
+        ),
+        fence,
+    )
+    .execute(&mut *tx)
+    .await?;
+    Ok(updated.rows_affected() == 1)
+}
+
+/// Ends a job that has not ended yet as failed, with the reason.
+async fn end_job(
+    tx: &mut SqliteConnection,
+    job: &JobId,
+    now: UnixMs,
+    error: &str,
+) -> StoreResult<()> {
     sqlx::query(
-        "UPDATE jobs SET status = 'failed', finished_at = ?1, error = ?3, lease_owner = NULL, lease_until = NULL \
-         WHERE status = 'running' AND lease_until < ?1 AND lost_leases >= ?2",
+        "UPDATE jobs SET status = 'failed', finished_at = ?2, error = ?3 WHERE id = ?1 AND status IN ('queued', 'running')",
+    )
+    .bind(job.as_str())
+    .bind(now.0)
+    .bind(error)
+    .execute(&mut *tx)
+    .await?;
+    Ok(())
+}
+
+/// Fails every job one of whose shards lost its lease once more than `retries` allow, with the
+/// reason.
+async fn give_up_on_exhausted(
+    tx: &mut SqliteConnection,
+    now: UnixMs,
+    retries: u64,
+) -> StoreResult<()> {
+    let exhausted = sqlx::query(
+        "SELECT s.job_id, s.batch, s.grp FROM shards s JOIN jobs j ON j.id = s.job_id \
+         WHERE s.status = 'running' AND s.lease_until < ?1 AND s.failures >= ?2 AND j.status IN ('queued', 'running')",
     )
     .bind(now.0)
     .bind(count_to_sql(retries))
-    .bind(gave_up(retries))
-    .execute(executor)
+    .fetch_all(&mut *tx)
     .await?;
+    for row in exhausted {
+        let job = JobId::from(row.try_get::<String, _>("job_id")?);
+        let reason = gave_up(retries, shard_id_from_row(&row)?);
+        end_job(tx, &job, now, &reason).await?;
+    }
     Ok(())
 }
 
@@ -139,13 +256,14 @@ where
 impl JobQueue for SqliteStore {
     #[tracing::instrument(skip_all, fields(job = %job.id))]
     async fn insert_job(&self, job: QueuedJob, max_queued: u64) -> StoreResult<Option<JobRecord>> {
-        if !insert_queued(&self.writer, &job, max_queued).await? {
+        let mut tx = self.writer.begin().await?;
+        if !insert_queued(&mut tx, &job, max_queued).await? {
+            tx.rollback().await?;
             return Ok(None);
         }
-        // Read back through the writer: a reader may not see the commit yet.
-        select_job(&self.writer, &job.owner, &job.id)
-            .await
-            .map(Some)
+        let record = select_job(&mut *tx, &job.owner, &job.id).await?;
+        tx.commit().await?;
+        Ok(Some(record))
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]
@@ -171,7 +289,7 @@ impl JobQueue for SqliteStore {
     #[tracing::instrument(skip_all, fields(job = %id))]
     async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord> {
         let row = sqlx::query(concat!(
-            "UPDATE jobs SET status = 'cancelled', finished_at = ?3, lease_owner = NULL, lease_until = NULL \
+            "UPDATE jobs SET status = 'cancelled', finished_at = ?3 \
              WHERE id = ?1 AND owner = ?2 AND status IN ('queued', 'running') RETURNING ",
             job_columns!()
         ))
@@ -197,91 +315,202 @@ impl JobQueue for SqliteStore {
         terms: LeaseTerms,
         retries: u64,
     ) -> StoreResult<Option<Claim>> {
-        give_up_on_exhausted(&self.writer, terms.now, retries).await?;
-        let row = sqlx::query(
-            "UPDATE jobs SET status = 'running', attempt = attempt + 1, lease_owner = ?1, lease_until = ?2 + ?3, \
-             operations_done = 0, started_at = COALESCE(started_at, ?2), lost_leases = lost_leases + (status = 'running') \
-             WHERE seq = (SELECT seq FROM jobs WHERE status = 'queued' \
-                          OR (status = 'running' AND lease_until < ?2 AND lost_leases < ?4) ORDER BY seq LIMIT 1) \
-             RETURNING id, spec, attempt, operations_total",
+        let mut tx = self.writer.begin().await?;
+        give_up_on_exhausted(&mut tx, terms.now, retries).await?;
+        let claimed = sqlx::query(
+            "UPDATE shards SET status = 'running', attempt = attempt + 1, lease_owner = ?1, lease_until = ?2 + ?3, \
+             operations_done = 0, failures = failures + (status = 'running') \
+             WHERE rowid = (SELECT s.rowid FROM shards s JOIN jobs j ON j.id = s.job_id \
+                            WHERE j.status IN ('queued', 'running') \
+                            AND (s.status = 'queued' OR (s.status = 'running' AND s.lease_until < ?2)) \
+                            AND (s.grp >= 0 OR NOT EXISTS (SELECT 1 FROM shards o WHERE o.job_id = s.job_id \
+                                 AND o.batch = s.batch AND o.grp >= 0 AND o.status <> 'done')) \
+                            ORDER BY j.seq, s.batch, s.grp LIMIT 1) \
+             RETURNING job_id, batch, grp, attempt, operations_total",
         )
         .bind(worker)
         .bind(terms.now.0)
         .bind(terms.duration_ms)
-        .bind(count_to_sql(retries))
-        .fetch_optional(&self.writer)
+        .fetch_optional(&mut *tx)
         .await?;
-        row.as_ref().map(claim_from_row).transpose()
+        let Some(claimed) = claimed else {
+            tx.commit().await?;
+            return Ok(None);
+        };
+        let job = JobId::from(claimed.try_get::<String, _>("job_id")?);
+        sqlx::query(
+            "UPDATE jobs SET status = 'running', started_at = COALESCE(started_at, ?2) WHERE id = ?1 AND status = 'queued'",
+        )
+        .bind(job.as_str())
+        .bind(terms.now.0)
+        .execute(&mut *tx)
+        .await?;
+        sum_progress(&mut tx, &job).await?;
+        let row = sqlx::query(
+            "SELECT s.job_id, s.batch, s.grp, s.attempt, s.operations_total, j.spec, j.started_at \
+             FROM shards s JOIN jobs j ON j.id = s.job_id WHERE s.job_id = ?1 AND s.batch = ?2 AND s.grp = ?3",
+        )
+        .bind(job.as_str())
+        .bind(claimed.try_get::<i64, _>("batch")?)
+        .bind(claimed.try_get::<i64, _>("grp")?)
+        .fetch_one(&mut *tx)
+        .await?;
+        tx.commit().await?;
+        claim_from_row(&row).map(Some)
     }
 
-    #[tracing::instrument(skip_all, fields(job = %fence.job))]
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn heartbeat(
         &self,
         fence: &Fence,
         terms: LeaseTerms,
         operations_done: u64,
     ) -> StoreResult<Lease> {
+        let mut tx = self.writer.begin().await?;
         let updated = fenced(
-            "UPDATE jobs SET lease_until = ?3 + ?4, operations_done = ?5 \
-             WHERE id = ?1 AND attempt = ?2 AND status = 'running'",
+            concat!(
+                "UPDATE shards SET lease_until = ?5 + ?6, operations_done = ?7 WHERE ",
+                fenced_shard!()
+            ),
             fence,
         )
         .bind(terms.now.0)
         .bind(terms.duration_ms)
         .bind(count_to_sql(operations_done))
-        .execute(&self.writer)
+        .execute(&mut *tx)
         .await?;
         if updated.rows_affected() == 1 {
+            sum_progress(&mut tx, &fence.job).await?;
+            tx.commit().await?;
             return Ok(Lease::Held);
         }
         let status: Option<String> = sqlx::query_scalar("SELECT status FROM jobs WHERE id = ?1")
             .bind(fence.job.as_str())
-            .fetch_optional(&self.writer)
+            .fetch_optional(&mut *tx)
             .await?;
-        Ok(if status.as_deref() == Some("cancelled") {
-            Lease::Cancelled
-        } else {
+        tx.commit().await?;
+        Ok(if status.as_deref() == Some("running") {
             Lease::Lost
+        } else {
+            Lease::Cancelled
         })
     }
 
-    #[tracing::instrument(skip_all, fields(job = %fence.job))]
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
+    async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool> {
+        let partial = to_json("group accumulators", stats)?;
+        let mut tx = self.writer.begin().await?;
+        let updated = fenced(
+            concat!(
+                "UPDATE shards SET status = 'done', partial = ?5, operations_done = operations_total, \
+                 lease_owner = NULL, lease_until = NULL WHERE ",
+                fenced_shard!()
+            ),
+            fence,
+        )
+        .bind(partial)
+        .execute(&mut *tx)
+        .await?;
+        if updated.rows_affected() == 0 {
+            tx.rollback().await?;
+            return Ok(false);
+        }
+        sum_progress(&mut tx, &fence.job).await?;
+        tx.commit().await?;
+        Ok(true)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
+    async fn add_batch(&self, fence: &Fence, shards: &[ShardPlan]) -> StoreResult<bool> {
+        let mut tx = self.writer.begin().await?;
+        if !finish_shard(&mut tx, fence).await? {
+            tx.rollback().await?;
+            return Ok(false);
+        }
+        insert_shards(&mut tx, &fence.job, shards).await?;
+        sum_progress(&mut tx, &fence.job).await?;
+        tx.commit().await?;
+        Ok(true)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool> {
-        let updated = fenced(
-            "UPDATE jobs SET status = 'failed', finished_at = ?3, error = ?4, lease_owner = NULL, lease_until = NULL \
-             WHERE id = ?1 AND attempt = ?2 AND status = 'running'",
+        let mut tx = self.writer.begin().await?;
+        if !finish_shard(&mut tx, fence).await? {
+            tx.rollback().await?;
+            return Ok(false);
+        }
+        end_job(&mut tx, &fence.job, now, error).await?;
+        tx.commit().await?;
+        Ok(true)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
+    async fn fail_attempt(
+        &self,
+        fence: &Fence,
+        now: UnixMs,
+        error: &str,
+        retries: u64,
+    ) -> StoreResult<bool> {
+        let mut tx = self.writer.begin().await?;
+        let failures: Option<i64> = fenced(
+            concat!(
+                "UPDATE shards SET status = 'queued', failures = failures + 1, error = ?5, operations_done = 0, \
+                 lease_owner = NULL, lease_until = NULL WHERE ",
+                fenced_shard!(),
+                " RETURNING failures"
+            ),
             fence,
         )
-        .bind(now.0)
         .bind(error)
-        .execute(&self.writer)
-        .await?;
-        Ok(updated.rows_affected() == 1)
+        .fetch_optional(&mut *tx)
+        .await?
+        .map(|row| row.try_get("failures"))
+        .transpose()?;
+        let Some(failures) = failures else {
+            tx.rollback().await?;
+            return Ok(false);
+        };
+        let failures = failures.max(0) as u64;
+        if failures > retries {
+            let reason = failed_too_often(retries, fence.shard, failures, error);
+            end_job(&mut tx, &fence.job, now, &reason).await?;
+        } else {
+            sum_progress(&mut tx, &fence.job).await?;
+        }
+        tx.commit().await?;
+        Ok(true)
     }
 
-    #[tracing::instrument(skip_all, fields(job = %fence.job))]
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn release(&self, fence: &Fence) -> StoreResult<bool> {
+        let mut tx = self.writer.begin().await?;
         let updated = fenced(
-            "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 \
-             WHERE id = ?1 AND attempt = ?2 AND status = 'running'",
+            concat!(
+                "UPDATE shards SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 WHERE ",
+                fenced_shard!()
+            ),
             fence,
         )
-        .execute(&self.writer)
+        .execute(&mut *tx)
         .await?;
+        sum_progress(&mut tx, &fence.job).await?;
+        tx.commit().await?;
         Ok(updated.rows_affected() == 1)
     }
 
-    #[tracing::instrument(skip_all)]
-    async fn reclaim_expired(&self, now: UnixMs, retries: u64) -> StoreResult<u64> {
-        give_up_on_exhausted(&self.writer, now, retries).await?;
-        let updated = sqlx::query(
-            "UPDATE jobs SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0, \
-             lost_leases = lost_leases + 1 WHERE status = 'running' AND lease_until < ?1",
-        )
-        .bind(now.0)
-        .execute(&self.writer)
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn shards(&self, id: &JobId) -> StoreResult<Vec<ShardRecord>> {
+        let rows = sqlx::query(concat!(
+            "SELECT ",
+            shard_columns!(),
+            " FROM shards WHERE job_id = ?1 ORDER BY batch, grp < 0, grp"
+        ))
+        .bind(id.as_str())
+        .fetch_all(&self.readers)
         .await?;
-        Ok(updated.rows_affected())
+        Ok(rows.iter().map(shard_from_row).collect::<Result<_, _>>()?)
     }
 
     #[tracing::instrument(skip_all)]
@@ -317,18 +546,21 @@ impl Results for SqliteStore {
     ) -> StoreResult<bool> {
         let text = to_json("result", result)?;
         let mut tx = self.writer.begin().await?;
-        let updated = fenced(
-            "UPDATE jobs SET status = 'succeeded', finished_at = ?3, operations_done = operations_total, \
-             lease_owner = NULL, lease_until = NULL WHERE id = ?1 AND attempt = ?2 AND status = 'running'",
-            fence,
-        )
-        .bind(finished_at.0)
-        .execute(&mut *tx)
-        .await?;
-        if updated.rows_affected() == 0 {
+        if !finish_shard(&mut tx, fence).await? {
             tx.rollback().await?;
             return Ok(false);
         }
+        sqlx::query(
+            "UPDATE jobs SET status = 'succeeded', finished_at = ?2, operations_done = operations_total WHERE id = ?1",
+        )
+        .bind(fence.job.as_str())
+        .bind(finished_at.0)
+        .execute(&mut *tx)
+        .await?;
+        sqlx::query("UPDATE shards SET partial = NULL WHERE job_id = ?1")
+            .bind(fence.job.as_str())
+            .execute(&mut *tx)
+            .await?;
         sqlx::query("INSERT INTO results (job_id, result) VALUES (?1, ?2)")
             .bind(fence.job.as_str())
             .bind(text)
@@ -353,6 +585,17 @@ impl Results for SqliteStore {
         }
         tx.commit().await?;
         Ok(true)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn partials(&self, id: &JobId) -> StoreResult<Vec<(ShardId, GroupStats)>> {
+        let rows = sqlx::query(
+            "SELECT batch, grp, partial FROM shards WHERE job_id = ?1 AND grp >= 0 AND status = 'done' AND partial IS NOT NULL ORDER BY batch, grp",
+        )
+        .bind(id.as_str())
+        .fetch_all(&self.readers)
+        .await?;
+        rows.iter().map(partial_from_row).collect()
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]
@@ -505,7 +748,7 @@ impl Schedules for SqliteStore {
             tx.rollback().await?;
             return Ok(NewRun::AlreadyExists);
         }
-        if !insert_queued(&mut *tx, &job, max_queued).await? {
+        if !insert_queued(&mut tx, &job, max_queued).await? {
             tx.rollback().await?;
             return Ok(NewRun::QueueFull);
         }

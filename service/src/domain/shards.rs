@@ -1,0 +1,172 @@
+//! How a job is cut for many workers: each batch of devices into its groups (the engine's unit of
+//! independent work, at most 32), plus one merge step per batch. Any worker on any machine runs any
+//! group, alone, under its own lease; the merge step, claimable once the batch's groups are done,
+//! puts their accumulators back in group order and either stores the Result or, for a precision
+//! target not yet met, adds the next batch. Results are bit-identical to running the job whole.
+
+use bouncewear_model::montecarlo::engine::{Batch, GroupStats};
+use bouncewear_model::montecarlo::{Job, JobResult, Tally, next_batch, summarize_job};
+use serde::Serialize;
+use std::fmt;
+use utoipa::ToSchema;
+
+/// One shard of a job: a group of a batch, or that batch's merge step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, ToSchema)]
+pub struct ShardId {
+    pub batch: u64,
+    /// The group within the batch; `None` for the batch's merge step.
+    pub group: Option<u64>,
+}
+
+impl ShardId {
+    pub fn group(batch: u64, group: u64) -> Self {
+        Self {
+            batch,
+            group: Some(group),
+        }
+    }
+
+    pub fn merge(batch: u64) -> Self {
+        Self { batch, group: None }
+    }
+}
+
+impl fmt::Display for ShardId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.group {
+            Some(group) => write!(f, "batch {} group {group}", self.batch),
+            None => write!(f, "batch {} merge", self.batch),
+        }
+    }
+}
+
+/// A shard to be queued, with the operations it runs (none for a merge step).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ShardPlan {
+    pub shard: ShardId,
+    pub operations: u64,
+}
+
+/// The shards of one batch: its groups in order, then its merge step.
+pub fn batch_shards(job: &Job, batch: Batch) -> Vec<ShardPlan> {
+    let operations = job.spec().operations;
+    (0..batch.groups())
+        .map(|group| {
+            let devices = batch.group_devices(group);
+            ShardPlan {
+                shard: ShardId::group(batch.index, group),
+                operations: (devices.end - devices.start).saturating_mul(operations),
+            }
+        })
+        .chain([ShardPlan {
+            shard: ShardId::merge(batch.index),
+            operations: 0,
+        }])
+        .collect()
+}
+
+/// The shards a job enters the queue with: those of its first batch.
+pub fn first_shards(job: &Job) -> Vec<ShardPlan> {
+    let first = Batch::of(job, 0).expect("a valid job runs at least one device");
+    batch_shards(job, first)
+}
+
+/// What a batch's merge step leads to.
+#[derive(Debug)]
+pub enum Merged {
+    /// The job is done: its Result.
+    Result(Box<JobResult>),
+    /// A precision target is not met yet: the next batch's shards, to queue.
+    Next(Vec<ShardPlan>),
+}
+
+/// Stored accumulators that do not make up the batches they should.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("the stored groups of batch {batch} do not make it up: {detail}")]
+pub struct Incomplete {
+    pub batch: u64,
+    pub detail: String,
+}
+
+/// The merge step of batch `last`: puts every done group of batches `0..=last` back in batch and
+/// group order (`partials` as the store lists them) and decides as [`run_job`] does after that
+/// batch: the Result, after `wall_s` seconds of running, or the next batch.
+///
+/// [`run_job`]: bouncewear_model::montecarlo::run_job
+pub fn merge(
+    job: &Job,
+    last: u64,
+    partials: Vec<(ShardId, GroupStats)>,
+    wall_s: f64,
+) -> Result<Merged, Incomplete> {
+    let mut tally = Tally::new();
+    let mut partials = partials.into_iter().peekable();
+    for index in 0..=last {
+        let incomplete = |detail: String| Incomplete {
+            batch: index,
+            detail,
+        };
+        let batch = Batch::of(job, index)
+            .ok_or_else(|| incomplete("the job runs no such batch".to_owned()))?;
+        let mut groups = Vec::new();
+        while let Some((shard, stats)) = partials.next_if(|(shard, _)| shard.batch == index) {
+            let expected = ShardId::group(index, groups.len() as u64);
+            if shard != expected {
+                return Err(incomplete(format!(
+                    "found {shard} where {expected} belongs"
+                )));
+            }
+            groups.push(stats);
+        }
+        if groups.len() as u64 != batch.groups() {
+            return Err(incomplete(format!(
+                "{} of its {} groups are stored",
+                groups.len(),
+                batch.groups()
+            )));
+        }
+        tally.add_batch(batch, groups);
+    }
+    if let Some((shard, _)) = partials.peek() {
+        return Err(Incomplete {
+            batch: shard.batch,
+            detail: format!("{shard} is stored after batch {last}'s merge"),
+        });
+    }
+    Ok(match next_batch(job, &tally) {
+        Some(batch) => Merged::Next(batch_shards(job, batch)),
+        None => Merged::Result(Box::new(summarize_job(job, &tally, wall_s))),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_batch_is_its_groups_and_a_merge_and_the_groups_share_its_operations() {
+        let job = Job::from_json(r#"{"devices": 70, "operations": 3}"#, || 1).unwrap();
+        let shards = first_shards(&job);
+        assert_eq!(shards.len(), 33);
+        assert_eq!(shards[32].shard, ShardId::merge(0));
+        assert_eq!(shards.iter().map(|s| s.operations).sum::<u64>(), 210);
+        assert!(shards[..32].iter().all(|s| [6, 9].contains(&s.operations)));
+    }
+
+    #[test]
+    fn fewer_devices_than_groups_make_one_group_per_device() {
+        let job = Job::from_json(r#"{"devices": 2, "operations": 5}"#, || 1).unwrap();
+        let groups: Vec<_> = first_shards(&job)
+            .iter()
+            .map(|s| (s.shard.to_string(), s.operations))
+            .collect();
+        assert_eq!(
+            groups,
+            [
+                ("batch 0 group 0".to_owned(), 5),
+                ("batch 0 group 1".to_owned(), 5),
+                ("batch 0 merge".to_owned(), 0)
+            ]
+        );
+    }
+}
