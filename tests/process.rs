@@ -90,7 +90,7 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
     let database = temp_db("worker");
     let server = Spawned::start(&database, &["--workers", "0"]);
     let mut worker = Command::new(BIN)
-        .args(["worker", "--database"])
+        .args(["worker", "--workers", "2", "--database"])
         .arg(format!("sqlite://{}", database.display()))
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped())
@@ -102,7 +102,7 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
         .read_line(&mut line)
         .unwrap();
     assert!(
-        line.starts_with("bouncewear worker running 1 job(s)"),
+        line.starts_with("bouncewear worker running 2 shard(s) at a time"),
         "{line}"
     );
     let job = json!({"devices": 50, "operations": 40, "seed": 8});
