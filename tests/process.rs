@@ -7,9 +7,10 @@ mod support;
 use serde_json::json;
 use std::process::Command;
 use std::time::{Duration, Instant};
-use support::app::{Service, Spawned};
+use support::app::{Service, Spawned, WorkerProcess};
 use support::client::{delete, get};
-use support::{BIN, run_job, scattered_job, temp_db};
+use support::postgres::Postgres;
+use support::{BIN, run_job, scattered_job, temp_db, temp_dir};
 
 #[test]
 fn a_job_killed_mid_run_finishes_after_restart_with_the_identical_result() {
@@ -134,5 +135,118 @@ fn a_worker_needs_at_least_one_slot_and_a_known_database_scheme() {
             stderr.contains(message) && !stderr.contains("secret"),
             "{args:?}: {stderr}"
         );
+    }
+}
+
+/// The shards of a job, as `GET /v1/jobs/{id}/shards` lists them.
+fn shards(server: &impl Service, id: &str) -> Vec<serde_json::Value> {
+    let reply = get(&server.url(&format!("/v1/jobs/{id}/shards")), None).json();
+    reply["shards"].as_array().unwrap().clone()
+}
+
+/// The process id in a shard's worker name (`PID-INSTANCE/SLOT`).
+fn worker_pid(shard: &serde_json::Value) -> Option<u32> {
+    shard["worker"].as_str()?.split('-').next()?.parse().ok()
+}
+
+/// The Result's `operations` and `devices`, as the bytes a client receives.
+fn numbers(result: &serde_json::Value) -> (String, String) {
+    (
+        result["operations"].to_string(),
+        result["devices"].to_string(),
+    )
+}
+
+#[test]
+fn three_worker_processes_on_postgres_survive_kill_9_and_give_the_bits_of_one_machine() {
+    let Some(cluster) = Postgres::start(&temp_dir("process-shards")) else {
+        return;
+    };
+    // 32 groups of 10 devices x 60,000 operations: a few tenths of a second each.
+    let job = scattered_job(320, 60_000, 77);
+    let local = numbers(&run_job(&job, &[]));
+
+    // One worker on SQLite and one on PostgreSQL, side by side.
+    let single: Vec<(Spawned, String)> = [
+        format!("sqlite://{}", temp_db("shards-sqlite").display()),
+        cluster.database("single"),
+    ]
+    .iter()
+    .map(|url| {
+        let server = Spawned::on(url, &["--workers", "1"]);
+        let id = server.submit(&job);
+        (server, id)
+    })
+    .collect();
+    for (server, id) in &single {
+        server.wait_for(id, "succeeded", Duration::from_secs(120));
+        let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
+        assert_eq!(numbers(&result), local, "one worker, to the bit");
+    }
+    drop(single);
+
+    // An API-only node and three worker processes, one shard at a time each; kill -9 a worker
+    // mid-shard, twice, starting a new one each time.
+    let url = cluster.database("sharded");
+    let api = Spawned::on(&url, &["--workers", "0"]);
+    let worker_args = [
+        "--workers",
+        "1",
+        "--compute-threads",
+        "1",
+        "--lease-seconds",
+        "2",
+    ];
+    let mut workers: Vec<WorkerProcess> = (0..3)
+        .map(|_| WorkerProcess::start(&url, &worker_args))
+        .collect();
+    let id = api.submit(&job);
+    let mut killed = Vec::new();
+    let started = Instant::now();
+    while killed.len() < 2 {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "no shard ever ran"
+        );
+        let running = shards(&api, &id).into_iter().find_map(|shard| {
+            let pid = worker_pid(&shard).filter(|_| shard["status"] == "running")?;
+            let index = workers.iter().position(|w| w.child.id() == pid)?;
+            shard["group"].is_u64().then_some((index, shard))
+        });
+        let Some((index, shard)) = running else {
+            std::thread::sleep(Duration::from_millis(20));
+            continue;
+        };
+        workers.swap_remove(index).kill();
+        killed.push((shard["batch"].clone(), shard["group"].clone()));
+        workers.push(WorkerProcess::start(&url, &worker_args));
+        std::thread::sleep(Duration::from_millis(300));
+    }
+    api.wait_for(&id, "succeeded", Duration::from_secs(180));
+    let result = get(&api.url(&format!("/v1/jobs/{id}/result")), None).json();
+    assert_eq!(
+        numbers(&result),
+        local,
+        "three workers and two kills, to the bit"
+    );
+
+    // Only the killed shards ran again; every other shard ran once.
+    let shards = shards(&api, &id);
+    assert_eq!(shards.len(), 33, "32 groups and the merge");
+    let rerun: Vec<_> = shards
+        .iter()
+        .filter(|s| s["attempt"].as_u64().unwrap() > 1)
+        .map(|s| (s["batch"].clone(), s["group"].clone()))
+        .collect();
+    assert!(!rerun.is_empty(), "a killed shard reran: {shards:#?}");
+    for shard in &rerun {
+        assert!(
+            killed.contains(shard),
+            "{shard:?} reran but was never killed ({killed:?}): {shards:#?}"
+        );
+    }
+    for shard in &shards {
+        assert_eq!(shard["status"], "done");
+        assert!(shard["attempt"].as_u64().unwrap() <= 2, "{shard}");
     }
 }

@@ -19,7 +19,7 @@ use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Observer, Watch};
 use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use tokio::sync::{Notify, broadcast, oneshot, watch};
 use tokio::task::JoinHandle;
 
@@ -92,12 +92,16 @@ impl Workers {
     async fn work(&self, slot: usize, mut shutdown: watch::Receiver<bool>) {
         let worker = format!("{}/{slot}", self.instance);
         while !*shutdown.borrow() {
+            let claiming = Instant::now();
             match self
                 .store
                 .claim(&worker, self.lease_terms(), self.retries)
                 .await
             {
-                Ok(Some(claim)) => self.run(claim, &mut shutdown).await,
+                Ok(Some(claim)) => {
+                    step_seconds("claim", claiming);
+                    self.run(claim, &mut shutdown).await
+                }
                 Ok(None) => {
                     tokio::select! {
                         () = self.wake.notified() => {}
@@ -144,13 +148,17 @@ impl Workers {
         let devices = batch.group_devices(group);
         let operations = (devices.end - devices.start) * job.spec().operations;
         tracing::debug!(operations, "group started");
+        let running = Instant::now();
         let ran = self
             .under_lease(fence, shutdown, move |observer| {
                 run_group(&job, batch, group, observer)
             })
             .await;
         let stats = match ran {
-            Ran::Done(stats) => stats,
+            Ran::Done(stats) => {
+                step_seconds("run", running);
+                stats
+            }
             Ran::Stopped { shutdown } => return self.stopped(fence, shutdown).await,
             Ran::Panicked => {
                 return self
@@ -158,8 +166,10 @@ impl Workers {
                     .await;
             }
         };
+        let storing = Instant::now();
         match self.store.complete(fence, &stats).await {
             Ok(true) => {
+                step_seconds("store", storing);
                 metrics::counter!("bouncewear_operations_simulated_total").increment(operations);
                 tracing::debug!("group done");
             }
@@ -180,6 +190,7 @@ impl Workers {
         started_at: UnixMs,
         shutdown: &mut watch::Receiver<bool>,
     ) {
+        let merging = Instant::now();
         let partials = match self.store.partials(&fence.job).await {
             Ok(partials) => partials,
             Err(error) => {
@@ -195,7 +206,10 @@ impl Workers {
             })
             .await;
         match ran {
-            Ran::Done(Ok(Merged::Result(result))) => self.succeed(fence, &result).await,
+            Ran::Done(Ok(Merged::Result(result))) => {
+                self.succeed(fence, &result).await;
+                step_seconds("merge", merging);
+            }
             Ran::Done(Ok(Merged::Next(shards))) => match self.store.add_batch(fence, &shards).await
             {
                 Ok(true) => tracing::info!(
@@ -327,6 +341,14 @@ impl Workers {
             }
         }
     }
+}
+
+/// Records how long one step of a shard's life took: `claim` (finding and leasing it), `run` (a
+/// group's simulation), `store` (writing its accumulators), `merge` (reading every group's back,
+/// merging, summarising and storing the Result). What sharding costs is all but `run`.
+fn step_seconds(step: &'static str, since: Instant) {
+    metrics::histogram!("bouncewear_shard_step_seconds", "step" => step)
+        .record(since.elapsed().as_secs_f64());
 }
 
 /// Wakes idle workers when the database announces a queued job (from any instance), so that a

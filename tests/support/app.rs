@@ -55,10 +55,13 @@ pub trait Service {
             if job["status"] == status {
                 return job;
             }
+            let ended = ["succeeded", "failed", "cancelled"]
+                .contains(&job["status"].as_str().unwrap_or(""));
             assert!(
-                started.elapsed() < timeout,
-                "job {id} is {} after {timeout:?}",
-                job["status"]
+                !ended && started.elapsed() < timeout,
+                "job {id} is {} after {:?}, waiting for {status}: {job}",
+                job["status"],
+                started.elapsed()
             );
             std::thread::sleep(Duration::from_millis(50));
         }
@@ -150,9 +153,13 @@ pub struct Spawned {
 
 impl Spawned {
     pub fn start(database: &Path, args: &[&str]) -> Self {
-        let url = format!("sqlite://{}", database.display());
+        Self::on(&format!("sqlite://{}", database.display()), args)
+    }
+
+    /// A server on the database `url` names (SQLite or PostgreSQL).
+    pub fn on(url: &str, args: &[&str]) -> Self {
         let mut child = Command::new(BIN)
-            .args(["serve", "--bind", "127.0.0.1:0", "--database", &url])
+            .args(["serve", "--bind", "127.0.0.1:0", "--database", url])
             .args(args)
             .env("RUST_LOG", "warn")
             .stdout(Stdio::piped())
@@ -177,6 +184,44 @@ impl Spawned {
     pub fn kill(mut self) {
         self.child.kill().unwrap();
         self.child.wait().unwrap();
+    }
+}
+
+/// `bouncewear worker` as a child process, running its shards; killed when dropped.
+pub struct WorkerProcess {
+    pub child: Child,
+}
+
+impl WorkerProcess {
+    /// Starts a worker on the database `url` names and waits until it runs.
+    pub fn start(url: &str, args: &[&str]) -> Self {
+        let mut child = Command::new(BIN)
+            .args(["worker", "--database", url])
+            .args(args)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("worker starts");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        assert!(line.starts_with("bouncewear worker running"), "{line}");
+        Self { child }
+    }
+
+    /// SIGKILL, mid-shard or not: no shutdown handler runs.
+    pub fn kill(mut self) {
+        self.child.kill().unwrap();
+        self.child.wait().unwrap();
+    }
+}
+
+impl Drop for WorkerProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
     }
 }
 

@@ -6,7 +6,7 @@ use super::error::{
 };
 use super::{AppState, JsonText};
 use crate::domain::{JobId, JobStatus, Owner, QueuedJob, UnixMs, draw_seed};
-use crate::store::{JobRecord, Operations, Page, QueueEvent};
+use crate::store::{JobRecord, Operations, Page, QueueEvent, ShardRecord};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::{HeaderValue, StatusCode, header};
@@ -30,6 +30,7 @@ pub fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
         .routes(routes!(submit_job, list_jobs))
         .routes(routes!(get_job, cancel_job))
+        .routes(routes!(get_shards))
         .routes(routes!(get_result))
         .routes(routes!(get_distribution))
         .routes(routes!(job_events))
@@ -223,6 +224,77 @@ pub async fn get_job(
 ) -> Result<Json<JobResource>, ApiError> {
     let record = state.store.job(&owner, &id).await?;
     Ok(Json(JobResource::from_record(&record)))
+}
+
+/// One shard of a job: a group of devices of one batch (or the batch's merge step), as workers
+/// claim it.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ShardResource {
+    /// Batch of devices (0 unless a precision target added batches).
+    pub batch: u64,
+    /// Group within the batch; absent for the batch's merge step.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub group: Option<u64>,
+    /// `queued`, `running` or `done`.
+    pub status: String,
+    /// Times it was claimed: 1 if it ran once; more after a worker died, stalled or failed.
+    pub attempt: i64,
+    /// Runs that failed or lost their lease.
+    pub failures: u64,
+    /// The worker holding or last holding it (`PID-INSTANCE/SLOT`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub worker: Option<String>,
+    pub operations_done: u64,
+    pub operations_total: u64,
+    /// Why its last run failed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+impl ShardResource {
+    fn from_record(record: ShardRecord) -> Self {
+        Self {
+            batch: record.shard.batch,
+            group: record.shard.group,
+            status: record.status,
+            attempt: record.attempt.0,
+            failures: record.failures,
+            worker: record.worker,
+            operations_done: record.operations_done,
+            operations_total: record.operations_total,
+            error: record.error,
+        }
+    }
+}
+
+/// A job's shards.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ShardList {
+    /// In batch order; in each batch its groups, then its merge step.
+    pub shards: Vec<ShardResource>,
+}
+
+/// The shards a job runs as, on any worker of any machine: where each stands and how often it
+/// ran. An operator's view: a shard with more than one attempt was rerun.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/shards", tag = "jobs", params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The job's shards", body = ShardList),
+        Unauthorized,
+        NoSuchJob,
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn get_shards(
+    State(state): State<AppState>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<JobId>,
+) -> Result<Json<ShardList>, ApiError> {
+    state.store.job(&owner, &id).await?;
+    let shards = state.store.shards(&id).await?;
+    Ok(Json(ShardList {
+        shards: shards.into_iter().map(ShardResource::from_record).collect(),
+    }))
 }
 
 /// Cancel a queued or running job.

@@ -1,0 +1,187 @@
+#!/usr/bin/env python3
+"""Scale-out benchmark (not a test): one 10^7-operation job on PostgreSQL run by 1, 2 and 4 worker
+processes, and what sharding costs per shard.
+
+    cargo build --release
+    python3 tools/scaleout_bench.py [--bin target/release/bouncewear] [--database postgres://...]
+
+Without --database it starts a throwaway PostgreSQL cluster (Debian's `postgresql`: initdb and
+pg_ctl in a temporary directory, as the `postgres` user when run as root) and removes it after.
+
+Each worker process runs one shard at a time on one compute thread (`worker --workers 1
+--compute-threads 1`), so N processes use N cores: on a 2-core machine expect a plateau at 2.
+Throughput is operations over the wall time from submission to the stored Result, seen by polling
+the API every 20 ms. The per-shard overhead comes from the workers' own clocks, the
+`bouncewear_shard_step_seconds` histogram of a `serve --workers 1` node running the same job:
+`claim` (finding and leasing a shard), `store` (writing a group's accumulators in the transaction
+that counts it done) and `merge` (reading every group back, merging in order, summarising and
+storing the Result), beside `run` (the simulation itself).
+"""
+
+import argparse
+import json
+import os
+import re
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+
+JOB = {
+    "name": "scale-out benchmark",
+    "devices": 1000,
+    "operations": 10000,
+    "seed": 2026,
+    "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+    "scatter": [
+        {"parameter": "contact_radius_m", "per": "device",
+         "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 0.8e-3, "min": 1e-3}},
+        {"parameter": "impact_velocity_m_s", "per": "operation",
+         "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.05}},
+    ],
+}
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def postgres_bin():
+    for root in sorted(os.listdir("/usr/lib/postgresql"), reverse=True) if os.path.isdir("/usr/lib/postgresql") else []:
+        path = os.path.join("/usr/lib/postgresql", root, "bin")
+        if os.path.isfile(os.path.join(path, "initdb")):
+            return path
+    found = shutil.which("initdb")
+    return os.path.dirname(found) if found else None
+
+
+class Cluster:
+    """A throwaway PostgreSQL cluster."""
+
+    def __init__(self):
+        self.bin = postgres_bin()
+        if not self.bin:
+            sys.exit("no PostgreSQL: install Debian's postgresql or pass --database")
+        self.dir = tempfile.mkdtemp(prefix="bouncewear-scaleout-")
+        self.root = os.geteuid() == 0
+        if self.root:
+            subprocess.run(["chown", "-R", "postgres:postgres", self.dir], check=True)
+        self.port = free_port()
+        data = os.path.join(self.dir, "data")
+        self.run("initdb", "-D", data, "-U", "postgres", "-A", "trust", "-E", "UTF8", "--no-sync")
+        options = f"-p {self.port} -k {self.dir} -c listen_addresses=127.0.0.1"
+        self.run("pg_ctl", "-D", data, "-l", os.path.join(self.dir, "server.log"), "-o", options, "-w", "start")
+        self.data = data
+
+    def run(self, tool, *args):
+        command = [os.path.join(self.bin, tool), *args]
+        if self.root:
+            command = ["runuser", "-u", "postgres", "--", *command]
+        subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+
+    def database(self, name):
+        self.run("psql", "-h", "127.0.0.1", "-p", str(self.port), "-U", "postgres", "-c", f'CREATE DATABASE "{name}"')
+        return f"postgres://postgres@127.0.0.1:{self.port}/{name}"
+
+    def stop(self):
+        self.run("pg_ctl", "-D", self.data, "-m", "immediate", "stop")
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+def start(binary, args, first_line):
+    process = subprocess.Popen([binary, *args], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                               env={**os.environ, "RUST_LOG": "warn"}, text=True)
+    line = process.stdout.readline()
+    assert line.startswith(first_line), line
+    return process, line
+
+
+def serve(binary, database, workers):
+    process, line = start(binary, ["serve", "--bind", "127.0.0.1:0", "--database", database,
+                                   "--workers", str(workers), "--compute-threads", "1"], "bouncewear listening")
+    return process, line.strip().rsplit(" ", 1)[-1]
+
+
+def call(url, body=None):
+    data = json.dumps(body).encode() if body is not None else None
+    request = urllib.request.Request(url, data=data, headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(request) as reply:
+        text = reply.read().decode()
+        return json.loads(text) if reply.headers.get_content_type().endswith("json") else text
+
+
+def run_job(base, job):
+    """Submits `job` and waits for its Result: (wall seconds, Result)."""
+    started = time.perf_counter()
+    job_id = call(f"{base}/v1/jobs", job)["id"]
+    while True:
+        status = call(f"{base}/v1/jobs/{job_id}")["status"]
+        if status == "succeeded":
+            return time.perf_counter() - started, call(f"{base}/v1/jobs/{job_id}/result"), job_id
+        if status in ("failed", "cancelled"):
+            sys.exit(f"job {job_id} {status}")
+        time.sleep(0.02)
+
+
+def step_means(metrics):
+    """Mean seconds and count per step of `bouncewear_shard_step_seconds`."""
+    sums, counts = {}, {}
+    for line in metrics.splitlines():
+        match = re.match(r'bouncewear_shard_step_seconds_(sum|count)\{step="(\w+)"\} (\S+)', line)
+        if match:
+            (sums if match[1] == "sum" else counts)[match[2]] = float(match[3])
+    return {step: (sums[step] / counts[step], int(counts[step])) for step in sums if counts.get(step)}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--bin", default="target/release/bouncewear")
+    parser.add_argument("--database", help="a PostgreSQL server's admin URL (postgres://USER@HOST:PORT)")
+    parser.add_argument("--workers", default="1,2,4")
+    args = parser.parse_args()
+    cluster = None if args.database else Cluster()
+    new_database = (lambda name: cluster.database(name)) if cluster else (lambda name: args.database)
+    operations = JOB["devices"] * JOB["operations"]
+    rows, results = [], []
+    try:
+        for count in [int(n) for n in args.workers.split(",")]:
+            database = new_database(f"scaleout_{count}")
+            api, base = serve(args.bin, database, 0)
+            workers = [start(args.bin, ["worker", "--database", database, "--workers", "1", "--compute-threads", "1"],
+                             "bouncewear worker running")[0] for _ in range(count)]
+            wall, result, _ = run_job(base, JOB)
+            results.append(json.dumps([result["operations"], result["devices"]], sort_keys=True))
+            rows.append((count, wall, operations / wall))
+            for process in [*workers, api]:
+                process.terminate()
+                process.wait()
+        node, base = serve(args.bin, new_database("scaleout_steps"), 1)
+        _, _, job_id = run_job(base, JOB)
+        steps = step_means(call(f"{base}/metrics"))
+        node.terminate()
+        node.wait()
+    finally:
+        if cluster:
+            cluster.stop()
+    print(f"one job of {operations:.0e} operations (48 V / 15 A, radius and velocity scattered), "
+          f"{os.cpu_count()} cores, PostgreSQL\n")
+    print("| worker processes | wall (s) | operations/s | speed-up |")
+    print("|---|---|---|---|")
+    for count, wall, rate in rows:
+        print(f"| {count} | {wall:.2f} | {rate / 1e6:.2f} M | {rows[0][1] / wall:.2f}x |")
+    print(f"\nResults identical for every worker count: {len(set(results)) == 1}\n")
+    print("| shard step | mean (ms) | count |")
+    print("|---|---|---|")
+    for step in ("claim", "run", "store", "merge"):
+        if step in steps:
+            mean, count = steps[step]
+            print(f"| {step} | {mean * 1e3:.2f} | {count} |")
+
+
+if __name__ == "__main__":
+    main()
