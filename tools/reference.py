@@ -21,7 +21,8 @@ DEFAULTS = {
                   "contact_arm_m": 0.03, "static_force_n": 0.344, "drop_height_m": 1e-3, "impact_velocity_m_s": None},
     "material": {"youngs_modulus_pa": 1.0e11, "dynamic_yield_pressure_pa": 2.0e8, "contact_radius_m": 7.7e-3,
                  "kappa": None, "min_arc_voltage_v": 12, "min_arc_current_a": 0.4, "breakdown_field_v_per_m": 1e8,
-                 "softening_energy_j": 6.2e-4, "arc_restitution": {"a": 0.235, "b_s_per_m": 0.371}},
+                 "softening_energy_j": 6.2e-4,
+                 "arc_restitution": {"law": "paper", "a": 0.235, "b_s_per_m": 0.371, "calibration_current_a": 15}},
     "circuit": {"supply_voltage_v": 0, "current_a": 0},
     "losses": {"impact_energy_loss_j": 1e-6, "min_separation_m": 1e-7, "max_bounces": 64},
 }
@@ -53,6 +54,13 @@ def restitution_closed(u, kappa):
 
 
 def simulate(scenario, fidelity):
+    """The `simulate` output of docs/contract.md "Scenario"."""
+    return operation(scenario, fidelity)[0]
+
+
+def operation(scenario, fidelity, radius=None, pressure=None):
+    """One operation on a surface of the given radius and pressure (the scenario's when None): the
+    `simulate` output and the first impact's plastic work (docs/model.md section 4)."""
     g = lambda section, name: field(scenario, section, name)
     m = g("mechanism", "inertia_kg_m2") / g("mechanism", "contact_arm_m") ** 2
     k = g("mechanism", "spring_stiffness_n_per_m") * g("mechanism", "spring_arm_m") ** 2 / g("mechanism", "contact_arm_m") ** 2
@@ -61,18 +69,27 @@ def simulate(scenario, fidelity):
     u = g("mechanism", "impact_velocity_m_s")
     if u is None:
         u = sqrt((k * h * h + 2 * fs * h) / m)
-    p, r, e_mod = g("material", "dynamic_yield_pressure_pa"), g("material", "contact_radius_m"), g("material", "youngs_modulus_pa")
+    p0, r0, e_mod = g("material", "dynamic_yield_pressure_pa"), g("material", "contact_radius_m"), g("material", "youngs_modulus_pa")
+    p = p0 if pressure is None else mpf(pressure)
+    r = r0 if radius is None else mpf(radius)
     kappa = g("material", "kappa")
     if kappa is None:
         kappa = mpf("2.784") * (p ** 5 * r ** 3 / (e_mod ** 4 * m)) ** (mpf(1) / 8)
+    else:
+        kappa = kappa * (r / r0) ** (mpf(3) / 8) * (p / p0) ** (mpf(5) / 8)
     vs, i0 = g("circuit", "supply_voltage_v"), g("circuit", "current_a")
     vmin, imin = g("material", "min_arc_voltage_v"), g("material", "min_arc_current_a")
     i_arc = i0 * (vs - vmin) / vs if vs > 0 else mpf(0)
     arcs = vs > vmin and i_arc >= imin and i_arc > 0
     power = vmin * i_arc if arcs else mpf(0)
-    law = scenario.get("material", {}).get("arc_restitution", {})
-    a = mpf(law.get("a", 0.235))
-    b = mpf(law.get("b_s_per_m", 0.371))
+    law = dict(DEFAULTS["material"]["arc_restitution"], **scenario.get("material", {}).get("arc_restitution", {}))
+    a, b = mpf(law["a"]), mpf(law["b_s_per_m"])
+    # docs/model.md section 5: the continuous law weights the arc's effect on restitution by
+    # w = (I_arc - I_min) / (I_arc at the calibration current - I_min), within [0, 1].
+    weight = mpf(1)
+    if law["law"] == "continuous" and arcs:
+        i_cal = mpf(law["calibration_current_a"]) * (vs - vmin) / vs
+        weight = min(mpf(1), max(mpf(0), (i_arc - imin) / (i_cal - imin)))
     eps = g("losses", "impact_energy_loss_j")
     gmin = g("losses", "min_separation_m")
     max_bounces = int(g("losses", "max_bounces"))
@@ -83,12 +100,12 @@ def simulate(scenario, fidelity):
            "bounce_count": 0, "pre_arc_s": mpf(0), "arc_energy_j": mpf(0), "peak_force_n": mpf(0),
            "impact_duration_s": mpf(0), "truncated": False, "bounces": []}
     if u == 0:
-        return out
+        return out, mpf(0)
     kappa1, p1 = kappa, p
     if arcs:
         tp = vs / g("material", "breakdown_field_v_per_m") / u
         ep = power * tp
-        p1 = p / (1 + ep / g("material", "softening_energy_j"))
+        p1 = p / (1 + weight * ep / g("material", "softening_energy_j"))
         kappa1 = kappa * (p1 / p) ** (mpf(5) / 8)
         out["pre_arc_s"], out["arc_energy_j"] = tp, ep
     e1 = e_of(u, kappa1)
@@ -98,6 +115,8 @@ def simulate(scenario, fidelity):
     wc = sqrt(kc / m)
     out["peak_force_n"] = fmax
     out["impact_duration_s"] = (pi - atan2(u * wc * m, fs)) / wc + mpf("1.8395") * m * e1 * u / fmax
+    # The work of the fully plastic loading, k_c d_max^2 / 2 with d_max = F_max / k_c.
+    plastic_work = fmax * fmax / (2 * kc)
 
     constant_force = (closed and fs > 0) or k == 0
     w = sqrt(k / m)
@@ -123,9 +142,13 @@ def simulate(scenario, fidelity):
         energy = power * duration
         out["arc_energy_j"] += energy
         out["bounces"].append({"separation_velocity_m_s": v, "duration_s": duration, "peak_gap_m": gap, "arc_energy_j": energy})
-        e = min(e_of(v, kappa1), max(mpf(0), a + b * v)) if arcs else e_of(v, kappa)
+        if arcs:
+            mechanical = e_of(v, kappa1)
+            e = (1 - weight) * mechanical + weight * min(mechanical, max(mpf(0), a + b * v))
+        else:
+            e = e_of(v, kappa)
         v = sqrt(max(mpf(0), e * e * v * v - 2 * eps / m))
-    return out
+    return out, plastic_work
 
 
 def to_json(value):

@@ -66,11 +66,24 @@ pub fn softened_kappa(kappa: f64, softening_ratio: f64) -> f64 {
 }
 
 /// Restitution of an impact after an arcing bounce (eq. 16, empirical):
-/// `e = min(e_mechanical, max(0, a + b v))`, where `e_mechanical` is eq. 7 (or 18) with the softened kappa.
+/// `e = min(e_mechanical, max(0, a + b v))`, where `e_mechanical` is eq. 7 (or 18) with the softened
+/// kappa; under the continuous law, weighted by the arc current (docs/model.md section 5).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ArcRestitution {
     pub a: f64,
     pub b_s_per_m: f64,
+    pub law: ArcRestitutionLaw,
+}
+
+/// How strongly an arc changes restitution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ArcRestitutionLaw {
+    /// Fully, whatever its current: eq. 16 as the paper fitted it at 15 A.
+    Paper,
+    /// In proportion to `w = (I_arc - I_min) / (I_cal - I_min)`, clamped to `[0, 1]`, where `I_cal`
+    /// is the arc current at the calibration current for this supply (above `I_min`: the scenario
+    /// checks it).
+    Continuous { calibration_arc_current_a: f64 },
 }
 
 impl ArcRestitution {
@@ -78,6 +91,28 @@ impl ArcRestitution {
     #[inline]
     pub fn linear(&self, impact_speed_m_s: f64) -> f64 {
         (self.a + self.b_s_per_m * impact_speed_m_s).max(0.0)
+    }
+
+    /// The weight `w` of an arc of current `I_arc`: 1 under the paper law; under the continuous law
+    /// 0 at the minimum arc current, rising linearly to 1 at the calibration current, and 1 above it.
+    pub fn weight(&self, arc_current_a: f64, min_arc_current_a: f64) -> f64 {
+        match self.law {
+            ArcRestitutionLaw::Paper => 1.0,
+            ArcRestitutionLaw::Continuous {
+                calibration_arc_current_a,
+            } => ((arc_current_a - min_arc_current_a)
+                / (calibration_arc_current_a - min_arc_current_a))
+                .clamp(0.0, 1.0),
+        }
+    }
+
+    /// Eq. 16 weighted by `w`: `e = (1 - w) e_m + w min(e_m, max(0, a + b v))`, where `e_m` is the
+    /// mechanical restitution on the softened surface. `w = 1` is eq. 16 and `w = 0` is `e_m`, both
+    /// exactly; the final `min` keeps rounding from lifting `e` above `e_m` (and so above 1).
+    #[inline]
+    pub fn weighted(&self, mechanical: f64, impact_speed_m_s: f64, weight: f64) -> f64 {
+        let eq_16 = mechanical.min(self.linear(impact_speed_m_s));
+        ((1.0 - weight) * mechanical + weight * eq_16).min(mechanical)
     }
 }
 
@@ -132,20 +167,58 @@ mod tests {
         assert!((exact - 0.66).abs() < 0.005, "eq. 7 ratio {exact}");
     }
 
+    fn paper_law(a: f64, b_s_per_m: f64) -> ArcRestitution {
+        ArcRestitution {
+            a,
+            b_s_per_m,
+            law: ArcRestitutionLaw::Paper,
+        }
+    }
+
     #[test]
     fn arc_restitution_law_is_clamped_at_zero() {
-        let law = ArcRestitution {
-            a: 0.235,
-            b_s_per_m: 0.371,
-        };
-        assert_relative_eq!(law.linear(0.1), 0.2721, max_relative = 1e-15);
-        assert_eq!(
-            ArcRestitution {
-                a: -1.0,
-                b_s_per_m: 0.1
-            }
-            .linear(0.1),
-            0.0
+        assert_relative_eq!(
+            paper_law(0.235, 0.371).linear(0.1),
+            0.2721,
+            max_relative = 1e-15
         );
+        assert_eq!(paper_law(-1.0, 0.1).linear(0.1), 0.0);
+    }
+
+    #[test]
+    fn the_continuous_weight_rises_from_the_minimum_arc_current_to_the_calibration_current() {
+        // 48 V: the calibration current 15 A arcs at 11.25 A; I_min = 0.4 A.
+        let law = ArcRestitution {
+            law: ArcRestitutionLaw::Continuous {
+                calibration_arc_current_a: arc_current_a(15.0, 48.0, 12.0),
+            },
+            ..paper_law(0.235, 0.371)
+        };
+        let weight = |current_a: f64| law.weight(arc_current_a(current_a, 48.0, 12.0), 0.4);
+        assert_eq!(weight(0.5), 0.0, "below I_min, were it to arc");
+        assert!(weight(0.4 * 48.0 / 36.0) < 1e-15, "at I_min");
+        assert_eq!(weight(15.0), 1.0);
+        assert_eq!(weight(20.0), 1.0);
+        assert_relative_eq!(
+            weight(7.5),
+            (5.625 - 0.4) / (11.25 - 0.4),
+            max_relative = 1e-15
+        );
+        assert_eq!(paper_law(0.235, 0.371).weight(0.4, 0.4), 1.0);
+    }
+
+    #[test]
+    fn weighted_restitution_runs_from_mechanical_to_eq_16() {
+        let law = paper_law(0.235, 0.371);
+        let (mechanical, v) = (0.6, 0.1);
+        assert_eq!(law.weighted(mechanical, v, 0.0), mechanical);
+        assert_eq!(law.weighted(mechanical, v, 1.0), law.linear(v));
+        assert_relative_eq!(
+            law.weighted(mechanical, v, 0.25),
+            0.75 * mechanical + 0.25 * law.linear(v),
+            max_relative = 1e-15
+        );
+        // Below the linear law, eq. 16 keeps the mechanical value at every weight.
+        assert_eq!(law.weighted(0.2, v, 0.5), 0.2);
     }
 }

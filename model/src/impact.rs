@@ -54,6 +54,22 @@ impl Impact {
         1.8395 * self.mass_kg * restitution * self.impact_speed_m_s / peak_force_n
     }
 
+    /// Plastic work of the impact (Fig. 19): the work the contact absorbs while it loads fully
+    /// plastically, from touch to maximum approach,
+    ///
+    /// `W_p = k_c d_max^2 / 2 = F_max^2 / (2 k_c) = m u^2 / 2 + F_s F_max / k_c`,
+    ///
+    /// with `d_max = F_max / k_c`. It is Tabor's `p V`: the yield pressure times the indented volume
+    /// `pi r d_max^2 / 2`. The last form, the kinetic energy plus the static force's work over the
+    /// approach (the energy balance of [`Impact::peak_force_n`]), is the one evaluated: it never
+    /// squares `F_max`. The elastic unloading that follows gives back the rebound, `m (e u)^2 / 2`,
+    /// out of elastic strain this loading model does not separate from the plastic work.
+    pub fn plastic_work_j(&self, peak_force_n: f64) -> f64 {
+        let u = self.impact_speed_m_s;
+        0.5 * self.mass_kg * u * u
+            + self.static_force_n * (peak_force_n / self.contact_stiffness_n_per_m)
+    }
+
     /// Impact duration `t_load + t_unload`, with the peak force it needs; `(F_max, duration)`.
     pub fn peak_force_and_duration(&self, restitution: f64) -> (f64, f64) {
         let peak = self.peak_force_n();
@@ -100,6 +116,28 @@ mod tests {
             rig(0.344, 0.223_985_471_683_820_85).peak_force_n(),
             65.890_236_517_721_7,
             max_relative = 1e-13
+        );
+    }
+
+    #[test]
+    fn plastic_work_is_the_work_of_the_plastic_loading() {
+        let impact = rig(0.344, 0.224);
+        let f = impact.peak_force_n();
+        let kc = impact.contact_stiffness_n_per_m;
+        assert_relative_eq!(
+            impact.plastic_work_j(f),
+            f * f / (2.0 * kc),
+            max_relative = 1e-12
+        );
+    }
+
+    #[test]
+    fn without_static_force_the_plastic_work_is_the_kinetic_energy() {
+        let impact = rig(0.0, 0.3);
+        assert_relative_eq!(
+            impact.plastic_work_j(impact.peak_force_n()),
+            0.5 * M * 0.09,
+            max_relative = 1e-15
         );
     }
 

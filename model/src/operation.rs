@@ -1,11 +1,11 @@
 //! One make operation: the first impact and the bounce sequence that follows it
 //! (docs/model.md sections 3-5 and 7).
 
-use crate::arc::{Arc, ArcRestitution, softened_kappa};
+use crate::arc::{Arc, ArcRestitution, ArcRestitutionLaw, arc_current_a, softened_kappa};
 use crate::impact::{Impact, contact_stiffness};
 use crate::mechanism::{Flight, effective_mass, effective_stiffness, impact_velocity};
 use crate::restitution::{self, KappaLaw, LOWER_BOUND_FACTOR};
-use crate::scenario::Scenario;
+use crate::scenario::{ArcRestitutionLawKind, Scenario};
 use serde::{Deserialize, Serialize};
 
 /// How the model is evaluated (docs/model.md section 7).
@@ -86,6 +86,10 @@ pub struct Outcome {
     pub impact_duration_s: f64,
     /// The sequence reached `max_bounces` with another bounce to come.
     pub truncated: bool,
+    /// Energy the first impact leaves in the surface (docs/model.md section 4). A job metric; the
+    /// `simulate` output of docs/contract.md "Scenario" keeps its fixed fields and leaves it out.
+    #[serde(skip)]
+    pub first_impact_plastic_work_j: f64,
 }
 
 /// One bounce: the flight after a separation.
@@ -121,6 +125,8 @@ pub struct Operation {
     kappa_law: KappaLaw,
     arc: Option<Arc>,
     arc_restitution: ArcRestitution,
+    /// How strongly the arc changes restitution (section 5): 1 under the paper law.
+    arc_weight: f64,
     /// `2 eps / m`: the squared speed an impact's energy loss removes.
     loss_speed_sq: f64,
     /// The separation speed whose flight just reaches `min_separation_m`; slower flights end the sequence.
@@ -176,6 +182,16 @@ impl Setup {
             arc_restitution: ArcRestitution {
                 a: mat.arc_restitution.a,
                 b_s_per_m: mat.arc_restitution.b_s_per_m,
+                law: match mat.arc_restitution.law {
+                    ArcRestitutionLawKind::Paper => ArcRestitutionLaw::Paper,
+                    ArcRestitutionLawKind::Continuous => ArcRestitutionLaw::Continuous {
+                        calibration_arc_current_a: arc_current_a(
+                            mat.arc_restitution.calibration_current_a,
+                            spec.circuit.supply_voltage_v,
+                            mat.min_arc_voltage_v,
+                        ),
+                    },
+                },
             },
             loss_speed_sq: 2.0 * spec.losses.impact_energy_loss_j / mass_kg,
             min_separation_m: spec.losses.min_separation_m,
@@ -198,6 +214,27 @@ impl Setup {
         } else {
             self.stiffness_n_per_m
         };
+        let arc = Arc::strike(
+            self.supply_voltage_v,
+            conditions.current_a,
+            self.min_arc_voltage_v,
+            self.min_arc_current_a,
+            conditions.breakdown_field_v_per_m,
+            self.softening_energy_j,
+        );
+        // The weight matters only while an arc burns, and only then is it a number.
+        let arc_weight = if arc.is_some() {
+            self.arc_restitution.weight(
+                arc_current_a(
+                    conditions.current_a,
+                    self.supply_voltage_v,
+                    self.min_arc_voltage_v,
+                ),
+                self.min_arc_current_a,
+            )
+        } else {
+            1.0
+        };
         Operation {
             fidelity,
             mass_kg: self.mass_kg,
@@ -213,15 +250,9 @@ impl Setup {
                 )
             }),
             kappa_law: self.kappa_law,
-            arc: Arc::strike(
-                self.supply_voltage_v,
-                conditions.current_a,
-                self.min_arc_voltage_v,
-                self.min_arc_current_a,
-                conditions.breakdown_field_v_per_m,
-                self.softening_energy_j,
-            ),
+            arc,
             arc_restitution: self.arc_restitution,
+            arc_weight,
             loss_speed_sq: self.loss_speed_sq,
             min_bounce_speed: impact_velocity(
                 self.mass_kg,
@@ -279,12 +310,13 @@ impl Operation {
             return out;
         }
 
-        // Pre-impact arc softens the surface for the first impact (section 5).
+        // Pre-impact arc softens the surface for the first impact (section 5), in full under the
+        // paper law (a weight of exactly 1 changes no bit).
         let (kappa_1, pressure_1) = match &self.arc {
             Some(arc) => {
                 out.pre_arc_s = arc.pre_arc_duration_s(u);
                 out.arc_energy_j = arc.energy_j(out.pre_arc_s);
-                let ratio = arc.softening_ratio(out.arc_energy_j);
+                let ratio = arc.softening_ratio(self.arc_weight * out.arc_energy_j);
                 (softened_kappa(kappa, ratio), pressure_pa * ratio)
             }
             None => (kappa, pressure_pa),
@@ -301,6 +333,7 @@ impl Operation {
                 impact_speed_m_s: u,
             };
             (out.peak_force_n, out.impact_duration_s) = impact.peak_force_and_duration(out.e1);
+            out.first_impact_plastic_work_j = impact.plastic_work_j(out.peak_force_n);
         }
 
         // The loop carries squared speeds: an impact multiplies v^2 by e^2 and removes 2 eps / m.
@@ -367,20 +400,33 @@ impl Operation {
 
     /// Eq. 16 after an arcing bounce, squared: `min(e(v; kappa_1), max(0, a + b v))^2`. Eq. 7 is solved
     /// only when the linear law is above its cheap lower bound `min(1, (5/8)^(3/8) eps0)`; otherwise
-    /// the linear law is the minimum. The result is identical either way.
+    /// the linear law is the minimum. The result is identical either way. An arc weighted below 1
+    /// (the continuous law, section 5) takes [`ArcRestitution::weighted`] instead.
     #[inline]
     fn arc_restitution_squared(&self, v: f64, kappa_1_sq: f64) -> f64 {
+        let eps0_sq = kappa_1_sq / v.sqrt();
+        if self.arc_weight < 1.0 {
+            let mechanical = self.mechanical_restitution_squared(eps0_sq).sqrt();
+            let e = self
+                .arc_restitution
+                .weighted(mechanical, v, self.arc_weight);
+            return e * e;
+        }
         let linear = self.arc_restitution.linear(v);
         let linear_sq = linear * linear;
-        let eps0_sq = kappa_1_sq / v.sqrt();
         if linear_sq <= (LOWER_BOUND_FACTOR * LOWER_BOUND_FACTOR * eps0_sq).min(1.0) {
             return linear_sq;
         }
-        let mechanical_sq = match self.fidelity {
+        linear_sq.min(self.mechanical_restitution_squared(eps0_sq))
+    }
+
+    /// `e^2` of eq. 7 (or eq. 18) from the squared scaled speed `eps0^2 = kappa^2 / sqrt(v)`.
+    #[inline]
+    fn mechanical_restitution_squared(&self, eps0_sq: f64) -> f64 {
+        match self.fidelity {
             Fidelity::Exact => restitution::restitution_squared_scaled(eps0_sq),
             Fidelity::ClosedForm => eps0_sq.min(1.0),
-        };
-        linear_sq.min(mechanical_sq)
+        }
     }
 
     /// Speed after an impact from the squared rebound speed `(e v)^2`, less the energy `eps` every

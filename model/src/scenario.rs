@@ -61,14 +61,62 @@ pub struct MaterialSpec {
     pub breakdown_field_v_per_m: f64,
     pub softening_energy_j: f64,
     pub arc_restitution: ArcRestitutionSpec,
+    pub wear_law: WearLawSpec,
+    /// The share of the eroded mass the anode loses (the cathode loses the rest); the anode/cathode
+    /// split of the eroded mass is reported only when it is given (docs/model.md section 6).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub anode_erosion_fraction: Option<f64>,
 }
 
+/// Restitution after an arcing bounce (docs/model.md section 5).
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ArcRestitutionSpec {
+    pub law: ArcRestitutionLawKind,
     pub a: f64,
     pub b_s_per_m: f64,
+    /// The circuit current at which `a` and `b_s_per_m` were fitted (the paper: 15 A).
+    pub calibration_current_a: f64,
+}
+
+/// Which post-arc restitution law applies (docs/model.md section 5).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ArcRestitutionLawKind {
+    /// Eq. 16 whenever an arc burns, whatever its current.
+    #[default]
+    Paper,
+    /// The arc's effect on restitution grows linearly with the arc current, from none at the
+    /// minimum arc current to eq. 16 at the calibration current.
+    Continuous,
+}
+
+/// How the surface changes with arc energy over an endurance test (docs/model.md section 6).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WearLawSpec {
+    pub law: WearLawKind,
+    /// `roughening_and_softening`: the dynamic yield pressure the arc-heated surface tends to.
+    pub worn_pressure_pa: f64,
+    /// `roughening_and_softening`: the arc energy that closes `1 - 1/e` of the pressure's fall.
+    pub annealing_energy_j: f64,
+}
+
+/// Which wear law applies (docs/model.md section 6).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WearLawKind {
+    /// Arc energy lowers the effective radius towards `worn_radius_m`.
+    #[default]
+    Roughening,
+    /// Kappa is held at its new-contact value (the paper's suggestion, Section V.B).
+    Constant,
+    /// Roughening, and arc energy also lowers the dynamic yield pressure towards `worn_pressure_pa`.
+    RougheningAndSoftening,
 }
 
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -118,6 +166,8 @@ impl Default for MaterialSpec {
             breakdown_field_v_per_m: 1e8,
             softening_energy_j: 6.2e-4,
             arc_restitution: ArcRestitutionSpec::default(),
+            wear_law: WearLawSpec::default(),
+            anode_erosion_fraction: None,
         }
     }
 }
@@ -125,8 +175,20 @@ impl Default for MaterialSpec {
 impl Default for ArcRestitutionSpec {
     fn default() -> Self {
         Self {
+            law: ArcRestitutionLawKind::Paper,
             a: 0.235,
             b_s_per_m: 0.371,
+            calibration_current_a: 15.0,
+        }
+    }
+}
+
+impl Default for WearLawSpec {
+    fn default() -> Self {
+        Self {
+            law: WearLawKind::Roughening,
+            worn_pressure_pa: 1.0e8,
+            annealing_energy_j: 500.0,
         }
     }
 }
@@ -274,14 +336,49 @@ fn check_spec(spec: &ScenarioSpec, root: &Pointer, errors: &mut Vec<FieldError>)
             ),
         });
     }
-    let at_law = at.child("arc_restitution");
-    check_number(errors, at_law.child("a"), mat.arc_restitution.a, Finite);
-    check_number(
-        errors,
-        at_law.child("b_s_per_m"),
-        mat.arc_restitution.b_s_per_m,
-        Finite,
-    );
+    let (law, at_law) = (&mat.arc_restitution, at.child("arc_restitution"));
+    let (wear, at_wear) = (&mat.wear_law, at.child("wear_law"));
+    for (pointer, value, rule) in [
+        (at_law.child("a"), law.a, Finite),
+        (at_law.child("b_s_per_m"), law.b_s_per_m, Finite),
+        (
+            at_law.child("calibration_current_a"),
+            law.calibration_current_a,
+            Positive,
+        ),
+        (
+            at_wear.child("worn_pressure_pa"),
+            wear.worn_pressure_pa,
+            Positive,
+        ),
+        (
+            at_wear.child("annealing_energy_j"),
+            wear.annealing_energy_j,
+            Positive,
+        ),
+    ] {
+        check_number(errors, pointer, value, rule);
+    }
+    check_calibration_arcs(spec, &at_law, errors);
+    if wear.law == WearLawKind::RougheningAndSoftening
+        && wear.worn_pressure_pa > mat.dynamic_yield_pressure_pa
+    {
+        errors.push(FieldError {
+            pointer: at_wear.child("worn_pressure_pa").to_string(),
+            detail: format!(
+                "must not exceed dynamic_yield_pressure_pa ({} Pa) under roughening_and_softening, got {} Pa",
+                mat.dynamic_yield_pressure_pa, wear.worn_pressure_pa
+            ),
+        });
+    }
+    if let Some(fraction) = mat.anode_erosion_fraction
+        && !(0.0..=1.0).contains(&fraction)
+    {
+        errors.push(FieldError {
+            pointer: at.child("anode_erosion_fraction").to_string(),
+            detail: format!("must be from 0 to 1, got {fraction}"),
+        });
+    }
 
     let at = root.child("circuit");
     check_number(
@@ -317,6 +414,33 @@ fn check_spec(spec: &ScenarioSpec, root: &Pointer, errors: &mut Vec<FieldError>)
             detail: format!(
                 "must be from 1 to {MAX_BOUNCES_LIMIT}, got {}",
                 losses.max_bounces
+            ),
+        });
+    }
+}
+
+/// The continuous post-arc law interpolates between the minimum arc current and the arc current at
+/// the calibration current (docs/model.md section 5), so wherever the supply can arc at all, it must
+/// arc at the calibration current.
+fn check_calibration_arcs(spec: &ScenarioSpec, at_law: &Pointer, errors: &mut Vec<FieldError>) {
+    let (mat, circuit) = (&spec.material, &spec.circuit);
+    if mat.arc_restitution.law != ArcRestitutionLawKind::Continuous
+        || circuit.supply_voltage_v <= mat.min_arc_voltage_v
+    {
+        return;
+    }
+    let calibration_arc_current_a = crate::arc::arc_current_a(
+        mat.arc_restitution.calibration_current_a,
+        circuit.supply_voltage_v,
+        mat.min_arc_voltage_v,
+    );
+    if calibration_arc_current_a <= mat.min_arc_current_a {
+        errors.push(FieldError {
+            pointer: at_law.child("calibration_current_a").to_string(),
+            detail: format!(
+                "must make an arc under the continuous law: at {} V its arc current is {calibration_arc_current_a} A, \
+                 not above min_arc_current_a ({} A)",
+                circuit.supply_voltage_v, mat.min_arc_current_a
             ),
         });
     }
@@ -423,6 +547,30 @@ mod tests {
                 "/material/arc_restitution/a",
             ),
             (
+                r#"{"material":{"arc_restitution":{"calibration_current_a":0}}}"#,
+                "/material/arc_restitution/calibration_current_a",
+            ),
+            (
+                r#"{"material":{"arc_restitution":{"law":"continuous","calibration_current_a":0.5}},"circuit":{"supply_voltage_v":48}}"#,
+                "/material/arc_restitution/calibration_current_a",
+            ),
+            (
+                r#"{"material":{"wear_law":{"worn_pressure_pa":-1}}}"#,
+                "/material/wear_law/worn_pressure_pa",
+            ),
+            (
+                r#"{"material":{"wear_law":{"annealing_energy_j":0}}}"#,
+                "/material/wear_law/annealing_energy_j",
+            ),
+            (
+                r#"{"material":{"wear_law":{"law":"roughening_and_softening","worn_pressure_pa":3e8}}}"#,
+                "/material/wear_law/worn_pressure_pa",
+            ),
+            (
+                r#"{"material":{"anode_erosion_fraction":1.5}}"#,
+                "/material/anode_erosion_fraction",
+            ),
+            (
                 r#"{"circuit":{"supply_voltage_v":-48}}"#,
                 "/circuit/supply_voltage_v",
             ),
@@ -459,6 +607,18 @@ mod tests {
             (r#"{"circuit":{"current_a":"15"}}"#, "/circuit/current_a"),
             (r#"{"circuit":[]}"#, "/circuit"),
             (r#"{"unknown_section":{}}"#, "/unknown_section"),
+            (
+                r#"{"material":{"wear_law":{"law":"melting"}}}"#,
+                "/material/wear_law/law",
+            ),
+            (
+                r#"{"material":{"arc_restitution":{"law":"linear"}}}"#,
+                "/material/arc_restitution/law",
+            ),
+            (
+                r#"{"material":{"wear_law":{"worn_radius_m":1e-3}}}"#,
+                "/material/wear_law/worn_radius_m",
+            ),
             (r#"{"mechanism":{"static_force_n":1}"#, ""),
             ("[]", ""),
         ];

@@ -66,6 +66,23 @@ fn a_latin_hypercube_job_whose_groups_share_one_permutation() {
 }
 
 #[test]
+fn a_softening_job_with_plastic_work_and_the_anode_cathode_split() {
+    assert_group_by_group_is_whole(
+        r#"{"devices": 40, "operations": 25, "seed": 5,
+            "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15},
+                         "material": {"wear_law": {"law": "roughening_and_softening"},
+                                      "anode_erosion_fraction": 0.7,
+                                      "arc_restitution": {"law": "continuous"}}},
+            "scatter": [
+              {"parameter": "current_a", "per": "device",
+               "distribution": {"kind": "uniform", "min": 2, "max": 20}}],
+            "metrics": ["first_impact_plastic_work_j", "total_bounce_s", "cumulative_plastic_work_j",
+                        "anode_eroded_mass_kg", "cathode_eroded_mass_kg", "final_kappa"],
+            "failure": {"cumulative_plastic_work_j": {"above": 0.009}}}"#,
+    );
+}
+
+#[test]
 fn fewer_devices_than_groups_and_a_metric_subset() {
     assert_group_by_group_is_whole(
         r#"{"devices": 5, "operations": 30, "seed": 9, "metrics": ["total_bounce_s", "bounce_count"]}"#,

@@ -481,3 +481,80 @@ fn failure_criteria_are_validated() {
         );
     }
 }
+
+#[test]
+fn the_anode_cathode_split_needs_the_anodes_share_and_names_where_it_is_asked_for() {
+    let cases = [
+        (
+            json!({"metrics": ["e1", "anode_eroded_mass_kg"]}),
+            "/metrics/1",
+        ),
+        (
+            json!({"failure": {"cathode_eroded_mass_kg": {"above": 1e-9}}}),
+            "/failure/cathode_eroded_mass_kg",
+        ),
+        (
+            json!({"scenario": {"material": {"wear_law": {"law": "roughening_and_softening"}}},
+                   "scatter": [{"parameter": "dynamic_yield_pressure_pa", "per": "device",
+                                "distribution": {"kind": "uniform", "min": 5e7, "max": 3e8}}]}),
+            "/scatter/0/distribution/min",
+        ),
+    ];
+    for (document, pointer) in cases {
+        assert_eq!(pointers(document.clone()), [pointer], "{document}");
+    }
+    let split = json!({"scenario": {"material": {"anode_erosion_fraction": 0.7}},
+                       "metrics": ["anode_eroded_mass_kg", "cathode_eroded_mass_kg"]});
+    assert_eq!(pointers(split), Vec::<String>::new());
+}
+
+#[test]
+fn all_metrics_include_plastic_work_and_the_split_only_with_a_polarity() {
+    let names = |document: Value| {
+        let result = run(&job(document));
+        let mut names: Vec<String> = result.operations.keys().cloned().collect();
+        names.extend(result.devices.keys().cloned());
+        names
+    };
+    let plain = names(json!({"devices": 2, "operations": 3}));
+    assert!(plain.contains(&"first_impact_plastic_work_j".to_owned()));
+    assert!(plain.contains(&"cumulative_plastic_work_j".to_owned()));
+    assert!(!plain.iter().any(|name| name.contains("anode")));
+    let split = names(json!({"devices": 2, "operations": 3,
+                             "scenario": {"material": {"anode_erosion_fraction": 0.5}}}));
+    assert_eq!(split.len(), plain.len() + 2);
+}
+
+#[test]
+fn cumulative_plastic_work_is_the_sum_of_the_first_impacts() {
+    let result = run(&job(json!({
+        "devices": 3, "operations": 40, "bin_operations": 40, "scenario": arcing(),
+        "metrics": ["first_impact_plastic_work_j", "cumulative_plastic_work_j"]})));
+    let per_operation = result.operations["first_impact_plastic_work_j"][0]
+        .summary
+        .mean;
+    let per_device = result.devices["cumulative_plastic_work_j"].mean;
+    assert!(
+        (per_device - 40.0 * per_operation).abs() <= 1e-12 * per_device,
+        "{per_device} vs 40 x {per_operation}"
+    );
+}
+
+#[test]
+fn a_result_warns_when_the_paper_law_runs_far_from_its_calibration_current() {
+    let far = run(&job(json!({"devices": 2, "operations": 3,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 2}}})));
+    assert_eq!(far.diagnostics.len(), 1);
+    assert_eq!(far.diagnostics[0].pointer, "/scenario/circuit/current_a");
+    let text = serde_json::to_string(&far).unwrap();
+    assert!(text.contains(r#""diagnostics":[{"pointer":"/scenario/circuit/current_a""#));
+    let near = run(&job(
+        json!({"devices": 2, "operations": 3, "scenario": arcing()}),
+    ));
+    assert!(near.diagnostics.is_empty());
+    assert!(
+        !serde_json::to_string(&near)
+            .unwrap()
+            .contains("diagnostics")
+    );
+}

@@ -13,7 +13,7 @@ use super::job::{Job, Parameter, Per, SamplerKind, Scatter};
 use super::metric::{DeviceMetric, Metric};
 use crate::operation::{Conditions, Needs, Outcome, Setup};
 use crate::stats::Accumulator;
-use crate::wear::WearLaw;
+use crate::wear::{DeviceWear, WearLaw};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -185,10 +185,10 @@ impl<'a> Plan<'a> {
             .operation(&nominal.conditions, job.spec().fidelity)
             .arcs()
             || current_scattered;
+        let wear = WearLaw::new(scenario);
         Self {
             job,
             setup,
-            wear: WearLaw::new(scenario),
             nominal,
             device_scatter,
             operation_scatter,
@@ -196,11 +196,13 @@ impl<'a> Plan<'a> {
             needs: Needs {
                 impact: job.operation_metrics().iter().any(|m| m.needs_impact())
                     || job
-                        .failure()
+                        .device_metrics()
                         .iter()
-                        .any(|(m, _)| matches!(m, Metric::Operation(m) if m.needs_impact())),
+                        .any(|m| Metric::Device(*m).needs_impact())
+                    || job.failure().iter().any(|(m, _)| m.needs_impact()),
             },
-            track_wear: can_arc && job.spec().operations > 1,
+            track_wear: can_arc && job.spec().operations > 1 && wear.changes_surface(),
+            wear,
         }
     }
 
@@ -231,7 +233,7 @@ impl<'a> Plan<'a> {
         let fidelity = job.spec().fidelity;
         let mut operation = self.setup.operation(&draws.conditions, fidelity);
         let metrics = job.operation_metrics();
-        let mut cumulative_arc_energy_j = 0.0;
+        let mut device_wear = DeviceWear::default();
         let mut failed_at = None;
         let operations = job.spec().operations;
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
@@ -255,23 +257,27 @@ impl<'a> Plan<'a> {
                     }
                     (op_draws.radius_m, op_draws.pressure_pa)
                 };
-                let radius_m = if self.track_wear && cumulative_arc_energy_j > 0.0 {
-                    self.wear.radius_m(radius_m, cumulative_arc_energy_j)
+                let energy_j = device_wear.cumulative_arc_energy_j;
+                let (radius_m, pressure_pa) = if self.track_wear && energy_j > 0.0 {
+                    (
+                        self.wear.radius_m(radius_m, energy_j),
+                        self.wear.pressure_pa(pressure_pa, energy_j),
+                    )
                 } else {
-                    radius_m
+                    (radius_m, pressure_pa)
                 };
                 let outcome = operation.run(radius_m, pressure_pa, self.needs, None);
                 for (accumulator, metric) in bin.iter_mut().zip(metrics) {
                     accumulator.push(metric.value(&outcome));
                 }
-                cumulative_arc_energy_j += outcome.arc_energy_j;
-                if failed_at.is_none() && self.fails(&outcome, &draws, cumulative_arc_energy_j) {
+                device_wear.add(&outcome);
+                if failed_at.is_none() && self.fails(&outcome, &draws, &device_wear) {
                     failed_at = Some(op + 1);
                 }
             }
         }
         for (accumulator, metric) in stats.devices.iter_mut().zip(job.device_metrics()) {
-            accumulator.push(self.device_metric(*metric, &draws, cumulative_arc_energy_j));
+            accumulator.push(self.device_metric(*metric, &draws, &device_wear));
         }
         if !job.failure().is_empty() {
             stats.lives.push(DeviceLife {
@@ -284,39 +290,41 @@ impl<'a> Plan<'a> {
 
     /// Whether any failure criterion is met by this operation or by the device's state after it.
     #[inline]
-    fn fails(&self, outcome: &Outcome, draws: &Draws, cumulative_arc_energy_j: f64) -> bool {
+    fn fails(&self, outcome: &Outcome, draws: &Draws, device_wear: &DeviceWear) -> bool {
         self.job.failure().iter().any(|(metric, criterion)| {
             let value = match metric {
                 Metric::Operation(metric) => metric.value(outcome),
-                Metric::Device(metric) => {
-                    self.device_metric(*metric, draws, cumulative_arc_energy_j)
-                }
+                Metric::Device(metric) => self.device_metric(*metric, draws, device_wear),
             };
             criterion.fails(value)
         })
     }
 
-    fn device_metric(
-        &self,
-        metric: DeviceMetric,
-        draws: &Draws,
-        cumulative_arc_energy_j: f64,
-    ) -> f64 {
+    fn device_metric(&self, metric: DeviceMetric, draws: &Draws, device_wear: &DeviceWear) -> f64 {
+        let energy_j = device_wear.cumulative_arc_energy_j;
         let final_radius_m = || {
-            if cumulative_arc_energy_j > 0.0 {
-                self.wear.radius_m(draws.radius_m, cumulative_arc_energy_j)
+            if energy_j > 0.0 {
+                self.wear.radius_m(draws.radius_m, energy_j)
             } else {
                 draws.radius_m
             }
         };
+        let eroded_mass_split_kg = || {
+            self.wear
+                .eroded_mass_split_kg(energy_j)
+                .expect("the job checked that the scenario gives the polarity")
+        };
         match metric {
-            DeviceMetric::CumulativeArcEnergy => cumulative_arc_energy_j,
-            DeviceMetric::ErodedMass => self.wear.eroded_mass_kg(cumulative_arc_energy_j),
+            DeviceMetric::CumulativeArcEnergy => energy_j,
+            DeviceMetric::ErodedMass => self.wear.eroded_mass_kg(energy_j),
             DeviceMetric::FinalRadius => final_radius_m(),
-            DeviceMetric::FinalKappa => self
-                .setup
-                .kappa_law()
-                .at(final_radius_m(), draws.pressure_pa),
+            DeviceMetric::FinalKappa => self.setup.kappa_law().at(
+                final_radius_m(),
+                self.wear.pressure_pa(draws.pressure_pa, energy_j),
+            ),
+            DeviceMetric::CumulativePlasticWork => device_wear.cumulative_plastic_work_j,
+            DeviceMetric::AnodeErodedMass => eroded_mass_split_kg().0,
+            DeviceMetric::CathodeErodedMass => eroded_mass_split_kg().1,
         }
     }
 

@@ -5,7 +5,7 @@ use super::distribution::{Distribution, DistributionSpec, Domain};
 use super::metric::{DeviceMetric, Metric, OperationMetric};
 use crate::error::{FieldError, InvalidInput, Pointer};
 use crate::operation::Fidelity;
-use crate::scenario::{Scenario, ScenarioSpec};
+use crate::scenario::{Scenario, ScenarioSpec, WearLawKind};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -156,8 +156,8 @@ pub struct CriterionSpec {
 }
 
 /// When a device fails: a metric strictly above or below a threshold. Operation metrics are checked
-/// at every operation; device metrics (`cumulative_arc_energy_j`, `eroded_mass_kg`, `final_radius_m`,
-/// `final_kappa`) on the device's running state after every operation.
+/// at every operation; device metrics (`cumulative_arc_energy_j`, `final_kappa`, ...) on the
+/// device's running state after every operation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Criterion {
     Above(f64),
@@ -269,18 +269,25 @@ impl Job {
             Err(_) => Vec::new(),
         };
 
+        let polarity = spec.scenario.material.anode_erosion_fraction.is_some();
         let metrics = match &spec.metrics {
             None => OperationMetric::ALL
                 .map(Metric::Operation)
                 .into_iter()
-                .chain(DeviceMetric::ALL.map(Metric::Device))
+                .chain(
+                    DeviceMetric::ALL
+                        .into_iter()
+                        .filter(|m| polarity || !m.needs_polarity())
+                        .map(Metric::Device),
+                )
                 .collect(),
             Some(names) => {
                 let mut metrics: Vec<Metric> = Vec::new();
                 for (i, name) in names.iter().enumerate() {
-                    match parse_metric(name, &root.child("metrics").child(i), &mut errors) {
+                    let at = root.child("metrics").child(i);
+                    match parse_metric(name, &at, polarity, &mut errors) {
                         Some(metric) if metrics.contains(&metric) => errors.push(FieldError {
-                            pointer: root.child("metrics").child(i).to_string(),
+                            pointer: at.to_string(),
                             detail: format!("`{name}` is listed twice"),
                         }),
                         Some(metric) => metrics.push(metric),
@@ -300,7 +307,7 @@ impl Job {
         let mut limits = BTreeMap::new();
         for (name, &limit) in &spec.limits {
             let at = root.child("limits").child(name);
-            if let Some(metric) = parse_metric(name, &at, &mut errors) {
+            if let Some(metric) = parse_metric(name, &at, polarity, &mut errors) {
                 if !limit.is_finite() {
                     errors.push(FieldError {
                         pointer: at.to_string(),
@@ -321,7 +328,7 @@ impl Job {
             .precision
             .as_ref()
             .and_then(|p| check_precision(p, &spec, &metrics, root, &mut errors));
-        let failure = check_failure(&spec.failure, &root.child("failure"), &mut errors);
+        let failure = check_failure(&spec.failure, &root.child("failure"), polarity, &mut errors);
 
         if !errors.is_empty() {
             return Err(InvalidInput::new(errors));
@@ -438,15 +445,27 @@ fn split_metrics(metrics: &[Metric]) -> (Vec<OperationMetric>, Vec<DeviceMetric>
     (operation.collect(), device.collect())
 }
 
-fn parse_metric(name: &str, at: &Pointer, errors: &mut Vec<FieldError>) -> Option<Metric> {
-    let metric = Metric::parse(name);
-    if metric.is_none() {
-        errors.push(FieldError {
-            pointer: at.to_string(),
-            detail: format!("unknown metric `{name}`; known: {}", Metric::all_names()),
-        });
-    }
-    metric
+/// The metric `name`, if it is known and, for the anode/cathode split, the scenario gives the
+/// polarity (`polarity`: `material.anode_erosion_fraction` is set).
+fn parse_metric(
+    name: &str,
+    at: &Pointer,
+    polarity: bool,
+    errors: &mut Vec<FieldError>,
+) -> Option<Metric> {
+    let detail = match Metric::parse(name) {
+        None => format!("unknown metric `{name}`; known: {}", Metric::all_names()),
+        Some(Metric::Device(metric)) if metric.needs_polarity() && !polarity => format!(
+            "`{name}` needs the anode's share of the eroded mass: set \
+             scenario/material/anode_erosion_fraction"
+        ),
+        Some(metric) => return Some(metric),
+    };
+    errors.push(FieldError {
+        pointer: at.to_string(),
+        detail,
+    });
+    None
 }
 
 /// The values each parameter may take in this scenario (docs/model.md section 9).
@@ -458,6 +477,15 @@ fn domain(parameter: Parameter, scenario: &Scenario) -> Domain {
             lower: spec.material.worn_radius_m,
             inclusive: true,
         },
+        // An annealing surface's p0 must stay at or above the pressure it softens towards.
+        Parameter::DynamicYieldPressure
+            if spec.material.wear_law.law == WearLawKind::RougheningAndSoftening =>
+        {
+            Domain {
+                lower: spec.material.wear_law.worn_pressure_pa,
+                inclusive: true,
+            }
+        }
         Parameter::DynamicYieldPressure | Parameter::BreakdownField => Domain::POSITIVE,
         // Without a spring, a zero static force would never return the arm.
         Parameter::StaticForce if spec.mechanism.spring_stiffness_n_per_m == 0.0 => {
@@ -505,12 +533,13 @@ fn check_scatter(
 fn check_failure(
     specs: &BTreeMap<String, CriterionSpec>,
     at: &Pointer,
+    polarity: bool,
     errors: &mut Vec<FieldError>,
 ) -> Vec<(Metric, Criterion)> {
     let mut failure = Vec::new();
     for (name, spec) in specs {
         let at = at.child(name);
-        let Some(metric) = parse_metric(name, &at, errors) else {
+        let Some(metric) = parse_metric(name, &at, polarity, errors) else {
             continue;
         };
         let criterion = match (spec.above, spec.below) {

@@ -26,10 +26,12 @@ pub enum OperationMetric {
     PeakForce,
     #[serde(rename = "impact_duration_s")]
     ImpactDuration,
+    #[serde(rename = "first_impact_plastic_work_j")]
+    FirstImpactPlasticWork,
 }
 
 impl OperationMetric {
-    pub const ALL: [OperationMetric; 10] = [
+    pub const ALL: [OperationMetric; 11] = [
         Self::ImpactVelocity,
         Self::Kappa,
         Self::E1,
@@ -40,6 +42,7 @@ impl OperationMetric {
         Self::ArcEnergy,
         Self::PeakForce,
         Self::ImpactDuration,
+        Self::FirstImpactPlasticWork,
     ];
 
     pub fn name(self) -> &'static str {
@@ -54,6 +57,7 @@ impl OperationMetric {
             Self::ArcEnergy => "arc_energy_j",
             Self::PeakForce => "peak_force_n",
             Self::ImpactDuration => "impact_duration_s",
+            Self::FirstImpactPlasticWork => "first_impact_plastic_work_j",
         }
     }
 
@@ -70,6 +74,7 @@ impl OperationMetric {
             Self::ArcEnergy => outcome.arc_energy_j,
             Self::PeakForce => outcome.peak_force_n,
             Self::ImpactDuration => outcome.impact_duration_s,
+            Self::FirstImpactPlasticWork => outcome.first_impact_plastic_work_j,
         }
     }
 
@@ -80,7 +85,10 @@ impl OperationMetric {
 
     /// Whether the metric needs the first-impact phase (section 4).
     pub fn needs_impact(self) -> bool {
-        matches!(self, Self::PeakForce | Self::ImpactDuration)
+        matches!(
+            self,
+            Self::PeakForce | Self::ImpactDuration | Self::FirstImpactPlasticWork
+        )
     }
 }
 
@@ -95,14 +103,23 @@ pub enum DeviceMetric {
     FinalRadius,
     #[serde(rename = "final_kappa")]
     FinalKappa,
+    #[serde(rename = "cumulative_plastic_work_j")]
+    CumulativePlasticWork,
+    #[serde(rename = "anode_eroded_mass_kg")]
+    AnodeErodedMass,
+    #[serde(rename = "cathode_eroded_mass_kg")]
+    CathodeErodedMass,
 }
 
 impl DeviceMetric {
-    pub const ALL: [DeviceMetric; 4] = [
+    pub const ALL: [DeviceMetric; 7] = [
         Self::CumulativeArcEnergy,
         Self::ErodedMass,
         Self::FinalRadius,
         Self::FinalKappa,
+        Self::CumulativePlasticWork,
+        Self::AnodeErodedMass,
+        Self::CathodeErodedMass,
     ];
 
     pub fn name(self) -> &'static str {
@@ -111,7 +128,16 @@ impl DeviceMetric {
             Self::ErodedMass => "eroded_mass_kg",
             Self::FinalRadius => "final_radius_m",
             Self::FinalKappa => "final_kappa",
+            Self::CumulativePlasticWork => "cumulative_plastic_work_j",
+            Self::AnodeErodedMass => "anode_eroded_mass_kg",
+            Self::CathodeErodedMass => "cathode_eroded_mass_kg",
         }
+    }
+
+    /// Whether the metric splits the eroded mass by polarity, which needs the scenario's
+    /// `material.anode_erosion_fraction`.
+    pub fn needs_polarity(self) -> bool {
+        matches!(self, Self::AnodeErodedMass | Self::CathodeErodedMass)
     }
 }
 
@@ -140,6 +166,14 @@ impl Metric {
         match self {
             Metric::Operation(m) => m.name(),
             Metric::Device(m) => m.name(),
+        }
+    }
+
+    /// Whether the metric needs the first-impact phase (section 4), at every operation.
+    pub fn needs_impact(self) -> bool {
+        match self {
+            Metric::Operation(m) => m.needs_impact(),
+            Metric::Device(m) => m == DeviceMetric::CumulativePlasticWork,
         }
     }
 

@@ -3,6 +3,7 @@
 //! energy (docs/model.md section 6), summarised per bin of operations with honest confidence
 //! intervals.
 
+pub mod diagnostics;
 pub mod distribution;
 pub mod engine;
 pub mod job;
@@ -71,6 +72,9 @@ pub struct JobResult {
     /// With failure criteria: the life analysis of the devices' operations to failure.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub life: Option<LifeReport>,
+    /// Warnings about how far to trust the numbers (e.g. eq. 16 far from its calibration current).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub diagnostics: Vec<diagnostics::Diagnostic>,
     pub timing: Timing,
 }
 
@@ -209,6 +213,7 @@ pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
             }
         }),
         life: life_report(job, tally),
+        diagnostics: diagnostics::diagnose(job),
         timing: Timing {
             wall_s,
             operations_per_s: operations_run as f64 / wall_s.max(1e-9),
