@@ -27,7 +27,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
         ],
     ),
     ("api", &["config", "domain", "plots", "store", "telemetry"]),
-    ("worker", &["domain", "store"]),
+    ("worker", &["domain", "store", "telemetry"]),
     ("scheduler", &["domain", "store"]),
     ("bench", &["plots"]),
     ("store", &["domain"]),
