@@ -10,7 +10,14 @@ const ALLOWED: &[(&str, &[&str])] = &[
     (
         "cli",
         &[
-            "app", "bench", "compute", "config", "domain", "plots", "progress",
+            "app",
+            "bench",
+            "compute",
+            "config",
+            "domain",
+            "plots",
+            "progress",
+            "telemetry",
         ],
     ),
     (

@@ -179,7 +179,6 @@ async fn join_workers(handles: Vec<tokio::task::JoinHandle<()>>) {
 /// `bouncewear worker`: runs jobs from the queue until SIGINT or SIGTERM, without serving HTTP
 /// (scale jobs out across machines with several of these on one PostgreSQL database).
 pub async fn work(config: WorkerConfig) -> Result<(), StartupError> {
-    telemetry::init_logging();
     if config.workers == Some(0) {
         return Err(StartupError::NoWorkers);
     }
@@ -212,7 +211,6 @@ fn describe(url: &str) -> String {
 
 /// `bouncewear serve`: the application until SIGINT or SIGTERM.
 pub async fn serve(config: ServeConfig) -> Result<(), StartupError> {
-    telemetry::init_logging();
     let application = Application::build(config).await?;
     // Tests and scripts read the port from this line.
     println!("bouncewear listening on http://{}", application.address());

@@ -7,6 +7,7 @@ use crate::bench::BenchError;
 use crate::compute::PoolError;
 use crate::domain::draw_seed;
 use crate::progress::ProgressBar;
+use crate::telemetry::{self, LogFormat};
 use bouncewear_model::montecarlo::{Job, run_job};
 use bouncewear_model::{Fidelity, InvalidInput, Scenario, simulate};
 use clap::{Parser, Subcommand, ValueEnum};
@@ -21,6 +22,15 @@ use std::process::ExitCode;
     about = "Monte Carlo wear simulation of bouncing electrical contacts (McBride & Sharkh 1992)"
 )]
 pub struct Cli {
+    /// Log lines as `text` (coloured only when stderr is a terminal) or `json` (one object a line).
+    #[arg(
+        long,
+        global = true,
+        value_enum,
+        env = "BOUNCEWEAR_LOG_FORMAT",
+        default_value_t = LogFormat::Text
+    )]
+    log_format: LogFormat,
     #[command(subcommand)]
     command: Command,
 }
@@ -150,6 +160,7 @@ pub fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<(), CliError> {
+    telemetry::init_logging(cli.log_format);
     match cli.command {
         Command::Simulate { fidelity, file } => {
             let scenario = Scenario::from_json(&read_input(&file)?)?;

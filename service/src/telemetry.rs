@@ -1,21 +1,70 @@
 //! Logs (tracing, to stderr, `RUST_LOG` to filter; text or JSON) and Prometheus metrics: every
 //! metric the service records is named, described and given its buckets here.
 
-use axum::extract::{MatchedPath, Request};
+use axum::extract::MatchedPath;
 use axum::http::Method;
+use axum::http::Request;
 use axum::middleware::Next;
 use axum::response::Response;
+use clap::ValueEnum;
 use metrics_exporter_prometheus::{Matcher, PrometheusBuilder, PrometheusHandle};
+use std::io::IsTerminal;
 use std::sync::OnceLock;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
-pub fn init_logging() {
+/// How log lines are written (`--log-format`, `BOUNCEWEAR_LOG_FORMAT`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LogFormat {
+    /// One line per event, coloured only when stderr is a terminal.
+    Text,
+    /// One JSON object per line, for log collectors.
+    Json,
+}
+
+/// Logs to stderr, filtered by `RUST_LOG` (default: info, and warnings from sqlx).
+pub fn init_logging(format: LogFormat) {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,sqlx=warn"));
-    let _ = tracing_subscriber::fmt()
+    let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .try_init();
+        .with_writer(std::io::stderr);
+    let _ = match format {
+        LogFormat::Text => builder
+            .with_ansi(std::io::stderr().is_terminal())
+            .try_init(),
+        // The request's fields (method, route, request id) sit beside the event's own.
+        LogFormat::Json => builder
+            .json()
+            .flatten_event(true)
+            .with_current_span(true)
+            .with_span_list(false)
+            .try_init(),
+    };
+}
+
+/// The span every request runs in: its method, route template, URI and request id.
+pub fn request_span<B>(request: &Request<B>) -> tracing::Span {
+    let request_id = request
+        .headers()
+        .get("x-request-id")
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("-");
+    tracing::info_span!(
+        "request",
+        method = %request.method(),
+        route = %route_label(request),
+        uri = %request.uri(),
+        request_id,
+    )
+}
+
+/// The one log line of a request, at info: its status and latency, in the request's span.
+pub fn log_response<B>(response: &axum::http::Response<B>, latency: Duration, _: &tracing::Span) {
+    tracing::info!(
+        status = response.status().as_u16(),
+        latency_ms = latency.as_secs_f64() * 1e3,
+        "answered"
+    );
 }
 
 const HTTP_REQUESTS: &str = "bouncewear_http_requests_total";
@@ -150,7 +199,7 @@ fn method_label(method: &Method) -> &'static str {
 
 /// The route template a request matched (`/v1/jobs/{id}`), or `other` for anything the router
 /// does not know: label values come only from the router's own table.
-pub fn route_label(request: &Request) -> String {
+fn route_label<B>(request: &Request<B>) -> String {
     request
         .extensions()
         .get::<MatchedPath>()
@@ -158,7 +207,7 @@ pub fn route_label(request: &Request) -> String {
 }
 
 /// Counts requests and their latency by method, route template and status.
-pub async fn record_request(request: Request, next: Next) -> Response {
+pub async fn record_request(request: axum::extract::Request, next: Next) -> Response {
     let started = Instant::now();
     let method = method_label(request.method());
     let route = route_label(&request);
