@@ -301,3 +301,52 @@ fn life_analysis_is_served_as_json_and_per_device_csv() {
         404,
     );
 }
+
+/// GET `url` with `accept-encoding`: the status, the `content-encoding` and the raw body.
+fn get_encoded(url: &str, accept_encoding: &str) -> (u16, Option<String>, Vec<u8>) {
+    let mut response = agent()
+        .get(url)
+        .header("accept-encoding", accept_encoding)
+        .call()
+        .unwrap();
+    let encoding = response
+        .headers()
+        .get("content-encoding")
+        .map(|v| v.to_str().unwrap().to_owned());
+    let body = response
+        .body_mut()
+        .with_config()
+        .limit(1 << 28)
+        .read_to_vec()
+        .unwrap();
+    (response.status().as_u16(), encoding, body)
+}
+
+#[test]
+fn a_result_comes_gzip_or_br_compressed_when_the_client_accepts_it() {
+    use std::io::Read;
+    let server = TestApp::start(&temp_db("compression"), &[]);
+    let id = server.submit(&scattered_job(20, 50, 5));
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let url = server.url(&format!("/v1/jobs/{id}/result"));
+    let (status, encoding, plain) = get_encoded(&url, "identity");
+    assert_eq!((status, encoding), (200, None));
+    let plain: Value = serde_json::from_slice(&plain).unwrap();
+
+    let (status, encoding, gzipped) = get_encoded(&url, "gzip");
+    assert_eq!((status, encoding.as_deref()), (200, Some("gzip")));
+    let mut text = Vec::new();
+    flate2::read::GzDecoder::new(&gzipped[..])
+        .read_to_end(&mut text)
+        .unwrap();
+    assert!(gzipped.len() * 3 < text.len(), "JSON compresses well");
+    assert_eq!(serde_json::from_slice::<Value>(&text).unwrap(), plain);
+
+    let (status, encoding, brotli) = get_encoded(&url, "br");
+    assert_eq!((status, encoding.as_deref()), (200, Some("br")));
+    let mut text = Vec::new();
+    brotli_decompressor::Decompressor::new(&brotli[..], 4096)
+        .read_to_end(&mut text)
+        .unwrap();
+    assert_eq!(serde_json::from_slice::<Value>(&text).unwrap(), plain);
+}

@@ -25,6 +25,7 @@ use std::collections::HashSet;
 use std::sync::Arc;
 use tokio::sync::Notify;
 use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::compression::CompressionLayer;
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
 use tower_http::trace::TraceLayer;
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
@@ -95,6 +96,8 @@ pub fn router(state: AppState) -> axum::Router {
                 "a handler panicked".into(),
             )))
         }))
+        // gzip or br as the client accepts; event streams, images and tiny bodies stay as they are.
+        .layer(CompressionLayer::new())
         // One line per request at info; server errors are logged where they arise, with their cause.
         .layer(
             TraceLayer::new_for_http()
