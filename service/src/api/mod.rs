@@ -2,6 +2,7 @@
 //! come from the same `#[utoipa::path]` handlers, so they cannot drift apart. Handlers speak HTTP
 //! only: the rules are the domain's, the storage the store's.
 
+pub mod cache;
 pub mod error;
 pub mod jobs;
 pub mod plots;
