@@ -109,6 +109,7 @@ fn every_subcommand_has_help() {
         &["bench", "--help"],
         &["serve", "--help"],
         &["worker", "--help"],
+        &["health", "--help"],
     ] {
         let output = bouncewear(args, "");
         assert!(output.status.success(), "{args:?}");

@@ -218,3 +218,51 @@ fn text_logs_on_a_pipe_have_no_colour_and_name_the_request() {
         assert!(line.contains(field), "{field} in {line}");
     }
 }
+
+/// The command of the Dockerfile's `HEALTHCHECK ... CMD [...]`, without the binary's name.
+fn dockerfile_health_check() -> Vec<String> {
+    let dockerfile = include_str!("../Dockerfile");
+    let line = dockerfile
+        .lines()
+        .find(|l| l.starts_with("HEALTHCHECK"))
+        .expect("the Dockerfile has a HEALTHCHECK");
+    let (_, command) = line.split_once(" CMD ").expect("HEALTHCHECK ... CMD [...]");
+    let mut command: Vec<String> = serde_json::from_str(command).expect("the exec form");
+    assert_eq!(command.remove(0), "bouncewear", "{line}");
+    command
+}
+
+#[test]
+fn the_images_health_check_passes_against_a_healthy_server_and_fails_without_one() {
+    let server = Spawned::start(&temp_db("health"), &[]);
+    let check = dockerfile_health_check();
+    let healthy = Command::new(BIN)
+        .args(&check)
+        .env("BOUNCEWEAR_HEALTH_URL", server.url("/healthz"))
+        .output()
+        .unwrap();
+    assert!(healthy.status.success(), "{healthy:?}");
+    let health: Value = serde_json::from_slice(&healthy.stdout).unwrap();
+    assert_eq!(health["status"], "ok");
+
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let nobody = format!("http://127.0.0.1:{port}/healthz");
+    let refused = Command::new(BIN)
+        .args(&check)
+        .env("BOUNCEWEAR_HEALTH_URL", &nobody)
+        .output()
+        .unwrap();
+    assert_eq!(refused.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains(&nobody));
+
+    let not_health = Command::new(BIN)
+        .args(&check)
+        .env("BOUNCEWEAR_HEALTH_URL", server.url("/no-such-page"))
+        .output()
+        .unwrap();
+    assert_eq!(not_health.status.code(), Some(1), "only a 200 is healthy");
+}

@@ -1,4 +1,4 @@
-//! Command line: `bouncewear simulate | run | bench | serve`.
+//! Command line: `bouncewear simulate | run | serve | worker | health | bench`.
 //!
 //! Bad input exits with code 2 and one line on stderr naming the field (a JSON pointer) and the rule.
 
@@ -62,6 +62,20 @@ enum Command {
     Serve(crate::config::ServeConfig),
     /// Run jobs from the queue's database without serving HTTP: more machines for one queue.
     Worker(crate::config::WorkerConfig),
+    /// Ask a running server whether it is healthy: exit 0 when its `/healthz` answers 200, 1 when
+    /// not (the Docker image's health check).
+    Health {
+        /// The health endpoint.
+        #[arg(
+            long,
+            env = "BOUNCEWEAR_HEALTH_URL",
+            default_value = "http://127.0.0.1:8080/healthz"
+        )]
+        url: String,
+        /// Seconds to wait for the answer.
+        #[arg(long, default_value_t = 2.0)]
+        timeout_seconds: f64,
+    },
     /// Measure speed against error and write report.json, report.md and report.svg.
     Bench {
         /// A smaller run that finishes in well under two minutes.
@@ -184,6 +198,13 @@ fn run(cli: Cli) -> Result<(), CliError> {
         }
         Command::Serve(config) => Ok(async_runtime()?.block_on(crate::app::serve(config))?),
         Command::Worker(config) => Ok(async_runtime()?.block_on(crate::app::work(config))?),
+        Command::Health {
+            url,
+            timeout_seconds,
+        } => {
+            println!("{}", check_health(&url, timeout_seconds)?);
+            Ok(())
+        }
         Command::Bench {
             quick,
             out,
@@ -193,6 +214,30 @@ fn run(cli: Cli) -> Result<(), CliError> {
             eprintln!("bouncewear: wrote {}/report.{{json,md,svg}}", out.display());
             print_json(&report)
         }
+    }
+}
+
+/// The body of a 200 from `url`; anything else is a failure naming what went wrong.
+fn check_health(url: &str, timeout_seconds: f64) -> Result<String, CliError> {
+    let agent: ureq::Agent = ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .timeout_global(Some(std::time::Duration::from_secs_f64(
+            timeout_seconds.max(0.001),
+        )))
+        .build()
+        .into();
+    let unhealthy = |what: String| CliError::Failed(format!("{url}: {what}"));
+    let mut response = agent
+        .get(url)
+        .call()
+        .map_err(|e| unhealthy(e.to_string()))?;
+    let body = response
+        .body_mut()
+        .read_to_string()
+        .map_err(|e| unhealthy(e.to_string()))?;
+    match response.status().as_u16() {
+        200 => Ok(body),
+        status => Err(unhealthy(format!("{status} {body}"))),
     }
 }
 
