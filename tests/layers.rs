@@ -36,7 +36,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("api", &["config", "domain", "plots", "store", "telemetry"]),
     ("worker", &["domain", "store", "telemetry"]),
     ("scheduler", &["domain", "store"]),
-    ("bench", &["plots"]),
+    ("bench", &["plots", "progress"]),
     ("store", &["domain"]),
     ("domain", &[]),
     ("plots", &[]),

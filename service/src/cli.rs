@@ -6,7 +6,7 @@ use crate::app::StartupError;
 use crate::bench::BenchError;
 use crate::compute::PoolError;
 use crate::domain::draw_seed;
-use crate::progress::ProgressBar;
+use crate::progress::Progress;
 use crate::telemetry::{self, LogFormat};
 use bouncewear_model::montecarlo::{Job, run_job};
 use bouncewear_model::{Fidelity, InvalidInput, Scenario, simulate};
@@ -57,6 +57,9 @@ enum Command {
         /// wear curve (`bands-METRIC.svg`) and histograms (`histograms-METRIC.svg`), and `weibull.svg`.
         #[arg(long)]
         plots: Option<PathBuf>,
+        /// No progress bar (it is drawn only when stderr is a terminal anyway).
+        #[arg(long, short)]
+        quiet: bool,
     },
     /// Serve the HTTP API, with the job queue in an embedded SQLite database (or PostgreSQL).
     Serve(crate::config::ServeConfig),
@@ -87,6 +90,10 @@ enum Command {
         /// Worker threads (default: one per core).
         #[arg(long)]
         threads: Option<usize>,
+        /// No progress bar (it is drawn only when stderr is a terminal anyway), and no note of
+        /// where the report went.
+        #[arg(long, short)]
+        quiet: bool,
     },
 }
 
@@ -184,10 +191,11 @@ fn run(cli: Cli) -> Result<(), CliError> {
             file,
             threads,
             plots,
+            quiet,
         } => {
             let job = Job::from_json(&read_input(&file)?, draw_seed)?;
             let pool = thread_pool(threads)?;
-            let progress = ProgressBar::for_stderr();
+            let progress = Progress::operations(quiet);
             let result = pool.install(|| run_job(&job, &progress));
             progress.finish();
             let result = result.map_err(|cancelled| CliError::Failed(cancelled.to_string()))?;
@@ -209,9 +217,16 @@ fn run(cli: Cli) -> Result<(), CliError> {
             quick,
             out,
             threads,
+            quiet,
         } => {
-            let report = thread_pool(threads)?.install(|| crate::bench::bench(&out, quick))?;
-            eprintln!("bouncewear: wrote {}/report.{{json,md,svg}}", out.display());
+            let progress = Progress::steps(quiet, crate::bench::measurements(quick));
+            let report =
+                thread_pool(threads)?.install(|| crate::bench::bench(&out, quick, &progress));
+            progress.finish();
+            let report = report?;
+            if !quiet {
+                eprintln!("bouncewear: wrote {}/report.{{json,md,svg}}", out.display());
+            }
             print_json(&report)
         }
     }
