@@ -12,5 +12,6 @@ VOLUME /data
 EXPOSE 8080
 ENV BOUNCEWEAR_BIND=0.0.0.0:8080 \
     BOUNCEWEAR_DATABASE=sqlite:///data/bouncewear.db
-HEALTHCHECK --interval=30s --timeout=3s CMD ["bouncewear", "--version"]
+# The image has no curl: the binary asks its own /healthz (BOUNCEWEAR_HEALTH_URL when the port moves).
+HEALTHCHECK --interval=30s --timeout=3s --start-period=10s --retries=3 CMD ["bouncewear", "health"]
 ENTRYPOINT ["bouncewear", "serve"]

@@ -109,6 +109,7 @@ fn every_subcommand_has_help() {
         &["bench", "--help"],
         &["serve", "--help"],
         &["worker", "--help"],
+        &["health", "--help"],
     ] {
         let output = bouncewear(args, "");
         assert!(output.status.success(), "{args:?}");
@@ -236,14 +237,54 @@ fn a_reader_that_stops_early_is_not_an_error() {
     assert!(!stderr.contains("Broken pipe"), "{stderr}");
 }
 
+/// Runs the binary with `args` on a terminal (util-linux `script` gives it one), its stdout
+/// thrown away: what the terminal showed.
+fn on_a_terminal(args: &[&str]) -> String {
+    let quoted: Vec<String> = std::iter::once(support::BIN)
+        .chain(args.iter().copied())
+        .map(|arg| format!("'{arg}'"))
+        .collect();
+    let output = std::process::Command::new("script")
+        .args(["--quiet", "--return", "--command"])
+        .arg(format!("{} > /dev/null", quoted.join(" ")))
+        .arg("/dev/null")
+        .stdin(std::process::Stdio::null())
+        .output()
+        .expect("util-linux `script` runs");
+    assert!(output.status.success(), "{args:?}: {output:?}");
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
 #[test]
-fn bench_quick_writes_the_report_in_all_three_forms() {
-    let out = temp_dir("bench");
-    let output = bouncewear(&["bench", "--quick", "--out", out.to_str().unwrap()], "");
+fn run_shows_progress_with_the_time_left_only_on_a_terminal_and_not_when_quiet() {
+    let job = temp_dir("progress").join("job.json");
+    std::fs::write(&job, r#"{"devices": 400, "operations": 2000, "seed": 1}"#).unwrap();
+    let job = job.to_str().unwrap();
+    let shown = on_a_terminal(&["run", job, "--threads", "1"]);
     assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
+        shown.contains("/800,000 operations") && shown.contains("ETA"),
+        "{shown}"
+    );
+    assert_eq!(
+        on_a_terminal(&["run", job, "--threads", "1", "--quiet"]),
+        ""
+    );
+    let piped = bouncewear(&["run", job, "--threads", "1"], "");
+    assert!(piped.status.success());
+    assert_eq!(
+        String::from_utf8_lossy(&piped.stderr),
+        "",
+        "nothing on a pipe"
+    );
+}
+
+#[test]
+fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal() {
+    let out = temp_dir("bench");
+    let shown = on_a_terminal(&["bench", "--quick", "--out", out.to_str().unwrap()]);
+    assert!(
+        shown.contains("15/15 measurements") && shown.contains("ETA"),
+        "{shown}"
     );
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();

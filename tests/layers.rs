@@ -10,7 +10,14 @@ const ALLOWED: &[(&str, &[&str])] = &[
     (
         "cli",
         &[
-            "app", "bench", "compute", "config", "domain", "plots", "progress",
+            "app",
+            "bench",
+            "compute",
+            "config",
+            "domain",
+            "plots",
+            "progress",
+            "telemetry",
         ],
     ),
     (
@@ -27,9 +34,9 @@ const ALLOWED: &[(&str, &[&str])] = &[
         ],
     ),
     ("api", &["config", "domain", "plots", "store", "telemetry"]),
-    ("worker", &["domain", "store"]),
+    ("worker", &["domain", "store", "telemetry"]),
     ("scheduler", &["domain", "store"]),
-    ("bench", &["plots"]),
+    ("bench", &["plots", "progress"]),
     ("store", &["domain"]),
     ("domain", &[]),
     ("plots", &[]),

@@ -1,14 +1,15 @@
 //! The service as a process: what only a real process shows (SIGKILL, SIGTERM, refusing to
-//! start), through the binary.
+//! start, its log on stderr), through the binary.
 
 #[path = "support/mod.rs"]
 mod support;
 
-use serde_json::json;
+use serde_json::{Value, json};
 use std::process::Command;
+use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 use support::app::{Service, Spawned, WorkerProcess};
-use support::client::{delete, get};
+use support::client::{agent, delete, get, reply};
 use support::postgres::Postgres;
 use support::{BIN, run_job, scattered_job, temp_db, temp_dir};
 
@@ -249,4 +250,132 @@ fn three_worker_processes_on_postgres_survive_kill_9_and_give_the_bits_of_one_ma
         assert_eq!(shard["status"], "done");
         assert!(shard["attempt"].as_u64().unwrap() <= 2, "{shard}");
     }
+}
+/// The log's lines up to the first that mentions `needle` (the last one), waiting for it at
+/// most ten seconds.
+fn log_until(lines: &Receiver<String>, needle: &str) -> Vec<String> {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let mut read = Vec::new();
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match lines.recv_timeout(left) {
+            Ok(line) if line.contains(needle) => {
+                read.push(line);
+                return read;
+            }
+            Ok(line) => read.push(line),
+            Err(error) => panic!("no log line with {needle} after {read:?}: {error}"),
+        }
+    }
+}
+
+/// GET `path` with `request_id` as its `x-request-id`; the status.
+fn tagged_get(server: &Spawned, path: &str, request_id: &str) -> u16 {
+    let request = agent()
+        .get(&server.url(path))
+        .header("x-request-id", request_id);
+    reply(request.call()).status
+}
+
+#[test]
+fn each_request_is_one_json_log_line_with_its_route_status_latency_and_request_id() {
+    let (server, lines) = Spawned::logging(&temp_db("json-log"), &["--log-format", "json"]);
+    assert_eq!(
+        tagged_get(&server, "/v1/jobs/no-such-job", "json-log-test-1"),
+        404
+    );
+    let line = log_until(&lines, "json-log-test-1").pop().unwrap();
+    assert!(!line.contains('\u{1b}'), "no colour codes: {line}");
+    let event: Value = serde_json::from_str(&line).expect("one JSON object a line");
+    assert_eq!(event["level"], "INFO");
+    assert_eq!(event["status"], 404);
+    assert!(event["latency_ms"].as_f64().unwrap() >= 0.0, "{event}");
+    let request = &event["span"];
+    assert_eq!(
+        (
+            &request["method"],
+            &request["route"],
+            &request["request_id"]
+        ),
+        (
+            &json!("GET"),
+            &json!("/v1/jobs/{id}"),
+            &json!("json-log-test-1")
+        ),
+        "{event}"
+    );
+    get(&server.url("/healthz"), None);
+    let later = log_until(&lines, r#""route":"/healthz""#);
+    assert!(
+        later.iter().all(|l| !l.contains("json-log-test-1")),
+        "one line per request: {later:?}"
+    );
+}
+
+#[test]
+fn text_logs_on_a_pipe_have_no_colour_and_name_the_request() {
+    let (server, lines) = Spawned::logging(&temp_db("text-log"), &[]);
+    assert_eq!(tagged_get(&server, "/healthz", "text-log-test-1"), 200);
+    let line = log_until(&lines, "text-log-test-1").pop().unwrap();
+    assert!(
+        !line.contains('\u{1b}'),
+        "no colour codes on a pipe: {line}"
+    );
+    for field in [
+        "INFO",
+        "method=GET",
+        "route=/healthz",
+        "status=200",
+        "latency_ms=",
+    ] {
+        assert!(line.contains(field), "{field} in {line}");
+    }
+}
+
+/// The command of the Dockerfile's `HEALTHCHECK ... CMD [...]`, without the binary's name.
+fn dockerfile_health_check() -> Vec<String> {
+    let dockerfile = include_str!("../Dockerfile");
+    let line = dockerfile
+        .lines()
+        .find(|l| l.starts_with("HEALTHCHECK"))
+        .expect("the Dockerfile has a HEALTHCHECK");
+    let (_, command) = line.split_once(" CMD ").expect("HEALTHCHECK ... CMD [...]");
+    let mut command: Vec<String> = serde_json::from_str(command).expect("the exec form");
+    assert_eq!(command.remove(0), "bouncewear", "{line}");
+    command
+}
+
+#[test]
+fn the_images_health_check_passes_against_a_healthy_server_and_fails_without_one() {
+    let server = Spawned::start(&temp_db("health"), &[]);
+    let check = dockerfile_health_check();
+    let healthy = Command::new(BIN)
+        .args(&check)
+        .env("BOUNCEWEAR_HEALTH_URL", server.url("/healthz"))
+        .output()
+        .unwrap();
+    assert!(healthy.status.success(), "{healthy:?}");
+    let health: Value = serde_json::from_slice(&healthy.stdout).unwrap();
+    assert_eq!(health["status"], "ok");
+
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let nobody = format!("http://127.0.0.1:{port}/healthz");
+    let refused = Command::new(BIN)
+        .args(&check)
+        .env("BOUNCEWEAR_HEALTH_URL", &nobody)
+        .output()
+        .unwrap();
+    assert_eq!(refused.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains(&nobody));
+
+    let not_health = Command::new(BIN)
+        .args(&check)
+        .env("BOUNCEWEAR_HEALTH_URL", server.url("/no-such-page"))
+        .output()
+        .unwrap();
+    assert_eq!(not_health.status.code(), Some(1), "only a 200 is healthy");
 }

@@ -10,11 +10,11 @@ use crate::domain::Owner;
 use crate::store::{Store, StoreError};
 use crate::telemetry;
 use crate::worker::Workers;
-use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle};
+use metrics_exporter_prometheus::PrometheusHandle;
 use std::collections::HashSet;
 use std::future::Future;
 use std::net::SocketAddr;
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 use std::time::Duration;
 use tokio::net::TcpListener;
 use tokio::sync::{Notify, watch};
@@ -82,7 +82,7 @@ impl Application {
             config: Arc::new(config),
             key_owners: Arc::new(key_owners),
             wake: Arc::clone(&workers.wake),
-            metrics: prometheus(),
+            metrics: telemetry::prometheus(),
             shutdown,
         };
         Ok(Self {
@@ -179,7 +179,6 @@ async fn join_workers(handles: Vec<tokio::task::JoinHandle<()>>) {
 /// `bouncewear worker`: runs jobs from the queue until SIGINT or SIGTERM, without serving HTTP
 /// (scale jobs out across machines with several of these on one PostgreSQL database).
 pub async fn work(config: WorkerConfig) -> Result<(), StartupError> {
-    telemetry::init_logging();
     if config.workers == Some(0) {
         return Err(StartupError::NoWorkers);
     }
@@ -212,27 +211,10 @@ fn describe(url: &str) -> String {
 
 /// `bouncewear serve`: the application until SIGINT or SIGTERM.
 pub async fn serve(config: ServeConfig) -> Result<(), StartupError> {
-    telemetry::init_logging();
     let application = Application::build(config).await?;
     // Tests and scripts read the port from this line.
     println!("bouncewear listening on http://{}", application.address());
     application.run_until_stopped(wait_for_signal()).await
-}
-
-/// The Prometheus registry. `metrics`' macros record into one process-wide recorder, so every
-/// application in a process (several, in tests) shares this one handle to it.
-fn prometheus() -> PrometheusHandle {
-    static HANDLE: OnceLock<PrometheusHandle> = OnceLock::new();
-    HANDLE
-        .get_or_init(|| {
-            let recorder = PrometheusBuilder::new().build_recorder();
-            let handle = recorder.handle();
-            if metrics::set_global_recorder(recorder).is_err() {
-                tracing::warn!("another metrics recorder is installed; /metrics will be empty");
-            }
-            handle
-        })
-        .clone()
 }
 
 async fn report_queue_depth(store: Arc<dyn Store>, metrics: PrometheusHandle) {

@@ -8,6 +8,7 @@
 //! - Throughput of the reference jobs, and what each skip of unneeded work saves.
 
 use crate::plots::{Panel, Series, work_precision_svg};
+use crate::progress::Progress;
 use bouncewear_model::montecarlo::{Job, JobResult, OperationMetric, Silent, run_job};
 use bouncewear_model::wear::WearLaw;
 use bouncewear_model::{Fidelity, Needs, Operation, Outcome, Pointer, Scenario};
@@ -80,18 +81,30 @@ pub enum BenchError {
     },
 }
 
+/// How many measurements [`bench`] makes, for its progress bar.
+pub fn measurements(quick: bool) -> u64 {
+    let count = Fidelity::ALL.len()
+        + SAMPLERS.len() * sampled_devices(quick).len()
+        + THROUGHPUT_JOBS.len() * THROUGHPUT_METRICS.len()
+        + 1;
+    count as u64
+}
+
 /// Runs every measurement on the current rayon pool and writes `report.{json,md,svg}` into `out`.
-pub fn bench(out: &Path, quick: bool) -> Result<Report, BenchError> {
+pub fn bench(out: &Path, quick: bool, progress: &Progress) -> Result<Report, BenchError> {
     let report = Report {
         machine: Machine {
             threads: rayon::current_num_threads(),
             quick,
             version: env!("CARGO_PKG_VERSION"),
         },
-        tiers: Fidelity::ALL.iter().map(|&f| tier(f, quick)).collect(),
-        sampling: sampling(quick),
-        throughput: throughput(quick),
-        skips: skips(quick),
+        tiers: Fidelity::ALL
+            .iter()
+            .map(|&f| progress.measure(format!("tier {}", f.as_str()), || tier(f, quick)))
+            .collect(),
+        sampling: sampling(quick, progress),
+        throughput: throughput(quick, progress),
+        skips: progress.measure("what skipping saves", || skips(quick)),
     };
     std::fs::create_dir_all(out).map_err(|source| io_error(out, source))?;
     let write = |name: &str, text: String| {
@@ -222,21 +235,29 @@ fn run(job: &Job) -> JobResult {
     run_job(job, &Silent).expect("nothing cancels a benchmark")
 }
 
-fn sampling(quick: bool) -> Vec<Sampling> {
-    let counts: &[u64] = if quick {
+const SAMPLERS: [&str; 2] = ["random", "lhs"];
+
+fn sampled_devices(quick: bool) -> &'static [u64] {
+    if quick {
         &[100, 400, 1600, 6400]
     } else {
         &[100, 400, 1600, 6400, 25600, 102400]
-    };
+    }
+}
+
+fn sampling(quick: bool, progress: &Progress) -> Vec<Sampling> {
     let mut rows = Vec::new();
-    for sampler in ["random", "lhs"] {
-        for &devices in counts {
+    for sampler in SAMPLERS {
+        for &devices in sampled_devices(quick) {
             let mut spec = reference_job(devices, 20, false, sampler, Some(&["total_bounce_s"]))
                 .spec()
                 .clone();
             spec.bin_operations = Some(20);
             let job = Job::new(spec, || 0, &Pointer::root()).expect("the reference job is valid");
-            let result = run(&job);
+            let result = progress
+                .measure(format!("sampling: {sampler}, {devices} devices"), || {
+                    run(&job)
+                });
             let p95 = &result.operations["total_bounce_s"][0].summary.quantiles["p95"];
             rows.push(Sampling {
                 sampler: if sampler == "lhs" { "lhs" } else { "random" },
@@ -249,15 +270,19 @@ fn sampling(quick: bool) -> Vec<Sampling> {
     rows
 }
 
-fn throughput(quick: bool) -> Vec<Throughput> {
+/// The throughput jobs: a name, and whether it arcs.
+const THROUGHPUT_JOBS: [(&str, bool); 2] = [("48 V / 15 A", true), ("mechanical", false)];
+/// Each throughput job with all metrics and with one.
+const THROUGHPUT_METRICS: [(&str, Option<&[&str]>); 2] =
+    [("all", None), ("total_bounce_s", Some(&["total_bounce_s"]))];
+
+fn throughput(quick: bool, progress: &Progress) -> Vec<Throughput> {
     let (devices, operations) = if quick { (400, 500) } else { (2000, 500) };
     let mut rows = Vec::new();
-    for (name, arcing) in [("48 V / 15 A", true), ("mechanical", false)] {
-        for (metrics, list) in [
-            ("all", None),
-            ("total_bounce_s", Some(&["total_bounce_s"][..])),
-        ] {
-            let result = run(&reference_job(devices, operations, arcing, "random", list));
+    for (name, arcing) in THROUGHPUT_JOBS {
+        for (metrics, list) in THROUGHPUT_METRICS {
+            let job = reference_job(devices, operations, arcing, "random", list);
+            let result = progress.measure(format!("throughput: {name}, {metrics}"), || run(&job));
             rows.push(Throughput {
                 job: name,
                 devices,

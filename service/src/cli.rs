@@ -1,4 +1,4 @@
-//! Command line: `bouncewear simulate | run | bench | serve`.
+//! Command line: `bouncewear simulate | run | serve | worker | health | bench`.
 //!
 //! Bad input exits with code 2 and one line on stderr naming the field (a JSON pointer) and the rule.
 
@@ -6,7 +6,8 @@ use crate::app::StartupError;
 use crate::bench::BenchError;
 use crate::compute::PoolError;
 use crate::domain::draw_seed;
-use crate::progress::ProgressBar;
+use crate::progress::Progress;
+use crate::telemetry::{self, LogFormat};
 use bouncewear_model::montecarlo::{Job, run_job};
 use bouncewear_model::{Fidelity, InvalidInput, Scenario, simulate};
 use clap::{Parser, Subcommand, ValueEnum};
@@ -21,6 +22,15 @@ use std::process::ExitCode;
     about = "Monte Carlo wear simulation of bouncing electrical contacts (McBride & Sharkh 1992)"
 )]
 pub struct Cli {
+    /// Log lines as `text` (coloured only when stderr is a terminal) or `json` (one object a line).
+    #[arg(
+        long,
+        global = true,
+        value_enum,
+        env = "BOUNCEWEAR_LOG_FORMAT",
+        default_value_t = LogFormat::Text
+    )]
+    log_format: LogFormat,
     #[command(subcommand)]
     command: Command,
 }
@@ -47,11 +57,28 @@ enum Command {
         /// wear curve (`bands-METRIC.svg`) and histograms (`histograms-METRIC.svg`), and `weibull.svg`.
         #[arg(long)]
         plots: Option<PathBuf>,
+        /// No progress bar (it is drawn only when stderr is a terminal anyway).
+        #[arg(long, short)]
+        quiet: bool,
     },
     /// Serve the HTTP API, with the job queue in an embedded SQLite database (or PostgreSQL).
     Serve(crate::config::ServeConfig),
     /// Run jobs from the queue's database without serving HTTP: more machines for one queue.
     Worker(crate::config::WorkerConfig),
+    /// Ask a running server whether it is healthy: exit 0 when its `/healthz` answers 200, 1 when
+    /// not (the Docker image's health check).
+    Health {
+        /// The health endpoint.
+        #[arg(
+            long,
+            env = "BOUNCEWEAR_HEALTH_URL",
+            default_value = "http://127.0.0.1:8080/healthz"
+        )]
+        url: String,
+        /// Seconds to wait for the answer.
+        #[arg(long, default_value_t = 2.0)]
+        timeout_seconds: f64,
+    },
     /// Measure speed against error and write report.json, report.md and report.svg.
     Bench {
         /// A smaller run that finishes in well under two minutes.
@@ -63,6 +90,10 @@ enum Command {
         /// Worker threads (default: one per core).
         #[arg(long)]
         threads: Option<usize>,
+        /// No progress bar (it is drawn only when stderr is a terminal anyway), and no note of
+        /// where the report went.
+        #[arg(long, short)]
+        quiet: bool,
     },
 }
 
@@ -150,6 +181,7 @@ pub fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<(), CliError> {
+    telemetry::init_logging(cli.log_format);
     match cli.command {
         Command::Simulate { fidelity, file } => {
             let scenario = Scenario::from_json(&read_input(&file)?)?;
@@ -159,10 +191,11 @@ fn run(cli: Cli) -> Result<(), CliError> {
             file,
             threads,
             plots,
+            quiet,
         } => {
             let job = Job::from_json(&read_input(&file)?, draw_seed)?;
             let pool = thread_pool(threads)?;
-            let progress = ProgressBar::for_stderr();
+            let progress = Progress::operations(quiet);
             let result = pool.install(|| run_job(&job, &progress));
             progress.finish();
             let result = result.map_err(|cancelled| CliError::Failed(cancelled.to_string()))?;
@@ -173,15 +206,53 @@ fn run(cli: Cli) -> Result<(), CliError> {
         }
         Command::Serve(config) => Ok(async_runtime()?.block_on(crate::app::serve(config))?),
         Command::Worker(config) => Ok(async_runtime()?.block_on(crate::app::work(config))?),
+        Command::Health {
+            url,
+            timeout_seconds,
+        } => {
+            println!("{}", check_health(&url, timeout_seconds)?);
+            Ok(())
+        }
         Command::Bench {
             quick,
             out,
             threads,
+            quiet,
         } => {
-            let report = thread_pool(threads)?.install(|| crate::bench::bench(&out, quick))?;
-            eprintln!("bouncewear: wrote {}/report.{{json,md,svg}}", out.display());
+            let progress = Progress::steps(quiet, crate::bench::measurements(quick));
+            let report =
+                thread_pool(threads)?.install(|| crate::bench::bench(&out, quick, &progress));
+            progress.finish();
+            let report = report?;
+            if !quiet {
+                eprintln!("bouncewear: wrote {}/report.{{json,md,svg}}", out.display());
+            }
             print_json(&report)
         }
+    }
+}
+
+/// The body of a 200 from `url`; anything else is a failure naming what went wrong.
+fn check_health(url: &str, timeout_seconds: f64) -> Result<String, CliError> {
+    let agent: ureq::Agent = ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .timeout_global(Some(std::time::Duration::from_secs_f64(
+            timeout_seconds.max(0.001),
+        )))
+        .build()
+        .into();
+    let unhealthy = |what: String| CliError::Failed(format!("{url}: {what}"));
+    let mut response = agent
+        .get(url)
+        .call()
+        .map_err(|e| unhealthy(e.to_string()))?;
+    let body = response
+        .body_mut()
+        .read_to_string()
+        .map_err(|e| unhealthy(e.to_string()))?;
+    match response.status().as_u16() {
+        200 => Ok(body),
+        status => Err(unhealthy(format!("{status} {body}"))),
     }
 }
 

@@ -1,69 +1,75 @@
-//! A progress bar on stderr for `bouncewear run`, drawn only when stderr is a terminal.
+//! Progress bars on stderr for `bouncewear run` and `bench` (indicatif, with the time left), drawn
+//! only when stderr is a terminal and `--quiet` was not given: a pipe or a log file gets nothing.
 
 use bouncewear_model::montecarlo::Observer;
-use std::io::{IsTerminal, Write};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
+use std::io::IsTerminal;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::Instant;
 
-/// Redraws at most every 100 ms, from whichever worker thread reports.
-pub struct ProgressBar {
-    started: Instant,
-    last_drawn_ms: AtomicU64,
-    enabled: bool,
+pub struct Progress {
+    bar: ProgressBar,
+    /// The length last given to the bar: setting it takes a lock, so only a change does.
+    total: AtomicU64,
 }
 
-impl ProgressBar {
-    pub fn for_stderr() -> Self {
-        Self {
-            started: Instant::now(),
-            last_drawn_ms: AtomicU64::new(0),
-            enabled: std::io::stderr().is_terminal(),
-        }
+impl Progress {
+    /// A job's operations: how many are done, their rate, and the time left.
+    pub fn operations(quiet: bool) -> Self {
+        Self::new(
+            quiet,
+            0,
+            "{wide_bar} {percent:>3}%  {human_pos}/{human_len} operations  {rate}  ETA {eta}",
+        )
     }
 
-    pub fn finish(&self) {
-        if self.enabled {
-            eprintln!();
-        }
+    /// `steps` measurements, each named while it runs.
+    pub fn steps(quiet: bool, steps: u64) -> Self {
+        Self::new(
+            quiet,
+            steps,
+            "{wide_bar} {pos}/{len} measurements  ETA {eta}  {msg}",
+        )
     }
-}
 
-impl Observer for ProgressBar {
-    fn progress(&self, done: u64, total: u64) {
-        if !self.enabled {
-            return;
-        }
-        let elapsed = self.started.elapsed();
-        let now_ms = u64::try_from(elapsed.as_millis()).unwrap_or(u64::MAX);
-        let last = self.last_drawn_ms.load(Ordering::Relaxed);
-        let is_last = done >= total;
-        if !is_last && now_ms < last + 100 {
-            return;
-        }
-        if self
-            .last_drawn_ms
-            .compare_exchange(last, now_ms, Ordering::Relaxed, Ordering::Relaxed)
-            .is_err()
-            && !is_last
-        {
-            return;
-        }
-        let fraction = if total == 0 {
-            1.0
+    fn new(quiet: bool, total: u64, template: &str) -> Self {
+        let target = if quiet || !std::io::stderr().is_terminal() {
+            ProgressDrawTarget::hidden()
         } else {
-            done as f64 / total as f64
+            ProgressDrawTarget::stderr()
         };
-        let filled = (fraction * 30.0) as usize;
-        let rate = done as f64 / elapsed.as_secs_f64().max(1e-9);
-        let mut stderr = std::io::stderr().lock();
-        let _ = write!(
-            stderr,
-            "\r[{}{}] {:5.1}%  {done}/{total} operations  {:.2} M/s ",
-            "#".repeat(filled),
-            " ".repeat(30 - filled.min(30)),
-            100.0 * fraction,
-            rate / 1e6
-        );
-        let _ = stderr.flush();
+        let style = ProgressStyle::with_template(template)
+            .expect("the templates are valid")
+            .with_key(
+                "rate",
+                |state: &ProgressState, out: &mut dyn std::fmt::Write| {
+                    let _ = write!(out, "{:.2} M/s", state.per_sec() / 1e6);
+                },
+            );
+        Self {
+            bar: ProgressBar::with_draw_target(Some(total), target).with_style(style),
+            total: AtomicU64::new(total),
+        }
+    }
+
+    /// Runs one measurement under its name, and counts it.
+    pub fn measure<T>(&self, name: impl Into<String>, work: impl FnOnce() -> T) -> T {
+        self.bar.set_message(name.into());
+        let value = work();
+        self.bar.inc(1);
+        value
+    }
+
+    /// Takes the bar off the terminal.
+    pub fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
+}
+
+impl Observer for Progress {
+    fn progress(&self, done: u64, total: u64) {
+        if self.total.swap(total, Ordering::Relaxed) != total {
+            self.bar.set_length(total);
+        }
+        self.bar.set_position(done);
     }
 }

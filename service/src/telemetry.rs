@@ -1,32 +1,293 @@
-//! Logs (tracing, to stderr, `RUST_LOG` to filter) and Prometheus metrics.
+//! Logs (tracing, to stderr, `RUST_LOG` to filter; text or JSON) and Prometheus metrics: every
+//! metric the service records is named, described and given its buckets here.
 
-use axum::extract::{MatchedPath, Request};
+use axum::extract::MatchedPath;
+use axum::http::Method;
+use axum::http::Request;
 use axum::middleware::Next;
 use axum::response::Response;
-use std::time::Instant;
+use clap::ValueEnum;
+use metrics_exporter_prometheus::{Matcher, PrometheusBuilder, PrometheusHandle};
+use std::io::IsTerminal;
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
 
-pub fn init_logging() {
+/// How log lines are written (`--log-format`, `BOUNCEWEAR_LOG_FORMAT`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LogFormat {
+    /// One line per event, coloured only when stderr is a terminal.
+    Text,
+    /// One JSON object per line, for log collectors.
+    Json,
+}
+
+/// Logs to stderr, filtered by `RUST_LOG` (default: info, and warnings from sqlx).
+pub fn init_logging(format: LogFormat) {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,sqlx=warn"));
-    let _ = tracing_subscriber::fmt()
+    let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .try_init();
+        .with_writer(std::io::stderr);
+    let _ = match format {
+        LogFormat::Text => builder
+            .with_ansi(std::io::stderr().is_terminal())
+            .try_init(),
+        // The request's fields (method, route, request id) sit beside the event's own.
+        LogFormat::Json => builder
+            .json()
+            .flatten_event(true)
+            .with_current_span(true)
+            .with_span_list(false)
+            .try_init(),
+    };
+}
+
+/// The span every request runs in: its method, route template, URI and request id.
+pub fn request_span<B>(request: &Request<B>) -> tracing::Span {
+    let request_id = request
+        .headers()
+        .get("x-request-id")
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("-");
+    tracing::info_span!(
+        "request",
+        method = %request.method(),
+        route = %route_label(request),
+        uri = %request.uri(),
+        request_id,
+    )
+}
+
+/// The one log line of a request, at info: its status and latency, in the request's span.
+pub fn log_response<B>(response: &axum::http::Response<B>, latency: Duration, _: &tracing::Span) {
+    tracing::info!(
+        status = response.status().as_u16(),
+        latency_ms = latency.as_secs_f64() * 1e3,
+        "answered"
+    );
+}
+
+const HTTP_REQUESTS: &str = "bouncewear_http_requests_total";
+const HTTP_DURATION: &str = "bouncewear_http_request_duration_seconds";
+const BUILD_INFO: &str = "bouncewear_build_info";
+const JOB_DURATION: &str = "bouncewear_job_duration_seconds";
+const JOB_RATE: &str = "bouncewear_job_operations_per_second";
+const SHARD_STEP: &str = "bouncewear_shard_step_seconds";
+
+/// Request latency: from a cached health check to a result of many megabytes.
+const HTTP_BUCKETS: &[f64] = &[
+    0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,
+];
+/// A job's wall time: a hundredth of a second to a day.
+const JOB_DURATION_BUCKETS: &[f64] = &[
+    0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0, 3000.0, 10000.0, 86400.0,
+];
+/// Simulated operations per second of wall time: a tiny job's start-up to a large machine's speed.
+const JOB_RATE_BUCKETS: &[f64] = &[
+    1e3, 3e3, 1e4, 3e4, 1e5, 3e5, 1e6, 2e6, 5e6, 1e7, 2e7, 5e7, 1e8,
+];
+
+/// One step of a shard's life: a millisecond's claim to a long group's run.
+const SHARD_STEP_BUCKETS: &[f64] = &[
+    0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 10.0, 60.0, 600.0,
+];
+
+/// The metrics recorder's configuration: which histograms have which buckets (the others would
+/// be summaries, which cannot be aggregated across instances).
+fn prometheus_builder() -> PrometheusBuilder {
+    [
+        (HTTP_DURATION, HTTP_BUCKETS),
+        (JOB_DURATION, JOB_DURATION_BUCKETS),
+        (JOB_RATE, JOB_RATE_BUCKETS),
+        (SHARD_STEP, SHARD_STEP_BUCKETS),
+    ]
+    .into_iter()
+    .fold(PrometheusBuilder::new(), |builder, (name, buckets)| {
+        builder
+            .set_buckets_for_metric(Matcher::Full(name.to_owned()), buckets)
+            .expect("bucket lists are not empty")
+    })
+}
+
+/// The HELP text of every metric the service records, wherever it records it.
+fn describe_metrics() {
+    metrics::describe_counter!(
+        HTTP_REQUESTS,
+        "HTTP requests answered, by method, route template and status."
+    );
+    metrics::describe_histogram!(
+        HTTP_DURATION,
+        metrics::Unit::Seconds,
+        "Time from a request's arrival to its response's headers, by method, route template and status."
+    );
+    metrics::describe_gauge!(BUILD_INFO, "Always 1; its labels name the running build.");
+    metrics::describe_gauge!("bouncewear_jobs_queued", "Jobs waiting in the queue.");
+    metrics::describe_gauge!(
+        "bouncewear_jobs_running",
+        "Jobs claimed by a worker and not yet finished."
+    );
+    metrics::describe_counter!(
+        "bouncewear_jobs_submitted_total",
+        "Jobs accepted into the queue by this instance."
+    );
+    metrics::describe_counter!(
+        "bouncewear_jobs_finished_total",
+        "Jobs that ended on this instance, by status (succeeded, failed, cancelled)."
+    );
+    metrics::describe_counter!(
+        "bouncewear_operations_simulated_total",
+        "Make operations simulated by this instance's workers, counted as each group of devices is stored."
+    );
+    metrics::describe_histogram!(
+        JOB_DURATION,
+        metrics::Unit::Seconds,
+        "Wall time of a succeeded job's run, from its claim to its result."
+    );
+    metrics::describe_histogram!(
+        JOB_RATE,
+        "Simulated operations per second of wall time, one observation per succeeded job."
+    );
+    metrics::describe_histogram!(
+        SHARD_STEP,
+        metrics::Unit::Seconds,
+        "One step of a shard on this instance's workers, by step: claim (finding and leasing it), run (simulating a group), store (writing its accumulators), merge (reading them back, merging, storing the Result)."
+    );
+}
+
+fn process_metrics() -> &'static metrics_process::Collector {
+    static COLLECTOR: OnceLock<metrics_process::Collector> = OnceLock::new();
+    COLLECTOR.get_or_init(metrics_process::Collector::default)
+}
+
+/// The Prometheus registry, installed once per process with every metric described. `metrics`'
+/// macros record into one process-wide recorder, so every application in a process (several, in
+/// tests) shares this one handle to it.
+pub fn prometheus() -> PrometheusHandle {
+    static HANDLE: OnceLock<PrometheusHandle> = OnceLock::new();
+    HANDLE
+        .get_or_init(|| {
+            let recorder = prometheus_builder().build_recorder();
+            let handle = recorder.handle();
+            if metrics::set_global_recorder(recorder).is_err() {
+                tracing::warn!("another metrics recorder is installed; /metrics will be empty");
+            }
+            describe_metrics();
+            process_metrics().describe();
+            metrics::gauge!(
+                BUILD_INFO,
+                "version" => env!("CARGO_PKG_VERSION"),
+                "profile" => if cfg!(debug_assertions) { "debug" } else { "release" },
+                "os" => std::env::consts::OS,
+                "arch" => std::env::consts::ARCH,
+            )
+            .set(1.0);
+            handle
+        })
+        .clone()
+}
+
+/// The text a scrape gets, with the process metrics read at this moment.
+pub fn render_metrics(handle: &PrometheusHandle) -> String {
+    process_metrics().collect();
+    handle.render()
+}
+
+/// Records a succeeded job's wall time and speed. `operations` is what the job simulated.
+pub fn record_job_finished(wall_s: f64, operations: u64) {
+    metrics::histogram!(JOB_DURATION).record(wall_s);
+    if wall_s > 0.0 {
+        metrics::histogram!(JOB_RATE).record(operations as f64 / wall_s);
+    }
+}
+
+/// Records how long one step of a shard took, from `since`: `claim`, `run`, `store` or `merge`.
+/// What sharding costs is all but `run`.
+pub fn record_shard_step(step: &'static str, since: std::time::Instant) {
+    metrics::histogram!(SHARD_STEP, "step" => step).record(since.elapsed().as_secs_f64());
+}
+
+/// A label value for a request's method: the standard ones by name, any other `other`, so a
+/// client cannot grow the number of series.
+fn method_label(method: &Method) -> &'static str {
+    ["GET", "HEAD", "POST", "PUT", "DELETE", "PATCH", "OPTIONS"]
+        .into_iter()
+        .find(|known| *known == method.as_str())
+        .unwrap_or("other")
+}
+
+/// The route template a request matched (`/v1/jobs/{id}`), or `other` for anything the router
+/// does not know: label values come only from the router's own table.
+fn route_label<B>(request: &Request<B>) -> String {
+    request
+        .extensions()
+        .get::<MatchedPath>()
+        .map_or_else(|| "other".to_owned(), |p| p.as_str().to_owned())
 }
 
 /// Counts requests and their latency by method, route template and status.
-pub async fn record_request(request: Request, next: Next) -> Response {
+pub async fn record_request(request: axum::extract::Request, next: Next) -> Response {
     let started = Instant::now();
-    let method = request.method().to_string();
-    let route = request
-        .extensions()
-        .get::<MatchedPath>()
-        .map_or_else(|| "unmatched".to_owned(), |p| p.as_str().to_owned());
+    let method = method_label(request.method());
+    let route = route_label(&request);
     let response = next.run(request).await;
     let status = response.status().as_u16().to_string();
-    let labels = [("method", method), ("route", route), ("status", status)];
-    metrics::counter!("bouncewear_http_requests_total", &labels).increment(1);
-    metrics::histogram!("bouncewear_http_request_duration_seconds", &labels)
-        .record(started.elapsed().as_secs_f64());
+    let labels = [
+        ("method", method.to_owned()),
+        ("route", route),
+        ("status", status),
+    ];
+    metrics::counter!(HTTP_REQUESTS, &labels).increment(1);
+    metrics::histogram!(HTTP_DURATION, &labels).record(started.elapsed().as_secs_f64());
     response
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_finished_job_is_one_observation_of_its_duration_and_its_speed() {
+        let recorder = prometheus_builder().build_recorder();
+        let handle = recorder.handle();
+        metrics::with_local_recorder(&recorder, || {
+            describe_metrics();
+            record_job_finished(2.0, 10_000_000);
+        });
+        let text = handle.render();
+        for line in [
+            "# TYPE bouncewear_job_duration_seconds histogram",
+            "bouncewear_job_duration_seconds_bucket{le=\"1\"} 0",
+            "bouncewear_job_duration_seconds_bucket{le=\"3\"} 1",
+            "bouncewear_job_duration_seconds_sum 2",
+            "bouncewear_job_duration_seconds_count 1",
+            "# TYPE bouncewear_job_operations_per_second histogram",
+            "bouncewear_job_operations_per_second_bucket{le=\"2000000\"} 0",
+            "bouncewear_job_operations_per_second_bucket{le=\"5000000\"} 1",
+            "bouncewear_job_operations_per_second_sum 5000000",
+        ] {
+            assert!(text.lines().any(|l| l == line), "{line} in\n{text}");
+        }
+        for name in [JOB_DURATION, JOB_RATE] {
+            assert!(text.contains(&format!("# HELP {name} ")), "{text}");
+        }
+    }
+
+    #[test]
+    fn a_job_of_no_measurable_time_records_its_duration_but_no_speed() {
+        let recorder = prometheus_builder().build_recorder();
+        let handle = recorder.handle();
+        metrics::with_local_recorder(&recorder, || record_job_finished(0.0, 5));
+        let text = handle.render();
+        assert!(
+            text.contains("bouncewear_job_duration_seconds_count 1"),
+            "{text}"
+        );
+        assert!(!text.contains(JOB_RATE), "{text}");
+    }
+
+    #[test]
+    fn methods_outside_the_standard_ones_share_one_label() {
+        assert_eq!(method_label(&Method::GET), "GET");
+        assert_eq!(method_label(&Method::from_bytes(b"BREW").unwrap()), "other");
+    }
 }

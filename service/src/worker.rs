@@ -13,6 +13,7 @@
 use crate::domain::UnixMs;
 use crate::domain::shards::{Merged, merge};
 use crate::store::{Claim, Fence, Lease, LeaseTerms, QueueEvent, Store};
+use crate::telemetry::{record_job_finished, record_shard_step};
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::{Batch, run_group};
 use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Observer, Watch};
@@ -99,7 +100,7 @@ impl Workers {
                 .await
             {
                 Ok(Some(claim)) => {
-                    step_seconds("claim", claiming);
+                    record_shard_step("claim", claiming);
                     self.run(claim, &mut shutdown).await
                 }
                 Ok(None) => {
@@ -156,7 +157,7 @@ impl Workers {
             .await;
         let stats = match ran {
             Ran::Done(stats) => {
-                step_seconds("run", running);
+                record_shard_step("run", running);
                 stats
             }
             Ran::Stopped { shutdown } => return self.stopped(fence, shutdown).await,
@@ -169,7 +170,7 @@ impl Workers {
         let storing = Instant::now();
         match self.store.complete(fence, &stats).await {
             Ok(true) => {
-                step_seconds("store", storing);
+                record_shard_step("store", storing);
                 metrics::counter!("bouncewear_operations_simulated_total").increment(operations);
                 tracing::debug!("group done");
             }
@@ -208,7 +209,7 @@ impl Workers {
         match ran {
             Ran::Done(Ok(Merged::Result(result))) => {
                 self.succeed(fence, &result).await;
-                step_seconds("merge", merging);
+                record_shard_step("merge", merging);
             }
             Ran::Done(Ok(Merged::Next(shards))) => match self.store.add_batch(fence, &shards).await
             {
@@ -329,6 +330,8 @@ impl Workers {
             Ok(true) => {
                 metrics::counter!("bouncewear_jobs_finished_total", "status" => "succeeded")
                     .increment(1);
+                let operations = result.job.devices_run() * result.job.spec().operations;
+                record_job_finished(result.timing.wall_s, operations);
                 tracing::info!(wall_s = result.timing.wall_s, "job succeeded");
             }
             Ok(false) => {
@@ -341,14 +344,6 @@ impl Workers {
             }
         }
     }
-}
-
-/// Records how long one step of a shard's life took: `claim` (finding and leasing it), `run` (a
-/// group's simulation), `store` (writing its accumulators), `merge` (reading every group's back,
-/// merging, summarising and storing the Result). What sharding costs is all but `run`.
-fn step_seconds(step: &'static str, since: Instant) {
-    metrics::histogram!("bouncewear_shard_step_seconds", "step" => step)
-        .record(since.elapsed().as_secs_f64());
 }
 
 /// Wakes idle workers when the database announces a queued job (from any instance), so that a

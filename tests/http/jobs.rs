@@ -1,7 +1,7 @@
 //! `/v1/jobs`: submission to result, listing, cancelling, the queue bound, life, and every 4xx.
 
 use crate::support::app::{Service, TestApp};
-use crate::support::client::{agent, assert_problem, delete, get, post, reply};
+use crate::support::client::{Reply, agent, assert_problem, authorized, delete, get, post, reply};
 use crate::support::{run_job, scattered_job, submit_concurrently, temp_db, wearing_template};
 use serde_json::{Value, json};
 use std::io::{BufRead, BufReader};
@@ -300,4 +300,139 @@ fn life_analysis_is_served_as_json_and_per_device_csv() {
         &get(&server.url(&format!("/v1/jobs/{plain}/life")), None),
         404,
     );
+}
+
+/// GET `url` with `accept-encoding`: the status, the `content-encoding` and the raw body.
+fn get_encoded(url: &str, accept_encoding: &str) -> (u16, Option<String>, Vec<u8>) {
+    let mut response = agent()
+        .get(url)
+        .header("accept-encoding", accept_encoding)
+        .call()
+        .unwrap();
+    let encoding = response
+        .headers()
+        .get("content-encoding")
+        .map(|v| v.to_str().unwrap().to_owned());
+    let body = response
+        .body_mut()
+        .with_config()
+        .limit(1 << 28)
+        .read_to_vec()
+        .unwrap();
+    (response.status().as_u16(), encoding, body)
+}
+
+#[test]
+fn a_result_comes_gzip_or_br_compressed_when_the_client_accepts_it() {
+    use std::io::Read;
+    let server = TestApp::start(&temp_db("compression"), &[]);
+    let id = server.submit(&scattered_job(20, 50, 5));
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let url = server.url(&format!("/v1/jobs/{id}/result"));
+    let (status, encoding, plain) = get_encoded(&url, "identity");
+    assert_eq!((status, encoding), (200, None));
+    let plain: Value = serde_json::from_slice(&plain).unwrap();
+
+    let (status, encoding, gzipped) = get_encoded(&url, "gzip");
+    assert_eq!((status, encoding.as_deref()), (200, Some("gzip")));
+    let mut text = Vec::new();
+    flate2::read::GzDecoder::new(&gzipped[..])
+        .read_to_end(&mut text)
+        .unwrap();
+    assert!(gzipped.len() * 3 < text.len(), "JSON compresses well");
+    assert_eq!(serde_json::from_slice::<Value>(&text).unwrap(), plain);
+
+    let (status, encoding, brotli) = get_encoded(&url, "br");
+    assert_eq!((status, encoding.as_deref()), (200, Some("br")));
+    let mut text = Vec::new();
+    brotli_decompressor::Decompressor::new(&brotli[..], 4096)
+        .read_to_end(&mut text)
+        .unwrap();
+    assert_eq!(serde_json::from_slice::<Value>(&text).unwrap(), plain);
+}
+
+/// GET `url` with `If-None-Match: tag`.
+fn get_if_none_match(url: &str, tag: &str, key: Option<&str>) -> Reply {
+    reply(authorized(agent().get(url).header("if-none-match", tag), key).call())
+}
+
+#[test]
+fn a_succeeded_jobs_results_are_immutable_with_an_etag_and_a_current_tag_gets_304() {
+    let server = TestApp::start(&temp_db("etag"), &[]);
+    let id = server.submit(&wearing_template(48.0));
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let mut tags = Vec::new();
+    for path in [
+        "result",
+        "distributions/e1",
+        "distributions/e1?format=csv",
+        "distributions/e1?op_start=100",
+        "life",
+        "life?format=csv",
+    ] {
+        let url = server.url(&format!("/v1/jobs/{id}/{path}"));
+        let first = get(&url, None);
+        assert_eq!(first.status, 200, "{path}: {}", first.body);
+        assert_eq!(
+            first.header("cache-control"),
+            Some("public, max-age=31536000, immutable"),
+            "{path}"
+        );
+        let tag = first.header("etag").expect("an ETag").to_owned();
+        let again = get_if_none_match(&url, &tag, None);
+        assert_eq!((again.status, again.body.as_str()), (304, ""), "{path}");
+        assert_eq!(again.header("etag"), Some(tag.as_str()), "{path}");
+        let listed = get_if_none_match(&url, &format!("W/\"0\", {tag}"), None);
+        assert_eq!(listed.status, 304, "{path}: a tag among others");
+        let stale = get_if_none_match(&url, "W/\"0\"", None);
+        assert_eq!((stale.status, &stale.body), (200, &first.body), "{path}");
+        tags.push(tag);
+    }
+    tags.sort();
+    tags.dedup();
+    assert_eq!(tags.len(), 6, "each representation has its own tag");
+}
+
+#[test]
+fn with_api_keys_results_are_cached_privately_and_unfinished_jobs_not_at_all() {
+    let server = TestApp::start(&temp_db("etag-keys"), &["--api-key", "alpha"]);
+    let jobs = server.url("/v1/jobs");
+    let submit = |job: Value| {
+        let reply = post(&jobs, &job.to_string(), Some("alpha"));
+        assert_eq!(reply.status, 202, "{}", reply.body);
+        reply.json()["id"].as_str().unwrap().to_owned()
+    };
+    let done = submit(json!({"devices": 2, "operations": 20, "seed": 3}));
+    let result = server.url(&format!("/v1/jobs/{done}/result"));
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    let first = loop {
+        let reply = get(&result, Some("alpha"));
+        if reply.status == 200 || std::time::Instant::now() > deadline {
+            break reply;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert_eq!(
+        (first.status, first.header("cache-control")),
+        (200, Some("private, max-age=31536000, immutable"))
+    );
+    let tag = first.header("etag").unwrap();
+    assert_eq!(get_if_none_match(&result, tag, Some("alpha")).status, 304);
+    assert_problem(&get_if_none_match(&result, tag, None), 401);
+
+    let running = submit(json!({"devices": 1000, "operations": 1_000_000, "seed": 4}));
+    let unfinished = get(
+        &server.url(&format!("/v1/jobs/{running}/result")),
+        Some("alpha"),
+    );
+    assert_problem(&unfinished, 409);
+    assert_eq!(
+        (
+            unfinished.header("etag"),
+            unfinished.header("cache-control")
+        ),
+        (None, None)
+    );
+    let cancel = agent().delete(&server.url(&format!("/v1/jobs/{running}")));
+    assert_eq!(reply(authorized(cancel, Some("alpha")).call()).status, 200);
 }

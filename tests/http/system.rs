@@ -1,9 +1,13 @@
-//! The OpenAPI document, docs, health and metrics, and API keys.
+//! The OpenAPI document, docs, health and metrics (every family described), and API keys.
 
 use crate::support::app::{Service, TestApp};
-use crate::support::client::{agent, assert_problem, get, post, reply};
+use crate::support::client::{agent, assert_problem, delete, get, post, reply};
 use crate::support::temp_db;
 use serde_json::json;
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::time::Duration;
 
 #[test]
 fn openapi_docs_health_and_metrics_are_served() {
@@ -92,4 +96,139 @@ fn api_keys_are_required_and_isolate_jobs() {
         200,
         "health needs no key"
     );
+}
+
+/// One `/metrics` scrape: the type and help of each family, and each sample's name and labels.
+struct Scrape {
+    types: BTreeMap<String, String>,
+    helps: BTreeSet<String>,
+    samples: Vec<(String, String)>,
+}
+
+impl Scrape {
+    fn of(text: &str) -> Self {
+        let mut scrape = Scrape {
+            types: BTreeMap::new(),
+            helps: BTreeSet::new(),
+            samples: Vec::new(),
+        };
+        for line in text.lines().filter(|l| !l.is_empty()) {
+            if let Some(rest) = line.strip_prefix("# TYPE ") {
+                let (name, kind) = rest.split_once(' ').unwrap();
+                scrape.types.insert(name.to_owned(), kind.to_owned());
+            } else if let Some(rest) = line.strip_prefix("# HELP ") {
+                scrape
+                    .helps
+                    .insert(rest.split_once(' ').unwrap().0.to_owned());
+            } else {
+                let end = line.find(['{', ' ']).unwrap();
+                let labels = line[end..].rsplit_once(' ').unwrap().0.to_owned();
+                scrape.samples.push((line[..end].to_owned(), labels));
+            }
+        }
+        scrape
+    }
+
+    /// The family a sample belongs to: its own name, or a histogram's or summary's.
+    fn family(&self, sample: &str) -> String {
+        ["_bucket", "_sum", "_count"]
+            .into_iter()
+            .filter_map(|suffix| sample.strip_suffix(suffix))
+            .find(|base| {
+                matches!(
+                    self.types.get(*base).map(String::as_str),
+                    Some("histogram" | "summary")
+                )
+            })
+            .unwrap_or(sample)
+            .to_owned()
+    }
+
+    fn labels_of(&self, name: &str) -> Vec<&str> {
+        self.samples
+            .iter()
+            .filter(|(sample, _)| sample == name)
+            .map(|(_, labels)| labels.as_str())
+            .collect()
+    }
+}
+
+#[test]
+fn every_metric_family_has_help_and_type_and_latency_is_a_histogram() {
+    let server = TestApp::start(&temp_db("metrics"), &[]);
+    let done = server.submit(&json!({"devices": 2, "operations": 50, "seed": 1}));
+    server.wait_for(&done, "succeeded", Duration::from_secs(60));
+    let long = server.submit(&json!({"devices": 1000, "operations": 1_000_000, "seed": 2}));
+    assert_eq!(delete(&server.url(&format!("/v1/jobs/{long}"))).status, 200);
+    get(&server.url("/healthz"), None);
+    get(&server.url("/no/such/page/12345"), None);
+    // A method no client library sends, so written by hand.
+    let mut raw = TcpStream::connect(server.base().trim_start_matches("http://")).unwrap();
+    raw.write_all(b"BREW /healthz HTTP/1.1\r\nhost: bouncewear\r\nconnection: close\r\n\r\n")
+        .unwrap();
+    let mut answer = String::new();
+    raw.read_to_string(&mut answer).unwrap();
+    assert!(answer.starts_with("HTTP/1.1 405"), "{answer}");
+    // The queue gauges are reported once a second.
+    std::thread::sleep(Duration::from_millis(1100));
+
+    let text = get(&server.url("/metrics"), None).body;
+    let scrape = Scrape::of(&text);
+    for (sample, _) in &scrape.samples {
+        let family = scrape.family(sample);
+        assert!(
+            scrape.types.contains_key(&family),
+            "TYPE of {family}:\n{text}"
+        );
+        assert!(scrape.helps.contains(&family), "HELP of {family}:\n{text}");
+    }
+    for family in [
+        "bouncewear_http_requests_total",
+        "bouncewear_jobs_submitted_total",
+        "bouncewear_jobs_finished_total",
+        "bouncewear_operations_simulated_total",
+        "bouncewear_jobs_queued",
+        "bouncewear_jobs_running",
+        "bouncewear_build_info",
+        "process_resident_memory_bytes",
+        "process_cpu_seconds_total",
+        "process_open_fds",
+        "process_start_time_seconds",
+    ] {
+        assert!(
+            scrape.types.contains_key(family),
+            "{family} is exported:\n{text}"
+        );
+    }
+    let latency = "bouncewear_http_request_duration_seconds";
+    assert_eq!(scrape.types[latency], "histogram");
+    let buckets = scrape.labels_of(&format!("{latency}_bucket"));
+    assert!(
+        buckets
+            .iter()
+            .any(|l| l.contains(r#"route="/healthz""#) && l.contains(r#"le="+Inf""#))
+    );
+    let version = format!(r#"version="{}""#, env!("CARGO_PKG_VERSION"));
+    assert!(
+        scrape
+            .labels_of("bouncewear_build_info")
+            .iter()
+            .any(|l| l.contains(&version))
+    );
+
+    // Label values come from the router's table and the standard methods, never from the client.
+    let requests = scrape.labels_of("bouncewear_http_requests_total");
+    assert!(
+        requests.iter().all(|l| !l.contains("no/such")),
+        "{requests:?}"
+    );
+    assert!(
+        requests.iter().any(|l| l.contains(r#"route="other""#)),
+        "{requests:?}"
+    );
+    assert!(
+        requests.iter().any(|l| l.contains(r#"method="other""#)),
+        "{requests:?}"
+    );
+    assert!(requests.iter().all(|l| !l.contains("BREW")), "{requests:?}");
 }

@@ -11,6 +11,7 @@ use serde_json::Value;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 /// A running service, however it runs.
@@ -145,6 +146,10 @@ impl Drop for TestApp {
     }
 }
 
+fn sqlite_url(database: &Path) -> String {
+    format!("sqlite://{}", database.display())
+}
+
 /// `bouncewear serve` as a child process; killed when dropped.
 pub struct Spawned {
     pub child: Child,
@@ -153,19 +158,42 @@ pub struct Spawned {
 
 impl Spawned {
     pub fn start(database: &Path, args: &[&str]) -> Self {
-        Self::on(&format!("sqlite://{}", database.display()), args)
+        Self::on(&sqlite_url(database), args)
     }
 
     /// A server on the database `url` names (SQLite or PostgreSQL).
     pub fn on(url: &str, args: &[&str]) -> Self {
-        let mut child = Command::new(BIN)
+        let mut command = Self::command(url, args);
+        command.env("RUST_LOG", "warn").stderr(Stdio::null());
+        Self::spawn(command)
+    }
+
+    /// The server logging at info to a pipe, whose lines arrive on the receiver as they are written.
+    pub fn logging(database: &Path, args: &[&str]) -> (Self, Receiver<String>) {
+        let mut command = Self::command(&sqlite_url(database), args);
+        command.env_remove("RUST_LOG").stderr(Stdio::piped());
+        let mut server = Self::spawn(command);
+        let stderr = server.child.stderr.take().unwrap();
+        let (sender, lines) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                let _ = sender.send(line);
+            }
+        });
+        (server, lines)
+    }
+
+    fn command(url: &str, args: &[&str]) -> Command {
+        let mut command = Command::new(BIN);
+        command
             .args(["serve", "--bind", "127.0.0.1:0", "--database", url])
             .args(args)
-            .env("RUST_LOG", "warn")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("server starts");
+            .stdout(Stdio::piped());
+        command
+    }
+
+    fn spawn(mut command: Command) -> Self {
+        let mut child = command.spawn().expect("server starts");
         let mut line = String::new();
         BufReader::new(child.stdout.take().unwrap())
             .read_line(&mut line)

@@ -51,7 +51,11 @@ pub fn reply(response: Result<ureq::http::Response<ureq::Body>, ureq::Error>) ->
     }
 }
 
-fn authorized<B>(request: ureq::RequestBuilder<B>, key: Option<&str>) -> ureq::RequestBuilder<B> {
+/// `request` with `Authorization: Bearer KEY` when there is a key.
+pub fn authorized<B>(
+    request: ureq::RequestBuilder<B>,
+    key: Option<&str>,
+) -> ureq::RequestBuilder<B> {
     match key {
         Some(key) => request.header("authorization", &format!("Bearer {key}")),
         None => request,

@@ -1,5 +1,6 @@
 //! `/v1/jobs`: submit, list, inspect, cancel, results, distributions and live progress.
 
+use super::cache::{NotModified, immutable};
 use super::error::{
     ApiError, Internal, PROBLEM, Problem,
     responses::{BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, Unauthorized},
@@ -9,7 +10,7 @@ use crate::domain::{JobId, JobStatus, Owner, QueuedJob, UnixMs, draw_seed};
 use crate::store::{JobRecord, Operations, Page, QueueEvent, ShardRecord};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
-use axum::http::{HeaderValue, StatusCode, header};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
@@ -334,7 +335,8 @@ pub async fn succeeded(state: &AppState, owner: &Owner, id: &JobId) -> Result<Jo
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
-        (status = 200, description = "The result", body = JobResult),
+        (status = 200, description = "The result", body = JobResult, headers(("ETag" = String, description = "A tag of the content, for If-None-Match"), ("Cache-Control" = String, description = "Immutable for a year"))),
+        NotModified,
         Unauthorized,
         NoSuchJob,
         NotSucceeded,
@@ -345,6 +347,7 @@ pub async fn get_result(
     State(state): State<AppState>,
     Extension(owner): Extension<Owner>,
     Path(id): Path<JobId>,
+    headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     succeeded(&state, &owner, &id).await?;
     let result = state
@@ -352,7 +355,7 @@ pub async fn get_result(
         .result_json(&id)
         .await?
         .ok_or_else(|| without_result(&id))?;
-    Ok(([(header::CONTENT_TYPE, "application/json")], result).into_response())
+    Ok(immutable(&state, &headers, JSON, result))
 }
 
 #[derive(Debug, Deserialize, IntoParams)]
@@ -397,7 +400,8 @@ pub struct Distribution {
     get, path = "/v1/jobs/{id}/distributions/{metric}", tag = "jobs",
     params(("id" = String, Path, description = "Job id"), ("metric" = String, Path, description = "An operation or device metric"), DistributionQuery),
     responses(
-        (status = 200, description = "The bins", body = Distribution, content_type = "application/json"),
+        (status = 200, description = "The bins", body = Distribution, content_type = "application/json", headers(("ETag" = String, description = "A tag of the content, for If-None-Match"), ("Cache-Control" = String, description = "Immutable for a year"))),
+        NotModified,
         BadQuery,
         Unauthorized,
         (status = 404, description = "No such job, or the job has no such metric", body = Problem, content_type = PROBLEM),
@@ -410,6 +414,7 @@ pub async fn get_distribution(
     Extension(owner): Extension<Owner>,
     Path((id, metric)): Path<(JobId, String)>,
     query: Result<Query<DistributionQuery>, QueryRejection>,
+    headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
     let (op_start, op_end) = (
@@ -447,20 +452,25 @@ pub async fn get_distribution(
             "job {id} has no bins of `{metric}` in that range (was the metric requested?)"
         )));
     };
-    match query.format.unwrap_or(Format::Json) {
-        Format::Json => Ok(Json(Distribution {
-            job_id: record.id.to_string(),
-            metric,
-            kind,
-            bins,
-        })
-        .into_response()),
-        Format::Csv => Ok((
-            [(header::CONTENT_TYPE, "text/csv; charset=utf-8")],
-            to_csv(&bins),
-        )
-            .into_response()),
-    }
+    Ok(match query.format.unwrap_or(Format::Json) {
+        Format::Json => {
+            let distribution = Distribution {
+                job_id: record.id.to_string(),
+                metric,
+                kind,
+                bins,
+            };
+            immutable(&state, &headers, JSON, to_json(&distribution)?)
+        }
+        Format::Csv => immutable(&state, &headers, CSV, to_csv(&bins)),
+    })
+}
+
+const JSON: &str = "application/json";
+const CSV: &str = "text/csv; charset=utf-8";
+
+fn to_json(value: &impl Serialize) -> Result<Vec<u8>, ApiError> {
+    serde_json::to_vec(value).map_err(|e| Internal(e.to_string()).into())
 }
 
 /// One row per bin: range, moments, intervals and every quantile.
@@ -522,7 +532,8 @@ pub struct LifeQuery {
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/life", tag = "jobs", params(("id" = String, Path, description = "Job id"), LifeQuery),
     responses(
-        (status = 200, description = "The life analysis (JSON), or per-device lives (CSV)", body = bouncewear_model::montecarlo::LifeReport),
+        (status = 200, description = "The life analysis (JSON), or per-device lives (CSV)", body = bouncewear_model::montecarlo::LifeReport, headers(("ETag" = String, description = "A tag of the content, for If-None-Match"), ("Cache-Control" = String, description = "Immutable for a year"))),
+        NotModified,
         BadQuery,
         Unauthorized,
         (status = 404, description = "No such job, or it has no failure criteria", body = Problem, content_type = PROBLEM),
@@ -535,6 +546,7 @@ pub async fn get_life(
     Extension(owner): Extension<Owner>,
     Path(id): Path<JobId>,
     query: Result<Query<LifeQuery>, QueryRejection>,
+    headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
     succeeded(&state, &owner, &id).await?;
@@ -545,7 +557,7 @@ pub async fn get_life(
         )));
     };
     match query.format.unwrap_or(Format::Json) {
-        Format::Json => Ok(Json(life).into_response()),
+        Format::Json => Ok(immutable(&state, &headers, JSON, to_json(&life)?)),
         Format::Csv => {
             let mut csv = String::from("device,operations_to_failure,censored\n");
             for device in state.store.lives(&id).await? {
@@ -555,7 +567,7 @@ pub async fn get_life(
                     device.device, device.operations_to_failure, device.censored
                 );
             }
-            Ok(([(header::CONTENT_TYPE, "text/csv; charset=utf-8")], csv).into_response())
+            Ok(immutable(&state, &headers, CSV, csv))
         }
     }
 }

@@ -2,6 +2,7 @@
 //! come from the same `#[utoipa::path]` handlers, so they cannot drift apart. Handlers speak HTTP
 //! only: the rules are the domain's, the storage the store's.
 
+pub mod cache;
 pub mod error;
 pub mod jobs;
 pub mod plots;
@@ -25,6 +26,7 @@ use std::collections::HashSet;
 use std::sync::Arc;
 use tokio::sync::Notify;
 use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::compression::CompressionLayer;
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
 use tower_http::trace::TraceLayer;
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
@@ -76,7 +78,10 @@ pub fn router(state: AppState) -> axum::Router {
     let (router, openapi) = api_routes(state);
     let openapi = Arc::new(openapi);
     router
-        .route("/openapi.json", get(move || async move { axum::Json(openapi.as_ref().clone()) }))
+        .route(
+            "/openapi.json",
+            get(move || async move { axum::Json(openapi.as_ref().clone()) }),
+        )
         .route("/docs", get(system::docs))
         .route("/docs/rapidoc-min.js", get(system::docs_script))
         .route("/", get(system::dashboard))
@@ -88,12 +93,19 @@ pub fn router(state: AppState) -> axum::Router {
         .layer(DefaultBodyLimit::max(max_body))
         .layer(axum::middleware::from_fn(telemetry::record_request))
         .layer(CatchPanicLayer::custom(|_| {
-            IntoResponse::into_response(ApiError::Internal(error::Internal("a handler panicked".into())))
+            IntoResponse::into_response(ApiError::Internal(error::Internal(
+                "a handler panicked".into(),
+            )))
         }))
-        .layer(TraceLayer::new_for_http().make_span_with(|request: &Request<_>| {
-            let request_id = request.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
-            tracing::info_span!("request", method = %request.method(), uri = %request.uri(), request_id)
-        }))
+        // gzip or br as the client accepts; event streams, images and tiny bodies stay as they are.
+        .layer(CompressionLayer::new())
+        // One line per request at info; server errors are logged where they arise, with their cause.
+        .layer(
+            TraceLayer::new_for_http()
+                .make_span_with(telemetry::request_span)
+                .on_response(telemetry::log_response)
+                .on_failure(()),
+        )
         .layer(PropagateRequestIdLayer::x_request_id())
         .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
 }

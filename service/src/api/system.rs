@@ -2,6 +2,7 @@
 
 use super::AppState;
 use super::error::{ApiError, Problem};
+use crate::telemetry;
 use axum::Json;
 use axum::extract::State;
 use axum::http::header;
@@ -39,7 +40,8 @@ pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ApiE
     }))
 }
 
-/// Prometheus metrics: requests, queue depth, jobs and simulated operations.
+/// Prometheus metrics: requests and their latency, queue depth, jobs, simulated operations, the
+/// build and the process.
 #[utoipa::path(
     get, path = "/metrics", tag = "system",
     responses((status = 200, description = "Prometheus text format", body = String, content_type = "text/plain"))
@@ -47,7 +49,7 @@ pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ApiE
 pub async fn prometheus_metrics(State(state): State<AppState>) -> impl IntoResponse {
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
-        state.metrics.render(),
+        telemetry::render_metrics(&state.metrics),
     )
 }
 

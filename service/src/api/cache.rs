@@ -1,0 +1,101 @@
+//! What a succeeded job produced never changes, so its representations carry an `ETag` and may be
+//! cached for a year without asking again; `If-None-Match` with a current tag gets 304 and no body.
+
+use super::AppState;
+use axum::body::Bytes;
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use sha2::{Digest, Sha256};
+
+/// The OpenAPI response of a request whose `If-None-Match` names the current tag.
+#[derive(utoipa::IntoResponses)]
+#[response(
+    status = 304,
+    description = "Not modified: If-None-Match names the current ETag"
+)]
+pub struct NotModified;
+
+/// A succeeded job's result, distribution or life, as `content_type`, with its validator.
+pub fn immutable(
+    state: &AppState,
+    request: &HeaderMap,
+    content_type: &'static str,
+    body: impl Into<Bytes>,
+) -> Response {
+    let body = body.into();
+    let tag = entity_tag(&body);
+    // With API keys a result is its owner's alone: no shared cache may keep it for others.
+    let cache_control = if state.key_owners.is_empty() {
+        "public, max-age=31536000, immutable"
+    } else {
+        "private, max-age=31536000, immutable"
+    };
+    let headers = [
+        (header::ETAG, tag.clone()),
+        (
+            header::CACHE_CONTROL,
+            HeaderValue::from_static(cache_control),
+        ),
+    ];
+    if matches_any(request, &tag) {
+        return (StatusCode::NOT_MODIFIED, headers).into_response();
+    }
+    let content_type = [(header::CONTENT_TYPE, HeaderValue::from_static(content_type))];
+    (headers, content_type, body).into_response()
+}
+
+/// A weak tag from the SHA-256 of the bytes: weak because compression may send other bytes for
+/// the same content, which a strong tag would have to tell apart.
+fn entity_tag(body: &[u8]) -> HeaderValue {
+    let hex: String = Sha256::digest(body)[..16]
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    HeaderValue::from_str(&format!("W/\"{hex}\"")).expect("hex is a valid header value")
+}
+
+/// Whether `If-None-Match` names `tag` (weak comparison, RFC 9110 section 13.1.2) or is `*`.
+fn matches_any(request: &HeaderMap, tag: &HeaderValue) -> bool {
+    let opaque = |t: &str| t.trim().trim_start_matches("W/").to_owned();
+    let ours = opaque(tag.to_str().unwrap_or_default());
+    request
+        .get_all(header::IF_NONE_MATCH)
+        .iter()
+        .filter_map(|value| value.to_str().ok())
+        .flat_map(|value| value.split(','))
+        .any(|candidate| candidate.trim() == "*" || opaque(candidate) == ours)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn asking(if_none_match: &str) -> HeaderMap {
+        let mut headers = HeaderMap::new();
+        headers.insert(
+            header::IF_NONE_MATCH,
+            HeaderValue::from_str(if_none_match).unwrap(),
+        );
+        headers
+    }
+
+    #[test]
+    fn if_none_match_compares_tags_weakly_in_a_list_or_as_a_star() {
+        let tag = entity_tag(b"{}");
+        let opaque = tag.to_str().unwrap().trim_start_matches("W/").to_owned();
+        assert!(matches_any(&asking(tag.to_str().unwrap()), &tag));
+        assert!(
+            matches_any(&asking(&opaque), &tag),
+            "a strong form matches weakly"
+        );
+        assert!(matches_any(&asking(&format!("\"other\", {opaque}")), &tag));
+        assert!(matches_any(&asking("*"), &tag));
+        assert!(!matches_any(&asking("\"other\""), &tag));
+        assert!(!matches_any(&HeaderMap::new(), &tag));
+    }
+
+    #[test]
+    fn other_bytes_get_another_tag() {
+        assert_ne!(entity_tag(b"{\"a\":1}"), entity_tag(b"{\"a\":2}"));
+    }
+}
