@@ -4,19 +4,23 @@
 #[path = "support/mod.rs"]
 mod support;
 
+use bouncewear::compute::thread_pool;
 use bouncewear::domain::shards::{Merged, merge};
 use bouncewear::domain::{
     Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, ShardId, UnixMs,
 };
 use bouncewear::scheduler::tick;
 use bouncewear::store::{self, Lease, LeaseTerms, ScheduleRecord, Store, StoreError};
+use bouncewear::worker::Workers;
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::{Batch, run_group};
 use bouncewear_model::montecarlo::{Job, Silent, run_job};
 use chrono::{DateTime, Utc};
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 use support::postgres::Postgres;
 use support::temp_dir;
+use tokio::sync::{Notify, watch};
 
 fn queued(seed: u64) -> QueuedJob {
     queued_job(r#"{"devices": 2, "operations": 3}"#, seed)
@@ -51,6 +55,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_claim_whose_lease_expired_is_fenced_out_by_its_successor(&database("fence")).await;
     a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(&database("shards")).await;
     a_precision_target_queues_its_next_batch_from_the_merge(&database("batches")).await;
+    a_poison_job_fails_after_the_retry_limit_with_the_reason(&database("poison")).await;
     concurrent_submissions_never_overshoot_the_queue_bound(&database("bound")).await;
     every_u64_seed_reads_back_exactly(&database("seeds")).await;
     a_job_whose_lease_keeps_expiring_fails_with_the_reason(&database("retries")).await;
@@ -297,6 +302,65 @@ async fn a_precision_target_queues_its_next_batch_from_the_merge(url: &str) {
     assert_eq!(
         without_timing(&store.result_json(&id).await.unwrap().unwrap()),
         without_timing(&serde_json::to_string(&whole).unwrap())
+    );
+}
+
+/// Runs one statement on the database behind a store, as an operator (or a disk) could.
+async fn execute(url: &str, sql: &'static str) {
+    if url.starts_with("sqlite:") {
+        let pool = sqlx::SqlitePool::connect(url).await.unwrap();
+        sqlx::query(sql).execute(&pool).await.unwrap();
+    } else {
+        let pool = sqlx::PgPool::connect(url).await.unwrap();
+        sqlx::query(sql).execute(&pool).await.unwrap();
+    }
+}
+
+/// A job whose stored accumulators are damaged makes every merge fail: real workers retry it the
+/// configured number of times, then the job fails with the reason, instead of looping forever.
+async fn a_poison_job_fails_after_the_retry_limit_with_the_reason(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let id = store.insert_job(single(3), 10).await.unwrap().unwrap().id;
+    let claim = store.claim("w", terms(0), 2).await.unwrap().unwrap();
+    let job = Job::new(claim.spec.clone(), || 0, &Pointer::root()).unwrap();
+    let batch = Batch::of(&job, 0).unwrap();
+    let stats = run_group(&job, batch, 0, &Silent).unwrap();
+    assert!(store.complete(&claim.fence, &stats).await.unwrap());
+    execute(url, "UPDATE shards SET partial = '{\"damaged\": true}'").await;
+
+    let workers = Arc::new(Workers {
+        store: Arc::clone(&store),
+        compute: Arc::new(thread_pool(Some(1)).unwrap()),
+        lease: Duration::from_secs(30),
+        retries: 2,
+        instance: "poison".to_owned(),
+        wake: Arc::new(Notify::new()),
+    });
+    let (stop, stopping) = watch::channel(false);
+    let handles = Arc::clone(&workers).spawn(1, stopping);
+    let started = Instant::now();
+    let failed = loop {
+        let job = store.job(&Owner::anonymous(), &id).await.unwrap();
+        if job.status.is_terminal() {
+            break job;
+        }
+        assert!(started.elapsed() < Duration::from_secs(30), "{job:?}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    stop.send(true).unwrap();
+    for handle in handles {
+        handle.await.unwrap();
+    }
+    assert_eq!(failed.status, JobStatus::Failed);
+    let reason = failed.error.unwrap();
+    assert!(
+        reason.starts_with("gave up after 2 retries: batch 0 merge failed 3 times; the last time: reading the groups' accumulators failed: stored group accumulators cannot be read"),
+        "{reason}"
+    );
+    let merge = store.shards(&id).await.unwrap().pop().unwrap();
+    assert_eq!(
+        (merge.shard, merge.attempt, merge.failures),
+        (ShardId::merge(0), Attempt(3), 3)
     );
 }
 
