@@ -147,7 +147,17 @@ def main():
     cluster = None if args.database else Cluster()
     new_database = (lambda name: cluster.database(name)) if cluster else (lambda name: args.database)
     operations = JOB["devices"] * JOB["operations"]
-    rows, results = [], []
+    rows, results, baseline = [], [], []
+    with tempfile.NamedTemporaryFile("w", suffix=".json") as job_file:
+        json.dump(JOB, job_file)
+        job_file.flush()
+        for threads in (1, 2):
+            started = time.perf_counter()
+            output = subprocess.run([args.bin, "run", job_file.name, "--threads", str(threads)],
+                                    check=True, capture_output=True, text=True).stdout
+            baseline.append((threads, time.perf_counter() - started))
+            result = json.loads(output)
+            results.append(json.dumps([result["operations"], result["devices"]], sort_keys=True))
     try:
         for count in [int(n) for n in args.workers.split(",")]:
             database = new_database(f"scaleout_{count}")
@@ -170,11 +180,15 @@ def main():
             cluster.stop()
     print(f"one job of {operations:.0e} operations (48 V / 15 A, radius and velocity scattered), "
           f"{os.cpu_count()} cores, PostgreSQL\n")
-    print("| worker processes | wall (s) | operations/s | speed-up |")
+    print("| run by | wall (s) | operations/s | speed-up |")
     print("|---|---|---|---|")
+    for threads, wall in baseline:
+        print(f"| `bouncewear run --threads {threads}` (no database) | {wall:.2f} | {operations / wall / 1e6:.2f} M | "
+              f"{baseline[0][1] / wall:.2f}x |")
     for count, wall, rate in rows:
-        print(f"| {count} | {wall:.2f} | {rate / 1e6:.2f} M | {rows[0][1] / wall:.2f}x |")
-    print(f"\nResults identical for every worker count: {len(set(results)) == 1}\n")
+        print(f"| {count} worker process{'es' if count > 1 else ''} | {wall:.2f} | {rate / 1e6:.2f} M | "
+              f"{baseline[0][1] / wall:.2f}x |")
+    print(f"\nResults identical to `run` for every worker count: {len(set(results)) == 1}\n")
     print("| shard step | mean (ms) | count |")
     print("|---|---|---|")
     for step in ("claim", "run", "store", "merge"):
