@@ -1,7 +1,7 @@
 //! The same API on PostgreSQL: a job's life from submission to result (bit-identical to `run`),
 //! listing, cancelling, life, and a schedule's trend, on a throwaway cluster.
 
-use crate::support::app::{Service, TestApp};
+use crate::support::app::{Service, Spawned, TestApp};
 use crate::support::client::{agent, delete, get, post};
 use crate::support::postgres::Postgres;
 use crate::support::{run_job, scattered_job, submit_concurrently, temp_dir, wearing_template};
@@ -96,9 +96,10 @@ fn two_api_nodes_on_one_postgres_accept_or_refuse_every_submission_and_lose_none
         return;
     };
     let database = cluster.database("burst");
+    // Two API processes, each with its own workers, on one database.
     let nodes = [
-        TestApp::on(&database, &["--max-queued", "150"]),
-        TestApp::on(&database, &["--max-queued", "150"]),
+        Spawned::on(&database, &["--max-queued", "150"]),
+        Spawned::on(&database, &["--max-queued", "150"]),
     ];
     let urls: Vec<String> = nodes.iter().map(|node| node.url("/v1/jobs")).collect();
     let mut accepted = submit_concurrently(&urls, 200);
