@@ -305,14 +305,15 @@ async fn a_precision_target_queues_its_next_batch_from_the_merge(url: &str) {
     );
 }
 
-/// Runs one statement on the database behind a store, as an operator (or a disk) could.
-async fn execute(url: &str, sql: &'static str) {
+/// Runs one statement on the database behind a store, as an operator (or a failing disk) could:
+/// `sqlite` on SQLite, `postgres` on PostgreSQL.
+async fn execute(url: &str, sqlite: &'static str, postgres: &'static str) {
     if url.starts_with("sqlite:") {
         let pool = sqlx::SqlitePool::connect(url).await.unwrap();
-        sqlx::query(sql).execute(&pool).await.unwrap();
+        sqlx::query(sqlite).execute(&pool).await.unwrap();
     } else {
         let pool = sqlx::PgPool::connect(url).await.unwrap();
-        sqlx::query(sql).execute(&pool).await.unwrap();
+        sqlx::query(postgres).execute(&pool).await.unwrap();
     }
 }
 
@@ -326,7 +327,13 @@ async fn a_poison_job_fails_after_the_retry_limit_with_the_reason(url: &str) {
     let batch = Batch::of(&job, 0).unwrap();
     let stats = run_group(&job, batch, 0, &Silent).unwrap();
     assert!(store.complete(&claim.fence, &stats).await.unwrap());
-    execute(url, "UPDATE shards SET partial = '{\"damaged\": true}'").await;
+    // A gzip header cut short.
+    execute(
+        url,
+        "UPDATE shards SET partial = X'1f8b0800'",
+        "UPDATE shards SET partial = '\\x1f8b0800'::bytea",
+    )
+    .await;
 
     let workers = Arc::new(Workers {
         store: Arc::clone(&store),

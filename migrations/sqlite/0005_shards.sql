@@ -14,7 +14,7 @@ CREATE TABLE shards (
     lease_until      INTEGER,
     operations_done  INTEGER NOT NULL DEFAULT 0,
     operations_total INTEGER NOT NULL,
-    partial          TEXT,                                -- a done group's accumulators (JSON, floats by their bits), until the Result is stored
+    partial          BLOB,    -- a done group's accumulators (gzipped JSON, floats by their bits), until the Result is stored
     error            TEXT,                                -- why its last run failed
     PRIMARY KEY (job_id, batch, grp)
 );

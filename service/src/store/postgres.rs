@@ -9,8 +9,8 @@ use super::rows::{
     bind_distribution, bind_fence, bind_life, bind_queued_job, bind_schedule, bind_shard,
     claim_from_row, count_from_sql, count_to_sql, distribution_from_row, distribution_rows,
     failed_too_often, gave_up, job_columns, job_from_row, life_from_row, partial_from_row,
-    run_from_row, schedule_columns, schedule_from_row, shard_columns, shard_from_row,
-    shard_id_from_row, spec_from_json, to_json,
+    partial_to_sql, run_from_row, schedule_columns, schedule_from_row, shard_columns,
+    shard_from_row, shard_id_from_row, spec_from_json, to_json,
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
@@ -395,7 +395,7 @@ impl JobQueue for PgStore {
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool> {
-        let partial = to_json("group accumulators", stats)?;
+        let partial = partial_to_sql(stats)?;
         let mut tx = self.pool.begin().await?;
         let updated = fenced(
             concat!(

@@ -23,6 +23,7 @@ pub(crate) trait ReadRow {
     fn text(&self, column: &str) -> Result<String, sqlx::Error>;
     fn maybe_text(&self, column: &str) -> Result<Option<String>, sqlx::Error>;
     fn flag(&self, column: &str) -> Result<bool, sqlx::Error>;
+    fn bytes(&self, column: &str) -> Result<Vec<u8>, sqlx::Error>;
 }
 
 macro_rules! read_row {
@@ -41,6 +42,9 @@ macro_rules! read_row {
                 self.try_get(column)
             }
             fn flag(&self, column: &str) -> Result<bool, sqlx::Error> {
+                self.try_get(column)
+            }
+            fn bytes(&self, column: &str) -> Result<Vec<u8>, sqlx::Error> {
                 self.try_get(column)
             }
         }
@@ -248,11 +252,25 @@ pub(crate) fn claim_from_row(row: &impl ReadRow) -> StoreResult<Claim> {
     })
 }
 
+/// A done group's accumulators as stored: JSON (every float by its bits, so exact), gzipped. The
+/// dense histogram counts are mostly runs of zeros and small numbers, which gzip shrinks about
+/// tenfold.
+pub(crate) fn partial_to_sql(stats: &GroupStats) -> StoreResult<Vec<u8>> {
+    use std::io::Write;
+    let text = to_json("group accumulators", stats)?;
+    let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    encoder
+        .write_all(text.as_bytes())
+        .and_then(|()| encoder.finish())
+        .map_err(|e| corrupt("group accumulators", e))
+}
+
 /// A done group's accumulators, from a row `batch, grp, partial`.
 pub(crate) fn partial_from_row(row: &impl ReadRow) -> StoreResult<(ShardId, GroupStats)> {
     let shard = shard_id_from_row(row)?;
-    let text = row.text("partial")?;
-    let stats = serde_json::from_str(&text).map_err(|e| corrupt("group accumulators", e))?;
+    let stored = row.bytes("partial")?;
+    let stats = serde_json::from_reader(flate2::read::GzDecoder::new(stored.as_slice()))
+        .map_err(|e| corrupt("group accumulators", e))?;
     Ok((shard, stats))
 }
 
