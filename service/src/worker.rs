@@ -40,6 +40,23 @@ pub struct Workers {
     pub wake: Arc<Notify>,
 }
 
+/// A shard's lease, heartbeated by a task of its own for as long as this lives.
+struct KeptLease {
+    /// Set when the computation must stop: the job ended, the lease was lost, or shutdown.
+    cancel: Arc<AtomicBool>,
+    /// Set when the stop is this process's shutdown (the shard goes back to the queue).
+    stopping: Arc<AtomicBool>,
+    /// The shard's operations done so far, reported with each heartbeat.
+    done: Arc<AtomicU64>,
+    keeper: JoinHandle<()>,
+}
+
+impl Drop for KeptLease {
+    fn drop(&mut self) {
+        self.keeper.abort();
+    }
+}
+
 /// How a computation under a lease ended.
 enum Ran<T> {
     Done(T),
@@ -128,20 +145,16 @@ impl Workers {
                 return self.fail(fence, &reason).await;
             }
         };
+        // The lease is kept from here to the last write: reading, computing and storing.
+        let lease = self.keep_lease(fence, shutdown.clone());
         match fence.shard.group {
-            Some(group) => self.run_group(fence, job, group, shutdown).await,
-            None => self.merge(fence, job, claim.started_at, shutdown).await,
+            Some(group) => self.run_group(fence, job, group, &lease).await,
+            None => self.merge(fence, job, claim.started_at, &lease).await,
         }
     }
 
     /// Runs one group and stores its accumulators.
-    async fn run_group(
-        &self,
-        fence: &Fence,
-        job: Job,
-        group: u64,
-        shutdown: &mut watch::Receiver<bool>,
-    ) {
+    async fn run_group(&self, fence: &Fence, job: Job, group: u64, lease: &KeptLease) {
         let Some(batch) = Batch::of(&job, fence.shard.batch).filter(|b| group < b.groups()) else {
             let reason = format!("{} is not part of the job", fence.shard);
             return self.fail(fence, &reason).await;
@@ -151,7 +164,7 @@ impl Workers {
         tracing::debug!(operations, "group started");
         let running = Instant::now();
         let ran = self
-            .under_lease(fence, shutdown, move |observer| {
+            .compute(lease, move |observer| {
                 run_group(&job, batch, group, observer)
             })
             .await;
@@ -184,13 +197,7 @@ impl Workers {
     }
 
     /// Puts the done groups back in order: the Result, or the next batch of a precision target.
-    async fn merge(
-        &self,
-        fence: &Fence,
-        job: Job,
-        started_at: UnixMs,
-        shutdown: &mut watch::Receiver<bool>,
-    ) {
+    async fn merge(&self, fence: &Fence, job: Job, started_at: UnixMs, lease: &KeptLease) {
         let merging = Instant::now();
         let partials = match self.store.partials(&fence.job).await {
             Ok(partials) => partials,
@@ -202,9 +209,7 @@ impl Workers {
         let last = fence.shard.batch;
         let wall_s = (UnixMs::now().0 - started_at.0).max(0) as f64 / 1000.0;
         let ran = self
-            .under_lease(fence, shutdown, move |_| {
-                Ok(merge(&job, last, partials, wall_s))
-            })
+            .compute(lease, move |_| Ok(merge(&job, last, partials, wall_s)))
             .await;
         match ran {
             Ran::Done(Ok(Merged::Result(result))) => {
@@ -233,55 +238,80 @@ impl Workers {
         }
     }
 
-    /// Runs `task` on the compute pool while heartbeating the shard's lease with its progress; the
-    /// task stops through its observer when the job ends, the lease is lost or the process stops.
-    async fn under_lease<T: Send + 'static>(
-        &self,
-        fence: &Fence,
-        shutdown: &mut watch::Receiver<bool>,
-        task: impl FnOnce(&dyn Observer) -> Result<T, Cancelled> + Send + 'static,
-    ) -> Ran<T> {
+    /// Heartbeats the shard's lease with its progress until the returned guard is dropped; stops
+    /// the computation (through its observer) when the job ends, the lease is lost or the process
+    /// is stopping.
+    fn keep_lease(&self, fence: &Fence, mut shutdown: watch::Receiver<bool>) -> KeptLease {
         let cancel = Arc::new(AtomicBool::new(false));
+        let stopping = Arc::new(AtomicBool::new(false));
         let done = Arc::new(AtomicU64::new(0));
-        let (sender, mut finished) = oneshot::channel();
-        {
-            let (cancel, done) = (Arc::clone(&cancel), Arc::clone(&done));
-            self.compute.spawn(move || {
-                let observer = Watch {
-                    cancel: &cancel,
-                    on_progress: |d, _| done.store(d, Ordering::Relaxed),
-                };
-                let _ = sender.send(std::panic::catch_unwind(AssertUnwindSafe(|| {
-                    task(&observer)
-                })));
-            });
-        }
         let period = (self.lease / 3).min(HEARTBEAT_MAX_PERIOD);
-        let mut heartbeat = tokio::time::interval(period);
-        let mut stopping = false;
-        let outcome = loop {
-            tokio::select! {
-                outcome = &mut finished => break outcome,
-                _ = heartbeat.tick() => {
-                    let progress = done.load(Ordering::Relaxed);
-                    match self.store.heartbeat(fence, self.lease_terms(), progress).await {
-                        Ok(Lease::Held) => {}
-                        Ok(lease @ (Lease::Cancelled | Lease::Lost)) => {
-                            tracing::info!(?lease, "stopping: the shard is no longer ours to run");
-                            cancel.store(true, Ordering::Relaxed);
+        let keeper = {
+            let (store, fence) = (Arc::clone(&self.store), fence.clone());
+            let (cancel, stopping, done) = (
+                Arc::clone(&cancel),
+                Arc::clone(&stopping),
+                Arc::clone(&done),
+            );
+            let duration_ms = i64::try_from(self.lease.as_millis()).unwrap_or(i64::MAX);
+            tokio::spawn(async move {
+                let mut heartbeat = tokio::time::interval(period);
+                heartbeat.tick().await; // the claim itself just set the lease
+                loop {
+                    tokio::select! {
+                        _ = heartbeat.tick() => {
+                            let terms = LeaseTerms { now: UnixMs::now(), duration_ms };
+                            let progress = done.load(Ordering::Relaxed);
+                            match store.heartbeat(&fence, terms, progress).await {
+                                Ok(Lease::Held) => {}
+                                Ok(lease @ (Lease::Cancelled | Lease::Lost)) => {
+                                    tracing::info!(?lease, "stopping: the shard is no longer ours to run");
+                                    cancel.store(true, Ordering::Relaxed);
+                                    return;
+                                }
+                                Err(error) => tracing::warn!(%error, "heartbeat failed; the lease may expire"),
+                            }
                         }
-                        Err(error) => tracing::warn!(%error, "heartbeat failed; the lease may expire"),
+                        _ = shutdown.changed() => {
+                            stopping.store(true, Ordering::Relaxed);
+                            cancel.store(true, Ordering::Relaxed);
+                            return;
+                        }
                     }
                 }
-                _ = shutdown.changed(), if !stopping => {
-                    stopping = true;
-                    cancel.store(true, Ordering::Relaxed);
-                }
-            }
+            })
         };
-        match outcome {
+        KeptLease {
+            cancel,
+            stopping,
+            done,
+            keeper,
+        }
+    }
+
+    /// Runs `task` on the compute pool, reporting its progress to the lease and stopping when the
+    /// lease says so.
+    async fn compute<T: Send + 'static>(
+        &self,
+        lease: &KeptLease,
+        task: impl FnOnce(&dyn Observer) -> Result<T, Cancelled> + Send + 'static,
+    ) -> Ran<T> {
+        let (sender, finished) = oneshot::channel();
+        let (cancel, done) = (Arc::clone(&lease.cancel), Arc::clone(&lease.done));
+        self.compute.spawn(move || {
+            let observer = Watch {
+                cancel: &cancel,
+                on_progress: |d, _| done.store(d, Ordering::Relaxed),
+            };
+            let _ = sender.send(std::panic::catch_unwind(AssertUnwindSafe(|| {
+                task(&observer)
+            })));
+        });
+        match finished.await {
             Ok(Ok(Ok(value))) => Ran::Done(value),
-            Ok(Ok(Err(Cancelled))) => Ran::Stopped { shutdown: stopping },
+            Ok(Ok(Err(Cancelled))) => Ran::Stopped {
+                shutdown: lease.stopping.load(Ordering::Relaxed),
+            },
             Ok(Err(_)) | Err(_) => Ran::Panicked,
         }
     }
