@@ -252,9 +252,9 @@ pub(crate) fn claim_from_row(row: &impl ReadRow) -> StoreResult<Claim> {
     })
 }
 
-/// A done group's accumulators as stored: JSON (every float by its bits, so exact), gzipped. The
-/// dense histogram counts are mostly runs of zeros and small numbers, which gzip shrinks about
-/// tenfold.
+/// A done group's accumulators as stored: JSON (every float by its bits, so exact), gzipped, which
+/// takes the dense histogram counts' runs of zeros and small numbers to under a third (45 kB for a
+/// group of 10 bins x 14 metrics).
 pub(crate) fn partial_to_sql(stats: &GroupStats) -> StoreResult<Vec<u8>> {
     use std::io::Write;
     let text = to_json("group accumulators", stats)?;
@@ -268,9 +268,13 @@ pub(crate) fn partial_to_sql(stats: &GroupStats) -> StoreResult<Vec<u8>> {
 /// A done group's accumulators, from a row `batch, grp, partial`.
 pub(crate) fn partial_from_row(row: &impl ReadRow) -> StoreResult<(ShardId, GroupStats)> {
     let shard = shard_id_from_row(row)?;
+    use std::io::Read;
     let stored = row.bytes("partial")?;
-    let stats = serde_json::from_reader(flate2::read::GzDecoder::new(stored.as_slice()))
+    let mut text = Vec::with_capacity(stored.len() * 8);
+    flate2::read::GzDecoder::new(stored.as_slice())
+        .read_to_end(&mut text)
         .map_err(|e| corrupt("group accumulators", e))?;
+    let stats = serde_json::from_slice(&text).map_err(|e| corrupt("group accumulators", e))?;
     Ok((shard, stats))
 }
 
