@@ -56,6 +56,8 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(&database("shards")).await;
     a_precision_target_queues_its_next_batch_from_the_merge(&database("batches")).await;
     a_poison_job_fails_after_the_retry_limit_with_the_reason(&database("poison")).await;
+    a_cancelled_job_keeps_no_accumulators(&database("cancel-partials")).await;
+    jobs_queued_before_shards_existed_get_theirs_on_open(&database("backfill")).await;
     concurrent_submissions_never_overshoot_the_queue_bound(&database("bound")).await;
     every_u64_seed_reads_back_exactly(&database("seeds")).await;
     a_job_whose_lease_keeps_expiring_fails_with_the_reason(&database("retries")).await;
@@ -368,6 +370,55 @@ async fn a_poison_job_fails_after_the_retry_limit_with_the_reason(url: &str) {
     assert_eq!(
         (merge.shard, merge.attempt, merge.failures),
         (ShardId::merge(0), Attempt(3), 3)
+    );
+}
+
+async fn a_cancelled_job_keeps_no_accumulators(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let id = store.insert_job(queued(5), 10).await.unwrap().unwrap().id;
+    let claim = store.claim("w", terms(0), 2).await.unwrap().unwrap();
+    let job = Job::new(claim.spec.clone(), || 0, &Pointer::root()).unwrap();
+    let stats = run_group(&job, Batch::of(&job, 0).unwrap(), 0, &Silent).unwrap();
+    assert!(store.complete(&claim.fence, &stats).await.unwrap());
+    assert_eq!(store.partials(&id).await.unwrap().len(), 1);
+    store
+        .cancel(&Owner::anonymous(), &id, UnixMs(9))
+        .await
+        .unwrap();
+    assert!(store.partials(&id).await.unwrap().is_empty());
+    assert!(
+        store.claim("w", terms(0), 2).await.unwrap().is_none(),
+        "a cancelled job's shards are never claimed"
+    );
+}
+
+/// Rows written before migration 0005 have no shards: opening the store cuts them.
+async fn jobs_queued_before_shards_existed_get_theirs_on_open(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let id = store.insert_job(queued(6), 10).await.unwrap().unwrap().id;
+    execute(url, "DELETE FROM shards", "DELETE FROM shards").await;
+    assert!(store.claim("w", terms(0), 2).await.unwrap().is_none());
+    drop(store);
+    let store = store::open(url).await.unwrap();
+    let shards: Vec<ShardId> = store
+        .shards(&id)
+        .await
+        .unwrap()
+        .iter()
+        .map(|s| s.shard)
+        .collect();
+    assert_eq!(
+        shards,
+        [
+            ShardId::group(0, 0),
+            ShardId::group(0, 1),
+            ShardId::merge(0)
+        ]
+    );
+    let claim = store.claim("w", terms(0), 2).await.unwrap().unwrap();
+    assert_eq!(
+        (claim.fence.job, claim.fence.shard),
+        (id, ShardId::group(0, 0))
     );
 }
 

@@ -217,7 +217,7 @@ async fn finish_shard(tx: &mut PgConnection, fence: &Fence) -> StoreResult<bool>
     Ok(updated.rows_affected() == 1)
 }
 
-/// Ends a job that has not ended yet as failed, with the reason.
+/// Ends a job that has not ended yet as failed, with the reason, dropping its groups' accumulators.
 async fn end_job(tx: &mut PgConnection, job: &JobId, now: UnixMs, error: &str) -> StoreResult<()> {
     sqlx::query(
         "UPDATE jobs SET status = 'failed', finished_at = $2, error = $3 WHERE id = $1 AND status IN ('queued', 'running')",
@@ -227,6 +227,15 @@ async fn end_job(tx: &mut PgConnection, job: &JobId, now: UnixMs, error: &str) -
     .bind(error)
     .execute(&mut *tx)
     .await?;
+    drop_partials(tx, job).await
+}
+
+/// Drops a job's groups' accumulators: it ended, and they will never be merged.
+async fn drop_partials(tx: &mut PgConnection, job: &JobId) -> StoreResult<()> {
+    sqlx::query("UPDATE shards SET partial = NULL WHERE job_id = $1 AND partial IS NOT NULL")
+        .bind(job.as_str())
+        .execute(&mut *tx)
+        .await?;
     Ok(())
 }
 
@@ -296,6 +305,7 @@ impl JobQueue for PgStore {
         .fetch_optional(&self.pool)
         .await?;
         if let Some(row) = row {
+            drop_partials(&mut *self.pool.acquire().await?, id).await?;
             return Ok(job_from_row(&row)?);
         }
         let ended = select_job(&self.pool, owner, id).await?;
@@ -557,10 +567,7 @@ impl Results for PgStore {
         .bind(finished_at.0)
         .execute(&mut *tx)
         .await?;
-        sqlx::query("UPDATE shards SET partial = NULL WHERE job_id = $1")
-            .bind(fence.job.as_str())
-            .execute(&mut *tx)
-            .await?;
+        drop_partials(&mut tx, &fence.job).await?;
         sqlx::query("INSERT INTO results (job_id, result) VALUES ($1, $2)")
             .bind(fence.job.as_str())
             .bind(text)

@@ -211,7 +211,7 @@ async fn finish_shard(tx: &mut SqliteConnection, fence: &Fence) -> StoreResult<b
     Ok(updated.rows_affected() == 1)
 }
 
-/// Ends a job that has not ended yet as failed, with the reason.
+/// Ends a job that has not ended yet as failed, with the reason, dropping its groups' accumulators.
 async fn end_job(
     tx: &mut SqliteConnection,
     job: &JobId,
@@ -226,6 +226,15 @@ async fn end_job(
     .bind(error)
     .execute(&mut *tx)
     .await?;
+    drop_partials(tx, job).await
+}
+
+/// Drops a job's groups' accumulators: it ended, and they will never be merged.
+async fn drop_partials(tx: &mut SqliteConnection, job: &JobId) -> StoreResult<()> {
+    sqlx::query("UPDATE shards SET partial = NULL WHERE job_id = ?1 AND partial IS NOT NULL")
+        .bind(job.as_str())
+        .execute(&mut *tx)
+        .await?;
     Ok(())
 }
 
@@ -299,6 +308,7 @@ impl JobQueue for SqliteStore {
         .fetch_optional(&self.writer)
         .await?;
         if let Some(row) = row {
+            drop_partials(&mut *self.writer.acquire().await?, id).await?;
             return Ok(job_from_row(&row)?);
         }
         let ended = select_job(&self.writer, owner, id).await?;
@@ -315,7 +325,9 @@ impl JobQueue for SqliteStore {
         terms: LeaseTerms,
         retries: u64,
     ) -> StoreResult<Option<Claim>> {
-        let mut tx = self.writer.begin().await?;
+        // It reads before it writes: take the write lock first, so that instances sharing the file
+        // wait on `busy_timeout` rather than fail to upgrade a read.
+        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
         give_up_on_exhausted(&mut tx, terms.now, retries).await?;
         let claimed = sqlx::query(
             "UPDATE shards SET status = 'running', attempt = attempt + 1, lease_owner = ?1, lease_until = ?2 + ?3, \
@@ -557,10 +569,7 @@ impl Results for SqliteStore {
         .bind(finished_at.0)
         .execute(&mut *tx)
         .await?;
-        sqlx::query("UPDATE shards SET partial = NULL WHERE job_id = ?1")
-            .bind(fence.job.as_str())
-            .execute(&mut *tx)
-            .await?;
+        drop_partials(&mut tx, &fence.job).await?;
         sqlx::query("INSERT INTO results (job_id, result) VALUES (?1, ?2)")
             .bind(fence.job.as_str())
             .bind(text)
