@@ -1,0 +1,103 @@
+#!/usr/bin/env python3
+"""The README's examples, run as written against a live server.
+
+    python3 tests/readme/check.py BASE_URL [README.md]
+
+Every fenced ```sh block that follows a `<!-- readme-test -->` line is run with bash (`set -euo
+pipefail`), from the repository root, with `target/release` on the PATH and the README's address
+`http://127.0.0.1:8080` replaced by BASE_URL. It must succeed, and when a ```text block follows
+under `<!-- readme-output -->`, the output must have the documented shape, line by line: the same
+JSON keys and value types (numbers may differ), or for other lines the same fields with the same
+words (numbers may differ). Under `<!-- readme-output exact -->` the output must be the one shown,
+to the character (deterministic commands: what the README shows is what a user gets).
+"""
+
+import json
+import os
+import re
+import subprocess
+import sys
+
+README_BASE = "http://127.0.0.1:8080"
+NUMBER = re.compile(r"-?\d+(\.\d+)?([eE][-+]?\d+)?")
+
+
+def blocks(text):
+    """(script, expected output or None, exact?, line number) for each marked block."""
+    lines = text.split("\n")
+    found = []
+    for i, line in enumerate(lines):
+        if line.strip() != "<!-- readme-test -->":
+            continue
+        start = i + 1
+        assert lines[start].startswith("```sh"), f"line {start + 1}: a ```sh block must follow"
+        end = lines.index("```", start + 1)
+        script = "\n".join(lines[start + 1:end])
+        expected, exact = None, False
+        rest = [j for j in range(end + 1, min(end + 4, len(lines))) if lines[j].strip()]
+        marker = lines[rest[0]].strip() if rest else ""
+        if marker in ("<!-- readme-output -->", "<!-- readme-output exact -->"):
+            exact = "exact" in marker
+            out_start = rest[0] + 1
+            assert lines[out_start].startswith("```"), f"line {out_start + 1}: an output block must follow"
+            out_end = lines.index("```", out_start + 1)
+            expected = lines[out_start + 1:out_end]
+        found.append((script, expected, exact, start + 1))
+    return found
+
+
+def shape(value):
+    """The shape of a JSON value: keys and types, numbers as one type."""
+    if isinstance(value, dict):
+        return {key: shape(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [shape(value[0])] if value else []
+    if isinstance(value, bool) or value is None:
+        return type(value).__name__
+    if isinstance(value, (int, float)):
+        return "number"
+    return "string"
+
+
+def same_shape(actual, documented):
+    try:
+        return shape(json.loads(actual)) == shape(json.loads(documented))
+    except json.JSONDecodeError:
+        words = lambda line: [NUMBER.sub("#", w) for w in re.split(r"[\s,]+", line.strip())]
+        return words(actual) == words(documented)
+
+
+def main():
+    base = sys.argv[1].rstrip("/")
+    readme = sys.argv[2] if len(sys.argv) > 2 else "README.md"
+    root = os.path.dirname(os.path.abspath(readme))
+    env = {**os.environ, "PATH": os.path.join(root, "target", "release") + os.pathsep + os.environ["PATH"]}
+    found = blocks(open(readme, encoding="utf-8").read())
+    assert found, "no README example is marked for testing"
+    failures = 0
+    for script, expected, exact, line in found:
+        run = subprocess.run(["bash", "-euo", "pipefail", "-c", script.replace(README_BASE, base)],
+                             cwd=root, env=env, capture_output=True, text=True, timeout=300)
+        output = run.stdout.rstrip("\n").split("\n") if run.stdout.strip() else []
+        problem = None
+        if run.returncode != 0:
+            problem = f"exit {run.returncode}: {run.stderr.strip()}"
+        elif expected is not None and len(output) != len(expected):
+            problem = f"{len(output)} lines of output, {len(expected)} documented"
+        elif exact and output != expected:
+            problem = "the output differs from the one shown"
+        elif expected is not None:
+            for got, documented in zip(output, expected):
+                if not same_shape(got, documented):
+                    problem = f"output {got!r} does not have the shape of {documented!r}"
+                    break
+        status = "ok" if problem is None else f"FAILED: {problem}"
+        print(f"README.md:{line}: {status}")
+        if problem:
+            print("\n".join(output), file=sys.stderr)
+            failures += 1
+    sys.exit(1 if failures else 0)
+
+
+if __name__ == "__main__":
+    main()
