@@ -3,6 +3,7 @@
 use super::job::{Job, Parameter};
 use crate::arc::Arc;
 use crate::error::Pointer;
+use crate::operation::Operation;
 use crate::scenario::ArcRestitutionLawKind;
 use serde::{Deserialize, Serialize};
 
@@ -13,6 +14,23 @@ pub const PAPER_LAW_CURRENT_FACTOR: f64 = 2.0;
 /// The quantiles of a scattered current that are checked against the calibration current.
 const SCATTERED_CURRENT_QUANTILES: [f64; 2] = [0.01, 0.99];
 
+/// The inputs the paper's measurements cover (docs/model.md sections 8 and 9): impact velocities from the
+/// 0.1 m/s of the softening-energy fit to the 0.71 m/s of Fig. 4, static forces from Fig. 6's 0.344 N
+/// to Fig. 19's 4.33 N.
+pub const PAPER_IMPACT_VELOCITY_M_S: [f64; 2] = [0.1, 0.71];
+pub const PAPER_STATIC_FORCE_N: [f64; 2] = [0.344, 4.33];
+
+/// What a run met, counted over all its operations.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Counts {
+    /// Operations run.
+    pub operations: u64,
+    /// Operations whose bounces reached `scenario.losses.max_bounces` with another to come: their
+    /// bounce times and counts are cut short.
+    pub operations_at_max_bounces: u64,
+}
+
 /// One warning: the field of the job it concerns (a JSON pointer) and what to know about it.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -21,14 +39,84 @@ pub struct Diagnostic {
     pub detail: String,
 }
 
-/// The warnings of a job: under the paper's post-arc law, an arcing current (the nominal one, or
-/// the 1st and 99th percentiles of a scattered one) more than [`PAPER_LAW_CURRENT_FACTOR`] away from
-/// the calibration current.
-pub fn diagnose(job: &Job) -> Vec<Diagnostic> {
+/// The warnings of a run: bounce sequences cut at `max_bounces`, an impact velocity or static force
+/// outside the paper's measurements, and the paper's post-arc law far from its calibration current.
+pub fn diagnose(job: &Job, counts: &Counts) -> Vec<Diagnostic> {
+    let mut found = Vec::new();
+    if counts.operations_at_max_bounces > 0 {
+        found.push(Diagnostic {
+            pointer: "/scenario/losses/max_bounces".to_owned(),
+            detail: format!(
+                "{} of {} operations reached max_bounces ({}) with another bounce to come: their \
+                 bounce times and counts are cut short; a larger max_bounces runs them out",
+                counts.operations_at_max_bounces,
+                counts.operations,
+                job.scenario().spec().losses.max_bounces
+            ),
+        });
+    }
+    let nominal_velocity =
+        || Operation::nominal(job.scenario(), job.spec().fidelity).impact_velocity_m_s();
+    for (parameter, field, [low, high], unit, nominal) in [
+        (
+            Parameter::ImpactVelocity,
+            "impact velocity",
+            PAPER_IMPACT_VELOCITY_M_S,
+            "m/s",
+            Pointer::root()
+                .child("scenario")
+                .child("mechanism")
+                .child("impact_velocity_m_s"),
+        ),
+        (
+            Parameter::StaticForce,
+            "static force",
+            PAPER_STATIC_FORCE_N,
+            "N",
+            Pointer::root()
+                .child("scenario")
+                .child("mechanism")
+                .child("static_force_n"),
+        ),
+    ] {
+        let (pointer, values) = match job.scatter().iter().position(|s| s.parameter == parameter) {
+            Some(i) => (
+                Pointer::root()
+                    .child("scatter")
+                    .child(i)
+                    .child("distribution"),
+                SCATTERED_CURRENT_QUANTILES.map(|q| job.scatter()[i].distribution.quantile(q)),
+            ),
+            None => {
+                let value = match parameter {
+                    Parameter::ImpactVelocity => nominal_velocity(),
+                    _ => job.scenario().spec().mechanism.static_force_n,
+                };
+                (nominal, [value; 2])
+            }
+        };
+        if let Some(value) = values.into_iter().find(|v| !(low..=high).contains(v)) {
+            found.push(Diagnostic {
+                pointer: pointer.to_string(),
+                detail: format!(
+                    "{field} {value} {unit} is outside the {low} to {high} {unit} the paper's \
+                     measurements cover: the model extrapolates there (docs/model.md section 9)"
+                ),
+            });
+        }
+    }
+    found.extend(paper_law_far_from_calibration(job));
+    found
+}
+
+/// Under the paper's post-arc law, an arcing current (the nominal one, or the 1st and 99th
+/// percentiles of a scattered one) more than [`PAPER_LAW_CURRENT_FACTOR`] away from the calibration
+/// current.
+fn paper_law_far_from_calibration(job: &Job) -> Option<Diagnostic> {
     let spec = job.scenario().spec();
     let (mat, circuit) = (&spec.material, &spec.circuit);
     if mat.arc_restitution.law != ArcRestitutionLawKind::Paper {
-        return Vec::new();
+        return None;
     }
     let scattered = job
         .scatter()
@@ -74,8 +162,6 @@ pub fn diagnose(job: &Job) -> Vec<Diagnostic> {
              arc's effect out towards the minimum arc current (docs/model.md section 5)"
         ),
     })
-    .into_iter()
-    .collect()
 }
 
 #[cfg(test)]
@@ -83,7 +169,7 @@ mod tests {
     use super::*;
 
     fn diagnose_json(text: &str) -> Vec<Diagnostic> {
-        diagnose(&Job::from_json(text, || 1).unwrap())
+        diagnose(&Job::from_json(text, || 1).unwrap(), &Counts::default())
     }
 
     #[test]
@@ -112,6 +198,55 @@ mod tests {
             )
             .is_empty()
         );
+    }
+
+    #[test]
+    fn cut_bounce_sequences_are_counted_over_every_group_and_warned_of() {
+        use crate::montecarlo::{Silent, run_job};
+        let job = Job::from_json(
+            r#"{"devices": 40, "operations": 5, "scenario": {"losses": {"max_bounces": 3}}}"#,
+            || 1,
+        )
+        .unwrap();
+        let result = run_job(&job, &Silent).unwrap();
+        // The default rig bounces 7 times mechanically: every operation is cut at 3.
+        assert_eq!(
+            result.counts,
+            Counts {
+                operations: 200,
+                operations_at_max_bounces: 200
+            }
+        );
+        assert_eq!(
+            result.diagnostics[0].pointer,
+            "/scenario/losses/max_bounces"
+        );
+        assert!(
+            result.diagnostics[0]
+                .detail
+                .starts_with("200 of 200 operations")
+        );
+        let whole = run_job(
+            &Job::from_json(r#"{"devices": 4, "operations": 5}"#, || 1).unwrap(),
+            &Silent,
+        )
+        .unwrap();
+        assert_eq!(whole.counts.operations_at_max_bounces, 0);
+        assert!(whole.diagnostics.is_empty());
+    }
+
+    #[test]
+    fn inputs_outside_the_papers_measurements_are_flagged_by_their_field() {
+        let fast = diagnose_json(r#"{"scenario": {"mechanism": {"impact_velocity_m_s": 1.5}}}"#);
+        assert_eq!(fast.len(), 1);
+        assert_eq!(fast[0].pointer, "/scenario/mechanism/impact_velocity_m_s");
+        assert!(fast[0].detail.contains("1.5 m/s"), "{}", fast[0].detail);
+        let forces = diagnose_json(
+            r#"{"scatter": [{"parameter": "static_force_n", "per": "device",
+                             "distribution": {"kind": "uniform", "min": 0.3, "max": 2}}]}"#,
+        );
+        assert_eq!(forces.len(), 1);
+        assert_eq!(forces[0].pointer, "/scatter/0/distribution");
     }
 
     #[test]

@@ -69,6 +69,9 @@ pub struct GroupStats {
     pub devices: Vec<Accumulator>,
     /// With failure criteria: each device's life, in device order.
     pub lives: Vec<DeviceLife>,
+    /// Operations whose bounce sequence reached `max_bounces` with another bounce to come.
+    #[serde(default)]
+    pub operations_at_max_bounces: u64,
 }
 
 /// When one device failed (or that it survived the test: censored at the last operation).
@@ -99,6 +102,7 @@ impl GroupStats {
                 .map(|m| Accumulator::new(limit(Metric::Device(*m))))
                 .collect(),
             lives: Vec::new(),
+            operations_at_max_bounces: 0,
         }
     }
 
@@ -110,6 +114,7 @@ impl GroupStats {
             mine.merge(theirs);
         }
         self.lives.extend_from_slice(&other.lives);
+        self.operations_at_max_bounces += other.operations_at_max_bounces;
     }
 }
 
@@ -270,6 +275,7 @@ impl<'a> Plan<'a> {
                 for (accumulator, metric) in bin.iter_mut().zip(metrics) {
                     accumulator.push(metric.value(&outcome));
                 }
+                stats.operations_at_max_bounces += u64::from(outcome.truncated);
                 device_wear.add(&outcome);
                 if failed_at.is_none() && self.fails(&outcome, &draws, &device_wear) {
                     failed_at = Some(op + 1);

@@ -72,7 +72,10 @@ pub struct JobResult {
     /// With failure criteria: the life analysis of the devices' operations to failure.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub life: Option<LifeReport>,
-    /// Warnings about how far to trust the numbers (e.g. eq. 16 far from its calibration current).
+    /// What the run met that bears on its numbers, counted over every operation.
+    pub counts: diagnostics::Counts,
+    /// Warnings about how far to trust the numbers (e.g. eq. 16 far from its calibration current,
+    /// bounce sequences cut at `max_bounces`, inputs outside the paper's measurements).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub diagnostics: Vec<diagnostics::Diagnostic>,
     pub timing: Timing,
@@ -197,6 +200,14 @@ pub fn next_batch(job: &Job, tally: &Tally) -> Option<engine::Batch> {
 /// `wall_s` is the time the run took, for the Result's timing.
 pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
     let operations_run = tally.devices * job.spec().operations;
+    let counts = diagnostics::Counts {
+        operations: operations_run,
+        operations_at_max_bounces: tally
+            .groups
+            .iter()
+            .map(|g| g.operations_at_max_bounces)
+            .sum(),
+    };
     JobResult {
         job: ResolvedJob::new(job, tally.devices),
         operations: summarize_operations(job, tally),
@@ -213,7 +224,8 @@ pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
             }
         }),
         life: life_report(job, tally),
-        diagnostics: diagnostics::diagnose(job),
+        counts,
+        diagnostics: diagnostics::diagnose(job, &counts),
         timing: Timing {
             wall_s,
             operations_per_s: operations_run as f64 / wall_s.max(1e-9),
