@@ -2,17 +2,33 @@
 
 use crate::support::app::{Service, TestApp};
 use crate::support::client::{agent, authorized, post};
-use crate::support::{scattered_job, temp_db};
+use crate::support::postgres::Postgres;
+use crate::support::{scattered_job, temp_db, temp_dir};
 use serde_json::Value;
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader};
 
+const KEYS_AND_ONE_WORKER: [&str; 4] = ["--api-key", "alpha,beta", "--workers", "1"];
+
 #[test]
 fn one_stream_carries_the_progress_and_end_of_every_job_of_its_key_and_no_other() {
-    let server = TestApp::start(
-        &temp_db("events"),
-        &["--api-key", "alpha,beta", "--workers", "1"],
-    );
+    let server = TestApp::start(&temp_db("events"), &KEYS_AND_ONE_WORKER);
+    the_stream_carries_every_job_of_its_key_and_no_other(&server);
+}
+
+/// On PostgreSQL the stream wakes on the database's announcements instead of polling.
+#[test]
+fn on_postgres_one_stream_carries_every_job_of_its_key_and_no_other() {
+    let Some(cluster) = Postgres::start(&temp_dir("http-events-postgres")) else {
+        return;
+    };
+    let server = TestApp::on(&cluster.database("service"), &KEYS_AND_ONE_WORKER);
+    the_stream_carries_every_job_of_its_key_and_no_other(&server);
+}
+
+/// alpha's jobs, submitted before and after the stream opens, each show progress and then end on
+/// alpha's stream; beta's job never appears on it.
+fn the_stream_carries_every_job_of_its_key_and_no_other(server: &TestApp) {
     let submit = |key: &str, seed: u64| {
         let job = scattered_job(3000, 400, seed).to_string();
         let reply = post(&server.url("/v1/jobs"), &job, Some(key));
