@@ -52,6 +52,7 @@ fn utc(text: &str) -> DateTime<Utc> {
 /// Every check, on fresh databases that `database(name)` names by URL.
 async fn every_promise(database: impl Fn(&str) -> String) {
     unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(&database("cancel")).await;
+    live_jobs_are_the_owners_active_ones_and_any_newer_than_the_mark(&database("live")).await;
     a_claim_whose_lease_expired_is_fenced_out_by_its_successor(&database("fence")).await;
     a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(&database("shards")).await;
     a_precision_target_queues_its_next_batch_from_the_merge(&database("batches")).await;
@@ -87,6 +88,34 @@ async fn unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(url: &str)
         store.cancel(&other, &id, UnixMs(3)).await,
         Err(StoreError::NotFound { .. })
     ));
+}
+
+async fn live_jobs_are_the_owners_active_ones_and_any_newer_than_the_mark(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let owner = Owner::anonymous();
+    let insert = |seed| {
+        let store = store.clone();
+        async move { store.insert_job(queued(seed), 10).await.unwrap().unwrap() }
+    };
+    let active = insert(1).await;
+    let ended = insert(2).await;
+    store.cancel(&owner, &ended.id, UnixMs(2)).await.unwrap();
+    let newer = insert(3).await;
+    store.cancel(&owner, &newer.id, UnixMs(3)).await.unwrap();
+    let job = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || 4).unwrap();
+    let others = QueuedJob::new(&job, Owner::of_key("another key"), None, UnixMs(1));
+    store.insert_job(others, 10).await.unwrap().unwrap();
+
+    let ids =
+        |records: Vec<store::JobRecord>| records.into_iter().map(|r| r.id).collect::<Vec<_>>();
+    assert_eq!(
+        ids(store.live_jobs(&owner, ended.seq).await.unwrap()),
+        [active.id.clone(), newer.id]
+    );
+    assert_eq!(
+        ids(store.live_jobs(&owner, i64::MAX).await.unwrap()),
+        [active.id]
+    );
 }
 
 async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor(url: &str) {

@@ -468,6 +468,28 @@ pub fn kaplan_meier(data: &[(f64, bool)]) -> Result<Vec<KaplanMeierPoint>, LifeE
     Ok(points)
 }
 
+/// Median-rank plotting positions `F` of the failures, one per Kaplan-Meier point (that of the last
+/// failure at its time), for `devices` devices in all. The ranks are Johnson's adjusted ranks,
+/// `j = j' + (devices + 1 - j') / (1 + r)` for each failure in time order, with `j'` the previous
+/// rank (0 at first) and `r` the devices still at risk, the failure itself included; `F` is then
+/// Bernard's approximation of the median rank, `(j - 0.3) / (devices + 0.4)`. Without censoring
+/// `j` counts 1, 2, ..., so the last failure has `F = (n - 0.3) / (n + 0.4) < 1` and shows on a
+/// Weibull scale, where Kaplan-Meier's `F = 1` cannot.
+pub fn median_ranks(kaplan_meier: &[KaplanMeierPoint], devices: usize) -> Vec<f64> {
+    let n = devices as f64;
+    let mut rank = 0.0;
+    kaplan_meier
+        .iter()
+        .map(|point| {
+            for k in 0..point.failures {
+                let at_risk = point.at_risk.saturating_sub(k) as f64;
+                rank += (n + 1.0 - rank) / (1.0 + at_risk);
+            }
+            (rank - 0.3) / (n + 0.4)
+        })
+        .collect()
+}
+
 /// Greenwood's term `d / (n (n - d))`; infinite when all at risk fail (`R` drops to 0).
 fn greenwood_term(at_risk: usize, failures: usize) -> f64 {
     let (n, d) = (at_risk as f64, failures as f64);
@@ -822,6 +844,52 @@ mod tests {
 
     /// 6-MP arm of Freireich et al. (1963), Klein & Moeschberger (2003) table 4.1A; `+` marks
     /// censoring. Log-log bounds as printed by R's `survfit(..., conf.type = "log-log")`.
+    #[test]
+    fn median_ranks_follow_johnson_and_bernard() {
+        // tools/median_ranks_reference.py, which walks the units one by one.
+        let five = [
+            (1.0, true),
+            (2.0, false),
+            (3.0, true),
+            (4.0, false),
+            (5.0, true),
+        ];
+        let ranks = median_ranks(&kaplan_meier(&five).unwrap(), five.len());
+        // Adjusted ranks 1, 2.25 and 4.125 (ReliaSoft's example), over N + 0.4 = 5.4.
+        let expected = [0.7 / 5.4, 1.95 / 5.4, 3.825 / 5.4];
+        for (f, want) in ranks.iter().zip(expected) {
+            assert!((f - want).abs() < 1e-15, "{f} against {want}");
+        }
+
+        let failed = [6, 6, 6, 7, 10, 13, 16, 22, 23].map(|t| (f64::from(t), true));
+        let censored =
+            [6, 9, 10, 11, 17, 19, 20, 25, 32, 32, 34, 35].map(|t| (f64::from(t), false));
+        let data: Vec<_> = censored.into_iter().chain(failed).collect();
+        let ranks = median_ranks(&kaplan_meier(&data).unwrap(), data.len());
+        // One position per failure time: that of its last failure (three at t = 6).
+        let expected = [
+            0.126_168_224_299_065_43,
+            0.175_493_250_259_605_4,
+            0.227_901_090_342_679_14,
+            0.288_371_675_053_918_03,
+            0.348_842_259_765_157,
+            0.431_989_313_743_110_45,
+            0.515_136_367_721_064,
+        ];
+        assert_eq!(ranks.len(), expected.len());
+        for (f, want) in ranks.iter().zip(expected) {
+            assert!((f - want).abs() < 1e-14, "{f} against {want}");
+        }
+    }
+
+    #[test]
+    fn the_last_failure_of_a_complete_sample_has_a_median_rank_below_one() {
+        let data: Vec<_> = (1..=10).map(|t| (f64::from(t), true)).collect();
+        let ranks = median_ranks(&kaplan_meier(&data).unwrap(), data.len());
+        assert_eq!(ranks.len(), 10);
+        assert!((ranks[9] - 9.7 / 10.4).abs() < 1e-15);
+    }
+
     #[test]
     fn kaplan_meier_matches_the_textbook_six_mp_example() {
         let failed = [6, 6, 6, 7, 10, 13, 16, 22, 23].map(|t| (f64::from(t), true));

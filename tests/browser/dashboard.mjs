@@ -1,6 +1,9 @@
 // End-to-end test of the dashboard in a real browser (Debian's chromium, driven by playwright-core):
 // submit the "Quick check" preset on /, follow the job to `succeeded` on its page, check that the
-// wear-curve and histogram plots are there, and save screenshots.
+// wear-curve and histogram plots are there, and save screenshots. Then under load: with 20 active
+// jobs and a schedule, every plot of both pages loads within 5 s and a submit through the form is
+// accepted while they run (Chromium opens at most 6 connections per host: the page must not hold
+// one stream per job).
 //
 //   node tests/browser/dashboard.mjs BASE_URL OUT_DIR
 //
@@ -21,7 +24,9 @@ const base = baseArg.replace(/\/+$/, "");
 const CHROMIUM = process.env.CHROMIUM || "/usr/bin/chromium";
 const JOB_TIMEOUT_MS = 120_000;
 const STEP_TIMEOUT_MS = 30_000;
-const OVERALL_TIMEOUT_MS = 240_000;
+const OVERALL_TIMEOUT_MS = 300_000;
+const ACTIVE_JOBS = 20;
+const PLOT_TIMEOUT_MS = 5_000;
 
 mkdirSync(outDir, { recursive: true });
 
@@ -172,6 +177,133 @@ await step("the job's row says succeeded", () => page.waitForSelector(`${rowSele
 await page.waitForLoadState("networkidle", { timeout: 10_000 }).catch(() => {});
 await step("save dashboard.png", () => page.screenshot({ path: join(outDir, "dashboard.png"), fullPage: true }));
 log(`saved ${join(outDir, "dashboard.png")}`);
+
+// 4. Under load. The jobs and the schedule are made through the API, outside the browser.
+const apiKeyHeader = apiKey ? { authorization: `Bearer ${apiKey}` } : {};
+async function call(method, path, body) {
+  const headers = { ...apiKeyHeader, accept: "application/json" };
+  if (body !== undefined) headers["content-type"] = "application/json";
+  const response = await fetch(`${base}${path}`, {
+    method,
+    headers,
+    body: body === undefined ? undefined : JSON.stringify(body),
+  });
+  const text = await response.text();
+  if (!response.ok) throw new Error(`${method} ${path} answered ${response.status}: ${text.slice(0, 300)}`);
+  return text ? JSON.parse(text) : null;
+}
+
+log("creating a schedule and running it once, so that its trend has a point");
+const schedule = await step("create a schedule", () =>
+  call("POST", "/v1/schedules", {
+    name: "Nightly quick check",
+    cron: "0 1 * * *",
+    time_zone: "Europe/Berlin",
+    template: { devices: 100, operations: 100, seed: 7, scenario: { circuit: { supply_voltage_v: 48, current_a: 15 } } },
+    statistics: ["operations.total_bounce_s.mean", "operations.bounce_count.p50"],
+  }),
+);
+const run = await step("run the schedule now", () => call("POST", `/v1/schedules/${schedule.id}/run`));
+const runJob = (run && (run.job || run)) || {};
+await step(`the schedule's run ${runJob.id} succeeds`, async () => {
+  for (const started = Date.now(); Date.now() - started < JOB_TIMEOUT_MS; ) {
+    const job = await call("GET", `/v1/jobs/${runJob.id}`);
+    if (job.status === "succeeded") return;
+    if (!["queued", "running"].includes(job.status)) throw new Error(`it ended ${job.status}`);
+    await new Promise((resolve) => setTimeout(resolve, 250));
+  }
+  throw new Error("it did not end in time");
+});
+
+log(`submitting ${ACTIVE_JOBS} long jobs`);
+const active = [];
+for (let k = 0; k < ACTIVE_JOBS; k++) {
+  const job = await step(`submit long job ${k + 1}`, () =>
+    call("POST", "/v1/jobs", { name: `Long job ${k + 1}`, devices: 100000, operations: 10000, seed: k + 1 }),
+  );
+  active.push(job.id);
+}
+
+// Every event stream the jobs page opens, and when each plot request is answered.
+const streams = [];
+page.on("request", (request) => {
+  const path = new URL(request.url()).pathname;
+  if (path === "/v1/events" || /^\/v1\/jobs\/[^/]+\/events$/.test(path)) streams.push(path);
+});
+log(`opening ${base}/ with ${ACTIVE_JOBS} active jobs`);
+const loadStarted = Date.now();
+await step(`open ${base}/ under load`, () => page.goto(`${base}/`, { waitUntil: "load" }));
+await step(`every trend plot loads within ${PLOT_TIMEOUT_MS / 1000} s`, () =>
+  page.waitForFunction(
+    () => {
+      const plots = [...document.querySelectorAll("#schedules .plot")];
+      return plots.length > 0 && plots.every((plot) => plot.querySelector("svg"));
+    },
+    null,
+    { timeout: Math.max(1, PLOT_TIMEOUT_MS - (Date.now() - loadStarted)), polling: 100 },
+  ),
+);
+log(`the trend plot loaded ${Date.now() - loadStarted} ms after navigation`);
+const activeRows = await step(`the ${ACTIVE_JOBS} long jobs are listed as active`, async () => {
+  await page.waitForFunction(
+    (ids) => ids.every((id) => {
+      const row = document.querySelector(`#jobs-body tr[data-job-id="${id}"]`);
+      return row && ["queued", "running"].includes(row.dataset.status);
+    }),
+    active,
+    { timeout: PLOT_TIMEOUT_MS },
+  );
+  return active.length;
+});
+const nextRun = (await page.textContent(`[data-schedule-id="${schedule.id}"] .next-run`)) || "";
+if (!/\d{4}-\d\d-\d\d \d\d:\d\d Europe\/Berlin \(\d{4}-\d\d-\d\d \d\d:\d\d UTC\)/.test(nextRun)) {
+  await fail(`the schedule's next run does not name its zone: "${nextRun.trim()}"`);
+}
+if (streams.length !== 1 || streams[0] !== "/v1/events") {
+  await fail(`the jobs page opened these event streams, not one /v1/events: ${streams.join(", ")}`);
+}
+log(`${activeRows} active rows on one event stream; ${nextRun.trim()}`);
+
+log("submitting through the form while they run");
+const submitStarted = Date.now();
+const [loaded] = await step("submit the Quick check preset under load", () =>
+  Promise.all([
+    page.waitForResponse(
+      (r) => new URL(r.url()).pathname === "/v1/jobs" && r.request().method() === "POST",
+      { timeout: PLOT_TIMEOUT_MS },
+    ),
+    page.click("#submit-button"),
+  ]),
+);
+if (loaded.status() !== 202) await fail(`POST /v1/jobs under load answered ${loaded.status()}`);
+const formJob = await loaded.json();
+active.push(formJob.id);
+await step("the form says the job was submitted", () =>
+  page.waitForSelector("#submit-ok:not([hidden])", { timeout: PLOT_TIMEOUT_MS }),
+);
+await step("its row appears", () =>
+  page.waitForSelector(`#jobs-body tr[data-job-id="${formJob.id}"]`, { timeout: PLOT_TIMEOUT_MS }),
+);
+log(`submitted ${formJob.id} in ${Date.now() - submitStarted} ms`);
+
+log(`opening ${base}${link} under load`);
+const jobPageStarted = Date.now();
+await step(`open ${base}${link} under load`, () => page.goto(`${base}${link}`, { waitUntil: "load" }));
+await step(`the job page's plots load within ${PLOT_TIMEOUT_MS / 1000} s`, () =>
+  page.waitForFunction(
+    () => ["#plot-bands", "#plot-histograms"].every((id) => document.querySelector(`${id} svg`)),
+    null,
+    { timeout: Math.max(1, PLOT_TIMEOUT_MS - (Date.now() - jobPageStarted)), polling: 100 },
+  ),
+);
+log(`the job page's plots loaded ${Date.now() - jobPageStarted} ms after navigation`);
+
+await step("cancel the long jobs", () =>
+  Promise.all(active.map((id) => call("DELETE", `/v1/jobs/${id}`).catch((error) => {
+    if (!/ answered 409/.test(error.message)) throw error;
+  }))),
+);
+await step("delete the schedule", () => call("DELETE", `/v1/schedules/${schedule.id}`));
 
 if (pageErrors.length) await fail(`uncaught errors in the page: ${pageErrors.join(" | ")}`);
 clearTimeout(watchdog);

@@ -20,6 +20,7 @@ fn openapi_docs_health_and_metrics_are_served() {
         "/v1/jobs/{id}/result",
         "/v1/jobs/{id}/distributions/{metric}",
         "/v1/jobs/{id}/events",
+        "/v1/events",
         "/v1/simulate",
         "/healthz",
         "/metrics",

@@ -148,13 +148,42 @@
     return typeof value === "number" && Number.isFinite(value) ? value.toLocaleString("en-US") : "–";
   }
 
+  /** A time in the browser's zone, with the zone's name ("Nov 22, 2026, 16:05:12 CET"). */
   function fmtTime(text) {
     if (!text) return "–";
     const date = new Date(text);
     if (Number.isNaN(date.getTime())) return String(text);
     return date.toLocaleString(undefined, {
       year: "numeric", month: "short", day: "numeric", hour: "2-digit", minute: "2-digit", second: "2-digit",
+      timeZoneName: "short",
     });
+  }
+
+  /** `YYYY-MM-DD HH:MM` of `date` in the IANA zone `timeZone`. */
+  function wallClock(date, timeZone) {
+    const parts = {};
+    const format = new Intl.DateTimeFormat("en-GB", {
+      timeZone, year: "numeric", month: "2-digit", day: "2-digit", hour: "2-digit", minute: "2-digit", hourCycle: "h23",
+    });
+    for (const part of format.formatToParts(date)) parts[part.type] = part.value;
+    return parts.year + "-" + parts.month + "-" + parts.day + " " + parts.hour + ":" + parts.minute;
+  }
+
+  /**
+   * A time in a schedule's zone, named, and in UTC: "2026-11-23 01:00 Europe/Berlin
+   * (2026-11-23 00:00 UTC)". A zone this browser does not know is shown in UTC only.
+   */
+  function fmtZoned(text, timeZone) {
+    if (!text) return "–";
+    const date = new Date(text);
+    if (Number.isNaN(date.getTime())) return String(text);
+    const utc = wallClock(date, "UTC") + " UTC";
+    if (!timeZone || timeZone === "UTC") return utc;
+    try {
+      return wallClock(date, timeZone) + " " + timeZone + " (" + utc + ")";
+    } catch (_) {
+      return utc;
+    }
   }
 
   function badge(status) {
@@ -349,15 +378,15 @@
   }
 
   /**
-   * Follows `GET /v1/jobs/{id}/events` with fetch (EventSource cannot send the key header), calling
-   * onEvent(name, data) for each event while wanted() holds. Resolves true after the final `status`
-   * event (or when no longer wanted), false when the stream ends without one.
+   * Follows an event stream (`GET /v1/events` or `/v1/jobs/{id}/events`) with fetch (EventSource
+   * cannot send the key header), calling onEvent(name, data) for each event while wanted() holds,
+   * and onOpen() once the stream answered. Resolves true once onEvent returns true (or when no
+   * longer wanted), false when the stream ends. `signal` aborts it.
    */
-  async function streamEvents(id, onEvent, wanted = () => true) {
-    const response = await api("/v1/jobs/" + encodeURIComponent(id) + "/events", {
-      headers: { Accept: "text/event-stream" },
-    });
+  async function streamEvents(path, onEvent, { wanted = () => true, onOpen = () => {}, signal } = {}) {
+    const response = await api(path, { headers: { Accept: "text/event-stream" }, signal });
     if (!response.ok) throw await failed(response);
+    onOpen();
     if (!response.body || !response.body.getReader) throw new Error("no streaming body");
     const reader = response.body.getReader();
     const decoder = new TextDecoder();
@@ -382,8 +411,7 @@
         } catch (_) {
           continue;
         }
-        onEvent(event.event, data);
-        if (event.event === "status") {
+        if (onEvent(event.event, data)) {
           reader.cancel().catch(() => {});
           return true;
         }
@@ -396,26 +424,47 @@
     const rows = new Map(); // job id -> {row, bar, statusCell, job}
     let cursor = null;
     let pollTimer = null;
-    const streaming = new Set(); // ids of jobs followed over Server-Sent Events
+    let live = false; // the event stream is open: it brings every change to the rows
+    let liveStream = null; // {generation, controller} of the current stream
 
-    // Live rows: each queued or running job follows its event stream; polling is the fallback.
-    function follow(job) {
-      if (!ACTIVE.has(job.status) || streaming.has(job.id)) return;
-      streaming.add(job.id);
-      streamEvents(job.id, (name, data) => {
-        const entry = rows.get(job.id);
-        if (!entry) return;
+    // Live rows: one stream for all of the caller's jobs, however many run (a stream per job would
+    // take the browser's six connections per host and stall the plots and the form). The rows are
+    // (re)loaded once it answers, so that no job ending in between is missed. While it is down,
+    // active rows are polled and it is retried.
+    function followAll(retry) {
+      if (liveStream) liveStream.controller.abort();
+      const current = { controller: new AbortController() };
+      liveStream = current;
+      live = false;
+      let opened = false;
+      streamEvents("/v1/events", (name, data) => {
+        const entry = data && rows.get(data.id);
+        if (!entry) return false;
         if (name === "status") {
           updateRow(data);
-        } else {
+        } else if (name === "progress") {
           const progress = { operations_done: data.operations_done, operations_total: data.operations_total };
           updateRow(Object.assign({}, entry.job, { status: data.status || entry.job.status, progress }));
         }
+        return false;
+      }, {
+        wanted: () => liveStream === current,
+        signal: current.controller.signal,
+        onOpen: () => {
+          opened = true;
+          live = true;
+          loadJobs(false);
+        },
       })
         .catch(() => {})
         .finally(() => {
-          streaming.delete(job.id);
+          if (liveStream !== current) return;
+          live = false;
+          if (!opened && !retry) loadJobs(false);
           schedulePoll();
+          setTimeout(() => {
+            if (liveStream === current) followAll(true);
+          }, 5000);
         });
     }
 
@@ -448,7 +497,6 @@
         }
         const entry = jobRow(job);
         rows.set(job.id, entry);
-        follow(job);
         if (atTop) {
           entry.row.classList.add("fresh");
           body.prepend(entry.row);
@@ -482,10 +530,10 @@
       }
     }
 
-    // Fallback: an active job whose stream ended early (a proxy, an error) is fetched every second.
+    // Fallback while the event stream is down (a proxy, an error): active jobs are fetched every second.
     function schedulePoll() {
       if (pollTimer) return;
-      const polled = (e) => ACTIVE.has(e.job.status) && !streaming.has(e.job.id);
+      const polled = (e) => ACTIVE.has(e.job.status) && !live;
       if (![...rows.values()].some(polled)) return;
       pollTimer = setTimeout(async () => {
         const ids = [...rows.values()].filter(polled).map((e) => e.job.id);
@@ -549,7 +597,7 @@
     $("#jobs-more").addEventListener("click", () => loadJobs(true));
     $("#schedules-refresh").addEventListener("click", () => loadSchedules());
     setupKeyField(() => {
-      loadJobs(false);
+      followAll();
       loadSchedules();
     });
 
@@ -636,8 +684,8 @@
           runButton),
         el("div", { class: "meta" },
           el("span", {}, el("code", {}, schedule.cron || "–"), " in ", el("b", {}, schedule.time_zone || "UTC")),
-          el("span", {}, "next run ", el("b", {}, schedule.enabled ? fmtTime(schedule.next_run_at) : "–")),
-          el("span", {}, "last run ", el("b", {}, fmtTime(schedule.last_run_at))),
+          el("span", { class: "next-run" }, "next run ", el("b", {}, schedule.enabled ? fmtZoned(schedule.next_run_at, schedule.time_zone) : "–")),
+          el("span", {}, "last run ", el("b", {}, fmtZoned(schedule.last_run_at, schedule.time_zone))),
           statistics.length ? el("span", {}, "follows ", el("b", {}, statistics.join(", "))) : null),
         plot,
         note);
@@ -645,7 +693,7 @@
       return card;
     }
 
-    loadJobs(false);
+    followAll();
     loadSchedules();
   }
 
@@ -729,12 +777,13 @@
     /** Follows the event stream; resolves true if it saw the final `status` event. */
     function followEvents(generation) {
       return streamEvents(
-        id,
+        base + "/events",
         (name, data) => {
           if (name === "status") render(data);
           else if (name === "progress") onProgress(data);
+          return name === "status";
         },
-        () => generation === following,
+        { wanted: () => generation === following },
       );
     }
 

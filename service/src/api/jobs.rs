@@ -5,6 +5,7 @@ use super::error::{
     ApiError, Internal, PROBLEM, Problem,
     responses::{BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, Unauthorized},
 };
+use super::events::{next_look, progress_event, status_event};
 use super::{AppState, JsonText};
 use crate::domain::{JobId, JobStatus, Owner, QueuedJob, UnixMs, draw_seed};
 use crate::store::{JobRecord, Operations, Page, QueueEvent, ShardRecord};
@@ -21,7 +22,6 @@ use futures_util::stream::Stream;
 use serde::{Deserialize, Serialize};
 use std::convert::Infallible;
 use std::fmt::Write as _;
-use std::time::Duration;
 use tokio::sync::broadcast;
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
@@ -585,34 +585,6 @@ fn without_result(id: &JobId) -> ApiError {
     ApiError::Internal(Internal(format!("job {id} succeeded without a result")))
 }
 
-/// How often the event stream looks at the job when the store announces nothing.
-const EVENT_POLL: Duration = Duration::from_millis(200);
-/// With announcements (PostgreSQL), the stream looks when its job changed, and at least this often
-/// in case an announcement was missed (a dropped listening connection).
-const EVENT_FALLBACK_POLL: Duration = Duration::from_secs(2);
-
-/// Waits until it is worth looking at job `id` again: an announcement of a change to it, or the
-/// polling interval.
-async fn next_look(events: &mut Option<broadcast::Receiver<QueueEvent>>, id: &JobId) {
-    let Some(receiver) = events else {
-        return tokio::time::sleep(EVENT_POLL).await;
-    };
-    let changed = async {
-        loop {
-            match receiver.recv().await {
-                Ok(QueueEvent::Changed(changed)) if changed == *id => return true,
-                Ok(_) => {}
-                Err(broadcast::error::RecvError::Lagged(_)) => return true,
-                Err(broadcast::error::RecvError::Closed) => return false,
-            }
-        }
-    };
-    // The announcements stopped for good: poll from now on.
-    if let Ok(false) = tokio::time::timeout(EVENT_FALLBACK_POLL, changed).await {
-        *events = None;
-    }
-}
-
 /// Server-Sent Events: `progress` events while the job runs, then one `status` event when it ends.
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path, description = "Job id")),
@@ -657,7 +629,11 @@ pub async fn job_events(
             let record = match w.pending.take() {
                 Some(record) => record,
                 None => {
-                    next_look(&mut w.events, &w.id).await;
+                    next_look(
+                        &mut w.events,
+                        |event| matches!(event, QueueEvent::Changed(changed) if *changed == w.id),
+                    )
+                    .await;
                     match w.state.store.job(&w.owner, &w.id).await {
                         Ok(record) => record,
                         Err(_) => return None,
@@ -667,18 +643,11 @@ pub async fn job_events(
             let seen = (record.status, record.operations_done);
             if record.status.is_terminal() {
                 w.ended = true;
-                let data =
-                    serde_json::to_string(&JobResource::from_record(&record)).unwrap_or_default();
-                return Some((Ok(Event::default().event("status").data(data)), w));
+                return Some((Ok(status_event(&record)), w));
             }
             if w.last != Some(seen) {
                 w.last = Some(seen);
-                let progress = Progress::of(&record);
-                let data = serde_json::json!({"status": record.status, "operations_done": progress.operations_done, "operations_total": progress.operations_total});
-                return Some((
-                    Ok(Event::default().event("progress").data(data.to_string())),
-                    w,
-                ));
+                return Some((Ok(progress_event(&record, false)), w));
             }
         }
     });

@@ -4,6 +4,7 @@
 
 pub mod cache;
 pub mod error;
+pub mod events;
 pub mod jobs;
 pub mod plots;
 pub mod schedules;
@@ -114,6 +115,7 @@ pub fn router(state: AppState) -> axum::Router {
 fn api_routes(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
     let v1 = OpenApiRouter::new()
         .merge(jobs::router())
+        .merge(events::router())
         .merge(schedules::router())
         .merge(plots::router())
         .merge(simulate::router())

@@ -15,6 +15,7 @@ use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
+use chrono::DateTime;
 use serde::Deserialize;
 use utoipa::IntoParams;
 use utoipa_axum::router::OpenApiRouter;
@@ -108,8 +109,12 @@ pub async fn schedule_trend_plot(
         .iter()
         .filter_map(|run| {
             let value = run.values.get(&statistic)?.as_ref()?;
+            let label = DateTime::parse_from_rfc3339(&run.scheduled_for).map_or_else(
+                |_| run.scheduled_for.clone(),
+                |at| schedule.definition.wall_clock(at.to_utc()),
+            );
             Some(TrendPoint {
-                label: run.scheduled_for.clone(),
+                label,
                 value: value.value,
                 ci95: Some(value.ci95),
                 flagged: value.drift,
@@ -118,6 +123,7 @@ pub async fn schedule_trend_plot(
         .collect();
     let svg = plots::trend_svg(
         &format!("{}: {statistic}", schedule.definition.name),
+        &format!("run (time in {})", schedule.definition.time_zone),
         &statistic,
         &points,
     );

@@ -62,6 +62,13 @@ impl ScheduleDefinition {
         let name = format!("{} @ {}", self.name, due.to_rfc3339());
         Ok(QueuedJob::new(&job, owner, Some(name), now))
     }
+
+    /// `at` on the schedule's wall clock, to the minute, as its trend labels runs:
+    /// `2026-11-22 03:00`. (A stored zone always parses; UTC stands in should one not.)
+    pub fn wall_clock(&self, at: DateTime<Utc>) -> String {
+        let zone = Tz::from_str(&self.time_zone).unwrap_or(Tz::UTC);
+        at.with_timezone(&zone).format("%Y-%m-%d %H:%M").to_string()
+    }
 }
 
 /// A schedule document that passed every rule; only [`ValidSchedule::parse`] makes one.
@@ -321,6 +328,23 @@ impl<'de> Deserialize<'de> for Statistic {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_wall_clock_is_the_schedules_zone_to_the_minute() {
+        let definition = ScheduleDefinition {
+            name: "nightly".into(),
+            cron: "0 1 * * *".into(),
+            time_zone: "Europe/Berlin".into(),
+            template: JobSpec::default(),
+            statistics: Vec::new(),
+            enabled: true,
+        };
+        // 00:00:00.123 UTC is 01:00 in Berlin in winter.
+        assert_eq!(
+            definition.wall_clock(utc("2026-11-22T00:00:00.123Z")),
+            "2026-11-22 01:00"
+        );
+    }
 
     fn utc(text: &str) -> DateTime<Utc> {
         DateTime::parse_from_rfc3339(text)

@@ -6,7 +6,7 @@ use bouncewear_model::montecarlo::Bin;
 
 use super::axes::{Frame, Legend, LinearAxis, Scale, draw_frame_axes, draw_x_ticks, draw_y_grid};
 use super::svg::{BAND, BLUE, INK, LABEL, RED, SMALL, Style, Svg, fmt_sig, points};
-use super::{extent, finite, limit_of, message_svg, pad, quantile};
+use super::{extent, finite, limit_of, message_svg, pad, quantile, whole_valued};
 
 /// The wear curve of `metric`: per bin of operations (at the bin's midpoint), a band from p05 to
 /// p95, the median, the mean (dashed) and the limit when there is one, with a legend.
@@ -54,7 +54,7 @@ pub fn quantile_bands_svg(metric: &str, bins: &[Bin]) -> String {
         .flatten();
     let (y_lo, y_hi) = extent(ys_values);
     let (y_lo, y_hi) = pad(y_lo, y_hi, 0.05);
-    let y_axis = LinearAxis::new(y_lo, y_hi, 6, false);
+    let y_axis = LinearAxis::new(y_lo, y_hi, 6, whole_valued(metric));
     let xs = Scale::new(x_axis.lo, x_axis.hi, frame.left, frame.right());
     let ys = Scale::new(y_axis.lo, y_axis.hi, frame.bottom(), frame.top);
 
@@ -143,7 +143,7 @@ pub fn quantile_bands_svg(metric: &str, bins: &[Bin]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plots::fixtures::{check, summary, wear_bins};
+    use crate::plots::fixtures::{bounce_count_bins, check, fractional_labels, summary, wear_bins};
 
     #[test]
     fn bands_of_a_wear_test() {
@@ -158,6 +158,13 @@ mod tests {
         assert!(svg.contains(">operation<"));
         // The last bin's midpoint is inside the axis: 1000 is a tick.
         assert!(svg.contains(">1000<"));
+    }
+
+    #[test]
+    fn a_whole_valued_metric_gets_whole_ticks() {
+        let svg = quantile_bands_svg("bounce_count", &bounce_count_bins(6));
+        check(&svg);
+        assert_eq!(fractional_labels(&svg), Vec::<&str>::new());
     }
 
     #[test]

@@ -3,14 +3,16 @@
 use std::fmt::Write as _;
 
 use bouncewear_model::montecarlo::Bin;
+use bouncewear_model::stats::Summary;
 
 use super::axes::{Frame, LinearAxis, Scale, draw_frame_axes, draw_x_ticks, draw_y_grid};
 use super::svg::{BAR, BLUE, INK, LABEL, MUTED_SMALL, RED, Style, Svg, num};
-use super::{limit_of, message_svg, pad, pick_evenly, quantile};
+use super::{limit_of, message_svg, pad, pick_evenly, quantile, whole_valued};
 
 /// Small multiples of the histogram of `metric` in each bin of operations (at most 12 panels,
 /// evenly spaced over the bins when there are more, as the title says), on a shared x axis. Each
-/// panel marks the median and, when the metric has a limit, the limit.
+/// panel marks the median and, when the metric has a limit, the limit. The panels share their y
+/// scale too, so that a taller bar is a larger count in any panel.
 pub fn histograms_svg(metric: &str, bins: &[Bin]) -> String {
     const MAX_PANELS: usize = 12;
     let chosen = pick_evenly(bins.len(), MAX_PANELS);
@@ -47,7 +49,14 @@ pub fn histograms_svg(metric: &str, bins: &[Bin]) -> String {
         }
     }
     let (lo, hi) = pad(lo, hi, 0.04);
-    let x_axis = LinearAxis::new(lo, hi, 4, false);
+    let x_axis = LinearAxis::new(lo, hi, 4, whole_valued(metric));
+    let max_count = chosen
+        .iter()
+        .flat_map(|&i| class_counts(&bins[i].summary).iter().copied())
+        .max()
+        .unwrap_or(0)
+        .max(1);
+    let y_axis = LinearAxis::new(0.0, max_count as f64, 3, true);
     let limit_shown = chosen.iter().any(|&i| limit_of(&bins[i].summary).is_some());
 
     let mut svg = Svg::new(width, height, &title);
@@ -91,18 +100,7 @@ pub fn histograms_svg(metric: &str, bins: &[Bin]) -> String {
         );
 
         let count = |c: u64| c as f64;
-        let bars = s
-            .histogram
-            .counts
-            .len()
-            .min(s.histogram.edges.len().saturating_sub(1));
-        let max_count = s.histogram.counts[..bars]
-            .iter()
-            .copied()
-            .max()
-            .unwrap_or(0)
-            .max(1);
-        let y_axis = LinearAxis::new(0.0, count(max_count), 3, true);
+        let bars = class_counts(s).len();
         let xs = Scale::new(x_axis.lo, x_axis.hi, frame.left, frame.right());
         let ys = Scale::new(y_axis.lo, y_axis.hi, frame.bottom(), frame.top);
         draw_y_grid(&mut svg, &frame, &y_axis, &ys);
@@ -169,10 +167,18 @@ pub fn histograms_svg(metric: &str, bins: &[Bin]) -> String {
     svg.finish()
 }
 
+/// The counts of a histogram's classes: as many as it has edges for.
+fn class_counts(s: &Summary) -> &[u64] {
+    let h = &s.histogram;
+    &h.counts[..h.counts.len().min(h.edges.len().saturating_sub(1))]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plots::fixtures::{check, summary, wear_bins};
+    use crate::plots::fixtures::{
+        bounce_count_bins, check, fractional_labels, summary, uniform, wear_bins,
+    };
     use bouncewear_model::stats::Histogram;
 
     #[test]
@@ -200,6 +206,51 @@ mod tests {
         assert_eq!(pick_evenly(40, 12).len(), 12);
         let v = pick_evenly(13, 12);
         assert_eq!((v.len(), v[0], v[11]), (12, 0, 12));
+    }
+
+    fn bin(values: &[f64], op_start: u64) -> Bin {
+        Bin {
+            summary: summary(values, None),
+            op_start,
+            op_end: op_start + 1,
+        }
+    }
+
+    /// The height of the tallest bar of each panel.
+    fn tallest_bars(svg: &str) -> Vec<f64> {
+        let bar = format!(r#"fill="{BAR}""#);
+        svg.split(r#"<g class="panel""#)
+            .skip(1)
+            .map(|panel| {
+                panel[..panel.find("</g>").unwrap()]
+                    .split("<rect ")
+                    .filter(|rect| rect.contains(&bar))
+                    .map(|rect| {
+                        let height = &rect[rect.find("height=\"").unwrap() + 8..];
+                        height[..height.find('"').unwrap()].parse::<f64>().unwrap()
+                    })
+                    .fold(0.0, f64::max)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn histogram_panels_share_one_count_scale() {
+        let few: Vec<f64> = (0..50).map(|k| uniform(3, k)).collect();
+        let many: Vec<f64> = few.iter().cycle().take(200).copied().collect();
+        let svg = histograms_svg("e1", &[bin(&few, 0), bin(&many, 1)]);
+        check(&svg);
+        let tallest = tallest_bars(&svg);
+        // Four times the operations in the same classes: bars four times as tall.
+        assert!((tallest[1] / tallest[0] - 4.0).abs() < 0.05, "{tallest:?}");
+    }
+
+    #[test]
+    fn a_whole_valued_metric_gets_whole_ticks() {
+        let svg = histograms_svg("bounce_count", &bounce_count_bins(4));
+        check(&svg);
+        assert!(svg.contains(">2</text>"));
+        assert_eq!(fractional_labels(&svg), Vec::<&str>::new());
     }
 
     #[test]

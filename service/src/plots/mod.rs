@@ -19,7 +19,7 @@ mod trend;
 mod weibull;
 mod work_precision;
 
-use bouncewear_model::montecarlo::JobResult;
+use bouncewear_model::montecarlo::{JobResult, Metric};
 use bouncewear_model::stats::Summary;
 
 pub use bands::quantile_bands_svg;
@@ -59,6 +59,11 @@ pub fn job_plot(result: &JobResult, kind: &str, metric: &str) -> Result<String, 
         },
         other => Err(PlotError::NoSuchPlot(other.to_owned())),
     }
+}
+
+/// Whether `metric` takes whole values only (`bounce_count`): its axes get whole ticks.
+fn whole_valued(metric: &str) -> bool {
+    matches!(Metric::parse(metric), Some(Metric::Operation(m)) if m.is_integer())
 }
 
 fn finite(v: f64) -> Option<f64> {
@@ -254,6 +259,31 @@ mod fixtures {
                     summary: summary(&values, limit),
                     op_start: b as u64 * per_bin,
                     op_end: (b as u64 + 1) * per_bin,
+                }
+            })
+            .collect()
+    }
+
+    /// The numbers among the texts of `svg` that are not whole: none on an axis of counts.
+    pub(super) fn fractional_labels(svg: &str) -> Vec<&str> {
+        svg.split("<text ")
+            .skip(1)
+            .map(|t| &t[t.find('>').unwrap() + 1..t.find("</text>").unwrap()])
+            .filter(|label| label.parse::<f64>().is_ok_and(|v| v.fract() != 0.0))
+            .collect()
+    }
+
+    /// Bins of a whole-valued metric, 1 to 3 bounces an operation.
+    pub(super) fn bounce_count_bins(count: u64) -> Vec<Bin> {
+        (0..count)
+            .map(|b| {
+                let values: Vec<f64> = (0..200)
+                    .map(|k| (1.0 + 3.0 * uniform(b, k)).floor())
+                    .collect();
+                Bin {
+                    summary: summary(&values, None),
+                    op_start: b * 100,
+                    op_end: (b + 1) * 100,
                 }
             })
             .collect()

@@ -17,8 +17,8 @@ pub struct TrendPoint {
 }
 
 /// A night-by-night trend: points with 95 % error bars joined by a line, flagged points in red
-/// with a ring; x labels rotated and thinned when there are many.
-pub fn trend_svg(title: &str, y_label: &str, points: &[TrendPoint]) -> String {
+/// with a ring; x labels rotated and thinned when there are many, `x_label` under them.
+pub fn trend_svg(title: &str, x_label: &str, y_label: &str, points: &[TrendPoint]) -> String {
     if points.is_empty() {
         return message_svg(title, "No run has a value yet.");
     }
@@ -114,7 +114,12 @@ pub fn trend_svg(title: &str, y_label: &str, points: &[TrendPoint]) -> String {
         }
     }
     draw_frame_axes(&mut svg, &frame);
-    svg.text(frame.left + frame.width / 2.0, height - 10.0, "run", LABEL);
+    svg.text(
+        frame.left + frame.width / 2.0,
+        height - 10.0,
+        x_label,
+        LABEL,
+    );
     svg.y_label(18.0, frame.top + frame.height / 2.0, y_label);
     let mut legend = Legend::new(frame.left, 46.0);
     legend.dot(&mut svg, BLUE, "value");
@@ -146,7 +151,12 @@ mod tests {
         let points: Vec<TrendPoint> = (0..5)
             .map(|k| night(k, 0.009 + 0.0001 * k as f64, k == 3))
             .collect();
-        let svg = trend_svg("Nightly <wear> & \"drift\"", "p95 total_bounce_s", &points);
+        let svg = trend_svg(
+            "Nightly <wear> & \"drift\"",
+            "run",
+            "p95 total_bounce_s",
+            &points,
+        );
         check(&svg);
         assert!(svg.contains("Nightly &lt;wear&gt; &amp; &quot;drift&quot;"));
         assert!(svg.contains("2026-03-01"));
@@ -161,7 +171,7 @@ mod tests {
         let points: Vec<TrendPoint> = (0..120)
             .map(|k| night(k % 28, 1.0 + (k as f64 * 0.3).sin(), k % 17 == 0))
             .collect();
-        let svg = trend_svg("Nightly", "mean e1", &points);
+        let svg = trend_svg("Nightly", "run", "mean e1", &points);
         check(&svg);
         assert!(svg.contains("rotate(-45"));
         let labels = svg.matches("rotate(-45").count();
@@ -170,8 +180,8 @@ mod tests {
 
     #[test]
     fn trend_of_degenerate_points() {
-        check(&trend_svg("Empty", "x", &[]));
-        assert!(trend_svg("Empty", "x", &[]).contains("No run has a value yet"));
+        check(&trend_svg("Empty", "run", "x", &[]));
+        assert!(trend_svg("Empty", "run", "x", &[]).contains("No run has a value yet"));
         let flat: Vec<TrendPoint> = (0..3)
             .map(|_| TrendPoint {
                 label: String::new(),
@@ -180,7 +190,7 @@ mod tests {
                 flagged: false,
             })
             .collect();
-        check(&trend_svg("Flat", "x", &flat));
+        check(&trend_svg("Flat", "run", "x", &flat));
         let odd = vec![
             TrendPoint {
                 label: "a".into(),
@@ -201,8 +211,8 @@ mod tests {
                 flagged: true,
             },
         ];
-        check(&trend_svg("Odd", "x", &odd));
+        check(&trend_svg("Odd", "run", "x", &odd));
         let one = vec![night(0, 3.0, false)];
-        check(&trend_svg("One", "x", &one));
+        check(&trend_svg("One", "run", "x", &one));
     }
 }

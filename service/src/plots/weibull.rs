@@ -2,7 +2,7 @@
 
 use std::fmt::Write as _;
 
-use bouncewear_model::life::{KaplanMeierPoint, LifeAnalysis, weibull_scale};
+use bouncewear_model::life::{KaplanMeierPoint, LifeAnalysis, median_ranks, weibull_scale};
 
 use super::axes::{
     Frame, Legend, LogAxis, Scale, draw_frame_axes, draw_log_x_axis, draw_no_data, widen_log,
@@ -13,8 +13,10 @@ use super::svg::{
 };
 use super::{pick_evenly, segments};
 
-/// A Weibull probability plot of `life`: Kaplan-Meier unreliability `1 - R` at each failure time,
-/// the maximum-likelihood line and its pointwise 95 % bounds on time (delta method on `ln t_p`
+/// A Weibull probability plot of `life`: the median rank of each failure time (Bernard's
+/// approximation on Johnson's adjusted ranks, as reliability tools plot censored data; the last
+/// failure too, which Kaplan-Meier would put at `F = 1`, off the scale) with the Kaplan-Meier
+/// Greenwood bounds as bars when there are few, the maximum-likelihood line and its pointwise 95 % bounds on time (delta method on `ln t_p`
 /// with `covariance_ln`), on log time against `ln(-ln(1 - F))` labelled in percent. Annotated
 /// with beta, eta and B10. Without a fit, the points (if any) and `weibull_error`.
 pub fn weibull_svg(life: &LifeAnalysis) -> String {
@@ -26,16 +28,17 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
         .as_ref()
         .filter(|w| w.beta.is_finite() && w.beta > 0.0 && w.eta.is_finite() && w.eta > 0.0);
 
-    // Kaplan-Meier points with 0 < F < 1: F = 1 (R = 0) has no place on the Weibull scale.
-    let usable = |p: &&KaplanMeierPoint| {
-        let f = 1.0 - p.reliability;
-        p.time.is_finite() && p.time > 0.0 && f > 0.0 && f < 1.0
-    };
-    let usable_points: Vec<&KaplanMeierPoint> = life.kaplan_meier.iter().filter(usable).collect();
-    let omitted = life.kaplan_meier.len() - usable_points.len();
-    // One step per distinct failure time can mean tens of thousands: draw an even selection.
+    // Each failure time at its median rank, always inside 0 < F < 1.
+    let ranks = median_ranks(&life.kaplan_meier, life.failures + life.censored);
+    let usable_points: Vec<(&KaplanMeierPoint, f64)> = life
+        .kaplan_meier
+        .iter()
+        .zip(ranks)
+        .filter(|&(p, f)| p.time.is_finite() && p.time > 0.0 && f > 0.0 && f < 1.0)
+        .collect();
+    // One point per distinct failure time can mean tens of thousands: draw an even selection.
     const MAX_POINTS: usize = 1500;
-    let points: Vec<&KaplanMeierPoint> = pick_evenly(usable_points.len(), MAX_POINTS)
+    let points: Vec<(&KaplanMeierPoint, f64)> = pick_evenly(usable_points.len(), MAX_POINTS)
         .into_iter()
         .map(|i| usable_points[i])
         .collect();
@@ -44,8 +47,8 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
     let (y_min_cap, y_max_cap) = (weibull_scale(1e-4), weibull_scale(1.0 - 1e-4));
     let mut y_lo = weibull_scale(0.01);
     let mut y_hi = weibull_scale(0.99);
-    for p in &points {
-        let y = weibull_scale(1.0 - p.reliability).clamp(y_min_cap, y_max_cap);
+    for &(_, f) in &points {
+        let y = weibull_scale(f).clamp(y_min_cap, y_max_cap);
         y_lo = y_lo.min(y);
         y_hi = y_hi.max(y);
     }
@@ -55,7 +58,7 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
     // x range: the points, and the fit between B10 and eta; then clamped to 8 decades.
     let mut t_lo = f64::INFINITY;
     let mut t_hi = f64::NEG_INFINITY;
-    for p in &points {
+    for (p, _) in &points {
         t_lo = t_lo.min(p.time);
         t_hi = t_hi.max(p.time);
     }
@@ -115,7 +118,7 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
 
     let (lx0, lx1) = (x_axis.lo.ln(), x_axis.hi.ln());
     let mut legend = Legend::new(frame.left, 48.0);
-    legend.dot(&mut svg, INK, "Kaplan\u{2013}Meier 1 \u{2212} R");
+    legend.dot(&mut svg, INK, "median ranks (Bernard, Johnson-adjusted)");
 
     if let Some(w) = fit {
         let (ln_eta, beta) = (w.eta.ln(), w.beta);
@@ -161,7 +164,7 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
 
     // Points, with Greenwood bounds as thin bars when there are few.
     if points.len() <= 60 {
-        for p in &points {
+        for (p, _) in &points {
             if let Some([lo, hi]) = p.ci95 {
                 let f_lo = (1.0 - hi).clamp(1e-4, 1.0 - 1e-4);
                 let f_hi = (1.0 - lo).clamp(1e-4, 1.0 - 1e-4);
@@ -174,8 +177,8 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
     }
     let r = if points.len() > 200 { 2.2 } else { 3.2 };
     let mut dots = String::new();
-    for p in &points {
-        let y = weibull_scale(1.0 - p.reliability).clamp(y_lo, y_hi);
+    for &(p, f) in &points {
+        let y = weibull_scale(f).clamp(y_lo, y_hi);
         let _ = write!(
             dots,
             r#"<circle cx="{}" cy="{}" r="{r}" fill="{INK}" fill-opacity="0.85"/>"#,
@@ -232,12 +235,9 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
         "{} failed, {} censored",
         life.failures, life.censored
     ));
-    if omitted > 0 {
-        notes.push(format!("{omitted} point(s) at F = 100 % not shown"));
-    }
     if points.len() < usable_points.len() {
         notes.push(format!(
-            "{} of {} Kaplan\u{2013}Meier points shown, evenly spaced",
+            "{} of {} failure times shown, evenly spaced",
             points.len(),
             usable_points.len()
         ));
@@ -342,12 +342,18 @@ mod tests {
     }
 
     #[test]
-    fn weibull_plot_all_failed_and_wide() {
-        // Every device fails: the last Kaplan-Meier point has F = 1 and is left out.
+    fn weibull_plot_shows_every_failure_time_of_a_complete_sample() {
+        // Every device fails: Kaplan-Meier would put the last one at F = 1, off the scale; at its
+        // median rank it is drawn with the others.
         let life = life_of(&weibull_data(50, 0.4, 1e5, f64::INFINITY));
         let svg = weibull_svg(&life);
         check(&svg);
-        assert!(svg.contains("at F = 100 % not shown"));
+        let legend_dots = 1;
+        assert_eq!(
+            svg.matches("<circle").count(),
+            life.kaplan_meier.len() + legend_dots
+        );
+        assert!(svg.contains("median ranks (Bernard, Johnson-adjusted)"));
         let life = life_of(&weibull_data(80, 12.0, 500.0, 520.0));
         check(&weibull_svg(&life));
     }

@@ -216,6 +216,9 @@ pub trait JobQueue: Send + Sync + 'static {
     async fn job(&self, owner: &Owner, id: &JobId) -> StoreResult<JobRecord>;
     /// Newest first.
     async fn jobs(&self, owner: &Owner, page: Page) -> StoreResult<Vec<JobRecord>>;
+    /// The owner's queued and running jobs, and its other jobs submitted after `after` (a `seq`),
+    /// oldest first: what a live view of the owner's jobs looks at.
+    async fn live_jobs(&self, owner: &Owner, after: i64) -> StoreResult<Vec<JobRecord>>;
     /// Cancels a queued or running job; [`StoreError::Conflict`] if it already ended.
     async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord>;
     /// Leases the next shard to run: of the oldest job with one, a queued shard or a running one

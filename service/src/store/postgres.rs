@@ -292,6 +292,25 @@ impl JobQueue for PgStore {
         Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)
     }
 
+    #[tracing::instrument(skip_all)]
+    async fn live_jobs(&self, owner: &Owner, after: i64) -> StoreResult<Vec<JobRecord>> {
+        // Two arms, so that each reads an index: the active jobs by status, the new ones by owner.
+        let rows = sqlx::query(concat!(
+            "SELECT ",
+            job_columns!(),
+            " FROM jobs WHERE status IN ('queued', 'running') AND owner = $1 \
+             UNION ALL SELECT ",
+            job_columns!(),
+            " FROM jobs WHERE owner = $1 AND seq > $2 AND status NOT IN ('queued', 'running') \
+             ORDER BY seq"
+        ))
+        .bind(owner.as_str())
+        .bind(after)
+        .fetch_all(&self.pool)
+        .await?;
+        Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)
+    }
+
     #[tracing::instrument(skip_all, fields(job = %id))]
     async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord> {
         let row = sqlx::query(concat!(
