@@ -26,6 +26,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "api",
             "compute",
             "config",
+            "connections",
             "domain",
             "scheduler",
             "store",
@@ -42,6 +43,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("plots", &[]),
     ("config", &[]),
     ("compute", &[]),
+    ("connections", &[]),
     ("telemetry", &[]),
     ("progress", &[]),
 ];

@@ -6,6 +6,7 @@
 use crate::api::{self, AppState};
 use crate::compute::{PoolError, thread_pool};
 use crate::config::{ServeConfig, WorkerConfig};
+use crate::connections::{self, ConnectionLimits};
 use crate::domain::Owner;
 use crate::store::{Store, StoreError};
 use crate::telemetry;
@@ -35,8 +36,6 @@ pub enum StartupError {
         address: SocketAddr,
         source: std::io::Error,
     },
-    #[error("server: {0}")]
-    Serve(std::io::Error),
     #[error("--workers must be at least 1 for a worker process")]
     NoWorkers,
 }
@@ -136,16 +135,17 @@ impl Application {
             tracing::info!("shutting down: no new requests, running jobs go back to the queue");
             let _ = shutdown_sender.send(true);
         });
-        let mut stopped = stopping;
-        let served = axum::serve(listener, router)
-            .with_graceful_shutdown(async move {
-                let _ = stopped.wait_for(|stop| *stop).await;
-            })
-            .await;
+        let limits = ConnectionLimits::new(config.max_connections, config.header_timeout());
+        tracing::info!(
+            max_connections = limits.max_connections,
+            header_timeout_s = limits.header_timeout.as_secs_f64(),
+            "accepting connections"
+        );
+        connections::serve(listener, router, limits, stopping).await;
         reporter.abort();
         let _ = scheduler.await;
         join_workers(handles).await;
-        served.map_err(StartupError::Serve)
+        Ok(())
     }
 }
 

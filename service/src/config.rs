@@ -58,6 +58,57 @@ pub struct ServeConfig {
     /// Largest request body, in bytes.
     #[arg(long, env = "BOUNCEWEAR_MAX_BODY_BYTES", default_value_t = 1 << 20)]
     pub max_body_bytes: usize,
+    /// Seconds a connection may take to send a request's headers (and may stay idle between
+    /// requests); a client that stalls is disconnected.
+    #[arg(
+        long,
+        env = "BOUNCEWEAR_HEADER_TIMEOUT_SECONDS",
+        default_value_t = 10.0
+    )]
+    pub header_timeout_seconds: f64,
+    /// Seconds a request may take to send its whole body; later, 408.
+    #[arg(long, env = "BOUNCEWEAR_BODY_TIMEOUT_SECONDS", default_value_t = 30.0)]
+    pub body_timeout_seconds: f64,
+    /// Seconds a request may take until its response starts (waiting for a slot included);
+    /// later, 503. An event stream, once started, runs as long as its job.
+    #[arg(
+        long,
+        env = "BOUNCEWEAR_REQUEST_TIMEOUT_SECONDS",
+        default_value_t = 60.0
+    )]
+    pub request_timeout_seconds: f64,
+    /// Requests handled at the same time; more wait for a slot (within the request timeout).
+    #[arg(
+        long,
+        env = "BOUNCEWEAR_MAX_CONCURRENT_REQUESTS",
+        default_value_t = 256
+    )]
+    pub max_concurrent_requests: usize,
+    /// Open connections at most; more wait in the listen backlog. Never more than the process's
+    /// open-file limit (RLIMIT_NOFILE) less what the database and the process need (default: that).
+    #[arg(long, env = "BOUNCEWEAR_MAX_CONNECTIONS")]
+    pub max_connections: Option<usize>,
     #[command(flatten)]
     pub queue: WorkerConfig,
+}
+
+/// Seconds from a flag: at least a millisecond (a zero timeout would refuse everything), at most
+/// a year (later deadlines overflow the clock).
+fn seconds(value: f64) -> Duration {
+    const YEAR: Duration = Duration::from_secs(365 * 86_400);
+    Duration::try_from_secs_f64(value.max(0.001)).map_or(YEAR, |d| d.min(YEAR))
+}
+
+impl ServeConfig {
+    pub fn header_timeout(&self) -> Duration {
+        seconds(self.header_timeout_seconds)
+    }
+
+    pub fn body_timeout(&self) -> Duration {
+        seconds(self.body_timeout_seconds)
+    }
+
+    pub fn request_timeout(&self) -> Duration {
+        seconds(self.request_timeout_seconds)
+    }
 }

@@ -3,7 +3,8 @@
 //!
 //! Layers, with arrows only downward (a test checks the `use crate::` lines):
 //! `cli` | `app` -> `api` | `worker` | `scheduler` -> `domain` | `store` | `plots` -> the model.
-//! `store` persists `domain` types; `config`, `compute`, `telemetry` and `progress` are leaves.
+//! `store` persists `domain` types; `config`, `compute`, `connections` (the accept loop),
+//! `telemetry` and `progress` are leaves.
 
 pub mod api;
 pub mod app;
@@ -11,6 +12,7 @@ pub mod bench;
 pub mod cli;
 pub mod compute;
 pub mod config;
+pub mod connections;
 pub mod domain;
 pub mod plots;
 pub mod progress;

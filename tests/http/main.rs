@@ -6,6 +6,7 @@ mod support;
 
 mod events;
 mod jobs;
+mod limits;
 mod postgres;
 mod schedules;
 mod simulate;

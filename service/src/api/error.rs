@@ -6,6 +6,7 @@ use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use bouncewear_model::{FieldError, InvalidInput};
 use serde::Serialize;
+use std::time::Duration;
 use utoipa::ToSchema;
 
 /// The media type of every error response.
@@ -53,6 +54,10 @@ pub enum ApiError {
     QueueFull(u64),
     #[error("method not allowed")]
     MethodNotAllowed,
+    #[error("the request body did not arrive within {} s", .0.as_secs_f64())]
+    BodyTimeout(Duration),
+    #[error("no answer within {} s; retry later", .0.as_secs_f64())]
+    Timeout(Duration),
     #[error("internal error")]
     Internal(#[from] Internal),
 }
@@ -102,6 +107,8 @@ impl ApiError {
             ApiError::UnsupportedMediaType => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             ApiError::QueueFull(_) => StatusCode::TOO_MANY_REQUESTS,
             ApiError::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
+            ApiError::BodyTimeout(_) => StatusCode::REQUEST_TIMEOUT,
+            ApiError::Timeout(_) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -154,6 +161,14 @@ impl IntoResponse for ApiError {
         match self {
             ApiError::QueueFull(_) => {
                 headers.insert(header::RETRY_AFTER, HeaderValue::from_static("5"));
+            }
+            // The connection may still hold the rest of a body nobody reads: start afresh.
+            ApiError::Timeout(_) => {
+                headers.insert(header::RETRY_AFTER, HeaderValue::from_static("5"));
+                headers.insert(header::CONNECTION, HeaderValue::from_static("close"));
+            }
+            ApiError::BodyTimeout(_) => {
+                headers.insert(header::CONNECTION, HeaderValue::from_static("close"));
             }
             ApiError::Unauthorized => {
                 headers.insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
@@ -239,6 +254,25 @@ pub mod responses {
         content_type = "application/problem+json"
     )]
     pub struct NotSucceeded(pub Problem);
+
+    /// Every request: the server answers within `--request-timeout-seconds` or not at all.
+    #[derive(IntoResponses)]
+    #[response(
+        status = 503,
+        description = "No answer within the request timeout; retry after Retry-After seconds",
+        content_type = "application/problem+json",
+        headers(("Retry-After" = u32, description = "Seconds to wait before retrying"))
+    )]
+    pub struct Unavailable(pub Problem);
+
+    /// Every request with a body: it must arrive whole within `--body-timeout-seconds`.
+    #[derive(IntoResponses)]
+    #[response(
+        status = 408,
+        description = "The body did not arrive within the body timeout",
+        content_type = "application/problem+json"
+    )]
+    pub struct BodyTimeout(pub Problem);
 
     #[derive(IntoResponses)]
     #[response(

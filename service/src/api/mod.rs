@@ -6,6 +6,7 @@ pub mod cache;
 pub mod error;
 pub mod events;
 pub mod jobs;
+pub mod limits;
 pub mod plots;
 pub mod schedules;
 pub mod simulate;
@@ -29,6 +30,7 @@ use tokio::sync::Notify;
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::compression::CompressionLayer;
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+use tower_http::timeout::RequestBodyDeadlineLayer;
 use tower_http::trace::TraceLayer;
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
 use utoipa::{Modify, OpenApi};
@@ -76,6 +78,11 @@ impl Modify for BearerAuth {
 /// the docs UI, the dashboard, the fallbacks, and the layers every request passes.
 pub fn router(state: AppState) -> axum::Router {
     let max_body = state.config.max_body_bytes;
+    let body_timeout = state.config.body_timeout();
+    let admission = limits::Admission::new(
+        state.config.max_concurrent_requests,
+        state.config.request_timeout(),
+    );
     let (router, openapi) = api_routes(state);
     let openapi = Arc::new(openapi);
     router
@@ -92,6 +99,11 @@ pub fn router(state: AppState) -> axum::Router {
         .fallback(|| async { ApiError::NotFound("no such resource".to_owned()) })
         .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
         .layer(DefaultBodyLimit::max(max_body))
+        .layer(axum::middleware::from_fn_with_state(
+            admission,
+            limits::admit,
+        ))
+        .layer(RequestBodyDeadlineLayer::new(body_timeout))
         .layer(axum::middleware::from_fn(telemetry::record_request))
         .layer(CatchPanicLayer::custom(|_| {
             IntoResponse::into_response(ApiError::Internal(error::Internal(
@@ -123,11 +135,46 @@ fn api_routes(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
             state.clone(),
             authenticate,
         ));
-    let (router, openapi) = OpenApiRouter::with_openapi(ApiDoc::openapi())
+    let (router, mut openapi) = OpenApiRouter::with_openapi(ApiDoc::openapi())
         .merge(v1)
         .merge(system::router())
         .split_for_parts();
+    EveryRequest.modify(&mut openapi);
     (router.with_state(state), openapi)
+}
+
+/// The answers any request may get from the layers around the handlers (`limits`), written into
+/// every operation of the document once its paths are all there.
+struct EveryRequest;
+
+impl Modify for EveryRequest {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        use error::responses::{BodyTimeout, Unavailable};
+        use utoipa::IntoResponses;
+        let (unavailable, body_timeout) = (Unavailable::responses(), BodyTimeout::responses());
+        for item in openapi.paths.paths.values_mut() {
+            let operations = [
+                &mut item.get,
+                &mut item.put,
+                &mut item.post,
+                &mut item.delete,
+                &mut item.patch,
+            ];
+            for operation in operations.into_iter().flatten() {
+                let with_body = operation.request_body.is_some();
+                let common = unavailable
+                    .iter()
+                    .chain(body_timeout.iter().filter(|_| with_body));
+                for (status, response) in common {
+                    // An operation's own description of the status stays.
+                    let responses = &mut operation.responses.responses;
+                    responses
+                        .entry(status.clone())
+                        .or_insert_with(|| response.clone());
+                }
+            }
+        }
+    }
 }
 
 /// With API keys configured, every /v1 call needs `Authorization: Bearer KEY`; jobs belong to the key.
@@ -159,7 +206,7 @@ async fn authenticate(
 }
 
 /// A JSON request body as text: `application/json` (415 otherwise), at most `max_body_bytes` (413),
-/// UTF-8 (400). Parsing is left to the model, whose errors name the field.
+/// whole within the body timeout (408), UTF-8 (400). Parsing is left to the model, whose errors name the field.
 pub struct JsonText(pub String);
 
 impl FromRequest<AppState> for JsonText {
@@ -188,6 +235,8 @@ impl FromRequest<AppState> for JsonText {
             .map_err(|rejection| {
                 if rejection.status() == axum::http::StatusCode::PAYLOAD_TOO_LARGE {
                     ApiError::TooLarge(limit)
+                } else if limits::is_body_timeout(&rejection) {
+                    ApiError::BodyTimeout(state.config.body_timeout())
                 } else {
                     ApiError::BadRequest(rejection.body_text())
                 }

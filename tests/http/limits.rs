@@ -1,0 +1,142 @@
+//! What slow or many clients can take of the server: a deadline for headers, for a body and for an
+//! answer, bounded connections and requests. Slow clients are raw sockets that stall mid-request.
+
+use crate::support::app::{Service, TestApp};
+use crate::support::client::{agent, delete, get};
+use crate::support::{scattered_job, temp_db};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::time::{Duration, Instant};
+
+/// A client that sends the start of a request line and then nothing.
+fn stalled_in_headers(server: &TestApp) -> TcpStream {
+    let mut stream = TcpStream::connect(server.base().trim_start_matches("http://")).unwrap();
+    stream.write_all(b"GET /heal").unwrap();
+    stream
+}
+
+/// A client that sends a job's headers and only part of its body.
+fn stalled_in_body(server: &TestApp) -> TcpStream {
+    let mut stream = TcpStream::connect(server.base().trim_start_matches("http://")).unwrap();
+    stream
+        .write_all(
+            b"POST /v1/jobs HTTP/1.1\r\nhost: bouncewear\r\ncontent-type: application/json\r\n\
+              content-length: 100\r\n\r\n{\"devices\": 1,",
+        )
+        .unwrap();
+    stream
+}
+
+/// Reads what the server sends until it closes the connection; how long that took from `since`.
+fn until_closed(mut stream: TcpStream, since: Instant) -> (String, Duration) {
+    stream
+        .set_read_timeout(Some(Duration::from_secs(20)))
+        .unwrap();
+    let mut answer = Vec::new();
+    stream
+        .read_to_end(&mut answer)
+        .expect("the server closes the connection");
+    (
+        String::from_utf8_lossy(&answer).into_owned(),
+        since.elapsed(),
+    )
+}
+
+#[test]
+fn a_client_stalling_in_its_headers_is_cut_off_and_delays_no_one() {
+    let server = TestApp::start(&temp_db("slow-headers"), &["--header-timeout-seconds", "2"]);
+    let started = Instant::now();
+    let stalled: Vec<TcpStream> = (0..100).map(|_| stalled_in_headers(&server)).collect();
+    assert_eq!(get(&server.url("/healthz"), None).status, 200);
+    assert!(
+        started.elapsed() < Duration::from_secs(1),
+        "health waited {:?} behind the stalled clients",
+        started.elapsed()
+    );
+    for stream in stalled {
+        let (_, waited) = until_closed(stream, started);
+        assert!(
+            (Duration::from_millis(1900)..Duration::from_secs(10)).contains(&waited),
+            "cut off after {waited:?}, the header timeout is 2 s"
+        );
+    }
+}
+
+#[test]
+fn more_stalled_clients_than_connections_delay_health_by_header_timeouts_only() {
+    let server = TestApp::start(
+        &temp_db("slow-many"),
+        &["--header-timeout-seconds", "1", "--max-connections", "10"],
+    );
+    let started = Instant::now();
+    let stalled: Vec<TcpStream> = (0..30).map(|_| stalled_in_headers(&server)).collect();
+    assert_eq!(get(&server.url("/healthz"), None).status, 200);
+    let waited = started.elapsed();
+    // Ten at a time, each batch cut off after a second: health is the fourth batch.
+    assert!(
+        (Duration::from_millis(2500)..Duration::from_secs(10)).contains(&waited),
+        "health answered after {waited:?}"
+    );
+    drop(stalled);
+}
+
+#[test]
+fn a_body_that_does_not_arrive_in_time_gets_408() {
+    let server = TestApp::start(&temp_db("slow-body"), &["--body-timeout-seconds", "1"]);
+    let started = Instant::now();
+    let (answer, waited) = until_closed(stalled_in_body(&server), started);
+    assert!(answer.starts_with("HTTP/1.1 408"), "{answer}");
+    assert!(answer.contains("application/problem+json"), "{answer}");
+    assert!(
+        (Duration::from_millis(900)..Duration::from_secs(10)).contains(&waited),
+        "{waited:?}"
+    );
+}
+
+#[test]
+fn requests_wait_for_a_slot_and_one_slower_than_the_request_timeout_gets_503() {
+    let server = TestApp::start(
+        &temp_db("slow-answer"),
+        &[
+            "--request-timeout-seconds",
+            "1",
+            "--max-concurrent-requests",
+            "1",
+        ],
+    );
+    // The one slot goes to a request whose body never comes, until its time is up.
+    let started = Instant::now();
+    let slow = stalled_in_body(&server);
+    std::thread::sleep(Duration::from_millis(200));
+    assert_eq!(get(&server.url("/v1/jobs"), None).status, 200);
+    assert!(
+        started.elapsed() >= Duration::from_millis(900),
+        "the second request waited for the slot: {:?}",
+        started.elapsed()
+    );
+    let (answer, waited) = until_closed(slow, started);
+    assert!(answer.starts_with("HTTP/1.1 503"), "{answer}");
+    let answer = answer.to_ascii_lowercase();
+    assert!(
+        answer.contains("retry-after: 5") && answer.contains("application/problem+json"),
+        "{answer}"
+    );
+    assert!(waited < Duration::from_secs(5), "{waited:?}");
+}
+
+#[test]
+fn an_event_stream_outlives_the_request_timeout() {
+    let server = TestApp::start(&temp_db("long-stream"), &["--request-timeout-seconds", "1"]);
+    let id = server.submit(&scattered_job(200_000, 1000, 1));
+    let mut events = agent()
+        .get(&server.url(&format!("/v1/jobs/{id}/events")))
+        .call()
+        .unwrap();
+    let started = Instant::now();
+    let mut lines = BufReader::new(events.body_mut().as_reader()).lines();
+    while started.elapsed() < Duration::from_millis(2500) {
+        let line = lines.next().expect("the stream goes on").unwrap();
+        assert!(!line.starts_with("event: status"), "the job ended: {line}");
+    }
+    assert_eq!(delete(&server.url(&format!("/v1/jobs/{id}"))).status, 200);
+}
