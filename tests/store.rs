@@ -51,6 +51,7 @@ fn utc(text: &str) -> DateTime<Utc> {
 
 /// Every check, on fresh databases that `database(name)` names by URL.
 async fn every_promise(database: impl Fn(&str) -> String) {
+    a_store_that_takes_writes_and_is_migrated_is_ready(&database("ready")).await;
     unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(&database("cancel")).await;
     live_jobs_are_the_owners_active_ones_and_any_newer_than_the_mark(&database("live")).await;
     a_claim_whose_lease_expired_is_fenced_out_by_its_successor(&database("fence")).await;
@@ -65,6 +66,15 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     two_scheduler_loops_never_duplicate_a_night(&database("race")).await;
     missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(&database("catch-up")).await;
     a_full_queue_leaves_the_night_due_for_the_next_tick(&database("full")).await;
+}
+
+async fn a_store_that_takes_writes_and_is_migrated_is_ready(url: &str) {
+    let store = store::open(url).await.unwrap();
+    store.ready(0, UnixMs(1)).await.unwrap();
+    store
+        .ready(0, UnixMs(2))
+        .await
+        .expect("the readiness row is updated");
 }
 
 async fn unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(url: &str) {

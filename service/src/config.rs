@@ -88,6 +88,10 @@ pub struct ServeConfig {
     /// open-file limit (RLIMIT_NOFILE) less what the database and the process need (default: that).
     #[arg(long, env = "BOUNCEWEAR_MAX_CONNECTIONS")]
     pub max_connections: Option<usize>,
+    /// Free disk space, in MB, beside a SQLite database below which the server reports itself not
+    /// ready (`/readyz` answers 503).
+    #[arg(long, env = "BOUNCEWEAR_MIN_FREE_DISK_MB", default_value_t = 100)]
+    pub min_free_disk_mb: u64,
     #[command(flatten)]
     pub queue: WorkerConfig,
 }
@@ -110,5 +114,9 @@ impl ServeConfig {
 
     pub fn request_timeout(&self) -> Duration {
         seconds(self.request_timeout_seconds)
+    }
+
+    pub fn min_free_disk_bytes(&self) -> u64 {
+        self.min_free_disk_mb.saturating_mul(1 << 20)
     }
 }

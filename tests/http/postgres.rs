@@ -2,7 +2,7 @@
 //! listing, cancelling, life, and a schedule's trend, on a throwaway cluster.
 
 use crate::support::app::{Service, Spawned, TestApp};
-use crate::support::client::{agent, delete, get, post};
+use crate::support::client::{agent, assert_problem, delete, get, post};
 use crate::support::postgres::Postgres;
 use crate::support::{run_job, scattered_job, submit_concurrently, temp_dir, wearing_template};
 use serde_json::json;
@@ -114,4 +114,27 @@ fn two_api_nodes_on_one_postgres_accept_or_refuse_every_submission_and_lose_none
     for id in &accepted {
         nodes[0].wait_for(id, "succeeded", Duration::from_secs(120));
     }
+}
+
+#[test]
+fn a_database_that_goes_away_gets_503_with_retry_after_and_not_ready() {
+    let Some(cluster) = Postgres::start(&temp_dir("http-postgres-down")) else {
+        return;
+    };
+    let server = TestApp::on(
+        &cluster.database("down"),
+        &["--workers", "0", "--request-timeout-seconds", "5"],
+    );
+    assert_eq!(get(&server.url("/readyz"), None).status, 200);
+    if !cluster.stop() {
+        return;
+    }
+    let jobs = get(&server.url("/v1/jobs"), None);
+    let problem = assert_problem(&jobs, 503);
+    assert!(jobs.header("retry-after").is_some());
+    assert!(
+        !problem["detail"].as_str().unwrap().contains("127.0.0.1"),
+        "the cause is logged, not sent: {problem}"
+    );
+    assert_problem(&get(&server.url("/readyz"), None), 503);
 }

@@ -23,6 +23,7 @@ fn openapi_docs_health_and_metrics_are_served() {
         "/v1/events",
         "/v1/simulate",
         "/healthz",
+        "/readyz",
         "/metrics",
     ] {
         assert!(openapi["paths"][path].is_object(), "{path} documented");
@@ -232,4 +233,53 @@ fn every_metric_family_has_help_and_type_and_latency_is_a_histogram() {
         "{requests:?}"
     );
     assert!(requests.iter().all(|l| !l.contains("BREW")), "{requests:?}");
+}
+
+#[test]
+fn readiness_turns_503_when_the_database_file_is_replaced_or_deleted() {
+    let database = temp_db("ready-file");
+    let server = TestApp::start(&database, &[]);
+    let ready = get(&server.url("/readyz"), None);
+    assert_eq!(
+        (ready.status, ready.json()["status"].clone()),
+        (200, json!("ready"))
+    );
+    // Another file moved over it: the server would go on writing into the one it opened.
+    let copy = database.with_extension("copy");
+    std::fs::copy(&database, &copy).unwrap();
+    std::fs::rename(&copy, &database).unwrap();
+    let replaced = get(&server.url("/readyz"), None);
+    let problem = assert_problem(&replaced, 503);
+    assert!(replaced.header("retry-after").is_some());
+    assert!(
+        problem["detail"].as_str().unwrap().contains("replaced"),
+        "{problem}"
+    );
+    std::fs::remove_file(&database).unwrap();
+    let problem = assert_problem(&get(&server.url("/readyz"), None), 503);
+    assert!(
+        problem["detail"].as_str().unwrap().contains("gone"),
+        "{problem}"
+    );
+}
+
+#[test]
+fn readiness_turns_503_below_the_free_disk_threshold() {
+    let server = TestApp::start(
+        &temp_db("ready-disk"),
+        &["--min-free-disk-mb", "1000000000000"],
+    );
+    let problem = assert_problem(&get(&server.url("/readyz"), None), 503);
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("--min-free-disk-mb"),
+        "{problem}"
+    );
+    assert_eq!(
+        get(&server.url("/healthz"), None).status,
+        200,
+        "alive all the same"
+    );
 }

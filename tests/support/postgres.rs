@@ -124,6 +124,18 @@ impl Postgres {
         })
     }
 
+    /// Stops the throwaway cluster at once, as a crash or an outage would; `false` for a server
+    /// given by URL, which is not ours to stop.
+    pub fn stop(&self) -> bool {
+        let Some(cluster) = &self.cluster else {
+            return false;
+        };
+        let data = cluster.dir.join("data");
+        let data = data.to_str().unwrap();
+        cluster.run("pg_ctl", &["-D", data, "-m", "immediate", "-w", "stop"]);
+        true
+    }
+
     /// A new, empty database on the server; its URL.
     pub fn database(&self, name: &str) -> String {
         let name = format!("bouncewear_test_{}_{name}", std::process::id());

@@ -58,6 +58,12 @@ pub enum ApiError {
     BodyTimeout(Duration),
     #[error("no answer within {} s; retry later", .0.as_secs_f64())]
     Timeout(Duration),
+    /// The storage failed for now: logged, and the client told to retry.
+    #[error("the database is unavailable; retry later")]
+    Unavailable(Internal),
+    /// Readiness failed; the detail is for operators and names no secret.
+    #[error("{0}")]
+    NotReady(String),
     #[error("internal error")]
     Internal(#[from] Internal),
 }
@@ -68,12 +74,15 @@ pub enum ApiError {
 pub struct Internal(pub String);
 
 /// The store's outcomes in HTTP's terms, in this one place: what the client asked for does not
-/// exist (404) or contradicts the stored state (409); anything else is ours (500, logged).
+/// exist (404) or contradicts the stored state (409); a database that cannot answer now is 503
+/// with Retry-After (logged); anything else is ours (500, logged).
 impl From<StoreError> for ApiError {
     fn from(error: StoreError) -> Self {
         match error {
             StoreError::NotFound { .. } => ApiError::NotFound(error.to_string()),
             StoreError::Conflict(detail) => ApiError::Conflict(detail),
+            StoreError::NotReady(detail) => ApiError::NotReady(detail),
+            other if other.is_unavailable() => ApiError::Unavailable(Internal(other.to_string())),
             other => ApiError::Internal(Internal(other.to_string())),
         }
     }
@@ -108,7 +117,9 @@ impl ApiError {
             ApiError::QueueFull(_) => StatusCode::TOO_MANY_REQUESTS,
             ApiError::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::BodyTimeout(_) => StatusCode::REQUEST_TIMEOUT,
-            ApiError::Timeout(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::Timeout(_) | ApiError::Unavailable(_) | ApiError::NotReady(_) => {
+                StatusCode::SERVICE_UNAVAILABLE
+            }
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -142,8 +153,11 @@ impl ApiError {
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let status = self.status();
-        if let ApiError::Internal(cause) = &self {
-            tracing::error!(%cause, "internal error");
+        match &self {
+            ApiError::Internal(cause) => tracing::error!(%cause, "internal error"),
+            ApiError::Unavailable(cause) => tracing::error!(%cause, "the database is unavailable"),
+            ApiError::NotReady(reason) => tracing::warn!(%reason, "not ready"),
+            _ => {}
         }
         let problem = Problem {
             kind: "about:blank",
@@ -159,7 +173,7 @@ impl IntoResponse for ApiError {
             HeaderValue::from_static("application/problem+json"),
         );
         match self {
-            ApiError::QueueFull(_) => {
+            ApiError::QueueFull(_) | ApiError::Unavailable(_) | ApiError::NotReady(_) => {
                 headers.insert(header::RETRY_AFTER, HeaderValue::from_static("5"));
             }
             // The connection may still hold the rest of a body nobody reads: start afresh.
@@ -255,11 +269,12 @@ pub mod responses {
     )]
     pub struct NotSucceeded(pub Problem);
 
-    /// Every request: the server answers within `--request-timeout-seconds` or not at all.
+    /// Every request: the server answers within `--request-timeout-seconds`, and its database
+    /// may fail for a while.
     #[derive(IntoResponses)]
     #[response(
         status = 503,
-        description = "No answer within the request timeout; retry after Retry-After seconds",
+        description = "No answer within the request timeout, or the database is unavailable; retry after Retry-After seconds",
         content_type = "application/problem+json",
         headers(("Retry-After" = u32, description = "Seconds to wait before retrying"))
     )]
@@ -281,4 +296,25 @@ pub mod responses {
         content_type = "application/problem+json"
     )]
     pub struct QueueFull(pub Problem);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_database_that_cannot_answer_is_503_with_retry_after_and_no_cause() {
+        let response =
+            ApiError::from(StoreError::Database(sqlx::Error::PoolTimedOut)).into_response();
+        assert_eq!(response.status(), StatusCode::SERVICE_UNAVAILABLE);
+        assert_eq!(response.headers()[header::RETRY_AFTER], "5");
+        assert_eq!(response.headers()[header::CONTENT_TYPE], PROBLEM);
+    }
+
+    #[test]
+    fn stored_data_that_does_not_decode_is_still_ours() {
+        let error = StoreError::Database(sqlx::Error::ColumnNotFound("seq".to_owned()));
+        let response = ApiError::from(error).into_response();
+        assert_eq!(response.status(), StatusCode::INTERNAL_SERVER_ERROR);
+    }
 }

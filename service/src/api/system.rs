@@ -2,6 +2,7 @@
 
 use super::AppState;
 use super::error::{ApiError, Problem};
+use crate::domain::UnixMs;
 use crate::telemetry;
 use axum::Json;
 use axum::extract::State;
@@ -16,28 +17,50 @@ use utoipa_axum::routes;
 pub fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
         .routes(routes!(healthz))
+        .routes(routes!(readyz))
         .routes(routes!(prometheus_metrics))
 }
 
+/// What `/healthz` and `/readyz` answer when all is well.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct Health {
+    /// `ok` (alive) or `ready`; anything else is a 503 problem.
     pub status: &'static str,
     pub database: &'static str,
     pub version: &'static str,
 }
 
+impl Health {
+    fn json(status: &'static str) -> Json<Self> {
+        Json(Health {
+            status,
+            database: "ok",
+            version: env!("CARGO_PKG_VERSION"),
+        })
+    }
+}
+
 /// Liveness and database reachability.
 #[utoipa::path(
     get, path = "/healthz", tag = "system",
-    responses((status = 200, description = "Healthy", body = Health), (status = 500, description = "The database is unreachable", body = Problem, content_type = "application/problem+json"))
+    responses((status = 200, description = "Healthy", body = Health), (status = 503, description = "The database is unreachable", body = Problem, content_type = "application/problem+json", headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))))
 )]
 pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ApiError> {
     state.store.ping().await?;
-    Ok(Json(Health {
-        status: "ok",
-        database: "ok",
-        version: env!("CARGO_PKG_VERSION"),
-    }))
+    Ok(Health::json("ok"))
+}
+
+/// Readiness: this instance can do its work. Its database takes a write, every migration this
+/// build knows is applied, and, for SQLite, the file at the database's path is still the one it
+/// opened, with at least `--min-free-disk-mb` free beside it.
+#[utoipa::path(
+    get, path = "/readyz", tag = "system",
+    responses((status = 200, description = "Ready", body = Health), (status = 503, description = "Not ready; the detail says why", body = Problem, content_type = "application/problem+json", headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))))
+)]
+pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiError> {
+    let min_free = state.config.min_free_disk_bytes();
+    state.store.ready(min_free, UnixMs::now()).await?;
+    Ok(Health::json("ready"))
 }
 
 /// Prometheus metrics: requests and their latency, queue depth, jobs, simulated operations, the

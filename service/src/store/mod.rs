@@ -42,6 +42,9 @@ pub enum StoreError {
     /// A stored document no longer reads as its type (written by another version, or damaged).
     #[error("stored {what} cannot be read: {detail}")]
     Corrupt { what: &'static str, detail: String },
+    /// This instance cannot do its work now, and why (see [`JobQueue::ready`]).
+    #[error("not ready: {0}")]
+    NotReady(String),
 }
 
 impl StoreError {
@@ -49,6 +52,27 @@ impl StoreError {
         Self::NotFound {
             kind: "job",
             id: id.to_string(),
+        }
+    }
+
+    /// Whether the database failed to answer for now (unreachable, busy, out of space, read-only,
+    /// not ready): a retry later may succeed. Any other failure is the stored data's or ours.
+    pub fn is_unavailable(&self) -> bool {
+        match self {
+            StoreError::NotReady(_) => true,
+            StoreError::Database(sqlx::Error::Database(error)) => {
+                matches!(error.kind(), sqlx::error::ErrorKind::Other)
+            }
+            StoreError::Database(error) => matches!(
+                error,
+                sqlx::Error::Io(_)
+                    | sqlx::Error::Tls(_)
+                    | sqlx::Error::Protocol(_)
+                    | sqlx::Error::PoolTimedOut
+                    | sqlx::Error::PoolClosed
+                    | sqlx::Error::WorkerCrashed
+            ),
+            _ => false,
         }
     }
 
@@ -268,6 +292,11 @@ pub trait JobQueue: Send + Sync + 'static {
         None
     }
     async fn ping(&self) -> StoreResult<()>;
+    /// Whether this instance can do its work (`/readyz`): the database takes a write (recorded at
+    /// `now`), every migration this build knows is applied, and, for SQLite, the file at the
+    /// database's path is still the one opened, with at least `min_free_disk_bytes` free beside
+    /// it. [`StoreError::NotReady`] says what is wrong.
+    async fn ready(&self, min_free_disk_bytes: u64, now: UnixMs) -> StoreResult<()>;
 }
 
 /// What a succeeded job leaves: its Result, one row per (metric, bin), each device's life.

@@ -6,11 +6,12 @@
 //! `migrations/postgres/`; the row mapping is shared with SQLite (`rows.rs`).
 
 use super::rows::{
-    bind_distribution, bind_fence, bind_life, bind_queued_job, bind_schedule, bind_shard,
-    claim_from_row, count_from_sql, count_to_sql, distribution_from_row, distribution_rows,
-    failed_too_often, gave_up, job_columns, job_from_row, life_from_row, partial_from_row,
-    partial_to_sql, run_from_row, schedule_columns, schedule_from_row, shard_columns,
-    shard_from_row, shard_id_from_row, spec_from_json, to_json,
+    LATEST_APPLIED_MIGRATION, READINESS_WRITE, bind_distribution, bind_fence, bind_life,
+    bind_queued_job, bind_schedule, bind_shard, claim_from_row, count_from_sql, count_to_sql,
+    distribution_from_row, distribution_rows, failed_too_often, gave_up, job_columns, job_from_row,
+    life_from_row, partial_from_row, partial_to_sql, run_from_row, schedule_columns,
+    schedule_from_row, schema_current, shard_columns, shard_from_row, shard_id_from_row,
+    spec_from_json, to_json,
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
@@ -24,6 +25,7 @@ use async_trait::async_trait;
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::montecarlo::{DeviceLife, Job, JobResult};
+use sqlx::migrate::Migrator;
 use sqlx::postgres::{PgArguments, PgConnection, PgListener, PgPool, PgPoolOptions};
 use sqlx::query::Query;
 use sqlx::{Postgres, Row};
@@ -34,6 +36,8 @@ pub struct PgStore {
     pool: PgPool,
     events: broadcast::Sender<QueueEvent>,
 }
+
+static MIGRATOR: Migrator = sqlx::migrate!("../migrations/postgres");
 
 /// The channel the schema's trigger announces every job change on (`migrations/postgres/0003`).
 const JOB_CHANNEL: &str = "bouncewear_jobs";
@@ -52,7 +56,7 @@ impl PgStore {
             .acquire_timeout(Duration::from_secs(30))
             .connect(url)
             .await?;
-        sqlx::migrate!("../migrations/postgres").run(&pool).await?;
+        MIGRATOR.run(&pool).await?;
         backfill_shards(&pool).await?;
         let mut listener = PgListener::connect_with(&pool).await?;
         listener.listen(JOB_CHANNEL).await?;
@@ -557,6 +561,19 @@ impl JobQueue for PgStore {
     async fn ping(&self) -> StoreResult<()> {
         sqlx::query("SELECT 1").execute(&self.pool).await?;
         Ok(())
+    }
+
+    /// PostgreSQL's disk is its server's to watch: readiness here is the write and the schema.
+    #[tracing::instrument(skip_all)]
+    async fn ready(&self, _min_free_disk_bytes: u64, now: UnixMs) -> StoreResult<()> {
+        sqlx::query(READINESS_WRITE)
+            .bind(now.0)
+            .execute(&self.pool)
+            .await?;
+        let applied = sqlx::query_scalar(LATEST_APPLIED_MIGRATION)
+            .fetch_one(&self.pool)
+            .await?;
+        schema_current(&MIGRATOR, applied)
     }
 
     fn events(&self) -> Option<broadcast::Receiver<QueueEvent>> {

@@ -11,6 +11,7 @@ use crate::domain::{
 };
 use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
+use sqlx::migrate::Migrator;
 use sqlx::postgres::PgRow;
 use sqlx::query::Query;
 use sqlx::sqlite::SqliteRow;
@@ -98,6 +99,29 @@ pub(crate) fn corrupt(what: &'static str, error: impl std::fmt::Display) -> Stor
         what,
         detail: error.to_string(),
     }
+}
+
+// ---- readiness ------------------------------------------------------------------------------
+
+/// The write readiness makes, `now` as parameter 1: the same in both backends' SQL.
+pub(crate) const READINESS_WRITE: &str = "INSERT INTO readiness (id, checked_at) VALUES (1, $1) \
+     ON CONFLICT (id) DO UPDATE SET checked_at = excluded.checked_at";
+
+/// The newest migration applied to the database.
+pub(crate) const LATEST_APPLIED_MIGRATION: &str =
+    "SELECT MAX(version) FROM _sqlx_migrations WHERE success";
+
+/// Not ready when the database's schema is older than this build's (`applied`, the newest
+/// migration applied): another version migrated it back, or it is another database.
+pub(crate) fn schema_current(migrator: &Migrator, applied: Option<i64>) -> StoreResult<()> {
+    let known = migrator.iter().map(|m| m.version).max().unwrap_or(0);
+    let applied = applied.unwrap_or(0);
+    if applied < known {
+        return Err(StoreError::NotReady(format!(
+            "the database's schema is at migration {applied}; this build needs {known}"
+        )));
+    }
+    Ok(())
 }
 
 /// A statement of either backend, its parameters bound one after the other.

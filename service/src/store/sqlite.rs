@@ -6,11 +6,12 @@
 //! Each table's columns and row mapping are written once, below its section heading.
 
 use super::rows::{
-    bind_distribution, bind_fence, bind_life, bind_queued_job, bind_schedule, bind_shard,
-    claim_from_row, count_from_sql, count_to_sql, distribution_from_row, distribution_rows,
-    failed_too_often, gave_up, job_columns, job_from_row, life_from_row, partial_from_row,
-    partial_to_sql, run_from_row, schedule_columns, schedule_from_row, seed_to_sql, shard_columns,
-    shard_from_row, shard_id_from_row, spec_from_json, to_json,
+    LATEST_APPLIED_MIGRATION, READINESS_WRITE, bind_distribution, bind_fence, bind_life,
+    bind_queued_job, bind_schedule, bind_shard, claim_from_row, count_from_sql, count_to_sql,
+    distribution_from_row, distribution_rows, failed_too_often, gave_up, job_columns, job_from_row,
+    life_from_row, partial_from_row, partial_to_sql, run_from_row, schedule_columns,
+    schedule_from_row, schema_current, seed_to_sql, shard_columns, shard_from_row,
+    shard_id_from_row, spec_from_json, to_json,
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
@@ -24,19 +25,29 @@ use async_trait::async_trait;
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::montecarlo::{DeviceLife, Job, JobResult};
+use sqlx::migrate::Migrator;
 use sqlx::query::Query;
 use sqlx::sqlite::{
     SqliteArguments, SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions,
     SqliteSynchronous,
 };
 use sqlx::{Row, Sqlite, SqliteConnection};
+use std::ffi::CString;
+use std::mem::MaybeUninit;
+use std::os::unix::ffi::OsStrExt;
+use std::os::unix::fs::MetadataExt;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::time::Duration;
 
 pub struct SqliteStore {
     writer: SqlitePool,
     readers: SqlitePool,
+    /// The file opened; none for an in-memory database.
+    file: Option<DatabaseFile>,
 }
+
+static MIGRATOR: Migrator = sqlx::migrate!("../migrations/sqlite");
 
 impl SqliteStore {
     /// Opens (creating if missing) and migrates the database at `url`.
@@ -52,15 +63,81 @@ impl SqliteStore {
             .max_connections(1)
             .connect_with(options.clone())
             .await?;
-        sqlx::migrate!("../migrations/sqlite").run(&writer).await?;
+        MIGRATOR.run(&writer).await?;
         backfill_seeds(&writer).await?;
         backfill_shards(&writer).await?;
         let readers = SqlitePoolOptions::new()
             .max_connections(4)
-            .connect_with(options.read_only(true))
+            .connect_with(options.clone().read_only(true))
             .await?;
-        Ok(Self { writer, readers })
+        Ok(Self {
+            writer,
+            readers,
+            file: DatabaseFile::opened(options.get_filename()),
+        })
     }
+}
+
+/// The database file as the store opened it: connections keep writing to the file they opened,
+/// so a file deleted or replaced under a running server would take its writes into nowhere.
+/// Readiness checks that the path still leads to it, and that its disk has room.
+struct DatabaseFile {
+    path: PathBuf,
+    device: u64,
+    inode: u64,
+}
+
+impl DatabaseFile {
+    fn opened(path: &Path) -> Option<Self> {
+        let metadata = std::fs::metadata(path).ok()?;
+        Some(Self {
+            path: path.to_owned(),
+            device: metadata.dev(),
+            inode: metadata.ino(),
+        })
+    }
+
+    fn check(&self, min_free_bytes: u64) -> StoreResult<()> {
+        let now = std::fs::metadata(&self.path).map_err(|error| {
+            StoreError::NotReady(format!("the database file is gone from its path ({error})"))
+        })?;
+        if (now.dev(), now.ino()) != (self.device, self.inode) {
+            return Err(StoreError::NotReady(
+                "the database file at its path is not the one this server opened (replaced)"
+                    .to_owned(),
+            ));
+        }
+        let directory = match self.path.parent() {
+            Some(parent) if !parent.as_os_str().is_empty() => parent,
+            _ => Path::new("."),
+        };
+        let free = free_bytes(directory).map_err(|error| {
+            StoreError::NotReady(format!("free disk space cannot be read ({error})"))
+        })?;
+        if free < min_free_bytes {
+            return Err(StoreError::NotReady(format!(
+                "{} MB free beside the database, below the {} MB required (--min-free-disk-mb)",
+                free >> 20,
+                min_free_bytes >> 20
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Bytes an unprivileged process may still write on the file system of `directory` (statvfs).
+fn free_bytes(directory: &Path) -> std::io::Result<u64> {
+    let path = CString::new(directory.as_os_str().as_bytes())?;
+    let mut stats = MaybeUninit::<libc::statvfs>::uninit();
+    // SAFETY: `path` is a NUL-terminated string and `stats` has room for one `statvfs`, which
+    // the call fills when it returns 0.
+    if unsafe { libc::statvfs(path.as_ptr(), stats.as_mut_ptr()) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    // SAFETY: filled by the successful call above.
+    let stats = unsafe { stats.assume_init() };
+    let (blocks, block_size): (u64, u64) = (stats.f_bavail, stats.f_frsize);
+    Ok(blocks.saturating_mul(block_size))
 }
 
 /// Gives jobs stored before the `seed` column their seed, read from their spec (migration 0003).
@@ -561,6 +638,21 @@ impl JobQueue for SqliteStore {
     async fn ping(&self) -> StoreResult<()> {
         sqlx::query("SELECT 1").execute(&self.readers).await?;
         Ok(())
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn ready(&self, min_free_disk_bytes: u64, now: UnixMs) -> StoreResult<()> {
+        if let Some(file) = &self.file {
+            file.check(min_free_disk_bytes)?;
+        }
+        sqlx::query(READINESS_WRITE)
+            .bind(now.0)
+            .execute(&self.writer)
+            .await?;
+        let applied = sqlx::query_scalar(LATEST_APPLIED_MIGRATION)
+            .fetch_one(&self.readers)
+            .await?;
+        schema_current(&MIGRATOR, applied)
     }
 }
 
