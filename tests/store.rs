@@ -10,7 +10,9 @@ use bouncewear::domain::{
     Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, ShardId, UnixMs,
 };
 use bouncewear::scheduler::tick;
-use bouncewear::store::{self, Lease, LeaseTerms, ScheduleRecord, Store, StoreError};
+use bouncewear::store::{
+    self, Lease, LeaseTerms, NewRun, RunSlot, ScheduleRecord, Store, StoreError,
+};
 use bouncewear::worker::Workers;
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::{Batch, run_group};
@@ -36,6 +38,11 @@ fn queued_job(text: &str, seed: u64) -> QueuedJob {
     QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1))
 }
 
+/// Three devices at 48 V / 15 A that fail when e1 falls below 0.36: a result with lives.
+const WEARING: &str = r#"{"devices": 3, "operations": 40, "seed": 4,
+    "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+    "failure": {"e1": {"below": 0.36}}}"#;
+
 fn terms(now: i64) -> LeaseTerms {
     LeaseTerms {
         now: UnixMs(now),
@@ -54,6 +61,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_store_that_takes_writes_and_is_migrated_is_ready(&database("ready")).await;
     unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(&database("cancel")).await;
     live_jobs_are_the_owners_active_ones_and_any_newer_than_the_mark(&database("live")).await;
+    ended_jobs_are_deleted_with_everything_stored_for_them(&database("delete")).await;
     a_claim_whose_lease_expired_is_fenced_out_by_its_successor(&database("fence")).await;
     a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(&database("shards")).await;
     a_precision_target_queues_its_next_batch_from_the_merge(&database("batches")).await;
@@ -125,6 +133,63 @@ async fn live_jobs_are_the_owners_active_ones_and_any_newer_than_the_mark(url: &
     assert_eq!(
         ids(store.live_jobs(&owner, i64::MAX).await.unwrap()),
         [active.id]
+    );
+}
+
+async fn ended_jobs_are_deleted_with_everything_stored_for_them(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let owner = Owner::anonymous();
+    let id = store
+        .insert_job(queued_job(WEARING, 4), 10)
+        .await
+        .unwrap()
+        .unwrap()
+        .id;
+    let early = store.delete_job(&owner, &id).await.unwrap_err();
+    assert_eq!(
+        early.to_string(),
+        format!("job {id} is queued: cancel it first")
+    );
+    run_every_shard(store.as_ref()).await;
+    let other = Owner::of_key("another key");
+    assert!(matches!(
+        store.delete_job(&other, &id).await,
+        Err(StoreError::NotFound { .. })
+    ));
+    store.delete_job(&owner, &id).await.unwrap();
+    assert!(matches!(
+        store.job(&owner, &id).await,
+        Err(StoreError::NotFound { .. })
+    ));
+    assert!(store.result_json(&id).await.unwrap().is_none());
+    assert!(store.shards(&id).await.unwrap().is_empty());
+    assert!(store.lives(&id).await.unwrap().is_empty());
+
+    // A schedule's run goes with its job; retention takes only what ended before its time.
+    let schedule = nightly("s1", "2026-11-22T03:00:00Z");
+    store.insert_schedule(&schedule).await.unwrap();
+    let slot = RunSlot {
+        schedule: &schedule.id,
+        scheduled_for: UnixMs(5),
+        manual: true,
+    };
+    let NewRun::Created(run) = store.create_run(slot, queued(1), 10).await.unwrap() else {
+        panic!("the run is created");
+    };
+    store.cancel(&owner, &run.id, UnixMs(10)).await.unwrap();
+    let recent = store.insert_job(queued(2), 10).await.unwrap().unwrap().id;
+    store.cancel(&owner, &recent, UnixMs(1000)).await.unwrap();
+    let waiting = store.insert_job(queued(3), 10).await.unwrap().unwrap().id;
+    assert_eq!(store.prune_jobs(UnixMs(500)).await.unwrap(), 1);
+    assert!(store.runs(&schedule.id, 10).await.unwrap().is_empty());
+    assert!(store.job(&owner, &run.id).await.is_err());
+    assert_eq!(
+        store.job(&owner, &recent).await.unwrap().status,
+        JobStatus::Cancelled
+    );
+    assert_eq!(
+        store.job(&owner, &waiting).await.unwrap().status,
+        JobStatus::Queued
     );
 }
 
@@ -270,9 +335,7 @@ fn without_timing(result: &str) -> serde_json::Value {
 
 async fn a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(url: &str) {
     let store = store::open(url).await.unwrap();
-    let text = r#"{"devices": 3, "operations": 40, "seed": 4,
-        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
-        "failure": {"e1": {"below": 0.36}}}"#;
+    let text = WEARING;
     let id = store
         .insert_job(queued_job(text, 4), 10)
         .await

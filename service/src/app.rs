@@ -124,6 +124,13 @@ impl Application {
             Arc::clone(&state.wake),
             stopping.clone(),
         ));
+        let retention = config.retain_days.map(|days| {
+            tokio::spawn(crate::retention::run(
+                Arc::clone(&state.store),
+                days,
+                stopping.clone(),
+            ))
+        });
         // `--workers 0` makes an API-only instance that leaves the queue to others.
         let handles = workers.spawn(slots, stopping.clone());
         let reporter = tokio::spawn(report_queue_depth(
@@ -144,6 +151,9 @@ impl Application {
         connections::serve(listener, router, limits, stopping).await;
         reporter.abort();
         let _ = scheduler.await;
+        if let Some(retention) = retention {
+            let _ = retention.await;
+        }
         join_workers(handles).await;
         Ok(())
     }

@@ -92,6 +92,10 @@ pub struct ServeConfig {
     /// ready (`/readyz` answers 503).
     #[arg(long, env = "BOUNCEWEAR_MIN_FREE_DISK_MB", default_value_t = 100)]
     pub min_free_disk_mb: u64,
+    /// Delete finished jobs, with everything stored for them, this many days after they ended
+    /// (checked at start-up and every hour). Without it, they stay until deleted.
+    #[arg(long, env = "BOUNCEWEAR_RETAIN_DAYS")]
+    pub retain_days: Option<u32>,
     #[command(flatten)]
     pub queue: WorkerConfig,
 }

@@ -2,7 +2,8 @@
 //! [`bouncewear_model`].
 //!
 //! Layers, with arrows only downward (a test checks the `use crate::` lines):
-//! `cli` | `app` -> `api` | `worker` | `scheduler` -> `domain` | `store` | `plots` -> the model.
+//! `cli` | `app` -> `api` | `worker` | `scheduler` | `retention` -> `domain` | `store` | `plots` ->
+//! the model.
 //! `store` persists `domain` types; `config`, `compute`, `connections` (the accept loop),
 //! `telemetry` and `progress` are leaves.
 
@@ -16,6 +17,7 @@ pub mod connections;
 pub mod domain;
 pub mod plots;
 pub mod progress;
+pub mod retention;
 pub mod scheduler;
 pub mod store;
 pub mod telemetry;

@@ -2,10 +2,12 @@
 
 use crate::support::app::{Service, TestApp};
 use crate::support::client::{Reply, agent, assert_problem, authorized, delete, get, post, reply};
-use crate::support::{run_job, scattered_job, submit_concurrently, temp_db, wearing_template};
+use crate::support::{
+    on_own_runtime, run_job, scattered_job, submit_concurrently, temp_db, wearing_template,
+};
 use serde_json::{Value, json};
 use std::io::{BufRead, BufReader};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 #[test]
 fn a_job_goes_from_submission_to_result_with_live_progress() {
@@ -121,7 +123,7 @@ fn jobs_are_listed_newest_first_with_cursor_paging() {
 }
 
 #[test]
-fn cancelling_stops_a_running_job_and_only_once() {
+fn cancelling_stops_a_running_job_and_a_second_delete_deletes_it() {
     let server = TestApp::start(&temp_db("cancel"), &[]);
     let id = server.submit(&scattered_job(200_000, 1000, 1));
     server.wait_for(&id, "running", Duration::from_secs(10));
@@ -130,7 +132,6 @@ fn cancelling_stops_a_running_job_and_only_once() {
         (cancelled.status, cancelled.json()["status"].as_str()),
         (200, Some("cancelled"))
     );
-    assert_eq!(delete(&server.url(&format!("/v1/jobs/{id}"))).status, 409);
     assert_eq!(
         get(&server.url(&format!("/v1/jobs/{id}/result")), None).status,
         409
@@ -141,6 +142,82 @@ fn cancelling_stops_a_running_job_and_only_once() {
     assert_eq!(
         get(&server.url(&format!("/v1/jobs/{id}")), None).json()["status"],
         "cancelled"
+    );
+    assert_eq!(delete(&server.url(&format!("/v1/jobs/{id}"))).status, 204);
+    assert_problem(&get(&server.url(&format!("/v1/jobs/{id}")), None), 404);
+}
+
+/// One number from the database file, read beside the running server; `?1` is the job's id.
+fn sql_number(database: &std::path::Path, sql: &'static str, job: &str) -> i64 {
+    let url = format!("sqlite://{}", database.display());
+    let job = job.to_owned();
+    let binds_job = sql.contains("?1");
+    on_own_runtime(async move {
+        use sqlx::Connection;
+        let mut connection = sqlx::SqliteConnection::connect(&url).await.unwrap();
+        let query = sqlx::query_scalar(sql);
+        let query = if binds_job { query.bind(job) } else { query };
+        query.fetch_one(&mut connection).await.unwrap()
+    })
+}
+
+/// The pages of the database file in use: freed pages are reused by later writes.
+const USED_PAGES: &str = "SELECT (SELECT page_count FROM pragma_page_count()) \
+     - (SELECT freelist_count FROM pragma_freelist_count())";
+
+#[test]
+fn deleting_a_finished_job_deletes_every_row_stored_for_it_and_frees_its_pages() {
+    let database = temp_db("delete");
+    let server = TestApp::start(&database, &[]);
+    let id = server.submit(&wearing_template(48.0));
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let tables: [&'static str; 5] = [
+        "SELECT COUNT(*) FROM jobs WHERE id = ?1",
+        "SELECT COUNT(*) FROM shards WHERE job_id = ?1",
+        "SELECT COUNT(*) FROM results WHERE job_id = ?1",
+        "SELECT COUNT(*) FROM distributions WHERE job_id = ?1",
+        "SELECT COUNT(*) FROM device_lives WHERE job_id = ?1",
+    ];
+    for sql in tables {
+        assert!(sql_number(&database, sql, &id) > 0, "{sql}");
+    }
+    let used = sql_number(&database, USED_PAGES, &id);
+    assert_eq!(delete(&server.url(&format!("/v1/jobs/{id}"))).status, 204);
+    for sql in tables {
+        assert_eq!(sql_number(&database, sql, &id), 0, "{sql}");
+    }
+    let now_used = sql_number(&database, USED_PAGES, &id);
+    assert!(now_used < used, "{now_used} pages in use, {used} before");
+    assert_problem(
+        &get(&server.url(&format!("/v1/jobs/{id}/result")), None),
+        404,
+    );
+    assert_problem(&delete(&server.url(&format!("/v1/jobs/{id}"))), 404);
+}
+
+#[test]
+fn jobs_that_ended_before_the_retention_are_deleted_at_start_up() {
+    let database = temp_db("retention");
+    let done = {
+        let server = TestApp::start(&database, &[]);
+        let done = server.submit(&json!({"devices": 2, "operations": 2, "seed": 1}));
+        server.wait_for(&done, "succeeded", Duration::from_secs(20));
+        done
+    };
+    let server = TestApp::start(&database, &["--retain-days", "0", "--workers", "0"]);
+    let queued = server.submit(&json!({"devices": 2, "operations": 2, "seed": 2}));
+    let started = Instant::now();
+    while get(&server.url(&format!("/v1/jobs/{done}")), None).status != 404 {
+        assert!(
+            started.elapsed() < Duration::from_secs(10),
+            "{done} is still there"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(
+        get(&server.url(&format!("/v1/jobs/{queued}")), None).json()["status"],
+        "queued",
+        "a job that has not ended stays"
     );
 }
 

@@ -16,6 +16,22 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 pub const BIN: &str = env!("CARGO_BIN_EXE_bouncewear");
 
+/// Runs `work` to its end on a runtime of its own, in a thread of its own: callers may be inside
+/// an async runtime, which cannot block on another.
+pub fn on_own_runtime<T: Send + 'static>(
+    work: impl std::future::Future<Output = T> + Send + 'static,
+) -> T {
+    std::thread::spawn(move || {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap()
+            .block_on(work)
+    })
+    .join()
+    .expect("the thread finishes")
+}
+
 /// A fresh directory for one test, named after it.
 pub fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("bouncewear-test-{}-{name}", std::process::id()));

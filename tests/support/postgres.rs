@@ -151,22 +151,14 @@ impl Postgres {
 /// async runtime, which cannot block on another).
 fn admin_sql(admin: &str, statement: String) -> Result<(), sqlx::Error> {
     let admin = admin.to_owned();
-    std::thread::spawn(move || {
-        let runtime = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .unwrap();
-        runtime.block_on(async {
-            use sqlx::Connection;
-            let mut connection = sqlx::PgConnection::connect(&admin).await?;
-            sqlx::query(sqlx::AssertSqlSafe(statement))
-                .execute(&mut connection)
-                .await
-                .map(drop)
-        })
+    super::on_own_runtime(async move {
+        use sqlx::Connection;
+        let mut connection = sqlx::PgConnection::connect(&admin).await?;
+        sqlx::query(sqlx::AssertSqlSafe(statement))
+            .execute(&mut connection)
+            .await
+            .map(drop)
     })
-    .join()
-    .expect("the admin thread finishes")
 }
 
 impl Cluster {

@@ -8,7 +8,7 @@ use super::error::{
 use super::events::{next_look, progress_event, status_event};
 use super::{AppState, JsonText};
 use crate::domain::{JobId, JobStatus, Owner, QueuedJob, UnixMs, draw_seed};
-use crate::store::{JobRecord, Operations, Page, QueueEvent, ShardRecord};
+use crate::store::{JobRecord, Operations, Page, QueueEvent, ShardRecord, StoreError};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
@@ -298,14 +298,14 @@ pub async fn get_shards(
     }))
 }
 
-/// Cancel a queued or running job.
+/// Cancel a queued or running job; delete a job that ended, with everything stored for it.
 #[utoipa::path(
     delete, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
         (status = 200, description = "Cancelled", body = JobResource),
+        (status = 204, description = "The job had ended: deleted, with its result, distributions and device lives"),
         Unauthorized,
         NoSuchJob,
-        (status = 409, description = "The job already ended", body = Problem, content_type = PROBLEM),
     ),
     security((), ("api_key" = []))
 )]
@@ -313,10 +313,19 @@ pub async fn cancel_job(
     State(state): State<AppState>,
     Extension(owner): Extension<Owner>,
     Path(id): Path<JobId>,
-) -> Result<Json<JobResource>, ApiError> {
-    let record = state.store.cancel(&owner, &id, UnixMs::now()).await?;
-    metrics::counter!("bouncewear_jobs_finished_total", "status" => "cancelled").increment(1);
-    Ok(Json(JobResource::from_record(&record)))
+) -> Result<Response, ApiError> {
+    match state.store.cancel(&owner, &id, UnixMs::now()).await {
+        Ok(record) => {
+            metrics::counter!("bouncewear_jobs_finished_total", "status" => "cancelled")
+                .increment(1);
+            Ok(Json(JobResource::from_record(&record)).into_response())
+        }
+        Err(StoreError::Conflict(_)) => {
+            state.store.delete_job(&owner, &id).await?;
+            Ok(StatusCode::NO_CONTENT.into_response())
+        }
+        Err(error) => Err(error.into()),
+    }
 }
 
 /// The job, if it succeeded: results exist only then (409 before).

@@ -245,6 +245,13 @@ pub trait JobQueue: Send + Sync + 'static {
     async fn live_jobs(&self, owner: &Owner, after: i64) -> StoreResult<Vec<JobRecord>>;
     /// Cancels a queued or running job; [`StoreError::Conflict`] if it already ended.
     async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord>;
+    /// Deletes a job that ended, with everything stored for it (its shards, result,
+    /// distributions, device lives, its place among a schedule's runs), in one transaction;
+    /// [`StoreError::Conflict`] while it is queued or running.
+    async fn delete_job(&self, owner: &Owner, id: &JobId) -> StoreResult<()>;
+    /// Deletes every owner's jobs that ended before `ended_before` as [`JobQueue::delete_job`]
+    /// does, in one transaction; how many.
+    async fn prune_jobs(&self, ended_before: UnixMs) -> StoreResult<u64>;
     /// Leases the next shard to run: of the oldest job with one, a queued shard or a running one
     /// whose lease expired (bumping its attempt), a merge step only once its batch's groups are
     /// done. A shard whose lease has already expired `retries` times fails its job instead, with

@@ -101,6 +101,32 @@ pub(crate) fn corrupt(what: &'static str, error: impl std::fmt::Display) -> Stor
     }
 }
 
+// ---- deleting ended jobs -------------------------------------------------------------------
+// A job's shards, result, distributions and device lives go with it (ON DELETE CASCADE); its
+// schedule run row is deleted in the same transaction (its key is checked at commit).
+
+/// Deletes job `$1` of owner `$2` if it ended.
+pub(crate) const DELETE_ENDED_JOB: &str = "DELETE FROM jobs WHERE id = $1 AND owner = $2 \
+     AND status IN ('succeeded', 'failed', 'cancelled')";
+
+pub(crate) const DELETE_RUN_OF_JOB: &str = "DELETE FROM schedule_runs WHERE job_id = $1";
+
+/// Deletes the jobs that ended before `$1`.
+pub(crate) const PRUNE_JOBS: &str = "DELETE FROM jobs WHERE finished_at < $1 \
+     AND status IN ('succeeded', 'failed', 'cancelled')";
+
+pub(crate) const PRUNE_RUNS: &str = "DELETE FROM schedule_runs WHERE job_id IN \
+     (SELECT id FROM jobs WHERE finished_at < $1 AND status IN ('succeeded', 'failed', 'cancelled'))";
+
+/// Why an existing job cannot be deleted: it has not ended.
+pub(crate) fn not_ended(job: &JobRecord) -> StoreError {
+    StoreError::Conflict(format!(
+        "job {} is {}: cancel it first",
+        job.id,
+        job.status.as_str()
+    ))
+}
+
 // ---- readiness ------------------------------------------------------------------------------
 
 /// The write readiness makes, `now` as parameter 1: the same in both backends' SQL.

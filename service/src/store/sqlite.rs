@@ -6,12 +6,13 @@
 //! Each table's columns and row mapping are written once, below its section heading.
 
 use super::rows::{
-    LATEST_APPLIED_MIGRATION, READINESS_WRITE, bind_distribution, bind_fence, bind_life,
-    bind_queued_job, bind_schedule, bind_shard, claim_from_row, count_from_sql, count_to_sql,
-    distribution_from_row, distribution_rows, failed_too_often, gave_up, job_columns, job_from_row,
-    life_from_row, partial_from_row, partial_to_sql, run_from_row, schedule_columns,
-    schedule_from_row, schema_current, seed_to_sql, shard_columns, shard_from_row,
-    shard_id_from_row, spec_from_json, to_json,
+    DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS,
+    READINESS_WRITE, bind_distribution, bind_fence, bind_life, bind_queued_job, bind_schedule,
+    bind_shard, claim_from_row, count_from_sql, count_to_sql, distribution_from_row,
+    distribution_rows, failed_too_often, gave_up, job_columns, job_from_row, life_from_row,
+    not_ended, partial_from_row, partial_to_sql, run_from_row, schedule_columns, schedule_from_row,
+    schema_current, seed_to_sql, shard_columns, shard_from_row, shard_id_from_row, spec_from_json,
+    to_json,
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
@@ -412,6 +413,41 @@ impl JobQueue for SqliteStore {
             "job {id} already ended: {}",
             ended.status.as_str()
         )))
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn delete_job(&self, owner: &Owner, id: &JobId) -> StoreResult<()> {
+        let mut tx = self.writer.begin().await?;
+        let deleted = sqlx::query(DELETE_ENDED_JOB)
+            .bind(id.as_str())
+            .bind(owner.as_str())
+            .execute(&mut *tx)
+            .await?;
+        if deleted.rows_affected() == 0 {
+            let job = select_job(&mut *tx, owner, id).await?;
+            return Err(not_ended(&job));
+        }
+        sqlx::query(DELETE_RUN_OF_JOB)
+            .bind(id.as_str())
+            .execute(&mut *tx)
+            .await?;
+        tx.commit().await?;
+        Ok(())
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn prune_jobs(&self, ended_before: UnixMs) -> StoreResult<u64> {
+        let mut tx = self.writer.begin().await?;
+        sqlx::query(PRUNE_RUNS)
+            .bind(ended_before.0)
+            .execute(&mut *tx)
+            .await?;
+        let deleted = sqlx::query(PRUNE_JOBS)
+            .bind(ended_before.0)
+            .execute(&mut *tx)
+            .await?;
+        tx.commit().await?;
+        Ok(deleted.rows_affected())
     }
 
     #[tracing::instrument(skip_all, fields(worker))]
