@@ -5,9 +5,11 @@
 mod support;
 
 use bouncewear::compute::thread_pool;
+use bouncewear::domain::idempotency::KEY_LIFETIME_MS;
 use bouncewear::domain::shards::{Merged, merge};
 use bouncewear::domain::{
-    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, ShardId, UnixMs,
+    Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueuedJob, ScheduleDefinition,
+    ScheduleId, ShardId, UnixMs,
 };
 use bouncewear::scheduler::tick;
 use bouncewear::store::{
@@ -62,6 +64,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(&database("cancel")).await;
     live_jobs_are_the_owners_active_ones_and_any_newer_than_the_mark(&database("live")).await;
     ended_jobs_are_deleted_with_everything_stored_for_them(&database("delete")).await;
+    a_key_creates_once_and_refuses_another_body_for_24_hours(&database("keys")).await;
     a_claim_whose_lease_expired_is_fenced_out_by_its_successor(&database("fence")).await;
     a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(&database("shards")).await;
     a_precision_target_queues_its_next_batch_from_the_merge(&database("batches")).await;
@@ -134,6 +137,57 @@ async fn live_jobs_are_the_owners_active_ones_and_any_newer_than_the_mark(url: &
         ids(store.live_jobs(&owner, i64::MAX).await.unwrap()),
         [active.id]
     );
+}
+
+async fn a_key_creates_once_and_refuses_another_body_for_24_hours(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let key = IdempotencyKey::new("retry-1", "body A").unwrap();
+    let Some(Once::Created(job)) = store
+        .insert_job_once(queued(1), 10, &key, UnixMs(1000))
+        .await
+        .unwrap()
+    else {
+        panic!("the first use of a key creates");
+    };
+    let again = store
+        .insert_job_once(queued(2), 10, &key, UnixMs(2000))
+        .await;
+    assert_eq!(again.unwrap(), Some(Once::Replayed(job)));
+    assert_eq!(store.queue_depth().await.unwrap(), (1, 0));
+    let other_body = IdempotencyKey::new("retry-1", "body B").unwrap();
+    let reused = store
+        .insert_job_once(queued(3), 10, &other_body, UnixMs(3000))
+        .await;
+    assert_eq!(reused.unwrap(), Some(Once::KeyReused));
+    let theirs = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || 4).unwrap();
+    let theirs = QueuedJob::new(&theirs, Owner::of_key("another key"), None, UnixMs(1));
+    let created = store.insert_job_once(theirs, 10, &key, UnixMs(3000)).await;
+    assert!(
+        matches!(created.unwrap(), Some(Once::Created(_))),
+        "keys are per owner"
+    );
+    let a_day_later = UnixMs(1000 + KEY_LIFETIME_MS + 1);
+    let fresh = store
+        .insert_job_once(queued(4), 10, &other_body, a_day_later)
+        .await;
+    assert!(
+        matches!(fresh.unwrap(), Some(Once::Created(_))),
+        "forgotten after 24 h"
+    );
+
+    let schedule = nightly("s1", "2026-11-22T03:00:00Z");
+    let created = store.insert_schedule_once(&schedule, &key, UnixMs(1)).await;
+    assert!(
+        matches!(created.unwrap(), Once::Created(_)),
+        "keys are per collection"
+    );
+    let retry = nightly("s2", "2026-11-22T03:00:00Z");
+    let replayed = store
+        .insert_schedule_once(&retry, &key, UnixMs(2))
+        .await
+        .unwrap();
+    assert!(matches!(replayed, Once::Replayed(s) if s.id == schedule.id));
+    assert_eq!(store.schedules(&Owner::anonymous()).await.unwrap().len(), 1);
 }
 
 async fn ended_jobs_are_deleted_with_everything_stored_for_them(url: &str) {

@@ -513,3 +513,51 @@ fn with_api_keys_results_are_cached_privately_and_unfinished_jobs_not_at_all() {
     let cancel = agent().delete(&server.url(&format!("/v1/jobs/{running}")));
     assert_eq!(reply(authorized(cancel, Some("alpha")).call()).status, 200);
 }
+
+/// 422, a problem that names the header.
+fn assert_key_reused(reply: &Reply) {
+    let problem = assert_problem(reply, 422);
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(detail.contains("Idempotency-Key"), "{problem}");
+}
+
+#[test]
+fn a_retry_with_the_same_idempotency_key_gets_the_first_resource_and_another_body_422() {
+    let server = TestApp::start(&temp_db("idempotency"), &["--workers", "0"]);
+    let post_with = |path: &str, key: &str, body: &Value| {
+        reply(
+            agent()
+                .post(&server.url(path))
+                .header("content-type", "application/json")
+                .header("idempotency-key", key)
+                .send(&body.to_string()),
+        )
+    };
+    // No seed: the server draws one, and a retry must not draw another.
+    let job = json!({"devices": 1, "operations": 1});
+    let first = post_with("/v1/jobs", "retry-1", &job);
+    let again = post_with("/v1/jobs", "retry-1", &job);
+    assert_eq!((first.status, again.status), (202, 202));
+    assert_eq!(first.json(), again.json());
+    assert_eq!(again.header("location"), first.header("location"));
+    assert_eq!(again.header("idempotent-replayed"), Some("true"));
+    assert_eq!(server.list_job_ids(10).len(), 1, "one job for two requests");
+    let changed = post_with(
+        "/v1/jobs",
+        "retry-1",
+        &json!({"devices": 2, "operations": 1}),
+    );
+    assert_key_reused(&changed);
+    assert_problem(&post_with("/v1/jobs", "two words", &job), 400);
+
+    // Keys are per collection: the same key makes one schedule.
+    let schedule = json!({"name": "n", "cron": "0 3 * * *", "time_zone": "UTC",
+                          "template": {"devices": 1, "operations": 1}});
+    let first = post_with("/v1/schedules", "retry-1", &schedule);
+    let again = post_with("/v1/schedules", "retry-1", &schedule);
+    assert_eq!((first.status, again.status), (201, 201), "{}", first.body);
+    assert_eq!(first.json()["id"], again.json()["id"]);
+    let renamed = json!({"name": "m", "cron": "0 3 * * *", "time_zone": "UTC",
+                         "template": {"devices": 1, "operations": 1}});
+    assert_key_reused(&post_with("/v1/schedules", "retry-1", &renamed));
+}

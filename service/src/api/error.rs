@@ -34,6 +34,10 @@ pub struct ProblemField {
 
 #[derive(Debug, thiserror::Error)]
 pub enum ApiError {
+    #[error(
+        "Idempotency-Key `{0}` was used with another body within 24 hours; send a new key for a new request"
+    )]
+    KeyReused(String),
     #[error("the request body is not valid JSON")]
     MalformedJson(InvalidInput),
     #[error("the request body breaks the contract")]
@@ -108,7 +112,7 @@ impl ApiError {
     pub fn status(&self) -> StatusCode {
         match self {
             ApiError::MalformedJson(_) | ApiError::BadRequest(_) => StatusCode::BAD_REQUEST,
-            ApiError::Invalid(_) => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::Invalid(_) | ApiError::KeyReused(_) => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::Unauthorized => StatusCode::UNAUTHORIZED,
             ApiError::NotFound(_) => StatusCode::NOT_FOUND,
             ApiError::Conflict(_) => StatusCode::CONFLICT,

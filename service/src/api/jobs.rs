@@ -6,8 +6,8 @@ use super::error::{
     responses::{BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, Unauthorized},
 };
 use super::events::{next_look, progress_event, status_event};
-use super::{AppState, JsonText};
-use crate::domain::{JobId, JobStatus, Owner, QueuedJob, UnixMs, draw_seed};
+use super::{AppState, JsonText, idempotency_key, replayed};
+use crate::domain::{JobId, JobStatus, Once, Owner, QueuedJob, UnixMs, draw_seed};
 use crate::store::{JobRecord, Operations, Page, QueueEvent, ShardRecord, StoreError};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
@@ -114,8 +114,9 @@ impl JobResource {
 #[utoipa::path(
     post, path = "/v1/jobs", tag = "jobs",
     request_body(content = JobSpec, description = "The job of docs/contract.md", content_type = "application/json"),
+    params(("Idempotency-Key" = Option<String>, Header, description = "Retries with the same key and body within 24 hours get the job the first created (422 for another body)")),
     responses(
-        (status = 202, description = "Queued", body = JobResource, headers(("Location" = String, description = "The job's URL"))),
+        (status = 202, description = "Queued (or, for a retry with the same Idempotency-Key, queued before: then `Idempotent-Replayed: true`)", body = JobResource, headers(("Location" = String, description = "The job's URL"))),
         BodyRejected,
         Unauthorized,
         QueueFull,
@@ -125,19 +126,46 @@ impl JobResource {
 pub async fn submit_job(
     State(state): State<AppState>,
     Extension(owner): Extension<Owner>,
+    headers: HeaderMap,
     JsonText(body): JsonText,
 ) -> Result<Response, ApiError> {
+    let key = idempotency_key(&headers, &body)?;
     let job = Job::from_json(&body, draw_seed)?;
     job.check_size(state.config.max_job_operations, &Pointer::root())?;
-    let new = QueuedJob::new(&job, owner, job.spec().name.clone(), UnixMs::now());
-    let record = state
-        .store
-        .insert_job(new, state.config.max_queued)
-        .await?
-        .ok_or(ApiError::QueueFull(state.config.max_queued))?;
-    state.wake.notify_one();
-    metrics::counter!("bouncewear_jobs_submitted_total").increment(1);
-    accepted(&record)
+    let now = UnixMs::now();
+    let new = QueuedJob::new(&job, owner, job.spec().name.clone(), now);
+    let max_queued = state.config.max_queued;
+    let once = match key {
+        Some(key) => {
+            state
+                .store
+                .insert_job_once(new, max_queued, &key, now)
+                .await?
+        }
+        None => state
+            .store
+            .insert_job(new, max_queued)
+            .await?
+            .map(Once::Created),
+    };
+    match once.ok_or(ApiError::QueueFull(max_queued))? {
+        Once::Created(record) => {
+            state.wake.notify_one();
+            metrics::counter!("bouncewear_jobs_submitted_total").increment(1);
+            accepted(&record)
+        }
+        Once::Replayed(record) => accepted(&record).map(replayed),
+        Once::KeyReused => Err(ApiError::KeyReused(header_text(&headers))),
+    }
+}
+
+/// The `Idempotency-Key` a request sent, for the problem that names it.
+pub fn header_text(headers: &HeaderMap) -> String {
+    headers
+        .get(super::IDEMPOTENCY_KEY)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or_default()
+        .to_owned()
 }
 
 /// 202 for a job that entered the queue: the job resource, and its URL in `Location`.

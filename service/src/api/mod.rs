@@ -13,7 +13,7 @@ pub mod simulate;
 pub mod system;
 
 use crate::config::ServeConfig;
-use crate::domain::Owner;
+use crate::domain::{IdempotencyKey, Owner};
 use crate::store::Store;
 use crate::telemetry;
 use axum::body::Bytes;
@@ -203,6 +203,33 @@ async fn authenticate(
     };
     request.extensions_mut().insert(owner);
     Ok(next.run(request).await)
+}
+
+/// The request's `Idempotency-Key`, if it has one, with its body's fingerprint (400 if malformed).
+pub fn idempotency_key(
+    headers: &axum::http::HeaderMap,
+    body: &str,
+) -> Result<Option<IdempotencyKey>, ApiError> {
+    let Some(value) = headers.get(IDEMPOTENCY_KEY) else {
+        return Ok(None);
+    };
+    let key = value
+        .to_str()
+        .map_err(|_| ApiError::BadRequest("Idempotency-Key must be visible ASCII".to_owned()))?;
+    IdempotencyKey::new(key, body)
+        .map(Some)
+        .map_err(ApiError::BadRequest)
+}
+
+pub const IDEMPOTENCY_KEY: &str = "idempotency-key";
+
+/// A response given again to a retry with the same `Idempotency-Key`: marked as such.
+pub fn replayed(mut response: Response) -> Response {
+    response.headers_mut().insert(
+        axum::http::HeaderName::from_static("idempotent-replayed"),
+        axum::http::HeaderValue::from_static("true"),
+    );
+    response
 }
 
 /// A JSON request body as text: `application/json` (415 otherwise), at most `max_body_bytes` (413),

@@ -4,16 +4,16 @@ use super::error::{
     ApiError,
     responses::{BadQuery, BodyRejected, NoSuchSchedule, QueueFull, Unauthorized},
 };
-use super::jobs::{JobResource, accepted, stored_result};
-use super::{AppState, JsonText};
+use super::jobs::{JobResource, accepted, header_text, stored_result};
+use super::{AppState, JsonText, idempotency_key, replayed};
 use crate::domain::trend::trend;
 use crate::domain::{
-    JobStatus, Owner, ScheduleId, ScheduleSpec, TrendValue, UnixMs, ValidSchedule,
+    JobStatus, Once, Owner, ScheduleId, ScheduleSpec, TrendValue, UnixMs, ValidSchedule,
 };
 use crate::store::{NewRun, RunSlot, ScheduleRecord};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
-use axum::http::{HeaderValue, StatusCode, header};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
 use serde::{Deserialize, Serialize};
@@ -101,8 +101,9 @@ async fn resource(state: &AppState, record: &ScheduleRecord) -> Result<ScheduleR
 #[utoipa::path(
     post, path = "/v1/schedules", tag = "schedules",
     request_body(content = ScheduleSpec, content_type = "application/json"),
+    params(("Idempotency-Key" = Option<String>, Header, description = "Retries with the same key and body within 24 hours get the schedule the first created (422 for another body)")),
     responses(
-        (status = 201, description = "Created", body = ScheduleResource, headers(("Location" = String, description = "The schedule's URL"))),
+        (status = 201, description = "Created (or, for a retry with the same Idempotency-Key, created before: then `Idempotent-Replayed: true`)", body = ScheduleResource, headers(("Location" = String, description = "The schedule's URL"))),
         BodyRejected,
         Unauthorized,
     ),
@@ -111,18 +112,35 @@ async fn resource(state: &AppState, record: &ScheduleRecord) -> Result<ScheduleR
 pub async fn create_schedule(
     State(state): State<AppState>,
     Extension(owner): Extension<Owner>,
+    headers: HeaderMap,
     JsonText(body): JsonText,
 ) -> Result<Response, ApiError> {
+    let key = idempotency_key(&headers, &body)?;
     let valid = ValidSchedule::parse(&body, state.config.max_job_operations)?;
     let now = UnixMs::now();
     let record = record(valid, ScheduleId::generate(), owner, now, now);
-    state.store.insert_schedule(&record).await?;
+    let once = match key {
+        Some(key) => state.store.insert_schedule_once(&record, &key, now).await?,
+        None => {
+            state.store.insert_schedule(&record).await?;
+            Once::Created(record)
+        }
+    };
+    match once {
+        Once::Created(record) => created(&state, &record).await,
+        Once::Replayed(record) => created(&state, &record).await.map(replayed),
+        Once::KeyReused => Err(ApiError::KeyReused(header_text(&headers))),
+    }
+}
+
+/// 201 for a schedule that was created: the resource, and its URL in `Location`.
+async fn created(state: &AppState, record: &ScheduleRecord) -> Result<Response, ApiError> {
     let location = HeaderValue::from_str(&format!("/v1/schedules/{}", record.id))
         .map_err(|e| super::error::Internal(e.to_string()))?;
     Ok((
         StatusCode::CREATED,
         [(header::LOCATION, location)],
-        Json(resource(&state, &record).await?),
+        Json(resource(state, record).await?),
     )
         .into_response())
 }

@@ -3,12 +3,14 @@
 //! trend and drift are read. The HTTP handlers, the workers and the scheduler all come here, so each
 //! rule is written once.
 
+pub mod idempotency;
 mod ids;
 pub mod jobs;
 pub mod schedules;
 pub mod shards;
 pub mod trend;
 
+pub use idempotency::{IdempotencyKey, Once};
 pub use ids::{Attempt, JobId, Owner, ScheduleId, UnixMs};
 pub use jobs::{JobStatus, QueuedJob, draw_seed};
 pub use schedules::{ScheduleDefinition, ScheduleSpec, Statistic, Timetable, ValidSchedule};

@@ -11,8 +11,8 @@ mod rows;
 pub mod sqlite;
 
 use crate::domain::{
-    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, ShardId,
-    ShardPlan, UnixMs,
+    Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueuedJob, ScheduleDefinition,
+    ScheduleId, ShardId, ShardPlan, UnixMs,
 };
 use async_trait::async_trait;
 use bouncewear_model::montecarlo::engine::GroupStats;
@@ -237,6 +237,16 @@ pub enum QueueEvent {
 pub trait JobQueue: Send + Sync + 'static {
     /// Inserts a queued job unless `max_queued` jobs are already queued (then `None`).
     async fn insert_job(&self, job: QueuedJob, max_queued: u64) -> StoreResult<Option<JobRecord>>;
+    /// As [`JobQueue::insert_job`], once per key of the job's owner: a key used within 24 hours
+    /// (before `now`) gives the job it created, or [`Once::KeyReused`] for another body. The key
+    /// is remembered only with a job (a full queue leaves it unused).
+    async fn insert_job_once(
+        &self,
+        job: QueuedJob,
+        max_queued: u64,
+        key: &IdempotencyKey,
+        now: UnixMs,
+    ) -> StoreResult<Option<Once<JobRecord>>>;
     async fn job(&self, owner: &Owner, id: &JobId) -> StoreResult<JobRecord>;
     /// Newest first.
     async fn jobs(&self, owner: &Owner, page: Page) -> StoreResult<Vec<JobRecord>>;
@@ -345,6 +355,14 @@ pub trait Results: Send + Sync + 'static {
 #[async_trait]
 pub trait Schedules: Send + Sync + 'static {
     async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()>;
+    /// As [`Schedules::insert_schedule`], once per key of the schedule's owner (see
+    /// [`JobQueue::insert_job_once`]).
+    async fn insert_schedule_once(
+        &self,
+        schedule: &ScheduleRecord,
+        key: &IdempotencyKey,
+        now: UnixMs,
+    ) -> StoreResult<Once<ScheduleRecord>>;
     async fn schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<ScheduleRecord>;
     /// Oldest first.
     async fn schedules(&self, owner: &Owner) -> StoreResult<Vec<ScheduleRecord>>;

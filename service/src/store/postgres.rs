@@ -6,12 +6,13 @@
 //! `migrations/postgres/`; the row mapping is shared with SQLite (`rows.rs`).
 
 use super::rows::{
-    DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS,
-    READINESS_WRITE, bind_distribution, bind_fence, bind_life, bind_queued_job, bind_schedule,
-    bind_shard, claim_from_row, count_from_sql, count_to_sql, distribution_from_row,
-    distribution_rows, failed_too_often, gave_up, job_columns, job_from_row, life_from_row,
-    not_ended, partial_from_row, partial_to_sql, run_from_row, schedule_columns, schedule_from_row,
-    schema_current, shard_columns, shard_from_row, shard_id_from_row, spec_from_json, to_json,
+    Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, FORGET_EXPIRED_KEY, LATEST_APPLIED_MIGRATION,
+    PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY, REMEMBERED_KEY, bind_distribution,
+    bind_fence, bind_key, bind_life, bind_queued_job, bind_schedule, bind_shard, claim_from_row,
+    count_from_sql, count_to_sql, distribution_from_row, distribution_rows, failed_too_often,
+    gave_up, job_columns, job_from_row, life_from_row, not_ended, partial_from_row, partial_to_sql,
+    remembered_from_row, run_from_row, schedule_columns, schedule_from_row, schema_current,
+    shard_columns, shard_from_row, shard_id_from_row, spec_from_json, to_json,
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
@@ -19,7 +20,8 @@ use super::{
     StoreError, StoreResult,
 };
 use crate::domain::{
-    JobId, Owner, QueuedJob, ScheduleId, ShardId, ShardPlan, UnixMs, first_shards,
+    IdempotencyKey, JobId, Once, Owner, QueuedJob, ScheduleId, ShardId, ShardPlan, UnixMs,
+    first_shards,
 };
 use async_trait::async_trait;
 use bouncewear_model::Pointer;
@@ -118,6 +120,50 @@ async fn backfill_shards(writer: &PgPool) -> StoreResult<()> {
         }
         tx.commit().await?;
     }
+    Ok(())
+}
+
+// ---- idempotency keys ----------------------------------------------------------------------
+
+/// In the caller's transaction, holding the key's advisory lock: forgets the key if it expired, then reads what it created (fingerprint, id).
+async fn remembered(
+    tx: &mut PgConnection,
+    owner: &Owner,
+    collection: &str,
+    key: &IdempotencyKey,
+    now: UnixMs,
+) -> StoreResult<Option<(String, String)>> {
+    // Two instances retrying at once: the second waits for the first's key.
+    sqlx::query("SELECT pg_advisory_xact_lock(hashtextextended($1, 0))")
+        .bind(format!("{}/{collection}/{}", owner.as_str(), key.key))
+        .execute(&mut *tx)
+        .await?;
+    sqlx::query(FORGET_EXPIRED_KEY)
+        .bind(owner.as_str())
+        .bind(collection)
+        .bind(key.key.as_str())
+        .bind(IdempotencyKey::expired_before(now).0)
+        .execute(&mut *tx)
+        .await?;
+    let row = sqlx::query(REMEMBERED_KEY)
+        .bind(owner.as_str())
+        .bind(collection)
+        .bind(key.key.as_str())
+        .fetch_optional(&mut *tx)
+        .await?;
+    Ok(row.as_ref().map(remembered_from_row).transpose()?)
+}
+
+async fn remember(
+    tx: &mut PgConnection,
+    owner: &Owner,
+    created: Created<'_>,
+    key: &IdempotencyKey,
+    now: UnixMs,
+) -> StoreResult<()> {
+    bind_key(sqlx::query(REMEMBER_KEY), owner, created, key, now)
+        .execute(&mut *tx)
+        .await?;
     Ok(())
 }
 
@@ -274,6 +320,34 @@ impl JobQueue for PgStore {
         let record = select_job(&mut *tx, &job.owner, &job.id).await?;
         tx.commit().await?;
         Ok(Some(record))
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %job.id))]
+    async fn insert_job_once(
+        &self,
+        job: QueuedJob,
+        max_queued: u64,
+        key: &IdempotencyKey,
+        now: UnixMs,
+    ) -> StoreResult<Option<Once<JobRecord>>> {
+        let mut tx = self.pool.begin().await?;
+        if let Some((fingerprint, id)) = remembered(&mut tx, &job.owner, "jobs", key, now).await? {
+            let once = if fingerprint == key.fingerprint {
+                Once::Replayed(select_job(&mut *tx, &job.owner, &JobId::from(id)).await?)
+            } else {
+                Once::KeyReused
+            };
+            tx.commit().await?;
+            return Ok(Some(once));
+        }
+        if !insert_queued(&mut tx, &job, max_queued).await? {
+            tx.rollback().await?;
+            return Ok(None);
+        }
+        remember(&mut tx, &job.owner, Created::Job(&job.id), key, now).await?;
+        let record = select_job(&mut *tx, &job.owner, &job.id).await?;
+        tx.commit().await?;
+        Ok(Some(Once::Created(record)))
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]
@@ -718,17 +792,46 @@ impl Results for PgStore {
     }
 }
 
+const INSERT_SCHEDULE: &str = concat!(
+    "INSERT INTO schedules (",
+    schedule_columns!(),
+    ") VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)"
+);
+
 #[async_trait]
 impl Schedules for PgStore {
     #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
     async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
-        let insert = sqlx::query(concat!(
-            "INSERT INTO schedules (",
-            schedule_columns!(),
-            ") VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)"
-        ));
-        bind_schedule(insert, schedule)?.execute(&self.pool).await?;
+        bind_schedule(sqlx::query(INSERT_SCHEDULE), schedule)?
+            .execute(&self.pool)
+            .await?;
         Ok(())
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
+    async fn insert_schedule_once(
+        &self,
+        schedule: &ScheduleRecord,
+        key: &IdempotencyKey,
+        now: UnixMs,
+    ) -> StoreResult<Once<ScheduleRecord>> {
+        let owner = &schedule.owner;
+        let mut tx = self.pool.begin().await?;
+        if let Some((fingerprint, id)) = remembered(&mut tx, owner, "schedules", key, now).await? {
+            tx.commit().await?;
+            if fingerprint != key.fingerprint {
+                return Ok(Once::KeyReused);
+            }
+            return Ok(Once::Replayed(
+                self.schedule(owner, &ScheduleId::from(id)).await?,
+            ));
+        }
+        bind_schedule(sqlx::query(INSERT_SCHEDULE), schedule)?
+            .execute(&mut *tx)
+            .await?;
+        remember(&mut tx, owner, Created::Schedule(&schedule.id), key, now).await?;
+        tx.commit().await?;
+        Ok(Once::Created(schedule.clone()))
     }
 
     #[tracing::instrument(skip_all, fields(schedule = %id))]

@@ -6,8 +6,8 @@ use super::{
     StoreResult,
 };
 use crate::domain::{
-    Attempt, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId, ShardId,
-    ShardPlan, UnixMs,
+    Attempt, IdempotencyKey, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId,
+    ShardId, ShardPlan, UnixMs,
 };
 use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
@@ -125,6 +125,71 @@ pub(crate) fn not_ended(job: &JobRecord) -> StoreError {
         job.id,
         job.status.as_str()
     ))
+}
+
+// ---- idempotency keys ----------------------------------------------------------------------
+
+/// Forgets key `$3` of owner `$1` in collection `$2` if it was used before `$4`.
+pub(crate) const FORGET_EXPIRED_KEY: &str = "DELETE FROM idempotency_keys \
+     WHERE owner = $1 AND collection = $2 AND key = $3 AND created_at < $4";
+
+/// What key `$3` of owner `$1` in collection `$2` created: `fingerprint, resource`.
+pub(crate) const REMEMBERED_KEY: &str = "SELECT fingerprint, COALESCE(job_id, schedule_id) AS resource \
+     FROM idempotency_keys WHERE owner = $1 AND collection = $2 AND key = $3";
+
+/// Remembers `owner, collection, key, fingerprint, job_id, schedule_id, created_at`.
+pub(crate) const REMEMBER_KEY: &str = "INSERT INTO idempotency_keys \
+     (owner, collection, key, fingerprint, job_id, schedule_id, created_at) \
+     VALUES ($1, $2, $3, $4, $5, $6, $7)";
+
+/// A remembered key: the fingerprint of its first body and the id of what that created.
+pub(crate) fn remembered_from_row(row: &impl ReadRow) -> Result<(String, String), sqlx::Error> {
+    Ok((row.text("fingerprint")?, row.text("resource")?))
+}
+
+/// Binds [`REMEMBER_KEY`]'s parameters: a job's or a schedule's key, used at `now`.
+pub(crate) fn bind_key<'q, DB>(
+    query: Statement<'q, DB>,
+    owner: &Owner,
+    created: Created<'_>,
+    key: &IdempotencyKey,
+    now: UnixMs,
+) -> Statement<'q, DB>
+where
+    DB: Database,
+    for<'t> i64: Encode<'t, DB> + Type<DB>,
+    for<'t> String: Encode<'t, DB> + Type<DB>,
+    for<'t> Option<String>: Encode<'t, DB> + Type<DB>,
+{
+    let (job, schedule) = match created {
+        Created::Job(id) => (Some(id.to_string()), None),
+        Created::Schedule(id) => (None, Some(id.to_string())),
+    };
+    query
+        .bind(owner.as_str().to_owned())
+        .bind(created.collection().to_owned())
+        .bind(key.key.clone())
+        .bind(key.fingerprint.clone())
+        .bind(job)
+        .bind(schedule)
+        .bind(now.0)
+}
+
+/// What a POST with a key created.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Created<'a> {
+    Job(&'a JobId),
+    Schedule(&'a ScheduleId),
+}
+
+impl Created<'_> {
+    /// The collection it was POSTed to: keys are per owner and collection.
+    pub(crate) fn collection(self) -> &'static str {
+        match self {
+            Created::Job(_) => "jobs",
+            Created::Schedule(_) => "schedules",
+        }
+    }
 }
 
 // ---- readiness ------------------------------------------------------------------------------
