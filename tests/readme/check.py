@@ -4,7 +4,9 @@
     python3 tests/readme/check.py BASE_URL [README.md]
 
 Every fenced ```sh block that follows a `<!-- readme-test -->` line is run with bash (`set -euo
-pipefail`), from the repository root, with `target/release` on the PATH and the README's address
+pipefail`) in a fresh directory where `target` is the repository's (so `target/release/bouncewear`
+runs as in the README, and files the example writes are thrown away), with `target/release` on the
+PATH and the README's address
 `http://127.0.0.1:8080` replaced by BASE_URL. It must succeed, and when a ```text block follows
 under `<!-- readme-output -->`, the output must have the documented shape, line by line: the same
 JSON keys and value types (numbers may differ), or for other lines the same fields with the same
@@ -17,6 +19,7 @@ import os
 import re
 import subprocess
 import sys
+import tempfile
 
 README_BASE = "http://127.0.0.1:8080"
 NUMBER = re.compile(r"-?\d+(\.\d+)?([eE][-+]?\d+)?")
@@ -76,8 +79,10 @@ def main():
     assert found, "no README example is marked for testing"
     failures = 0
     for script, expected, exact, line in found:
-        run = subprocess.run(["bash", "-euo", "pipefail", "-c", script.replace(README_BASE, base)],
-                             cwd=root, env=env, capture_output=True, text=True, timeout=300)
+        with tempfile.TemporaryDirectory(prefix="bouncewear-readme-") as scratch:
+            os.symlink(os.path.join(root, "target"), os.path.join(scratch, "target"))
+            run = subprocess.run(["bash", "-euo", "pipefail", "-c", script.replace(README_BASE, base)],
+                                 cwd=scratch, env=env, capture_output=True, text=True, timeout=300)
         output = run.stdout.rstrip("\n").split("\n") if run.stdout.strip() else []
         problem = None
         if run.returncode != 0:
