@@ -43,7 +43,8 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("store", &["domain"]),
     ("domain", &[]),
     ("plots", &[]),
-    ("config", &[]),
+    // The flags name their limits in the domain's terms (a queue bound, schedule limits).
+    ("config", &["domain"]),
     ("compute", &[]),
     ("connections", &[]),
     ("telemetry", &[]),

@@ -8,12 +8,12 @@ use bouncewear::compute::thread_pool;
 use bouncewear::domain::idempotency::KEY_LIFETIME_MS;
 use bouncewear::domain::shards::{Merged, merge};
 use bouncewear::domain::{
-    Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueuedJob, ScheduleDefinition,
-    ScheduleId, ShardId, UnixMs,
+    Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob,
+    ScheduleDefinition, ScheduleId, ShardId, UnixMs,
 };
 use bouncewear::scheduler::tick;
 use bouncewear::store::{
-    self, Lease, LeaseTerms, NewRun, RunSlot, ScheduleRecord, Store, StoreError,
+    self, JobRecord, Lease, LeaseTerms, NewRun, RunSlot, ScheduleRecord, Store, StoreError,
 };
 use bouncewear::worker::Workers;
 use bouncewear_model::Pointer;
@@ -70,8 +70,14 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_precision_target_queues_its_next_batch_from_the_merge(&database("batches")).await;
     a_poison_job_fails_after_the_retry_limit_with_the_reason(&database("poison")).await;
     a_cancelled_job_keeps_no_accumulators(&database("cancel-partials")).await;
+    a_result_the_database_refuses_for_a_while_is_stored_without_running_again(&database("refused"))
+        .await;
+    a_result_the_database_keeps_refusing_fails_its_job_at_the_retry_limit(&database("refusing"))
+        .await;
+    lives_beyond_the_listing_cap_are_counted_not_listed(&database("listed")).await;
     jobs_queued_before_shards_existed_get_theirs_on_open(&database("backfill")).await;
     concurrent_submissions_never_overshoot_the_queue_bound(&database("bound")).await;
+    one_owner_fills_only_its_share_of_the_queue(&database("share")).await;
     every_u64_seed_reads_back_exactly(&database("seeds")).await;
     a_job_whose_lease_keeps_expiring_fails_with_the_reason(&database("retries")).await;
     two_scheduler_loops_never_duplicate_a_night(&database("race")).await;
@@ -96,7 +102,7 @@ async fn unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(url: &str)
         matches!(missing, StoreError::NotFound { kind: "job", .. }),
         "{missing}"
     );
-    let id = store.insert_job(queued(1), 10).await.unwrap().unwrap().id;
+    let id = insert(&store, queued(1)).await;
     let cancelled = store.cancel(&owner, &id, UnixMs(2)).await.unwrap();
     assert_eq!(cancelled.status, JobStatus::Cancelled);
     let again = store.cancel(&owner, &id, UnixMs(3)).await.unwrap_err();
@@ -116,7 +122,13 @@ async fn live_jobs_are_the_owners_active_ones_and_any_newer_than_the_mark(url: &
     let owner = Owner::anonymous();
     let insert = |seed| {
         let store = store.clone();
-        async move { store.insert_job(queued(seed), 10).await.unwrap().unwrap() }
+        async move {
+            store
+                .insert_job(queued(seed), QueueBound::total(10))
+                .await
+                .unwrap()
+                .unwrap()
+        }
     };
     let active = insert(1).await;
     let ended = insert(2).await;
@@ -125,7 +137,11 @@ async fn live_jobs_are_the_owners_active_ones_and_any_newer_than_the_mark(url: &
     store.cancel(&owner, &newer.id, UnixMs(3)).await.unwrap();
     let job = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || 4).unwrap();
     let others = QueuedJob::new(&job, Owner::of_key("another key"), None, UnixMs(1));
-    store.insert_job(others, 10).await.unwrap().unwrap();
+    store
+        .insert_job(others, QueueBound::total(10))
+        .await
+        .unwrap()
+        .unwrap();
 
     let ids =
         |records: Vec<store::JobRecord>| records.into_iter().map(|r| r.id).collect::<Vec<_>>();
@@ -143,32 +159,34 @@ async fn a_key_creates_once_and_refuses_another_body_for_24_hours(url: &str) {
     let store = store::open(url).await.unwrap();
     let key = IdempotencyKey::new("retry-1", "body A").unwrap();
     let Some(Once::Created(job)) = store
-        .insert_job_once(queued(1), 10, &key, UnixMs(1000))
+        .insert_job_once(queued(1), QueueBound::total(10), &key, UnixMs(1000))
         .await
         .unwrap()
     else {
         panic!("the first use of a key creates");
     };
     let again = store
-        .insert_job_once(queued(2), 10, &key, UnixMs(2000))
+        .insert_job_once(queued(2), QueueBound::total(10), &key, UnixMs(2000))
         .await;
     assert_eq!(again.unwrap(), Some(Once::Replayed(job)));
     assert_eq!(store.queue_depth().await.unwrap(), (1, 0));
     let other_body = IdempotencyKey::new("retry-1", "body B").unwrap();
     let reused = store
-        .insert_job_once(queued(3), 10, &other_body, UnixMs(3000))
+        .insert_job_once(queued(3), QueueBound::total(10), &other_body, UnixMs(3000))
         .await;
     assert_eq!(reused.unwrap(), Some(Once::KeyReused));
     let theirs = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || 4).unwrap();
     let theirs = QueuedJob::new(&theirs, Owner::of_key("another key"), None, UnixMs(1));
-    let created = store.insert_job_once(theirs, 10, &key, UnixMs(3000)).await;
+    let created = store
+        .insert_job_once(theirs, QueueBound::total(10), &key, UnixMs(3000))
+        .await;
     assert!(
         matches!(created.unwrap(), Some(Once::Created(_))),
         "keys are per owner"
     );
     let a_day_later = UnixMs(1000 + KEY_LIFETIME_MS + 1);
     let fresh = store
-        .insert_job_once(queued(4), 10, &other_body, a_day_later)
+        .insert_job_once(queued(4), QueueBound::total(10), &other_body, a_day_later)
         .await;
     assert!(
         matches!(fresh.unwrap(), Some(Once::Created(_))),
@@ -193,12 +211,7 @@ async fn a_key_creates_once_and_refuses_another_body_for_24_hours(url: &str) {
 async fn ended_jobs_are_deleted_with_everything_stored_for_them(url: &str) {
     let store = store::open(url).await.unwrap();
     let owner = Owner::anonymous();
-    let id = store
-        .insert_job(queued_job(WEARING, 4), 10)
-        .await
-        .unwrap()
-        .unwrap()
-        .id;
+    let id = insert(&store, queued_job(WEARING, 4)).await;
     let early = store.delete_job(&owner, &id).await.unwrap_err();
     assert_eq!(
         early.to_string(),
@@ -227,13 +240,17 @@ async fn ended_jobs_are_deleted_with_everything_stored_for_them(url: &str) {
         scheduled_for: UnixMs(5),
         manual: true,
     };
-    let NewRun::Created(run) = store.create_run(slot, queued(1), 10).await.unwrap() else {
+    let NewRun::Created(run) = store
+        .create_run(slot, queued(1), QueueBound::total(10))
+        .await
+        .unwrap()
+    else {
         panic!("the run is created");
     };
     store.cancel(&owner, &run.id, UnixMs(10)).await.unwrap();
-    let recent = store.insert_job(queued(2), 10).await.unwrap().unwrap().id;
+    let recent = insert(&store, queued(2)).await;
     store.cancel(&owner, &recent, UnixMs(1000)).await.unwrap();
-    let waiting = store.insert_job(queued(3), 10).await.unwrap().unwrap().id;
+    let waiting = insert(&store, queued(3)).await;
     assert_eq!(store.prune_jobs(UnixMs(500)).await.unwrap(), 1);
     assert!(store.runs(&schedule.id, 10).await.unwrap().is_empty());
     assert!(store.job(&owner, &run.id).await.is_err());
@@ -249,7 +266,10 @@ async fn ended_jobs_are_deleted_with_everything_stored_for_them(url: &str) {
 
 async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor(url: &str) {
     let store = store::open(url).await.unwrap();
-    store.insert_job(single(1), 10).await.unwrap();
+    store
+        .insert_job(single(1), QueueBound::total(10))
+        .await
+        .unwrap();
     let first = store.claim("a", terms(0), 3).await.unwrap().unwrap();
     assert_eq!(first.fence.shard, ShardId::group(0, 0));
     assert!(
@@ -299,7 +319,12 @@ async fn concurrent_submissions_never_overshoot_the_queue_bound(url: &str) {
     let submissions: Vec<_> = (0..40)
         .map(|seed| {
             let store = Arc::clone(&store);
-            tokio::spawn(async move { store.insert_job(queued(seed), 15).await.unwrap() })
+            tokio::spawn(async move {
+                store
+                    .insert_job(queued(seed), QueueBound::total(15))
+                    .await
+                    .unwrap()
+            })
         })
         .collect();
     let mut accepted = 0;
@@ -312,7 +337,7 @@ async fn concurrent_submissions_never_overshoot_the_queue_bound(url: &str) {
 
 async fn a_job_whose_lease_keeps_expiring_fails_with_the_reason(url: &str) {
     let store = store::open(url).await.unwrap();
-    let id = store.insert_job(single(1), 10).await.unwrap().unwrap().id;
+    let id = insert(&store, single(1)).await;
     // Claimed at t = 0 s; every later claim finds the lease (1 s) expired: its worker died.
     let mut attempts = 0;
     let mut now = 0;
@@ -330,7 +355,7 @@ async fn a_job_whose_lease_keeps_expiring_fails_with_the_reason(url: &str) {
     );
 
     // A run that fails counts the same way, and the last reason is kept.
-    let id = store.insert_job(single(2), 10).await.unwrap().unwrap().id;
+    let id = insert(&store, single(2)).await;
     for attempt in 1..=2 {
         let claim = store.claim("w", terms(now), 1).await.unwrap().unwrap();
         assert_eq!(claim.fence.attempt, Attempt(attempt));
@@ -371,9 +396,24 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
                 let partials = store.partials(&fence.job).await.unwrap();
                 match merge(&job, fence.shard.batch, partials, 1.0).unwrap() {
                     Merged::Result(result) => {
-                        assert!(store.succeed(fence, UnixMs(5), &result).await.unwrap())
+                        assert!(
+                            store
+                                .succeed(fence, UnixMs(5), &result)
+                                .await
+                                .unwrap()
+                                .is_some()
+                        )
                     }
-                    Merged::Next(shards) => assert!(store.add_batch(fence, &shards).await.unwrap()),
+                    Merged::Next { shards, folded } => {
+                        assert!(store.add_batch(fence, &shards, &folded).await.unwrap());
+                        // Only the merged batch keeps accumulators: the fold of all so far.
+                        let kept = store.partials(&fence.job).await.unwrap();
+                        assert!(
+                            kept.iter()
+                                .all(|(shard, _)| shard.batch == fence.shard.batch)
+                        );
+                        assert_eq!(kept.len(), folded.len());
+                    }
                 }
             }
         }
@@ -390,12 +430,7 @@ fn without_timing(result: &str) -> serde_json::Value {
 async fn a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(url: &str) {
     let store = store::open(url).await.unwrap();
     let text = WEARING;
-    let id = store
-        .insert_job(queued_job(text, 4), 10)
-        .await
-        .unwrap()
-        .unwrap()
-        .id;
+    let id = insert(&store, queued_job(text, 4)).await;
     let ran = run_every_shard(store.as_ref()).await;
     assert_eq!(
         ran,
@@ -433,12 +468,7 @@ async fn a_precision_target_queues_its_next_batch_from_the_merge(url: &str) {
         "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
                      "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.05, "min": 0.05}}],
         "precision": {"metric": "e1", "relative_half_width": 1e-6, "max_devices": 100}}"#;
-    let id = store
-        .insert_job(queued_job(text, 8), 10)
-        .await
-        .unwrap()
-        .unwrap()
-        .id;
+    let id = insert(&store, queued_job(text, 8)).await;
     let ran = run_every_shard(store.as_ref()).await;
     let whole = run_job(&Job::from_json(text, || 0).unwrap(), &Silent).unwrap();
     assert_eq!(
@@ -479,7 +509,7 @@ async fn execute(url: &str, sqlite: &'static str, postgres: &'static str) {
 /// configured number of times, then the job fails with the reason, instead of looping forever.
 async fn a_poison_job_fails_after_the_retry_limit_with_the_reason(url: &str) {
     let store = store::open(url).await.unwrap();
-    let id = store.insert_job(single(3), 10).await.unwrap().unwrap().id;
+    let id = insert(&store, single(3)).await;
     let claim = store.claim("w", terms(0), 2).await.unwrap().unwrap();
     let job = Job::new(claim.spec.clone(), || 0, &Pointer::root()).unwrap();
     let batch = Batch::of(&job, 0).unwrap();
@@ -493,29 +523,7 @@ async fn a_poison_job_fails_after_the_retry_limit_with_the_reason(url: &str) {
     )
     .await;
 
-    let workers = Arc::new(Workers {
-        store: Arc::clone(&store),
-        compute: Arc::new(thread_pool(Some(1)).unwrap()),
-        lease: Duration::from_secs(30),
-        retries: 2,
-        instance: "poison".to_owned(),
-        wake: Arc::new(Notify::new()),
-    });
-    let (stop, stopping) = watch::channel(false);
-    let handles = Arc::clone(&workers).spawn(1, stopping);
-    let started = Instant::now();
-    let failed = loop {
-        let job = store.job(&Owner::anonymous(), &id).await.unwrap();
-        if job.status.is_terminal() {
-            break job;
-        }
-        assert!(started.elapsed() < Duration::from_secs(30), "{job:?}");
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    };
-    stop.send(true).unwrap();
-    for handle in handles {
-        handle.await.unwrap();
-    }
+    let failed = run_until_ended(&store, workers(&store, 2, u64::MAX), &id, async || {}).await;
     assert_eq!(failed.status, JobStatus::Failed);
     let reason = failed.error.unwrap();
     assert!(
@@ -529,9 +537,180 @@ async fn a_poison_job_fails_after_the_retry_limit_with_the_reason(url: &str) {
     );
 }
 
+/// A trigger that refuses every Result as a full disk would: a real failure of the database, on
+/// the write that stores a job's outcome.
+const REFUSE_RESULTS: (&str, &str) = (
+    "CREATE TRIGGER refuse_results BEFORE INSERT ON results BEGIN SELECT RAISE(ABORT, 'injected: database or disk is full'); END",
+    "CREATE FUNCTION refuse_results() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN \
+     RAISE EXCEPTION 'injected: could not extend file' USING ERRCODE = 'disk_full'; END $$",
+);
+const REFUSE_RESULTS_ON_INSERT: &str = "CREATE TRIGGER refuse_results BEFORE INSERT ON results FOR EACH ROW EXECUTE FUNCTION refuse_results()";
+const ACCEPT_RESULTS: (&str, &str) = (
+    "DROP TRIGGER refuse_results",
+    "DROP TRIGGER refuse_results ON results",
+);
+
+async fn refuse_results(url: &str) {
+    execute(url, REFUSE_RESULTS.0, REFUSE_RESULTS.1).await;
+    if !url.starts_with("sqlite:") {
+        execute(url, "SELECT 1", REFUSE_RESULTS_ON_INSERT).await;
+    }
+}
+
+/// Inserts a queued job into a queue of ten; its id.
+async fn insert(store: &Arc<dyn Store>, job: QueuedJob) -> JobId {
+    let bound = QueueBound::total(10);
+    store.insert_job(job, bound).await.unwrap().unwrap().id
+}
+
+/// Real workers with `retries`, on `store`.
+fn workers(store: &Arc<dyn Store>, retries: u64, listed_lives: u64) -> Arc<Workers> {
+    Arc::new(Workers {
+        store: Arc::clone(store),
+        compute: Arc::new(thread_pool(Some(1)).unwrap()),
+        lease: Duration::from_secs(30),
+        retries,
+        instance: "store-test".to_owned(),
+        wake: Arc::new(Notify::new()),
+        listed_lives,
+    })
+}
+
+/// Runs `workers` until job `id` ends, and stops them; the job as it ended.
+async fn run_until_ended(
+    store: &Arc<dyn Store>,
+    workers: Arc<Workers>,
+    id: &JobId,
+    meanwhile: impl AsyncFnOnce(),
+) -> JobRecord {
+    let (stop, stopping) = watch::channel(false);
+    let handles = workers.spawn(1, stopping);
+    meanwhile().await;
+    let started = Instant::now();
+    let ended = loop {
+        let job = store.job(&Owner::anonymous(), id).await.unwrap();
+        if job.status.is_terminal() {
+            break job;
+        }
+        assert!(started.elapsed() < Duration::from_secs(60), "{job:?}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    stop.send(true).unwrap();
+    for handle in handles {
+        handle.await.unwrap();
+    }
+    ended
+}
+
+/// A Result the database refuses (full disk) is written again after a backoff, with the lease
+/// kept: once the database takes writes again, the job succeeds without its merge running twice.
+async fn a_result_the_database_refuses_for_a_while_is_stored_without_running_again(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let id = insert(&store, single(6)).await;
+    refuse_results(url).await;
+    let ended = run_until_ended(&store, workers(&store, 3, u64::MAX), &id, async || {
+        // The merge runs, and its first write is refused at once; the retries come after 250 ms
+        // and 750 ms, so the database takes writes again before the third.
+        let started = Instant::now();
+        while store.shards(&id).await.unwrap().last().unwrap().status != "running" {
+            assert!(started.elapsed() < Duration::from_secs(30));
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        tokio::time::sleep(Duration::from_millis(400)).await;
+        execute(url, ACCEPT_RESULTS.0, ACCEPT_RESULTS.1).await;
+    })
+    .await;
+    assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
+    let merge = store.shards(&id).await.unwrap().pop().unwrap();
+    assert_eq!(
+        (merge.shard, merge.attempt, merge.failures),
+        (ShardId::merge(0), Attempt(1), 0),
+        "stored on a retry of the write, not by running the merge again"
+    );
+    assert!(store.result(&id).await.unwrap().is_some());
+}
+
+/// A Result the database never takes counts against the retry limit like a failed run: the job
+/// fails with the reason instead of being computed again forever.
+async fn a_result_the_database_keeps_refusing_fails_its_job_at_the_retry_limit(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let id = insert(&store, single(7)).await;
+    refuse_results(url).await;
+    let ended = run_until_ended(&store, workers(&store, 1, u64::MAX), &id, async || {}).await;
+    assert_eq!(ended.status, JobStatus::Failed);
+    let reason = ended.error.unwrap();
+    assert!(
+        reason.starts_with("gave up after 1 retries: batch 0 merge failed 2 times; the last time: storing the result failed: ")
+            && reason.contains("injected"),
+        "{reason}"
+    );
+    let merge = store.shards(&id).await.unwrap().pop().unwrap();
+    assert_eq!((merge.attempt, merge.failures), (Attempt(2), 2));
+    assert!(store.result(&id).await.unwrap().is_none());
+    assert!(
+        ended.stored_bytes < 1000,
+        "only the spec stays: {}",
+        ended.stored_bytes
+    );
+}
+
+/// Each device's life is listed up to the workers' cap, across groups, and read back page by page;
+/// the life analysis still counts every device.
+async fn lives_beyond_the_listing_cap_are_counted_not_listed(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let text = r#"{"devices": 80, "operations": 30, "seed": 9,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "failure": {"e1": {"below": 0.4}}}"#;
+    let id = insert(&store, queued_job(text, 9)).await;
+    let ended = run_until_ended(&store, workers(&store, 1, 25), &id, async || {}).await;
+    assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
+    let whole = run_job(&Job::from_json(text, || 9).unwrap(), &Silent).unwrap();
+    let whole_life = whole.life.unwrap();
+    let stored = store.result(&id).await.unwrap().unwrap().life.unwrap();
+    assert_eq!(stored.analysis, whole_life.analysis);
+    assert_eq!(stored.failures + stored.censored, 80);
+    let listed = store.lives(&id).await.unwrap();
+    assert_eq!(listed, whole_life.devices[..25]);
+    let page = store.lives_page(&id, Some(9), 4).await.unwrap();
+    assert_eq!(page, whole_life.devices[10..14]);
+    // The spec, the Result, its distributions and 24 bytes per listed life.
+    let result_bytes = store.result_json(&id).await.unwrap().unwrap().len() as u64;
+    assert!(
+        ended.stored_bytes > result_bytes + 25 * 24 && ended.stored_bytes < 3 * result_bytes,
+        "{} bytes stored for a result of {result_bytes}",
+        ended.stored_bytes
+    );
+}
+
+async fn one_owner_fills_only_its_share_of_the_queue(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let bound = QueueBound {
+        total: 3,
+        per_owner: 2,
+    };
+    let of = |owner: &Owner, seed| {
+        let job = Job::from_json(r#"{"devices": 1, "operations": 1}"#, || seed).unwrap();
+        QueuedJob::new(&job, owner.clone(), None, UnixMs(1))
+    };
+    let (greedy, other) = (Owner::of_key("greedy"), Owner::of_key("other"));
+    let mut accepted = Vec::new();
+    for (seed, owner) in [&greedy, &greedy, &greedy, &other, &other]
+        .into_iter()
+        .enumerate()
+    {
+        let inserted = store
+            .insert_job(of(owner, seed as u64), bound)
+            .await
+            .unwrap();
+        accepted.push(inserted.is_some());
+    }
+    // The greedy key's third is past its share, the other key's second past the whole queue.
+    assert_eq!(accepted, [true, true, false, true, false]);
+}
+
 async fn a_cancelled_job_keeps_no_accumulators(url: &str) {
     let store = store::open(url).await.unwrap();
-    let id = store.insert_job(queued(5), 10).await.unwrap().unwrap().id;
+    let id = insert(&store, queued(5)).await;
     let claim = store.claim("w", terms(0), 2).await.unwrap().unwrap();
     let job = Job::new(claim.spec.clone(), || 0, &Pointer::root()).unwrap();
     let stats = run_group(&job, Batch::of(&job, 0).unwrap(), 0, &Silent).unwrap();
@@ -551,7 +730,7 @@ async fn a_cancelled_job_keeps_no_accumulators(url: &str) {
 /// Rows written before migration 0005 have no shards: opening the store cuts them.
 async fn jobs_queued_before_shards_existed_get_theirs_on_open(url: &str) {
     let store = store::open(url).await.unwrap();
-    let id = store.insert_job(queued(6), 10).await.unwrap().unwrap().id;
+    let id = insert(&store, queued(6)).await;
     execute(url, "DELETE FROM shards", "DELETE FROM shards").await;
     assert!(store.claim("w", terms(0), 2).await.unwrap().is_none());
     drop(store);
@@ -582,7 +761,7 @@ async fn every_u64_seed_reads_back_exactly(url: &str) {
     let store = store::open(url).await.unwrap();
     for seed in [0, 1 << 53, i64::MAX as u64 + 1, u64::MAX] {
         let id = store
-            .insert_job(queued(seed), 10)
+            .insert_job(queued(seed), QueueBound::total(10))
             .await
             .unwrap()
             .unwrap()
@@ -627,8 +806,8 @@ async fn two_scheduler_loops_never_duplicate_a_night(url: &str) {
     let mut created = 0;
     for _ in 0..5 {
         let (a, b) = tokio::join!(
-            tick(first.as_ref(), 1000, now),
-            tick(second.as_ref(), 1000, now)
+            tick(first.as_ref(), QueueBound::total(1000), now),
+            tick(second.as_ref(), QueueBound::total(1000), now)
         );
         created += a.unwrap() + b.unwrap();
     }
@@ -659,9 +838,16 @@ async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: 
         .unwrap();
     // The server was down for three nights; it starts at 08:00.
     let now = utc("2026-11-22T08:00:00Z");
-    assert_eq!(tick(store.as_ref(), 100, now).await.unwrap(), 1);
     assert_eq!(
-        tick(store.as_ref(), 100, now).await.unwrap(),
+        tick(store.as_ref(), QueueBound::total(100), now)
+            .await
+            .unwrap(),
+        1
+    );
+    assert_eq!(
+        tick(store.as_ref(), QueueBound::total(100), now)
+            .await
+            .unwrap(),
         0,
         "a restart the same morning adds nothing"
     );
@@ -678,7 +864,12 @@ async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: 
     );
     // The next night runs at its time, once.
     let next_night = utc("2026-11-23T03:00:01Z");
-    assert_eq!(tick(store.as_ref(), 100, next_night).await.unwrap(), 1);
+    assert_eq!(
+        tick(store.as_ref(), QueueBound::total(100), next_night)
+            .await
+            .unwrap(),
+        1
+    );
     assert_eq!(store.runs(&id, 10).await.unwrap().len(), 2);
 }
 
@@ -689,13 +880,23 @@ async fn a_full_queue_leaves_the_night_due_for_the_next_tick(url: &str) {
         .await
         .unwrap();
     let now = utc("2026-11-22T03:00:05Z");
-    assert_eq!(tick(store.as_ref(), 0, now).await.unwrap(), 0);
+    assert_eq!(
+        tick(store.as_ref(), QueueBound::total(0), now)
+            .await
+            .unwrap(),
+        0
+    );
     let due = store
         .due_schedules(UnixMs::from_datetime(now))
         .await
         .unwrap();
     assert_eq!(due.len(), 1, "still due");
-    assert_eq!(tick(store.as_ref(), 10, now).await.unwrap(), 1);
+    assert_eq!(
+        tick(store.as_ref(), QueueBound::total(10), now)
+            .await
+            .unwrap(),
+        1
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -718,7 +919,7 @@ async fn postgres_announces_queued_jobs_and_their_progress(url: &str) {
     use bouncewear::store::QueueEvent;
     let store = store::open(url).await.unwrap();
     let mut events = store.events().expect("PostgreSQL announces changes");
-    let id = store.insert_job(queued(1), 10).await.unwrap().unwrap().id;
+    let id = insert(&store, queued(1)).await;
     let mut next = async || {
         tokio::time::timeout(std::time::Duration::from_secs(10), events.recv())
             .await

@@ -115,35 +115,134 @@ pub struct LifeAnalysis {
     pub kaplan_meier: Vec<KaplanMeierPoint>,
 }
 
+/// Lives grouped by time: at each distinct time, how many devices failed then and how many were
+/// censored then. The exact summary of any number of devices, as long as the distinct times: a
+/// job's lives are whole operations, so a job of `D` devices and `N` operations has at most
+/// `min(D, N)` of them, whatever its size. Every analysis below works on it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Lives {
+    /// Ascending in time, one entry per distinct time.
+    at: Vec<LivesAt>,
+}
+
+/// The devices of [`Lives`] at one time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LivesAt {
+    pub time: f64,
+    pub failures: u64,
+    pub censored: u64,
+}
+
+impl LivesAt {
+    fn devices(&self) -> f64 {
+        (self.failures + self.censored) as f64
+    }
+}
+
+impl Lives {
+    /// Groups `(time, failed)` pairs by time; an invalid time (see the module documentation) is
+    /// an error naming the first pair that has one.
+    pub fn from_pairs(data: &[(f64, bool)]) -> Result<Self, LifeError> {
+        if let Some(index) = data.iter().position(|&(t, _)| !(t.is_finite() && t > 0.0)) {
+            return Err(LifeError::InvalidTime {
+                index,
+                time: data[index].0,
+            });
+        }
+        let mut sorted = data.to_vec();
+        sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut at: Vec<LivesAt> = Vec::new();
+        for (time, failed) in sorted {
+            if at.last().is_none_or(|last| last.time != time) {
+                at.push(LivesAt {
+                    time,
+                    failures: 0,
+                    censored: 0,
+                });
+            }
+            let last = at.last_mut().expect("pushed above");
+            if failed {
+                last.failures += 1;
+            } else {
+                last.censored += 1;
+            }
+        }
+        Ok(Self { at })
+    }
+
+    /// From whole-operation lives: `(operations, failures, censored)` in ascending operations,
+    /// each at least 1 (a device's life counts the operation it failed at). Entries out of order,
+    /// repeated, empty or at 0 operations are dropped.
+    pub fn from_counts(counts: impl IntoIterator<Item = (u64, u64, u64)>) -> Self {
+        let mut at: Vec<LivesAt> = Vec::new();
+        for (operations, failures, censored) in counts {
+            let after_last = at.last().is_none_or(|last| last.time < operations as f64);
+            if operations > 0 && failures + censored > 0 && after_last {
+                at.push(LivesAt {
+                    time: operations as f64,
+                    failures,
+                    censored,
+                });
+            }
+        }
+        Self { at }
+    }
+
+    /// The distinct times, ascending.
+    pub fn at(&self) -> &[LivesAt] {
+        &self.at
+    }
+
+    pub fn failures(&self) -> u64 {
+        self.at.iter().map(|a| a.failures).sum()
+    }
+
+    pub fn censored(&self) -> u64 {
+        self.at.iter().map(|a| a.censored).sum()
+    }
+}
+
 /// The Weibull fit, B1, B10 and the Kaplan-Meier curve of `data` (`(time, failed)` pairs, see the
 /// module documentation). Never panics; an input the fit cannot use gives `weibull: None` with the
 /// reason, and invalid times also leave the Kaplan-Meier curve empty.
 pub fn analyse(data: &[(f64, bool)]) -> LifeAnalysis {
-    let failures = data.iter().filter(|&&(_, failed)| failed).count();
-    let (weibull, weibull_error) = match fit_weibull(data) {
+    match Lives::from_pairs(data) {
+        Ok(lives) => analyse_lives(&lives),
+        Err(error) => {
+            let failures = data.iter().filter(|&&(_, failed)| failed).count();
+            LifeAnalysis {
+                failures,
+                censored: data.len() - failures,
+                weibull: None,
+                weibull_error: Some(error.to_string()),
+                b1: None,
+                b10: None,
+                kaplan_meier: Vec::new(),
+            }
+        }
+    }
+}
+
+/// [`analyse`] of lives grouped by time.
+pub fn analyse_lives(lives: &Lives) -> LifeAnalysis {
+    let (weibull, weibull_error) = match fit_weibull_lives(lives) {
         Ok(w) => (Some(w), None),
         Err(e) => (None, Some(e.to_string())),
     };
     LifeAnalysis {
-        failures,
-        censored: data.len() - failures,
+        failures: count(lives.failures()),
+        censored: count(lives.censored()),
         b1: weibull.as_ref().and_then(|w| b_life(w, 0.01)),
         b10: weibull.as_ref().and_then(|w| b_life(w, 0.10)),
         weibull,
         weibull_error,
-        kaplan_meier: kaplan_meier(data).unwrap_or_default(),
+        kaplan_meier: kaplan_meier_lives(lives),
     }
 }
 
-/// Checks that every time is finite and positive.
-fn validate(data: &[(f64, bool)]) -> Result<(), LifeError> {
-    match data.iter().position(|&(t, _)| !(t.is_finite() && t > 0.0)) {
-        Some(index) => Err(LifeError::InvalidTime {
-            index,
-            time: data[index].0,
-        }),
-        None => Ok(()),
-    }
+/// A device count as the reports' `usize` (saturating on a 32-bit target).
+fn count(n: u64) -> usize {
+    usize::try_from(n).unwrap_or(usize::MAX)
 }
 
 /// Maximum-likelihood two-parameter Weibull with right censoring.
@@ -155,44 +254,55 @@ fn validate(data: &[(f64, bool)]) -> Result<(), LifeError> {
 /// into `d ln L / d beta = 0` this leaves one equation in `beta` (`profile_score`) whose
 /// left side decreases strictly, so its root is unique; it is bracketed and solved by Newton's
 /// method safeguarded by bisection (`solve_shape`). Times enter only as `ln(t / t_max)`, so
-/// `t^beta` never overflows whatever `beta` and the scale of the times.
+/// `t^beta` never overflows whatever `beta` and the scale of the times. Devices that share a time
+/// enter once, weighted by their number ([`Lives`]).
 ///
 /// Needs at least one failure and two distinct failure times ([`LifeError`]). Bounds: see
 /// [`Weibull`].
 pub fn fit_weibull(data: &[(f64, bool)]) -> Result<Weibull, LifeError> {
-    validate(data)?;
-    if data.is_empty() {
+    fit_weibull_lives(&Lives::from_pairs(data)?)
+}
+
+/// [`fit_weibull`] of lives grouped by time.
+pub fn fit_weibull_lives(lives: &Lives) -> Result<Weibull, LifeError> {
+    let at = lives.at();
+    let Some(last) = at.last() else {
         return Err(LifeError::Empty);
-    }
-    let failures = data.iter().filter(|&&(_, failed)| failed).count();
-    let censored = data.len() - failures;
-    let mut failure_times = data.iter().filter(|&&(_, failed)| failed).map(|&(t, _)| t);
+    };
+    let (failures, censored) = (count(lives.failures()), count(lives.censored()));
+    let mut failure_times = at.iter().filter(|a| a.failures > 0).map(|a| a.time);
     let Some(first) = failure_times.next() else {
         return Err(LifeError::NoFailures { censored });
     };
-    if failure_times.all(|t| t == first) {
+    if failure_times.next().is_none() {
         return Err(LifeError::SingleFailureTime {
             failures,
             time: first,
         });
     }
 
-    let ln_t_max = data
+    // Ascending times: the last is the largest.
+    let ln_t_max = last.time.ln();
+    let scaled: Vec<Scaled> = at
         .iter()
-        .map(|&(t, _)| t.ln())
-        .fold(f64::NEG_INFINITY, f64::max);
-    let scaled: Vec<(f64, bool)> = data.iter().map(|&(t, f)| (t.ln() - ln_t_max, f)).collect();
-    let beta = solve_shape(&scaled, failures);
-    let ln_eta = ln_t_max + ln_scale_given_shape(&scaled, failures, beta);
+        .map(|a| Scaled {
+            s: a.time.ln() - ln_t_max,
+            devices: a.devices(),
+            failures: a.failures as f64,
+        })
+        .collect();
+    let r = lives.failures() as f64;
+    let beta = solve_shape(&scaled, r);
+    let ln_eta = ln_t_max + ln_scale_given_shape(&scaled, r, beta);
     let eta = ln_eta.exp();
 
-    let covariance_ln = invert_2x2(observed_information(data, ln_eta, beta));
+    let covariance_ln = invert_2x2(observed_information(at, ln_eta, beta));
     let weibull = Weibull {
         beta,
         eta,
         beta_ci95: log_wald_interval(beta, covariance_ln[1][1].sqrt()),
         eta_ci95: log_wald_interval(eta, covariance_ln[0][0].sqrt()),
-        log_likelihood: weibull_log_likelihood(data, beta, eta),
+        log_likelihood: log_likelihood(at, beta, eta),
         failures,
         censored,
         covariance_ln,
@@ -202,6 +312,14 @@ pub fn fit_weibull(data: &[(f64, bool)]) -> Result<Weibull, LifeError> {
     } else {
         Err(LifeError::NotFinite { beta, eta })
     }
+}
+
+/// One distinct time of [`Lives`] on the scale the shape is solved on: `s = ln(t / t_max)`, with
+/// its devices and failures as weights.
+struct Scaled {
+    s: f64,
+    devices: f64,
+    failures: f64,
 }
 
 /// Whether every number of the fit is finite and the variances positive.
@@ -219,7 +337,8 @@ fn weibull_is_finite(w: &Weibull) -> bool {
 }
 
 /// The Weibull log likelihood with right censoring (see [`fit_weibull`]), with `(t/eta)^beta`
-/// evaluated as `exp(beta (ln t - ln eta))`.
+/// evaluated as `exp(beta (ln t - ln eta))`. Times need not be valid here: an invalid one gives a
+/// non-finite likelihood.
 pub fn weibull_log_likelihood(data: &[(f64, bool)], beta: f64, eta: f64) -> f64 {
     let (ln_beta, ln_eta) = (beta.ln(), eta.ln());
     data.iter()
@@ -235,6 +354,19 @@ pub fn weibull_log_likelihood(data: &[(f64, bool)], beta: f64, eta: f64) -> f64 
         .sum()
 }
 
+/// [`weibull_log_likelihood`] of lives grouped by time.
+fn log_likelihood(at: &[LivesAt], beta: f64, eta: f64) -> f64 {
+    let (ln_beta, ln_eta) = (beta.ln(), eta.ln());
+    at.iter()
+        .map(|a| {
+            let ln_t = a.time.ln();
+            let cumulative_hazard = (beta * (ln_t - ln_eta)).exp();
+            a.failures as f64 * (ln_beta - beta * ln_eta + (beta - 1.0) * ln_t)
+                - a.devices() * cumulative_hazard
+        })
+        .sum()
+}
+
 /// The profile score `g(beta) = (1/r) d ln L_p / d beta` and its derivative, with `s_i = ln(t_i /
 /// t_max)` and weights `w_i = e^(beta s_i)` over all devices:
 ///
@@ -243,35 +375,30 @@ pub fn weibull_log_likelihood(data: &[(f64, bool)], beta: f64, eta: f64) -> f64 
 /// where `m = sum w s / sum w` and `v = sum w (s - m)^2 / sum w` are the weighted mean and
 /// variance of `s`. `g' < 0`, so `g` has at most one root. `m` is a ratio, so scaling the times
 /// by `t_max` changes nothing, and `w <= 1` with `w = 1` at `t_max` keeps `sum w >= 1`.
-fn profile_score(scaled: &[(f64, bool)], failures: usize, beta: f64) -> (f64, f64) {
+fn profile_score(scaled: &[Scaled], r: f64, beta: f64) -> (f64, f64) {
     let (mut weight_sum, mut weighted_s) = (0.0, 0.0);
-    for &(s, _) in scaled {
-        let w = (beta * s).exp();
+    for x in scaled {
+        let w = x.devices * (beta * x.s).exp();
         weight_sum += w;
-        weighted_s += w * s;
+        weighted_s += w * x.s;
     }
     let mean = weighted_s / weight_sum;
     let variance = scaled
         .iter()
-        .map(|&(s, _)| (beta * s).exp() * (s - mean).powi(2))
+        .map(|x| x.devices * (beta * x.s).exp() * (x.s - mean).powi(2))
         .sum::<f64>()
         / weight_sum;
-    let mean_failures = mean_failure_log_time(scaled, failures);
+    let mean_failures = mean_failure_log_time(scaled, r);
     (
         1.0 / beta + mean_failures - mean,
         -1.0 / (beta * beta) - variance,
     )
 }
 
-/// `mean_failures(s)`, the mean of `s_i = ln(t_i / t_max)` over the failures: negative as soon as
-/// one failure time is below `t_max`.
-fn mean_failure_log_time(scaled: &[(f64, bool)], failures: usize) -> f64 {
-    scaled
-        .iter()
-        .filter(|&&(_, f)| f)
-        .map(|&(s, _)| s)
-        .sum::<f64>()
-        / failures as f64
+/// `mean_failures(s)`, the mean of `s_i = ln(t_i / t_max)` over the `r` failures: negative as soon
+/// as one failure time is below `t_max`.
+fn mean_failure_log_time(scaled: &[Scaled], r: f64) -> f64 {
+    scaled.iter().map(|x| x.failures * x.s).sum::<f64>() / r
 }
 
 /// The root of [`profile_score`].
@@ -281,17 +408,17 @@ fn mean_failure_log_time(scaled: &[(f64, bool)], failures: usize) -> f64 {
 /// because `g -> mean_failures(s) < 0` as `beta -> inf` (`m -> 0`). Newton steps that leave the
 /// bracket are replaced by bisection of the bracket in `ln beta` (the bracket can span many
 /// octaves). Stops when a step or the bracket is at the resolution of `f64`.
-fn solve_shape(scaled: &[(f64, bool)], failures: usize) -> f64 {
+fn solve_shape(scaled: &[Scaled], r: f64) -> f64 {
     const MAX_ITERATIONS: usize = 200;
-    let mut lo = -1.0 / mean_failure_log_time(scaled, failures);
+    let mut lo = -1.0 / mean_failure_log_time(scaled, r);
     let mut hi = 2.0 * lo;
-    while hi.is_finite() && profile_score(scaled, failures, hi).0 >= 0.0 {
+    while hi.is_finite() && profile_score(scaled, r, hi).0 >= 0.0 {
         lo = hi;
         hi *= 2.0;
     }
     let mut beta = lo;
     for _ in 0..MAX_ITERATIONS {
-        let (g, dg) = profile_score(scaled, failures, beta);
+        let (g, dg) = profile_score(scaled, r, beta);
         if g == 0.0 {
             break;
         }
@@ -318,9 +445,9 @@ fn solve_shape(scaled: &[(f64, bool)], failures: usize) -> f64 {
 
 /// `ln(eta(beta) / t_max) = ln(sum_all (t/t_max)^beta / r) / beta`, the scale that maximises the
 /// likelihood for a given shape.
-fn ln_scale_given_shape(scaled: &[(f64, bool)], failures: usize, beta: f64) -> f64 {
-    let weight_sum: f64 = scaled.iter().map(|&(s, _)| (beta * s).exp()).sum();
-    (weight_sum / failures as f64).ln() / beta
+fn ln_scale_given_shape(scaled: &[Scaled], r: f64, beta: f64) -> f64 {
+    let weight_sum: f64 = scaled.iter().map(|x| x.devices * (beta * x.s).exp()).sum();
+    (weight_sum / r).ln() / beta
 }
 
 /// Observed information, `-Hessian of ln L`, in `(u, v) = (ln eta, ln beta)`.
@@ -330,18 +457,16 @@ fn ln_scale_given_shape(scaled: &[(f64, bool)], failures: usize, beta: f64) -> f
 ///
 /// `I_uu = beta^2 sum x`, `I_uv = beta (r - sum x z - sum x)`, `I_vv = sum x z^2 + sum x z -
 /// sum_f z`.
-fn observed_information(data: &[(f64, bool)], ln_eta: f64, beta: f64) -> [[f64; 2]; 2] {
+fn observed_information(at: &[LivesAt], ln_eta: f64, beta: f64) -> [[f64; 2]; 2] {
     let (mut sum_x, mut sum_xz, mut sum_xzz, mut sum_failure_z, mut r) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for &(t, failed) in data {
-        let z = beta * (t.ln() - ln_eta);
-        let x = z.exp();
+    for a in at {
+        let z = beta * (a.time.ln() - ln_eta);
+        let x = a.devices() * z.exp();
         sum_x += x;
         sum_xz += x * z;
         sum_xzz += x * z * z;
-        if failed {
-            sum_failure_z += z;
-            r += 1.0;
-        }
+        sum_failure_z += a.failures as f64 * z;
+        r += a.failures as f64;
     }
     let uv = beta * (r - sum_xz - sum_x);
     [
@@ -441,31 +566,29 @@ fn quantile_ln_variance(c: &[[f64; 2]; 2], k_over_beta: f64) -> f64 {
 /// (`greenwood_term`), log-log transformed (`log_log_interval`). Empty data or data without
 /// failures give no points; only an invalid time is an error.
 pub fn kaplan_meier(data: &[(f64, bool)]) -> Result<Vec<KaplanMeierPoint>, LifeError> {
-    validate(data)?;
-    let mut sorted = data.to_vec();
-    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+    Ok(kaplan_meier_lives(&Lives::from_pairs(data)?))
+}
+
+/// [`kaplan_meier`] of lives grouped by time.
+pub fn kaplan_meier_lives(lives: &Lives) -> Vec<KaplanMeierPoint> {
     let mut points = Vec::new();
     let (mut reliability, mut greenwood) = (1.0, 0.0);
-    let mut start = 0;
-    while start < sorted.len() {
-        let time = sorted[start].0;
-        let end = start + sorted[start..].partition_point(|&(t, _)| t == time);
-        let failures = sorted[start..end].iter().filter(|&&(_, f)| f).count();
-        let at_risk = sorted.len() - start;
-        if failures > 0 {
-            reliability *= 1.0 - failures as f64 / at_risk as f64;
-            greenwood += greenwood_term(at_risk, failures);
+    let mut at_risk = lives.failures() + lives.censored();
+    for a in lives.at() {
+        if a.failures > 0 {
+            reliability *= 1.0 - a.failures as f64 / at_risk as f64;
+            greenwood += greenwood_term(at_risk, a.failures);
             points.push(KaplanMeierPoint {
-                time,
+                time: a.time,
                 reliability,
                 ci95: log_log_interval(reliability, greenwood),
-                at_risk,
-                failures,
+                at_risk: count(at_risk),
+                failures: count(a.failures),
             });
         }
-        start = end;
+        at_risk -= a.failures + a.censored;
     }
-    Ok(points)
+    points
 }
 
 /// Median-rank plotting positions `F` of the failures, one per Kaplan-Meier point (that of the last
@@ -491,7 +614,7 @@ pub fn median_ranks(kaplan_meier: &[KaplanMeierPoint], devices: usize) -> Vec<f6
 }
 
 /// Greenwood's term `d / (n (n - d))`; infinite when all at risk fail (`R` drops to 0).
-fn greenwood_term(at_risk: usize, failures: usize) -> f64 {
+fn greenwood_term(at_risk: u64, failures: u64) -> f64 {
     let (n, d) = (at_risk as f64, failures as f64);
     d / (n * (n - d))
 }
@@ -1136,6 +1259,51 @@ mod tests {
                 })
                 .collect();
             assert_well_formed(&analyse(&data));
+        }
+
+        /// Devices that share a time enter once with their number as weight: `copies` devices
+        /// per observation give the fit of the observations (the MLE of replicated data), with
+        /// the covariance divided by `copies`, and the same Kaplan-Meier curve with counts
+        /// times `copies`; lives given as whole-operation counts are the same lives.
+        #[test]
+        fn grouped_lives_weigh_each_time_by_its_devices(
+            lives in prop::collection::vec((1u64..60, any::<bool>()), 1..80),
+            copies in 2u64..6,
+        ) {
+            let pairs: Vec<(f64, bool)> = lives.iter().map(|&(t, f)| (t as f64, f)).collect();
+            let once = analyse(&pairs);
+            let mut counts: BTreeMap<u64, (u64, u64)> = BTreeMap::new();
+            for &(t, failed) in &lives {
+                let entry = counts.entry(t).or_default();
+                if failed { entry.0 += copies } else { entry.1 += copies }
+            }
+            let grouped = analyse_lives(&Lives::from_counts(counts.iter().map(|(&t, &(f, c))| (t, f, c))));
+            let repeated: Vec<(f64, bool)> = pairs
+                .iter()
+                .flat_map(|&pair| std::iter::repeat_n(pair, copies as usize))
+                .collect();
+            prop_assert_eq!(&grouped, &analyse(&repeated));
+            prop_assert_eq!(grouped.failures, once.failures * copies as usize);
+            prop_assert_eq!(grouped.censored, once.censored * copies as usize);
+            prop_assert_eq!(grouped.kaplan_meier.len(), once.kaplan_meier.len());
+            for (g, o) in grouped.kaplan_meier.iter().zip(&once.kaplan_meier) {
+                prop_assert_eq!((g.time, g.at_risk, g.failures), (o.time, o.at_risk * copies as usize, o.failures * copies as usize));
+                assert_relative_eq!(g.reliability, o.reliability, max_relative = 1e-12);
+            }
+            prop_assert_eq!(grouped.weibull.is_some(), once.weibull.is_some());
+            if let (Some(g), Some(o)) = (&grouped.weibull, &once.weibull) {
+                assert_relative_eq!(g.beta, o.beta, max_relative = 1e-9);
+                assert_relative_eq!(g.eta, o.eta, max_relative = 1e-9);
+                for (i, j) in [(0, 0), (0, 1), (1, 1)] {
+                    assert_relative_eq!(
+                        g.covariance_ln[i][j] * copies as f64,
+                        o.covariance_ln[i][j],
+                        max_relative = 1e-6,
+                        epsilon = 1e-12 * o.covariance_ln[i][i].abs()
+                    );
+                }
+                assert_relative_eq!(g.log_likelihood, o.log_likelihood * copies as f64, max_relative = 1e-9);
+            }
         }
     }
 }

@@ -120,7 +120,7 @@ impl Application {
         let stopping = state.shutdown.clone();
         let scheduler = tokio::spawn(crate::scheduler::run(
             Arc::clone(&state.store),
-            config.max_queued,
+            config.queue_bound(),
             Arc::clone(&state.wake),
             stopping.clone(),
         ));
@@ -170,6 +170,7 @@ async fn start_workers(config: &WorkerConfig) -> Result<Workers, StartupError> {
         retries: config.max_retries,
         instance: format!("{}-{}", std::process::id(), uuid::Uuid::new_v4().simple()),
         wake: Arc::new(Notify::new()),
+        listed_lives: config.max_listed_lives,
     })
 }
 

@@ -1,5 +1,6 @@
 //! `bouncewear serve` and `bouncewear worker` configuration: flags, each with an environment variable.
 
+use crate::domain::{QueueBound, ScheduleLimits};
 use clap::Args;
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -29,6 +30,10 @@ pub struct WorkerConfig {
     /// more and it fails with the reason, instead of being retried forever.
     #[arg(long, env = "BOUNCEWEAR_MAX_RETRIES", default_value_t = 3)]
     pub max_retries: u64,
+    /// Devices of a job whose own life is kept and listed (`/v1/jobs/{id}/life?format=csv`): the
+    /// first ones, in device order. The life analysis counts every device whatever this is.
+    #[arg(long, env = "BOUNCEWEAR_MAX_LISTED_LIVES", default_value_t = 100_000)]
+    pub max_listed_lives: u64,
 }
 
 impl WorkerConfig {
@@ -48,6 +53,18 @@ pub struct ServeConfig {
     /// Queued jobs at most; further submissions get 429 with Retry-After.
     #[arg(long, env = "BOUNCEWEAR_MAX_QUEUED", default_value_t = 1000)]
     pub max_queued: u64,
+    /// Queued jobs at most per API key (and per schedule's key), so that one key cannot fill the
+    /// queue for all (default: half of --max-queued with two keys or more, else all of it).
+    #[arg(long, env = "BOUNCEWEAR_MAX_QUEUED_PER_KEY")]
+    pub max_queued_per_key: Option<u64>,
+    /// Shortest interval between two runs of a schedule, in seconds: a cron expression that fires
+    /// more often is refused (422).
+    #[arg(
+        long,
+        env = "BOUNCEWEAR_MIN_SCHEDULE_INTERVAL_SECONDS",
+        default_value_t = 3600
+    )]
+    pub min_schedule_interval_seconds: u64,
     /// Largest job, in operations (devices x operations, with max_devices for a precision target).
     #[arg(
         long,
@@ -118,6 +135,33 @@ impl ServeConfig {
 
     pub fn request_timeout(&self) -> Duration {
         seconds(self.request_timeout_seconds)
+    }
+
+    /// What a schedule may ask for: each run's size, and how often it runs.
+    pub fn schedule_limits(&self) -> ScheduleLimits {
+        ScheduleLimits {
+            max_job_operations: self.max_job_operations,
+            min_interval: i64::try_from(self.min_schedule_interval_seconds)
+                .ok()
+                .and_then(chrono::TimeDelta::try_seconds)
+                .unwrap_or(chrono::TimeDelta::MAX),
+        }
+    }
+
+    /// The queue's bound: `--max-queued` in all, and each key's share.
+    pub fn queue_bound(&self) -> QueueBound {
+        let share = if self.api_keys.len() >= 2 {
+            self.max_queued.div_ceil(2)
+        } else {
+            self.max_queued
+        };
+        QueueBound {
+            total: self.max_queued,
+            per_owner: self
+                .max_queued_per_key
+                .unwrap_or(share)
+                .min(self.max_queued),
+        }
     }
 
     pub fn min_free_disk_bytes(&self) -> u64 {

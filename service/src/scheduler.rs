@@ -3,7 +3,7 @@
 //! night once, not three times), and its next run moves past now. The (schedule, due time) primary
 //! key makes the job unique across restarts and across instances sharing the database.
 
-use crate::domain::{Timetable, UnixMs};
+use crate::domain::{QueueBound, Timetable, UnixMs};
 use crate::store::{NewRun, RunSlot, Store, StoreResult};
 use chrono::{DateTime, Utc};
 use std::sync::Arc;
@@ -14,12 +14,12 @@ const TICK: Duration = Duration::from_secs(1);
 
 pub async fn run(
     store: Arc<dyn Store>,
-    max_queued: u64,
+    bound: QueueBound,
     wake: Arc<Notify>,
     mut shutdown: watch::Receiver<bool>,
 ) {
     while !*shutdown.borrow() {
-        match tick(store.as_ref(), max_queued, Utc::now()).await {
+        match tick(store.as_ref(), bound, Utc::now()).await {
             Ok(0) => {}
             Ok(created) => {
                 tracing::info!(created, "scheduled jobs created");
@@ -35,7 +35,7 @@ pub async fn run(
 }
 
 /// One pass over the due schedules at `now`; returns how many jobs it created.
-pub async fn tick(store: &dyn Store, max_queued: u64, now: DateTime<Utc>) -> StoreResult<usize> {
+pub async fn tick(store: &dyn Store, bound: QueueBound, now: DateTime<Utc>) -> StoreResult<usize> {
     let mut created = 0;
     for schedule in store.due_schedules(UnixMs::from_datetime(now)).await? {
         let definition = &schedule.definition;
@@ -61,7 +61,7 @@ pub async fn tick(store: &dyn Store, max_queued: u64, now: DateTime<Utc>) -> Sto
             scheduled_for: due,
             manual: false,
         };
-        match store.create_run(slot, job, max_queued).await? {
+        match store.create_run(slot, job, bound).await? {
             NewRun::Created(_) => created += 1,
             NewRun::AlreadyExists => {}
             NewRun::QueueFull => {

@@ -72,6 +72,7 @@ const HTTP_DURATION: &str = "bouncewear_http_request_duration_seconds";
 const BUILD_INFO: &str = "bouncewear_build_info";
 const JOB_DURATION: &str = "bouncewear_job_duration_seconds";
 const JOB_RATE: &str = "bouncewear_job_operations_per_second";
+const JOB_STORED_BYTES: &str = "bouncewear_job_stored_bytes";
 const SHARD_STEP: &str = "bouncewear_shard_step_seconds";
 
 /// Request latency: from a cached health check to a result of many megabytes.
@@ -86,6 +87,8 @@ const JOB_DURATION_BUCKETS: &[f64] = &[
 const JOB_RATE_BUCKETS: &[f64] = &[
     1e3, 3e3, 1e4, 3e4, 1e5, 3e5, 1e6, 2e6, 5e6, 1e7, 2e7, 5e7, 1e8,
 ];
+/// From a job of one bin to one of a thousand bins with a full listing of device lives.
+const JOB_STORED_BYTES_BUCKETS: &[f64] = &[1e4, 3e4, 1e5, 3e5, 1e6, 3e6, 1e7, 3e7, 1e8, 3e8, 1e9];
 
 /// One step of a shard's life: a millisecond's claim to a long group's run.
 const SHARD_STEP_BUCKETS: &[f64] = &[
@@ -99,6 +102,7 @@ fn prometheus_builder() -> PrometheusBuilder {
         (HTTP_DURATION, HTTP_BUCKETS),
         (JOB_DURATION, JOB_DURATION_BUCKETS),
         (JOB_RATE, JOB_RATE_BUCKETS),
+        (JOB_STORED_BYTES, JOB_STORED_BYTES_BUCKETS),
         (SHARD_STEP, SHARD_STEP_BUCKETS),
     ]
     .into_iter()
@@ -138,10 +142,19 @@ fn describe_metrics() {
         "bouncewear_operations_simulated_total",
         "Make operations simulated by this instance's workers, counted as each group of devices is stored."
     );
+    metrics::describe_counter!(
+        "bouncewear_store_retries_total",
+        "Writes of a shard's outcome the database did not take and that were tried again after a backoff."
+    );
     metrics::describe_histogram!(
         JOB_DURATION,
         metrics::Unit::Seconds,
         "Wall time of a succeeded job's run, from its claim to its result."
+    );
+    metrics::describe_histogram!(
+        JOB_STORED_BYTES,
+        metrics::Unit::Bytes,
+        "Bytes stored for a succeeded job (spec, result, distributions, listed device lives), one observation per job."
     );
     metrics::describe_histogram!(
         JOB_RATE,
@@ -193,8 +206,9 @@ pub fn render_metrics(handle: &PrometheusHandle) -> String {
 }
 
 /// Records a succeeded job's wall time and speed. `operations` is what the job simulated.
-pub fn record_job_finished(wall_s: f64, operations: u64) {
+pub fn record_job_finished(wall_s: f64, operations: u64, stored_bytes: u64) {
     metrics::histogram!(JOB_DURATION).record(wall_s);
+    metrics::histogram!(JOB_STORED_BYTES).record(stored_bytes as f64);
     if wall_s > 0.0 {
         metrics::histogram!(JOB_RATE).record(operations as f64 / wall_s);
     }
@@ -246,12 +260,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_finished_job_is_one_observation_of_its_duration_and_its_speed() {
+    fn a_finished_job_is_one_observation_of_its_duration_its_speed_and_its_bytes() {
         let recorder = prometheus_builder().build_recorder();
         let handle = recorder.handle();
         metrics::with_local_recorder(&recorder, || {
             describe_metrics();
-            record_job_finished(2.0, 10_000_000);
+            record_job_finished(2.0, 10_000_000, 250_000);
         });
         let text = handle.render();
         for line in [
@@ -264,10 +278,14 @@ mod tests {
             "bouncewear_job_operations_per_second_bucket{le=\"2000000\"} 0",
             "bouncewear_job_operations_per_second_bucket{le=\"5000000\"} 1",
             "bouncewear_job_operations_per_second_sum 5000000",
+            "# TYPE bouncewear_job_stored_bytes histogram",
+            "bouncewear_job_stored_bytes_bucket{le=\"100000\"} 0",
+            "bouncewear_job_stored_bytes_bucket{le=\"300000\"} 1",
+            "bouncewear_job_stored_bytes_sum 250000",
         ] {
             assert!(text.lines().any(|l| l == line), "{line} in\n{text}");
         }
-        for name in [JOB_DURATION, JOB_RATE] {
+        for name in [JOB_DURATION, JOB_RATE, JOB_STORED_BYTES] {
             assert!(text.contains(&format!("# HELP {name} ")), "{text}");
         }
     }
@@ -276,7 +294,7 @@ mod tests {
     fn a_job_of_no_measurable_time_records_its_duration_but_no_speed() {
         let recorder = prometheus_builder().build_recorder();
         let handle = recorder.handle();
-        metrics::with_local_recorder(&recorder, || record_job_finished(0.0, 5));
+        metrics::with_local_recorder(&recorder, || record_job_finished(0.0, 5, 1));
         let text = handle.render();
         assert!(
             text.contains("bouncewear_job_duration_seconds_count 1"),

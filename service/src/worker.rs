@@ -12,7 +12,7 @@
 
 use crate::domain::UnixMs;
 use crate::domain::shards::{Merged, merge};
-use crate::store::{Claim, Fence, Lease, LeaseTerms, QueueEvent, Store};
+use crate::store::{Claim, Fence, Lease, LeaseTerms, QueueEvent, Store, StoreResult};
 use crate::telemetry::{record_job_finished, record_shard_step};
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::{Batch, run_group};
@@ -28,6 +28,10 @@ use tokio::task::JoinHandle;
 const HEARTBEAT_MAX_PERIOD: Duration = Duration::from_millis(500);
 /// An idle worker looks for expired leases at least this often.
 const IDLE_POLL: Duration = Duration::from_millis(500);
+/// A write the database could not take is tried again after this, doubling up to
+/// [`STORE_RETRY_MAX_DELAY`], at most `retries` times, with the lease kept meanwhile.
+const STORE_RETRY_FIRST_DELAY: Duration = Duration::from_millis(250);
+const STORE_RETRY_MAX_DELAY: Duration = Duration::from_secs(8);
 
 pub struct Workers {
     pub store: Arc<dyn Store>,
@@ -38,6 +42,8 @@ pub struct Workers {
     pub instance: String,
     /// Notified on every submission, so an idle worker starts at once.
     pub wake: Arc<Notify>,
+    /// Devices whose own life a job lists (the life CSV); the life analysis counts every device.
+    pub listed_lives: u64,
 }
 
 /// A shard's lease, heartbeated by a task of its own for as long as this lives.
@@ -180,8 +186,13 @@ impl Workers {
                     .await;
             }
         };
+        let mut stats = stats;
+        stats.lives.keep_listed_below(self.listed_lives);
         let storing = Instant::now();
-        match self.store.complete(fence, &stats).await {
+        let stored = self
+            .store_with_backoff(lease, || self.store.complete(fence, &stats))
+            .await;
+        match stored {
             Ok(true) => {
                 record_shard_step("store", storing);
                 metrics::counter!("bouncewear_operations_simulated_total").increment(operations);
@@ -191,7 +202,8 @@ impl Workers {
                 tracing::info!("group discarded: the job ended or the shard was taken over")
             }
             Err(error) => {
-                tracing::error!(%error, "storing the group failed; its lease will expire and it reruns")
+                let reason = format!("storing the group's accumulators failed: {error}");
+                self.fail_attempt(fence, &reason).await
             }
         }
     }
@@ -213,10 +225,12 @@ impl Workers {
             .await;
         match ran {
             Ran::Done(Ok(Merged::Result(result))) => {
-                self.succeed(fence, &result).await;
+                self.succeed(fence, &result, lease).await;
                 record_shard_step("merge", merging);
             }
-            Ran::Done(Ok(Merged::Next(shards))) => match self.store.add_batch(fence, &shards).await
+            Ran::Done(Ok(Merged::Next { shards, folded })) => match self
+                .store_with_backoff(lease, || self.store.add_batch(fence, &shards, &folded))
+                .await
             {
                 Ok(true) => tracing::info!(
                     batch = last + 1,
@@ -226,7 +240,8 @@ impl Workers {
                     "next batch discarded: the job ended or the shard was taken over"
                 ),
                 Err(error) => {
-                    tracing::error!(%error, "queueing the next batch failed; the merge reruns")
+                    let reason = format!("queueing the next batch failed: {error}");
+                    self.fail_attempt(fence, &reason).await
                 }
             },
             Ran::Done(Err(incomplete)) => self.fail_attempt(fence, &incomplete.to_string()).await,
@@ -355,22 +370,58 @@ impl Workers {
         }
     }
 
-    async fn succeed(&self, fence: &Fence, result: &JobResult) {
-        match self.store.succeed(fence, UnixMs::now(), result).await {
-            Ok(true) => {
+    async fn succeed(&self, fence: &Fence, result: &JobResult, lease: &KeptLease) {
+        let stored = self
+            .store_with_backoff(lease, || self.store.succeed(fence, UnixMs::now(), result))
+            .await;
+        match stored {
+            Ok(Some(stored_bytes)) => {
                 metrics::counter!("bouncewear_jobs_finished_total", "status" => "succeeded")
                     .increment(1);
                 let operations = result.job.devices_run() * result.job.spec().operations;
-                record_job_finished(result.timing.wall_s, operations);
-                tracing::info!(wall_s = result.timing.wall_s, "job succeeded");
+                record_job_finished(result.timing.wall_s, operations, stored_bytes);
+                tracing::info!(wall_s = result.timing.wall_s, stored_bytes, "job succeeded");
             }
-            Ok(false) => {
+            Ok(None) => {
                 tracing::info!(
                     "result discarded: the job ended or the merge was taken over meanwhile"
                 )
             }
             Err(error) => {
-                tracing::error!(%error, "storing the result failed; the lease will expire and the merge rerun")
+                let reason = format!("storing the result failed: {error}");
+                self.fail_attempt(fence, &reason).await
+            }
+        }
+    }
+
+    /// Runs a write of a shard's outcome, trying again with backoff while the database cannot
+    /// take it (full, unreachable, busy) and the lease holds, at most `retries` times: the outcome
+    /// is kept, not computed again. The error that remains goes to [`Workers::fail_attempt`], so
+    /// it counts against the same limit as a failed run.
+    async fn store_with_backoff<T, F>(
+        &self,
+        lease: &KeptLease,
+        mut write: impl FnMut() -> F,
+    ) -> StoreResult<T>
+    where
+        F: Future<Output = StoreResult<T>>,
+    {
+        let mut delay = STORE_RETRY_FIRST_DELAY;
+        let mut tries = 0;
+        loop {
+            match write().await {
+                Err(error)
+                    if error.is_unavailable()
+                        && tries < self.retries
+                        && !lease.cancel.load(Ordering::Relaxed) =>
+                {
+                    tries += 1;
+                    metrics::counter!("bouncewear_store_retries_total").increment(1);
+                    tracing::warn!(%error, tries, ?delay, "the database did not take the write; trying again");
+                    tokio::time::sleep(delay).await;
+                    delay = (delay * 2).min(STORE_RETRY_MAX_DELAY);
+                }
+                outcome => return outcome,
             }
         }
     }

@@ -235,6 +235,41 @@ fn two_hundred_concurrent_submissions_are_all_accepted_or_refused_with_429() {
     );
 }
 
+/// One key that fills its share of the queue gets 429; another key still gets in.
+#[test]
+fn a_second_key_gets_in_when_the_first_has_filled_its_share_of_the_queue() {
+    let server = TestApp::start(
+        &temp_db("fair"),
+        &[
+            "--api-key",
+            "alpha,beta",
+            "--max-queued",
+            "6",
+            "--workers",
+            "0",
+        ],
+    );
+    let jobs = server.url("/v1/jobs");
+    let job = r#"{"devices": 1, "operations": 1}"#;
+    for _ in 0..3 {
+        assert_eq!(post(&jobs, job, Some("alpha")).status, 202);
+    }
+    let refused = post(&jobs, job, Some("alpha"));
+    let problem = assert_problem(&refused, 429);
+    assert!(refused.header("retry-after").is_some());
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("3 per API key"),
+        "{problem}"
+    );
+    for _ in 0..3 {
+        assert_eq!(post(&jobs, job, Some("beta")).status, 202);
+    }
+    assert_problem(&post(&jobs, job, Some("beta")), 429);
+}
+
 #[test]
 fn bad_requests_get_the_right_4xx_problem() {
     let server = TestApp::start(
@@ -377,6 +412,60 @@ fn life_analysis_is_served_as_json_and_per_device_csv() {
         &get(&server.url(&format!("/v1/jobs/{plain}/life")), None),
         404,
     );
+}
+
+/// A job whose result holds many rows is stored in short transactions: submissions meanwhile are
+/// all accepted (or refused with 429 once the queue is full), never failed. Its device lives are
+/// listed up to `--max-listed-lives` and streamed page by page, while the life analysis counts
+/// every device.
+#[test]
+fn submissions_go_on_while_a_large_result_is_stored_and_its_lives_stream_in_pages() {
+    let server = TestApp::start(
+        &temp_db("large-result"),
+        &["--workers", "1", "--max-listed-lives", "15000"],
+    );
+    let mut job = wearing_template(48.0);
+    job["devices"] = json!(25_000);
+    job["operations"] = json!(40);
+    job["bin_operations"] = json!(1);
+    job["failure"] = json!({"e1": {"below": 0.4}});
+    let id = server.submit(&job);
+    let jobs = [server.url("/v1/jobs")];
+    let mut rounds = 0;
+    loop {
+        let status = get(&server.url(&format!("/v1/jobs/{id}")), None).json()["status"].clone();
+        if status == "succeeded" {
+            break;
+        }
+        assert!(status == "queued" || status == "running", "{status}");
+        assert!(rounds < 2000, "the job did not end");
+        submit_concurrently(&jobs, 10);
+        rounds += 1;
+    }
+    assert!(rounds > 0, "submissions ran alongside the job");
+    let resource = get(&server.url(&format!("/v1/jobs/{id}")), None).json();
+    assert!(resource["stored_bytes"].as_u64().unwrap() > 15_000 * 24);
+    let life = get(&server.url(&format!("/v1/jobs/{id}/life")), None).json();
+    assert_eq!(
+        life["failures"].as_u64().unwrap() + life["censored"].as_u64().unwrap(),
+        25_000
+    );
+    let url = server.url(&format!("/v1/jobs/{id}/life?format=csv"));
+    let csv = get(&url, None);
+    assert_eq!(csv.status, 200);
+    let rows: Vec<&str> = csv.body.lines().collect();
+    assert_eq!(rows.len(), 15_001, "the header and the listed devices");
+    assert!(rows[1].starts_with("0,") && rows[15_000].starts_with("14999,"));
+    assert!(
+        rows[1..].windows(2).all(|w| {
+            let device = |row: &str| row.split(',').next().unwrap().parse::<u64>().unwrap();
+            device(w[1]) == device(w[0]) + 1
+        }),
+        "every listed device once, in order, across pages"
+    );
+    let tag = csv.header("etag").unwrap().to_owned();
+    let again = reply(agent().get(&url).header("if-none-match", &tag).call());
+    assert_eq!(again.status, 304);
 }
 
 /// GET `url` with `accept-encoding`: the status, the `content-encoding` and the raw body.

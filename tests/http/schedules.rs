@@ -101,6 +101,11 @@ fn bad_schedules_name_their_field() {
             "/time_zone",
         ),
         (
+            // Every 5 minutes: below the default minimum interval of an hour.
+            json!({"name": "x", "cron": "*/5 * * * *", "template": {}}),
+            "/cron",
+        ),
+        (
             json!({"name": "x", "cron": "0 3 * * *", "template": {"devices": 0}}),
             "/template/devices",
         ),

@@ -10,6 +10,7 @@
 //! (see [`crate::stats`]).
 
 use super::job::{Job, Parameter, Per, SamplerKind, Scatter};
+use super::lives::{DeviceLife, GroupLives};
 use super::metric::{DeviceMetric, Metric};
 use crate::operation::{Conditions, Needs, Outcome, Setup};
 use crate::stats::Accumulator;
@@ -67,20 +68,11 @@ pub struct Cancelled;
 pub struct GroupStats {
     pub operations: Vec<Accumulator>,
     pub devices: Vec<Accumulator>,
-    /// With failure criteria: each device's life, in device order.
-    pub lives: Vec<DeviceLife>,
+    /// With failure criteria: the devices' lives.
+    pub lives: GroupLives,
     /// Operations whose bounce sequence reached `max_bounces` with another bounce to come.
     #[serde(default)]
     pub operations_at_max_bounces: u64,
-}
-
-/// When one device failed (or that it survived the test: censored at the last operation).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub struct DeviceLife {
-    pub device: u64,
-    /// Operations run up to and including the failing one (all of them when censored).
-    pub operations_to_failure: u64,
-    pub censored: bool,
 }
 
 impl GroupStats {
@@ -101,7 +93,7 @@ impl GroupStats {
                 .iter()
                 .map(|m| Accumulator::new(limit(Metric::Device(*m))))
                 .collect(),
-            lives: Vec::new(),
+            lives: GroupLives::default(),
             operations_at_max_bounces: 0,
         }
     }
@@ -113,7 +105,7 @@ impl GroupStats {
         for (mine, theirs) in self.devices.iter_mut().zip(&other.devices) {
             mine.merge(theirs);
         }
-        self.lives.extend_from_slice(&other.lives);
+        self.lives.merge(&other.lives);
         self.operations_at_max_bounces += other.operations_at_max_bounces;
     }
 }
@@ -286,7 +278,7 @@ impl<'a> Plan<'a> {
             accumulator.push(self.device_metric(*metric, &draws, &device_wear));
         }
         if !job.failure().is_empty() {
-            stats.lives.push(DeviceLife {
+            stats.lives.record(DeviceLife {
                 device,
                 operations_to_failure: failed_at.unwrap_or(operations),
                 censored: failed_at.is_none(),

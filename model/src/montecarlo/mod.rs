@@ -7,10 +7,12 @@ pub mod diagnostics;
 pub mod distribution;
 pub mod engine;
 pub mod job;
+pub mod lives;
 pub mod metric;
 
-pub use engine::{Cancelled, DeviceLife, Observer, Silent, Tally, Watch};
+pub use engine::{Cancelled, Observer, Silent, Tally, Watch};
 pub use job::{Job, JobSpec};
+pub use lives::{DeviceLife, GroupLives};
 pub use metric::{DeviceMetric, Metric, OperationMetric};
 
 use crate::stats::{Accumulator, Summary, summarize};
@@ -167,8 +169,9 @@ pub struct LifeReport {
     pub censored: u64,
     #[cfg_attr(feature = "openapi", schema(value_type = Object))]
     pub analysis: crate::life::LifeAnalysis,
-    /// Every device's life, in device order (not part of the Result JSON: the service serves it
-    /// as CSV).
+    /// Each device's life, in device order, as far as the groups kept them listed (all of them
+    /// unless trimmed with [`GroupLives::keep_listed_below`]); not part of the Result JSON: the
+    /// service serves it as CSV.
     #[serde(skip)]
     pub devices: Vec<DeviceLife>,
 }
@@ -237,23 +240,17 @@ fn life_report(job: &Job, tally: &Tally) -> Option<LifeReport> {
     if job.failure().is_empty() {
         return None;
     }
-    let mut devices: Vec<DeviceLife> = tally
-        .groups
-        .iter()
-        .flat_map(|g| g.lives.iter().copied())
-        .collect();
-    devices.sort_by_key(|life| life.device);
-    let data: Vec<(f64, bool)> = devices
-        .iter()
-        .map(|d| (d.operations_to_failure as f64, !d.censored))
-        .collect();
-    let failures = devices.iter().filter(|d| !d.censored).count() as u64;
+    let mut lives = GroupLives::default();
+    for group in &tally.groups {
+        lives.merge(&group.lives);
+    }
+    let analysis = crate::life::analyse_lives(&lives.lives());
     Some(LifeReport {
         criteria: job.spec().failure.clone(),
-        failures,
-        censored: devices.len() as u64 - failures,
-        analysis: crate::life::analyse(&data),
-        devices,
+        failures: analysis.failures as u64,
+        censored: analysis.censored as u64,
+        analysis,
+        devices: lives.listed,
     })
 }
 

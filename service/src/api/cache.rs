@@ -2,7 +2,7 @@
 //! cached for a year without asking again; `If-None-Match` with a current tag gets 304 and no body.
 
 use super::AppState;
-use axum::body::Bytes;
+use axum::body::{Body, Bytes};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use sha2::{Digest, Sha256};
@@ -24,6 +24,29 @@ pub fn immutable(
 ) -> Response {
     let body = body.into();
     let tag = entity_tag(&body);
+    immutable_body(state, request, content_type, tag, Body::from(body))
+}
+
+/// As [`immutable`], for a body streamed from the store: its tag comes from `identity`, bytes
+/// that name the content once and for all (the job and what of it), since a stream cannot be
+/// hashed before it is sent.
+pub fn immutable_stream(
+    state: &AppState,
+    request: &HeaderMap,
+    content_type: &'static str,
+    identity: &[u8],
+    body: Body,
+) -> Response {
+    immutable_body(state, request, content_type, entity_tag(identity), body)
+}
+
+fn immutable_body(
+    state: &AppState,
+    request: &HeaderMap,
+    content_type: &'static str,
+    tag: HeaderValue,
+    body: Body,
+) -> Response {
     // With API keys a result is its owner's alone: no shared cache may keep it for others.
     let cache_control = if state.key_owners.is_empty() {
         "public, max-age=31536000, immutable"

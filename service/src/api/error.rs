@@ -1,6 +1,7 @@
 //! Every error a client can see, as `application/problem+json` (RFC 9457), in one place.
 //! Internal errors are logged with their cause and reach the client as a bare 500.
 
+use crate::domain::QueueBound;
 use crate::store::StoreError;
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -54,8 +55,12 @@ pub enum ApiError {
     TooLarge(usize),
     #[error("the request body must be application/json")]
     UnsupportedMediaType,
-    #[error("the queue holds {0} jobs, its limit; retry later")]
-    QueueFull(u64),
+    #[error(
+        "the queue is full: it holds at most {} queued jobs in all and {} per API key; retry later",
+        .0.total,
+        .0.per_owner
+    )]
+    QueueFull(QueueBound),
     #[error("method not allowed")]
     MethodNotAllowed,
     #[error("the request body did not arrive within {} s", .0.as_secs_f64())]

@@ -1,6 +1,6 @@
 //! `/v1/jobs`: submit, list, inspect, cancel, results, distributions and live progress.
 
-use super::cache::{NotModified, immutable};
+use super::cache::{NotModified, immutable, immutable_stream};
 use super::error::{
     ApiError, Internal, PROBLEM, Problem,
     responses::{BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, Unauthorized},
@@ -9,6 +9,7 @@ use super::events::{next_look, progress_event, status_event};
 use super::{AppState, JsonText, idempotency_key, replayed};
 use crate::domain::{JobId, JobStatus, Once, Owner, QueuedJob, UnixMs, draw_seed};
 use crate::store::{JobRecord, Operations, Page, QueueEvent, ShardRecord, StoreError};
+use axum::body::{Body, Bytes};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
@@ -18,7 +19,7 @@ use axum::{Extension, Json};
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
 use bouncewear_model::stats::{QUANTILES, Summary};
-use futures_util::stream::Stream;
+use futures_util::stream::{Stream, StreamExt};
 use serde::{Deserialize, Serialize};
 use std::convert::Infallible;
 use std::fmt::Write as _;
@@ -52,6 +53,10 @@ pub struct JobResource {
     pub error: Option<String>,
     /// The seed the job runs with (drawn at submission when the job did not give one).
     pub seed: u64,
+    /// Bytes stored for the job: its spec, its groups' accumulators while it runs, and once it
+    /// succeeded its result, distributions and listed device lives (database overhead aside).
+    /// `DELETE` frees them.
+    pub stored_bytes: u64,
     pub links: Links,
 }
 
@@ -101,6 +106,7 @@ impl JobResource {
             finished_at: record.finished_at.map(UnixMs::to_rfc3339),
             error: record.error.clone(),
             seed: record.seed,
+            stored_bytes: record.stored_bytes,
             links: Links {
                 result: format!("{this}/result"),
                 events: format!("{this}/events"),
@@ -134,21 +140,12 @@ pub async fn submit_job(
     job.check_size(state.config.max_job_operations, &Pointer::root())?;
     let now = UnixMs::now();
     let new = QueuedJob::new(&job, owner, job.spec().name.clone(), now);
-    let max_queued = state.config.max_queued;
+    let bound = state.config.queue_bound();
     let once = match key {
-        Some(key) => {
-            state
-                .store
-                .insert_job_once(new, max_queued, &key, now)
-                .await?
-        }
-        None => state
-            .store
-            .insert_job(new, max_queued)
-            .await?
-            .map(Once::Created),
+        Some(key) => state.store.insert_job_once(new, bound, &key, now).await?,
+        None => state.store.insert_job(new, bound).await?.map(Once::Created),
     };
-    match once.ok_or(ApiError::QueueFull(max_queued))? {
+    match once.ok_or(ApiError::QueueFull(bound))? {
         Once::Created(record) => {
             state.wake.notify_one();
             metrics::counter!("bouncewear_jobs_submitted_total").increment(1);
@@ -596,17 +593,53 @@ pub async fn get_life(
     match query.format.unwrap_or(Format::Json) {
         Format::Json => Ok(immutable(&state, &headers, JSON, to_json(&life)?)),
         Format::Csv => {
-            let mut csv = String::from("device,operations_to_failure,censored\n");
-            for device in state.store.lives(&id).await? {
+            let identity = format!("{id}/life.csv");
+            let body = Body::from_stream(life_csv(state.clone(), id));
+            Ok(immutable_stream(
+                &state,
+                &headers,
+                CSV,
+                identity.as_bytes(),
+                body,
+            ))
+        }
+    }
+}
+
+/// Devices a page of the life CSV reads from the store at a time.
+const LIVES_PER_PAGE: u32 = 10_000;
+
+/// The life CSV of a job, its header and then one page of listed devices at a time: what a
+/// response holds in memory is one page, whatever the job's size. A store error ends the stream
+/// (the client sees a truncated body: the status line is sent before the rows).
+fn life_csv(
+    state: AppState,
+    id: JobId,
+) -> impl Stream<Item = Result<Bytes, crate::store::StoreError>> + Send {
+    let header = Bytes::from_static(b"device,operations_to_failure,censored\n");
+    let pages = futures_util::stream::try_unfold(Some(None), move |after| {
+        let (state, id) = (state.clone(), id.clone());
+        async move {
+            let Some(after) = after else {
+                return Ok(None);
+            };
+            let page = state.store.lives_page(&id, after, LIVES_PER_PAGE).await?;
+            let Some(last) = page.last() else {
+                return Ok(None);
+            };
+            let next = (page.len() == LIVES_PER_PAGE as usize).then_some(Some(last.device));
+            let mut csv = String::with_capacity(page.len() * 16);
+            for device in &page {
                 let _ = writeln!(
                     csv,
                     "{},{},{}",
                     device.device, device.operations_to_failure, device.censored
                 );
             }
-            Ok(immutable(&state, &headers, CSV, csv))
+            Ok(Some((Bytes::from(csv), next)))
         }
-    }
+    });
+    futures_util::stream::once(async move { Ok(header) }).chain(pages)
 }
 
 /// The stored Result of a succeeded job, parsed.

@@ -16,6 +16,7 @@ use axum::extract::{Path, Query, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
+use chrono::Utc;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use utoipa::{IntoParams, ToSchema};
@@ -116,7 +117,7 @@ pub async fn create_schedule(
     JsonText(body): JsonText,
 ) -> Result<Response, ApiError> {
     let key = idempotency_key(&headers, &body)?;
-    let valid = ValidSchedule::parse(&body, state.config.max_job_operations)?;
+    let valid = ValidSchedule::parse(&body, state.config.schedule_limits(), Utc::now())?;
     let now = UnixMs::now();
     let record = record(valid, ScheduleId::generate(), owner, now, now);
     let once = match key {
@@ -203,7 +204,7 @@ pub async fn replace_schedule(
     JsonText(body): JsonText,
 ) -> Result<Json<ScheduleResource>, ApiError> {
     let existing = state.store.schedule(&owner, &id).await?;
-    let valid = ValidSchedule::parse(&body, state.config.max_job_operations)?;
+    let valid = ValidSchedule::parse(&body, state.config.schedule_limits(), Utc::now())?;
     let record = record(valid, id, owner, existing.created_at, UnixMs::now());
     state.store.update_schedule(&record).await?;
     Ok(Json(resource(&state, &record).await?))
@@ -260,7 +261,7 @@ pub async fn run_schedule_now(
         };
         match state
             .store
-            .create_run(slot, job, state.config.max_queued)
+            .create_run(slot, job, state.config.queue_bound())
             .await?
         {
             NewRun::Created(record) => {
@@ -268,7 +269,7 @@ pub async fn run_schedule_now(
                 return accepted(&record);
             }
             NewRun::AlreadyExists => continue,
-            NewRun::QueueFull => return Err(ApiError::QueueFull(state.config.max_queued)),
+            NewRun::QueueFull => return Err(ApiError::QueueFull(state.config.queue_bound())),
         }
     }
     Err(ApiError::Conflict(

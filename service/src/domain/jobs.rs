@@ -55,6 +55,24 @@ impl JobStatus {
     }
 }
 
+/// How many jobs may wait in the queue: `total` in all, and `per_owner` of any one owner (API
+/// key), so that one key cannot fill the queue and lock every other key out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct QueueBound {
+    pub total: u64,
+    pub per_owner: u64,
+}
+
+impl QueueBound {
+    /// `total` jobs, any owner may queue them all.
+    pub fn total(total: u64) -> Self {
+        Self {
+            total,
+            per_owner: total,
+        }
+    }
+}
+
 /// A validated job ready for the queue: its seed is fixed, so that every attempt to run it (after
 /// a crash, on another machine) gives the same numbers.
 #[derive(Debug, Clone, PartialEq)]

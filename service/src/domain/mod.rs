@@ -12,7 +12,9 @@ pub mod trend;
 
 pub use idempotency::{IdempotencyKey, Once};
 pub use ids::{Attempt, JobId, Owner, ScheduleId, UnixMs};
-pub use jobs::{JobStatus, QueuedJob, draw_seed};
-pub use schedules::{ScheduleDefinition, ScheduleSpec, Statistic, Timetable, ValidSchedule};
+pub use jobs::{JobStatus, QueueBound, QueuedJob, draw_seed};
+pub use schedules::{
+    ScheduleDefinition, ScheduleLimits, ScheduleSpec, Statistic, Timetable, ValidSchedule,
+};
 pub use shards::{ShardId, ShardPlan, batch_shards, first_shards};
 pub use trend::TrendValue;

@@ -6,7 +6,7 @@ use super::{Owner, UnixMs};
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
 use bouncewear_model::stats::{QUANTILES, Summary};
 use bouncewear_model::{FieldError, InvalidInput, Pointer};
-use chrono::{DateTime, TimeZone, Utc};
+use chrono::{DateTime, TimeDelta, TimeZone, Utc};
 use chrono_tz::Tz;
 use croner::Cron;
 use serde::{Deserialize, Serialize};
@@ -71,6 +71,14 @@ impl ScheduleDefinition {
     }
 }
 
+/// The server's limits on a schedule: each run's job size, and how often it may run.
+#[derive(Debug, Clone, Copy)]
+pub struct ScheduleLimits {
+    pub max_job_operations: u64,
+    /// The shortest interval allowed between two runs.
+    pub min_interval: TimeDelta,
+}
+
 /// A schedule document that passed every rule; only [`ValidSchedule::parse`] makes one.
 #[derive(Debug, Clone)]
 pub struct ValidSchedule {
@@ -80,8 +88,13 @@ pub struct ValidSchedule {
 
 impl ValidSchedule {
     /// Parses and validates a schedule document, naming every field at fault. Each run of the
-    /// template must fit `max_job_operations`, the server's job size limit.
-    pub fn parse(body: &str, max_job_operations: u64) -> Result<Self, InvalidInput> {
+    /// template must fit the server's job size limit, and its runs, over the year after `now`,
+    /// must be at least the minimum interval apart.
+    pub fn parse(
+        body: &str,
+        limits: ScheduleLimits,
+        now: DateTime<Utc>,
+    ) -> Result<Self, InvalidInput> {
         let spec: ScheduleSpec = bouncewear_model::error::from_json(
             body,
             &["/statistics", "/template/scatter", "/template/metrics"],
@@ -103,9 +116,23 @@ impl ValidSchedule {
                 })
             })
             .ok();
+        if let Some(gap) = timetable
+            .as_ref()
+            .and_then(|t| t.gap_below(limits.min_interval, now))
+        {
+            errors.push(FieldError {
+                pointer: "/cron".into(),
+                detail: format!(
+                    "runs {} apart at {}: runs must be at least {} apart (the server's --min-schedule-interval-seconds)",
+                    describe_interval(gap.1 - gap.0),
+                    gap.1.to_rfc3339(),
+                    describe_interval(limits.min_interval)
+                ),
+            });
+        }
         let template = root.child("template");
         let size = Job::new(spec.template.clone(), || 0, &template)
-            .and_then(|job| job.check_size(max_job_operations, &template));
+            .and_then(|job| job.check_size(limits.max_job_operations, &template));
         if let Err(invalid) = size {
             errors.extend_from_slice(invalid.errors());
         }
@@ -182,6 +209,31 @@ impl Timetable {
             cron: parsed,
             time_zone,
         })
+    }
+
+    /// Two consecutive runs less than `min` apart, within the year and a day after `now` (every
+    /// month, weekday and DST change; a Feb 29 of a later leap year aside), if there are any.
+    /// Looks at 20,000 runs at most: as many in a year and a day are less than an hour apart on
+    /// average.
+    pub fn gap_below(
+        &self,
+        min: TimeDelta,
+        now: DateTime<Utc>,
+    ) -> Option<(DateTime<Utc>, DateTime<Utc>)> {
+        const MAX_RUNS: usize = 20_000;
+        let end = now + TimeDelta::days(367);
+        let mut previous = self.next_after(now)?;
+        for _ in 0..MAX_RUNS {
+            let next = self.next_after(previous)?;
+            if next - previous < min {
+                return Some((previous, next));
+            }
+            if next > end {
+                return None;
+            }
+            previous = next;
+        }
+        None
     }
 
     /// The first due time strictly after `after`. Wall-clock times follow the time zone, DST
@@ -322,6 +374,25 @@ impl<'de> Deserialize<'de> for Statistic {
         String::deserialize(deserializer)?
             .parse()
             .map_err(serde::de::Error::custom)
+    }
+}
+
+/// An interval as a person reads it: `1 h`, `30 min`, `1 d 2 h`, `45 s`.
+fn describe_interval(interval: TimeDelta) -> String {
+    let seconds = interval.num_seconds().max(0);
+    let parts = [(86_400, "d"), (3_600, "h"), (60, "min"), (1, "s")];
+    let mut rest = seconds;
+    let mut text = Vec::new();
+    for (unit, name) in parts {
+        if rest >= unit {
+            text.push(format!("{} {name}", rest / unit));
+            rest %= unit;
+        }
+    }
+    if text.is_empty() {
+        "0 s".to_owned()
+    } else {
+        text.join(" ")
     }
 }
 
@@ -472,11 +543,17 @@ mod tests {
         assert_eq!(read("life.beta"), Some((weibull.beta, weibull.beta_ci95)));
     }
 
+    const HOURLY: ScheduleLimits = ScheduleLimits {
+        max_job_operations: u64::MAX,
+        min_interval: TimeDelta::hours(1),
+    };
+
     #[test]
     fn a_schedule_names_every_field_at_fault() {
         let invalid = ValidSchedule::parse(
             r#"{"name": " ", "cron": "every night", "template": {"devices": 0}, "statistics": ["life.mtbf"]}"#,
-            1000,
+            HOURLY,
+            utc("2026-11-22T08:00:00Z"),
         )
         .unwrap_err();
         let pointers: Vec<&str> = invalid
@@ -490,6 +567,41 @@ mod tests {
         );
     }
 
+    /// Runs closer than the minimum interval are refused wherever they fall: every minute, twice
+    /// in one hour of one day a week, or an hour apart across the autumn DST change.
+    #[test]
+    fn runs_closer_than_the_minimum_interval_are_refused_naming_the_cron() {
+        let now = utc("2026-11-22T08:00:00Z");
+        let check = |cron: &str, zone: &str| {
+            let body = format!(
+                r#"{{"name": "n", "cron": "{cron}", "time_zone": "{zone}", "template": {{}}}}"#
+            );
+            ValidSchedule::parse(&body, HOURLY, now).map(|_| ())
+        };
+        for (cron, zone) in [("* * * * *", "UTC"), ("0,30 3 * * 2", "UTC")] {
+            let invalid = check(cron, zone).unwrap_err();
+            assert_eq!(invalid.errors().len(), 1, "{cron}");
+            assert_eq!(invalid.errors()[0].pointer, "/cron");
+            assert!(
+                invalid.errors()[0].detail.contains("at least 1 h apart"),
+                "{invalid:?}"
+            );
+        }
+        assert!(check("0 * * * *", "UTC").is_ok(), "hourly is allowed");
+        assert!(check("0 3 * * *", "Europe/Berlin").is_ok());
+        assert!(check("0 0 29 2 *", "UTC").is_ok(), "a leap day alone");
+        let day = ScheduleLimits {
+            min_interval: TimeDelta::hours(24),
+            ..HOURLY
+        };
+        // The night the clocks go forward, two 03:00 runs in Berlin are 23 h apart.
+        let body =
+            r#"{"name": "n", "cron": "0 3 * * *", "time_zone": "Europe/Berlin", "template": {}}"#;
+        assert!(ValidSchedule::parse(body, day, now).is_err());
+        let utc_body = r#"{"name": "n", "cron": "0 3 * * *", "template": {}}"#;
+        assert!(ValidSchedule::parse(utc_body, day, now).is_ok());
+    }
+
     #[test]
     fn a_disabled_schedule_has_no_next_run() {
         let body = |enabled: bool| {
@@ -499,7 +611,7 @@ mod tests {
         };
         let now = UnixMs::from_datetime(utc("2026-11-22T08:00:00Z"));
         let next = |enabled| {
-            ValidSchedule::parse(&body(enabled), u64::MAX)
+            ValidSchedule::parse(&body(enabled), HOURLY, now.to_datetime())
                 .unwrap()
                 .next_run_after(now)
         };

@@ -76,8 +76,14 @@ pub fn first_shards(job: &Job) -> Vec<ShardPlan> {
 pub enum Merged {
     /// The job is done: its Result.
     Result(Box<JobResult>),
-    /// A precision target is not met yet: the next batch's shards, to queue.
-    Next(Vec<ShardPlan>),
+    /// A precision target is not met yet: the next batch's shards, to queue, and the groups of
+    /// every batch so far folded into one set (group `i` of each batch merged into group `i`, in
+    /// batch order, as [`Tally::add_batch`] does), to store in place of theirs: a job's stored
+    /// accumulators, and what a merge reads, stay those of two batches however many it runs.
+    Next {
+        shards: Vec<ShardPlan>,
+        folded: Vec<GroupStats>,
+    },
 }
 
 /// Stored accumulators that do not make up the batches they should.
@@ -90,7 +96,9 @@ pub struct Incomplete {
 
 /// The merge step of batch `last`: puts every done group of batches `0..=last` back in batch and
 /// group order (`partials` as the store lists them) and decides as [`run_job`] does after that
-/// batch: the Result, after `wall_s` seconds of running, or the next batch.
+/// batch: the Result, after `wall_s` seconds of running, or the next batch. The first batch
+/// listed may be the fold of every batch up to it ([`Merged::Next`]); the sequence of merges, and
+/// so every bit, is the same as from each batch's own groups.
 ///
 /// [`run_job`]: bouncewear_model::montecarlo::run_job
 pub fn merge(
@@ -101,7 +109,11 @@ pub fn merge(
 ) -> Result<Merged, Incomplete> {
     let mut tally = Tally::new();
     let mut partials = partials.into_iter().peekable();
-    for index in 0..=last {
+    // Batches before the first listed were folded into it: it stands for all of them.
+    let first = partials
+        .peek()
+        .map_or(0, |(shard, _)| shard.batch.min(last));
+    for index in first..=last {
         let incomplete = |detail: String| Incomplete {
             batch: index,
             detail,
@@ -125,7 +137,14 @@ pub fn merge(
                 batch.groups()
             )));
         }
-        tally.add_batch(batch, groups);
+        if index == first && first > 0 {
+            tally = Tally {
+                groups,
+                devices: batch.first + batch.size,
+            };
+        } else {
+            tally.add_batch(batch, groups);
+        }
     }
     if let Some((shard, _)) = partials.peek() {
         return Err(Incomplete {
@@ -134,7 +153,10 @@ pub fn merge(
         });
     }
     Ok(match next_batch(job, &tally) {
-        Some(batch) => Merged::Next(batch_shards(job, batch)),
+        Some(batch) => Merged::Next {
+            shards: batch_shards(job, batch),
+            folded: tally.groups,
+        },
         None => Merged::Result(Box::new(summarize_job(job, &tally, wall_s))),
     })
 }

@@ -11,8 +11,8 @@ mod rows;
 pub mod sqlite;
 
 use crate::domain::{
-    Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueuedJob, ScheduleDefinition,
-    ScheduleId, ShardId, ShardPlan, UnixMs,
+    Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob,
+    ScheduleDefinition, ScheduleId, ShardId, ShardPlan, UnixMs,
 };
 use async_trait::async_trait;
 use bouncewear_model::montecarlo::engine::GroupStats;
@@ -102,6 +102,10 @@ pub struct JobRecord {
     pub created_at: UnixMs,
     pub started_at: Option<UnixMs>,
     pub finished_at: Option<UnixMs>,
+    /// Bytes stored for the job: its spec, its groups' accumulators while it runs, and once it
+    /// succeeded its Result, distributions and listed device lives (not the database's own
+    /// overhead: indexes, free pages).
+    pub stored_bytes: u64,
 }
 
 /// One page of a newest-first listing: the rows below the cursor `before` (a `seq`).
@@ -235,15 +239,16 @@ pub enum QueueEvent {
 /// The durable job queue: submissions, leases with fencing, and the end of every job.
 #[async_trait]
 pub trait JobQueue: Send + Sync + 'static {
-    /// Inserts a queued job unless `max_queued` jobs are already queued (then `None`).
-    async fn insert_job(&self, job: QueuedJob, max_queued: u64) -> StoreResult<Option<JobRecord>>;
+    /// Inserts a queued job unless the queue or its owner's share of it is full (then `None`).
+    async fn insert_job(&self, job: QueuedJob, bound: QueueBound)
+    -> StoreResult<Option<JobRecord>>;
     /// As [`JobQueue::insert_job`], once per key of the job's owner: a key used within 24 hours
     /// (before `now`) gives the job it created, or [`Once::KeyReused`] for another body. The key
     /// is remembered only with a job (a full queue leaves it unused).
     async fn insert_job_once(
         &self,
         job: QueuedJob,
-        max_queued: u64,
+        bound: QueueBound,
         key: &IdempotencyKey,
         now: UnixMs,
     ) -> StoreResult<Option<Once<JobRecord>>>;
@@ -283,8 +288,15 @@ pub trait JobQueue: Send + Sync + 'static {
     /// Marks a group done with its accumulators, in one transaction, if the claim still holds it.
     async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool>;
     /// Marks a merge step done and queues the next batch's shards, in one transaction, if the
-    /// claim still holds it (a precision target not met yet).
-    async fn add_batch(&self, fence: &Fence, shards: &[ShardPlan]) -> StoreResult<bool>;
+    /// claim still holds it (a precision target not met yet). `folded` (the groups of every batch
+    /// so far, folded) replaces the accumulators of the merged batch's groups, and those of
+    /// earlier batches are dropped: see [`crate::domain::Merged::Next`].
+    async fn add_batch(
+        &self,
+        fence: &Fence,
+        shards: &[ShardPlan],
+        folded: &[GroupStats],
+    ) -> StoreResult<bool>;
     /// Marks the job failed with `error` at once (a failure no retry can mend), if the claim still
     /// holds its shard.
     async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool>;
@@ -320,14 +332,16 @@ pub trait JobQueue: Send + Sync + 'static {
 #[async_trait]
 pub trait Results: Send + Sync + 'static {
     /// Stores the result, marks the merge step done and the job succeeded, and drops the groups'
-    /// accumulators, in one transaction, if the claim still holds the merge step; `false`
-    /// otherwise (nothing written).
+    /// accumulators, if the claim still holds the merge step: the distributions and device lives
+    /// first, in short transactions, then the rest in one. The job's stored bytes
+    /// ([`JobRecord::stored_bytes`]); `None` if the claim no longer holds (the job stays
+    /// unsucceeded; rows already written go when it ends, or its next merge writes them again).
     async fn succeed(
         &self,
         fence: &Fence,
         finished_at: UnixMs,
         result: &JobResult,
-    ) -> StoreResult<bool>;
+    ) -> StoreResult<Option<u64>>;
     /// The accumulators of the job's done groups, in batch and group order.
     async fn partials(&self, id: &JobId) -> StoreResult<Vec<(ShardId, GroupStats)>>;
     /// The Result JSON as stored, to be served as it is.
@@ -347,8 +361,28 @@ pub trait Results: Send + Sync + 'static {
         metric: &str,
         range: Operations,
     ) -> StoreResult<Vec<DistributionRow>>;
-    /// Each device's life, in device order.
-    async fn lives(&self, id: &JobId) -> StoreResult<Vec<DeviceLife>>;
+    /// The listed devices' lives after device `after` (from the first without), in device order,
+    /// at most `limit`: one page of a keyset walk, whatever the job's size.
+    async fn lives_page(
+        &self,
+        id: &JobId,
+        after: Option<u64>,
+        limit: u32,
+    ) -> StoreResult<Vec<DeviceLife>>;
+
+    /// Every listed device's life, in device order (page by page; for tests and small jobs).
+    async fn lives(&self, id: &JobId) -> StoreResult<Vec<DeviceLife>> {
+        let mut lives: Vec<DeviceLife> = Vec::new();
+        loop {
+            let page = self
+                .lives_page(id, lives.last().map(|l| l.device), 10_000)
+                .await?;
+            if page.is_empty() {
+                return Ok(lives);
+            }
+            lives.extend(page);
+        }
+    }
 }
 
 /// Schedules and their runs.
@@ -376,7 +410,7 @@ pub trait Schedules: Send + Sync + 'static {
         &self,
         slot: RunSlot<'_>,
         job: QueuedJob,
-        max_queued: u64,
+        bound: QueueBound,
     ) -> StoreResult<NewRun>;
     /// Moves `next_run_at` from `from` to `to`, unless another loop already moved it.
     async fn advance_schedule(

@@ -6,13 +6,14 @@
 //! `migrations/postgres/`; the row mapping is shared with SQLite (`rows.rs`).
 
 use super::rows::{
-    Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, FORGET_EXPIRED_KEY, LATEST_APPLIED_MIGRATION,
-    PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY, REMEMBERED_KEY, bind_distribution,
-    bind_fence, bind_key, bind_life, bind_queued_job, bind_schedule, bind_shard, claim_from_row,
-    count_from_sql, count_to_sql, distribution_from_row, distribution_rows, failed_too_often,
-    gave_up, job_columns, job_from_row, life_from_row, not_ended, partial_from_row, partial_to_sql,
-    remembered_from_row, run_from_row, schedule_columns, schedule_from_row, schema_current,
-    shard_columns, shard_from_row, shard_id_from_row, spec_from_json, to_json,
+    self, Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, FORGET_EXPIRED_KEY,
+    LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY,
+    REMEMBERED_KEY, bind_distribution, bind_fence, bind_key, bind_life, bind_queued_job,
+    bind_schedule, bind_shard, claim_from_row, count_from_sql, count_to_sql, distribution_from_row,
+    distribution_rows, failed_too_often, gave_up, job_columns, job_from_row, life_from_row,
+    not_ended, partial_from_row, partial_to_sql, remembered_from_row, run_from_row,
+    schedule_columns, schedule_from_row, schema_current, shard_columns, shard_from_row,
+    shard_id_from_row, spec_from_json, to_json,
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
@@ -20,8 +21,8 @@ use super::{
     StoreError, StoreResult,
 };
 use crate::domain::{
-    IdempotencyKey, JobId, Once, Owner, QueuedJob, ScheduleId, ShardId, ShardPlan, UnixMs,
-    first_shards,
+    IdempotencyKey, JobId, Once, Owner, QueueBound, QueuedJob, ScheduleId, ShardId, ShardPlan,
+    UnixMs, first_shards,
 };
 use async_trait::async_trait;
 use bouncewear_model::Pointer;
@@ -173,24 +174,26 @@ const SELECT_JOB: &str = concat!(
     " FROM jobs WHERE id = $1 AND owner = $2"
 );
 
-/// Inserts a queued job with its first shards unless `max_queued` jobs are already queued, inside
+/// Inserts a queued job with its first shards unless the queue or the owner's share of it is full ([`QueueBound`]), inside
 /// the caller's transaction (which holds the queue lock until it ends).
 async fn insert_queued(
     tx: &mut PgConnection,
     job: &QueuedJob,
-    max_queued: u64,
+    bound: QueueBound,
 ) -> StoreResult<bool> {
     sqlx::query("SELECT pg_advisory_xact_lock($1)")
         .bind(QUEUE_LOCK)
         .execute(&mut *tx)
         .await?;
     let insert = sqlx::query(
-        "INSERT INTO jobs (id, owner, name, spec, seed, status, operations_total, created_at) \
-         SELECT $1, $2, $3, $4, $5, 'queued', $6, $7 \
-         WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < $8",
+        "INSERT INTO jobs (id, owner, name, spec, seed, status, operations_total, created_at, stored_bytes) \
+         SELECT $1, $2, $3, $4, $5, 'queued', $6, $7, octet_length($4) \
+         WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < $8 \
+           AND (SELECT COUNT(*) FROM jobs WHERE status = 'queued' AND owner = $2) < $9",
     );
     let inserted = bind_queued_job(insert, job)?
-        .bind(count_to_sql(max_queued))
+        .bind(count_to_sql(bound.total))
+        .bind(count_to_sql(bound.per_owner))
         .execute(&mut *tx)
         .await?;
     if inserted.rows_affected() == 0 {
@@ -277,7 +280,93 @@ async fn end_job(tx: &mut PgConnection, job: &JobId, now: UnixMs, error: &str) -
     .bind(error)
     .execute(&mut *tx)
     .await?;
-    drop_partials(tx, job).await
+    drop_unfinished(tx, job).await
+}
+
+/// Whether the claim still holds its shard, locking the job's row against ending for the rest of
+/// the transaction.
+async fn holds(tx: &mut PgConnection, fence: &Fence) -> StoreResult<bool> {
+    Ok(fenced(
+        concat!(
+            "SELECT 1 FROM jobs WHERE id = $1 AND EXISTS (SELECT 1 FROM shards WHERE ",
+            fenced_shard!(),
+            ") FOR SHARE"
+        ),
+        fence,
+    )
+    .fetch_optional(&mut *tx)
+    .await?
+    .is_some())
+}
+
+impl PgStore {
+    /// Writes a result's distribution rows and listed device lives in short transactions of
+    /// bounded size ([`rows::DISTRIBUTIONS_PER_WRITE`], [`rows::LIVES_PER_WRITE`]), each only while
+    /// the claim holds the merge step, so that no result holds the database for long. A merge that
+    /// stops midway leaves rows that its rerun writes again, the same (the job is deterministic),
+    /// or that ending the job drops. The bytes written (see [`JobRecord::stored_bytes`]); `None`
+    /// once the claim no longer holds.
+    async fn write_rows(&self, fence: &Fence, result: &JobResult) -> StoreResult<Option<u64>> {
+        let distributions: Vec<_> = distribution_rows(result).collect();
+        let mut bytes = 0;
+        for chunk in distributions.chunks(rows::DISTRIBUTIONS_PER_WRITE) {
+            let mut tx = self.pool.begin().await?;
+            if !holds(&mut tx, fence).await? {
+                tx.rollback().await?;
+                return Ok(None);
+            }
+            for (metric, row) in chunk {
+                bytes += to_json("summary", &row.summary)?.len() as u64;
+                let insert = sqlx::query(
+                    "INSERT INTO distributions (job_id, metric, kind, bin, op_start, op_end, n, mean, sd, min, max, \
+                     p05, p50, p95, exceedance, summary) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16) ON CONFLICT DO NOTHING",
+                );
+                bind_distribution(insert, &fence.job, metric, row)?
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            tx.commit().await?;
+        }
+        let lives = result
+            .life
+            .as_ref()
+            .map_or(&[][..], |life| &life.devices[..]);
+        for chunk in lives.chunks(rows::LIVES_PER_WRITE) {
+            let mut tx = self.pool.begin().await?;
+            if !holds(&mut tx, fence).await? {
+                tx.rollback().await?;
+                return Ok(None);
+            }
+            bytes += chunk.len() as u64 * rows::LIFE_ROW_BYTES;
+            for life in chunk {
+                let insert = sqlx::query(
+                    "INSERT INTO device_lives (job_id, device, operations_to_failure, censored) VALUES ($1, $2, $3, $4) ON CONFLICT DO NOTHING",
+                );
+                bind_life(insert, &fence.job, life)
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            tx.commit().await?;
+        }
+        Ok(Some(bytes))
+    }
+}
+
+/// Drops what an unfinished run of a job that ended left: its groups' accumulators, and the rows
+/// of a merge step that stopped while it wrote them.
+async fn drop_unfinished(tx: &mut PgConnection, job: &JobId) -> StoreResult<()> {
+    drop_partials(tx, job).await?;
+    for delete in [
+        "UPDATE jobs SET stored_bytes = octet_length(spec) WHERE id = $1",
+        "DELETE FROM distributions WHERE job_id = $1",
+        "DELETE FROM device_lives WHERE job_id = $1",
+    ] {
+        sqlx::query(delete)
+            .bind(job.as_str())
+            .execute(&mut *tx)
+            .await?;
+    }
+    Ok(())
 }
 
 /// Drops a job's groups' accumulators: it ended, and they will never be merged.
@@ -311,9 +400,13 @@ async fn give_up_on_exhausted(tx: &mut PgConnection, now: UnixMs, retries: u64) 
 #[async_trait]
 impl JobQueue for PgStore {
     #[tracing::instrument(skip_all, fields(job = %job.id))]
-    async fn insert_job(&self, job: QueuedJob, max_queued: u64) -> StoreResult<Option<JobRecord>> {
+    async fn insert_job(
+        &self,
+        job: QueuedJob,
+        bound: QueueBound,
+    ) -> StoreResult<Option<JobRecord>> {
         let mut tx = self.pool.begin().await?;
-        if !insert_queued(&mut tx, &job, max_queued).await? {
+        if !insert_queued(&mut tx, &job, bound).await? {
             tx.rollback().await?;
             return Ok(None);
         }
@@ -326,7 +419,7 @@ impl JobQueue for PgStore {
     async fn insert_job_once(
         &self,
         job: QueuedJob,
-        max_queued: u64,
+        bound: QueueBound,
         key: &IdempotencyKey,
         now: UnixMs,
     ) -> StoreResult<Option<Once<JobRecord>>> {
@@ -340,7 +433,7 @@ impl JobQueue for PgStore {
             tx.commit().await?;
             return Ok(Some(once));
         }
-        if !insert_queued(&mut tx, &job, max_queued).await? {
+        if !insert_queued(&mut tx, &job, bound).await? {
             tx.rollback().await?;
             return Ok(None);
         }
@@ -402,7 +495,7 @@ impl JobQueue for PgStore {
         .fetch_optional(&self.pool)
         .await?;
         if let Some(row) = row {
-            drop_partials(&mut *self.pool.acquire().await?, id).await?;
+            drop_unfinished(&mut *self.pool.acquire().await?, id).await?;
             return Ok(job_from_row(&row)?);
         }
         let ended = select_job(&self.pool, owner, id).await?;
@@ -538,6 +631,7 @@ impl JobQueue for PgStore {
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool> {
         let partial = partial_to_sql(stats)?;
+        let partial_bytes = partial.len() as u64;
         let mut tx = self.pool.begin().await?;
         let updated = fenced(
             concat!(
@@ -554,18 +648,56 @@ impl JobQueue for PgStore {
             tx.rollback().await?;
             return Ok(false);
         }
+        sqlx::query("UPDATE jobs SET stored_bytes = stored_bytes + $2 WHERE id = $1")
+            .bind(fence.job.as_str())
+            .bind(count_to_sql(partial_bytes))
+            .execute(&mut *tx)
+            .await?;
         sum_progress(&mut tx, &fence.job).await?;
         tx.commit().await?;
         Ok(true)
     }
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    async fn add_batch(&self, fence: &Fence, shards: &[ShardPlan]) -> StoreResult<bool> {
+    async fn add_batch(
+        &self,
+        fence: &Fence,
+        shards: &[ShardPlan],
+        folded: &[GroupStats],
+    ) -> StoreResult<bool> {
+        let folded = folded
+            .iter()
+            .map(partial_to_sql)
+            .collect::<StoreResult<Vec<_>>>()?;
         let mut tx = self.pool.begin().await?;
         if !finish_shard(&mut tx, fence).await? {
             tx.rollback().await?;
             return Ok(false);
         }
+        let batch = count_to_sql(fence.shard.batch);
+        for (group, partial) in folded.into_iter().enumerate() {
+            sqlx::query(
+                "UPDATE shards SET partial = $4 WHERE job_id = $1 AND batch = $2 AND grp = $3",
+            )
+            .bind(fence.job.as_str())
+            .bind(batch)
+            .bind(count_to_sql(group as u64))
+            .bind(partial)
+            .execute(&mut *tx)
+            .await?;
+        }
+        sqlx::query("UPDATE shards SET partial = NULL WHERE job_id = $1 AND batch < $2 AND partial IS NOT NULL")
+            .bind(fence.job.as_str())
+            .bind(batch)
+            .execute(&mut *tx)
+            .await?;
+        sqlx::query(
+            "UPDATE jobs SET stored_bytes = octet_length(spec) + \
+             (SELECT COALESCE(SUM(octet_length(partial)), 0) FROM shards WHERE job_id = $1) WHERE id = $1",
+        )
+        .bind(fence.job.as_str())
+        .execute(&mut *tx)
+        .await?;
         insert_shards(&mut tx, &fence.job, shards).await?;
         sum_progress(&mut tx, &fence.job).await?;
         tx.commit().await?;
@@ -698,45 +830,35 @@ impl Results for PgStore {
         fence: &Fence,
         finished_at: UnixMs,
         result: &JobResult,
-    ) -> StoreResult<bool> {
+    ) -> StoreResult<Option<u64>> {
         let text = to_json("result", result)?;
+        let Some(row_bytes) = self.write_rows(fence, result).await? else {
+            return Ok(None);
+        };
+        let result_bytes = text.len() as u64 + row_bytes;
         let mut tx = self.pool.begin().await?;
         if !finish_shard(&mut tx, fence).await? {
             tx.rollback().await?;
-            return Ok(false);
+            return Ok(None);
         }
-        sqlx::query(
-            "UPDATE jobs SET status = 'succeeded', finished_at = $2, operations_done = operations_total WHERE id = $1",
+        let stored = sqlx::query(
+            "UPDATE jobs SET status = 'succeeded', finished_at = $2, operations_done = operations_total, \
+             stored_bytes = octet_length(spec) + $3 WHERE id = $1 RETURNING stored_bytes",
         )
         .bind(fence.job.as_str())
         .bind(finished_at.0)
-        .execute(&mut *tx)
+        .bind(count_to_sql(result_bytes))
+        .fetch_one(&mut *tx)
         .await?;
+        let stored_bytes = count_from_sql(&stored, "stored_bytes")?;
         drop_partials(&mut tx, &fence.job).await?;
         sqlx::query("INSERT INTO results (job_id, result) VALUES ($1, $2)")
             .bind(fence.job.as_str())
             .bind(text)
             .execute(&mut *tx)
             .await?;
-        for (metric, row) in distribution_rows(result) {
-            let insert = sqlx::query(
-                "INSERT INTO distributions (job_id, metric, kind, bin, op_start, op_end, n, mean, sd, min, max, \
-                 p05, p50, p95, exceedance, summary) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16)",
-            );
-            bind_distribution(insert, &fence.job, metric, &row)?
-                .execute(&mut *tx)
-                .await?;
-        }
-        for life in result.life.iter().flat_map(|life| &life.devices) {
-            let insert = sqlx::query(
-                "INSERT INTO device_lives (job_id, device, operations_to_failure, censored) VALUES ($1, $2, $3, $4)",
-            );
-            bind_life(insert, &fence.job, life)
-                .execute(&mut *tx)
-                .await?;
-        }
         tx.commit().await?;
-        Ok(true)
+        Ok(Some(stored_bytes))
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]
@@ -781,11 +903,19 @@ impl Results for PgStore {
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn lives(&self, id: &JobId) -> StoreResult<Vec<DeviceLife>> {
+    async fn lives_page(
+        &self,
+        id: &JobId,
+        after: Option<u64>,
+        limit: u32,
+    ) -> StoreResult<Vec<DeviceLife>> {
         let rows = sqlx::query(
-            "SELECT device, operations_to_failure, censored FROM device_lives WHERE job_id = $1 ORDER BY device",
+            "SELECT device, operations_to_failure, censored FROM device_lives \
+             WHERE job_id = $1 AND device > $2 ORDER BY device LIMIT $3",
         )
         .bind(id.as_str())
+        .bind(after.map_or(-1, count_to_sql))
+        .bind(i64::from(limit))
         .fetch_all(&self.pool)
         .await?;
         Ok(rows.iter().map(life_from_row).collect::<Result<_, _>>()?)
@@ -906,7 +1036,7 @@ impl Schedules for PgStore {
         &self,
         slot: RunSlot<'_>,
         job: QueuedJob,
-        max_queued: u64,
+        bound: QueueBound,
     ) -> StoreResult<NewRun> {
         let mut tx = self.pool.begin().await?;
         // Claim the slot first: the primary key decides who runs this night (a concurrent claim of
@@ -925,7 +1055,7 @@ impl Schedules for PgStore {
             tx.rollback().await?;
             return Ok(NewRun::AlreadyExists);
         }
-        if !insert_queued(&mut tx, &job, max_queued).await? {
+        if !insert_queued(&mut tx, &job, bound).await? {
             tx.rollback().await?;
             return Ok(NewRun::QueueFull);
         }

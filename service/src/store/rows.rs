@@ -223,7 +223,7 @@ pub(crate) type Statement<'q, DB> = Query<'q, DB, <DB as Database>::Arguments>;
 macro_rules! job_columns {
     () => {
         "seq, id, owner, name, seed, status, operations_done, operations_total, error, \
-         created_at, started_at, finished_at"
+         created_at, started_at, finished_at, stored_bytes"
     };
 }
 
@@ -243,6 +243,7 @@ pub(crate) fn job_from_row(row: &impl ReadRow) -> Result<JobRecord, sqlx::Error>
         created_at: ms(row, "created_at")?,
         started_at: optional_ms(row, "started_at")?,
         finished_at: optional_ms(row, "finished_at")?,
+        stored_bytes: count_from_sql(row, "stored_bytes")?,
     })
 }
 
@@ -396,6 +397,13 @@ pub(crate) fn partial_from_row(row: &impl ReadRow) -> StoreResult<(ShardId, Grou
 // ---- results, distributions, device lives --------------------------------------------------
 
 /// One `distributions` row per bin of every operation metric, and one per device metric.
+/// Distribution rows a result writes per transaction: about 2 kB each.
+pub(crate) const DISTRIBUTIONS_PER_WRITE: usize = 250;
+/// Device lives a result writes per transaction.
+pub(crate) const LIVES_PER_WRITE: usize = 5_000;
+/// What a device life counts towards a job's stored bytes: its three numbers.
+pub(crate) const LIFE_ROW_BYTES: u64 = 24;
+
 pub(crate) fn distribution_rows(
     result: &JobResult,
 ) -> impl Iterator<Item = (&str, DistributionRow)> {
