@@ -110,6 +110,7 @@ fn every_subcommand_has_help() {
         &["serve", "--help"],
         &["worker", "--help"],
         &["health", "--help"],
+        &["calibrate", "--help"],
     ] {
         let output = bouncewear(args, "");
         assert!(output.status.success(), "{args:?}");
@@ -323,4 +324,41 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
             .unwrap()
             .contains("| exact |")
     );
+}
+
+/// Measurements made by `simulate` itself at kappa 0.3, at three impact velocities: `calibrate`
+/// gives kappa back, and a scenario that `simulate` accepts; bad requests name their field.
+#[test]
+fn calibrate_fits_kappa_to_simulated_measurements() {
+    let observations: Vec<Value> = [0.2, 0.4, 0.6]
+        .iter()
+        .map(|v| {
+            let scenario = format!(
+                r#"{{"material": {{"kappa": 0.3}}, "mechanism": {{"impact_velocity_m_s": {v}}}}}"#
+            );
+            let output = bouncewear(&["simulate"], &scenario);
+            let outcome: Value = serde_json::from_slice(&output.stdout).unwrap();
+            serde_json::json!({"impact_velocity_m_s": v, "first_bounce_s": outcome["first_bounce_s"],
+                               "e1": outcome["e1"], "bounce_count": outcome["bounce_count"]})
+        })
+        .collect();
+    let request = serde_json::json!({"fit": ["material.kappa"], "observations": observations});
+    let output = bouncewear(&["calibrate"], &request.to_string());
+    assert!(output.status.success(), "{output:?}");
+    let fit: Value = serde_json::from_slice(&output.stdout).unwrap();
+    let kappa = &fit["estimates"]["material.kappa"];
+    assert!(
+        (kappa["value"].as_f64().unwrap() / 0.3 - 1.0).abs() < 1e-6,
+        "{kappa}"
+    );
+    assert_eq!(fit["residuals"]["bounce_count"]["rms_relative"], 0.0);
+    let fitted = bouncewear(&["simulate"], &fit["scenario"].to_string());
+    assert!(fitted.status.success(), "the fitted scenario simulates");
+
+    let line = rejected(
+        &["calibrate"],
+        r#"{"fit": ["material.kappa", "material.contact_radius_m"], "scenario": {"material": {"kappa": 0.3}},
+            "observations": [{"e1": 0.5}, {"e1": 0.45, "impact_velocity_m_s": 0.4}, {"e1": 0.4, "impact_velocity_m_s": 0.6}]}"#,
+    );
+    assert!(line.contains("/fit/1"), "{line}");
 }

@@ -64,19 +64,26 @@ class Client:
             data = json.dumps(body)
             headers["content-type"] = "application/json"
         started = time.perf_counter()
-        try:
-            if self.conn is None:
-                self.conn = http.client.HTTPConnection(self.host, self.port, timeout=120)
-            self.conn.request(method, path, body=data, headers=headers)
-            response = self.conn.getresponse()
-            payload = response.read() if read else b""
-            status = response.status
-            if response.getheader("connection", "").lower() == "close":
-                self.conn.close()
+        # A kept-alive connection idle past the server's header timeout is closed by the server
+        # (as documented); one such stale connection is reopened once, like any HTTP client does.
+        for attempt in range(2):
+            reused = self.conn is not None
+            try:
+                if self.conn is None:
+                    self.conn = http.client.HTTPConnection(self.host, self.port, timeout=120)
+                self.conn.request(method, path, body=data, headers=headers)
+                response = self.conn.getresponse()
+                payload = response.read() if read else b""
+                status = response.status
+                if response.getheader("connection", "").lower() == "close":
+                    self.conn.close()
+                    self.conn = None
+                break
+            except (OSError, http.client.HTTPException) as error:
                 self.conn = None
-        except (OSError, http.client.HTTPException) as error:
-            self.conn = None
-            payload, status = str(error).encode(), f"error: {type(error).__name__}"
+                payload, status = str(error).encode(), f"error: {type(error).__name__}"
+                if not (reused and attempt == 0):
+                    break
         self.stats.record(kind, time.perf_counter() - started, status)
         return status, payload
 

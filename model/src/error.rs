@@ -93,6 +93,11 @@ impl InvalidInput {
         }])
     }
 
+    /// The pointers of the fields at fault, in order.
+    pub fn pointers(&self) -> Vec<&str> {
+        self.errors.iter().map(|e| e.pointer.as_str()).collect()
+    }
+
     pub fn errors(&self) -> &[FieldError] {
         &self.errors
     }

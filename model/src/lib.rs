@@ -15,6 +15,7 @@
 //! and confidence intervals are [`stats`].
 
 pub mod arc;
+pub mod calibration;
 pub mod error;
 pub mod impact;
 pub mod life;

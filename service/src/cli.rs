@@ -8,6 +8,7 @@ use crate::compute::PoolError;
 use crate::domain::draw_seed;
 use crate::progress::Progress;
 use crate::telemetry::{self, LogFormat};
+use bouncewear_model::calibration::{CalibrationSpec, calibrate};
 use bouncewear_model::montecarlo::{Job, run_job};
 use bouncewear_model::{Fidelity, InvalidInput, Scenario, simulate};
 use clap::{Parser, Subcommand, ValueEnum};
@@ -43,6 +44,14 @@ enum Command {
         #[arg(long, value_enum, default_value_t = FidelityArg::Exact)]
         fidelity: FidelityArg,
         /// Scenario JSON file; `-` or nothing reads standard input.
+        #[arg(default_value = "-")]
+        file: PathBuf,
+    },
+    /// Fit scenario parameters to measured operations and print the estimates, the fitted
+    /// scenario and the residuals as JSON (docs/model.md "Calibration").
+    Calibrate {
+        /// Calibration JSON file: `{"scenario", "fit": ["material.kappa", ...], "observations":
+        /// [...]}`; `-` or nothing reads standard input.
         #[arg(default_value = "-")]
         file: PathBuf,
     },
@@ -186,6 +195,10 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::Simulate { fidelity, file } => {
             let scenario = Scenario::from_json(&read_input(&file)?)?;
             print_json(&simulate(&scenario, fidelity.into()))
+        }
+        Command::Calibrate { file } => {
+            let spec = CalibrationSpec::from_json(&read_input(&file)?)?;
+            print_json(&calibrate(&spec)?)
         }
         Command::Run {
             file,

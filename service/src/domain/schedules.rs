@@ -556,13 +556,8 @@ mod tests {
             utc("2026-11-22T08:00:00Z"),
         )
         .unwrap_err();
-        let pointers: Vec<&str> = invalid
-            .errors()
-            .iter()
-            .map(|e| e.pointer.as_str())
-            .collect();
         assert_eq!(
-            pointers,
+            invalid.pointers(),
             ["/name", "/cron", "/template/devices", "/statistics/0"]
         );
     }
