@@ -22,8 +22,9 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use std::collections::BTreeMap;
 
-/// The most observations one calibration may carry.
-pub const MAX_OBSERVATIONS: usize = 10_000;
+/// The most observations one calibration may carry: a fit simulates each of them `2k + 1` times
+/// per iteration for `k` parameters, so this bounds its time (well under a second).
+pub const MAX_OBSERVATIONS: usize = 1000;
 /// The most parameters one calibration may fit.
 pub const MAX_PARAMETERS: usize = 8;
 
@@ -209,13 +210,23 @@ impl Problem {
         for (i, observation) in spec.observations.iter().enumerate() {
             let at = root.child("observations").child(i);
             let mut measured = observation.bounce_count.is_some();
-            if let Some(v) = observation.impact_velocity_m_s
-                && !(v.is_finite() && v > 0.0)
-            {
-                errors.push(FieldError {
-                    pointer: at.child("impact_velocity_m_s").to_string(),
-                    detail: format!("must be a positive number, got {v}"),
-                });
+            if let Some(v) = observation.impact_velocity_m_s {
+                // The scenario's rule for an impact velocity, at the observation's place.
+                let mut with_velocity = spec.scenario.clone();
+                with_velocity.mechanism.impact_velocity_m_s = Some(v);
+                if let Err(invalid) = Scenario::new(with_velocity, &root) {
+                    let velocity = "/mechanism/impact_velocity_m_s";
+                    errors.extend(
+                        invalid
+                            .errors()
+                            .iter()
+                            .filter(|e| e.pointer == velocity)
+                            .map(|e| FieldError {
+                                pointer: at.child("impact_velocity_m_s").to_string(),
+                                detail: e.detail.clone(),
+                            }),
+                    );
+                }
             }
             for quantity in FITTED {
                 if let Some(value) = observation.measured(quantity) {
@@ -342,7 +353,7 @@ impl Problem {
 
     /// Minimises the sum of squared residuals from `start`; the optimum and the iterations taken.
     fn levenberg_marquardt(&self, start: Vec<f64>) -> Result<(Vec<f64>, u32), InvalidInput> {
-        const MAX_ITERATIONS: u32 = 200;
+        const MAX_ITERATIONS: u32 = 100;
         let invalid_start = || {
             InvalidInput::single(
                 &Pointer::root().child("scenario"),
@@ -695,6 +706,7 @@ mod tests {
                 Observation::default(),
                 Observation {
                     first_bounce_s: Some(-1.0),
+                    impact_velocity_m_s: Some(-0.2),
                     ..Observation::default()
                 },
             ],
@@ -706,6 +718,7 @@ mod tests {
                 "/fit/0",
                 "/fit/1",
                 "/observations/0",
+                "/observations/1/impact_velocity_m_s",
                 "/observations/1/first_bounce_s"
             ]
         );
