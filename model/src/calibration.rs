@@ -48,13 +48,19 @@ pub struct CalibrationSpec {
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Observation {
-    /// The operation's impact velocity; without it, the scenario's.
+    /// The operation's measured impact velocity, m/s; without it, the scenario's.
     pub impact_velocity_m_s: Option<f64>,
+    /// Measured duration of the first bounce, s.
     pub first_bounce_s: Option<f64>,
+    /// Measured time from the first touch to the last, s.
     pub total_bounce_s: Option<f64>,
+    /// Measured number of bounces (reported against, not fitted: it steps).
     pub bounce_count: Option<u32>,
+    /// Coefficient of restitution of the first impact, from a velocity measurement.
     pub e1: Option<f64>,
+    /// Measured peak contact force of the first impact, N.
     pub peak_force_n: Option<f64>,
+    /// Measured arc energy of the operation, J.
     pub arc_energy_j: Option<f64>,
 }
 
@@ -85,6 +91,7 @@ impl Observation {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Estimate {
+    /// The least-squares estimate.
     pub value: f64,
     /// 95 % interval, `[lower, upper]`.
     pub ci95: [f64; 2],
@@ -106,6 +113,7 @@ pub struct Residuals {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Calibration {
+    /// By parameter, as named in `fit`.
     pub estimates: BTreeMap<String, Estimate>,
     /// The starting scenario with the estimates in place: ready to be a job's scenario.
     #[cfg_attr(feature = "openapi", schema(value_type = Object))]
