@@ -136,20 +136,137 @@ pub fn from_json<T: DeserializeOwned>(
     text: &str,
     array_fields: &[&str],
 ) -> Result<T, InvalidInput> {
-    let value: serde_json::Value =
-        serde_json::from_str(text).map_err(|error| invalid_from_serde(Pointer::root(), &error))?;
-    reject_misplaced_arrays(&value, &Pointer::root(), array_fields)?;
+    let value = read_strict(text)?;
+    check_shape(&value, &Pointer::root(), array_fields)?;
     serde_path_to_error::deserialize(value).map_err(|error| {
         let pointer = path_to_pointer(error.path());
         invalid_from_serde(pointer, error.inner())
     })
 }
 
-fn reject_misplaced_arrays(
+/// Reads JSON text into a value, naming by pointer what the text itself gets wrong where a value
+/// is at fault: a number beyond f64 (`1e400`) and a member given twice in one object (which
+/// serde_json would silently resolve to the last). Other syntax errors name the whole document.
+fn read_strict(text: &str) -> Result<serde_json::Value, InvalidInput> {
+    let mut reader = serde_json::Deserializer::from_str(text);
+    let Strict(value) = serde_path_to_error::deserialize(&mut reader).map_err(|error| {
+        let (pointer, inner) = (path_to_pointer(error.path()), error.inner());
+        // serde_json calls an overflowing number a syntax error, but the text is JSON: only the
+        // value cannot be represented, so it breaks a rule at its field.
+        if inner.to_string().starts_with("number out of range") {
+            InvalidInput::single(
+                &pointer,
+                format!("{inner}: a number's magnitude must stay below 1.8e308"),
+            )
+        } else {
+            invalid_from_serde(pointer, inner)
+        }
+    })?;
+    reader
+        .end()
+        .map_err(|error| invalid_from_serde(Pointer::root(), &error))?;
+    Ok(value)
+}
+
+/// A JSON value whose objects name each member once.
+struct Strict(serde_json::Value);
+
+impl<'de> serde::Deserialize<'de> for Strict {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        deserializer.deserialize_any(StrictVisitor).map(Strict)
+    }
+}
+
+struct StrictVisitor;
+
+impl<'de> serde::de::Visitor<'de> for StrictVisitor {
+    type Value = serde_json::Value;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("a JSON value")
+    }
+
+    fn visit_bool<E>(self, value: bool) -> Result<Self::Value, E> {
+        Ok(value.into())
+    }
+
+    fn visit_i64<E>(self, value: i64) -> Result<Self::Value, E> {
+        Ok(value.into())
+    }
+
+    fn visit_u64<E>(self, value: u64) -> Result<Self::Value, E> {
+        Ok(value.into())
+    }
+
+    fn visit_f64<E>(self, value: f64) -> Result<Self::Value, E> {
+        Ok(value.into())
+    }
+
+    fn visit_str<E>(self, value: &str) -> Result<Self::Value, E> {
+        Ok(value.into())
+    }
+
+    fn visit_string<E>(self, value: String) -> Result<Self::Value, E> {
+        Ok(value.into())
+    }
+
+    fn visit_unit<E>(self) -> Result<Self::Value, E> {
+        Ok(serde_json::Value::Null)
+    }
+
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
+        let mut items = Vec::new();
+        while let Some(Strict(item)) = seq.next_element()? {
+            items.push(item);
+        }
+        Ok(items.into())
+    }
+
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+        let mut members = serde_json::Map::new();
+        while let Some(name) = map.next_key::<String>()? {
+            if members.contains_key(&name) {
+                // Failing as the member's value puts its name in the error's path.
+                return map.next_value_seed(GivenTwice);
+            }
+            let Strict(value) = map.next_value()?;
+            members.insert(name, value);
+        }
+        Ok(members.into())
+    }
+}
+
+/// The value of a member its object already has: refused.
+struct GivenTwice;
+
+impl<'de> serde::de::DeserializeSeed<'de> for GivenTwice {
+    type Value = serde_json::Value;
+
+    fn deserialize<D: serde::Deserializer<'de>>(self, _: D) -> Result<Self::Value, D::Error> {
+        Err(serde::de::Error::custom(
+            "is given twice in its object; give each member once",
+        ))
+    }
+}
+
+/// The most characters any text in a document may have: a name, a label, a cron expression, a
+/// metric's name, and the name of any member. Longer text is never a mistake worth storing.
+pub const MAX_TEXT_CHARS: usize = 200;
+
+/// The rules every document's shape obeys before its types are read: arrays only where the
+/// document has lists (`array_fields`), and no text longer than [`MAX_TEXT_CHARS`].
+fn check_shape(
     value: &serde_json::Value,
     at: &Pointer,
     array_fields: &[&str],
 ) -> Result<(), InvalidInput> {
+    let too_long = |text: &str| text.chars().count() > MAX_TEXT_CHARS;
+    let length_error = |at: &Pointer, what: &str| {
+        InvalidInput::single(
+            at,
+            format!("{what} must be at most {MAX_TEXT_CHARS} characters"),
+        )
+    };
     match value {
         serde_json::Value::Array(items) => {
             if !array_fields.contains(&at.as_str()) {
@@ -161,11 +278,16 @@ fn reject_misplaced_arrays(
             items
                 .iter()
                 .enumerate()
-                .try_for_each(|(i, item)| reject_misplaced_arrays(item, &at.child(i), array_fields))
+                .try_for_each(|(i, item)| check_shape(item, &at.child(i), array_fields))
         }
         serde_json::Value::Object(members) => members.iter().try_for_each(|(name, member)| {
-            reject_misplaced_arrays(member, &at.child(name), array_fields)
+            let at = at.child(name);
+            if too_long(name) {
+                return Err(length_error(&at, "a member's name"));
+            }
+            check_shape(member, &at, array_fields)
         }),
+        serde_json::Value::String(text) if too_long(text) => Err(length_error(at, "text")),
         _ => Ok(()),
     }
 }
@@ -200,6 +322,39 @@ mod tests {
             Pointer::root().child("a/b").child("m~n").child(3).as_str(),
             "/a~1b/m~0n/3"
         );
+    }
+
+    fn pointers(text: &str) -> Vec<String> {
+        let err = from_json::<serde_json::Value>(text, &[]).unwrap_err();
+        assert_eq!(err.kind(), InputErrorKind::Rule, "{err}");
+        err.errors().iter().map(|e| e.pointer.clone()).collect()
+    }
+
+    #[test]
+    fn a_number_beyond_f64_breaks_a_rule_at_its_field() {
+        assert_eq!(pointers(r#"{"a": {"b": 1e400}}"#), ["/a/b"]);
+        assert_eq!(pointers(r#"{"a": -1e400}"#), ["/a"]);
+    }
+
+    #[test]
+    fn a_member_given_twice_is_named() {
+        assert_eq!(pointers(r#"{"a": {"b": 1, "b": 2}}"#), ["/a/b"]);
+        assert_eq!(pointers(r#"{"a": 1, "c": {}, "a": 1}"#), ["/a"]);
+    }
+
+    #[test]
+    fn text_longer_than_the_limit_is_named_as_a_value_or_a_member() {
+        let long = "x".repeat(MAX_TEXT_CHARS + 1);
+        assert_eq!(
+            pointers(&format!(r#"{{"a": {{"b": "{long}"}}}}"#)),
+            ["/a/b"]
+        );
+        assert_eq!(
+            pointers(&format!(r#"{{"a": {{"{long}": 1}}}}"#)),
+            [format!("/a/{long}")]
+        );
+        let longest = "é".repeat(MAX_TEXT_CHARS);
+        assert!(from_json::<serde_json::Value>(&format!(r#"{{"a": "{longest}"}}"#), &[]).is_ok());
     }
 
     #[test]

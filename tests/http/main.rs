@@ -10,4 +10,5 @@ mod limits;
 mod postgres;
 mod schedules;
 mod simulate;
+mod strict;
 mod system;

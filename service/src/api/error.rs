@@ -53,7 +53,7 @@ pub enum ApiError {
     Conflict(String),
     #[error("the request body is larger than {0} bytes")]
     TooLarge(usize),
-    #[error("the request body must be application/json")]
+    #[error("the request body must be application/json in UTF-8 (no charset, or charset=utf-8)")]
     UnsupportedMediaType,
     #[error(
         "the queue is full: it holds at most {} queued jobs in all and {} per API key; retry later",
@@ -233,7 +233,7 @@ pub mod responses {
         TooLarge(Problem),
         #[response(
             status = 415,
-            description = "Body is not JSON",
+            description = "Body is not `application/json` in UTF-8 (another type, or a charset other than utf-8)",
             content_type = "application/problem+json"
         )]
         NotJson(Problem),

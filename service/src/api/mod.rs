@@ -232,9 +232,25 @@ pub fn replayed(mut response: Response) -> Response {
     response
 }
 
-/// A JSON request body as text: `application/json` (415 otherwise), at most `max_body_bytes` (413),
-/// whole within the body timeout (408), UTF-8 (400). Parsing is left to the model, whose errors name the field.
+/// A JSON request body as text: `application/json` in UTF-8 (415 for another type or charset), at
+/// most `max_body_bytes` (413), whole within the body timeout (408), UTF-8 indeed (400). Parsing is
+/// left to the model, whose errors name the field.
 pub struct JsonText(pub String);
+
+/// Whether a `Content-Type` says JSON in UTF-8: `application/json` or `application/*+json`, with
+/// no `charset` parameter or `charset=utf-8` (JSON is UTF-8, RFC 8259 section 8.1).
+fn is_utf8_json(content_type: &str) -> bool {
+    let mut parts = content_type.split(';');
+    let essence = parts.next().unwrap_or("").trim().to_ascii_lowercase();
+    let json = essence == "application/json"
+        || (essence.starts_with("application/") && essence.ends_with("+json"));
+    json && parts.all(|parameter| match parameter.split_once('=') {
+        Some((name, value)) if name.trim().eq_ignore_ascii_case("charset") => {
+            value.trim().trim_matches('"').eq_ignore_ascii_case("utf-8")
+        }
+        _ => true,
+    })
+}
 
 impl FromRequest<AppState> for JsonText {
     type Rejection = ApiError;
@@ -245,15 +261,7 @@ impl FromRequest<AppState> for JsonText {
             .get(header::CONTENT_TYPE)
             .and_then(|v| v.to_str().ok())
             .unwrap_or("");
-        let essence = content_type
-            .split(';')
-            .next()
-            .unwrap_or("")
-            .trim()
-            .to_ascii_lowercase();
-        if !(essence == "application/json"
-            || (essence.starts_with("application/") && essence.ends_with("+json")))
-        {
+        if !is_utf8_json(content_type) {
             return Err(ApiError::UnsupportedMediaType);
         }
         let limit = state.config.max_body_bytes;

@@ -101,10 +101,11 @@ impl ValidSchedule {
         )?;
         let root = Pointer::root();
         let mut errors = Vec::new();
-        if spec.name.trim().is_empty() || spec.name.len() > 200 {
+        // Longer text was refused before (MAX_TEXT_CHARS); a name must also say something.
+        if spec.name.trim().is_empty() {
             errors.push(FieldError {
                 pointer: "/name".into(),
-                detail: "must be 1 to 200 characters".into(),
+                detail: "must have a character other than white space".into(),
             });
         }
         let time_zone = spec.time_zone.unwrap_or_else(|| "UTC".to_owned());

@@ -1,0 +1,130 @@
+//! Input that names its field: numbers beyond f64, members given twice and text over its length
+//! limit are 422 with the JSON pointer at fault; a charset other than UTF-8 is 415.
+
+use crate::support::app::{Service, TestApp};
+use crate::support::client::{agent, assert_problem, post, reply};
+use crate::support::temp_db;
+
+/// The pointers of a 422 problem's `errors`.
+fn rejected_pointers(server: &TestApp, path: &str, body: &str) -> Vec<String> {
+    let problem = assert_problem(&post(&server.url(path), body, None), 422);
+    problem["errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["pointer"].as_str().unwrap().to_owned())
+        .collect()
+}
+
+const SCHEDULE: &str =
+    r#"{"name": "nightly", "cron": "0 3 * * *", "template": {"devices": 2, "operations": 2}}"#;
+
+#[test]
+fn numbers_beyond_f64_name_their_pointer() {
+    let server = TestApp::start(&temp_db("strict-range"), &[]);
+    for (path, body, pointer) in [
+        (
+            "/v1/simulate",
+            r#"{"circuit": {"current_a": 1e400}}"#,
+            "/circuit/current_a",
+        ),
+        (
+            "/v1/jobs",
+            r#"{"scenario": {"mechanism": {"drop_height_m": -1e400}}}"#,
+            "/scenario/mechanism/drop_height_m",
+        ),
+        (
+            "/v1/jobs",
+            r#"{"devices": 2, "operations": 2, "limits": {"e1": 1e999}}"#,
+            "/limits/e1",
+        ),
+        ("/v1/jobs", r#"{"seed": 18446744073709551616}"#, "/seed"),
+        ("/v1/jobs", r#"{"seed": -1}"#, "/seed"),
+        (
+            "/v1/simulate",
+            r#"{"losses": {"max_bounces": 4294967296}}"#,
+            "/losses/max_bounces",
+        ),
+    ] {
+        assert_eq!(
+            rejected_pointers(&server, path, body),
+            [pointer],
+            "{path} {body}"
+        );
+    }
+}
+
+#[test]
+fn a_member_given_twice_is_rejected_naming_it() {
+    let server = TestApp::start(&temp_db("strict-duplicate"), &[]);
+    assert_eq!(
+        rejected_pointers(&server, "/v1/jobs", r#"{"devices": 2, "devices": 3}"#),
+        ["/devices"]
+    );
+    assert_eq!(
+        rejected_pointers(
+            &server,
+            "/v1/simulate",
+            r#"{"circuit": {"current_a": 1, "supply_voltage_v": 2, "current_a": 1}}"#
+        ),
+        ["/circuit/current_a"]
+    );
+    let twice = SCHEDULE.replacen(r#""devices": 2"#, r#""devices": 2, "devices": 2"#, 1);
+    assert_eq!(
+        rejected_pointers(&server, "/v1/schedules", &twice),
+        ["/template/devices"]
+    );
+}
+
+#[test]
+fn text_over_its_length_limit_is_rejected_naming_it() {
+    let server = TestApp::start(&temp_db("strict-length"), &[]);
+    let long = "x".repeat(201);
+    let job = format!(r#"{{"devices": 2, "operations": 2, "name": "{long}"}}"#);
+    assert_eq!(rejected_pointers(&server, "/v1/jobs", &job), ["/name"]);
+    let schedule = SCHEDULE.replace("nightly", &long);
+    assert_eq!(
+        rejected_pointers(&server, "/v1/schedules", &schedule),
+        ["/name"]
+    );
+    let metric = format!(r#"{{"devices": 2, "operations": 2, "metrics": ["{long}"]}}"#);
+    assert_eq!(
+        rejected_pointers(&server, "/v1/jobs", &metric),
+        ["/metrics/0"]
+    );
+    let key = format!(r#"{{"devices": 2, "operations": 2, "limits": {{"{long}": 1}}}}"#);
+    assert_eq!(
+        rejected_pointers(&server, "/v1/jobs", &key),
+        [format!("/limits/{long}")]
+    );
+    // The limit counts characters, not bytes: 200 two-byte characters fit.
+    let wide = SCHEDULE.replace("nightly", &"é".repeat(200));
+    assert_eq!(post(&server.url("/v1/schedules"), &wide, None).status, 201);
+}
+
+#[test]
+fn a_charset_other_than_utf8_is_415_and_utf8_is_accepted() {
+    let server = TestApp::start(&temp_db("strict-charset"), &[]);
+    let send = |content_type: &str| {
+        reply(
+            agent()
+                .post(&server.url("/v1/simulate"))
+                .header("content-type", content_type)
+                .send("{}"),
+        )
+    };
+    for refused in [
+        "application/json; charset=iso-8859-1",
+        "application/json; charset=utf-16",
+        "application/json;charset=\"latin1\"",
+    ] {
+        assert_problem(&send(refused), 415);
+    }
+    for accepted in [
+        "application/json",
+        "application/json; charset=utf-8",
+        "application/json;charset=\"UTF-8\"",
+    ] {
+        assert_eq!(send(accepted).status, 200, "{accepted}");
+    }
+}
