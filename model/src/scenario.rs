@@ -21,9 +21,13 @@ pub const MAX_BOUNCES_LIMIT: u32 = 10_000;
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ScenarioSpec {
+    /// The moving contact's mechanism (docs/model.md section 1); omitted fields take the paper's rig.
     pub mechanism: MechanismSpec,
+    /// The contact material and its wear (sections 2-6); omitted fields take AgNi 80/20.
     pub material: MaterialSpec,
+    /// The switched circuit; the default (0 V, 0 A) never arcs.
     pub circuit: CircuitSpec,
+    /// Energy lost per impact and when a bounce sequence ends (section 7).
     pub losses: LossesSpec,
 }
 
@@ -31,11 +35,17 @@ pub struct ScenarioSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MechanismSpec {
+    /// Moment of inertia of the moving arm about its pivot, kg m² (positive).
     pub inertia_kg_m2: f64,
+    /// Stiffness of the contact spring, N/m (non-negative).
     pub spring_stiffness_n_per_m: f64,
+    /// Distance from the pivot to the spring, m (positive).
     pub spring_arm_m: f64,
+    /// Distance from the pivot to the contact, m (positive).
     pub contact_arm_m: f64,
+    /// Contact force once closed, N (non-negative; positive when the spring stiffness is 0).
     pub static_force_n: f64,
+    /// Travel of the contact before first touch, m (non-negative); sets the impact velocity by eq. 2.
     pub drop_height_m: f64,
     /// Overrides eq. 2 when given.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -46,21 +56,34 @@ pub struct MechanismSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MaterialSpec {
+    /// Young's modulus of the contact material, Pa (positive).
     pub youngs_modulus_pa: f64,
+    /// Dynamic yield pressure `p0` of a new surface, Pa (positive).
     pub dynamic_yield_pressure_pa: f64,
+    /// Radius of curvature `r0` of a new contact, m (positive, at least `worn_radius_m`).
     pub contact_radius_m: f64,
     /// Overrides eq. 8 at the nominal radius and pressure when given.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub kappa: Option<f64>,
+    /// Radius the surface roughens towards, `r_inf`, m (positive, at most `contact_radius_m`).
     pub worn_radius_m: f64,
+    /// Arc energy that closes `1 - 1/e` of the radius' fall, J (positive).
     pub roughening_energy_j: f64,
+    /// Mass eroded per joule of arc energy, kg/J (non-negative).
     pub erosion_kg_per_j: f64,
+    /// Density of the contact material, kg/m³ (positive).
     pub density_kg_m3: f64,
+    /// Minimum arc voltage: below it no arc burns, V (non-negative).
     pub min_arc_voltage_v: f64,
+    /// Minimum arc current: below it no arc burns, A (non-negative).
     pub min_arc_current_a: f64,
+    /// Field strength at which the gap breaks down before touch (pre-arc), V/m (positive).
     pub breakdown_field_v_per_m: f64,
+    /// Arc energy over which the pre-arc softens the surface, J (positive).
     pub softening_energy_j: f64,
+    /// Restitution after an arcing bounce (section 5).
     pub arc_restitution: ArcRestitutionSpec,
+    /// How the surface changes with arc energy over an endurance test (section 6).
     pub wear_law: WearLawSpec,
     /// The share of the eroded mass the anode loses (the cathode loses the rest); the anode/cathode
     /// split of the eroded mass is reported only when it is given (docs/model.md section 6).
@@ -73,8 +96,11 @@ pub struct MaterialSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ArcRestitutionSpec {
+    /// `paper` (eq. 16 whenever an arc burns) or `continuous` (scaled with the arc current).
     pub law: ArcRestitutionLawKind,
+    /// Coefficient `a` of eq. 16 (finite, magnitude at most 1e30).
     pub a: f64,
+    /// Coefficient `b` of eq. 16, s/m (finite, magnitude at most 1e30).
     pub b_s_per_m: f64,
     /// The circuit current at which `a` and `b_s_per_m` were fitted (the paper: 15 A).
     pub calibration_current_a: f64,
@@ -98,6 +124,7 @@ pub enum ArcRestitutionLawKind {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct WearLawSpec {
+    /// `roughening`, `constant` or `roughening_and_softening`.
     pub law: WearLawKind,
     /// `roughening_and_softening`: the dynamic yield pressure the arc-heated surface tends to.
     pub worn_pressure_pa: f64,
@@ -123,7 +150,9 @@ pub enum WearLawKind {
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CircuitSpec {
+    /// Supply voltage of the switched circuit, V (non-negative).
     pub supply_voltage_v: f64,
+    /// Circuit current once closed, A (non-negative).
     pub current_a: f64,
 }
 
@@ -131,8 +160,11 @@ pub struct CircuitSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LossesSpec {
+    /// Energy lost at each impact besides restitution, J (non-negative).
     pub impact_energy_loss_j: f64,
+    /// Smallest peak gap that counts as a bounce, m (non-negative).
     pub min_separation_m: f64,
+    /// Most bounces simulated per operation, 1 to 10000; longer sequences are cut and counted.
     pub max_bounces: u32,
 }
 

@@ -368,7 +368,7 @@ fn bad_requests_get_the_right_4xx_problem() {
             )),
             None,
         ),
-        400,
+        404,
     );
     let cancelled = server.submit(&json!({"devices": 1000, "operations": 1000, "seed": 1}));
     delete(&server.url(&format!("/v1/jobs/{cancelled}")));

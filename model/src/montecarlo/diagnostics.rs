@@ -35,7 +35,9 @@ pub struct Counts {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Diagnostic {
+    /// JSON pointer to the field of the job the warning concerns.
     pub pointer: String,
+    /// What to know about it.
     pub detail: String,
 }
 

@@ -19,32 +19,52 @@ pub const MAX_REJECTIONS: u32 = 1000;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum DistributionSpec {
+    /// Always `value`.
     Fixed {
+        /// The one value.
         value: f64,
     },
+    /// A normal, truncated to `[min, max]`; the window must keep at least 5 % of its mass.
     Normal {
+        /// Mean before truncation.
         mean: f64,
+        /// Standard deviation before truncation (positive).
         sd: f64,
+        /// Lower truncation bound: required, and valid for the parameter.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         min: Option<f64>,
+        /// Upper truncation bound, above `min` (default: none).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         max: Option<f64>,
     },
+    /// A lognormal (for parameters that may take any positive value).
     Lognormal {
+        /// Median (positive).
         median: f64,
+        /// Standard deviation of the logarithm (positive).
         sigma: f64,
     },
+    /// Uniform on `[min, max]`.
     Uniform {
+        /// Lower bound, valid for the parameter.
         min: f64,
+        /// Upper bound, above `min`.
         max: f64,
     },
+    /// Triangular on `[min, max]` with its peak at `mode`.
     Triangular {
+        /// Lower bound, valid for the parameter.
         min: f64,
+        /// The most likely value, from `min` to `max`.
         mode: f64,
+        /// Upper bound, above `min`.
         max: f64,
     },
+    /// A two-parameter Weibull (for parameters that may take any positive value).
     Weibull {
+        /// Scale (positive).
         scale: f64,
+        /// Shape (positive).
         shape: f64,
     },
 }

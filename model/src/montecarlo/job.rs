@@ -20,30 +20,42 @@ pub const MAX_OPERATIONS: u64 = 100_000_000;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct JobSpec {
+    /// A label for the job, shown in lists and the dashboard (at most 200 characters).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub name: Option<String>,
+    /// The scenario every operation starts from (docs/contract.md "Scenario"); omitted fields take the paper's rig.
     #[serde(default)]
     pub scenario: ScenarioSpec,
+    /// `exact` (default) or `closed_form` evaluation of the model.
     #[serde(default)]
     pub fidelity: Fidelity,
+    /// Devices simulated, 1 to 100000000; devices x operations must fit the server's job size limit.
     #[serde(default = "default_count")]
     #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 100_000_000))]
     pub devices: u64,
+    /// Make operations per device, 1 to 100000000.
     #[serde(default = "default_count")]
     #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 100_000_000))]
     pub operations: u64,
+    /// Operations per bin of the operation metrics, 1 to `operations`, giving at most 1000 bins (default `operations / 10`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bin_operations: Option<u64>,
+    /// Seed of the random streams; the same seed gives the same Result bit for bit (drawn at submission when omitted).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
+    /// `random` (default) or `lhs` (Latin hypercube) draws of device-level scatter.
     #[serde(default)]
     pub sampler: SamplerKind,
+    /// Scenario values that vary between devices or operations, each parameter at most once.
     #[serde(default)]
     pub scatter: Vec<ScatterSpec>,
+    /// Metrics to summarise (default: all); at least one, each once. Anode/cathode masses need `scenario.material.anode_erosion_fraction`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub metrics: Option<Vec<String>>,
+    /// Exceedance limits by metric name: the Result reports the probability of exceeding each. Each metric must be among the job's metrics.
     #[serde(default)]
     pub limits: BTreeMap<String, f64>,
+    /// A precision target: more device batches until it is met, up to `max_devices`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub precision: Option<PrecisionSpec>,
     /// Failure criteria: a device fails at the first operation where any is met (life analysis).
@@ -92,8 +104,11 @@ pub enum SamplerKind {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScatterSpec {
+    /// The scenario value that varies.
     pub parameter: Parameter,
+    /// `device`: drawn once per device; `operation`: drawn again for every operation.
     pub per: Per,
+    /// The distribution it is drawn from; every value it can give must be valid for the parameter.
     pub distribution: DistributionSpec,
 }
 
@@ -133,10 +148,14 @@ pub enum Per {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PrecisionSpec {
+    /// One of the job's operation metrics.
     pub metric: String,
+    /// `mean` or a quantile `p01` ... `p99` (default `p95`).
     #[serde(default = "default_statistic")]
     pub statistic: String,
+    /// Target 95 % CI half-width relative to the statistic's value, above 0 and below 1.
     pub relative_half_width: f64,
+    /// Most devices to run, from `devices` to 100000000.
     pub max_devices: u64,
 }
 
@@ -149,8 +168,10 @@ fn default_statistic() -> String {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CriterionSpec {
+    /// The device fails when the metric rises strictly above this value.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub above: Option<f64>,
+    /// The device fails when the metric falls strictly below this value.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub below: Option<f64>,
 }

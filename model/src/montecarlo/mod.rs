@@ -38,7 +38,9 @@ pub const RANDOM_CRATES: [(&str, &str); 3] = [
 pub struct Bin {
     #[serde(flatten)]
     pub summary: Summary,
+    /// First operation of the bin (0-based).
     pub op_start: u64,
+    /// End of the bin, exclusive.
     pub op_end: u64,
 }
 
@@ -46,18 +48,26 @@ pub struct Bin {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PrecisionReport {
+    /// The operation metric of the target.
     pub metric: String,
+    /// The statistic of the target.
     pub statistic: String,
+    /// The half-width asked for, relative to the value.
     pub target_relative_half_width: f64,
+    /// The half-width reached, relative to the value.
     pub achieved_relative_half_width: f64,
+    /// Whether the target was met within `max_devices`.
     pub met: bool,
+    /// Devices that ran.
     pub devices: u64,
 }
 
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Timing {
+    /// Wall-clock time the run took, s.
     pub wall_s: f64,
+    /// Operations simulated per second of wall-clock time.
     pub operations_per_s: f64,
 }
 
@@ -67,8 +77,11 @@ pub struct Timing {
 pub struct JobResult {
     /// The job with every default filled in, its seed, the generator and crate versions.
     pub job: ResolvedJob,
+    /// Per operation metric, its bins in operation order.
     pub operations: BTreeMap<String, Vec<Bin>>,
+    /// Per device metric, its summary over devices at the end of the test.
     pub devices: BTreeMap<String, Summary>,
+    /// With a precision target: whether it was met.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub precision: Option<PrecisionReport>,
     /// With failure criteria: the life analysis of the devices' operations to failure.
@@ -80,6 +93,7 @@ pub struct JobResult {
     /// bounce sequences cut at `max_bounces`, inputs outside the paper's measurements).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub diagnostics: Vec<diagnostics::Diagnostic>,
+    /// How long the run took.
     pub timing: Timing,
 }
 
@@ -164,9 +178,13 @@ impl Serialize for ResolvedJob {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LifeReport {
+    /// The failure criteria, by metric.
     pub criteria: BTreeMap<String, job::CriterionSpec>,
+    /// Devices that failed within the test.
     pub failures: u64,
+    /// Devices that survived every operation (right-censored).
     pub censored: u64,
+    /// Weibull fit (maximum likelihood with censoring, Fisher-matrix bounds), B1 and B10 life, Kaplan-Meier reliability.
     #[cfg_attr(feature = "openapi", schema(value_type = Object))]
     pub analysis: crate::life::LifeAnalysis,
     /// Each device's life, in device order, as far as the groups kept them listed (all of them

@@ -19,8 +19,11 @@ pub struct Problem {
     /// Always `about:blank`: the status says what kind of problem it is.
     #[serde(rename = "type")]
     pub kind: &'static str,
+    /// The status' reason phrase.
     pub title: String,
+    /// The HTTP status code.
     pub status: u16,
+    /// What went wrong, in words.
     pub detail: String,
     /// For invalid input: each field at fault, as a JSON pointer into the request body.
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -29,7 +32,9 @@ pub struct Problem {
 
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ProblemField {
+    /// JSON pointer to the field in the request body (`""` is the whole document).
     pub pointer: String,
+    /// The rule it broke, with the value.
     pub detail: String,
 }
 
@@ -301,8 +306,9 @@ pub mod responses {
     #[derive(IntoResponses)]
     #[response(
         status = 429,
-        description = "The queue is full; see Retry-After",
-        content_type = "application/problem+json"
+        description = "The queue is full; retry after Retry-After seconds",
+        content_type = "application/problem+json",
+        headers(("Retry-After" = u32, description = "Seconds to wait before retrying"))
     )]
     pub struct QueueFull(pub Problem);
 }

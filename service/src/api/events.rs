@@ -126,6 +126,11 @@ impl Follower {
 /// Server-Sent Events for all of your queued and running jobs, in one stream: first a `progress`
 /// event for each, then one for every change, and a `status` event when one ends. Jobs submitted
 /// later join the stream. Events carry the job's `id`.
+///
+/// Open it once for a page that shows many jobs: browsers hold at most six connections per host.
+/// Each `progress` event's data is `{id, status, operations_done, operations_total}`; a `status`
+/// event's data is the JobResource. The stream stays open until the client closes it or the server
+/// shuts down; with API keys it shows only your jobs.
 #[utoipa::path(
     get, path = "/v1/events", tag = "jobs",
     responses(

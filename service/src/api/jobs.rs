@@ -42,14 +42,25 @@ pub fn router() -> OpenApiRouter<AppState> {
 /// A job as the API shows it.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct JobResource {
+    /// The job's id (a UUID).
+    #[schema(format = "uuid")]
     pub id: String,
+    /// The job's `name`, if it had one.
     pub name: Option<String>,
+    /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
     pub status: JobStatus,
+    /// Operations done of the planned total.
     pub progress: Progress,
     /// RFC 3339.
+    #[schema(format = DateTime)]
     pub created_at: String,
+    /// RFC 3339; when a worker first started it.
+    #[schema(format = DateTime)]
     pub started_at: Option<String>,
+    /// RFC 3339; when it ended.
+    #[schema(format = DateTime)]
     pub finished_at: Option<String>,
+    /// Why it failed.
     pub error: Option<String>,
     /// The seed the job runs with (drawn at submission when the job did not give one).
     pub seed: u64,
@@ -57,20 +68,26 @@ pub struct JobResource {
     /// succeeded its result, distributions and listed device lives (database overhead aside).
     /// `DELETE` frees them.
     pub stored_bytes: u64,
+    /// URLs of the job, its result and its event stream.
     pub links: Links,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, ToSchema)]
 pub struct Progress {
+    /// Operations simulated so far.
     pub operations_done: u64,
+    /// Operations planned (a precision target may add batches).
     pub operations_total: u64,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
 pub struct Links {
+    /// The job's URL.
     #[serde(rename = "self")]
     pub this: String,
+    /// Its result's URL (409 until it succeeded).
     pub result: String,
+    /// Its event stream's URL.
     pub events: String,
 }
 
@@ -117,10 +134,16 @@ impl JobResource {
 }
 
 /// Submit a Monte Carlo job; it is queued durably before the response is sent.
+///
+/// The body is a Job (docs/contract.md "Job"): every field is optional, the scenario defaults to
+/// the paper's rig. The response is the queued JobResource, with its URL in `Location`; follow
+/// `links.events` for live progress and `links.result` once it succeeded. A job larger than the
+/// server's `--max-job-operations` is 422 naming `/devices` (or `/precision/max_devices`); a full
+/// queue is 429 with `Retry-After`. Send an `Idempotency-Key` to retry safely.
 #[utoipa::path(
     post, path = "/v1/jobs", tag = "jobs",
     request_body(content = JobSpec, description = "The job of docs/contract.md", content_type = "application/json"),
-    params(("Idempotency-Key" = Option<String>, Header, description = "Retries with the same key and body within 24 hours get the job the first created (422 for another body)")),
+    params(("Idempotency-Key" = Option<String>, Header, description = "Retries with the same key and body within 24 hours get the job the first created (422 for another body); 1 to 255 visible ASCII characters (400 otherwise)", pattern = "^[!-~]{1,255}$", example = "4f1c2b9e-nightly-2026-11-22")),
     responses(
         (status = 202, description = "Queued (or, for a retry with the same Idempotency-Key, queued before: then `Idempotent-Replayed: true`)", body = JobResource, headers(("Location" = String, description = "The job's URL"))),
         BodyRejected,
@@ -182,14 +205,17 @@ pub fn accepted(record: &JobRecord) -> Result<Response, ApiError> {
 #[into_params(parameter_in = Query)]
 pub struct ListQuery {
     /// Page size, 1 to 100 (default 20).
-    #[param(minimum = 1, maximum = 100)]
+    #[param(minimum = 1, maximum = 100, example = 20)]
     pub limit: Option<u32>,
     /// `next_cursor` of the previous page.
-    #[param(pattern = "^[1-9][0-9]{0,18}$")]
+    #[param(pattern = "^[1-9][0-9]{0,18}$", example = "42")]
     pub cursor: Option<String>,
 }
 
 /// List your jobs, newest first, with cursor paging.
+///
+/// Pages of at most `limit` jobs (default 20); pass a page's `next_cursor` as `cursor` for the
+/// next. With API keys, only your jobs.
 #[utoipa::path(
     get, path = "/v1/jobs", tag = "jobs", params(ListQuery),
     responses(
@@ -234,6 +260,9 @@ pub async fn list_jobs(
 }
 
 /// A job's status and progress.
+///
+/// The JobResource: status (`queued`, `running`, `succeeded`, `failed`, `cancelled`), progress in
+/// operations, times (RFC 3339), the seed, and links to the result and the event stream.
 #[utoipa::path(
     get, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
@@ -270,7 +299,9 @@ pub struct ShardResource {
     /// The worker holding or last holding it (`PID-INSTANCE/SLOT`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub worker: Option<String>,
+    /// Operations this shard has simulated.
     pub operations_done: u64,
+    /// Operations in this shard.
     pub operations_total: u64,
     /// Why its last run failed.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -302,6 +333,9 @@ pub struct ShardList {
 
 /// The shards a job runs as, on any worker of any machine: where each stands and how often it
 /// ran. An operator's view: a shard with more than one attempt was rerun.
+///
+/// Each shard's status (`queued`, `running`, `done`), attempts, failures, the worker that holds or
+/// held it, and its operations.
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/shards", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
@@ -324,6 +358,10 @@ pub async fn get_shards(
 }
 
 /// Cancel a queued or running job; delete a job that ended, with everything stored for it.
+///
+/// A queued or running job is cancelled and its resource returned (200): workers stop at their next
+/// check. A job that already ended is deleted with its result, distributions and device lives
+/// (204); a later GET is 404.
 #[utoipa::path(
     delete, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
@@ -366,6 +404,10 @@ pub async fn succeeded(state: &AppState, owner: &Owner, id: &JobId) -> Result<Jo
 }
 
 /// The Result of docs/contract.md (409 until the job succeeded).
+///
+/// The whole Result: the resolved job, per-bin summaries of every operation metric, device
+/// summaries, life analysis, precision, counts, diagnostics and timing. It never changes, so it
+/// carries an `ETag` and `Cache-Control: immutable`; `If-None-Match` gets 304.
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
@@ -396,11 +438,13 @@ pub async fn get_result(
 #[into_params(parameter_in = Query)]
 pub struct DistributionQuery {
     /// First operation of interest (bins ending after it are returned).
+    #[param(example = 0)]
     pub op_start: Option<u64>,
     /// End of the range, exclusive (bins starting before it are returned).
+    #[param(example = 100)]
     pub op_end: Option<u64>,
     /// `json` (default) or `csv`.
-    #[param(inline)]
+    #[param(inline, example = "csv")]
     pub format: Option<Format>,
 }
 
@@ -416,25 +460,35 @@ pub enum Format {
 pub struct DistributionBin {
     #[serde(flatten)]
     pub summary: Summary,
+    /// First operation of the bin (0-based).
     pub op_start: u64,
+    /// End of the bin, exclusive.
     pub op_end: u64,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
 pub struct Distribution {
+    /// The job's id.
+    #[schema(format = "uuid")]
     pub job_id: String,
+    /// The metric's name.
     pub metric: String,
     /// `operation` (one bin per `bin_operations`) or `device` (one summary at the end of the test).
     pub kind: String,
+    /// The bins in the range, in operation order.
     pub bins: Vec<DistributionBin>,
 }
 
 /// One metric's bins, as JSON or CSV, optionally for a range of operations.
+///
+/// `format=json` (default) gives the bins as JSON, `format=csv` one CSV row per bin
+/// (`op_start,op_end,n,mean,...`, every quantile with its interval). `op_start` and `op_end` select
+/// the bins that overlap the range; an empty range has no bins (404).
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/distributions/{metric}", tag = "jobs",
     params(("id" = String, Path, description = "Job id"), ("metric" = String, Path, description = "An operation or device metric"), DistributionQuery),
     responses(
-        (status = 200, description = "The bins", body = Distribution, content_type = "application/json", headers(("ETag" = String, description = "A tag of the content, for If-None-Match"), ("Cache-Control" = String, description = "Immutable for a year"))),
+        (status = 200, description = "The bins: JSON, or with `format=csv` one CSV row per bin", content((Distribution = "application/json"), (String = "text/csv")), headers(("ETag" = String, description = "A tag of the content, for If-None-Match"), ("Cache-Control" = String, description = "Immutable for a year"))),
         NotModified,
         BadQuery,
         Unauthorized,
@@ -455,11 +509,6 @@ pub async fn get_distribution(
         query.op_start.unwrap_or(0),
         query.op_end.unwrap_or(u64::MAX),
     );
-    if op_start >= op_end {
-        return Err(ApiError::BadRequest(format!(
-            "op_start ({op_start}) must be below op_end ({op_end})"
-        )));
-    }
     let record = succeeded(&state, &owner, &id).await?;
     if Metric::parse(&metric).is_none() {
         return Err(ApiError::NotFound(format!(
@@ -548,8 +597,11 @@ fn to_csv(bins: &[DistributionBin]) -> String {
 pub struct ServerSentEvent {
     /// `progress` or `status`.
     pub event: Option<String>,
+    /// The event's JSON document.
     pub data: String,
+    /// Not sent.
     pub id: Option<String>,
+    /// Not sent.
     pub retry: Option<u64>,
 }
 
@@ -557,16 +609,19 @@ pub struct ServerSentEvent {
 #[into_params(parameter_in = Query)]
 pub struct LifeQuery {
     /// `json` (default): the analysis; `csv`: one row per device, `device,operations_to_failure,censored`.
-    #[param(inline)]
+    #[param(inline, example = "json")]
     pub format: Option<Format>,
 }
 
 /// Life analysis of a job with failure criteria: Weibull (maximum likelihood with right censoring,
 /// Fisher-matrix bounds), B1 and B10 life, Kaplan-Meier reliability; or each device's life as CSV.
+///
+/// Needs a job with `failure` criteria (404 otherwise). `format=json` (default) gives the analysis;
+/// `format=csv` gives one row per device: `device,operations_to_failure,censored`.
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/life", tag = "jobs", params(("id" = String, Path, description = "Job id"), LifeQuery),
     responses(
-        (status = 200, description = "The life analysis (JSON), or per-device lives (CSV)", body = bouncewear_model::montecarlo::LifeReport, headers(("ETag" = String, description = "A tag of the content, for If-None-Match"), ("Cache-Control" = String, description = "Immutable for a year"))),
+        (status = 200, description = "The life analysis (JSON), or with `format=csv` one row per device: `device,operations_to_failure,censored`", content((bouncewear_model::montecarlo::LifeReport = "application/json"), (String = "text/csv")), headers(("ETag" = String, description = "A tag of the content, for If-None-Match"), ("Cache-Control" = String, description = "Immutable for a year"))),
         NotModified,
         BadQuery,
         Unauthorized,
@@ -656,6 +711,10 @@ fn without_result(id: &JobId) -> ApiError {
 }
 
 /// Server-Sent Events: `progress` events while the job runs, then one `status` event when it ends.
+///
+/// `progress` events (data: `{status, operations_done, operations_total}`) while the job is queued
+/// or runs, then one `status` event (data: the JobResource) when it ends, and the stream closes. A
+/// job that already ended gets its `status` event at once.
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(

@@ -7,6 +7,7 @@ pub mod error;
 pub mod events;
 pub mod jobs;
 pub mod limits;
+pub mod openapi;
 pub mod plots;
 pub mod schedules;
 pub mod simulate;
@@ -84,7 +85,7 @@ pub fn router(state: AppState) -> axum::Router {
         state.config.request_timeout(),
     );
     let (router, openapi) = api_routes(state);
-    let openapi = Arc::new(openapi);
+    let openapi = Arc::new(openapi::document(&openapi));
     router
         .route(
             "/openapi.json",

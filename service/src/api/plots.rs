@@ -33,11 +33,16 @@ const SVG: &str = "image/svg+xml";
 #[into_params(parameter_in = Query)]
 pub struct PlotQuery {
     /// The operation metric to draw (default `total_bounce_s`); ignored by `weibull.svg`.
+    #[param(example = "total_bounce_s")]
     pub metric: Option<String>,
 }
 
 /// A plot of a succeeded job: `bands.svg` (p05/p50/p95 across operations: the wear curve),
 /// `histograms.svg` (per bin) or `weibull.svg` (life, with bounds).
+///
+/// SVG, as the dashboard shows it. `bands.svg` and `histograms.svg` draw `metric` (an operation
+/// metric of the job, default `total_bounce_s`); `weibull.svg` needs failure criteria and plots
+/// median-rank positions with the fitted line and its bounds.
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/plots/{kind}", tag = "jobs",
     params(("id" = String, Path, description = "Job id"), ("kind" = String, Path, description = "bands.svg, histograms.svg or weibull.svg"), PlotQuery),
@@ -71,10 +76,14 @@ pub async fn job_plot(
 #[into_params(parameter_in = Query)]
 pub struct TrendQuery {
     /// One of the schedule's statistics (default: its first).
+    #[param(example = "operations.total_bounce_s.p95")]
     pub statistic: Option<String>,
 }
 
 /// A schedule's trend of one statistic, with 95 % intervals and drift flags.
+///
+/// SVG: one point per succeeded run with its 95 % interval, runs whose value left the previous
+/// run's interval flagged, labelled on the schedule's clock.
 #[utoipa::path(
     get, path = "/v1/schedules/{id}/plots/trend.svg", tag = "schedules",
     params(("id" = String, Path, description = "Schedule id"), TrendQuery),

@@ -33,23 +33,39 @@ pub fn router() -> OpenApiRouter<AppState> {
 
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ScheduleResource {
+    /// The schedule's id (a UUID).
+    #[schema(format = "uuid")]
     pub id: String,
+    /// The schedule's name.
     pub name: String,
+    /// Its cron expression.
     pub cron: String,
+    /// The IANA time zone its cron expression is read in.
     pub time_zone: String,
+    /// Whether it runs on its timetable.
     pub enabled: bool,
+    /// The job each run submits.
     #[schema(value_type = Object)]
     pub template: serde_json::Value,
+    /// The statistics its trend follows.
     pub statistics: Vec<String>,
     /// RFC 3339; null when disabled.
+    #[schema(format = DateTime)]
     pub next_run_at: Option<String>,
+    /// RFC 3339; the due time of its latest run, if any.
+    #[schema(format = DateTime)]
     pub last_run_at: Option<String>,
+    /// RFC 3339.
+    #[schema(format = DateTime)]
     pub created_at: String,
+    /// RFC 3339; when its definition last changed.
+    #[schema(format = DateTime)]
     pub updated_at: String,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ScheduleList {
+    /// Your schedules, oldest first.
     pub schedules: Vec<ScheduleResource>,
 }
 
@@ -99,10 +115,14 @@ async fn resource(state: &AppState, record: &ScheduleRecord) -> Result<ScheduleR
 }
 
 /// Create a schedule.
+///
+/// The body is a ScheduleSpec: a name, a cron expression in a time zone, the job template each run
+/// submits and the statistics to follow. Returns 201 with the schedule and its URL in `Location`.
+/// Send an `Idempotency-Key` to retry safely.
 #[utoipa::path(
     post, path = "/v1/schedules", tag = "schedules",
     request_body(content = ScheduleSpec, content_type = "application/json"),
-    params(("Idempotency-Key" = Option<String>, Header, description = "Retries with the same key and body within 24 hours get the schedule the first created (422 for another body)")),
+    params(("Idempotency-Key" = Option<String>, Header, description = "Retries with the same key and body within 24 hours get the schedule the first created (422 for another body); 1 to 255 visible ASCII characters (400 otherwise)", pattern = "^[!-~]{1,255}$", example = "4f1c2b9e-nightly-2026-11-22")),
     responses(
         (status = 201, description = "Created (or, for a retry with the same Idempotency-Key, created before: then `Idempotent-Replayed: true`)", body = ScheduleResource, headers(("Location" = String, description = "The schedule's URL"))),
         BodyRejected,
@@ -147,6 +167,8 @@ async fn created(state: &AppState, record: &ScheduleRecord) -> Result<Response, 
 }
 
 /// Your schedules, oldest first.
+///
+/// With API keys, only your schedules.
 #[utoipa::path(
     get, path = "/v1/schedules", tag = "schedules",
     responses(
@@ -167,6 +189,8 @@ pub async fn list_schedules(
 }
 
 /// One schedule.
+///
+/// Its definition, the next due time (null while disabled) and the due time of its latest run.
 #[utoipa::path(
     get, path = "/v1/schedules/{id}", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     responses(
@@ -186,6 +210,9 @@ pub async fn get_schedule(
 }
 
 /// Replace a schedule's definition (its runs stay).
+///
+/// The body is a whole ScheduleSpec, as for creation; the next due time is worked out again. Its
+/// runs and their jobs stay.
 #[utoipa::path(
     put, path = "/v1/schedules/{id}", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     request_body(content = ScheduleSpec, content_type = "application/json"),
@@ -211,6 +238,8 @@ pub async fn replace_schedule(
 }
 
 /// Delete a schedule (its jobs stay).
+///
+/// Jobs it already submitted stay, with their results.
 #[utoipa::path(
     delete, path = "/v1/schedules/{id}", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     responses(
@@ -230,6 +259,9 @@ pub async fn delete_schedule(
 }
 
 /// Run a schedule now, outside its timetable.
+///
+/// Queues one job from the template now (202, the job's URL in `Location`); it counts in the trend
+/// as a manual run. A full queue is 429 with `Retry-After`.
 #[utoipa::path(
     post, path = "/v1/schedules/{id}/run", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     responses(
@@ -281,16 +313,21 @@ pub async fn run_schedule_now(
 #[into_params(parameter_in = Query)]
 pub struct RunsQuery {
     /// How many of the latest runs, 1 to 366 (default 60).
-    #[param(minimum = 1, maximum = 366)]
+    #[param(minimum = 1, maximum = 366, example = 30)]
     pub limit: Option<u32>,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
 pub struct Run {
     /// RFC 3339: the due time (or the request time of a manual run).
+    #[schema(format = DateTime)]
     pub scheduled_for: String,
+    /// The job the run submitted.
+    #[schema(format = "uuid")]
     pub job_id: String,
+    /// The job's status.
     pub status: JobStatus,
+    /// Whether it was started by `POST /v1/schedules/{id}/run`.
     pub manual: bool,
     /// Each statistic's value, its 95 % interval, and whether it left the previous run's interval;
     /// null until the job succeeded or when the result lacks the statistic.
@@ -300,13 +337,20 @@ pub struct Run {
 
 #[derive(Debug, Serialize, ToSchema)]
 pub struct Trend {
+    /// The schedule's id.
+    #[schema(format = "uuid")]
     pub schedule_id: String,
+    /// The statistics followed.
     pub statistics: Vec<String>,
     /// Oldest first.
     pub runs: Vec<Run>,
 }
 
 /// The run-by-run trend of the schedule's statistics, with drift flags.
+///
+/// The latest `limit` runs (default 60), oldest first, each with its job, status, and for every
+/// statistic its value, its 95 % interval and whether it drifted out of the previous run's
+/// interval.
 #[utoipa::path(
     get, path = "/v1/schedules/{id}/runs", tag = "schedules", params(("id" = String, Path, description = "Schedule id"), RunsQuery),
     responses(

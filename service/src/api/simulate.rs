@@ -22,11 +22,15 @@ pub fn router() -> OpenApiRouter<AppState> {
 #[into_params(parameter_in = Query)]
 pub struct SimulateQuery {
     /// `exact` (default) or `closed_form`.
-    #[param(inline)]
+    #[param(inline, example = "exact")]
     pub fidelity: Option<Fidelity>,
 }
 
 /// Simulate one make operation of a scenario.
+///
+/// Runs the model once, synchronously, for the given scenario (every field optional; the empty
+/// document is the paper's rig): the outcome of the operation and each bounce. The same output as
+/// `bouncewear simulate`.
 #[utoipa::path(
     post, path = "/v1/simulate", tag = "simulate",
     params(SimulateQuery),

@@ -26,7 +26,9 @@ pub fn router() -> OpenApiRouter<AppState> {
 pub struct Health {
     /// `ok` (alive) or `ready`; anything else is a 503 problem.
     pub status: &'static str,
+    /// `ok`: the database answered.
     pub database: &'static str,
+    /// The server's version.
     pub version: &'static str,
 }
 
@@ -41,6 +43,9 @@ impl Health {
 }
 
 /// Liveness and database reachability.
+///
+/// 200 while the process runs and its database answers; 503 with `Retry-After` otherwise. Needs no
+/// API key.
 #[utoipa::path(
     get, path = "/healthz", tag = "system",
     responses((status = 200, description = "Healthy", body = Health), (status = 503, description = "The database is unreachable", body = Problem, content_type = "application/problem+json", headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))))
@@ -53,6 +58,9 @@ pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ApiE
 /// Readiness: this instance can do its work. Its database takes a write, every migration this
 /// build knows is applied, and, for SQLite, the file at the database's path is still the one it
 /// opened, with at least `--min-free-disk-mb` free beside it.
+///
+/// 200 when ready, else 503 with a problem whose detail says why and `Retry-After`. For load
+/// balancers; needs no API key.
 #[utoipa::path(
     get, path = "/readyz", tag = "system",
     responses((status = 200, description = "Ready", body = Health), (status = 503, description = "Not ready; the detail says why", body = Problem, content_type = "application/problem+json", headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))))
@@ -65,6 +73,9 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiEr
 
 /// Prometheus metrics: requests and their latency, queue depth, jobs, simulated operations, the
 /// build and the process.
+///
+/// Prometheus text format 0.0.4: every family has HELP and TYPE, request latency is a histogram.
+/// Needs no API key.
 #[utoipa::path(
     get, path = "/metrics", tag = "system",
     responses((status = 200, description = "Prometheus text format", body = String, content_type = "text/plain"))

@@ -21,6 +21,7 @@ const DEFAULT_STATISTIC: &str = "operations.total_bounce_s.p95";
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ScheduleSpec {
+    /// A label for the schedule and its jobs (1 to 200 characters, not only white space).
     pub name: String,
     /// Cron expression: 5 fields (minute hour day month weekday), or 6 with seconds first.
     pub cron: String,
@@ -33,6 +34,7 @@ pub struct ScheduleSpec {
     /// `devices.eroded_mass_kg.mean`, `life.b10` (default: `operations.total_bounce_s.p95`).
     #[serde(default)]
     pub statistics: Option<Vec<String>>,
+    /// Whether it runs on its timetable (default true).
     #[serde(default)]
     pub enabled: Option<bool>,
 }

@@ -1,0 +1,398 @@
+//! The OpenAPI document as served: utoipa's, built from the handlers and the types' doc comments,
+//! with what its attributes cannot say added here, each part once: a working example of every
+//! request body, the links from a created resource to the operations on it (so a client, or
+//! schemathesis' stateful phase, can follow them), the length limit on all text a client sends,
+//! and descriptions of the simulation's output types, whose Rust docs are written for the physics.
+
+use bouncewear_model::error::MAX_TEXT_CHARS;
+use serde_json::{Map, Value, json};
+use std::collections::BTreeSet;
+
+/// The document served at `/openapi.json`.
+pub fn document(openapi: &utoipa::openapi::OpenApi) -> Value {
+    let mut document = serde_json::to_value(openapi).expect("an OpenAPI document serialises");
+    add_request_examples(&mut document);
+    limit_request_text(&mut document);
+    add_links(&mut document);
+    describe_output_types(&mut document);
+    hoist_optional_descriptions(&mut document);
+    document
+}
+
+/// Example bodies, by operation: each valid, and accepted by a server with the default limits (the
+/// OpenAPI check in CI sends every one of them).
+fn request_examples() -> [(&'static str, Value); 4] {
+    let template = json!({
+        "name": "AgNi at 48 V, 15 A",
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "devices": 20,
+        "operations": 200,
+        "bin_operations": 20,
+        "scatter": [{
+            "parameter": "contact_radius_m",
+            "per": "device",
+            "distribution": {"kind": "uniform", "min": 0.0070, "max": 0.0085}
+        }],
+        "failure": {"cumulative_arc_energy_j": {"above": 2.0}}
+    });
+    let mut job = template.clone();
+    job["seed"] = json!(42);
+    let schedule = json!({
+        "name": "nightly AgNi",
+        "cron": "0 3 * * *",
+        "time_zone": "Europe/London",
+        "template": template,
+        "statistics": ["operations.total_bounce_s.p95", "life.b10"]
+    });
+    let mut paused = schedule.clone();
+    paused["enabled"] = json!(false);
+    [
+        ("submit_job", job),
+        ("create_schedule", schedule),
+        ("replace_schedule", paused),
+        (
+            "simulate_operation",
+            json!({"circuit": {"supply_voltage_v": 48, "current_a": 15}}),
+        ),
+    ]
+}
+
+fn operations_mut(document: &mut Value) -> impl Iterator<Item = (&String, &mut Value)> {
+    document["paths"]
+        .as_object_mut()
+        .into_iter()
+        .flat_map(|paths| paths.iter_mut())
+        .flat_map(|(path, item)| {
+            item.as_object_mut()
+                .into_iter()
+                .flat_map(|methods| methods.values_mut())
+                .map(move |operation| (path, operation))
+        })
+}
+
+fn add_request_examples(document: &mut Value) {
+    let examples = request_examples();
+    for (_, operation) in operations_mut(document) {
+        let id = operation["operationId"].as_str().unwrap_or_default();
+        if let Some((_, example)) = examples.iter().find(|(name, _)| *name == id)
+            && let Some(media) = operation.pointer_mut("/requestBody/content/application~1json")
+        {
+            media["example"] = example.clone();
+        }
+    }
+}
+
+/// `maxLength` on every string a request body may hold, and on the names of its maps' members:
+/// the rule `bouncewear_model::error::from_json` enforces on every document.
+fn limit_request_text(document: &mut Value) {
+    let mut names = BTreeSet::new();
+    let bodies: Vec<Value> = operations_mut(document)
+        .filter_map(|(_, operation)| {
+            operation
+                .pointer("/requestBody/content/application~1json/schema")
+                .cloned()
+        })
+        .collect();
+    let schemas = document["components"]["schemas"].clone();
+    for body in &bodies {
+        collect_refs(body, &schemas, &mut names);
+    }
+    for name in names {
+        if let Some(schema) = document["components"]["schemas"].get_mut(&name) {
+            limit_text(schema);
+        }
+    }
+}
+
+/// The names of the component schemas `schema` refers to, directly or through others.
+fn collect_refs(schema: &Value, schemas: &Value, names: &mut BTreeSet<String>) {
+    match schema {
+        Value::Object(members) => {
+            if let Some(name) = members
+                .get("$ref")
+                .and_then(Value::as_str)
+                .and_then(|r| r.strip_prefix("#/components/schemas/"))
+                && names.insert(name.to_owned())
+            {
+                collect_refs(&schemas[name], schemas, names);
+            }
+            members
+                .values()
+                .for_each(|member| collect_refs(member, schemas, names));
+        }
+        Value::Array(items) => items
+            .iter()
+            .for_each(|item| collect_refs(item, schemas, names)),
+        _ => {}
+    }
+}
+
+fn limit_text(schema: &mut Value) {
+    let Value::Object(members) = schema else {
+        return;
+    };
+    let is_string = match members.get("type") {
+        Some(Value::String(kind)) => kind == "string",
+        Some(Value::Array(kinds)) => kinds.iter().any(|k| k == "string"),
+        _ => false,
+    };
+    if is_string && !members.contains_key("enum") && !members.contains_key("maxLength") {
+        members.insert("maxLength".to_owned(), json!(MAX_TEXT_CHARS));
+    }
+    if members.contains_key("additionalProperties") {
+        let names = members
+            .entry("propertyNames")
+            .or_insert_with(|| json!({"type": "string"}));
+        names["maxLength"] = json!(MAX_TEXT_CHARS);
+    }
+    for (name, member) in members.iter_mut() {
+        match name.as_str() {
+            "properties" => member
+                .as_object_mut()
+                .into_iter()
+                .flat_map(Map::values_mut)
+                .for_each(limit_text),
+            "items" | "additionalProperties" => limit_text(member),
+            "oneOf" | "anyOf" | "allOf" => member
+                .as_array_mut()
+                .into_iter()
+                .flatten()
+                .for_each(limit_text),
+            _ => {}
+        }
+    }
+}
+
+/// From the response that creates a job (or a schedule) to every operation on `/v1/jobs/{id}...`
+/// (or `/v1/schedules/{id}...`), with the new resource's `id`.
+fn add_links(document: &mut Value) {
+    let targets = |prefix: &str, document: &Value| -> Map<String, Value> {
+        let mut links = Map::new();
+        for (path, item) in document["paths"].as_object().into_iter().flatten() {
+            if !path.starts_with(prefix) {
+                continue;
+            }
+            for operation in item.as_object().into_iter().flat_map(Map::values) {
+                let Some(id) = operation["operationId"].as_str() else {
+                    continue;
+                };
+                links.insert(
+                    id.to_owned(),
+                    json!({
+                        "operationId": id,
+                        "parameters": {"id": "$response.body#/id"},
+                        "description": format!("`{id}` on the resource this response created"),
+                    }),
+                );
+            }
+        }
+        links
+    };
+    let job_links = targets("/v1/jobs/{id}", document);
+    let schedule_links = targets("/v1/schedules/{id}", document);
+    for (_, operation) in operations_mut(document) {
+        let (status, links) = match operation["operationId"].as_str() {
+            Some("submit_job" | "run_schedule_now") => ("202", &job_links),
+            Some("create_schedule") => ("201", &schedule_links),
+            _ => continue,
+        };
+        if let Some(response) = operation["responses"].get_mut(status) {
+            response["links"] = Value::Object(links.clone());
+        }
+    }
+}
+
+/// Descriptions of the properties of the `simulate` output and of a metric's summary, by schema.
+const OUTPUT_DESCRIPTIONS: &[(&str, &[(&str, &str)])] = &[
+    (
+        "Outcome",
+        &[
+            (
+                "impact_velocity_m_s",
+                "Closing velocity of the moving contact at first impact, m/s (eq. 2, or the scenario's override)",
+            ),
+            (
+                "first_bounce_s",
+                "Duration of the first bounce (the first flight after a separation), s",
+            ),
+            (
+                "total_bounce_s",
+                "Time from first impact until the contacts stay closed, s",
+            ),
+            (
+                "bounce_count",
+                "Bounces (separations) before the contacts stay closed",
+            ),
+            (
+                "pre_arc_s",
+                "Duration of the pre-arc before first touch, s (0 when the circuit cannot arc)",
+            ),
+            (
+                "arc_energy_j",
+                "Arc energy over the operation (pre-arc and every bounce), J",
+            ),
+            (
+                "peak_force_n",
+                "Peak contact force of the first impact, N (eq. 12)",
+            ),
+            (
+                "impact_duration_s",
+                "Duration of the first impact, s (eq. 13)",
+            ),
+        ],
+    ),
+    (
+        "Bounce",
+        &[
+            (
+                "separation_velocity_m_s",
+                "Velocity at which the contacts part at the start of this bounce, m/s",
+            ),
+            ("duration_s", "Time the contacts are apart, s"),
+            ("peak_gap_m", "Largest gap between the contacts, m (eq. 4)"),
+            ("arc_energy_j", "Arc energy during this bounce, J"),
+        ],
+    ),
+    (
+        "Simulation",
+        &[("bounces", "Every bounce in order, the first first")],
+    ),
+    (
+        "Summary",
+        &[
+            ("n", "Values summarised"),
+            ("mean", "Mean of the values"),
+            (
+                "mean_ci95",
+                "95 % confidence interval of the mean, [low, high]",
+            ),
+            ("min", "Smallest value (exact)"),
+            ("max", "Largest value (exact)"),
+            (
+                "histogram",
+                "20 equal-width bins over [min, max], counts summing to n",
+            ),
+            (
+                "exceedance",
+                "Probability of exceeding the job's limit for the metric; only with a limit",
+            ),
+        ],
+    ),
+    (
+        "QuantileSummary",
+        &[
+            ("value", "The quantile (within 0.2 %)"),
+            (
+                "ci95",
+                "95 % confidence interval of the quantile, [low, high]",
+            ),
+        ],
+    ),
+    (
+        "Exceedance",
+        &[
+            ("limit", "The job's limit for the metric"),
+            ("probability", "Share of values strictly above the limit"),
+            (
+                "ci95",
+                "95 % confidence interval of the probability, [low, high]",
+            ),
+        ],
+    ),
+    (
+        "Histogram",
+        &[
+            (
+                "edges",
+                "Bin edges, one more than the bins: bin i is [edges[i], edges[i + 1]), the last closed",
+            ),
+            ("counts", "Values in each bin"),
+        ],
+    ),
+];
+
+fn describe_output_types(document: &mut Value) {
+    let schemas = &mut document["components"]["schemas"];
+    for (schema, properties) in OUTPUT_DESCRIPTIONS {
+        for (property, description) in *properties {
+            if let Some(schema) = schemas.get_mut(*schema) {
+                describe(schema, property, description);
+            }
+        }
+    }
+    // A distribution's tag, in each of its kinds.
+    for kind in schemas
+        .pointer_mut("/DistributionSpec/oneOf")
+        .and_then(Value::as_array_mut)
+        .into_iter()
+        .flatten()
+    {
+        describe(kind, "kind", "Which distribution; its parameters follow");
+    }
+}
+
+/// Describes `property` of `schema`, or of the part of it (`allOf`) that has the property.
+fn describe(schema: &mut Value, property: &str, description: &str) {
+    let pointer = format!("/properties/{property}");
+    let target = if schema.pointer(&pointer).is_some() {
+        schema.pointer_mut(&pointer)
+    } else {
+        schema
+            .get_mut("allOf")
+            .and_then(Value::as_array_mut)
+            .into_iter()
+            .flatten()
+            .find_map(|part| part.pointer_mut(&pointer))
+    };
+    if let Some(Value::Object(members)) = target {
+        members
+            .entry("description")
+            .or_insert_with(|| json!(description));
+    }
+}
+
+/// utoipa writes an optional reference's doc comment on the reference inside its `oneOf`, where
+/// a reader (or the docs UI) does not look: it goes on the property itself.
+fn hoist_optional_descriptions(document: &mut Value) {
+    let schemas = document["components"]["schemas"].as_object_mut();
+    for schema in schemas.into_iter().flat_map(Map::values_mut) {
+        let properties = schema.get_mut("properties").and_then(Value::as_object_mut);
+        for property in properties.into_iter().flat_map(Map::values_mut) {
+            let description = property["oneOf"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .find_map(|part| part.get("description").cloned());
+            if let (Some(description), Value::Object(members)) = (description, property) {
+                members.entry("description").or_insert(description);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strings_and_member_names_get_the_length_limit_and_enums_keep_theirs() {
+        let mut schema = json!({
+            "type": "object",
+            "properties": {
+                "name": {"type": ["string", "null"]},
+                "law": {"type": "string", "enum": ["paper"]},
+                "limits": {"type": "object", "additionalProperties": {"type": "number"}},
+                "metrics": {"type": "array", "items": {"type": "string"}}
+            }
+        });
+        limit_text(&mut schema);
+        let properties = &schema["properties"];
+        assert_eq!(properties["name"]["maxLength"], MAX_TEXT_CHARS);
+        assert!(properties["law"].get("maxLength").is_none());
+        assert_eq!(
+            properties["limits"]["propertyNames"]["maxLength"],
+            MAX_TEXT_CHARS
+        );
+        assert_eq!(properties["metrics"]["items"]["maxLength"], MAX_TEXT_CHARS);
+    }
+}
