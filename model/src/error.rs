@@ -198,8 +198,19 @@ impl<'de> serde::de::Visitor<'de> for StrictVisitor {
         Ok(value.into())
     }
 
+    /// A number written with a fraction or exponent but integral (`2.0`, `1e3`) is an integer, as
+    /// JSON Schema counts it: it may fill an integer field.
     fn visit_f64<E>(self, value: f64) -> Result<Self::Value, E> {
-        Ok(value.into())
+        const TWO_TO_64: f64 = 18_446_744_073_709_551_616.0;
+        Ok(if value.fract() != 0.0 || !value.is_finite() {
+            value.into()
+        } else if (0.0..TWO_TO_64).contains(&value) {
+            (value as u64).into()
+        } else if value >= i64::MIN as f64 && value < 0.0 {
+            (value as i64).into()
+        } else {
+            value.into()
+        })
     }
 
     fn visit_str<E>(self, value: &str) -> Result<Self::Value, E> {
@@ -355,6 +366,15 @@ mod tests {
         );
         let longest = "é".repeat(MAX_TEXT_CHARS);
         assert!(from_json::<serde_json::Value>(&format!(r#"{{"a": "{longest}"}}"#), &[]).is_ok());
+    }
+
+    #[test]
+    fn an_integral_number_fills_an_integer_field_and_a_fraction_does_not() {
+        assert_eq!(from_json::<u64>("2.0", &[]), Ok(2));
+        assert_eq!(from_json::<u64>("1e3", &[]), Ok(1000));
+        assert_eq!(from_json::<i64>("-4.0", &[]), Ok(-4));
+        assert!(from_json::<u64>("2.5", &[]).is_err());
+        assert!(from_json::<u64>("1.8446744073709552e19", &[]).is_err());
     }
 
     #[test]

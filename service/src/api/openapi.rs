@@ -5,6 +5,10 @@
 //! and descriptions of the simulation's output types, whose Rust docs are written for the physics.
 
 use bouncewear_model::error::MAX_TEXT_CHARS;
+use bouncewear_model::montecarlo::job::{MAX_DEVICES, MAX_OPERATIONS};
+use bouncewear_model::montecarlo::{DeviceMetric, OperationMetric};
+use bouncewear_model::scenario::{MAX_BOUNCES_LIMIT, MAX_MAGNITUDE, MIN_MAGNITUDE};
+use bouncewear_model::stats::QUANTILES;
 use serde_json::{Map, Value, json};
 use std::collections::BTreeSet;
 
@@ -12,6 +16,7 @@ use std::collections::BTreeSet;
 pub fn document(openapi: &utoipa::openapi::OpenApi) -> Value {
     let mut document = serde_json::to_value(openapi).expect("an OpenAPI document serialises");
     add_request_examples(&mut document);
+    constrain_request_fields(&mut document);
     limit_request_text(&mut document);
     add_links(&mut document);
     describe_output_types(&mut document);
@@ -79,6 +84,198 @@ fn add_request_examples(document: &mut Value) {
         {
             media["example"] = example.clone();
         }
+    }
+}
+
+/// The range rules of docs/model.md section 9 as `check_spec` applies them, for the schema.
+#[derive(Clone, Copy)]
+enum Range {
+    /// From `MIN_MAGNITUDE` to `MAX_MAGNITUDE`.
+    Positive,
+    /// 0, or as `Positive`.
+    NonNegative,
+    /// Magnitude at most `MAX_MAGNITUDE`.
+    Finite,
+}
+
+impl Range {
+    fn schema(self) -> Value {
+        match self {
+            Range::Positive => json!({"minimum": MIN_MAGNITUDE, "maximum": MAX_MAGNITUDE}),
+            Range::NonNegative => json!({
+                "minimum": 0, "maximum": MAX_MAGNITUDE,
+                "not": {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": MIN_MAGNITUDE}
+            }),
+            Range::Finite => json!({"minimum": -MAX_MAGNITUDE, "maximum": MAX_MAGNITUDE}),
+        }
+    }
+}
+
+/// What each field of a request body may hold on its own, as the model's validation has it
+/// (`Scenario::new`, `Job::new`, `ValidSchedule::parse`). Rules that relate fields to each other
+/// (`worn_radius_m` at most `contact_radius_m`, `bin_operations` at most `operations`, a job's size
+/// against the server's limit...) are in the descriptions: JSON Schema cannot state them.
+fn constrain_request_fields(document: &mut Value) {
+    use Range::{Finite, NonNegative, Positive};
+    let ranges: [(&str, &[(&str, Range)]); 6] = [
+        (
+            "MechanismSpec",
+            &[
+                ("inertia_kg_m2", Positive),
+                ("spring_stiffness_n_per_m", NonNegative),
+                ("spring_arm_m", Positive),
+                ("contact_arm_m", Positive),
+                ("static_force_n", NonNegative),
+                ("drop_height_m", NonNegative),
+                ("impact_velocity_m_s", NonNegative),
+            ],
+        ),
+        (
+            "MaterialSpec",
+            &[
+                ("youngs_modulus_pa", Positive),
+                ("dynamic_yield_pressure_pa", Positive),
+                ("contact_radius_m", Positive),
+                ("kappa", Positive),
+                ("worn_radius_m", Positive),
+                ("roughening_energy_j", Positive),
+                ("erosion_kg_per_j", NonNegative),
+                ("density_kg_m3", Positive),
+                ("min_arc_voltage_v", NonNegative),
+                ("min_arc_current_a", NonNegative),
+                ("breakdown_field_v_per_m", Positive),
+                ("softening_energy_j", Positive),
+            ],
+        ),
+        (
+            "ArcRestitutionSpec",
+            &[
+                ("a", Finite),
+                ("b_s_per_m", Finite),
+                ("calibration_current_a", Positive),
+            ],
+        ),
+        (
+            "WearLawSpec",
+            &[
+                ("worn_pressure_pa", Positive),
+                ("annealing_energy_j", Positive),
+            ],
+        ),
+        (
+            "CircuitSpec",
+            &[
+                ("supply_voltage_v", NonNegative),
+                ("current_a", NonNegative),
+            ],
+        ),
+        (
+            "LossesSpec",
+            &[
+                ("impact_energy_loss_j", NonNegative),
+                ("min_separation_m", NonNegative),
+            ],
+        ),
+    ];
+    let operation_metrics: Vec<&str> = OperationMetric::ALL.iter().map(|m| m.name()).collect();
+    let metrics: Vec<&str> = operation_metrics
+        .iter()
+        .copied()
+        .chain(DeviceMetric::ALL.iter().map(|m| m.name()))
+        .collect();
+    let quantiles: Vec<&str> = QUANTILES.iter().map(|(name, _)| *name).collect();
+    let statistic = format!(
+        "^((operations|devices)\\.({})\\.(mean|{})|life\\.(b1|b10|beta|eta))$",
+        metrics.join("|"),
+        quantiles.join("|")
+    );
+    let names = json!({"type": "string", "enum": metrics});
+    let statistics: Vec<&str> = std::iter::once("mean")
+        .chain(quantiles.iter().copied())
+        .collect();
+    let mut time_zones: Vec<Value> = chrono_tz::TZ_VARIANTS
+        .iter()
+        .map(|tz| json!(tz.name()))
+        .collect();
+    time_zones.push(Value::Null);
+    let mut fields: Vec<(&str, &str, Value)> = ranges
+        .iter()
+        .flat_map(|(schema, fields)| {
+            fields
+                .iter()
+                .map(move |(field, range)| (*schema, *field, range.schema()))
+        })
+        .collect();
+    fields.extend([
+        (
+            "MaterialSpec",
+            "anode_erosion_fraction",
+            json!({"minimum": 0, "maximum": 1}),
+        ),
+        (
+            "LossesSpec",
+            "max_bounces",
+            json!({"minimum": 1, "maximum": MAX_BOUNCES_LIMIT}),
+        ),
+        (
+            "JobSpec",
+            "bin_operations",
+            json!({"minimum": 1, "maximum": MAX_OPERATIONS}),
+        ),
+        (
+            "JobSpec",
+            "seed",
+            json!({"minimum": 0, "maximum": u64::MAX}),
+        ),
+        (
+            "JobSpec",
+            "metrics",
+            json!({"minItems": 1, "uniqueItems": true, "items": names}),
+        ),
+        ("JobSpec", "limits", json!({"propertyNames": names})),
+        ("JobSpec", "failure", json!({"propertyNames": names})),
+        (
+            "PrecisionSpec",
+            "metric",
+            json!({"enum": operation_metrics}),
+        ),
+        ("PrecisionSpec", "statistic", json!({"enum": statistics})),
+        (
+            "PrecisionSpec",
+            "relative_half_width",
+            json!({"exclusiveMinimum": 0, "exclusiveMaximum": 1}),
+        ),
+        (
+            "PrecisionSpec",
+            "max_devices",
+            json!({"minimum": 1, "maximum": MAX_DEVICES}),
+        ),
+        ("ScheduleSpec", "name", json!({"pattern": "\\S"})),
+        ("ScheduleSpec", "time_zone", json!({"enum": time_zones})),
+        (
+            "ScheduleSpec",
+            "statistics",
+            json!({"minItems": 1, "items": {"type": "string", "pattern": statistic}}),
+        ),
+    ]);
+    let schemas = &mut document["components"]["schemas"];
+    for (schema, field, rules) in fields {
+        let pointer = format!("/{schema}/properties/{field}");
+        if let (Some(Value::Object(members)), Value::Object(rules)) =
+            (schemas.pointer_mut(&pointer), rules)
+        {
+            members.extend(rules);
+        }
+    }
+    // Without a spring, a static force of 0 would never return the arm.
+    if let Some(Value::Object(mechanism)) = schemas.get_mut("MechanismSpec") {
+        mechanism.insert(
+            "not".to_owned(),
+            json!({
+                "required": ["static_force_n", "spring_stiffness_n_per_m"],
+                "properties": {"static_force_n": {"const": 0}, "spring_stiffness_n_per_m": {"const": 0}}
+            }),
+        );
     }
 }
 

@@ -1,0 +1,127 @@
+"""Schemathesis hooks for the rules JSON Schema cannot state.
+
+The OpenAPI document gives every request field the range the server enforces on it alone, and
+states in words the rules that relate fields to each other (docs/contract.md "Job"). Schemathesis
+generates from the schema, so a generated request that the schema accepts may still break one of
+those rules, and the server then rightly answers 422. This hook applies those rules to the
+requests schemathesis means to be valid (its positive cases), nothing else: negative cases and
+everything the schema can say are left to the server, and to the checks.
+
+Each repair names the rule it applies. BOUNCEWEAR_MAX_JOB_OPERATIONS is the server's
+`--max-job-operations`.
+"""
+
+import os
+import uuid
+
+import schemathesis
+from schemathesis import GenerationMode
+
+MAX_JOB_OPERATIONS = int(os.environ.get("BOUNCEWEAR_MAX_JOB_OPERATIONS", "2000000000"))
+POLAR = {"anode_eroded_mass_kg", "cathode_eroded_mass_kg"}
+OPERATION_METRICS = {
+    "impact_velocity_m_s", "kappa", "e1", "first_bounce_s", "total_bounce_s", "bounce_count",
+    "pre_arc_s", "arc_energy_j", "peak_force_n", "impact_duration_s", "first_impact_plastic_work_j",
+}
+DEFAULT_CONTACT_RADIUS_M = 7.7e-3
+DEFAULT_PRESSURE_PA = 2.0e8
+
+
+def repair_scenario(scenario):
+    material = scenario.get("material")
+    if not isinstance(material, dict):
+        return
+    # worn_radius_m is at most contact_radius_m.
+    contact = material.get("contact_radius_m", DEFAULT_CONTACT_RADIUS_M)
+    if material.get("worn_radius_m", 0.711e-3) > contact:
+        material["worn_radius_m"] = contact
+    wear = material.get("wear_law")
+    # Under roughening_and_softening, worn_pressure_pa is at most dynamic_yield_pressure_pa.
+    if isinstance(wear, dict) and wear.get("law") == "roughening_and_softening":
+        pressure = material.get("dynamic_yield_pressure_pa", DEFAULT_PRESSURE_PA)
+        if wear.get("worn_pressure_pa", 1.0e8) > pressure:
+            wear["worn_pressure_pa"] = pressure
+    # The continuous post-arc law must arc at its calibration current: a relation of four fields
+    # of two sections; the paper's law has no such rule.
+    law = material.get("arc_restitution")
+    if isinstance(law, dict) and law.get("law") == "continuous":
+        law["law"] = "paper"
+
+
+def repair_job(job):
+    if not isinstance(job, dict):
+        return
+    if isinstance(job.get("scenario"), dict):
+        repair_scenario(job["scenario"])
+    devices = job.get("devices", 1000)
+    operations = job.get("operations", 1000)
+    # devices x operations (max_devices with a precision target) within the server's limit.
+    if devices * operations > MAX_JOB_OPERATIONS:
+        devices = job["devices"] = min(devices, MAX_JOB_OPERATIONS)
+        operations = job["operations"] = max(1, MAX_JOB_OPERATIONS // devices)
+    # bin_operations is at most operations and makes at most 1000 bins.
+    bins = job.get("bin_operations")
+    if bins is not None and (bins > operations or -(-operations // bins) > 1000):
+        del job["bin_operations"]
+    if "bin_operations" not in job and operations > 1000 * max(1, operations // 10):
+        job["bin_operations"] = -(-operations // 1000)
+    # Each scatter distribution's numbers relate to each other and to the scenario: the request
+    # examples send a valid scatter.
+    job.pop("scatter", None)
+    # The anode/cathode masses need scenario.material.anode_erosion_fraction.
+    polarity = (job.get("scenario") or {}).get("material", {}).get("anode_erosion_fraction") is not None
+    metrics = job.get("metrics")
+    if isinstance(metrics, list) and not polarity:
+        metrics[:] = [m for m in metrics if m not in POLAR]
+        if not metrics:
+            del job["metrics"]
+    listed = set(job.get("metrics") or []) or None
+    available = lambda name: (polarity or name not in POLAR) and (listed is None or name in listed)
+    # Limits are on the job's metrics.
+    if isinstance(job.get("limits"), dict):
+        job["limits"] = {k: v for k, v in job["limits"].items() if available(k)}
+    # A failure criterion gives exactly one of above or below, on a metric the scenario has.
+    if isinstance(job.get("failure"), dict):
+        failure = {}
+        for name, criterion in job["failure"].items():
+            if not (polarity or name not in POLAR):
+                continue
+            given = {k: v for k, v in criterion.items() if v is not None}
+            failure[name] = given if len(given) == 1 else {"above": next(iter(given.values()), 0)}
+        job["failure"] = failure
+    # A precision target is on one of the job's operation metrics, with max_devices from devices
+    # to what the size limit allows.
+    precision = job.get("precision")
+    if isinstance(precision, dict):
+        fits = precision.get("max_devices", 0) * operations <= MAX_JOB_OPERATIONS
+        if (
+            not available(precision.get("metric"))
+            or precision.get("metric") not in OPERATION_METRICS
+            or precision.get("max_devices", 0) < devices
+            or not fits
+        ):
+            del job["precision"]
+
+
+@schemathesis.hook
+def map_case(context, case):
+    meta = case.meta
+    if meta is None or meta.generation.mode != GenerationMode.POSITIVE:
+        return case
+    # An Idempotency-Key names one request: a key used again with another body is refused (422)
+    # by design, so each generated request gets its own.
+    if case.headers and "Idempotency-Key" in case.headers:
+        case.headers["Idempotency-Key"] = uuid.uuid4().hex
+    operation = case.operation
+    body = case.body if isinstance(case.body, dict) else None
+    if body is None:
+        return case
+    if operation.path == "/v1/jobs" and operation.method.upper() == "POST":
+        repair_job(body)
+    elif operation.path == "/v1/simulate":
+        repair_scenario(body)
+    elif operation.path.startswith("/v1/schedules"):
+        repair_job(body.get("template"))
+        # A cron expression's syntax (croner's) is not a regular expression worth keeping in step.
+        body["cron"] = "0 3 * * *"
+    return case
