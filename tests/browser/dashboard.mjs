@@ -1,6 +1,7 @@
 // End-to-end test of the dashboard in a real browser (Debian's chromium, driven by playwright-core):
 // submit the "Quick check" preset on /, follow the job to `succeeded` on its page, check that the
-// wear-curve and histogram plots are there, and save screenshots. Then under load: with 20 active
+// wear-curve and histogram plots are there, and save screenshots: the jobs page, a job's page, a
+// schedule's trend over a few runs and a job's Weibull plot. Then under load: with 20 active
 // jobs and a schedule, every plot of both pages loads within 5 s and a submit through the form is
 // accepted while they run (Chromium opens at most 6 connections per host: the page must not hold
 // one stream per job).
@@ -27,6 +28,8 @@ const STEP_TIMEOUT_MS = 30_000;
 const OVERALL_TIMEOUT_MS = 300_000;
 const ACTIVE_JOBS = 20;
 const PLOT_TIMEOUT_MS = 5_000;
+// Runs of the schedule before the trend is photographed: enough for a line with drift flags.
+const TREND_RUNS = 4;
 
 mkdirSync(outDir, { recursive: true });
 
@@ -199,21 +202,56 @@ const schedule = await step("create a schedule", () =>
     name: "Nightly quick check",
     cron: "0 1 * * *",
     time_zone: "Europe/Berlin",
-    template: { devices: 100, operations: 100, seed: 7, scenario: { circuit: { supply_voltage_v: 48, current_a: 15 } } },
+    // No seed: each run draws its own, so the trend moves from run to run.
+    template: { devices: 100, operations: 100, scenario: { circuit: { supply_voltage_v: 48, current_a: 15 } } },
     statistics: ["operations.total_bounce_s.mean", "operations.bounce_count.p50"],
   }),
 );
-const run = await step("run the schedule now", () => call("POST", `/v1/schedules/${schedule.id}/run`));
-const runJob = (run && (run.job || run)) || {};
-await step(`the schedule's run ${runJob.id} succeeds`, async () => {
+async function succeeds(id) {
   for (const started = Date.now(); Date.now() - started < JOB_TIMEOUT_MS; ) {
-    const job = await call("GET", `/v1/jobs/${runJob.id}`);
+    const job = await call("GET", `/v1/jobs/${id}`);
     if (job.status === "succeeded") return;
     if (!["queued", "running"].includes(job.status)) throw new Error(`it ended ${job.status}`);
     await new Promise((resolve) => setTimeout(resolve, 250));
   }
   throw new Error("it did not end in time");
-});
+}
+for (let k = 1; k <= TREND_RUNS; k++) {
+  const run = await step(`run the schedule now (${k} of ${TREND_RUNS})`, () =>
+    call("POST", `/v1/schedules/${schedule.id}/run`),
+  );
+  await step(`the schedule's run ${run.id} succeeds`, () => succeeds(run.id));
+}
+
+// A schedule's trend and a job's Weibull plot, for the README: the plot kinds the jobs above lack.
+await step(`open ${base}/ for the trend`, () => page.goto(`${base}/`, { waitUntil: "load" }));
+await step("the trend plot shows an SVG", () => page.waitForSelector("#schedules .plot svg"));
+await step("save dashboard-trend.png", () =>
+  page.locator("#schedules-section").screenshot({ path: join(outDir, "dashboard-trend.png") }),
+);
+log(`saved ${join(outDir, "dashboard-trend.png")}`);
+const lifeJob = await step("submit a job with a failure criterion", () =>
+  call("POST", "/v1/jobs", {
+    name: "Life to 330 J of arc energy",
+    scenario: { circuit: { supply_voltage_v: 48, current_a: 15 } },
+    devices: 100,
+    operations: 200,
+    seed: 5,
+    scatter: [
+      { parameter: "contact_radius_m", per: "device", distribution: { kind: "uniform", min: 0.004, max: 0.0085 } },
+      { parameter: "impact_velocity_m_s", per: "operation", distribution: { kind: "uniform", min: 0.1, max: 0.6 } },
+    ],
+    failure: { cumulative_arc_energy_j: { above: 330 } },
+  }),
+);
+await step(`the life job ${lifeJob.id} succeeds`, () => succeeds(lifeJob.id));
+await step(`open ${base}/jobs/${lifeJob.id}`, () => page.goto(`${base}/jobs/${lifeJob.id}`, { waitUntil: "load" }));
+await step("#plot-weibull shows an SVG", () => page.waitForSelector("#plot-weibull svg"));
+await page.waitForTimeout(300);
+await step("save dashboard-life.png", () =>
+  page.locator("#life-section").screenshot({ path: join(outDir, "dashboard-life.png") }),
+);
+log(`saved ${join(outDir, "dashboard-life.png")}`);
 
 log(`submitting ${ACTIVE_JOBS} long jobs`);
 const active = [];
