@@ -202,8 +202,15 @@ const schedule = await step("create a schedule", () =>
     name: "Nightly quick check",
     cron: "0 1 * * *",
     time_zone: "Europe/Berlin",
-    // No seed: each run draws its own, so the trend moves from run to run.
-    template: { devices: 100, operations: 100, scenario: { circuit: { supply_voltage_v: 48, current_a: 15 } } },
+    // No seed: each run draws its own, and the scattered impact velocity moves the trend.
+    template: {
+      devices: 100,
+      operations: 100,
+      scenario: { circuit: { supply_voltage_v: 48, current_a: 15 } },
+      scatter: [
+        { parameter: "impact_velocity_m_s", per: "operation", distribution: { kind: "uniform", min: 0.2, max: 0.6 } },
+      ],
+    },
     statistics: ["operations.total_bounce_s.mean", "operations.bounce_count.p50"],
   }),
 );
