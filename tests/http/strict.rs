@@ -128,3 +128,18 @@ fn a_charset_other_than_utf8_is_415_and_utf8_is_accepted() {
         assert_eq!(send(accepted).status, 200, "{accepted}");
     }
 }
+
+#[test]
+fn an_integral_number_fills_an_integer_field_as_json_schema_counts_it() {
+    let server = TestApp::start(&temp_db("strict-integral"), &[]);
+    let accepted = post(
+        &server.url("/v1/jobs"),
+        r#"{"devices": 2.0, "operations": 3e0, "seed": 7}"#,
+        None,
+    );
+    assert_eq!(accepted.status, 202, "{}", accepted.body);
+    assert_eq!(
+        rejected_pointers(&server, "/v1/jobs", r#"{"devices": 2.5}"#),
+        ["/devices"]
+    );
+}
