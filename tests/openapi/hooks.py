@@ -103,11 +103,12 @@ def repair_job(job):
             del job["precision"]
 
 
+# Just before each call: the stateful phase fills bodies from earlier responses after generation.
 @schemathesis.hook
-def map_case(context, case):
+def before_call(context, case, kwargs):
     meta = case.meta
     if meta is None or meta.generation.mode != GenerationMode.POSITIVE:
-        return case
+        return
     # An Idempotency-Key names one request: a key used again with another body is refused (422)
     # by design, so each generated request gets its own.
     if case.headers and "Idempotency-Key" in case.headers:
@@ -115,7 +116,7 @@ def map_case(context, case):
     operation = case.operation
     body = case.body if isinstance(case.body, dict) else None
     if body is None:
-        return case
+        return
     if operation.path == "/v1/jobs" and operation.method.upper() == "POST":
         repair_job(body)
     elif operation.path == "/v1/simulate":
@@ -124,4 +125,3 @@ def map_case(context, case):
         repair_job(body.get("template"))
         # A cron expression's syntax (croner's) is not a regular expression worth keeping in step.
         body["cron"] = "0 3 * * *"
-    return case
