@@ -21,6 +21,7 @@ use std::path::Path;
 use std::time::Instant;
 
 const REFERENCE: &str = include_str!("../../tests/data/reference_spread.json");
+const REFERENCE_JOBS: &str = include_str!("../../tests/data/reference_jobs.json");
 
 #[derive(Debug, Serialize)]
 pub struct Report {
@@ -203,7 +204,8 @@ fn tier(fidelity: Fidelity, quick: bool) -> Tier {
     }
 }
 
-/// The reference job: radius and hardness scattered per device, closing velocity per operation.
+/// A reference job of `tests/data/reference_jobs.json` (radius and hardness scattered per device,
+/// closing velocity per operation), cut to `devices` x `operations`.
 fn reference_job(
     devices: u64,
     operations: u64,
@@ -211,20 +213,11 @@ fn reference_job(
     sampler: &str,
     metrics: Option<&[&str]>,
 ) -> Job {
-    let mut job = json!({
-        "devices": devices, "operations": operations, "seed": 20261122, "sampler": sampler,
-        "scatter": [
-            {"parameter": "contact_radius_m", "per": "device",
-             "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 0.8e-3, "min": 1e-3}},
-            {"parameter": "dynamic_yield_pressure_pa", "per": "device",
-             "distribution": {"kind": "lognormal", "median": 2e8, "sigma": 0.15}},
-            {"parameter": "impact_velocity_m_s", "per": "operation",
-             "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.05}}
-        ]
-    });
-    if arcing {
-        job["scenario"] = json!({"circuit": {"supply_voltage_v": 48, "current_a": 15}});
-    }
+    let jobs: Value = serde_json::from_str(REFERENCE_JOBS).expect("the reference jobs are JSON");
+    let mut job = jobs[if arcing { "48 V / 15 A" } else { "mechanical" }].clone();
+    job["devices"] = json!(devices);
+    job["operations"] = json!(operations);
+    job["sampler"] = json!(sampler);
     if let Some(metrics) = metrics {
         job["metrics"] = json!(metrics);
     }
