@@ -41,7 +41,7 @@ impl Impact {
         let root_km = (self.contact_stiffness_n_per_m * self.mass_kg).sqrt();
         let angle = if self.impact_speed_m_s > 0.0 {
             std::f64::consts::FRAC_PI_2
-                + (self.static_force_n / (self.impact_speed_m_s * root_km)).atan()
+                + crate::elementary::atan(self.static_force_n / (self.impact_speed_m_s * root_km))
         } else {
             PI
         };

@@ -11,13 +11,18 @@
 //! | 6 | wear over an endurance test | [`wear`] |
 //! | 8, 9 | defaults, validation | [`scenario`] |
 //!
+//! The physics is written once over [`lanes::Real`]: one `f64`, or a batch of devices in lockstep,
+//! with its own `atan` and `exp` ([`elementary`]) so that every CPU computes the same bits.
+//!
 //! The Monte Carlo engine (jobs, scatter, parallel streams) is [`montecarlo`]; its mergeable summaries
 //! and confidence intervals are [`stats`].
 
 pub mod arc;
 pub mod calibration;
+pub mod elementary;
 pub mod error;
 pub mod impact;
+pub mod lanes;
 pub mod life;
 pub mod mechanism;
 pub mod montecarlo;

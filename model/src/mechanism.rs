@@ -84,7 +84,7 @@ impl Flight {
         } else if self.static_force_n == 0.0 {
             std::f64::consts::PI / self.omega
         } else {
-            self.two_over_omega * (v * self.atan_per_speed).atan()
+            self.two_over_omega * crate::elementary::atan(v * self.atan_per_speed)
         }
     }
 

@@ -95,7 +95,7 @@ impl WearLaw {
 /// `worn + (new - worn) exp(-scaled_energy)`: a surface property relaxing from new to worn.
 #[inline]
 fn relax(new: f64, worn: f64, scaled_energy: f64) -> f64 {
-    worn + (new - worn) * (-scaled_energy).exp()
+    worn + (new - worn) * crate::elementary::exp(-scaled_energy)
 }
 
 /// What a device has accumulated over the operations it has run (docs/model.md section 6).

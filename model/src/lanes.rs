@@ -1,0 +1,301 @@
+//! Numbers the physics is written over: one `f64`, or a batch of devices in lockstep.
+//!
+//! The operation (docs/model.md sections 1-5) is written once, generic over [`Real`], so the scalar
+//! path (`simulate`, one device) and the batch path ([`Lanes`], one value per device) cannot drift
+//! apart: the batch path is the scalar path run on every lane.
+//!
+//! Same bits on every CPU: a [`Real`] offers only `+`, `-`, `*`, `/`, `sqrt` (all correctly rounded
+//! by IEEE 754), comparisons, `min`, `max`, selection and exact bit manipulation. No fused
+//! multiply-add (Rust never contracts `a * b + c` by itself) and no libm: `atan` and `exp` are this
+//! crate's own ([`crate::elementary`]). Whatever instruction set a [`Lanes`] loop is compiled for, and
+//! however many lanes it has, each lane rounds exactly as the scalar does.
+
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
+
+/// A number, or a batch of numbers computed in lockstep.
+pub trait Real:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+{
+    /// One truth value per lane.
+    type Mask: Mask;
+    /// How many numbers this is.
+    const LANES: usize;
+
+    /// Every lane `x`.
+    fn splat(x: f64) -> Self;
+    fn sqrt(self) -> Self;
+    /// IEEE `minNum`: the other operand when one is NaN.
+    fn min(self, other: Self) -> Self;
+    fn max(self, other: Self) -> Self;
+    fn abs(self) -> Self;
+    /// `self`'s magnitude with `sign`'s sign bit.
+    fn copysign(self, sign: Self) -> Self;
+    fn lt(self, other: Self) -> Self::Mask;
+    fn le(self, other: Self) -> Self::Mask;
+    fn eq(self, other: Self) -> Self::Mask;
+    /// Where `mask` holds, `yes`; elsewhere `no`.
+    fn select(mask: Self::Mask, yes: Self, no: Self) -> Self;
+    /// `2^self` for a whole number `self` in `[-1022, 1023]`, built from its bits (exact).
+    fn exp2_int(self) -> Self;
+    /// Lane `i`.
+    fn lane(&self, i: usize) -> f64;
+
+    fn gt(self, other: Self) -> Self::Mask {
+        other.lt(self)
+    }
+    fn ge(self, other: Self) -> Self::Mask {
+        other.le(self)
+    }
+}
+
+/// One truth value per lane.
+pub trait Mask: Copy + BitAnd<Output = Self> + BitOr<Output = Self> + Not<Output = Self> {
+    fn any(self) -> bool;
+    fn lane(&self, i: usize) -> bool;
+}
+
+/// `2^52 + 1023`: adding a whole number `n` in `[-1022, 1023]` leaves `n + 1023` in the low mantissa
+/// bits, which shifted into the exponent field are `2^n`.
+const EXP2_INT_BIAS: f64 = 4_503_599_627_371_519.0;
+
+impl Real for f64 {
+    type Mask = bool;
+    const LANES: usize = 1;
+
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        x
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        f64::sqrt(self)
+    }
+    #[inline(always)]
+    fn min(self, other: Self) -> Self {
+        f64::min(self, other)
+    }
+    #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        f64::max(self, other)
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        f64::abs(self)
+    }
+    #[inline(always)]
+    fn copysign(self, sign: Self) -> Self {
+        f64::copysign(self, sign)
+    }
+    #[inline(always)]
+    fn lt(self, other: Self) -> bool {
+        self < other
+    }
+    #[inline(always)]
+    fn le(self, other: Self) -> bool {
+        self <= other
+    }
+    #[inline(always)]
+    fn eq(self, other: Self) -> bool {
+        self == other
+    }
+    #[inline(always)]
+    fn select(mask: bool, yes: Self, no: Self) -> Self {
+        if mask { yes } else { no }
+    }
+    #[inline(always)]
+    fn exp2_int(self) -> Self {
+        f64::from_bits((self + EXP2_INT_BIAS).to_bits() << 52)
+    }
+    #[inline(always)]
+    fn lane(&self, _: usize) -> f64 {
+        *self
+    }
+}
+
+impl Mask for bool {
+    #[inline(always)]
+    fn any(self) -> bool {
+        self
+    }
+    #[inline(always)]
+    fn lane(&self, _: usize) -> bool {
+        *self
+    }
+}
+
+/// `N` devices' values of one quantity, computed lane by lane in loops the compiler vectorises for
+/// whatever instruction set the calling function enables.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C, align(64))]
+pub struct Lanes<const N: usize>(pub [f64; N]);
+
+/// `N` truth values, one per lane of a [`Lanes`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LaneMask<const N: usize>(pub [bool; N]);
+
+impl<const N: usize> Lanes<N> {
+    #[inline(always)]
+    fn map(self, f: impl Fn(f64) -> f64) -> Self {
+        Self(std::array::from_fn(|i| f(self.0[i])))
+    }
+
+    #[inline(always)]
+    fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
+        Self(std::array::from_fn(|i| f(self.0[i], other.0[i])))
+    }
+
+    #[inline(always)]
+    fn compare(self, other: Self, f: impl Fn(f64, f64) -> bool) -> LaneMask<N> {
+        LaneMask(std::array::from_fn(|i| f(self.0[i], other.0[i])))
+    }
+}
+
+macro_rules! lane_operator {
+    ($trait:ident, $method:ident, $op:tt) => {
+        impl<const N: usize> $trait for Lanes<N> {
+            type Output = Self;
+            #[inline(always)]
+            fn $method(self, other: Self) -> Self {
+                self.zip(other, |a, b| a $op b)
+            }
+        }
+    };
+}
+lane_operator!(Add, add, +);
+lane_operator!(Sub, sub, -);
+lane_operator!(Mul, mul, *);
+lane_operator!(Div, div, /);
+
+impl<const N: usize> Neg for Lanes<N> {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        self.map(|a| -a)
+    }
+}
+
+impl<const N: usize> Real for Lanes<N> {
+    type Mask = LaneMask<N>;
+    const LANES: usize = N;
+
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        Self([x; N])
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        self.map(f64::sqrt)
+    }
+    #[inline(always)]
+    fn min(self, other: Self) -> Self {
+        self.zip(other, f64::min)
+    }
+    #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        self.zip(other, f64::max)
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        self.map(f64::abs)
+    }
+    #[inline(always)]
+    fn copysign(self, sign: Self) -> Self {
+        self.zip(sign, f64::copysign)
+    }
+    #[inline(always)]
+    fn lt(self, other: Self) -> LaneMask<N> {
+        self.compare(other, |a, b| a < b)
+    }
+    #[inline(always)]
+    fn le(self, other: Self) -> LaneMask<N> {
+        self.compare(other, |a, b| a <= b)
+    }
+    #[inline(always)]
+    fn eq(self, other: Self) -> LaneMask<N> {
+        self.compare(other, |a, b| a == b)
+    }
+    #[inline(always)]
+    fn select(mask: LaneMask<N>, yes: Self, no: Self) -> Self {
+        Self(std::array::from_fn(|i| {
+            if mask.0[i] { yes.0[i] } else { no.0[i] }
+        }))
+    }
+    #[inline(always)]
+    fn exp2_int(self) -> Self {
+        self.map(<f64 as Real>::exp2_int)
+    }
+    #[inline(always)]
+    fn lane(&self, i: usize) -> f64 {
+        self.0[i]
+    }
+}
+
+macro_rules! mask_operator {
+    ($trait:ident, $method:ident, $op:tt) => {
+        impl<const N: usize> $trait for LaneMask<N> {
+            type Output = Self;
+            #[inline(always)]
+            fn $method(self, other: Self) -> Self {
+                Self(std::array::from_fn(|i| self.0[i] $op other.0[i]))
+            }
+        }
+    };
+}
+mask_operator!(BitAnd, bitand, &);
+mask_operator!(BitOr, bitor, |);
+
+impl<const N: usize> Not for LaneMask<N> {
+    type Output = Self;
+    #[inline(always)]
+    fn not(self) -> Self {
+        Self(self.0.map(|a| !a))
+    }
+}
+
+impl<const N: usize> Mask for LaneMask<N> {
+    #[inline(always)]
+    fn any(self) -> bool {
+        self.0.iter().any(|&a| a)
+    }
+    #[inline(always)]
+    fn lane(&self, i: usize) -> bool {
+        self.0[i]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exp2_int_is_the_power_of_two_across_the_normal_range() {
+        for n in -1022..=1023 {
+            assert_eq!(f64::from(n).exp2_int(), 2f64.powi(n), "2^{n}");
+        }
+    }
+
+    #[test]
+    fn a_lane_of_a_batch_computes_what_the_scalar_does() {
+        let x = Lanes([0.3, -2.0, 7.5, 1e300]);
+        let y = Lanes([1.1, 0.0, -7.5, 2.0]);
+        let batch = Lanes::select(
+            (x * y).lt(y / x),
+            (x + y).sqrt(),
+            (x - y).min(-x).copysign(y),
+        );
+        for i in 0..4 {
+            let (x, y) = (x.0[i], y.0[i]);
+            let scalar = f64::select(
+                (x * y).lt(y / x),
+                (x + y).sqrt(),
+                (x - y).min(-x).copysign(y),
+            );
+            assert_eq!(batch.0[i].to_bits(), scalar.to_bits(), "lane {i}");
+        }
+    }
+}
