@@ -3,9 +3,9 @@
 //! mechanical. Divan reports the
 //! time per job and, through the item counter, per operation.
 //!
-//! `cargo bench -p bouncewear-model --bench engine`
+//! `cargo bench -p bouncewear-model --bench engine`, once per kernel this CPU runs.
 
-use bouncewear_model::montecarlo::{Job, Silent, run_job};
+use bouncewear_model::montecarlo::{Job, Kernel, Silent, run_job_on};
 use divan::{Bencher, black_box, counter::ItemsCount};
 use serde_json::Value;
 
@@ -25,14 +25,39 @@ fn reference_job(scenario: &str) -> (Job, u64) {
     (job, operations)
 }
 
-#[divan::bench(args = ["48 V / 15 A", "mechanical"], sample_count = 5, sample_size = 1)]
-fn job_on_one_thread(bencher: Bencher, scenario: &str) {
+/// Every kernel this CPU runs, by name.
+fn kernels() -> Vec<String> {
+    Kernel::all()
+        .into_iter()
+        .map(|k| format!("{} x{}", k.isa().as_str(), k.lanes()))
+        .collect()
+}
+
+fn kernel(name: &str) -> Kernel {
+    Kernel::all()
+        .into_iter()
+        .find(|k| format!("{} x{}", k.isa().as_str(), k.lanes()) == name)
+        .expect("a kernel of this CPU")
+}
+
+fn job_on_one_thread(bencher: Bencher, scenario: &str, kernel_name: &str) {
     let (job, operations) = reference_job(scenario);
+    let kernel = kernel(kernel_name);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .expect("a pool of one thread");
     bencher
         .counter(ItemsCount::new(operations))
-        .bench_local(|| pool.install(|| run_job(black_box(&job), &Silent)));
+        .bench_local(|| pool.install(|| run_job_on(kernel, black_box(&job), &Silent)));
+}
+
+#[divan::bench(args = kernels(), sample_count = 5, sample_size = 1)]
+fn arcing_48v_15a(bencher: Bencher, kernel: &str) {
+    job_on_one_thread(bencher, "48 V / 15 A", kernel);
+}
+
+#[divan::bench(args = kernels(), sample_count = 5, sample_size = 1)]
+fn mechanical(bencher: Bencher, kernel: &str) {
+    job_on_one_thread(bencher, "mechanical", kernel);
 }

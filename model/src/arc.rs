@@ -5,6 +5,8 @@
 //! burns at the material's minimum arc voltage `V_min`, so the load sees `V_s - V_min` and the arc
 //! current is `I_arc = I_0 (V_s - V_min) / V_s`.
 
+use crate::lanes::Real;
+
 /// Arc current `I_arc = I_0 (V_s - V_min) / V_s`; zero without supply.
 pub fn arc_current_a(current_a: f64, supply_voltage_v: f64, min_arc_voltage_v: f64) -> f64 {
     if supply_voltage_v <= min_arc_voltage_v {
@@ -45,23 +47,28 @@ impl Arc {
     }
 
     /// Pre-impact arc (Fig. 8, 9): it burns from the breakdown gap to touch, `t_p = d_b / u_i`.
-    pub fn pre_arc_duration_s(&self, impact_speed_m_s: f64) -> f64 {
-        self.breakdown_gap_m / impact_speed_m_s
+    #[inline(always)]
+    pub fn pre_arc_duration_s<L: Real>(&self, impact_speed_m_s: L) -> L {
+        L::splat(self.breakdown_gap_m) / impact_speed_m_s
     }
 
     /// Energy of an arc of the given duration, `E = P t` (pre-arc and every bounce alike).
-    pub fn energy_j(&self, duration_s: f64) -> f64 {
-        self.power_w * duration_s
+    #[inline(always)]
+    pub fn energy_j<L: Real>(&self, duration_s: L) -> L {
+        L::splat(self.power_w) * duration_s
     }
 
     /// Surface softening by the pre-arc energy (Fig. 10): `p_1 / p = 1 / (1 + E_p / E_s)`.
-    pub fn softening_ratio(&self, pre_arc_energy_j: f64) -> f64 {
-        1.0 / (1.0 + pre_arc_energy_j / self.softening_energy_j)
+    #[inline(always)]
+    pub fn softening_ratio<L: Real>(&self, pre_arc_energy_j: L) -> L {
+        let one = L::splat(1.0);
+        one / (one + pre_arc_energy_j / L::splat(self.softening_energy_j))
     }
 }
 
 /// Kappa of the softened surface: eq. 8 scales as `p^(5/8)`, so `kappa_1 = kappa (p_1/p)^(5/8)`.
-pub fn softened_kappa(kappa: f64, softening_ratio: f64) -> f64 {
+#[inline(always)]
+pub fn softened_kappa<L: Real>(kappa: L, softening_ratio: L) -> L {
     kappa * crate::restitution::pow_5_8(softening_ratio)
 }
 
@@ -88,9 +95,9 @@ pub enum ArcRestitutionLaw {
 
 impl ArcRestitution {
     /// The linear law `max(0, a + b v)` alone.
-    #[inline]
-    pub fn linear(&self, impact_speed_m_s: f64) -> f64 {
-        (self.a + self.b_s_per_m * impact_speed_m_s).max(0.0)
+    #[inline(always)]
+    pub fn linear<L: Real>(&self, impact_speed_m_s: L) -> L {
+        (L::splat(self.a) + L::splat(self.b_s_per_m) * impact_speed_m_s).max(L::splat(0.0))
     }
 
     /// The weight `w` of an arc of current `I_arc`: 1 under the paper law; under the continuous law
@@ -109,10 +116,10 @@ impl ArcRestitution {
     /// Eq. 16 weighted by `w`: `e = (1 - w) e_m + w min(e_m, max(0, a + b v))`, where `e_m` is the
     /// mechanical restitution on the softened surface. `w = 1` is eq. 16 and `w = 0` is `e_m`, both
     /// exactly; the final `min` keeps rounding from lifting `e` above `e_m` (and so above 1).
-    #[inline]
-    pub fn weighted(&self, mechanical: f64, impact_speed_m_s: f64, weight: f64) -> f64 {
+    #[inline(always)]
+    pub fn weighted<L: Real>(&self, mechanical: L, impact_speed_m_s: L, weight: f64) -> L {
         let eq_16 = mechanical.min(self.linear(impact_speed_m_s));
-        ((1.0 - weight) * mechanical + weight * eq_16).min(mechanical)
+        (L::splat(1.0 - weight) * mechanical + L::splat(weight) * eq_16).min(mechanical)
     }
 }
 

@@ -4,32 +4,37 @@
 //! `pi r p d` with the approach `d`, so loading is a spring `k_c = pi r p` driven by the static force,
 //! `m d'' = F_s - k_c d`, `d(0) = 0`, `d'(0) = u`. Unloading is elastic (Hertz).
 
-use std::f64::consts::PI;
+use crate::elementary::atan;
+use crate::lanes::Real;
+use std::f64::consts::{FRAC_PI_2, PI};
 
 /// Plastic contact stiffness `k_c = pi r p`.
-pub fn contact_stiffness(contact_radius_m: f64, pressure_pa: f64) -> f64 {
-    PI * contact_radius_m * pressure_pa
+#[inline(always)]
+pub fn contact_stiffness<L: Real>(contact_radius_m: L, pressure_pa: L) -> L {
+    L::splat(PI) * contact_radius_m * pressure_pa
 }
 
 /// Loading of one impact: mass `m` meeting contact stiffness `k_c` at speed `u` under static force `F_s`.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Impact {
-    pub mass_kg: f64,
-    pub contact_stiffness_n_per_m: f64,
-    pub static_force_n: f64,
-    pub impact_speed_m_s: f64,
+pub struct Impact<L = f64> {
+    pub mass_kg: L,
+    pub contact_stiffness_n_per_m: L,
+    pub static_force_n: L,
+    pub impact_speed_m_s: L,
 }
 
-impl Impact {
+impl<L: Real> Impact<L> {
     /// `u sqrt(k_c m) = u w_c m`, the momentum-like term shared by the force and the loading time.
-    fn scaled_momentum(&self) -> f64 {
+    #[inline(always)]
+    fn scaled_momentum(&self) -> L {
         self.impact_speed_m_s * (self.contact_stiffness_n_per_m * self.mass_kg).sqrt()
     }
 
     /// Peak force (Fig. 15, linear in `u`): `F_max = F_s + sqrt(F_s^2 + k_c m u^2)`, the force at
     /// maximum approach, where `1/2 m u^2 + F_s d = 1/2 k_c d^2`. Within the magnitudes a valid
     /// scenario allows (docs/model.md section 9) the squares stay far inside f64's range.
-    pub fn peak_force_n(&self) -> f64 {
+    #[inline(always)]
+    pub fn peak_force_n(&self) -> L {
         let fs = self.static_force_n;
         let x = self.scaled_momentum();
         fs + (fs * fs + x * x).sqrt()
@@ -37,21 +42,23 @@ impl Impact {
 
     /// Loading time to maximum approach (eq. 12): `t_load = (pi - atan2(u w_c m, F_s)) / w_c`, which
     /// is `pi / (2 w_c)` when `F_s = 0`. For `u > 0` this is `(pi/2 + atan(F_s / (u w_c m))) / w_c`.
-    pub fn loading_time_s(&self) -> f64 {
+    #[inline(always)]
+    pub fn loading_time_s(&self) -> L {
         let root_km = (self.contact_stiffness_n_per_m * self.mass_kg).sqrt();
-        let angle = if self.impact_speed_m_s > 0.0 {
-            std::f64::consts::FRAC_PI_2
-                + crate::elementary::atan(self.static_force_n / (self.impact_speed_m_s * root_km))
-        } else {
-            PI
-        };
+        let u = self.impact_speed_m_s;
+        let angle = L::select(
+            L::splat(0.0).lt(u),
+            L::splat(FRAC_PI_2) + atan(self.static_force_n / (u * root_km)),
+            L::splat(PI),
+        );
         angle * self.mass_kg / root_km
     }
 
     /// Elastic (Hertz) unloading time (eq. 13): `t_unload = 1.8395 m e u / F_max`, the Hertzian
     /// half-period of a rebound at speed `e u` from peak force `F_max`.
-    pub fn unloading_time_s(&self, restitution: f64, peak_force_n: f64) -> f64 {
-        1.8395 * self.mass_kg * restitution * self.impact_speed_m_s / peak_force_n
+    #[inline(always)]
+    pub fn unloading_time_s(&self, restitution: L, peak_force_n: L) -> L {
+        L::splat(1.8395) * self.mass_kg * restitution * self.impact_speed_m_s / peak_force_n
     }
 
     /// Plastic work of the impact (Fig. 19): the work the contact absorbs while it loads fully
@@ -64,14 +71,16 @@ impl Impact {
     /// approach (the energy balance of [`Impact::peak_force_n`]), is the one evaluated: it never
     /// squares `F_max`. The elastic unloading that follows gives back the rebound, `m (e u)^2 / 2`,
     /// out of elastic strain this loading model does not separate from the plastic work.
-    pub fn plastic_work_j(&self, peak_force_n: f64) -> f64 {
+    #[inline(always)]
+    pub fn plastic_work_j(&self, peak_force_n: L) -> L {
         let u = self.impact_speed_m_s;
-        0.5 * self.mass_kg * u * u
+        L::splat(0.5) * self.mass_kg * u * u
             + self.static_force_n * (peak_force_n / self.contact_stiffness_n_per_m)
     }
 
     /// Impact duration `t_load + t_unload`, with the peak force it needs; `(F_max, duration)`.
-    pub fn peak_force_and_duration(&self, restitution: f64) -> (f64, f64) {
+    #[inline(always)]
+    pub fn peak_force_and_duration(&self, restitution: L) -> (L, L) {
         let peak = self.peak_force_n();
         (
             peak,

@@ -28,6 +28,8 @@ pub trait Real:
 
     /// Every lane `x`.
     fn splat(x: f64) -> Self;
+    /// Lane `i` is `f(i)`.
+    fn from_fn(f: impl FnMut(usize) -> f64) -> Self;
     fn sqrt(self) -> Self;
     /// IEEE `minNum`: the other operand when one is NaN.
     fn min(self, other: Self) -> Self;
@@ -70,6 +72,10 @@ impl Real for f64 {
     #[inline(always)]
     fn splat(x: f64) -> Self {
         x
+    }
+    #[inline(always)]
+    fn from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
+        f(0)
     }
     #[inline(always)]
     fn sqrt(self) -> Self {
@@ -186,6 +192,10 @@ impl<const N: usize> Real for Lanes<N> {
     #[inline(always)]
     fn splat(x: f64) -> Self {
         Self([x; N])
+    }
+    #[inline(always)]
+    fn from_fn(f: impl FnMut(usize) -> f64) -> Self {
+        Self(std::array::from_fn(f))
     }
     #[inline(always)]
     fn sqrt(self) -> Self {

@@ -4,6 +4,9 @@
 //! return spring an effective stiffness, so that free flight with gap `x > 0` obeys
 //! `m x'' = -F_s - k x` (eq. 1).
 
+use crate::elementary::atan;
+use crate::lanes::Real;
+
 /// Effective mass at the contact, `m = J / h'^2` (eq. 1).
 pub fn effective_mass(inertia_kg_m2: f64, contact_arm_m: f64) -> f64 {
     inertia_kg_m2 / (contact_arm_m * contact_arm_m)
@@ -77,21 +80,21 @@ impl Flight {
     /// Exact flight time after a separation at speed `v` (eq. 3, the exact solution of eq. 1):
     /// `T(v) = (2/w) atan2(v w m, F_s)`, evaluated as `(2/w) atan(v sqrt(k m) / F_s)`; it is `pi/w`
     /// when `F_s = 0`, and the constant-force time of eq. 4 when `k = 0`.
-    #[inline]
-    pub fn exact_time_s(&self, v: f64) -> f64 {
+    #[inline(always)]
+    pub fn exact_time_s<L: Real>(&self, v: L) -> L {
         if self.stiffness_n_per_m == 0.0 {
             self.constant_force_time_s(v)
         } else if self.static_force_n == 0.0 {
-            std::f64::consts::PI / self.omega
+            L::splat(std::f64::consts::PI / self.omega)
         } else {
-            self.two_over_omega * crate::elementary::atan(v * self.atan_per_speed)
+            L::splat(self.two_over_omega) * atan(v * L::splat(self.atan_per_speed))
         }
     }
 
     /// Constant-force flight time (eq. 4): `T(v) = 2 v m / F_s`, the `k -> 0` limit of eq. 3.
-    #[inline]
-    pub fn constant_force_time_s(&self, v: f64) -> f64 {
-        v * self.constant_force_time_per_speed
+    #[inline(always)]
+    pub fn constant_force_time_s<L: Real>(&self, v: L) -> L {
+        v * L::splat(self.constant_force_time_per_speed)
     }
 
     /// Exact peak gap of the flight: with `d = F_s/k` and `x = v/w`,

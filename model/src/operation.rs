@@ -3,6 +3,7 @@
 
 use crate::arc::{Arc, ArcRestitution, ArcRestitutionLaw, arc_current_a, softened_kappa};
 use crate::impact::{Impact, contact_stiffness};
+use crate::lanes::{Mask, Real};
 use crate::mechanism::{Flight, effective_mass, effective_stiffness, impact_velocity};
 use crate::restitution::{self, KappaLaw, LOWER_BOUND_FACTOR};
 use crate::scenario::{ArcRestitutionLawKind, Scenario};
@@ -90,6 +91,46 @@ pub struct Outcome {
     /// `simulate` output of docs/contract.md "Scenario" keeps its fixed fields and leaves it out.
     #[serde(skip)]
     pub first_impact_plastic_work_j: f64,
+}
+
+/// What one operation produced on every lane of a [`Real`]: an [`Outcome`] per lane.
+#[derive(Debug, Clone, Copy)]
+pub struct Outcomes<L: Real> {
+    pub impact_velocity_m_s: L,
+    pub kappa: L,
+    pub e1: L,
+    pub first_bounce_s: L,
+    pub total_bounce_s: L,
+    /// A whole number per lane.
+    pub bounce_count: L,
+    pub pre_arc_s: L,
+    pub arc_energy_j: L,
+    pub peak_force_n: L,
+    pub impact_duration_s: L,
+    pub truncated: L::Mask,
+    pub first_impact_plastic_work_j: L,
+}
+
+impl<L: Real> Outcomes<L> {
+    /// The outcome of lane `i`.
+    #[inline(always)]
+    pub fn lane(&self, i: usize) -> Outcome {
+        Outcome {
+            impact_velocity_m_s: self.impact_velocity_m_s.lane(i),
+            kappa: self.kappa.lane(i),
+            e1: self.e1.lane(i),
+            first_bounce_s: self.first_bounce_s.lane(i),
+            total_bounce_s: self.total_bounce_s.lane(i),
+            // At most `max_bounces`, a u32.
+            bounce_count: self.bounce_count.lane(i) as u32,
+            pre_arc_s: self.pre_arc_s.lane(i),
+            arc_energy_j: self.arc_energy_j.lane(i),
+            peak_force_n: self.peak_force_n.lane(i),
+            impact_duration_s: self.impact_duration_s.lane(i),
+            truncated: self.truncated.lane(i),
+            first_impact_plastic_work_j: self.first_impact_plastic_work_j.lane(i),
+        }
+    }
 }
 
 /// One bounce: the flight after a separation.
@@ -297,81 +338,134 @@ impl Operation {
         radius_m: f64,
         pressure_pa: f64,
         needs: Needs,
-        mut bounces: Option<&mut Vec<Bounce>>,
+        bounces: Option<&mut Vec<Bounce>>,
     ) -> Outcome {
         let u = self.impact_velocity_m_s;
-        let kappa = self.kappa_law.at(radius_m, pressure_pa);
-        let mut out = Outcome {
-            impact_velocity_m_s: u,
-            kappa,
-            ..Outcome::default()
+        let outcomes = match bounces {
+            Some(list) => self.run_lanes(
+                u,
+                radius_m,
+                pressure_pa,
+                needs,
+                |v, duration_s, arc_energy_j, _| {
+                    list.push(Bounce {
+                        separation_velocity_m_s: v,
+                        duration_s,
+                        peak_gap_m: self.peak_gap_m(v),
+                        arc_energy_j,
+                    });
+                },
+            ),
+            None => self.run_lanes(u, radius_m, pressure_pa, needs, |_, _, _, _| {}),
         };
-        if u <= 0.0 {
-            return out;
-        }
+        outcomes.lane(0)
+    }
+
+    /// Runs one operation on every lane: impact speed `u` (in place of this operation's own) on a
+    /// surface of radius `radius_m` and pressure `pressure_pa`. The lanes advance in lockstep, each
+    /// exactly as it would alone; the bounce loop runs until every lane has stopped, a stopped lane
+    /// keeping its values. `on_bounce(v, duration, arc energy, bouncing)` sees every bounce, with the
+    /// lanes that really bounce.
+    #[inline(always)]
+    pub fn run_lanes<L: Real>(
+        &self,
+        u: L,
+        radius_m: L,
+        pressure_pa: L,
+        needs: Needs,
+        mut on_bounce: impl FnMut(L, L, L, L::Mask),
+    ) -> Outcomes<L> {
+        let c = L::splat;
+        let zero = c(0.0);
+        let kappa = self.kappa_law.at(radius_m, pressure_pa);
+        // A lane that does not move keeps its speed and kappa, and zero for everything else.
+        let moving = zero.lt(u);
+        let keep = |x: L| L::select(moving, x, zero);
 
         // Pre-impact arc softens the surface for the first impact (section 5), in full under the
         // paper law (a weight of exactly 1 changes no bit).
-        let (kappa_1, pressure_1) = match &self.arc {
+        let (pre_arc_s, pre_arc_energy_j, kappa_1, pressure_1) = match &self.arc {
             Some(arc) => {
-                out.pre_arc_s = arc.pre_arc_duration_s(u);
-                out.arc_energy_j = arc.energy_j(out.pre_arc_s);
-                let ratio = arc.softening_ratio(self.arc_weight * out.arc_energy_j);
-                (softened_kappa(kappa, ratio), pressure_pa * ratio)
+                let pre_arc_s = arc.pre_arc_duration_s(u);
+                let energy_j = arc.energy_j(pre_arc_s);
+                let ratio = arc.softening_ratio(c(self.arc_weight) * energy_j);
+                (
+                    pre_arc_s,
+                    energy_j,
+                    softened_kappa(kappa, ratio),
+                    pressure_pa * ratio,
+                )
             }
-            None => (kappa, pressure_pa),
+            None => (zero, zero, kappa, pressure_pa),
         };
-        out.e1 = match self.fidelity {
+        let e1 = match self.fidelity {
             Fidelity::Exact => restitution::restitution(u, kappa_1),
             Fidelity::ClosedForm => restitution::restitution_closed_form(u, kappa_1),
         };
-        if needs.impact {
+        let (peak_force_n, impact_duration_s, plastic_work_j) = if needs.impact {
             let impact = Impact {
-                mass_kg: self.mass_kg,
+                mass_kg: c(self.mass_kg),
                 contact_stiffness_n_per_m: contact_stiffness(radius_m, pressure_1),
-                static_force_n: self.static_force_n,
+                static_force_n: c(self.static_force_n),
                 impact_speed_m_s: u,
             };
-            (out.peak_force_n, out.impact_duration_s) = impact.peak_force_and_duration(out.e1);
-            out.first_impact_plastic_work_j = impact.plastic_work_j(out.peak_force_n);
-        }
+            let (peak, duration) = impact.peak_force_and_duration(e1);
+            (peak, duration, impact.plastic_work_j(peak))
+        } else {
+            (zero, zero, zero)
+        };
 
         // The loop carries squared speeds: an impact multiplies v^2 by e^2 and removes 2 eps / m.
-        let rebound = out.e1 * u;
+        let rebound = e1 * u;
         let mut v = self.separation_speed(rebound * rebound);
         let (kappa_sq, kappa_1_sq) = (kappa * kappa, kappa_1 * kappa_1);
-        while v > 0.0 && v >= self.min_bounce_speed {
-            if out.bounce_count == self.max_bounces {
-                out.truncated = true;
+        let min_bounce_speed = c(self.min_bounce_speed);
+        let bouncing = |v: L| zero.lt(v) & min_bounce_speed.le(v);
+        let max_bounces = c(f64::from(self.max_bounces));
+        let mut active = moving & bouncing(v);
+        let mut truncated = zero.lt(zero);
+        let (mut bounce_count, mut first_bounce_s, mut total_bounce_s) = (zero, zero, zero);
+        let mut arc_energy_j = pre_arc_energy_j;
+        loop {
+            let at_cap = active & bounce_count.eq(max_bounces);
+            truncated = truncated | at_cap;
+            active = active & !at_cap;
+            if !active.any() {
                 break;
             }
             let duration_s = self.flight_time_s(v);
-            out.bounce_count += 1;
-            out.total_bounce_s += duration_s;
-            if out.bounce_count == 1 {
-                out.first_bounce_s = duration_s;
-            }
-            let arc_energy_j = self
-                .arc
-                .as_ref()
-                .map_or(0.0, |arc| arc.energy_j(duration_s));
-            out.arc_energy_j += arc_energy_j;
-            if let Some(list) = bounces.as_deref_mut() {
-                list.push(Bounce {
-                    separation_velocity_m_s: v,
-                    duration_s,
-                    peak_gap_m: self.peak_gap_m(v),
-                    arc_energy_j,
-                });
-            }
+            bounce_count = L::select(active, bounce_count + c(1.0), bounce_count);
+            total_bounce_s = L::select(active, total_bounce_s + duration_s, total_bounce_s);
+            first_bounce_s =
+                L::select(active & bounce_count.eq(c(1.0)), duration_s, first_bounce_s);
+            let bounce_arc_energy_j = match &self.arc {
+                Some(arc) => arc.energy_j(duration_s),
+                None => zero,
+            };
+            arc_energy_j = L::select(active, arc_energy_j + bounce_arc_energy_j, arc_energy_j);
+            on_bounce(v, duration_s, bounce_arc_energy_j, active);
             let rebound_sq = if self.arc.is_some() {
                 self.arc_restitution_squared(v, kappa_1_sq) * (v * v)
             } else {
                 self.rebound_squared(v, kappa_sq)
             };
             v = self.separation_speed(rebound_sq);
+            active = active & bouncing(v);
         }
-        out
+        Outcomes {
+            impact_velocity_m_s: u,
+            kappa,
+            e1: keep(e1),
+            first_bounce_s,
+            total_bounce_s,
+            bounce_count,
+            pre_arc_s: keep(pre_arc_s),
+            arc_energy_j: keep(arc_energy_j),
+            peak_force_n: keep(peak_force_n),
+            impact_duration_s: keep(impact_duration_s),
+            truncated,
+            first_impact_plastic_work_j: keep(plastic_work_j),
+        }
     }
 
     /// The full `simulate` output at this operation's nominal radius and pressure.
@@ -389,8 +483,8 @@ impl Operation {
 
     /// The squared rebound speed `(e v)^2` of an impact at speed `v` at this fidelity (eq. 7 or
     /// eq. 18), from `kappa^2`. Eq. 18 needs no division: `(e v)^2 = min(v^2, kappa^2 v sqrt(v))`.
-    #[inline]
-    fn rebound_squared(&self, v: f64, kappa_sq: f64) -> f64 {
+    #[inline(always)]
+    fn rebound_squared<L: Real>(&self, v: L, kappa_sq: L) -> L {
         let v_sq = v * v;
         match self.fidelity {
             Fidelity::Exact => restitution::restitution_squared_scaled(kappa_sq / v.sqrt()) * v_sq,
@@ -398,12 +492,12 @@ impl Operation {
         }
     }
 
-    /// Eq. 16 after an arcing bounce, squared: `min(e(v; kappa_1), max(0, a + b v))^2`. Eq. 7 is solved
-    /// only when the linear law is above its cheap lower bound `min(1, (5/8)^(3/8) eps0)`; otherwise
-    /// the linear law is the minimum. The result is identical either way. An arc weighted below 1
-    /// (the continuous law, section 5) takes [`ArcRestitution::weighted`] instead.
-    #[inline]
-    fn arc_restitution_squared(&self, v: f64, kappa_1_sq: f64) -> f64 {
+    /// Eq. 16 after an arcing bounce, squared: `min(e(v; kappa_1), max(0, a + b v))^2`. Where the
+    /// linear law is at or below eq. 7's cheap lower bound `min(1, (5/8)^(3/8) eps0)` it is the
+    /// minimum, and eq. 7's root is not needed (the result is identical either way). An arc
+    /// weighted below 1 (the continuous law, section 5) takes [`ArcRestitution::weighted`] instead.
+    #[inline(always)]
+    fn arc_restitution_squared<L: Real>(&self, v: L, kappa_1_sq: L) -> L {
         let eps0_sq = kappa_1_sq / v.sqrt();
         if self.arc_weight < 1.0 {
             let mechanical = self.mechanical_restitution_squared(eps0_sq).sqrt();
@@ -414,30 +508,35 @@ impl Operation {
         }
         let linear = self.arc_restitution.linear(v);
         let linear_sq = linear * linear;
-        if linear_sq <= (LOWER_BOUND_FACTOR * LOWER_BOUND_FACTOR * eps0_sq).min(1.0) {
-            return linear_sq;
-        }
-        linear_sq.min(self.mechanical_restitution_squared(eps0_sq))
+        let below_bound = linear_sq
+            .le((L::splat(LOWER_BOUND_FACTOR * LOWER_BOUND_FACTOR) * eps0_sq).min(L::splat(1.0)));
+        L::select(
+            below_bound,
+            linear_sq,
+            linear_sq.min(self.mechanical_restitution_squared(eps0_sq)),
+        )
     }
 
     /// `e^2` of eq. 7 (or eq. 18) from the squared scaled speed `eps0^2 = kappa^2 / sqrt(v)`.
-    #[inline]
-    fn mechanical_restitution_squared(&self, eps0_sq: f64) -> f64 {
+    #[inline(always)]
+    fn mechanical_restitution_squared<L: Real>(&self, eps0_sq: L) -> L {
         match self.fidelity {
             Fidelity::Exact => restitution::restitution_squared_scaled(eps0_sq),
-            Fidelity::ClosedForm => eps0_sq.min(1.0),
+            Fidelity::ClosedForm => eps0_sq.min(L::splat(1.0)),
         }
     }
 
     /// Speed after an impact from the squared rebound speed `(e v)^2`, less the energy `eps` every
     /// impact loses (section 3): `v' = sqrt(max(0, (e v)^2 - 2 eps / m))`.
-    #[inline]
-    fn separation_speed(&self, rebound_sq: f64) -> f64 {
-        (rebound_sq - self.loss_speed_sq).max(0.0).sqrt()
+    #[inline(always)]
+    fn separation_speed<L: Real>(&self, rebound_sq: L) -> L {
+        (rebound_sq - L::splat(self.loss_speed_sq))
+            .max(L::splat(0.0))
+            .sqrt()
     }
 
-    #[inline]
-    fn flight_time_s(&self, v: f64) -> f64 {
+    #[inline(always)]
+    fn flight_time_s<L: Real>(&self, v: L) -> L {
         if self.constant_force_flight {
             self.flight.constant_force_time_s(v)
         } else {

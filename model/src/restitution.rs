@@ -7,6 +7,8 @@
 //! with `z` in `((5/8)^(3/4), 1]`. No `kappa^8`, `u^2` or `q = kappa^4/u` is ever formed, so nothing
 //! overflows or underflows for any finite positive input: a tiny `eps0` gives `a = 0`, `z = 1`, `e = eps0`.
 
+use crate::lanes::Real;
+
 /// The scaled speed at and above which eq. 7 has no root below 1: `eps0 >= (8/5)^(3/8)` gives `e = 1`
 /// (equivalently `u <= u_c = (5/8)^(3/2) kappa^4`, or `q >= (8/5)^(3/2)`).
 pub const ELASTIC_SCALED_SPEED: f64 = 1.192_737_828_708_026_8;
@@ -31,21 +33,21 @@ pub fn kappa(
 
 /// `x^(1/8)` by three correctly rounded square roots: within 2 ulps, and about twice as fast as `powf`
 /// (kappa is rescaled at every operation of a wearing device).
-#[inline]
-pub fn eighth_root(x: f64) -> f64 {
+#[inline(always)]
+pub fn eighth_root<L: Real>(x: L) -> L {
     x.sqrt().sqrt().sqrt()
 }
 
 /// `x^(3/8)`, the radius scaling of eq. 8.
-#[inline]
-pub fn pow_3_8(x: f64) -> f64 {
+#[inline(always)]
+pub fn pow_3_8<L: Real>(x: L) -> L {
     let t = eighth_root(x);
     t * t * t
 }
 
 /// `x^(5/8)`, the pressure scaling of eq. 8.
-#[inline]
-pub fn pow_5_8(x: f64) -> f64 {
+#[inline(always)]
+pub fn pow_5_8<L: Real>(x: L) -> L {
     let t = eighth_root(x);
     let t2 = t * t;
     t2 * t2 * t
@@ -62,23 +64,24 @@ pub struct KappaLaw {
 }
 
 impl KappaLaw {
-    /// Kappa at radius `r` and pressure `p`; exactly the reference value at the reference point.
-    #[inline]
-    pub fn at(&self, radius_m: f64, pressure_pa: f64) -> f64 {
-        let mut kappa = self.reference_kappa;
-        if radius_m != self.reference_radius_m {
-            kappa *= pow_3_8(radius_m / self.reference_radius_m);
-        }
-        if pressure_pa != self.reference_pressure_pa {
-            kappa *= pow_5_8(pressure_pa / self.reference_pressure_pa);
-        }
-        kappa
+    /// Kappa at radius `r` and pressure `p`; exactly the reference value at the reference point
+    /// (where a factor would round, it is exactly 1 instead).
+    #[inline(always)]
+    pub fn at<L: Real>(&self, radius_m: L, pressure_pa: L) -> L {
+        let (r0, p0) = (
+            L::splat(self.reference_radius_m),
+            L::splat(self.reference_pressure_pa),
+        );
+        let one = L::splat(1.0);
+        let radius_factor = L::select(radius_m.eq(r0), one, pow_3_8(radius_m / r0));
+        let pressure_factor = L::select(pressure_pa.eq(p0), one, pow_5_8(pressure_pa / p0));
+        L::splat(self.reference_kappa) * radius_factor * pressure_factor
     }
 }
 
 /// The scaled speed `eps0 = kappa u^(-1/4)` (infinite at `u = 0`, which is elastic).
-#[inline]
-pub fn scaled_speed(impact_speed_m_s: f64, kappa: f64) -> f64 {
+#[inline(always)]
+pub fn scaled_speed<L: Real>(impact_speed_m_s: L, kappa: L) -> L {
     kappa / impact_speed_m_s.sqrt().sqrt()
 }
 
@@ -86,30 +89,30 @@ pub fn scaled_speed(impact_speed_m_s: f64, kappa: f64) -> f64 {
 ///
 /// `e = 1` at and below the critical speed `u_c`, continuous across it, decreasing in `u`,
 /// increasing in `kappa`, always in `[0, 1]`. Accurate to a few ulps (see [`restitution_scaled`]).
-#[inline]
-pub fn restitution(impact_speed_m_s: f64, kappa: f64) -> f64 {
+#[inline(always)]
+pub fn restitution<L: Real>(impact_speed_m_s: L, kappa: L) -> L {
     restitution_scaled(scaled_speed(impact_speed_m_s, kappa))
 }
 
 /// Eq. 7 as a function of the scaled speed alone: `e = eps0 sqrt(z)`, `z` the root of the quartic.
 /// Nothing here can overflow or underflow: for tiny `eps0`, `a` is 0, `z` is 1 and `e = eps0`.
-#[inline]
-pub fn restitution_scaled(eps0: f64) -> f64 {
-    if eps0 >= ELASTIC_SCALED_SPEED || eps0.is_nan() {
-        return 1.0;
-    }
-    (eps0 * quartic_root(0.375 * eps0 * eps0).sqrt()).min(1.0)
+#[inline(always)]
+pub fn restitution_scaled<L: Real>(eps0: L) -> L {
+    let one = L::splat(1.0);
+    let inelastic = eps0.lt(L::splat(ELASTIC_SCALED_SPEED));
+    let e = (eps0 * quartic_root(L::splat(0.375) * eps0 * eps0).sqrt()).min(one);
+    L::select(inelastic, e, one)
 }
 
 /// `e^2` of eq. 7 from `eps0^2 = kappa^2 / sqrt(u)`, for the bounce loop, which carries squared
 /// speeds: `(e v)^2 = e^2 v^2` needs no square root of its own. Same accuracy as [`restitution_scaled`]
 /// as long as `eps0^2` does not underflow (`e > 1e-154`; below that the rebound is zero).
-#[inline]
-pub fn restitution_squared_scaled(eps0_sq: f64) -> f64 {
-    if eps0_sq >= ELASTIC_SCALED_SPEED_SQ || eps0_sq.is_nan() {
-        return 1.0;
-    }
-    (eps0_sq * quartic_root(0.375 * eps0_sq)).min(1.0)
+#[inline(always)]
+pub fn restitution_squared_scaled<L: Real>(eps0_sq: L) -> L {
+    let one = L::splat(1.0);
+    let inelastic = eps0_sq.lt(L::splat(ELASTIC_SCALED_SPEED_SQ));
+    let e_sq = (eps0_sq * quartic_root(L::splat(0.375) * eps0_sq)).min(one);
+    L::select(inelastic, e_sq, one)
 }
 
 /// The root `z` of `z^4 = (1 - a z)^3` for `a` in `[0, 3/8 (8/5)^(3/4)]`.
@@ -118,8 +121,8 @@ pub fn restitution_squared_scaled(eps0_sq: f64) -> f64 {
 /// one Newton step on `F(z) = z^4 - (1 - a z)^3`. Newton squares the error times `|F''/2F'| < 2`, so
 /// the step leaves below 1.2e-17: what remains is the rounding of the step itself, a few ulps.
 /// A fixed step count keeps the bounce loop free of data-dependent branches.
-#[inline]
-fn quartic_root(a: f64) -> f64 {
+#[inline(always)]
+fn quartic_root<L: Real>(a: L) -> L {
     const C: [f64; 7] = [
         0.999_999_997_672_269_1,
         -0.749_999_575_334_258_9,
@@ -129,21 +132,23 @@ fn quartic_root(a: f64) -> f64 {
         -0.039_156_188_123_702_57,
         0.008_050_232_553_153_345,
     ];
+    let k = L::splat;
     let a2 = a * a;
     // Estrin's scheme: a short dependency chain.
-    let z = (C[0] + C[1] * a) + a2 * ((C[2] + C[3] * a) + a2 * ((C[4] + C[5] * a) + a2 * C[6]));
-    let c = 1.0 - a * z;
+    let z = (k(C[0]) + k(C[1]) * a)
+        + a2 * ((k(C[2]) + k(C[3]) * a) + a2 * ((k(C[4]) + k(C[5]) * a) + a2 * k(C[6])));
+    let c = k(1.0) - a * z;
     let z2 = z * z;
-    z - (z2 * z2 - c * c * c) / (4.0 * z2 * z + 3.0 * a * c * c)
+    z - (z2 * z2 - c * c * c) / (k(4.0) * z2 * z + k(3.0) * a * c * c)
 }
 
 /// The paper's approximation (eq. 18): `e ~= min(1, kappa u^(-1/4))`, i.e. `min(1, eps0)`.
 ///
 /// It neglects the `(1 - 3e^2/8)^(3/8)` factor of eq. 7, so it overestimates `e` by up to
 /// `(8/5)^(3/8) - 1 = 19 %` just below the elastic limit and by `3 eps0^2 / 64` for small `eps0`.
-#[inline]
-pub fn restitution_closed_form(impact_speed_m_s: f64, kappa: f64) -> f64 {
-    scaled_speed(impact_speed_m_s, kappa).min(1.0)
+#[inline(always)]
+pub fn restitution_closed_form<L: Real>(impact_speed_m_s: L, kappa: L) -> L {
+    scaled_speed(impact_speed_m_s, kappa).min(L::splat(1.0))
 }
 
 /// The critical speed `u_c = (5/8)^(3/2) kappa^4` at and below which eq. 7 gives `e = 1`.

@@ -6,6 +6,8 @@
 //! The paper's own suggestion (Section V.B) is to hold kappa constant; a third law also anneals the
 //! surface, lowering the dynamic yield pressure towards a floor. Erosion removes `gamma` kg per joule.
 
+use crate::elementary::exp;
+use crate::lanes::Real;
 use crate::operation::Outcome;
 use crate::scenario::{Scenario, WearLawKind};
 
@@ -41,29 +43,29 @@ impl WearLaw {
 
     /// Effective radius after cumulative arc energy `W`: `r = r_inf + (r0 - r_inf) exp(-W / W_r)`
     /// when the law roughens; `r0` under the `constant` law.
-    #[inline]
-    pub fn radius_m(&self, new_radius_m: f64, cumulative_arc_energy_j: f64) -> f64 {
+    #[inline(always)]
+    pub fn radius_m<L: Real>(&self, new_radius_m: L, cumulative_arc_energy_j: L) -> L {
         if self.kind == WearLawKind::Constant {
             return new_radius_m;
         }
         relax(
             new_radius_m,
             self.worn_radius_m,
-            cumulative_arc_energy_j * self.inverse_roughening_energy,
+            cumulative_arc_energy_j * L::splat(self.inverse_roughening_energy),
         )
     }
 
     /// Dynamic yield pressure after cumulative arc energy `W`: under `roughening_and_softening`,
     /// `p = p_inf + (p0 - p_inf) exp(-W / W_p)`; otherwise `p0`.
-    #[inline]
-    pub fn pressure_pa(&self, new_pressure_pa: f64, cumulative_arc_energy_j: f64) -> f64 {
+    #[inline(always)]
+    pub fn pressure_pa<L: Real>(&self, new_pressure_pa: L, cumulative_arc_energy_j: L) -> L {
         if self.kind != WearLawKind::RougheningAndSoftening {
             return new_pressure_pa;
         }
         relax(
             new_pressure_pa,
             self.worn_pressure_pa,
-            cumulative_arc_energy_j * self.inverse_annealing_energy,
+            cumulative_arc_energy_j * L::splat(self.inverse_annealing_energy),
         )
     }
 
@@ -93,9 +95,10 @@ impl WearLaw {
 }
 
 /// `worn + (new - worn) exp(-scaled_energy)`: a surface property relaxing from new to worn.
-#[inline]
-fn relax(new: f64, worn: f64, scaled_energy: f64) -> f64 {
-    worn + (new - worn) * crate::elementary::exp(-scaled_energy)
+#[inline(always)]
+fn relax<L: Real>(new: L, worn: f64, scaled_energy: L) -> L {
+    let worn = L::splat(worn);
+    worn + (new - worn) * exp(-scaled_energy)
 }
 
 /// What a device has accumulated over the operations it has run (docs/model.md section 6).

@@ -10,8 +10,10 @@
 //! (see [`crate::stats`]).
 
 use super::job::{Job, Parameter, Per, SamplerKind, Scatter};
+use super::kernel::{Kernel, LaneWork};
 use super::lives::{DeviceLife, GroupLives};
 use super::metric::{DeviceMetric, Metric};
+use crate::lanes::Real;
 use crate::operation::{Conditions, Needs, Outcome, Setup};
 use crate::stats::Accumulator;
 use crate::wear::{DeviceWear, WearLaw};
@@ -152,10 +154,13 @@ struct Plan<'a> {
     needs: Needs,
     /// Wear changes the radius only if an arc can burn and a later operation exists.
     track_wear: bool,
+    /// Only lane parameters (speed, radius, pressure) scatter, so devices can run in lockstep.
+    lockstep: bool,
+    kernel: Kernel,
 }
 
 impl<'a> Plan<'a> {
-    fn new(job: &'a Job) -> Self {
+    fn new(job: &'a Job, kernel: Kernel) -> Self {
         let scenario = job.scenario();
         let spec = scenario.spec();
         let setup = Setup::new(scenario);
@@ -166,14 +171,9 @@ impl<'a> Plan<'a> {
         };
         let (device_scatter, operation_scatter): (Vec<_>, Vec<_>) =
             job.scatter().iter().partition(|s| s.per == Per::Device);
-        let cheap_operation_scatter = operation_scatter.iter().all(|s| {
-            matches!(
-                s.parameter,
-                Parameter::ImpactVelocity
-                    | Parameter::ContactRadius
-                    | Parameter::DynamicYieldPressure
-            )
-        });
+        let cheap_operation_scatter = operation_scatter
+            .iter()
+            .all(|s| s.parameter.is_lane_value());
         let current_scattered = job
             .scatter()
             .iter()
@@ -200,19 +200,13 @@ impl<'a> Plan<'a> {
             },
             track_wear: can_arc && job.spec().operations > 1 && wear.changes_surface(),
             wear,
+            lockstep: job.scatter().iter().all(|s| s.parameter.is_lane_value()),
+            kernel,
         }
     }
 
-    /// Runs device `device` (its stream), with its LHS strata if any, into `stats`.
-    fn run_device(
-        &self,
-        device: u64,
-        strata: Option<(&[Vec<u32>], usize)>,
-        stats: &mut GroupStats,
-    ) {
-        let job = self.job;
-        let mut rng = ChaCha8Rng::seed_from_u64(job.seed());
-        rng.set_stream(device);
+    /// The device-level draws of one device from its stream, with its LHS strata if any.
+    fn device_draws(&self, strata: Option<(&[Vec<u32>], usize)>, rng: &mut ChaCha8Rng) -> Draws {
         let mut draws = self.nominal;
         for (k, scatter) in self.device_scatter.iter().enumerate() {
             let value = match strata {
@@ -221,68 +215,135 @@ impl<'a> Plan<'a> {
                         u32::try_from(permutations[k].len()).expect("batch fits u32");
                     scatter
                         .distribution
-                        .stratified(permutations[k][local], strata_count, &mut rng)
+                        .stratified(permutations[k][local], strata_count, rng)
                 }
-                None => scatter.distribution.sample(&mut rng),
+                None => scatter.distribution.sample(rng),
             };
             draws.set(scatter.parameter, value);
         }
+        draws
+    }
+
+    /// Runs the `L::LANES` devices of the chunk from `first_local` on, in lockstep, into `stats`:
+    /// each from its own stream, with the draws and the arithmetic it would have alone. Each bin's
+    /// values wait in `buffer` and go into the accumulators device after device, in the order of
+    /// one device at a time, so the sums come out the same to the bit for any number of lanes.
+    #[inline(always)]
+    fn run_devices<L: Real>(
+        &self,
+        chunk: &Chunk<'_>,
+        first_local: u64,
+        stats: &mut GroupStats,
+        buffer: &mut Vec<f64>,
+    ) {
+        let job = self.job;
+        let lanes = L::LANES;
         let fidelity = job.spec().fidelity;
-        let mut operation = self.setup.operation(&draws.conditions, fidelity);
+        let (mut rngs, mut draws) = (Vec::with_capacity(lanes), Vec::with_capacity(lanes));
+        for local in first_local..first_local + lanes as u64 {
+            let mut rng = ChaCha8Rng::seed_from_u64(job.seed());
+            rng.set_stream(chunk.first + local);
+            let local_index = usize::try_from(local).expect("batch fits in memory");
+            draws.push(self.device_draws(chunk.permutations.map(|p| (p, local_index)), &mut rng));
+            rngs.push(rng);
+        }
+        // Lanes share the operation's constants: in lockstep only speed, radius and pressure differ.
+        let mut operation = self.setup.operation(&draws[0].conditions, fidelity);
+        let base_speed = operation.impact_velocity_m_s();
+        let lane_speed = |d: &Draws| d.conditions.impact_velocity_m_s.unwrap_or(base_speed);
+        let device_speed = L::from_fn(|k| lane_speed(&draws[k]));
+        let device_radius = L::from_fn(|k| draws[k].radius_m);
+        let device_pressure = L::from_fn(|k| draws[k].pressure_pa);
+        let mut operation_draws = draws.clone();
+        let mut speeds = vec![0.0; lanes];
+        let mut wear = vec![DeviceWear::default(); lanes];
+        let mut failed_at = vec![None; lanes];
         let metrics = job.operation_metrics();
-        let mut device_wear = DeviceWear::default();
-        let mut failed_at = None;
         let operations = job.spec().operations;
+        let bin_operations = usize::try_from(job.bin_operations()).expect("bins fit in memory");
+        buffer.resize(lanes * bin_operations * metrics.len(), 0.0);
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
         for bin_index in 0..bins {
             let start = job.bin_operations() * bin_index as u64;
             let end = (start + job.bin_operations()).min(operations);
-            let bin =
-                &mut stats.operations[bin_index * metrics.len()..(bin_index + 1) * metrics.len()];
+            let in_bin = usize::try_from(end - start).expect("bins fit in memory");
             for op in start..end {
-                let (radius_m, pressure_pa) = if self.operation_scatter.is_empty() {
-                    (draws.radius_m, draws.pressure_pa)
+                let (speed, radius_m, pressure_pa) = if self.operation_scatter.is_empty() {
+                    (device_speed, device_radius, device_pressure)
                 } else {
-                    let mut op_draws = draws;
-                    for scatter in &self.operation_scatter {
-                        op_draws.set(scatter.parameter, scatter.distribution.sample(&mut rng));
+                    for k in 0..lanes {
+                        let mut op_draws = draws[k];
+                        for scatter in &self.operation_scatter {
+                            op_draws
+                                .set(scatter.parameter, scatter.distribution.sample(&mut rngs[k]));
+                        }
+                        speeds[k] = if self.cheap_operation_scatter {
+                            lane_speed(&op_draws)
+                        } else {
+                            debug_assert_eq!(lanes, 1, "only lane parameters scatter in lockstep");
+                            operation = self.setup.operation(&op_draws.conditions, fidelity);
+                            operation.impact_velocity_m_s()
+                        };
+                        operation_draws[k] = op_draws;
                     }
-                    if !self.cheap_operation_scatter {
-                        operation = self.setup.operation(&op_draws.conditions, fidelity);
-                    } else if let Some(u) = op_draws.conditions.impact_velocity_m_s {
-                        operation.set_impact_velocity(u);
-                    }
-                    (op_draws.radius_m, op_draws.pressure_pa)
-                };
-                let energy_j = device_wear.cumulative_arc_energy_j;
-                let (radius_m, pressure_pa) = if self.track_wear && energy_j > 0.0 {
                     (
-                        self.wear.radius_m(radius_m, energy_j),
-                        self.wear.pressure_pa(pressure_pa, energy_j),
+                        L::from_fn(|k| speeds[k]),
+                        L::from_fn(|k| operation_draws[k].radius_m),
+                        L::from_fn(|k| operation_draws[k].pressure_pa),
+                    )
+                };
+                let (radius_m, pressure_pa) = if self.track_wear {
+                    let energy_j = L::from_fn(|k| wear[k].cumulative_arc_energy_j);
+                    let worn = L::splat(0.0).lt(energy_j);
+                    (
+                        L::select(worn, self.wear.radius_m(radius_m, energy_j), radius_m),
+                        L::select(
+                            worn,
+                            self.wear.pressure_pa(pressure_pa, energy_j),
+                            pressure_pa,
+                        ),
                     )
                 } else {
                     (radius_m, pressure_pa)
                 };
-                let outcome = operation.run(radius_m, pressure_pa, self.needs, None);
-                for (accumulator, metric) in bin.iter_mut().zip(metrics) {
-                    accumulator.push(metric.value(&outcome));
+                let outcomes =
+                    operation.run_lanes(speed, radius_m, pressure_pa, self.needs, |_, _, _, _| {});
+                let row = usize::try_from(op - start).expect("bins fit in memory");
+                for k in 0..lanes {
+                    let outcome = outcomes.lane(k);
+                    let at = (k * in_bin + row) * metrics.len();
+                    for (slot, metric) in buffer[at..at + metrics.len()].iter_mut().zip(metrics) {
+                        *slot = metric.value(&outcome);
+                    }
+                    stats.operations_at_max_bounces += u64::from(outcome.truncated);
+                    wear[k].add(&outcome);
+                    if failed_at[k].is_none() && self.fails(&outcome, &draws[k], &wear[k]) {
+                        failed_at[k] = Some(op + 1);
+                    }
                 }
-                stats.operations_at_max_bounces += u64::from(outcome.truncated);
-                device_wear.add(&outcome);
-                if failed_at.is_none() && self.fails(&outcome, &draws, &device_wear) {
-                    failed_at = Some(op + 1);
+            }
+            if metrics.is_empty() {
+                continue;
+            }
+            let bin =
+                &mut stats.operations[bin_index * metrics.len()..(bin_index + 1) * metrics.len()];
+            for values in buffer[..lanes * in_bin * metrics.len()].chunks_exact(metrics.len()) {
+                for (accumulator, &value) in bin.iter_mut().zip(values) {
+                    accumulator.push(value);
                 }
             }
         }
-        for (accumulator, metric) in stats.devices.iter_mut().zip(job.device_metrics()) {
-            accumulator.push(self.device_metric(*metric, &draws, &device_wear));
-        }
-        if !job.failure().is_empty() {
-            stats.lives.record(DeviceLife {
-                device,
-                operations_to_failure: failed_at.unwrap_or(operations),
-                censored: failed_at.is_none(),
-            });
+        for k in 0..lanes {
+            for (accumulator, metric) in stats.devices.iter_mut().zip(job.device_metrics()) {
+                accumulator.push(self.device_metric(*metric, &draws[k], &wear[k]));
+            }
+            if !job.failure().is_empty() {
+                stats.lives.record(DeviceLife {
+                    device: chunk.first + first_local + k as u64,
+                    operations_to_failure: failed_at[k].unwrap_or(operations),
+                    censored: failed_at[k].is_none(),
+                });
+            }
         }
     }
 
@@ -385,20 +446,29 @@ impl<'a> Plan<'a> {
             chunk.size * group / groups,
             chunk.size * (group + 1) / groups,
         );
-        for local in start..end {
+        let mut buffer = Vec::new();
+        let mut local = start;
+        while local < end {
             if observer.cancelled() {
                 return Err(Cancelled);
             }
-            let local_index = usize::try_from(local).expect("batch fits in memory");
-            self.run_device(
-                chunk.first + local,
-                chunk.permutations.map(|p| (p, local_index)),
-                &mut stats,
-            );
-            observer.progress(
-                done.fetch_add(operations, Ordering::Relaxed) + operations,
-                total,
-            );
+            // The devices that do not fill a batch of lanes run one by one, through the same code.
+            let kernel = if self.lockstep && end - local >= self.kernel.lanes() as u64 {
+                self.kernel
+            } else {
+                Kernel::SCALAR
+            };
+            kernel.run(Devices {
+                plan: self,
+                chunk,
+                first_local: local,
+                stats: &mut stats,
+                buffer: &mut buffer,
+            });
+            let devices = kernel.lanes() as u64;
+            let ran = operations * devices;
+            observer.progress(done.fetch_add(ran, Ordering::Relaxed) + ran, total);
+            local += devices;
         }
         Ok(stats)
     }
@@ -409,6 +479,23 @@ struct Chunk<'a> {
     first: u64,
     size: u64,
     permutations: Option<&'a [Vec<u32>]>,
+}
+
+/// The devices of a chunk from `first_local` on, as many as the kernel has lanes.
+struct Devices<'p, 'a> {
+    plan: &'p Plan<'a>,
+    chunk: &'p Chunk<'p>,
+    first_local: u64,
+    stats: &'p mut GroupStats,
+    buffer: &'p mut Vec<f64>,
+}
+
+impl LaneWork for Devices<'_, '_> {
+    #[inline(always)]
+    fn run<L: Real>(self) {
+        self.plan
+            .run_devices::<L>(self.chunk, self.first_local, self.stats, self.buffer);
+    }
 }
 
 /// The devices one batch runs: `first..first + size`. Every job runs batch 0 (its `devices`); a
@@ -460,7 +547,7 @@ pub fn run_group(
         group < batch.groups() && Batch::of(job, batch.index) == Some(batch),
         "group {group} of {batch:?} is not part of the job"
     );
-    let plan = Plan::new(job);
+    let plan = Plan::new(job, Kernel::best());
     let permutations = plan.batch_permutations(batch.index, batch.size);
     let chunk = Chunk {
         first: batch.first,
@@ -501,14 +588,25 @@ impl Default for Tally {
     }
 }
 
-/// Runs the job on the current rayon pool: the first batch of `devices`, then, with a precision
-/// target, more batches of the same size until `accept` says the target is met or `max_devices` ran.
+/// Runs the job on the current rayon pool with the best kernel this CPU has: the first batch of
+/// `devices`, then, with a precision target, more batches of the same size until `accept` says the
+/// target is met or `max_devices` ran.
 pub fn run(
+    job: &Job,
+    observer: &dyn Observer,
+    accept: impl FnMut(&Tally) -> bool,
+) -> Result<Tally, Cancelled> {
+    run_on(Kernel::best(), job, observer, accept)
+}
+
+/// [`run`] with the given kernel: every kernel gives the same bits.
+pub fn run_on(
+    kernel: Kernel,
     job: &Job,
     observer: &dyn Observer,
     mut accept: impl FnMut(&Tally) -> bool,
 ) -> Result<Tally, Cancelled> {
-    let plan = Plan::new(job);
+    let plan = Plan::new(job, kernel);
     let done = AtomicU64::new(0);
     let mut tally = Tally::new();
     let mut next = Batch::of(job, 0);

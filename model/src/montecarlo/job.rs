@@ -134,6 +134,18 @@ pub enum Parameter {
     BreakdownField,
 }
 
+impl Parameter {
+    /// Whether the parameter is an argument of an operation (speed, radius, pressure) rather than
+    /// one of its constants: scattering it needs no rebuild, and devices can differ in it while
+    /// they run in lockstep.
+    pub fn is_lane_value(self) -> bool {
+        matches!(
+            self,
+            Parameter::ImpactVelocity | Parameter::ContactRadius | Parameter::DynamicYieldPressure
+        )
+    }
+}
+
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

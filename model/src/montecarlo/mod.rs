@@ -7,11 +7,13 @@ pub mod diagnostics;
 pub mod distribution;
 pub mod engine;
 pub mod job;
+pub mod kernel;
 pub mod lives;
 pub mod metric;
 
 pub use engine::{Cancelled, Observer, Silent, Tally, Watch};
 pub use job::{Job, JobSpec};
+pub use kernel::{Isa, Kernel};
 pub use lives::{DeviceLife, GroupLives};
 pub use metric::{DeviceMetric, Metric, OperationMetric};
 
@@ -194,10 +196,19 @@ pub struct LifeReport {
     pub devices: Vec<DeviceLife>,
 }
 
-/// Runs a job on the current rayon pool and summarises it.
+/// Runs a job on the current rayon pool with the best kernel this CPU has, and summarises it.
 pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, Cancelled> {
+    run_job_on(Kernel::best(), job, observer)
+}
+
+/// [`run_job`] with the given kernel: every kernel gives the same Result, to the bit.
+pub fn run_job_on(
+    kernel: Kernel,
+    job: &Job,
+    observer: &dyn Observer,
+) -> Result<JobResult, Cancelled> {
     let started = Instant::now();
-    let tally = engine::run(job, observer, |tally| precision_met(job, tally))?;
+    let tally = engine::run_on(kernel, job, observer, |tally| precision_met(job, tally))?;
     Ok(summarize_job(job, &tally, started.elapsed().as_secs_f64()))
 }
 

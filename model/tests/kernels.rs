@@ -1,0 +1,119 @@
+//! Every kernel (instruction set and number of lanes this CPU has) gives the same bits: lockstep
+//! batches against one device at a time, on whole jobs and on single operations.
+
+use bouncewear_model::lanes::{Lanes, Mask};
+use bouncewear_model::montecarlo::{Job, Kernel, Silent, run_job_on};
+use bouncewear_model::{Fidelity, Needs, Operation, Outcome, Scenario};
+use proptest::prelude::*;
+use serde_json::{Value, json};
+
+const JOBS: &str = include_str!("../../tests/data/reference_jobs.json");
+
+/// The Result without its timing, as text: equal text is equal bits (floats round-trip).
+fn result_text(kernel: Kernel, spec: &Value) -> String {
+    let job = Job::from_json(&spec.to_string(), || 0).unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let result = pool.install(|| run_job_on(kernel, &job, &Silent)).unwrap();
+    let mut value = serde_json::to_value(result).unwrap();
+    value.as_object_mut().unwrap().remove("timing");
+    value.to_string()
+}
+
+fn jobs() -> Vec<Value> {
+    let reference: Value = serde_json::from_str(JOBS).unwrap();
+    let mut jobs: Vec<Value> = ["48 V / 15 A", "mechanical"]
+        .iter()
+        .map(|name| {
+            let mut job = reference[name].clone();
+            // 37 devices: batches of every width leave a remainder that runs one by one.
+            job["devices"] = json!(37);
+            job["operations"] = json!(60);
+            job
+        })
+        .collect();
+    // Failure criteria, limits, wear that softens, Latin hypercube strata.
+    let mut wearing = reference["48 V / 15 A"].clone();
+    wearing["devices"] = json!(40);
+    wearing["operations"] = json!(50);
+    wearing["sampler"] = json!("lhs");
+    wearing["scenario"]["material"] = json!({"wear_law": {"law": "roughening_and_softening"}});
+    // Softening needs a pressure above its floor, which a lognormal does not keep.
+    wearing["scatter"].as_array_mut().unwrap().remove(1);
+    wearing["failure"] = json!({"total_bounce_s": {"above": 2e-3}});
+    wearing["limits"] = json!({"e1": 0.5});
+    jobs.push(wearing);
+    // A scattered current changes the operation's constants: no lockstep, one device at a time.
+    let mut current = reference["48 V / 15 A"].clone();
+    current["devices"] = json!(20);
+    current["operations"] = json!(30);
+    current["fidelity"] = json!("closed_form");
+    current["scatter"].as_array_mut().unwrap().push(json!(
+        {"parameter": "current_a", "per": "device",
+         "distribution": {"kind": "uniform", "min": 2, "max": 20}}
+    ));
+    jobs.push(current);
+    jobs
+}
+
+#[test]
+fn every_kernel_on_this_cpu_gives_the_bits_of_one_device_at_a_time() {
+    let kernels = Kernel::all();
+    assert!(
+        kernels.len() >= 4,
+        "the portable kernels at least: {kernels:?}"
+    );
+    for spec in jobs() {
+        let scalar = result_text(Kernel::SCALAR, &spec);
+        for &kernel in &kernels {
+            assert!(
+                result_text(kernel, &spec) == scalar,
+                "{kernel:?} differs from one device at a time on {spec}"
+            );
+        }
+    }
+}
+
+const SCENARIOS: [&str; 4] = [
+    "{}",
+    r#"{"circuit": {"supply_voltage_v": 48, "current_a": 15}}"#,
+    r#"{"circuit": {"supply_voltage_v": 48, "current_a": 5},
+        "material": {"arc_restitution": {"law": "continuous"}}}"#,
+    r#"{"mechanism": {"static_force_n": 0.05}, "losses": {"max_bounces": 3}}"#,
+];
+
+proptest! {
+    #[test]
+    fn a_lane_of_a_lockstep_operation_is_the_operation_run_alone(
+        scenario in 0..SCENARIOS.len(),
+        closed_form in any::<bool>(),
+        speeds in prop::array::uniform8(prop_oneof![Just(0.0), 1e-4..2.0f64]),
+        radii in prop::array::uniform8(1e-3..2e-2f64),
+        pressures in prop::array::uniform8(5e7..5e8f64),
+    ) {
+        let fidelity = if closed_form { Fidelity::ClosedForm } else { Fidelity::Exact };
+        let mut operation =
+            Operation::nominal(&Scenario::from_json(SCENARIOS[scenario]).unwrap(), fidelity);
+        let mut bounces = [0u32; 8];
+        let outcomes = operation.run_lanes(
+            Lanes(speeds),
+            Lanes(radii),
+            Lanes(pressures),
+            Needs::ALL,
+            |_, _, _, bouncing| {
+                for (i, count) in bounces.iter_mut().enumerate() {
+                    *count += u32::from(bouncing.lane(i));
+                }
+            },
+        );
+        for i in 0..8 {
+            operation.set_impact_velocity(speeds[i]);
+            let alone: Outcome = operation.run(radii[i], pressures[i], Needs::ALL, None);
+            let lane = outcomes.lane(i);
+            prop_assert_eq!(format!("{lane:?}"), format!("{alone:?}"), "lane {}", i);
+            prop_assert_eq!(bounces[i], alone.bounce_count);
+        }
+    }
+}
