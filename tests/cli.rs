@@ -284,7 +284,7 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
     let out = temp_dir("bench");
     let shown = on_a_terminal(&["bench", "--quick", "--out", out.to_str().unwrap()]);
     assert!(
-        shown.contains("15/15 measurements") && shown.contains("ETA"),
+        shown.contains("17/17 measurements") && shown.contains("ETA"),
         "{shown}"
     );
     let report: Value =

@@ -9,7 +9,9 @@
 
 use crate::plots::{Panel, Series, work_precision_svg};
 use crate::progress::Progress;
-use bouncewear_model::montecarlo::{Job, JobResult, OperationMetric, Silent, run_job};
+use bouncewear_model::montecarlo::{
+    Job, JobResult, Kernel, OperationMetric, Silent, run_job, run_job_on,
+};
 use bouncewear_model::wear::WearLaw;
 use bouncewear_model::{Fidelity, Needs, Operation, Outcome, Pointer, Scenario};
 use serde::Serialize;
@@ -30,6 +32,7 @@ pub struct Report {
     pub sampling: Vec<Sampling>,
     pub throughput: Vec<Throughput>,
     pub skips: Vec<Skip>,
+    pub engine: Vec<EngineRow>,
 }
 
 #[derive(Debug, Serialize)]
@@ -64,6 +67,27 @@ pub struct Throughput {
     pub operations_per_s: f64,
 }
 
+/// One reference job: the engine per operation and thread, one device at a time and in lockstep,
+/// next to the floor; then the whole `bouncewear run` process against the NumPy peer's.
+#[derive(Debug, Serialize)]
+pub struct EngineRow {
+    pub job: &'static str,
+    pub devices: u64,
+    pub operations: u64,
+    pub kernel: String,
+    pub ns_per_op_one_device_at_a_time: f64,
+    pub ns_per_op_lockstep: f64,
+    /// The floor for this job on an AVX-512 core: square roots and divisions alone.
+    pub floor_ns_per_op_scalar: f64,
+    pub floor_ns_per_op_8_lanes: f64,
+    /// `bouncewear run --threads N` as a whole process, wall seconds.
+    pub run_process_s: f64,
+    /// `python3 tools/numpy_peer.py` as a whole process on one core, when NumPy is installed.
+    pub numpy_peer_process_s: Option<f64>,
+    /// The peer's wall time over ours.
+    pub ratio: Option<f64>,
+}
+
 #[derive(Debug, Serialize)]
 pub struct Skip {
     pub skip: &'static str,
@@ -87,7 +111,8 @@ pub fn measurements(quick: bool) -> u64 {
     let count = Fidelity::ALL.len()
         + SAMPLERS.len() * sampled_devices(quick).len()
         + THROUGHPUT_JOBS.len() * THROUGHPUT_METRICS.len()
-        + 1;
+        + 1
+        + THROUGHPUT_JOBS.len();
     count as u64
 }
 
@@ -106,6 +131,14 @@ pub fn bench(out: &Path, quick: bool, progress: &Progress) -> Result<Report, Ben
         sampling: sampling(quick, progress),
         throughput: throughput(quick, progress),
         skips: progress.measure("what skipping saves", || skips(quick)),
+        engine: THROUGHPUT_JOBS
+            .iter()
+            .map(|&(name, arcing)| {
+                progress.measure(format!("engine and NumPy peer: {name}"), || {
+                    engine_row(name, arcing, quick, out)
+                })
+            })
+            .collect::<Result<_, _>>()?,
     };
     std::fs::create_dir_all(out).map_err(|source| io_error(out, source))?;
     let write = |name: &str, text: String| {
@@ -288,6 +321,101 @@ fn throughput(quick: bool, progress: &Progress) -> Vec<Throughput> {
     rows
 }
 
+const NUMPY_PEER: &str = include_str!("../../tools/numpy_peer.py");
+
+/// The floor (square roots and divisions only, Zen 5): scalar and 8-lane ns per operation.
+fn floor_ns_per_op(arcing: bool) -> (f64, f64) {
+    if arcing { (78.0, 10.0) } else { (136.0, 22.0) }
+}
+
+fn engine_row(
+    name: &'static str,
+    arcing: bool,
+    quick: bool,
+    out: &Path,
+) -> Result<EngineRow, BenchError> {
+    let (devices, operations) = if quick { (400, 100) } else { (2000, 500) };
+    let job = reference_job(devices, operations, arcing, "random", None);
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a pool of one thread");
+    let ops = (devices * operations) as usize;
+    let per_op = |kernel: Kernel| {
+        ns_per_item(3, ops, || {
+            black_box(
+                one_thread
+                    .install(|| run_job_on(kernel, &job, &Silent))
+                    .ok(),
+            );
+        })
+    };
+    let kernel = Kernel::best();
+    let (scalar, lockstep) = (per_op(Kernel::SCALAR), per_op(kernel));
+    // The job as a file, for the two processes.
+    std::fs::create_dir_all(out).map_err(|source| io_error(out, source))?;
+    let path = out.join("engine-job.json");
+    let text = serde_json::to_string(job.spec()).expect("a job serialises");
+    std::fs::write(&path, &text).map_err(|source| io_error(&path, source))?;
+    let exe = std::env::current_exe().map_err(|source| io_error(&path, source))?;
+    let threads = rayon::current_num_threads().to_string();
+    let run_process_s = best_process_s(
+        std::process::Command::new(exe)
+            .args(["run", "--quiet", "--threads", &threads])
+            .arg(&path),
+    )
+    .expect("bouncewear runs its own job");
+    let numpy_peer_process_s = numpy_available()
+        .then(|| {
+            best_process_s(
+                std::process::Command::new("python3")
+                    .args(["-c", NUMPY_PEER])
+                    .arg(&text),
+            )
+        })
+        .flatten();
+    let (floor_scalar, floor_lanes) = floor_ns_per_op(arcing);
+    Ok(EngineRow {
+        job: name,
+        devices,
+        operations,
+        kernel: format!("{} x{}", kernel.isa().as_str(), kernel.lanes()),
+        ns_per_op_one_device_at_a_time: scalar,
+        ns_per_op_lockstep: lockstep,
+        floor_ns_per_op_scalar: floor_scalar,
+        floor_ns_per_op_8_lanes: floor_lanes,
+        run_process_s,
+        numpy_peer_process_s,
+        ratio: numpy_peer_process_s.map(|peer| peer / run_process_s),
+    })
+}
+
+/// Whether `python3` can import NumPy (the peer is optional: CI need not install it).
+fn numpy_available() -> bool {
+    std::process::Command::new("python3")
+        .args(["-c", "import numpy"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|status| status.success())
+}
+
+/// Best of three wall times of a whole process, its output thrown away; `None` if it fails.
+fn best_process_s(command: &mut std::process::Command) -> Option<f64> {
+    command
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null());
+    let mut best = f64::INFINITY;
+    for _ in 0..3 {
+        let started = Instant::now();
+        if !command.status().ok()?.success() {
+            return None;
+        }
+        best = best.min(started.elapsed().as_secs_f64());
+    }
+    Some(best)
+}
+
 fn skips(quick: bool) -> Vec<Skip> {
     let repeats = if quick { 200_000 } else { 2_000_000 };
     let mechanical = Operation::nominal(&Scenario::default(), Fidelity::Exact);
@@ -398,6 +526,34 @@ fn markdown(report: &Report) -> String {
             row.operations,
             row.metrics,
             row.operations_per_s / 1e6
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\n## Engine against the NumPy peer\n\nns per operation on one thread (every metric), one device at a time and in lockstep, next to the floor of square roots and divisions on an AVX-512 core; then `bouncewear run` on {} threads against `tools/numpy_peer.py` on one core, whole processes, best of three.\n",
+        report.machine.threads
+    );
+    let _ = writeln!(
+        md,
+        "| job | devices x operations | kernel | ns/op alone | ns/op lockstep | floor scalar / 8 lanes | run s | NumPy s | ratio |\n|---|---|---|---|---|---|---|---|---|"
+    );
+    for row in &report.engine {
+        let optional =
+            |x: Option<f64>, digits: usize| x.map_or("-".to_owned(), |x| format!("{x:.digits$}"));
+        let _ = writeln!(
+            md,
+            "| {} | {} x {} | {} | {:.0} | {:.0} | {:.0} / {:.0} | {:.3} | {} | {} |",
+            row.job,
+            row.devices,
+            row.operations,
+            row.kernel,
+            row.ns_per_op_one_device_at_a_time,
+            row.ns_per_op_lockstep,
+            row.floor_ns_per_op_scalar,
+            row.floor_ns_per_op_8_lanes,
+            row.run_process_s,
+            optional(row.numpy_peer_process_s, 3),
+            optional(row.ratio, 1),
         );
     }
     let _ = writeln!(
