@@ -19,6 +19,7 @@ pub use metric::{DeviceMetric, Metric, OperationMetric};
 
 use crate::stats::{Accumulator, Summary, summarize};
 use job::Statistic;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -300,6 +301,8 @@ fn operation_groups(job: &Job, tally: &Tally, bin: usize, metric: usize) -> Vec<
         .collect()
 }
 
+/// Every bin of every operation metric, the bins of a metric in parallel (each summary is computed
+/// alone, so the threads change no number).
 fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> {
     let bins = usize::try_from(job.bins()).expect("bins fit in memory");
     job.operation_metrics()
@@ -307,6 +310,7 @@ fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> 
         .enumerate()
         .map(|(m, metric)| {
             let summaries = (0..bins)
+                .into_par_iter()
                 .map(|b| {
                     let op_start = job.bin_operations() * b as u64;
                     let mut summary = summarize(&operation_groups(job, tally, b, m));
