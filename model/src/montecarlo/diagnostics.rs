@@ -81,14 +81,8 @@ pub fn diagnose(job: &Job, counts: &Counts) -> Vec<Diagnostic> {
                 .child("static_force_n"),
         ),
     ] {
-        let (pointer, values) = match job.scatter().iter().position(|s| s.parameter == parameter) {
-            Some(i) => (
-                Pointer::root()
-                    .child("scatter")
-                    .child(i)
-                    .child("distribution"),
-                SCATTERED_CURRENT_QUANTILES.map(|q| job.scatter()[i].distribution.quantile(q)),
-            ),
+        let (pointer, values) = match scattered_range(job, parameter) {
+            Some(scattered) => scattered,
             None => {
                 let value = match parameter {
                     Parameter::ImpactVelocity => nominal_velocity(),
@@ -111,6 +105,21 @@ pub fn diagnose(job: &Job, counts: &Counts) -> Vec<Diagnostic> {
     found
 }
 
+/// Where the job scatters `parameter`, its distribution's pointer and the 1st and 99th
+/// percentiles ([`SCATTERED_CURRENT_QUANTILES`]) that stand for its range.
+fn scattered_range(job: &Job, parameter: Parameter) -> Option<(Pointer, [f64; 2])> {
+    let i = job
+        .scatter()
+        .iter()
+        .position(|s| s.parameter == parameter)?;
+    let pointer = Pointer::root()
+        .child("scatter")
+        .child(i)
+        .child("distribution");
+    let quantiles = SCATTERED_CURRENT_QUANTILES.map(|q| job.scatter()[i].distribution.quantile(q));
+    Some((pointer, quantiles))
+}
+
 /// Under the paper's post-arc law, an arcing current (the nominal one, or the 1st and 99th
 /// percentiles of a scattered one) more than [`PAPER_LAW_CURRENT_FACTOR`] away from the calibration
 /// current.
@@ -120,18 +129,8 @@ fn paper_law_far_from_calibration(job: &Job) -> Option<Diagnostic> {
     if mat.arc_restitution.law != ArcRestitutionLawKind::Paper {
         return None;
     }
-    let scattered = job
-        .scatter()
-        .iter()
-        .position(|s| s.parameter == Parameter::Current);
-    let (pointer, currents) = match scattered {
-        Some(i) => (
-            Pointer::root()
-                .child("scatter")
-                .child(i)
-                .child("distribution"),
-            SCATTERED_CURRENT_QUANTILES.map(|q| job.scatter()[i].distribution.quantile(q)),
-        ),
+    let (pointer, currents) = match scattered_range(job, Parameter::Current) {
+        Some(scattered) => scattered,
         None => (
             Pointer::root()
                 .child("scenario")
