@@ -9,6 +9,7 @@
 //! | 4 (eq. 12, 13) | peak force, impact duration | [`impact`] |
 //! | 5 (eq. 16) | arcing, pre-arc, softening, arc energy, electrical restitution | [`arc`] |
 //! | 6 | wear over an endurance test | [`wear`] |
+//! | 7 (eq. 9, 10, 14, 15, 17, 19) | the paper's closed forms and readings of e, as checks | [`paper_forms`] |
 //! | 8, 9 | defaults, validation | [`scenario`] |
 //!
 //! The physics is written once over [`lanes::Real`]: one `f64`, or a batch of devices in lockstep,
@@ -27,6 +28,7 @@ pub mod life;
 pub mod mechanism;
 pub mod montecarlo;
 pub mod operation;
+pub mod paper_forms;
 pub mod restitution;
 pub mod scenario;
 pub mod stats;

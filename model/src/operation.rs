@@ -330,6 +330,20 @@ impl Operation {
         self.arc.is_some()
     }
 
+    /// The flight between impacts, for the paper's closed forms ([`crate::paper_forms`]).
+    pub fn flight(&self) -> &Flight {
+        &self.flight
+    }
+
+    pub fn static_force_n(&self) -> f64 {
+        self.static_force_n
+    }
+
+    /// Eq. 16's line `e = a + b v`, as `(a, b)`.
+    pub fn arc_restitution_line(&self) -> (f64, f64) {
+        (self.arc_restitution.a, self.arc_restitution.b_s_per_m)
+    }
+
     /// Runs one operation on a surface of radius `radius_m` and pressure `pressure_pa`.
     ///
     /// Allocates nothing; the bounces are pushed to `bounces` when it is given.
