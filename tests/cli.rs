@@ -284,7 +284,7 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
     let out = temp_dir("bench");
     let shown = on_a_terminal(&["bench", "--quick", "--out", out.to_str().unwrap()]);
     assert!(
-        shown.contains("17/17 measurements") && shown.contains("ETA"),
+        shown.contains("19/19 measurements") && shown.contains("ETA"),
         "{shown}"
     );
     let report: Value =
@@ -309,6 +309,16 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
             > 1e-3,
         "closed form is not"
     );
+    // The paper's closed forms: each applies to some of the scenarios, and costs accuracy.
+    let forms = report["paper_forms"].as_array().unwrap();
+    assert_eq!(forms.len(), 2);
+    for form in forms {
+        assert!(form["scenarios"].as_u64().unwrap() > 0, "{form}");
+        assert!(
+            form["median_rel_error"]["first_bounce_s"].as_f64().unwrap() > 1e-3,
+            "{form}"
+        );
+    }
     let sampling = report["sampling"].as_array().unwrap();
     assert!(
         sampling.iter().any(|s| s["sampler"] == "lhs")
@@ -323,6 +333,11 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
         std::fs::read_to_string(out.join("report.md"))
             .unwrap()
             .contains("| exact |")
+    );
+    assert!(
+        std::fs::read_to_string(out.join("report.md"))
+            .unwrap()
+            .contains("| paper eq. 9/10, e = 0.4 (")
     );
 }
 

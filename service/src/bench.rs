@@ -12,6 +12,7 @@ use crate::progress::Progress;
 use bouncewear_model::montecarlo::{
     Job, JobResult, Kernel, OperationMetric, Silent, run_job, run_job_on,
 };
+use bouncewear_model::paper_forms::{BounceTimes, constant_restitution, simplified_electrical};
 use bouncewear_model::wear::WearLaw;
 use bouncewear_model::{Fidelity, Needs, Operation, Outcome, Pointer, Scenario};
 use serde::Serialize;
@@ -29,6 +30,7 @@ const REFERENCE_JOBS: &str = include_str!("../../tests/data/reference_jobs.json"
 pub struct Report {
     pub machine: Machine,
     pub tiers: Vec<Tier>,
+    pub paper_forms: Vec<PaperForm>,
     pub sampling: Vec<Sampling>,
     pub throughput: Vec<Throughput>,
     pub skips: Vec<Skip>,
@@ -45,6 +47,18 @@ pub struct Machine {
 #[derive(Debug, Serialize)]
 pub struct Tier {
     pub fidelity: Fidelity,
+    pub ns_per_op: f64,
+    pub max_rel_error: BTreeMap<&'static str, f64>,
+    pub median_rel_error: BTreeMap<&'static str, f64>,
+}
+
+/// One of the paper's closed forms of the bounce times (docs/model.md section 7), over the
+/// reference scenarios it applies to: its cost and its error against the exact model.
+#[derive(Debug, Serialize)]
+pub struct PaperForm {
+    pub form: &'static str,
+    /// How many of the reference scenarios it applies to (`F_s > 0`; arcing for eq. 17/19).
+    pub scenarios: usize,
     pub ns_per_op: f64,
     pub max_rel_error: BTreeMap<&'static str, f64>,
     pub median_rel_error: BTreeMap<&'static str, f64>,
@@ -109,6 +123,7 @@ pub enum BenchError {
 /// How many measurements [`bench`] makes, for its progress bar.
 pub fn measurements(quick: bool) -> u64 {
     let count = Fidelity::ALL.len()
+        + PAPER_FORMS.len()
         + SAMPLERS.len() * sampled_devices(quick).len()
         + THROUGHPUT_JOBS.len() * THROUGHPUT_METRICS.len()
         + 1
@@ -127,6 +142,14 @@ pub fn bench(out: &Path, quick: bool, progress: &Progress) -> Result<Report, Ben
         tiers: Fidelity::ALL
             .iter()
             .map(|&f| progress.measure(format!("tier {}", f.as_str()), || tier(f, quick)))
+            .collect(),
+        paper_forms: PAPER_FORMS
+            .iter()
+            .map(|&(name, form)| {
+                progress.measure(format!("paper form {name}"), || {
+                    paper_form(name, form, quick)
+                })
+            })
             .collect(),
         sampling: sampling(quick, progress),
         throughput: throughput(quick, progress),
@@ -205,19 +228,44 @@ fn tier(fidelity: Fidelity, quick: bool) -> Tier {
             }
         }
     });
-    let mut max_rel_error = BTreeMap::new();
-    let mut median_rel_error = BTreeMap::new();
     // Only the fields of the `simulate` output the reference carries (not the plastic work).
     let in_reference = |metric: &OperationMetric| cases[0].1.get(metric.name()).is_some();
-    for metric in OperationMetric::ALL.into_iter().filter(in_reference) {
-        let mut errors: Vec<f64> = outcomes
+    let metrics: Vec<OperationMetric> = OperationMetric::ALL
+        .into_iter()
+        .filter(in_reference)
+        .collect();
+    let (median_rel_error, max_rel_error) = relative_errors(&metrics, |metric| {
+        outcomes
             .iter()
             .zip(&cases)
             .map(|(outcome, (_, reference))| {
-                let (got, want) = (
-                    metric.value(outcome),
-                    reference[metric.name()].as_f64().expect("number"),
-                );
+                let want = reference[metric.name()].as_f64().expect("number");
+                (metric.value(outcome), want)
+            })
+            .collect()
+    });
+    Tier {
+        fidelity,
+        ns_per_op,
+        max_rel_error,
+        median_rel_error,
+    }
+}
+
+/// Relative errors by metric name.
+type Errors = BTreeMap<&'static str, f64>;
+
+/// The median and largest relative error of each metric over `(got, want)` pairs.
+fn relative_errors(
+    metrics: &[OperationMetric],
+    pairs: impl Fn(OperationMetric) -> Vec<(f64, f64)>,
+) -> (Errors, Errors) {
+    let mut median = BTreeMap::new();
+    let mut max = BTreeMap::new();
+    for &metric in metrics {
+        let mut errors: Vec<f64> = pairs(metric)
+            .into_iter()
+            .map(|(got, want)| {
                 if got == want {
                     0.0
                 } else {
@@ -226,11 +274,59 @@ fn tier(fidelity: Fidelity, quick: bool) -> Tier {
             })
             .collect();
         errors.sort_by(f64::total_cmp);
-        max_rel_error.insert(metric.name(), *errors.last().expect("80 cases"));
-        median_rel_error.insert(metric.name(), errors[errors.len() / 2]);
+        median.insert(
+            metric.name(),
+            errors.get(errors.len() / 2).copied().unwrap_or(0.0),
+        );
+        max.insert(metric.name(), errors.last().copied().unwrap_or(0.0));
     }
-    Tier {
-        fidelity,
+    (median, max)
+}
+
+/// The paper's closed forms `bench` reports, by name.
+const PAPER_FORMS: [(&str, fn(&Operation) -> Option<BounceTimes>); 2] = [
+    ("eq. 9/10, e = 0.4", |op| constant_restitution(op, 0.4)),
+    ("eq. 17/19", simplified_electrical),
+];
+
+/// A closed form of the paper over the reference scenarios it applies to.
+fn paper_form(
+    name: &'static str,
+    form: fn(&Operation) -> Option<BounceTimes>,
+    quick: bool,
+) -> PaperForm {
+    let cases = reference_cases();
+    let (operations, references): (Vec<Operation>, Vec<&Value>) = cases
+        .iter()
+        .map(|(s, reference)| (Operation::nominal(s, Fidelity::Exact), reference))
+        .filter(|(op, _)| form(op).is_some())
+        .unzip();
+    let times: Vec<BounceTimes> = operations.iter().filter_map(form).collect();
+    let repeats = if quick { 20_000 } else { 200_000 };
+    let ns_per_op = ns_per_item(5, repeats * operations.len().max(1), || {
+        for _ in 0..repeats {
+            for op in &operations {
+                black_box(form(black_box(op)));
+            }
+        }
+    });
+    let metrics = [OperationMetric::FirstBounce, OperationMetric::TotalBounce];
+    let (median_rel_error, max_rel_error) = relative_errors(&metrics, |metric| {
+        times
+            .iter()
+            .zip(&references)
+            .map(|(t, reference)| {
+                let got = match metric {
+                    OperationMetric::FirstBounce => t.first_bounce_s,
+                    _ => t.total_bounce_s,
+                };
+                (got, reference[metric.name()].as_f64().expect("number"))
+            })
+            .collect()
+    });
+    PaperForm {
+        form: name,
+        scenarios: operations.len(),
         ns_per_op,
         max_rel_error,
         median_rel_error,
@@ -498,6 +594,15 @@ fn markdown(report: &Report) -> String {
             );
         }
     }
+    for form in &report.paper_forms {
+        for (metric, max) in &form.max_rel_error {
+            let _ = writeln!(
+                md,
+                "| paper {} ({} of the scenarios) | {:.1} | {metric} | {:.1e} | {:.1e} |",
+                form.form, form.scenarios, form.ns_per_op, form.median_rel_error[metric], max
+            );
+        }
+    }
     let _ = writeln!(
         md,
         "\n## Sampling\n\n95 % CI half-width of p95 total bounce time (relative), 20 operations per device, radius and hardness scattered per device, velocity per operation.\n"
@@ -591,6 +696,13 @@ fn svg(report: &Report) -> String {
                     (floor(t.max_rel_error[METRIC]), t.ns_per_op),
                 ],
             })
+            .chain(report.paper_forms.iter().map(|f| Series {
+                name: format!("paper {}", f.form),
+                points: vec![
+                    (floor(f.median_rel_error[METRIC]), f.ns_per_op),
+                    (floor(f.max_rel_error[METRIC]), f.ns_per_op),
+                ],
+            }))
             .collect(),
     };
     let sampling = Panel {
