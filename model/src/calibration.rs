@@ -80,9 +80,11 @@ const FITTED: [&str; 6] = [
 ];
 
 impl Observation {
-    /// The measured value of a quantity of [`FITTED`], if measured.
-    fn measured(&self, quantity: &str) -> Option<f64> {
+    /// The measured value of a quantity (a field name: `first_bounce_s`, `bounce_count`, ...), if
+    /// measured.
+    pub fn measured(&self, quantity: &str) -> Option<f64> {
         match quantity {
+            "bounce_count" => self.bounce_count.map(f64::from),
             "first_bounce_s" => self.first_bounce_s,
             "second_bounce_s" => self.second_bounce_s,
             "total_bounce_s" => self.total_bounce_s,

@@ -54,6 +54,9 @@ enum Command {
         /// [...]}`; `-` or nothing reads standard input.
         #[arg(default_value = "-")]
         file: PathBuf,
+        /// Also write the fit as an SVG file: simulated against measured, a panel per quantity.
+        #[arg(long, value_name = "FILE")]
+        plot: Option<PathBuf>,
     },
     /// Run a Monte Carlo endurance job and print its Result as JSON.
     Run {
@@ -196,9 +199,18 @@ fn run(cli: Cli) -> Result<(), CliError> {
             let scenario = Scenario::from_json(&read_input(&file)?)?;
             print_json(&simulate(&scenario, fidelity.into()))
         }
-        Command::Calibrate { file } => {
+        Command::Calibrate { file, plot } => {
             let spec = CalibrationSpec::from_json(&read_input(&file)?)?;
-            print_json(&calibrate(&spec)?)
+            let fit = calibrate(&spec)?;
+            if let Some(path) = plot {
+                let svg =
+                    crate::plots::calibration_svg(&crate::plots::calibration_panels(&spec, &fit));
+                std::fs::write(&path, svg).map_err(|source| CliError::Io {
+                    path: path.display().to_string(),
+                    source,
+                })?;
+            }
+            print_json(&fit)
         }
         Command::Run {
             file,

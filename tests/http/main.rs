@@ -4,6 +4,7 @@
 #[path = "../support/mod.rs"]
 mod support;
 
+mod calibrations;
 mod events;
 mod jobs;
 mod limits;

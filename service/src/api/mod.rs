@@ -3,6 +3,7 @@
 //! only: the rules are the domain's, the storage the store's.
 
 pub mod cache;
+pub mod calibrations;
 pub mod error;
 pub mod events;
 pub mod jobs;
@@ -54,7 +55,7 @@ pub struct AppState {
 #[openapi(
     info(title = "bouncewear", description = "Monte Carlo wear simulation of bouncing electrical contacts (McBride & Sharkh 1992). The contract is docs/contract.md; the physics docs/model.md."),
     modifiers(&BearerAuth),
-    tags((name = "jobs", description = "Monte Carlo endurance jobs on a durable queue"), (name = "schedules", description = "Nightly runs of a job template and their trend"), (name = "simulate", description = "One make operation"), (name = "system", description = "Health, metrics, documentation"))
+    tags((name = "jobs", description = "Monte Carlo endurance jobs on a durable queue"), (name = "schedules", description = "Nightly runs of a job template and their trend"), (name = "simulate", description = "One make operation"), (name = "calibrations", description = "A scenario fitted to measured operations"), (name = "system", description = "Health, metrics, documentation"))
 )]
 struct ApiDoc;
 
@@ -132,6 +133,7 @@ fn api_routes(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
         .merge(schedules::router())
         .merge(plots::router())
         .merge(simulate::router())
+        .merge(calibrations::router())
         .layer(axum::middleware::from_fn_with_state(
             state.clone(),
             authenticate,

@@ -4,6 +4,7 @@
 //! schemathesis' stateful phase, can follow them), the length limit on all text a client sends,
 //! and descriptions of the simulation's output types, whose Rust docs are written for the physics.
 
+use bouncewear_model::calibration::{MAX_OBSERVATIONS, MAX_PARAMETERS};
 use bouncewear_model::error::MAX_TEXT_CHARS;
 use bouncewear_model::montecarlo::job::{MAX_DEVICES, MAX_OPERATIONS};
 use bouncewear_model::montecarlo::{DeviceMetric, OperationMetric};
@@ -26,7 +27,7 @@ pub fn document(openapi: &utoipa::openapi::OpenApi) -> Value {
 
 /// Example bodies, by operation: each valid, and accepted by a server with the default limits (the
 /// OpenAPI check in CI sends every one of them).
-fn request_examples() -> [(&'static str, Value); 4] {
+fn request_examples() -> [(&'static str, Value); 5] {
     let template = json!({
         "name": "AgNi at 48 V, 15 A",
         "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
@@ -59,7 +60,23 @@ fn request_examples() -> [(&'static str, Value); 4] {
             "simulate_operation",
             json!({"circuit": {"supply_voltage_v": 48, "current_a": 15}}),
         ),
+        ("create_calibration", calibration_example()),
     ]
+}
+
+/// Bounce traces of the paper's rig at three closing velocities (simulated at kappa 0.33 and 2 uJ
+/// lost per impact, rounded to three digits as a measurement would be): kappa and the energy lost
+/// per impact fitted to them.
+pub fn calibration_example() -> Value {
+    json!({
+        "scenario": {},
+        "fit": ["material.kappa", "losses.impact_energy_loss_j"],
+        "observations": [
+            {"impact_velocity_m_s": 0.2, "first_bounce_s": 0.00896, "second_bounce_s": 0.00515, "total_bounce_s": 0.0188, "bounce_count": 4},
+            {"impact_velocity_m_s": 0.3, "first_bounce_s": 0.0116, "second_bounce_s": 0.00657, "total_bounce_s": 0.025, "bounce_count": 5},
+            {"impact_velocity_m_s": 0.4, "first_bounce_s": 0.0136, "second_bounce_s": 0.00772, "total_bounce_s": 0.0297, "bounce_count": 5}
+        ]
+    })
 }
 
 fn operations_mut(document: &mut Value) -> impl Iterator<Item = (&String, &mut Value)> {
@@ -250,6 +267,21 @@ fn constrain_request_fields(document: &mut Value) {
             "max_devices",
             json!({"minimum": 1, "maximum": MAX_DEVICES}),
         ),
+        (
+            "CalibrationSpec",
+            "fit",
+            json!({"minItems": 1, "maxItems": MAX_PARAMETERS, "uniqueItems": true}),
+        ),
+        (
+            "CalibrationSpec",
+            "observations",
+            json!({"minItems": 1, "maxItems": MAX_OBSERVATIONS}),
+        ),
+        (
+            "Observation",
+            "impact_velocity_m_s",
+            Range::NonNegative.schema(),
+        ),
         ("ScheduleSpec", "name", json!({"pattern": "\\S"})),
         ("ScheduleSpec", "time_zone", json!({"enum": time_zones})),
         (
@@ -258,6 +290,18 @@ fn constrain_request_fields(document: &mut Value) {
             json!({"minItems": 1, "items": {"type": "string", "pattern": statistic}}),
         ),
     ]);
+    // A measured quantity is a positive number.
+    fields.extend(
+        [
+            "first_bounce_s",
+            "second_bounce_s",
+            "total_bounce_s",
+            "e1",
+            "peak_force_n",
+            "arc_energy_j",
+        ]
+        .map(|field| ("Observation", field, json!({"exclusiveMinimum": 0}))),
+    );
     let schemas = &mut document["components"]["schemas"];
     for (schema, field, rules) in fields {
         let pointer = format!("/{schema}/properties/{field}");

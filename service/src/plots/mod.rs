@@ -1,6 +1,6 @@
 //! Standalone SVG plots for the dashboard: a job's per-bin histograms and wear curve, a Weibull
-//! probability plot of a life analysis, a schedule's night-by-night trend, and the benchmark's
-//! work-precision panels.
+//! probability plot of a life analysis, a schedule's night-by-night trend, a calibration's fit,
+//! and the benchmark's work-precision panels.
 //!
 //! Every function returns one complete SVG document (`<svg ...>` to `</svg>\n`) with a white
 //! background, a `viewBox` and its own `width`/`height`, so it can be served as `image/svg+xml`
@@ -13,6 +13,7 @@
 
 mod axes;
 mod bands;
+mod calibration;
 mod histograms;
 mod svg;
 mod trend;
@@ -23,6 +24,7 @@ use bouncewear_model::montecarlo::{JobResult, Metric};
 use bouncewear_model::stats::Summary;
 
 pub use bands::quantile_bands_svg;
+pub use calibration::{FitPanel, calibration_panels, calibration_svg};
 pub use histograms::histograms_svg;
 pub use trend::{TrendPoint, trend_svg};
 pub use weibull::weibull_svg;

@@ -1,0 +1,96 @@
+//! `POST /v1/calibrations`: a scenario fitted to measured operations, as `bouncewear calibrate`
+//! prints it (docs/model.md section 10).
+
+use super::error::{
+    ApiError, Internal,
+    responses::{BadQuery, BodyRejected, Unauthorized},
+};
+use super::{AppState, JsonText};
+use crate::plots::{calibration_panels, calibration_svg};
+use axum::Json;
+use axum::extract::Query;
+use axum::extract::rejection::QueryRejection;
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use bouncewear_model::calibration::{Calibration, CalibrationSpec, calibrate};
+use serde::Deserialize;
+use std::sync::LazyLock;
+use tokio::sync::Semaphore;
+use utoipa::{IntoParams, ToSchema};
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new().routes(routes!(create_calibration))
+}
+
+/// Fits run off the async runtime, at most one per core at a time: a fit is bounded (at most
+/// 1000 observations and 8 parameters, well under a second each on one core), and the rest wait
+/// their turn within the request timeout.
+static FITS: LazyLock<Semaphore> =
+    LazyLock::new(|| Semaphore::new(std::thread::available_parallelism().map_or(1, |n| n.get())));
+
+/// The representation of a calibration.
+#[derive(Debug, Clone, Copy, Default, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum CalibrationFormat {
+    /// The estimates, fitted scenario, residuals and readings.
+    #[default]
+    Json,
+    /// The fit as a plot: simulated against measured, a panel per quantity.
+    Svg,
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct CalibrationQuery {
+    /// `json` (default) or `svg` (the plot of the fit).
+    #[param(inline, example = "json")]
+    pub format: Option<CalibrationFormat>,
+}
+
+/// Fit a scenario to measured operations.
+///
+/// Least squares in the parameters' logarithms, each observation simulated at its own measured
+/// impact velocity: estimates with 95 % intervals, the fitted scenario ready to submit as a job,
+/// the residuals, and the paper's readings of e off bounce times with their bias under the fitted
+/// model. Synchronous. A parameter the measurements cannot determine is refused with 422 naming
+/// its place in `fit`. `format=svg` gives the fit as a plot instead.
+#[utoipa::path(
+    post, path = "/v1/calibrations", tag = "calibrations",
+    params(CalibrationQuery),
+    request_body(content = CalibrationSpec, description = "The starting scenario, the parameters to fit and the measured operations (docs/model.md section 10)", content_type = "application/json"),
+    responses(
+        (status = 200, description = "The fit (JSON), or with `format=svg` its plot", content((Calibration = "application/json"), (String = "image/svg+xml"))),
+        BadQuery,
+        BodyRejected,
+        Unauthorized,
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn create_calibration(
+    query: Result<Query<CalibrationQuery>, QueryRejection>,
+    JsonText(body): JsonText,
+) -> Result<Response, ApiError> {
+    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let spec = CalibrationSpec::from_json(&body)?;
+    let _turn = FITS
+        .acquire()
+        .await
+        .map_err(|_| Internal("the calibration queue is closed".into()))?;
+    let (spec, fit) = tokio::task::spawn_blocking(move || {
+        let fit = calibrate(&spec);
+        (spec, fit)
+    })
+    .await
+    .map_err(|e| Internal(format!("a calibration failed: {e}")))?;
+    let fit = fit?;
+    Ok(match query.format.unwrap_or_default() {
+        CalibrationFormat::Json => Json(fit).into_response(),
+        CalibrationFormat::Svg => (
+            [(header::CONTENT_TYPE, "image/svg+xml")],
+            calibration_svg(&calibration_panels(&spec, &fit)),
+        )
+            .into_response(),
+    })
+}

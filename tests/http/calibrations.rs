@@ -1,0 +1,101 @@
+//! `POST /v1/calibrations`: a scenario fitted to measured operations, as `bouncewear calibrate`
+//! prints it, or its plot.
+
+use crate::support::app::{Service, TestApp};
+use crate::support::client::{assert_problem, post};
+use crate::support::{bouncewear, temp_db};
+use serde_json::{Value, json};
+
+/// Bounce traces of the paper's rig, simulated by the binary at kappa 0.33 and 2 uJ lost per
+/// impact and rounded to three digits.
+fn measurements() -> Value {
+    let observations: Vec<Value> = [0.2, 0.3, 0.4]
+        .into_iter()
+        .map(|v| {
+            let scenario = json!({
+                "mechanism": {"impact_velocity_m_s": v},
+                "material": {"kappa": 0.33},
+                "losses": {"impact_energy_loss_j": 2e-6}
+            });
+            let output = bouncewear(&["simulate"], &scenario.to_string());
+            let simulated: Value = serde_json::from_slice(&output.stdout).unwrap();
+            let round = |x: &Value| {
+                format!("{:.3e}", x.as_f64().unwrap())
+                    .parse::<f64>()
+                    .unwrap()
+            };
+            json!({
+                "impact_velocity_m_s": v,
+                "first_bounce_s": round(&simulated["first_bounce_s"]),
+                "second_bounce_s": round(&simulated["bounces"][1]["duration_s"]),
+                "total_bounce_s": round(&simulated["total_bounce_s"]),
+                "bounce_count": simulated["bounce_count"],
+            })
+        })
+        .collect();
+    json!({
+        "fit": ["material.kappa", "losses.impact_energy_loss_j"],
+        "observations": observations
+    })
+}
+
+#[test]
+fn a_calibration_over_http_is_the_calibrate_command_and_recovers_the_parameters() {
+    let server = TestApp::start(&temp_db("calibrations"), &[]);
+    let request = measurements().to_string();
+    let fitted = post(&server.url("/v1/calibrations"), &request, None);
+    assert_eq!(fitted.status, 200, "{}", fitted.body);
+    let fit = fitted.json();
+    let output = bouncewear(&["calibrate"], &request);
+    let cli: Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(fit, cli);
+    for (name, truth) in [
+        ("material.kappa", 0.33),
+        ("losses.impact_energy_loss_j", 2e-6),
+    ] {
+        let estimate = &fit["estimates"][name];
+        let [lo, hi] = [0, 1].map(|i| estimate["ci95"][i].as_f64().unwrap());
+        assert!(lo < truth && truth < hi, "{name}: {estimate}");
+    }
+    // The fitted scenario is one a job accepts.
+    let job = json!({"scenario": fit["scenario"], "devices": 2, "operations": 2, "seed": 1});
+    assert_eq!(
+        post(&server.url("/v1/jobs"), &job.to_string(), None).status,
+        202
+    );
+    // The paper's readings of e2 off the bounce times, with their bias.
+    let e2 = &fit["restitution_from_bounce_times"]["e2"];
+    assert_eq!(e2["observations"], json!([0, 1, 2]));
+    assert!(e2["bias"].as_f64().unwrap() > 0.01, "{e2}");
+
+    let plot = post(&server.url("/v1/calibrations?format=svg"), &request, None);
+    assert_eq!(plot.status, 200);
+    assert_eq!(plot.content_type, "image/svg+xml");
+    assert!(plot.body.starts_with("<svg") && plot.body.contains("total_bounce_s"));
+}
+
+#[test]
+fn an_ill_posed_calibration_is_refused_naming_the_field() {
+    let server = TestApp::start(&temp_db("calibrations-bad"), &[]);
+    let url = server.url("/v1/calibrations");
+    // With kappa given, the contact radius changes nothing the data measure.
+    let mut request = measurements();
+    request["scenario"] = json!({"material": {"kappa": 0.33}});
+    request["fit"] = json!(["material.kappa", "material.contact_radius_m"]);
+    let problem = assert_problem(&post(&url, &request.to_string(), None), 422);
+    assert_eq!(problem["errors"][0]["pointer"], "/fit/1", "{problem}");
+    // A field that is not a positive number of the scenario, and an observation measuring nothing.
+    let bad = json!({"fit": ["material.arc_restitution.law"], "observations": [{"impact_velocity_m_s": 0.3}]});
+    let problem = assert_problem(&post(&url, &bad.to_string(), None), 422);
+    let pointers: Vec<&str> = problem["errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["pointer"].as_str().unwrap())
+        .collect();
+    assert_eq!(pointers, ["/fit/0", "/observations/0"], "{problem}");
+    assert_problem(
+        &post(&format!("{url}?format=png"), &bad.to_string(), None),
+        400,
+    );
+}
