@@ -15,19 +15,24 @@
 //! objective; its residuals are reported with the others.
 
 use crate::error::{FieldError, InvalidInput, Pointer};
-use crate::operation::{Fidelity, Operation, Simulation, simulate};
+use crate::operation::{Fidelity, Needs, Operation, Simulation, simulate};
 use crate::paper_forms::{e_from_bounce_times, e1_from_first_bounce};
+use crate::restitution::KappaLaw;
 use crate::scenario::{Scenario, ScenarioSpec};
 use crate::stats::Z_975;
+use crate::wear::{DeviceWear, WearLaw};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 /// The most observations one calibration may carry: a fit simulates each of them `2k + 1` times
 /// per iteration for `k` parameters, so this bounds its time (well under a second).
 pub const MAX_OBSERVATIONS: usize = 1000;
 /// The most parameters one calibration may fit.
 pub const MAX_PARAMETERS: usize = 8;
+/// The latest operation of an endurance test an observation may be from: every evaluation of the
+/// fit runs a device that far, so this bounds a wear curve's cost (10 ms per evaluation).
+pub const MAX_OPERATION: u64 = 100_000;
 
 /// A calibration request.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -50,6 +55,11 @@ pub struct CalibrationSpec {
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Observation {
+    /// Where in an endurance test of the scenario the operation was measured, 0 (a new contact,
+    /// the default) to 100000: the operations before it run at the scenario's own conditions and
+    /// wear the surface (docs/model.md section 6), so observations along one device's test are
+    /// its wear curve.
+    pub operation: Option<u64>,
     /// The operation's measured impact velocity, m/s; without it, the scenario's.
     pub impact_velocity_m_s: Option<f64>,
     /// Measured duration of the first bounce, s.
@@ -67,16 +77,20 @@ pub struct Observation {
     pub peak_force_n: Option<f64>,
     /// Measured arc energy of the operation, J.
     pub arc_energy_j: Option<f64>,
+    /// Measured mass the contacts have lost by erosion, from the start of the test up to and
+    /// including this operation, kg.
+    pub eroded_mass_kg: Option<f64>,
 }
 
 /// The measured quantities that enter the objective, by name.
-const FITTED: [&str; 6] = [
+const FITTED: [&str; 7] = [
     "first_bounce_s",
     "second_bounce_s",
     "total_bounce_s",
     "e1",
     "peak_force_n",
     "arc_energy_j",
+    "eroded_mass_kg",
 ];
 
 impl Observation {
@@ -91,6 +105,7 @@ impl Observation {
             "e1" => self.e1,
             "peak_force_n" => self.peak_force_n,
             "arc_energy_j" => self.arc_energy_j,
+            "eroded_mass_kg" => self.eroded_mass_kg,
             _ => None,
         }
     }
@@ -249,6 +264,12 @@ impl Problem {
         for (i, observation) in spec.observations.iter().enumerate() {
             let at = root.child("observations").child(i);
             let mut measured = observation.bounce_count.is_some();
+            if observation.operation.is_some_and(|j| j > MAX_OPERATION) {
+                errors.push(FieldError {
+                    pointer: at.child("operation").to_string(),
+                    detail: format!("must be from 0 to {MAX_OPERATION}"),
+                });
+            }
             if let Some(v) = observation.impact_velocity_m_s {
                 // The scenario's rule for an impact velocity, at the observation's place.
                 let mut with_velocity = spec.scenario.clone();
@@ -283,7 +304,7 @@ impl Problem {
             if !measured {
                 errors.push(FieldError {
                     pointer: at.to_string(),
-                    detail: "measures nothing: give at least one of first_bounce_s, second_bounce_s, total_bounce_s, bounce_count, e1, peak_force_n, arc_energy_j".into(),
+                    detail: "measures nothing: give at least one of first_bounce_s, second_bounce_s, total_bounce_s, bounce_count, e1, peak_force_n, arc_energy_j, eroded_mass_kg".into(),
                 });
             }
         }
@@ -353,14 +374,56 @@ impl Problem {
             .collect()
     }
 
-    /// Every observation simulated at `theta`; `None` where the scenario breaks a rule.
-    fn simulate_all(&self, theta: &[f64]) -> Option<Vec<Simulation>> {
+    /// Every observation simulated at `theta` on the surface its place in the endurance test
+    /// gives, with the eroded mass up to it; `None` where the scenario breaks a rule.
+    fn simulate_all(&self, theta: &[f64]) -> Option<Vec<Measured>> {
+        let scenario = self.scenario(theta)?;
+        let law = WearLaw::new(&scenario);
+        let energies = self.arc_energy_before(&scenario, &law);
+        let operations = self.operations(theta)?;
+        let reference = *operations.first()?.kappa_law();
         Some(
-            self.operations(theta)?
+            self.observations
                 .iter()
-                .map(Operation::simulate)
+                .zip(&operations)
+                .map(|(observation, op)| {
+                    let energy_j = energies[&observation.operation.unwrap_or(0)];
+                    let (radius_m, pressure_pa) = surface(&law, &reference, energy_j);
+                    let mut bounces = Vec::new();
+                    let outcome = op.run(radius_m, pressure_pa, Needs::ALL, Some(&mut bounces));
+                    Measured {
+                        eroded_mass_kg: law.eroded_mass_kg(energy_j + outcome.arc_energy_j),
+                        simulation: Simulation { outcome, bounces },
+                    }
+                })
                 .collect(),
         )
+    }
+
+    /// The cumulative arc energy before each operation an observation is from: one device run
+    /// through the endurance test at the scenario's own conditions.
+    fn arc_energy_before(&self, scenario: &Scenario, law: &WearLaw) -> BTreeMap<u64, f64> {
+        let wanted: BTreeSet<u64> = self
+            .observations
+            .iter()
+            .map(|o| o.operation.unwrap_or(0))
+            .collect();
+        let last = wanted.last().copied().unwrap_or(0);
+        let op = Operation::nominal(scenario, Fidelity::Exact);
+        let reference = *op.kappa_law();
+        let mut wear = DeviceWear::default();
+        let mut energies = BTreeMap::new();
+        for j in 0..=last {
+            if wanted.contains(&j) {
+                energies.insert(j, wear.cumulative_arc_energy_j);
+            }
+            if j < last {
+                let (radius_m, pressure_pa) =
+                    surface(law, &reference, wear.cumulative_arc_energy_j);
+                wear.add(&op.run(radius_m, pressure_pa, Needs::ALL, None));
+            }
+        }
+        energies
     }
 
     /// The relative residual of every term at `theta`.
@@ -537,7 +600,8 @@ impl Problem {
             }
             if let Some(count) = observation.bounce_count {
                 let entry = by_quantity.entry("bounce_count".to_owned()).or_default();
-                let difference = f64::from(outcomes[i].outcome.bounce_count) - f64::from(count);
+                let difference =
+                    f64::from(outcomes[i].simulation.outcome.bounce_count) - f64::from(count);
                 entry.0.push(difference);
                 entry.1 += (difference / f64::from(count.max(1))).powi(2);
             }
@@ -571,9 +635,33 @@ fn lookup<'a>(scenario: &'a Value, path: &[String]) -> Option<&'a Value> {
     path.iter().try_fold(scenario, |at, key| at.get(key))
 }
 
-fn simulated(simulation: &Simulation, quantity: &str) -> f64 {
+/// An observation as simulated: the operation, and the mass eroded up to it.
+struct Measured {
+    simulation: Simulation,
+    eroded_mass_kg: f64,
+}
+
+/// The surface after `energy_j` of arc energy: new while no arc has burnt (as the engine has it).
+fn surface(law: &WearLaw, reference: &KappaLaw, energy_j: f64) -> (f64, f64) {
+    let (radius_m, pressure_pa) = (
+        reference.reference_radius_m,
+        reference.reference_pressure_pa,
+    );
+    if energy_j > 0.0 {
+        (
+            law.radius_m(radius_m, energy_j),
+            law.pressure_pa(pressure_pa, energy_j),
+        )
+    } else {
+        (radius_m, pressure_pa)
+    }
+}
+
+fn simulated(measured: &Measured, quantity: &str) -> f64 {
+    let simulation = &measured.simulation;
     let outcome = &simulation.outcome;
     match quantity {
+        "eroded_mass_kg" => measured.eroded_mass_kg,
         "first_bounce_s" => outcome.first_bounce_s,
         // No second bounce lasts no time.
         "second_bounce_s" => simulation.bounces.get(1).map_or(0.0, |b| b.duration_s),
@@ -610,7 +698,12 @@ impl Problem {
                 - second.separation_velocity_m_s / first.separation_velocity_m_s;
             Some((reading, modelled))
         };
-        let simulations: Vec<Simulation> = operations.iter().map(Operation::simulate).collect();
+        let simulations: Vec<Simulation> = self
+            .simulate_all(theta)
+            .expect("the optimum simulates")
+            .into_iter()
+            .map(|measured| measured.simulation)
+            .collect();
         type Read<'a> = &'a dyn Fn(usize, &Operation, &Simulation) -> Option<(f64, f64)>;
         for (name, read) in [("e1", &e1 as Read), ("e2", &e2 as Read)] {
             let (observations, pairs): (Vec<usize>, Vec<(f64, f64)>) = (0..operations.len())
@@ -892,6 +985,63 @@ mod tests {
         .outcome
         .first_bounce_s;
         assert!((first - 0.0090).abs() < 0.0002, "{first}");
+    }
+
+    /// A wear curve: one device's first and total bounce times and eroded mass at five points of
+    /// a 1000-operation test at 48 V / 15 A, from the independent 50-digit trajectory of
+    /// `tools/wear_reference.py`. Started from the wrong roughening energy and erosion rate, the
+    /// fit finds the trajectory's own, and its simulated curve is the reference's to 1e-9.
+    #[test]
+    fn a_wear_curve_gives_the_roughening_energy_and_the_erosion_rate() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tests/data/wear_reference.json"
+        );
+        let reference: Value =
+            serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        let trajectory = &reference["roughening"]["operations"];
+        let at = |name: &str, j: usize| trajectory[name][j].as_f64().unwrap();
+        let observations = [0_usize, 100, 250, 500, 999]
+            .into_iter()
+            .map(|j| {
+                let energy_j: f64 = (0..=j).map(|k| at("arc_energy_j", k)).sum();
+                Observation {
+                    operation: Some(j as u64),
+                    first_bounce_s: Some(at("first_bounce_s", j)),
+                    total_bounce_s: Some(at("total_bounce_s", j)),
+                    eroded_mass_kg: Some(2e-9 * energy_j),
+                    ..Observation::default()
+                }
+            })
+            .collect();
+        let mut scenario: ScenarioSpec =
+            serde_json::from_value(reference["roughening"]["scenario"].clone()).unwrap();
+        scenario.material.roughening_energy_j = 800.0;
+        scenario.material.erosion_kg_per_j = 5e-9;
+        let fit = calibrate(&CalibrationSpec {
+            scenario,
+            fit: vec![
+                "material.roughening_energy_j".into(),
+                "material.erosion_kg_per_j".into(),
+            ],
+            observations,
+        })
+        .unwrap();
+        let estimates = &fit.estimates;
+        assert!(
+            (estimates["material.roughening_energy_j"].value / 500.0 - 1.0).abs() < 1e-8,
+            "{estimates:?}"
+        );
+        assert!(
+            (estimates["material.erosion_kg_per_j"].value / 2e-9 - 1.0).abs() < 1e-8,
+            "{estimates:?}"
+        );
+        for quantity in ["first_bounce_s", "total_bounce_s", "eroded_mass_kg"] {
+            assert!(
+                fit.residuals[quantity].rms_relative < 1e-9,
+                "{quantity}: {fit:?}"
+            );
+        }
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! schemathesis' stateful phase, can follow them), the length limit on all text a client sends,
 //! and descriptions of the simulation's output types, whose Rust docs are written for the physics.
 
-use bouncewear_model::calibration::{MAX_OBSERVATIONS, MAX_PARAMETERS};
+use bouncewear_model::calibration::{MAX_OBSERVATIONS, MAX_OPERATION, MAX_PARAMETERS};
 use bouncewear_model::error::MAX_TEXT_CHARS;
 use bouncewear_model::montecarlo::job::{MAX_DEVICES, MAX_OPERATIONS};
 use bouncewear_model::montecarlo::{DeviceMetric, OperationMetric};
@@ -281,6 +281,11 @@ fn constrain_request_fields(document: &mut Value) {
             "Observation",
             "impact_velocity_m_s",
             Range::NonNegative.schema(),
+        ),
+        (
+            "Observation",
+            "operation",
+            json!({"minimum": 0, "maximum": MAX_OPERATION}),
         ),
         ("ScheduleSpec", "name", json!({"pattern": "\\S"})),
         ("ScheduleSpec", "time_zone", json!({"enum": time_zones})),
