@@ -48,6 +48,10 @@ pub struct CalibrationSpec {
     pub fit: Vec<String>,
     /// Measured operations.
     pub observations: Vec<Observation>,
+    /// Bounds on fitted parameters, by their name in `fit`: `[lower, upper]`, positive, lower
+    /// below upper. The fit stays within them; an estimate on a bound says so.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub bounds: BTreeMap<String, [f64; 2]>,
 }
 
 /// One measured operation: any of the quantities, at least one of them measured.
@@ -121,6 +125,10 @@ pub struct Estimate {
     pub ci95: [f64; 2],
     /// Standard error of the parameter's logarithm.
     pub se_ln: f64,
+    /// Present and true when the estimate sits on one of its `bounds`: the data pull it beyond,
+    /// and its interval is cut at the bound.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub at_bound: bool,
 }
 
 /// Residuals of one measured quantity over the observations that measured it.
@@ -182,6 +190,8 @@ struct Problem {
     observations: Vec<Observation>,
     /// `(observation, quantity)` of every term of the objective.
     terms: Vec<(usize, &'static str)>,
+    /// `[ln lower, ln upper]` of each parameter (unbounded: the whole line).
+    bounds_ln: Vec<[f64; 2]>,
 }
 
 impl CalibrationSpec {
@@ -200,6 +210,7 @@ pub fn calibrate(spec: &CalibrationSpec) -> Result<Calibration, InvalidInput> {
         .iter()
         .map(|(_, path)| problem.start_value(path).ln())
         .collect();
+    let start = problem.within_bounds(start);
     let (theta, iterations) = problem.levenberg_marquardt(start)?;
     problem.report(&theta, iterations)
 }
@@ -319,15 +330,48 @@ impl Problem {
                 ),
             });
         }
+        for (name, &[lower, upper]) in &spec.bounds {
+            let pointer = root.child("bounds").child(name.as_str()).to_string();
+            if !parameters.iter().any(|(n, _)| n == name) {
+                errors.push(FieldError {
+                    pointer,
+                    detail: format!("`{name}` is not a parameter in `fit`"),
+                });
+            } else if !(lower > 0.0 && lower < upper && upper.is_finite()) {
+                errors.push(FieldError {
+                    pointer,
+                    detail: format!(
+                        "must be [lower, upper] with 0 < lower < upper, got [{lower}, {upper}]"
+                    ),
+                });
+            }
+        }
         if !errors.is_empty() {
             return Err(InvalidInput::new(errors));
         }
         Ok(Self {
+            bounds_ln: parameters
+                .iter()
+                .map(|(name, _)| {
+                    spec.bounds
+                        .get(name)
+                        .map_or([f64::NEG_INFINITY, f64::INFINITY], |b| b.map(f64::ln))
+                })
+                .collect(),
             base,
             parameters,
             observations: spec.observations.clone(),
             terms,
         })
+    }
+
+    /// `theta` moved onto its bounds where it lies beyond them (a projected step).
+    fn within_bounds(&self, theta: Vec<f64>) -> Vec<f64> {
+        theta
+            .into_iter()
+            .zip(&self.bounds_ln)
+            .map(|(t, [lower, upper])| t.clamp(*lower, *upper))
+            .collect()
     }
 
     /// A parameter's starting value: the scenario's, or for an absent kappa the one the model
@@ -488,7 +532,8 @@ impl Problem {
                     lambda *= 10.0;
                     continue;
                 };
-                let trial: Vec<f64> = theta.iter().zip(&step).map(|(t, s)| t + s).collect();
+                let trial =
+                    self.within_bounds(theta.iter().zip(&step).map(|(t, s)| t + s).collect());
                 match self.residuals(&trial) {
                     Some(trial_residuals) if sum_of_squares(&trial_residuals) < cost => {
                         let small = step.iter().all(|s| s.abs() < 1e-10);
@@ -580,11 +625,21 @@ impl Problem {
             .map(|(i, (name, _))| {
                 let se_ln = (variance * covariance.get(i).map_or(f64::NAN, |row| row[i])).sqrt();
                 let value = theta[i].exp();
+                let [lower, upper] = self.bounds_ln[i];
                 let ci95 = [
-                    (theta[i] - Z_975 * se_ln).exp(),
-                    (theta[i] + Z_975 * se_ln).exp(),
+                    (theta[i] - Z_975 * se_ln).max(lower).exp(),
+                    (theta[i] + Z_975 * se_ln).min(upper).exp(),
                 ];
-                (name.clone(), Estimate { value, ci95, se_ln })
+                let at_bound = theta[i] == lower || theta[i] == upper;
+                (
+                    name.clone(),
+                    Estimate {
+                        value,
+                        ci95,
+                        se_ln,
+                        at_bound,
+                    },
+                )
             })
             .collect();
         let outcomes = self.simulate_all(theta).expect("the optimum simulates");
@@ -838,6 +893,7 @@ mod tests {
             scenario: ScenarioSpec::default(),
             fit: vec!["material.kappa".into()],
             observations,
+            bounds: BTreeMap::new(),
         }
     }
 
@@ -953,6 +1009,7 @@ mod tests {
             scenario,
             fit: vec!["material.arc_restitution.a".into()],
             observations,
+            bounds: BTreeMap::new(),
         })
         .unwrap();
         let a = &fit.estimates["material.arc_restitution.a"];
@@ -1025,6 +1082,7 @@ mod tests {
                 "material.erosion_kg_per_j".into(),
             ],
             observations,
+            bounds: BTreeMap::new(),
         })
         .unwrap();
         let estimates = &fit.estimates;
@@ -1055,9 +1113,33 @@ mod tests {
         assert!(invalid.errors()[0].detail.contains("cannot determine"));
     }
 
+    /// Bounds around the truth change nothing; bounds that leave it out hold the estimate on the
+    /// nearer one, which the estimate says.
+    #[test]
+    fn bounds_hold_the_estimate() {
+        let free = calibrate(&synthetic(0.3, 1e-6, 0.01)).unwrap();
+        let mut spec = synthetic(0.3, 1e-6, 0.01);
+        spec.bounds.insert("material.kappa".into(), [0.2, 0.4]);
+        let within = calibrate(&spec).unwrap();
+        assert_eq!(within.estimates, free.estimates);
+        spec.bounds.insert("material.kappa".into(), [0.32, 0.4]);
+        let held = &calibrate(&spec).unwrap().estimates["material.kappa"];
+        assert!(
+            held.at_bound && (held.value / 0.32 - 1.0).abs() < 1e-12,
+            "{held:?}"
+        );
+        assert!(held.ci95[0] >= held.value * (1.0 - 1e-12), "{held:?}");
+        let json = serde_json::to_value(&free.estimates["material.kappa"]).unwrap();
+        assert!(json.get("at_bound").is_none(), "{json}");
+    }
+
     #[test]
     fn bad_requests_name_their_fields() {
         let spec = CalibrationSpec {
+            bounds: BTreeMap::from([
+                ("material.kappa".into(), [0.5, 0.4]),
+                ("losses.impact_energy_loss_j".into(), [1e-7, 1e-5]),
+            ]),
             scenario: ScenarioSpec::default(),
             fit: vec!["kappa".into(), "material.nothing".into()],
             observations: vec![
@@ -1077,7 +1159,9 @@ mod tests {
                 "/fit/1",
                 "/observations/0",
                 "/observations/1/impact_velocity_m_s",
-                "/observations/1/first_bounce_s"
+                "/observations/1/first_bounce_s",
+                "/bounds/losses.impact_energy_loss_j",
+                "/bounds/material.kappa"
             ]
         );
     }

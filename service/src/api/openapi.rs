@@ -283,6 +283,14 @@ fn constrain_request_fields(document: &mut Value) {
             Range::NonNegative.schema(),
         ),
         (
+            "CalibrationSpec",
+            "bounds",
+            json!({"additionalProperties": {
+                "type": "array", "minItems": 2, "maxItems": 2,
+                "items": {"type": "number", "exclusiveMinimum": 0, "maximum": MAX_MAGNITUDE}
+            }}),
+        ),
+        (
             "Observation",
             "operation",
             json!({"minimum": 0, "maximum": MAX_OPERATION}),
