@@ -287,7 +287,7 @@ fn constrain_request_fields(document: &mut Value) {
             "bounds",
             json!({"additionalProperties": {
                 "type": "array", "minItems": 2, "maxItems": 2,
-                "items": {"type": "number", "exclusiveMinimum": 0, "maximum": MAX_MAGNITUDE}
+                "items": {"type": "number", "exclusiveMinimum": 0}
             }}),
         ),
         (
