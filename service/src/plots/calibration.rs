@@ -45,7 +45,7 @@ pub fn calibration_svg(panels: &[FitPanel]) -> String {
     svg.title(title, 16.0, 24.0);
     for (k, panel) in panels.iter().enumerate() {
         let (x0, y0) = (panel_w * (k % 3) as f64, 40.0 + panel_h * (k / 3) as f64);
-        let frame = Frame::inset(x0, y0, panel_w, panel_h, [72.0, 24.0, 16.0, 48.0]);
+        let frame = Frame::inset(x0, y0, panel_w, panel_h, [72.0, 24.0, 28.0, 48.0]);
         svg.text(x0 + panel_w / 2.0, y0 + 14.0, &panel.quantity, SMALL);
         let finite: Vec<(f64, f64)> = panel
             .points
