@@ -284,18 +284,17 @@ fn relative_errors(
     (median, max)
 }
 
+/// A closed form of the paper: the bounce times it gives for an operation, where it applies.
+type ClosedForm = fn(&Operation) -> Option<BounceTimes>;
+
 /// The paper's closed forms `bench` reports, by name.
-const PAPER_FORMS: [(&str, fn(&Operation) -> Option<BounceTimes>); 2] = [
+const PAPER_FORMS: [(&str, ClosedForm); 2] = [
     ("eq. 9/10, e = 0.4", |op| constant_restitution(op, 0.4)),
     ("eq. 17/19", simplified_electrical),
 ];
 
 /// A closed form of the paper over the reference scenarios it applies to.
-fn paper_form(
-    name: &'static str,
-    form: fn(&Operation) -> Option<BounceTimes>,
-    quick: bool,
-) -> PaperForm {
+fn paper_form(name: &'static str, form: ClosedForm, quick: bool) -> PaperForm {
     let cases = reference_cases();
     let (operations, references): (Vec<Operation>, Vec<&Value>) = cases
         .iter()
