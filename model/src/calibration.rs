@@ -86,8 +86,8 @@ pub struct Observation {
     pub eroded_mass_kg: Option<f64>,
 }
 
-/// The measured quantities that enter the objective, by name.
-const FITTED: [&str; 7] = [
+/// The measured quantities that enter the objective, by name: each a positive number.
+pub const FITTED: [&str; 7] = [
     "first_bounce_s",
     "second_bounce_s",
     "total_bounce_s",

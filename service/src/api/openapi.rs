@@ -4,7 +4,7 @@
 //! schemathesis' stateful phase, can follow them), the length limit on all text a client sends,
 //! and descriptions of the simulation's output types, whose Rust docs are written for the physics.
 
-use bouncewear_model::calibration::{MAX_OBSERVATIONS, MAX_OPERATION, MAX_PARAMETERS};
+use bouncewear_model::calibration::{FITTED, MAX_OBSERVATIONS, MAX_OPERATION, MAX_PARAMETERS};
 use bouncewear_model::error::MAX_TEXT_CHARS;
 use bouncewear_model::montecarlo::job::{MAX_DEVICES, MAX_OPERATIONS};
 use bouncewear_model::montecarlo::{DeviceMetric, OperationMetric};
@@ -304,17 +304,7 @@ fn constrain_request_fields(document: &mut Value) {
         ),
     ]);
     // A measured quantity is a positive number.
-    fields.extend(
-        [
-            "first_bounce_s",
-            "second_bounce_s",
-            "total_bounce_s",
-            "e1",
-            "peak_force_n",
-            "arc_energy_j",
-        ]
-        .map(|field| ("Observation", field, json!({"exclusiveMinimum": 0}))),
-    );
+    fields.extend(FITTED.map(|field| ("Observation", field, json!({"exclusiveMinimum": 0}))));
     let schemas = &mut document["components"]["schemas"];
     for (schema, field, rules) in fields {
         let pointer = format!("/{schema}/properties/{field}");
