@@ -20,6 +20,7 @@
 //! | [`accumulator`] | count, min, max, shifted sums, exceedance count, sketch |
 //! | [`intervals`] | Student t 0.975 quantile, Wilson score interval |
 //! | [`summary`] | the serialised `SUMMARY` and [`summarize`] |
+//! | [`sobol`] | Sobol' first-order and total indices by pick-freeze, with delta-method intervals |
 //!
 //! Accumulators serialise exactly, every float by its bits (infinities included), so a group's
 //! state can cross machines and merge into the same numbers.
@@ -28,6 +29,7 @@ pub mod accumulator;
 mod bits;
 pub mod intervals;
 pub mod sketch;
+pub mod sobol;
 pub mod summary;
 
 pub use accumulator::Accumulator;
