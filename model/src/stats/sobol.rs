@@ -156,7 +156,7 @@ impl SobolAccumulator {
             value: 0.0,
             ci95: [0.0, 0.0],
         };
-        if self.n < 2 || !(variance > 0.0) {
+        if self.n < 2 || variance.is_nan() || variance <= 0.0 {
             return vec![
                 SobolIndices {
                     first: zero,
