@@ -15,6 +15,7 @@
 //! objective; its residuals are reported with the others.
 
 use crate::error::{FieldError, InvalidInput, Pointer};
+use crate::linalg::{invert, smallest_pivot, solve};
 use crate::operation::{Fidelity, Needs, Operation, Simulation, simulate};
 use crate::paper_forms::{e_from_bounce_times, e1_from_first_bounce};
 use crate::restitution::KappaLaw;
@@ -798,63 +799,6 @@ fn normal_equations(columns: &[Vec<f64>], residuals: &[f64]) -> (Vec<Vec<f64>>, 
         .collect();
     let jtr = columns.iter().map(|a| dot(a, residuals)).collect();
     (jtj, jtr)
-}
-
-/// Solves `a x = b` for a symmetric positive definite `a` by Cholesky; `None` if it is not.
-fn solve(a: Vec<Vec<f64>>, b: Vec<f64>) -> Option<Vec<f64>> {
-    let l = cholesky(&a)?;
-    let n = b.len();
-    let mut y = vec![0.0; n];
-    for i in 0..n {
-        y[i] = (b[i] - (0..i).map(|j| l[i][j] * y[j]).sum::<f64>()) / l[i][i];
-    }
-    let mut x = vec![0.0; n];
-    for i in (0..n).rev() {
-        x[i] = (y[i] - (i + 1..n).map(|j| l[j][i] * x[j]).sum::<f64>()) / l[i][i];
-    }
-    Some(x)
-}
-
-fn cholesky(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
-    let n = a.len();
-    let mut l = vec![vec![0.0; n]; n];
-    for i in 0..n {
-        for j in 0..=i {
-            let sum = a[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
-            if i == j {
-                if sum.is_nan() || sum <= 0.0 {
-                    return None;
-                }
-                l[i][i] = sum.sqrt();
-            } else {
-                l[i][j] = sum / l[j][j];
-            }
-        }
-    }
-    Some(l)
-}
-
-/// The smallest squared Cholesky pivot of a Gram matrix of unit columns: 0 when they are linearly
-/// dependent, 1 when orthogonal.
-fn smallest_pivot(gram: &[Vec<f64>]) -> f64 {
-    match cholesky(gram) {
-        Some(l) => (0..l.len()).map(|i| l[i][i] * l[i][i]).fold(1.0, f64::min),
-        None => 0.0,
-    }
-}
-
-/// The inverse of a symmetric positive definite matrix, column by column.
-fn invert(a: Vec<Vec<f64>>) -> Option<Vec<Vec<f64>>> {
-    let n = a.len();
-    let columns: Option<Vec<Vec<f64>>> = (0..n)
-        .map(|j| {
-            solve(
-                a.clone(),
-                (0..n).map(|i| f64::from(u8::from(i == j))).collect(),
-            )
-        })
-        .collect();
-    columns
 }
 
 #[cfg(test)]

@@ -25,6 +25,7 @@ pub mod error;
 pub mod impact;
 pub mod lanes;
 pub mod life;
+mod linalg;
 pub mod mechanism;
 pub mod montecarlo;
 pub mod operation;

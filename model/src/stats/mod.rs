@@ -20,6 +20,7 @@
 //! | [`accumulator`] | count, min, max, shifted sums, exceedance count, sketch |
 //! | [`intervals`] | Student t 0.975 quantile, Wilson score interval |
 //! | [`summary`] | the serialised `SUMMARY` and [`summarize`] |
+//! | [`regression`] | standardised regression coefficients, mergeable |
 //! | [`sobol`] | Sobol' first-order and total indices by pick-freeze, with delta-method intervals |
 //!
 //! Accumulators serialise exactly, every float by its bits (infinities included), so a group's
@@ -28,6 +29,7 @@
 pub mod accumulator;
 mod bits;
 pub mod intervals;
+pub mod regression;
 pub mod sketch;
 pub mod sobol;
 pub mod summary;
