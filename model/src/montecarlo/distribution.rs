@@ -705,4 +705,61 @@ mod tests {
             assert_relative_eq!(d.quantile(u), x, max_relative = 1e-9);
         }
     }
+
+    /// Truncated lognormal and Weibull specs with the untruncated CDF of each.
+    fn truncated_cases() -> [(DistributionSpec, fn(f64) -> f64); 2] {
+        [
+            (
+                parse(r#"{"kind":"lognormal","median":1,"sigma":0.5,"min":0.8,"max":3}"#),
+                |x: f64| standard_normal_cdf(x.ln() / 0.5),
+            ),
+            (
+                parse(r#"{"kind":"weibull","scale":2,"shape":3,"min":1,"max":2.5}"#),
+                |x: f64| 1.0 - (-(x / 2.0).powi(3)).exp(),
+            ),
+        ]
+    }
+
+    fn truncated(spec: &DistributionSpec) -> (Distribution, Window) {
+        match Distribution::new(spec, Domain::POSITIVE, &Pointer::root()).unwrap() {
+            d @ (Distribution::Lognormal { window, .. } | Distribution::Weibull { window, .. }) => {
+                (d, window)
+            }
+            other => unreachable!("not a truncated case: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn truncated_lognormal_and_weibull_draws_stay_in_the_window_and_count_rejections() {
+        for (spec, cdf) in truncated_cases() {
+            let (d, window) = truncated(&spec);
+            let mut rng = ChaCha8Rng::seed_from_u64(3);
+            let (n, mut rejections) = (100_000, 0);
+            let inside = (0..n)
+                .map(|_| d.sample_counting(&mut rng, &mut rejections))
+                .all(|x| (window.min..=window.max).contains(&x));
+            assert!(inside, "{spec:?}");
+            let kept = cdf(window.max) - cdf(window.min);
+            // Each kept draw costs 1 / kept draws on average: (1 - kept) / kept rejections.
+            let expected = f64::from(n) * (1.0 - kept) / kept;
+            assert!(
+                (rejections as f64 - expected).abs() < 0.03 * expected,
+                "{spec:?}: {rejections} vs {expected}"
+            );
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn a_truncated_quantile_inverts_the_truncated_cdf(u in 0.001f64..0.999) {
+            for (spec, cdf) in truncated_cases() {
+                let (d, window) = truncated(&spec);
+                let x = d.quantile(u);
+                proptest::prop_assert!((window.min..=window.max).contains(&x));
+                let truncated_cdf =
+                    (cdf(x) - cdf(window.min)) / (cdf(window.max) - cdf(window.min));
+                proptest::prop_assert!((truncated_cdf - u).abs() < 1e-9, "{spec:?}: {truncated_cdf} vs {u}");
+            }
+        }
+    }
 }

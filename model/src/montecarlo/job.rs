@@ -16,6 +16,14 @@ pub const MAX_BINS: u64 = 1000;
 pub const MAX_DEVICES: u64 = 100_000_000;
 /// See [`MAX_DEVICES`].
 pub const MAX_OPERATIONS: u64 = 100_000_000;
+/// The members of a job that are lists (`*` for any index): JSON arrays are refused elsewhere.
+pub const LIST_FIELDS: [&str; 5] = [
+    "/scatter",
+    "/metrics",
+    "/correlation/parameters",
+    "/correlation/matrix",
+    "/correlation/matrix/*",
+];
 
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -343,7 +351,7 @@ pub struct Job {
 impl Job {
     /// Parses and validates a job document; a missing seed is drawn by `draw_seed`.
     pub fn from_json(text: &str, draw_seed: impl FnOnce() -> u64) -> Result<Self, InvalidInput> {
-        let spec: JobSpec = crate::error::from_json(text, &["/scatter", "/metrics"])?;
+        let spec: JobSpec = crate::error::from_json(text, &LIST_FIELDS)?;
         Self::new(spec, draw_seed, &Pointer::root())
     }
 
