@@ -50,7 +50,8 @@ pub struct Diagnostic {
 }
 
 /// The warnings of a run: bounce sequences cut at `max_bounces`, an impact velocity or static force
-/// outside the paper's measurements, and the paper's post-arc law far from its calibration current.
+/// outside the paper's measurements, the paper's post-arc law far from its calibration current, and
+/// truncated distributions' rejected draws.
 pub fn diagnose(job: &Job, counts: &Counts) -> Vec<Diagnostic> {
     let mut found = Vec::new();
     if counts.operations_at_max_bounces > 0 {
@@ -129,8 +130,8 @@ fn truncated_draws(counts: &Counts) -> impl Iterator<Item = Diagnostic> + '_ {
                 .to_string(),
             detail: format!(
                 "{rejected} random draws fell outside the truncation window [min, max] and were \
-                 drawn again: the values follow the truncated distribution, as asked; the share \
-                 of the untruncated one cut away is the share of draws rejected"
+                 drawn again: the values follow the truncated distribution, as asked; many \
+                 rejections per kept draw mean the window cuts away much of the distribution"
             ),
         })
 }

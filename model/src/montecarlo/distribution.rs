@@ -706,8 +706,11 @@ mod tests {
         }
     }
 
+    /// An untruncated CDF.
+    type Cdf = fn(f64) -> f64;
+
     /// Truncated lognormal and Weibull specs with the untruncated CDF of each.
-    fn truncated_cases() -> [(DistributionSpec, fn(f64) -> f64); 2] {
+    fn truncated_cases() -> [(DistributionSpec, Cdf); 2] {
         [
             (
                 parse(r#"{"kind":"lognormal","median":1,"sigma":0.5,"min":0.8,"max":3}"#),
