@@ -1,21 +1,12 @@
 //! Scatter beyond the basics: scenario constants drawn per device or operation, truncated
 //! lognormal and Weibull draws and their rejection counts, and correlated draws (a Gaussian copula).
 
+mod support;
+
 use bouncewear_model::montecarlo::engine::{Batch, Tally, batch_draws, run_group};
-use bouncewear_model::montecarlo::{Job, JobResult, Silent, run_job, summarize_job};
+use bouncewear_model::montecarlo::{Job, Silent, summarize_job};
 use serde_json::{Value, json};
-
-fn job(value: Value) -> Job {
-    Job::from_json(&value.to_string(), || 7).expect("valid job")
-}
-
-fn run_on(threads: usize, job: &Job) -> JobResult {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    pool.install(|| run_job(job, &Silent)).unwrap()
-}
+use support::{job, run_on};
 
 /// Every fault of a job, as `(pointer, detail)`.
 fn faults(value: Value) -> Vec<(String, String)> {
@@ -36,39 +27,46 @@ fn pointers(value: Value) -> Vec<String> {
         .collect()
 }
 
-/// Each new parameter, its scenario section and field, and a valid value other than the default.
-const CONSTANTS: [(&str, &str, &str, f64); 10] = [
-    ("inertia_kg_m2", "mechanism", "inertia_kg_m2", 2.1e-5),
+/// Each new parameter, its field in the scenario (a JSON pointer), and a valid value other than
+/// the default.
+const CONSTANTS: [(&str, &str, f64); 10] = [
+    ("inertia_kg_m2", "/mechanism/inertia_kg_m2", 2.1e-5),
     (
         "spring_stiffness_n_per_m",
-        "mechanism",
-        "spring_stiffness_n_per_m",
+        "/mechanism/spring_stiffness_n_per_m",
         150.0,
     ),
-    ("supply_voltage_v", "circuit", "supply_voltage_v", 36.0),
-    (
-        "impact_energy_loss_j",
-        "losses",
-        "impact_energy_loss_j",
-        3e-6,
-    ),
-    ("min_separation_m", "losses", "min_separation_m", 2e-5),
-    ("arc_restitution_a", "material", "arc_restitution", 0.3),
+    ("supply_voltage_v", "/circuit/supply_voltage_v", 36.0),
+    ("impact_energy_loss_j", "/losses/impact_energy_loss_j", 3e-6),
+    ("min_separation_m", "/losses/min_separation_m", 2e-5),
+    ("arc_restitution_a", "/material/arc_restitution/a", 0.3),
     (
         "arc_restitution_b_s_per_m",
-        "material",
-        "arc_restitution",
+        "/material/arc_restitution/b_s_per_m",
         -0.2,
     ),
-    ("erosion_kg_per_j", "material", "erosion_kg_per_j", 5e-9),
+    ("erosion_kg_per_j", "/material/erosion_kg_per_j", 5e-9),
     (
         "roughening_energy_j",
-        "material",
-        "roughening_energy_j",
+        "/material/roughening_energy_j",
         200.0,
     ),
-    ("kappa", "material", "kappa", 0.6),
+    ("kappa", "/material/kappa", 0.6),
 ];
+
+/// `document` with `value` at `pointer`, the objects on the way made as needed.
+fn with_value(mut document: Value, pointer: &str, value: f64) -> Value {
+    let mut at = &mut document;
+    for token in pointer.split('/').skip(1) {
+        at = at
+            .as_object_mut()
+            .expect("an object on the way")
+            .entry(token)
+            .or_insert_with(|| json!({}));
+    }
+    *at = json!(value);
+    document
+}
 
 /// An arcing job whose radius scatters per device (so devices differ), with `extra` scatter.
 fn arcing_job(scenario: Value, extra: Option<Value>) -> Value {
@@ -81,7 +79,7 @@ fn arcing_job(scenario: Value, extra: Option<Value>) -> Value {
 
 #[test]
 fn a_fixed_draw_of_a_scenario_constant_runs_as_the_scenario_with_that_value() {
-    for (parameter, section, field, value) in CONSTANTS {
+    for (parameter, field, value) in CONSTANTS {
         let scenario = json!({"circuit": {"supply_voltage_v": 48, "current_a": 15}});
         let fixed = json!({"kind": "fixed", "value": value});
         for per in ["device", "operation"] {
@@ -89,12 +87,7 @@ fn a_fixed_draw_of_a_scenario_constant_runs_as_the_scenario_with_that_value() {
                 scenario.clone(),
                 Some(json!({"parameter": parameter, "per": per, "distribution": fixed})),
             ));
-            let mut given = scenario.clone();
-            given[section][field] = match field {
-                "arc_restitution" if parameter.ends_with("_a") => json!({"a": value}),
-                "arc_restitution" => json!({"b_s_per_m": value}),
-                _ => json!(value),
-            };
+            let given = with_value(scenario.clone(), field, value);
             let nominal = job(arcing_job(given, None));
             let (drawn, nominal) = (run_on(2, &drawn), run_on(2, &nominal));
             assert_eq!(
@@ -113,7 +106,7 @@ fn a_fixed_draw_of_a_scenario_constant_runs_as_the_scenario_with_that_value() {
 fn a_scattered_constant_changes_the_devices_it_is_drawn_for() {
     let scenario = json!({"circuit": {"supply_voltage_v": 48, "current_a": 15}});
     let nominal = run_on(2, &job(arcing_job(scenario.clone(), None)));
-    for (parameter, _, _, value) in CONSTANTS {
+    for (parameter, _, value) in CONSTANTS {
         let spread = json!({"kind": "uniform", "min": value.abs() * 0.5, "max": value.abs() * 1.5});
         let drawn = run_on(
             2,
