@@ -264,6 +264,19 @@ impl<'de> serde::de::DeserializeSeed<'de> for GivenTwice {
 /// metric's name, and the name of any member. Longer text is never a mistake worth storing.
 pub const MAX_TEXT_CHARS: usize = 200;
 
+/// Whether `pointer` is the list field `field`, in which a `*` token stands for any index
+/// (`/correlation/matrix/*`: each row of a matrix).
+fn matches_field(field: &str, pointer: &str) -> bool {
+    let (mut field, mut pointer) = (field.split('/'), pointer.split('/'));
+    loop {
+        match (field.next(), pointer.next()) {
+            (None, None) => return true,
+            (Some(f), Some(p)) if f == p || f == "*" => {}
+            _ => return false,
+        }
+    }
+}
+
 /// The rules every document's shape obeys before its types are read: arrays only where the
 /// document has lists (`array_fields`), and no text longer than [`MAX_TEXT_CHARS`].
 fn check_shape(
@@ -280,7 +293,10 @@ fn check_shape(
     };
     match value {
         serde_json::Value::Array(items) => {
-            if !array_fields.contains(&at.as_str()) {
+            if !array_fields
+                .iter()
+                .any(|field| matches_field(field, at.as_str()))
+            {
                 return Err(InvalidInput::single(
                     at,
                     "expected an object or a number, found an array",

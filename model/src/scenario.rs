@@ -263,6 +263,14 @@ impl Scenario {
     pub fn spec(&self) -> &ScenarioSpec {
         &self.0
     }
+
+    /// The scenario with Monte Carlo draws in place, not checked again: a job admits only
+    /// distributions whose every value keeps its field valid (`montecarlo::job`'s domains).
+    pub(crate) fn with_draws(&self, draw: impl FnOnce(&mut ScenarioSpec)) -> Self {
+        let mut spec = self.0.clone();
+        draw(&mut spec);
+        Self(spec)
+    }
 }
 
 /// Which rule a number must satisfy.

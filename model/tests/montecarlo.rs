@@ -1,21 +1,12 @@
 //! The Monte Carlo engine: validation, determinism, skips that change nothing, wear, sampling,
 //! precision targets and honest confidence intervals.
 
-use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Silent, run_job};
+mod support;
+
+use bouncewear_model::montecarlo::{Job, JobResult, JobSpec};
 use bouncewear_model::{FieldError, Pointer};
 use serde_json::{Value, json};
-
-fn job(value: Value) -> Job {
-    Job::from_json(&value.to_string(), || 7).expect("valid job")
-}
-
-fn run_on(threads: usize, job: &Job) -> JobResult {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    pool.install(|| run_job(job, &Silent)).unwrap()
-}
+use support::{job, run_on};
 
 fn run(job: &Job) -> JobResult {
     run_on(2, job)

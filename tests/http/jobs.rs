@@ -650,3 +650,47 @@ fn a_retry_with_the_same_idempotency_key_gets_the_first_resource_and_another_bod
                          "template": {"devices": 1, "operations": 1}});
     assert_key_reused(&post_with("/v1/schedules", "retry-1", &renamed));
 }
+
+/// A correlated, truncated lognormal scatter of a scenario constant runs through the shards to a
+/// Result that counts the rejected draws of its random truncated scatter; a matrix that is not
+/// positive definite is refused by its pointer.
+#[test]
+fn a_correlated_truncated_scatter_runs_and_a_bad_matrix_is_refused_by_its_pointer() {
+    let server = TestApp::start(&temp_db("correlated"), &[]);
+    let mut job = json!({
+        "devices": 40, "operations": 5, "seed": 8,
+        "scenario": {"circuit": {"supply_voltage_v": 48.0, "current_a": 15.0}},
+        "scatter": [
+            {"parameter": "inertia_kg_m2", "per": "operation",
+             "distribution": {"kind": "lognormal", "median": 1.6e-5, "sigma": 0.3, "min": 1.4e-5}},
+            {"parameter": "impact_velocity_m_s", "per": "operation",
+             "distribution": {"kind": "uniform", "min": 0.2, "max": 0.3}},
+            {"parameter": "kappa", "per": "device",
+             "distribution": {"kind": "lognormal", "median": 0.35, "sigma": 0.3, "min": 0.3}}],
+        "correlation": {"parameters": ["inertia_kg_m2", "impact_velocity_m_s"],
+                        "matrix": [[1.0, -0.5], [-0.5, 1.0]]}
+    });
+    let id = server.submit(&job);
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
+    assert_eq!(result["job"]["correlation"], job["correlation"]);
+    assert_eq!(result["counts"]["operations"], 200);
+    // Correlated draws invert the truncated CDF; the random kappa draws reject below its min.
+    let rejections = &result["counts"]["truncation_rejections"];
+    assert_eq!(rejections[0], 0, "{result}");
+    assert!(rejections[2].as_u64().unwrap() > 0, "{result}");
+    let pointers: Vec<&str> = result["diagnostics"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d["pointer"].as_str().unwrap())
+        .collect();
+    assert!(
+        pointers.contains(&"/scatter/2/distribution"),
+        "{pointers:?}"
+    );
+
+    job["correlation"]["matrix"] = json!([[1, 1], [1, 1]]);
+    let refused = assert_problem(&post(&server.url("/v1/jobs"), &job.to_string(), None), 422);
+    assert_eq!(refused["errors"][0]["pointer"], "/correlation/matrix/1");
+}

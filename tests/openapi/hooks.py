@@ -78,6 +78,8 @@ def repair_job(job):
     # Each scatter distribution's numbers relate to each other and to the scenario: the request
     # examples send a valid scatter.
     job.pop("scatter", None)
+    # A correlation is over scatter entries of the same `per`, so it goes with them.
+    job.pop("correlation", None)
     # The anode/cathode masses need scenario.material.anode_erosion_fraction.
     polarity = (job.get("scenario") or {}).get("material", {}).get("anode_erosion_fraction") is not None
     metrics = job.get("metrics")

@@ -22,13 +22,21 @@ pub const PAPER_STATIC_FORCE_N: [f64; 2] = [0.344, 4.33];
 
 /// What a run met, counted over all its operations.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Counts {
     /// Operations run.
     pub operations: u64,
     /// Operations whose bounces reached `scenario.losses.max_bounces` with another to come: their
     /// bounce times and counts are cut short.
     pub operations_at_max_bounces: u64,
+    /// Per scatter entry, in the job's order: random draws of its truncated distribution that fell
+    /// outside `[min, max]` and were drawn again. Left out when there were none.
+    #[serde(default, skip_serializing_if = "none_rejected")]
+    pub truncation_rejections: Vec<u64>,
+}
+
+fn none_rejected(counts: &[u64]) -> bool {
+    counts.iter().all(|&count| count == 0)
 }
 
 /// One warning: the field of the job it concerns (a JSON pointer) and what to know about it.
@@ -42,7 +50,8 @@ pub struct Diagnostic {
 }
 
 /// The warnings of a run: bounce sequences cut at `max_bounces`, an impact velocity or static force
-/// outside the paper's measurements, and the paper's post-arc law far from its calibration current.
+/// outside the paper's measurements, the paper's post-arc law far from its calibration current, and
+/// truncated distributions' rejected draws.
 pub fn diagnose(job: &Job, counts: &Counts) -> Vec<Diagnostic> {
     let mut found = Vec::new();
     if counts.operations_at_max_bounces > 0 {
@@ -102,7 +111,29 @@ pub fn diagnose(job: &Job, counts: &Counts) -> Vec<Diagnostic> {
         }
     }
     found.extend(paper_law_far_from_calibration(job));
+    found.extend(truncated_draws(counts));
     found
+}
+
+/// Each scatter entry whose truncated distribution rejected draws: how many, against the draws kept.
+fn truncated_draws(counts: &Counts) -> impl Iterator<Item = Diagnostic> + '_ {
+    counts
+        .truncation_rejections
+        .iter()
+        .enumerate()
+        .filter(|(_, rejected)| **rejected > 0)
+        .map(|(i, rejected)| Diagnostic {
+            pointer: Pointer::root()
+                .child("scatter")
+                .child(i)
+                .child("distribution")
+                .to_string(),
+            detail: format!(
+                "{rejected} random draws fell outside the truncation window [min, max] and were \
+                 drawn again: the values follow the truncated distribution, as asked; many \
+                 rejections per kept draw mean the window cuts away much of the distribution"
+            ),
+        })
 }
 
 /// Where the job scatters `parameter`, its distribution's pointer and the 1st and 99th
@@ -215,7 +246,8 @@ mod tests {
             result.counts,
             Counts {
                 operations: 200,
-                operations_at_max_bounces: 200
+                operations_at_max_bounces: 200,
+                truncation_rejections: Vec::new(),
             }
         );
         assert_eq!(

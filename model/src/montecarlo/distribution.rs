@@ -7,9 +7,10 @@ use rand::distr::{Distribution as _, Open01};
 use rand_distr::{LogNormal, Normal, Triangular, Weibull};
 use serde::{Deserialize, Serialize};
 
-/// Truncated normals are drawn by rejection; validation requires at least this acceptance
-/// probability, so that [`MAX_REJECTIONS`] failures in a row have probability below
-/// `0.95^1000 = 5e-23` (the draw is then clamped into the window, which never happens in practice).
+/// Truncated distributions (normal, lognormal, Weibull) are drawn by rejection; validation requires
+/// at least this acceptance probability, so that [`MAX_REJECTIONS`] failures in a row have
+/// probability below `0.95^1000 = 5e-23` (the draw is then clamped into the window, which never
+/// happens in practice).
 pub const MIN_ACCEPTANCE: f64 = 0.05;
 /// See [`MIN_ACCEPTANCE`].
 pub const MAX_REJECTIONS: u32 = 1000;
@@ -30,19 +31,25 @@ pub enum DistributionSpec {
         mean: f64,
         /// Standard deviation before truncation (positive).
         sd: f64,
-        /// Lower truncation bound: required, and valid for the parameter.
+        /// Lower truncation bound, valid for the parameter; required unless the parameter may take any finite value.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         min: Option<f64>,
         /// Upper truncation bound, above `min` (default: none).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         max: Option<f64>,
     },
-    /// A lognormal (for parameters that may take any positive value).
+    /// A lognormal, optionally truncated to `[min, max]` (the window must keep at least 5 % of its mass).
     Lognormal {
-        /// Median (positive).
+        /// Median before truncation (positive).
         median: f64,
         /// Standard deviation of the logarithm (positive).
         sigma: f64,
+        /// Lower truncation bound, valid for the parameter; required where values near 0 are not.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        min: Option<f64>,
+        /// Upper truncation bound, above `min` (default: none).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        max: Option<f64>,
     },
     /// Uniform on `[min, max]`.
     Uniform {
@@ -60,12 +67,18 @@ pub enum DistributionSpec {
         /// Upper bound, above `min`.
         max: f64,
     },
-    /// A two-parameter Weibull (for parameters that may take any positive value).
+    /// A two-parameter Weibull, optionally truncated to `[min, max]` (the window must keep at least 5 % of its mass).
     Weibull {
-        /// Scale (positive).
+        /// Scale before truncation (positive).
         scale: f64,
         /// Shape (positive).
         shape: f64,
+        /// Lower truncation bound, valid for the parameter; required where values near 0 are not.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        min: Option<f64>,
+        /// Upper truncation bound, above `min` (default: none).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        max: Option<f64>,
     },
 }
 
@@ -85,6 +98,11 @@ impl Domain {
         lower: 0.0,
         inclusive: true,
     };
+    /// Any finite value (a coefficient that may be negative).
+    pub const FINITE: Domain = Domain {
+        lower: f64::NEG_INFINITY,
+        inclusive: false,
+    };
 
     pub fn contains(&self, x: f64) -> bool {
         x.is_finite() && (x > self.lower || (self.inclusive && x == self.lower))
@@ -92,11 +110,53 @@ impl Domain {
 
     fn describe(&self) -> String {
         match (self.lower, self.inclusive) {
+            (f64::NEG_INFINITY, _) => "finite".to_owned(),
             (0.0, false) => "positive".to_owned(),
             (0.0, true) => "non-negative".to_owned(),
             (lower, true) => format!("at least {lower}"),
             (lower, false) => format!("above {lower}"),
         }
+    }
+
+    /// The `min` to suggest for truncating a distribution that reaches below the domain.
+    fn suggested_min(&self) -> String {
+        if self.inclusive {
+            format!("\"min\": {}", self.lower)
+        } else {
+            format!("a \"min\" above {}", self.lower)
+        }
+    }
+}
+
+/// The window `[min, max]` a distribution is truncated to, with the probabilities of its bounds
+/// under the untruncated distribution. Untruncated, it is the whole support (`cdf_min` 0 and
+/// `cdf_max` 1), so that draws and quantiles are those of the plain distribution, bit for bit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Window {
+    pub min: f64,
+    pub max: f64,
+    pub cdf_min: f64,
+    pub cdf_max: f64,
+}
+
+impl Window {
+    /// A draw from `draw` inside the window, by rejection; `rejections` counts the draws that fell
+    /// outside it.
+    #[inline]
+    fn sample(&self, mut draw: impl FnMut() -> f64, rejections: &mut u64) -> f64 {
+        for _ in 0..MAX_REJECTIONS {
+            let x = draw();
+            if x >= self.min && x <= self.max {
+                return x;
+            }
+            *rejections += 1;
+        }
+        draw().clamp(self.min, self.max)
+    }
+
+    /// The untruncated probability of the truncated distribution's probability `u`.
+    fn probability(&self, u: f64) -> f64 {
+        self.cdf_min + u * (self.cdf_max - self.cdf_min)
     }
 }
 
@@ -108,15 +168,13 @@ pub enum Distribution {
         normal: Normal<f64>,
         mean: f64,
         sd: f64,
-        min: f64,
-        max: f64,
-        cdf_min: f64,
-        cdf_max: f64,
+        window: Window,
     },
     Lognormal {
         lognormal: LogNormal<f64>,
         median: f64,
         sigma: f64,
+        window: Window,
     },
     Uniform {
         min: f64,
@@ -132,6 +190,7 @@ pub enum Distribution {
         weibull: Weibull<f64>,
         scale: f64,
         shape: f64,
+        window: Window,
     },
 }
 
@@ -152,64 +211,50 @@ impl Distribution {
                 Distribution::Fixed(value)
             }
             DistributionSpec::Normal { mean, sd, min, max } => {
-                let (lo, hi) = (
-                    min.unwrap_or(f64::NEG_INFINITY),
-                    max.unwrap_or(f64::INFINITY),
-                );
                 if !mean.is_finite() {
                     faults.fail("mean", "must be a finite number".into());
                 }
                 faults.positive("sd", sd);
-                match min {
-                    None => faults.fail(
-                        "min",
-                        format!(
-                            "is required: an untruncated normal can produce values that are not {}",
-                            domain.describe()
-                        ),
-                    ),
-                    Some(lo) => faults.lowest_in("min", lo, domain),
-                }
-                if max.is_some() {
-                    faults.max_above_min(hi, lo);
-                }
-                let (cdf_min, cdf_max) = (
-                    standard_normal_cdf((lo - mean) / sd),
-                    standard_normal_cdf((hi - mean) / sd),
-                );
-                if faults.errors.is_empty()
-                    && (cdf_max - cdf_min < MIN_ACCEPTANCE || cdf_max.is_nan() || cdf_min.is_nan())
-                {
-                    faults.fail(
-                        "min",
-                        format!(
-                            "the window [min, max] keeps only {:.3e} of the normal's mass; at least {MIN_ACCEPTANCE} is needed",
-                            cdf_max - cdf_min
-                        ),
-                    );
-                }
+                let support = Support {
+                    name: format!("normal(mean {mean}, sd {sd})"),
+                    lowest: f64::NEG_INFINITY,
+                    missing_min: "min",
+                };
+                let window = faults.window(&support, min, max, domain, |x| {
+                    standard_normal_cdf((x - mean) / sd)
+                });
                 match Normal::new(mean, sd) {
                     Ok(normal) if faults.errors.is_empty() => Distribution::Normal {
                         normal,
                         mean,
                         sd,
-                        min: lo,
-                        max: hi,
-                        cdf_min,
-                        cdf_max,
+                        window,
                     },
                     _ => return Err(faults.errors),
                 }
             }
-            DistributionSpec::Lognormal { median, sigma } => {
+            DistributionSpec::Lognormal {
+                median,
+                sigma,
+                min,
+                max,
+            } => {
                 faults.positive("median", median);
                 faults.positive("sigma", sigma);
-                faults.reaches_zero("lognormal", domain);
+                let support = Support {
+                    name: format!("lognormal(median {median}, sigma {sigma})"),
+                    lowest: 0.0,
+                    missing_min: "kind",
+                };
+                let window = faults.window(&support, min, max, domain, |x| {
+                    standard_normal_cdf((x / median).ln() / sigma)
+                });
                 match LogNormal::new(median.ln(), sigma) {
                     Ok(lognormal) if faults.errors.is_empty() => Distribution::Lognormal {
                         lognormal,
                         median,
                         sigma,
+                        window,
                     },
                     _ => return Err(faults.errors),
                 }
@@ -235,15 +280,28 @@ impl Distribution {
                     _ => return Err(faults.errors),
                 }
             }
-            DistributionSpec::Weibull { scale, shape } => {
+            DistributionSpec::Weibull {
+                scale,
+                shape,
+                min,
+                max,
+            } => {
                 faults.positive("scale", scale);
                 faults.positive("shape", shape);
-                faults.reaches_zero("Weibull", domain);
+                let support = Support {
+                    name: format!("Weibull(scale {scale}, shape {shape})"),
+                    lowest: 0.0,
+                    missing_min: "kind",
+                };
+                let window = faults.window(&support, min, max, domain, |x| {
+                    -(-(x / scale).powf(shape)).exp_m1()
+                });
                 match Weibull::new(scale, shape) {
                     Ok(weibull) if faults.errors.is_empty() => Distribution::Weibull {
                         weibull,
                         scale,
                         shape,
+                        window,
                     },
                     _ => return Err(faults.errors),
                 }
@@ -259,44 +317,46 @@ impl Distribution {
     /// One random draw.
     #[inline]
     pub fn sample<R: rand::Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+        self.sample_counting(rng, &mut 0)
+    }
+
+    /// One random draw; a truncated distribution adds to `rejections` the draws it made outside
+    /// its window (diagnostics count them).
+    #[inline]
+    pub fn sample_counting<R: rand::Rng + ?Sized>(&self, rng: &mut R, rejections: &mut u64) -> f64 {
         match self {
             Distribution::Fixed(value) => *value,
-            Distribution::Normal {
-                normal, min, max, ..
-            } => {
-                for _ in 0..MAX_REJECTIONS {
-                    let x = normal.sample(rng);
-                    if x >= *min && x <= *max {
-                        return x;
-                    }
-                }
-                normal.sample(rng).clamp(*min, *max)
+            Distribution::Normal { normal, window, .. } => {
+                window.sample(|| normal.sample(rng), rejections)
             }
-            Distribution::Lognormal { lognormal, .. } => lognormal.sample(rng),
+            Distribution::Lognormal {
+                lognormal, window, ..
+            } => window.sample(|| lognormal.sample(rng), rejections),
             Distribution::Uniform { min, max } => min + (max - min) * rng.random::<f64>(),
             Distribution::Triangular { triangular, .. } => triangular.sample(rng),
-            Distribution::Weibull { weibull, .. } => weibull.sample(rng),
+            Distribution::Weibull {
+                weibull, window, ..
+            } => window.sample(|| weibull.sample(rng), rejections),
         }
     }
 
-    /// The value at probability `u` in (0, 1): the inverse CDF, for stratified (LHS) draws.
-    /// A truncated normal is inverted inside its window, so no rejection is needed.
+    /// The value at probability `u` in (0, 1): the inverse CDF, for stratified (LHS) and
+    /// correlated draws. A truncated distribution is inverted inside its window, so no rejection
+    /// is needed.
     pub fn quantile(&self, u: f64) -> f64 {
         match *self {
             Distribution::Fixed(value) => value,
             Distribution::Normal {
-                mean,
-                sd,
-                min,
-                max,
-                cdf_min,
-                cdf_max,
+                mean, sd, window, ..
+            } => (mean + sd * standard_normal_quantile(window.probability(u)))
+                .clamp(window.min, window.max),
+            Distribution::Lognormal {
+                median,
+                sigma,
+                window,
                 ..
-            } => (mean + sd * standard_normal_quantile(cdf_min + u * (cdf_max - cdf_min)))
-                .clamp(min, max),
-            Distribution::Lognormal { median, sigma, .. } => {
-                median * (sigma * standard_normal_quantile(u)).exp()
-            }
+            } => (median * (sigma * standard_normal_quantile(window.probability(u))).exp())
+                .clamp(window.min, window.max),
             Distribution::Uniform { min, max } => min + u * (max - min),
             Distribution::Triangular { min, mode, max, .. } => {
                 let split = (mode - min) / (max - min);
@@ -306,15 +366,30 @@ impl Distribution {
                     max - ((1.0 - u) * (max - min) * (max - mode)).sqrt()
                 }
             }
-            Distribution::Weibull { scale, shape, .. } => scale * (-(-u).ln_1p()).powf(1.0 / shape),
+            Distribution::Weibull {
+                scale,
+                shape,
+                window,
+                ..
+            } => (scale * (-(-window.probability(u)).ln_1p()).powf(1.0 / shape))
+                .clamp(window.min, window.max),
         }
     }
 
     /// A draw at a random point of stratum `stratum` of `strata` equal-probability strata.
     pub fn stratified<R: rand::Rng + ?Sized>(&self, stratum: u32, strata: u32, rng: &mut R) -> f64 {
-        let offset: f64 = rng.sample(Open01);
-        self.quantile((f64::from(stratum) + offset) / f64::from(strata))
+        self.quantile(stratified_probability(stratum, strata, rng))
     }
+}
+
+/// A random probability in stratum `stratum` of `strata` equal strata of (0, 1).
+pub fn stratified_probability<R: rand::Rng + ?Sized>(
+    stratum: u32,
+    strata: u32,
+    rng: &mut R,
+) -> f64 {
+    let offset: f64 = rng.sample(Open01);
+    (f64::from(stratum) + offset) / f64::from(strata)
 }
 
 /// The errors found in one distribution, each below its pointer.
@@ -356,18 +431,74 @@ impl Faults<'_> {
         }
     }
 
-    /// A distribution whose support reaches down to 0 needs a domain that does too.
-    fn reaches_zero(&mut self, kind: &str, domain: Domain) {
-        if domain.lower > 0.0 {
+    /// The truncation window of a distribution over `support`: `min` and `max` as given, else the
+    /// support's own ends. A support reaching below `domain` needs a `min`, which the error
+    /// suggests; the window must keep at least [`MIN_ACCEPTANCE`] of the mass (`cdf` is the
+    /// untruncated CDF).
+    fn window(
+        &mut self,
+        support: &Support,
+        min: Option<f64>,
+        max: Option<f64>,
+        domain: Domain,
+        cdf: impl Fn(f64) -> f64,
+    ) -> Window {
+        let lo = min.unwrap_or(support.lowest);
+        let hi = max.unwrap_or(f64::INFINITY);
+        match min {
+            Some(lo) => self.lowest_in("min", lo, domain),
+            None if domain.lower > support.lowest => {
+                self.fail(
+                    support.missing_min,
+                    format!(
+                        "a {} reaches below {} (this parameter must be {}); add {} to truncate it",
+                        support.name,
+                        domain.lower,
+                        domain.describe(),
+                        domain.suggested_min()
+                    ),
+                );
+            }
+            None => {}
+        }
+        if max.is_some() {
+            self.max_above_min(hi, lo);
+        }
+        let (cdf_min, cdf_max) = match (min, max) {
+            (None, None) => (0.0, 1.0),
+            _ => (
+                if lo <= support.lowest { 0.0 } else { cdf(lo) },
+                if hi.is_finite() { cdf(hi) } else { 1.0 },
+            ),
+        };
+        if self.errors.is_empty()
+            && (cdf_max - cdf_min < MIN_ACCEPTANCE || cdf_max.is_nan() || cdf_min.is_nan())
+        {
             self.fail(
-                "kind",
+                "min",
                 format!(
-                    "a {kind} reaches down to 0; this parameter must be {}",
-                    domain.describe()
+                    "the window [min, max] keeps only {:.3e} of the distribution's mass; at least {MIN_ACCEPTANCE} is needed",
+                    cdf_max - cdf_min
                 ),
             );
         }
+        Window {
+            min: lo,
+            max: hi,
+            cdf_min,
+            cdf_max,
+        }
     }
+}
+
+/// Where a distribution's values lie before truncation, for [`Faults::window`].
+struct Support {
+    /// The distribution and its parameters, as an error names it.
+    name: String,
+    /// The lowest value it reaches (approaches).
+    lowest: f64,
+    /// The field an error about a missing `min` names.
+    missing_min: &'static str,
 }
 
 /// `Phi(x)`, the standard normal CDF, from libm's `erfc` (accurate in both tails).
@@ -572,6 +703,66 @@ mod tests {
             let d =
                 Distribution::new(&parse(json), Domain::NON_NEGATIVE, &Pointer::root()).unwrap();
             assert_relative_eq!(d.quantile(u), x, max_relative = 1e-9);
+        }
+    }
+
+    /// An untruncated CDF.
+    type Cdf = fn(f64) -> f64;
+
+    /// Truncated lognormal and Weibull specs with the untruncated CDF of each.
+    fn truncated_cases() -> [(DistributionSpec, Cdf); 2] {
+        [
+            (
+                parse(r#"{"kind":"lognormal","median":1,"sigma":0.5,"min":0.8,"max":3}"#),
+                |x: f64| standard_normal_cdf(x.ln() / 0.5),
+            ),
+            (
+                parse(r#"{"kind":"weibull","scale":2,"shape":3,"min":1,"max":2.5}"#),
+                |x: f64| 1.0 - (-(x / 2.0).powi(3)).exp(),
+            ),
+        ]
+    }
+
+    fn truncated(spec: &DistributionSpec) -> (Distribution, Window) {
+        match Distribution::new(spec, Domain::POSITIVE, &Pointer::root()).unwrap() {
+            d @ (Distribution::Lognormal { window, .. } | Distribution::Weibull { window, .. }) => {
+                (d, window)
+            }
+            other => unreachable!("not a truncated case: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn truncated_lognormal_and_weibull_draws_stay_in_the_window_and_count_rejections() {
+        for (spec, cdf) in truncated_cases() {
+            let (d, window) = truncated(&spec);
+            let mut rng = ChaCha8Rng::seed_from_u64(3);
+            let (n, mut rejections) = (100_000, 0);
+            let inside = (0..n)
+                .map(|_| d.sample_counting(&mut rng, &mut rejections))
+                .all(|x| (window.min..=window.max).contains(&x));
+            assert!(inside, "{spec:?}");
+            let kept = cdf(window.max) - cdf(window.min);
+            // Each kept draw costs 1 / kept draws on average: (1 - kept) / kept rejections.
+            let expected = f64::from(n) * (1.0 - kept) / kept;
+            assert!(
+                (rejections as f64 - expected).abs() < 0.03 * expected,
+                "{spec:?}: {rejections} vs {expected}"
+            );
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn a_truncated_quantile_inverts_the_truncated_cdf(u in 0.001f64..0.999) {
+            for (spec, cdf) in truncated_cases() {
+                let (d, window) = truncated(&spec);
+                let x = d.quantile(u);
+                proptest::prop_assert!((window.min..=window.max).contains(&x));
+                let truncated_cdf =
+                    (cdf(x) - cdf(window.min)) / (cdf(window.max) - cdf(window.min));
+                proptest::prop_assert!((truncated_cdf - u).abs() < 1e-9, "{spec:?}: {truncated_cdf} vs {u}");
+            }
         }
     }
 }

@@ -9,18 +9,23 @@
 //! samples; groups of devices are. Confidence intervals come from the spread between the groups
 //! (see [`crate::stats`]).
 
+use super::correlation::Correlation;
+use super::distribution::{standard_normal_cdf, standard_normal_quantile, stratified_probability};
 use super::job::{Job, Parameter, Per, SamplerKind, Scatter};
 use super::kernel::{Kernel, LaneWork};
 use super::lives::{DeviceLife, GroupLives};
 use super::metric::{DeviceMetric, Metric};
 use crate::lanes::Real;
 use crate::operation::{Conditions, Needs, Outcome, Setup};
+use crate::scenario::Scenario;
 use crate::stats::Accumulator;
 use crate::wear::{DeviceWear, WearLaw};
-use rand::SeedableRng;
 use rand::seq::SliceRandom;
+use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// The most groups (independent units for confidence intervals) a summary is built from.
@@ -75,6 +80,10 @@ pub struct GroupStats {
     /// Operations whose bounce sequence reached `max_bounces` with another bounce to come.
     #[serde(default)]
     pub operations_at_max_bounces: u64,
+    /// Per scatter entry, in the job's order: draws of its truncated distribution that fell
+    /// outside the window and were drawn again.
+    #[serde(default)]
+    pub truncation_rejections: Vec<u64>,
 }
 
 impl GroupStats {
@@ -97,6 +106,7 @@ impl GroupStats {
                 .collect(),
             lives: GroupLives::default(),
             operations_at_max_bounces: 0,
+            truncation_rejections: vec![0; job.scatter().len()],
         }
     }
 
@@ -109,6 +119,20 @@ impl GroupStats {
         }
         self.lives.merge(&other.lives);
         self.operations_at_max_bounces += other.operations_at_max_bounces;
+        add_counts(
+            &mut self.truncation_rejections,
+            &other.truncation_rejections,
+        );
+    }
+}
+
+/// Adds `other` to `counts` entry by entry (a missing entry counts 0).
+pub fn add_counts(counts: &mut Vec<u64>, other: &[u64]) {
+    if counts.len() < other.len() {
+        counts.resize(other.len(), 0);
+    }
+    for (count, add) in counts.iter_mut().zip(other) {
+        *count += add;
     }
 }
 
@@ -120,15 +144,22 @@ pub struct Tally {
 }
 
 /// Parameters of one device or operation that scatter can replace.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 struct Draws {
     radius_m: f64,
     pressure_pa: f64,
     conditions: Conditions,
+    /// Drawn constants of the scenario ([`Parameter::is_scenario_constant`]): the scenario is
+    /// rebuilt with them.
+    constants: Vec<(Parameter, f64)>,
 }
 
 impl Draws {
     fn set(&mut self, parameter: Parameter, value: f64) {
+        if parameter.is_scenario_constant() {
+            self.constants.push((parameter, value));
+            return;
+        }
         match parameter {
             Parameter::ContactRadius => self.radius_m = value,
             Parameter::DynamicYieldPressure => self.pressure_pa = value,
@@ -137,6 +168,108 @@ impl Draws {
             Parameter::StaticForce => self.conditions.static_force_n = value,
             Parameter::Current => self.conditions.current_a = value,
             Parameter::BreakdownField => self.conditions.breakdown_field_v_per_m = value,
+            _ => unreachable!("scenario constants are kept apart"),
+        }
+    }
+}
+
+/// What a scenario's constants fix for all its operations: built once for the job, and again for
+/// each draw that scatters one of them.
+#[derive(Debug, Clone)]
+struct Model {
+    setup: Setup,
+    wear: WearLaw,
+}
+
+impl Model {
+    fn new(scenario: &Scenario) -> Self {
+        Self {
+            setup: Setup::new(scenario),
+            wear: WearLaw::new(scenario),
+        }
+    }
+}
+
+/// The scatter entries of one `per`, in the job's order, and the correlation among some of them.
+struct Entries<'a> {
+    /// Each entry with its index in the job's scatter.
+    scatter: Vec<(usize, &'a Scatter)>,
+    /// The job's correlation, when it is over entries of this `per`, and each entry's row in its
+    /// matrix (if it has one).
+    correlation: Option<(&'a Correlation, Vec<Option<usize>>)>,
+}
+
+impl<'a> Entries<'a> {
+    fn new(job: &'a Job, per: Per) -> Self {
+        let scatter: Vec<_> = job
+            .scatter()
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.per == per)
+            .collect();
+        let correlation = job.correlation().filter(|c| c.per() == per).map(|c| {
+            let rows = scatter
+                .iter()
+                .map(|(index, _)| c.members().iter().position(|m| m == index))
+                .collect();
+            (c, rows)
+        });
+        Self {
+            scatter,
+            correlation,
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.scatter.is_empty()
+    }
+
+    /// Draws every entry from `rng`, in the job's order, and hands each value to `set` with the
+    /// entry's index in the job's scatter: entry `k` in stratum `permutations[k][local]` under
+    /// LHS (`strata`), otherwise at random, counting the rejections of truncated draws by entry.
+    /// Correlated entries draw a standard normal each (from their stratum under LHS), correlated
+    /// together and then mapped through `Phi` and the marginal's inverse CDF.
+    fn draw(
+        &self,
+        job: &Job,
+        strata: Option<(&[Vec<u32>], usize)>,
+        rng: &mut ChaCha8Rng,
+        rejections: &mut [u64],
+        mut set: impl FnMut(usize, f64),
+    ) {
+        let mut normals = match &self.correlation {
+            Some((correlation, _)) => vec![0.0; correlation.members().len()],
+            None => Vec::new(),
+        };
+        for (k, &(index, scatter)) in self.scatter.iter().enumerate() {
+            let stratum = strata.map(|(permutations, local)| {
+                let strata = u32::try_from(permutations[k].len()).expect("batch fits u32");
+                (permutations[k][local], strata)
+            });
+            if let Some(row) = self.correlation.as_ref().and_then(|(_, rows)| rows[k]) {
+                normals[row] = match stratum {
+                    Some((stratum, strata)) => {
+                        standard_normal_quantile(stratified_probability(stratum, strata, rng))
+                    }
+                    None => rng.sample(StandardNormal),
+                };
+                continue;
+            }
+            let value = match stratum {
+                Some((stratum, strata)) => scatter.distribution.stratified(stratum, strata, rng),
+                None => scatter
+                    .distribution
+                    .sample_counting(rng, &mut rejections[index]),
+            };
+            set(index, value);
+        }
+        if let Some((correlation, _)) = &self.correlation {
+            correlation.correlate(&mut normals);
+            for (&index, normal) in correlation.members().iter().zip(normals) {
+                // Phi rounds to 0 or 1 beyond about 8 standard deviations; stay inside (0, 1).
+                let u = standard_normal_cdf(normal).clamp(f64::MIN_POSITIVE, 1.0 - f64::EPSILON);
+                set(index, job.scatter()[index].distribution.quantile(u));
+            }
         }
     }
 }
@@ -144,13 +277,15 @@ impl Draws {
 /// The job worked out for the hot loop.
 struct Plan<'a> {
     job: &'a Job,
-    setup: Setup,
-    wear: WearLaw,
+    /// The nominal scenario's model.
+    model: Model,
     nominal: Draws,
-    device_scatter: Vec<&'a Scatter>,
-    operation_scatter: Vec<&'a Scatter>,
+    device_scatter: Entries<'a>,
+    operation_scatter: Entries<'a>,
     /// Per-operation scatter touches only the velocity, radius or pressure: no operation rebuild.
     cheap_operation_scatter: bool,
+    /// Per-operation scatter draws a constant of the scenario: a model for every operation.
+    operation_constants: bool,
     needs: Needs,
     /// Wear changes the radius only if an arc can burn and a later operation exists.
     track_wear: bool,
@@ -163,33 +298,43 @@ impl<'a> Plan<'a> {
     fn new(job: &'a Job, kernel: Kernel) -> Self {
         let scenario = job.scenario();
         let spec = scenario.spec();
-        let setup = Setup::new(scenario);
+        let model = Model::new(scenario);
         let nominal = Draws {
             radius_m: spec.material.contact_radius_m,
             pressure_pa: spec.material.dynamic_yield_pressure_pa,
             conditions: Conditions::nominal(scenario),
+            constants: Vec::new(),
         };
-        let (device_scatter, operation_scatter): (Vec<_>, Vec<_>) =
-            job.scatter().iter().partition(|s| s.per == Per::Device);
+        let (device_scatter, operation_scatter) = (
+            Entries::new(job, Per::Device),
+            Entries::new(job, Per::Operation),
+        );
         let cheap_operation_scatter = operation_scatter
+            .scatter
             .iter()
-            .all(|s| s.parameter.is_lane_value());
-        let current_scattered = job
+            .all(|(_, s)| s.parameter.is_lane_value());
+        let operation_constants = operation_scatter
+            .scatter
+            .iter()
+            .any(|(_, s)| s.parameter.is_scenario_constant());
+        let arcs_scattered = job
             .scatter()
             .iter()
-            .any(|s| s.parameter == Parameter::Current);
-        let can_arc = setup
+            .any(|s| matches!(s.parameter, Parameter::Current | Parameter::SupplyVoltage));
+        let can_arc = model
+            .setup
             .operation(&nominal.conditions, job.spec().fidelity)
             .arcs()
-            || current_scattered;
-        let wear = WearLaw::new(scenario);
+            || arcs_scattered;
+        let wear = model.wear;
         Self {
             job,
-            setup,
+            model,
             nominal,
             device_scatter,
             operation_scatter,
             cheap_operation_scatter,
+            operation_constants,
             needs: Needs {
                 impact: job.operation_metrics().iter().any(|m| m.needs_impact())
                     || job
@@ -199,29 +344,22 @@ impl<'a> Plan<'a> {
                     || job.failure().iter().any(|(m, _)| m.needs_impact()),
             },
             track_wear: can_arc && job.spec().operations > 1 && wear.changes_surface(),
-            wear,
             lockstep: job.scatter().iter().all(|s| s.parameter.is_lane_value()),
             kernel,
         }
     }
 
-    /// The device-level draws of one device from its stream, with its LHS strata if any.
-    fn device_draws(&self, strata: Option<(&[Vec<u32>], usize)>, rng: &mut ChaCha8Rng) -> Draws {
-        let mut draws = self.nominal;
-        for (k, scatter) in self.device_scatter.iter().enumerate() {
-            let value = match strata {
-                Some((permutations, local)) => {
-                    let strata_count =
-                        u32::try_from(permutations[k].len()).expect("batch fits u32");
-                    scatter
-                        .distribution
-                        .stratified(permutations[k][local], strata_count, rng)
-                }
-                None => scatter.distribution.sample(rng),
-            };
-            draws.set(scatter.parameter, value);
+    /// The model of the scenario with the constants `draws` holds: the nominal one when it holds none.
+    fn model(&self, draws: &Draws) -> Cow<'_, Model> {
+        if draws.constants.is_empty() {
+            return Cow::Borrowed(&self.model);
         }
-        draws
+        let scenario = self.job.scenario().with_draws(|spec| {
+            for &(parameter, value) in &draws.constants {
+                parameter.set_in(spec, value);
+            }
+        });
+        Cow::Owned(Model::new(&scenario))
     }
 
     /// Runs the `L::LANES` devices of the chunk from `first_local` on, in lockstep, into `stats`:
@@ -244,11 +382,21 @@ impl<'a> Plan<'a> {
             let mut rng = ChaCha8Rng::seed_from_u64(job.seed());
             rng.set_stream(chunk.first + local);
             let local_index = usize::try_from(local).expect("batch fits in memory");
-            draws.push(self.device_draws(chunk.permutations.map(|p| (p, local_index)), &mut rng));
+            let mut device = self.nominal.clone();
+            self.device_scatter.draw(
+                job,
+                chunk.permutations.map(|p| (p, local_index)),
+                &mut rng,
+                &mut stats.truncation_rejections,
+                |index, value| device.set(job.scatter()[index].parameter, value),
+            );
+            draws.push(device);
             rngs.push(rng);
         }
         // Lanes share the operation's constants: in lockstep only speed, radius and pressure differ.
-        let mut operation = self.setup.operation(&draws[0].conditions, fidelity);
+        let device_model = self.model(&draws[0]);
+        let mut wear_law = device_model.wear;
+        let mut operation = device_model.setup.operation(&draws[0].conditions, fidelity);
         let base_speed = operation.impact_velocity_m_s();
         let lane_speed = |d: &Draws| d.conditions.impact_velocity_m_s.unwrap_or(base_speed);
         let device_speed = L::from_fn(|k| lane_speed(&draws[k]));
@@ -272,16 +420,26 @@ impl<'a> Plan<'a> {
                     (device_speed, device_radius, device_pressure)
                 } else {
                     for k in 0..lanes {
-                        let mut op_draws = draws[k];
-                        for scatter in &self.operation_scatter {
-                            op_draws
-                                .set(scatter.parameter, scatter.distribution.sample(&mut rngs[k]));
-                        }
+                        let mut op_draws = draws[k].clone();
+                        self.operation_scatter.draw(
+                            job,
+                            None,
+                            &mut rngs[k],
+                            &mut stats.truncation_rejections,
+                            |index, value| op_draws.set(job.scatter()[index].parameter, value),
+                        );
                         speeds[k] = if self.cheap_operation_scatter {
                             lane_speed(&op_draws)
                         } else {
                             debug_assert_eq!(lanes, 1, "only lane parameters scatter in lockstep");
-                            operation = self.setup.operation(&op_draws.conditions, fidelity);
+                            if self.operation_constants {
+                                let model = self.model(&op_draws);
+                                wear_law = model.wear;
+                                operation = model.setup.operation(&op_draws.conditions, fidelity);
+                            } else {
+                                operation =
+                                    device_model.setup.operation(&op_draws.conditions, fidelity);
+                            }
                             operation.impact_velocity_m_s()
                         };
                         operation_draws[k] = op_draws;
@@ -296,10 +454,10 @@ impl<'a> Plan<'a> {
                     let energy_j = L::from_fn(|k| wear[k].cumulative_arc_energy_j);
                     let worn = L::splat(0.0).lt(energy_j);
                     (
-                        L::select(worn, self.wear.radius_m(radius_m, energy_j), radius_m),
+                        L::select(worn, wear_law.radius_m(radius_m, energy_j), radius_m),
                         L::select(
                             worn,
-                            self.wear.pressure_pa(pressure_pa, energy_j),
+                            wear_law.pressure_pa(pressure_pa, energy_j),
                             pressure_pa,
                         ),
                     )
@@ -317,7 +475,9 @@ impl<'a> Plan<'a> {
                     }
                     stats.operations_at_max_bounces += u64::from(outcome.truncated);
                     wear[k].add(&outcome);
-                    if failed_at[k].is_none() && self.fails(&outcome, &draws[k], &wear[k]) {
+                    if failed_at[k].is_none()
+                        && self.fails(&device_model, &outcome, &draws[k], &wear[k])
+                    {
                         failed_at[k] = Some(op + 1);
                     }
                 }
@@ -335,7 +495,7 @@ impl<'a> Plan<'a> {
         }
         for k in 0..lanes {
             for (accumulator, metric) in stats.devices.iter_mut().zip(job.device_metrics()) {
-                accumulator.push(self.device_metric(*metric, &draws[k], &wear[k]));
+                accumulator.push(self.device_metric(&device_model, *metric, &draws[k], &wear[k]));
             }
             if !job.failure().is_empty() {
                 stats.lives.record(DeviceLife {
@@ -349,37 +509,51 @@ impl<'a> Plan<'a> {
 
     /// Whether any failure criterion is met by this operation or by the device's state after it.
     #[inline]
-    fn fails(&self, outcome: &Outcome, draws: &Draws, device_wear: &DeviceWear) -> bool {
+    fn fails(
+        &self,
+        model: &Model,
+        outcome: &Outcome,
+        draws: &Draws,
+        device_wear: &DeviceWear,
+    ) -> bool {
         self.job.failure().iter().any(|(metric, criterion)| {
             let value = match metric {
                 Metric::Operation(metric) => metric.value(outcome),
-                Metric::Device(metric) => self.device_metric(*metric, draws, device_wear),
+                Metric::Device(metric) => self.device_metric(model, *metric, draws, device_wear),
             };
             criterion.fails(value)
         })
     }
 
-    fn device_metric(&self, metric: DeviceMetric, draws: &Draws, device_wear: &DeviceWear) -> f64 {
+    /// A device metric of the device with `draws` and its `model` (per-operation draws do not
+    /// enter: the device's own values do, as for its radius).
+    fn device_metric(
+        &self,
+        model: &Model,
+        metric: DeviceMetric,
+        draws: &Draws,
+        device_wear: &DeviceWear,
+    ) -> f64 {
+        let wear = &model.wear;
         let energy_j = device_wear.cumulative_arc_energy_j;
         let final_radius_m = || {
             if energy_j > 0.0 {
-                self.wear.radius_m(draws.radius_m, energy_j)
+                wear.radius_m(draws.radius_m, energy_j)
             } else {
                 draws.radius_m
             }
         };
         let eroded_mass_split_kg = || {
-            self.wear
-                .eroded_mass_split_kg(energy_j)
+            wear.eroded_mass_split_kg(energy_j)
                 .expect("the job checked that the scenario gives the polarity")
         };
         match metric {
             DeviceMetric::CumulativeArcEnergy => energy_j,
-            DeviceMetric::ErodedMass => self.wear.eroded_mass_kg(energy_j),
+            DeviceMetric::ErodedMass => wear.eroded_mass_kg(energy_j),
             DeviceMetric::FinalRadius => final_radius_m(),
-            DeviceMetric::FinalKappa => self.setup.kappa_law().at(
+            DeviceMetric::FinalKappa => model.setup.kappa_law().at(
                 final_radius_m(),
-                self.wear.pressure_pa(draws.pressure_pa, energy_j),
+                wear.pressure_pa(draws.pressure_pa, energy_j),
             ),
             DeviceMetric::CumulativePlasticWork => device_wear.cumulative_plastic_work_j,
             DeviceMetric::AnodeErodedMass => eroded_mass_split_kg().0,
@@ -393,6 +567,7 @@ impl<'a> Plan<'a> {
         rng.set_stream(LHS_STREAM_BASE | batch);
         let size = u32::try_from(size).expect("an LHS batch has fewer than 2^32 devices");
         self.device_scatter
+            .scatter
             .iter()
             .map(|_| {
                 let mut permutation: Vec<u32> = (0..size).collect();
@@ -557,6 +732,31 @@ pub fn run_group(
     let devices = batch.group_devices(group);
     let total = (devices.end - devices.start) * job.spec().operations;
     plan.run_chunk(&chunk, group, observer, &AtomicU64::new(0), total)
+}
+
+/// The device-level values each device of `batch` draws, as the run draws them: one row per
+/// device, one value per scatter entry in the job's order (NaN where the entry is per operation):
+/// what an analysis of the inputs, or a test of the sampler, reads.
+pub fn batch_draws(job: &Job, batch: Batch) -> Vec<Vec<f64>> {
+    let plan = Plan::new(job, Kernel::SCALAR);
+    let permutations = plan.batch_permutations(batch.index, batch.size);
+    let mut rejections = vec![0; job.scatter().len()];
+    (0..batch.size)
+        .map(|local| {
+            let mut rng = ChaCha8Rng::seed_from_u64(job.seed());
+            rng.set_stream(batch.first + local);
+            let mut row = vec![f64::NAN; job.scatter().len()];
+            let local = usize::try_from(local).expect("batch fits in memory");
+            plan.device_scatter.draw(
+                job,
+                permutations.as_deref().map(|p| (p, local)),
+                &mut rng,
+                &mut rejections,
+                |index, value| row[index] = value,
+            );
+            row
+        })
+        .collect()
 }
 
 impl Tally {

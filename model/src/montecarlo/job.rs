@@ -1,11 +1,12 @@
 //! The job of docs/contract.md "Job": what a user submits ([`JobSpec`]) and what passed every rule
 //! ([`Job`]).
 
+use super::correlation::{Correlation, CorrelationSpec};
 use super::distribution::{Distribution, DistributionSpec, Domain};
 use super::metric::{DeviceMetric, Metric, OperationMetric};
 use crate::error::{FieldError, InvalidInput, Pointer};
 use crate::operation::Fidelity;
-use crate::scenario::{Scenario, ScenarioSpec, WearLawKind};
+use crate::scenario::{ArcRestitutionLawKind, Scenario, ScenarioSpec, WearLawKind};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -15,6 +16,14 @@ pub const MAX_BINS: u64 = 1000;
 pub const MAX_DEVICES: u64 = 100_000_000;
 /// See [`MAX_DEVICES`].
 pub const MAX_OPERATIONS: u64 = 100_000_000;
+/// The members of a job that are lists (`*` for any index): JSON arrays are refused elsewhere.
+pub const LIST_FIELDS: [&str; 5] = [
+    "/scatter",
+    "/metrics",
+    "/correlation/parameters",
+    "/correlation/matrix",
+    "/correlation/matrix/*",
+];
 
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -49,6 +58,10 @@ pub struct JobSpec {
     /// Scenario values that vary between devices or operations, each parameter at most once.
     #[serde(default)]
     pub scatter: Vec<ScatterSpec>,
+    /// Correlation among scattered parameters of the same `per` (a Gaussian copula over their
+    /// marginals); none by default.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correlation: Option<CorrelationSpec>,
     /// Metrics to summarise (default: all); at least one, each once. Anode/cathode masses need `scenario.material.anode_erosion_fraction`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub metrics: Option<Vec<String>>,
@@ -79,6 +92,7 @@ impl Default for JobSpec {
             seed: None,
             sampler: SamplerKind::default(),
             scatter: Vec::new(),
+            correlation: None,
             metrics: None,
             limits: BTreeMap::new(),
             precision: None,
@@ -112,7 +126,7 @@ pub struct ScatterSpec {
     pub distribution: DistributionSpec,
 }
 
-/// The scenario values scatter may replace.
+/// The scenario values scatter may replace, named as their scenario fields.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -132,6 +146,29 @@ pub enum Parameter {
     Current,
     #[serde(rename = "breakdown_field_v_per_m")]
     BreakdownField,
+    #[serde(rename = "inertia_kg_m2")]
+    Inertia,
+    #[serde(rename = "spring_stiffness_n_per_m")]
+    SpringStiffness,
+    #[serde(rename = "supply_voltage_v")]
+    SupplyVoltage,
+    #[serde(rename = "impact_energy_loss_j")]
+    ImpactEnergyLoss,
+    #[serde(rename = "min_separation_m")]
+    MinSeparation,
+    /// `material.arc_restitution.a`.
+    #[serde(rename = "arc_restitution_a")]
+    ArcRestitutionA,
+    /// `material.arc_restitution.b_s_per_m`.
+    #[serde(rename = "arc_restitution_b_s_per_m")]
+    ArcRestitutionB,
+    #[serde(rename = "erosion_kg_per_j")]
+    ErosionRate,
+    #[serde(rename = "roughening_energy_j")]
+    RougheningEnergy,
+    /// The override of eq. 8 at the scenario's nominal radius and pressure (`material.kappa`).
+    #[serde(rename = "kappa")]
+    Kappa,
 }
 
 impl Parameter {
@@ -144,6 +181,63 @@ impl Parameter {
             Parameter::ImpactVelocity | Parameter::ContactRadius | Parameter::DynamicYieldPressure
         )
     }
+
+    /// Whether the parameter is a constant of the scenario that the operation's conditions do not
+    /// carry: scattering it rebuilds the scenario's setup and wear law for each draw.
+    pub fn is_scenario_constant(self) -> bool {
+        !self.is_lane_value()
+            && !matches!(
+                self,
+                Parameter::DropHeight
+                    | Parameter::StaticForce
+                    | Parameter::Current
+                    | Parameter::BreakdownField
+            )
+    }
+
+    /// The name a job gives it.
+    pub fn name(self) -> String {
+        serde_name(&self)
+    }
+
+    /// Puts `value` in its field of `spec`.
+    pub fn set_in(self, spec: &mut ScenarioSpec, value: f64) {
+        let (mech, mat) = (&mut spec.mechanism, &mut spec.material);
+        let field = match self {
+            Parameter::ContactRadius => &mut mat.contact_radius_m,
+            Parameter::DynamicYieldPressure => &mut mat.dynamic_yield_pressure_pa,
+            Parameter::ImpactVelocity => {
+                mech.impact_velocity_m_s = Some(value);
+                return;
+            }
+            Parameter::Kappa => {
+                mat.kappa = Some(value);
+                return;
+            }
+            Parameter::DropHeight => &mut mech.drop_height_m,
+            Parameter::StaticForce => &mut mech.static_force_n,
+            Parameter::Current => &mut spec.circuit.current_a,
+            Parameter::BreakdownField => &mut mat.breakdown_field_v_per_m,
+            Parameter::Inertia => &mut mech.inertia_kg_m2,
+            Parameter::SpringStiffness => &mut mech.spring_stiffness_n_per_m,
+            Parameter::SupplyVoltage => &mut spec.circuit.supply_voltage_v,
+            Parameter::ImpactEnergyLoss => &mut spec.losses.impact_energy_loss_j,
+            Parameter::MinSeparation => &mut spec.losses.min_separation_m,
+            Parameter::ArcRestitutionA => &mut mat.arc_restitution.a,
+            Parameter::ArcRestitutionB => &mut mat.arc_restitution.b_s_per_m,
+            Parameter::ErosionRate => &mut mat.erosion_kg_per_j,
+            Parameter::RougheningEnergy => &mut mat.roughening_energy_j,
+        };
+        *field = value;
+    }
+}
+
+/// The name serde gives a unit variant.
+fn serde_name<T: Serialize>(value: &T) -> String {
+    match serde_json::to_value(value) {
+        Ok(serde_json::Value::String(name)) => name,
+        _ => unreachable!("a unit variant serialises as its name"),
+    }
 }
 
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -152,6 +246,13 @@ impl Parameter {
 pub enum Per {
     Device,
     Operation,
+}
+
+impl Per {
+    /// The name a job gives it.
+    pub fn name(self) -> String {
+        serde_name(&self)
+    }
 }
 
 /// Run device batches until the 95 % CI half-width of `statistic` of `metric` (last bin) is at most
@@ -239,6 +340,7 @@ pub struct Job {
     seed: u64,
     bin_operations: u64,
     scatter: Vec<Scatter>,
+    correlation: Option<Correlation>,
     operation_metrics: Vec<OperationMetric>,
     device_metrics: Vec<DeviceMetric>,
     limits: BTreeMap<Metric, f64>,
@@ -249,7 +351,7 @@ pub struct Job {
 impl Job {
     /// Parses and validates a job document; a missing seed is drawn by `draw_seed`.
     pub fn from_json(text: &str, draw_seed: impl FnOnce() -> u64) -> Result<Self, InvalidInput> {
-        let spec: JobSpec = crate::error::from_json(text, &["/scatter", "/metrics"])?;
+        let spec: JobSpec = crate::error::from_json(text, &LIST_FIELDS)?;
         Self::new(spec, draw_seed, &Pointer::root())
     }
 
@@ -301,6 +403,11 @@ impl Job {
             }
             Err(_) => Vec::new(),
         };
+        let correlation = spec.correlation.as_ref().and_then(|correlation| {
+            Correlation::new(correlation, &spec.scatter, &root.child("correlation"))
+                .map_err(|found| errors.extend(found))
+                .ok()
+        });
 
         let polarity = spec.scenario.material.anode_erosion_fraction.is_some();
         let metrics = match &spec.metrics {
@@ -375,6 +482,7 @@ impl Job {
             seed,
             bin_operations,
             scatter,
+            correlation,
             operation_metrics,
             device_metrics,
             limits,
@@ -434,6 +542,11 @@ impl Job {
 
     pub fn scatter(&self) -> &[Scatter] {
         &self.scatter
+    }
+
+    /// The correlation among scatter entries, if the job gives one.
+    pub fn correlation(&self) -> Option<&Correlation> {
+        self.correlation.as_ref()
     }
 
     /// In the order the job lists them (all metrics when it lists none): the engine's accumulators
@@ -501,33 +614,68 @@ fn parse_metric(
     None
 }
 
-/// The values each parameter may take in this scenario (docs/model.md section 9).
-fn domain(parameter: Parameter, scenario: &Scenario) -> Domain {
+/// The values each parameter may take in this scenario (docs/model.md section 9), given the
+/// other parameters the job scatters.
+fn domain(parameter: Parameter, scenario: &Scenario, scattered: &[ScatterSpec]) -> Domain {
     let spec = scenario.spec();
+    let (mech, mat) = (&spec.mechanism, &spec.material);
+    let is_scattered = |p: Parameter| scattered.iter().any(|s| s.parameter == p);
     match parameter {
         // r0 must stay at or above the worn radius r_inf.
         Parameter::ContactRadius => Domain {
-            lower: spec.material.worn_radius_m,
+            lower: mat.worn_radius_m,
             inclusive: true,
         },
         // An annealing surface's p0 must stay at or above the pressure it softens towards.
         Parameter::DynamicYieldPressure
-            if spec.material.wear_law.law == WearLawKind::RougheningAndSoftening =>
+            if mat.wear_law.law == WearLawKind::RougheningAndSoftening =>
         {
             Domain {
-                lower: spec.material.wear_law.worn_pressure_pa,
+                lower: mat.wear_law.worn_pressure_pa,
                 inclusive: true,
             }
         }
-        Parameter::DynamicYieldPressure | Parameter::BreakdownField => Domain::POSITIVE,
+        Parameter::DynamicYieldPressure
+        | Parameter::BreakdownField
+        | Parameter::Inertia
+        | Parameter::RougheningEnergy
+        | Parameter::Kappa => Domain::POSITIVE,
         // Without a spring, a zero static force would never return the arm.
-        Parameter::StaticForce if spec.mechanism.spring_stiffness_n_per_m == 0.0 => {
+        Parameter::StaticForce if mech.spring_stiffness_n_per_m == 0.0 => Domain::POSITIVE,
+        // Nor, without a static force, a zero spring (a scattered force may be 0).
+        Parameter::SpringStiffness
+            if mech.static_force_n == 0.0 || is_scattered(Parameter::StaticForce) =>
+        {
             Domain::POSITIVE
         }
+        // Under the continuous law, a supply that can arc must arc at the calibration current:
+        // `I_c (V - V_min) / V > I_min` holds above `V = V_min I_c / (I_c - I_min)`.
+        Parameter::SupplyVoltage
+            if mat.arc_restitution.law == ArcRestitutionLawKind::Continuous =>
+        {
+            let (calibration_a, min_a) = (
+                mat.arc_restitution.calibration_current_a,
+                mat.min_arc_current_a,
+            );
+            Domain {
+                lower: if calibration_a > min_a {
+                    mat.min_arc_voltage_v * calibration_a / (calibration_a - min_a)
+                } else {
+                    f64::INFINITY
+                },
+                inclusive: false,
+            }
+        }
+        Parameter::ArcRestitutionA | Parameter::ArcRestitutionB => Domain::FINITE,
         Parameter::ImpactVelocity
         | Parameter::DropHeight
         | Parameter::StaticForce
-        | Parameter::Current => Domain::NON_NEGATIVE,
+        | Parameter::Current
+        | Parameter::SpringStiffness
+        | Parameter::SupplyVoltage
+        | Parameter::ImpactEnergyLoss
+        | Parameter::MinSeparation
+        | Parameter::ErosionRate => Domain::NON_NEGATIVE,
     }
 }
 
@@ -549,7 +697,7 @@ fn check_scatter(
         }
         match Distribution::new(
             &spec.distribution,
-            domain(spec.parameter, scenario),
+            domain(spec.parameter, scenario, specs),
             &at.child("distribution"),
         ) {
             Ok(distribution) => scatter.push(Scatter {

@@ -3,6 +3,7 @@
 //! energy (docs/model.md section 6), summarised per bin of operations with honest confidence
 //! intervals.
 
+pub mod correlation;
 pub mod diagnostics;
 pub mod distribution;
 pub mod engine;
@@ -233,6 +234,10 @@ pub fn next_batch(job: &Job, tally: &Tally) -> Option<engine::Batch> {
 /// `wall_s` is the time the run took, for the Result's timing.
 pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
     let operations_run = tally.devices * job.spec().operations;
+    let mut truncation_rejections = Vec::new();
+    for group in &tally.groups {
+        engine::add_counts(&mut truncation_rejections, &group.truncation_rejections);
+    }
     let counts = diagnostics::Counts {
         operations: operations_run,
         operations_at_max_bounces: tally
@@ -240,7 +245,9 @@ pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
             .iter()
             .map(|g| g.operations_at_max_bounces)
             .sum(),
+        truncation_rejections,
     };
+    let diagnostics = diagnostics::diagnose(job, &counts);
     JobResult {
         job: ResolvedJob::new(job, tally.devices),
         operations: summarize_operations(job, tally),
@@ -258,7 +265,7 @@ pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
         }),
         life: life_report(job, tally),
         counts,
-        diagnostics: diagnostics::diagnose(job, &counts),
+        diagnostics,
         timing: Timing {
             wall_s,
             operations_per_s: operations_run as f64 / wall_s.max(1e-9),

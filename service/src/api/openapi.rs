@@ -38,7 +38,15 @@ fn request_examples() -> [(&'static str, Value); 5] {
             "parameter": "contact_radius_m",
             "per": "device",
             "distribution": {"kind": "uniform", "min": 0.0070, "max": 0.0085}
+        }, {
+            "parameter": "inertia_kg_m2",
+            "per": "device",
+            "distribution": {"kind": "lognormal", "median": 1.593e-5, "sigma": 0.1, "min": 1.3e-5}
         }],
+        "correlation": {
+            "parameters": ["contact_radius_m", "inertia_kg_m2"],
+            "matrix": [[1, 0.4], [0.4, 1]]
+        },
         "failure": {"cumulative_arc_energy_j": {"above": 2.0}}
     });
     let mut job = template.clone();
@@ -294,6 +302,17 @@ fn constrain_request_fields(document: &mut Value) {
             "Observation",
             "operation",
             json!({"minimum": 0, "maximum": MAX_OPERATION}),
+        ),
+        (
+            "CorrelationSpec",
+            "parameters",
+            json!({"minItems": 2, "uniqueItems": true}),
+        ),
+        (
+            "CorrelationSpec",
+            "matrix",
+            json!({"minItems": 2, "items": {"type": "array",
+                   "items": {"type": "number", "minimum": -1, "maximum": 1}}}),
         ),
         ("ScheduleSpec", "name", json!({"pattern": "\\S"})),
         ("ScheduleSpec", "time_zone", json!({"enum": time_zones})),

@@ -3,6 +3,7 @@
 
 use super::jobs::{QueuedJob, draw_seed};
 use super::{Owner, UnixMs};
+use bouncewear_model::montecarlo::job::LIST_FIELDS;
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
 use bouncewear_model::stats::{QUANTILES, Summary};
 use bouncewear_model::{FieldError, InvalidInput, Pointer};
@@ -97,10 +98,11 @@ impl ValidSchedule {
         limits: ScheduleLimits,
         now: DateTime<Utc>,
     ) -> Result<Self, InvalidInput> {
-        let spec: ScheduleSpec = bouncewear_model::error::from_json(
-            body,
-            &["/statistics", "/template/scatter", "/template/metrics"],
-        )?;
+        let template_lists = LIST_FIELDS.map(|field| format!("/template{field}"));
+        let lists: Vec<&str> = std::iter::once("/statistics")
+            .chain(template_lists.iter().map(String::as_str))
+            .collect();
+        let spec: ScheduleSpec = bouncewear_model::error::from_json(body, &lists)?;
         let root = Pointer::root();
         let mut errors = Vec::new();
         // Longer text was refused before (MAX_TEXT_CHARS); a name must also say something.

@@ -1,0 +1,440 @@
+//! Scatter beyond the basics: scenario constants drawn per device or operation, truncated
+//! lognormal and Weibull draws and their rejection counts, and correlated draws (a Gaussian copula).
+
+mod support;
+
+use bouncewear_model::montecarlo::engine::{Batch, Tally, batch_draws, run_group};
+use bouncewear_model::montecarlo::{Job, Silent, summarize_job};
+use serde_json::{Value, json};
+use support::{job, run_on};
+
+/// Every fault of a job, as `(pointer, detail)`.
+fn faults(value: Value) -> Vec<(String, String)> {
+    match Job::from_json(&value.to_string(), || 7) {
+        Ok(_) => Vec::new(),
+        Err(invalid) => invalid
+            .errors()
+            .iter()
+            .map(|e| (e.pointer.clone(), e.detail.clone()))
+            .collect(),
+    }
+}
+
+fn pointers(value: Value) -> Vec<String> {
+    faults(value)
+        .into_iter()
+        .map(|(pointer, _)| pointer)
+        .collect()
+}
+
+/// Each new parameter, its field in the scenario (a JSON pointer), and a valid value other than
+/// the default.
+const CONSTANTS: [(&str, &str, f64); 10] = [
+    ("inertia_kg_m2", "/mechanism/inertia_kg_m2", 2.1e-5),
+    (
+        "spring_stiffness_n_per_m",
+        "/mechanism/spring_stiffness_n_per_m",
+        150.0,
+    ),
+    ("supply_voltage_v", "/circuit/supply_voltage_v", 36.0),
+    ("impact_energy_loss_j", "/losses/impact_energy_loss_j", 3e-6),
+    ("min_separation_m", "/losses/min_separation_m", 2e-5),
+    ("arc_restitution_a", "/material/arc_restitution/a", 0.3),
+    (
+        "arc_restitution_b_s_per_m",
+        "/material/arc_restitution/b_s_per_m",
+        -0.2,
+    ),
+    ("erosion_kg_per_j", "/material/erosion_kg_per_j", 5e-9),
+    (
+        "roughening_energy_j",
+        "/material/roughening_energy_j",
+        200.0,
+    ),
+    ("kappa", "/material/kappa", 0.6),
+];
+
+/// `document` with `value` at `pointer`, the objects on the way made as needed.
+fn with_value(mut document: Value, pointer: &str, value: f64) -> Value {
+    let mut at = &mut document;
+    for token in pointer.split('/').skip(1) {
+        at = at
+            .as_object_mut()
+            .expect("an object on the way")
+            .entry(token)
+            .or_insert_with(|| json!({}));
+    }
+    *at = json!(value);
+    document
+}
+
+/// An arcing job whose radius scatters per device (so devices differ), with `extra` scatter.
+fn arcing_job(scenario: Value, extra: Option<Value>) -> Value {
+    let mut scatter = vec![json!({"parameter": "contact_radius_m", "per": "device",
+        "distribution": {"kind": "uniform", "min": 5e-3, "max": 9e-3}})];
+    scatter.extend(extra);
+    json!({"devices": 6, "operations": 8, "bin_operations": 4, "seed": 3, "scenario": scenario,
+           "scatter": scatter})
+}
+
+#[test]
+fn a_fixed_draw_of_a_scenario_constant_runs_as_the_scenario_with_that_value() {
+    for (parameter, field, value) in CONSTANTS {
+        let scenario = json!({"circuit": {"supply_voltage_v": 48, "current_a": 15}});
+        let fixed = json!({"kind": "fixed", "value": value});
+        for per in ["device", "operation"] {
+            let drawn = job(arcing_job(
+                scenario.clone(),
+                Some(json!({"parameter": parameter, "per": per, "distribution": fixed})),
+            ));
+            let given = with_value(scenario.clone(), field, value);
+            let nominal = job(arcing_job(given, None));
+            let (drawn, nominal) = (run_on(2, &drawn), run_on(2, &nominal));
+            assert_eq!(
+                drawn.operations, nominal.operations,
+                "{parameter} per {per}"
+            );
+            // Device metrics take the device's own values, not those of its operations.
+            if per == "device" {
+                assert_eq!(drawn.devices, nominal.devices, "{parameter}");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_scattered_constant_changes_the_devices_it_is_drawn_for() {
+    let scenario = json!({"circuit": {"supply_voltage_v": 48, "current_a": 15}});
+    let nominal = run_on(2, &job(arcing_job(scenario.clone(), None)));
+    for (parameter, _, value) in CONSTANTS {
+        let spread = json!({"kind": "uniform", "min": value.abs() * 0.5, "max": value.abs() * 1.5});
+        let drawn = run_on(
+            2,
+            &job(arcing_job(
+                scenario.clone(),
+                Some(json!({"parameter": parameter, "per": "device", "distribution": spread})),
+            )),
+        );
+        assert!(
+            drawn.operations != nominal.operations || drawn.devices != nominal.devices,
+            "{parameter}"
+        );
+    }
+}
+
+#[test]
+fn a_distribution_that_can_leave_the_domain_names_the_min_that_would_truncate_it() {
+    let scatter = |parameter: &str, distribution: Value| json!({"scatter": [{"parameter": parameter, "per": "device", "distribution": distribution}]});
+    let radius = faults(scatter(
+        "contact_radius_m",
+        json!({"kind": "lognormal", "median": 1e-3, "sigma": 0.3}),
+    ));
+    assert_eq!(radius.len(), 1);
+    assert_eq!(radius[0].0, "/scatter/0/distribution/kind");
+    assert!(
+        radius[0]
+            .1
+            .contains(r#"add "min": 0.000711 to truncate it"#),
+        "{}",
+        radius[0].1
+    );
+    let inertia = faults(scatter(
+        "inertia_kg_m2",
+        json!({"kind": "normal", "mean": 1.6e-5, "sd": 2e-6}),
+    ));
+    assert_eq!(inertia[0].0, "/scatter/0/distribution/min");
+    assert!(
+        inertia[0]
+            .1
+            .starts_with("a normal(mean 0.000016, sd 0.000002) reaches below 0"),
+        "{}",
+        inertia[0].1
+    );
+    assert!(inertia[0].1.contains(r#"add a "min" above 0"#));
+    // Eq. 16's coefficients may take any finite value: an untruncated normal is valid for them.
+    assert!(
+        pointers(scatter(
+            "arc_restitution_a",
+            json!({"kind": "normal", "mean": 0.2, "sd": 0.1})
+        ))
+        .is_empty()
+    );
+    assert_eq!(
+        pointers(scatter(
+            "contact_radius_m",
+            json!({"kind": "weibull", "scale": 1e-3, "shape": 4, "min": 7.11e-4, "max": 7.2e-4})
+        )),
+        ["/scatter/0/distribution/min"]
+    );
+}
+
+#[test]
+fn scenario_rules_across_fields_hold_for_every_draw() {
+    let both = json!({"scatter": [
+        {"parameter": "static_force_n", "per": "device",
+         "distribution": {"kind": "uniform", "min": 0, "max": 1}},
+        {"parameter": "spring_stiffness_n_per_m", "per": "device",
+         "distribution": {"kind": "uniform", "min": 0, "max": 300}}]});
+    assert_eq!(pointers(both), ["/scatter/1/distribution/min"]);
+    let continuous = json!({
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15},
+                     "material": {"arc_restitution": {"law": "continuous"}}},
+        "scatter": [{"parameter": "supply_voltage_v", "per": "device",
+                     "distribution": {"kind": "uniform", "min": 12.2, "max": 60}}]});
+    assert_eq!(pointers(continuous), ["/scatter/0/distribution/min"]);
+}
+
+/// A truncated lognormal radius that keeps about three quarters of its mass.
+fn truncated_radius(devices: u64, per: &str) -> Value {
+    json!({"devices": devices, "operations": 3, "seed": 11,
+           "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+           "scatter": [{"parameter": "contact_radius_m", "per": per,
+                        "distribution": {"kind": "lognormal", "median": 1e-3, "sigma": 0.5,
+                                         "min": 7.11e-4, "max": 5e-3}}]})
+}
+
+#[test]
+fn truncated_draws_are_counted_over_every_group_and_warned_of() {
+    let job = job(truncated_radius(400, "operation"));
+    let result = run_on(3, &job);
+    let rejected = result.counts.truncation_rejections[0];
+    // P(X < 0.711 mm) = Phi(ln(0.711) / 0.5) = 0.248 of 1200 draws kept: about 396 rejected.
+    assert!((300..500).contains(&rejected), "{rejected}");
+    let warning = result
+        .diagnostics
+        .iter()
+        .find(|d| d.pointer == "/scatter/0/distribution")
+        .expect("a warning for the truncated entry");
+    assert!(
+        warning
+            .detail
+            .starts_with(&format!("{rejected} random draws"))
+    );
+    let batch = Batch::of(&job, 0).unwrap();
+    let groups = (0..batch.groups())
+        .map(|g| run_group(&job, batch, g, &Silent).unwrap())
+        .collect();
+    let mut tally = Tally::new();
+    tally.add_batch(batch, groups);
+    assert_eq!(summarize_job(&job, &tally, 1.0).counts, result.counts);
+    assert_eq!(run_on(1, &job).counts, result.counts);
+}
+
+#[test]
+fn an_lhs_truncated_draw_needs_no_rejection_and_keeps_to_its_window() {
+    let mut spec = truncated_radius(200, "device");
+    spec["sampler"] = json!("lhs");
+    let job = job(spec);
+    let draws = batch_draws(&job, Batch::of(&job, 0).unwrap());
+    assert!(draws.iter().all(|row| (7.11e-4..=5e-3).contains(&row[0])));
+    let counts = run_on(2, &job).counts;
+    assert!(counts.truncation_rejections.iter().all(|&c| c == 0));
+}
+
+/// Spearman's rank correlation of two samples.
+fn spearman(x: &[f64], y: &[f64]) -> f64 {
+    let ranks = |v: &[f64]| {
+        let mut order: Vec<usize> = (0..v.len()).collect();
+        order.sort_by(|&a, &b| v[a].total_cmp(&v[b]));
+        let mut rank = vec![0.0; v.len()];
+        for (r, &i) in order.iter().enumerate() {
+            rank[i] = r as f64;
+        }
+        rank
+    };
+    let (rx, ry) = (ranks(x), ranks(y));
+    let n = x.len() as f64;
+    let mean = (n - 1.0) / 2.0;
+    let cov: f64 = rx
+        .iter()
+        .zip(&ry)
+        .map(|(a, b)| (a - mean) * (b - mean))
+        .sum();
+    let var: f64 = rx.iter().map(|a| (a - mean) * (a - mean)).sum();
+    cov / var
+}
+
+fn correlated(devices: u64, sampler: &str, rho: f64) -> Value {
+    json!({"devices": devices, "operations": 2, "seed": 5, "sampler": sampler,
+           "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+           "scatter": [
+               {"parameter": "impact_velocity_m_s", "per": "device",
+                "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.05, "min": 0.15}},
+               {"parameter": "current_a", "per": "operation",
+                "distribution": {"kind": "uniform", "min": 10, "max": 20}},
+               {"parameter": "contact_radius_m", "per": "device",
+                "distribution": {"kind": "lognormal", "median": 1e-3, "sigma": 0.4,
+                                 "min": 7.11e-4}}],
+           "correlation": {"parameters": ["impact_velocity_m_s", "contact_radius_m"],
+                           "matrix": [[1, rho], [rho, 1]]}})
+}
+
+#[test]
+fn correlated_draws_have_the_asked_rank_correlation_and_keep_their_marginals() {
+    let rho: f64 = -0.6;
+    // The rank correlation of a Gaussian copula with correlation rho.
+    let spearman_rho = 6.0 / std::f64::consts::PI * (rho / 2.0).asin();
+    for sampler in ["random", "lhs"] {
+        let job = job(correlated(4000, sampler, rho));
+        let draws = batch_draws(&job, Batch::of(&job, 0).unwrap());
+        let column = |i: usize| draws.iter().map(|row| row[i]).collect::<Vec<f64>>();
+        let (speed, radius) = (column(0), column(2));
+        let got = spearman(&speed, &radius);
+        assert!(
+            (got - spearman_rho).abs() < 0.04,
+            "{sampler}: {got} vs {spearman_rho}"
+        );
+        for (values, distribution) in [
+            (&speed, &job.scatter()[0].distribution),
+            (&radius, &job.scatter()[2].distribution),
+        ] {
+            for p in [0.05, 0.25, 0.5, 0.75, 0.95] {
+                let below = values
+                    .iter()
+                    .filter(|&&v| v <= distribution.quantile(p))
+                    .count() as f64
+                    / values.len() as f64;
+                assert!((below - p).abs() < 0.025, "{sampler}: {below} vs {p}");
+            }
+        }
+    }
+}
+
+#[test]
+fn under_lhs_the_first_correlated_parameter_still_fills_every_stratum_once() {
+    let job = job(correlated(500, "lhs", 0.8));
+    let draws = batch_draws(&job, Batch::of(&job, 0).unwrap());
+    let distribution = &job.scatter()[0].distribution;
+    let mut strata: Vec<usize> = draws
+        .iter()
+        .map(|row| {
+            (0..500)
+                .position(|s| row[0] < distribution.quantile(f64::from(s + 1) / 500.0))
+                .unwrap_or(499)
+        })
+        .collect();
+    strata.sort_unstable();
+    assert_eq!(strata, (0..500).collect::<Vec<_>>());
+}
+
+#[test]
+fn correlated_results_are_bit_identical_for_any_thread_count() {
+    let mut spec = correlated(37, "random", 0.5);
+    spec["correlation"] = json!({"parameters": ["impact_velocity_m_s", "contact_radius_m"],
+                                 "matrix": [[1, 0.5], [0.5, 1]]});
+    let job = job(spec);
+    let reference = run_on(1, &job);
+    for threads in [2, 3] {
+        let again = run_on(threads, &job);
+        assert_eq!(again.operations, reference.operations, "threads {threads}");
+        assert_eq!(again.devices, reference.devices, "threads {threads}");
+        assert_eq!(again.counts, reference.counts, "threads {threads}");
+    }
+}
+
+#[test]
+fn bad_correlations_are_refused_naming_the_pointer() {
+    let with = |parameters: Value, matrix: Value| {
+        let mut spec = correlated(10, "random", 0.0);
+        spec["correlation"] = json!({"parameters": parameters, "matrix": matrix});
+        spec
+    };
+    let pair = json!(["impact_velocity_m_s", "contact_radius_m"]);
+    let cases = [
+        (
+            with(pair.clone(), json!([[1, 0.2], [0.3, 1]])),
+            vec!["/correlation/matrix/0/1"],
+        ),
+        (
+            with(pair.clone(), json!([[1, 0.2], [0.2, 0.9]])),
+            vec!["/correlation/matrix/1/1"],
+        ),
+        (
+            with(pair.clone(), json!([[1, 1.5], [1.5, 1]])),
+            vec!["/correlation/matrix/0/1", "/correlation/matrix/1/0"],
+        ),
+        (
+            with(pair.clone(), json!([[1, 0.2], [0.2]])),
+            vec!["/correlation/matrix/1"],
+        ),
+        (
+            with(pair.clone(), json!([[1, 0.2], [0.2, 1], [0, 0]])),
+            vec!["/correlation/matrix"],
+        ),
+        (
+            with(pair.clone(), json!([[1, 1], [1, 1]])),
+            vec!["/correlation/matrix/1"],
+        ),
+        (
+            with(
+                json!(["impact_velocity_m_s", "static_force_n"]),
+                json!([[1, 0], [0, 1]]),
+            ),
+            vec!["/correlation/parameters/1"],
+        ),
+        (
+            with(
+                json!(["impact_velocity_m_s", "current_a"]),
+                json!([[1, 0], [0, 1]]),
+            ),
+            vec!["/correlation/parameters/1"],
+        ),
+        (
+            with(
+                json!(["impact_velocity_m_s", "impact_velocity_m_s"]),
+                json!([[1, 0], [0, 1]]),
+            ),
+            vec!["/correlation/parameters/1"],
+        ),
+        (
+            with(json!(["impact_velocity_m_s"]), json!([[1]])),
+            vec!["/correlation/parameters"],
+        ),
+    ];
+    for (spec, expected) in cases {
+        assert_eq!(pointers(spec.clone()), expected, "{}", spec["correlation"]);
+    }
+    let mixed = faults(with(
+        json!(["impact_velocity_m_s", "current_a"]),
+        json!([[1, 0], [0, 1]]),
+    ));
+    assert!(mixed[0].1.contains("same `per`"), "{}", mixed[0].1);
+}
+
+#[test]
+fn an_indefinite_matrix_is_refused_at_the_row_where_cholesky_fails() {
+    let spec = json!({"scatter": [
+        {"parameter": "impact_velocity_m_s", "per": "device",
+         "distribution": {"kind": "uniform", "min": 0.2, "max": 0.3}},
+        {"parameter": "static_force_n", "per": "device",
+         "distribution": {"kind": "uniform", "min": 0.4, "max": 0.6}},
+        {"parameter": "kappa", "per": "device",
+         "distribution": {"kind": "uniform", "min": 0.4, "max": 0.6}}],
+        "correlation": {"parameters": ["impact_velocity_m_s", "static_force_n", "kappa"],
+                        "matrix": [[1, 0.9, 0.9], [0.9, 1, -0.9], [0.9, -0.9, 1]]}});
+    let found = faults(spec);
+    assert_eq!(found.len(), 1);
+    assert_eq!(found[0].0, "/correlation/matrix/2");
+    assert!(
+        found[0].1.contains("not positive definite"),
+        "{}",
+        found[0].1
+    );
+}
+
+#[test]
+fn a_correlation_per_operation_is_deterministic() {
+    let spec = json!({"devices": 5, "operations": 20, "seed": 9,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "scatter": [
+            {"parameter": "impact_velocity_m_s", "per": "operation",
+             "distribution": {"kind": "uniform", "min": 0.2, "max": 0.4}},
+            {"parameter": "supply_voltage_v", "per": "operation",
+             "distribution": {"kind": "weibull", "scale": 48, "shape": 8, "min": 30}}],
+        "correlation": {"parameters": ["supply_voltage_v", "impact_velocity_m_s"],
+                        "matrix": [[1, 0.7], [0.7, 1]]}});
+    let job = job(spec);
+    let (one, three) = (run_on(1, &job), run_on(3, &job));
+    assert_eq!(one.operations, three.operations);
+    assert_eq!(one.devices, three.devices);
+}
