@@ -19,14 +19,20 @@ pub(crate) fn solve(a: Vec<Vec<f64>>, b: Vec<f64>) -> Option<Vec<f64>> {
 /// The lower Cholesky factor `L` of a symmetric positive definite `a = L L^T`; `None` if `a` is
 /// not positive definite.
 pub(crate) fn cholesky(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
+    cholesky_above(a, 0.0).ok()
+}
+
+/// The lower Cholesky factor of `a` when every squared pivot is above `min_pivot`; else the row
+/// whose pivot is not.
+pub(crate) fn cholesky_above(a: &[Vec<f64>], min_pivot: f64) -> Result<Vec<Vec<f64>>, usize> {
     let n = a.len();
     let mut l = vec![vec![0.0; n]; n];
     for i in 0..n {
         for j in 0..=i {
             let sum = a[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
             if i == j {
-                if sum.is_nan() || sum <= 0.0 {
-                    return None;
+                if sum.is_nan() || sum <= min_pivot {
+                    return Err(i);
                 }
                 l[i][i] = sum.sqrt();
             } else {
@@ -34,7 +40,7 @@ pub(crate) fn cholesky(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
             }
         }
     }
-    Some(l)
+    Ok(l)
 }
 
 /// The smallest squared Cholesky pivot of a Gram matrix of unit columns: 0 when they are linearly

@@ -5,6 +5,7 @@
 
 use super::job::{Parameter, Per, ScatterSpec};
 use crate::error::{FieldError, Pointer};
+use crate::linalg::cholesky_above;
 use serde::{Deserialize, Serialize};
 
 /// The smallest pivot the Cholesky factorisation accepts: below it the matrix is singular to
@@ -177,24 +178,10 @@ fn check_matrix(matrix: &[Vec<f64>], at: &Pointer, fail: &mut impl FnMut(Pointer
     }
 }
 
-/// The Cholesky factor of a symmetric matrix, or the first row whose pivot is not above
-/// [`MIN_PIVOT`].
+/// The lower Cholesky factor of a correlation matrix whose every squared pivot is above
+/// [`MIN_PIVOT`]; else the row whose pivot is not.
 fn cholesky(matrix: &[Vec<f64>]) -> Result<Vec<Vec<f64>>, usize> {
-    let mut factor: Vec<Vec<f64>> = Vec::with_capacity(matrix.len());
-    for (i, row) in matrix.iter().enumerate() {
-        let mut lower = vec![0.0; i + 1];
-        for j in 0..i {
-            let dot: f64 = (0..j).map(|k| lower[k] * factor[j][k]).sum();
-            lower[j] = (row[j] - dot) / factor[j][j];
-        }
-        let pivot = row[i] - lower[..i].iter().map(|x| x * x).sum::<f64>();
-        if pivot.is_nan() || pivot <= MIN_PIVOT {
-            return Err(i);
-        }
-        lower[i] = pivot.sqrt();
-        factor.push(lower);
-    }
-    Ok(factor)
+    cholesky_above(matrix, MIN_PIVOT)
 }
 
 #[cfg(test)]
