@@ -549,3 +549,40 @@ fn a_result_warns_when_the_paper_law_runs_far_from_its_calibration_current() {
             .contains("diagnostics")
     );
 }
+
+#[test]
+fn a_query_after_the_run_at_the_standard_levels_answers_the_results_summaries() {
+    use bouncewear_model::montecarlo::{Metric, RunGroups, engine, query_metric, summarize_job};
+    use bouncewear_model::stats::QUANTILES;
+    let job = job(json!({"devices": 24, "operations": 20, "bin_operations": 5,
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                     "distribution": {"kind": "uniform", "min": 0.2, "max": 0.6}}]}));
+    let tally = engine::run(&job, &Silent, |_| false).unwrap();
+    let result = summarize_job(&job, &tally, 1.0);
+    let groups = RunGroups::new(&job, tally);
+    let levels = QUANTILES.map(|(_, q)| q);
+    let summaries = result
+        .operations
+        .iter()
+        .flat_map(|(metric, bins)| {
+            bins.iter()
+                .enumerate()
+                .map(move |(bin, b)| (metric, bin as u64, &b.summary))
+        })
+        .chain(result.devices.iter().map(|(metric, s)| (metric, 0, s)));
+    for (metric, bin, summary) in summaries {
+        let at = groups
+            .of(metric, bin)
+            .expect("every summary has its groups");
+        let answer = query_metric(Metric::parse(metric).unwrap(), &at, &levels, &[]);
+        for (key, level) in QUANTILES {
+            assert_eq!(
+                answer.quantiles[&level.to_string()],
+                summary.quantiles[key],
+                "{metric} bin {bin} {key}"
+            );
+        }
+    }
+    assert!(groups.of("total_bounce_s", 4).is_none());
+    assert!(groups.of("eroded_mass_kg", 1).is_none());
+}

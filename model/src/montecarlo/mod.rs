@@ -18,7 +18,9 @@ pub use kernel::{Isa, Kernel};
 pub use lives::{DeviceLife, GroupLives};
 pub use metric::{DeviceMetric, Metric, OperationMetric};
 
-use crate::stats::{Accumulator, Summary, summarize};
+use crate::stats::{
+    Accumulator, QuantileSummary, QueryAnswer, Summary, Threshold, query, summarize,
+};
 use job::Statistic;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -339,9 +341,68 @@ fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> 
 /// The sketch reports a bucket midpoint (within 0.2 %); for a whole-number metric below 256 each bucket
 /// holds one whole number, so the nearest whole number is the exact sample quantile.
 fn round_quantiles(summary: &mut Summary) {
-    for quantile in summary.quantiles.values_mut() {
-        quantile.value = quantile.value.round();
-        quantile.ci95 = [quantile.ci95[0].floor(), quantile.ci95[1].ceil()];
+    summary.quantiles.values_mut().for_each(round_quantile);
+}
+
+fn round_quantile(quantile: &mut QuantileSummary) {
+    quantile.value = quantile.value.round();
+    quantile.ci95 = [quantile.ci95[0].floor(), quantile.ci95[1].ceil()];
+}
+
+/// [`query`] of one (metric, bin) after the run, from the groups [`RunGroups::of`] gave: its
+/// quantiles rounded for a whole-number metric, as in the Result's summaries, so that a standard
+/// level answers the summary's value and interval.
+pub fn query_metric(
+    metric: Metric,
+    groups: &[Accumulator],
+    levels: &[f64],
+    thresholds: &[Threshold],
+) -> QueryAnswer {
+    let mut answer = query(groups, levels, thresholds);
+    if matches!(metric, Metric::Operation(m) if m.is_integer()) {
+        answer.quantiles.values_mut().for_each(round_quantile);
+    }
+    answer
+}
+
+/// The groups' accumulators of a finished run, by the (metric, bin) of the Result they summarise:
+/// what a query after the run ([`query_metric`]) needs.
+#[derive(Debug)]
+pub struct RunGroups {
+    operation_metrics: Vec<OperationMetric>,
+    device_metrics: Vec<DeviceMetric>,
+    groups: Vec<engine::GroupStats>,
+}
+
+impl RunGroups {
+    pub fn new(job: &Job, tally: Tally) -> Self {
+        Self {
+            operation_metrics: job.operation_metrics().to_vec(),
+            device_metrics: job.device_metrics().to_vec(),
+            groups: tally.groups,
+        }
+    }
+
+    /// Bin `bin` of the operation metric named `metric`, or the device metric's summary (`bin`
+    /// 0), as its groups' accumulators in group order; `None` for a (metric, bin) the run did not
+    /// summarise.
+    pub fn of(&self, metric: &str, bin: u64) -> Option<Vec<Accumulator>> {
+        let bin = usize::try_from(bin).ok()?;
+        let take = |pick: &dyn Fn(&engine::GroupStats) -> Option<&Accumulator>| {
+            self.groups.iter().map(|g| pick(g).cloned()).collect()
+        };
+        match Metric::parse(metric)? {
+            Metric::Operation(m) => {
+                let m = self.operation_metrics.iter().position(|&o| o == m)?;
+                let index = bin * self.operation_metrics.len() + m;
+                take(&|g| g.operations.get(index))
+            }
+            Metric::Device(m) if bin == 0 => {
+                let m = self.device_metrics.iter().position(|&d| d == m)?;
+                take(&|g| g.devices.get(m))
+            }
+            Metric::Device(_) => None,
+        }
     }
 }
 

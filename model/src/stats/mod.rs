@@ -22,6 +22,7 @@
 //! | [`summary`] | the serialised `SUMMARY` and [`summarize`] |
 //! | [`regression`] | standardised regression coefficients, mergeable |
 //! | [`sobol`] | Sobol' first-order and total indices by pick-freeze, with delta-method intervals |
+//! | [`query`] | any quantile and any threshold after the run, from the same groups and estimators |
 //!
 //! Accumulators serialise exactly, every float by its bits (infinities included), so a group's
 //! state can cross machines and merge into the same numbers.
@@ -29,6 +30,7 @@
 pub mod accumulator;
 mod bits;
 pub mod intervals;
+pub mod query;
 pub mod regression;
 pub mod sketch;
 pub mod sobol;
@@ -36,6 +38,7 @@ pub mod summary;
 
 pub use accumulator::Accumulator;
 pub use intervals::{Z_975, student_t_975, wilson_interval};
+pub use query::{QueryAnswer, Threshold, ThresholdExceedance, query};
 pub use sketch::Sketch;
 pub use summary::{Exceedance, HISTOGRAM_BINS, Histogram, QuantileSummary, Summary, summarize};
 

@@ -99,48 +99,23 @@ pub struct Summary {
 /// # Panics
 /// If the groups have different limits.
 pub fn summarize(groups: &[Accumulator]) -> Summary {
-    let limit = groups.first().and_then(Accumulator::limit);
-    let mut all = Accumulator::new(limit);
-    groups.iter().for_each(|group| all.merge(group));
+    let merged = Merged::of(groups);
+    let all = &merged.all;
     let (min, max) = (all.min(), all.max());
-    let clip = |[lo, hi]: [f64; 2]| [lo.max(min), hi.min(max)];
-
-    let filled: Vec<&Accumulator> = groups.iter().filter(|g| g.count() > 0).collect();
 
     let mean = all.mean();
-    let group_means: Vec<f64> = filled.iter().map(|g| g.mean()).collect();
-    let mean_ci95 = clip(batch_interval(mean, &group_means));
+    let group_means: Vec<f64> = merged.filled.iter().map(|g| g.mean()).collect();
+    let mean_ci95 = merged.clip(batch_interval(mean, &group_means));
 
     let levels = QUANTILES.map(|(_, q)| q);
-    let values = all.quantiles(&levels);
     let quantiles = QUANTILES
         .iter()
-        .zip(values)
-        .map(|(&(key, q), value)| {
-            let ci95 = clip(woodruff_interval(&all, &filled, q, value));
-            (key.to_string(), QuantileSummary { value, ci95 })
-        })
+        .zip(merged.quantiles(&levels))
+        .map(|(&(key, _), quantile)| (key.to_string(), quantile))
         .collect();
 
-    let exceedance = limit.map(|limit| {
-        let n = all.count();
-        let probability = proportion(all.count_above(), n);
-        let ci95 = if filled.len() < 2 {
-            [probability, probability]
-        } else {
-            let shares: Vec<f64> = filled
-                .iter()
-                .map(|g| proportion(g.count_above(), g.count()))
-                .collect();
-            let var = sample_variance(&shares) / shares.len() as f64;
-            let n = n as f64;
-            let n_eff = if probability == 0.0 || probability == 1.0 || var == 0.0 {
-                n
-            } else {
-                (probability * (1.0 - probability) / var).min(n)
-            };
-            wilson_interval(probability, n_eff, Z_975)
-        };
+    let exceedance = all.limit().map(|limit| {
+        let (probability, ci95) = merged.share(Accumulator::count_above);
         Exceedance {
             limit,
             probability,
@@ -156,9 +131,78 @@ pub fn summarize(groups: &[Accumulator]) -> Summary {
         min,
         max,
         quantiles,
-        histogram: histogram(&all),
+        histogram: histogram(all),
         exceedance,
     }
+}
+
+/// The groups of one (metric, bin) merged, in slice order, with the non-empty ones kept apart for
+/// the intervals: the one home of the estimators [`summarize`] documents, which the after-run
+/// query ([`super::query`]) uses too.
+pub(super) struct Merged<'a> {
+    /// Every value, for the point estimates.
+    pub(super) all: Accumulator,
+    /// The non-empty groups (`G'` of them), each one independent observation.
+    pub(super) filled: Vec<&'a Accumulator>,
+}
+
+impl<'a> Merged<'a> {
+    /// Merges `groups` in slice order; they must all have the same limit.
+    pub(super) fn of(groups: &'a [Accumulator]) -> Self {
+        let limit = groups.first().and_then(Accumulator::limit);
+        let mut all = Accumulator::new(limit);
+        groups.iter().for_each(|group| all.merge(group));
+        let filled = groups.iter().filter(|g| g.count() > 0).collect();
+        Self { all, filled }
+    }
+
+    /// An interval clipped to `[min, max]`, where the true values lie.
+    fn clip(&self, [lo, hi]: [f64; 2]) -> [f64; 2] {
+        [lo.max(self.all.min()), hi.min(self.all.max())]
+    }
+
+    /// The quantiles of `levels` with their Woodruff intervals, clipped to `[min, max]`.
+    pub(super) fn quantiles(&self, levels: &[f64]) -> Vec<QuantileSummary> {
+        let values = self.all.quantiles(levels);
+        levels
+            .iter()
+            .zip(values)
+            .map(|(&q, value)| {
+                let ci95 = self.clip(woodruff_interval(&self.all, &self.filled, q, value));
+                QuantileSummary { value, ci95 }
+            })
+            .collect()
+    }
+
+    /// The share of values that `count` counts in a group, over all groups, and its Wilson
+    /// interval with the design effect of the groups' shares.
+    pub(super) fn share(&self, count: impl Fn(&Accumulator) -> u64) -> (f64, [f64; 2]) {
+        let n = self.all.count();
+        let counted = self.filled.iter().map(|g| count(g)).sum();
+        let probability = proportion(counted, n);
+        let shares: Vec<f64> = self
+            .filled
+            .iter()
+            .map(|g| proportion(count(g), g.count()))
+            .collect();
+        (probability, design_effect_interval(probability, n, &shares))
+    }
+}
+
+/// Wilson's interval for the proportion `probability` of `n` values, with the design effect of the
+/// groups' proportions `shares` (see [`summarize`]); degenerate with fewer than two groups.
+fn design_effect_interval(probability: f64, n: u64, shares: &[f64]) -> [f64; 2] {
+    if shares.len() < 2 {
+        return [probability, probability];
+    }
+    let var = sample_variance(shares) / shares.len() as f64;
+    let n = n as f64;
+    let n_eff = if probability == 0.0 || probability == 1.0 || var == 0.0 {
+        n
+    } else {
+        (probability * (1.0 - probability) / var).min(n)
+    };
+    wilson_interval(probability, n_eff, Z_975)
 }
 
 /// `above / n`, 0 when `n = 0`.
