@@ -13,12 +13,14 @@ use bouncewear::domain::{
 };
 use bouncewear::scheduler::tick;
 use bouncewear::store::{
-    self, JobRecord, Lease, LeaseTerms, NewRun, RunSlot, ScheduleRecord, Store, StoreError,
+    self, JobRecord, Lease, LeaseTerms, NewRun, Operations, RunSlot, ScheduleRecord, Store,
+    StoreError,
 };
 use bouncewear::worker::Workers;
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::{Batch, run_group};
 use bouncewear_model::montecarlo::{Job, Silent, run_job};
+use bouncewear_model::stats::summarize;
 use chrono::{DateTime, Utc};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -231,6 +233,13 @@ async fn ended_jobs_are_deleted_with_everything_stored_for_them(url: &str) {
     assert!(store.result_json(&id).await.unwrap().is_none());
     assert!(store.shards(&id).await.unwrap().is_empty());
     assert!(store.lives(&id).await.unwrap().is_empty());
+    assert!(
+        store
+            .distribution_groups(&id, "e1", every_operation())
+            .await
+            .unwrap()
+            .is_empty()
+    );
 
     // A schedule's run goes with its job; retention takes only what ended before its time.
     let schedule = nightly("s1", "2026-11-22T03:00:00Z");
@@ -395,10 +404,10 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
             None => {
                 let partials = store.partials(&fence.job).await.unwrap();
                 match merge(&job, fence.shard.batch, partials, 1.0).unwrap() {
-                    Merged::Result(result) => {
+                    Merged::Result { result, groups } => {
                         assert!(
                             store
-                                .succeed(fence, UnixMs(5), &result)
+                                .succeed(fence, UnixMs(5), &result, &groups)
                                 .await
                                 .unwrap()
                                 .is_some()
@@ -419,6 +428,13 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
         }
     }
     ran
+}
+
+fn every_operation() -> Operations {
+    Operations {
+        start: 0,
+        end: u64::MAX,
+    }
 }
 
 fn without_timing(result: &str) -> serde_json::Value {
@@ -452,8 +468,23 @@ async fn a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(url: &st
     assert_eq!(store.lives(&id).await.unwrap(), whole.life.unwrap().devices);
     assert!(
         store.partials(&id).await.unwrap().is_empty(),
-        "accumulators go with the Result"
+        "the running accumulators go with the Result"
     );
+    // Each distribution keeps the final groups it summarises, for queries after the run.
+    for metric in ["e1", "eroded_mass_kg"] {
+        let bins = store
+            .distribution(&id, metric, every_operation())
+            .await
+            .unwrap();
+        let groups = store
+            .distribution_groups(&id, metric, every_operation())
+            .await
+            .unwrap();
+        assert_eq!(groups.len(), bins.len());
+        for (bin, groups) in bins.iter().zip(groups) {
+            assert_eq!(summarize(&groups.unwrap()), bin.summary, "{metric}");
+        }
+    }
     let shards = store.shards(&id).await.unwrap();
     assert!(
         shards

@@ -16,7 +16,7 @@ use crate::store::{Claim, Fence, Lease, LeaseTerms, QueueEvent, Store, StoreResu
 use crate::telemetry::{record_job_finished, record_shard_step};
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::{Batch, run_group};
-use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Observer, Watch};
+use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Observer, RunGroups, Watch};
 use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -224,8 +224,8 @@ impl Workers {
             .compute(lease, move |_| Ok(merge(&job, last, partials, wall_s)))
             .await;
         match ran {
-            Ran::Done(Ok(Merged::Result(result))) => {
-                self.succeed(fence, &result, lease).await;
+            Ran::Done(Ok(Merged::Result { result, groups })) => {
+                self.succeed(fence, &result, &groups, lease).await;
                 record_shard_step("merge", merging);
             }
             Ran::Done(Ok(Merged::Next { shards, folded })) => match self
@@ -370,9 +370,17 @@ impl Workers {
         }
     }
 
-    async fn succeed(&self, fence: &Fence, result: &JobResult, lease: &KeptLease) {
+    async fn succeed(
+        &self,
+        fence: &Fence,
+        result: &JobResult,
+        groups: &RunGroups,
+        lease: &KeptLease,
+    ) {
         let stored = self
-            .store_with_backoff(lease, || self.store.succeed(fence, UnixMs::now(), result))
+            .store_with_backoff(lease, || {
+                self.store.succeed(fence, UnixMs::now(), result, groups)
+            })
             .await;
         match stored {
             Ok(Some(stored_bytes)) => {

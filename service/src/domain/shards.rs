@@ -5,7 +5,7 @@
 //! target not yet met, adds the next batch. Results are bit-identical to running the job whole.
 
 use bouncewear_model::montecarlo::engine::{Batch, GroupStats};
-use bouncewear_model::montecarlo::{Job, JobResult, Tally, next_batch, summarize_job};
+use bouncewear_model::montecarlo::{Job, JobResult, RunGroups, Tally, next_batch, summarize_job};
 use serde::Serialize;
 use std::fmt;
 use utoipa::ToSchema;
@@ -74,8 +74,12 @@ pub fn first_shards(job: &Job) -> Vec<ShardPlan> {
 /// What a batch's merge step leads to.
 #[derive(Debug)]
 pub enum Merged {
-    /// The job is done: its Result.
-    Result(Box<JobResult>),
+    /// The job is done: its Result, and the final groups' accumulators of each of its (metric,
+    /// bin), kept for queries after the run.
+    Result {
+        result: Box<JobResult>,
+        groups: RunGroups,
+    },
     /// A precision target is not met yet: the next batch's shards, to queue, and the groups of
     /// every batch so far folded into one set (group `i` of each batch merged into group `i`, in
     /// batch order, as [`Tally::add_batch`] does), to store in place of theirs: a job's stored
@@ -157,7 +161,10 @@ pub fn merge(
             shards: batch_shards(job, batch),
             folded: tally.groups,
         },
-        None => Merged::Result(Box::new(summarize_job(job, &tally, wall_s))),
+        None => Merged::Result {
+            result: Box::new(summarize_job(job, &tally, wall_s)),
+            groups: RunGroups::new(job, tally),
+        },
     })
 }
 

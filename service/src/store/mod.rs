@@ -16,8 +16,8 @@ use crate::domain::{
 };
 use async_trait::async_trait;
 use bouncewear_model::montecarlo::engine::GroupStats;
-use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
-use bouncewear_model::stats::Summary;
+use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec, RunGroups};
+use bouncewear_model::stats::{Accumulator, Summary};
 use std::sync::Arc;
 
 pub type StoreResult<T> = Result<T, StoreError>;
@@ -103,7 +103,8 @@ pub struct JobRecord {
     pub started_at: Option<UnixMs>,
     pub finished_at: Option<UnixMs>,
     /// Bytes stored for the job: its spec, its groups' accumulators while it runs, and once it
-    /// succeeded its Result, distributions and listed device lives (not the database's own
+    /// succeeded its Result, distributions (with their final groups' accumulators) and listed
+    /// device lives (not the database's own
     /// overhead: indexes, free pages).
     pub stored_bytes: u64,
 }
@@ -332,8 +333,9 @@ pub trait JobQueue: Send + Sync + 'static {
 #[async_trait]
 pub trait Results: Send + Sync + 'static {
     /// Stores the result, marks the merge step done and the job succeeded, and drops the groups'
-    /// accumulators, if the claim still holds the merge step: the distributions and device lives
-    /// first, in short transactions, then the rest in one. The job's stored bytes
+    /// accumulators, if the claim still holds the merge step: the distributions (each with the
+    /// final groups' accumulators of its (metric, bin), from `groups`, for queries after the run)
+    /// and device lives first, in short transactions, then the rest in one. The job's stored bytes
     /// ([`JobRecord::stored_bytes`]); `None` if the claim no longer holds (the job stays
     /// unsucceeded; rows already written go when it ends, or its next merge writes them again).
     async fn succeed(
@@ -341,6 +343,7 @@ pub trait Results: Send + Sync + 'static {
         fence: &Fence,
         finished_at: UnixMs,
         result: &JobResult,
+        groups: &RunGroups,
     ) -> StoreResult<Option<u64>>;
     /// The accumulators of the job's done groups, in batch and group order.
     async fn partials(&self, id: &JobId) -> StoreResult<Vec<(ShardId, GroupStats)>>;
@@ -361,6 +364,14 @@ pub trait Results: Send + Sync + 'static {
         metric: &str,
         range: Operations,
     ) -> StoreResult<Vec<DistributionRow>>;
+    /// The groups' accumulators of the bins [`Results::distribution`] gives, in the same order:
+    /// what a query after the run reads. `None` for a bin stored before they were kept.
+    async fn distribution_groups(
+        &self,
+        id: &JobId,
+        metric: &str,
+        range: Operations,
+    ) -> StoreResult<Vec<Option<Vec<Accumulator>>>>;
     /// The listed devices' lives after device `after` (from the first without), in device order,
     /// at most `limit`: one page of a keyset walk, whatever the job's size.
     async fn lives_page(

@@ -6,14 +6,14 @@
 //! `migrations/postgres/`; the row mapping is shared with SQLite (`rows.rs`).
 
 use super::rows::{
-    self, Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, FORGET_EXPIRED_KEY,
+    self, Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, FORGET_EXPIRED_KEY, INSERT_DISTRIBUTION,
     LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY,
-    REMEMBERED_KEY, bind_distribution, bind_fence, bind_key, bind_life, bind_queued_job,
-    bind_schedule, bind_shard, claim_from_row, count_from_sql, count_to_sql, distribution_from_row,
-    distribution_rows, failed_too_often, gave_up, job_columns, job_from_row, life_from_row,
-    not_ended, partial_from_row, partial_to_sql, remembered_from_row, run_from_row,
-    schedule_columns, schedule_from_row, schema_current, shard_columns, shard_from_row,
-    shard_id_from_row, spec_from_json, to_json,
+    REMEMBERED_KEY, SELECT_DISTRIBUTION_GROUPS, bind_distribution, bind_fence, bind_key, bind_life,
+    bind_queued_job, bind_schedule, bind_shard, claim_from_row, count_from_sql, count_to_sql,
+    distribution_from_row, distribution_rows, failed_too_often, gave_up, groups_from_row,
+    job_columns, job_from_row, life_from_row, not_ended, partial_from_row, partial_to_sql,
+    remembered_from_row, row_groups_to_sql, run_from_row, schedule_columns, schedule_from_row,
+    schema_current, shard_columns, shard_from_row, shard_id_from_row, spec_from_json, to_json,
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
@@ -27,7 +27,8 @@ use crate::domain::{
 use async_trait::async_trait;
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::GroupStats;
-use bouncewear_model::montecarlo::{DeviceLife, Job, JobResult};
+use bouncewear_model::montecarlo::{DeviceLife, Job, JobResult, RunGroups};
+use bouncewear_model::stats::Accumulator;
 use sqlx::migrate::Migrator;
 use sqlx::postgres::{PgArguments, PgConnection, PgListener, PgPool, PgPoolOptions};
 use sqlx::query::Query;
@@ -306,7 +307,12 @@ impl PgStore {
     /// stops midway leaves rows that its rerun writes again, the same (the job is deterministic),
     /// or that ending the job drops. The bytes written (see [`JobRecord::stored_bytes`]); `None`
     /// once the claim no longer holds.
-    async fn write_rows(&self, fence: &Fence, result: &JobResult) -> StoreResult<Option<u64>> {
+    async fn write_rows(
+        &self,
+        fence: &Fence,
+        result: &JobResult,
+        groups: &RunGroups,
+    ) -> StoreResult<Option<u64>> {
         let distributions: Vec<_> = distribution_rows(result).collect();
         let mut bytes = 0;
         for chunk in distributions.chunks(rows::DISTRIBUTIONS_PER_WRITE) {
@@ -317,13 +323,17 @@ impl PgStore {
             }
             for (metric, row) in chunk {
                 bytes += to_json("summary", &row.summary)?.len() as u64;
-                let insert = sqlx::query(
-                    "INSERT INTO distributions (job_id, metric, kind, bin, op_start, op_end, n, mean, sd, min, max, \
-                     p05, p50, p95, exceedance, summary) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16) ON CONFLICT DO NOTHING",
-                );
-                bind_distribution(insert, &fence.job, metric, row)?
-                    .execute(&mut *tx)
-                    .await?;
+                let stored = row_groups_to_sql(groups, metric, row)?;
+                bytes += stored.len() as u64;
+                bind_distribution(
+                    sqlx::query(INSERT_DISTRIBUTION),
+                    &fence.job,
+                    metric,
+                    row,
+                    stored,
+                )?
+                .execute(&mut *tx)
+                .await?;
             }
             tx.commit().await?;
         }
@@ -830,9 +840,10 @@ impl Results for PgStore {
         fence: &Fence,
         finished_at: UnixMs,
         result: &JobResult,
+        groups: &RunGroups,
     ) -> StoreResult<Option<u64>> {
         let text = to_json("result", result)?;
-        let Some(row_bytes) = self.write_rows(fence, result).await? else {
+        let Some(row_bytes) = self.write_rows(fence, result, groups).await? else {
             return Ok(None);
         };
         let result_bytes = text.len() as u64 + row_bytes;
@@ -900,6 +911,23 @@ impl Results for PgStore {
         .fetch_all(&self.pool)
         .await?;
         rows.iter().map(distribution_from_row).collect()
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id, metric))]
+    async fn distribution_groups(
+        &self,
+        id: &JobId,
+        metric: &str,
+        range: Operations,
+    ) -> StoreResult<Vec<Option<Vec<Accumulator>>>> {
+        let rows = sqlx::query(SELECT_DISTRIBUTION_GROUPS)
+            .bind(id.as_str())
+            .bind(metric)
+            .bind(count_to_sql(range.start))
+            .bind(count_to_sql(range.end))
+            .fetch_all(&self.pool)
+            .await?;
+        rows.iter().map(groups_from_row).collect()
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]

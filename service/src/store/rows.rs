@@ -10,7 +10,8 @@ use crate::domain::{
     ShardId, ShardPlan, UnixMs,
 };
 use bouncewear_model::montecarlo::engine::GroupStats;
-use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
+use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec, RunGroups};
+use bouncewear_model::stats::Accumulator;
 use sqlx::migrate::Migrator;
 use sqlx::postgres::PgRow;
 use sqlx::query::Query;
@@ -25,6 +26,7 @@ pub(crate) trait ReadRow {
     fn maybe_text(&self, column: &str) -> Result<Option<String>, sqlx::Error>;
     fn flag(&self, column: &str) -> Result<bool, sqlx::Error>;
     fn bytes(&self, column: &str) -> Result<Vec<u8>, sqlx::Error>;
+    fn maybe_bytes(&self, column: &str) -> Result<Option<Vec<u8>>, sqlx::Error>;
 }
 
 macro_rules! read_row {
@@ -46,6 +48,9 @@ macro_rules! read_row {
                 self.try_get(column)
             }
             fn bytes(&self, column: &str) -> Result<Vec<u8>, sqlx::Error> {
+                self.try_get(column)
+            }
+            fn maybe_bytes(&self, column: &str) -> Result<Option<Vec<u8>>, sqlx::Error> {
                 self.try_get(column)
             }
         }
@@ -372,26 +377,37 @@ pub(crate) fn claim_from_row(row: &impl ReadRow) -> StoreResult<Claim> {
 /// takes the dense histogram counts' runs of zeros and small numbers to under a third (45 kB for a
 /// group of 10 bins x 14 metrics).
 pub(crate) fn partial_to_sql(stats: &GroupStats) -> StoreResult<Vec<u8>> {
-    use std::io::Write;
-    let text = to_json("group accumulators", stats)?;
-    let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
-    encoder
-        .write_all(text.as_bytes())
-        .and_then(|()| encoder.finish())
-        .map_err(|e| corrupt("group accumulators", e))
+    gzip_json("group accumulators", stats)
 }
 
 /// A done group's accumulators, from a row `batch, grp, partial`.
 pub(crate) fn partial_from_row(row: &impl ReadRow) -> StoreResult<(ShardId, GroupStats)> {
     let shard = shard_id_from_row(row)?;
-    use std::io::Read;
-    let stored = row.bytes("partial")?;
-    let mut text = Vec::with_capacity(stored.len() * 8);
-    flate2::read::GzDecoder::new(stored.as_slice())
-        .read_to_end(&mut text)
-        .map_err(|e| corrupt("group accumulators", e))?;
-    let stats = serde_json::from_slice(&text).map_err(|e| corrupt("group accumulators", e))?;
+    let stats = gunzip_json("group accumulators", &row.bytes("partial")?)?;
     Ok((shard, stats))
+}
+
+/// Accumulators as stored: JSON, every float by its bits, gzipped.
+fn gzip_json(what: &'static str, value: &impl serde::Serialize) -> StoreResult<Vec<u8>> {
+    use std::io::Write;
+    let text = to_json(what, value)?;
+    let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    encoder
+        .write_all(text.as_bytes())
+        .and_then(|()| encoder.finish())
+        .map_err(|e| corrupt(what, e))
+}
+
+fn gunzip_json<T: serde::de::DeserializeOwned>(
+    what: &'static str,
+    stored: &[u8],
+) -> StoreResult<T> {
+    use std::io::Read;
+    let mut text = Vec::with_capacity(stored.len() * 8);
+    flate2::read::GzDecoder::new(stored)
+        .read_to_end(&mut text)
+        .map_err(|e| corrupt(what, e))?;
+    serde_json::from_slice(&text).map_err(|e| corrupt(what, e))
 }
 
 // ---- results, distributions, device lives --------------------------------------------------
@@ -433,13 +449,18 @@ pub(crate) fn distribution_rows(
     bins.chain(devices)
 }
 
-/// Binds one `distributions` row: `job_id, metric, kind, bin, op_start, op_end, n, mean, sd, min,
-/// max, p05, p50, p95, exceedance, summary` as parameters 1 to 16.
+/// Inserts one `distributions` row (a merge step that reruns writes the same row again: kept).
+pub(crate) const INSERT_DISTRIBUTION: &str = "INSERT INTO distributions (job_id, metric, kind, bin, \
+     op_start, op_end, n, mean, sd, min, max, p05, p50, p95, exceedance, summary, groups) VALUES \
+     ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16, $17) ON CONFLICT DO NOTHING";
+
+/// Binds [`INSERT_DISTRIBUTION`]'s parameters: `groups` is [`row_groups_to_sql`].
 pub(crate) fn bind_distribution<'q, DB>(
     query: Statement<'q, DB>,
     job: &JobId,
     metric: &str,
     row: &DistributionRow,
+    groups: Vec<u8>,
 ) -> StoreResult<Statement<'q, DB>>
 where
     DB: Database,
@@ -447,6 +468,7 @@ where
     for<'t> f64: Encode<'t, DB> + Type<DB>,
     for<'t> Option<f64>: Encode<'t, DB> + Type<DB>,
     for<'t> String: Encode<'t, DB> + Type<DB>,
+    for<'t> Vec<u8>: Encode<'t, DB> + Type<DB>,
 {
     let summary = &row.summary;
     let quantile = |key: &str| summary.quantiles.get(key).map_or(0.0, |q| q.value);
@@ -466,7 +488,34 @@ where
         .bind(quantile("p50"))
         .bind(quantile("p95"))
         .bind(summary.exceedance.as_ref().map(|e| e.probability))
-        .bind(to_json("summary", summary)?))
+        .bind(to_json("summary", summary)?)
+        .bind(groups))
+}
+
+/// The groups' accumulators one distribution row summarises, as stored for queries after the run.
+pub(crate) fn row_groups_to_sql(
+    groups: &RunGroups,
+    metric: &str,
+    row: &DistributionRow,
+) -> StoreResult<Vec<u8>> {
+    let of_row = u64::try_from(row.bin)
+        .ok()
+        .and_then(|bin| groups.of(metric, bin))
+        .ok_or_else(|| corrupt(GROUPS, format!("the run has no {metric} bin {}", row.bin)))?;
+    gzip_json(GROUPS, &of_row)
+}
+
+const GROUPS: &str = "groups of a distribution";
+
+/// The groups of the bins of metric `$2` of job `$1` overlapping `[$3, $4)`, in bin order.
+pub(crate) const SELECT_DISTRIBUTION_GROUPS: &str = "SELECT groups FROM distributions \
+     WHERE job_id = $1 AND metric = $2 AND op_end > $3 AND op_start < $4 ORDER BY bin";
+
+/// A row's groups' accumulators; `None` for a row stored before they were kept.
+pub(crate) fn groups_from_row(row: &impl ReadRow) -> StoreResult<Option<Vec<Accumulator>>> {
+    row.maybe_bytes("groups")?
+        .map(|stored| gunzip_json(GROUPS, &stored))
+        .transpose()
 }
 
 /// Binds one `device_lives` row: `job_id, device, operations_to_failure, censored`.
