@@ -9,6 +9,7 @@ mod events;
 mod jobs;
 mod limits;
 mod postgres;
+mod query;
 mod schedules;
 mod simulate;
 mod strict;

@@ -11,7 +11,7 @@ use super::summary::{Merged, QuantileSummary};
 /// One side of a threshold: the share of values above it, or below it.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
-#[serde(rename_all = "lowercase", deny_unknown_fields)]
+#[serde(rename_all = "lowercase")]
 pub enum Threshold {
     /// Values strictly above it.
     Above(f64),

@@ -7,7 +7,7 @@ use super::error::{
 };
 use super::events::{next_look, progress_event, status_event};
 use super::{AppState, JsonText, idempotency_key, replayed};
-use crate::domain::{JobId, JobStatus, Once, Owner, QueuedJob, UnixMs, draw_seed};
+use crate::domain::{AfterRunQuery, JobId, JobStatus, Once, Owner, QueuedJob, UnixMs, draw_seed};
 use crate::store::{JobRecord, Operations, Page, QueueEvent, ShardRecord, StoreError};
 use axum::body::{Body, Bytes};
 use axum::extract::rejection::QueryRejection;
@@ -17,8 +17,8 @@ use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
 use bouncewear_model::Pointer;
-use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
-use bouncewear_model::stats::{QUANTILES, Summary};
+use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric, query_metric};
+use bouncewear_model::stats::{Accumulator, QUANTILES, QueryAnswer, Summary};
 use futures_util::stream::{Stream, StreamExt};
 use serde::{Deserialize, Serialize};
 use std::convert::Infallible;
@@ -446,6 +446,14 @@ pub struct DistributionQuery {
     /// `json` (default) or `csv`.
     #[param(inline, example = "csv")]
     pub format: Option<Format>,
+    /// Quantile levels to answer after the run, each bin gaining `query.quantiles` keyed by the
+    /// level in shortest form: 1 to 20 comma-separated numbers strictly between 0 and 1. JSON only.
+    #[param(example = "0.5,0.999")]
+    pub quantiles: Option<String>,
+    /// Thresholds to answer after the run, each bin gaining `query.exceedance` in this order:
+    /// 1 to 20 comma-separated `above:X` or `below:X`, X a finite number. JSON only.
+    #[param(example = "above:0.005,below:0.002")]
+    pub exceedance: Option<String>,
 }
 
 #[derive(Debug, Clone, Copy, Deserialize, ToSchema)]
@@ -464,6 +472,9 @@ pub struct DistributionBin {
     pub op_start: u64,
     /// End of the bin, exclusive.
     pub op_end: u64,
+    /// With `quantiles` or `exceedance`: their answers for this bin, with 95 % intervals.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub query: Option<QueryAnswer>,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -479,11 +490,15 @@ pub struct Distribution {
     pub bins: Vec<DistributionBin>,
 }
 
-/// One metric's bins, as JSON or CSV, optionally for a range of operations.
+/// One metric's bins, as JSON or CSV, optionally for a range of operations, optionally with any
+/// quantile and any threshold answered after the run.
 ///
 /// `format=json` (default) gives the bins as JSON, `format=csv` one CSV row per bin
 /// (`op_start,op_end,n,mean,...`, every quantile with its interval). `op_start` and `op_end` select
-/// the bins that overlap the range; an empty range has no bins (404).
+/// the bins that overlap the range; an empty range has no bins (404). With `quantiles` or
+/// `exceedance` (JSON only; 400 for a bad item, naming the parameter) each bin gains `query`:
+/// the asked quantiles and exceedance probabilities, from the bin's stored groups with the
+/// summaries' estimators and intervals (409 for a job stored before groups were kept).
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/distributions/{metric}", tag = "jobs",
     params(("id" = String, Path, description = "Job id"), ("metric" = String, Path, description = "An operation or device metric"), DistributionQuery),
@@ -505,37 +520,58 @@ pub async fn get_distribution(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let after_run = AfterRunQuery::parse(query.quantiles.as_deref(), query.exceedance.as_deref())
+        .map_err(|bad| ApiError::BadRequest(bad.to_string()))?;
+    let format = query.format.unwrap_or(Format::Json);
+    if after_run.is_some() && matches!(format, Format::Csv) {
+        return Err(ApiError::BadRequest(
+            "query parameters `quantiles` and `exceedance` are answered in JSON only, not with format=csv"
+                .to_owned(),
+        ));
+    }
     let (op_start, op_end) = (
         query.op_start.unwrap_or(0),
         query.op_end.unwrap_or(u64::MAX),
     );
     let record = succeeded(&state, &owner, &id).await?;
-    if Metric::parse(&metric).is_none() {
+    let Some(parsed) = Metric::parse(&metric) else {
         return Err(ApiError::NotFound(format!(
             "no metric `{metric}`; known: {}",
             Metric::all_names()
         )));
-    }
+    };
     let range = Operations {
         start: op_start,
         end: op_end,
     };
     let rows = state.store.distribution(&record.id, &metric, range).await?;
     let kind = rows.first().map(|r| r.kind.clone());
+    let Some(kind) = kind else {
+        return Err(ApiError::NotFound(format!(
+            "job {id} has no bins of `{metric}` in that range (was the metric requested?)"
+        )));
+    };
+    let mut answers = match after_run {
+        Some(after_run) => {
+            let groups = state
+                .store
+                .distribution_groups(&record.id, &metric, range)
+                .await?;
+            answer(parsed, groups, after_run).await?
+        }
+        None => Vec::new(),
+    }
+    .into_iter();
     let bins: Vec<DistributionBin> = rows
         .into_iter()
         .map(|row| DistributionBin {
             summary: row.summary,
             op_start: row.op_start,
             op_end: row.op_end,
+            query: answers.next(),
         })
         .collect();
-    let Some(kind) = kind else {
-        return Err(ApiError::NotFound(format!(
-            "job {id} has no bins of `{metric}` in that range (was the metric requested?)"
-        )));
-    };
-    Ok(match query.format.unwrap_or(Format::Json) {
+    Ok(match format {
         Format::Json => {
             let distribution = Distribution {
                 job_id: record.id.to_string(),
@@ -547,6 +583,29 @@ pub async fn get_distribution(
         }
         Format::Csv => immutable(&state, &headers, CSV, to_csv(&bins)),
     })
+}
+
+/// Each bin's answer to `after_run`, from its stored groups, off the async threads (a wide range
+/// of a large job decodes many accumulators); 409 for a bin stored before groups were kept.
+async fn answer(
+    metric: Metric,
+    groups: Vec<Option<Vec<Accumulator>>>,
+    after_run: AfterRunQuery,
+) -> Result<Vec<QueryAnswer>, ApiError> {
+    let groups: Vec<Vec<Accumulator>> = groups.into_iter().collect::<Option<_>>().ok_or_else(|| {
+        ApiError::Conflict(
+            "this job was stored before its groups were kept: rerun it to ask `quantiles` or `exceedance`"
+                .to_owned(),
+        )
+    })?;
+    tokio::task::spawn_blocking(move || {
+        groups
+            .iter()
+            .map(|bin| query_metric(metric, bin, &after_run.levels, &after_run.thresholds))
+            .collect()
+    })
+    .await
+    .map_err(|e| Internal(e.to_string()).into())
 }
 
 const JSON: &str = "application/json";

@@ -6,6 +6,7 @@
 pub mod idempotency;
 mod ids;
 pub mod jobs;
+pub mod query;
 pub mod schedules;
 pub mod shards;
 pub mod trend;
@@ -13,6 +14,7 @@ pub mod trend;
 pub use idempotency::{IdempotencyKey, Once};
 pub use ids::{Attempt, JobId, Owner, ScheduleId, UnixMs};
 pub use jobs::{JobStatus, QueueBound, QueuedJob, draw_seed};
+pub use query::AfterRunQuery;
 pub use schedules::{
     ScheduleDefinition, ScheduleLimits, ScheduleSpec, Statistic, Timetable, ValidSchedule,
 };

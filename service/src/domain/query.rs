@@ -1,0 +1,153 @@
+//! A query after the run (docs/contract.md "HTTP API", distributions): which quantile levels and
+//! which thresholds to answer from a metric's stored groups, read from the query string's
+//! `quantiles=0.5,0.999` and `exceedance=above:0.005,below:0.002`.
+
+use bouncewear_model::stats::Threshold;
+use std::fmt;
+
+/// At most this many levels, and this many thresholds, in one query.
+pub const MAX_ITEMS: usize = 20;
+
+/// The levels and thresholds of one query, each valid: levels in `(0, 1)`, thresholds finite.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct AfterRunQuery {
+    pub levels: Vec<f64>,
+    pub thresholds: Vec<Threshold>,
+}
+
+/// A query parameter at fault, and the rule it broke.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BadQuery {
+    pub parameter: &'static str,
+    pub rule: String,
+}
+
+impl fmt::Display for BadQuery {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "query parameter `{}`: {}", self.parameter, self.rule)
+    }
+}
+
+impl std::error::Error for BadQuery {}
+
+impl AfterRunQuery {
+    /// The query the two parameters ask for; `None` when neither is given.
+    pub fn parse(
+        quantiles: Option<&str>,
+        exceedance: Option<&str>,
+    ) -> Result<Option<Self>, BadQuery> {
+        if quantiles.is_none() && exceedance.is_none() {
+            return Ok(None);
+        }
+        let levels = items("quantiles", quantiles, level)?;
+        let thresholds = items("exceedance", exceedance, threshold)?;
+        Ok(Some(Self { levels, thresholds }))
+    }
+}
+
+/// The comma-separated items of `parameter`, each read by `read` (an absent parameter has none).
+fn items<T>(
+    parameter: &'static str,
+    text: Option<&str>,
+    read: fn(&str) -> Result<T, String>,
+) -> Result<Vec<T>, BadQuery> {
+    let Some(text) = text else {
+        return Ok(Vec::new());
+    };
+    let bad = |rule: String| BadQuery { parameter, rule };
+    let items: Vec<&str> = text.split(',').collect();
+    if items.len() > MAX_ITEMS {
+        return Err(bad(format!(
+            "at most {MAX_ITEMS} comma-separated items, got {}",
+            items.len()
+        )));
+    }
+    items
+        .into_iter()
+        .map(|item| read(item).map_err(|rule| bad(format!("`{}`: {rule}", shown(item)))))
+        .collect()
+}
+
+/// A level: a number strictly between 0 and 1.
+fn level(item: &str) -> Result<f64, String> {
+    number(item)
+        .filter(|q| *q > 0.0 && *q < 1.0)
+        .ok_or_else(|| "a quantile level must be a number strictly between 0 and 1".to_owned())
+}
+
+/// A threshold: `above:X` or `below:X` with X a finite number.
+fn threshold(item: &str) -> Result<Threshold, String> {
+    let rule = || "must be `above:X` or `below:X` with X a finite number".to_owned();
+    let (side, value) = item.split_once(':').ok_or_else(rule)?;
+    let value = number(value).ok_or_else(rule)?;
+    match side {
+        "above" => Ok(Threshold::Above(value)),
+        "below" => Ok(Threshold::Below(value)),
+        _ => Err(rule()),
+    }
+}
+
+/// A finite decimal number (not `inf`, `NaN` or beyond f64).
+fn number(text: &str) -> Option<f64> {
+    let plain = text
+        .bytes()
+        .all(|b| b.is_ascii_digit() || b"+-.eE".contains(&b));
+    text.parse::<f64>().ok().filter(|x| plain && x.is_finite())
+}
+
+/// An item as repeated in an error: at most 40 characters of it.
+fn shown(item: &str) -> String {
+    item.chars().take(40).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(quantiles: Option<&str>, exceedance: Option<&str>) -> Result<AfterRunQuery, String> {
+        AfterRunQuery::parse(quantiles, exceedance)
+            .map(Option::unwrap_or_default)
+            .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn levels_and_thresholds_are_read_in_order() {
+        let query = parse(Some("0.5,0.999"), Some("above:0.005,below:2e-3")).unwrap();
+        assert_eq!(query.levels, [0.5, 0.999]);
+        assert_eq!(
+            query.thresholds,
+            [Threshold::Above(0.005), Threshold::Below(0.002)]
+        );
+        assert_eq!(AfterRunQuery::parse(None, None), Ok(None));
+        assert_eq!(parse(None, Some("above:-1")).unwrap().levels, []);
+    }
+
+    #[test]
+    fn bad_items_name_the_parameter_and_the_rule() {
+        for (quantiles, exceedance, parameter) in [
+            (Some("0"), None, "quantiles"),
+            (Some("1"), None, "quantiles"),
+            (Some("0.5,"), None, "quantiles"),
+            (Some(""), None, "quantiles"),
+            (Some("NaN"), None, "quantiles"),
+            (Some("inf"), None, "quantiles"),
+            (None, Some("above:1e400"), "exceedance"),
+            (None, Some("above:inf"), "exceedance"),
+            (None, Some("over:1"), "exceedance"),
+            (None, Some("above"), "exceedance"),
+            (None, Some("above:"), "exceedance"),
+        ] {
+            let error = AfterRunQuery::parse(quantiles, exceedance).unwrap_err();
+            assert_eq!(error.parameter, parameter, "{quantiles:?} {exceedance:?}");
+        }
+        let many = vec!["0.5"; MAX_ITEMS + 1].join(",");
+        assert_eq!(
+            parse(Some(&many), None).unwrap_err(),
+            "query parameter `quantiles`: at most 20 comma-separated items, got 21"
+        );
+        assert_eq!(
+            parse(Some("0.5,2"), None).unwrap_err(),
+            "query parameter `quantiles`: `2`: a quantile level must be a number strictly between 0 and 1"
+        );
+    }
+}

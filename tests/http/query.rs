@@ -1,0 +1,90 @@
+//! `/v1/jobs/{id}/distributions/{metric}?quantiles=&exceedance=`: any quantile and any threshold,
+//! answered after the run from the stored groups, with intervals.
+
+use crate::support::app::{Service, TestApp};
+use crate::support::client::{assert_problem, get};
+use crate::support::{scattered_job, temp_db};
+use serde_json::Value;
+use std::time::Duration;
+
+fn pair(value: &Value) -> [f64; 2] {
+    [value[0].as_f64().unwrap(), value[1].as_f64().unwrap()]
+}
+
+#[test]
+fn any_quantile_and_threshold_are_answered_after_the_run_with_intervals() {
+    let server = TestApp::start(&temp_db("query"), &[]);
+    let id = server.submit(&scattered_job(64, 40, 5));
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let url = |query: &str| server.url(&format!("/v1/jobs/{id}/distributions/e1{query}"));
+    let plain = get(&url(""), None).json();
+    assert!(
+        plain["bins"][0].get("query").is_none(),
+        "unchanged without a query"
+    );
+    let median = plain["bins"][0]["quantiles"]["p50"]["value"]
+        .as_f64()
+        .unwrap();
+
+    let asked = get(
+        &url(&format!(
+            "?quantiles=0.5,0.999&exceedance=above:{median},below:{median}"
+        )),
+        None,
+    );
+    assert_eq!(asked.status, 200, "{}", asked.body);
+    let asked = asked.json();
+    let bins = asked["bins"].as_array().unwrap();
+    assert_eq!(bins.len(), plain["bins"].as_array().unwrap().len());
+    for bin in bins {
+        let (min, max) = (bin["min"].as_f64().unwrap(), bin["max"].as_f64().unwrap());
+        let query = &bin["query"];
+        assert_eq!(
+            query["quantiles"]["0.5"], bin["quantiles"]["p50"],
+            "level 0.5 is the job's own p50"
+        );
+        for level in ["0.5", "0.999"] {
+            let value = query["quantiles"][level]["value"].as_f64().unwrap();
+            let [lo, hi] = pair(&query["quantiles"][level]["ci95"]);
+            assert!(
+                min <= lo && lo <= value && value <= hi && hi <= max,
+                "{level}: {query}"
+            );
+        }
+        let exceedance = query["exceedance"].as_array().unwrap();
+        assert_eq!(exceedance.len(), 2);
+        assert_eq!(exceedance[0]["above"].as_f64(), Some(median));
+        assert_eq!(exceedance[1]["below"].as_f64(), Some(median));
+        for item in exceedance {
+            let probability = item["probability"].as_f64().unwrap();
+            let [lo, hi] = pair(&item["ci95"]);
+            assert!(
+                0.0 <= lo && lo <= probability && probability <= hi && hi <= 1.0,
+                "{item}"
+            );
+        }
+        let total = exceedance[0]["probability"].as_f64().unwrap()
+            + exceedance[1]["probability"].as_f64().unwrap();
+        assert!(total <= 1.0, "above and below the same threshold: {total}");
+    }
+}
+
+#[test]
+fn a_bad_query_is_400_naming_its_parameter() {
+    let server = TestApp::start(&temp_db("bad-query"), &[]);
+    let id = server.submit(&scattered_job(4, 4, 5));
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    for (query, parameter) in [
+        ("quantiles=1", "quantiles"),
+        ("quantiles=0.5,,0.9", "quantiles"),
+        ("quantiles=NaN", "quantiles"),
+        ("exceedance=over:1", "exceedance"),
+        ("exceedance=above:1e999", "exceedance"),
+        ("quantiles=0.5&format=csv", "format=csv"),
+    ] {
+        let url = server.url(&format!("/v1/jobs/{id}/distributions/e1?{query}"));
+        let problem = assert_problem(&get(&url, None), 400);
+        let detail = problem["detail"].as_str().unwrap();
+        assert!(detail.contains(parameter), "{query}: {detail}");
+    }
+}
