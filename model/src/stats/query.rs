@@ -41,9 +41,12 @@ impl Threshold {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
 pub struct ThresholdExceedance {
+    /// `above` or `below`, and the threshold.
     #[serde(flatten)]
     pub threshold: Threshold,
+    /// The share of values beyond the threshold.
     pub probability: f64,
+    /// Its 95 % confidence interval: Wilson's, with the design effect of the groups.
     pub ci95: [f64; 2],
 }
 
@@ -52,7 +55,9 @@ pub struct ThresholdExceedance {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq, Default)]
 pub struct QueryAnswer {
+    /// Per level asked, keyed by the level in shortest form: the value and its Woodruff interval.
     pub quantiles: BTreeMap<String, QuantileSummary>,
+    /// Per threshold asked, in order: the probability beyond it and its interval.
     pub exceedance: Vec<ThresholdExceedance>,
 }
 

@@ -542,6 +542,13 @@ const OUTPUT_DESCRIPTIONS: &[(&str, &[(&str, &str)])] = &[
         ],
     ),
     (
+        "DistributionBin",
+        &[(
+            "query",
+            "With `quantiles` or `exceedance`: their answers for this bin, with 95 % intervals",
+        )],
+    ),
+    (
         "QuantileSummary",
         &[
             ("value", "The quantile (within 0.2 %)"),
