@@ -264,8 +264,8 @@ impl<'de> serde::de::DeserializeSeed<'de> for GivenTwice {
 /// metric's name, and the name of any member. Longer text is never a mistake worth storing.
 pub const MAX_TEXT_CHARS: usize = 200;
 
-/// Whether `pointer` is the list field `field`, in which a `*` token stands for any index
-/// (`/correlation/matrix/*`: each row of a matrix).
+/// Whether `pointer` is the list field `field`, in which a `*` token stands for any index or
+/// member name (`/correlation/matrix/*`: each row of a matrix; `/limits/*`: any metric's list).
 fn matches_field(field: &str, pointer: &str) -> bool {
     let (mut field, mut pointer) = (field.split('/'), pointer.split('/'));
     loop {

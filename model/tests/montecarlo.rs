@@ -586,3 +586,44 @@ fn a_query_after_the_run_at_the_standard_levels_answers_the_results_summaries() 
     assert!(groups.of("total_bounce_s", 4).is_none());
     assert!(groups.of("eroded_mass_kg", 1).is_none());
 }
+
+#[test]
+fn a_metric_may_have_several_limits_answered_as_a_query_after_the_run_answers_them() {
+    use bouncewear_model::montecarlo::{RunGroups, engine, summarize_job};
+    use bouncewear_model::stats::{Threshold, query};
+    let spec = json!({"devices": 16, "operations": 10, "bin_operations": 5,
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                     "distribution": {"kind": "uniform", "min": 0.2, "max": 0.6}}],
+        "limits": {"e1": [{"above": 0.4}, {"below": 0.3}], "total_bounce_s": 0.002}});
+    let job = job(spec.clone());
+    let tally = engine::run(&job, &Silent, |_| false).unwrap();
+    let result = summarize_job(&job, &tally, 1.0);
+    let groups = RunGroups::new(&job, tally);
+    let thresholds = [Threshold::Above(0.4), Threshold::Below(0.3)];
+    for (bin, summary) in result.operations["e1"].iter().enumerate() {
+        let asked = query(&groups.of("e1", bin as u64).unwrap(), &[], &thresholds);
+        assert_eq!(summary.summary.exceedances, asked.exceedance);
+        assert_eq!(summary.summary.exceedance, None);
+    }
+    // The one-number form keeps its shape: `exceedance`, and no `exceedances`.
+    let json = serde_json::to_value(&result).unwrap();
+    let bin = &json["operations"]["total_bounce_s"][0];
+    assert_eq!(bin["exceedance"]["limit"], 0.002);
+    assert!(bin.get("exceedances").is_none());
+    assert_eq!(json["operations"]["e1"][0]["exceedances"][1]["below"], 0.3);
+    assert_eq!(json["job"]["limits"], spec["limits"]);
+}
+
+#[test]
+fn a_list_of_limits_holds_1_to_20_finite_thresholds() {
+    assert_eq!(pointers(json!({"limits": {"e1": []}})), ["/limits/e1"]);
+    let invalid = Job::from_json(
+        r#"{"limits": {"e1": [{"above": 1}, {"below": 1e400}]}}"#,
+        || 7,
+    )
+    .unwrap_err();
+    assert_eq!(invalid.pointers(), ["/limits/e1/1/below"], "{invalid}");
+    let many: Vec<Value> = (0..21).map(|i| json!({"above": i})).collect();
+    assert_eq!(pointers(json!({"limits": {"e1": many}})), ["/limits/e1"]);
+    assert!(pointers(json!({"limits": {"e1": [{"above": 1}, {"below": 2}]}})).is_empty());
+}

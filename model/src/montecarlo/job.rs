@@ -7,6 +7,7 @@ use super::metric::{DeviceMetric, Metric, OperationMetric};
 use crate::error::{FieldError, InvalidInput, Pointer};
 use crate::operation::Fidelity;
 use crate::scenario::{ArcRestitutionLawKind, Scenario, ScenarioSpec, WearLawKind};
+use crate::stats::Threshold;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -17,9 +18,10 @@ pub const MAX_DEVICES: u64 = 100_000_000;
 /// See [`MAX_DEVICES`].
 pub const MAX_OPERATIONS: u64 = 100_000_000;
 /// The members of a job that are lists (`*` for any index): JSON arrays are refused elsewhere.
-pub const LIST_FIELDS: [&str; 5] = [
+pub const LIST_FIELDS: [&str; 6] = [
     "/scatter",
     "/metrics",
+    "/limits/*",
     "/correlation/parameters",
     "/correlation/matrix",
     "/correlation/matrix/*",
@@ -67,7 +69,7 @@ pub struct JobSpec {
     pub metrics: Option<Vec<String>>,
     /// Exceedance limits by metric name: the Result reports the probability of exceeding each. Each metric must be among the job's metrics.
     #[serde(default)]
-    pub limits: BTreeMap<String, f64>,
+    pub limits: BTreeMap<String, LimitSpec>,
     /// A precision target: more device batches until it is met, up to `max_devices`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub precision: Option<PrecisionSpec>,
@@ -331,6 +333,56 @@ pub struct Precision {
     pub max_devices: u64,
 }
 
+/// A metric's exceedance limits (docs/contract.md "Job"): one number, the Result's `exceedance`
+/// above it (counted exactly), or 1 to 20 thresholds `{"above": x}` / `{"below": x}`, the
+/// Result's `exceedances`, as a query after the run answers them.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum LimitSpec {
+    Above(f64),
+    Thresholds(Vec<Threshold>),
+}
+
+/// At most this many thresholds per metric.
+pub const MAX_THRESHOLDS: usize = 20;
+
+impl LimitSpec {
+    /// Whether every number is finite and a list holds 1 to [`MAX_THRESHOLDS`]; pushes what is not.
+    fn check(&self, at: &Pointer, errors: &mut Vec<FieldError>) -> bool {
+        let before = errors.len();
+        let mut fault = |pointer: &Pointer, detail: String| {
+            errors.push(FieldError {
+                pointer: pointer.to_string(),
+                detail,
+            })
+        };
+        match self {
+            LimitSpec::Above(limit) if !limit.is_finite() => {
+                fault(at, "must be a finite number".to_owned())
+            }
+            LimitSpec::Above(_) => {}
+            LimitSpec::Thresholds(list) => {
+                if !(1..=MAX_THRESHOLDS).contains(&list.len()) {
+                    fault(
+                        at,
+                        format!(
+                            "must list 1 to {MAX_THRESHOLDS} thresholds, got {}",
+                            list.len()
+                        ),
+                    );
+                }
+                for (i, threshold) in list.iter().enumerate() {
+                    if !threshold.value().is_finite() {
+                        fault(&at.child(i), "must be a finite number".to_owned());
+                    }
+                }
+            }
+        }
+        errors.len() == before
+    }
+}
+
 /// A job that passed every rule: defaults filled in, seed fixed, distributions ready. It can only be
 /// built by [`Job::new`], so the engine never re-validates and the parts always agree with `spec`.
 #[derive(Debug, Clone, PartialEq)]
@@ -344,6 +396,7 @@ pub struct Job {
     operation_metrics: Vec<OperationMetric>,
     device_metrics: Vec<DeviceMetric>,
     limits: BTreeMap<Metric, f64>,
+    thresholds: BTreeMap<Metric, Vec<Threshold>>,
     precision: Option<Precision>,
     failure: Vec<(Metric, Criterion)>,
 }
@@ -444,22 +497,24 @@ impl Job {
             }
         };
 
-        let mut limits = BTreeMap::new();
-        for (name, &limit) in &spec.limits {
+        let (mut limits, mut thresholds) = (BTreeMap::new(), BTreeMap::new());
+        for (name, limit) in &spec.limits {
             let at = root.child("limits").child(name);
             if let Some(metric) = parse_metric(name, &at, polarity, &mut errors) {
-                if !limit.is_finite() {
-                    errors.push(FieldError {
-                        pointer: at.to_string(),
-                        detail: "must be a finite number".to_owned(),
-                    });
-                } else if !metrics.contains(&metric) {
+                if !metrics.contains(&metric) {
                     errors.push(FieldError {
                         pointer: at.to_string(),
                         detail: format!("`{name}` is not among the job's metrics"),
                     });
-                } else {
-                    limits.insert(metric, limit);
+                } else if limit.check(&at, &mut errors) {
+                    match limit {
+                        LimitSpec::Above(limit) => {
+                            limits.insert(metric, *limit);
+                        }
+                        LimitSpec::Thresholds(list) => {
+                            thresholds.insert(metric, list.clone());
+                        }
+                    }
                 }
             }
         }
@@ -486,6 +541,7 @@ impl Job {
             operation_metrics,
             device_metrics,
             limits,
+            thresholds,
             precision,
             failure,
         })
@@ -560,8 +616,14 @@ impl Job {
         &self.device_metrics
     }
 
+    /// The limits given as one number: their exceedance is counted exactly as the job runs.
     pub fn limits(&self) -> &BTreeMap<Metric, f64> {
         &self.limits
+    }
+
+    /// The limits given as a list of thresholds, answered from the groups after the run.
+    pub fn thresholds(&self) -> &BTreeMap<Metric, Vec<Threshold>> {
+        &self.thresholds
     }
 
     pub fn precision(&self) -> Option<&Precision> {

@@ -13,7 +13,7 @@ pub mod lives;
 pub mod metric;
 
 pub use engine::{Cancelled, Observer, Silent, Tally, Watch};
-pub use job::{Job, JobSpec};
+pub use job::{Job, JobSpec, LimitSpec};
 pub use kernel::{Isa, Kernel};
 pub use lives::{DeviceLife, GroupLives};
 pub use metric::{DeviceMetric, Metric, OperationMetric};
@@ -322,10 +322,12 @@ fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> 
                 .into_par_iter()
                 .map(|b| {
                     let op_start = job.bin_operations() * b as u64;
-                    let mut summary = summarize(&operation_groups(job, tally, b, m));
+                    let groups = operation_groups(job, tally, b, m);
+                    let mut summary = summarize(&groups);
                     if metric.is_integer() {
                         round_quantiles(&mut summary);
                     }
+                    answer_thresholds(job, Metric::Operation(*metric), &groups, &mut summary);
                     Bin {
                         summary,
                         op_start,
@@ -336,6 +338,14 @@ fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> 
             (metric.name().to_owned(), summaries)
         })
         .collect()
+}
+
+/// The summary's `exceedances`: the metric's thresholds, if the job lists any, answered as a query
+/// after the run answers them.
+fn answer_thresholds(job: &Job, metric: Metric, groups: &[Accumulator], summary: &mut Summary) {
+    if let Some(thresholds) = job.thresholds().get(&metric) {
+        summary.exceedances = query(groups, &[], thresholds).exceedance;
+    }
 }
 
 /// The sketch reports a bucket midpoint (within 0.2 %); for a whole-number metric below 256 each bucket
@@ -413,7 +423,9 @@ fn summarize_devices(job: &Job, tally: &Tally) -> BTreeMap<String, Summary> {
         .map(|(m, metric)| {
             let groups: Vec<Accumulator> =
                 tally.groups.iter().map(|g| g.devices[m].clone()).collect();
-            (metric.name().to_owned(), summarize(&groups))
+            let mut summary = summarize(&groups);
+            answer_thresholds(job, Metric::Device(*metric), &groups, &mut summary);
+            (metric.name().to_owned(), summary)
         })
         .collect()
 }

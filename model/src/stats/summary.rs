@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 use super::QUANTILES;
 use super::accumulator::Accumulator;
 use super::intervals::{Z_975, student_t_975, wilson_interval};
+use super::query::ThresholdExceedance;
 
 /// Number of equal-width histogram bins between the exact min and max.
 pub const HISTOGRAM_BINS: usize = 20;
@@ -64,6 +65,10 @@ pub struct Summary {
     /// Present only for a metric with a configured limit.
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub exceedance: Option<Exceedance>,
+    /// Present only for a metric with a list of thresholds: one each, in the job's order, as a
+    /// query after the run ([`super::query`]) answers them.
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
+    pub exceedances: Vec<ThresholdExceedance>,
 }
 
 /// Summarises the groups of one (metric, bin): merges them, in slice order, for the point values
@@ -133,6 +138,7 @@ pub fn summarize(groups: &[Accumulator]) -> Summary {
         quantiles,
         histogram: histogram(all),
         exceedance,
+        exceedances: Vec::new(),
     }
 }
 

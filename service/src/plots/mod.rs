@@ -238,6 +238,7 @@ mod fixtures {
                 probability: 0.1,
                 ci95: [0.05, 0.15],
             }),
+            exceedances: Vec::new(),
         }
     }
 
