@@ -4,7 +4,7 @@
 use crate::support::app::{Service, TestApp};
 use crate::support::client::{assert_problem, get};
 use crate::support::{scattered_job, temp_db};
-use serde_json::Value;
+use serde_json::{Value, json};
 use std::time::Duration;
 
 fn pair(value: &Value) -> [f64; 2] {
@@ -14,7 +14,9 @@ fn pair(value: &Value) -> [f64; 2] {
 #[test]
 fn any_quantile_and_threshold_are_answered_after_the_run_with_intervals() {
     let server = TestApp::start(&temp_db("query"), &[]);
-    let id = server.submit(&scattered_job(64, 40, 5));
+    let mut job = scattered_job(64, 40, 5);
+    job["limits"]["e1"] = json!([{"above": 0.3}, {"below": 0.3}]);
+    let id = server.submit(&job);
     server.wait_for(&id, "succeeded", Duration::from_secs(60));
     let url = |query: &str| server.url(&format!("/v1/jobs/{id}/distributions/e1{query}"));
     let plain = get(&url(""), None).json();
@@ -66,6 +68,17 @@ fn any_quantile_and_threshold_are_answered_after_the_run_with_intervals() {
         let total = exceedance[0]["probability"].as_f64().unwrap()
             + exceedance[1]["probability"].as_f64().unwrap();
         assert!(total <= 1.0, "above and below the same threshold: {total}");
+    }
+
+    // The job's list of limits is answered as the same query answers it.
+    let limits = get(&url("?exceedance=above:0.3,below:0.3"), None).json();
+    for (bin, stored) in limits["bins"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(plain["bins"].as_array().unwrap())
+    {
+        assert_eq!(bin["query"]["exceedance"], stored["exceedances"]);
     }
 }
 

@@ -67,7 +67,7 @@ pub struct JobSpec {
     /// Metrics to summarise (default: all); at least one, each once. Anode/cathode masses need `scenario.material.anode_erosion_fraction`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub metrics: Option<Vec<String>>,
-    /// Exceedance limits by metric name: the Result reports the probability of exceeding each. Each metric must be among the job's metrics.
+    /// Exceedance limits by metric name, each a number (the Result reports the probability above it) or a list of 1 to 20 `{"above": x}` / `{"below": x}` (the probability beyond each). Each metric must be among the job's metrics.
     #[serde(default)]
     pub limits: BTreeMap<String, LimitSpec>,
     /// A precision target: more device batches until it is met, up to `max_devices`.
