@@ -119,7 +119,7 @@ mod tests {
             [Threshold::Above(0.005), Threshold::Below(0.002)]
         );
         assert_eq!(AfterRunQuery::parse(None, None), Ok(None));
-        assert_eq!(parse(None, Some("above:-1")).unwrap().levels, []);
+        assert!(parse(None, Some("above:-1")).unwrap().levels.is_empty());
     }
 
     #[test]
