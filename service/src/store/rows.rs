@@ -2,8 +2,8 @@
 //! place per table, whatever the database), and how values are stored (counts, seeds, times, JSON).
 
 use super::{
-    Claim, DistributionRow, Fence, JobRecord, RunRecord, ScheduleRecord, ShardRecord, StoreError,
-    StoreResult,
+    Claim, DistributionRow, Fence, JobRecord, Operations, RunRecord, ScheduleRecord, ShardRecord,
+    StoreError, StoreResult,
 };
 use crate::domain::{
     Attempt, IdempotencyKey, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId,
@@ -507,9 +507,32 @@ pub(crate) fn row_groups_to_sql(
 
 const GROUPS: &str = "groups of a distribution";
 
-/// The groups of the bins of metric `$2` of job `$1` overlapping `[$3, $4)`, in bin order.
+/// The bins of metric `$2` of job `$1` overlapping `[$3, $4)`, in bin order: their summaries.
+pub(crate) const SELECT_DISTRIBUTION: &str = "SELECT kind, bin, op_start, op_end, summary \
+     FROM distributions WHERE job_id = $1 AND metric = $2 AND op_end > $3 AND op_start < $4 ORDER BY bin";
+
+/// The same bins' groups' accumulators.
 pub(crate) const SELECT_DISTRIBUTION_GROUPS: &str = "SELECT groups FROM distributions \
      WHERE job_id = $1 AND metric = $2 AND op_end > $3 AND op_start < $4 ORDER BY bin";
+
+/// Binds [`SELECT_DISTRIBUTION`]'s (or [`SELECT_DISTRIBUTION_GROUPS`]') parameters.
+pub(crate) fn bind_bins<'q, DB>(
+    query: Statement<'q, DB>,
+    job: &JobId,
+    metric: &str,
+    range: Operations,
+) -> Statement<'q, DB>
+where
+    DB: Database,
+    for<'t> i64: Encode<'t, DB> + Type<DB>,
+    for<'t> String: Encode<'t, DB> + Type<DB>,
+{
+    query
+        .bind(job.to_string())
+        .bind(metric.to_owned())
+        .bind(count_to_sql(range.start))
+        .bind(count_to_sql(range.end))
+}
 
 /// A row's groups' accumulators; `None` for a row stored before they were kept.
 pub(crate) fn groups_from_row(row: &impl ReadRow) -> StoreResult<Option<Vec<Accumulator>>> {

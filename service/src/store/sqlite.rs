@@ -8,13 +8,13 @@
 use super::rows::{
     self, Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, FORGET_EXPIRED_KEY, INSERT_DISTRIBUTION,
     LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY,
-    REMEMBERED_KEY, SELECT_DISTRIBUTION_GROUPS, bind_distribution, bind_fence, bind_key, bind_life,
-    bind_queued_job, bind_schedule, bind_shard, claim_from_row, count_from_sql, count_to_sql,
-    distribution_from_row, distribution_rows, failed_too_often, gave_up, groups_from_row,
-    job_columns, job_from_row, life_from_row, not_ended, partial_from_row, partial_to_sql,
-    remembered_from_row, row_groups_to_sql, run_from_row, schedule_columns, schedule_from_row,
-    schema_current, seed_to_sql, shard_columns, shard_from_row, shard_id_from_row, spec_from_json,
-    to_json,
+    REMEMBERED_KEY, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, bind_bins, bind_distribution,
+    bind_fence, bind_key, bind_life, bind_queued_job, bind_schedule, bind_shard, claim_from_row,
+    count_from_sql, count_to_sql, distribution_from_row, distribution_rows, failed_too_often,
+    gave_up, groups_from_row, job_columns, job_from_row, life_from_row, not_ended,
+    partial_from_row, partial_to_sql, remembered_from_row, row_groups_to_sql, run_from_row,
+    schedule_columns, schedule_from_row, schema_current, seed_to_sql, shard_columns,
+    shard_from_row, shard_id_from_row, spec_from_json, to_json,
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
@@ -973,16 +973,9 @@ impl Results for SqliteStore {
         metric: &str,
         range: Operations,
     ) -> StoreResult<Vec<DistributionRow>> {
-        let rows = sqlx::query(
-            "SELECT kind, bin, op_start, op_end, summary FROM distributions \
-             WHERE job_id = ?1 AND metric = ?2 AND op_end > ?3 AND op_start < ?4 ORDER BY bin",
-        )
-        .bind(id.as_str())
-        .bind(metric)
-        .bind(count_to_sql(range.start))
-        .bind(count_to_sql(range.end))
-        .fetch_all(&self.readers)
-        .await?;
+        let rows = bind_bins(sqlx::query(SELECT_DISTRIBUTION), id, metric, range)
+            .fetch_all(&self.readers)
+            .await?;
         rows.iter().map(distribution_from_row).collect()
     }
 
@@ -993,11 +986,7 @@ impl Results for SqliteStore {
         metric: &str,
         range: Operations,
     ) -> StoreResult<Vec<Option<Vec<Accumulator>>>> {
-        let rows = sqlx::query(SELECT_DISTRIBUTION_GROUPS)
-            .bind(id.as_str())
-            .bind(metric)
-            .bind(count_to_sql(range.start))
-            .bind(count_to_sql(range.end))
+        let rows = bind_bins(sqlx::query(SELECT_DISTRIBUTION_GROUPS), id, metric, range)
             .fetch_all(&self.readers)
             .await?;
         rows.iter().map(groups_from_row).collect()
