@@ -6,7 +6,7 @@
 
 use bouncewear_model::calibration::{FITTED, MAX_OBSERVATIONS, MAX_OPERATION, MAX_PARAMETERS};
 use bouncewear_model::error::MAX_TEXT_CHARS;
-use bouncewear_model::montecarlo::job::{MAX_DEVICES, MAX_OPERATIONS};
+use bouncewear_model::montecarlo::job::{MAX_DEVICES, MAX_OPERATIONS, MAX_THRESHOLDS};
 use bouncewear_model::montecarlo::{DeviceMetric, OperationMetric};
 use bouncewear_model::scenario::{MAX_BOUNCES_LIMIT, MAX_MAGNITUDE, MIN_MAGNITUDE};
 use bouncewear_model::stats::QUANTILES;
@@ -342,6 +342,28 @@ fn constrain_request_fields(document: &mut Value) {
                 "properties": {"static_force_n": {"const": 0}, "spring_stiffness_n_per_m": {"const": 0}}
             }),
         );
+    }
+    // A list of limits holds 1 to 20 thresholds, each exactly one of `above` or `below`; in an
+    // answer (ThresholdExceedance) a threshold's probability and interval sit beside it.
+    if let (Some(sides), Some(answer)) = (
+        schemas.get("Threshold").cloned(),
+        schemas.pointer_mut("/ThresholdExceedance/allOf/0"),
+    ) {
+        *answer = sides;
+    }
+    if let Some(Value::Object(list)) = schemas.pointer_mut("/LimitSpec/oneOf/1") {
+        list.extend([
+            ("minItems".to_owned(), json!(1)),
+            ("maxItems".to_owned(), json!(MAX_THRESHOLDS)),
+        ]);
+    }
+    for side in schemas
+        .pointer_mut("/Threshold/oneOf")
+        .and_then(Value::as_array_mut)
+        .into_iter()
+        .flatten()
+    {
+        side["additionalProperties"] = json!(false);
     }
 }
 
