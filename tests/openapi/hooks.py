@@ -115,6 +115,32 @@ def repair_job(job):
             del job["precision"]
 
 
+def finite(text):
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if value - value == 0 else None
+
+
+def repair_after_run_query(query):
+    """A query after the run: each level a number strictly between 0 and 1, each threshold a finite
+    number (the patterns state the characters, not the values), and neither with `format=csv`."""
+    if query.get("format") == "csv":
+        query.pop("quantiles", None)
+        query.pop("exceedance", None)
+    levels = query.get("quantiles")
+    if levels is not None and not all(
+        (finite(level) or 0) > 0 and (finite(level) or 1) < 1 for level in levels.split(",")
+    ):
+        query["quantiles"] = "0.5,0.999"
+    thresholds = query.get("exceedance")
+    if thresholds is not None and not all(
+        finite(item.partition(":")[2]) is not None for item in thresholds.split(",")
+    ):
+        query["exceedance"] = "above:0.005,below:0.002"
+
+
 # Just before each call: the stateful phase fills bodies from earlier responses after generation.
 @schemathesis.hook
 def before_call(context, case, kwargs):
@@ -126,6 +152,8 @@ def before_call(context, case, kwargs):
     if case.headers and "Idempotency-Key" in case.headers:
         case.headers["Idempotency-Key"] = uuid.uuid4().hex
     operation = case.operation
+    if operation.path.endswith("/distributions/{metric}") and case.query:
+        repair_after_run_query(case.query)
     body = case.body if isinstance(case.body, dict) else None
     if body is None:
         return

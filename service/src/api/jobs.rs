@@ -448,11 +448,14 @@ pub struct DistributionQuery {
     pub format: Option<Format>,
     /// Quantile levels to answer after the run, each bin gaining `query.quantiles` keyed by the
     /// level in shortest form: 1 to 20 comma-separated numbers strictly between 0 and 1. JSON only.
-    #[param(example = "0.5,0.999")]
+    #[param(pattern = "^[-+0-9.eE]+(,[-+0-9.eE]+){0,19}$", example = "0.5,0.999")]
     pub quantiles: Option<String>,
     /// Thresholds to answer after the run, each bin gaining `query.exceedance` in this order:
     /// 1 to 20 comma-separated `above:X` or `below:X`, X a finite number. JSON only.
-    #[param(example = "above:0.005,below:0.002")]
+    #[param(
+        pattern = "^(above|below):[-+0-9.eE]+(,(above|below):[-+0-9.eE]+){0,19}$",
+        example = "above:0.005,below:0.002"
+    )]
     pub exceedance: Option<String>,
 }
 
