@@ -237,22 +237,44 @@ mod tests {
     const P_ABOVE_HALF: f64 = 0.308_537_538_725_986_9;
     const P_BELOW_MINUS_ONE: f64 = 0.158_655_253_931_457_05;
 
+    /// A job's design: groups of devices of operations, the sd of the devices' offsets.
+    struct Design {
+        groups: usize,
+        devices: usize,
+        operations: usize,
+        device_sd: f64,
+    }
+
+    /// Strongly correlated operations: 16 groups of 4 devices of 25 operations each.
+    const CLUSTERED: Design = Design {
+        groups: 16,
+        devices: 4,
+        operations: 25,
+        device_sd: 1.5,
+    };
+
+    /// Independent values: 32 groups of 50 devices of one operation.
+    const INDEPENDENT: Design = Design {
+        groups: 32,
+        devices: 50,
+        operations: 1,
+        device_sd: 0.0,
+    };
+
     /// How often the after-run intervals of `reps` simulated jobs (seeds `seed..seed + reps`) cover
-    /// the truth: the 0.9 quantile, the share above 0.5 sd and the share below -1 sd. Each job has
-    /// 16 groups of 4 devices of 25 strongly correlated operations (value = device offset + noise,
-    /// offsets of sd 1.5), so the whole is normal with sd `s = sqrt(1 + 1.5^2)`.
-    fn coverage(reps: u64, seed: u64) -> [f64; 3] {
-        let (device_sd, groups, devices, operations) = (1.5, 16, 4, 25);
-        let s = (1.0f64 + device_sd * device_sd).sqrt();
+    /// the truth: the 0.9 quantile, the share above 0.5 sd and the share below -1 sd. A value is
+    /// its device's offset plus noise, so the whole is normal with sd `s = sqrt(1 + device_sd^2)`.
+    fn coverage(design: &Design, reps: u64, seed: u64) -> [f64; 3] {
+        let s = (1.0 + design.device_sd * design.device_sd).sqrt();
         let mut hits = [0u64; 3];
         for rep in 0..reps {
             let mut rng = SplitMix(seed + rep);
-            let accumulators: Vec<Accumulator> = (0..groups)
+            let accumulators: Vec<Accumulator> = (0..design.groups)
                 .map(|_| {
                     let mut acc = Accumulator::new(None);
-                    for _ in 0..devices {
-                        let offset = device_sd * rng.normal();
-                        (0..operations).for_each(|_| acc.push(offset + rng.normal()));
+                    for _ in 0..design.devices {
+                        let offset = design.device_sd * rng.normal();
+                        (0..design.operations).for_each(|_| acc.push(offset + rng.normal()));
                     }
                     acc
                 })
@@ -272,10 +294,12 @@ mod tests {
 
     #[test]
     fn after_run_intervals_cover_the_truth() {
-        let [quantile, above, below] = coverage(200, 1000);
-        assert!((0.88..=0.99).contains(&quantile), "p90 {quantile}");
-        assert!((0.88..=0.99).contains(&above), "above {above}");
-        assert!((0.88..=0.99).contains(&below), "below {below}");
+        for design in [CLUSTERED, INDEPENDENT] {
+            let [quantile, above, below] = coverage(&design, 200, 1000);
+            assert!((0.88..=0.99).contains(&quantile), "p90 {quantile}");
+            assert!((0.88..=0.99).contains(&above), "above {above}");
+            assert!((0.88..=0.99).contains(&below), "below {below}");
+        }
     }
 
     /// The 400-seed figures: `cargo test -p bouncewear-model --release -- --ignored --nocapture
@@ -283,10 +307,12 @@ mod tests {
     #[test]
     #[ignore = "slow: the 400-seed coverage figures"]
     fn after_run_coverage_over_400_seeds() {
-        let [quantile, above, below] = coverage(400, 5000);
-        println!("coverage over 400 seeds: p90 {quantile}, above {above}, below {below}");
-        for covered in [quantile, above, below] {
-            assert!((0.90..=0.98).contains(&covered), "{covered}");
+        for (name, design) in [("clustered", CLUSTERED), ("independent", INDEPENDENT)] {
+            let [quantile, above, below] = coverage(&design, 400, 5000);
+            println!("{name}, 400 seeds: p90 {quantile}, above {above}, below {below}");
+            for covered in [quantile, above, below] {
+                assert!((0.90..=0.98).contains(&covered), "{name}: {covered}");
+            }
         }
     }
 }
