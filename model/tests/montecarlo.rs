@@ -552,7 +552,9 @@ fn a_result_warns_when_the_paper_law_runs_far_from_its_calibration_current() {
 
 #[test]
 fn a_query_after_the_run_at_the_standard_levels_answers_the_results_summaries() {
-    use bouncewear_model::montecarlo::{Metric, RunGroups, engine, query_metric, summarize_job};
+    use bouncewear_model::montecarlo::{
+        Metric, RunGroups, Silent, engine, query_metric, summarize_job,
+    };
     use bouncewear_model::stats::QUANTILES;
     let job = job(json!({"devices": 24, "operations": 20, "bin_operations": 5,
         "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
@@ -589,7 +591,7 @@ fn a_query_after_the_run_at_the_standard_levels_answers_the_results_summaries() 
 
 #[test]
 fn a_metric_may_have_several_limits_answered_as_a_query_after_the_run_answers_them() {
-    use bouncewear_model::montecarlo::{RunGroups, engine, summarize_job};
+    use bouncewear_model::montecarlo::{RunGroups, Silent, engine, summarize_job};
     use bouncewear_model::stats::{Threshold, query};
     let spec = json!({"devices": 16, "operations": 10, "bin_operations": 5,
         "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
