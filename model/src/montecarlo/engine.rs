@@ -11,12 +11,13 @@
 
 use super::correlation::Correlation;
 use super::distribution::{standard_normal_cdf, standard_normal_quantile, stratified_probability};
-use super::job::{Job, Parameter, Per, SamplerKind, Scatter};
+use super::job::{Job, Parameter, Per, SamplerKind, Scatter, SensitivityMethod};
 use super::kernel::{Kernel, LaneWork};
 use super::lives::{DeviceLife, GroupLives};
 use super::metric::{DeviceMetric, Metric};
+use super::sensitivity::{LaneCells, SensitivityPlan, SensitivityStats};
 use crate::lanes::Real;
-use crate::operation::{Conditions, Needs, Outcome, Setup};
+use crate::operation::{Conditions, Needs, Operation, Outcome, Outcomes, Setup};
 use crate::scenario::Scenario;
 use crate::stats::Accumulator;
 use crate::wear::{DeviceWear, WearLaw};
@@ -33,6 +34,11 @@ pub const GROUPS: u64 = 32;
 
 /// LHS permutations draw from streams at and above this; device streams are below it.
 const LHS_STREAM_BASE: u64 = 1 << 63;
+
+/// Sensitivity analysis: device `d`'s `B` draws come from stream `2^62 + d`, its operations' `B'`
+/// draws from stream `2^62 + 2^61 + d` (devices are fewer than `2^61`).
+const SOBOL_DEVICE_STREAM_BASE: u64 = 1 << 62;
+const SOBOL_OPERATION_STREAM_BASE: u64 = (1 << 62) | (1 << 61);
 
 /// What the engine reports while it runs, and how it is stopped.
 pub trait Observer: Sync {
@@ -84,10 +90,13 @@ pub struct GroupStats {
     /// outside the window and were drawn again.
     #[serde(default)]
     pub truncation_rejections: Vec<u64>,
+    /// With a sensitivity analysis: its sums.
+    #[serde(default)]
+    pub sensitivity: SensitivityStats,
 }
 
 impl GroupStats {
-    fn new(job: &Job) -> Self {
+    fn new(job: &Job, sensitivity: Option<&SensitivityPlan>) -> Self {
         let limit = |metric| job.limits().get(&metric).copied();
         let per_bin: Vec<Option<f64>> = job
             .operation_metrics()
@@ -107,6 +116,9 @@ impl GroupStats {
             lives: GroupLives::default(),
             operations_at_max_bounces: 0,
             truncation_rejections: vec![0; job.scatter().len()],
+            sensitivity: sensitivity
+                .map(|plan| SensitivityStats::new(plan, bins))
+                .unwrap_or_default(),
         }
     }
 
@@ -123,6 +135,7 @@ impl GroupStats {
             &mut self.truncation_rejections,
             &other.truncation_rejections,
         );
+        self.sensitivity.merge(&other.sensitivity);
     }
 }
 
@@ -292,6 +305,7 @@ struct Plan<'a> {
     /// Only lane parameters (speed, radius, pressure) scatter, so devices can run in lockstep.
     lockstep: bool,
     kernel: Kernel,
+    sensitivity: Option<SensitivityPlan>,
 }
 
 impl<'a> Plan<'a> {
@@ -327,7 +341,7 @@ impl<'a> Plan<'a> {
             .arcs()
             || arcs_scattered;
         let wear = model.wear;
-        Self {
+        let mut plan = Self {
             job,
             model,
             nominal,
@@ -346,7 +360,35 @@ impl<'a> Plan<'a> {
             track_wear: can_arc && job.spec().operations > 1 && wear.changes_surface(),
             lockstep: job.scatter().iter().all(|s| s.parameter.is_lane_value()),
             kernel,
-        }
+            sensitivity: None,
+        };
+        plan.sensitivity = job.sensitivity().map(|method| {
+            // Sums are taken about the nominal scenario's values: a new device's operation.
+            let fidelity = job.spec().fidelity;
+            let nominal = &plan.nominal;
+            let operation = plan.model.setup.operation(&nominal.conditions, fidelity);
+            let outcome = operation
+                .run_lanes(
+                    operation.impact_velocity_m_s(),
+                    nominal.radius_m,
+                    nominal.pressure_pa,
+                    plan.needs,
+                    |_, _, _, _| {},
+                )
+                .lane(0);
+            let operation_shifts = job
+                .operation_metrics()
+                .iter()
+                .map(|m| m.value(&outcome))
+                .collect();
+            let device_shifts = job
+                .device_metrics()
+                .iter()
+                .map(|m| plan.device_metric(&plan.model, *m, nominal, &DeviceWear::default()))
+                .collect();
+            SensitivityPlan::new(job, method, operation_shifts, device_shifts)
+        });
+        plan
     }
 
     /// The model of the scenario with the constants `draws` holds: the nominal one when it holds none.
@@ -362,10 +404,58 @@ impl<'a> Plan<'a> {
         Cow::Owned(Model::new(&scenario))
     }
 
+    /// Draws the device-level scatter of `lanes` devices from `stream_of(device)`, each from its
+    /// own stream: their draws, their streams as the operations go on to use them, and the drawn
+    /// values by scatter entry (NaN for entries drawn per operation).
+    fn draw_devices(
+        &self,
+        chunk: &Chunk<'_>,
+        first_local: u64,
+        lanes: usize,
+        stream_of: impl Fn(u64) -> u64,
+        strata: Option<&[Vec<u32>]>,
+        rejections: &mut [u64],
+    ) -> (Vec<Draws>, Vec<ChaCha8Rng>, Vec<Vec<f64>>) {
+        let job = self.job;
+        let mut drawn = (
+            Vec::with_capacity(lanes),
+            Vec::with_capacity(lanes),
+            Vec::with_capacity(lanes),
+        );
+        for local in first_local..first_local + lanes as u64 {
+            let mut rng = ChaCha8Rng::seed_from_u64(job.seed());
+            rng.set_stream(stream_of(chunk.first + local));
+            let local_index = usize::try_from(local).expect("batch fits in memory");
+            let mut device = self.nominal.clone();
+            let mut values = vec![f64::NAN; job.scatter().len()];
+            self.device_scatter.draw(
+                job,
+                strata.map(|p| (p, local_index)),
+                &mut rng,
+                rejections,
+                |index, value| {
+                    device.set(job.scatter()[index].parameter, value);
+                    values[index] = value;
+                },
+            );
+            drawn.0.push(device);
+            drawn.1.push(rng);
+            drawn.2.push(values);
+        }
+        drawn
+    }
+
     /// Runs the `L::LANES` devices of the chunk from `first_local` on, in lockstep, into `stats`:
     /// each from its own stream, with the draws and the arithmetic it would have alone. Each bin's
     /// values wait in `buffer` and go into the accumulators device after device, in the order of
     /// one device at a time, so the sums come out the same to the bit for any number of lanes.
+    ///
+    /// With Sobol' indices over device-level parameters, the devices run again alongside, as
+    /// variants: `B`, drawn from the devices' Sobol' streams, and `AB_i`, the devices with
+    /// parameter `i` taken from `B`, which draw their operations from the devices' own streams
+    /// as the devices do. With operation-level parameters, each operation of the devices is also
+    /// evaluated at `B'`, drawn from the devices' operation Sobol' streams, and at `AB'_i`, in
+    /// the device's state.
     #[inline(always)]
     fn run_devices<L: Real>(
         &self,
@@ -376,111 +466,125 @@ impl<'a> Plan<'a> {
     ) {
         let job = self.job;
         let lanes = L::LANES;
-        let fidelity = job.spec().fidelity;
-        let (mut rngs, mut draws) = (Vec::with_capacity(lanes), Vec::with_capacity(lanes));
-        for local in first_local..first_local + lanes as u64 {
-            let mut rng = ChaCha8Rng::seed_from_u64(job.seed());
-            rng.set_stream(chunk.first + local);
-            let local_index = usize::try_from(local).expect("batch fits in memory");
-            let mut device = self.nominal.clone();
-            self.device_scatter.draw(
-                job,
-                chunk.permutations.map(|p| (p, local_index)),
-                &mut rng,
-                &mut stats.truncation_rejections,
-                |index, value| device.set(job.scatter()[index].parameter, value),
+        let (draws, rngs, inputs) = self.draw_devices(
+            chunk,
+            first_local,
+            lanes,
+            |device| device,
+            chunk.permutations,
+            &mut stats.truncation_rejections,
+        );
+        let mut variants = vec![Variant::<L>::new(self, draws, rngs, inputs)];
+        let sensitivity = self.sensitivity.as_ref();
+        let sobol = sensitivity.filter(|s| s.method == SensitivityMethod::Sobol);
+        let mut scratch = vec![0; job.scatter().len()];
+        if let Some(plan) = sobol.filter(|s| !s.device_inputs.is_empty()) {
+            let (b_draws, b_rngs, b_inputs) = self.draw_devices(
+                chunk,
+                first_local,
+                lanes,
+                |device| SOBOL_DEVICE_STREAM_BASE | device,
+                None,
+                &mut scratch,
             );
-            draws.push(device);
-            rngs.push(rng);
+            let a = &variants[0];
+            let swapped: Vec<Variant<L>> = plan
+                .device_inputs
+                .iter()
+                .map(|&input| {
+                    let (mut draws, mut inputs) = (a.draws.clone(), a.inputs.clone());
+                    for k in 0..lanes {
+                        let value = b_inputs[k][input];
+                        draws[k].set(job.scatter()[input].parameter, value);
+                        inputs[k][input] = value;
+                    }
+                    Variant::new(self, draws, a.rngs.clone(), inputs)
+                })
+                .collect();
+            variants.push(Variant::new(self, b_draws, b_rngs, b_inputs));
+            variants.extend(swapped);
         }
-        // Lanes share the operation's constants: in lockstep only speed, radius and pressure differ.
-        let device_model = self.model(&draws[0]);
-        let mut wear_law = device_model.wear;
-        let mut operation = device_model.setup.operation(&draws[0].conditions, fidelity);
-        let base_speed = operation.impact_velocity_m_s();
-        let lane_speed = |d: &Draws| d.conditions.impact_velocity_m_s.unwrap_or(base_speed);
-        let device_speed = L::from_fn(|k| lane_speed(&draws[k]));
-        let device_radius = L::from_fn(|k| draws[k].radius_m);
-        let device_pressure = L::from_fn(|k| draws[k].pressure_pa);
-        let mut operation_draws = draws.clone();
-        let mut speeds = vec![0.0; lanes];
-        let mut wear = vec![DeviceWear::default(); lanes];
+        // The operation-level B' draws, from each device's own operation Sobol' stream.
+        let mut operation_rngs: Vec<ChaCha8Rng> = match sobol {
+            Some(plan) if !plan.operation_inputs.is_empty() => (0..lanes as u64)
+                .map(|k| {
+                    let mut rng = ChaCha8Rng::seed_from_u64(job.seed());
+                    rng.set_stream(SOBOL_OPERATION_STREAM_BASE | (chunk.first + first_local + k));
+                    rng
+                })
+                .collect(),
+            _ => Vec::new(),
+        };
+        let mut cells = sensitivity.map(|plan| LaneCells::new(plan, lanes));
+
         let mut failed_at = vec![None; lanes];
         let metrics = job.operation_metrics();
         let operations = job.spec().operations;
         let bin_operations = usize::try_from(job.bin_operations()).expect("bins fit in memory");
         buffer.resize(lanes * bin_operations * metrics.len(), 0.0);
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
+        // Per evaluation (variants, then B' and AB'_i), lane and metric: this operation's values.
+        let evaluations = variants.len() + sobol.map_or(0, |p| p.operation_evaluations());
+        let mut values = vec![0.0; evaluations * lanes * metrics.len()];
+        let variant_count = variants.len();
         for bin_index in 0..bins {
             let start = job.bin_operations() * bin_index as u64;
             let end = (start + job.bin_operations()).min(operations);
             let in_bin = usize::try_from(end - start).expect("bins fit in memory");
             for op in start..end {
-                let (speed, radius_m, pressure_pa) = if self.operation_scatter.is_empty() {
-                    (device_speed, device_radius, device_pressure)
-                } else {
-                    for k in 0..lanes {
-                        let mut op_draws = draws[k].clone();
-                        self.operation_scatter.draw(
-                            job,
-                            None,
-                            &mut rngs[k],
-                            &mut stats.truncation_rejections,
-                            |index, value| op_draws.set(job.scatter()[index].parameter, value),
-                        );
-                        speeds[k] = if self.cheap_operation_scatter {
-                            lane_speed(&op_draws)
-                        } else {
-                            debug_assert_eq!(lanes, 1, "only lane parameters scatter in lockstep");
-                            if self.operation_constants {
-                                let model = self.model(&op_draws);
-                                wear_law = model.wear;
-                                operation = model.setup.operation(&op_draws.conditions, fidelity);
-                            } else {
-                                operation =
-                                    device_model.setup.operation(&op_draws.conditions, fidelity);
-                            }
-                            operation.impact_velocity_m_s()
-                        };
-                        operation_draws[k] = op_draws;
-                    }
-                    (
-                        L::from_fn(|k| speeds[k]),
-                        L::from_fn(|k| operation_draws[k].radius_m),
-                        L::from_fn(|k| operation_draws[k].pressure_pa),
-                    )
-                };
-                let (radius_m, pressure_pa) = if self.track_wear {
-                    let energy_j = L::from_fn(|k| wear[k].cumulative_arc_energy_j);
-                    let worn = L::splat(0.0).lt(energy_j);
-                    (
-                        L::select(worn, wear_law.radius_m(radius_m, energy_j), radius_m),
-                        L::select(
-                            worn,
-                            wear_law.pressure_pa(pressure_pa, energy_j),
-                            pressure_pa,
-                        ),
-                    )
-                } else {
-                    (radius_m, pressure_pa)
-                };
-                let outcomes =
-                    operation.run_lanes(speed, radius_m, pressure_pa, self.needs, |_, _, _, _| {});
                 let row = usize::try_from(op - start).expect("bins fit in memory");
-                for k in 0..lanes {
-                    let outcome = outcomes.lane(k);
-                    let at = (k * in_bin + row) * metrics.len();
-                    for (slot, metric) in buffer[at..at + metrics.len()].iter_mut().zip(metrics) {
-                        *slot = metric.value(&outcome);
+                for (v, variant) in variants.iter_mut().enumerate() {
+                    let rejections: &mut [u64] = if v == 0 {
+                        &mut stats.truncation_rejections
+                    } else {
+                        &mut scratch
+                    };
+                    variant.draw_operation(self, rejections);
+                    let outcomes = variant.evaluate(self, &variant.op_draws);
+                    if v == 0 {
+                        if let Some(plan) = sobol.filter(|p| !p.operation_inputs.is_empty()) {
+                            self.evaluate_operation_swaps(
+                                plan,
+                                variant,
+                                &mut operation_rngs,
+                                &mut scratch,
+                                &mut values[variant_count * lanes * metrics.len()..],
+                            );
+                        }
                     }
-                    stats.operations_at_max_bounces += u64::from(outcome.truncated);
-                    wear[k].add(&outcome);
-                    if failed_at[k].is_none()
-                        && self.fails(&device_model, &outcome, &draws[k], &wear[k])
-                    {
-                        failed_at[k] = Some(op + 1);
+                    for k in 0..lanes {
+                        let outcome = outcomes.lane(k);
+                        let at = (v * lanes + k) * metrics.len();
+                        for (slot, metric) in values[at..at + metrics.len()].iter_mut().zip(metrics)
+                        {
+                            *slot = metric.value(&outcome);
+                        }
+                        variant.wear[k].add(&outcome);
+                        if v != 0 {
+                            continue;
+                        }
+                        let at = (k * in_bin + row) * metrics.len();
+                        buffer[at..at + metrics.len()]
+                            .copy_from_slice(&values[k * metrics.len()..(k + 1) * metrics.len()]);
+                        stats.operations_at_max_bounces += u64::from(outcome.truncated);
+                        if failed_at[k].is_none()
+                            && self.fails(
+                                &variant.model,
+                                &outcome,
+                                &variant.draws[k],
+                                &variant.wear[k],
+                            )
+                        {
+                            failed_at[k] = Some(op + 1);
+                        }
                     }
                 }
+                if let Some(cells) = &mut cells {
+                    cells.push_operation(&values, &variants[0].inputs, variant_count);
+                }
+            }
+            if let Some(cells) = &mut cells {
+                cells.merge_bin(&mut stats.sensitivity, bin_index);
             }
             if metrics.is_empty() {
                 continue;
@@ -493,9 +597,13 @@ impl<'a> Plan<'a> {
                 }
             }
         }
+        let a = &variants[0];
         for k in 0..lanes {
             for (accumulator, metric) in stats.devices.iter_mut().zip(job.device_metrics()) {
-                accumulator.push(self.device_metric(&device_model, *metric, &draws[k], &wear[k]));
+                accumulator.push(self.device_metric(&a.model, *metric, &a.draws[k], &a.wear[k]));
+            }
+            if let Some(plan) = sensitivity {
+                self.push_device_sensitivity(plan, &variants, k, &mut stats.sensitivity);
             }
             if !job.failure().is_empty() {
                 stats.lives.record(DeviceLife {
@@ -504,6 +612,78 @@ impl<'a> Plan<'a> {
                     censored: failed_at[k].is_none(),
                 });
             }
+        }
+    }
+
+    /// Evaluates the operation the devices (`a`) just drew at `B'`, drawn from `rngs`, and at
+    /// `AB'_i`, in the devices' state: the values go to `values`, per evaluation, lane and metric.
+    #[inline(always)]
+    fn evaluate_operation_swaps<L: Real>(
+        &self,
+        plan: &SensitivityPlan,
+        a: &Variant<'_, L>,
+        rngs: &mut [ChaCha8Rng],
+        rejections: &mut [u64],
+        values: &mut [f64],
+    ) {
+        let job = self.job;
+        let (lanes, metrics) = (L::LANES, job.operation_metrics());
+        let mut b_draws = Vec::with_capacity(lanes);
+        let mut b_values = vec![vec![f64::NAN; job.scatter().len()]; lanes];
+        for (k, rng) in rngs.iter_mut().enumerate() {
+            let mut draws = a.draws[k].clone();
+            let row = &mut b_values[k];
+            self.operation_scatter
+                .draw(job, None, rng, rejections, |index, value| {
+                    draws.set(job.scatter()[index].parameter, value);
+                    row[index] = value;
+                });
+            b_draws.push(draws);
+        }
+        let mut record = |evaluation: usize, outcomes: Outcomes<L>| {
+            for k in 0..lanes {
+                let outcome = outcomes.lane(k);
+                let at = (evaluation * lanes + k) * metrics.len();
+                for (slot, metric) in values[at..at + metrics.len()].iter_mut().zip(metrics) {
+                    *slot = metric.value(&outcome);
+                }
+            }
+        };
+        record(0, a.evaluate(self, &b_draws));
+        for (i, &input) in plan.operation_inputs.iter().enumerate() {
+            let swapped: Vec<Draws> = (0..lanes)
+                .map(|k| {
+                    let mut draws = a.op_draws[k].clone();
+                    draws.set(job.scatter()[input].parameter, b_values[k][input]);
+                    draws
+                })
+                .collect();
+            record(1 + i, a.evaluate(self, &swapped));
+        }
+    }
+
+    /// Lane `k`'s device metrics in every variant, into the device cells of `stats`.
+    fn push_device_sensitivity<L: Real>(
+        &self,
+        plan: &SensitivityPlan,
+        variants: &[Variant<'_, L>],
+        k: usize,
+        stats: &mut SensitivityStats,
+    ) {
+        let job = self.job;
+        let first_cell = usize::try_from(job.bins()).expect("bins fit in memory")
+            * job.operation_metrics().len();
+        let a = &variants[0];
+        let inputs: Vec<f64> = plan.device_inputs.iter().map(|&i| a.inputs[k][i]).collect();
+        for (j, metric) in job.device_metrics().iter().enumerate() {
+            let value =
+                |v: &Variant<'_, L>| self.device_metric(&v.model, *metric, &v.draws[k], &v.wear[k]);
+            let a_value = value(a);
+            if plan.device_sobol() {
+                let ab: Vec<f64> = variants[2..].iter().map(value).collect();
+                stats.device[first_cell + j].push(a_value, value(&variants[1]), &ab);
+            }
+            stats.regression[first_cell + j].push(&inputs, a_value);
         }
     }
 
@@ -616,7 +796,7 @@ impl<'a> Plan<'a> {
     ) -> Result<GroupStats, Cancelled> {
         let operations = self.job.spec().operations;
         let groups = GROUPS.min(chunk.size);
-        let mut stats = GroupStats::new(self.job);
+        let mut stats = GroupStats::new(self.job, self.sensitivity.as_ref());
         let (start, end) = (
             chunk.size * group / groups,
             chunk.size * (group + 1) / groups,
@@ -646,6 +826,143 @@ impl<'a> Plan<'a> {
             local += devices;
         }
         Ok(stats)
+    }
+}
+
+/// Devices running in lockstep with their draws and state: the job's devices, or, for a
+/// sensitivity analysis, the same devices with some parameters drawn again.
+struct Variant<'p, L: Real> {
+    draws: Vec<Draws>,
+    /// Each lane's stream, as its operations draw from it.
+    rngs: Vec<ChaCha8Rng>,
+    /// Each lane's parameter values by scatter entry: the device's, and this operation's.
+    inputs: Vec<Vec<f64>>,
+    /// The model of the lanes' scenario constants (lanes in lockstep share them).
+    model: Cow<'p, Model>,
+    /// The operation of the device's conditions, and the lanes' speed, radius and pressure.
+    operation: Operation,
+    speed: L,
+    radius_m: L,
+    pressure_pa: L,
+    wear: Vec<DeviceWear>,
+    /// This operation's draws.
+    op_draws: Vec<Draws>,
+}
+
+impl<'p, L: Real> Variant<'p, L> {
+    fn new(
+        plan: &'p Plan<'_>,
+        draws: Vec<Draws>,
+        rngs: Vec<ChaCha8Rng>,
+        inputs: Vec<Vec<f64>>,
+    ) -> Self {
+        let model = plan.model(&draws[0]);
+        let operation = model
+            .setup
+            .operation(&draws[0].conditions, plan.job.spec().fidelity);
+        let base_speed = operation.impact_velocity_m_s();
+        Self {
+            speed: L::from_fn(|k| {
+                draws[k]
+                    .conditions
+                    .impact_velocity_m_s
+                    .unwrap_or(base_speed)
+            }),
+            radius_m: L::from_fn(|k| draws[k].radius_m),
+            pressure_pa: L::from_fn(|k| draws[k].pressure_pa),
+            wear: vec![DeviceWear::default(); L::LANES],
+            op_draws: draws.clone(),
+            draws,
+            rngs,
+            inputs,
+            model,
+            operation,
+        }
+    }
+
+    /// Draws the next operation's per-operation scatter of every lane from its stream.
+    #[inline(always)]
+    fn draw_operation(&mut self, plan: &Plan<'_>, rejections: &mut [u64]) {
+        if plan.operation_scatter.is_empty() {
+            return;
+        }
+        let job = plan.job;
+        for k in 0..L::LANES {
+            let mut draws = self.draws[k].clone();
+            let row = &mut self.inputs[k];
+            plan.operation_scatter.draw(
+                job,
+                None,
+                &mut self.rngs[k],
+                rejections,
+                |index, value| {
+                    draws.set(job.scatter()[index].parameter, value);
+                    row[index] = value;
+                },
+            );
+            self.op_draws[k] = draws;
+        }
+    }
+
+    /// The operation with the lanes' draws `op_draws` (this operation's, or swapped ones), on the
+    /// lanes' surfaces as their wear has left them.
+    #[inline(always)]
+    fn evaluate(&self, plan: &Plan<'_>, op_draws: &[Draws]) -> Outcomes<L> {
+        let fidelity = plan.job.spec().fidelity;
+        let lane_speed = |d: &Draws| {
+            d.conditions
+                .impact_velocity_m_s
+                .unwrap_or(self.operation.impact_velocity_m_s())
+        };
+        let (operation, wear_law, speed, radius_m, pressure_pa) =
+            if plan.operation_scatter.is_empty() {
+                (
+                    self.operation,
+                    self.model.wear,
+                    self.speed,
+                    self.radius_m,
+                    self.pressure_pa,
+                )
+            } else if plan.cheap_operation_scatter {
+                (
+                    self.operation,
+                    self.model.wear,
+                    L::from_fn(|k| lane_speed(&op_draws[k])),
+                    L::from_fn(|k| op_draws[k].radius_m),
+                    L::from_fn(|k| op_draws[k].pressure_pa),
+                )
+            } else {
+                debug_assert_eq!(L::LANES, 1, "only lane parameters scatter in lockstep");
+                let draws = &op_draws[0];
+                let model = if plan.operation_constants {
+                    plan.model(draws)
+                } else {
+                    Cow::Borrowed(&*self.model)
+                };
+                let operation = model.setup.operation(&draws.conditions, fidelity);
+                (
+                    operation,
+                    model.wear,
+                    L::splat(operation.impact_velocity_m_s()),
+                    L::splat(draws.radius_m),
+                    L::splat(draws.pressure_pa),
+                )
+            };
+        let (radius_m, pressure_pa) = if plan.track_wear {
+            let energy_j = L::from_fn(|k| self.wear[k].cumulative_arc_energy_j);
+            let worn = L::splat(0.0).lt(energy_j);
+            (
+                L::select(worn, wear_law.radius_m(radius_m, energy_j), radius_m),
+                L::select(
+                    worn,
+                    wear_law.pressure_pa(pressure_pa, energy_j),
+                    pressure_pa,
+                ),
+            )
+        } else {
+            (radius_m, pressure_pa)
+        };
+        operation.run_lanes(speed, radius_m, pressure_pa, plan.needs, |_, _, _, _| {})
     }
 }
 

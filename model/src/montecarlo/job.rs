@@ -76,7 +76,34 @@ pub struct JobSpec {
     /// Failure criteria: a device fails at the first operation where any is met (life analysis).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub failure: BTreeMap<String, CriterionSpec>,
+    /// Which scattered parameters drive each metric: the Result's `sensitivity` (none by default).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensitivity: Option<SensitivitySpec>,
 }
+
+/// The sensitivity analysis a job asks for (docs/contract.md "Sensitivity").
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensitivitySpec {
+    /// `sobol`: first-order and total Sobol' indices with 95 % intervals, and the regression
+    /// coefficients; each device runs again once more than it has device-level parameters, and
+    /// each operation once more than it has operation-level ones. `regression`: standardised
+    /// regression coefficients only, at no extra cost.
+    pub method: SensitivityMethod,
+}
+
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SensitivityMethod {
+    Sobol,
+    Regression,
+}
+
+/// The most cells (bins x operation metrics + device metrics, times parameters) a sensitivity
+/// analysis keeps sums for: each holds about 40 numbers in every group.
+pub const MAX_SENSITIVITY_CELLS: u64 = 4096;
 
 fn default_count() -> u64 {
     1000
@@ -99,6 +126,7 @@ impl Default for JobSpec {
             limits: BTreeMap::new(),
             precision: None,
             failure: BTreeMap::new(),
+            sensitivity: None,
         }
     }
 }
@@ -399,6 +427,7 @@ pub struct Job {
     thresholds: BTreeMap<Metric, Vec<Threshold>>,
     precision: Option<Precision>,
     failure: Vec<(Metric, Criterion)>,
+    sensitivity: Option<SensitivityMethod>,
 }
 
 impl Job {
@@ -524,6 +553,17 @@ impl Job {
             .as_ref()
             .and_then(|p| check_precision(p, &spec, &metrics, root, &mut errors));
         let failure = check_failure(&spec.failure, &root.child("failure"), polarity, &mut errors);
+        let sensitivity = spec.sensitivity.as_ref().map(|sensitivity| {
+            check_sensitivity(
+                sensitivity,
+                &spec,
+                &metrics,
+                bin_operations,
+                root,
+                &mut errors,
+            );
+            sensitivity.method
+        });
 
         if !errors.is_empty() {
             return Err(InvalidInput::new(errors));
@@ -544,6 +584,7 @@ impl Job {
             thresholds,
             precision,
             failure,
+            sensitivity,
         })
     }
 
@@ -559,6 +600,19 @@ impl Job {
             .as_ref()
             .map_or(self.spec.devices, |p| p.max_devices)
             .saturating_mul(self.spec.operations)
+            .saturating_mul(self.evaluations_per_operation())
+    }
+
+    /// How many times each operation is evaluated: once, and with Sobol' indices once more per
+    /// device-level parameter and one more (the `B` device), and once more per operation-level
+    /// parameter and one more (the `B` operation).
+    pub fn evaluations_per_operation(&self) -> u64 {
+        if self.sensitivity != Some(SensitivityMethod::Sobol) {
+            return 1;
+        }
+        let count = |per| self.scatter.iter().filter(|s| s.per == per).count() as u64;
+        let extra = |k: u64| if k == 0 { 0 } else { k + 1 };
+        1 + extra(count(Per::Device)) + extra(count(Per::Operation))
     }
 
     /// Refuses a job that could run more than `limit` operations, naming (below `root`) the device
@@ -632,6 +686,64 @@ impl Job {
 
     pub fn failure(&self) -> &[(Metric, Criterion)] {
         &self.failure
+    }
+
+    /// The sensitivity analysis the job asks for.
+    pub fn sensitivity(&self) -> Option<SensitivityMethod> {
+        self.sensitivity
+    }
+}
+
+/// A sensitivity analysis needs a scattered parameter, independent inputs for Sobol' indices
+/// (pick-freeze swaps one input at a time, which a copula would tie to the others), and a bounded
+/// number of cells.
+fn check_sensitivity(
+    sensitivity: &SensitivitySpec,
+    spec: &JobSpec,
+    metrics: &[Metric],
+    bin_operations: u64,
+    root: &Pointer,
+    errors: &mut Vec<FieldError>,
+) {
+    let at = root.child("sensitivity");
+    let mut fault = |pointer: &Pointer, detail: String| {
+        errors.push(FieldError {
+            pointer: pointer.to_string(),
+            detail,
+        })
+    };
+    if spec.scatter.is_empty() {
+        fault(
+            &at,
+            "needs at least one scattered parameter (`scatter`): only they can drive a metric"
+                .to_owned(),
+        );
+        return;
+    }
+    if sensitivity.method == SensitivityMethod::Sobol && spec.correlation.is_some() {
+        fault(
+            &at.child("method"),
+            "Sobol' indices by pick-freeze need independent inputs, and `correlation` ties some \
+             together: use `regression`, or leave out `correlation`"
+                .to_owned(),
+        );
+    }
+    let operation_metrics = metrics
+        .iter()
+        .filter(|m| matches!(m, Metric::Operation(_)))
+        .count() as u64;
+    let device_metrics = metrics.len() as u64 - operation_metrics;
+    let bins = spec.operations.div_ceil(bin_operations.max(1));
+    let cells = (bins * operation_metrics + device_metrics) * spec.scatter.len() as u64;
+    if cells > MAX_SENSITIVITY_CELLS {
+        fault(
+            &at,
+            format!(
+                "would keep {cells} cells (bins x operation metrics + device metrics, times \
+                 scattered parameters); at most {MAX_SENSITIVITY_CELLS}: use fewer bins \
+                 (`bin_operations`), `metrics` or parameters"
+            ),
+        );
     }
 }
 

@@ -11,6 +11,7 @@ pub mod job;
 pub mod kernel;
 pub mod lives;
 pub mod metric;
+pub mod sensitivity;
 
 pub use engine::{Cancelled, Observer, Silent, Tally, Watch};
 pub use job::{Job, JobSpec, LimitSpec};
@@ -93,6 +94,10 @@ pub struct JobResult {
     /// With failure criteria: the life analysis of the devices' operations to failure.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub life: Option<LifeReport>,
+    /// With a sensitivity analysis: per metric, its bins in operation order (a device metric:
+    /// one entry), each with the indices of every parameter that drives it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensitivity: Option<BTreeMap<String, Vec<sensitivity::SensitivityBin>>>,
     /// What the run met that bears on its numbers, counted over every operation.
     pub counts: diagnostics::Counts,
     /// Warnings about how far to trust the numbers (e.g. eq. 16 far from its calibration current,
@@ -266,6 +271,10 @@ pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
             }
         }),
         life: life_report(job, tally),
+        sensitivity: job.sensitivity().map(|_| {
+            let groups: Vec<_> = tally.groups.iter().map(|g| &g.sensitivity).collect();
+            sensitivity::summarize_sensitivity(job, &groups)
+        }),
         counts,
         diagnostics,
         timing: Timing {

@@ -58,18 +58,28 @@ impl RegressionAccumulator {
         let width = self.sums.len();
         assert_eq!(x.len() + 1, width, "one value per input");
         self.n += 1;
-        let w: Vec<f64> = x
-            .iter()
-            .chain(std::iter::once(&y))
-            .zip(&self.shifts)
-            .map(|(v, s)| v - s)
-            .collect();
+        let k = width - 1;
+        let w = |r: usize| {
+            if r < k {
+                x[r] - self.shifts[r]
+            } else {
+                y - self.shifts[k]
+            }
+        };
         for r in 0..width {
-            self.sums[r] += w[r];
+            let w_r = w(r);
+            self.sums[r] += w_r;
             for s in 0..width {
-                self.products[r * width + s] += w[r] * w[s];
+                self.products[r * width + s] += w_r * w(s);
             }
         }
+    }
+
+    /// Forgets every sample, keeping the inputs and shifts.
+    pub fn clear(&mut self) {
+        self.n = 0;
+        self.sums.fill(0.0);
+        self.products.fill(0.0);
     }
 
     /// Adds another accumulator's samples (same inputs and shifts).

@@ -97,6 +97,14 @@ impl SobolAccumulator {
         }
     }
 
+    /// Forgets every sample, keeping the inputs and the shift.
+    pub fn clear(&mut self) {
+        (self.n, self.clusters, self.squared_sizes) = (0, 0, 0.0);
+        self.sums.fill([0.0; Z]);
+        self.products.fill([0.0; PRODUCTS]);
+        self.weighted.fill([0.0; Z]);
+    }
+
     /// An empty accumulator of the same inputs and shift, for one cluster's samples.
     pub fn empty_like(&self) -> Self {
         Self::new(self.inputs(), self.shift)
