@@ -1057,23 +1057,37 @@ pub fn run_group(
 pub fn batch_draws(job: &Job, batch: Batch) -> Vec<Vec<f64>> {
     let plan = Plan::new(job, Kernel::SCALAR);
     let permutations = plan.batch_permutations(batch.index, batch.size);
-    let mut rejections = vec![0; job.scatter().len()];
-    (0..batch.size)
-        .map(|local| {
-            let mut rng = ChaCha8Rng::seed_from_u64(job.seed());
-            rng.set_stream(batch.first + local);
-            let mut row = vec![f64::NAN; job.scatter().len()];
-            let local = usize::try_from(local).expect("batch fits in memory");
-            plan.device_scatter.draw(
-                job,
-                permutations.as_deref().map(|p| (p, local)),
-                &mut rng,
-                &mut rejections,
-                |index, value| row[index] = value,
-            );
-            row
-        })
-        .collect()
+    draws_of(&plan, batch, |device| device, permutations.as_deref())
+}
+
+/// The device-level values of the devices' `B` samples in a Sobol' analysis, as
+/// [`batch_draws`] gives the devices' own (the `A` samples): what a check of the indices against
+/// another implementation on the same samples reads.
+pub fn sobol_b_draws(job: &Job, batch: Batch) -> Vec<Vec<f64>> {
+    let plan = Plan::new(job, Kernel::SCALAR);
+    draws_of(
+        &plan,
+        batch,
+        |device| SOBOL_DEVICE_STREAM_BASE | device,
+        None,
+    )
+}
+
+fn draws_of(
+    plan: &Plan<'_>,
+    batch: Batch,
+    stream_of: impl Fn(u64) -> u64,
+    strata: Option<&[Vec<u32>]>,
+) -> Vec<Vec<f64>> {
+    let chunk = Chunk {
+        first: batch.first,
+        size: batch.size,
+        permutations: strata,
+    };
+    let lanes = usize::try_from(batch.size).expect("batch fits in memory");
+    let mut rejections = vec![0; plan.job.scatter().len()];
+    plan.draw_devices(&chunk, 0, lanes, stream_of, strata, &mut rejections)
+        .2
 }
 
 impl Tally {
