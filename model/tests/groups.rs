@@ -56,6 +56,22 @@ fn a_wearing_job_with_scatter_limits_and_failure_criteria() {
 }
 
 #[test]
+fn a_sensitivity_analysis_over_both_levels_and_a_scenario_constant() {
+    assert_group_by_group_is_whole(
+        r#"{"devices": 50, "operations": 12, "bin_operations": 4, "seed": 5, "sampler": "lhs",
+            "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+            "scatter": [
+              {"parameter": "contact_radius_m", "per": "device",
+               "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 1.5e-3, "min": 1e-3}},
+              {"parameter": "inertia_kg_m2", "per": "device",
+               "distribution": {"kind": "uniform", "min": 1.4e-5, "max": 1.8e-5}},
+              {"parameter": "impact_velocity_m_s", "per": "operation",
+               "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.05}}],
+            "sensitivity": {"method": "sobol"}}"#,
+    );
+}
+
+#[test]
 fn a_latin_hypercube_job_whose_groups_share_one_permutation() {
     assert_group_by_group_is_whole(
         r#"{"devices": 45, "operations": 20, "seed": 3, "sampler": "lhs",
