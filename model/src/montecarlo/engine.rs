@@ -541,16 +541,16 @@ impl<'a> Plan<'a> {
                     };
                     variant.draw_operation(self, rejections);
                     let outcomes = variant.evaluate(self, &variant.op_draws);
-                    if v == 0 {
-                        if let Some(plan) = sobol.filter(|p| !p.operation_inputs.is_empty()) {
-                            self.evaluate_operation_swaps(
-                                plan,
-                                variant,
-                                &mut operation_rngs,
-                                &mut scratch,
-                                &mut values[variant_count * lanes * metrics.len()..],
-                            );
-                        }
+                    if v == 0
+                        && let Some(plan) = sobol.filter(|p| !p.operation_inputs.is_empty())
+                    {
+                        self.evaluate_operation_swaps(
+                            plan,
+                            variant,
+                            &mut operation_rngs,
+                            &mut scratch,
+                            &mut values[variant_count * lanes * metrics.len()..],
+                        );
                     }
                     for k in 0..lanes {
                         let outcome = outcomes.lane(k);
@@ -598,7 +598,7 @@ impl<'a> Plan<'a> {
             }
         }
         let a = &variants[0];
-        for k in 0..lanes {
+        for (k, failed_at) in failed_at.iter().enumerate() {
             for (accumulator, metric) in stats.devices.iter_mut().zip(job.device_metrics()) {
                 accumulator.push(self.device_metric(&a.model, *metric, &a.draws[k], &a.wear[k]));
             }
@@ -608,8 +608,8 @@ impl<'a> Plan<'a> {
             if !job.failure().is_empty() {
                 stats.lives.record(DeviceLife {
                     device: chunk.first + first_local + k as u64,
-                    operations_to_failure: failed_at[k].unwrap_or(operations),
-                    censored: failed_at[k].is_none(),
+                    operations_to_failure: failed_at.unwrap_or(operations),
+                    censored: failed_at.is_none(),
                 });
             }
         }

@@ -218,7 +218,7 @@ impl<'p> LaneCells<'p> {
         let (lanes, metrics) = (self.lanes, self.metrics);
         let at =
             |evaluation: usize, k: usize, m: usize| values[(evaluation * lanes + k) * metrics + m];
-        for k in 0..lanes {
+        for (k, lane_inputs) in inputs.iter().enumerate().take(lanes) {
             for m in 0..metrics {
                 let cell = k * metrics + m;
                 let a = at(0, k, m);
@@ -235,7 +235,7 @@ impl<'p> LaneCells<'p> {
                     );
                     self.operation[cell].push_to_cluster(a, at(variants, k, m), &self.ab);
                 }
-                self.regression[cell].push(&inputs[k], a);
+                self.regression[cell].push(lane_inputs, a);
             }
         }
     }
