@@ -284,13 +284,26 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
     let out = temp_dir("bench");
     let shown = on_a_terminal(&["bench", "--quick", "--out", out.to_str().unwrap()]);
     assert!(
-        shown.contains("19/19 measurements") && shown.contains("ETA"),
+        shown.contains("22/22 measurements") && shown.contains("ETA"),
         "{shown}"
     );
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     let tiers = report["tiers"].as_array().unwrap();
     assert_eq!(tiers.len(), 2);
+    // Coverage of the 95 % intervals in three designs, the Sobol' indices' among them.
+    let coverage = report["coverage"].as_array().unwrap();
+    assert!(
+        coverage
+            .iter()
+            .any(|row| row["statistic"] == "velocity: total index")
+    );
+    for row in coverage {
+        assert!(
+            (0.0..=1.0).contains(&row["coverage"].as_f64().unwrap()),
+            "{row}"
+        );
+    }
     for tier in tiers {
         assert!(tier["ns_per_op"].as_f64().unwrap() > 0.0);
         assert_eq!(tier["max_rel_error"].as_object().unwrap().len(), 10);

@@ -6,11 +6,13 @@
 //! - Sampling: the 95 % CI half-width of p95 total bounce time against wall time, for growing device
 //!   counts, random against Latin hypercube.
 //! - Throughput of the reference jobs, and what each skip of unneeded work saves.
+//! - Intervals: how often the nominal 95 % intervals (summary, after-run queries, Sobol' indices)
+//!   of small jobs cover the truth of a much larger one, and how wide they are.
 
 use crate::plots::{Panel, Series, work_precision_svg};
 use crate::progress::Progress;
 use bouncewear_model::montecarlo::{
-    Job, JobResult, Kernel, OperationMetric, Silent, run_job, run_job_on,
+    Job, JobResult, Kernel, Metric, OperationMetric, Silent, run_job, run_job_on,
 };
 use bouncewear_model::paper_forms::{BounceTimes, constant_restitution, simplified_electrical};
 use bouncewear_model::wear::WearLaw;
@@ -35,6 +37,7 @@ pub struct Report {
     pub throughput: Vec<Throughput>,
     pub skips: Vec<Skip>,
     pub engine: Vec<EngineRow>,
+    pub coverage: Vec<Coverage>,
 }
 
 #[derive(Debug, Serialize)]
@@ -128,7 +131,8 @@ pub fn measurements(quick: bool) -> u64 {
         + SAMPLERS.len() * sampled_devices(quick).len()
         + THROUGHPUT_JOBS.len() * THROUGHPUT_METRICS.len()
         + 1
-        + THROUGHPUT_JOBS.len();
+        + THROUGHPUT_JOBS.len()
+        + COVERAGE_DESIGNS.len();
     count as u64
 }
 
@@ -163,6 +167,7 @@ pub fn bench(out: &Path, quick: bool, progress: &Progress) -> Result<Report, Ben
                 })
             })
             .collect::<Result<_, _>>()?,
+        coverage: coverage(quick, progress),
     };
     std::fs::create_dir_all(out).map_err(|source| io_error(out, source))?;
     let write = |name: &str, text: String| {
@@ -676,6 +681,21 @@ fn markdown(report: &Report) -> String {
             row.skip, row.ns_per_op_doing_it, row.ns_per_op_skipping
         );
     }
+    let _ = writeln!(
+        md,
+        "\n## Intervals: coverage and width\n\nHow often the nominal 95 % intervals of a job of 64 devices x 20 operations at 48 V / 15 A cover the truth (the same statistic of one job 1000 times larger; `--quick`: 20 times larger, over 20 seeds), and their mean half-width relative to the truth. Radius and hardness scatter per device, the closing velocity per operation.\n"
+    );
+    let _ = writeln!(
+        md,
+        "| design | statistic | seeds | coverage | mean rel. half-width |\n|---|---|---|---|---|"
+    );
+    for row in &report.coverage {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {:.3} | {:.3} |",
+            row.design, row.statistic, row.seeds, row.coverage, row.mean_relative_half_width
+        );
+    }
     md
 }
 
@@ -727,4 +747,146 @@ fn svg(report: &Report) -> String {
             .collect(),
     };
     work_precision_svg("bouncewear bench: speed against error", &[tiers, sampling])
+}
+
+/// How often the nominal 95 % intervals of a small job cover the truth, and how wide they are: one
+/// design of scatter, one statistic.
+#[derive(Debug, Serialize)]
+pub struct Coverage {
+    pub design: &'static str,
+    pub statistic: &'static str,
+    /// Jobs (seeds) the share is over.
+    pub seeds: u32,
+    pub coverage: f64,
+    /// The mean of the intervals' half-widths relative to the truth.
+    pub mean_relative_half_width: f64,
+}
+
+/// The designs: which of the parameters scatter, and how (radius and hardness per
+/// device, closing velocity per operation).
+const COVERAGE_DESIGNS: [(&str, &[&str]); 3] = [
+    ("device-scattered", &["device"]),
+    ("operation-scattered", &["operation"]),
+    ("both", &["device", "operation"]),
+];
+
+/// A design's job at 48 V / 15 A: `devices` x 20 operations in one bin, with Sobol' indices
+/// when the design scatters per device.
+fn coverage_job(levels: &[&str], devices: u64, seed: u64) -> Job {
+    let mut scatter = Vec::new();
+    if levels.contains(&"device") {
+        scatter.push(json!({"parameter": "contact_radius_m", "per": "device",
+            "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 1e-3, "min": 1e-3}}));
+        scatter.push(
+            json!({"parameter": "dynamic_yield_pressure_pa", "per": "device",
+            "distribution": {"kind": "lognormal", "median": 2e8, "sigma": 0.1}}),
+        );
+    }
+    if levels.contains(&"operation") {
+        scatter.push(
+            json!({"parameter": "impact_velocity_m_s", "per": "operation",
+            "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.03, "min": 0.05}}),
+        );
+    }
+    let job = json!({
+        "devices": devices, "operations": 20, "bin_operations": 20, "seed": seed,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "metrics": ["total_bounce_s"], "scatter": scatter,
+        "sensitivity": {"method": "sobol"},
+    });
+    Job::from_json(&job.to_string(), || 0).expect("the coverage jobs are valid")
+}
+
+/// One run's estimates, each with its 95 % interval, by statistic: the summary's mean, p50 and
+/// p95, a quantile and an exceedance asked after the run, and the Sobol' indices.
+fn coverage_estimates(job: &Job, exceedance_above: f64) -> Vec<(&'static str, f64, [f64; 2])> {
+    use bouncewear_model::montecarlo::{RunGroups, engine, query_metric, summarize_job};
+    use bouncewear_model::stats::Threshold;
+    let tally = engine::run(job, &Silent, |_| false).expect("nothing cancels a benchmark");
+    let result = summarize_job(job, &tally, 1.0);
+    let bin = &result.operations["total_bounce_s"][0].summary;
+    let groups = RunGroups::new(job, tally)
+        .of("total_bounce_s", 0)
+        .expect("the job has the metric");
+    let metric = Metric::Operation(OperationMetric::TotalBounce);
+    let answer = query_metric(
+        metric,
+        &groups,
+        &[0.99],
+        &[Threshold::Above(exceedance_above)],
+    );
+    let mut estimates = vec![
+        ("mean", bin.mean, bin.mean_ci95),
+        ("p50", bin.quantiles["p50"].value, bin.quantiles["p50"].ci95),
+        ("p95", bin.quantiles["p95"].value, bin.quantiles["p95"].ci95),
+        (
+            "p99 after the run",
+            answer.quantiles["0.99"].value,
+            answer.quantiles["0.99"].ci95,
+        ),
+        (
+            "P(above the true p90) after the run",
+            answer.exceedance[0].probability,
+            answer.exceedance[0].ci95,
+        ),
+    ];
+    let sensitivity = &result.sensitivity.as_ref().expect("asked for")["total_bounce_s"][0];
+    for (parameter, statistic) in [
+        (
+            "dynamic_yield_pressure_pa",
+            ["pressure: first-order index", "pressure: total index"],
+        ),
+        (
+            "impact_velocity_m_s",
+            ["velocity: first-order index", "velocity: total index"],
+        ),
+    ] {
+        if let Some(indices) = sensitivity.indices.get(parameter) {
+            for (index, name) in [indices.first, indices.total].into_iter().zip(statistic) {
+                if let Some(index) = index {
+                    estimates.push((name, index.value, index.ci95));
+                }
+            }
+        }
+    }
+    estimates
+}
+
+/// Coverage of every statistic in every design: 64 devices per job, the truth from one job 1000
+/// (quick: 20 times, over 20 seeds) larger.
+fn coverage(quick: bool, progress: &Progress) -> Vec<Coverage> {
+    let (seeds, scale) = if quick { (20_u32, 20) } else { (200, 1000) };
+    let mut rows = Vec::new();
+    for (design, levels) in COVERAGE_DESIGNS {
+        progress.measure(format!("interval coverage: {design}"), || {
+            let large = coverage_job(levels, 64 * scale, 1_000_000);
+            // The exceedance threshold is the truth's p90, so the true probability is about 0.1;
+            // the truth's own answer for it is the reference.
+            let p90 = {
+                let result = run(&large);
+                result.operations["total_bounce_s"][0].summary.quantiles["p90"].value
+            };
+            let truth = coverage_estimates(&large, p90);
+            let mut hits = vec![(0_u32, 0.0); truth.len()];
+            for seed in 0..seeds {
+                let estimates = coverage_estimates(&coverage_job(levels, 64, u64::from(seed)), p90);
+                for ((hit, width), ((_, _, [lo, hi]), (_, true_value, _))) in
+                    hits.iter_mut().zip(estimates.iter().zip(&truth))
+                {
+                    *hit += u32::from(*lo <= *true_value && *true_value <= *hi);
+                    *width += 0.5 * (hi - lo) / true_value.abs().max(f64::MIN_POSITIVE);
+                }
+            }
+            for ((statistic, _, _), (hit, width)) in truth.iter().zip(hits) {
+                rows.push(Coverage {
+                    design,
+                    statistic,
+                    seeds,
+                    coverage: f64::from(hit) / f64::from(seeds),
+                    mean_relative_half_width: width / f64::from(seeds),
+                });
+            }
+        });
+    }
+    rows
 }
