@@ -855,7 +855,7 @@ fn coverage_estimates(job: &Job, exceedance_above: f64) -> Vec<(&'static str, f6
 /// Coverage of every statistic in every design: 64 devices per job, the truth from one job 1000
 /// (quick: 20 times, over 20 seeds) larger.
 fn coverage(quick: bool, progress: &Progress) -> Vec<Coverage> {
-    let (seeds, scale) = if quick { (20_u32, 20) } else { (200, 1000) };
+    let (seeds, scale) = if quick { (20_u32, 20) } else { (400, 1000) };
     let mut rows = Vec::new();
     for (design, levels) in COVERAGE_DESIGNS {
         progress.measure(format!("interval coverage: {design}"), || {
