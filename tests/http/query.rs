@@ -82,6 +82,62 @@ fn any_quantile_and_threshold_are_answered_after_the_run_with_intervals() {
     }
 }
 
+/// In CSV the answers are columns after the others, with the numbers of the JSON answer.
+#[test]
+fn a_query_after_the_run_in_csv_has_a_column_per_answer() {
+    let server = TestApp::start(&temp_db("query-csv"), &[]);
+    let id = server.submit(&scattered_job(16, 20, 5));
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let query = "quantiles=0.5,0.999&exceedance=above:0.3,below:0.25";
+    let url = |format: &str| server.url(&format!("/v1/jobs/{id}/distributions/e1?{query}{format}"));
+    let json = get(&url(""), None).json();
+    let csv = get(&url("&format=csv"), None);
+    assert_eq!(csv.status, 200, "{}", csv.body);
+    let mut lines = csv.body.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let asked = [
+        "q0.5",
+        "q0.5_ci95_lo",
+        "q0.5_ci95_hi",
+        "q0.999",
+        "q0.999_ci95_lo",
+        "q0.999_ci95_hi",
+        "above:0.3",
+        "above:0.3_ci95_lo",
+        "above:0.3_ci95_hi",
+        "below:0.25",
+        "below:0.25_ci95_lo",
+        "below:0.25_ci95_hi",
+    ];
+    assert_eq!(header[header.len() - asked.len()..], asked);
+    let bins = json["bins"].as_array().unwrap();
+    for (line, bin) in lines.zip(bins) {
+        let cells: Vec<f64> = line
+            .split(',')
+            .map(|c| c.parse().unwrap_or(f64::NAN))
+            .collect();
+        let answers = &cells[cells.len() - asked.len()..];
+        let q = &bin["query"];
+        let expected = [
+            &q["quantiles"]["0.5"]["value"],
+            &q["quantiles"]["0.5"]["ci95"][0],
+            &q["quantiles"]["0.5"]["ci95"][1],
+            &q["quantiles"]["0.999"]["value"],
+            &q["quantiles"]["0.999"]["ci95"][0],
+            &q["quantiles"]["0.999"]["ci95"][1],
+            &q["exceedance"][0]["probability"],
+            &q["exceedance"][0]["ci95"][0],
+            &q["exceedance"][0]["ci95"][1],
+            &q["exceedance"][1]["probability"],
+            &q["exceedance"][1]["ci95"][0],
+            &q["exceedance"][1]["ci95"][1],
+        ];
+        for (got, want) in answers.iter().zip(expected) {
+            assert_eq!(*got, want.as_f64().unwrap(), "{line}");
+        }
+    }
+}
+
 #[test]
 fn a_bad_query_is_400_naming_its_parameter() {
     let server = TestApp::start(&temp_db("bad-query"), &[]);
@@ -93,7 +149,6 @@ fn a_bad_query_is_400_naming_its_parameter() {
         ("quantiles=NaN", "quantiles"),
         ("exceedance=over:1", "exceedance"),
         ("exceedance=above:1e999", "exceedance"),
-        ("quantiles=0.5&format=csv", "format=csv"),
     ] {
         let url = server.url(&format!("/v1/jobs/{id}/distributions/e1?{query}"));
         let problem = assert_problem(&get(&url, None), 400);

@@ -127,10 +127,7 @@ def finite(text):
 
 def repair_after_run_query(query):
     """A query after the run: each level a number strictly between 0 and 1, each threshold a finite
-    number (the patterns state the characters, not the values), and neither with `format=csv`."""
-    if query.get("format") == "csv":
-        query.pop("quantiles", None)
-        query.pop("exceedance", None)
+    number (the patterns state the characters, not the values)."""
     levels = query.get("quantiles")
     if levels is not None and not all(
         (finite(level) or 0) > 0 and (finite(level) or 1) < 1 for level in levels.split(",")

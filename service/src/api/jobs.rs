@@ -18,7 +18,7 @@ use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric, query_metric};
-use bouncewear_model::stats::{Accumulator, QUANTILES, QueryAnswer, Summary};
+use bouncewear_model::stats::{Accumulator, QUANTILES, QueryAnswer, Summary, Threshold};
 use futures_util::stream::{Stream, StreamExt};
 use serde::{Deserialize, Serialize};
 use std::convert::Infallible;
@@ -447,11 +447,13 @@ pub struct DistributionQuery {
     #[param(inline, example = "csv")]
     pub format: Option<Format>,
     /// Quantile levels to answer after the run, each bin gaining `query.quantiles` keyed by the
-    /// level in shortest form: 1 to 20 comma-separated numbers strictly between 0 and 1. JSON only.
+    /// level in shortest form: 1 to 20 comma-separated numbers strictly between 0 and 1 (with
+    /// `format=csv`: columns `q{level}`, `q{level}_ci95_lo`, `q{level}_ci95_hi`).
     #[param(pattern = "^[-+0-9.eE]+(,[-+0-9.eE]+){0,19}$", example = "0.5,0.999")]
     pub quantiles: Option<String>,
     /// Thresholds to answer after the run, each bin gaining `query.exceedance` in this order:
-    /// 1 to 20 comma-separated `above:X` or `below:X`, X a finite number. JSON only.
+    /// 1 to 20 comma-separated `above:X` or `below:X`, X a finite number (with `format=csv`:
+    /// columns `above:X`, `above:X_ci95_lo`, `above:X_ci95_hi`).
     #[param(
         pattern = "^(above|below):[-+0-9.eE]+(,(above|below):[-+0-9.eE]+){0,19}$",
         example = "above:0.005,below:0.002"
@@ -499,9 +501,10 @@ pub struct Distribution {
 /// `format=json` (default) gives the bins as JSON, `format=csv` one CSV row per bin
 /// (`op_start,op_end,n,mean,...`, every quantile with its interval). `op_start` and `op_end` select
 /// the bins that overlap the range; an empty range has no bins (404). With `quantiles` or
-/// `exceedance` (JSON only; 400 for a bad item, naming the parameter) each bin gains `query`:
-/// the asked quantiles and exceedance probabilities, from the bin's stored groups with the
-/// summaries' estimators and intervals (409 for a job stored before groups were kept).
+/// `exceedance` (400 for a bad item, naming the parameter) each bin gains `query`: the asked
+/// quantiles and exceedance probabilities, from the bin's stored groups with the summaries'
+/// estimators and intervals (409 for a job stored before groups were kept); in CSV, columns after
+/// the others, in the order asked.
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/distributions/{metric}", tag = "jobs",
     params(("id" = String, Path, description = "Job id"), ("metric" = String, Path, description = "An operation or device metric"), DistributionQuery),
@@ -526,12 +529,6 @@ pub async fn get_distribution(
     let after_run = AfterRunQuery::parse(query.quantiles.as_deref(), query.exceedance.as_deref())
         .map_err(|bad| ApiError::BadRequest(bad.to_string()))?;
     let format = query.format.unwrap_or(Format::Json);
-    if after_run.is_some() && matches!(format, Format::Csv) {
-        return Err(ApiError::BadRequest(
-            "query parameters `quantiles` and `exceedance` are answered in JSON only, not with format=csv"
-                .to_owned(),
-        ));
-    }
     let (op_start, op_end) = (
         query.op_start.unwrap_or(0),
         query.op_end.unwrap_or(u64::MAX),
@@ -618,13 +615,29 @@ fn to_json(value: &impl Serialize) -> Result<Vec<u8>, ApiError> {
     serde_json::to_vec(value).map_err(|e| Internal(e.to_string()).into())
 }
 
-/// One row per bin: range, moments, intervals and every quantile.
+/// One row per bin: range, moments, intervals and every quantile; after them, the answers to a
+/// query after the run: per level `q{level}` with its interval, per threshold `above:{x}` (or
+/// `below:{x}`) with its interval, in the order asked.
 fn to_csv(bins: &[DistributionBin]) -> String {
     let mut csv = String::from("op_start,op_end,n,mean,mean_ci95_lo,mean_ci95_hi,sd,min,max");
     for (name, _) in QUANTILES {
         let _ = write!(csv, ",{name},{name}_ci95_lo,{name}_ci95_hi");
     }
-    csv.push_str(",exceedance_limit,exceedance_probability\n");
+    csv.push_str(",exceedance_limit,exceedance_probability");
+    let asked = bins.first().and_then(|bin| bin.query.as_ref());
+    if let Some(answer) = asked {
+        for level in answer.quantiles.keys() {
+            let _ = write!(csv, ",q{level},q{level}_ci95_lo,q{level}_ci95_hi");
+        }
+        for item in &answer.exceedance {
+            let name = match item.threshold {
+                Threshold::Above(x) => format!("above:{x}"),
+                Threshold::Below(x) => format!("below:{x}"),
+            };
+            let _ = write!(csv, ",{name},{name}_ci95_lo,{name}_ci95_hi");
+        }
+    }
+    csv.push('\n');
     for bin in bins {
         let s = &bin.summary;
         let _ = write!(
@@ -646,10 +659,19 @@ fn to_csv(bins: &[DistributionBin]) -> String {
         }
         match &s.exceedance {
             Some(e) => {
-                let _ = writeln!(csv, ",{},{}", e.limit, e.probability);
+                let _ = write!(csv, ",{},{}", e.limit, e.probability);
             }
-            None => csv.push_str(",,\n"),
+            None => csv.push_str(",,"),
         }
+        if let Some(answer) = &bin.query {
+            for q in answer.quantiles.values() {
+                let _ = write!(csv, ",{},{},{}", q.value, q.ci95[0], q.ci95[1]);
+            }
+            for e in &answer.exceedance {
+                let _ = write!(csv, ",{},{},{}", e.probability, e.ci95[0], e.ci95[1]);
+            }
+        }
+        csv.push('\n');
     }
     csv
 }
