@@ -66,7 +66,8 @@ enum Command {
         #[arg(long)]
         threads: Option<usize>,
         /// Also write the plots as SVG files into this directory: for every operation metric its
-        /// wear curve (`bands-METRIC.svg`) and histograms (`histograms-METRIC.svg`), and `weibull.svg`.
+        /// wear curve (`bands-METRIC.svg`) and histograms (`histograms-METRIC.svg`), `weibull.svg`,
+        /// and with a sensitivity analysis, for every metric of it, `sensitivity-METRIC.svg`.
         #[arg(long)]
         plots: Option<PathBuf>,
         /// No progress bar (it is drawn only when stderr is a terminal anyway).
@@ -303,6 +304,12 @@ fn write_plots(
         files.push((
             "weibull.svg".to_owned(),
             crate::plots::weibull_svg(&life.analysis),
+        ));
+    }
+    for (metric, bins) in result.sensitivity.iter().flatten() {
+        files.push((
+            format!("sensitivity-{metric}.svg"),
+            crate::plots::sensitivity_svg(metric, bins),
         ));
     }
     for (name, svg) in files {

@@ -1,7 +1,8 @@
 // End-to-end test of the dashboard in a real browser (Debian's chromium, driven by playwright-core):
 // submit the "Quick check" preset on /, follow the job to `succeeded` on its page, check that the
 // wear-curve and histogram plots are there, and save screenshots: the jobs page, a job's page, a
-// schedule's trend over a few runs and a job's Weibull plot. Then under load: with 20 active
+// schedule's trend over a few runs, a job's Weibull plot and a job's sensitivity analysis (its
+// section shown, its Sobol' plot and table, hidden on a job without one). Then under load: with 20 active
 // jobs and a schedule, every plot of both pages loads within 5 s and a submit through the form is
 // accepted while they run (Chromium opens at most 6 connections per host: the page must not hold
 // one stream per job).
@@ -168,6 +169,9 @@ if (!bandsTitle || !bandsTitle.includes("total_bounce_s")) {
   await fail(`the wear curve is not of total_bounce_s: "${bandsTitle}"`);
 }
 await step("the device metrics table is filled", () => page.waitForSelector("#devices-table tbody tr"));
+if (!(await page.locator("#sensitivity-section").isHidden())) {
+  await fail("#sensitivity-section is shown for a job without a sensitivity analysis");
+}
 await page.waitForTimeout(300);
 await step("save dashboard-job.png", () =>
   page.screenshot({ path: join(outDir, "dashboard-job.png"), fullPage: true }),
@@ -259,6 +263,50 @@ await step("save dashboard-life.png", () =>
   page.locator("#life-section").screenshot({ path: join(outDir, "dashboard-life.png") }),
 );
 log(`saved ${join(outDir, "dashboard-life.png")}`);
+const sensitivityJob = await step("submit a job with a sensitivity analysis", () =>
+  call("POST", "/v1/jobs", {
+    name: "Sobol' indices at 48 V",
+    scenario: { circuit: { supply_voltage_v: 48, current_a: 15 } },
+    devices: 100,
+    operations: 100,
+    bin_operations: 50,
+    seed: 7,
+    scatter: [
+      { parameter: "impact_velocity_m_s", per: "operation", distribution: { kind: "normal", mean: 0.3, sd: 0.03, min: 0 } },
+      { parameter: "dynamic_yield_pressure_pa", per: "device", distribution: { kind: "normal", mean: 1.0e9, sd: 1.0e8, min: 1e8 } },
+      { parameter: "contact_radius_m", per: "device", distribution: { kind: "normal", mean: 3e-3, sd: 1e-4, min: 2e-3 } },
+    ],
+    sensitivity: { method: "sobol" },
+  }),
+);
+await step(`the sensitivity job ${sensitivityJob.id} succeeds`, () => succeeds(sensitivityJob.id));
+await step(`open ${base}/jobs/${sensitivityJob.id}`, () =>
+  page.goto(`${base}/jobs/${sensitivityJob.id}`, { waitUntil: "load" }),
+);
+await step("#sensitivity-section is shown", () => page.waitForSelector("#sensitivity-section:not([hidden])"));
+await step("#plot-sensitivity shows an SVG", () => page.waitForSelector("#sensitivity-section #plot-sensitivity svg"));
+const sensitivityTitle = await page.textContent("#plot-sensitivity svg title");
+if (!sensitivityTitle || !sensitivityTitle.includes("total_bounce_s") || !sensitivityTitle.includes("Sobol")) {
+  await fail(`the sensitivity plot is not of total_bounce_s's Sobol' indices: "${sensitivityTitle}"`);
+}
+const sensitivityRows = await step("the sensitivity table lists the three parameters", async () => {
+  await page.waitForFunction(() => document.querySelectorAll("#sensitivity-table tbody tr").length === 3);
+  return page.$$eval("#sensitivity-table tbody tr td:first-child", (cells) => cells.map((c) => c.textContent));
+});
+if (!sensitivityRows.includes("impact_velocity_m_s")) await fail(`the sensitivity table lists ${sensitivityRows.join(", ")}`);
+// Another metric, a device metric: the plot follows the selection.
+await step("select final_radius_m for the sensitivity", () => page.selectOption("#sensitivity-metric", "final_radius_m"));
+await step("the sensitivity plot follows the selection", () =>
+  page.waitForFunction(() => {
+    const title = document.querySelector("#plot-sensitivity svg title");
+    return title && title.textContent.includes("final_radius_m");
+  }),
+);
+await page.waitForTimeout(300);
+await step("save dashboard-sensitivity.png", () =>
+  page.locator("#sensitivity-section").screenshot({ path: join(outDir, "dashboard-sensitivity.png") }),
+);
+log(`saved ${join(outDir, "dashboard-sensitivity.png")}`);
 
 log(`submitting ${ACTIVE_JOBS} long jobs`);
 const active = [];

@@ -414,6 +414,45 @@ fn life_analysis_is_served_as_json_and_per_device_csv() {
     );
 }
 
+#[test]
+fn a_sensitivity_job_has_a_sensitivity_plot_and_a_job_without_one_gets_404() {
+    let server = TestApp::start(&temp_db("sensitivity-plot"), &[]);
+    let mut job = scattered_job(64, 100, 5);
+    job["bin_operations"] = json!(50);
+    job["sensitivity"] = json!({"method": "sobol"});
+    let id = server.submit(&job);
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let plot = |id: &str, query: &str| {
+        get(
+            &server.url(&format!("/v1/jobs/{id}/plots/sensitivity.svg{query}")),
+            None,
+        )
+    };
+    let svg = plot(&id, "");
+    assert_eq!(svg.status, 200, "{}", svg.body);
+    assert_eq!(svg.content_type, "image/svg+xml");
+    assert!(svg.body.starts_with("<svg") && svg.body.ends_with("</svg>\n"));
+    assert!(svg.body.contains("total_bounce_s") && svg.body.contains("contact_radius_m"));
+    assert!(svg.body.contains("operations 0-49") && svg.body.contains("operations 50-99"));
+    assert!(!svg.body.contains("NaN"));
+    // A device metric has its indices over the devices; a metric the analysis lacks is 404.
+    let device = plot(&id, "?metric=final_radius_m");
+    assert_eq!(device.status, 200, "{}", device.body);
+    assert!(device.body.contains("devices at the end of the test"));
+    assert_problem(&plot(&id, "?metric=no_such_metric"), 404);
+
+    let plain = server.submit(&scattered_job(4, 20, 5));
+    server.wait_for(&plain, "succeeded", Duration::from_secs(20));
+    let problem = assert_problem(&plot(&plain, ""), 404);
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("no sensitivity analysis"),
+        "{problem}"
+    );
+}
+
 /// A job whose result holds many rows is stored in short transactions: submissions meanwhile are
 /// all accepted (or refused with 429 once the queue is full), never failed. Its device lives are
 /// listed up to `--max-listed-lives` and streamed page by page, while the life analysis counts

@@ -879,6 +879,7 @@
       show($("#result"), true);
       renderOperations(result);
       renderLife(result);
+      renderSensitivity(result);
       renderDevices(result);
       renderRun(result);
     }
@@ -958,6 +959,62 @@
       table.replaceChildren(
         el("thead", {}, el("tr", {}, el("th", {}, "Weibull fit"), el("th", { class: "num" }, "estimate"), el("th", { class: "num" }, "95 % interval"))),
         el("tbody", {}, rows.map(([k, v, ci]) => el("tr", {}, el("td", {}, k), el("td", { class: "num" }, v), el("td", { class: "num" }, ci)))));
+    }
+
+    // Which parameters drive each metric: the plot of the first and last bin, and a table of the
+    // last bin's indices (method regression: its standardised regression coefficients).
+    function renderSensitivity(result) {
+      const sensitivity = result.sensitivity;
+      const metrics = Object.keys(sensitivity || {});
+      show($("#sensitivity-section"), metrics.length > 0);
+      if (!metrics.length) return;
+      const select = $("#sensitivity-metric");
+      select.replaceChildren(...metrics.map((m) => el("option", { value: m }, m)));
+      const operationMetric = $("#metric").value;
+      select.value = metrics.includes(operationMetric) ? operationMetric
+        : metrics.includes("total_bounce_s") ? "total_bounce_s" : metrics[0];
+      const showMetric = () => {
+        const metric = select.value;
+        injectSvg($("#plot-sensitivity"), base + "/plots/sensitivity.svg?metric=" + encodeURIComponent(metric));
+        renderSensitivityTable(sensitivity[metric] || []);
+      };
+      select.onchange = showMetric;
+      showMetric();
+    }
+
+    function renderSensitivityTable(bins) {
+      const table = $("#sensitivity-table");
+      const last = bins[bins.length - 1];
+      const entries = Object.entries((last && last.indices) || {});
+      if (!entries.length) {
+        $("#sensitivity-bin").textContent = "";
+        table.replaceChildren(el("tbody", {}, el("tr", {}, el("td", { class: "muted" }, "No indices for this metric."))));
+        return;
+      }
+      const sobol = entries.some(([, p]) => p.first || p.total);
+      const where = typeof last.op_start === "number" && typeof last.op_end === "number"
+        ? "Last bin, operations " + last.op_start + "–" + (last.op_end - 1)
+        : "Over the devices at the end of the test";
+      $("#sensitivity-bin").textContent = where +
+        (typeof last.r_squared === "number" ? "; the regression explains R² = " + fmt(last.r_squared, 3) + " of the variance." : ".");
+      const weight = (p) => {
+        const v = sobol ? (p.total || {}).value : Math.abs(p.src);
+        return typeof v === "number" && Number.isFinite(v) ? v : -Infinity;
+      };
+      entries.sort(([, a], [, b]) => (weight(b) - weight(a)) || 0);
+      const index = (e) => [
+        el("td", { class: "num" }, e ? fmt(e.value, 3) : "–"),
+        el("td", { class: "num" }, e ? fmtInterval(e.ci95) : "–"),
+      ];
+      const heads = sobol
+        ? ["parameter", "per", "first-order", "95 % interval", "total", "95 % interval"]
+        : ["parameter", "per", "standardised regression coefficient"];
+      table.replaceChildren(
+        el("thead", {}, el("tr", {}, heads.map((h, i) => el("th", { class: i > 1 ? "num" : "" }, h)))),
+        el("tbody", {}, entries.map(([name, p]) => el("tr", {},
+          el("td", { class: "mono" }, name),
+          el("td", {}, p.per || "–"),
+          sobol ? [...index(p.first), ...index(p.total)] : el("td", { class: "num" }, fmt(p.src, 3))))));
     }
 
     function renderDevices(result) {

@@ -1,5 +1,5 @@
-//! Plots as SVG, rendered by the server (`crate::plots`): a job's wear curves, histograms and Weibull
-//! plot, and a schedule's trend. The dashboard and `bouncewear run --plots` show the same pictures.
+//! Plots as SVG, rendered by the server (`crate::plots`): a job's wear curves, histograms, Weibull
+//! plot and sensitivity indices, and a schedule's trend. The dashboard and `bouncewear run --plots` show the same pictures.
 
 use super::AppState;
 use super::error::{
@@ -32,25 +32,32 @@ const SVG: &str = "image/svg+xml";
 #[derive(Debug, Deserialize, IntoParams)]
 #[into_params(parameter_in = Query)]
 pub struct PlotQuery {
-    /// The operation metric to draw (default `total_bounce_s`); ignored by `weibull.svg`.
+    /// The metric to draw (default `total_bounce_s`): an operation metric for `bands.svg` and
+    /// `histograms.svg`, any metric of the sensitivity analysis for `sensitivity.svg`; ignored by
+    /// `weibull.svg`.
     #[param(example = "total_bounce_s")]
     pub metric: Option<String>,
 }
 
 /// A plot of a succeeded job: `bands.svg` (p05/p50/p95 across operations: the wear curve),
-/// `histograms.svg` (per bin) or `weibull.svg` (life, with bounds).
+/// `histograms.svg` (per bin), `weibull.svg` (life, with bounds) or `sensitivity.svg` (which
+/// parameters drive a metric).
 ///
 /// SVG, as the dashboard shows it. `bands.svg` and `histograms.svg` draw `metric` (an operation
 /// metric of the job, default `total_bounce_s`); `weibull.svg` needs failure criteria and plots
-/// median-rank positions with the fitted line and its bounds.
+/// median-rank positions with the fitted line and its bounds; `sensitivity.svg` needs a job
+/// submitted with `sensitivity` and draws, for `metric` (an operation or device metric), the
+/// first-order and total Sobol' indices of each scattered parameter with their 95 % intervals in
+/// the first and the last bin (method `regression`: the absolute standardised regression
+/// coefficients).
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/plots/{kind}", tag = "jobs",
-    params(("id" = String, Path, description = "Job id"), ("kind" = String, Path, description = "bands.svg, histograms.svg or weibull.svg"), PlotQuery),
+    params(("id" = String, Path, description = "Job id"), ("kind" = String, Path, description = "bands.svg, histograms.svg, weibull.svg or sensitivity.svg"), PlotQuery),
     responses(
         (status = 200, description = "The plot", body = String, content_type = SVG),
         BadQuery,
         Unauthorized,
-        (status = 404, description = "No such job, plot or metric", body = Problem, content_type = PROBLEM),
+        (status = 404, description = "No such job, plot or metric, or no sensitivity analysis", body = Problem, content_type = PROBLEM),
         NotSucceeded,
     ),
     security((), ("api_key" = []))

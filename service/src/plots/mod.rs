@@ -1,6 +1,6 @@
 //! Standalone SVG plots for the dashboard: a job's per-bin histograms and wear curve, a Weibull
-//! probability plot of a life analysis, a schedule's night-by-night trend, a calibration's fit,
-//! and the benchmark's work-precision panels.
+//! probability plot of a life analysis, a sensitivity analysis's indices, a schedule's
+//! night-by-night trend, a calibration's fit, and the benchmark's work-precision panels.
 //!
 //! Every function returns one complete SVG document (`<svg ...>` to `</svg>\n`) with a white
 //! background, a `viewBox` and its own `width`/`height`, so it can be served as `image/svg+xml`
@@ -15,6 +15,7 @@ mod axes;
 mod bands;
 mod calibration;
 mod histograms;
+mod sensitivity;
 mod svg;
 mod trend;
 mod weibull;
@@ -26,6 +27,7 @@ use bouncewear_model::stats::Summary;
 pub use bands::quantile_bands_svg;
 pub use calibration::{FitPanel, calibration_panels, calibration_svg};
 pub use histograms::histograms_svg;
+pub use sensitivity::sensitivity_svg;
 pub use trend::{TrendPoint, trend_svg};
 pub use weibull::weibull_svg;
 pub use work_precision::{Panel, Series, work_precision_svg};
@@ -39,12 +41,17 @@ pub enum PlotError {
     NoMetric(String),
     #[error("the job has no failure criteria, so no Weibull plot")]
     NoLifeAnalysis,
-    #[error("no plot `{0}`: bands.svg, histograms.svg or weibull.svg")]
+    #[error("the job has no sensitivity analysis: submit it with `sensitivity`")]
+    NoSensitivity,
+    #[error("the job's sensitivity analysis has no metric `{0}`")]
+    NoSensitivityMetric(String),
+    #[error("no plot `{0}`: bands.svg, histograms.svg, weibull.svg or sensitivity.svg")]
     NoSuchPlot(String),
 }
 
-/// The plot `kind` (`bands.svg`, `histograms.svg` or `weibull.svg`) of a job's result, by the
-/// file name the dashboard and `bouncewear run --plots` both use.
+/// The plot `kind` (`bands.svg`, `histograms.svg`, `weibull.svg` or `sensitivity.svg`) of a job's
+/// result, by the file name the dashboard and `bouncewear run --plots` both use. `metric` is an
+/// operation metric for the first two, any metric of the sensitivity analysis for the last.
 pub fn job_plot(result: &JobResult, kind: &str, metric: &str) -> Result<String, PlotError> {
     let bins = || {
         result
@@ -59,6 +66,16 @@ pub fn job_plot(result: &JobResult, kind: &str, metric: &str) -> Result<String, 
             Some(life) => Ok(weibull_svg(&life.analysis)),
             None => Err(PlotError::NoLifeAnalysis),
         },
+        "sensitivity.svg" => {
+            let sensitivity = result
+                .sensitivity
+                .as_ref()
+                .ok_or(PlotError::NoSensitivity)?;
+            let bins = sensitivity
+                .get(metric)
+                .ok_or_else(|| PlotError::NoSensitivityMetric(metric.to_owned()))?;
+            Ok(sensitivity_svg(metric, bins))
+        }
         other => Err(PlotError::NoSuchPlot(other.to_owned())),
     }
 }
