@@ -70,7 +70,9 @@ pub struct SobolAccumulator {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct IndexEstimate {
+    /// The index: a share of the output's variance, 0 to 1 up to sampling error.
     pub value: f64,
+    /// Its 95 % confidence interval (delta method, from the spread between independent units).
     pub ci95: [f64; 2],
 }
 
@@ -78,7 +80,9 @@ pub struct IndexEstimate {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SobolIndices {
+    /// The share of the variance the input explains alone.
     pub first: IndexEstimate,
+    /// The share it has a part in, interactions included.
     pub total: IndexEstimate,
 }
 
