@@ -140,6 +140,31 @@ fn run_is_bit_identical_for_threads_1_2_3_and_on_a_rerun() {
     }
 }
 
+/// `--plots DIR` writes the dashboard's plots: per operation metric its bands and histograms, and
+/// with a sensitivity analysis its chart per metric of the analysis.
+#[test]
+fn run_writes_the_dashboards_plots_sensitivity_included() {
+    let mut job = support::scattered_job(24, 20, 3);
+    job["metrics"] = serde_json::json!(["total_bounce_s", "final_radius_m"]);
+    job["sensitivity"] = serde_json::json!({"method": "sobol"});
+    let dir = temp_dir("plots");
+    let result = run_job(&job, &["--plots", dir.to_str().unwrap()]);
+    assert!(result["sensitivity"]["total_bounce_s"].is_array());
+    for name in [
+        "bands-total_bounce_s.svg",
+        "histograms-total_bounce_s.svg",
+        "sensitivity-total_bounce_s.svg",
+        "sensitivity-final_radius_m.svg",
+    ] {
+        let svg = std::fs::read_to_string(dir.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(
+            svg.starts_with("<svg") && svg.ends_with("</svg>\n"),
+            "{name}"
+        );
+        assert!(!svg.contains("NaN"), "{name}");
+    }
+}
+
 /// A one-device job without scatter is `simulate` repeated, with the radius of docs/model.md
 /// section 6 worked out by hand from the arc energy of the operations before.
 #[test]
