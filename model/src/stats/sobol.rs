@@ -350,17 +350,23 @@ mod tests {
         [(); 3].map(|()| PI * (2.0 * rng.uniform() - 1.0))
     }
 
+    /// One base sample's evaluations: `f(A)`, `f(B)` and `f(AB_i)`.
+    fn evaluations(rng: &mut SplitMix) -> (f64, f64, [f64; 3]) {
+        let (a, b) = (sample(rng), sample(rng));
+        let ab = [0, 1, 2].map(|i| {
+            let mut x = a;
+            x[i] = b[i];
+            ishigami(x)
+        });
+        (ishigami(a), ishigami(b), ab)
+    }
+
     fn pick_freeze(seed: u64, n: usize, shift: f64) -> SobolAccumulator {
         let mut rng = SplitMix(seed);
         let mut sobol = SobolAccumulator::new(3, shift);
         for _ in 0..n {
-            let (a, b) = (sample(&mut rng), sample(&mut rng));
-            let ab = [0, 1, 2].map(|i| {
-                let mut x = a;
-                x[i] = b[i];
-                ishigami(x)
-            });
-            sobol.push(ishigami(a), ishigami(b), &ab);
+            let (a, b, ab) = evaluations(&mut rng);
+            sobol.push(a, b, &ab);
         }
         sobol
     }
@@ -420,13 +426,8 @@ mod tests {
         let mut rng = SplitMix(7);
         let mut group = SobolAccumulator::new(3, 3.5);
         for j in 0..3000 {
-            let (a, b) = (sample(&mut rng), sample(&mut rng));
-            let ab = [0, 1, 2].map(|i| {
-                let mut x = a;
-                x[i] = b[i];
-                ishigami(x)
-            });
-            group.push(ishigami(a), ishigami(b), &ab);
+            let (a, b, ab) = evaluations(&mut rng);
+            group.push(a, b, &ab);
             if j % 700 == 699 {
                 merged.merge(&group);
                 group = SobolAccumulator::new(3, 3.5);
@@ -493,14 +494,9 @@ mod tests {
         let mut rng = SplitMix(3);
         let mut clustered = SobolAccumulator::new(3, 3.5);
         for _ in 0..500 {
-            let (a, b) = (sample(&mut rng), sample(&mut rng));
-            let ab = [0, 1, 2].map(|i| {
-                let mut x = a;
-                x[i] = b[i];
-                ishigami(x)
-            });
+            let (a, b, ab) = evaluations(&mut rng);
             let mut cluster = clustered.empty_like();
-            cluster.push_to_cluster(ishigami(a), ishigami(b), &ab);
+            cluster.push_to_cluster(a, b, &ab);
             clustered.merge_cluster(&cluster);
         }
         assert_eq!(alone, clustered);
