@@ -167,15 +167,17 @@ impl<'a> Merged<'a> {
         [lo.max(self.all.min()), hi.min(self.all.max())]
     }
 
-    /// The quantiles of `levels` with their Woodruff intervals, clipped to `[min, max]`.
+    /// The quantiles of `levels` with their Woodruff intervals, clipped to `[min, max]`: one pass
+    /// over each group's buckets for every level, and one over all values for the bounds.
     pub(super) fn quantiles(&self, levels: &[f64]) -> Vec<QuantileSummary> {
         let values = self.all.quantiles(levels);
-        levels
-            .iter()
-            .zip(values)
-            .map(|(&q, value)| {
-                let ci95 = self.clip(woodruff_interval(&self.all, &self.filled, q, value));
-                QuantileSummary { value, ci95 }
+        let intervals = woodruff_intervals(&self.all, &self.filled, levels, &values);
+        values
+            .into_iter()
+            .zip(intervals)
+            .map(|(value, ci95)| QuantileSummary {
+                value,
+                ci95: self.clip(ci95),
             })
             .collect()
     }
@@ -226,34 +228,50 @@ fn sample_variance(values: &[f64]) -> f64 {
     values.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0)
 }
 
-/// Woodruff's interval for the quantile `value` at level `q` (see [`summarize`]): the clustered
-/// standard error of the share at or below `value`, mapped back through the overall quantiles.
-/// Values are compared at bucket resolution, consistent with how `value` itself was found.
-fn woodruff_interval(all: &Accumulator, groups: &[&Accumulator], q: f64, value: f64) -> [f64; 2] {
+/// Woodruff's intervals for the quantiles `values` at `levels` (see [`summarize`]): the clustered
+/// standard error of the share at or below each value, mapped back through the overall quantiles.
+/// Values are compared at bucket resolution, consistent with how they were found.
+fn woodruff_intervals(
+    all: &Accumulator,
+    groups: &[&Accumulator],
+    levels: &[f64],
+    values: &[f64],
+) -> Vec<[f64; 2]> {
     let g = groups.len();
     if g < 2 {
-        return [value, value];
+        return values.iter().map(|&value| [value, value]).collect();
     }
-    let at_or_below = |acc: &Accumulator| -> f64 {
-        acc.sketch()
-            .buckets()
-            .take_while(|&(midpoint, _)| midpoint <= value)
-            .map(|(_, count)| count as f64)
-            .sum()
-    };
-    let n = all.count() as f64;
-    let share = at_or_below(all) / n;
-    let squares: f64 = groups
+    let at_or_below = all.sketch().counts_at_or_below(values);
+    let per_group: Vec<(f64, Vec<u64>)> = groups
         .iter()
         .map(|group| {
-            let residual = at_or_below(group) - share * group.count() as f64;
-            residual * residual
+            let counts = group.sketch().counts_at_or_below(values);
+            (group.count() as f64, counts)
         })
-        .sum();
-    let variance = g as f64 / (g as f64 - 1.0) * squares / (n * n);
-    let half = student_t_975(g as u64 - 1) * variance.sqrt();
-    let at = |level: f64| all.quantile(level.clamp(0.0, 1.0));
-    [at(q - half), at(q + half)]
+        .collect();
+    let n = all.count() as f64;
+    let t = student_t_975(g as u64 - 1);
+    let bounds: Vec<f64> = levels
+        .iter()
+        .enumerate()
+        .flat_map(|(i, &q)| {
+            let share = at_or_below[i] as f64 / n;
+            let squares: f64 = per_group
+                .iter()
+                .map(|(size, counts)| {
+                    let residual = counts[i] as f64 - share * size;
+                    residual * residual
+                })
+                .sum();
+            let variance = g as f64 / (g as f64 - 1.0) * squares / (n * n);
+            let half = t * variance.sqrt();
+            [(q - half).clamp(0.0, 1.0), (q + half).clamp(0.0, 1.0)]
+        })
+        .collect();
+    all.quantiles(&bounds)
+        .chunks_exact(2)
+        .map(|bound| [bound[0], bound[1]])
+        .collect()
 }
 
 /// Batch-means interval from one statistic per independent group (`G` of them):

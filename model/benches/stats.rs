@@ -1,11 +1,16 @@
-//! One bin's values into its accumulators, as the engine buffers them: 11 metrics of 8 devices x 50
-//! operations (the reference jobs' bins at 8 lanes), pushed one by one in the order of one device
-//! at a time, or a metric's column at a time with `Accumulator::push_batch`. Both give the same
-//! accumulators to the bit; divan reports the time per value.
+//! The statistics of one bin as the engine gives them, on one thread.
 //!
-//! `cargo bench -p bouncewear-model --bench accumulate`
+//! `accumulate`: one bin's values into its accumulators, as the engine buffers them: 11 metrics of
+//! 8 devices x 50 operations (the reference jobs' bins at 8 lanes), pushed one by one in the order
+//! of one device at a time, or a metric's column at a time with `Accumulator::push_batch`. Both
+//! give the same accumulators to the bit; divan reports the time per value.
+//!
+//! `summary`: the summary of one (metric, bin) of the reference jobs, 32 groups of 3100 values
+//! (2000 devices x 50 operations) spread over about 9 binades, with an exceedance limit.
+//!
+//! `cargo bench -p bouncewear-model --bench stats`
 
-use bouncewear_model::stats::Accumulator;
+use bouncewear_model::stats::{Accumulator, summarize};
 use divan::{Bencher, black_box, counter::ItemsCount};
 
 fn main() {
@@ -57,7 +62,7 @@ fn accumulators() -> Vec<Accumulator> {
 }
 
 #[divan::bench]
-fn one_by_one(bencher: Bencher) {
+fn accumulate_one_by_one(bencher: Bencher) {
     let (_, rows) = bin();
     let mut accumulators = accumulators();
     bencher
@@ -72,7 +77,7 @@ fn one_by_one(bencher: Bencher) {
 }
 
 #[divan::bench]
-fn push_batch(bencher: Bencher) {
+fn accumulate_push_batch(bencher: Bencher) {
     let (columns, _) = bin();
     let mut accumulators = accumulators();
     bencher
@@ -85,4 +90,19 @@ fn push_batch(bencher: Bencher) {
                 accumulator.push_batch(values);
             }
         });
+}
+
+#[divan::bench(sample_count = 50)]
+fn summary_of_32_groups(bencher: Bencher) {
+    let groups: Vec<Accumulator> = (0..32)
+        .map(|g| {
+            let mut group = Accumulator::new(Some(3e-3));
+            // Log-uniform over e^-3 .. e^3 around 2e-3.
+            uniforms(g + 100)
+                .take(3100)
+                .for_each(|u| group.push(2e-3 * (6.0 * u - 3.0).exp()));
+            group
+        })
+        .collect();
+    bencher.bench_local(|| summarize(black_box(&groups)));
 }
