@@ -447,8 +447,9 @@ impl<'a> Plan<'a> {
 
     /// Runs the `L::LANES` devices of the chunk from `first_local` on, in lockstep, into `stats`:
     /// each from its own stream, with the draws and the arithmetic it would have alone. Each bin's
-    /// values wait in `buffer` and go into the accumulators device after device, in the order of
-    /// one device at a time, so the sums come out the same to the bit for any number of lanes.
+    /// values wait in `buffer`, one column per metric, and go into each accumulator in one batch,
+    /// device after device, in the order of one device at a time, so the sums come out the same to
+    /// the bit for any number of lanes.
     ///
     /// With Sobol' indices over device-level parameters, the devices run again alongside, as
     /// variants: `B`, drawn from the devices' Sobol' streams, and `AB_i`, the devices with
@@ -563,9 +564,10 @@ impl<'a> Plan<'a> {
                         if v != 0 {
                             continue;
                         }
-                        let at = (k * in_bin + row) * metrics.len();
-                        buffer[at..at + metrics.len()]
-                            .copy_from_slice(&values[k * metrics.len()..(k + 1) * metrics.len()]);
+                        let lane = &values[k * metrics.len()..(k + 1) * metrics.len()];
+                        for (column, &value) in buffer.chunks_exact_mut(lanes * in_bin).zip(lane) {
+                            column[k * in_bin + row] = value;
+                        }
                         stats.operations_at_max_bounces += u64::from(outcome.truncated);
                         if failed_at[k].is_none()
                             && self.fails(
@@ -591,10 +593,8 @@ impl<'a> Plan<'a> {
             }
             let bin =
                 &mut stats.operations[bin_index * metrics.len()..(bin_index + 1) * metrics.len()];
-            for values in buffer[..lanes * in_bin * metrics.len()].chunks_exact(metrics.len()) {
-                for (accumulator, &value) in bin.iter_mut().zip(values) {
-                    accumulator.push(value);
-                }
+            for (accumulator, values) in bin.iter_mut().zip(buffer.chunks_exact(lanes * in_bin)) {
+                accumulator.push_batch(values);
             }
         }
         let a = &variants[0];

@@ -302,16 +302,33 @@ mod tests {
         }
     }
 
-    /// The 400-seed figures: `cargo test -p bouncewear-model --release -- --ignored --nocapture
-    /// after_run_coverage_over_400_seeds`.
+    /// The figures over 1200 seeds, in three blocks of 400: `cargo test -p bouncewear-model
+    /// --release -- --ignored --nocapture after_run_coverage_over_1200_seeds`. A coverage of 95 %
+    /// over 400 seeds has a standard error of 1.1 points, so only the pooled figure is held to
+    /// 93-97 %; each block to 92-98 %.
     #[test]
-    #[ignore = "slow: the 400-seed coverage figures"]
-    fn after_run_coverage_over_400_seeds() {
+    #[ignore = "slow: the 1200-seed coverage figures"]
+    fn after_run_coverage_over_1200_seeds() {
         for (name, design) in [("clustered", CLUSTERED), ("independent", INDEPENDENT)] {
-            let [quantile, above, below] = coverage(&design, 400, 5000);
-            println!("{name}, 400 seeds: p90 {quantile}, above {above}, below {below}");
-            for covered in [quantile, above, below] {
-                assert!((0.90..=0.98).contains(&covered), "{name}: {covered}");
+            let blocks = [5000, 5400, 5800].map(|seed| coverage(&design, 400, seed));
+            for (block, figures) in blocks.iter().enumerate() {
+                let [quantile, above, below] = figures;
+                println!(
+                    "{name}, 400 seeds (block {block}): p90 {quantile}, above {above}, below {below}"
+                );
+                for covered in figures {
+                    assert!(
+                        (0.92..=0.98).contains(covered),
+                        "{name} block {block}: {covered}"
+                    );
+                }
+            }
+            let pooled: [f64; 3] =
+                std::array::from_fn(|i| blocks.iter().map(|b| b[i]).sum::<f64>() / 3.0);
+            let [quantile, above, below] = pooled;
+            println!("{name}, 1200 seeds: p90 {quantile}, above {above}, below {below}");
+            for covered in pooled {
+                assert!((0.93..=0.97).contains(&covered), "{name}: {covered}");
             }
         }
     }

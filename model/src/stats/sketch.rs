@@ -243,6 +243,23 @@ impl Sketch {
         values
     }
 
+    /// For each of `values` (in any order), the number of values whose bucket midpoint is at or
+    /// below it (exact zeros at 0): one pass over the buckets for all of them.
+    pub fn counts_at_or_below(&self, values: &[f64]) -> Vec<u64> {
+        let mut order: Vec<usize> = (0..values.len()).collect();
+        order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
+        let mut counts = vec![0; values.len()];
+        let mut buckets = self.buckets().peekable();
+        let mut seen = 0;
+        for i in order {
+            while let Some((_, count)) = buckets.next_if(|&(midpoint, _)| midpoint <= values[i]) {
+                seen += count;
+            }
+            counts[i] = seen;
+        }
+        counts
+    }
+
     /// Slots allocated in the dense stores, to check that memory follows the range, not the count.
     #[cfg(test)]
     fn allocated_buckets(&self) -> usize {
@@ -425,6 +442,21 @@ mod tests {
         let together = sketch.quantiles(&levels);
         let apart: Vec<f64> = levels.iter().map(|&q| sketch.quantile(q)).collect();
         assert_eq!(together, apart);
+    }
+
+    proptest! {
+        #[test]
+        fn counts_at_or_below_match_a_scan_per_value(
+            values in prop::collection::vec(finite_value(), 0..300),
+            at in prop::collection::vec(finite_value(), 0..12),
+        ) {
+            let sketch = sketch_of(&values);
+            let scanned: Vec<u64> = at
+                .iter()
+                .map(|&v| sketch.buckets().filter(|&(midpoint, _)| midpoint <= v).map(|(_, c)| c).sum())
+                .collect();
+            prop_assert_eq!(sketch.counts_at_or_below(&at), scanned);
+        }
     }
 
     fn finite_value() -> impl Strategy<Value = f64> {
