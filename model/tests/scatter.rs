@@ -438,3 +438,39 @@ fn a_correlation_per_operation_is_deterministic() {
     assert_eq!(one.operations, three.operations);
     assert_eq!(one.devices, three.devices);
 }
+
+/// Each device draws its operations' values ahead, in blocks: the values, their order and the
+/// rejections must be those of drawing one operation at a time from the device's own stream, with
+/// no draw past its last operation (130 operations: two blocks and a short one).
+#[test]
+fn operation_draws_are_each_devices_stream_one_operation_at_a_time() {
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    let (devices, operations, seed) = (9_u64, 130_u64, 4242_u64);
+    let job = job(json!({
+        "devices": devices, "operations": operations, "bin_operations": operations, "seed": seed,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "metrics": ["impact_velocity_m_s"],
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+                     "distribution": {"kind": "normal", "mean": 0.2, "sd": 0.1, "min": 0.15}}]}));
+    let distribution = &job.scatter()[0].distribution;
+    let (mut rejections, mut values) = (0, Vec::new());
+    for device in 0..devices {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        rng.set_stream(device);
+        for _ in 0..operations {
+            values.push(distribution.sample_counting(&mut rng, &mut rejections));
+        }
+    }
+    for threads in [1, 2] {
+        let result = run_on(threads, &job);
+        assert_eq!(result.counts.truncation_rejections, [rejections]);
+        let summary = &result.operations["impact_velocity_m_s"][0].summary;
+        assert_eq!(summary.n, devices * operations);
+        let min = values.iter().copied().fold(f64::INFINITY, f64::min);
+        let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        assert_eq!((summary.min, summary.max), (min, max));
+        let mean = values.iter().sum::<f64>() / values.len() as f64;
+        approx::assert_relative_eq!(summary.mean, mean, max_relative = 1e-12);
+    }
+}

@@ -237,6 +237,11 @@ impl<'a> Entries<'a> {
         self.scatter.is_empty()
     }
 
+    /// The number of entries, each set once per draw.
+    fn len(&self) -> usize {
+        self.scatter.len()
+    }
+
     /// Draws every entry from `rng`, in the job's order, and hands each value to `set` with the
     /// entry's index in the job's scatter: entry `k` in stratum `permutations[k][local]` under
     /// LHS (`strata`), otherwise at random, counting the rejections of truncated draws by entry.
@@ -540,7 +545,7 @@ impl<'a> Plan<'a> {
                     } else {
                         &mut scratch
                     };
-                    variant.draw_operation(self, rejections);
+                    variant.draw_operation(self, rejections, operations - op);
                     let outcomes = variant.evaluate(self, &variant.op_draws);
                     if v == 0
                         && let Some(plan) = sobol.filter(|p| !p.operation_inputs.is_empty())
@@ -847,7 +852,17 @@ struct Variant<'p, L: Real> {
     wear: Vec<DeviceWear>,
     /// This operation's draws.
     op_draws: Vec<Draws>,
+    /// The next operations' per-operation draws, drawn ahead from each lane's stream in one
+    /// loop per lane ([`Variant::draw_operation`]): `(scatter index, value)` in the order
+    /// [`Entries::draw`] sets them, lane after lane, operation after operation.
+    ahead: Vec<(usize, f64)>,
+    /// Operations per lane in `ahead`, and the next one to use.
+    ahead_operations: usize,
+    ahead_next: usize,
 }
+
+/// Operations whose per-operation draws a lane takes from its stream in one go.
+const DRAW_AHEAD: u64 = 64;
 
 impl<'p, L: Real> Variant<'p, L> {
     fn new(
@@ -877,31 +892,50 @@ impl<'p, L: Real> Variant<'p, L> {
             inputs,
             model,
             operation,
+            ahead: Vec::new(),
+            ahead_operations: 0,
+            ahead_next: 0,
         }
     }
 
-    /// Draws the next operation's per-operation scatter of every lane from its stream.
+    /// Draws the next operation's per-operation scatter of every lane from its stream, of
+    /// `remaining` operations (this one included) the device has left. Each lane draws up to
+    /// [`DRAW_AHEAD`] operations at a time from its stream, in one loop: the same values from the
+    /// same streams in the same order as one operation at a time, and never a draw past the
+    /// device's last operation, so the truncation rejections count the same.
     #[inline(always)]
-    fn draw_operation(&mut self, plan: &Plan<'_>, rejections: &mut [u64]) {
-        if plan.operation_scatter.is_empty() {
+    fn draw_operation(&mut self, plan: &Plan<'_>, rejections: &mut [u64], remaining: u64) {
+        let entries = plan.operation_scatter.len();
+        if entries == 0 {
             return;
         }
         let job = plan.job;
+        if self.ahead_next == self.ahead_operations {
+            let operations = remaining.min(DRAW_AHEAD);
+            self.ahead_operations = usize::try_from(operations).expect("a block fits in memory");
+            self.ahead_next = 0;
+            let ahead = &mut self.ahead;
+            ahead.clear();
+            for rng in &mut self.rngs {
+                for _ in 0..operations {
+                    plan.operation_scatter
+                        .draw(job, None, rng, rejections, |index, value| {
+                            ahead.push((index, value));
+                        });
+                }
+            }
+        }
         for k in 0..L::LANES {
             let mut draws = self.draws[k].clone();
             let row = &mut self.inputs[k];
-            plan.operation_scatter.draw(
-                job,
-                None,
-                &mut self.rngs[k],
-                rejections,
-                |index, value| {
-                    draws.set(job.scatter()[index].parameter, value);
-                    row[index] = value;
-                },
-            );
+            let at = (k * self.ahead_operations + self.ahead_next) * entries;
+            for &(index, value) in &self.ahead[at..at + entries] {
+                draws.set(job.scatter()[index].parameter, value);
+                row[index] = value;
+            }
             self.op_draws[k] = draws;
         }
+        self.ahead_next += 1;
     }
 
     /// The operation with the lanes' draws `op_draws` (this operation's, or swapped ones), on the
