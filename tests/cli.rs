@@ -307,7 +307,14 @@ fn run_shows_progress_with_the_time_left_only_on_a_terminal_and_not_when_quiet()
 #[test]
 fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal() {
     let out = temp_dir("bench");
-    let shown = on_a_terminal(&["bench", "--quick", "--out", out.to_str().unwrap()]);
+    let shown = on_a_terminal(&[
+        "bench",
+        "--quick",
+        "--coverage-seeds",
+        "7",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(
         shown.contains("22/22 measurements") && shown.contains("ETA"),
         "{shown}"
@@ -328,7 +335,14 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
             (0.0..=1.0).contains(&row["coverage"].as_f64().unwrap()),
             "{row}"
         );
+        assert_eq!(row["seeds"], 7, "{row}");
     }
+    let refused = bouncewear(&["bench", "--coverage-seeds", "0"], "");
+    assert!(!refused.status.success());
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("--coverage-seeds"),
+        "{refused:?}"
+    );
     for tier in tiers {
         assert!(tier["ns_per_op"].as_f64().unwrap() > 0.0);
         assert_eq!(tier["max_rel_error"].as_object().unwrap().len(), 10);

@@ -136,8 +136,14 @@ pub fn measurements(quick: bool) -> u64 {
     count as u64
 }
 
-/// Runs every measurement on the current rayon pool and writes `report.{json,md,svg}` into `out`.
-pub fn bench(out: &Path, quick: bool, progress: &Progress) -> Result<Report, BenchError> {
+/// Runs every measurement on the current rayon pool and writes `report.{json,md,svg}` into `out`;
+/// each coverage figure is over `coverage_seeds` jobs (default 400, quick 20).
+pub fn bench(
+    out: &Path,
+    quick: bool,
+    coverage_seeds: Option<u32>,
+    progress: &Progress,
+) -> Result<Report, BenchError> {
     let report = Report {
         machine: Machine {
             threads: rayon::current_num_threads(),
@@ -167,7 +173,7 @@ pub fn bench(out: &Path, quick: bool, progress: &Progress) -> Result<Report, Ben
                 })
             })
             .collect::<Result<_, _>>()?,
-        coverage: coverage(quick, progress),
+        coverage: coverage(quick, coverage_seeds, progress),
     };
     std::fs::create_dir_all(out).map_err(|source| io_error(out, source))?;
     let write = |name: &str, text: String| {
@@ -852,10 +858,11 @@ fn coverage_estimates(job: &Job, exceedance_above: f64) -> Vec<(&'static str, f6
     estimates
 }
 
-/// Coverage of every statistic in every design: 64 devices per job, the truth from one job 1000
-/// (quick: 20 times, over 20 seeds) larger.
-fn coverage(quick: bool, progress: &Progress) -> Vec<Coverage> {
-    let (seeds, scale) = if quick { (20_u32, 20) } else { (400, 1000) };
+/// Coverage of every statistic in every design: 64 devices per job, over `seeds` jobs (400;
+/// quick: 20), the truth from one job 1000 (quick: 20) times larger.
+fn coverage(quick: bool, seeds: Option<u32>, progress: &Progress) -> Vec<Coverage> {
+    let (default_seeds, scale) = if quick { (20_u32, 20) } else { (400, 1000) };
+    let seeds = seeds.unwrap_or(default_seeds);
     let mut rows = Vec::new();
     for (design, levels) in COVERAGE_DESIGNS {
         progress.measure(format!("interval coverage: {design}"), || {
