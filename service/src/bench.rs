@@ -689,7 +689,7 @@ fn markdown(report: &Report) -> String {
     }
     let _ = writeln!(
         md,
-        "\n## Intervals: coverage and width\n\nHow often the nominal 95 % intervals of a job of 64 devices x 20 operations at 48 V / 15 A cover the truth (the same statistic of one job 1000 times larger; `--quick`: 20 times larger, over 20 seeds), and their mean half-width relative to the truth. Radius and hardness scatter per device, the closing velocity per operation.\n"
+        "\n## Intervals: coverage and width\n\nHow often the nominal 95 % intervals of a job of 64 devices x 20 operations at 48 V / 15 A cover the truth (the same statistic of one job 1000 times larger, `--quick`: 20 times; over as many jobs as the seeds column says), and their mean half-width relative to the truth. Radius and hardness scatter per device, the closing velocity per operation.\n"
     );
     let _ = writeln!(
         md,
