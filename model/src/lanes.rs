@@ -10,6 +10,9 @@
 //! crate's own ([`crate::elementary`]). Whatever instruction set a [`Lanes`] loop is compiled for, and
 //! however many lanes it has, each lane rounds exactly as the scalar does.
 
+// Lane loops index several arrays at once: the index is the lane.
+#![allow(clippy::needless_range_loop)]
+
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 
 /// A number, or a batch of numbers computed in lockstep.
@@ -140,24 +143,49 @@ impl Mask for bool {
 #[repr(C, align(64))]
 pub struct Lanes<const N: usize>(pub [f64; N]);
 
-/// `N` truth values, one per lane of a [`Lanes`].
+/// `N` truth values, one per lane of a [`Lanes`], each a 64-bit word of all ones (true) or all
+/// zeros (false): the form vector compares produce and blends consume, so a comparison and a
+/// selection stay one instruction per register.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct LaneMask<const N: usize>(pub [bool; N]);
+#[repr(C, align(64))]
+pub struct LaneMask<const N: usize>([u64; N]);
 
+/// The mask word of a truth value.
+#[inline(always)]
+fn word(truth: bool) -> u64 {
+    (truth as u64).wrapping_neg()
+}
+
+// Every lane operation below is a plain indexed loop over the arrays: after inlining into a
+// kernel compiled for an instruction set, the loop vectoriser turns each into full-width
+// instructions of that set (closures through `std::array::from_fn` were left half-vectorised,
+// and out of line they ran in the baseline instruction set).
 impl<const N: usize> Lanes<N> {
     #[inline(always)]
     fn map(self, f: impl Fn(f64) -> f64) -> Self {
-        Self(std::array::from_fn(|i| f(self.0[i])))
+        let mut out = [0.0; N];
+        for i in 0..N {
+            out[i] = f(self.0[i]);
+        }
+        Self(out)
     }
 
     #[inline(always)]
     fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
-        Self(std::array::from_fn(|i| f(self.0[i], other.0[i])))
+        let mut out = [0.0; N];
+        for i in 0..N {
+            out[i] = f(self.0[i], other.0[i]);
+        }
+        Self(out)
     }
 
     #[inline(always)]
     fn compare(self, other: Self, f: impl Fn(f64, f64) -> bool) -> LaneMask<N> {
-        LaneMask(std::array::from_fn(|i| f(self.0[i], other.0[i])))
+        let mut out = [0; N];
+        for i in 0..N {
+            out[i] = word(f(self.0[i], other.0[i]));
+        }
+        LaneMask(out)
     }
 }
 
@@ -194,8 +222,12 @@ impl<const N: usize> Real for Lanes<N> {
         Self([x; N])
     }
     #[inline(always)]
-    fn from_fn(f: impl FnMut(usize) -> f64) -> Self {
-        Self(std::array::from_fn(f))
+    fn from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
+        let mut out = [0.0; N];
+        for (i, slot) in out.iter_mut().enumerate() {
+            *slot = f(i);
+        }
+        Self(out)
     }
     #[inline(always)]
     fn sqrt(self) -> Self {
@@ -231,9 +263,12 @@ impl<const N: usize> Real for Lanes<N> {
     }
     #[inline(always)]
     fn select(mask: LaneMask<N>, yes: Self, no: Self) -> Self {
-        Self(std::array::from_fn(|i| {
-            if mask.0[i] { yes.0[i] } else { no.0[i] }
-        }))
+        let mut out = [0.0; N];
+        for i in 0..N {
+            let m = mask.0[i];
+            out[i] = f64::from_bits((yes.0[i].to_bits() & m) | (no.0[i].to_bits() & !m));
+        }
+        Self(out)
     }
     #[inline(always)]
     fn exp2_int(self) -> Self {
@@ -251,7 +286,11 @@ macro_rules! mask_operator {
             type Output = Self;
             #[inline(always)]
             fn $method(self, other: Self) -> Self {
-                Self(std::array::from_fn(|i| self.0[i] $op other.0[i]))
+                let mut out = [0; N];
+                for i in 0..N {
+                    out[i] = self.0[i] $op other.0[i];
+                }
+                Self(out)
             }
         }
     };
@@ -263,18 +302,26 @@ impl<const N: usize> Not for LaneMask<N> {
     type Output = Self;
     #[inline(always)]
     fn not(self) -> Self {
-        Self(self.0.map(|a| !a))
+        let mut out = [0; N];
+        for i in 0..N {
+            out[i] = !self.0[i];
+        }
+        Self(out)
     }
 }
 
 impl<const N: usize> Mask for LaneMask<N> {
     #[inline(always)]
     fn any(self) -> bool {
-        self.0.iter().any(|&a| a)
+        let mut any = 0;
+        for i in 0..N {
+            any |= self.0[i];
+        }
+        any != 0
     }
     #[inline(always)]
     fn lane(&self, i: usize) -> bool {
-        self.0[i]
+        self.0[i] != 0
     }
 }
 

@@ -450,7 +450,9 @@ impl<'a> Plan<'a> {
         drawn
     }
 
-    /// Runs the `L::LANES` devices of the chunk from `first_local` on, in lockstep, into `stats`:
+    /// Runs the `active` devices of the chunk from `first_local` on, in lockstep on `L::LANES`
+    /// lanes (spare lanes compute a copy of the first device: they draw from a copy of its
+    /// stream, count no rejections, and nothing reads their values), into `stats`:
     /// each from its own stream, with the draws and the arithmetic it would have alone. Each bin's
     /// values wait in `buffer`, one column per metric, and go into each accumulator in one batch,
     /// device after device, in the order of one device at a time, so the sums come out the same to
@@ -467,20 +469,28 @@ impl<'a> Plan<'a> {
         &self,
         chunk: &Chunk<'_>,
         first_local: u64,
+        active: usize,
         stats: &mut GroupStats,
         buffer: &mut Vec<f64>,
     ) {
         let job = self.job;
         let lanes = L::LANES;
-        let (draws, rngs, inputs) = self.draw_devices(
+        debug_assert!(
+            active == lanes || (active < lanes && self.sensitivity.is_none()),
+            "spare lanes only without a sensitivity analysis"
+        );
+        let (mut draws, mut rngs, mut inputs) = self.draw_devices(
             chunk,
             first_local,
-            lanes,
+            active,
             |device| device,
             chunk.permutations,
             &mut stats.truncation_rejections,
         );
-        let mut variants = vec![Variant::<L>::new(self, draws, rngs, inputs)];
+        draws.resize(lanes, draws[0].clone());
+        rngs.resize(lanes, rngs[0].clone());
+        inputs.resize(lanes, inputs[0].clone());
+        let mut variants = vec![Variant::<L>::new(self, draws, rngs, inputs, active)];
         let sensitivity = self.sensitivity.as_ref();
         let sobol = sensitivity.filter(|s| s.method == SensitivityMethod::Sobol);
         let mut scratch = vec![0; job.scatter().len()];
@@ -504,10 +514,10 @@ impl<'a> Plan<'a> {
                         draws[k].set(job.scatter()[input].parameter, value);
                         inputs[k][input] = value;
                     }
-                    Variant::new(self, draws, a.rngs.clone(), inputs)
+                    Variant::new(self, draws, a.rngs.clone(), inputs, lanes)
                 })
                 .collect();
-            variants.push(Variant::new(self, b_draws, b_rngs, b_inputs));
+            variants.push(Variant::new(self, b_draws, b_rngs, b_inputs, lanes));
             variants.extend(swapped);
         }
         // The operation-level B' draws, from each device's own operation Sobol' stream.
@@ -527,7 +537,7 @@ impl<'a> Plan<'a> {
         let metrics = job.operation_metrics();
         let operations = job.spec().operations;
         let bin_operations = usize::try_from(job.bin_operations()).expect("bins fit in memory");
-        buffer.resize(lanes * bin_operations * metrics.len(), 0.0);
+        buffer.resize(active * bin_operations * metrics.len(), 0.0);
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
         // Per evaluation (variants, then B' and AB'_i), lane and metric: this operation's values.
         let evaluations = variants.len() + sobol.map_or(0, |p| p.operation_evaluations());
@@ -566,11 +576,11 @@ impl<'a> Plan<'a> {
                             *slot = metric.value(&outcome);
                         }
                         variant.wear[k].add(&outcome);
-                        if v != 0 {
+                        if v != 0 || k >= active {
                             continue;
                         }
                         let lane = &values[k * metrics.len()..(k + 1) * metrics.len()];
-                        for (column, &value) in buffer.chunks_exact_mut(lanes * in_bin).zip(lane) {
+                        for (column, &value) in buffer.chunks_exact_mut(active * in_bin).zip(lane) {
                             column[k * in_bin + row] = value;
                         }
                         stats.operations_at_max_bounces += u64::from(outcome.truncated);
@@ -598,12 +608,12 @@ impl<'a> Plan<'a> {
             }
             let bin =
                 &mut stats.operations[bin_index * metrics.len()..(bin_index + 1) * metrics.len()];
-            for (accumulator, values) in bin.iter_mut().zip(buffer.chunks_exact(lanes * in_bin)) {
+            for (accumulator, values) in bin.iter_mut().zip(buffer.chunks_exact(active * in_bin)) {
                 accumulator.push_batch(values);
             }
         }
         let a = &variants[0];
-        for (k, failed_at) in failed_at.iter().enumerate() {
+        for (k, failed_at) in failed_at.iter().enumerate().take(active) {
             for (accumulator, metric) in stats.devices.iter_mut().zip(job.device_metrics()) {
                 accumulator.push(self.device_metric(&a.model, *metric, &a.draws[k], &a.wear[k]));
             }
@@ -812,20 +822,27 @@ impl<'a> Plan<'a> {
             if observer.cancelled() {
                 return Err(Cancelled);
             }
-            // The devices that do not fill a batch of lanes run one by one, through the same code.
-            let kernel = if self.lockstep && end - local >= self.kernel.lanes() as u64 {
-                self.kernel
+            let left = end - local;
+            let lanes = self.kernel.lanes() as u64;
+            // A batch of lanes, full or (without a sensitivity analysis) at least half full, its
+            // spare lanes computing a copy of its first device, whose values nobody reads: half a
+            // batch costs less in lockstep than its devices one by one (docs/performance.md).
+            // Fewer devices run one by one, through the same code.
+            let (kernel, devices) = if self.lockstep
+                && (left >= lanes || (2 * left >= lanes && self.sensitivity.is_none()))
+            {
+                (self.kernel, left.min(lanes))
             } else {
-                Kernel::SCALAR
+                (Kernel::SCALAR, 1)
             };
             kernel.run(Devices {
                 plan: self,
                 chunk,
                 first_local: local,
+                active: usize::try_from(devices).expect("a batch fits in memory"),
                 stats: &mut stats,
                 buffer: &mut buffer,
             });
-            let devices = kernel.lanes() as u64;
             let ran = operations * devices;
             observer.progress(done.fetch_add(ran, Ordering::Relaxed) + ran, total);
             local += devices;
@@ -859,6 +876,10 @@ struct Variant<'p, L: Real> {
     /// Operations per lane in `ahead`, and the next one to use.
     ahead_operations: usize,
     ahead_next: usize,
+    /// Lanes that are devices; the others are spare and count no rejections.
+    active: usize,
+    /// The rejections spare lanes count, which nobody reads.
+    spare_rejections: Vec<u64>,
 }
 
 /// Operations whose per-operation draws a lane takes from its stream in one go.
@@ -870,6 +891,7 @@ impl<'p, L: Real> Variant<'p, L> {
         draws: Vec<Draws>,
         rngs: Vec<ChaCha8Rng>,
         inputs: Vec<Vec<f64>>,
+        active: usize,
     ) -> Self {
         let model = plan.model(&draws[0]);
         let operation = model
@@ -895,6 +917,8 @@ impl<'p, L: Real> Variant<'p, L> {
             ahead: Vec::new(),
             ahead_operations: 0,
             ahead_next: 0,
+            active,
+            spare_rejections: vec![0; plan.job.scatter().len()],
         }
     }
 
@@ -916,7 +940,12 @@ impl<'p, L: Real> Variant<'p, L> {
             self.ahead_next = 0;
             let ahead = &mut self.ahead;
             ahead.clear();
-            for rng in &mut self.rngs {
+            for (k, rng) in self.rngs.iter_mut().enumerate() {
+                let rejections: &mut [u64] = if k < self.active {
+                    &mut *rejections
+                } else {
+                    &mut self.spare_rejections
+                };
                 for _ in 0..operations {
                     plan.operation_scatter
                         .draw(job, None, rng, rejections, |index, value| {
@@ -1012,6 +1041,8 @@ struct Devices<'p, 'a> {
     plan: &'p Plan<'a>,
     chunk: &'p Chunk<'p>,
     first_local: u64,
+    /// The batch's devices: its first `active` lanes; the others copy the first device.
+    active: usize,
     stats: &'p mut GroupStats,
     buffer: &'p mut Vec<f64>,
 }
@@ -1019,8 +1050,13 @@ struct Devices<'p, 'a> {
 impl LaneWork for Devices<'_, '_> {
     #[inline(always)]
     fn run<L: Real>(self) {
-        self.plan
-            .run_devices::<L>(self.chunk, self.first_local, self.stats, self.buffer);
+        self.plan.run_devices::<L>(
+            self.chunk,
+            self.first_local,
+            self.active,
+            self.stats,
+            self.buffer,
+        );
     }
 }
 

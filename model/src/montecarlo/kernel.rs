@@ -35,6 +35,15 @@ impl Isa {
         }
     }
 
+    /// Bits per vector register.
+    fn width(self) -> u32 {
+        match self {
+            Isa::Portable => 128,
+            Isa::Avx2 => 256,
+            Isa::Avx512 => 512,
+        }
+    }
+
     pub fn as_str(self) -> &'static str {
         match self {
             Isa::Portable => "portable",
@@ -44,8 +53,16 @@ impl Isa {
     }
 }
 
-/// Devices per lockstep batch that a kernel may have (1 is one device at a time).
-pub const LANE_COUNTS: [usize; 4] = [1, 4, 8, 16];
+/// The lockstep kernels a build holds: instruction set and devices per batch. Each is a full copy
+/// of the operation and the engine loop, optimised on its own, so every entry costs build time
+/// (about a minute each on this project's machine): the list holds two widths for the instruction
+/// set this machine has, so that batch width is tested, and one for each other set.
+pub const KERNELS: [(Isa, usize); 4] = [
+    (Isa::Portable, 4),
+    (Isa::Avx2, 4),
+    (Isa::Avx2, 8),
+    (Isa::Avx512, 8),
+];
 
 /// An instruction set and a number of lanes, checked against this CPU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -61,40 +78,33 @@ impl Kernel {
         lanes: 1,
     };
 
-    /// The kernel, if this CPU runs its instruction set and `lanes` is one of [`LANE_COUNTS`]. One
-    /// lane is [`Kernel::SCALAR`] whatever the instruction set.
+    /// The kernel, if this CPU runs its instruction set and the build holds it ([`KERNELS`]).
+    /// One lane is [`Kernel::SCALAR`] whatever the instruction set.
     pub fn new(isa: Isa, lanes: usize) -> Option<Kernel> {
         if lanes == 1 {
             return Some(Kernel::SCALAR);
         }
-        (isa.available() && LANE_COUNTS.contains(&lanes)).then_some(Kernel { isa, lanes })
+        (isa.available() && KERNELS.contains(&(isa, lanes))).then_some(Kernel { isa, lanes })
     }
 
-    /// The fastest kernel on this CPU, as measured (docs/performance.md).
+    /// The fastest kernel on this CPU, as measured (docs/performance.md): the widest instruction
+    /// set's widest batch.
     pub fn best() -> Kernel {
-        let isa = if Isa::Avx512.available() {
-            Isa::Avx512
-        } else if Isa::Avx2.available() {
-            Isa::Avx2
-        } else {
-            Isa::Portable
-        };
-        Kernel { isa, lanes: 8 }
+        Kernel::all()
+            .into_iter()
+            .max_by_key(|k| (k.isa.width(), k.lanes))
+            .unwrap_or(Kernel::SCALAR)
     }
 
     /// Every kernel this CPU runs, [`Kernel::SCALAR`] first.
     pub fn all() -> Vec<Kernel> {
-        let mut kernels = Vec::new();
-        for kernel in Isa::ALL
-            .into_iter()
-            .flat_map(|isa| LANE_COUNTS.map(|lanes| Kernel::new(isa, lanes)))
-            .flatten()
-        {
-            if !kernels.contains(&kernel) {
-                kernels.push(kernel);
-            }
-        }
-        kernels
+        std::iter::once(Kernel::SCALAR)
+            .chain(
+                KERNELS
+                    .into_iter()
+                    .filter_map(|(isa, lanes)| Kernel::new(isa, lanes)),
+            )
+            .collect()
     }
 
     pub fn isa(self) -> Isa {
@@ -108,10 +118,8 @@ impl Kernel {
     /// Runs `work` on this kernel's lanes, compiled for its instruction set.
     pub(crate) fn run<W: LaneWork>(self, work: W) {
         match (self.isa, self.lanes) {
-            (_, 1) => work.run::<f64>(),
-            (Isa::Portable, 4) => work.run::<Lanes<4>>(),
-            (Isa::Portable, 8) => work.run::<Lanes<8>>(),
-            (Isa::Portable, _) => work.run::<Lanes<16>>(),
+            (_, 1) => portable::<W, f64>(work),
+            (Isa::Portable, _) => portable::<W, Lanes<4>>(work),
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `Kernel::new` checked that this CPU has AVX2.
             (Isa::Avx2, lanes) => unsafe { x86::avx2(work, lanes) },
@@ -124,6 +132,12 @@ impl Kernel {
     }
 }
 
+/// `work` on lanes `L` in the build's baseline instruction set, optimised on its own.
+#[inline(never)]
+fn portable<W: LaneWork, L: Real>(work: W) {
+    work.run::<L>()
+}
+
 /// Work written once over [`Real`]; its `run` must be `#[inline(always)]`, so that each kernel
 /// compiles it for its own instruction set.
 pub(crate) trait LaneWork {
@@ -132,23 +146,33 @@ pub(crate) trait LaneWork {
 
 #[cfg(target_arch = "x86_64")]
 mod x86 {
+    //! One function per instruction set and lane count: each is optimised on its own (one
+    //! function holding every width took the optimiser several times as long) and in parallel.
     use super::{LaneWork, Lanes};
 
     #[target_feature(enable = "avx2")]
     pub(super) fn avx2<W: LaneWork>(work: W, lanes: usize) {
         match lanes {
-            4 => work.run::<Lanes<4>>(),
-            8 => work.run::<Lanes<8>>(),
-            _ => work.run::<Lanes<16>>(),
+            4 => avx2_lanes::<W, 4>(work),
+            _ => avx2_lanes::<W, 8>(work),
         }
+    }
+
+    #[target_feature(enable = "avx2")]
+    #[inline(never)]
+    fn avx2_lanes<W: LaneWork, const N: usize>(work: W) {
+        work.run::<Lanes<N>>()
     }
 
     #[target_feature(enable = "avx512f")]
     pub(super) fn avx512<W: LaneWork>(work: W, lanes: usize) {
-        match lanes {
-            4 => work.run::<Lanes<4>>(),
-            8 => work.run::<Lanes<8>>(),
-            _ => work.run::<Lanes<16>>(),
-        }
+        debug_assert_eq!(lanes, 8, "KERNELS holds AVX-512F with 8 lanes");
+        avx512_lanes::<W, 8>(work)
+    }
+
+    #[target_feature(enable = "avx512f")]
+    #[inline(never)]
+    fn avx512_lanes<W: LaneWork, const N: usize>(work: W) {
+        work.run::<Lanes<N>>()
     }
 }
