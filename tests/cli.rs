@@ -316,15 +316,24 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
         out.to_str().unwrap(),
     ]);
     assert!(
-        shown.contains("22/22 measurements") && shown.contains("ETA"),
+        shown.contains("25/25 measurements") && shown.contains("ETA"),
         "{shown}"
     );
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     let tiers = report["tiers"].as_array().unwrap();
     assert_eq!(tiers.len(), 2);
-    // Coverage of the 95 % intervals in three designs, the Sobol' indices' among them.
+    // Coverage of the 95 % intervals in three designs at two sizes, the Sobol' indices' among them.
     let coverage = report["coverage"].as_array().unwrap();
+    for devices in [64, 512] {
+        assert_eq!(
+            coverage
+                .iter()
+                .filter(|row| row["devices"] == devices)
+                .count(),
+            coverage.len() / 2
+        );
+    }
     assert!(
         coverage
             .iter()

@@ -88,7 +88,10 @@ pub struct Summary {
 /// - each quantile's `ci95`: Woodruff's interval for clustered samples. The share of values at or
 ///   below the estimate, `F(value)`, is a mean of indicators, so its clustered variance comes from
 ///   the groups' shares as a ratio estimator, `V = G'/(G'-1) sum_g (c_g - F n_g)^2 / n^2`; the
-///   interval `q +- t sqrt(V)` in probability is mapped back through the overall quantile function.
+///   interval `q +- t sqrt(V)` in probability is mapped back through the overall quantile function,
+///   interpolated within buckets ([`super::Sketch::interpolated_quantile`]) and widened to hold the
+///   value if need be. Ends at bucket midpoints would move by up to half a bucket (0.2 %) at
+///   random, which at 512 devices is half an interval and covered 90 % (`bouncewear bench`).
 ///   Unlike the spread of group quantiles (sectioning), this stays honest when a group holds few
 ///   values (a group's p95 of four values is its maximum).
 /// - both are clipped to `[min, max]`, where the true values lie.
@@ -256,10 +259,8 @@ fn woodruff_intervals(
         .collect();
     let n = all.count() as f64;
     let t = student_t_975(g as u64 - 1);
-    let bounds: Vec<f64> = levels
-        .iter()
-        .enumerate()
-        .flat_map(|(i, &q)| {
+    let halves: Vec<f64> = (0..levels.len())
+        .map(|i| {
             let share = at_or_below[i] as f64 / n;
             let squares: f64 = per_group
                 .iter()
@@ -269,13 +270,24 @@ fn woodruff_intervals(
                 })
                 .sum();
             let variance = g as f64 / (g as f64 - 1.0) * squares / (n * n);
-            let half = t * variance.sqrt();
-            [(q - half).clamp(0.0, 1.0), (q + half).clamp(0.0, 1.0)]
+            t * variance.sqrt()
         })
         .collect();
-    all.quantiles(&bounds)
-        .chunks_exact(2)
-        .map(|bound| [bound[0], bound[1]])
+    let bounds: Vec<f64> = levels
+        .iter()
+        .zip(&halves)
+        .flat_map(|(&q, &half)| [(q - half).clamp(0.0, 1.0), (q + half).clamp(0.0, 1.0)])
+        .collect();
+    let ends = all.sketch().interpolated_quantiles(&bounds);
+    ends.chunks_exact(2)
+        .zip(values.iter().zip(&halves))
+        .map(|(end, (&value, &half))| {
+            if half == 0.0 {
+                [value, value]
+            } else {
+                [end[0].min(value), end[1].max(value)]
+            }
+        })
         .collect()
 }
 
@@ -592,5 +604,33 @@ mod tests {
             (0.88..=0.99).contains(&exceedance),
             "exceedance {exceedance}"
         );
+    }
+
+    #[test]
+    fn quantile_intervals_resolve_within_a_bucket() {
+        // N(100.1, 0.5): the median's interval (about +-0.015) is far narrower than its bucket
+        // [100, 100.25], whose midpoint 100.125 is not the truth. Ends at bucket midpoints would be
+        // [100.125, 100.125] and never cover. Interpolated ends, widened to hold the value 100.125,
+        // cover (more than 95 %, since the widening reaches past the truth) and stay under
+        // half of the bucket.
+        let mut rng = SplitMix(31);
+        let reps = 200;
+        let mut hits = 0;
+        for _ in 0..reps {
+            let groups: Vec<Accumulator> = (0..32)
+                .map(|_| {
+                    let mut acc = Accumulator::new(None);
+                    (0..200).for_each(|_| acc.push(100.1 + 0.5 * rng.normal()));
+                    acc
+                })
+                .collect();
+            let median = &summarize(&groups).quantiles["p50"];
+            let [lo, hi] = median.ci95;
+            assert!(lo <= median.value && median.value <= hi);
+            assert!(hi - lo < 0.1, "{lo} {hi}");
+            hits += usize::from(lo <= 100.1 && 100.1 <= hi);
+        }
+        let coverage = hits as f64 / reps as f64;
+        assert!((0.90..=1.0).contains(&coverage), "median {coverage}");
     }
 }
