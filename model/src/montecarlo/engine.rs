@@ -157,7 +157,7 @@ pub struct Tally {
 }
 
 /// Parameters of one device or operation that scatter can replace.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, PartialEq)]
 struct Draws {
     radius_m: f64,
     pressure_pa: f64,
@@ -165,6 +165,26 @@ struct Draws {
     /// Drawn constants of the scenario ([`Parameter::is_scenario_constant`]): the scenario is
     /// rebuilt with them.
     constants: Vec<(Parameter, f64)>,
+}
+
+impl Clone for Draws {
+    fn clone(&self) -> Self {
+        Self {
+            radius_m: self.radius_m,
+            pressure_pa: self.pressure_pa,
+            conditions: self.conditions,
+            constants: self.constants.clone(),
+        }
+    }
+
+    /// In place, reusing the constants' allocation: each lane's operation draws start from its
+    /// device's at every operation.
+    fn clone_from(&mut self, source: &Self) {
+        self.radius_m = source.radius_m;
+        self.pressure_pa = source.pressure_pa;
+        self.conditions = source.conditions;
+        self.constants.clone_from(&source.constants);
+    }
 }
 
 impl Draws {
@@ -539,7 +559,8 @@ impl<'a> Plan<'a> {
         let bin_operations = usize::try_from(job.bin_operations()).expect("bins fit in memory");
         buffer.resize(active * bin_operations * metrics.len(), 0.0);
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
-        // Per evaluation (variants, then B' and AB'_i), lane and metric: this operation's values.
+        // Per evaluation (variants, then B' and AB'_i), lane and metric: this operation's values,
+        // for the sensitivity cells.
         let evaluations = variants.len() + sobol.map_or(0, |p| p.operation_evaluations());
         let mut values = vec![0.0; evaluations * lanes * metrics.len()];
         let variant_count = variants.len();
@@ -568,23 +589,33 @@ impl<'a> Plan<'a> {
                             &mut values[variant_count * lanes * metrics.len()..],
                         );
                     }
-                    for k in 0..lanes {
-                        let outcome = outcomes.lane(k);
-                        let at = (v * lanes + k) * metrics.len();
-                        for (slot, metric) in values[at..at + metrics.len()].iter_mut().zip(metrics)
+                    if v == 0 {
+                        // Each metric's column of the bin, from its lanes: one dispatch per metric.
+                        for (column, metric) in
+                            buffer.chunks_exact_mut(active * in_bin).zip(metrics)
                         {
-                            *slot = metric.value(&outcome);
+                            let values = metric.lanes(&outcomes);
+                            for k in 0..active {
+                                column[k * in_bin + row] = values.lane(k);
+                            }
+                        }
+                    }
+                    for (k, failed_at) in failed_at.iter_mut().enumerate() {
+                        let outcome = outcomes.lane(k);
+                        if cells.is_some() {
+                            let at = (v * lanes + k) * metrics.len();
+                            for (slot, metric) in
+                                values[at..at + metrics.len()].iter_mut().zip(metrics)
+                            {
+                                *slot = metric.value(&outcome);
+                            }
                         }
                         variant.wear[k].add(&outcome);
                         if v != 0 || k >= active {
                             continue;
                         }
-                        let lane = &values[k * metrics.len()..(k + 1) * metrics.len()];
-                        for (column, &value) in buffer.chunks_exact_mut(active * in_bin).zip(lane) {
-                            column[k * in_bin + row] = value;
-                        }
                         stats.operations_at_max_bounces += u64::from(outcome.truncated);
-                        if failed_at[k].is_none()
+                        if failed_at.is_none()
                             && self.fails(
                                 &variant.model,
                                 &outcome,
@@ -592,7 +623,7 @@ impl<'a> Plan<'a> {
                                 &variant.wear[k],
                             )
                         {
-                            failed_at[k] = Some(op + 1);
+                            *failed_at = Some(op + 1);
                         }
                     }
                 }
@@ -955,14 +986,14 @@ impl<'p, L: Real> Variant<'p, L> {
             }
         }
         for k in 0..L::LANES {
-            let mut draws = self.draws[k].clone();
+            let draws = &mut self.op_draws[k];
+            draws.clone_from(&self.draws[k]);
             let row = &mut self.inputs[k];
             let at = (k * self.ahead_operations + self.ahead_next) * entries;
             for &(index, value) in &self.ahead[at..at + entries] {
                 draws.set(job.scatter()[index].parameter, value);
                 row[index] = value;
             }
-            self.op_draws[k] = draws;
         }
         self.ahead_next += 1;
     }

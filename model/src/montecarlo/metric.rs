@@ -1,6 +1,7 @@
 //! Metrics a job can summarise (docs/contract.md "Job"): per operation, and per device at the end.
 
-use crate::operation::Outcome;
+use crate::lanes::Real;
+use crate::operation::{Outcome, Outcomes};
 use serde::{Deserialize, Serialize};
 
 /// A per-operation metric: one field of [`Outcome`].
@@ -58,6 +59,26 @@ impl OperationMetric {
             Self::PeakForce => "peak_force_n",
             Self::ImpactDuration => "impact_duration_s",
             Self::FirstImpactPlasticWork => "first_impact_plastic_work_j",
+        }
+    }
+
+    /// The metric's values on every lane of `outcomes`, as [`OperationMetric::value`] gives each
+    /// lane's: the engine reads a bin's column straight from them, one dispatch per metric rather
+    /// than per lane (a whole-number count lane is its `u32` as f64 already).
+    #[inline(always)]
+    pub fn lanes<L: Real>(self, outcomes: &Outcomes<L>) -> &L {
+        match self {
+            Self::ImpactVelocity => &outcomes.impact_velocity_m_s,
+            Self::Kappa => &outcomes.kappa,
+            Self::E1 => &outcomes.e1,
+            Self::FirstBounce => &outcomes.first_bounce_s,
+            Self::TotalBounce => &outcomes.total_bounce_s,
+            Self::BounceCount => &outcomes.bounce_count,
+            Self::PreArc => &outcomes.pre_arc_s,
+            Self::ArcEnergy => &outcomes.arc_energy_j,
+            Self::PeakForce => &outcomes.peak_force_n,
+            Self::ImpactDuration => &outcomes.impact_duration_s,
+            Self::FirstImpactPlasticWork => &outcomes.first_impact_plastic_work_j,
         }
     }
 
@@ -182,5 +203,37 @@ impl Metric {
         let operation = OperationMetric::ALL.iter().map(|m| m.name());
         let device = DeviceMetric::ALL.iter().map(|m| m.name());
         operation.chain(device).collect::<Vec<_>>().join(", ")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lanes::Lanes;
+
+    #[test]
+    fn lanes_give_each_lanes_value() {
+        // Every field distinct on every lane, the count a whole number.
+        let field = |f: f64| Lanes::<4>(std::array::from_fn(|k| f + k as f64 / 8.0));
+        let outcomes = Outcomes {
+            impact_velocity_m_s: field(1.0),
+            kappa: field(2.0),
+            e1: field(3.0),
+            first_bounce_s: field(4.0),
+            total_bounce_s: field(5.0),
+            bounce_count: Lanes(std::array::from_fn(|k| k as f64 + 1.0)),
+            pre_arc_s: field(7.0),
+            arc_energy_j: field(8.0),
+            peak_force_n: field(9.0),
+            impact_duration_s: field(10.0),
+            truncated: field(0.0).lt(Lanes::splat(0.2)),
+            first_impact_plastic_work_j: field(11.0),
+        };
+        for metric in OperationMetric::ALL {
+            for k in 0..4 {
+                let value = metric.value(&outcomes.lane(k));
+                assert_eq!(metric.lanes(&outcomes).lane(k).to_bits(), value.to_bits());
+            }
+        }
     }
 }
