@@ -639,9 +639,7 @@ impl<'a> Plan<'a> {
             }
             let bin =
                 &mut stats.operations[bin_index * metrics.len()..(bin_index + 1) * metrics.len()];
-            for (accumulator, values) in bin.iter_mut().zip(buffer.chunks_exact(active * in_bin)) {
-                accumulator.push_batch(values);
-            }
+            Accumulator::push_columns(bin, &buffer[..metrics.len() * active * in_bin]);
         }
         let a = &variants[0];
         for (k, failed_at) in failed_at.iter().enumerate().take(active) {

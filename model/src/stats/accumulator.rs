@@ -3,6 +3,53 @@
 
 use super::sketch::{Sketch, rank};
 
+/// Accumulators [`Accumulator::push_columns`] takes through their columns side by side.
+pub const INTERLEAVED: usize = 4;
+
+/// Column `k` into `accumulators[k]` for equally long columns, value by value across the columns:
+/// each accumulator sees its values in order, so its bits are those of pushing them one by one,
+/// while the `K` chains of dependent additions (and of sketch increments) overlap.
+#[inline(always)]
+fn push_side_by_side<const K: usize>(accumulators: &mut [Accumulator; K], columns: [&[f64]; K]) {
+    for (accumulator, column) in accumulators.iter_mut().zip(columns) {
+        if accumulator.count() == 0
+            && let Some(&first) = column.first()
+        {
+            accumulator.shift = first;
+        }
+    }
+    let shift = accumulators.each_ref().map(|a| a.shift);
+    let threshold = accumulators.each_ref().map(|a| a.threshold);
+    let mut min = accumulators.each_ref().map(|a| a.min);
+    let mut max = accumulators.each_ref().map(|a| a.max);
+    let mut sum = accumulators.each_ref().map(|a| a.sum);
+    let mut sum_sq = accumulators.each_ref().map(|a| a.sum_sq);
+    let mut above = accumulators.each_ref().map(|a| a.above);
+    let len = columns[0].len();
+    for x in (0..len).map(|i| columns.map(|column| column[i])) {
+        for k in 0..K {
+            min[k] = if x[k] < min[k] { x[k] } else { min[k] };
+            max[k] = if x[k] > max[k] { x[k] } else { max[k] };
+            let d = x[k] - shift[k];
+            sum[k] += d;
+            sum_sq[k] += d * d;
+            above[k] += u64::from(x[k] > threshold[k]);
+        }
+    }
+    // The sketches in a second pass: their increments are memory updates, kept out of the loop
+    // of register sums.
+    Sketch::push_columns(accumulators.each_mut().map(|a| &mut a.sketch), columns);
+    for (k, accumulator) in accumulators.iter_mut().enumerate() {
+        (
+            accumulator.min,
+            accumulator.max,
+            accumulator.sum,
+            accumulator.sum_sq,
+            accumulator.above,
+        ) = (min[k], max[k], sum[k], sum_sq[k], above[k]);
+    }
+}
+
 /// Count, exact min and max, shifted sums, an exact exceedance count and a [`Sketch`].
 ///
 /// Mean and variance use sums shifted by the first value `s`: `S = sum(x - s)`,
@@ -62,29 +109,46 @@ impl Accumulator {
     /// loop instead of being loaded and stored per value (a bin of a metric in the engine).
     #[inline]
     pub fn push_batch(&mut self, values: &[f64]) {
-        let Some(&first) = values.first() else {
+        push_side_by_side(std::array::from_mut(self), [values]);
+    }
+
+    /// Pushes column `m` of `columns` into `accumulators[m]`, the columns being equally long and
+    /// back to back, as [`Accumulator::push_batch`] on each in turn would, to the bit. Each
+    /// accumulator's sums are one chain of dependent additions that must stay in order; taking
+    /// [`INTERLEAVED`] accumulators through their columns side by side lets those chains (and the
+    /// sketches' increments) run at the same time instead of one after another.
+    ///
+    /// # Panics
+    /// If `columns` does not split into `accumulators.len()` equal columns.
+    #[inline(always)]
+    pub fn push_columns(accumulators: &mut [Accumulator], columns: &[f64]) {
+        if accumulators.is_empty() {
+            assert!(columns.is_empty(), "values without an accumulator");
             return;
-        };
-        if self.count() == 0 {
-            self.shift = first;
         }
-        let (shift, threshold) = (self.shift, self.threshold);
-        let (mut min, mut max, mut sum, mut sum_sq, mut above) =
-            (self.min, self.max, self.sum, self.sum_sq, self.above);
-        for &x in values {
-            if x < min {
-                min = x;
-            }
-            if x > max {
-                max = x;
-            }
-            let d = x - shift;
-            sum += d;
-            sum_sq += d * d;
-            above += u64::from(x > threshold);
-            self.sketch.push(x);
+        let len = columns.len() / accumulators.len();
+        assert_eq!(
+            len * accumulators.len(),
+            columns.len(),
+            "columns of unequal length"
+        );
+        if len == 0 {
+            return;
         }
-        (self.min, self.max, self.sum, self.sum_sq, self.above) = (min, max, sum, sum_sq, above);
+        let mut accumulators = accumulators.chunks_exact_mut(INTERLEAVED);
+        let mut columns = columns.chunks_exact(INTERLEAVED * len);
+        for (group, values) in accumulators.by_ref().zip(columns.by_ref()) {
+            let group: &mut [Accumulator; INTERLEAVED] =
+                group.try_into().expect("chunks of INTERLEAVED");
+            push_side_by_side(
+                group,
+                std::array::from_fn(|k| &values[k * len..(k + 1) * len]),
+            );
+        }
+        let rest = accumulators.into_remainder();
+        for (accumulator, values) in rest.iter_mut().zip(columns.remainder().chunks_exact(len)) {
+            accumulator.push_batch(values);
+        }
     }
 
     /// Adds the values of `other`, re-expressing its sums around this shift `a`: with
@@ -358,6 +422,30 @@ mod tests {
             }
             prop_assert_eq!(state(&batched), state(&one_by_one));
             prop_assert_eq!(batched, one_by_one);
+        }
+    }
+
+    proptest! {
+        /// Whole groups of four and a rest, empty and fresh accumulators, columns of one value.
+        #[test]
+        fn push_columns_equals_push_batch_per_column(
+            starts in prop::collection::vec(prop::collection::vec(batch_value(), 0..6), 0..11),
+            len in 0..70usize,
+            values in prop::collection::vec(batch_value(), 770),
+            limit in prop::option::of(-1.0..1.0f64),
+        ) {
+            let mut by_column: Vec<Accumulator> =
+                starts.iter().map(|start| accumulate(start, limit)).collect();
+            let mut side_by_side = by_column.clone();
+            let columns = &values[..len * starts.len()];
+            for (accumulator, column) in by_column.iter_mut().zip(columns.chunks(len.max(1))) {
+                accumulator.push_batch(column);
+            }
+            Accumulator::push_columns(&mut side_by_side, columns);
+            for (a, b) in side_by_side.iter().zip(&by_column) {
+                prop_assert_eq!(state(a), state(b));
+            }
+            prop_assert_eq!(side_by_side, by_column);
         }
     }
 

@@ -176,12 +176,40 @@ impl Sketch {
     pub fn push(&mut self, x: f64) {
         debug_assert!(x.is_finite(), "Sketch::push({x}): values must be finite");
         self.count += 1;
+        self.add_to_bucket(x);
+    }
+
+    /// Increments `x`'s bucket, leaving the count to the caller.
+    #[inline(always)]
+    fn add_to_bucket(&mut self, x: f64) {
         if x > 0.0 {
             self.positive.add(key(x));
         } else if x < 0.0 {
             self.negative.add(key(x));
         } else {
             self.zeros += 1;
+        }
+    }
+
+    /// Pushes column `k` into `sketches[k]` for equally long columns, with the same counts as
+    /// [`Sketch::push`] on each value, value by value across the columns: consecutive values of a
+    /// column often share a bucket, so each increment would wait for the one before, while the
+    /// sketches' increments are independent and overlap.
+    #[inline(always)]
+    pub fn push_columns<const K: usize>(sketches: [&mut Sketch; K], columns: [&[f64]; K]) {
+        let len = columns[0].len();
+        assert!(
+            columns.iter().all(|c| c.len() == len),
+            "columns of unequal length"
+        );
+        let mut sketches = sketches;
+        for sketch in sketches.iter_mut() {
+            sketch.count += len as u64;
+        }
+        for x in (0..len).map(|i| columns.map(|column| column[i])) {
+            for (sketch, x) in sketches.iter_mut().zip(x) {
+                sketch.add_to_bucket(x);
+            }
         }
     }
 
