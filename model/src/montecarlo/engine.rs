@@ -19,7 +19,7 @@ use super::sensitivity::{LaneCells, SensitivityPlan, SensitivityStats};
 use crate::lanes::Real;
 use crate::operation::{Conditions, Needs, Operation, Outcome, Outcomes, Setup};
 use crate::scenario::Scenario;
-use crate::stats::Accumulator;
+use crate::stats::{Accumulator, Rows};
 use crate::wear::{DeviceWear, WearLaw};
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
@@ -557,7 +557,7 @@ impl<'a> Plan<'a> {
         let metrics = job.operation_metrics();
         let operations = job.spec().operations;
         let bin_operations = usize::try_from(job.bin_operations()).expect("bins fit in memory");
-        buffer.resize(active * bin_operations * metrics.len(), 0.0);
+        buffer.resize(Rows::new(metrics.len(), active * bin_operations).len(), 0.0);
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
         // Per evaluation (variants, then B' and AB'_i), lane and metric: this operation's values,
         // for the sensitivity cells.
@@ -590,13 +590,14 @@ impl<'a> Plan<'a> {
                         );
                     }
                     if v == 0 {
-                        // Each metric's column of the bin, from its lanes: one dispatch per metric.
-                        for (column, metric) in
-                            buffer.chunks_exact_mut(active * in_bin).zip(metrics)
-                        {
+                        // Each metric's values of the bin, from its lanes: one dispatch per
+                        // metric, in the layout the accumulators read.
+                        let layout = Rows::new(metrics.len(), active * in_bin);
+                        for (m, metric) in metrics.iter().enumerate() {
+                            let (offset, stride) = layout.place(m);
                             let values = metric.lanes(&outcomes);
                             for k in 0..active {
-                                column[k * in_bin + row] = values.lane(k);
+                                buffer[offset + (k * in_bin + row) * stride] = values.lane(k);
                             }
                         }
                     }
@@ -639,7 +640,8 @@ impl<'a> Plan<'a> {
             }
             let bin =
                 &mut stats.operations[bin_index * metrics.len()..(bin_index + 1) * metrics.len()];
-            Accumulator::push_columns(bin, &buffer[..metrics.len() * active * in_bin]);
+            let layout = Rows::new(metrics.len(), active * in_bin);
+            Accumulator::push_rows(bin, &buffer[..layout.len()]);
         }
         let a = &variants[0];
         for (k, failed_at) in failed_at.iter().enumerate().take(active) {

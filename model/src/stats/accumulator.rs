@@ -3,19 +3,54 @@
 
 use super::sketch::{Sketch, rank};
 
-/// Accumulators [`Accumulator::push_columns`] takes through their columns side by side.
+/// Accumulators [`Accumulator::push_rows`] takes through their values side by side.
 pub const INTERLEAVED: usize = 4;
 
-/// Column `k` into `accumulators[k]` for equally long columns, value by value across the columns:
-/// each accumulator sees its values in order, so its bits are those of pushing them one by one,
-/// while the `K` chains of dependent additions (and of sketch increments) overlap.
+/// Where [`Accumulator::push_rows`] reads each metric's values in a block of `metrics` metrics x
+/// `values` values: the metrics in groups of [`INTERLEAVED`] (the last one narrower), each group
+/// row by row, a row holding one value of each of its metrics. A row is one vector load, and the
+/// group's running sums one vector of independent chains.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Rows {
+    metrics: usize,
+    values: usize,
+}
+
+impl Rows {
+    pub fn new(metrics: usize, values: usize) -> Self {
+        Self { metrics, values }
+    }
+
+    /// Values in the block.
+    pub fn len(&self) -> usize {
+        self.metrics * self.values
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Value `i` of metric `m` is at `offset + i * stride`: `(offset, stride)`.
+    #[inline(always)]
+    pub fn place(&self, m: usize) -> (usize, usize) {
+        debug_assert!(m < self.metrics, "metric {m} of {}", self.metrics);
+        let group = m / INTERLEAVED * INTERLEAVED;
+        let width = (self.metrics - group).min(INTERLEAVED);
+        (group * self.values + (m - group), width)
+    }
+}
+
+/// `K` accumulators from rows of `K` values, value `k` of each row into `accumulators[k]`: each
+/// accumulator sees its values in order, so its bits are those of pushing them one by one, while
+/// the `K` chains of dependent additions (and of sketch increments) overlap.
 #[inline(always)]
-fn push_side_by_side<const K: usize>(accumulators: &mut [Accumulator; K], columns: [&[f64]; K]) {
-    for (accumulator, column) in accumulators.iter_mut().zip(columns) {
-        if accumulator.count() == 0
-            && let Some(&first) = column.first()
-        {
-            accumulator.shift = first;
+fn push_side_by_side<const K: usize>(accumulators: &mut [Accumulator; K], rows: &[f64]) {
+    debug_assert_eq!(rows.len() % K, 0, "whole rows");
+    if let Some(first) = rows.first_chunk::<K>() {
+        for (accumulator, &first) in accumulators.iter_mut().zip(first) {
+            if accumulator.count() == 0 {
+                accumulator.shift = first;
+            }
         }
     }
     let shift = accumulators.each_ref().map(|a| a.shift);
@@ -25,8 +60,7 @@ fn push_side_by_side<const K: usize>(accumulators: &mut [Accumulator; K], column
     let mut sum = accumulators.each_ref().map(|a| a.sum);
     let mut sum_sq = accumulators.each_ref().map(|a| a.sum_sq);
     let mut above = accumulators.each_ref().map(|a| a.above);
-    let len = columns[0].len();
-    for x in (0..len).map(|i| columns.map(|column| column[i])) {
+    for x in rows.chunks_exact(K) {
         for k in 0..K {
             min[k] = if x[k] < min[k] { x[k] } else { min[k] };
             max[k] = if x[k] > max[k] { x[k] } else { max[k] };
@@ -38,7 +72,7 @@ fn push_side_by_side<const K: usize>(accumulators: &mut [Accumulator; K], column
     }
     // The sketches in a second pass: their increments are memory updates, kept out of the loop
     // of register sums.
-    Sketch::push_columns(accumulators.each_mut().map(|a| &mut a.sketch), columns);
+    Sketch::push_rows(accumulators.each_mut().map(|a| &mut a.sketch), rows);
     for (k, accumulator) in accumulators.iter_mut().enumerate() {
         (
             accumulator.min,
@@ -47,6 +81,26 @@ fn push_side_by_side<const K: usize>(accumulators: &mut [Accumulator; K], column
             accumulator.sum_sq,
             accumulator.above,
         ) = (min[k], max[k], sum[k], sum_sq[k], above[k]);
+    }
+}
+
+/// [`push_side_by_side`] on `K` accumulators.
+#[inline(always)]
+fn push_group<const K: usize>(accumulators: &mut [Accumulator], rows: &[f64]) {
+    let accumulators: &mut [Accumulator; K] = accumulators.try_into().expect("K accumulators");
+    push_side_by_side(accumulators, rows);
+}
+
+/// The last, narrower group of [`Accumulator::push_rows`], out of line: compiled into each kernel
+/// as well, it made the kernel slower than it saved (docs/performance.md).
+#[inline(never)]
+fn push_rest(accumulators: &mut [Accumulator], rows: &[f64]) {
+    match accumulators.len() {
+        0 => {}
+        1 => push_group::<1>(accumulators, rows),
+        2 => push_group::<2>(accumulators, rows),
+        3 => push_group::<3>(accumulators, rows),
+        _ => unreachable!("fewer than INTERLEAVED accumulators are left"),
     }
 }
 
@@ -109,46 +163,35 @@ impl Accumulator {
     /// loop instead of being loaded and stored per value (a bin of a metric in the engine).
     #[inline]
     pub fn push_batch(&mut self, values: &[f64]) {
-        push_side_by_side(std::array::from_mut(self), [values]);
+        push_side_by_side(std::array::from_mut(self), values);
     }
 
-    /// Pushes column `m` of `columns` into `accumulators[m]`, the columns being equally long and
-    /// back to back, as [`Accumulator::push_batch`] on each in turn would, to the bit. Each
+    /// Pushes a block laid out as [`Rows`] says, metric `m`'s values into `accumulators[m]`, as
+    /// [`Accumulator::push_batch`] on each metric's values in turn would, to the bit. Each
     /// accumulator's sums are one chain of dependent additions that must stay in order; taking
-    /// [`INTERLEAVED`] accumulators through their columns side by side lets those chains (and the
+    /// [`INTERLEAVED`] accumulators through their values side by side lets those chains (and the
     /// sketches' increments) run at the same time instead of one after another.
     ///
     /// # Panics
-    /// If `columns` does not split into `accumulators.len()` equal columns.
+    /// If `rows` does not split into `accumulators.len()` equally many values.
     #[inline(always)]
-    pub fn push_columns(accumulators: &mut [Accumulator], columns: &[f64]) {
+    pub fn push_rows(accumulators: &mut [Accumulator], rows: &[f64]) {
         if accumulators.is_empty() {
-            assert!(columns.is_empty(), "values without an accumulator");
+            assert!(rows.is_empty(), "values without an accumulator");
             return;
         }
-        let len = columns.len() / accumulators.len();
+        let values = rows.len() / accumulators.len();
         assert_eq!(
-            len * accumulators.len(),
-            columns.len(),
-            "columns of unequal length"
+            values * accumulators.len(),
+            rows.len(),
+            "metrics with unequally many values"
         );
-        if len == 0 {
-            return;
-        }
         let mut accumulators = accumulators.chunks_exact_mut(INTERLEAVED);
-        let mut columns = columns.chunks_exact(INTERLEAVED * len);
-        for (group, values) in accumulators.by_ref().zip(columns.by_ref()) {
-            let group: &mut [Accumulator; INTERLEAVED] =
-                group.try_into().expect("chunks of INTERLEAVED");
-            push_side_by_side(
-                group,
-                std::array::from_fn(|k| &values[k * len..(k + 1) * len]),
-            );
+        let mut rows = rows.chunks_exact(INTERLEAVED * values.max(1));
+        for (group, rows) in accumulators.by_ref().zip(rows.by_ref()) {
+            push_group::<INTERLEAVED>(group, rows);
         }
-        let rest = accumulators.into_remainder();
-        for (accumulator, values) in rest.iter_mut().zip(columns.remainder().chunks_exact(len)) {
-            accumulator.push_batch(values);
-        }
+        push_rest(accumulators.into_remainder(), rows.remainder());
     }
 
     /// Adds the values of `other`, re-expressing its sums around this shift `a`: with
@@ -426,26 +469,36 @@ mod tests {
     }
 
     proptest! {
-        /// Whole groups of four and a rest, empty and fresh accumulators, columns of one value.
+        /// Whole groups of four and a narrower last one, empty and fresh accumulators, one value
+        /// per metric.
         #[test]
-        fn push_columns_equals_push_batch_per_column(
+        fn push_rows_equals_push_batch_per_metric(
             starts in prop::collection::vec(prop::collection::vec(batch_value(), 0..6), 0..11),
             len in 0..70usize,
             values in prop::collection::vec(batch_value(), 770),
             limit in prop::option::of(-1.0..1.0f64),
         ) {
-            let mut by_column: Vec<Accumulator> =
+            let mut by_metric: Vec<Accumulator> =
                 starts.iter().map(|start| accumulate(start, limit)).collect();
-            let mut side_by_side = by_column.clone();
-            let columns = &values[..len * starts.len()];
-            for (accumulator, column) in by_column.iter_mut().zip(columns.chunks(len.max(1))) {
+            let mut side_by_side = by_metric.clone();
+            let layout = Rows::new(starts.len(), len);
+            let mut rows = vec![f64::NAN; layout.len()];
+            for (m, (accumulator, column)) in
+                by_metric.iter_mut().zip(values.chunks_exact(len.max(1))).enumerate()
+            {
+                let column = &column[..len];
                 accumulator.push_batch(column);
+                let (offset, stride) = layout.place(m);
+                for (i, &x) in column.iter().enumerate() {
+                    rows[offset + i * stride] = x;
+                }
             }
-            Accumulator::push_columns(&mut side_by_side, columns);
-            for (a, b) in side_by_side.iter().zip(&by_column) {
+            prop_assert!(rows.iter().all(|x| !x.is_nan()), "every slot placed once");
+            Accumulator::push_rows(&mut side_by_side, &rows);
+            for (a, b) in side_by_side.iter().zip(&by_metric) {
                 prop_assert_eq!(state(a), state(b));
             }
-            prop_assert_eq!(side_by_side, by_column);
+            prop_assert_eq!(side_by_side, by_metric);
         }
     }
 

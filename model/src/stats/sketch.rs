@@ -191,23 +191,19 @@ impl Sketch {
         }
     }
 
-    /// Pushes column `k` into `sketches[k]` for equally long columns, with the same counts as
-    /// [`Sketch::push`] on each value, value by value across the columns: consecutive values of a
-    /// column often share a bucket, so each increment would wait for the one before, while the
-    /// sketches' increments are independent and overlap.
+    /// Pushes value `k` of each row of `K` values into `sketches[k]`, with the same counts as
+    /// [`Sketch::push`] on each value, row by row: consecutive values of one sketch often share a
+    /// bucket, so each increment would wait for the one before, while the sketches' increments
+    /// are independent and overlap.
     #[inline(always)]
-    pub fn push_columns<const K: usize>(sketches: [&mut Sketch; K], columns: [&[f64]; K]) {
-        let len = columns[0].len();
-        assert!(
-            columns.iter().all(|c| c.len() == len),
-            "columns of unequal length"
-        );
+    pub fn push_rows<const K: usize>(sketches: [&mut Sketch; K], rows: &[f64]) {
+        assert_eq!(rows.len() % K, 0, "whole rows");
         let mut sketches = sketches;
         for sketch in sketches.iter_mut() {
-            sketch.count += len as u64;
+            sketch.count += (rows.len() / K) as u64;
         }
-        for x in (0..len).map(|i| columns.map(|column| column[i])) {
-            for (sketch, x) in sketches.iter_mut().zip(x) {
+        for row in rows.chunks_exact(K) {
+            for (sketch, &x) in sketches.iter_mut().zip(row) {
                 sketch.add_to_bucket(x);
             }
         }
