@@ -324,6 +324,9 @@ struct Plan<'a> {
     cheap_operation_scatter: bool,
     /// Per-operation scatter draws a constant of the scenario: a model for every operation.
     operation_constants: bool,
+    /// Per-operation scatter draws lane values only, none correlated: without a sensitivity
+    /// analysis, which reads the draws, they go straight into lanes ([`Variant::draw_lanes`]).
+    lane_draws: bool,
     needs: Needs,
     /// Wear changes the radius only if an arc can burn and a later operation exists.
     track_wear: bool,
@@ -356,6 +359,9 @@ impl<'a> Plan<'a> {
             .scatter
             .iter()
             .any(|(_, s)| s.parameter.is_scenario_constant());
+        let lane_draws = !operation_scatter.is_empty()
+            && cheap_operation_scatter
+            && operation_scatter.correlation.is_none();
         let arcs_scattered = job
             .scatter()
             .iter()
@@ -374,6 +380,7 @@ impl<'a> Plan<'a> {
             operation_scatter,
             cheap_operation_scatter,
             operation_constants,
+            lane_draws,
             needs: Needs {
                 impact: job.operation_metrics().iter().any(|m| m.needs_impact())
                     || job
@@ -552,6 +559,7 @@ impl<'a> Plan<'a> {
             _ => Vec::new(),
         };
         let mut cells = sensitivity.map(|plan| LaneCells::new(plan, lanes));
+        let lane_draws = self.lane_draws && sensitivity.is_none();
 
         let mut failed_at = vec![None; lanes];
         let metrics = job.operation_metrics();
@@ -576,8 +584,21 @@ impl<'a> Plan<'a> {
                     } else {
                         &mut scratch
                     };
-                    variant.draw_operation(self, rejections, operations - op);
-                    let outcomes = variant.evaluate(self, &variant.op_draws);
+                    let outcomes = if lane_draws {
+                        let (speed, radius_m, pressure_pa) =
+                            variant.draw_lanes(self, rejections, operations - op);
+                        variant.evaluate_lanes(
+                            self,
+                            &variant.operation,
+                            variant.model.wear,
+                            speed,
+                            radius_m,
+                            pressure_pa,
+                        )
+                    } else {
+                        variant.draw_operation(self, rejections, operations - op);
+                        variant.evaluate(self, &variant.op_draws)
+                    };
                     if v == 0
                         && let Some(plan) = sobol.filter(|p| !p.operation_inputs.is_empty())
                     {
@@ -904,7 +925,10 @@ struct Variant<'p, L: Real> {
     /// loop per lane ([`Variant::draw_operation`]): `(scatter index, value)` in the order
     /// [`Entries::draw`] sets them, lane after lane, operation after operation.
     ahead: Vec<(usize, f64)>,
-    /// Operations per lane in `ahead`, and the next one to use.
+    /// The same for [`Variant::draw_lanes`]: values only, by operation, lane and entry, so that
+    /// one operation's values of an entry are a short stride apart (drawn lane after lane).
+    lane_ahead: Vec<f64>,
+    /// Operations per lane in `ahead` (or `lane_ahead`), and the next one to use.
     ahead_operations: usize,
     ahead_next: usize,
     /// Lanes that are devices; the others are spare and count no rejections.
@@ -946,6 +970,7 @@ impl<'p, L: Real> Variant<'p, L> {
             model,
             operation,
             ahead: Vec::new(),
+            lane_ahead: Vec::new(),
             ahead_operations: 0,
             ahead_next: 0,
             active,
@@ -998,6 +1023,56 @@ impl<'p, L: Real> Variant<'p, L> {
         self.ahead_next += 1;
     }
 
+    /// [`Variant::draw_operation`] when the operation draws only lane values, uncorrelated, and
+    /// nothing reads the draws but the lanes (no sensitivity analysis): the same values from the
+    /// same streams in the same order, counting the same rejections, straight into this
+    /// operation's speed, radius and pressure lanes, without a [`Draws`] and an input row per
+    /// lane and operation.
+    #[inline(always)]
+    fn draw_lanes(&mut self, plan: &Plan<'_>, rejections: &mut [u64], remaining: u64) -> (L, L, L) {
+        let entries = &plan.operation_scatter.scatter;
+        let width = entries.len();
+        if self.ahead_next == self.ahead_operations {
+            let operations = remaining.min(DRAW_AHEAD);
+            self.ahead_operations = usize::try_from(operations).expect("a block fits in memory");
+            self.ahead_next = 0;
+            self.lane_ahead
+                .resize(self.ahead_operations * L::LANES * width, 0.0);
+            for (k, rng) in self.rngs.iter_mut().enumerate() {
+                let rejections: &mut [u64] = if k < self.active {
+                    &mut *rejections
+                } else {
+                    &mut self.spare_rejections
+                };
+                for op in 0..self.ahead_operations {
+                    let at = (op * L::LANES + k) * width;
+                    for (slot, &(index, scatter)) in
+                        self.lane_ahead[at..at + width].iter_mut().zip(entries)
+                    {
+                        *slot = scatter
+                            .distribution
+                            .sample_counting(rng, &mut rejections[index]);
+                    }
+                }
+            }
+        }
+        let (mut speed, mut radius_m, mut pressure_pa) =
+            (self.speed, self.radius_m, self.pressure_pa);
+        let row = self.ahead_next * L::LANES * width;
+        // In the job's order, as `Draws::set` takes them: a later entry of a parameter wins.
+        for (e, &(_, scatter)) in entries.iter().enumerate() {
+            let value = L::from_fn(|k| self.lane_ahead[row + k * width + e]);
+            match scatter.parameter {
+                Parameter::ImpactVelocity => speed = value,
+                Parameter::ContactRadius => radius_m = value,
+                Parameter::DynamicYieldPressure => pressure_pa = value,
+                _ => unreachable!("only lane values draw straight into lanes"),
+            }
+        }
+        self.ahead_next += 1;
+        (speed, radius_m, pressure_pa)
+    }
+
     /// The operation with the lanes' draws `op_draws` (this operation's, or swapped ones), on the
     /// lanes' surfaces as their wear has left them.
     #[inline(always)]
@@ -1042,6 +1117,21 @@ impl<'p, L: Real> Variant<'p, L> {
                     L::splat(draws.pressure_pa),
                 )
             };
+        self.evaluate_lanes(plan, &operation, wear_law, speed, radius_m, pressure_pa)
+    }
+
+    /// The operation at the lanes' speed, radius and pressure, on the lanes' surfaces as their
+    /// wear has left them.
+    #[inline(always)]
+    fn evaluate_lanes(
+        &self,
+        plan: &Plan<'_>,
+        operation: &Operation,
+        wear_law: WearLaw,
+        speed: L,
+        radius_m: L,
+        pressure_pa: L,
+    ) -> Outcomes<L> {
         let (radius_m, pressure_pa) = if plan.track_wear {
             let energy_j = L::from_fn(|k| self.wear[k].cumulative_arc_energy_j);
             let worn = L::splat(0.0).lt(energy_j);
@@ -1249,4 +1339,54 @@ pub fn run_on(
         next = Batch::of(job, batch.index + 1).filter(|_| !accept(&tally));
     }
     Ok(tally)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::{Value, json};
+
+    /// Group 0 of the job's first batch on `kernel`, each operation's draws going straight into
+    /// lanes or through a [`Draws`] per lane.
+    fn group_zero(job: &Job, kernel: Kernel, lane_draws: bool) -> GroupStats {
+        let mut plan = Plan::new(job, kernel);
+        assert!(plan.lane_draws, "the job draws lane values per operation");
+        plan.lane_draws = lane_draws;
+        let batch = Batch::of(job, 0).expect("a first batch");
+        let chunk = Chunk {
+            first: batch.first,
+            size: batch.size,
+            permutations: None,
+        };
+        plan.run_chunk(&chunk, 0, &Silent, &AtomicU64::new(0), 0)
+            .expect("not cancelled")
+    }
+
+    #[test]
+    fn operations_drawn_straight_into_lanes_give_the_bits_of_draws_per_lane() {
+        let reference: Value =
+            serde_json::from_str(include_str!("../../../tests/data/reference_jobs.json")).unwrap();
+        let mut spec = reference["mechanical"].clone();
+        // Group 0 holds 45 devices: a full batch of every width, and a remainder. 70 operations
+        // draw ahead twice. The velocity's window rejects about a quarter of its draws; the
+        // radius is drawn per operation as well, after it.
+        spec["devices"] = json!(45 * GROUPS);
+        spec["operations"] = json!(70);
+        spec["scatter"][2]["distribution"]["min"] = json!(0.21);
+        let radius = json!({"parameter": "contact_radius_m", "per": "operation",
+            "distribution": {"kind": "normal", "mean": 0.0077, "sd": 0.0008, "min": 0.001}});
+        spec["scatter"][0] = radius;
+        let job = Job::from_json(&spec.to_string(), || 0).unwrap();
+        for kernel in Kernel::all() {
+            let straight = group_zero(&job, kernel, true);
+            assert!(
+                straight.truncation_rejections[2] > 0,
+                "{kernel:?}: no rejection"
+            );
+            assert!(
+                straight == group_zero(&job, kernel, false),
+                "{kernel:?}: lane draws differ from draws per lane"
+            );
+        }
+    }
 }
