@@ -198,6 +198,10 @@ impl Sketch {
     #[inline(always)]
     pub fn push_rows<const K: usize>(sketches: [&mut Sketch; K], rows: &[f64]) {
         assert_eq!(rows.len() % K, 0, "whole rows");
+        debug_assert!(
+            rows.iter().all(|x| x.is_finite()),
+            "Sketch::push_rows: values must be finite"
+        );
         let mut sketches = sketches;
         for sketch in sketches.iter_mut() {
             sketch.count += (rows.len() / K) as u64;
@@ -350,6 +354,14 @@ mod tests {
 
     /// The bucket midpoint is within `2^-9` of any value in it.
     const BOUND: f64 = 1.0 / 512.0;
+
+    #[test]
+    #[cfg(debug_assertions)]
+    #[should_panic(expected = "values must be finite")]
+    fn push_rows_checks_its_values_like_push_in_debug_builds() {
+        let (mut a, mut b) = (Sketch::new(), Sketch::new());
+        Sketch::push_rows([&mut a, &mut b], &[1.0, 2.0, 3.0, f64::INFINITY]);
+    }
 
     fn sketch_of(values: &[f64]) -> Sketch {
         let mut sketch = Sketch::new();
