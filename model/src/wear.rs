@@ -8,7 +8,7 @@
 
 use crate::elementary::exp;
 use crate::lanes::Real;
-use crate::operation::Outcome;
+use crate::operation::{Outcome, Outcomes};
 use crate::scenario::{Scenario, WearLawKind};
 
 /// The material constants of wear.
@@ -101,21 +101,53 @@ fn relax<L: Real>(new: L, worn: f64, scaled_energy: L) -> L {
     worn + (new - worn) * exp(-scaled_energy)
 }
 
-/// What a device has accumulated over the operations it has run (docs/model.md section 6).
+/// What a device has accumulated over the operations it has run (docs/model.md section 6): one
+/// device's, or, over [`Lanes`](crate::lanes::Lanes), each lane's.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct DeviceWear {
+pub struct DeviceWear<L: Real = f64> {
     /// `W`: the arc energy of every operation so far.
-    pub cumulative_arc_energy_j: f64,
+    pub cumulative_arc_energy_j: L,
     /// The first-impact plastic work of every operation so far (section 4).
-    pub cumulative_plastic_work_j: f64,
+    pub cumulative_plastic_work_j: L,
+}
+
+impl<L: Real> DeviceWear<L> {
+    /// A new device on every lane.
+    pub fn new() -> Self {
+        Self {
+            cumulative_arc_energy_j: L::splat(0.0),
+            cumulative_plastic_work_j: L::splat(0.0),
+        }
+    }
+
+    /// Adds one operation on every lane.
+    #[inline(always)]
+    pub fn add_lanes(&mut self, outcomes: &Outcomes<L>) {
+        self.add_operation(outcomes.arc_energy_j, outcomes.first_impact_plastic_work_j);
+    }
+
+    #[inline(always)]
+    fn add_operation(&mut self, arc_energy_j: L, first_impact_plastic_work_j: L) {
+        self.cumulative_arc_energy_j = self.cumulative_arc_energy_j + arc_energy_j;
+        self.cumulative_plastic_work_j =
+            self.cumulative_plastic_work_j + first_impact_plastic_work_j;
+    }
+
+    /// Lane `i`'s device.
+    #[inline(always)]
+    pub fn lane(&self, i: usize) -> DeviceWear {
+        DeviceWear {
+            cumulative_arc_energy_j: self.cumulative_arc_energy_j.lane(i),
+            cumulative_plastic_work_j: self.cumulative_plastic_work_j.lane(i),
+        }
+    }
 }
 
 impl DeviceWear {
     /// Adds one operation.
     #[inline]
     pub fn add(&mut self, outcome: &Outcome) {
-        self.cumulative_arc_energy_j += outcome.arc_energy_j;
-        self.cumulative_plastic_work_j += outcome.first_impact_plastic_work_j;
+        self.add_operation(outcome.arc_energy_j, outcome.first_impact_plastic_work_j);
     }
 }
 

@@ -16,7 +16,7 @@ use super::kernel::{Kernel, LaneWork};
 use super::lives::{DeviceLife, GroupLives};
 use super::metric::{DeviceMetric, Metric};
 use super::sensitivity::{LaneCells, SensitivityPlan, SensitivityStats};
-use crate::lanes::Real;
+use crate::lanes::{Mask, Real};
 use crate::operation::{Conditions, Needs, Operation, Outcome, Outcomes, Setup};
 use crate::scenario::Scenario;
 use crate::stats::{Accumulator, Rows};
@@ -622,6 +622,17 @@ impl<'a> Plan<'a> {
                             }
                         }
                     }
+                    variant.wear.add_lanes(&outcomes);
+                    if v == 0 {
+                        stats.operations_at_max_bounces += (0..active)
+                            .map(|k| u64::from(outcomes.truncated.lane(k)))
+                            .sum::<u64>();
+                    }
+                    // Each lane's outcome, only for what reads it: the sensitivity cells and
+                    // the failure criteria.
+                    if cells.is_none() && (v != 0 || job.failure().is_empty()) {
+                        continue;
+                    }
                     for (k, failed_at) in failed_at.iter_mut().enumerate() {
                         let outcome = outcomes.lane(k);
                         if cells.is_some() {
@@ -632,17 +643,15 @@ impl<'a> Plan<'a> {
                                 *slot = metric.value(&outcome);
                             }
                         }
-                        variant.wear[k].add(&outcome);
                         if v != 0 || k >= active {
                             continue;
                         }
-                        stats.operations_at_max_bounces += u64::from(outcome.truncated);
                         if failed_at.is_none()
                             && self.fails(
                                 &variant.model,
                                 &outcome,
                                 &variant.draws[k],
-                                &variant.wear[k],
+                                &variant.wear.lane(k),
                             )
                         {
                             *failed_at = Some(op + 1);
@@ -667,7 +676,12 @@ impl<'a> Plan<'a> {
         let a = &variants[0];
         for (k, failed_at) in failed_at.iter().enumerate().take(active) {
             for (accumulator, metric) in stats.devices.iter_mut().zip(job.device_metrics()) {
-                accumulator.push(self.device_metric(&a.model, *metric, &a.draws[k], &a.wear[k]));
+                accumulator.push(self.device_metric(
+                    &a.model,
+                    *metric,
+                    &a.draws[k],
+                    &a.wear.lane(k),
+                ));
             }
             if let Some(plan) = sensitivity {
                 self.push_device_sensitivity(plan, &variants, k, &mut stats.sensitivity);
@@ -743,8 +757,9 @@ impl<'a> Plan<'a> {
         let a = &variants[0];
         let inputs: Vec<f64> = plan.device_inputs.iter().map(|&i| a.inputs[k][i]).collect();
         for (j, metric) in job.device_metrics().iter().enumerate() {
-            let value =
-                |v: &Variant<'_, L>| self.device_metric(&v.model, *metric, &v.draws[k], &v.wear[k]);
+            let value = |v: &Variant<'_, L>| {
+                self.device_metric(&v.model, *metric, &v.draws[k], &v.wear.lane(k))
+            };
             let a_value = value(a);
             if plan.device_sobol() {
                 let ab: Vec<f64> = variants[2..].iter().map(value).collect();
@@ -918,7 +933,7 @@ struct Variant<'p, L: Real> {
     speed: L,
     radius_m: L,
     pressure_pa: L,
-    wear: Vec<DeviceWear>,
+    wear: DeviceWear<L>,
     /// This operation's draws.
     op_draws: Vec<Draws>,
     /// The next operations' per-operation draws, drawn ahead from each lane's stream in one
@@ -962,7 +977,7 @@ impl<'p, L: Real> Variant<'p, L> {
             }),
             radius_m: L::from_fn(|k| draws[k].radius_m),
             pressure_pa: L::from_fn(|k| draws[k].pressure_pa),
-            wear: vec![DeviceWear::default(); L::LANES],
+            wear: DeviceWear::new(),
             op_draws: draws.clone(),
             draws,
             rngs,
@@ -1133,7 +1148,7 @@ impl<'p, L: Real> Variant<'p, L> {
         pressure_pa: L,
     ) -> Outcomes<L> {
         let (radius_m, pressure_pa) = if plan.track_wear {
-            let energy_j = L::from_fn(|k| self.wear[k].cumulative_arc_energy_j);
+            let energy_j = self.wear.cumulative_arc_energy_j;
             let worn = L::splat(0.0).lt(energy_j);
             (
                 L::select(worn, wear_law.radius_m(radius_m, energy_j), radius_m),
