@@ -1005,25 +1005,16 @@ impl<'p, L: Real> Variant<'p, L> {
             return;
         }
         let job = plan.job;
-        if self.ahead_next == self.ahead_operations {
-            let operations = remaining.min(DRAW_AHEAD);
-            self.ahead_operations = usize::try_from(operations).expect("a block fits in memory");
-            self.ahead_next = 0;
-            let ahead = &mut self.ahead;
+        if self.start_block(remaining) {
+            let mut ahead = std::mem::take(&mut self.ahead);
             ahead.clear();
-            for (k, rng) in self.rngs.iter_mut().enumerate() {
-                let rejections: &mut [u64] = if k < self.active {
-                    &mut *rejections
-                } else {
-                    &mut self.spare_rejections
-                };
-                for _ in 0..operations {
-                    plan.operation_scatter
-                        .draw(job, None, rng, rejections, |index, value| {
-                            ahead.push((index, value));
-                        });
-                }
-            }
+            self.draw_block(rejections, |_, _, rng, rejections| {
+                plan.operation_scatter
+                    .draw(job, None, rng, rejections, |index, value| {
+                        ahead.push((index, value));
+                    });
+            });
+            self.ahead = ahead;
         }
         for k in 0..L::LANES {
             let draws = &mut self.op_draws[k];
@@ -1038,6 +1029,41 @@ impl<'p, L: Real> Variant<'p, L> {
         self.ahead_next += 1;
     }
 
+    /// Whether the operations drawn ahead are used up; if so, starts a new block of up to
+    /// [`DRAW_AHEAD`] operations, never past the device's last (`remaining` left, this one
+    /// included), so that the rejections count as if drawn one operation at a time.
+    #[inline(always)]
+    fn start_block(&mut self, remaining: u64) -> bool {
+        if self.ahead_next < self.ahead_operations {
+            return false;
+        }
+        self.ahead_operations =
+            usize::try_from(remaining.min(DRAW_AHEAD)).expect("a block fits in memory");
+        self.ahead_next = 0;
+        true
+    }
+
+    /// Draws the block [`Variant::start_block`] started: lane after lane, each from its own
+    /// stream, `draw(lane, operation, stream, rejections)` for each of the block's operations;
+    /// the spare lanes count their rejections apart, where nobody reads them.
+    #[inline(always)]
+    fn draw_block(
+        &mut self,
+        rejections: &mut [u64],
+        mut draw: impl FnMut(usize, usize, &mut ChaCha8Rng, &mut [u64]),
+    ) {
+        for (k, rng) in self.rngs.iter_mut().enumerate() {
+            let rejections: &mut [u64] = if k < self.active {
+                &mut *rejections
+            } else {
+                &mut self.spare_rejections
+            };
+            for op in 0..self.ahead_operations {
+                draw(k, op, rng, rejections);
+            }
+        }
+    }
+
     /// [`Variant::draw_operation`] when the operation draws only lane values, uncorrelated, and
     /// nothing reads the draws but the lanes (no sensitivity analysis): the same values from the
     /// same streams in the same order, counting the same rejections, straight into this
@@ -1047,29 +1073,18 @@ impl<'p, L: Real> Variant<'p, L> {
     fn draw_lanes(&mut self, plan: &Plan<'_>, rejections: &mut [u64], remaining: u64) -> (L, L, L) {
         let entries = &plan.operation_scatter.scatter;
         let width = entries.len();
-        if self.ahead_next == self.ahead_operations {
-            let operations = remaining.min(DRAW_AHEAD);
-            self.ahead_operations = usize::try_from(operations).expect("a block fits in memory");
-            self.ahead_next = 0;
-            self.lane_ahead
-                .resize(self.ahead_operations * L::LANES * width, 0.0);
-            for (k, rng) in self.rngs.iter_mut().enumerate() {
-                let rejections: &mut [u64] = if k < self.active {
-                    &mut *rejections
-                } else {
-                    &mut self.spare_rejections
-                };
-                for op in 0..self.ahead_operations {
-                    let at = (op * L::LANES + k) * width;
-                    for (slot, &(index, scatter)) in
-                        self.lane_ahead[at..at + width].iter_mut().zip(entries)
-                    {
-                        *slot = scatter
-                            .distribution
-                            .sample_counting(rng, &mut rejections[index]);
-                    }
+        if self.start_block(remaining) {
+            let mut ahead = std::mem::take(&mut self.lane_ahead);
+            ahead.resize(self.ahead_operations * L::LANES * width, 0.0);
+            self.draw_block(rejections, |k, op, rng, rejections| {
+                let at = (op * L::LANES + k) * width;
+                for (slot, &(index, scatter)) in ahead[at..at + width].iter_mut().zip(entries) {
+                    *slot = scatter
+                        .distribution
+                        .sample_counting(rng, &mut rejections[index]);
                 }
-            }
+            });
+            self.lane_ahead = ahead;
         }
         let (mut speed, mut radius_m, mut pressure_pa) =
             (self.speed, self.radius_m, self.pressure_pa);
