@@ -576,6 +576,8 @@ impl<'a> Plan<'a> {
             let start = job.bin_operations() * bin_index as u64;
             let end = (start + job.bin_operations()).min(operations);
             let in_bin = usize::try_from(end - start).expect("bins fit in memory");
+            // Where the bin's values wait for the accumulators: each metric's from every lane.
+            let layout = Rows::new(metrics.len(), active * in_bin);
             for op in start..end {
                 let row = usize::try_from(op - start).expect("bins fit in memory");
                 for (v, variant) in variants.iter_mut().enumerate() {
@@ -613,7 +615,6 @@ impl<'a> Plan<'a> {
                     if v == 0 {
                         // Each metric's values of the bin, from its lanes: one dispatch per
                         // metric, in the layout the accumulators read.
-                        let layout = Rows::new(metrics.len(), active * in_bin);
                         for (m, metric) in metrics.iter().enumerate() {
                             let (offset, stride) = layout.place(m);
                             let values = metric.lanes(&outcomes);
@@ -670,7 +671,6 @@ impl<'a> Plan<'a> {
             }
             let bin =
                 &mut stats.operations[bin_index * metrics.len()..(bin_index + 1) * metrics.len()];
-            let layout = Rows::new(metrics.len(), active * in_bin);
             Accumulator::push_rows(bin, &buffer[..layout.len()]);
         }
         let a = &variants[0];
