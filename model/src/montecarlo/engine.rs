@@ -14,12 +14,12 @@ use super::distribution::{standard_normal_cdf, standard_normal_quantile, stratif
 use super::job::{Job, Parameter, Per, SamplerKind, Scatter, SensitivityMethod};
 use super::kernel::{Kernel, LaneWork};
 use super::lives::{DeviceLife, GroupLives};
-use super::metric::{DeviceMetric, Metric};
+use super::metric::{DeviceMetric, Metric, OperationMetric};
 use super::sensitivity::{LaneCells, SensitivityPlan, SensitivityStats};
 use crate::lanes::{Mask, Real};
 use crate::operation::{Conditions, Needs, Operation, Outcome, Outcomes, Setup};
 use crate::scenario::Scenario;
-use crate::stats::{Accumulator, Rows};
+use crate::stats::{Accumulator, LaneSums};
 use crate::wear::{DeviceWear, WearLaw};
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
@@ -480,10 +480,10 @@ impl<'a> Plan<'a> {
     /// Runs the `active` devices of the chunk from `first_local` on, in lockstep on `L::LANES`
     /// lanes (spare lanes compute a copy of the first device: they draw from a copy of its
     /// stream, count no rejections, and nothing reads their values), into `stats`:
-    /// each from its own stream, with the draws and the arithmetic it would have alone. Each bin's
-    /// values wait in `buffer`, one column per metric, and go into each accumulator in one batch,
-    /// device after device, in the order of one device at a time, so the sums come out the same to
-    /// the bit for any number of lanes.
+    /// each from its own stream, with the draws and the arithmetic it would have alone. Each
+    /// lane sums its device's values of a bin in the lanes ([`LaneSums`]), and the bin's
+    /// accumulators add those sums device after device, so the sums come out the same to the bit
+    /// for any number of lanes.
     ///
     /// With Sobol' indices over device-level parameters, the devices run again alongside, as
     /// variants: `B`, drawn from the devices' Sobol' streams, and `AB_i`, the devices with
@@ -498,7 +498,6 @@ impl<'a> Plan<'a> {
         first_local: u64,
         active: usize,
         stats: &mut GroupStats,
-        buffer: &mut Vec<f64>,
     ) {
         let job = self.job;
         let lanes = L::LANES;
@@ -564,8 +563,7 @@ impl<'a> Plan<'a> {
         let mut failed_at = vec![None; lanes];
         let metrics = job.operation_metrics();
         let operations = job.spec().operations;
-        let bin_operations = usize::try_from(job.bin_operations()).expect("bins fit in memory");
-        buffer.resize(Rows::new(metrics.len(), active * bin_operations).len(), 0.0);
+        let mut sums: Vec<LaneSums<L>> = Vec::with_capacity(metrics.len());
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
         // Per evaluation (variants, then B' and AB'_i), lane and metric: this operation's values,
         // for the sensitivity cells.
@@ -575,11 +573,8 @@ impl<'a> Plan<'a> {
         for bin_index in 0..bins {
             let start = job.bin_operations() * bin_index as u64;
             let end = (start + job.bin_operations()).min(operations);
-            let in_bin = usize::try_from(end - start).expect("bins fit in memory");
-            // Where the bin's values wait for the accumulators: each metric's from every lane.
-            let layout = Rows::new(metrics.len(), active * in_bin);
+            let bin = bin_index * metrics.len()..(bin_index + 1) * metrics.len();
             for op in start..end {
-                let row = usize::try_from(op - start).expect("bins fit in memory");
                 for (v, variant) in variants.iter_mut().enumerate() {
                     let rejections: &mut [u64] = if v == 0 {
                         &mut stats.truncation_rejections
@@ -612,16 +607,27 @@ impl<'a> Plan<'a> {
                             &mut values[variant_count * lanes * metrics.len()..],
                         );
                     }
-                    if v == 0 {
-                        // Each metric's values of the bin, from its lanes: one dispatch per
-                        // metric, in the layout the accumulators read.
-                        for (m, metric) in metrics.iter().enumerate() {
-                            let (offset, stride) = layout.place(m);
-                            let values = metric.lanes(&outcomes);
-                            for k in 0..active {
-                                buffer[offset + (k * in_bin + row) * stride] = values.lane(k);
-                            }
+                    if v == 0 && !metrics.is_empty() {
+                        // Each metric's values, one dispatch per metric: into the lanes' sums
+                        // (about the shift the first operation of the bin sets) and counted in
+                        // the sketches.
+                        let accumulators = &mut stats.operations[bin.clone()];
+                        let mut columns =
+                            [&outcomes.impact_velocity_m_s; OperationMetric::ALL.len()];
+                        for (column, metric) in columns.iter_mut().zip(metrics) {
+                            *column = metric.lanes(&outcomes);
                         }
+                        let columns = &columns[..metrics.len()];
+                        if op == start {
+                            sums.clear();
+                            sums.extend(accumulators.iter().zip(columns).map(
+                                |(accumulator, column)| LaneSums::new(accumulator, column.lane(0)),
+                            ));
+                        }
+                        for (sums, column) in sums.iter_mut().zip(columns) {
+                            sums.push(**column);
+                        }
+                        Accumulator::count_lanes(accumulators, columns, active);
                     }
                     variant.wear.add_lanes(&outcomes);
                     if v == 0 {
@@ -666,12 +672,9 @@ impl<'a> Plan<'a> {
             if let Some(cells) = &mut cells {
                 cells.merge_bin(&mut stats.sensitivity, bin_index);
             }
-            if metrics.is_empty() {
-                continue;
+            for (accumulator, sums) in stats.operations[bin].iter_mut().zip(&sums) {
+                accumulator.add_lanes(sums, active);
             }
-            let bin =
-                &mut stats.operations[bin_index * metrics.len()..(bin_index + 1) * metrics.len()];
-            Accumulator::push_rows(bin, &buffer[..layout.len()]);
         }
         let a = &variants[0];
         for (k, failed_at) in failed_at.iter().enumerate().take(active) {
@@ -883,7 +886,6 @@ impl<'a> Plan<'a> {
             chunk.size * group / groups,
             chunk.size * (group + 1) / groups,
         );
-        let mut buffer = Vec::new();
         let mut local = start;
         while local < end {
             if observer.cancelled() {
@@ -908,7 +910,6 @@ impl<'a> Plan<'a> {
                 first_local: local,
                 active: usize::try_from(devices).expect("a batch fits in memory"),
                 stats: &mut stats,
-                buffer: &mut buffer,
             });
             let ran = operations * devices;
             observer.progress(done.fetch_add(ran, Ordering::Relaxed) + ran, total);
@@ -1195,19 +1196,13 @@ struct Devices<'p, 'a> {
     /// The batch's devices: its first `active` lanes; the others copy the first device.
     active: usize,
     stats: &'p mut GroupStats,
-    buffer: &'p mut Vec<f64>,
 }
 
 impl LaneWork for Devices<'_, '_> {
     #[inline(always)]
     fn run<L: Real>(self) {
-        self.plan.run_devices::<L>(
-            self.chunk,
-            self.first_local,
-            self.active,
-            self.stats,
-            self.buffer,
-        );
+        self.plan
+            .run_devices::<L>(self.chunk, self.first_local, self.active, self.stats);
     }
 }
 

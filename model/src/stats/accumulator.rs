@@ -2,105 +2,60 @@
 //! in constant memory and a few nanoseconds per value.
 
 use super::sketch::{Sketch, rank};
+use crate::lanes::Real;
 
-/// Accumulators [`Accumulator::push_rows`] takes through their values side by side.
-pub const INTERLEAVED: usize = 4;
-
-/// Where [`Accumulator::push_rows`] reads each metric's values in a block of `metrics` metrics x
-/// `values` values: the metrics in groups of [`INTERLEAVED`] (the last one narrower), each group
-/// row by row, a row holding one value of each of its metrics. A row is one vector load, and the
-/// group's running sums one vector of independent chains.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Rows {
-    metrics: usize,
-    values: usize,
+/// The sums of one run of values per lane, in the lanes: for the engine, each lane's device's
+/// values of one (metric, bin), in operation order, about the shift of the [`Accumulator`] they
+/// will join. [`Accumulator::add_lanes`] then adds each lane's run as one term, in lane (device)
+/// order, so the sums depend on the devices and their values, not on how many lanes ran side by
+/// side: one lane or thirty-two give the same bits. Per value this is a handful of vector
+/// operations on independent lanes, instead of one long chain of dependent additions per metric
+/// over every device's values in turn.
+#[derive(Debug, Clone, Copy)]
+pub struct LaneSums<L: Real> {
+    shift: f64,
+    threshold: f64,
+    min: L,
+    max: L,
+    sum: L,
+    sum_sq: L,
+    /// Exact: a run of fewer than 2^53 values.
+    above: L,
 }
 
-impl Rows {
-    pub fn new(metrics: usize, values: usize) -> Self {
-        Self { metrics, values }
+impl<L: Real> LaneSums<L> {
+    /// Empty runs for `accumulator`, about its shift, or, while it is empty, about `first`: the
+    /// value it is going to see first (an empty accumulator takes its first value as its shift).
+    pub fn new(accumulator: &Accumulator, first: f64) -> Self {
+        let zero = L::splat(0.0);
+        Self {
+            shift: if accumulator.count() == 0 {
+                first
+            } else {
+                accumulator.shift
+            },
+            threshold: accumulator.threshold,
+            min: L::splat(f64::INFINITY),
+            max: L::splat(f64::NEG_INFINITY),
+            sum: zero,
+            sum_sq: zero,
+            above: zero,
+        }
     }
 
-    /// Values in the block.
-    pub fn len(&self) -> usize {
-        self.metrics * self.values
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    /// Value `i` of metric `m` is at `offset + i * stride`: `(offset, stride)`.
+    /// Adds the next value of each lane's run, with [`Accumulator::push`]'s arithmetic.
     #[inline(always)]
-    pub fn place(&self, m: usize) -> (usize, usize) {
-        debug_assert!(m < self.metrics, "metric {m} of {}", self.metrics);
-        let group = m / INTERLEAVED * INTERLEAVED;
-        let width = (self.metrics - group).min(INTERLEAVED);
-        (group * self.values + (m - group), width)
-    }
-}
-
-/// `K` accumulators from rows of `K` values, value `k` of each row into `accumulators[k]`: each
-/// accumulator sees its values in order, so its bits are those of pushing them one by one, while
-/// the `K` chains of dependent additions (and of sketch increments) overlap.
-#[inline(always)]
-fn push_side_by_side<const K: usize>(accumulators: &mut [Accumulator; K], rows: &[f64]) {
-    debug_assert_eq!(rows.len() % K, 0, "whole rows");
-    if let Some(first) = rows.first_chunk::<K>() {
-        for (accumulator, &first) in accumulators.iter_mut().zip(first) {
-            if accumulator.count() == 0 {
-                accumulator.shift = first;
-            }
-        }
-    }
-    let shift = accumulators.each_ref().map(|a| a.shift);
-    let threshold = accumulators.each_ref().map(|a| a.threshold);
-    let mut min = accumulators.each_ref().map(|a| a.min);
-    let mut max = accumulators.each_ref().map(|a| a.max);
-    let mut sum = accumulators.each_ref().map(|a| a.sum);
-    let mut sum_sq = accumulators.each_ref().map(|a| a.sum_sq);
-    let mut above = accumulators.each_ref().map(|a| a.above);
-    for x in rows.chunks_exact(K) {
-        for k in 0..K {
-            min[k] = if x[k] < min[k] { x[k] } else { min[k] };
-            max[k] = if x[k] > max[k] { x[k] } else { max[k] };
-            let d = x[k] - shift[k];
-            sum[k] += d;
-            sum_sq[k] += d * d;
-            above[k] += u64::from(x[k] > threshold[k]);
-        }
-    }
-    // The sketches in a second pass: their increments are memory updates, kept out of the loop
-    // of register sums.
-    Sketch::push_rows(accumulators.each_mut().map(|a| &mut a.sketch), rows);
-    for (k, accumulator) in accumulators.iter_mut().enumerate() {
-        (
-            accumulator.min,
-            accumulator.max,
-            accumulator.sum,
-            accumulator.sum_sq,
-            accumulator.above,
-        ) = (min[k], max[k], sum[k], sum_sq[k], above[k]);
-    }
-}
-
-/// [`push_side_by_side`] on `K` accumulators.
-#[inline(always)]
-fn push_group<const K: usize>(accumulators: &mut [Accumulator], rows: &[f64]) {
-    let accumulators: &mut [Accumulator; K] = accumulators.try_into().expect("K accumulators");
-    push_side_by_side(accumulators, rows);
-}
-
-/// The last, narrower group of [`Accumulator::push_rows`], out of line: compiled into each kernel
-/// as well, it made the kernel slower than it saved (docs/performance.md).
-#[inline(never)]
-fn push_rest(accumulators: &mut [Accumulator], rows: &[f64]) {
-    match accumulators.len() {
-        0 => {}
-        1 => push_group::<1>(accumulators, rows),
-        2 => push_group::<2>(accumulators, rows),
-        3 => push_group::<3>(accumulators, rows),
-        _ => unreachable!("fewer than INTERLEAVED accumulators are left"),
+    pub fn push(&mut self, x: L) {
+        self.min = L::select(x.lt(self.min), x, self.min);
+        self.max = L::select(x.gt(self.max), x, self.max);
+        let d = x - L::splat(self.shift);
+        self.sum = self.sum + d;
+        self.sum_sq = self.sum_sq + d * d;
+        self.above = L::select(
+            x.gt(L::splat(self.threshold)),
+            self.above + L::splat(1.0),
+            self.above,
+        );
     }
 }
 
@@ -158,40 +113,68 @@ impl Accumulator {
         self.push_batch(std::slice::from_ref(&x));
     }
 
-    /// Pushes `values` in order, as [`Accumulator::push`] on each in turn would, to the bit: the
-    /// sums are added in the same sequence, but the running state stays in registers across the
-    /// loop instead of being loaded and stored per value (a bin of a metric in the engine).
+    /// Pushes `values` in order, as [`Accumulator::push`] on each in turn would, to the bit, with
+    /// the running state in registers across the loop instead of loaded and stored per value.
     #[inline]
     pub fn push_batch(&mut self, values: &[f64]) {
-        push_side_by_side(std::array::from_mut(self), values);
+        if let Some(&first) = values.first()
+            && self.count() == 0
+        {
+            self.shift = first;
+        }
+        let (shift, threshold) = (self.shift, self.threshold);
+        let (mut min, mut max, mut sum, mut sum_sq, mut above) =
+            (self.min, self.max, self.sum, self.sum_sq, self.above);
+        for &x in values {
+            min = if x < min { x } else { min };
+            max = if x > max { x } else { max };
+            let d = x - shift;
+            sum += d;
+            sum_sq += d * d;
+            above += u64::from(x > threshold);
+            self.sketch.push(x);
+        }
+        (self.min, self.max, self.sum, self.sum_sq, self.above) = (min, max, sum, sum_sq, above);
     }
 
-    /// Pushes a block laid out as [`Rows`] says, metric `m`'s values into `accumulators[m]`, as
-    /// [`Accumulator::push_batch`] on each metric's values in turn would, to the bit. Each
-    /// accumulator's sums are one chain of dependent additions that must stay in order; taking
-    /// [`INTERLEAVED`] accumulators through their values side by side lets those chains (and the
-    /// sketches' increments) run at the same time instead of one after another.
-    ///
-    /// # Panics
-    /// If `rows` does not split into `accumulators.len()` equally many values.
+    /// Counts lane `k` of each of `columns[m]`, for `k < active`, in the sketch of
+    /// `accumulators[m]`: values whose sums join later, through [`Accumulator::add_lanes`] (until
+    /// then the counts run ahead of the sums). Lane by lane, each lane's values of every metric in
+    /// turn: the increments of one sketch are often to one bucket and wait on each other, those of
+    /// different sketches overlap. Counts do not depend on order.
     #[inline(always)]
-    pub fn push_rows(accumulators: &mut [Accumulator], rows: &[f64]) {
-        if accumulators.is_empty() {
-            assert!(rows.is_empty(), "values without an accumulator");
-            return;
-        }
-        let values = rows.len() / accumulators.len();
-        assert_eq!(
-            values * accumulators.len(),
-            rows.len(),
-            "metrics with unequally many values"
+    pub fn count_lanes<L: Real>(accumulators: &mut [Accumulator], columns: &[&L], active: usize) {
+        debug_assert_eq!(
+            accumulators.len(),
+            columns.len(),
+            "a column per accumulator"
         );
-        let mut accumulators = accumulators.chunks_exact_mut(INTERLEAVED);
-        let mut rows = rows.chunks_exact(INTERLEAVED * values.max(1));
-        for (group, rows) in accumulators.by_ref().zip(rows.by_ref()) {
-            push_group::<INTERLEAVED>(group, rows);
+        debug_assert!(active <= L::LANES, "{active} of {} lanes", L::LANES);
+        for k in 0..active {
+            for (accumulator, column) in accumulators.iter_mut().zip(columns) {
+                accumulator.sketch.push(column.lane(k));
+            }
         }
-        push_rest(accumulators.into_remainder(), rows.remainder());
+    }
+
+    /// Adds the runs of lanes `0..active` of `sums` (made by [`LaneSums::new`] on this
+    /// accumulator, their values already counted by [`Accumulator::count_lanes`]), lane after
+    /// lane, each run's sums as one term.
+    #[inline(always)]
+    pub fn add_lanes<L: Real>(&mut self, sums: &LaneSums<L>, active: usize) {
+        debug_assert!(
+            sums.threshold.to_bits() == self.threshold.to_bits(),
+            "sums made for another accumulator"
+        );
+        self.shift = sums.shift;
+        for k in 0..active {
+            let (min, max) = (sums.min.lane(k), sums.max.lane(k));
+            self.min = if min < self.min { min } else { self.min };
+            self.max = if max > self.max { max } else { self.max };
+            self.sum += sums.sum.lane(k);
+            self.sum_sq += sums.sum_sq.lane(k);
+            self.above += sums.above.lane(k) as u64;
+        }
     }
 
     /// Adds the values of `other`, re-expressing its sums around this shift `a`: with
@@ -302,6 +285,7 @@ impl Accumulator {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::lanes::Lanes;
     use crate::stats::QUANTILES;
     use crate::stats::test_util::{SplitMix, exact_quantile};
     use approx::assert_relative_eq;
@@ -468,37 +452,64 @@ mod tests {
         }
     }
 
+    /// Devices' runs of values as [`LaneSums`] on `L::LANES` lanes, the spare lanes copying the
+    /// first device; `start` pushed before.
+    fn lane_runs<L: Real>(start: &[f64], runs: &[&[f64]], limit: Option<f64>) -> Accumulator {
+        let mut accumulator = accumulate(start, limit);
+        for batch in runs.chunks(L::LANES) {
+            let lane = |k: usize| batch.get(k).unwrap_or(&batch[0]);
+            let mut sums = LaneSums::<L>::new(&accumulator, batch[0][0]);
+            for i in 0..batch[0].len() {
+                let x = L::from_fn(|k| lane(k)[i]);
+                sums.push(x);
+                Accumulator::count_lanes(
+                    std::slice::from_mut(&mut accumulator),
+                    &[&x],
+                    batch.len(),
+                );
+            }
+            accumulator.add_lanes(&sums, batch.len());
+        }
+        accumulator
+    }
+
     proptest! {
-        /// Whole groups of four and a narrower last one, empty and fresh accumulators, one value
-        /// per metric.
+        /// The same bits on one lane, four or eight (full and partly spare batches), and what
+        /// pushing every value in device order gives: the same count, extremes, exceedances and
+        /// sketch, and sums apart only by their rounding.
         #[test]
-        fn push_rows_equals_push_batch_per_metric(
-            starts in prop::collection::vec(prop::collection::vec(batch_value(), 0..6), 0..11),
-            len in 0..70usize,
-            values in prop::collection::vec(batch_value(), 770),
+        fn lane_sums_give_the_bits_of_any_width_and_the_values_of_pushing_each(
+            start in prop::collection::vec(batch_value(), 0..4),
+            devices in 1..20usize,
+            len in 1..30usize,
+            values in prop::collection::vec(batch_value(), 600),
             limit in prop::option::of(-1.0..1.0f64),
         ) {
-            let mut by_metric: Vec<Accumulator> =
-                starts.iter().map(|start| accumulate(start, limit)).collect();
-            let mut side_by_side = by_metric.clone();
-            let layout = Rows::new(starts.len(), len);
-            let mut rows = vec![f64::NAN; layout.len()];
-            for (m, (accumulator, column)) in
-                by_metric.iter_mut().zip(values.chunks_exact(len.max(1))).enumerate()
-            {
-                let column = &column[..len];
-                accumulator.push_batch(column);
-                let (offset, stride) = layout.place(m);
-                for (i, &x) in column.iter().enumerate() {
-                    rows[offset + i * stride] = x;
+            let runs: Vec<&[f64]> = values.chunks_exact(len).take(devices).collect();
+            let one = lane_runs::<f64>(&start, &runs, limit);
+            for other in [
+                lane_runs::<Lanes<4>>(&start, &runs, limit),
+                lane_runs::<Lanes<8>>(&start, &runs, limit),
+            ] {
+                prop_assert_eq!(&other, &one);
+                for (a, b) in [(other.min, one.min), (other.max, one.max), (other.sum, one.sum),
+                    (other.sum_sq, one.sum_sq), (other.shift, one.shift)] {
+                    prop_assert_eq!(a.to_bits(), b.to_bits());
                 }
             }
-            prop_assert!(rows.iter().all(|x| !x.is_nan()), "every slot placed once");
-            Accumulator::push_rows(&mut side_by_side, &rows);
-            for (a, b) in side_by_side.iter().zip(&by_metric) {
-                prop_assert_eq!(state(a), state(b));
-            }
-            prop_assert_eq!(side_by_side, by_metric);
+            let mut pushed = accumulate(&start, limit);
+            runs.iter().for_each(|run| run.iter().for_each(|&x| pushed.push(x)));
+            prop_assert_eq!(one.count(), pushed.count());
+            prop_assert_eq!(one.min.to_bits(), pushed.min.to_bits());
+            prop_assert_eq!(one.max.to_bits(), pushed.max.to_bits());
+            prop_assert_eq!(one.count_above(), pushed.count_above());
+            prop_assert_eq!(one.sketch(), pushed.sketch());
+            prop_assert_eq!(one.shift.to_bits(), pushed.shift.to_bits());
+            let scale = start.iter().chain(runs.concat().iter()).map(|x| (x - one.shift).abs())
+                .fold(0.0, f64::max);
+            let n = one.count() as f64;
+            prop_assert!((one.sum - pushed.sum).abs() <= 1e-13 * n * scale);
+            prop_assert!((one.sum_sq - pushed.sum_sq).abs() <= 1e-13 * n * scale * scale);
         }
     }
 

@@ -36,7 +36,7 @@ pub mod sketch;
 pub mod sobol;
 pub mod summary;
 
-pub use accumulator::{Accumulator, Rows};
+pub use accumulator::{Accumulator, LaneSums};
 pub use intervals::{Z_975, student_t_975, wilson_interval};
 pub use query::{QueryAnswer, Threshold, ThresholdExceedance, query};
 pub use sketch::Sketch;
