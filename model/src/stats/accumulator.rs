@@ -137,11 +137,9 @@ impl Accumulator {
         (self.min, self.max, self.sum, self.sum_sq, self.above) = (min, max, sum, sum_sq, above);
     }
 
-    /// Counts lane `k` of each of `columns[m]`, for `k < active`, in the sketch of
-    /// `accumulators[m]`: values whose sums join later, through [`Accumulator::add_lanes`] (until
-    /// then the counts run ahead of the sums). Lane by lane, each lane's values of every metric in
-    /// turn: the increments of one sketch are often to one bucket and wait on each other, those of
-    /// different sketches overlap. Counts do not depend on order.
+    /// Counts lanes `0..active` of each of `columns[m]` in the sketch of `accumulators[m]`
+    /// ([`Sketch::push_lanes`]): values whose sums join later, through [`Accumulator::add_lanes`]
+    /// (until then the counts run ahead of the sums). Counts do not depend on order.
     #[inline(always)]
     pub fn count_lanes<L: Real>(accumulators: &mut [Accumulator], columns: &[&L], active: usize) {
         debug_assert_eq!(
@@ -149,11 +147,8 @@ impl Accumulator {
             columns.len(),
             "a column per accumulator"
         );
-        debug_assert!(active <= L::LANES, "{active} of {} lanes", L::LANES);
-        for k in 0..active {
-            for (accumulator, column) in accumulators.iter_mut().zip(columns) {
-                accumulator.sketch.push(column.lane(k));
-            }
+        for (accumulator, column) in accumulators.iter_mut().zip(columns) {
+            accumulator.sketch.push_lanes(*column, active);
         }
     }
 
