@@ -66,11 +66,76 @@ pub fn rank(q: f64, n: u64) -> u64 {
     (k as u64).clamp(1, n)
 }
 
-/// Dense counts for the keys `offset .. offset + counts.len()`.
-#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
+/// An unsigned integer a store counts in.
+trait Count: Copy + Default + Into<u64> + TryFrom<u64> + std::ops::AddAssign {
+    fn wide(self) -> u64 {
+        self.into()
+    }
+
+    /// `n`, which the caller has checked fits.
+    fn of(n: u64) -> Self {
+        Self::try_from(n).unwrap_or_else(|_| unreachable!("{n} counted in a store too narrow"))
+    }
+}
+
+impl Count for u16 {}
+impl Count for u32 {}
+impl Count for u64 {}
+
+/// A store's counts in the narrowest integer that holds every count it may reach: no bucket
+/// holds more than its sketch's count, so two bytes a bucket while a sketch holds fewer than
+/// 65,536 values (a group's bin in most jobs), four, then eight. The memory a job touches for its
+/// sketches is a quarter of what eight bytes would take.
+#[derive(Debug, Clone)]
+enum Counts {
+    U16(Vec<u16>),
+    U32(Vec<u32>),
+    U64(Vec<u64>),
+}
+
+impl Default for Counts {
+    fn default() -> Self {
+        Counts::U16(Vec::new())
+    }
+}
+
+/// Runs `$body` with `$c` bound to the counts, whatever their width.
+macro_rules! with_counts {
+    ($counts:expr, $c:ident => $body:expr) => {
+        match $counts {
+            Counts::U16($c) => $body,
+            Counts::U32($c) => $body,
+            Counts::U64($c) => $body,
+        }
+    };
+}
+
+/// Counts `[offset, offset + old.len())` moved into `new_lo .. new_hi` of a new vector.
+fn regrown<T: Count>(old: &[T], offset: u32, new_lo: u32, new_hi: u32) -> Vec<T> {
+    let mut counts = vec![T::default(); (new_hi - new_lo) as usize];
+    let start = (offset - new_lo) as usize;
+    counts[start..start + old.len()].copy_from_slice(old);
+    counts
+}
+
+/// Adds `n` to `count` (which the caller has made wide enough).
+#[inline(always)]
+fn add<T: Count>(count: &mut T, n: u64) {
+    *count += T::of(n);
+}
+
+/// Counts converted to a wider (or equal) integer.
+fn widened<T: Count, U: Count>(counts: &[T]) -> Vec<U> {
+    counts.iter().map(|&c| U::of(c.wide())).collect()
+}
+
+/// Dense counts for the keys `offset .. offset + len`. Every mutating call is given `total`, an
+/// upper bound on any count after it (the sketch's count), and widens the counts first when they
+/// could not hold it.
+#[derive(Debug, Clone, Default)]
 struct Store {
     offset: u32,
-    counts: Vec<u64>,
+    counts: Counts,
 }
 
 /// Equal counts in every bucket, however each store grew: the range a store holds depends on the
@@ -81,13 +146,117 @@ impl PartialEq for Store {
     }
 }
 
+/// As `{offset, counts}` with every count a u64, whatever the width in memory.
+impl serde::Serialize for Store {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        struct Wide<'a>(&'a Store);
+        impl serde::Serialize for Wide<'_> {
+            fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+                serializer.collect_seq((0..self.0.len()).map(|i| self.0.get(i)))
+            }
+        }
+        let mut state = serializer.serialize_struct("Store", 2)?;
+        state.serialize_field("offset", &self.offset)?;
+        state.serialize_field("counts", &Wide(self))?;
+        state.end()
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for Store {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        #[derive(serde::Deserialize)]
+        #[serde(rename = "Store")]
+        struct Wide {
+            offset: u32,
+            counts: Vec<u64>,
+        }
+        let Wide { offset, counts } = Wide::deserialize(deserializer)?;
+        let end = u64::from(offset) + counts.len() as u64;
+        if end > u64::from(KEY_END) {
+            return Err(serde::de::Error::custom(format!(
+                "a store's keys end at {end}, beyond {KEY_END}"
+            )));
+        }
+        let mut store = Store {
+            offset,
+            counts: Counts::U64(counts),
+        };
+        store.narrow();
+        Ok(store)
+    }
+}
+
 impl Store {
+    fn len(&self) -> usize {
+        with_counts!(&self.counts, c => c.len())
+    }
+
+    /// The count of slot `i` (key `offset + i`).
     #[inline]
-    fn add(&mut self, key: u32) {
+    fn get(&self, i: usize) -> u64 {
+        with_counts!(&self.counts, c => c[i].wide())
+    }
+
+    /// The most any count can reach in the current width.
+    #[inline(always)]
+    fn room(&self) -> u64 {
+        match self.counts {
+            Counts::U16(_) => u16::MAX.into(),
+            Counts::U32(_) => u32::MAX.into(),
+            Counts::U64(_) => u64::MAX,
+        }
+    }
+
+    /// Widens the counts if `total` might not fit.
+    #[inline(always)]
+    fn fit(&mut self, total: u64) {
+        if total > self.room() {
+            self.widen(total);
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn widen(&mut self, total: u64) {
+        self.counts = match &self.counts {
+            Counts::U16(c) if total <= u32::MAX.into() => Counts::U32(widened(c)),
+            Counts::U16(c) => Counts::U64(widened(c)),
+            Counts::U32(c) => Counts::U64(widened(c)),
+            Counts::U64(_) => return,
+        };
+    }
+
+    /// The narrowest width that holds the largest count (after deserialising).
+    fn narrow(&mut self) {
+        let largest =
+            with_counts!(&self.counts, c => c.iter().map(|&x| x.wide()).max().unwrap_or(0));
+        self.counts = match &self.counts {
+            Counts::U64(c) if largest <= u16::MAX.into() => {
+                Counts::U16(c.iter().map(|&x| u16::of(x)).collect())
+            }
+            Counts::U64(c) if largest <= u32::MAX.into() => {
+                Counts::U32(c.iter().map(|&x| u32::of(x)).collect())
+            }
+            _ => return,
+        };
+    }
+
+    /// Counts one value of key `key`.
+    #[inline]
+    fn add(&mut self, key: u32, total: u64) {
+        self.fit(total);
         // Keys below `offset` wrap to huge indices, so one bounds check covers both sides.
-        match self.counts.get_mut(key.wrapping_sub(self.offset) as usize) {
-            Some(count) => *count += 1,
-            None => self.add_outside(key),
+        let i = key.wrapping_sub(self.offset) as usize;
+        let counted = with_counts!(&mut self.counts, c => match c.get_mut(i) {
+            Some(count) => {
+                *count += 1;
+                true
+            }
+            None => false,
+        });
+        if !counted {
+            self.add_outside(key);
         }
     }
 
@@ -95,27 +264,47 @@ impl Store {
     #[inline(never)]
     fn add_outside(&mut self, key: u32) {
         self.cover(key, key + 1);
-        self.counts[(key - self.offset) as usize] += 1;
+        let i = (key - self.offset) as usize;
+        with_counts!(&mut self.counts, c => c[i] += 1);
+    }
+
+    /// Counts `n` values whose keys, all in `lo ..= hi`, `keys` gives: one addition when they
+    /// share one key.
+    #[inline(always)]
+    fn add_all(&mut self, lo: u32, hi: u32, n: usize, keys: impl Fn(usize) -> u32, total: u64) {
+        self.fit(total);
+        self.cover(lo, hi + 1);
+        let offset = self.offset;
+        with_counts!(&mut self.counts, c => {
+            if lo == hi {
+                add(&mut c[(lo - offset) as usize], n as u64);
+            } else {
+                for k in 0..n {
+                    c[(keys(k) - offset) as usize] += 1;
+                }
+            }
+        });
     }
 
     /// Makes the dense range include the keys `lo .. hi` (nothing to do when it does already).
     #[inline(always)]
     fn cover(&mut self, lo: u32, hi: u32) {
-        let inside = lo >= self.offset && hi <= self.offset + self.counts.len() as u32;
-        if self.counts.is_empty() || !inside {
+        let len = self.len();
+        if len == 0 || lo < self.offset || hi > self.offset + len as u32 {
             self.grow(lo, hi);
         }
     }
 
-    /// Grows the dense range to include the keys `lo .. hi`. The range is widened by at least half
-    /// its length on the growing side, so a long run of new extremes reallocates only
+    /// Grows the dense range to include the keys `lo .. hi`. The range is widened by at least a
+    /// quarter of its length on the growing side, so a long run of new extremes reallocates only
     /// `O(log(range))` times.
     #[cold]
     #[inline(never)]
     fn grow(&mut self, lo: u32, hi: u32) {
+        let len = self.len() as u32;
         let old_lo = self.offset;
-        let old_hi = self.offset + self.counts.len() as u32;
-        let (new_lo, new_hi) = if self.counts.is_empty() {
+        let old_hi = self.offset + len;
+        let (new_lo, new_hi) = if len == 0 {
             (
                 lo.saturating_sub(MIN_SLACK / 2),
                 (hi + MIN_SLACK / 2).min(KEY_END),
@@ -124,7 +313,7 @@ impl Store {
             if lo >= old_lo && hi <= old_hi {
                 return;
             }
-            let slack = (self.counts.len() as u32 / 2).max(MIN_SLACK);
+            let slack = (len / 4).max(MIN_SLACK);
             (
                 if lo < old_lo {
                     lo.saturating_sub(slack)
@@ -138,39 +327,32 @@ impl Store {
                 },
             )
         };
-        let mut counts = vec![0; (new_hi - new_lo) as usize];
-        if !self.counts.is_empty() {
-            let start = (old_lo - new_lo) as usize;
-            counts[start..start + self.counts.len()].copy_from_slice(&self.counts);
-        }
+        let offset = if len == 0 { new_lo } else { old_lo };
+        with_counts!(&mut self.counts, c => *c = regrown(c, offset, new_lo, new_hi));
         self.offset = new_lo;
-        self.counts = counts;
     }
 
-    fn merge(&mut self, other: &Store) {
-        let Some(first) = other.counts.iter().position(|&c| c != 0) else {
+    fn merge(&mut self, other: &Store, total: u64) {
+        let (Some((lo, _)), Some((hi, _))) = (other.buckets().next(), other.buckets().next_back())
+        else {
             return;
         };
-        let last = other.counts.iter().rposition(|&c| c != 0).unwrap_or(first);
-        let lo = other.offset + first as u32;
-        self.cover(lo, other.offset + last as u32 + 1);
-        let start = (lo - self.offset) as usize;
-        for (mine, theirs) in self.counts[start..]
-            .iter_mut()
-            .zip(&other.counts[first..=last])
-        {
-            *mine += theirs;
-        }
+        self.fit(total);
+        self.cover(lo, hi + 1);
+        let (start, first) = ((lo - self.offset) as usize, (lo - other.offset) as usize);
+        with_counts!(&mut self.counts, c => {
+            for (i, mine) in c[start..=start + (hi - lo) as usize].iter_mut().enumerate() {
+                add(mine, other.get(first + i));
+            }
+        });
     }
 
     /// Non-empty buckets as `(key, count)`, by increasing key.
     fn buckets(&self) -> impl DoubleEndedIterator<Item = (u32, u64)> + '_ {
-        let offset = self.offset;
-        self.counts
-            .iter()
-            .enumerate()
-            .filter(|&(_, &count)| count != 0)
-            .map(move |(i, &count)| (offset + i as u32, count))
+        (0..self.len()).filter_map(move |i| {
+            let count = self.get(i);
+            (count != 0).then_some((self.offset + i as u32, count))
+        })
     }
 }
 
@@ -198,9 +380,9 @@ impl Sketch {
         debug_assert!(x.is_finite(), "Sketch::push({x}): values must be finite");
         self.count += 1;
         if x > 0.0 {
-            self.positive.add(key(x));
+            self.positive.add(key(x), self.count);
         } else if x < 0.0 {
-            self.negative.add(key(x));
+            self.negative.add(key(x), self.count);
         } else {
             self.zeros += 1;
         }
@@ -234,16 +416,8 @@ impl Sketch {
             (0..active).for_each(|k| self.push(x.lane(k)));
         } else {
             self.count += n;
-            let store = &mut self.positive;
-            store.cover(lo, hi + 1);
-            let offset = store.offset;
-            if lo == hi {
-                store.counts[(lo - offset) as usize] += n;
-            } else {
-                for k in 0..active {
-                    store.counts[(key(x.lane(k)) - offset) as usize] += 1;
-                }
-            }
+            self.positive
+                .add_all(lo, hi, active, |k| key(x.lane(k)), self.count);
         }
     }
 
@@ -252,8 +426,8 @@ impl Sketch {
     pub fn merge(&mut self, other: &Sketch) {
         self.count += other.count;
         self.zeros += other.zeros;
-        self.positive.merge(&other.positive);
-        self.negative.merge(&other.negative);
+        self.positive.merge(&other.positive, self.count);
+        self.negative.merge(&other.negative, self.count);
     }
 
     /// Number of values pushed (and merged).
@@ -375,7 +549,7 @@ impl Sketch {
     /// Slots allocated in the dense stores, to check that memory follows the range, not the count.
     #[cfg(test)]
     fn allocated_buckets(&self) -> usize {
-        self.positive.counts.len() + self.negative.counts.len()
+        self.positive.len() + self.negative.len()
     }
 }
 
@@ -575,6 +749,67 @@ mod tests {
             1.0,
         ];
         assert_close_to_exact(&values);
+    }
+
+    /// A sketch whose one bucket (the key of 1.0) holds `count` values, as a group's state
+    /// arrives from another machine.
+    fn one_bucket(count: u64) -> Sketch {
+        let json = format!(
+            r#"{{"count":{count},"zeros":0,"positive":{{"offset":{},"counts":[{count}]}},"negative":{{"offset":0,"counts":[]}}}}"#,
+            key(1.0)
+        );
+        serde_json::from_str(&json).expect("a sketch")
+    }
+
+    #[test]
+    fn counts_widen_past_two_and_four_bytes_without_losing_a_value() {
+        for full in [u64::from(u16::MAX), u64::from(u32::MAX)] {
+            let mut pushed = one_bucket(full);
+            pushed.push(1.0);
+            let mut lanes = one_bucket(full);
+            lanes.push_lanes(&Lanes::<4>::splat(1.0), 3);
+            let mut merged = one_bucket(full);
+            merged.merge(&one_bucket(full));
+            for (sketch, n) in [(pushed, full + 1), (lanes, full + 3), (merged, 2 * full)] {
+                assert_eq!(sketch.count(), n);
+                assert_eq!(
+                    sketch.buckets().collect::<Vec<_>>(),
+                    [(midpoint(key(1.0)), n)]
+                );
+                let json = serde_json::to_string(&sketch).expect("serialises");
+                assert!(json.contains(&format!("[{n}]")), "{json}");
+                assert_eq!(
+                    serde_json::from_str::<Sketch>(&json).expect("reads back"),
+                    sketch
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn serialised_counts_are_eight_byte_integers_whatever_the_width_in_memory() {
+        let sketch = sketch_of(&[1.0, 1.0, 2.0, -3.0, 0.0]);
+        let value = serde_json::to_value(&sketch).expect("serialises");
+        let counts = value["positive"]["counts"].as_array().expect("counts");
+        assert_eq!(counts.iter().filter_map(|c| c.as_u64()).sum::<u64>(), 3);
+        assert_eq!(
+            value["negative"]["counts"]
+                .as_array()
+                .expect("counts")
+                .iter()
+                .filter_map(|c| c.as_u64())
+                .sum::<u64>(),
+            1
+        );
+        assert_eq!(
+            serde_json::from_value::<Sketch>(value).expect("reads back"),
+            sketch
+        );
+        let beyond = r#"{"count":1,"zeros":0,"positive":{"offset":524287,"counts":[0,1]},"negative":{"offset":0,"counts":[]}}"#;
+        assert!(
+            serde_json::from_str::<Sketch>(beyond).is_err(),
+            "keys beyond the f64 range"
+        );
     }
 
     #[test]
