@@ -142,7 +142,7 @@ pub struct Window {
 impl Window {
     /// A draw from `draw` inside the window, by rejection; `rejections` counts the draws that fell
     /// outside it.
-    #[inline]
+    #[inline(always)]
     fn sample(&self, mut draw: impl FnMut() -> f64, rejections: &mut u64) -> f64 {
         for _ in 0..MAX_REJECTIONS {
             let x = draw();
@@ -322,7 +322,7 @@ impl Distribution {
 
     /// One random draw; a truncated distribution adds to `rejections` the draws it made outside
     /// its window (diagnostics count them).
-    #[inline]
+    #[inline(always)]
     pub fn sample_counting<R: rand::Rng + ?Sized>(&self, rng: &mut R, rejections: &mut u64) -> f64 {
         match self {
             Distribution::Fixed(value) => *value,
