@@ -347,6 +347,17 @@ impl Store {
         });
     }
 
+    /// The sum of the counts of the keys `keys` (those the store holds).
+    fn sum_keys(&self, keys: std::ops::Range<u32>) -> u64 {
+        let end = self.offset + self.len() as u32;
+        let (lo, hi) = (
+            keys.start.clamp(self.offset, end),
+            keys.end.clamp(self.offset, end),
+        );
+        let slots = (lo - self.offset) as usize..(hi.max(lo) - self.offset) as usize;
+        with_counts!(&self.counts, c => c[slots].iter().map(|&x| x.wide()).sum())
+    }
+
     /// Non-empty buckets as `(key, count)`, by increasing key.
     fn buckets(&self) -> impl DoubleEndedIterator<Item = (u32, u64)> + '_ {
         (0..self.len()).filter_map(move |i| {
@@ -530,20 +541,38 @@ impl Sketch {
     }
 
     /// For each of `values` (in any order), the number of values whose bucket midpoint is at or
-    /// below it (exact zeros at 0): one pass over the buckets for all of them.
+    /// below it (exact zeros at 0): a sum over the slots below the value's key, no scan of the
+    /// buckets.
     pub fn counts_at_or_below(&self, values: &[f64]) -> Vec<u64> {
-        let mut order: Vec<usize> = (0..values.len()).collect();
-        order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
-        let mut counts = vec![0; values.len()];
-        let mut buckets = self.buckets().peekable();
-        let mut seen = 0;
-        for i in order {
-            while let Some((_, count)) = buckets.next_if(|&(midpoint, _)| midpoint <= values[i]) {
-                seen += count;
-            }
-            counts[i] = seen;
+        values
+            .iter()
+            .map(|&value| self.count_at_or_below(value))
+            .collect()
+    }
+
+    fn count_at_or_below(&self, value: f64) -> u64 {
+        if value < 0.0 {
+            // Negative buckets of midpoint `-m <= value`, i.e. `m >= |value|`.
+            let k = key(value);
+            self.negative.sum_keys(k + 1..KEY_END)
+                + if midpoint(k) >= -value {
+                    self.negative.sum_keys(k..k + 1)
+                } else {
+                    0
+                }
+        } else if value > 0.0 {
+            let k = key(value);
+            self.negative.sum_keys(0..KEY_END)
+                + self.zeros
+                + self.positive.sum_keys(0..k)
+                + if midpoint(k) <= value {
+                    self.positive.sum_keys(k..k + 1)
+                } else {
+                    0
+                }
+        } else {
+            self.negative.sum_keys(0..KEY_END) + self.zeros
         }
-        counts
     }
 
     /// Slots allocated in the dense stores, to check that memory follows the range, not the count.
@@ -825,10 +854,16 @@ mod tests {
     proptest! {
         #[test]
         fn counts_at_or_below_match_a_scan_per_value(
-            values in prop::collection::vec(finite_value(), 0..300),
+            values in prop::collection::vec(finite_value(), 0..100),
             at in prop::collection::vec(finite_value(), 0..12),
         ) {
             let sketch = sketch_of(&values);
+            // Also the values themselves, the buckets' midpoints (a value on a midpoint counts
+            // its bucket), just beside them, and both zeros.
+            let midpoints: Vec<f64> = sketch.buckets().map(|(m, _)| m).collect();
+            let beside = midpoints.iter().flat_map(|&m| [m.next_up(), m.next_down()]);
+            let at: Vec<f64> = at.iter().chain(&values).chain(&midpoints).copied().chain(beside)
+                .chain([0.0, -0.0]).collect();
             let scanned: Vec<u64> = at
                 .iter()
                 .map(|&v| sketch.buckets().filter(|&(midpoint, _)| midpoint <= v).map(|(_, c)| c).sum())
