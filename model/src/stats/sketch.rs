@@ -12,10 +12,12 @@
 //! Exact zeros (`0.0` and `-0.0`) have their own count, so a quantile that falls on them is exactly
 //! 0; negative values use a second, mirrored store keyed by `|x|`.
 //!
-//! Memory: each store is a dense `Vec<u64>` over the keys between the smallest and largest seen,
-//! plus growth slack of at most half its length: 8 bytes x 256 buckets per binade spanned, e.g.
-//! 41 kB (x 1.5) for values spanning 6 decades (20 binades), whatever the number of values, and
-//! at most 4 MiB per store for the whole f64 range. Counts are `u64`, so no job overflows them.
+//! Memory: each store is a dense array of counts over the keys between the smallest and largest
+//! seen, plus growth slack of at most a quarter of its length, in the narrowest integer the
+//! sketch's count allows (`u16` below 65,536 values, then `u32`, then `u64`, so no job overflows
+//! them): 2 bytes x 256 buckets per binade spanned, e.g. 10 kB (x 1.25) for values spanning 6
+//! decades (20 binades) while a sketch holds fewer than 65,536 values, whatever the values, and at
+//! most 4 MiB per store for the whole f64 range. Serialised, every count is a `u64`.
 
 use crate::lanes::Real;
 
