@@ -148,19 +148,28 @@ impl PartialEq for Store {
     }
 }
 
-/// As `{offset, counts}` with every count a u64, whatever the width in memory.
+/// As `{offset, counts}` from the first non-empty bucket to the last, every count a u64: the same
+/// bytes for the same counts, however the store grew and whatever the width in memory (a group's
+/// state is stored and sent between machines).
 impl serde::Serialize for Store {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
         use serde::ser::SerializeStruct;
-        struct Wide<'a>(&'a Store);
+        struct Wide<'a>(&'a Store, std::ops::Range<usize>);
         impl serde::Serialize for Wide<'_> {
             fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-                serializer.collect_seq((0..self.0.len()).map(|i| self.0.get(i)))
+                serializer.collect_seq(self.1.clone().map(|i| self.0.get(i)))
             }
         }
+        let (offset, slots) = match (self.buckets().next(), self.buckets().next_back()) {
+            (Some((lo, _)), Some((hi, _))) => (
+                lo,
+                (lo - self.offset) as usize..(hi - self.offset) as usize + 1,
+            ),
+            _ => (0, 0..0),
+        };
         let mut state = serializer.serialize_struct("Store", 2)?;
-        state.serialize_field("offset", &self.offset)?;
-        state.serialize_field("counts", &Wide(self))?;
+        state.serialize_field("offset", &offset)?;
+        state.serialize_field("counts", &Wide(self, slots))?;
         state.end()
     }
 }
@@ -815,6 +824,24 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn the_same_counts_serialise_to_the_same_bytes_whatever_the_order_of_the_values() {
+        let values: Vec<f64> = (1..=400).map(|i| f64::from(i) * 0.37 - 60.0).collect();
+        let forward = sketch_of(&values);
+        let backward = sketch_of(&values.iter().rev().copied().collect::<Vec<_>>());
+        let mut by_lanes = Sketch::new();
+        for batch in values.chunks(8) {
+            by_lanes.push_lanes(&Lanes::<8>::from_fn(|k| batch[k]), 8);
+        }
+        let bytes = |s: &Sketch| serde_json::to_string(s).expect("serialises");
+        assert_eq!(bytes(&backward), bytes(&forward));
+        assert_eq!(bytes(&by_lanes), bytes(&forward));
+        assert!(
+            !bytes(&forward).contains("[0"),
+            "trimmed to the non-empty buckets"
+        );
     }
 
     #[test]
