@@ -50,6 +50,14 @@ pub trait Real:
     /// Lane `i`.
     fn lane(&self, i: usize) -> f64;
 
+    /// Sets lane `i` to `x`.
+    fn set_lane(&mut self, i: usize, x: f64);
+
+    /// A narrower batch the bounce loop moves its last lanes into once few of them still bounce:
+    /// one vector register (eight lanes) for a batch of several, else the batch itself
+    /// (docs/performance.md "Lanes that have stopped"). A lane computes the same in either.
+    type Part: Real;
+
     fn gt(self, other: Self) -> Self::Mask {
         other.lt(self)
     }
@@ -60,8 +68,13 @@ pub trait Real:
 
 /// One truth value per lane.
 pub trait Mask: Copy + BitAnd<Output = Self> + BitOr<Output = Self> + Not<Output = Self> {
+    /// Lane `i` is `f(i)`.
+    fn from_fn(f: impl FnMut(usize) -> bool) -> Self;
     fn any(self) -> bool;
+    /// How many lanes hold.
+    fn count(self) -> usize;
     fn lane(&self, i: usize) -> bool;
+    fn set_lane(&mut self, i: usize, truth: bool);
 }
 
 /// `2^52 + 1023`: adding a whole number `n` in `[-1022, 1023]` leaves `n + 1023` in the low mantissa
@@ -124,16 +137,35 @@ impl Real for f64 {
     fn lane(&self, _: usize) -> f64 {
         *self
     }
+
+    #[inline(always)]
+    fn set_lane(&mut self, _: usize, x: f64) {
+        *self = x;
+    }
+
+    type Part = f64;
 }
 
 impl Mask for bool {
+    #[inline(always)]
+    fn from_fn(mut f: impl FnMut(usize) -> bool) -> bool {
+        f(0)
+    }
     #[inline(always)]
     fn any(self) -> bool {
         self
     }
     #[inline(always)]
+    fn count(self) -> usize {
+        usize::from(self)
+    }
+    #[inline(always)]
     fn lane(&self, _: usize) -> bool {
         *self
+    }
+    #[inline(always)]
+    fn set_lane(&mut self, _: usize, truth: bool) {
+        *self = truth;
     }
 }
 
@@ -213,7 +245,25 @@ impl<const N: usize> Neg for Lanes<N> {
     }
 }
 
-impl<const N: usize> Real for Lanes<N> {
+/// The narrower batch of a batch ([`Real::Part`]): eight lanes, one AVX-512 register, or the
+/// batch itself when it is no wider.
+pub trait Split {
+    type Part: Real;
+}
+
+macro_rules! split {
+    ($($lanes:literal => $part:literal),*) => {
+        $(impl Split for Lanes<$lanes> {
+            type Part = Lanes<$part>;
+        })*
+    };
+}
+split!(1 => 1, 2 => 2, 4 => 4, 8 => 8, 16 => 8, 32 => 8, 64 => 8);
+
+impl<const N: usize> Real for Lanes<N>
+where
+    Lanes<N>: Split,
+{
     type Mask = LaneMask<N>;
     const LANES: usize = N;
 
@@ -278,6 +328,13 @@ impl<const N: usize> Real for Lanes<N> {
     fn lane(&self, i: usize) -> f64 {
         self.0[i]
     }
+
+    #[inline(always)]
+    fn set_lane(&mut self, i: usize, x: f64) {
+        self.0[i] = x;
+    }
+
+    type Part = <Self as Split>::Part;
 }
 
 macro_rules! mask_operator {
@@ -312,6 +369,14 @@ impl<const N: usize> Not for LaneMask<N> {
 
 impl<const N: usize> Mask for LaneMask<N> {
     #[inline(always)]
+    fn from_fn(mut f: impl FnMut(usize) -> bool) -> Self {
+        let mut out = [0; N];
+        for i in 0..N {
+            out[i] = word(f(i));
+        }
+        Self(out)
+    }
+    #[inline(always)]
     fn any(self) -> bool {
         let mut any = 0;
         for i in 0..N {
@@ -320,8 +385,20 @@ impl<const N: usize> Mask for LaneMask<N> {
         any != 0
     }
     #[inline(always)]
+    fn count(self) -> usize {
+        let mut count = 0;
+        for i in 0..N {
+            count += (self.0[i] & 1) as usize;
+        }
+        count
+    }
+    #[inline(always)]
     fn lane(&self, i: usize) -> bool {
         self.0[i] != 0
+    }
+    #[inline(always)]
+    fn set_lane(&mut self, i: usize, truth: bool) {
+        self.0[i] = word(truth);
     }
 }
 

@@ -133,6 +133,74 @@ impl<L: Real> Outcomes<L> {
     }
 }
 
+/// The bounce loop's state on every lane of a [`Real`].
+#[derive(Clone, Copy)]
+struct Flights<L: Real> {
+    /// Separation speed of the flight to come.
+    v: L,
+    /// `kappa^2` of the surface the impacts meet.
+    kappa_sq: L,
+    /// A whole number per lane.
+    bounce_count: L,
+    first_bounce_s: L,
+    total_bounce_s: L,
+    arc_energy_j: L,
+    /// Lanes still bouncing.
+    active: L::Mask,
+    truncated: L::Mask,
+}
+
+impl<L: Real> Flights<L> {
+    /// The active lanes, at most `L::Part::LANES` of them, moved into the first lanes of a
+    /// narrower batch (the rest inactive), with the lanes they came from.
+    #[inline(always)]
+    fn gather(&self) -> (Gathered, Flights<L::Part>) {
+        let mut lanes = Gathered::default();
+        for i in 0..L::LANES {
+            if self.active.lane(i) {
+                lanes.from[lanes.len] = i;
+                lanes.len += 1;
+            }
+        }
+        let from = |x: L| L::Part::from_fn(|j| x.lane(lanes.from[j.min(lanes.len - 1)]));
+        let narrow = Flights {
+            v: from(self.v),
+            kappa_sq: from(self.kappa_sq),
+            bounce_count: from(self.bounce_count),
+            first_bounce_s: from(self.first_bounce_s),
+            total_bounce_s: from(self.total_bounce_s),
+            arc_energy_j: from(self.arc_energy_j),
+            active: <L::Part as Real>::Mask::from_fn(|j| j < lanes.len),
+            truncated: <L::Part as Real>::Mask::from_fn(|_| false),
+        };
+        (lanes, narrow)
+    }
+
+    /// Writes the lanes [`Flights::gather`] moved back where they came from.
+    #[inline(always)]
+    fn scatter(&mut self, lanes: &Gathered, narrow: &Flights<L::Part>) {
+        for (j, &i) in lanes.from[..lanes.len].iter().enumerate() {
+            self.v.set_lane(i, narrow.v.lane(j));
+            self.bounce_count.set_lane(i, narrow.bounce_count.lane(j));
+            self.first_bounce_s
+                .set_lane(i, narrow.first_bounce_s.lane(j));
+            self.total_bounce_s
+                .set_lane(i, narrow.total_bounce_s.lane(j));
+            self.arc_energy_j.set_lane(i, narrow.arc_energy_j.lane(j));
+            self.active.set_lane(i, narrow.active.lane(j));
+            self.truncated.set_lane(i, narrow.truncated.lane(j));
+        }
+    }
+}
+
+/// Which lanes of a batch [`Flights::gather`] moved into a narrower one: at most eight, as no
+/// [`Real::Part`] is wider.
+#[derive(Default)]
+struct Gathered {
+    from: [usize; 8],
+    len: usize,
+}
+
 /// One bounce: the flight after a separation.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -361,7 +429,7 @@ impl Operation {
                 radius_m,
                 pressure_pa,
                 needs,
-                |v, duration_s, arc_energy_j, _| {
+                |_, v, duration_s, arc_energy_j| {
                     list.push(Bounce {
                         separation_velocity_m_s: v,
                         duration_s,
@@ -378,8 +446,8 @@ impl Operation {
     /// Runs one operation on every lane: impact speed `u` (in place of this operation's own) on a
     /// surface of radius `radius_m` and pressure `pressure_pa`. The lanes advance in lockstep, each
     /// exactly as it would alone; the bounce loop runs until every lane has stopped, a stopped lane
-    /// keeping its values. `on_bounce(v, duration, arc energy, bouncing)` sees every bounce, with the
-    /// lanes that really bounce.
+    /// keeping its values. `on_bounce(lane, v, duration, arc energy)` sees every bounce of every
+    /// lane, in order for each lane.
     #[inline(always)]
     pub fn run_lanes<L: Real>(
         &self,
@@ -387,7 +455,7 @@ impl Operation {
         radius_m: L,
         pressure_pa: L,
         needs: Needs,
-        mut on_bounce: impl FnMut(L, L, L, L::Mask),
+        mut on_bounce: impl FnMut(usize, f64, f64, f64),
     ) -> Outcomes<L> {
         let c = L::splat;
         let zero = c(0.0);
@@ -431,41 +499,46 @@ impl Operation {
 
         // The loop carries squared speeds: an impact multiplies v^2 by e^2 and removes 2 eps / m.
         let rebound = e1 * u;
-        let mut v = self.separation_speed(rebound * rebound);
-        let (kappa_sq, kappa_1_sq) = (kappa * kappa, kappa_1 * kappa_1);
-        let min_bounce_speed = c(self.min_bounce_speed);
-        let bouncing = |v: L| zero.lt(v) & min_bounce_speed.le(v);
-        let max_bounces = c(f64::from(self.max_bounces));
-        let mut active = moving & bouncing(v);
-        let mut truncated = zero.lt(zero);
-        let (mut bounce_count, mut first_bounce_s, mut total_bounce_s) = (zero, zero, zero);
-        let mut arc_energy_j = pre_arc_energy_j;
-        loop {
-            let at_cap = active & bounce_count.eq(max_bounces);
-            truncated = truncated | at_cap;
-            active = active & !at_cap;
-            if !active.any() {
+        let v = self.separation_speed(rebound * rebound);
+        let mut flights = Flights {
+            active: moving & self.bouncing(v),
+            v,
+            // The surface every later impact meets: softened while an arc burns (section 5).
+            kappa_sq: if self.arc.is_some() {
+                kappa_1 * kappa_1
+            } else {
+                kappa * kappa
+            },
+            bounce_count: zero,
+            first_bounce_s: zero,
+            total_bounce_s: zero,
+            arc_energy_j: pre_arc_energy_j,
+            truncated: zero.lt(zero),
+        };
+        // Once no more lanes bounce than a narrower batch holds, they move into one and finish
+        // there, so that the stopped lanes stop costing (docs/performance.md "Lanes that have
+        // stopped"); each lane computes the same in either.
+        while flights.active.any() {
+            if L::LANES > L::Part::LANES && flights.active.count() <= L::Part::LANES {
+                let (lanes, mut narrow) = flights.gather();
+                while narrow.active.any() {
+                    self.bounce(&mut narrow, &mut |j, v, duration_s, arc_energy_j| {
+                        on_bounce(lanes.from[j], v, duration_s, arc_energy_j)
+                    });
+                }
+                flights.scatter(&lanes, &narrow);
                 break;
             }
-            let duration_s = self.flight_time_s(v);
-            bounce_count = L::select(active, bounce_count + c(1.0), bounce_count);
-            total_bounce_s = L::select(active, total_bounce_s + duration_s, total_bounce_s);
-            first_bounce_s =
-                L::select(active & bounce_count.eq(c(1.0)), duration_s, first_bounce_s);
-            let bounce_arc_energy_j = match &self.arc {
-                Some(arc) => arc.energy_j(duration_s),
-                None => zero,
-            };
-            arc_energy_j = L::select(active, arc_energy_j + bounce_arc_energy_j, arc_energy_j);
-            on_bounce(v, duration_s, bounce_arc_energy_j, active);
-            let rebound_sq = if self.arc.is_some() {
-                self.arc_restitution_squared(v, kappa_1_sq) * (v * v)
-            } else {
-                self.rebound_squared(v, kappa_sq)
-            };
-            v = self.separation_speed(rebound_sq);
-            active = active & bouncing(v);
+            self.bounce(&mut flights, &mut on_bounce);
         }
+        let Flights {
+            bounce_count,
+            first_bounce_s,
+            total_bounce_s,
+            arc_energy_j,
+            truncated,
+            ..
+        } = flights;
         Outcomes {
             impact_velocity_m_s: u,
             kappa,
@@ -480,6 +553,62 @@ impl Operation {
             truncated,
             first_impact_plastic_work_j: keep(plastic_work_j),
         }
+    }
+
+    /// Whether a flight at separation speed `v` counts as a bounce: it opens the contact and reaches
+    /// `min_separation_m`.
+    #[inline(always)]
+    fn bouncing<L: Real>(&self, v: L) -> L::Mask {
+        L::splat(0.0).lt(v) & L::splat(self.min_bounce_speed).le(v)
+    }
+
+    /// One step of the bounce loop on the lanes of `f`: a lane at `max_bounces` stops (truncated);
+    /// every other active lane flies, lands and separates again, or stops.
+    #[inline(always)]
+    fn bounce<L: Real>(
+        &self,
+        f: &mut Flights<L>,
+        on_bounce: &mut impl FnMut(usize, f64, f64, f64),
+    ) {
+        let c = L::splat;
+        let at_cap = f.active & f.bounce_count.eq(c(f64::from(self.max_bounces)));
+        f.truncated = f.truncated | at_cap;
+        f.active = f.active & !at_cap;
+        if !f.active.any() {
+            return;
+        }
+        let active = f.active;
+        let v = f.v;
+        let duration_s = self.flight_time_s(v);
+        f.bounce_count = L::select(active, f.bounce_count + c(1.0), f.bounce_count);
+        f.total_bounce_s = L::select(active, f.total_bounce_s + duration_s, f.total_bounce_s);
+        f.first_bounce_s = L::select(
+            active & f.bounce_count.eq(c(1.0)),
+            duration_s,
+            f.first_bounce_s,
+        );
+        let bounce_arc_energy_j = match &self.arc {
+            Some(arc) => arc.energy_j(duration_s),
+            None => c(0.0),
+        };
+        f.arc_energy_j = L::select(active, f.arc_energy_j + bounce_arc_energy_j, f.arc_energy_j);
+        for i in 0..L::LANES {
+            if active.lane(i) {
+                on_bounce(
+                    i,
+                    v.lane(i),
+                    duration_s.lane(i),
+                    bounce_arc_energy_j.lane(i),
+                );
+            }
+        }
+        let rebound_sq = if self.arc.is_some() {
+            self.arc_restitution_squared(v, f.kappa_sq) * (v * v)
+        } else {
+            self.rebound_squared(v, f.kappa_sq)
+        };
+        f.v = self.separation_speed(rebound_sq);
+        f.active = active & self.bouncing(f.v);
     }
 
     /// The full `simulate` output at this operation's nominal radius and pressure.

@@ -149,7 +149,7 @@ pub(crate) trait LaneWork {
 mod x86 {
     //! One function per instruction set and lane count: each is optimised on its own (one
     //! function holding every width took the optimiser several times as long) and in parallel.
-    use super::{LaneWork, Lanes};
+    use super::{LaneWork, Lanes, Real};
 
     #[target_feature(enable = "avx2")]
     pub(super) fn avx2<W: LaneWork>(work: W, lanes: usize) {
@@ -159,7 +159,10 @@ mod x86 {
 
     #[target_feature(enable = "avx2")]
     #[inline(never)]
-    fn avx2_lanes<W: LaneWork, const N: usize>(work: W) {
+    fn avx2_lanes<W: LaneWork, const N: usize>(work: W)
+    where
+        Lanes<N>: Real,
+    {
         work.run::<Lanes<N>>()
     }
 
@@ -173,7 +176,10 @@ mod x86 {
 
     #[target_feature(enable = "avx512f")]
     #[inline(never)]
-    fn avx512_lanes<W: LaneWork, const N: usize>(work: W) {
+    fn avx512_lanes<W: LaneWork, const N: usize>(work: W)
+    where
+        Lanes<N>: Real,
+    {
         work.run::<Lanes<N>>()
     }
 }
