@@ -160,12 +160,12 @@ impl serde::Serialize for Store {
                 serializer.collect_seq(self.1.clone().map(|i| self.0.get(i)))
             }
         }
-        let (offset, slots) = match (self.buckets().next(), self.buckets().next_back()) {
-            (Some((lo, _)), Some((hi, _))) => (
+        let (offset, slots) = match self.occupied() {
+            Some((lo, hi)) => (
                 lo,
                 (lo - self.offset) as usize..(hi - self.offset) as usize + 1,
             ),
-            _ => (0, 0..0),
+            None => (0, 0..0),
         };
         let mut state = serializer.serialize_struct("Store", 2)?;
         state.serialize_field("offset", &offset)?;
@@ -344,18 +344,28 @@ impl Store {
     }
 
     fn merge(&mut self, other: &Store, total: u64) {
-        let (Some((lo, _)), Some((hi, _))) = (other.buckets().next(), other.buckets().next_back())
-        else {
+        let Some((lo, hi)) = other.occupied() else {
             return;
         };
         self.fit(total);
         self.cover(lo, hi + 1);
+        let span = (hi - lo) as usize;
         let (start, first) = ((lo - self.offset) as usize, (lo - other.offset) as usize);
-        with_counts!(&mut self.counts, c => {
-            for (i, mine) in c[start..=start + (hi - lo) as usize].iter_mut().enumerate() {
-                add(mine, other.get(first + i));
+        with_counts!(&other.counts, theirs => with_counts!(&mut self.counts, mine => {
+            let theirs = &theirs[first..=first + span];
+            for (mine, theirs) in mine[start..=start + span].iter_mut().zip(theirs) {
+                add(mine, theirs.wide());
             }
-        });
+        }));
+    }
+
+    /// The keys of the first and the last non-empty bucket; `None` when every count is zero.
+    fn occupied(&self) -> Option<(u32, u32)> {
+        with_counts!(&self.counts, c => {
+            let first = c.iter().position(|&x| x.wide() != 0)?;
+            let last = c.iter().rposition(|&x| x.wide() != 0)?;
+            Some((self.offset + first as u32, self.offset + last as u32))
+        })
     }
 
     /// The sum of the counts of the keys `keys` (those the store holds).
