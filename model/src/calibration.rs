@@ -5,11 +5,15 @@
 //! The objective is the sum of squared relative residuals, `(simulated - measured) / measured`,
 //! over every measured quantity of every observation, so that seconds, newtons and joules weigh
 //! alike. Parameters are fitted in logarithms (every physical parameter here is positive, so a
-//! bound at zero holds by construction) by Levenberg-Marquardt with a central-difference
-//! Jacobian. Standard errors come from the residual variance `s^2 = RSS / (n - k)` and `(J^T J)^-1`
-//! at the optimum; the 95 % intervals are `exp(ln x -+ 1.96 se)`. A parameter the data cannot
-//! identify (its column of `J` vanishes, or `J^T J` is singular to working precision) is refused
-//! with the reason, naming its place in `fit`.
+//! bound at zero holds by construction) by Levenberg-Marquardt with a finite-difference Jacobian
+//! that does not difference across a step of a stepping residual (the total bounce time jumps
+//! where a bounce appears or vanishes; see `Problem::jacobian`). Standard errors come from the
+//! residual variance `s^2 = RSS / (n - k)` and `(J^T J)^-1` at the optimum; the 95 % intervals are
+//! `exp(ln x -+ t se)`, `t` Student's 0.975 quantile with `n - k` degrees of freedom, since `s^2` is
+//! estimated. The same `(J^T J)^-1` gives the estimates' correlation matrix, and a pair of
+//! parameters correlated 0.95 or more in magnitude is warned of: the data fix a combination of
+//! them. A parameter the data cannot identify (its column of `J` vanishes, or `J^T J` is singular
+//! to working precision) is refused with the reason, naming its place in `fit`.
 //!
 //! The bounce count is an integer and steps as parameters change, so it does not enter the
 //! objective; its residuals are reported with the others.
@@ -20,7 +24,7 @@ use crate::operation::{Fidelity, Needs, Operation, Simulation, simulate};
 use crate::paper_forms::{e_from_bounce_times, e1_from_first_bounce};
 use crate::restitution::KappaLaw;
 use crate::scenario::{Scenario, ScenarioSpec};
-use crate::stats::Z_975;
+use crate::stats::student_t_975;
 use crate::wear::{DeviceWear, WearLaw};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -31,6 +35,8 @@ use std::collections::{BTreeMap, BTreeSet};
 pub const MAX_OBSERVATIONS: usize = 1000;
 /// The most parameters one calibration may fit.
 pub const MAX_PARAMETERS: usize = 8;
+/// The magnitude of correlation from which two fitted parameters are warned of as trading off.
+pub const TRADE_OFF: f64 = 0.95;
 /// The latest operation of an endurance test an observation may be from: every evaluation of the
 /// fit runs a device that far, so this bounds a wear curve's cost (10 ms per evaluation).
 pub const MAX_OPERATION: u64 = 100_000;
@@ -181,6 +187,14 @@ pub struct Calibration {
     pub iterations: u32,
     /// Residual standard deviation of the relative residuals, `sqrt(RSS / (n - k))`.
     pub residual_sd: f64,
+    /// The estimates' correlation matrix (of their logarithms, from `(J^T J)^-1`), by parameter
+    /// name and then parameter name, each row holding every parameter, itself with 1. Near -1 or
+    /// 1, the two parameters trade off: the data fix a combination of them better than either.
+    pub correlation: BTreeMap<String, BTreeMap<String, f64>>,
+    /// What the fit cannot vouch for, in words: one warning per pair of parameters whose
+    /// correlation is 0.95 or more in magnitude, naming them. Absent when empty.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 /// The request, checked: the starting scenario as JSON (every field present), the parameters'
@@ -485,23 +499,38 @@ impl Problem {
         residuals.iter().all(|r| r.is_finite()).then_some(residuals)
     }
 
-    /// Central-difference Jacobian of the residuals in `theta` (log parameters); `None` where a
-    /// step leaves the scenario's valid range.
-    fn jacobian(&self, theta: &[f64]) -> Option<Vec<Vec<f64>>> {
+    /// Jacobian of the residuals in `theta` (log parameters), `at` being the residuals at `theta`;
+    /// `None` where steps to both sides leave the scenario's valid range.
+    ///
+    /// A residual may step as a parameter moves: the total bounce time jumps where a bounce
+    /// appears or vanishes. A central difference that straddles such a step gives a derivative of
+    /// the jump over the step width, thousands of times the smooth slope, and one such column
+    /// entry collapses the covariance. So each residual's forward and backward one-sided
+    /// differences are compared: where they agree (the residual is smooth across both), the central
+    /// difference stands; where they disagree, a step lies on one side, and the difference of the
+    /// smooth side (the smaller in magnitude) is taken. A side whose step leaves the valid range
+    /// leaves the other side's difference.
+    fn jacobian(&self, theta: &[f64], at: &[f64]) -> Option<Vec<Vec<f64>>> {
         const STEP: f64 = 1e-5;
         let mut columns = Vec::with_capacity(theta.len());
         for k in 0..theta.len() {
-            let mut up = theta.to_vec();
-            let mut down = theta.to_vec();
-            up[k] += STEP;
-            down[k] -= STEP;
-            let (r_up, r_down) = (self.residuals(&up)?, self.residuals(&down)?);
-            columns.push(
-                r_up.iter()
-                    .zip(&r_down)
-                    .map(|(u, d)| (u - d) / (2.0 * STEP))
+            let side = |sign: f64| {
+                let mut moved = theta.to_vec();
+                moved[k] += sign * STEP;
+                self.residuals(&moved)
+            };
+            let column = match (side(1.0), side(-1.0)) {
+                (Some(up), Some(down)) => up
+                    .iter()
+                    .zip(&down)
+                    .zip(at)
+                    .map(|((u, d), r)| smooth_side((u - r) / STEP, (r - d) / STEP))
                     .collect(),
-            );
+                (Some(up), None) => up.iter().zip(at).map(|(u, r)| (u - r) / STEP).collect(),
+                (None, Some(down)) => down.iter().zip(at).map(|(d, r)| (r - d) / STEP).collect(),
+                (None, None) => return None,
+            };
+            columns.push(column);
         }
         Some(columns)
     }
@@ -520,7 +549,9 @@ impl Problem {
         let mut cost = sum_of_squares(&residuals);
         let mut lambda = 1e-3;
         for iteration in 1..=MAX_ITERATIONS {
-            let jacobian = self.jacobian(&theta).ok_or_else(invalid_start)?;
+            let jacobian = self
+                .jacobian(&theta, &residuals)
+                .ok_or_else(invalid_start)?;
             self.identifiable(&jacobian)?;
             let (jtj, jtr) = normal_equations(&jacobian, &residuals);
             let mut improved = false;
@@ -609,27 +640,34 @@ impl Problem {
 
     fn report(&self, theta: &[f64], iterations: u32) -> Result<Calibration, InvalidInput> {
         let residuals = self.residuals(theta).expect("the optimum simulates");
-        let jacobian = self.jacobian(theta).unwrap_or_else(|| {
-            // At a bound of the valid range: one-sided differences are not worth a second path;
-            // the error estimate then comes from the last full Jacobian's shape alone.
+        let jacobian = self.jacobian(theta, &residuals).unwrap_or_else(|| {
+            // Neither side of the optimum simulates: no slope, refused as unidentifiable below.
             vec![vec![0.0; residuals.len()]; theta.len()]
         });
         self.identifiable(&jacobian)?;
-        let (n, k) = (residuals.len() as f64, theta.len() as f64);
-        let variance = sum_of_squares(&residuals) / (n - k);
+        let degrees_of_freedom = residuals.len() - theta.len();
+        let variance = sum_of_squares(&residuals) / degrees_of_freedom as f64;
+        let t = student_t_975(degrees_of_freedom as u64);
         let (jtj, _) = normal_equations(&jacobian, &residuals);
         let covariance = invert(jtj).unwrap_or_default();
+        let entry = |i: usize, j: usize| {
+            covariance
+                .get(i)
+                .and_then(|row| row.get(j))
+                .copied()
+                .unwrap_or(f64::NAN)
+        };
         let estimates = self
             .parameters
             .iter()
             .enumerate()
             .map(|(i, (name, _))| {
-                let se_ln = (variance * covariance.get(i).map_or(f64::NAN, |row| row[i])).sqrt();
+                let se_ln = (variance * entry(i, i)).sqrt();
                 let value = theta[i].exp();
                 let [lower, upper] = self.bounds_ln[i];
                 let ci95 = [
-                    (theta[i] - Z_975 * se_ln).max(lower).exp(),
-                    (theta[i] + Z_975 * se_ln).min(upper).exp(),
+                    (theta[i] - t * se_ln).max(lower).exp(),
+                    (theta[i] + t * se_ln).min(upper).exp(),
                 ];
                 let at_bound = theta[i] == lower || theta[i] == upper;
                 (
@@ -643,6 +681,38 @@ impl Problem {
                 )
             })
             .collect();
+        let r = |i: usize, j: usize| {
+            if i == j {
+                1.0
+            } else {
+                (entry(i, j) / (entry(i, i) * entry(j, j)).sqrt()).clamp(-1.0, 1.0)
+            }
+        };
+        let names: Vec<&str> = self.parameters.iter().map(|(n, _)| n.as_str()).collect();
+        let correlation = names
+            .iter()
+            .enumerate()
+            .map(|(i, a)| {
+                let row = names
+                    .iter()
+                    .enumerate()
+                    .map(|(j, b)| ((*b).to_owned(), r(i, j)))
+                    .collect();
+                ((*a).to_owned(), row)
+            })
+            .collect();
+        let mut warnings = Vec::new();
+        for i in 0..names.len() {
+            for j in i + 1..names.len() {
+                let r = r(i, j);
+                if r.abs() >= TRADE_OFF {
+                    warnings.push(format!(
+                        "`{}` and `{}` trade off (correlation {r:.2}): the data constrain a combination of them; their intervals are wide because each can move with the other, so measure over a wider range of conditions or more quantities, or fix one of them",
+                        names[i], names[j]
+                    ));
+                }
+            }
+        }
         let outcomes = self.simulate_all(theta).expect("the optimum simulates");
         let mut by_quantity: BTreeMap<String, (Vec<f64>, f64)> = BTreeMap::new();
         for (i, observation) in self.observations.iter().enumerate() {
@@ -682,6 +752,8 @@ impl Problem {
             restitution_from_bounce_times: self.readings(theta),
             iterations,
             residual_sd: variance.sqrt(),
+            correlation,
+            warnings,
         })
     }
 }
@@ -790,6 +862,19 @@ fn sum_of_squares(values: &[f64]) -> f64 {
     values.iter().map(|v| v * v).sum()
 }
 
+/// A derivative from a residual's forward and backward differences: their mean where they agree
+/// to within half the larger (on a smooth residual they differ by the step times the curvature,
+/// orders of magnitude less), else the smaller, the side without a step.
+fn smooth_side(forward: f64, backward: f64) -> f64 {
+    if (forward - backward).abs() <= 0.5 * forward.abs().max(backward.abs()) {
+        0.5 * (forward + backward)
+    } else if forward.abs() <= backward.abs() {
+        forward
+    } else {
+        backward
+    }
+}
+
 /// `J^T J` and `J^T r` from the columns of `J`.
 fn normal_equations(columns: &[Vec<f64>], residuals: &[f64]) -> (Vec<Vec<f64>>, Vec<f64>) {
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
@@ -804,6 +889,10 @@ fn normal_equations(columns: &[Vec<f64>], residuals: &[f64]) -> (Vec<Vec<f64>>, 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stats::test_util::SplitMix;
+
+    /// The noise draw of issue 29's case the test keeps.
+    const ISSUE_29_SEED: u64 = 42;
 
     /// Measurements of the paper's rig at five impact velocities with kappa and the impact
     /// energy loss set, each quantity scaled by `1 + noise * u`, `u` a fixed pattern in [-1, 1].
@@ -839,6 +928,273 @@ mod tests {
             observations,
             bounds: BTreeMap::new(),
         }
+    }
+
+    /// Observations of `truth` at `places` (`(operation, impact velocity)`), the first and total
+    /// bounce times each scaled by `1 + noise z`, `z` standard normal from `rng`.
+    fn bounce_times(
+        truth: &ScenarioSpec,
+        places: &[(u64, f64)],
+        noise: f64,
+        rng: &mut SplitMix,
+    ) -> Vec<Observation> {
+        // The truth's own curve, simulated by the fit's own path (wear included).
+        let exact: Vec<Observation> = places
+            .iter()
+            .map(|&(operation, v)| Observation {
+                operation: Some(operation),
+                impact_velocity_m_s: Some(v),
+                first_bounce_s: Some(1.0),
+                total_bounce_s: Some(1.0),
+                ..Observation::default()
+            })
+            .collect();
+        let problem = Problem::new(&CalibrationSpec {
+            scenario: truth.clone(),
+            fit: vec!["material.kappa".into()],
+            observations: exact.clone(),
+            bounds: BTreeMap::new(),
+        })
+        .unwrap();
+        let outcomes = problem
+            .simulate_all(&[truth.material.kappa.unwrap().ln()])
+            .unwrap();
+        exact
+            .into_iter()
+            .zip(&outcomes)
+            .map(|(observation, outcome)| Observation {
+                first_bounce_s: Some(
+                    simulated(outcome, "first_bounce_s") * (1.0 + noise * rng.normal()),
+                ),
+                total_bounce_s: Some(
+                    simulated(outcome, "total_bounce_s") * (1.0 + noise * rng.normal()),
+                ),
+                ..observation
+            })
+            .collect()
+    }
+
+    /// Issue 29's case: 40 new contacts at 0.15 to 0.6 m/s, kappa 0.33, 2 % noise on the first
+    /// and the total bounce time.
+    fn issue_29(seed: u64) -> CalibrationSpec {
+        let mut truth = ScenarioSpec::default();
+        truth.material.kappa = Some(0.33);
+        let places: Vec<(u64, f64)> = (0..40)
+            .map(|i| (0, 0.15 + 0.45 * f64::from(i) / 39.0))
+            .collect();
+        CalibrationSpec {
+            scenario: ScenarioSpec::default(),
+            fit: vec!["material.kappa".into()],
+            observations: bounce_times(&truth, &places, 0.02, &mut SplitMix(seed)),
+            bounds: BTreeMap::new(),
+        }
+    }
+
+    /// One device's wear curve at 48 V / 15 A: the first and total bounce times at 20 points of a
+    /// 1000-operation test, at impact velocities cycling over 0.15 to 0.6 m/s, from kappa 0.33 and
+    /// the roughening energy 500 J, with 2 % noise. The early operations fix kappa, the fall of the
+    /// bounce times along the test the roughening energy. Started from eq. 8's kappa and 800 J.
+    fn wear_curve(seed: u64) -> CalibrationSpec {
+        let mut truth = ScenarioSpec::default();
+        truth.circuit.supply_voltage_v = 48.0;
+        truth.circuit.current_a = 15.0;
+        truth.material.kappa = Some(0.33);
+        truth.material.roughening_energy_j = 500.0;
+        let velocities = [0.15, 0.25, 0.35, 0.45, 0.6];
+        let places: Vec<(u64, f64)> = (0..20)
+            .map(|i| (50 * i as u64, velocities[i % velocities.len()]))
+            .collect();
+        let mut scenario = truth.clone();
+        scenario.material.kappa = None;
+        scenario.material.roughening_energy_j = 800.0;
+        CalibrationSpec {
+            scenario,
+            fit: vec![
+                "material.kappa".into(),
+                "material.roughening_energy_j".into(),
+            ],
+            observations: bounce_times(&truth, &places, 0.02, &mut SplitMix(seed)),
+            bounds: BTreeMap::new(),
+        }
+    }
+
+    /// The standard error of the first parameter's logarithm with the plain central difference
+    /// the fit used before (step 1e-5 in the logarithm), at the fit's optimum.
+    fn central_difference_se_ln(spec: &CalibrationSpec, fit: &Calibration) -> f64 {
+        let problem = Problem::new(spec).unwrap();
+        let theta: Vec<f64> = spec
+            .fit
+            .iter()
+            .map(|name| fit.estimates[name].value.ln())
+            .collect();
+        let residuals = problem.residuals(&theta).unwrap();
+        let columns: Vec<Vec<f64>> = (0..theta.len())
+            .map(|k| {
+                let mut up = theta.clone();
+                let mut down = theta.clone();
+                up[k] += 1e-5;
+                down[k] -= 1e-5;
+                let (up, down) = (
+                    problem.residuals(&up).unwrap(),
+                    problem.residuals(&down).unwrap(),
+                );
+                up.iter().zip(&down).map(|(u, d)| (u - d) / 2e-5).collect()
+            })
+            .collect();
+        let (jtj, _) = normal_equations(&columns, &residuals);
+        let variance = sum_of_squares(&residuals) / (residuals.len() - theta.len()) as f64;
+        (variance * invert(jtj).unwrap()[0][0]).sqrt()
+    }
+
+    /// Issue 29: with the first and total bounce times together, a central difference across a
+    /// step of the total bounce time (a bounce appearing) gave an interval 25 times too narrow,
+    /// 17 standard errors off the truth. The step-aware Jacobian gives an interval around 0.33
+    /// with a standard error between the single times' ones.
+    #[test]
+    fn first_and_total_bounce_times_together_give_an_honest_interval() {
+        let spec = issue_29(ISSUE_29_SEED);
+        let fit = calibrate(&spec).unwrap();
+        let kappa = &fit.estimates["material.kappa"];
+        let single = |keep: &str| {
+            let mut one = spec.clone();
+            for o in &mut one.observations {
+                if keep == "first_bounce_s" {
+                    o.total_bounce_s = None;
+                } else {
+                    o.first_bounce_s = None;
+                }
+            }
+            calibrate(&one).unwrap().estimates["material.kappa"].se_ln
+        };
+        let (first, total) = (single("first_bounce_s"), single("total_bounce_s"));
+        let central = central_difference_se_ln(&spec, &fit);
+        eprintln!(
+            "together {kappa:?}; first alone se_ln {first:.3e}, total alone {total:.3e}; central difference se_ln {central:.3e}"
+        );
+        assert!(kappa.ci95[0] < 0.33 && 0.33 < kappa.ci95[1], "{kappa:?}");
+        // Together, at least as precise as the better single time, and not by more than the
+        // two independent halves' combination allows (with room for a different optimum).
+        let combined = 1.0 / (first.powi(-2) + total.powi(-2)).sqrt();
+        assert!(
+            kappa.se_ln > 0.5 * combined && kappa.se_ln < 1.5 * first.min(total),
+            "{kappa:?}: first alone {first}, total alone {total}"
+        );
+        // The case does straddle a step: the plain central difference still collapses.
+        assert!(central < 0.1 * kappa.se_ln, "{central} against {kappa:?}");
+    }
+
+    /// The share of `seeds` fits whose 95 % interval holds each parameter's truth.
+    fn coverage(
+        spec: impl Fn(u64) -> CalibrationSpec,
+        truths: &[(&str, f64)],
+        seeds: u64,
+    ) -> Vec<f64> {
+        let mut covered = vec![0_u32; truths.len()];
+        for seed in 0..seeds {
+            let fit = calibrate(&spec(1000 + seed)).unwrap();
+            for (count, (name, truth)) in covered.iter_mut().zip(truths) {
+                let [lower, upper] = fit.estimates[*name].ci95;
+                *count += u32::from(lower <= *truth && *truth <= upper);
+            }
+        }
+        covered
+            .into_iter()
+            .map(|c| f64::from(c) / seeds as f64)
+            .collect()
+    }
+
+    const WEAR_TRUTH: [(&str, f64); 2] = [
+        ("material.kappa", 0.33),
+        ("material.roughening_energy_j", 500.0),
+    ];
+
+    /// The 95 % intervals hold the truth about 95 % of the time over 40 noise draws (a band
+    /// for 40 draws: 0.85 to 1) for kappa from the first and total bounce times together, and
+    /// for kappa and the roughening energy from a wear curve. Measured: 0.95; 0.95 and 0.975.
+    /// The 1000-draw version is `the_intervals_cover_the_truth_95_percent_of_the_time`.
+    #[test]
+    fn the_intervals_cover_the_truth() {
+        let together = coverage(issue_29, &[("material.kappa", 0.33)], 40);
+        let wear = coverage(wear_curve, &WEAR_TRUTH, 40);
+        eprintln!("coverage over 40 draws: together {together:?}, wear curve {wear:?}");
+        for c in together.into_iter().chain(wear) {
+            assert!((0.85..=1.0).contains(&c), "{c}");
+        }
+    }
+
+    /// As `the_intervals_cover_the_truth` over 1000 noise draws, in the band 0.93 to 0.97 (the
+    /// binomial standard deviation of a true 0.95 over 1000 draws is 0.007; over 200 it is 0.015,
+    /// and the first 200 of these draws give the roughening energy 0.92). Measured: 0.949;
+    /// 0.947 and 0.940. About 30 s in release:
+    /// `cargo test --release -p bouncewear-model --lib calibration -- --ignored --nocapture`.
+    #[test]
+    #[ignore = "1000 fits of each case: run with --release -- --ignored"]
+    fn the_intervals_cover_the_truth_95_percent_of_the_time() {
+        for seeds in [200, 1000] {
+            let together = coverage(issue_29, &[("material.kappa", 0.33)], seeds);
+            let wear = coverage(wear_curve, &WEAR_TRUTH, seeds);
+            eprintln!("coverage over {seeds} draws: together {together:?}, wear curve {wear:?}");
+            if seeds == 1000 {
+                for c in together.into_iter().chain(wear) {
+                    assert!((0.93..=0.97).contains(&c), "{c}");
+                }
+            }
+        }
+    }
+
+    /// The correlation matrix is symmetric with a unit diagonal; kappa and the pre-arc's
+    /// softening energy over a narrow band of impact velocities (0.215 to 0.225 m/s at 48 V /
+    /// 15 A) soften the first impact the same way, and are warned of as trading off.
+    #[test]
+    fn a_pair_that_trades_off_is_warned_of() {
+        let fit = calibrate(&wear_curve(1)).unwrap();
+        assert!(fit.warnings.is_empty(), "{:?}", fit.warnings);
+        let json = serde_json::to_value(&fit).unwrap();
+        assert!(json.get("warnings").is_none(), "{json}");
+        for (a, row) in &fit.correlation {
+            assert_eq!(row.len(), 2);
+            for (b, r) in row {
+                assert_eq!(*r, fit.correlation[b][a]);
+                if a == b {
+                    assert_eq!(*r, 1.0);
+                } else {
+                    assert!(r.abs() < 0.95, "{:?}", fit.correlation);
+                }
+            }
+        }
+        let mut truth = ScenarioSpec::default();
+        truth.circuit.supply_voltage_v = 48.0;
+        truth.circuit.current_a = 15.0;
+        truth.material.kappa = Some(0.33);
+        let places: Vec<(u64, f64)> = (0..11).map(|i| (0, 0.215 + 0.001 * f64::from(i))).collect();
+        let spec = CalibrationSpec {
+            scenario: truth.clone(),
+            fit: vec![
+                "material.kappa".into(),
+                "material.softening_energy_j".into(),
+            ],
+            observations: bounce_times(&truth, &places, 0.02, &mut SplitMix(7)),
+            bounds: BTreeMap::new(),
+        };
+        let fit = calibrate(&spec).unwrap();
+        eprintln!(
+            "{:?} {:?} {:?}",
+            fit.estimates, fit.correlation, fit.warnings
+        );
+        let r = fit.correlation["material.kappa"]["material.softening_energy_j"];
+        assert_eq!(
+            r,
+            fit.correlation["material.softening_energy_j"]["material.kappa"]
+        );
+        assert!(r.abs() >= 0.95, "{r}");
+        assert_eq!(fit.warnings.len(), 1, "{:?}", fit.warnings);
+        assert!(
+            fit.warnings[0].starts_with(&format!(
+                "`material.kappa` and `material.softening_energy_j` trade off (correlation {r:.2})"
+            )),
+            "{:?}",
+            fit.warnings
+        );
     }
 
     #[test]
