@@ -14,7 +14,10 @@ const REFERENCE: &str = include_str!("../../tests/data/engine_reference.json");
 fn differences(path: &str, want: &Value, got: &Value, out: &mut Vec<String>) {
     match (want, got) {
         (Value::Object(w), Value::Object(g)) => {
-            assert_eq!(w.len(), g.len(), "{path}: keys differ");
+            // A quantile's `reason` (a level the data cannot bound) is newer than the reference:
+            // words about a statistic, not one.
+            let statistics = g.keys().filter(|key| *key != "reason").count();
+            assert_eq!(w.len(), statistics, "{path}: keys differ");
             for (key, value) in w {
                 differences(&format!("{path}/{key}"), value, &g[key], out);
             }

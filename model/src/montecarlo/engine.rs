@@ -97,21 +97,23 @@ pub struct GroupStats {
 
 impl GroupStats {
     fn new(job: &Job, sensitivity: Option<&SensitivityPlan>) -> Self {
-        let limit = |metric| job.limits().get(&metric).copied();
-        let per_bin: Vec<Option<f64>> = job
+        // A metric's limit and list of thresholds, both counted exactly as the values arrive.
+        let empty = |metric| {
+            let thresholds = job.thresholds().get(&metric).map_or(&[][..], Vec::as_slice);
+            Accumulator::new(job.limits().get(&metric).copied()).counting(thresholds)
+        };
+        let per_bin: Vec<Accumulator> = job
             .operation_metrics()
             .iter()
-            .map(|m| limit(Metric::Operation(*m)))
+            .map(|m| empty(Metric::Operation(*m)))
             .collect();
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
         Self {
-            operations: (0..bins)
-                .flat_map(|_| per_bin.iter().map(|l| Accumulator::new(*l)))
-                .collect(),
+            operations: (0..bins).flat_map(|_| per_bin.iter().cloned()).collect(),
             devices: job
                 .device_metrics()
                 .iter()
-                .map(|m| Accumulator::new(limit(Metric::Device(*m))))
+                .map(|m| empty(Metric::Device(*m)))
                 .collect(),
             lives: GroupLives::default(),
             operations_at_max_bounces: 0,

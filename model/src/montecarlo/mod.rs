@@ -19,9 +19,7 @@ pub use kernel::{Isa, Kernel};
 pub use lives::{DeviceLife, GroupLives};
 pub use metric::{DeviceMetric, Metric, OperationMetric};
 
-use crate::stats::{
-    Accumulator, QuantileSummary, QueryAnswer, Summary, Threshold, query, summarize,
-};
+use crate::stats::{Accumulator, QueryAnswer, Summary, Threshold, query, summarize};
 use job::Statistic;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -63,7 +61,8 @@ pub struct PrecisionReport {
     pub target_relative_half_width: f64,
     /// The half-width reached, relative to the value.
     pub achieved_relative_half_width: f64,
-    /// Whether the target was met within `max_devices`.
+    /// Whether the target was met within `max_devices`: never while the data cannot bound the
+    /// statistic (a quantile level with a `reason`), whatever its interval's width.
     pub met: bool,
     /// Devices that ran.
     pub devices: u64,
@@ -223,8 +222,10 @@ pub fn run_job_on(
 
 /// Whether the job's precision target is met by what `tally` holds (never, without a target).
 pub fn precision_met(job: &Job, tally: &Tally) -> bool {
-    job.precision()
-        .is_some_and(|p| precision_half_width(job, tally, p) <= p.relative_half_width)
+    job.precision().is_some_and(|p| {
+        let (achieved, bounded) = precision_half_width(job, tally, p);
+        bounded && achieved <= p.relative_half_width
+    })
 }
 
 /// The batch to run after the batches in `tally`, if the job needs one: its precision target is
@@ -260,13 +261,13 @@ pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
         operations: summarize_operations(job, tally),
         devices: summarize_devices(job, tally),
         precision: job.precision().map(|p| {
-            let achieved = precision_half_width(job, tally, p);
+            let (achieved, bounded) = precision_half_width(job, tally, p);
             PrecisionReport {
                 metric: p.metric.name().to_owned(),
                 statistic: statistic_name(p.statistic).to_owned(),
                 target_relative_half_width: p.relative_half_width,
                 achieved_relative_half_width: achieved,
-                met: achieved <= p.relative_half_width,
+                met: bounded && achieved <= p.relative_half_width,
                 devices: tally.devices,
             }
         }),
@@ -360,12 +361,14 @@ fn answer_thresholds(job: &Job, metric: Metric, groups: &[Accumulator], summary:
 /// The sketch reports a bucket midpoint (within 0.2 %); for a whole-number metric below 256 each bucket
 /// holds one whole number, so the nearest whole number is the exact sample quantile.
 fn round_quantiles(summary: &mut Summary) {
-    summary.quantiles.values_mut().for_each(round_quantile);
+    for quantile in summary.quantiles.values_mut() {
+        round_quantile(&mut quantile.value, &mut quantile.ci95);
+    }
 }
 
-fn round_quantile(quantile: &mut QuantileSummary) {
-    quantile.value = quantile.value.round();
-    quantile.ci95 = [quantile.ci95[0].floor(), quantile.ci95[1].ceil()];
+fn round_quantile(value: &mut f64, ci95: &mut [f64; 2]) {
+    *value = value.round();
+    *ci95 = [ci95[0].floor(), ci95[1].ceil()];
 }
 
 /// [`query`] of one (metric, bin) after the run, from the groups [`RunGroups::of`] gave: its
@@ -379,7 +382,11 @@ pub fn query_metric(
 ) -> QueryAnswer {
     let mut answer = query(groups, levels, thresholds);
     if matches!(metric, Metric::Operation(m) if m.is_integer()) {
-        answer.quantiles.values_mut().for_each(round_quantile);
+        for quantile in answer.quantiles.values_mut() {
+            if let (Some(value), Some(ci95)) = (&mut quantile.value, &mut quantile.ci95) {
+                round_quantile(value, ci95);
+            }
+        }
     }
     answer
 }
@@ -440,8 +447,9 @@ fn summarize_devices(job: &Job, tally: &Tally) -> BTreeMap<String, Summary> {
 }
 
 /// The relative 95 % CI half-width of the precision statistic in the last bin (infinite when the
-/// statistic is 0 and the interval is not).
-fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) -> f64 {
+/// statistic is 0 and the interval is not), and whether the data bound the statistic at all (a
+/// quantile level with a `reason` does not meet any target).
+fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) -> (f64, bool) {
     let metric = job
         .operation_metrics()
         .iter()
@@ -449,17 +457,18 @@ fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) ->
         .expect("validated");
     let last_bin = usize::try_from(job.bins() - 1).expect("bins fit in memory");
     let summary = summarize(&operation_groups(job, tally, last_bin, metric));
-    let (value, [lo, hi]) = match precision.statistic {
-        Statistic::Mean => (summary.mean, summary.mean_ci95),
+    let (value, [lo, hi], bounded) = match precision.statistic {
+        Statistic::Mean => (summary.mean, summary.mean_ci95, true),
         Statistic::Quantile(name) => {
             let quantile = &summary.quantiles[name];
-            (quantile.value, quantile.ci95)
+            (quantile.value, quantile.ci95, quantile.reason.is_none())
         }
     };
     let half_width = 0.5 * (hi - lo);
-    if half_width == 0.0 {
+    let relative = if half_width == 0.0 {
         0.0
     } else {
         half_width / value.abs()
-    }
+    };
+    (relative, bounded)
 }

@@ -2,6 +2,7 @@
 //! in constant memory and a few nanoseconds per value.
 
 use super::sketch::{Sketch, rank};
+use super::threshold::{Threshold, ThresholdCount};
 use crate::lanes::Real;
 
 /// The sums of one run of values per lane, in the lanes: for the engine, each lane's device's
@@ -86,6 +87,9 @@ pub struct Accumulator {
     #[serde(with = "super::bits")]
     threshold: f64,
     above: u64,
+    /// A metric's list of thresholds, each with its exact count of values beyond.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    thresholds: Vec<ThresholdCount>,
     sketch: Sketch,
 }
 
@@ -102,7 +106,37 @@ impl Accumulator {
             limit,
             threshold: limit.unwrap_or(f64::INFINITY),
             above: 0,
+            thresholds: Vec::new(),
             sketch: Sketch::new(),
+        }
+    }
+
+    /// This accumulator, also counting exactly the values beyond each of `thresholds`.
+    pub fn counting(mut self, thresholds: &[Threshold]) -> Self {
+        debug_assert!(
+            thresholds.iter().all(|t| !t.value().is_nan()),
+            "thresholds must not be NaN"
+        );
+        self.thresholds = thresholds
+            .iter()
+            .copied()
+            .map(ThresholdCount::new)
+            .collect();
+        self
+    }
+
+    /// An empty accumulator with this one's limit and thresholds: what its values merge into.
+    pub fn empty_like(&self) -> Self {
+        let thresholds: Vec<Threshold> = self.thresholds.iter().map(|t| t.threshold).collect();
+        Self::new(self.limit).counting(&thresholds)
+    }
+
+    /// Counts the values of `values` beyond each threshold of the list.
+    #[inline(always)]
+    fn count_thresholds(&mut self, values: impl Iterator<Item = f64> + Clone) {
+        for counted in &mut self.thresholds {
+            let threshold = counted.threshold;
+            counted.beyond += values.clone().filter(|&x| threshold.beyond(x)).count() as u64;
         }
     }
 
@@ -135,10 +169,11 @@ impl Accumulator {
             self.sketch.push(x);
         }
         (self.min, self.max, self.sum, self.sum_sq, self.above) = (min, max, sum, sum_sq, above);
+        self.count_thresholds(values.iter().copied());
     }
 
     /// Counts lanes `0..active` of each of `columns[m]` in the sketch of `accumulators[m]`
-    /// ([`Sketch::push_lanes`]): values whose sums join later, through [`Accumulator::add_lanes`]
+    /// ([`Sketch::push_lanes`]) and against its list of thresholds: values whose sums join later, through [`Accumulator::add_lanes`]
     /// (until then the counts run ahead of the sums). Counts do not depend on order.
     #[inline(always)]
     pub fn count_lanes<L: Real>(accumulators: &mut [Accumulator], columns: &[&L], active: usize) {
@@ -149,6 +184,9 @@ impl Accumulator {
         );
         for (accumulator, column) in accumulators.iter_mut().zip(columns) {
             accumulator.sketch.push_lanes(*column, active);
+            if !accumulator.thresholds.is_empty() {
+                accumulator.count_thresholds((0..active).map(|k| column.lane(k)));
+            }
         }
     }
 
@@ -178,14 +216,20 @@ impl Accumulator {
     /// An empty `self` takes the other's shift, so merging into an empty accumulator copies exactly.
     ///
     /// # Panics
-    /// If the two accumulators were made with different limits.
+    /// If the two accumulators were made with different limits or thresholds.
     pub fn merge(&mut self, other: &Accumulator) {
         assert!(
-            self.limit.map(f64::to_bits) == other.limit.map(f64::to_bits),
-            "merging accumulators with different limits ({:?}, {:?})",
+            self.limit.map(f64::to_bits) == other.limit.map(f64::to_bits)
+                && self.thresholds.len() == other.thresholds.len()
+                && (self.thresholds.iter().zip(&other.thresholds))
+                    .all(|(a, b)| a.threshold.same(b.threshold)),
+            "merging accumulators with different limits ({:?}, {:?}) or thresholds",
             self.limit,
             other.limit
         );
+        for (mine, theirs) in self.thresholds.iter_mut().zip(&other.thresholds) {
+            mine.beyond += theirs.beyond;
+        }
         if other.count() == 0 {
             return;
         }
@@ -249,6 +293,25 @@ impl Accumulator {
     /// Exact number of values `x > limit`; 0 without a limit.
     pub fn count_above(&self) -> u64 {
         self.above
+    }
+
+    /// The list of thresholds counted, each with its exact count.
+    pub fn thresholds(&self) -> &[ThresholdCount] {
+        &self.thresholds
+    }
+
+    /// The exact number of values beyond `threshold`, when it was counted as the values arrived:
+    /// one of the list, or `above` the limit.
+    pub fn counted_beyond(&self, threshold: Threshold) -> Option<u64> {
+        if let (Threshold::Above(x), Some(limit)) = (threshold, self.limit)
+            && x.to_bits() == limit.to_bits()
+        {
+            return Some(self.above);
+        }
+        self.thresholds
+            .iter()
+            .find(|counted| counted.threshold.same(threshold))
+            .map(|counted| counted.beyond)
     }
 
     /// The bucket histogram of the values.
@@ -346,6 +409,60 @@ mod tests {
         assert_eq!(acc.count_above(), direct);
         assert_eq!(acc.limit(), Some(limit));
         assert_eq!(accumulate(&values, None).count_above(), 0);
+    }
+
+    proptest! {
+        /// A list of thresholds is counted exactly, value by value, however the values arrive
+        /// (pushed, in batches, in lanes, merged from parts) and across serialisation.
+        #[test]
+        fn a_list_of_thresholds_is_counted_exactly_however_the_values_arrive(
+            values in prop::collection::vec(batch_value(), 1..300),
+            at in prop::collection::vec(-1.0..1.0f64, 1..6),
+            cut in 0..300usize,
+        ) {
+            let thresholds: Vec<Threshold> = at
+                .iter()
+                .enumerate()
+                .map(|(i, &x)| if i % 2 == 0 { Threshold::Above(x) } else { Threshold::Below(x) })
+                .collect();
+            let expected: Vec<u64> = thresholds
+                .iter()
+                .map(|t| values.iter().filter(|&&x| t.beyond(x)).count() as u64)
+                .collect();
+            let fresh = || Accumulator::new(Some(0.25)).counting(&thresholds);
+            let counts = |acc: &Accumulator| -> Vec<u64> {
+                thresholds.iter().map(|&t| acc.counted_beyond(t).unwrap()).collect()
+            };
+            let mut pushed = fresh();
+            values.iter().for_each(|&x| pushed.push(x));
+            let mut batched = fresh();
+            batched.push_batch(&values);
+            let mut lanes = fresh();
+            for chunk in values.chunks(4) {
+                let x = Lanes::<4>::from_fn(|k| chunk.get(k).copied().unwrap_or(0.0));
+                Accumulator::count_lanes(std::slice::from_mut(&mut lanes), &[&x], chunk.len());
+            }
+            let (a, b) = values.split_at(cut.min(values.len()));
+            let (mut merged, mut part) = (fresh(), fresh());
+            merged.push_batch(a);
+            part.push_batch(b);
+            merged.merge(&part);
+            let text = serde_json::to_string(&merged).unwrap();
+            let restored: Accumulator = serde_json::from_str(&text).unwrap();
+            for acc in [&pushed, &batched, &lanes, &merged, &restored] {
+                prop_assert_eq!(counts(acc), expected.clone());
+            }
+            prop_assert_eq!(pushed.counted_beyond(Threshold::Above(0.25)), Some(pushed.count_above()));
+            prop_assert_eq!(pushed.counted_beyond(Threshold::Below(0.25)), None);
+            prop_assert_eq!(restored.empty_like().thresholds().len(), thresholds.len());
+        }
+    }
+
+    #[test]
+    #[should_panic(expected = "or thresholds")]
+    fn merge_rejects_different_thresholds() {
+        let counting = Accumulator::new(None).counting(&[Threshold::Above(1.0)]);
+        Accumulator::new(None).merge(&counting);
     }
 
     #[test]

@@ -70,7 +70,8 @@ pub fn student_t_975(df: u64) -> f64 {
 /// at normal quantile `z` (use [`Z_975`] for 95 %):
 /// `centre = (p + z^2/(2n)) / (1 + z^2/n)`,
 /// `half = z / (1 + z^2/n) * sqrt(p(1 - p)/n + z^2/(4n^2))`, result `[centre - half, centre + half]`
-/// clipped to `[0, 1]`. Unlike the Wald interval it stays inside `[0, 1]`, contains `p`, and is not
+/// clipped to `[0, 1]` and widened to hold `p` against rounding. Unlike the Wald interval it stays
+/// inside `[0, 1]`, contains `p`, and is not
 /// empty at `p = 0` or `1` (`[0, z^2/(n + z^2)]` at `p = 0`). `n_eff` may be fractional (a design
 /// effect applied); `n_eff <= 0` carries no information and gives `[0, 1]`.
 pub fn wilson_interval(p: f64, n_eff: f64, z: f64) -> [f64; 2] {
@@ -80,7 +81,11 @@ pub fn wilson_interval(p: f64, n_eff: f64, z: f64) -> [f64; 2] {
     let z2n = z * z / n_eff;
     let centre = (p + z2n / 2.0) / (1.0 + z2n);
     let half = z / (1.0 + z2n) * (p * (1.0 - p) / n_eff + z2n / (4.0 * n_eff)).sqrt();
-    [(centre - half).max(0.0), (centre + half).min(1.0)]
+    // The interval holds `p` exactly: at p = 0 rounding would leave its lower end at 1e-18.
+    [
+        (centre - half).max(0.0).min(p),
+        (centre + half).min(1.0).max(p),
+    ]
 }
 
 #[cfg(test)]

@@ -22,6 +22,7 @@
 //! | [`summary`] | the serialised `SUMMARY` and [`summarize`] |
 //! | [`regression`] | standardised regression coefficients, mergeable |
 //! | [`sobol`] | Sobol' first-order and total indices by pick-freeze, with delta-method intervals |
+//! | [`threshold`] | thresholds counted exactly as values arrive, or bounded by the buckets after |
 //! | [`query`] | any quantile and any threshold after the run, from the same groups and estimators |
 //!
 //! Accumulators serialise exactly, every float by its bits (infinities included), so a group's
@@ -35,12 +36,14 @@ pub mod regression;
 pub mod sketch;
 pub mod sobol;
 pub mod summary;
+pub mod threshold;
 
 pub use accumulator::{Accumulator, LaneSums};
 pub use intervals::{Z_975, student_t_975, wilson_interval};
-pub use query::{QueryAnswer, Threshold, ThresholdExceedance, query};
+pub use query::{QueryAnswer, QueryQuantile, query};
 pub use sketch::Sketch;
 pub use summary::{Exceedance, HISTOGRAM_BINS, Histogram, QuantileSummary, Summary, summarize};
+pub use threshold::{Resolution, Threshold, ThresholdExceedance};
 
 /// The reported quantiles: the key in `SUMMARY.quantiles` and the level `q` (see
 /// [`sketch::rank`] for the definition).

@@ -7,47 +7,37 @@ use serde::{Deserialize, Serialize};
 
 use super::accumulator::Accumulator;
 use super::summary::{Merged, QuantileSummary};
+use super::threshold::{Beyond, Resolution, Threshold, ThresholdExceedance};
 
-/// One side of a threshold: the share of values above it, or below it.
-#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
-#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
-#[serde(rename_all = "lowercase")]
-pub enum Threshold {
-    /// Values strictly above it.
-    Above(f64),
-    /// Values strictly below it.
-    Below(f64),
-}
-
-impl Threshold {
-    /// The threshold's value, whichever its side.
-    pub fn value(self) -> f64 {
-        match self {
-            Threshold::Above(x) | Threshold::Below(x) => x,
-        }
-    }
-
-    /// Whether `x` lies beyond the threshold, on its side.
-    fn beyond(self, x: f64) -> bool {
-        match self {
-            Threshold::Above(limit) => x > limit,
-            Threshold::Below(limit) => x < limit,
-        }
-    }
-}
-
-/// The probability of a value beyond a threshold, with a 95 % confidence interval; serialised as
-/// `{"above": x, "probability", "ci95"}` (or `"below"`).
+/// One quantile level asked after the run: its value and Woodruff interval, or, when the data
+/// cannot bound the level (a [`QuantileSummary`] with a `reason`), no value and the reason.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
-pub struct ThresholdExceedance {
-    /// `above` or `below`, and the threshold.
-    #[serde(flatten)]
-    pub threshold: Threshold,
-    /// The share of values beyond the threshold.
-    pub probability: f64,
-    /// Its 95 % confidence interval: Wilson's, with the design effect of the groups.
-    pub ci95: [f64; 2],
+pub struct QueryQuantile {
+    /// The quantile, within 0.2 %; `null` when the data cannot bound the level.
+    pub value: Option<f64>,
+    /// Its 95 % interval; `null` when the data cannot bound the level.
+    pub ci95: Option<[f64; 2]>,
+    /// Why there is no value, and what would give one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+}
+
+impl From<QuantileSummary> for QueryQuantile {
+    fn from(quantile: QuantileSummary) -> Self {
+        match quantile.reason {
+            None => Self {
+                value: Some(quantile.value),
+                ci95: Some(quantile.ci95),
+                reason: None,
+            },
+            reason => Self {
+                value: None,
+                ci95: None,
+                reason,
+            },
+        }
+    }
 }
 
 /// The answer to a query: the quantiles keyed by their level in shortest form (`"0.999"`), and one
@@ -55,8 +45,9 @@ pub struct ThresholdExceedance {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq, Default)]
 pub struct QueryAnswer {
-    /// Per level asked, keyed by the level in shortest form: the value and its Woodruff interval.
-    pub quantiles: BTreeMap<String, QuantileSummary>,
+    /// Per level asked, keyed by the level in shortest form: the value and its Woodruff interval,
+    /// or no value and the reason.
+    pub quantiles: BTreeMap<String, QueryQuantile>,
     /// Per threshold asked, in order: the probability beyond it and its interval.
     pub exceedance: Vec<ThresholdExceedance>,
 }
@@ -64,30 +55,28 @@ pub struct QueryAnswer {
 /// The quantiles of `levels` (each in `[0, 1]`) and the probabilities beyond `thresholds` of the
 /// values of `groups`, by the estimators of [`summarize`](super::summarize) on the same groups:
 /// for a level of [`QUANTILES`](super::QUANTILES) the value and interval are those of the summary,
-/// to the bit.
+/// to the bit. A level the data cannot bound (fewer than
+/// [`MIN_TAIL_UNITS`](super::summary::MIN_TAIL_UNITS) independent values beyond it, or one group)
+/// has no value, only the reason: its interval would end at the sample's extreme.
 ///
-/// A threshold's probability counts each value as if moved to its bucket's midpoint, clamped to
-/// its group's exact `[min, max]` (as the summary's histogram bins them): it is `c / n` for a whole
-/// count `c`, exact unless a value lies within 0.2 % of the threshold, and 0 above the maximum or
-/// below the minimum. Its interval is Wilson's with the design effect of the groups' shares, as the
-/// summary's `exceedance`.
+/// A threshold's probability is exact, `c / n` with Wilson's interval and the design effect of the
+/// groups' shares (as the summary's `exceedance`), when every value was compared with it: a
+/// threshold the groups counted as they ran (the job's limit, or one of its list), or one that no
+/// value shares a sketch bucket with (each group's exact `[min, max]` settles the values outside
+/// it). Otherwise it is bucket-limited ([`Resolution::Bucket`]): the values in the threshold's
+/// bucket count as spread evenly over the bucket's width for the probability, and the interval runs
+/// from the lower end of the interval with none of them beyond to the upper end of the interval
+/// with all of them beyond, so the store's resolution never puts the truth outside it.
 pub fn query(groups: &[Accumulator], levels: &[f64], thresholds: &[Threshold]) -> QueryAnswer {
     let merged = Merged::of(groups);
     let quantiles = levels
         .iter()
         .zip(merged.quantiles(levels))
-        .map(|(level, quantile)| (level.to_string(), quantile))
+        .map(|(level, quantile)| (level.to_string(), quantile.into()))
         .collect();
     let exceedance = thresholds
         .iter()
-        .map(|&threshold| {
-            let (probability, ci95) = merged.share(|group| count_beyond(group, threshold));
-            ThresholdExceedance {
-                threshold,
-                probability,
-                ci95,
-            }
-        })
+        .map(|&threshold| exceedance(&merged, threshold))
         .collect();
     QueryAnswer {
         quantiles,
@@ -95,16 +84,38 @@ pub fn query(groups: &[Accumulator], levels: &[f64], thresholds: &[Threshold]) -
     }
 }
 
-/// The values of `group` beyond `threshold`, each at its bucket's midpoint clamped to the group's
-/// `[min, max]`.
-fn count_beyond(group: &Accumulator, threshold: Threshold) -> u64 {
-    let (min, max) = (group.min(), group.max());
-    group
-        .sketch()
-        .buckets()
-        .filter(|&(midpoint, _)| threshold.beyond(midpoint.clamp(min, max)))
-        .map(|(_, count)| count)
-        .sum()
+/// The probability beyond `threshold` of the merged groups, exact or bucket-limited (see [`query`]).
+fn exceedance(merged: &Merged, threshold: Threshold) -> ThresholdExceedance {
+    let counts: Vec<(Beyond, Option<[f64; 2]>)> = merged
+        .filled
+        .iter()
+        .map(|group| Beyond::of(group, threshold))
+        .collect();
+    let sure: Vec<u64> = counts.iter().map(|(beyond, _)| beyond.sure).collect();
+    let (probability, ci95) = merged.share(&sure);
+    let Some(bucket) = counts.iter().find_map(|&(_, bucket)| bucket) else {
+        return ThresholdExceedance {
+            threshold,
+            probability,
+            ci95,
+            resolution: Resolution::Exact,
+            bucket: None,
+        };
+    };
+    let most: Vec<u64> = counts
+        .iter()
+        .map(|(beyond, _)| beyond.sure + beyond.unsure)
+        .collect();
+    let (highest, [_, upper]) = merged.share(&most);
+    let spread: f64 = counts.iter().map(|(beyond, _)| beyond.spread).sum();
+    let n = merged.all.count() as f64;
+    ThresholdExceedance {
+        threshold,
+        probability: (spread / n).clamp(probability, highest),
+        ci95: [ci95[0], upper],
+        resolution: Resolution::Bucket,
+        bucket: Some(bucket),
+    }
 }
 
 #[cfg(test)]
@@ -112,6 +123,7 @@ mod tests {
     use super::*;
     use crate::stats::test_util::SplitMix;
     use crate::stats::{QUANTILES, summarize};
+    use crate::stats::{QueryQuantile, Resolution};
     use proptest::prelude::*;
 
     fn accumulate(values: &[f64]) -> Accumulator {
@@ -151,7 +163,7 @@ mod tests {
     #[test]
     fn no_values_give_zeros() {
         let answer = query(&[], &[0.5], &[Threshold::Above(1.0)]);
-        assert_eq!(answer.quantiles["0.5"].value, 0.0);
+        assert_eq!(answer.quantiles["0.5"].value, Some(0.0));
         assert_eq!(answer.exceedance[0].probability, 0.0);
         assert_eq!(answer.exceedance[0].ci95, [0.0, 0.0]);
     }
@@ -171,7 +183,10 @@ mod tests {
             let levels = QUANTILES.map(|(_, q)| q);
             let answer = query(&groups, &levels, &[]);
             for (key, level) in QUANTILES {
-                prop_assert_eq!(&answer.quantiles[&level.to_string()], &summary.quantiles[key]);
+                prop_assert_eq!(
+                    &answer.quantiles[&level.to_string()],
+                    &QueryQuantile::from(summary.quantiles[key].clone())
+                );
             }
         }
 
@@ -190,6 +205,10 @@ mod tests {
             let below = values.iter().filter(|&&v| v < x).count() as f64;
             prop_assert_eq!(answer.exceedance[0].probability, above / n);
             prop_assert_eq!(answer.exceedance[1].probability, below / n);
+            for e in &answer.exceedance {
+                prop_assert_eq!(e.resolution, Resolution::Exact);
+                prop_assert_eq!(e.bucket, None);
+            }
             // Wilson's bounds at p = 0 or 1 are p up to rounding.
             for e in &answer.exceedance {
                 prop_assert!(e.ci95[0] - 1e-12 <= e.probability && e.probability <= e.ci95[1] + 1e-12);
@@ -214,6 +233,105 @@ mod tests {
             prop_assert!(above.windows(2).all(|w| w[0] >= w[1]));
             prop_assert!(below.windows(2).all(|w| w[0] <= w[1]));
         }
+    }
+
+    proptest! {
+        /// Whatever the values and the threshold, the interval holds the exact share of the
+        /// values beyond it (a Wilson interval holds its own proportion): the store's resolution
+        /// never puts the sample's own answer outside. Exact answers are the exact share.
+        #[test]
+        fn the_interval_holds_the_exact_share_whatever_shares_the_thresholds_bucket(
+            values in prop::collection::vec(value(), 1..400),
+            size in 1..100usize,
+            pick in 0..400usize,
+            nudge in prop_oneof![Just(0.0), -1e-3..1e-3f64],
+            above in any::<bool>(),
+        ) {
+            let x = values[pick % values.len()] * (1.0 + nudge);
+            let threshold = if above { Threshold::Above(x) } else { Threshold::Below(x) };
+            let answer = query(&groups_of(&values, size), &[], &[threshold]);
+            let e = &answer.exceedance[0];
+            let exact = values.iter().filter(|&&v| threshold.beyond(v)).count() as f64
+                / values.len() as f64;
+            prop_assert!(e.ci95[0] <= exact && exact <= e.ci95[1], "{e:?} against {exact}");
+            prop_assert!(e.ci95[0] <= e.probability && e.probability <= e.ci95[1], "{e:?}");
+            match e.resolution {
+                Resolution::Exact => prop_assert_eq!(e.probability, exact),
+                Resolution::Bucket => {
+                    let [lo, hi] = e.bucket.unwrap();
+                    prop_assert!(lo <= x && x <= hi);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_counted_threshold_is_exact_and_one_sharing_a_bucket_is_bucket_limited() {
+        let mut rng = SplitMix(7);
+        let values: Vec<f64> = (0..20_000).map(|_| 1.0 + rng.normal()).collect();
+        let counted = [Threshold::Above(1.5), Threshold::Below(0.0)];
+        let groups: Vec<Accumulator> = values
+            .chunks(1000)
+            .map(|chunk| {
+                let mut acc = Accumulator::new(Some(2.0)).counting(&counted);
+                acc.push_batch(chunk);
+                acc
+            })
+            .collect();
+        let asked = [
+            counted[0],
+            counted[1],
+            Threshold::Above(2.0),
+            Threshold::Above(1.2),
+        ];
+        let answer = query(&groups, &[], &asked);
+        let exact = |t: Threshold| {
+            values.iter().filter(|&&v| t.beyond(v)).count() as f64 / values.len() as f64
+        };
+        for e in &answer.exceedance[..3] {
+            assert_eq!(e.resolution, Resolution::Exact, "{e:?}");
+            assert_eq!(e.probability, exact(e.threshold));
+        }
+        let e = &answer.exceedance[3];
+        assert_eq!(e.resolution, Resolution::Bucket);
+        assert!(e.ci95[0] <= exact(e.threshold) && exact(e.threshold) <= e.ci95[1]);
+        // The bucket's values are unknown: the interval is wider than the exact one.
+        let json = serde_json::to_value(e).unwrap();
+        assert_eq!(json["resolution"], "bucket");
+        assert_eq!(json["bucket"].as_array().unwrap().len(), 2);
+        let json = serde_json::to_value(&answer.exceedance[0]).unwrap();
+        assert_eq!(json["resolution"], "exact");
+        assert!(json.get("bucket").is_none());
+    }
+
+    #[test]
+    fn a_level_beyond_the_data_has_no_value_and_says_why() {
+        let mut rng = SplitMix(11);
+        let values: Vec<f64> = (0..200_000).map(|_| 5.0 + rng.normal()).collect();
+        let groups = groups_of(&values, 200_000 / 32);
+        let answer = query(&groups, &[0.999_999, 0.000_001, 0.999, 0.5], &[]);
+        for level in ["0.999999", "0.000001"] {
+            let q = &answer.quantiles[level];
+            assert_eq!((q.value, q.ci95), (None, None), "{level}");
+            assert!(
+                q.reason.as_deref().unwrap().contains("beyond the data"),
+                "{q:?}"
+            );
+        }
+        let json = serde_json::to_value(&answer.quantiles["0.999999"]).unwrap();
+        assert!(json["value"].is_null() && json["ci95"].is_null());
+        for level in ["0.999", "0.5"] {
+            let q = &answer.quantiles[level];
+            let [lo, hi] = q.ci95.unwrap();
+            assert!(
+                lo < q.value.unwrap() && q.value.unwrap() < hi,
+                "{level}: {q:?}"
+            );
+            assert_eq!(q.reason, None);
+        }
+        // One group cannot measure the spread between groups: no interval either.
+        let one = query(&groups_of(&values[..1000], 1000), &[0.5], &[]);
+        assert!(one.quantiles["0.5"].value.is_none());
     }
 
     #[test]
@@ -285,7 +403,9 @@ mod tests {
                 &[Threshold::Above(0.5 * s), Threshold::Below(-s)],
             );
             let covers = |[lo, hi]: [f64; 2], truth: f64| u64::from(lo <= truth && truth <= hi);
-            hits[0] += covers(answer.quantiles["0.9"].ci95, Z_90 * s);
+            hits[0] += answer.quantiles["0.9"]
+                .ci95
+                .map_or(0, |ci95| covers(ci95, Z_90 * s));
             hits[1] += covers(answer.exceedance[0].ci95, P_ABOVE_HALF);
             hits[2] += covers(answer.exceedance[1].ci95, P_BELOW_MINUS_ONE);
         }

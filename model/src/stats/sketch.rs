@@ -388,6 +388,19 @@ impl Store {
     }
 }
 
+/// The counts of a sketch around a value `t` ([`Sketch::around`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Around {
+    /// Values in buckets wholly below `t`.
+    pub below: u64,
+    /// Values in the bucket that holds `t`.
+    pub within: u64,
+    /// Values in buckets wholly above `t`.
+    pub above: u64,
+    /// The value range `[lo, hi]` of the bucket that holds `t` (`[0, 0]` for `t = 0`).
+    pub bucket: [f64; 2],
+}
+
 /// Bucket counts of f64 values with `2^-9` relative resolution; see the module documentation.
 ///
 /// Values must be finite (checked in debug builds); a NaN counts as a zero and an infinity lands in
@@ -593,6 +606,43 @@ impl Sketch {
                 }
         } else {
             self.negative.sum_keys(0..KEY_END) + self.zeros
+        }
+    }
+
+    /// The values around `t`: how many lie surely below it, how many share its bucket (below it,
+    /// on it or above it: the sketch cannot tell) and how many surely above it, with that
+    /// bucket's value range. Exact zeros are a bucket of their own: at `t = 0` none is unsure.
+    pub fn around(&self, t: f64) -> Around {
+        let negatives = self.negative.sum_keys(0..KEY_END);
+        let positives = self.positive.sum_keys(0..KEY_END);
+        let k = key(t);
+        let [lo, hi] = [k, k + 1].map(|k| f64::from_bits(u64::from(k) << KEY_SHIFT));
+        if t > 0.0 {
+            let below = self.positive.sum_keys(0..k);
+            let within = self.positive.sum_keys(k..k + 1);
+            Around {
+                below: negatives + self.zeros + below,
+                within,
+                above: positives - below - within,
+                bucket: [lo, hi.min(f64::MAX)],
+            }
+        } else if t < 0.0 {
+            // The negative bucket `k` holds `x` with `|x|` in `[lo, hi)`.
+            let above = self.negative.sum_keys(0..k);
+            let within = self.negative.sum_keys(k..k + 1);
+            Around {
+                below: negatives - above - within,
+                within,
+                above: above + self.zeros + positives,
+                bucket: [-hi.min(f64::MAX), -lo],
+            }
+        } else {
+            Around {
+                below: negatives,
+                within: 0,
+                above: positives,
+                bucket: [0.0, 0.0],
+            }
         }
     }
 

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use super::QUANTILES;
 use super::accumulator::Accumulator;
 use super::intervals::{student_t_975, wilson_interval};
-use super::query::ThresholdExceedance;
+use super::threshold::ThresholdExceedance;
 
 /// Number of equal-width histogram bins between the exact min and max.
 pub const HISTOGRAM_BINS: usize = 20;
@@ -18,6 +18,43 @@ pub const HISTOGRAM_BINS: usize = 20;
 pub struct QuantileSummary {
     pub value: f64,
     pub ci95: [f64; 2],
+    /// Present when the data cannot bound the level ([`unsupported`]): why, and what would. The
+    /// value is then the sample's, and the interval claims more than the data hold.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+}
+
+/// How many independent values a level needs beyond it, on its rarer side, before the data bound
+/// it: `min(q, 1 - q) n_eff >= 5` (docs/contract.md, "Queries after the run").
+pub const MIN_TAIL_UNITS: f64 = 5.0;
+
+/// Why the groups cannot bound the quantile of level `q`, if they cannot: one group has no spread
+/// to measure, or fewer than [`MIN_TAIL_UNITS`] independent values lie beyond the level. The
+/// independent values are `n_eff = q (1 - q) / V` for the clustered variance `V` of the share at or
+/// below the estimate, at most `n` (`n` when `V = 0`: no group differs).
+fn unsupported(q: f64, variance: f64, n: u64, groups: usize) -> Option<String> {
+    if n == 0 {
+        return None;
+    }
+    if groups < 2 {
+        return Some(
+            "one group of devices: the spread between groups, and so an interval, cannot be estimated; run more devices"
+                .to_owned(),
+        );
+    }
+    let n = n as f64;
+    let n_eff = if variance > 0.0 {
+        (q * (1.0 - q) / variance).min(n)
+    } else {
+        n
+    };
+    let tail = q.min(1.0 - q) * n_eff;
+    (tail < MIN_TAIL_UNITS).then(|| {
+        format!(
+            "beyond the data: about {tail:.2} independent values lie beyond level {q} (effective sample size {n_eff:.0}), and bounding it needs {MIN_TAIL_UNITS}; run about {:.0} times as many devices",
+            (MIN_TAIL_UNITS / tail.max(1e-300)).min(1e12).ceil()
+        )
+    })
 }
 
 /// [`HISTOGRAM_BINS`] equal-width bins over the exact `[min, max]`: bin `i` is
@@ -90,7 +127,8 @@ pub struct Summary {
 ///   the groups' shares as a ratio estimator, `V = G'/(G'-1) sum_g (c_g - F n_g)^2 / n^2`; the
 ///   interval `q +- t sqrt(V)` in probability is mapped back through the overall quantile function,
 ///   interpolated within buckets ([`super::Sketch::interpolated_quantile`]) and widened to hold the
-///   value if need be. Ends at bucket midpoints would move by up to half a bucket (0.2 %) at
+///   value if need be. Where no group differs (`V = 0`, e.g. the top values all in one bucket) the
+///   interval is the value's bucket: the data place the quantile there, no closer. Ends at bucket midpoints would move by up to half a bucket (0.2 %) at
 ///   random, which at 512 devices is half an interval and covered 90 % (`bouncewear bench`).
 ///   Unlike the spread of group quantiles (sectioning), this stays honest when a group holds few
 ///   values (a group's p95 of four values is its maximum).
@@ -127,7 +165,8 @@ pub fn summarize(groups: &[Accumulator]) -> Summary {
         .collect();
 
     let exceedance = all.limit().map(|limit| {
-        let (probability, ci95) = merged.share(Accumulator::count_above);
+        let above: Vec<u64> = merged.filled.iter().map(|g| g.count_above()).collect();
+        let (probability, ci95) = merged.share(&above);
         Exceedance {
             limit,
             probability,
@@ -162,8 +201,9 @@ pub(super) struct Merged<'a> {
 impl<'a> Merged<'a> {
     /// Merges `groups` in slice order; they must all have the same limit.
     pub(super) fn of(groups: &'a [Accumulator]) -> Self {
-        let limit = groups.first().and_then(Accumulator::limit);
-        let mut all = Accumulator::new(limit);
+        let mut all = groups
+            .first()
+            .map_or_else(|| Accumulator::new(None), Accumulator::empty_like);
         groups.iter().for_each(|group| all.merge(group));
         let filled = groups.iter().filter(|g| g.count() > 0).collect();
         Self { all, filled }
@@ -182,23 +222,24 @@ impl<'a> Merged<'a> {
         values
             .into_iter()
             .zip(intervals)
-            .map(|(value, ci95)| QuantileSummary {
+            .zip(levels)
+            .map(|((value, (ci95, variance)), &q)| QuantileSummary {
                 value,
                 ci95: self.clip(ci95),
+                reason: unsupported(q, variance, self.all.count(), self.filled.len()),
             })
             .collect()
     }
 
-    /// The share of values that `count` counts in a group, over all groups, and its Wilson
-    /// interval with the design effect of the groups' shares.
-    pub(super) fn share(&self, count: impl Fn(&Accumulator) -> u64) -> (f64, [f64; 2]) {
+    /// The share of values that `counts` counts, one count per non-empty group (in `filled`'s
+    /// order), over all groups, and its Wilson interval with the design effect of the groups'
+    /// shares.
+    pub(super) fn share(&self, counts: &[u64]) -> (f64, [f64; 2]) {
+        debug_assert_eq!(counts.len(), self.filled.len(), "a count per group");
         let n = self.all.count();
-        let counted = self.filled.iter().map(|g| count(g)).sum();
-        let probability = proportion(counted, n);
-        let shares: Vec<f64> = self
-            .filled
-            .iter()
-            .map(|g| proportion(count(g), g.count()))
+        let probability = proportion(counts.iter().sum(), n);
+        let shares: Vec<f64> = (self.filled.iter().zip(counts))
+            .map(|(g, &count)| proportion(count, g.count()))
             .collect();
         (probability, design_effect_interval(probability, n, &shares))
     }
@@ -238,16 +279,17 @@ fn sample_variance(values: &[f64]) -> f64 {
 
 /// Woodruff's intervals for the quantiles `values` at `levels` (see [`summarize`]): the clustered
 /// standard error of the share at or below each value, mapped back through the overall quantiles.
-/// Values are compared at bucket resolution, consistent with how they were found.
+/// Values are compared at bucket resolution, consistent with how they were found. Each interval
+/// comes with the clustered variance of its share (0 with fewer than two groups).
 fn woodruff_intervals(
     all: &Accumulator,
     groups: &[&Accumulator],
     levels: &[f64],
     values: &[f64],
-) -> Vec<[f64; 2]> {
+) -> Vec<([f64; 2], f64)> {
     let g = groups.len();
     if g < 2 {
-        return values.iter().map(|&value| [value, value]).collect();
+        return values.iter().map(|&value| ([value, value], 0.0)).collect();
     }
     let at_or_below = all.sketch().counts_at_or_below(values);
     let per_group: Vec<(f64, Vec<u64>)> = groups
@@ -259,7 +301,7 @@ fn woodruff_intervals(
         .collect();
     let n = all.count() as f64;
     let t = student_t_975(g as u64 - 1);
-    let halves: Vec<f64> = (0..levels.len())
+    let variances: Vec<f64> = (0..levels.len())
         .map(|i| {
             let share = at_or_below[i] as f64 / n;
             let squares: f64 = per_group
@@ -269,10 +311,10 @@ fn woodruff_intervals(
                     residual * residual
                 })
                 .sum();
-            let variance = g as f64 / (g as f64 - 1.0) * squares / (n * n);
-            t * variance.sqrt()
+            g as f64 / (g as f64 - 1.0) * squares / (n * n)
         })
         .collect();
+    let halves: Vec<f64> = variances.iter().map(|v| t * v.sqrt()).collect();
     let bounds: Vec<f64> = levels
         .iter()
         .zip(&halves)
@@ -280,13 +322,16 @@ fn woodruff_intervals(
         .collect();
     let ends = all.sketch().interpolated_quantiles(&bounds);
     ends.chunks_exact(2)
-        .zip(values.iter().zip(&halves))
-        .map(|(end, (&value, &half))| {
-            if half == 0.0 {
-                [value, value]
+        .zip(values.iter().zip(&halves).zip(variances))
+        .map(|(end, ((&value, &half), variance))| {
+            // No group differs at this level (every value at or below it, say, when the top
+            // values share one bucket): the data place the quantile within its bucket, no closer.
+            let ci95 = if half == 0.0 {
+                all.sketch().around(value).bucket
             } else {
                 [end[0].min(value), end[1].max(value)]
-            }
+            };
+            (ci95, variance)
         })
         .collect()
 }

@@ -665,7 +665,13 @@ fn to_csv(bins: &[DistributionBin]) -> String {
         }
         if let Some(answer) = &bin.query {
             for q in answer.quantiles.values() {
-                let _ = write!(csv, ",{},{},{}", q.value, q.ci95[0], q.ci95[1]);
+                // A level the data cannot bound leaves its three cells empty.
+                match (q.value, q.ci95) {
+                    (Some(value), Some([lo, hi])) => {
+                        let _ = write!(csv, ",{value},{lo},{hi}");
+                    }
+                    _ => csv.push_str(",,,"),
+                }
             }
             for e in &answer.exceedance {
                 let _ = write!(csv, ",{},{},{}", e.probability, e.ci95[0], e.ci95[1]);

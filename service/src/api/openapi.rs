@@ -578,6 +578,45 @@ const OUTPUT_DESCRIPTIONS: &[(&str, &[(&str, &str)])] = &[
                 "ci95",
                 "95 % confidence interval of the quantile, [low, high]",
             ),
+            (
+                "reason",
+                "Present when the data cannot bound the level: why, and how many devices would",
+            ),
+        ],
+    ),
+    (
+        "QueryQuantile",
+        &[
+            (
+                "value",
+                "The quantile (within 0.2 %); null when the data cannot bound the level",
+            ),
+            (
+                "ci95",
+                "95 % confidence interval of the quantile, [low, high]; null with the value",
+            ),
+            ("reason", "Why there is no value, and what would give one"),
+        ],
+    ),
+    (
+        "ThresholdExceedance",
+        &[
+            (
+                "probability",
+                "Share of values strictly beyond the threshold",
+            ),
+            (
+                "ci95",
+                "95 % confidence interval of the probability, [low, high]",
+            ),
+            (
+                "resolution",
+                "exact: every value compared with the threshold; bucket: some share its sketch bucket, and the interval holds the truth whatever they are",
+            ),
+            (
+                "bucket",
+                "Bucket-limited only: the value range [low, high] of the bucket holding the threshold",
+            ),
         ],
     ),
     (

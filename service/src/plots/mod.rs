@@ -219,6 +219,7 @@ mod fixtures {
                 QuantileSummary {
                     value: v,
                     ci95: [v, v],
+                    reason: None,
                 },
             )
         })
