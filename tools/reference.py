@@ -22,7 +22,7 @@ DEFAULTS = {
     "material": {"youngs_modulus_pa": 1.0e11, "dynamic_yield_pressure_pa": 2.0e8, "contact_radius_m": 7.7e-3,
                  "kappa": None, "min_arc_voltage_v": 12, "min_arc_current_a": 0.4, "breakdown_field_v_per_m": 1e8,
                  "softening_energy_j": 6.2e-4,
-                 "arc_restitution": {"law": "paper", "a": 0.235, "b_s_per_m": 0.371, "calibration_current_a": 15}},
+                 "arc_restitution": {"law": "continuous", "a": 0.235, "b_s_per_m": 0.371, "calibration_current_a": 15}},
     "circuit": {"supply_voltage_v": 0, "current_a": 0},
     "losses": {"impact_energy_loss_j": 1e-6, "min_separation_m": 1e-7, "max_bounces": 64},
 }

@@ -102,9 +102,15 @@ impl ArcRestitution {
 
     /// The weight `w` of an arc of current `I_arc`: 1 under the paper law; under the continuous law
     /// 0 at the minimum arc current, rising linearly to 1 at the calibration current, and 1 above it.
+    /// A supply so close to the minimum arc voltage that the calibration current would not arc
+    /// (`I_cal <= I_min`) arcs only above the calibration current (the arc current is proportional
+    /// to the circuit current), so there `w = 1`.
     pub fn weight(&self, arc_current_a: f64, min_arc_current_a: f64) -> f64 {
         match self.law {
             ArcRestitutionLaw::Paper => 1.0,
+            ArcRestitutionLaw::Continuous {
+                calibration_arc_current_a,
+            } if calibration_arc_current_a <= min_arc_current_a => 1.0,
             ArcRestitutionLaw::Continuous {
                 calibration_arc_current_a,
             } => ((arc_current_a - min_arc_current_a)

@@ -96,7 +96,8 @@ pub struct MaterialSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ArcRestitutionSpec {
-    /// `paper` (eq. 16 whenever an arc burns) or `continuous` (scaled with the arc current).
+    /// `continuous` (the default: eq. 16 scaled with the arc current) or `paper` (eq. 16 whenever
+    /// an arc burns, with a cliff at the minimum arc current).
     pub law: ArcRestitutionLawKind,
     /// Coefficient `a` of eq. 16 (finite, magnitude at most 1e30).
     pub a: f64,
@@ -111,11 +112,14 @@ pub struct ArcRestitutionSpec {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ArcRestitutionLawKind {
-    /// Eq. 16 whenever an arc burns, whatever its current.
-    #[default]
+    /// Eq. 16 whenever an arc burns, whatever its current: restitution jumps where the arc current
+    /// crosses the minimum arc current (at 48 V the total bounce time falls from 28.6 ms at
+    /// 0.5333 A to 13.3 ms at 0.5334 A), so a scattered current near it gives a bimodal result.
     Paper,
-    /// The arc's effect on restitution grows linearly with the arc current, from none at the
-    /// minimum arc current to eq. 16 at the calibration current.
+    /// The default. The arc's effect on restitution grows linearly with the arc current, from none
+    /// at the minimum arc current to eq. 16 at the calibration current, and is eq. 16 to the bit
+    /// at the calibration current and above (the paper measured 15 A only).
+    #[default]
     Continuous,
 }
 
@@ -207,7 +211,7 @@ impl Default for MaterialSpec {
 impl Default for ArcRestitutionSpec {
     fn default() -> Self {
         Self {
-            law: ArcRestitutionLawKind::Paper,
+            law: ArcRestitutionLawKind::Continuous,
             a: 0.235,
             b_s_per_m: 0.371,
             calibration_current_a: 15.0,
@@ -399,7 +403,6 @@ fn check_spec(spec: &ScenarioSpec, root: &Pointer, errors: &mut Vec<FieldError>)
     ] {
         check_number(errors, pointer, value, rule);
     }
-    check_calibration_arcs(spec, &at_law, errors);
     if wear.law == WearLawKind::RougheningAndSoftening
         && wear.worn_pressure_pa > mat.dynamic_yield_pressure_pa
     {
@@ -454,33 +457,6 @@ fn check_spec(spec: &ScenarioSpec, root: &Pointer, errors: &mut Vec<FieldError>)
             detail: format!(
                 "must be from 1 to {MAX_BOUNCES_LIMIT}, got {}",
                 losses.max_bounces
-            ),
-        });
-    }
-}
-
-/// The continuous post-arc law interpolates between the minimum arc current and the arc current at
-/// the calibration current (docs/model.md section 5), so wherever the supply can arc at all, it must
-/// arc at the calibration current.
-fn check_calibration_arcs(spec: &ScenarioSpec, at_law: &Pointer, errors: &mut Vec<FieldError>) {
-    let (mat, circuit) = (&spec.material, &spec.circuit);
-    if mat.arc_restitution.law != ArcRestitutionLawKind::Continuous
-        || circuit.supply_voltage_v <= mat.min_arc_voltage_v
-    {
-        return;
-    }
-    let calibration_arc_current_a = crate::arc::arc_current_a(
-        mat.arc_restitution.calibration_current_a,
-        circuit.supply_voltage_v,
-        mat.min_arc_voltage_v,
-    );
-    if calibration_arc_current_a <= mat.min_arc_current_a {
-        errors.push(FieldError {
-            pointer: at_law.child("calibration_current_a").to_string(),
-            detail: format!(
-                "must make an arc under the continuous law: at {} V its arc current is {calibration_arc_current_a} A, \
-                 not above min_arc_current_a ({} A)",
-                circuit.supply_voltage_v, mat.min_arc_current_a
             ),
         });
     }
@@ -588,10 +564,6 @@ mod tests {
             ),
             (
                 r#"{"material":{"arc_restitution":{"calibration_current_a":0}}}"#,
-                "/material/arc_restitution/calibration_current_a",
-            ),
-            (
-                r#"{"material":{"arc_restitution":{"law":"continuous","calibration_current_a":0.5}},"circuit":{"supply_voltage_v":48}}"#,
                 "/material/arc_restitution/calibration_current_a",
             ),
             (

@@ -164,3 +164,46 @@ fn the_continuous_law_is_mechanical_as_the_arc_current_falls_to_its_minimum() {
         assert!((got - want).abs() <= 1e-9 * want, "{got} vs {want}");
     }
 }
+
+/// The default rig at 48 V with the scenario's default post-arc law (no `law` given).
+fn at_48_v_by_default(current_a: f64) -> Simulation {
+    let text = format!(r#"{{"circuit": {{"supply_voltage_v": 48, "current_a": {current_a}}}}}"#);
+    simulate(&Scenario::from_json(&text).unwrap(), Fidelity::Exact)
+}
+
+#[test]
+fn the_default_law_has_no_cliff_across_the_minimum_arc_current() {
+    // From 0.50 A to 0.57 A in steps of 0.1 mA, across I_0 = 0.5333 A where the paper law drops
+    // the total bounce time from 28.6 ms to 13.3 ms: the default law is the continuous one, so
+    // no step moves the time by more than three times its neighbours'.
+    let default: Vec<Outcome> = (0..=700)
+        .map(|i| at_48_v_by_default(0.5 + f64::from(i) * 1e-4).outcome)
+        .collect();
+    let continuous: Vec<Outcome> = (0..=700)
+        .map(|i| {
+            at_48_v(
+                0.5 + f64::from(i) * 1e-4,
+                "continuous",
+                DEFAULT_MIN_SEPARATION_M,
+            )
+            .outcome
+        })
+        .collect();
+    assert_eq!(
+        default, continuous,
+        "the default is the continuous law, to the bit"
+    );
+    assert_eq!(jumps(&default), Vec::<usize>::new());
+    let (below, above) = (&default[333], &default[334]);
+    assert!(
+        (below.total_bounce_s - above.total_bounce_s).abs() < 0.01e-3,
+        "{} ms -> {} ms",
+        below.total_bounce_s * 1e3,
+        above.total_bounce_s * 1e3
+    );
+    // At 15 A, the only current the paper measured, it is the paper's law to the bit.
+    assert_eq!(
+        at_48_v_by_default(15.0),
+        at_48_v(15.0, "paper", DEFAULT_MIN_SEPARATION_M)
+    );
+}

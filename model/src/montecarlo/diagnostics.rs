@@ -218,15 +218,16 @@ mod tests {
     #[test]
     fn the_paper_law_far_from_15_a_warns_and_the_continuous_law_does_not() {
         let found = diagnose_json(
-            r#"{"scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 0.6}}}"#,
+            r#"{"scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 0.6},
+                "material": {"arc_restitution": {"law": "paper"}}}}"#,
         );
         assert_eq!(found.len(), 1);
         assert_eq!(found[0].pointer, "/scenario/circuit/current_a");
         assert!(found[0].detail.contains("0.6 A"), "{}", found[0].detail);
+        // The continuous law is the default.
         assert!(
             diagnose_json(
-                r#"{"scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 0.6},
-                    "material": {"arc_restitution": {"law": "continuous"}}}}"#
+                r#"{"scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 0.6}}}"#
             )
             .is_empty()
         );
@@ -285,7 +286,8 @@ mod tests {
     #[test]
     fn a_scattered_current_warns_at_its_tails() {
         let found = diagnose_json(
-            r#"{"scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+            r#"{"scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15},
+                             "material": {"arc_restitution": {"law": "paper"}}},
                 "scatter": [{"parameter": "current_a", "per": "device",
                              "distribution": {"kind": "uniform", "min": 10, "max": 40}}]}"#,
         );

@@ -6,7 +6,7 @@ use super::distribution::{Distribution, DistributionSpec, Domain};
 use super::metric::{DeviceMetric, Metric, OperationMetric};
 use crate::error::{FieldError, InvalidInput, Pointer};
 use crate::operation::Fidelity;
-use crate::scenario::{ArcRestitutionLawKind, Scenario, ScenarioSpec, WearLawKind};
+use crate::scenario::{Scenario, ScenarioSpec, WearLawKind};
 use crate::stats::Threshold;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -821,24 +821,6 @@ fn domain(parameter: Parameter, scenario: &Scenario, scattered: &[ScatterSpec]) 
             if mech.static_force_n == 0.0 || is_scattered(Parameter::StaticForce) =>
         {
             Domain::POSITIVE
-        }
-        // Under the continuous law, a supply that can arc must arc at the calibration current:
-        // `I_c (V - V_min) / V > I_min` holds above `V = V_min I_c / (I_c - I_min)`.
-        Parameter::SupplyVoltage
-            if mat.arc_restitution.law == ArcRestitutionLawKind::Continuous =>
-        {
-            let (calibration_a, min_a) = (
-                mat.arc_restitution.calibration_current_a,
-                mat.min_arc_current_a,
-            );
-            Domain {
-                lower: if calibration_a > min_a {
-                    mat.min_arc_voltage_v * calibration_a / (calibration_a - min_a)
-                } else {
-                    f64::INFINITY
-                },
-                inclusive: false,
-            }
         }
         Parameter::ArcRestitutionA | Parameter::ArcRestitutionB => Domain::FINITE,
         Parameter::ImpactVelocity
