@@ -316,7 +316,7 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
         out.to_str().unwrap(),
     ]);
     assert!(
-        shown.contains("25/25 measurements") && shown.contains("ETA"),
+        shown.contains("26/26 measurements") && shown.contains("ETA"),
         "{shown}"
     );
     let report: Value =
@@ -345,6 +345,17 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
             "{row}"
         );
         assert_eq!(row["seeds"], 7, "{row}");
+    }
+    // Exceedance in the tail against the exact normal tail: counted as the job ran, and asked
+    // after it (bucket-limited, so it holds the truth at least as often).
+    let tail = report["tail_coverage"].as_array().unwrap();
+    assert_eq!(tail.len(), 2);
+    for row in tail {
+        assert_eq!(row["values"], 1_000_000, "{row}");
+        assert!(
+            (0.0..=1.0).contains(&row["coverage"].as_f64().unwrap()),
+            "{row}"
+        );
     }
     let refused = bouncewear(&["bench", "--coverage-seeds", "0"], "");
     assert!(!refused.status.success());
