@@ -121,9 +121,17 @@ impl ValidSchedule {
                 })
             })
             .ok();
-        if let Some(gap) = timetable
+        if timetable
             .as_ref()
-            .and_then(|t| t.gap_below(limits.min_interval, now))
+            .is_some_and(|t| t.next_after(now).is_none())
+        {
+            errors.push(FieldError {
+                pointer: "/cron".into(),
+                detail: "never runs: no date matches it (e.g. February 30)".into(),
+            });
+        } else if let Some(gap) = timetable
+            .as_ref()
+            .and_then(|t| t.on_the_wall_clock().gap_below(limits.min_interval, now))
         {
             errors.push(FieldError {
                 pointer: "/cron".into(),
@@ -214,6 +222,18 @@ impl Timetable {
             cron: parsed,
             time_zone,
         })
+    }
+
+    /// The same cron on the wall clock alone, without the time zone's DST changes: the schedule
+    /// as its author wrote it. The minimum interval between runs is a rule about that schedule;
+    /// a daily run that the spring-forward gap moves to just after the gap (23 h or, in
+    /// Lord Howe's half-hour change, 30 min from a neighbour) is the zone's artefact, not the
+    /// author's cron.
+    pub fn on_the_wall_clock(&self) -> Self {
+        Self {
+            cron: self.cron.clone(),
+            time_zone: Tz::UTC,
+        }
     }
 
     /// Two consecutive runs less than `min` apart, within the year and a day after `now` (every
@@ -594,12 +614,42 @@ mod tests {
             min_interval: TimeDelta::hours(24),
             ..HOURLY
         };
-        // The night the clocks go forward, two 03:00 runs in Berlin are 23 h apart.
+        // The night the clocks go forward, two 03:00 runs in Berlin are 23 h apart: the zone's
+        // doing, not the cron's, which runs once a day on the wall clock.
         let body =
             r#"{"name": "n", "cron": "0 3 * * *", "time_zone": "Europe/Berlin", "template": {}}"#;
-        assert!(ValidSchedule::parse(body, day, now).is_err());
+        assert!(ValidSchedule::parse(body, day, now).is_ok());
         let utc_body = r#"{"name": "n", "cron": "0 3 * * *", "template": {}}"#;
         assert!(ValidSchedule::parse(utc_body, day, now).is_ok());
+    }
+
+    /// A plain nightly cron is accepted in every IANA zone, half-hour DST changes and midnight
+    /// changes included: the minimum interval is measured on the wall clock's schedule.
+    #[test]
+    fn a_daily_cron_is_accepted_in_every_time_zone() {
+        let now = utc("2026-11-22T08:00:00Z");
+        for zone in chrono_tz::TZ_VARIANTS {
+            for cron in ["30 1 * * *", "0 0 * * *", "30 2 * * *", "0 3 * * *"] {
+                let body = format!(
+                    r#"{{"name": "n", "cron": "{cron}", "time_zone": "{}", "template": {{}}}}"#,
+                    zone.name()
+                );
+                let parsed = ValidSchedule::parse(&body, HOURLY, now);
+                assert!(parsed.is_ok(), "{cron} in {}: {parsed:?}", zone.name());
+            }
+        }
+    }
+
+    #[test]
+    fn a_cron_that_never_runs_is_refused() {
+        let now = utc("2026-11-22T08:00:00Z");
+        let body = r#"{"name": "n", "cron": "0 0 30 2 *", "template": {}}"#;
+        let invalid = ValidSchedule::parse(body, HOURLY, now).unwrap_err();
+        assert_eq!(invalid.pointers(), ["/cron"], "{invalid:?}");
+        assert!(
+            invalid.errors()[0].detail.contains("never runs"),
+            "{invalid:?}"
+        );
     }
 
     #[test]
