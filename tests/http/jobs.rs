@@ -123,7 +123,7 @@ fn jobs_are_listed_newest_first_with_cursor_paging() {
 }
 
 #[test]
-fn cancelling_stops_a_running_job_and_a_second_delete_deletes_it() {
+fn cancelling_stops_a_running_job_a_retried_cancel_keeps_it_and_a_purge_deletes_it() {
     let server = TestApp::start(&temp_db("cancel"), &[]);
     let id = server.submit(&scattered_job(200_000, 1000, 1));
     server.wait_for(&id, "running", Duration::from_secs(10));
@@ -143,7 +143,24 @@ fn cancelling_stops_a_running_job_and_a_second_delete_deletes_it() {
         get(&server.url(&format!("/v1/jobs/{id}")), None).json()["status"],
         "cancelled"
     );
-    assert_eq!(delete(&server.url(&format!("/v1/jobs/{id}"))).status, 204);
+    // A retried cancel changes nothing: the record stays.
+    let again = delete(&server.url(&format!("/v1/jobs/{id}")));
+    assert_eq!(
+        (again.status, again.json()["status"].as_str()),
+        (200, Some("cancelled"))
+    );
+    assert_eq!(
+        get(&server.url(&format!("/v1/jobs/{id}")), None).json()["status"],
+        "cancelled"
+    );
+    assert_problem(
+        &delete(&server.url(&format!("/v1/jobs/{id}?purge=maybe"))),
+        400,
+    );
+    assert_eq!(
+        delete(&server.url(&format!("/v1/jobs/{id}?purge=true"))).status,
+        204
+    );
     assert_problem(&get(&server.url(&format!("/v1/jobs/{id}")), None), 404);
 }
 

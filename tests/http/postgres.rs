@@ -50,7 +50,10 @@ fn jobs_results_and_schedules_work_the_same_on_postgres() {
     let long = server.submit(&scattered_job(200_000, 1000, 1));
     assert_eq!(delete(&server.url(&format!("/v1/jobs/{long}"))).status, 200);
     assert_eq!(server.list_job_ids(1), [long.clone(), id.clone()]);
-    assert_eq!(delete(&server.url(&format!("/v1/jobs/{long}"))).status, 204);
+    assert_eq!(
+        delete(&server.url(&format!("/v1/jobs/{long}?purge=true"))).status,
+        204
+    );
     assert_eq!(server.list_job_ids(1), std::slice::from_ref(&id));
 
     let wearing = server.submit(&wearing_template(48.0));

@@ -357,16 +357,28 @@ pub async fn get_shards(
     }))
 }
 
-/// Cancel a queued or running job; delete a job that ended, with everything stored for it.
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct DeleteQuery {
+    /// `true`: delete a job that ended, a cancelled one included, with everything stored for it.
+    /// Without it, a cancelled job is kept, so a retried cancel never destroys the record.
+    #[param(example = false)]
+    pub purge: Option<bool>,
+}
+
+/// Cancel a queued or running job; delete a job that succeeded or failed, with everything stored
+/// for it.
 ///
 /// A queued or running job is cancelled and its resource returned (200): workers stop at their next
-/// check. A job that already ended is deleted with its result, distributions and device lives
-/// (204); a later GET is 404.
+/// check. A cancelled job is returned as it is (200): a retried cancel changes nothing. A job that
+/// succeeded or failed is deleted with its result, distributions and device lives (204); a later
+/// GET is 404. `purge=true` deletes any job that ended, a cancelled one too (204).
 #[utoipa::path(
-    delete, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "Job id")),
+    delete, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "Job id"), DeleteQuery),
     responses(
-        (status = 200, description = "Cancelled", body = JobResource),
+        (status = 200, description = "Cancelled, now or before", body = JobResource),
         (status = 204, description = "The job had ended: deleted, with its result, distributions and device lives"),
+        (status = 400, description = "A malformed `purge`", body = Problem, content_type = PROBLEM),
         Unauthorized,
         NoSuchJob,
     ),
@@ -376,7 +388,10 @@ pub async fn cancel_job(
     State(state): State<AppState>,
     Extension(owner): Extension<Owner>,
     Path(id): Path<JobId>,
+    query: Result<Query<DeleteQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
+    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let purge = query.purge.unwrap_or(false);
     match state.store.cancel(&owner, &id, UnixMs::now()).await {
         Ok(record) => {
             metrics::counter!("bouncewear_jobs_finished_total", "status" => "cancelled")
@@ -384,6 +399,10 @@ pub async fn cancel_job(
             Ok(Json(JobResource::from_record(&record)).into_response())
         }
         Err(StoreError::Conflict(_)) => {
+            let record = state.store.job(&owner, &id).await?;
+            if record.status == JobStatus::Cancelled && !purge {
+                return Ok(Json(JobResource::from_record(&record)).into_response());
+            }
             state.store.delete_job(&owner, &id).await?;
             Ok(StatusCode::NO_CONTENT.into_response())
         }
@@ -796,8 +815,10 @@ pub async fn stored_result(state: &AppState, id: &JobId) -> Result<JobResult, Ap
         .ok_or_else(|| without_result(id))
 }
 
+/// A succeeded job's result is stored with it and deleted with it: missing, the job was deleted
+/// while the request ran (a DELETE racing this GET), so the job is not found.
 fn without_result(id: &JobId) -> ApiError {
-    ApiError::Internal(Internal(format!("job {id} succeeded without a result")))
+    ApiError::NotFound(format!("job {id} was deleted while this request ran"))
 }
 
 /// Server-Sent Events: `progress` events while the job runs, then one `status` event when it ends.

@@ -389,7 +389,12 @@ pub async fn schedule_trend(
     let mut results = Vec::with_capacity(runs.len());
     for run in &runs {
         results.push(match run.status {
-            JobStatus::Succeeded => Some(stored_result(state, &run.job_id).await?),
+            // A run's job deleted meanwhile has no result to read, like one that failed.
+            JobStatus::Succeeded => match stored_result(state, &run.job_id).await {
+                Ok(result) => Some(result),
+                Err(ApiError::NotFound(_)) => None,
+                Err(error) => return Err(error),
+            },
             _ => None,
         });
     }
