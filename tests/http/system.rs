@@ -283,3 +283,106 @@ fn readiness_turns_503_below_the_free_disk_threshold() {
         "alive all the same"
     );
 }
+
+#[test]
+fn a_deleted_database_file_refuses_writes_and_acknowledges_nothing() {
+    let database = temp_db("deleted-writes");
+    let server = TestApp::start(&database, &[]);
+    let job = json!({"devices": 2, "operations": 2, "seed": 1}).to_string();
+    assert_eq!(post(&server.url("/v1/jobs"), &job, None).status, 202);
+    std::fs::remove_file(&database).unwrap();
+    for _ in 0..5 {
+        let refused = post(&server.url("/v1/jobs"), &job, None);
+        let problem = assert_problem(&refused, 503);
+        assert!(refused.header("retry-after").is_some());
+        assert!(
+            problem["detail"].as_str().unwrap().contains("gone"),
+            "{problem}"
+        );
+    }
+    assert_problem(&get(&server.url("/readyz"), None), 503);
+    assert_eq!(get(&server.url("/healthz"), None).status, 200);
+}
+
+/// A tmpfs of `size` mounted at a fresh directory for one test, unmounted when dropped; `None`
+/// (after a loud notice) where this process may not mount one (not root, or no `mount`).
+struct SmallDisk(std::path::PathBuf);
+
+impl SmallDisk {
+    fn mount(name: &str, size: &str) -> Option<Self> {
+        let dir = crate::support::temp_dir(name);
+        let mounted = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
+            .arg(&dir)
+            .status()
+            .is_ok_and(|status| status.success());
+        if !mounted {
+            eprintln!("SKIPPED: {name} needs to mount a tmpfs (root and `mount`)");
+            return None;
+        }
+        Some(Self(dir))
+    }
+
+    /// Writes a file until the disk is full, then gives back `room` bytes.
+    fn fill(&self, room: u64) -> std::path::PathBuf {
+        let path = self.0.join("filler");
+        let mut file = std::fs::File::create(&path).unwrap();
+        let chunk = vec![0_u8; 64 * 1024];
+        while file.write_all(&chunk).is_ok() {}
+        let _ = file.sync_all();
+        let written = std::fs::metadata(&path).unwrap().len();
+        file.set_len(written.saturating_sub(room)).unwrap();
+        path
+    }
+}
+
+impl Drop for SmallDisk {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount").arg(&self.0).status();
+    }
+}
+
+/// Issue 30's fault: submissions while the database's disk is full. Some are refused (503), and
+/// every one acknowledged (202) is there, runs to the end once room is made, and is still there
+/// after a restart; the queue recovers without one.
+#[test]
+fn a_full_disk_loses_no_acknowledged_job_and_the_queue_recovers_by_itself() {
+    let Some(disk) = SmallDisk::mount("full-disk", "20m") else {
+        return;
+    };
+    let database = disk.0.join("bouncewear.db");
+    // No free-space threshold: the writes themselves meet the full disk.
+    let args = ["--min-free-disk-mb", "0", "--max-retries", "1000"];
+    let mut acknowledged = Vec::new();
+    {
+        let server = TestApp::start(&database, &args);
+        let filler = disk.fill(64 * 1024);
+        let mut refused = 0;
+        for seed in 0..60 {
+            let job = json!({"devices": 2, "operations": 20, "seed": seed}).to_string();
+            let reply = post(&server.url("/v1/jobs"), &job, None);
+            match reply.status {
+                202 => acknowledged.push(reply.json()["id"].as_str().unwrap().to_owned()),
+                503 => refused += 1,
+                status => panic!("{status}: {}", reply.body),
+            }
+        }
+        eprintln!(
+            "disk full: {} acknowledged, {refused} refused",
+            acknowledged.len()
+        );
+        std::fs::remove_file(filler).unwrap();
+        // Room again: the queue goes on by itself, and new work is taken.
+        let after = server.submit(&json!({"devices": 2, "operations": 20, "seed": 99}));
+        acknowledged.push(after);
+        for id in &acknowledged {
+            server.wait_for(id, "succeeded", Duration::from_secs(60));
+        }
+        assert_eq!(get(&server.url("/readyz"), None).status, 200);
+    }
+    let server = TestApp::start(&database, &args);
+    for id in &acknowledged {
+        let job = get(&server.url(&format!("/v1/jobs/{id}")), None);
+        assert_eq!(job.json()["status"], "succeeded", "{id}: {}", job.body);
+    }
+}

@@ -36,7 +36,7 @@ use sqlx::sqlite::{
     SqliteArguments, SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions,
     SqliteSynchronous,
 };
-use sqlx::{Row, Sqlite, SqliteConnection};
+use sqlx::{Connection, Row, Sqlite, SqliteConnection};
 use std::ffi::CString;
 use std::mem::MaybeUninit;
 use std::os::unix::ffi::OsStrExt;
@@ -71,6 +71,15 @@ impl SqliteStore {
         MIGRATOR.run(&writer).await?;
         backfill_seeds(&writer).await?;
         backfill_shards(&writer).await?;
+        let file = DatabaseFile::opened(options.get_filename());
+        let writer = match &file {
+            Some(_) => {
+                writer.close().await;
+                recovering_writer(options.clone().create_if_missing(false)).await?
+            }
+            // An in-memory database lives in its one connection: never closed, never reopened.
+            None => writer,
+        };
         let readers = SqlitePoolOptions::new()
             .max_connections(4)
             .connect_with(options.clone().read_only(true))
@@ -78,9 +87,49 @@ impl SqliteStore {
         Ok(Self {
             writer,
             readers,
-            file: DatabaseFile::opened(options.get_filename()),
+            file,
         })
     }
+
+    /// Refuses to acknowledge a write that went into a file no longer at the database's path
+    /// (deleted or replaced while serving): what it wrote is out of every later reader's reach.
+    fn acknowledge(&self) -> StoreResult<()> {
+        match &self.file {
+            Some(file) => file.still_there(),
+            None => Ok(()),
+        }
+    }
+
+    /// The writer, once the database's path still leads to the file the server opened: writes to
+    /// a deleted or replaced file are refused (503 with Retry-After), never acknowledged.
+    fn writer(&self) -> StoreResult<&SqlitePool> {
+        self.acknowledge()?;
+        Ok(&self.writer)
+    }
+}
+
+/// The one writer connection of a database file, which recovers from any failed statement: it is
+/// closed when it comes back to the pool still inside a transaction. A COMMIT that fails (a full
+/// disk) can leave SQLite's transaction rolled back and sqlx's count of open transactions at one;
+/// every later BEGIN would then be a savepoint inside a transaction that never commits,
+/// acknowledging writes that vanish. A fresh connection starts clean, and never creates a missing
+/// file (the store checks the file before each write: [`SqliteStore::writer`]).
+async fn recovering_writer(options: SqliteConnectOptions) -> StoreResult<SqlitePool> {
+    let pool = SqlitePoolOptions::new()
+        .max_connections(1)
+        .after_release(|connection, _| {
+            Box::pin(async move {
+                // The ping runs behind any rollback a dropped transaction queued, so the count
+                // of open transactions is settled when it answers.
+                if connection.ping().await.is_err() {
+                    return Ok(false);
+                }
+                Ok(!connection.is_in_transaction())
+            })
+        })
+        .connect_with(options)
+        .await?;
+    Ok(pool)
 }
 
 /// The database file as the store opened it: connections keep writing to the file they opened,
@@ -102,7 +151,8 @@ impl DatabaseFile {
         })
     }
 
-    fn check(&self, min_free_bytes: u64) -> StoreResult<()> {
+    /// Whether the path still leads to the file opened.
+    fn still_there(&self) -> StoreResult<()> {
         let now = std::fs::metadata(&self.path).map_err(|error| {
             StoreError::NotReady(format!("the database file is gone from its path ({error})"))
         })?;
@@ -112,6 +162,11 @@ impl DatabaseFile {
                     .to_owned(),
             ));
         }
+        Ok(())
+    }
+
+    fn check(&self, min_free_bytes: u64) -> StoreResult<()> {
+        self.still_there()?;
         let directory = match self.path.parent() {
             Some(parent) if !parent.as_os_str().is_empty() => parent,
             _ => Path::new("."),
@@ -384,7 +439,7 @@ impl SqliteStore {
         let distributions: Vec<_> = distribution_rows(result).collect();
         let mut bytes = 0;
         for chunk in distributions.chunks(rows::DISTRIBUTIONS_PER_WRITE) {
-            let mut tx = self.writer.begin().await?;
+            let mut tx = self.writer()?.begin().await?;
             if !holds(&mut tx, fence).await? {
                 tx.rollback().await?;
                 return Ok(None);
@@ -410,7 +465,7 @@ impl SqliteStore {
             .as_ref()
             .map_or(&[][..], |life| &life.devices[..]);
         for chunk in lives.chunks(rows::LIVES_PER_WRITE) {
-            let mut tx = self.writer.begin().await?;
+            let mut tx = self.writer()?.begin().await?;
             if !holds(&mut tx, fence).await? {
                 tx.rollback().await?;
                 return Ok(None);
@@ -487,13 +542,14 @@ impl JobQueue for SqliteStore {
         job: QueuedJob,
         bound: QueueBound,
     ) -> StoreResult<Option<JobRecord>> {
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         if !insert_queued(&mut tx, &job, bound).await? {
             tx.rollback().await?;
             return Ok(None);
         }
         let record = select_job(&mut *tx, &job.owner, &job.id).await?;
         tx.commit().await?;
+        self.acknowledge()?;
         Ok(Some(record))
     }
 
@@ -505,7 +561,7 @@ impl JobQueue for SqliteStore {
         key: &IdempotencyKey,
         now: UnixMs,
     ) -> StoreResult<Option<Once<JobRecord>>> {
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         if let Some((fingerprint, id)) = remembered(&mut tx, &job.owner, "jobs", key, now).await? {
             let once = if fingerprint == key.fingerprint {
                 Once::Replayed(select_job(&mut *tx, &job.owner, &JobId::from(id)).await?)
@@ -522,6 +578,7 @@ impl JobQueue for SqliteStore {
         remember(&mut tx, &job.owner, Created::Job(&job.id), key, now).await?;
         let record = select_job(&mut *tx, &job.owner, &job.id).await?;
         tx.commit().await?;
+        self.acknowledge()?;
         Ok(Some(Once::Created(record)))
     }
 
@@ -574,13 +631,13 @@ impl JobQueue for SqliteStore {
         .bind(id.as_str())
         .bind(owner.as_str())
         .bind(now.0)
-        .fetch_optional(&self.writer)
+        .fetch_optional(self.writer()?)
         .await?;
         if let Some(row) = row {
-            drop_unfinished(&mut *self.writer.acquire().await?, id).await?;
+            drop_unfinished(&mut *self.writer()?.acquire().await?, id).await?;
             return Ok(job_from_row(&row)?);
         }
-        let ended = select_job(&self.writer, owner, id).await?;
+        let ended = select_job(self.writer()?, owner, id).await?;
         Err(StoreError::Conflict(format!(
             "job {id} already ended: {}",
             ended.status.as_str()
@@ -589,7 +646,7 @@ impl JobQueue for SqliteStore {
 
     #[tracing::instrument(skip_all, fields(job = %id))]
     async fn delete_job(&self, owner: &Owner, id: &JobId) -> StoreResult<()> {
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         let deleted = sqlx::query(DELETE_ENDED_JOB)
             .bind(id.as_str())
             .bind(owner.as_str())
@@ -609,7 +666,7 @@ impl JobQueue for SqliteStore {
 
     #[tracing::instrument(skip_all)]
     async fn prune_jobs(&self, ended_before: UnixMs) -> StoreResult<u64> {
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         sqlx::query(PRUNE_RUNS)
             .bind(ended_before.0)
             .execute(&mut *tx)
@@ -631,7 +688,7 @@ impl JobQueue for SqliteStore {
     ) -> StoreResult<Option<Claim>> {
         // It reads before it writes: take the write lock first, so that instances sharing the file
         // wait on `busy_timeout` rather than fail to upgrade a read.
-        let mut tx = self.writer.begin_with("BEGIN IMMEDIATE").await?;
+        let mut tx = self.writer()?.begin_with("BEGIN IMMEDIATE").await?;
         give_up_on_exhausted(&mut tx, terms.now, retries).await?;
         let claimed = sqlx::query(
             "UPDATE shards SET status = 'running', attempt = attempt + 1, lease_owner = ?1, lease_until = ?2 + ?3, \
@@ -682,7 +739,7 @@ impl JobQueue for SqliteStore {
         terms: LeaseTerms,
         operations_done: u64,
     ) -> StoreResult<Lease> {
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         let updated = fenced(
             concat!(
                 "UPDATE shards SET lease_until = ?5 + ?6, operations_done = ?7 WHERE ",
@@ -716,7 +773,7 @@ impl JobQueue for SqliteStore {
     async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool> {
         let partial = partial_to_sql(stats)?;
         let partial_bytes = partial.len() as u64;
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         let updated = fenced(
             concat!(
                 "UPDATE shards SET status = 'done', partial = ?5, operations_done = operations_total, \
@@ -753,7 +810,7 @@ impl JobQueue for SqliteStore {
             .iter()
             .map(partial_to_sql)
             .collect::<StoreResult<Vec<_>>>()?;
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         if !finish_shard(&mut tx, fence).await? {
             tx.rollback().await?;
             return Ok(false);
@@ -790,7 +847,7 @@ impl JobQueue for SqliteStore {
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool> {
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         if !finish_shard(&mut tx, fence).await? {
             tx.rollback().await?;
             return Ok(false);
@@ -808,7 +865,7 @@ impl JobQueue for SqliteStore {
         error: &str,
         retries: u64,
     ) -> StoreResult<bool> {
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         let failures: Option<i64> = fenced(
             concat!(
                 "UPDATE shards SET status = 'queued', failures = failures + 1, error = ?5, operations_done = 0, \
@@ -840,7 +897,7 @@ impl JobQueue for SqliteStore {
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn release(&self, fence: &Fence) -> StoreResult<bool> {
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         let updated = fenced(
             concat!(
                 "UPDATE shards SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 WHERE ",
@@ -894,7 +951,7 @@ impl JobQueue for SqliteStore {
         }
         sqlx::query(READINESS_WRITE)
             .bind(now.0)
-            .execute(&self.writer)
+            .execute(self.writer()?)
             .await?;
         let applied = sqlx::query_scalar(LATEST_APPLIED_MIGRATION)
             .fetch_one(&self.readers)
@@ -920,7 +977,7 @@ impl Results for SqliteStore {
             return Ok(None);
         };
         let result_bytes = text.len() as u64 + row_bytes;
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         if !finish_shard(&mut tx, fence).await? {
             tx.rollback().await?;
             return Ok(None);
@@ -1025,7 +1082,7 @@ impl Schedules for SqliteStore {
     #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
     async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
         bind_schedule(sqlx::query(INSERT_SCHEDULE), schedule)?
-            .execute(&self.writer)
+            .execute(self.writer()?)
             .await?;
         Ok(())
     }
@@ -1038,7 +1095,7 @@ impl Schedules for SqliteStore {
         now: UnixMs,
     ) -> StoreResult<Once<ScheduleRecord>> {
         let owner = &schedule.owner;
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         if let Some((fingerprint, id)) = remembered(&mut tx, owner, "schedules", key, now).await? {
             tx.commit().await?;
             if fingerprint != key.fingerprint {
@@ -1065,7 +1122,7 @@ impl Schedules for SqliteStore {
         ))
         .bind(id.as_str())
         .bind(owner.as_str())
-        .fetch_optional(&self.writer)
+        .fetch_optional(self.writer()?)
         .await?
         .ok_or_else(|| StoreError::schedule_not_found(id))?;
         schedule_from_row(&row)
@@ -1091,7 +1148,7 @@ impl Schedules for SqliteStore {
              enabled = ?8, next_run_at = ?9, created_at = ?10, updated_at = ?11 WHERE id = ?1 AND owner = ?2",
         );
         let updated = bind_schedule(update, schedule)?
-            .execute(&self.writer)
+            .execute(self.writer()?)
             .await?;
         if updated.rows_affected() == 0 {
             return Err(StoreError::schedule_not_found(&schedule.id));
@@ -1104,7 +1161,7 @@ impl Schedules for SqliteStore {
         let deleted = sqlx::query("DELETE FROM schedules WHERE id = ?1 AND owner = ?2")
             .bind(id.as_str())
             .bind(owner.as_str())
-            .execute(&self.writer)
+            .execute(self.writer()?)
             .await?;
         if deleted.rows_affected() == 0 {
             return Err(StoreError::schedule_not_found(id));
@@ -1120,7 +1177,7 @@ impl Schedules for SqliteStore {
             " FROM schedules WHERE enabled = 1 AND next_run_at <= ?1 ORDER BY next_run_at"
         ))
         .bind(now.0)
-        .fetch_all(&self.writer)
+        .fetch_all(self.writer()?)
         .await?;
         rows.iter().map(schedule_from_row).collect()
     }
@@ -1132,7 +1189,7 @@ impl Schedules for SqliteStore {
         job: QueuedJob,
         bound: QueueBound,
     ) -> StoreResult<NewRun> {
-        let mut tx = self.writer.begin().await?;
+        let mut tx = self.writer()?.begin().await?;
         // Claim the slot first: the primary key decides who runs this night.
         let claimed = sqlx::query(
             "INSERT OR IGNORE INTO schedule_runs (schedule_id, scheduled_for, job_id, manual) VALUES (?1, ?2, ?3, ?4)",
@@ -1169,7 +1226,7 @@ impl Schedules for SqliteStore {
         .bind(id.as_str())
         .bind(from.map(|t| t.0))
         .bind(to.map(|t| t.0))
-        .execute(&self.writer)
+        .execute(self.writer()?)
         .await?;
         Ok(updated.rows_affected() == 1)
     }
