@@ -45,14 +45,26 @@ fn any_quantile_and_threshold_are_answered_after_the_run_with_intervals() {
             query["quantiles"]["0.5"], bin["quantiles"]["p50"],
             "level 0.5 is the job's own p50"
         );
-        for level in ["0.5", "0.999"] {
-            let value = query["quantiles"][level]["value"].as_f64().unwrap();
-            let [lo, hi] = pair(&query["quantiles"][level]["ci95"]);
-            assert!(
-                min <= lo && lo <= value && value <= hi && hi <= max,
-                "{level}: {query}"
-            );
-        }
+        let value = query["quantiles"]["0.5"]["value"].as_f64().unwrap();
+        let [lo, hi] = pair(&query["quantiles"]["0.5"]["ci95"]);
+        assert!(
+            min <= lo && lo <= value && value <= hi && hi <= max,
+            "0.5: {query}"
+        );
+        // 64 devices of 40 operations are at most 2560 values, 2.6 beyond a level of 0.999: the
+        // data cannot bound it, and the answer says so instead of ending at the maximum.
+        let extreme = &query["quantiles"]["0.999"];
+        assert!(
+            extreme["value"].is_null() && extreme["ci95"].is_null(),
+            "{extreme}"
+        );
+        assert!(
+            extreme["reason"]
+                .as_str()
+                .unwrap()
+                .contains("beyond the data"),
+            "{extreme}"
+        );
         let exceedance = query["exceedance"].as_array().unwrap();
         assert_eq!(exceedance.len(), 2);
         assert_eq!(exceedance[0]["above"].as_f64(), Some(median));
@@ -133,7 +145,11 @@ fn a_query_after_the_run_in_csv_has_a_column_per_answer() {
             &q["exceedance"][1]["ci95"][1],
         ];
         for (got, want) in answers.iter().zip(expected) {
-            assert_eq!(*got, want.as_f64().unwrap(), "{line}");
+            // A level the data cannot bound has no value: empty cells.
+            match want.as_f64() {
+                Some(want) => assert_eq!(*got, want, "{line}"),
+                None => assert!(want.is_null() && got.is_nan(), "{line}"),
+            }
         }
     }
 }
