@@ -207,3 +207,26 @@ fn the_default_law_has_no_cliff_across_the_minimum_arc_current() {
         at_48_v(15.0, "paper", DEFAULT_MIN_SEPARATION_M)
     );
 }
+
+#[test]
+fn a_supply_too_close_to_the_minimum_arc_voltage_arcs_only_above_the_calibration_current() {
+    // At 12.2 V the calibration current's arc current is 15 A x 0.2 / 12.2 = 0.25 A, below
+    // I_min = 0.4 A: an arc burns only above 24.4 A, beyond the calibration current, where the
+    // continuous law is eq. 16.
+    let at = |current_a: f64, law: &str| {
+        let text = format!(
+            r#"{{"circuit": {{"supply_voltage_v": 12.2, "current_a": {current_a}}},
+                "material": {{"arc_restitution": {{"law": "{law}"}}}}}}"#
+        );
+        simulate(&Scenario::from_json(&text).unwrap(), Fidelity::Exact)
+    };
+    for current_a in [20.0, 24.0, 25.0, 30.0] {
+        assert_eq!(
+            at(current_a, "continuous"),
+            at(current_a, "paper"),
+            "{current_a} A"
+        );
+    }
+    assert!(at(30.0, "continuous").outcome.arc_energy_j > 0.0);
+    assert_eq!(at(20.0, "continuous").outcome.arc_energy_j, 0.0);
+}

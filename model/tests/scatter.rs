@@ -176,12 +176,15 @@ fn scenario_rules_across_fields_hold_for_every_draw() {
         {"parameter": "spring_stiffness_n_per_m", "per": "device",
          "distribution": {"kind": "uniform", "min": 0, "max": 300}}]});
     assert_eq!(pointers(both), ["/scatter/1/distribution/min"]);
+    // Under the continuous law a supply too close to V_min for the calibration current to arc
+    // arcs only above that current, where the law is eq. 16 (docs/model.md section 5): every
+    // draw is a valid scenario, the default law's included.
     let continuous = json!({
         "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15},
                      "material": {"arc_restitution": {"law": "continuous"}}},
         "scatter": [{"parameter": "supply_voltage_v", "per": "device",
                      "distribution": {"kind": "uniform", "min": 12.2, "max": 60}}]});
-    assert_eq!(pointers(continuous), ["/scatter/0/distribution/min"]);
+    assert_eq!(pointers(continuous), Vec::<String>::new());
 }
 
 /// A truncated lognormal radius that keeps about three quarters of its mass.
