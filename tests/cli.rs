@@ -316,7 +316,7 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
         out.to_str().unwrap(),
     ]);
     assert!(
-        shown.contains("26/26 measurements") && shown.contains("ETA"),
+        shown.contains("28/28 measurements") && shown.contains("ETA"),
         "{shown}"
     );
     let report: Value =
@@ -357,6 +357,17 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
             "{row}"
         );
     }
+    // Calibration intervals over 20 noise draws of each study case: kappa from both bounce
+    // times; kappa and the roughening energy from a wear curve. 20 draws of a true 0.95 fall
+    // below 0.8 with probability 0.016: a fit that lost its interval would cover far less.
+    let calibration = report["calibration_coverage"].as_array().unwrap();
+    assert_eq!(calibration.len(), 3, "{calibration:?}");
+    for row in calibration {
+        assert_eq!(row["draws"], 20, "{row}");
+        assert!(row["coverage"].as_f64().unwrap() >= 0.8, "{row}");
+    }
+    let markdown = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(markdown.contains("## Calibration intervals"), "{markdown}");
     let refused = bouncewear(&["bench", "--coverage-seeds", "0"], "");
     assert!(!refused.status.success());
     assert!(
