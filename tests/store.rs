@@ -13,8 +13,8 @@ use bouncewear::domain::{
 };
 use bouncewear::scheduler::tick;
 use bouncewear::store::{
-    self, JobRecord, Lease, LeaseTerms, NewRun, Operations, RunSlot, ScheduleRecord, Store,
-    StoreError,
+    self, JobRecord, Lease, LeaseTerms, NewRun, Operations, RetryBudget, RunSlot, ScheduleRecord,
+    Store, StoreError,
 };
 use bouncewear::worker::Workers;
 use bouncewear_model::Pointer;
@@ -47,10 +47,19 @@ const WEARING: &str = r#"{"devices": 3, "operations": 40, "seed": 4,
     "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
     "failure": {"e1": {"below": 0.36}}}"#;
 
+/// A lease of 1 s taken at `now` on a clock the test steps.
 fn terms(now: i64) -> LeaseTerms {
     LeaseTerms {
-        now: UnixMs(now),
+        at: Some(UnixMs(now)),
         duration_ms: 1000,
+    }
+}
+
+/// `retries` of each kind.
+fn budget(retries: u64) -> RetryBudget {
+    RetryBudget {
+        failures: retries,
+        lost_leases: retries,
     }
 }
 
@@ -64,7 +73,7 @@ fn utc(text: &str) -> DateTime<Utc> {
 async fn every_promise(database: impl Fn(&str) -> String) {
     a_store_that_takes_writes_and_is_migrated_is_ready(&database("ready")).await;
     unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(&database("cancel")).await;
-    live_jobs_are_the_owners_active_ones_and_any_newer_than_the_mark(&database("live")).await;
+    live_jobs_are_every_active_one_and_any_newer_than_the_mark(&database("live")).await;
     ended_jobs_are_deleted_with_everything_stored_for_them(&database("delete")).await;
     a_key_creates_once_and_refuses_another_body_for_24_hours(&database("keys")).await;
     a_claim_whose_lease_expired_is_fenced_out_by_its_successor(&database("fence")).await;
@@ -82,6 +91,8 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     one_owner_fills_only_its_share_of_the_queue(&database("share")).await;
     every_u64_seed_reads_back_exactly(&database("seeds")).await;
     a_job_whose_lease_keeps_expiring_fails_with_the_reason(&database("retries")).await;
+    leases_run_on_the_database_clock(&database("db-clock")).await;
+    a_job_behind_another_is_served_next(&database("fair")).await;
     two_scheduler_loops_never_duplicate_a_night(&database("race")).await;
     missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(&database("catch-up")).await;
     a_full_queue_leaves_the_night_due_for_the_next_tick(&database("full")).await;
@@ -119,7 +130,7 @@ async fn unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(url: &str)
     ));
 }
 
-async fn live_jobs_are_the_owners_active_ones_and_any_newer_than_the_mark(url: &str) {
+async fn live_jobs_are_every_active_one_and_any_newer_than_the_mark(url: &str) {
     let store = store::open(url).await.unwrap();
     let owner = Owner::anonymous();
     let insert = |seed| {
@@ -139,21 +150,24 @@ async fn live_jobs_are_the_owners_active_ones_and_any_newer_than_the_mark(url: &
     store.cancel(&owner, &newer.id, UnixMs(3)).await.unwrap();
     let job = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || 4).unwrap();
     let others = QueuedJob::new(&job, Owner::of_key("another key"), None, UnixMs(1));
-    store
+    let others = store
         .insert_job(others, QueueBound::total(10))
         .await
         .unwrap()
         .unwrap();
 
-    let ids =
-        |records: Vec<store::JobRecord>| records.into_iter().map(|r| r.id).collect::<Vec<_>>();
+    let ids = |(records, newest): (Vec<store::JobRecord>, i64)| {
+        assert_eq!(newest, others.seq, "the newest seq of all owners");
+        records.into_iter().map(|r| r.id).collect::<Vec<_>>()
+    };
+    // Every owner's: the live view is one for the whole server, each stream picks its own.
     assert_eq!(
-        ids(store.live_jobs(&owner, ended.seq).await.unwrap()),
-        [active.id.clone(), newer.id]
+        ids(store.live_jobs(ended.seq).await.unwrap()),
+        [active.id.clone(), newer.id, others.id.clone()]
     );
     assert_eq!(
-        ids(store.live_jobs(&owner, i64::MAX).await.unwrap()),
-        [active.id]
+        ids(store.live_jobs(i64::MAX).await.unwrap()),
+        [active.id, others.id]
     );
 }
 
@@ -279,13 +293,25 @@ async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor(url: &str) {
         .insert_job(single(1), QueueBound::total(10))
         .await
         .unwrap();
-    let first = store.claim("a", terms(0), 3).await.unwrap().unwrap();
+    let first = store
+        .claim("a", terms(0), budget(3))
+        .await
+        .unwrap()
+        .unwrap();
     assert_eq!(first.fence.shard, ShardId::group(0, 0));
     assert!(
-        store.claim("b", terms(500), 3).await.unwrap().is_none(),
+        store
+            .claim("b", terms(500), budget(3))
+            .await
+            .unwrap()
+            .is_none(),
         "the group is leased, and the merge waits for it"
     );
-    let second = store.claim("b", terms(2000), 3).await.unwrap().unwrap();
+    let second = store
+        .claim("b", terms(2000), budget(3))
+        .await
+        .unwrap()
+        .unwrap();
     assert_eq!(second.fence.shard, ShardId::group(0, 0));
     assert_eq!(second.fence.attempt, Attempt(first.fence.attempt.0 + 1));
     assert_eq!(second.spec.seed, Some(1));
@@ -347,10 +373,15 @@ async fn concurrent_submissions_never_overshoot_the_queue_bound(url: &str) {
 async fn a_job_whose_lease_keeps_expiring_fails_with_the_reason(url: &str) {
     let store = store::open(url).await.unwrap();
     let id = insert(&store, single(1)).await;
-    // Claimed at t = 0 s; every later claim finds the lease (1 s) expired: its worker died.
+    // Claimed at t = 0 s; every later claim finds the lease (1 s) expired: its worker died. Lost
+    // leases have a budget of their own (2 here), apart from failed runs (0 here).
+    let lost = RetryBudget {
+        failures: 0,
+        lost_leases: 2,
+    };
     let mut attempts = 0;
     let mut now = 0;
-    while store.claim("w", terms(now), 2).await.unwrap().is_some() {
+    while store.claim("w", terms(now), lost).await.unwrap().is_some() {
         attempts += 1;
         now += 2000;
     }
@@ -360,23 +391,55 @@ async fn a_job_whose_lease_keeps_expiring_fails_with_the_reason(url: &str) {
     let reason = job.error.unwrap();
     assert_eq!(
         reason,
-        "gave up after 2 retries: the lease of batch 0 group 0 expired 3 times (its worker stopped or stalled each time)"
+        "gave up after 2 retries: the lease of batch 0 group 0 expired 3 times (its worker stopped or stalled, or lost the database, each time)"
+    );
+    let shards = store.shards(&id).await.unwrap();
+    assert_eq!((shards[0].failures, shards[0].lost_leases), (0, 2));
+    assert_eq!(
+        shards[0].history,
+        ["attempt 1 (w): lease lost", "attempt 2 (w): lease lost"],
+        "one line per attempt that did not finish"
     );
 
-    // A run that fails counts the same way, and the last reason is kept.
+    // A run that fails counts against the other budget, is claimed again only after its backoff
+    // (1 s, then 2 s), and the last reason is kept.
     let id = insert(&store, single(2)).await;
     for attempt in 1..=2 {
-        let claim = store.claim("w", terms(now), 1).await.unwrap().unwrap();
+        let claim = store
+            .claim("w", terms(now), budget(1))
+            .await
+            .unwrap()
+            .unwrap();
         assert_eq!(claim.fence.attempt, Attempt(attempt));
         let reason = format!("boom {attempt}");
         assert!(
             store
-                .fail_attempt(&claim.fence, UnixMs(now), &reason, 1)
+                .fail_attempt(&claim.fence, Some(UnixMs(now)), &reason, 1)
                 .await
                 .unwrap()
         );
+        if attempt == 1 {
+            assert!(
+                store
+                    .claim("w", terms(now + 999), budget(1))
+                    .await
+                    .unwrap()
+                    .is_none(),
+                "claimed again within its backoff"
+            );
+            let shards = store.shards(&id).await.unwrap();
+            assert_eq!((shards[0].failures, shards[0].lost_leases), (1, 0));
+            assert_eq!(shards[0].history, ["attempt 1 (w): failed: boom 1"]);
+        }
+        now += 1000;
     }
-    assert!(store.claim("w", terms(now), 1).await.unwrap().is_none());
+    assert!(
+        store
+            .claim("w", terms(now + 5000), budget(1))
+            .await
+            .unwrap()
+            .is_none()
+    );
     let job = store.job(&Owner::anonymous(), &id).await.unwrap();
     assert_eq!(job.status, JobStatus::Failed);
     assert_eq!(
@@ -387,11 +450,83 @@ async fn a_job_whose_lease_keeps_expiring_fails_with_the_reason(url: &str) {
     assert_eq!((shards[0].attempt, shards[0].failures), (Attempt(2), 2));
 }
 
+/// Leases run on the database's clock when the worker names no instant (as real workers do):
+/// held for their duration, then free for another worker, whatever the workers' own clocks say.
+async fn leases_run_on_the_database_clock(url: &str) {
+    let store = store::open(url).await.unwrap();
+    insert(&store, single(4)).await;
+    let lease = LeaseTerms::for_ms(300);
+    let first = store.claim("a", lease, budget(3)).await.unwrap().unwrap();
+    assert!(
+        store.claim("b", lease, budget(3)).await.unwrap().is_none(),
+        "held on the database's clock"
+    );
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    let second = store.claim("b", lease, budget(3)).await.unwrap().unwrap();
+    assert_eq!(second.fence.shard, first.fence.shard);
+    assert_eq!(
+        store.heartbeat(&first.fence, lease, 1).await.unwrap(),
+        Lease::Lost
+    );
+    assert_eq!(
+        store.heartbeat(&second.fence, lease, 1).await.unwrap(),
+        Lease::Held
+    );
+}
+
+/// Fair share (start-time fair queuing): a job is charged each shard's operations plus 10,000 as
+/// it is claimed, a free worker claims for the job with the least virtual start time, and a job
+/// joins at the latest start time served. So jobs submitted behind a large one, by the same owner
+/// or another, are claimed before its next shard, and the large one still gets its turns.
+async fn a_job_behind_another_is_served_next(url: &str) {
+    let store = store::open(url).await.unwrap();
+    // 64 devices: 32 groups of 6 operations; the others 2 groups of 3.
+    let large = insert(&store, queued_job(r#"{"devices": 64, "operations": 3}"#, 1)).await;
+    let first = store
+        .claim("w", terms(1), budget(3))
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(first.fence.job, large);
+    let small = insert(&store, queued(2)).await;
+    let job = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || 3).unwrap();
+    let theirs = QueuedJob::new(&job, Owner::of_key("another key"), None, UnixMs(1));
+    let theirs = store
+        .insert_job(theirs, QueueBound::total(10))
+        .await
+        .unwrap()
+        .unwrap()
+        .id;
+    let mut order = Vec::new();
+    for now in 2..=7 {
+        let claim = store
+            .claim("w", terms(now), budget(3))
+            .await
+            .unwrap()
+            .unwrap();
+        order.push(claim.fence.job.clone());
+    }
+    // Both joined at 0, where the large job's first group started; it stands at 10,006. After a
+    // group of 3 operations each, they stand at 10,003: below it still.
+    assert_eq!(
+        order,
+        [
+            small.clone(),
+            theirs.clone(),
+            small,
+            theirs,
+            large.clone(),
+            large
+        ],
+        "the least virtual start time, the oldest job at a tie"
+    );
+}
+
 /// Runs every claimable shard of the store's jobs the way workers do, in claim order, until none
 /// is left; returns the shards each claim ran.
 async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
     let mut ran = Vec::new();
-    while let Some(claim) = store.claim("w", terms(0), 3).await.unwrap() {
+    while let Some(claim) = store.claim("w", terms(0), budget(3)).await.unwrap() {
         let job = Job::new(claim.spec.clone(), || 0, &Pointer::root()).unwrap();
         let fence = &claim.fence;
         ran.push(fence.shard);
@@ -541,7 +676,11 @@ async fn execute(url: &str, sqlite: &'static str, postgres: &'static str) {
 async fn a_poison_job_fails_after_the_retry_limit_with_the_reason(url: &str) {
     let store = store::open(url).await.unwrap();
     let id = insert(&store, single(3)).await;
-    let claim = store.claim("w", terms(0), 2).await.unwrap().unwrap();
+    let claim = store
+        .claim("w", terms(0), budget(2))
+        .await
+        .unwrap()
+        .unwrap();
     let job = Job::new(claim.spec.clone(), || 0, &Pointer::root()).unwrap();
     let batch = Batch::of(&job, 0).unwrap();
     let stats = run_group(&job, batch, 0, &Silent).unwrap();
@@ -594,13 +733,13 @@ async fn insert(store: &Arc<dyn Store>, job: QueuedJob) -> JobId {
     store.insert_job(job, bound).await.unwrap().unwrap().id
 }
 
-/// Real workers with `retries`, on `store`.
+/// Real workers with `retries` of each kind, on `store`.
 fn workers(store: &Arc<dyn Store>, retries: u64, listed_lives: u64) -> Arc<Workers> {
     Arc::new(Workers {
         store: Arc::clone(store),
         compute: Arc::new(thread_pool(Some(1)).unwrap()),
         lease: Duration::from_secs(30),
-        retries,
+        budget: budget(retries),
         instance: "store-test".to_owned(),
         wake: Arc::new(Notify::new()),
         listed_lives,
@@ -742,7 +881,11 @@ async fn one_owner_fills_only_its_share_of_the_queue(url: &str) {
 async fn a_cancelled_job_keeps_no_accumulators(url: &str) {
     let store = store::open(url).await.unwrap();
     let id = insert(&store, queued(5)).await;
-    let claim = store.claim("w", terms(0), 2).await.unwrap().unwrap();
+    let claim = store
+        .claim("w", terms(0), budget(2))
+        .await
+        .unwrap()
+        .unwrap();
     let job = Job::new(claim.spec.clone(), || 0, &Pointer::root()).unwrap();
     let stats = run_group(&job, Batch::of(&job, 0).unwrap(), 0, &Silent).unwrap();
     assert!(store.complete(&claim.fence, &stats).await.unwrap());
@@ -753,7 +896,11 @@ async fn a_cancelled_job_keeps_no_accumulators(url: &str) {
         .unwrap();
     assert!(store.partials(&id).await.unwrap().is_empty());
     assert!(
-        store.claim("w", terms(0), 2).await.unwrap().is_none(),
+        store
+            .claim("w", terms(0), budget(2))
+            .await
+            .unwrap()
+            .is_none(),
         "a cancelled job's shards are never claimed"
     );
 }
@@ -763,7 +910,13 @@ async fn jobs_queued_before_shards_existed_get_theirs_on_open(url: &str) {
     let store = store::open(url).await.unwrap();
     let id = insert(&store, queued(6)).await;
     execute(url, "DELETE FROM shards", "DELETE FROM shards").await;
-    assert!(store.claim("w", terms(0), 2).await.unwrap().is_none());
+    assert!(
+        store
+            .claim("w", terms(0), budget(2))
+            .await
+            .unwrap()
+            .is_none()
+    );
     drop(store);
     let store = store::open(url).await.unwrap();
     let shards: Vec<ShardId> = store
@@ -781,7 +934,11 @@ async fn jobs_queued_before_shards_existed_get_theirs_on_open(url: &str) {
             ShardId::merge(0)
         ]
     );
-    let claim = store.claim("w", terms(0), 2).await.unwrap().unwrap();
+    let claim = store
+        .claim("w", terms(0), budget(2))
+        .await
+        .unwrap()
+        .unwrap();
     assert_eq!(
         (claim.fence.job, claim.fence.shard),
         (id, ShardId::group(0, 0))
@@ -959,7 +1116,11 @@ async fn postgres_announces_queued_jobs_and_their_progress(url: &str) {
     };
     assert_eq!(next().await, QueueEvent::Queued);
     assert_eq!(next().await, QueueEvent::Changed(id.clone()));
-    let claim = store.claim("w", terms(0), 3).await.unwrap().unwrap();
+    let claim = store
+        .claim("w", terms(0), budget(3))
+        .await
+        .unwrap()
+        .unwrap();
     assert_eq!(next().await, QueueEvent::Changed(id.clone()));
     store.heartbeat(&claim.fence, terms(100), 7).await.unwrap();
     assert_eq!(next().await, QueueEvent::Changed(id));

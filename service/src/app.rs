@@ -3,6 +3,7 @@
 //! serves, runs the workers and the scheduler, and when the shutdown future resolves stops
 //! accepting, hands running jobs back to the queue and returns.
 
+use crate::api::watch::JobWatch;
 use crate::api::{self, AppState};
 use crate::compute::{PoolError, thread_pool};
 use crate::config::{ServeConfig, WorkerConfig};
@@ -76,7 +77,13 @@ impl Application {
             source,
         })?;
         let (shutdown_sender, shutdown) = watch::channel(false);
+        let watch = JobWatch::start(
+            Arc::clone(&store),
+            config.max_streams_per_key,
+            shutdown.clone(),
+        );
         let state = AppState {
+            watch,
             store,
             config: Arc::new(config),
             key_owners: Arc::new(key_owners),
@@ -167,7 +174,7 @@ async fn start_workers(config: &WorkerConfig) -> Result<Workers, StartupError> {
         store,
         compute: Arc::new(thread_pool(config.compute_threads)?),
         lease: config.lease(),
-        retries: config.max_retries,
+        budget: config.retry_budget(),
         instance: format!("{}-{}", std::process::id(), uuid::Uuid::new_v4().simple()),
         wake: Arc::new(Notify::new()),
         listed_lives: config.max_listed_lives,

@@ -1,6 +1,6 @@
 //! `bouncewear serve` and `bouncewear worker` configuration: flags, each with an environment variable.
 
-use crate::domain::{QueueBound, ScheduleLimits};
+use crate::domain::{QueueBound, RetryBudget, ScheduleLimits};
 use clap::Args;
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -26,10 +26,16 @@ pub struct WorkerConfig {
     /// How long a claimed job stays leased without a heartbeat before another worker may take it.
     #[arg(long, env = "BOUNCEWEAR_LEASE_SECONDS", default_value_t = 30.0)]
     pub lease_seconds: f64,
-    /// Times a job may be run again after its lease expired (its worker stopped or stalled); once
-    /// more and it fails with the reason, instead of being retried forever.
+    /// Times a shard may be run again after its run failed (an error of the job itself), each
+    /// after a backoff (1 s, doubling, at most a minute); once more and its job fails with the reason.
     #[arg(long, env = "BOUNCEWEAR_MAX_RETRIES", default_value_t = 3)]
     pub max_retries: u64,
+    /// Times a shard may be run again after its lease expired (its worker killed or stalled, or cut
+    /// off from the database): counted apart from failed runs, since nothing need be wrong with the
+    /// job; once more and it fails with the reason. Also the writes a worker tries again while the
+    /// database cannot take them.
+    #[arg(long, env = "BOUNCEWEAR_MAX_LOST_LEASES", default_value_t = 10)]
+    pub max_lost_leases: u64,
     /// Devices of a job whose own life is kept and listed (`/v1/jobs/{id}/life?format=csv`): the
     /// first ones, in device order. The life analysis counts every device whatever this is.
     #[arg(long, env = "BOUNCEWEAR_MAX_LISTED_LIVES", default_value_t = 100_000)]
@@ -37,6 +43,13 @@ pub struct WorkerConfig {
 }
 
 impl WorkerConfig {
+    pub fn retry_budget(&self) -> RetryBudget {
+        RetryBudget {
+            failures: self.max_retries,
+            lost_leases: self.max_lost_leases,
+        }
+    }
+
     pub fn lease(&self) -> Duration {
         Duration::from_secs_f64(self.lease_seconds.max(0.5))
     }
@@ -105,6 +118,10 @@ pub struct ServeConfig {
     /// open-file limit (RLIMIT_NOFILE) less what the database and the process need (default: that).
     #[arg(long, env = "BOUNCEWEAR_MAX_CONNECTIONS")]
     pub max_connections: Option<usize>,
+    /// Event streams (`/v1/events`, `/v1/jobs/{id}/events`) one API key may hold open at once
+    /// (without API keys: all clients together); more get 429 with Retry-After.
+    #[arg(long, env = "BOUNCEWEAR_MAX_STREAMS_PER_KEY", default_value_t = 64)]
+    pub max_streams_per_key: usize,
     /// Free disk space, in MB, beside a SQLite database below which the server reports itself not
     /// ready (`/readyz` answers 503).
     #[arg(long, env = "BOUNCEWEAR_MIN_FREE_DISK_MB", default_value_t = 100)]

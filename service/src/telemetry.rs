@@ -113,6 +113,12 @@ fn prometheus_builder() -> PrometheusBuilder {
     })
 }
 
+/// Connections closed for a new client at the connection limit (`connections`).
+pub const CONNECTIONS_SHED: &str = "bouncewear_connections_shed_total";
+
+/// Reads of the job queue by the watcher behind every event stream (`api::watch`).
+pub const EVENT_WATCH_LOOKS: &str = "bouncewear_event_watch_looks_total";
+
 /// The HELP text of every metric the service records, wherever it records it.
 fn describe_metrics() {
     metrics::describe_counter!(
@@ -141,6 +147,14 @@ fn describe_metrics() {
     metrics::describe_counter!(
         "bouncewear_operations_simulated_total",
         "Make operations simulated by this instance's workers, counted as each group of devices is stored."
+    );
+    metrics::describe_counter!(
+        CONNECTIONS_SHED,
+        "Connections waiting for a request's headers that were closed to make room for a new client at the connection limit."
+    );
+    metrics::describe_counter!(
+        EVENT_WATCH_LOOKS,
+        "Reads of the job queue by the one watcher behind every event stream (none while no stream is open)."
     );
     metrics::describe_counter!(
         "bouncewear_store_retries_total",

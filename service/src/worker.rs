@@ -12,7 +12,7 @@
 
 use crate::domain::UnixMs;
 use crate::domain::shards::{Merged, merge};
-use crate::store::{Claim, Fence, Lease, LeaseTerms, QueueEvent, Store, StoreResult};
+use crate::store::{Claim, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store, StoreResult};
 use crate::telemetry::{record_job_finished, record_shard_step};
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::{Batch, run_group};
@@ -29,7 +29,7 @@ const HEARTBEAT_MAX_PERIOD: Duration = Duration::from_millis(500);
 /// An idle worker looks for expired leases at least this often.
 const IDLE_POLL: Duration = Duration::from_millis(500);
 /// A write the database could not take is tried again after this, doubling up to
-/// [`STORE_RETRY_MAX_DELAY`], at most `retries` times, with the lease kept meanwhile.
+/// [`STORE_RETRY_MAX_DELAY`], at most `budget.lost_leases` times, with the lease kept meanwhile.
 const STORE_RETRY_FIRST_DELAY: Duration = Duration::from_millis(250);
 const STORE_RETRY_MAX_DELAY: Duration = Duration::from_secs(8);
 
@@ -37,8 +37,9 @@ pub struct Workers {
     pub store: Arc<dyn Store>,
     pub compute: Arc<rayon::ThreadPool>,
     pub lease: Duration,
-    /// Times a shard is run again after it failed or its lease expired, before its job fails.
-    pub retries: u64,
+    /// Times a shard is run again after it failed, or apart after its lease expired, before its
+    /// job fails.
+    pub budget: RetryBudget,
     pub instance: String,
     /// Notified on every submission, so an idle worker starts at once.
     pub wake: Arc<Notify>,
@@ -105,12 +106,9 @@ impl Workers {
             .collect()
     }
 
-    /// The lease a claim or heartbeat asks for, from now.
+    /// The lease a claim or heartbeat asks for, from now on the database's clock.
     fn lease_terms(&self) -> LeaseTerms {
-        LeaseTerms {
-            now: UnixMs::now(),
-            duration_ms: i64::try_from(self.lease.as_millis()).unwrap_or(i64::MAX),
-        }
+        LeaseTerms::for_ms(i64::try_from(self.lease.as_millis()).unwrap_or(i64::MAX))
     }
 
     async fn work(&self, slot: usize, mut shutdown: watch::Receiver<bool>) {
@@ -119,7 +117,7 @@ impl Workers {
             let claiming = Instant::now();
             match self
                 .store
-                .claim(&worker, self.lease_terms(), self.retries)
+                .claim(&worker, self.lease_terms(), self.budget)
                 .await
             {
                 Ok(Some(claim)) => {
@@ -275,7 +273,7 @@ impl Workers {
                 loop {
                     tokio::select! {
                         _ = heartbeat.tick() => {
-                            let terms = LeaseTerms { now: UnixMs::now(), duration_ms };
+                            let terms = LeaseTerms::for_ms(duration_ms);
                             let progress = done.load(Ordering::Relaxed);
                             match store.heartbeat(&fence, terms, progress).await {
                                 Ok(Lease::Held) => {}
@@ -363,7 +361,7 @@ impl Workers {
         tracing::error!(reason, "shard failed");
         if let Err(error) = self
             .store
-            .fail_attempt(fence, UnixMs::now(), reason, self.retries)
+            .fail_attempt(fence, None, reason, self.budget.failures)
             .await
         {
             tracing::error!(%error, "could not record the failure; the shard's lease will expire");
@@ -420,7 +418,7 @@ impl Workers {
             match write().await {
                 Err(error)
                     if error.is_unavailable()
-                        && tries < self.retries
+                        && tries < self.budget.lost_leases
                         && !lease.cancel.load(Ordering::Relaxed) =>
                 {
                     tries += 1;

@@ -1,7 +1,7 @@
 //! `/v1/events`: one stream for all of the caller's jobs, whatever their number.
 
-use crate::support::app::{Service, TestApp};
-use crate::support::client::{agent, authorized, post};
+use crate::support::app::{Service, Spawned, TestApp};
+use crate::support::client::{agent, assert_problem, authorized, post};
 use crate::support::postgres::Postgres;
 use crate::support::{scattered_job, temp_db, temp_dir};
 use serde_json::Value;
@@ -78,4 +78,75 @@ fn the_stream_carries_every_job_of_its_key_and_no_other(server: &TestApp) {
             "job {id} shows progress before it ends: {events:?}"
         );
     }
+}
+
+/// The value of a counter on the server's `/metrics` (0 before its first increment).
+fn counter(server: &impl Service, name: &str) -> f64 {
+    let metrics = crate::support::client::get(&server.url("/metrics"), None).body;
+    metrics
+        .lines()
+        .find_map(|line| line.strip_prefix(name)?.strip_prefix(' ')?.parse().ok())
+        .unwrap_or(0.0)
+}
+
+/// Idle streams cost no database reads of their own: one watcher reads for all of them, about
+/// five times a second however many are open. And one key holds at most
+/// `--max-streams-per-key`: the next gets 429 with Retry-After, while another key still gets its
+/// own. A process of its own, so that its metrics are its alone.
+#[test]
+fn idle_streams_share_one_reader_and_each_key_has_a_cap() {
+    let server = Spawned::start(
+        &temp_db("events-cap"),
+        &[
+            "--api-key",
+            "alpha,beta",
+            "--workers",
+            "0",
+            "--max-streams-per-key",
+            "6",
+        ],
+    );
+    let open = |key: &str| {
+        let reply = authorized(agent().get(&server.url("/v1/events")), Some(key)).call();
+        reply.unwrap()
+    };
+    let streams: Vec<_> = (0..6).map(|_| open("alpha")).collect();
+    assert!(streams.iter().all(|s| s.status() == 200));
+    let refused = crate::support::client::reply(
+        authorized(agent().get(&server.url("/v1/events")), Some("alpha")).call(),
+    );
+    let problem = assert_problem(&refused, 429);
+    assert!(refused.header("retry-after").is_some(), "{problem}");
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("6 event streams"),
+        "{problem}"
+    );
+    let job = crate::support::client::reply(
+        authorized(
+            agent().get(&server.url("/v1/jobs/nope/events")),
+            Some("alpha"),
+        )
+        .call(),
+    );
+    assert_eq!(
+        job.status, 404,
+        "a job is looked up before its stream takes a place"
+    );
+    let beta = open("beta");
+    assert_eq!(beta.status(), 200, "another key has its own streams");
+
+    // Seven streams open for 3 s: each polling on its own would read about 7 x 15 = 105 times.
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let before = counter(&server, "bouncewear_event_watch_looks_total");
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    let looks = counter(&server, "bouncewear_event_watch_looks_total") - before;
+    assert!(
+        (5.0..=20.0).contains(&looks),
+        "{looks} reads in 3 s for seven streams"
+    );
+    drop(streams);
+    drop(beta);
 }

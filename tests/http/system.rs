@@ -352,7 +352,14 @@ fn a_full_disk_loses_no_acknowledged_job_and_the_queue_recovers_by_itself() {
     };
     let database = disk.0.join("bouncewear.db");
     // No free-space threshold: the writes themselves meet the full disk.
-    let args = ["--min-free-disk-mb", "0", "--max-retries", "1000"];
+    let args = [
+        "--min-free-disk-mb",
+        "0",
+        "--max-retries",
+        "1000",
+        "--max-lost-leases",
+        "1000",
+    ];
     let mut acknowledged = Vec::new();
     {
         let server = TestApp::start(&database, &args);

@@ -18,6 +18,8 @@ pub struct Postgres {
 struct Cluster {
     dir: PathBuf,
     bin: PathBuf,
+    /// The server's options (port, socket directory, no fsync).
+    options: String,
 }
 
 /// The directory of PostgreSQL's programs: where `pg_ctl` really is (links followed, so that
@@ -76,6 +78,10 @@ impl Postgres {
         let cluster = Cluster {
             dir: dir.to_owned(),
             bin,
+            options: format!(
+                "-p {port} -k {} -c listen_addresses=127.0.0.1 -c fsync=off -c synchronous_commit=off -c full_page_writes=off",
+                dir.display()
+            ),
         };
         if running_as_root() {
             let status = Command::new("chown")
@@ -100,23 +106,7 @@ impl Postgres {
                 "--no-sync",
             ],
         );
-        let options = format!(
-            "-p {port} -k {} -c listen_addresses=127.0.0.1 -c fsync=off -c synchronous_commit=off -c full_page_writes=off",
-            dir.display()
-        );
-        cluster.run(
-            "pg_ctl",
-            &[
-                "-D",
-                data.to_str().unwrap(),
-                "-l",
-                dir.join("server.log").to_str().unwrap(),
-                "-o",
-                &options,
-                "-w",
-                "start",
-            ],
-        );
+        cluster.start_server();
         Some(Self {
             admin: format!("postgres://postgres@127.0.0.1:{port}/postgres"),
             cluster: Some(cluster),
@@ -134,6 +124,14 @@ impl Postgres {
         let data = data.to_str().unwrap();
         cluster.run("pg_ctl", &["-D", data, "-m", "immediate", "-w", "stop"]);
         true
+    }
+
+    /// Starts the throwaway cluster again after [`Postgres::stop`], on the same port and data.
+    pub fn restart(&self) {
+        self.cluster
+            .as_ref()
+            .expect("only a throwaway cluster stops")
+            .start_server();
     }
 
     /// A new, empty database on the server; its URL.
@@ -162,6 +160,24 @@ fn admin_sql(admin: &str, statement: String) -> Result<(), sqlx::Error> {
 }
 
 impl Cluster {
+    fn start_server(&self) {
+        let data = self.dir.join("data");
+        let log = self.dir.join("server.log");
+        self.run(
+            "pg_ctl",
+            &[
+                "-D",
+                data.to_str().unwrap(),
+                "-l",
+                log.to_str().unwrap(),
+                "-o",
+                &self.options,
+                "-w",
+                "start",
+            ],
+        );
+    }
+
     /// Runs one of PostgreSQL's programs, as the `postgres` user when we are root; it must succeed.
     fn run(&self, program: &str, args: &[&str]) {
         let output = self.output(program, args);

@@ -66,6 +66,10 @@ pub enum ApiError {
         .0.per_owner
     )]
     QueueFull(QueueBound),
+    #[error(
+        "this API key holds {0} event streams already, the most it may; close one, or retry later"
+    )]
+    TooManyStreams(usize),
     #[error("method not allowed")]
     MethodNotAllowed,
     #[error("the request body did not arrive within {} s", .0.as_secs_f64())]
@@ -128,7 +132,7 @@ impl ApiError {
             ApiError::Conflict(_) => StatusCode::CONFLICT,
             ApiError::TooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
             ApiError::UnsupportedMediaType => StatusCode::UNSUPPORTED_MEDIA_TYPE,
-            ApiError::QueueFull(_) => StatusCode::TOO_MANY_REQUESTS,
+            ApiError::QueueFull(_) | ApiError::TooManyStreams(_) => StatusCode::TOO_MANY_REQUESTS,
             ApiError::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::BodyTimeout(_) => StatusCode::REQUEST_TIMEOUT,
             ApiError::Timeout(_) | ApiError::Unavailable(_) | ApiError::NotReady(_) => {
@@ -187,7 +191,10 @@ impl IntoResponse for ApiError {
             HeaderValue::from_static("application/problem+json"),
         );
         match self {
-            ApiError::QueueFull(_) | ApiError::Unavailable(_) | ApiError::NotReady(_) => {
+            ApiError::QueueFull(_)
+            | ApiError::TooManyStreams(_)
+            | ApiError::Unavailable(_)
+            | ApiError::NotReady(_) => {
                 headers.insert(header::RETRY_AFTER, HeaderValue::from_static("5"));
             }
             // The connection may still hold the rest of a body nobody reads: start afresh.
@@ -311,6 +318,16 @@ pub mod responses {
         headers(("Retry-After" = u32, description = "Seconds to wait before retrying"))
     )]
     pub struct QueueFull(pub Problem);
+
+    /// Event streams: each API key holds at most `--max-streams-per-key` at once.
+    #[derive(IntoResponses)]
+    #[response(
+        status = 429,
+        description = "This key holds the most event streams it may; retry after Retry-After seconds",
+        content_type = "application/problem+json",
+        headers(("Retry-After" = u32, description = "Seconds to wait before retrying"))
+    )]
+    pub struct TooManyStreams(pub Problem);
 }
 
 #[cfg(test)]

@@ -3,55 +3,23 @@
 //! streams that take all six leave every other request of the page waiting.
 
 use super::AppState;
-use super::error::{ApiError, responses::Unauthorized};
+use super::error::ApiError;
+use super::error::responses::{TooManyStreams, Unauthorized};
 use super::jobs::{JobResource, Progress, ServerSentEvent};
+use super::watch::{Snapshot, Subscription};
 use crate::domain::{JobId, JobStatus, Owner};
-use crate::store::{JobRecord, Page, QueueEvent};
+use crate::store::{JobRecord, StoreError};
 use axum::Extension;
 use axum::extract::State;
 use axum::response::sse::{Event, KeepAlive, Sse};
 use futures_util::stream::Stream;
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::convert::Infallible;
-use std::time::Duration;
-use tokio::sync::broadcast;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 pub fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new().routes(routes!(events))
-}
-
-/// How often a stream looks at its jobs when the store announces nothing; with announcements, the
-/// shortest time between two looks, however many jobs change.
-const EVENT_POLL: Duration = Duration::from_millis(200);
-/// With announcements (PostgreSQL), a stream looks when something it follows changed, and at least
-/// this often in case an announcement was missed (a dropped listening connection).
-const EVENT_FALLBACK_POLL: Duration = Duration::from_secs(2);
-
-/// Waits until it is worth looking again: an announcement the stream `wants`, or the polling
-/// interval. Without announcements (SQLite), or once they stopped for good, it polls.
-pub(super) async fn next_look(
-    events: &mut Option<broadcast::Receiver<QueueEvent>>,
-    wants: impl Fn(&QueueEvent) -> bool,
-) {
-    let Some(receiver) = events else {
-        return tokio::time::sleep(EVENT_POLL).await;
-    };
-    let changed = async {
-        loop {
-            match receiver.recv().await {
-                Ok(event) if wants(&event) => return true,
-                Ok(_) => {}
-                Err(broadcast::error::RecvError::Lagged(_)) => return true,
-                Err(broadcast::error::RecvError::Closed) => return false,
-            }
-        }
-    };
-    // The announcements stopped for good: poll from now on.
-    if let Ok(false) = tokio::time::timeout(EVENT_FALLBACK_POLL, changed).await {
-        *events = None;
-    }
 }
 
 /// The `progress` event of a running or queued job.
@@ -78,36 +46,43 @@ pub(super) fn status_event(record: &JobRecord) -> Event {
 struct Follower {
     state: AppState,
     owner: Owner,
+    subscription: Subscription,
     /// Queued and running jobs, with the status and count last sent.
     active: HashMap<JobId, (JobStatus, u64)>,
-    /// The newest job (by `seq`) looked at: later ones are new to the stream.
-    newest: i64,
-    events: Option<broadcast::Receiver<QueueEvent>>,
+    /// The newest job (by `seq`) of the last snapshot: later ones are new to the stream. `None`
+    /// before the first snapshot.
+    newest: Option<i64>,
     ready: VecDeque<Event>,
 }
 
 impl Follower {
-    /// Looks at the owner's jobs once and queues an event for each change since the last look:
+    /// Queues an event for each of the owner's jobs that changed since the last snapshot:
     /// `progress` for a queued or running job whose status or count moved, `status` for a job
-    /// that ended (one followed before, or one submitted since).
-    async fn look(&mut self) -> Result<(), ApiError> {
-        let live = self.state.store.live_jobs(&self.owner, self.newest).await?;
+    /// that ended (one followed before, or one submitted since the stream began).
+    async fn look(&mut self, snapshot: &Snapshot) {
+        let newest = *self.newest.get_or_insert(snapshot.newest);
         let mut gone: HashSet<JobId> = self.active.keys().cloned().collect();
-        for record in live {
-            self.newest = self.newest.max(record.seq);
+        let owner = self.owner.clone();
+        for record in snapshot.of(&owner) {
             gone.remove(&record.id);
-            self.tell(&record);
+            let followed = self.active.contains_key(&record.id);
+            if !record.status.is_terminal() || followed || record.seq > newest {
+                self.tell(record);
+            }
         }
-        // Followed jobs no longer queued or running: they ended since the last look.
+        self.newest = Some(newest.max(snapshot.newest));
+        // Followed jobs gone from the snapshot: ended so long ago that the watcher forgot them
+        // (this stream was not read meanwhile), or deleted. The store says which; on an error the
+        // job stays followed and is asked about again.
         for id in gone {
             match self.state.store.job(&self.owner, &id).await {
                 Ok(record) => self.tell(&record),
-                Err(_) => {
+                Err(StoreError::NotFound { .. }) => {
                     self.active.remove(&id);
                 }
+                Err(_) => {}
             }
         }
-        Ok(())
     }
 
     fn tell(&mut self, record: &JobRecord) {
@@ -136,6 +111,7 @@ impl Follower {
     responses(
         (status = 200, description = "An event stream that stays open: `progress` events (data: id, status, operations_done, operations_total) for each queued or running job at the start and whenever it moves, and one `status` event (data: the JobResource) when a job ends", content_type = "text/event-stream", body = ServerSentEvent),
         Unauthorized,
+        TooManyStreams,
     ),
     security((), ("api_key" = []))
 )]
@@ -143,48 +119,23 @@ pub async fn events(
     State(state): State<AppState>,
     Extension(owner): Extension<Owner>,
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
-    // Subscribed before the first look, so no change after it goes unannounced.
-    let events = state.store.events();
-    let newest = state
-        .store
-        .jobs(
-            &owner,
-            Page {
-                before: None,
-                limit: 1,
-            },
-        )
-        .await?
-        .first()
-        .map_or(0, |record| record.seq);
-    let mut follower = Follower {
+    let subscription = state.watch.subscribe(&owner)?;
+    let follower = Follower {
         state,
         owner,
+        subscription,
         active: HashMap::new(),
-        newest,
-        events,
+        newest: None,
         ready: VecDeque::new(),
     };
-    follower.look().await?;
     let stream = futures_util::stream::unfold(follower, |mut f| async move {
         loop {
-            if *f.state.shutdown.borrow() {
-                return None;
-            }
             if let Some(event) = f.ready.pop_front() {
                 return Some((Ok(event), f));
             }
-            if f.events.is_some() {
-                tokio::time::sleep(EVENT_POLL).await;
-            }
-            next_look(&mut f.events, |event| match event {
-                QueueEvent::Queued => true,
-                QueueEvent::Changed(id) => f.active.contains_key(id),
-            })
-            .await;
-            if f.look().await.is_err() {
-                return None;
-            }
+            let mut shutdown = f.state.shutdown.clone();
+            let snapshot = f.subscription.next(&mut shutdown).await?;
+            f.look(&snapshot).await;
         }
     });
     Ok(Sse::new(stream).keep_alive(KeepAlive::default()))

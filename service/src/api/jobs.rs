@@ -3,12 +3,15 @@
 use super::cache::{NotModified, immutable, immutable_stream};
 use super::error::{
     ApiError, Internal, PROBLEM, Problem,
-    responses::{BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, Unauthorized},
+    responses::{
+        BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, TooManyStreams, Unauthorized,
+    },
 };
-use super::events::{next_look, progress_event, status_event};
+use super::events::{progress_event, status_event};
+use super::watch::Subscription;
 use super::{AppState, JsonText, idempotency_key, replayed};
 use crate::domain::{AfterRunQuery, JobId, JobStatus, Once, Owner, QueuedJob, UnixMs, draw_seed};
-use crate::store::{JobRecord, Operations, Page, QueueEvent, ShardRecord, StoreError};
+use crate::store::{JobRecord, Operations, Page, ShardRecord, StoreError};
 use axum::body::{Body, Bytes};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
@@ -23,7 +26,6 @@ use futures_util::stream::{Stream, StreamExt};
 use serde::{Deserialize, Serialize};
 use std::convert::Infallible;
 use std::fmt::Write as _;
-use tokio::sync::broadcast;
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
@@ -294,8 +296,11 @@ pub struct ShardResource {
     pub status: String,
     /// Times it was claimed: 1 if it ran once; more after a worker died, stalled or failed.
     pub attempt: i64,
-    /// Runs that failed or lost their lease.
+    /// Runs that failed (an error of the job itself), each retried after a backoff.
     pub failures: u64,
+    /// Leases that expired before the run ended: its worker killed or stalled, or cut off from
+    /// the database. Counted against a budget of their own.
+    pub lost_leases: u64,
     /// The worker holding or last holding it (`PID-INSTANCE/SLOT`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub worker: Option<String>,
@@ -306,6 +311,9 @@ pub struct ShardResource {
     /// Why its last run failed.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// One line per attempt that did not finish, oldest first: `attempt N (worker): failed: ...`
+    /// or `attempt N (worker): lease lost`.
+    pub history: Vec<String>,
 }
 
 impl ShardResource {
@@ -316,10 +324,12 @@ impl ShardResource {
             status: record.status,
             attempt: record.attempt.0,
             failures: record.failures,
+            lost_leases: record.lost_leases,
             worker: record.worker,
             operations_done: record.operations_done,
             operations_total: record.operations_total,
             error: record.error,
+            history: record.history,
         }
     }
 }
@@ -831,6 +841,7 @@ fn without_result(id: &JobId) -> ApiError {
     responses(
         (status = 200, description = "An event stream: `progress` events (data: status, operations_done, operations_total) while the job runs, then one `status` event (data: the JobResource) when it ends", content_type = "text/event-stream", body = ServerSentEvent),
         Unauthorized,
+        TooManyStreams,
         NoSuchJob,
     ),
     security((), ("api_key" = []))
@@ -840,54 +851,57 @@ pub async fn job_events(
     Extension(owner): Extension<Owner>,
     Path(id): Path<JobId>,
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
-    // Subscribed before the first look, so no change after it goes unannounced.
-    let events = state.store.events();
     let first = state.store.job(&owner, &id).await?;
-    struct Watcher {
+    // Subscribed after the first read; its first snapshot is taken after this point.
+    let subscription = state.watch.subscribe(&owner)?;
+    struct Follower {
         state: AppState,
+        subscription: Subscription,
         owner: Owner,
         id: JobId,
         last: Option<(JobStatus, u64)>,
         pending: Option<JobRecord>,
         ended: bool,
-        events: Option<broadcast::Receiver<QueueEvent>>,
     }
-    let watcher = Watcher {
-        events,
+    let follower = Follower {
         state,
+        subscription,
         owner,
         id,
         last: None,
         pending: Some(first),
         ended: false,
     };
-    let stream = futures_util::stream::unfold(watcher, |mut w| async move {
+    let stream = futures_util::stream::unfold(follower, |mut f| async move {
         loop {
-            if w.ended || *w.state.shutdown.borrow() {
+            if f.ended {
                 return None;
             }
-            let record = match w.pending.take() {
+            let record = match f.pending.take() {
                 Some(record) => record,
                 None => {
-                    next_look(
-                        &mut w.events,
-                        |event| matches!(event, QueueEvent::Changed(changed) if *changed == w.id),
-                    )
-                    .await;
-                    match w.state.store.job(&w.owner, &w.id).await {
-                        Ok(record) => record,
-                        Err(_) => return None,
+                    let mut shutdown = f.state.shutdown.clone();
+                    let snapshot = f.subscription.next(&mut shutdown).await?;
+                    match snapshot.get(&f.id) {
+                        Some(record) => record.clone(),
+                        // Neither live nor ended lately: ask the store (a stream not read for
+                        // long, or the job deleted: then the stream ends).
+                        None => match f.state.store.job(&f.owner, &f.id).await {
+                            Ok(record) => record,
+                            Err(StoreError::NotFound { .. }) => return None,
+                            Err(_) => continue,
+                        },
                     }
                 }
             };
             let seen = (record.status, record.operations_done);
             if record.status.is_terminal() {
-                w.ended = true;
-                return Some((Ok(status_event(&record)), w));
+                f.ended = true;
+                return Some((Ok(status_event(&record)), f));
             }
-            if w.last != Some(seen) {
-                w.last = Some(seen);
-                return Some((Ok(progress_event(&record, false)), w));
+            if f.last != Some(seen) {
+                f.last = Some(seen);
+                return Some((Ok(progress_event(&record, false)), f));
             }
         }
     });

@@ -13,6 +13,7 @@ pub mod plots;
 pub mod schedules;
 pub mod simulate;
 pub mod system;
+pub mod watch;
 
 use crate::config::ServeConfig;
 use crate::domain::{IdempotencyKey, Owner};
@@ -49,6 +50,8 @@ pub struct AppState {
     pub metrics: PrometheusHandle,
     /// Turns true at shutdown: event streams end so the server can drain.
     pub shutdown: tokio::sync::watch::Receiver<bool>,
+    /// The one watcher of the queue behind every event stream.
+    pub watch: Arc<watch::JobWatch>,
 }
 
 #[derive(OpenApi)]

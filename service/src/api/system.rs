@@ -1,14 +1,16 @@
 //! Health, Prometheus metrics, the OpenAPI document and its docs UI (RapiDoc, vendored).
 
 use super::AppState;
-use super::error::{ApiError, Problem};
+use super::error::{ApiError, Internal, Problem};
 use crate::domain::UnixMs;
+use crate::store::{DATABASE_WAIT, StoreResult};
 use crate::telemetry;
 use axum::Json;
 use axum::extract::State;
 use axum::http::header;
 use axum::response::{Html, IntoResponse};
 use serde::Serialize;
+use std::future::Future;
 use std::sync::LazyLock;
 use utoipa::ToSchema;
 use utoipa_axum::router::OpenApiRouter;
@@ -51,8 +53,20 @@ impl Health {
     responses((status = 200, description = "Healthy", body = Health), (status = 503, description = "The database is unreachable", body = Problem, content_type = "application/problem+json", headers(("Retry-After" = u32, description = "Seconds to wait before asking again"))))
 )]
 pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ApiError> {
-    state.store.ping().await?;
+    within_wait(state.store.ping()).await?;
     Ok(Health::json("ok"))
+}
+
+/// A health check's answer within [`DATABASE_WAIT`]: a database that hangs (a network that drops
+/// packets rather than refusing) is unavailable too.
+async fn within_wait(check: impl Future<Output = StoreResult<()>>) -> Result<(), ApiError> {
+    match tokio::time::timeout(DATABASE_WAIT, check).await {
+        Ok(answer) => Ok(answer?),
+        Err(_) => Err(ApiError::Unavailable(Internal(format!(
+            "the database did not answer within {} s",
+            DATABASE_WAIT.as_secs_f64()
+        )))),
+    }
 }
 
 /// Readiness: this instance can do its work. Its database takes a write, every migration this
@@ -67,7 +81,7 @@ pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ApiE
 )]
 pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiError> {
     let min_free = state.config.min_free_disk_bytes();
-    state.store.ready(min_free, UnixMs::now()).await?;
+    within_wait(state.store.ready(min_free, UnixMs::now())).await?;
     Ok(Health::json("ready"))
 }
 

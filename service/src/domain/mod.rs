@@ -18,5 +18,8 @@ pub use query::AfterRunQuery;
 pub use schedules::{
     ScheduleDefinition, ScheduleLimits, ScheduleSpec, Statistic, Timetable, ValidSchedule,
 };
-pub use shards::{ShardId, ShardPlan, batch_shards, first_shards};
+pub use shards::{
+    RetryBudget, SHARD_OVERHEAD_OPERATIONS, ShardId, ShardPlan, batch_shards, first_shards,
+    retry_backoff_ms,
+};
 pub use trend::TrendValue;

@@ -168,6 +168,26 @@ pub fn merge(
     })
 }
 
+/// What a shard costs beyond its operations, in operations, for fair share: a claim and a store
+/// take about as long as simulating this many (1-2 ms each on SQLite at 5-10 M operations/s per
+/// thread), so a job of many tiny shards is charged for them and cannot crowd out a large one.
+pub const SHARD_OVERHEAD_OPERATIONS: i64 = 10_000;
+
+/// How often a shard may be run again before its job fails: after runs that failed (the job's own
+/// error, each retried after a backoff) and, apart, after leases lost (its worker killed or
+/// stalled, or the database out of its reach: nothing wrong with the job).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RetryBudget {
+    pub failures: u64,
+    pub lost_leases: u64,
+}
+
+/// The wait before a shard whose run failed `failures` times is claimed again: 1 s, doubling, at
+/// most a minute.
+pub fn retry_backoff_ms(failures: u64) -> i64 {
+    1000_i64 << failures.saturating_sub(1).min(6)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -125,11 +125,24 @@ pub struct Fence {
     pub attempt: Attempt,
 }
 
-/// A lease's terms: taken or renewed at `now`, held for `duration_ms`.
+/// A lease's terms: taken or renewed now, held for `duration_ms`.
 #[derive(Debug, Clone, Copy)]
 pub struct LeaseTerms {
-    pub now: UnixMs,
+    /// The instant "now" is: `None` reads the database's clock, which is what workers do, so that
+    /// machines whose clocks disagree still agree on when every lease ends; `Some` fixes it (tests
+    /// that step time).
+    pub at: Option<UnixMs>,
     pub duration_ms: i64,
+}
+
+impl LeaseTerms {
+    /// Terms on the database's clock.
+    pub fn for_ms(duration_ms: i64) -> Self {
+        Self {
+            at: None,
+            duration_ms,
+        }
+    }
 }
 
 /// A shard a worker has leased.
@@ -152,12 +165,16 @@ pub struct ShardRecord {
     pub status: String,
     /// Claims so far (the fencing attempt): 1 for a shard that ran once.
     pub attempt: Attempt,
-    /// Runs that failed or lost their lease.
+    /// Runs that failed.
     pub failures: u64,
+    /// Leases that expired before the run ended (a worker killed or stalled, an outage).
+    pub lost_leases: u64,
     pub worker: Option<String>,
     pub operations_done: u64,
     pub operations_total: u64,
     pub error: Option<String>,
+    /// One line per attempt that did not finish: which, by whom, and why.
+    pub history: Vec<String>,
 }
 
 /// What a heartbeat found.
@@ -237,6 +254,13 @@ pub enum QueueEvent {
     Changed(JobId),
 }
 
+/// How long a request waits for a PostgreSQL connection before it answers 503 with Retry-After:
+/// while the database is unreachable, every request and health check fails fast and frees its
+/// slot, and recovers by itself when the database is back.
+pub const DATABASE_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
+
+pub use crate::domain::RetryBudget;
+
 /// The durable job queue: submissions, leases with fencing, and the end of every job.
 #[async_trait]
 pub trait JobQueue: Send + Sync + 'static {
@@ -256,9 +280,10 @@ pub trait JobQueue: Send + Sync + 'static {
     async fn job(&self, owner: &Owner, id: &JobId) -> StoreResult<JobRecord>;
     /// Newest first.
     async fn jobs(&self, owner: &Owner, page: Page) -> StoreResult<Vec<JobRecord>>;
-    /// The owner's queued and running jobs, and its other jobs submitted after `after` (a `seq`),
-    /// oldest first: what a live view of the owner's jobs looks at.
-    async fn live_jobs(&self, owner: &Owner, after: i64) -> StoreResult<Vec<JobRecord>>;
+    /// Every owner's queued and running jobs, and the other jobs submitted after `after` (a
+    /// `seq`), oldest first, with the newest `seq` of all (read first, so a job submitted
+    /// meanwhile is newer than it): what the live view of jobs looks at.
+    async fn live_jobs(&self, after: i64) -> StoreResult<(Vec<JobRecord>, i64)>;
     /// Cancels a queued or running job; [`StoreError::Conflict`] if it already ended.
     async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord>;
     /// Deletes a job that ended, with everything stored for it (its shards, result,
@@ -268,15 +293,16 @@ pub trait JobQueue: Send + Sync + 'static {
     /// Deletes every owner's jobs that ended before `ended_before` as [`JobQueue::delete_job`]
     /// does, in one transaction; how many.
     async fn prune_jobs(&self, ended_before: UnixMs) -> StoreResult<u64>;
-    /// Leases the next shard to run: of the oldest job with one, a queued shard or a running one
-    /// whose lease expired (bumping its attempt), a merge step only once its batch's groups are
-    /// done. A shard whose lease has already expired `retries` times fails its job instead, with
-    /// the reason.
+    /// Leases the next shard to run: a queued shard past its backoff or a running one whose lease
+    /// expired (bumping its attempt), a merge step only once its batch's groups are done. Fair
+    /// share: of the job with the least virtual start time (then the oldest job; in a job, shards
+    /// in order), which is charged the shard's cost (docs/contract.md "Fair share"). A shard whose
+    /// lease has expired `budget.lost_leases + 1` times fails its job instead, with the reason.
     async fn claim(
         &self,
         worker: &str,
         terms: LeaseTerms,
-        retries: u64,
+        budget: RetryBudget,
     ) -> StoreResult<Option<Claim>>;
     /// Extends the shard's lease and records its progress (the job's is the sum over its
     /// shards), if the claim still holds it and the job still runs.
@@ -301,12 +327,13 @@ pub trait JobQueue: Send + Sync + 'static {
     /// Marks the job failed with `error` at once (a failure no retry can mend), if the claim still
     /// holds its shard.
     async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool>;
-    /// Hands a shard whose run failed back to the queue, counting the failure; once it failed more
-    /// than `retries` times, its job fails instead, with the reason.
+    /// Hands a shard whose run failed back to the queue, counting the failure, to be claimed again
+    /// after [`crate::domain::retry_backoff_ms`] on the database's clock (or from `at`, as [`LeaseTerms::at`]);
+    /// once it failed more than `retries` times, its job fails instead, with the reason.
     async fn fail_attempt(
         &self,
         fence: &Fence,
-        now: UnixMs,
+        at: Option<UnixMs>,
         error: &str,
         retries: u64,
     ) -> StoreResult<bool>;

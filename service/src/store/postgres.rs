@@ -25,6 +25,7 @@ use crate::domain::{
     IdempotencyKey, JobId, Once, Owner, QueueBound, QueuedJob, ScheduleId, ShardId, ShardPlan,
     UnixMs, first_shards,
 };
+use crate::domain::{RetryBudget, SHARD_OVERHEAD_OPERATIONS, retry_backoff_ms};
 use async_trait::async_trait;
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::GroupStats;
@@ -58,7 +59,8 @@ impl PgStore {
     pub async fn open(url: &str) -> StoreResult<Self> {
         let pool = PgPoolOptions::new()
             .max_connections(8)
-            .acquire_timeout(Duration::from_secs(30))
+            // During an outage a request gets its 503 within this, not after the pool's 30 s.
+            .acquire_timeout(super::DATABASE_WAIT)
             .connect(url)
             .await?;
         MIGRATOR.run(&pool).await?;
@@ -188,8 +190,9 @@ async fn insert_queued(
         .execute(&mut *tx)
         .await?;
     let insert = sqlx::query(
-        "INSERT INTO jobs (id, owner, name, spec, seed, status, operations_total, created_at, stored_bytes) \
-         SELECT $1, $2, $3, $4, $5, 'queued', $6, $7, octet_length($4) \
+        "INSERT INTO jobs (id, owner, name, spec, seed, status, operations_total, created_at, stored_bytes, vtime) \
+         SELECT $1, $2, $3, $4, $5, 'queued', $6, $7, octet_length($4), \
+                COALESCE((SELECT MAX(vstart) FROM jobs), 0) \
          WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < $8 \
            AND (SELECT COUNT(*) FROM jobs WHERE status = 'queued' AND owner = $2) < $9",
     );
@@ -391,10 +394,27 @@ async fn drop_partials(tx: &mut PgConnection, job: &JobId) -> StoreResult<()> {
 
 /// Fails every job one of whose shards lost its lease once more than `retries` allow, with the
 /// reason.
+/// The database's clock, in ms since the Unix epoch: one clock for every worker on every machine.
+async fn database_now(tx: &mut PgConnection) -> StoreResult<UnixMs> {
+    let now: i64 =
+        sqlx::query_scalar("SELECT (EXTRACT(EPOCH FROM clock_timestamp()) * 1000)::BIGINT")
+            .fetch_one(&mut *tx)
+            .await?;
+    Ok(UnixMs(now))
+}
+
+/// `at`, or the database's clock.
+async fn now_or(tx: &mut PgConnection, at: Option<UnixMs>) -> StoreResult<UnixMs> {
+    match at {
+        Some(at) => Ok(at),
+        None => database_now(tx).await,
+    }
+}
+
 async fn give_up_on_exhausted(tx: &mut PgConnection, now: UnixMs, retries: u64) -> StoreResult<()> {
     let exhausted = sqlx::query(
         "SELECT s.job_id, s.batch, s.grp FROM shards s JOIN jobs j ON j.id = s.job_id \
-         WHERE s.status = 'running' AND s.lease_until < $1 AND s.failures >= $2 AND j.status IN ('queued', 'running')",
+         WHERE s.status = 'running' AND s.lease_until < $1 AND s.lost_leases >= $2 AND j.status IN ('queued', 'running')",
     )
     .bind(now.0)
     .bind(count_to_sql(retries))
@@ -475,22 +495,26 @@ impl JobQueue for PgStore {
     }
 
     #[tracing::instrument(skip_all)]
-    async fn live_jobs(&self, owner: &Owner, after: i64) -> StoreResult<Vec<JobRecord>> {
-        // Two arms, so that each reads an index: the active jobs by status, the new ones by owner.
+    async fn live_jobs(&self, after: i64) -> StoreResult<(Vec<JobRecord>, i64)> {
+        let mut connection = self.pool.acquire().await?;
+        let newest: i64 = sqlx::query_scalar("SELECT COALESCE(MAX(seq), 0) FROM jobs")
+            .fetch_one(&mut *connection)
+            .await?;
+        // Two arms, so that each reads an index: the active jobs by status, the new ones by seq.
         let rows = sqlx::query(concat!(
             "SELECT ",
             job_columns!(),
-            " FROM jobs WHERE status IN ('queued', 'running') AND owner = $1 \
+            " FROM jobs WHERE status IN ('queued', 'running') \
              UNION ALL SELECT ",
             job_columns!(),
-            " FROM jobs WHERE owner = $1 AND seq > $2 AND status NOT IN ('queued', 'running') \
+            " FROM jobs WHERE seq > $1 AND status NOT IN ('queued', 'running') \
              ORDER BY seq"
         ))
-        .bind(owner.as_str())
         .bind(after)
-        .fetch_all(&self.pool)
+        .fetch_all(&mut *connection)
         .await?;
-        Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)
+        let jobs = rows.iter().map(job_from_row).collect::<Result<_, _>>()?;
+        Ok((jobs, newest))
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]
@@ -556,23 +580,32 @@ impl JobQueue for PgStore {
         &self,
         worker: &str,
         terms: LeaseTerms,
-        retries: u64,
+        budget: RetryBudget,
     ) -> StoreResult<Option<Claim>> {
         let mut tx = self.pool.begin().await?;
-        give_up_on_exhausted(&mut tx, terms.now, retries).await?;
+        let now = now_or(&mut tx, terms.at).await?;
+        give_up_on_exhausted(&mut tx, now, budget.lost_leases).await?;
+        // Fair share: the job with the least virtual start time (docs/contract.md "Fair share");
+        // in a job, shards in order.
         let claimed = sqlx::query(
             "UPDATE shards SET status = 'running', attempt = attempt + 1, lease_owner = $1, lease_until = $2 + $3, \
-             operations_done = 0, failures = failures + CASE WHEN status = 'running' THEN 1 ELSE 0 END \
+             operations_done = 0, retry_at = NULL, \
+             lost_leases = lost_leases + CASE WHEN status = 'running' THEN 1 ELSE 0 END, \
+             history = history || CASE WHEN status = 'running' \
+                 THEN 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): lease lost' || chr(10) \
+                 ELSE '' END \
              WHERE (job_id, batch, grp) = (SELECT s.job_id, s.batch, s.grp FROM shards s JOIN jobs j ON j.id = s.job_id \
                             WHERE j.status IN ('queued', 'running') \
-                            AND (s.status = 'queued' OR (s.status = 'running' AND s.lease_until < $2)) \
+                            AND ((s.status = 'queued' AND COALESCE(s.retry_at, 0) <= $2) \
+                                 OR (s.status = 'running' AND s.lease_until < $2)) \
                             AND (s.grp >= 0 OR NOT EXISTS (SELECT 1 FROM shards o WHERE o.job_id = s.job_id \
                                  AND o.batch = s.batch AND o.grp >= 0 AND o.status <> 'done')) \
-                            ORDER BY j.seq, s.batch, s.grp LIMIT 1 FOR UPDATE OF s SKIP LOCKED) \
+                            ORDER BY j.vtime, j.seq, s.batch, s.grp \
+                            LIMIT 1 FOR UPDATE OF s SKIP LOCKED) \
              RETURNING job_id, batch, grp, attempt, operations_total",
         )
         .bind(worker)
-        .bind(terms.now.0)
+        .bind(now.0)
         .bind(terms.duration_ms)
         .fetch_optional(&mut *tx)
         .await?;
@@ -582,12 +615,19 @@ impl JobQueue for PgStore {
         };
         let job = JobId::from(claimed.try_get::<String, _>("job_id")?);
         sqlx::query(
-            "UPDATE jobs SET status = 'running', started_at = COALESCE(started_at, $2) WHERE id = $1 AND status = 'queued'",
+            "UPDATE jobs SET status = 'running', started_at = COALESCE(started_at, $2) \
+             WHERE id = $1 AND status = 'queued'",
         )
         .bind(job.as_str())
-        .bind(terms.now.0)
+        .bind(now.0)
         .execute(&mut *tx)
         .await?;
+        // The job is charged its shard's cost as it is claimed.
+        sqlx::query("UPDATE jobs SET vstart = vtime, vtime = vtime + $2 WHERE id = $1")
+            .bind(job.as_str())
+            .bind(claimed.try_get::<i64, _>("operations_total")? + SHARD_OVERHEAD_OPERATIONS)
+            .execute(&mut *tx)
+            .await?;
         sum_progress(&mut tx, &job).await?;
         let row = sqlx::query(
             "SELECT s.job_id, s.batch, s.grp, s.attempt, s.operations_total, j.spec, j.started_at \
@@ -610,6 +650,7 @@ impl JobQueue for PgStore {
         operations_done: u64,
     ) -> StoreResult<Lease> {
         let mut tx = self.pool.begin().await?;
+        let now = now_or(&mut tx, terms.at).await?;
         let updated = fenced(
             concat!(
                 "UPDATE shards SET lease_until = $5 + $6, operations_done = $7 WHERE ",
@@ -617,7 +658,7 @@ impl JobQueue for PgStore {
             ),
             fence,
         )
-        .bind(terms.now.0)
+        .bind(now.0)
         .bind(terms.duration_ms)
         .bind(count_to_sql(operations_done))
         .execute(&mut *tx)
@@ -731,14 +772,16 @@ impl JobQueue for PgStore {
     async fn fail_attempt(
         &self,
         fence: &Fence,
-        now: UnixMs,
+        at: Option<UnixMs>,
         error: &str,
         retries: u64,
     ) -> StoreResult<bool> {
         let mut tx = self.pool.begin().await?;
+        let now = now_or(&mut tx, at).await?;
         let failures: Option<i64> = fenced(
             concat!(
                 "UPDATE shards SET status = 'queued', failures = failures + 1, error = $5, operations_done = 0, \
+                 history = history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): failed: ' || $5 || chr(10), \
                  lease_owner = NULL, lease_until = NULL WHERE ",
                 fenced_shard!(),
                 " RETURNING failures"
@@ -759,6 +802,15 @@ impl JobQueue for PgStore {
             let reason = failed_too_often(retries, fence.shard, failures, error);
             end_job(&mut tx, &fence.job, now, &reason).await?;
         } else {
+            sqlx::query(
+                "UPDATE shards SET retry_at = $4 WHERE job_id = $1 AND batch = $2 AND grp = $3",
+            )
+            .bind(fence.job.as_str())
+            .bind(count_to_sql(fence.shard.batch))
+            .bind(fence.shard.group.map_or(-1, count_to_sql))
+            .bind(now.0 + retry_backoff_ms(failures))
+            .execute(&mut *tx)
+            .await?;
             sum_progress(&mut tx, &fence.job).await?;
         }
         tx.commit().await?;

@@ -255,7 +255,7 @@ pub(crate) fn job_from_row(row: &impl ReadRow) -> Result<JobRecord, sqlx::Error>
 /// Why a job failed when one of its shards' lease kept expiring.
 pub(crate) fn gave_up(retries: u64, shard: ShardId) -> String {
     format!(
-        "gave up after {retries} retries: the lease of {shard} expired {} times (its worker stopped or stalled each time)",
+        "gave up after {retries} retries: the lease of {shard} expired {} times (its worker stopped or stalled, or lost the database, each time)",
         retries + 1
     )
 }
@@ -307,7 +307,7 @@ pub(crate) fn shard_id_from_row(row: &impl ReadRow) -> Result<ShardId, sqlx::Err
 
 macro_rules! shard_columns {
     () => {
-        "batch, grp, status, attempt, failures, lease_owner, operations_done, operations_total, error"
+        "batch, grp, status, attempt, failures, lost_leases, lease_owner, operations_done, operations_total, error, history"
     };
 }
 
@@ -319,10 +319,12 @@ pub(crate) fn shard_from_row(row: &impl ReadRow) -> Result<ShardRecord, sqlx::Er
         status: row.text("status")?,
         attempt: Attempt(row.int("attempt")?),
         failures: count_from_sql(row, "failures")?,
+        lost_leases: count_from_sql(row, "lost_leases")?,
         worker: row.maybe_text("lease_owner")?,
         operations_done: count_from_sql(row, "operations_done")?,
         operations_total: count_from_sql(row, "operations_total")?,
         error: row.maybe_text("error")?,
+        history: row.text("history")?.lines().map(str::to_owned).collect(),
     })
 }
 

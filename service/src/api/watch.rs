@@ -1,0 +1,279 @@
+//! One watcher of the job queue for every event stream of this process. Each stream used to read
+//! the database every 200 ms on its own, so 1000 idle streams were 5000 queries a second; now one
+//! task reads every owner's live jobs once per look and hands each stream the same snapshot, from
+//! which it takes its owner's jobs. The watcher reads only while some stream listens, keeps its
+//! last snapshot through a database outage (the streams stay open and resume), and caps how many
+//! streams one API key may hold.
+
+use super::error::ApiError;
+use crate::domain::{JobId, Owner};
+use crate::store::{JobRecord, QueueEvent, Store, StoreError, StoreResult};
+use crate::telemetry::EVENT_WATCH_LOOKS;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tokio::sync::{broadcast, watch};
+
+/// The shortest time between two looks, however many jobs change; without announcements
+/// (SQLite), how often the watcher looks.
+const LOOK_INTERVAL: Duration = Duration::from_millis(200);
+/// With announcements (PostgreSQL), the watcher looks when a job changed, and at least this often
+/// in case an announcement was missed (a dropped listening connection).
+const FALLBACK_INTERVAL: Duration = Duration::from_secs(2);
+/// After a failed look, the wait doubles from [`LOOK_INTERVAL`] up to this.
+const MAX_BACKOFF: Duration = Duration::from_secs(5);
+/// How long a job that ended stays in the snapshots: a stream that was not read for longer (a
+/// stalled client) asks the store for the jobs it still follows.
+const REMEMBER_ENDED: Duration = Duration::from_secs(60);
+
+/// What the watcher saw at one look.
+#[derive(Debug, Default)]
+pub struct Snapshot {
+    /// Counts the looks that succeeded since the watcher last started reading; 0 before.
+    generation: u64,
+    /// Every queued or running job and every job that ended within [`REMEMBER_ENDED`], oldest
+    /// first.
+    jobs: Vec<Arc<JobRecord>>,
+    /// Positions in `jobs`.
+    by_id: HashMap<JobId, usize>,
+    /// The newest `seq` of all jobs at this look: every job at most as new that ended since the
+    /// previous look is in `jobs`.
+    pub newest: i64,
+}
+
+impl Snapshot {
+    /// `owner`'s jobs, oldest first.
+    pub fn of<'a>(&'a self, owner: &'a Owner) -> impl Iterator<Item = &'a JobRecord> + 'a {
+        self.jobs
+            .iter()
+            .map(|job| job.as_ref())
+            .filter(move |job| job.owner == *owner)
+    }
+
+    /// The job if it is live or ended recently, whoever owns it.
+    pub fn get(&self, id: &JobId) -> Option<&JobRecord> {
+        self.by_id.get(id).map(|&i| self.jobs[i].as_ref())
+    }
+}
+
+/// The shared watcher: start it with [`JobWatch::start`], open streams with
+/// [`JobWatch::subscribe`].
+pub struct JobWatch {
+    snapshots: watch::Sender<Arc<Snapshot>>,
+    streams: Mutex<HashMap<Owner, usize>>,
+    per_key: usize,
+}
+
+impl JobWatch {
+    /// Starts the watcher over `store`; it runs until `shutdown` turns true. At most `per_key`
+    /// streams per owner.
+    pub fn start(
+        store: Arc<dyn Store>,
+        per_key: usize,
+        shutdown: watch::Receiver<bool>,
+    ) -> Arc<Self> {
+        let (snapshots, _) = watch::channel(Arc::new(Snapshot::default()));
+        let watch = Arc::new(Self {
+            snapshots,
+            streams: Mutex::new(HashMap::new()),
+            per_key,
+        });
+        tokio::spawn(Arc::clone(&watch).run(store, shutdown));
+        watch
+    }
+
+    /// A stream's place: refused (429) when `owner` already holds as many as allowed. Its first
+    /// snapshot is one taken after this call began waiting.
+    pub fn subscribe(self: &Arc<Self>, owner: &Owner) -> Result<Subscription, ApiError> {
+        let mut streams = self.streams.lock().unwrap_or_else(|e| e.into_inner());
+        let held = streams.entry(owner.clone()).or_default();
+        if *held >= self.per_key {
+            return Err(ApiError::TooManyStreams(self.per_key));
+        }
+        *held += 1;
+        Ok(Subscription {
+            receiver: self.snapshots.subscribe(),
+            owner: owner.clone(),
+            watch: Arc::clone(self),
+        })
+    }
+
+    async fn run(self: Arc<Self>, store: Arc<dyn Store>, mut shutdown: watch::Receiver<bool>) {
+        let mut announcements = store.events();
+        let mut tracked = Tracked::default();
+        let mut failures = 0_u32;
+        loop {
+            if *shutdown.borrow() {
+                return;
+            }
+            if self.snapshots.receiver_count() == 0 {
+                // Nobody listens: read nothing, and start afresh when somebody does.
+                tracked = Tracked::default();
+                failures = 0;
+                tokio::select! {
+                    () = tokio::time::sleep(LOOK_INTERVAL) => {}
+                    _ = shutdown.changed() => {}
+                }
+                continue;
+            }
+            metrics::counter!(EVENT_WATCH_LOOKS).increment(1);
+            let wait = match tracked.look(store.as_ref()).await {
+                Ok(()) => {
+                    if failures > 0 {
+                        tracing::info!("the event watcher reads the database again");
+                    }
+                    failures = 0;
+                    self.snapshots.send_replace(Arc::new(tracked.snapshot()));
+                    LOOK_INTERVAL
+                }
+                Err(error) => {
+                    if failures == 0 {
+                        tracing::warn!(%error, "the event watcher cannot read the database; streams stay open and wait");
+                    }
+                    failures = failures.saturating_add(1);
+                    LOOK_INTERVAL
+                        .saturating_mul(1 << failures.min(5))
+                        .min(MAX_BACKOFF)
+                }
+            };
+            tokio::select! {
+                () = tokio::time::sleep(wait) => {}
+                _ = shutdown.changed() => continue,
+            }
+            if failures == 0 {
+                next_announcement(&mut announcements).await;
+            }
+        }
+    }
+}
+
+/// With announcements, waits for one or [`FALLBACK_INTERVAL`]; without, returns at once. Once
+/// the announcements stop for good, it returns at once from then on (the caller polls).
+async fn next_announcement(events: &mut Option<broadcast::Receiver<QueueEvent>>) {
+    let Some(receiver) = events else {
+        return;
+    };
+    let changed = async {
+        match receiver.recv().await {
+            Ok(_) | Err(broadcast::error::RecvError::Lagged(_)) => true,
+            Err(broadcast::error::RecvError::Closed) => false,
+        }
+    };
+    if let Ok(false) = tokio::time::timeout(FALLBACK_INTERVAL, changed).await {
+        *events = None;
+    }
+}
+
+/// The watcher's memory between looks.
+#[derive(Default)]
+struct Tracked {
+    generation: u64,
+    /// `None` before the first look.
+    newest: Option<i64>,
+    live: HashMap<JobId, Arc<JobRecord>>,
+    ended: HashMap<JobId, (Instant, Arc<JobRecord>)>,
+}
+
+impl Tracked {
+    /// One look at the store; on an error nothing changes.
+    async fn look(&mut self, store: &dyn Store) -> StoreResult<()> {
+        let (rows, newest) = store.live_jobs(self.newest.unwrap_or(i64::MAX)).await?;
+        let mut live = HashMap::new();
+        let mut ended = Vec::new();
+        for record in rows {
+            let record = Arc::new(record);
+            if record.status.is_terminal() {
+                ended.push(record);
+            } else {
+                live.insert(record.id.clone(), record);
+            }
+        }
+        // Live at the last look, not now: ended since, or deleted.
+        for (id, before) in &self.live {
+            if live.contains_key(id) || ended.iter().any(|r| r.id == *id) {
+                continue;
+            }
+            match store.job(&before.owner, id).await {
+                Ok(record) if record.status.is_terminal() => ended.push(Arc::new(record)),
+                Ok(record) => {
+                    live.insert(id.clone(), Arc::new(record));
+                }
+                Err(StoreError::NotFound { .. }) => {}
+                Err(error) => return Err(error),
+            }
+        }
+        let now = Instant::now();
+        self.ended
+            .retain(|_, (at, _)| now.duration_since(*at) < REMEMBER_ENDED);
+        for record in ended {
+            self.ended.insert(record.id.clone(), (now, record));
+        }
+        self.live = live;
+        self.newest = Some(newest);
+        self.generation += 1;
+        Ok(())
+    }
+
+    fn snapshot(&self) -> Snapshot {
+        let mut jobs: Vec<Arc<JobRecord>> = self
+            .live
+            .values()
+            .chain(self.ended.values().map(|(_, record)| record))
+            .cloned()
+            .collect();
+        jobs.sort_by_key(|job| job.seq);
+        let by_id = jobs
+            .iter()
+            .enumerate()
+            .map(|(i, job)| (job.id.clone(), i))
+            .collect();
+        Snapshot {
+            generation: self.generation,
+            jobs,
+            by_id,
+            newest: self.newest.unwrap_or(0),
+        }
+    }
+}
+
+/// One stream's place at the watcher; gives it back when dropped.
+pub struct Subscription {
+    receiver: watch::Receiver<Arc<Snapshot>>,
+    owner: Owner,
+    watch: Arc<JobWatch>,
+}
+
+impl Subscription {
+    /// The next snapshot the stream has not seen (the first: one taken after it subscribed),
+    /// or `None` once `shutdown` turns true.
+    pub async fn next(&mut self, shutdown: &mut watch::Receiver<bool>) -> Option<Arc<Snapshot>> {
+        loop {
+            if *shutdown.borrow() {
+                return None;
+            }
+            tokio::select! {
+                changed = self.receiver.changed() => {
+                    changed.ok()?;
+                    let snapshot = Arc::clone(&self.receiver.borrow_and_update());
+                    // A generation of 0 is the empty value a restarted watcher begins with.
+                    if snapshot.generation > 0 {
+                        return Some(snapshot);
+                    }
+                }
+                _ = shutdown.changed() => {}
+            }
+        }
+    }
+}
+
+impl Drop for Subscription {
+    fn drop(&mut self) {
+        let mut streams = self.watch.streams.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(held) = streams.get_mut(&self.owner) {
+            *held -= 1;
+            if *held == 0 {
+                streams.remove(&self.owner);
+            }
+        }
+    }
+}
