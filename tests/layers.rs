@@ -46,7 +46,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     // The flags name their limits in the domain's terms (a queue bound, schedule limits).
     ("config", &["domain"]),
     ("compute", &[]),
-    ("connections", &[]),
+    ("connections", &["telemetry"]),
     ("telemetry", &[]),
     ("progress", &[]),
 ];
