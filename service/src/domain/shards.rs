@@ -185,11 +185,23 @@ pub struct RetryBudget {
 /// The wait before a shard whose run failed `failures` times is claimed again: 1 s, doubling, at
 /// most a minute.
 pub fn retry_backoff_ms(failures: u64) -> i64 {
-    1000_i64 << failures.saturating_sub(1).min(6)
+    (1000_i64 << failures.saturating_sub(1).min(6)).min(60_000)
 }
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_failed_run_waits_one_second_doubling_to_a_minute() {
+        let waits: Vec<i64> = (0..=9).map(super::retry_backoff_ms).collect();
+        assert_eq!(
+            waits,
+            [
+                1000, 1000, 2000, 4000, 8000, 16_000, 32_000, 60_000, 60_000, 60_000
+            ]
+        );
+        assert_eq!(super::retry_backoff_ms(u64::MAX), 60_000);
+    }
+
     use super::*;
 
     #[test]
