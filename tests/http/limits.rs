@@ -125,9 +125,9 @@ fn reconnecting_stalled_clients_beyond_the_connection_limit_delay_no_one() {
         "the stalled clients were cut off and came back"
     );
     // Without shedding, a health check waits for stalled clients' header timeouts (30 s); the
-    // bound leaves room for two busy cores shared with other tests.
+    // bound leaves room for two busy cores shared with other tests (alone: under 0.1 s).
     assert!(
-        slowest < Duration::from_secs(5),
+        slowest < Duration::from_secs(10),
         "a health check waited {slowest:?} behind stalled clients"
     );
 }

@@ -165,8 +165,9 @@ fn postgres_stopped_and_restarted_under_workers_fails_fast_and_loses_nothing() {
             !problem["detail"].as_str().unwrap().contains("127.0.0.1"),
             "the cause is logged, not sent: {problem}"
         );
+        // 2 s of waiting for the database, and room for cores shared with other tests.
         assert!(
-            took < Duration::from_millis(3500),
+            took < Duration::from_secs(5),
             "{path} answered after {took:?}"
         );
     }
