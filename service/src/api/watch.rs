@@ -112,7 +112,11 @@ impl JobWatch {
                 failures = 0;
                 tokio::select! {
                     () = tokio::time::sleep(LOOK_INTERVAL) => {}
-                    _ = shutdown.changed() => {}
+                    changed = shutdown.changed() => {
+                        if changed.is_err() {
+                            return;
+                        }
+                    }
                 }
                 continue;
             }
@@ -138,7 +142,12 @@ impl JobWatch {
             };
             tokio::select! {
                 () = tokio::time::sleep(wait) => {}
-                _ = shutdown.changed() => continue,
+                changed = shutdown.changed() => {
+                    if changed.is_err() {
+                        return;
+                    }
+                    continue;
+                }
             }
             if failures == 0 {
                 next_announcement(&mut announcements).await;
@@ -260,7 +269,8 @@ impl Subscription {
                         return Some(snapshot);
                     }
                 }
-                _ = shutdown.changed() => {}
+                // The server is gone with its shutdown signal: nothing more to tell.
+                changed = shutdown.changed() => changed.ok()?,
             }
         }
     }
