@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""The README's examples, run as written against a live server.
+"""The README's examples (or another document's), run as written against a live server.
 
-    python3 tests/readme/check.py BASE_URL [README.md]
+    python3 tests/readme/check.py BASE_URL [README.md | docs/manual.md]
 
 Every fenced ```sh block that follows a `<!-- readme-test -->` line is run with bash (`set -euo
 pipefail`) in a fresh directory where `target` is the repository's (so `target/release/bouncewear`
@@ -73,7 +73,8 @@ def same_shape(actual, documented):
 def main():
     base = sys.argv[1].rstrip("/")
     readme = sys.argv[2] if len(sys.argv) > 2 else "README.md"
-    root = os.path.dirname(os.path.abspath(readme))
+    # The repository's root (this file is tests/readme/check.py), whichever document is checked.
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     env = {**os.environ, "PATH": os.path.join(root, "target", "release") + os.pathsep + os.environ["PATH"]}
     found = blocks(open(readme, encoding="utf-8").read())
     assert found, "no README example is marked for testing"
@@ -97,7 +98,7 @@ def main():
                     problem = f"output {got!r} does not have the shape of {documented!r}"
                     break
         status = "ok" if problem is None else f"FAILED: {problem}"
-        print(f"README.md:{line}: {status}")
+        print(f"{readme}:{line}: {status}")
         if problem:
             print("\n".join(output), file=sys.stderr)
             failures += 1
