@@ -110,13 +110,8 @@ impl JobWatch {
                 // Nobody listens: read nothing, and start afresh when somebody does.
                 tracked = Tracked::default();
                 failures = 0;
-                tokio::select! {
-                    () = tokio::time::sleep(LOOK_INTERVAL) => {}
-                    changed = shutdown.changed() => {
-                        if changed.is_err() {
-                            return;
-                        }
-                    }
+                if !pause(LOOK_INTERVAL, &mut shutdown).await {
+                    return;
                 }
                 continue;
             }
@@ -140,19 +135,21 @@ impl JobWatch {
                         .min(MAX_BACKOFF)
                 }
             };
-            tokio::select! {
-                () = tokio::time::sleep(wait) => {}
-                changed = shutdown.changed() => {
-                    if changed.is_err() {
-                        return;
-                    }
-                    continue;
-                }
+            if !pause(wait, &mut shutdown).await {
+                return;
             }
-            if failures == 0 {
+            if failures == 0 && !*shutdown.borrow() {
                 next_announcement(&mut announcements).await;
             }
         }
+    }
+}
+
+/// Sleeps for `wait`, or less if `shutdown` changes; `false` once its sender is gone.
+async fn pause(wait: Duration, shutdown: &mut watch::Receiver<bool>) -> bool {
+    tokio::select! {
+        () = tokio::time::sleep(wait) => true,
+        changed = shutdown.changed() => changed.is_ok(),
     }
 }
 

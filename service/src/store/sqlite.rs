@@ -741,20 +741,16 @@ impl JobQueue for SqliteStore {
             return Ok(None);
         };
         let job = JobId::from(claimed.try_get::<String, _>("job_id")?);
+        // The job runs from its first claim, and is charged its shard's cost at each (fair share).
         sqlx::query(
-            "UPDATE jobs SET status = 'running', started_at = COALESCE(started_at, ?2) \
-             WHERE id = ?1 AND status = 'queued'",
+            "UPDATE jobs SET status = CASE WHEN status = 'queued' THEN 'running' ELSE status END, \
+             started_at = COALESCE(started_at, ?2), vstart = vtime, vtime = vtime + ?3 WHERE id = ?1",
         )
         .bind(job.as_str())
         .bind(now.0)
+        .bind(claimed.try_get::<i64, _>("operations_total")? + SHARD_OVERHEAD_OPERATIONS)
         .execute(&mut *tx)
         .await?;
-        // The job is charged its shard's cost as it is claimed.
-        sqlx::query("UPDATE jobs SET vstart = vtime, vtime = vtime + ?2 WHERE id = ?1")
-            .bind(job.as_str())
-            .bind(claimed.try_get::<i64, _>("operations_total")? + SHARD_OVERHEAD_OPERATIONS)
-            .execute(&mut *tx)
-            .await?;
         sum_progress(&mut tx, &job).await?;
         let row = sqlx::query(
             "SELECT s.job_id, s.batch, s.grp, s.attempt, s.operations_total, j.spec, j.started_at \
