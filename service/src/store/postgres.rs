@@ -9,9 +9,9 @@ use super::rows::{
     self, Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, FORGET_EXPIRED_KEY, INSERT_DISTRIBUTION,
     LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY,
     REMEMBERED_KEY, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, bind_bins, bind_distribution,
-    bind_fence, bind_key, bind_life, bind_queued_job, bind_schedule, bind_shard, claim_from_row,
+    bind_fence, bind_key, bind_life, bind_queued_job, bind_schedule, claim_from_row,
     count_from_sql, count_to_sql, distribution_from_row, distribution_rows, failed_too_often,
-    gave_up, groups_from_row, job_columns, job_from_row, life_from_row, not_ended,
+    gave_up, group_to_sql, groups_from_row, job_columns, job_from_row, life_from_row, not_ended,
     partial_from_row, partial_to_sql, remembered_from_row, row_groups_to_sql, run_from_row,
     schedule_columns, schedule_from_row, schema_current, shard_columns, shard_from_row,
     shard_id_from_row, spec_from_json, to_json,
@@ -178,47 +178,65 @@ const SELECT_JOB: &str = concat!(
     " FROM jobs WHERE id = $1 AND owner = $2"
 );
 
-/// Inserts a queued job with its first shards unless the queue or the owner's share of it is full ([`QueueBound`]), inside
-/// the caller's transaction (which holds the queue lock until it ends).
+/// Inserts a queued job with its first shards unless the queue or the owner's share of it is
+/// full ([`QueueBound`]), inside the caller's transaction. The rows go in first; the queue lock
+/// is taken only to count, and held until the transaction ends, so that submissions wait on
+/// each other for one count and a commit rather than for each other's inserts.
 async fn insert_queued(
     tx: &mut PgConnection,
     job: &QueuedJob,
     bound: QueueBound,
 ) -> StoreResult<bool> {
+    let insert = sqlx::query(
+        "INSERT INTO jobs (id, owner, name, spec, seed, status, operations_total, created_at, stored_bytes, vtime) \
+         SELECT $1, $2, $3, $4, $5, 'queued', $6, $7, octet_length($4), \
+                COALESCE((SELECT MAX(vstart) FROM jobs), 0)",
+    );
+    bind_queued_job(insert, job)?.execute(&mut *tx).await?;
+    insert_shards(tx, &job.id, &job.shards).await?;
     sqlx::query("SELECT pg_advisory_xact_lock($1)")
         .bind(QUEUE_LOCK)
         .execute(&mut *tx)
         .await?;
-    let insert = sqlx::query(
-        "INSERT INTO jobs (id, owner, name, spec, seed, status, operations_total, created_at, stored_bytes, vtime) \
-         SELECT $1, $2, $3, $4, $5, 'queued', $6, $7, octet_length($4), \
-                COALESCE((SELECT MAX(vstart) FROM jobs), 0) \
-         WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < $8 \
-           AND (SELECT COUNT(*) FROM jobs WHERE status = 'queued' AND owner = $2) < $9",
-    );
-    let inserted = bind_queued_job(insert, job)?
-        .bind(count_to_sql(bound.total))
-        .bind(count_to_sql(bound.per_owner))
-        .execute(&mut *tx)
-        .await?;
-    if inserted.rows_affected() == 0 {
-        return Ok(false);
-    }
-    insert_shards(tx, &job.id, &job.shards).await?;
-    Ok(true)
+    // The counts include the job just inserted.
+    let within: bool = sqlx::query_scalar(
+        "SELECT (SELECT COUNT(*) FROM jobs WHERE status = 'queued') <= $1 \
+            AND (SELECT COUNT(*) FROM jobs WHERE status = 'queued' AND owner = $2) <= $3",
+    )
+    .bind(count_to_sql(bound.total))
+    .bind(job.owner.as_str())
+    .bind(count_to_sql(bound.per_owner))
+    .fetch_one(&mut *tx)
+    .await?;
+    Ok(within)
 }
 
+/// Inserts the shards in one statement: one round trip whatever their number.
 async fn insert_shards(
     tx: &mut PgConnection,
     job: &JobId,
     shards: &[ShardPlan],
 ) -> StoreResult<()> {
-    for plan in shards {
-        let insert = sqlx::query(
-            "INSERT INTO shards (job_id, batch, grp, status, operations_total) VALUES ($1, $2, $3, 'queued', $4)",
-        );
-        bind_shard(insert, job, plan).execute(&mut *tx).await?;
-    }
+    let batches: Vec<i64> = shards
+        .iter()
+        .map(|plan| count_to_sql(plan.shard.batch))
+        .collect();
+    let groups: Vec<i64> = shards.iter().map(|plan| group_to_sql(plan.shard)).collect();
+    let operations: Vec<i64> = shards
+        .iter()
+        .map(|plan| count_to_sql(plan.operations))
+        .collect();
+    sqlx::query(
+        "INSERT INTO shards (job_id, batch, grp, status, operations_total) \
+         SELECT $1, batch, grp, 'queued', operations \
+         FROM UNNEST($2::BIGINT[], $3::BIGINT[], $4::BIGINT[]) AS plan (batch, grp, operations)",
+    )
+    .bind(job.as_str())
+    .bind(batches)
+    .bind(groups)
+    .bind(operations)
+    .execute(&mut *tx)
+    .await?;
     Ok(())
 }
 
