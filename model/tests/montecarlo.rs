@@ -9,17 +9,10 @@ use bouncewear_model::montecarlo::{
 use bouncewear_model::stats::Accumulator;
 use bouncewear_model::{FieldError, Pointer};
 use serde_json::{Value, json};
-use support::{job, run_on};
+use support::{job, pointers, run_on};
 
 fn run(job: &Job) -> JobResult {
     run_on(2, job)
-}
-
-fn pointers(value: Value) -> Vec<String> {
-    match Job::from_json(&value.to_string(), || 7) {
-        Ok(_) => Vec::new(),
-        Err(invalid) => invalid.errors().iter().map(|e| e.pointer.clone()).collect(),
-    }
 }
 
 const ARCING: &str = r#"{"circuit": {"supply_voltage_v": 48, "current_a": 15}}"#;

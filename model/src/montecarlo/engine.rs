@@ -29,6 +29,8 @@ use rayon::prelude::*;
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
+pub mod limit_state;
+
 /// The most groups (independent units for confidence intervals) a summary is built from.
 pub const GROUPS: u64 = 32;
 

@@ -4,6 +4,7 @@
 use super::correlation::{Correlation, CorrelationSpec};
 use super::distribution::{Distribution, DistributionSpec, Domain};
 use super::metric::{DeviceMetric, Metric, OperationMetric};
+use super::rare::{JobShape, RareEvent, RareEventSpec};
 use crate::error::{FieldError, InvalidInput, Pointer};
 use crate::operation::Fidelity;
 use crate::scenario::{Scenario, ScenarioSpec, WearLawKind};
@@ -79,6 +80,10 @@ pub struct JobSpec {
     /// Which scattered parameters drive each metric: the Result's `sensitivity` (none by default).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensitivity: Option<SensitivitySpec>,
+    /// A probability far out in one metric's tail, by subset simulation, importance sampling or
+    /// crude Monte Carlo in the job's input space: the Result's `rare_event` (none by default).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rare_event: Option<RareEventSpec>,
 }
 
 /// The sensitivity analysis a job asks for (docs/contract.md "Sensitivity").
@@ -127,6 +132,7 @@ impl Default for JobSpec {
             precision: None,
             failure: BTreeMap::new(),
             sensitivity: None,
+            rare_event: None,
         }
     }
 }
@@ -336,6 +342,20 @@ impl Criterion {
             Criterion::Below(limit) => value < limit,
         }
     }
+
+    /// How far `value` is past the limit, relative to it (absolute at a limit of 0): above 0
+    /// exactly when the criterion [`fails`](Criterion::fails).
+    pub fn margin(self, value: f64) -> f64 {
+        let (excess, limit) = match self {
+            Criterion::Above(limit) => (value - limit, limit),
+            Criterion::Below(limit) => (limit - value, limit),
+        };
+        if limit == 0.0 {
+            excess
+        } else {
+            excess / limit.abs()
+        }
+    }
 }
 
 /// One validated scatter entry.
@@ -428,6 +448,7 @@ pub struct Job {
     precision: Option<Precision>,
     failure: Vec<(Metric, Criterion)>,
     sensitivity: Option<SensitivityMethod>,
+    rare_event: Option<RareEvent>,
 }
 
 impl Job {
@@ -565,6 +586,22 @@ impl Job {
             sensitivity.method
         });
 
+        let rare_event = spec.rare_event.as_ref().and_then(|rare| {
+            let inputs = |per| spec.scatter.iter().filter(|s| s.per == per).count();
+            RareEvent::new(
+                rare,
+                &JobShape {
+                    operations: spec.operations,
+                    device_inputs: inputs(Per::Device),
+                    operation_inputs: inputs(Per::Operation),
+                    polarity,
+                    failure: !spec.failure.is_empty(),
+                },
+                &root.child("rare_event"),
+                &mut errors,
+            )
+        });
+
         if !errors.is_empty() {
             return Err(InvalidInput::new(errors));
         }
@@ -585,6 +622,7 @@ impl Job {
             precision,
             failure,
             sensitivity,
+            rare_event,
         })
     }
 
@@ -601,6 +639,7 @@ impl Job {
             .map_or(self.spec.devices, |p| p.max_devices)
             .saturating_mul(self.spec.operations)
             .saturating_mul(self.evaluations_per_operation())
+            .saturating_add(self.rare_event.map_or(0, |rare| rare.max_operations()))
     }
 
     /// How many times each operation is evaluated: once, and with Sobol' indices once more per
@@ -686,6 +725,11 @@ impl Job {
 
     pub fn failure(&self) -> &[(Metric, Criterion)] {
         &self.failure
+    }
+
+    /// The rare event the job asks, validated.
+    pub fn rare_event(&self) -> Option<&RareEvent> {
+        self.rare_event.as_ref()
     }
 
     /// The sensitivity analysis the job asks for.

@@ -11,6 +11,7 @@ pub mod job;
 pub mod kernel;
 pub mod lives;
 pub mod metric;
+pub mod rare;
 pub mod sensitivity;
 
 pub use engine::{Cancelled, Observer, Silent, Tally, Watch};
@@ -18,6 +19,7 @@ pub use job::{Job, JobSpec, LimitSpec};
 pub use kernel::{Isa, Kernel};
 pub use lives::{DeviceLife, GroupLives};
 pub use metric::{DeviceMetric, Metric, OperationMetric};
+pub use rare::{RareEventReport, RareEventSpec};
 
 use crate::stats::{Accumulator, QueryAnswer, Summary, Threshold, query, summarize};
 use job::Statistic;
@@ -97,6 +99,9 @@ pub struct JobResult {
     /// one entry), each with the indices of every parameter that drives it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensitivity: Option<BTreeMap<String, Vec<sensitivity::SensitivityBin>>>,
+    /// With a rare event: its probability, interval, design point and tail curve.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rare_event: Option<rare::RareEventReport>,
     /// What the run met that bears on its numbers, counted over every operation.
     pub counts: diagnostics::Counts,
     /// Warnings about how far to trust the numbers (e.g. eq. 16 far from its calibration current,
@@ -204,8 +209,17 @@ pub struct LifeReport {
     pub devices: Vec<DeviceLife>,
 }
 
+/// Why a run gave no Result.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RunError {
+    #[error(transparent)]
+    Cancelled(#[from] Cancelled),
+    #[error(transparent)]
+    RareEvent(#[from] rare::RareEventError),
+}
+
 /// Runs a job on the current rayon pool with the best kernel this CPU has, and summarises it.
-pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, Cancelled> {
+pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, RunError> {
     run_job_on(Kernel::best(), job, observer)
 }
 
@@ -214,10 +228,13 @@ pub fn run_job_on(
     kernel: Kernel,
     job: &Job,
     observer: &dyn Observer,
-) -> Result<JobResult, Cancelled> {
+) -> Result<JobResult, RunError> {
     let started = Instant::now();
     let tally = engine::run_on(kernel, job, observer, |tally| precision_met(job, tally))?;
-    Ok(summarize_job(job, &tally, started.elapsed().as_secs_f64()))
+    let rare_event = rare::estimate(job, observer)?;
+    let mut result = summarize_job(job, &tally, started.elapsed().as_secs_f64());
+    result.rare_event = rare_event;
+    Ok(result)
 }
 
 /// Whether the job's precision target is met by what `tally` holds (never, without a target).
@@ -276,6 +293,7 @@ pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
             let groups: Vec<_> = tally.groups.iter().map(|g| &g.sensitivity).collect();
             sensitivity::summarize_sensitivity(job, &groups)
         }),
+        rare_event: None,
         counts,
         diagnostics,
         timing: Timing {

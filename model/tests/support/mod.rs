@@ -16,3 +16,12 @@ pub fn run_on(threads: usize, job: &Job) -> JobResult {
         .unwrap();
     pool.install(|| run_job(job, &Silent)).unwrap()
 }
+
+/// The pointers of the faults `value` has as a job (none when it is valid).
+#[allow(dead_code, reason = "not every test file checks faults")]
+pub fn pointers(value: Value) -> Vec<String> {
+    match Job::from_json(&value.to_string(), || 7) {
+        Ok(_) => Vec::new(),
+        Err(invalid) => invalid.errors().iter().map(|e| e.pointer.clone()).collect(),
+    }
+}
