@@ -316,13 +316,20 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
         out.to_str().unwrap(),
     ]);
     assert!(
-        shown.contains("28/28 measurements") && shown.contains("ETA"),
+        shown.contains("35/35 measurements") && shown.contains("ETA"),
         "{shown}"
     );
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     let tiers = report["tiers"].as_array().unwrap();
     assert_eq!(tiers.len(), 2);
+    // Each rare-event method at 1e-3, 1e-6 and 1e-9 (crude at 1e-3 only), against the exact tail.
+    let rare = report["rare_events"].as_array().unwrap();
+    assert_eq!(rare.len(), 7);
+    assert!(
+        rare.iter()
+            .all(|row| row["mean_evaluations"].as_f64().unwrap() > 0.0)
+    );
     // Coverage of the 95 % intervals in three designs at two sizes, the Sobol' indices' among them.
     let coverage = report["coverage"].as_array().unwrap();
     for devices in [64, 512] {

@@ -538,7 +538,7 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
             }
             None => {
                 let partials = store.partials(&fence.job).await.unwrap();
-                match merge(&job, fence.shard.batch, partials, 1.0).unwrap() {
+                match merge(&job, fence.shard.batch, partials, 1.0, &Silent).unwrap() {
                     Merged::Result { result, groups } => {
                         assert!(
                             store

@@ -9,8 +9,9 @@ use crate::domain::draw_seed;
 use crate::progress::Progress;
 use crate::telemetry::{self, LogFormat};
 use bouncewear_model::calibration::{CalibrationSpec, calibrate};
+use bouncewear_model::montecarlo::rare::check_threshold;
 use bouncewear_model::montecarlo::{Job, run_job};
-use bouncewear_model::{Fidelity, InvalidInput, Scenario, simulate};
+use bouncewear_model::{Fidelity, InvalidInput, Pointer, Scenario, simulate};
 use clap::{Parser, Subcommand, ValueEnum};
 use std::io::{Read, Write};
 use std::path::PathBuf;
@@ -224,6 +225,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             quiet,
         } => {
             let job = Job::from_json(&read_input(&file)?, draw_seed)?;
+            check_threshold(&job, &Pointer::root().child("rare_event"))?;
             let pool = thread_pool(threads)?;
             let progress = Progress::operations(quiet);
             let result = pool.install(|| run_job(&job, &progress));
@@ -316,6 +318,11 @@ fn write_plots(
             format!("sensitivity-{metric}.svg"),
             crate::plots::sensitivity_svg(metric, bins),
         ));
+    }
+    if result.rare_event.is_some() {
+        let svg = crate::plots::job_plot(result, "tail.svg", "")
+            .map_err(|e| CliError::Failed(e.to_string()))?;
+        files.push(("tail.svg".to_owned(), svg));
     }
     for (name, svg) in files {
         let path = dir.join(name);

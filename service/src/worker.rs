@@ -11,7 +11,7 @@
 //! shutdown the running shard is stopped and handed back to the queue at once.
 
 use crate::domain::UnixMs;
-use crate::domain::shards::{Merged, merge};
+use crate::domain::shards::{MergeError, Merged, merge};
 use crate::store::{Claim, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store, StoreResult};
 use crate::telemetry::{record_job_finished, record_shard_step};
 use bouncewear_model::Pointer;
@@ -219,7 +219,12 @@ impl Workers {
         let last = fence.shard.batch;
         let wall_s = (UnixMs::now().0 - started_at.0).max(0) as f64 / 1000.0;
         let ran = self
-            .compute(lease, move |_| Ok(merge(&job, last, partials, wall_s)))
+            .compute(lease, move |observer| {
+                match merge(&job, last, partials, wall_s, observer) {
+                    Err(MergeError::Cancelled(cancelled)) => Err(cancelled),
+                    merged => Ok(merged),
+                }
+            })
             .await;
         match ran {
             Ran::Done(Ok(Merged::Result { result, groups })) => {
@@ -242,7 +247,10 @@ impl Workers {
                     self.fail_attempt(fence, &reason).await
                 }
             },
-            Ran::Done(Err(incomplete)) => self.fail_attempt(fence, &incomplete.to_string()).await,
+            Ran::Done(Err(MergeError::RareEvent(failed))) => {
+                self.fail(fence, &failed.to_string()).await
+            }
+            Ran::Done(Err(other)) => self.fail_attempt(fence, &other.to_string()).await,
             Ran::Stopped { shutdown } => self.stopped(fence, shutdown).await,
             Ran::Panicked => {
                 self.fail_attempt(fence, "internal error: merging the groups panicked")

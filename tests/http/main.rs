@@ -10,6 +10,7 @@ mod jobs;
 mod limits;
 mod postgres;
 mod query;
+mod rare;
 mod schedules;
 mod simulate;
 mod strict;

@@ -82,6 +82,8 @@ def repair_job(job):
     job.pop("correlation", None)
     # A sensitivity analysis needs a scattered parameter, so it goes with them too.
     job.pop("sensitivity", None)
+    # So does a rare event.
+    job.pop("rare_event", None)
     # The anode/cathode masses need scenario.material.anode_erosion_fraction.
     polarity = (job.get("scenario") or {}).get("material", {}).get("anode_erosion_fraction") is not None
     metrics = job.get("metrics")

@@ -880,6 +880,7 @@
       renderOperations(result);
       renderLife(result);
       renderSensitivity(result);
+      renderRareEvent(result);
       renderDevices(result);
       renderRun(result);
     }
@@ -959,6 +960,26 @@
       table.replaceChildren(
         el("thead", {}, el("tr", {}, el("th", {}, "Weibull fit"), el("th", { class: "num" }, "estimate"), el("th", { class: "num" }, "95 % interval"))),
         el("tbody", {}, rows.map(([k, v, ci]) => el("tr", {}, el("td", {}, k), el("td", { class: "num" }, v), el("td", { class: "num" }, ci)))));
+    }
+
+    // A rare event: its probability with interval, the tail curve and the design point.
+    function renderRareEvent(result) {
+      const rare = result.rare_event;
+      show($("#rare-section"), Boolean(rare));
+      if (!rare) return;
+      const asked = (result.job && result.job.rare_event) || {};
+      const side = asked.below !== undefined ? "below " + fmt(asked.below) : "above " + fmt(asked.above);
+      $("#rare-question").textContent = "P(" + asked.metric + " " + side + ") per device: " + fmt(rare.probability) +
+        ", 95 % interval " + fmtInterval(rare.ci95) + (typeof rare.cov === "number" ? ", c.o.v. " + fmt(rare.cov, 2) : "") +
+        "; " + rare.method + ", " + fmtCount(rare.evaluations) + " evaluations" +
+        (typeof rare.beta === "number" ? ", β = " + fmt(rare.beta, 3) : "") + ".";
+      injectSvg($("#plot-tail"), base + "/plots/tail.svg");
+      const entries = Object.entries(rare.design_point || {});
+      $("#rare-table").replaceChildren(
+        el("thead", {}, el("tr", {}, el("th", {}, "Design point (most probable failing inputs)"), el("th", { class: "num" }, "value"))),
+        el("tbody", {}, entries.length
+          ? entries.slice(0, 40).map(([k, v]) => el("tr", {}, el("td", {}, k), el("td", { class: "num" }, fmt(v))))
+          : [el("tr", {}, el("td", { class: "muted" }, "No evaluated input reached the threshold."))]));
     }
 
     // Which parameters drive each metric: the plot of the first and last bin, and a table of the

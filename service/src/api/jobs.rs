@@ -20,6 +20,7 @@ use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
 use bouncewear_model::Pointer;
+use bouncewear_model::montecarlo::rare::check_threshold;
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric, query_metric};
 use bouncewear_model::stats::{Accumulator, QUANTILES, QueryAnswer, Summary, Threshold};
 use futures_util::stream::{Stream, StreamExt};
@@ -39,6 +40,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(get_distribution))
         .routes(routes!(job_events))
         .routes(routes!(get_life))
+        .routes(routes!(get_rare_event))
 }
 
 /// A job as the API shows it.
@@ -163,6 +165,15 @@ pub async fn submit_job(
     let key = idempotency_key(&headers, &body)?;
     let job = Job::from_json(&body, draw_seed)?;
     job.check_size(state.config.max_job_operations, &Pointer::root())?;
+    if job.rare_event().is_some() {
+        // One device run to the operation read: off the async threads.
+        let checked = job.clone();
+        tokio::task::spawn_blocking(move || {
+            check_threshold(&checked, &Pointer::root().child("rare_event"))
+        })
+        .await
+        .map_err(|error| Internal(format!("checking the rare event's threshold: {error}")))??;
+    }
     let now = UnixMs::now();
     let new = QueuedJob::new(&job, owner, job.spec().name.clone(), now);
     let bound = state.config.queue_bound();
@@ -778,6 +789,62 @@ pub async fn get_life(
             ))
         }
     }
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct RareEventQuery {
+    /// `json` (default): the estimate; `csv`: its tail curve, `threshold,probability` per row.
+    #[param(inline, example = "json")]
+    pub format: Option<Format>,
+}
+
+/// A job's rare event: the probability beyond its threshold, the interval, the design point and
+/// the tail curve; or the tail curve as CSV.
+///
+/// Needs a job submitted with `rare_event` (404 otherwise). `format=json` (default) gives the
+/// Result's `rare_event`; `format=csv` gives the tail curve, one row per threshold from the bulk
+/// to the one asked: `threshold,probability`.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/rare_event", tag = "jobs", params(("id" = String, Path, description = "Job id"), RareEventQuery),
+    responses(
+        (status = 200, description = "The estimate (JSON), or with `format=csv` its tail curve: `threshold,probability`", content((bouncewear_model::montecarlo::RareEventReport = "application/json"), (String = "text/csv")), headers(("ETag" = String, description = "A tag of the content, for If-None-Match"), ("Cache-Control" = String, description = "Immutable for a year"))),
+        NotModified,
+        BadQuery,
+        Unauthorized,
+        (status = 404, description = "No such job, or it asks no rare event", body = Problem, content_type = PROBLEM),
+        NotSucceeded,
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn get_rare_event(
+    State(state): State<AppState>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<JobId>,
+    query: Result<Query<RareEventQuery>, QueryRejection>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    succeeded(&state, &owner, &id).await?;
+    let result = stored_result(&state, &id).await?;
+    let Some(rare) = result.rare_event else {
+        return Err(ApiError::NotFound(format!(
+            "job {id} asks no rare event: submit it with `rare_event`"
+        )));
+    };
+    Ok(match query.format.unwrap_or(Format::Json) {
+        Format::Json => immutable(&state, &headers, JSON, to_json(&rare)?),
+        Format::Csv => immutable(&state, &headers, CSV, tail_csv(&rare)),
+    })
+}
+
+/// The tail curve as CSV, every number as Rust prints it (shortest round-trip).
+fn tail_csv(report: &bouncewear_model::montecarlo::RareEventReport) -> String {
+    let mut csv = String::from("threshold,probability\n");
+    for point in &report.tail {
+        let _ = writeln!(csv, "{},{}", point.threshold, point.probability);
+    }
+    csv
 }
 
 /// Devices a page of the life CSV reads from the store at a time.

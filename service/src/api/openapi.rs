@@ -7,6 +7,7 @@
 use bouncewear_model::calibration::{FITTED, MAX_OBSERVATIONS, MAX_OPERATION, MAX_PARAMETERS};
 use bouncewear_model::error::MAX_TEXT_CHARS;
 use bouncewear_model::montecarlo::job::{MAX_DEVICES, MAX_OPERATIONS, MAX_THRESHOLDS};
+use bouncewear_model::montecarlo::rare::LIFE;
 use bouncewear_model::montecarlo::{DeviceMetric, OperationMetric};
 use bouncewear_model::scenario::{MAX_BOUNCES_LIMIT, MAX_MAGNITUDE, MIN_MAGNITUDE};
 use bouncewear_model::stats::QUANTILES;
@@ -263,6 +264,21 @@ fn constrain_request_fields(document: &mut Value) {
             "PrecisionSpec",
             "metric",
             json!({"enum": operation_metrics}),
+        ),
+        (
+            "RareEventSpec",
+            "metric",
+            json!({"enum": metrics.iter().copied().chain([LIFE]).collect::<Vec<_>>()}),
+        ),
+        (
+            "RareEventSpec",
+            "operation",
+            json!({"minimum": 1, "maximum": MAX_OPERATIONS}),
+        ),
+        (
+            "RareEventSpec",
+            "target_cov",
+            json!({"exclusiveMinimum": 0, "maximum": 1}),
         ),
         ("PrecisionSpec", "statistic", json!({"enum": statistics})),
         (

@@ -40,8 +40,8 @@ pub struct PlotQuery {
 }
 
 /// A plot of a succeeded job: `bands.svg` (p05/p50/p95 across operations: the wear curve),
-/// `histograms.svg` (per bin), `weibull.svg` (life, with bounds) or `sensitivity.svg` (which
-/// parameters drive a metric).
+/// `histograms.svg` (per bin), `weibull.svg` (life, with bounds), `sensitivity.svg` (which
+/// parameters drive a metric) or `tail.svg` (a rare event's tail curve).
 ///
 /// SVG, as the dashboard shows it. `bands.svg` and `histograms.svg` draw `metric` (an operation
 /// metric of the job, default `total_bounce_s`); `weibull.svg` needs failure criteria and plots
@@ -49,15 +49,16 @@ pub struct PlotQuery {
 /// submitted with `sensitivity` and draws, for `metric` (an operation or device metric), the
 /// first-order and total Sobol' indices of each scattered parameter with their 95 % intervals in
 /// the first and the last bin (method `regression`: the absolute standardised regression
-/// coefficients).
+/// coefficients); `tail.svg` needs a job submitted with `rare_event` and draws `P(metric beyond
+/// t)` on a log axis, from the bulk to the threshold asked, with the estimate's 95 % interval.
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/plots/{kind}", tag = "jobs",
-    params(("id" = String, Path, description = "Job id"), ("kind" = String, Path, description = "bands.svg, histograms.svg, weibull.svg or sensitivity.svg"), PlotQuery),
+    params(("id" = String, Path, description = "Job id"), ("kind" = String, Path, description = "bands.svg, histograms.svg, weibull.svg, sensitivity.svg or tail.svg"), PlotQuery),
     responses(
         (status = 200, description = "The plot", body = String, content_type = SVG),
         BadQuery,
         Unauthorized,
-        (status = 404, description = "No such job, plot or metric, or no sensitivity analysis", body = Problem, content_type = PROBLEM),
+        (status = 404, description = "No such job, plot or metric, or no sensitivity analysis or rare event", body = Problem, content_type = PROBLEM),
         NotSucceeded,
     ),
     security((), ("api_key" = []))

@@ -5,7 +5,10 @@
 //! target not yet met, adds the next batch. Results are bit-identical to running the job whole.
 
 use bouncewear_model::montecarlo::engine::{Batch, GroupStats};
-use bouncewear_model::montecarlo::{Job, JobResult, RunGroups, Tally, next_batch, summarize_job};
+use bouncewear_model::montecarlo::rare::{RareEventError, estimate};
+use bouncewear_model::montecarlo::{
+    Cancelled, Job, JobResult, Observer, RunError, RunGroups, Tally, next_batch, summarize_job,
+};
 use serde::Serialize;
 use std::fmt;
 use utoipa::ToSchema;
@@ -60,7 +63,8 @@ pub fn batch_shards(job: &Job, batch: Batch) -> Vec<ShardPlan> {
         })
         .chain([ShardPlan {
             shard: ShardId::merge(batch.index),
-            operations: 0,
+            // The last merge estimates the job's rare event, if it asks one.
+            operations: job.rare_event().map_or(0, |rare| rare.max_operations()),
         }])
         .collect()
 }
@@ -98,6 +102,19 @@ pub struct Incomplete {
     pub detail: String,
 }
 
+/// Why a merge step gave neither a Result nor a next batch.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum MergeError {
+    /// The store's groups are not the job's: worth another attempt.
+    #[error(transparent)]
+    Incomplete(#[from] Incomplete),
+    /// The job's rare event has no answer (the same on every attempt).
+    #[error(transparent)]
+    RareEvent(#[from] RareEventError),
+    #[error(transparent)]
+    Cancelled(#[from] Cancelled),
+}
+
 /// The merge step of batch `last`: puts every done group of batches `0..=last` back in batch and
 /// group order (`partials` as the store lists them) and decides as [`run_job`] does after that
 /// batch: the Result, after `wall_s` seconds of running, or the next batch. The first batch
@@ -110,7 +127,8 @@ pub fn merge(
     last: u64,
     partials: Vec<(ShardId, GroupStats)>,
     wall_s: f64,
-) -> Result<Merged, Incomplete> {
+    observer: &dyn Observer,
+) -> Result<Merged, MergeError> {
     let mut tally = Tally::new();
     let mut partials = partials.into_iter().peekable();
     // Batches before the first listed were folded into it: it stands for all of them.
@@ -128,18 +146,17 @@ pub fn merge(
         while let Some((shard, stats)) = partials.next_if(|(shard, _)| shard.batch == index) {
             let expected = ShardId::group(index, groups.len() as u64);
             if shard != expected {
-                return Err(incomplete(format!(
-                    "found {shard} where {expected} belongs"
-                )));
+                return Err(incomplete(format!("found {shard} where {expected} belongs")).into());
             }
             groups.push(stats);
         }
         if groups.len() as u64 != batch.groups() {
-            return Err(incomplete(format!(
+            let detail = format!(
                 "{} of its {} groups are stored",
                 groups.len(),
                 batch.groups()
-            )));
+            );
+            return Err(incomplete(detail).into());
         }
         if index == first && first > 0 {
             tally = Tally {
@@ -154,17 +171,27 @@ pub fn merge(
         return Err(Incomplete {
             batch: shard.batch,
             detail: format!("{shard} is stored after batch {last}'s merge"),
-        });
+        }
+        .into());
     }
     Ok(match next_batch(job, &tally) {
         Some(batch) => Merged::Next {
             shards: batch_shards(job, batch),
             folded: tally.groups,
         },
-        None => Merged::Result {
-            result: Box::new(summarize_job(job, &tally, wall_s)),
-            groups: RunGroups::new(job, tally),
-        },
+        None => {
+            let started = std::time::Instant::now();
+            let rare_event = estimate(job, observer).map_err(|error| match error {
+                RunError::Cancelled(cancelled) => MergeError::Cancelled(cancelled),
+                RunError::RareEvent(failed) => MergeError::RareEvent(failed),
+            })?;
+            let mut result = summarize_job(job, &tally, wall_s + started.elapsed().as_secs_f64());
+            result.rare_event = rare_event;
+            Merged::Result {
+                result: Box::new(result),
+                groups: RunGroups::new(job, tally),
+            }
+        }
     })
 }
 

@@ -17,6 +17,7 @@ mod calibration;
 mod histograms;
 mod sensitivity;
 mod svg;
+mod tail;
 mod trend;
 mod weibull;
 mod work_precision;
@@ -28,6 +29,7 @@ pub use bands::quantile_bands_svg;
 pub use calibration::{FitPanel, calibration_panels, calibration_svg};
 pub use histograms::histograms_svg;
 pub use sensitivity::sensitivity_svg;
+pub use tail::tail_svg;
 pub use trend::{TrendPoint, trend_svg};
 pub use weibull::weibull_svg;
 pub use work_precision::{Panel, Series, work_precision_svg};
@@ -45,13 +47,16 @@ pub enum PlotError {
     NoSensitivity,
     #[error("the job's sensitivity analysis has no metric `{0}`")]
     NoSensitivityMetric(String),
-    #[error("no plot `{0}`: bands.svg, histograms.svg, weibull.svg or sensitivity.svg")]
+    #[error("the job asks no rare event, so no tail curve: submit it with `rare_event`")]
+    NoRareEvent,
+    #[error("no plot `{0}`: bands.svg, histograms.svg, weibull.svg, sensitivity.svg or tail.svg")]
     NoSuchPlot(String),
 }
 
-/// The plot `kind` (`bands.svg`, `histograms.svg`, `weibull.svg` or `sensitivity.svg`) of a job's
-/// result, by the file name the dashboard and `bouncewear run --plots` both use. `metric` is an
-/// operation metric for the first two, any metric of the sensitivity analysis for the last.
+/// The plot `kind` (`bands.svg`, `histograms.svg`, `weibull.svg`, `sensitivity.svg` or
+/// `tail.svg`) of a job's result, by the file name the dashboard and `bouncewear run --plots` both
+/// use. `metric` is an operation metric for the first two, any metric of the sensitivity analysis
+/// for the fourth; the tail curve is of the job's rare event.
 pub fn job_plot(result: &JobResult, kind: &str, metric: &str) -> Result<String, PlotError> {
     let bins = || {
         result
@@ -75,6 +80,18 @@ pub fn job_plot(result: &JobResult, kind: &str, metric: &str) -> Result<String, 
                 .get(metric)
                 .ok_or_else(|| PlotError::NoSensitivityMetric(metric.to_owned()))?;
             Ok(sensitivity_svg(metric, bins))
+        }
+        "tail.svg" => {
+            let (Some(report), Some(asked)) = (&result.rare_event, &result.job.spec().rare_event)
+            else {
+                return Err(PlotError::NoRareEvent);
+            };
+            let beyond = if asked.below.is_some() {
+                "below"
+            } else {
+                "above"
+            };
+            Ok(tail_svg(&asked.metric, beyond, report))
         }
         other => Err(PlotError::NoSuchPlot(other.to_owned())),
     }
