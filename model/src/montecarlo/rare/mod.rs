@@ -334,7 +334,9 @@ pub struct RareEventReport {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TailPoint {
+    /// A threshold of the metric (the life: of the failure criteria's margin, 0 at failure).
     pub threshold: f64,
+    /// The estimated probability that one device's metric lies beyond it.
     pub probability: f64,
 }
 
