@@ -410,8 +410,6 @@ async fn drop_partials(tx: &mut PgConnection, job: &JobId) -> StoreResult<()> {
     Ok(())
 }
 
-/// Fails every job one of whose shards lost its lease once more than `retries` allow, with the
-/// reason.
 /// The database's clock, in ms since the Unix epoch: one clock for every worker on every machine.
 async fn database_now(tx: &mut PgConnection) -> StoreResult<UnixMs> {
     let now: i64 =
@@ -429,6 +427,8 @@ async fn now_or(tx: &mut PgConnection, at: Option<UnixMs>) -> StoreResult<UnixMs
     }
 }
 
+/// Fails every job one of whose shards lost its lease once more than `retries` allow, with the
+/// reason.
 async fn give_up_on_exhausted(tx: &mut PgConnection, now: UnixMs, retries: u64) -> StoreResult<()> {
     let exhausted = sqlx::query(
         "SELECT s.job_id, s.batch, s.grp FROM shards s JOIN jobs j ON j.id = s.job_id \

@@ -513,8 +513,6 @@ async fn drop_partials(tx: &mut SqliteConnection, job: &JobId) -> StoreResult<()
     Ok(())
 }
 
-/// Fails every job one of whose shards lost its lease once more than `retries` allow, with the
-/// reason.
 /// The database's clock, in ms since the Unix epoch: one clock for every process sharing the file.
 async fn database_now(tx: &mut SqliteConnection) -> StoreResult<UnixMs> {
     let now: i64 =
@@ -532,6 +530,8 @@ async fn now_or(tx: &mut SqliteConnection, at: Option<UnixMs>) -> StoreResult<Un
     }
 }
 
+/// Fails every job one of whose shards lost its lease once more than `retries` allow, with the
+/// reason.
 async fn give_up_on_exhausted(
     tx: &mut SqliteConnection,
     now: UnixMs,

@@ -132,6 +132,25 @@ impl<'a> Counter<'a> {
     fn left(&self) -> u64 {
         self.budget.max_evaluations.saturating_sub(self.done)
     }
+
+    /// The size of the next batch of at most `size`: what the budget has left, `None` once it
+    /// is spent.
+    fn next_batch(&self, size: usize) -> Option<usize> {
+        let n = size.min(usize::try_from(self.left()).unwrap_or(usize::MAX));
+        (n > 0).then_some(n)
+    }
+}
+
+/// The mean of `n` weights summing to `sum` (their squares to `sum2`) and its standard error.
+fn weighted_mean(sum: f64, sum2: f64, n: u64) -> (f64, f64) {
+    let mean = sum / n.max(1) as f64;
+    let variance = (sum2 / n.max(1) as f64 - mean * mean).max(0.0) / (n.max(2) - 1) as f64;
+    (mean, variance.sqrt())
+}
+
+/// Crude Monte Carlo's coefficient of variation at `p` over `n` samples.
+fn binomial_cov(p: f64, n: u64) -> f64 {
+    ((1.0 - p) / (n as f64 * p)).sqrt()
 }
 
 /// `n` inputs drawn from the streams `stream(index)` for `index` from `first`, each moved by
@@ -574,11 +593,11 @@ pub fn importance(
         .design_point
         .clone()
         .expect("a finished subset run has failing samples");
+    let mut closest = norm2(&design_point);
     for batch in 0_u64.. {
-        let n = SAMPLES_PER_LEVEL.min(usize::try_from(counter.left()).unwrap_or(usize::MAX));
-        if n == 0 {
+        let Some(n) = counter.next_batch(SAMPLES_PER_LEVEL) else {
             break;
-        }
+        };
         let (us, ys) = draw_batch(
             state,
             (n, batch * SAMPLES_PER_LEVEL as u64),
@@ -593,23 +612,19 @@ pub fn importance(
                 let weight = (shift / 2.0 - dot).exp();
                 sum += weight;
                 sum2 += weight * weight;
-                if norm2(u) < norm2(&design_point) {
-                    design_point = u.to_vec();
+                let norm = norm2(u);
+                if norm < closest {
+                    (design_point, closest) = (u.to_vec(), norm);
                 }
             }
         }
         samples += n as u64;
-        let mean = sum / samples as f64;
-        let variance = (sum2 / samples as f64 - mean * mean).max(0.0) / (samples - 1).max(1) as f64;
-        let cov = variance.sqrt() / mean;
-        if sum > 0.0 && cov <= budget.target_cov {
+        let (mean, se) = weighted_mean(sum, sum2, samples);
+        if sum > 0.0 && se / mean <= budget.target_cov {
             break;
         }
     }
-    let probability = sum / samples.max(1) as f64;
-    let variance = (sum2 / samples.max(1) as f64 - probability * probability).max(0.0)
-        / (samples.max(2) - 1) as f64;
-    let se = variance.sqrt();
+    let (probability, se) = weighted_mean(sum, sum2, samples);
     let mut tail = pilot.levels[..pilot.levels.len() - 1].to_vec();
     tail.push((threshold, probability));
     Ok(Estimate {
@@ -641,10 +656,9 @@ pub fn crude(
     let mut tail = Vec::new();
     let mut design_point: Option<Vec<f64>> = None;
     for batch in 0_u64.. {
-        let n = CRUDE_BATCH.min(usize::try_from(counter.left()).unwrap_or(usize::MAX));
-        if n == 0 {
+        let Some(n) = counter.next_batch(CRUDE_BATCH) else {
             break;
-        }
+        };
         let (us, ys) = draw_batch(
             state,
             (n, batch * CRUDE_BATCH as u64),
@@ -663,7 +677,6 @@ pub fn crude(
                 }
                 p *= LEVEL_PROBABILITY;
             }
-            tail.reverse();
             tail.sort_by(|a, b| a.0.total_cmp(&b.0));
         }
         hits += ys.iter().filter(|&&y| y > threshold).count() as u64;
@@ -675,8 +688,7 @@ pub fn crude(
         {
             design_point = Some(closest);
         }
-        let p = hits as f64 / samples as f64;
-        if hits > 0 && ((1.0 - p) / (samples as f64 * p)).sqrt() <= budget.target_cov {
+        if hits > 0 && binomial_cov(hits as f64 / samples as f64, samples) <= budget.target_cov {
             break;
         }
     }
@@ -685,7 +697,7 @@ pub fn crude(
     Ok(Estimate {
         probability,
         ci95: wilson_interval(probability, samples as f64, Z_975),
-        cov: (hits > 0).then(|| ((1.0 - probability) / (samples as f64 * probability)).sqrt()),
+        cov: (hits > 0).then(|| binomial_cov(probability, samples)),
         evaluations: counter.done,
         design_point,
         tail,
