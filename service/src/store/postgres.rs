@@ -8,13 +8,13 @@
 use super::rows::{
     self, Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, FORGET_EXPIRED_KEY, INSERT_DISTRIBUTION,
     LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY,
-    REMEMBERED_KEY, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, bind_bins, bind_distribution,
-    bind_fence, bind_key, bind_life, bind_queued_job, bind_schedule, claim_from_row,
-    count_from_sql, count_to_sql, distribution_from_row, distribution_rows, failed_too_often,
-    gave_up, group_to_sql, groups_from_row, job_columns, job_from_row, life_from_row, not_ended,
-    partial_from_row, partial_to_sql, remembered_from_row, row_groups_to_sql, run_from_row,
-    schedule_columns, schedule_from_row, schema_current, shard_columns, shard_from_row,
-    shard_id_from_row, spec_from_json, to_json,
+    REMEMBERED_KEY, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, SELECT_PARTIALS, bind_bins,
+    bind_distribution, bind_fence, bind_key, bind_life, bind_queued_job, bind_schedule,
+    claim_from_row, collect_partials, count_from_sql, count_to_sql, distribution_from_row,
+    distribution_rows, failed_too_often, gave_up, group_to_sql, groups_from_row, job_columns,
+    job_from_row, life_from_row, not_ended, partial_to_sql, remembered_from_row, row_groups_to_sql,
+    run_from_row, schedule_columns, schedule_from_row, schema_current, shard_columns,
+    shard_from_row, shard_id_from_row, spec_from_json, to_json,
 };
 use super::{
     Claim, DistributionRow, Fence, JobQueue, JobRecord, Lease, LeaseTerms, NewRun, Operations,
@@ -941,13 +941,12 @@ impl Results for PgStore {
 
     #[tracing::instrument(skip_all, fields(job = %id))]
     async fn partials(&self, id: &JobId) -> StoreResult<Vec<(ShardId, GroupStats)>> {
-        let rows = sqlx::query(
-            "SELECT batch, grp, partial FROM shards WHERE job_id = $1 AND grp >= 0 AND status = 'done' AND partial IS NOT NULL ORDER BY batch, grp",
+        collect_partials(
+            sqlx::query(SELECT_PARTIALS)
+                .bind(id.as_str())
+                .fetch(&self.pool),
         )
-        .bind(id.as_str())
-        .fetch_all(&self.pool)
-        .await?;
-        rows.iter().map(partial_from_row).collect()
+        .await
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]

@@ -382,34 +382,51 @@ pub(crate) fn partial_to_sql(stats: &GroupStats) -> StoreResult<Vec<u8>> {
     gzip_json("group accumulators", stats)
 }
 
-/// A done group's accumulators, from a row `batch, grp, partial`.
-pub(crate) fn partial_from_row(row: &impl ReadRow) -> StoreResult<(ShardId, GroupStats)> {
-    let shard = shard_id_from_row(row)?;
-    let stats = gunzip_json("group accumulators", &row.bytes("partial")?)?;
-    Ok((shard, stats))
+/// The query that lists a job's done groups' accumulators, in batch and group order, as rows
+/// `batch, grp, partial` (for [`collect_partials`]).
+pub(crate) const SELECT_PARTIALS: &str = "SELECT batch, grp, partial FROM shards \
+     WHERE job_id = $1 AND grp >= 0 AND status = 'done' AND partial IS NOT NULL ORDER BY batch, grp";
+
+/// The done groups' accumulators from [`SELECT_PARTIALS`]' rows as they stream in: each row's
+/// gzipped bytes are decoded (off the async threads) and dropped before the next row is read, so
+/// a merge holds its groups once, decoded, and never all of them stored beside them (32 groups of
+/// a 1000-bin job are about 185 MB gzipped).
+pub(crate) async fn collect_partials<R: ReadRow>(
+    rows: impl futures_util::Stream<Item = Result<R, sqlx::Error>>,
+) -> StoreResult<Vec<(ShardId, GroupStats)>> {
+    use futures_util::TryStreamExt;
+    let mut rows = std::pin::pin!(rows);
+    let mut partials = Vec::new();
+    while let Some(row) = rows.try_next().await? {
+        let shard = shard_id_from_row(&row)?;
+        let stored = row.bytes("partial")?;
+        drop(row);
+        let stats = tokio::task::spawn_blocking(move || {
+            gunzip_json::<GroupStats>("group accumulators", &stored)
+        })
+        .await
+        .map_err(|e| corrupt("group accumulators", e))??;
+        partials.push((shard, stats));
+    }
+    Ok(partials)
 }
 
-/// Accumulators as stored: JSON, every float by its bits, gzipped.
+/// Accumulators as stored: JSON, every float by its bits, gzipped. Written straight into the
+/// compressor: the JSON text (several times the gzipped size) is never held whole.
 fn gzip_json(what: &'static str, value: &impl serde::Serialize) -> StoreResult<Vec<u8>> {
-    use std::io::Write;
-    let text = to_json(what, value)?;
     let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
-    encoder
-        .write_all(text.as_bytes())
-        .and_then(|()| encoder.finish())
-        .map_err(|e| corrupt(what, e))
+    serde_json::to_writer(std::io::BufWriter::new(&mut encoder), value)
+        .map_err(|e| corrupt(what, e))?;
+    encoder.finish().map_err(|e| corrupt(what, e))
 }
 
+/// The inverse of [`gzip_json`], parsed as it is decompressed.
 fn gunzip_json<T: serde::de::DeserializeOwned>(
     what: &'static str,
     stored: &[u8],
 ) -> StoreResult<T> {
-    use std::io::Read;
-    let mut text = Vec::with_capacity(stored.len() * 8);
-    flate2::read::GzDecoder::new(stored)
-        .read_to_end(&mut text)
-        .map_err(|e| corrupt(what, e))?;
-    serde_json::from_slice(&text).map_err(|e| corrupt(what, e))
+    let text = std::io::BufReader::new(flate2::read::GzDecoder::new(stored));
+    serde_json::from_reader(text).map_err(|e| corrupt(what, e))
 }
 
 // ---- results, distributions, device lives --------------------------------------------------
