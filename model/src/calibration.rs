@@ -2,9 +2,9 @@
 //! squares from measured bounce times (and, where given, e1, peak force, arc energy), each
 //! observation simulated at its own measured impact velocity.
 //!
-//! The objective is the sum of squared relative residuals, `(simulated - measured) / measured`,
-//! over every measured quantity of every observation, so that seconds, newtons and joules weigh
-//! alike. Parameters are fitted in logarithms (every physical parameter here is positive, so a
+//! The objective is the sum of squared relative residuals,
+//! `2 (simulated - measured) / (simulated + measured)` (see `relative_difference`), over every
+//! measured quantity of every observation, so that seconds, newtons and joules weigh alike. Parameters are fitted in logarithms (every physical parameter here is positive, so a
 //! bound at zero holds by construction) by Levenberg-Marquardt with a finite-difference Jacobian
 //! that does not difference across a step of a stepping residual (the total bounce time jumps
 //! where a bounce appears or vanishes; see `Problem::jacobian`). Standard errors come from the
