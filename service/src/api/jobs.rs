@@ -768,8 +768,7 @@ pub async fn get_life(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
-    succeeded(&state, &owner, &id).await?;
-    let result = stored_result(&state, &id).await?;
+    let result = succeeded_result(&state, &owner, &id).await?;
     let Some(life) = result.life else {
         return Err(ApiError::NotFound(format!(
             "job {id} has no failure criteria, so no life analysis"
@@ -825,8 +824,7 @@ pub async fn get_rare_event(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
-    succeeded(&state, &owner, &id).await?;
-    let result = stored_result(&state, &id).await?;
+    let result = succeeded_result(&state, &owner, &id).await?;
     let Some(rare) = result.rare_event else {
         return Err(ApiError::NotFound(format!(
             "job {id} asks no rare event: submit it with `rare_event`"
@@ -881,6 +879,16 @@ fn life_csv(
         }
     });
     futures_util::stream::once(async move { Ok(header) }).chain(pages)
+}
+
+/// The stored Result of the caller's job, parsed (409 until the job succeeded).
+pub async fn succeeded_result(
+    state: &AppState,
+    owner: &Owner,
+    id: &JobId,
+) -> Result<JobResult, ApiError> {
+    succeeded(state, owner, id).await?;
+    stored_result(state, id).await
 }
 
 /// The stored Result of a succeeded job, parsed.

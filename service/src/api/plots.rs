@@ -6,7 +6,7 @@ use super::error::{
     ApiError, PROBLEM, Problem,
     responses::{BadQuery, NotSucceeded, Unauthorized},
 };
-use super::jobs::{stored_result, succeeded};
+use super::jobs::succeeded_result;
 use super::schedules::schedule_trend;
 use crate::domain::{JobId, Owner, ScheduleId};
 use crate::plots::{self, TrendPoint};
@@ -70,8 +70,7 @@ pub async fn job_plot(
     query: Result<Query<PlotQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
-    succeeded(&state, &owner, &id).await?;
-    let result = stored_result(&state, &id).await?;
+    let result = succeeded_result(&state, &owner, &id).await?;
     let svg = plots::job_plot(
         &result,
         &kind,
