@@ -641,8 +641,9 @@ fn normal_tail(z: f64) -> f64 {
 /// threshold is a normal tail (the truncation at 0.05 m/s moves it by 1e-18), so every interval
 /// can be held to the exact probability at a size where a bucket's bias would show (half a bucket
 /// is 0.2 %, several standard errors of a share near 0.02 here). Thresholds named in the job are
-/// counted exactly as it runs, and the after-run query's bucket-limited intervals hold the truth
-/// whatever the values in the threshold's bucket.
+/// counted exactly as it runs; the after-run query counts the far tail exactly from the values each
+/// group keeps at its ends, and its bucket-limited intervals in the bulk hold the truth whatever
+/// the values in the threshold's bucket.
 #[test]
 fn every_exceedance_interval_covers_the_exact_probability_at_ten_million_values() {
     use bouncewear_model::montecarlo::{Metric, RunGroups, Silent, engine, query_metric};
@@ -682,24 +683,40 @@ fn every_exceedance_interval_covers_the_exact_probability_at_ten_million_values(
         assert_eq!(e.resolution, Resolution::Exact, "{e:?}");
         assert!(e.ci95[0] <= p && p <= e.ci95[1], "{e:?} against {p}");
     }
-    // After the run: the listed thresholds again (exact), and others, bucket-limited.
+    // After the run: the listed thresholds again (exact); others in the bulk, bucket-limited;
+    // and others in the far tail (about 1e-4, 30 values per group), counted exactly from the
+    // values each group keeps at its ends.
     let mut asked = listed.to_vec();
-    asked.extend([0.2, 0.2631, 0.27, 0.29, 0.3].map(Threshold::Above));
-    asked.extend([0.15, 0.2, 0.21].map(Threshold::Below));
+    let bulk = [0.2, 0.2631, 0.27, 0.29]
+        .map(Threshold::Above)
+        .into_iter()
+        .chain([0.2, 0.21].map(Threshold::Below));
+    let far = [at(3.709_016_485_455_709), 0.3]
+        .map(Threshold::Above)
+        .into_iter()
+        .chain([Threshold::Below(at(-3.719_016_485_455_709))]);
+    asked.extend(bulk.clone().chain(far.clone()));
     let groups = RunGroups::new(&job, tally)
         .of("impact_velocity_m_s", 0)
         .unwrap();
     let metric = Metric::parse("impact_velocity_m_s").unwrap();
     let answer = query_metric(metric, &groups, &[], &asked);
     assert_eq!(answer.exceedance[..listed.len()], summary.exceedances[..]);
-    for e in &answer.exceedance[listed.len()..] {
+    let bulk = bulk.count();
+    for (i, e) in answer.exceedance[listed.len()..].iter().enumerate() {
         let p = truth(e.threshold);
-        assert_eq!(e.resolution, Resolution::Bucket, "{e:?}");
-        let [lo, hi] = e.bucket.expect("bucket-limited");
-        assert!(
-            lo <= e.threshold.value() && e.threshold.value() <= hi,
-            "{e:?}"
-        );
+        if i < bulk {
+            assert_eq!(e.resolution, Resolution::Bucket, "{e:?}");
+            let [lo, hi] = e.bucket.expect("bucket-limited");
+            assert!(
+                lo <= e.threshold.value() && e.threshold.value() <= hi,
+                "{e:?}"
+            );
+        } else {
+            assert_eq!(e.resolution, Resolution::Exact, "{e:?}");
+            let beyond = (e.probability * 1e7).round();
+            assert!(beyond > 300.0, "{e:?}: counted from the kept values");
+        }
         assert!(e.ci95[0] <= p && p <= e.ci95[1], "{e:?} against {p}");
         assert!(
             e.ci95[0] <= e.probability && e.probability <= e.ci95[1],

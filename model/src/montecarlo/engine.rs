@@ -19,7 +19,7 @@ use super::sensitivity::{LaneCells, SensitivityPlan, SensitivityStats};
 use crate::lanes::{Mask, Real};
 use crate::operation::{Conditions, Needs, Operation, Outcome, Outcomes, Setup};
 use crate::scenario::Scenario;
-use crate::stats::{Accumulator, LaneSums};
+use crate::stats::{Accumulator, LaneSums, tails};
 use crate::wear::{DeviceWear, WearLaw};
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
@@ -99,15 +99,19 @@ pub struct GroupStats {
 
 impl GroupStats {
     fn new(job: &Job, sensitivity: Option<&SensitivityPlan>) -> Self {
-        // A metric's limit and list of thresholds, both counted exactly as the values arrive.
-        let empty = |metric| {
+        // A metric's limit and list of thresholds, both counted exactly as the values arrive, and
+        // its most extreme values, kept within a budget per metric over the bins.
+        let empty = |metric, keep| {
             let thresholds = job.thresholds().get(&metric).map_or(&[][..], Vec::as_slice);
-            Accumulator::new(job.limits().get(&metric).copied()).counting(thresholds)
+            Accumulator::new(job.limits().get(&metric).copied())
+                .counting(thresholds)
+                .keeping(keep)
         };
+        let keep = tails::keep_for_bins(job.bins());
         let per_bin: Vec<Accumulator> = job
             .operation_metrics()
             .iter()
-            .map(|m| empty(Metric::Operation(*m)))
+            .map(|m| empty(Metric::Operation(*m), keep))
             .collect();
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
         Self {
@@ -115,7 +119,7 @@ impl GroupStats {
             devices: job
                 .device_metrics()
                 .iter()
-                .map(|m| empty(Metric::Device(*m)))
+                .map(|m| empty(Metric::Device(*m), Some(tails::MAX_KEEP)))
                 .collect(),
             lives: GroupLives::default(),
             operations_at_max_bounces: 0,

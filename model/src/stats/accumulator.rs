@@ -2,6 +2,7 @@
 //! in constant memory and a few nanoseconds per value.
 
 use super::sketch::{Sketch, rank};
+use super::tails::Tails;
 use super::threshold::{Threshold, ThresholdCount};
 use crate::lanes::Real;
 
@@ -60,7 +61,8 @@ impl<L: Real> LaneSums<L> {
     }
 }
 
-/// Count, exact min and max, shifted sums, an exact exceedance count and a [`Sketch`].
+/// Count, exact min and max, shifted sums, an exact exceedance count, a [`Sketch`] and, when
+/// asked for, the most extreme values themselves ([`Tails`]).
 ///
 /// Mean and variance use sums shifted by the first value `s`: `S = sum(x - s)`,
 /// `Q = sum((x - s)^2)`, `mean = s + S/n`, `var = (Q - S^2/n) / (n - 1)`. Shifting by a value of
@@ -91,6 +93,9 @@ pub struct Accumulator {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     thresholds: Vec<ThresholdCount>,
     sketch: Sketch,
+    /// The most extreme values, exactly; none in accumulators stored before they were kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    tails: Option<Tails>,
 }
 
 impl Accumulator {
@@ -108,7 +113,15 @@ impl Accumulator {
             above: 0,
             thresholds: Vec::new(),
             sketch: Sketch::new(),
+            tails: None,
         }
+    }
+
+    /// This accumulator, also keeping exactly its `keep` smallest and `keep` largest values (none
+    /// with `None`).
+    pub fn keeping(mut self, keep: Option<u32>) -> Self {
+        self.tails = keep.map(Tails::new);
+        self
     }
 
     /// This accumulator, also counting exactly the values beyond each of `thresholds`.
@@ -128,7 +141,9 @@ impl Accumulator {
     /// An empty accumulator with this one's limit and thresholds: what its values merge into.
     pub fn empty_like(&self) -> Self {
         let thresholds: Vec<Threshold> = self.thresholds.iter().map(|t| t.threshold).collect();
-        Self::new(self.limit).counting(&thresholds)
+        Self::new(self.limit)
+            .counting(&thresholds)
+            .keeping(self.tails.as_ref().map(Tails::keep))
     }
 
     /// Counts the values of `values` beyond each threshold of the list.
@@ -167,13 +182,16 @@ impl Accumulator {
             sum_sq += d * d;
             above += u64::from(x > threshold);
             self.sketch.push(x);
+            if let Some(tails) = &mut self.tails {
+                tails.push(x);
+            }
         }
         (self.min, self.max, self.sum, self.sum_sq, self.above) = (min, max, sum, sum_sq, above);
         self.count_thresholds(values.iter().copied());
     }
 
     /// Counts lanes `0..active` of each of `columns[m]` in the sketch of `accumulators[m]`
-    /// ([`Sketch::push_lanes`]) and against its list of thresholds: values whose sums join later, through [`Accumulator::add_lanes`]
+    /// ([`Sketch::push_lanes`]), against its list of thresholds and in its tails: values whose sums join later, through [`Accumulator::add_lanes`]
     /// (until then the counts run ahead of the sums). Counts do not depend on order.
     #[inline(always)]
     pub fn count_lanes<L: Real>(accumulators: &mut [Accumulator], columns: &[&L], active: usize) {
@@ -184,6 +202,9 @@ impl Accumulator {
         );
         for (accumulator, column) in accumulators.iter_mut().zip(columns) {
             accumulator.sketch.push_lanes(*column, active);
+            if let Some(tails) = &mut accumulator.tails {
+                tails.push_lanes(*column, active);
+            }
             if !accumulator.thresholds.is_empty() {
                 accumulator.count_thresholds((0..active).map(|k| column.lane(k)));
             }
@@ -229,6 +250,11 @@ impl Accumulator {
         );
         for (mine, theirs) in self.thresholds.iter_mut().zip(&other.thresholds) {
             mine.beyond += theirs.beyond;
+        }
+        // Tails stay exact only while every part kept them.
+        match (&mut self.tails, &other.tails) {
+            (Some(mine), Some(theirs)) => mine.merge(theirs),
+            (tails, _) => *tails = None,
         }
         if other.count() == 0 {
             return;
@@ -312,6 +338,17 @@ impl Accumulator {
             .iter()
             .find(|counted| counted.threshold.same(threshold))
             .map(|counted| counted.beyond)
+    }
+
+    /// The exact number of values beyond `threshold` when the kept extremes settle it
+    /// ([`Tails::beyond`]).
+    pub fn tails_beyond(&self, threshold: Threshold) -> Option<u64> {
+        self.tails.as_ref()?.beyond(threshold, self.count())
+    }
+
+    /// The most extreme values, when this accumulator keeps them.
+    pub fn tails(&self) -> Option<&Tails> {
+        self.tails.as_ref()
     }
 
     /// The bucket histogram of the values.

@@ -28,3 +28,17 @@ pub mod optional {
         Option::<u64>::deserialize(deserializer).map(|bits| bits.map(f64::from_bits))
     }
 }
+
+/// The same for a list of floats.
+pub mod list {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(values: &[f64], serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_seq(values.iter().map(|value| value.to_bits()))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<Vec<f64>, D::Error> {
+        Vec::<u64>::deserialize(deserializer)
+            .map(|bits| bits.into_iter().map(f64::from_bits).collect())
+    }
+}

@@ -22,6 +22,7 @@
 //! | [`summary`] | the serialised `SUMMARY` and [`summarize`] |
 //! | [`regression`] | standardised regression coefficients, mergeable |
 //! | [`sobol`] | Sobol' first-order and total indices by pick-freeze, with delta-method intervals |
+//! | [`tails`] | the most extreme values of each accumulator, kept exactly |
 //! | [`threshold`] | thresholds counted exactly as values arrive, or bounded by the buckets after |
 //! | [`query`] | any quantile and any threshold after the run, from the same groups and estimators |
 //!
@@ -36,6 +37,7 @@ pub mod regression;
 pub mod sketch;
 pub mod sobol;
 pub mod summary;
+pub mod tails;
 pub mod threshold;
 
 pub use accumulator::{Accumulator, LaneSums};
@@ -43,6 +45,7 @@ pub use intervals::{Z_975, student_t_975, wilson_interval};
 pub use query::{QueryAnswer, QueryQuantile, query};
 pub use sketch::Sketch;
 pub use summary::{Exceedance, HISTOGRAM_BINS, Histogram, QuantileSummary, Summary, summarize};
+pub use tails::Tails;
 pub use threshold::{Resolution, Threshold, ThresholdExceedance};
 
 /// The reported quantiles: the key in `SUMMARY.quantiles` and the level `q` (see

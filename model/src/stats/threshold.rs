@@ -50,8 +50,9 @@ impl Threshold {
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum Resolution {
-    /// Every value was compared with the threshold: the threshold was counted as the job ran, or
-    /// no value shares its bucket. The interval is the sampling interval alone.
+    /// Every value was compared with the threshold: the threshold was counted as the job ran, it
+    /// lies in the far tail every group keeps exactly, or no value shares its bucket. The interval
+    /// is the sampling interval alone.
     #[default]
     Exact,
     /// Some values share the threshold's bucket (`bucket`), so which side they lie on is unknown:
@@ -127,10 +128,13 @@ impl Beyond {
     }
 
     /// The values of `group` beyond `threshold`: its exact count when the group counted that
-    /// threshold as it ran; otherwise the exact `[min, max]` settles the threshold outside them,
+    /// threshold as it ran or its kept extremes settle it ([`Tails::beyond`](super::Tails::beyond)); otherwise the exact `[min, max]` settles the threshold outside them,
     /// and inside the sketch settles every bucket but the one holding the threshold.
     pub(super) fn of(group: &Accumulator, threshold: Threshold) -> (Self, Option<[f64; 2]>) {
-        if let Some(count) = group.counted_beyond(threshold) {
+        if let Some(count) = group
+            .counted_beyond(threshold)
+            .or_else(|| group.tails_beyond(threshold))
+        {
             return (Self::exact(count), None);
         }
         let (n, min, max) = (group.count(), group.min(), group.max());

@@ -627,7 +627,7 @@ const OUTPUT_DESCRIPTIONS: &[(&str, &[(&str, &str)])] = &[
             ),
             (
                 "resolution",
-                "exact: every value compared with the threshold; bucket: some share its sketch bucket, and the interval holds the truth whatever they are",
+                "exact: every value compared with the threshold (counted as the job ran, from the extreme values each group keeps, or no value shares its bucket); bucket: some share its sketch bucket, and the interval holds the truth whatever they are",
             ),
             (
                 "bucket",
