@@ -346,11 +346,6 @@ impl Accumulator {
         self.tails.as_ref()?.beyond(threshold, self.count())
     }
 
-    /// The most extreme values, when this accumulator keeps them.
-    pub fn tails(&self) -> Option<&Tails> {
-        self.tails.as_ref()
-    }
-
     /// The bucket histogram of the values.
     pub fn sketch(&self) -> &Sketch {
         &self.sketch
