@@ -741,7 +741,7 @@ fn markdown(report: &Report) -> String {
     }
     let _ = writeln!(
         md,
-        "\n## Calibration intervals\n\nHow often the 95 % interval of a fitted parameter holds the truth, over fits to synthetic measurements with 2 % noise, a noise draw per seed (`bouncewear_model::calibration::study`). The binomial standard deviation of a true 0.95 is 0.015 over 200 draws and 0.007 over 1000.\n\n| case | parameter | truth | draws | coverage |\n|---|---|---|---|---|"
+        "\n## Calibration intervals\n\nHow often the 95 % profile-likelihood interval of a fitted parameter holds the truth, over fits to synthetic measurements with 2 % noise, a noise draw per seed (`bouncewear_model::calibration::study`). The binomial standard deviation of a true 0.95 is 0.015 over 200 draws and 0.007 over 1000.\n\n| case | parameter | truth | draws | coverage |\n|---|---|---|---|---|"
     );
     for row in &report.calibration_coverage {
         let _ = writeln!(
