@@ -4,10 +4,11 @@
     python3 tests/readme/check.py BASE_URL [README.md | docs/manual.md]
 
 Every fenced ```sh block that follows a `<!-- readme-test -->` line is run with bash (`set -euo
-pipefail`) in a fresh directory where `target` is the repository's (so `target/release/bouncewear`
-runs as in the README, and files the example writes are thrown away), with `target/release` on the
-PATH and the README's address
-`http://127.0.0.1:8080` replaced by BASE_URL. It must succeed, and when a ```text block follows
+pipefail`) in a fresh directory holding `target/release`, a link to the directory of the binary
+under test (BOUNCEWEAR_BIN_DIR, by default the repository's `target/release`), so that
+`target/release/bouncewear` runs as in the README and files the example writes are thrown away;
+that directory is on the PATH, and the README's address `http://127.0.0.1:8080` is replaced by
+BASE_URL. It must succeed, and when a ```text block follows
 under `<!-- readme-output -->`, the output must have the documented shape, line by line: the same
 JSON keys and value types (numbers may differ), or for other lines the same fields with the same
 words (numbers may differ). Under `<!-- readme-output exact -->` the output must be the one shown,
@@ -75,13 +76,15 @@ def main():
     readme = sys.argv[2] if len(sys.argv) > 2 else "README.md"
     # The repository's root (this file is tests/readme/check.py), whichever document is checked.
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    env = {**os.environ, "PATH": os.path.join(root, "target", "release") + os.pathsep + os.environ["PATH"]}
+    bin_dir = os.path.abspath(os.environ.get("BOUNCEWEAR_BIN_DIR", os.path.join(root, "target", "release")))
+    env = {**os.environ, "PATH": bin_dir + os.pathsep + os.environ["PATH"]}
     found = blocks(open(readme, encoding="utf-8").read())
     assert found, "no README example is marked for testing"
     failures = 0
     for script, expected, exact, line in found:
         with tempfile.TemporaryDirectory(prefix="bouncewear-readme-") as scratch:
-            os.symlink(os.path.join(root, "target"), os.path.join(scratch, "target"))
+            os.mkdir(os.path.join(scratch, "target"))
+            os.symlink(bin_dir, os.path.join(scratch, "target", "release"))
             run = subprocess.run(["bash", "-euo", "pipefail", "-c", script.replace(README_BASE, base)],
                                  cwd=scratch, env=env, capture_output=True, text=True, timeout=300)
         output = run.stdout.rstrip("\n").split("\n") if run.stdout.strip() else []
