@@ -278,12 +278,110 @@ impl Scenario {
 }
 
 /// Which rule a number must satisfy.
-#[derive(Clone, Copy)]
-enum Rule {
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rule {
+    /// From [`MIN_MAGNITUDE`] to [`MAX_MAGNITUDE`].
     Positive,
+    /// 0, or as [`Rule::Positive`].
     NonNegative,
+    /// Magnitude at most [`MAX_MAGNITUDE`].
     Finite,
 }
+
+/// A number of a scenario with a rule of its own (docs/model.md section 9).
+#[derive(Debug, Clone, Copy)]
+pub struct NumberRule {
+    /// Its place in a scenario: the section (and sub-section), then the field.
+    pub path: &'static [&'static str],
+    /// The spec type that holds it, as the OpenAPI document names its schema.
+    pub schema: &'static str,
+    pub rule: Rule,
+    /// Its value in a scenario; `None` for an optional field left out.
+    pub value: fn(&ScenarioSpec) -> Option<f64>,
+}
+
+impl NumberRule {
+    /// The field's name, the last step of its path.
+    pub fn field(&self) -> &'static str {
+        self.path[self.path.len() - 1]
+    }
+}
+
+/// A [`NumberRule`] from the field's place, written once: `number!(Positive, "MechanismSpec",
+/// mechanism.inertia_kg_m2)` names the path and reads the value from the same words.
+macro_rules! number {
+    ($rule:ident, $schema:expr, $($step:ident).+) => {
+        NumberRule {
+            path: &[$(stringify!($step)),+],
+            schema: $schema,
+            rule: Rule::$rule,
+            value: |s| Present::present(s.$($step).+),
+        }
+    };
+}
+
+/// A number field's value, `None` where an optional field is left out.
+trait Present {
+    fn present(self) -> Option<f64>;
+}
+
+impl Present for f64 {
+    fn present(self) -> Option<f64> {
+        Some(self)
+    }
+}
+
+impl Present for Option<f64> {
+    fn present(self) -> Option<f64> {
+        self
+    }
+}
+
+/// The one list of the scenario's number rules: `check_spec` applies them, the OpenAPI document
+/// states them as each field's range. Rules that relate fields to each other follow in
+/// `check_spec`.
+pub const NUMBER_RULES: [NumberRule; 28] = {
+    const MECHANISM: &str = "MechanismSpec";
+    const MATERIAL: &str = "MaterialSpec";
+    const ARC: &str = "ArcRestitutionSpec";
+    const WEAR: &str = "WearLawSpec";
+    const CIRCUIT: &str = "CircuitSpec";
+    const LOSSES: &str = "LossesSpec";
+    [
+        number!(Positive, MECHANISM, mechanism.inertia_kg_m2),
+        number!(NonNegative, MECHANISM, mechanism.spring_stiffness_n_per_m),
+        number!(Positive, MECHANISM, mechanism.spring_arm_m),
+        number!(Positive, MECHANISM, mechanism.contact_arm_m),
+        number!(NonNegative, MECHANISM, mechanism.static_force_n),
+        number!(NonNegative, MECHANISM, mechanism.drop_height_m),
+        number!(NonNegative, MECHANISM, mechanism.impact_velocity_m_s),
+        number!(Positive, MATERIAL, material.youngs_modulus_pa),
+        number!(Positive, MATERIAL, material.dynamic_yield_pressure_pa),
+        number!(Positive, MATERIAL, material.contact_radius_m),
+        number!(Positive, MATERIAL, material.kappa),
+        number!(Positive, MATERIAL, material.worn_radius_m),
+        number!(Positive, MATERIAL, material.roughening_energy_j),
+        number!(NonNegative, MATERIAL, material.erosion_kg_per_j),
+        number!(Positive, MATERIAL, material.density_kg_m3),
+        number!(NonNegative, MATERIAL, material.min_arc_voltage_v),
+        number!(NonNegative, MATERIAL, material.min_arc_current_a),
+        number!(Positive, MATERIAL, material.breakdown_field_v_per_m),
+        number!(Positive, MATERIAL, material.softening_energy_j),
+        number!(Finite, ARC, material.arc_restitution.a),
+        number!(Finite, ARC, material.arc_restitution.b_s_per_m),
+        number!(
+            Positive,
+            ARC,
+            material.arc_restitution.calibration_current_a
+        ),
+        number!(Positive, WEAR, material.wear_law.worn_pressure_pa),
+        number!(Positive, WEAR, material.wear_law.annealing_energy_j),
+        number!(NonNegative, CIRCUIT, circuit.supply_voltage_v),
+        number!(NonNegative, CIRCUIT, circuit.current_a),
+        number!(NonNegative, LOSSES, losses.impact_energy_loss_j),
+        number!(NonNegative, LOSSES, losses.min_separation_m),
+    ]
+};
 
 fn check_number(errors: &mut Vec<FieldError>, pointer: Pointer, value: f64, rule: Rule) {
     let detail = if !value.is_finite() {
@@ -314,26 +412,17 @@ fn check_number(errors: &mut Vec<FieldError>, pointer: Pointer, value: f64, rule
 }
 
 fn check_spec(spec: &ScenarioSpec, root: &Pointer, errors: &mut Vec<FieldError>) {
-    use Rule::{Finite, NonNegative, Positive};
+    for number in &NUMBER_RULES {
+        if let Some(value) = (number.value)(spec) {
+            let pointer = number
+                .path
+                .iter()
+                .fold(root.clone(), |at, step| at.child(step));
+            check_number(errors, pointer, value, number.rule);
+        }
+    }
     let mech = &spec.mechanism;
     let at = root.child("mechanism");
-    for (field, value, rule) in [
-        ("inertia_kg_m2", mech.inertia_kg_m2, Positive),
-        (
-            "spring_stiffness_n_per_m",
-            mech.spring_stiffness_n_per_m,
-            NonNegative,
-        ),
-        ("spring_arm_m", mech.spring_arm_m, Positive),
-        ("contact_arm_m", mech.contact_arm_m, Positive),
-        ("static_force_n", mech.static_force_n, NonNegative),
-        ("drop_height_m", mech.drop_height_m, NonNegative),
-    ] {
-        check_number(errors, at.child(field), value, rule);
-    }
-    if let Some(u) = mech.impact_velocity_m_s {
-        check_number(errors, at.child("impact_velocity_m_s"), u, NonNegative);
-    }
     if mech.static_force_n == 0.0 && mech.spring_stiffness_n_per_m == 0.0 {
         errors.push(FieldError {
             pointer: at.child("static_force_n").to_string(),
@@ -345,32 +434,6 @@ fn check_spec(spec: &ScenarioSpec, root: &Pointer, errors: &mut Vec<FieldError>)
 
     let mat = &spec.material;
     let at = root.child("material");
-    for (field, value, rule) in [
-        ("youngs_modulus_pa", mat.youngs_modulus_pa, Positive),
-        (
-            "dynamic_yield_pressure_pa",
-            mat.dynamic_yield_pressure_pa,
-            Positive,
-        ),
-        ("contact_radius_m", mat.contact_radius_m, Positive),
-        ("worn_radius_m", mat.worn_radius_m, Positive),
-        ("roughening_energy_j", mat.roughening_energy_j, Positive),
-        ("erosion_kg_per_j", mat.erosion_kg_per_j, NonNegative),
-        ("density_kg_m3", mat.density_kg_m3, Positive),
-        ("min_arc_voltage_v", mat.min_arc_voltage_v, NonNegative),
-        ("min_arc_current_a", mat.min_arc_current_a, NonNegative),
-        (
-            "breakdown_field_v_per_m",
-            mat.breakdown_field_v_per_m,
-            Positive,
-        ),
-        ("softening_energy_j", mat.softening_energy_j, Positive),
-    ] {
-        check_number(errors, at.child(field), value, rule);
-    }
-    if let Some(kappa) = mat.kappa {
-        check_number(errors, at.child("kappa"), kappa, Positive);
-    }
     if mat.contact_radius_m > 0.0 && mat.worn_radius_m > mat.contact_radius_m {
         errors.push(FieldError {
             pointer: at.child("worn_radius_m").to_string(),
@@ -380,29 +443,7 @@ fn check_spec(spec: &ScenarioSpec, root: &Pointer, errors: &mut Vec<FieldError>)
             ),
         });
     }
-    let (law, at_law) = (&mat.arc_restitution, at.child("arc_restitution"));
     let (wear, at_wear) = (&mat.wear_law, at.child("wear_law"));
-    for (pointer, value, rule) in [
-        (at_law.child("a"), law.a, Finite),
-        (at_law.child("b_s_per_m"), law.b_s_per_m, Finite),
-        (
-            at_law.child("calibration_current_a"),
-            law.calibration_current_a,
-            Positive,
-        ),
-        (
-            at_wear.child("worn_pressure_pa"),
-            wear.worn_pressure_pa,
-            Positive,
-        ),
-        (
-            at_wear.child("annealing_energy_j"),
-            wear.annealing_energy_j,
-            Positive,
-        ),
-    ] {
-        check_number(errors, pointer, value, rule);
-    }
     if wear.law == WearLawKind::RougheningAndSoftening
         && wear.worn_pressure_pa > mat.dynamic_yield_pressure_pa
     {
@@ -423,37 +464,10 @@ fn check_spec(spec: &ScenarioSpec, root: &Pointer, errors: &mut Vec<FieldError>)
         });
     }
 
-    let at = root.child("circuit");
-    check_number(
-        errors,
-        at.child("supply_voltage_v"),
-        spec.circuit.supply_voltage_v,
-        NonNegative,
-    );
-    check_number(
-        errors,
-        at.child("current_a"),
-        spec.circuit.current_a,
-        NonNegative,
-    );
-
     let losses = &spec.losses;
-    let at = root.child("losses");
-    check_number(
-        errors,
-        at.child("impact_energy_loss_j"),
-        losses.impact_energy_loss_j,
-        NonNegative,
-    );
-    check_number(
-        errors,
-        at.child("min_separation_m"),
-        losses.min_separation_m,
-        NonNegative,
-    );
     if !(1..=MAX_BOUNCES_LIMIT).contains(&losses.max_bounces) {
         errors.push(FieldError {
-            pointer: at.child("max_bounces").to_string(),
+            pointer: root.child("losses").child("max_bounces").to_string(),
             detail: format!(
                 "must be from 1 to {MAX_BOUNCES_LIMIT}, got {}",
                 losses.max_bounces
@@ -476,6 +490,40 @@ mod tests {
     #[test]
     fn empty_document_is_the_papers_rig() {
         assert_eq!(Scenario::from_json("{}").unwrap(), Scenario::default());
+    }
+
+    /// Each entry of `NUMBER_RULES` reads the field its path names: a value breaking its rule at
+    /// that path is refused at that pointer, and the default scenario keeps every rule.
+    #[test]
+    fn every_number_rule_reads_the_field_it_names() {
+        let defaults = ScenarioSpec::default();
+        let defaults_json = serde_json::to_value(&defaults).unwrap();
+        for number in &NUMBER_RULES {
+            let bad = match number.rule {
+                Rule::Positive | Rule::NonNegative => -1.0,
+                Rule::Finite => 2.0 * MAX_MAGNITUDE,
+            };
+            let mut document = serde_json::json!({});
+            let mut at = &mut document;
+            for step in &number.path[..number.path.len() - 1] {
+                at = &mut at[*step];
+            }
+            at[number.field()] = serde_json::json!(bad);
+            let pointer = format!("/{}", number.path.join("/"));
+            assert!(
+                pointers(&document.to_string()).contains(&pointer),
+                "{pointer} with {bad}"
+            );
+            // The accessor reads the same field as the path.
+            let spec: ScenarioSpec = serde_json::from_value(document).unwrap();
+            assert_eq!((number.value)(&spec), Some(bad), "{pointer}");
+            if let Some(value) = (number.value)(&defaults) {
+                assert_eq!(
+                    defaults_json.pointer(&pointer),
+                    Some(&serde_json::json!(value))
+                );
+            }
+        }
     }
 
     #[test]

@@ -3,6 +3,7 @@
 use crate::support::app::{Service, TestApp};
 use crate::support::client::{agent, assert_problem, delete, get, post, reply};
 use crate::support::temp_db;
+use bouncewear_model::scenario::{MAX_MAGNITUDE, MIN_MAGNITUDE, NUMBER_RULES, Rule};
 use serde_json::json;
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{Read, Write};
@@ -37,6 +38,47 @@ fn openapi_docs_health_and_metrics_are_served() {
         metrics.contains("bouncewear_http_requests_total"),
         "{metrics}"
     );
+}
+
+/// The scenario's number rules have one home, `NUMBER_RULES` in the model: validation applies
+/// them and the document states each as its field's range. A number of a scenario section with
+/// no rule, or a rule whose field the document does not have, fails here.
+#[test]
+fn every_number_of_a_scenario_has_its_one_rule_in_the_document() {
+    let server = TestApp::start(&temp_db("rules"), &[]);
+    let openapi = get(&server.url("/openapi.json"), None).json();
+    let schemas = &openapi["components"]["schemas"];
+    for number in &NUMBER_RULES {
+        let property = &schemas[number.schema]["properties"][number.field()];
+        let bound = |key: &str| property[key].as_f64();
+        let expected = match number.rule {
+            Rule::Positive => (MIN_MAGNITUDE, MAX_MAGNITUDE),
+            Rule::NonNegative => (0.0, MAX_MAGNITUDE),
+            Rule::Finite => (-MAX_MAGNITUDE, MAX_MAGNITUDE),
+        };
+        assert_eq!(
+            (bound("minimum"), bound("maximum")),
+            (Some(expected.0), Some(expected.1)),
+            "{}.{}: {property}",
+            number.schema,
+            number.field()
+        );
+    }
+    let sections: BTreeSet<&str> = NUMBER_RULES.iter().map(|n| n.schema).collect();
+    for section in sections {
+        let properties = schemas[section]["properties"].as_object().unwrap();
+        for (field, property) in properties {
+            let types = &property["type"];
+            let number = types == "number"
+                || types
+                    .as_array()
+                    .is_some_and(|t| t.contains(&json!("number")));
+            assert!(
+                !number || property.get("minimum").is_some(),
+                "{section}.{field} is a number with no rule: {property}"
+            );
+        }
+    }
 }
 
 #[test]

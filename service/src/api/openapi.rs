@@ -9,7 +9,9 @@ use bouncewear_model::error::MAX_TEXT_CHARS;
 use bouncewear_model::montecarlo::job::{MAX_DEVICES, MAX_OPERATIONS, MAX_THRESHOLDS};
 use bouncewear_model::montecarlo::rare::LIFE;
 use bouncewear_model::montecarlo::{DeviceMetric, OperationMetric};
-use bouncewear_model::scenario::{MAX_BOUNCES_LIMIT, MAX_MAGNITUDE, MIN_MAGNITUDE};
+use bouncewear_model::scenario::{
+    MAX_BOUNCES_LIMIT, MAX_MAGNITUDE, MIN_MAGNITUDE, NUMBER_RULES, Rule,
+};
 use bouncewear_model::stats::QUANTILES;
 use serde_json::{Map, Value, json};
 use std::collections::BTreeSet;
@@ -113,96 +115,25 @@ fn add_request_examples(document: &mut Value) {
     }
 }
 
-/// The range rules of docs/model.md section 9 as `check_spec` applies them, for the schema.
-#[derive(Clone, Copy)]
-enum Range {
-    /// From `MIN_MAGNITUDE` to `MAX_MAGNITUDE`.
-    Positive,
-    /// 0, or as `Positive`.
-    NonNegative,
-    /// Magnitude at most `MAX_MAGNITUDE`.
-    Finite,
-}
-
-impl Range {
-    fn schema(self) -> Value {
-        match self {
-            Range::Positive => json!({"minimum": MIN_MAGNITUDE, "maximum": MAX_MAGNITUDE}),
-            Range::NonNegative => json!({
-                "minimum": 0, "maximum": MAX_MAGNITUDE,
-                "not": {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": MIN_MAGNITUDE}
-            }),
-            Range::Finite => json!({"minimum": -MAX_MAGNITUDE, "maximum": MAX_MAGNITUDE}),
-        }
+/// A number rule of docs/model.md section 9 as JSON Schema keywords.
+fn range(rule: Rule) -> Value {
+    match rule {
+        Rule::Positive => json!({"minimum": MIN_MAGNITUDE, "maximum": MAX_MAGNITUDE}),
+        Rule::NonNegative => json!({
+            "minimum": 0, "maximum": MAX_MAGNITUDE,
+            "not": {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": MIN_MAGNITUDE}
+        }),
+        Rule::Finite => json!({"minimum": -MAX_MAGNITUDE, "maximum": MAX_MAGNITUDE}),
     }
 }
 
-/// What each field of a request body may hold on its own, as the model's validation has it
-/// (`Scenario::new`, `Job::new`, `ValidSchedule::parse`). Rules that relate fields to each other
-/// (`worn_radius_m` at most `contact_radius_m`, `bin_operations` at most `operations`, a job's size
-/// against the server's limit...) are in the descriptions: JSON Schema cannot state them.
+/// What each field of a request body may hold on its own, as the model's validation has it: the
+/// scenario's numbers from the model's own list (`NUMBER_RULES`, which `Scenario::new` applies),
+/// the other fields as `Job::new`, `calibrate` and `ValidSchedule::parse` check them. Rules that
+/// relate fields to each other (`worn_radius_m` at most `contact_radius_m`, `bin_operations` at
+/// most `operations`, a job's size against the server's limit...) are in the descriptions: JSON
+/// Schema cannot state them.
 fn constrain_request_fields(document: &mut Value) {
-    use Range::{Finite, NonNegative, Positive};
-    let ranges: [(&str, &[(&str, Range)]); 6] = [
-        (
-            "MechanismSpec",
-            &[
-                ("inertia_kg_m2", Positive),
-                ("spring_stiffness_n_per_m", NonNegative),
-                ("spring_arm_m", Positive),
-                ("contact_arm_m", Positive),
-                ("static_force_n", NonNegative),
-                ("drop_height_m", NonNegative),
-                ("impact_velocity_m_s", NonNegative),
-            ],
-        ),
-        (
-            "MaterialSpec",
-            &[
-                ("youngs_modulus_pa", Positive),
-                ("dynamic_yield_pressure_pa", Positive),
-                ("contact_radius_m", Positive),
-                ("kappa", Positive),
-                ("worn_radius_m", Positive),
-                ("roughening_energy_j", Positive),
-                ("erosion_kg_per_j", NonNegative),
-                ("density_kg_m3", Positive),
-                ("min_arc_voltage_v", NonNegative),
-                ("min_arc_current_a", NonNegative),
-                ("breakdown_field_v_per_m", Positive),
-                ("softening_energy_j", Positive),
-            ],
-        ),
-        (
-            "ArcRestitutionSpec",
-            &[
-                ("a", Finite),
-                ("b_s_per_m", Finite),
-                ("calibration_current_a", Positive),
-            ],
-        ),
-        (
-            "WearLawSpec",
-            &[
-                ("worn_pressure_pa", Positive),
-                ("annealing_energy_j", Positive),
-            ],
-        ),
-        (
-            "CircuitSpec",
-            &[
-                ("supply_voltage_v", NonNegative),
-                ("current_a", NonNegative),
-            ],
-        ),
-        (
-            "LossesSpec",
-            &[
-                ("impact_energy_loss_j", NonNegative),
-                ("min_separation_m", NonNegative),
-            ],
-        ),
-    ];
     let operation_metrics: Vec<&str> = OperationMetric::ALL.iter().map(|m| m.name()).collect();
     let metrics: Vec<&str> = operation_metrics
         .iter()
@@ -224,13 +155,9 @@ fn constrain_request_fields(document: &mut Value) {
         .map(|tz| json!(tz.name()))
         .collect();
     time_zones.push(Value::Null);
-    let mut fields: Vec<(&str, &str, Value)> = ranges
+    let mut fields: Vec<(&str, &str, Value)> = NUMBER_RULES
         .iter()
-        .flat_map(|(schema, fields)| {
-            fields
-                .iter()
-                .map(move |(field, range)| (*schema, *field, range.schema()))
-        })
+        .map(|number| (number.schema, number.field(), range(number.rule)))
         .collect();
     fields.extend([
         (
@@ -304,7 +231,7 @@ fn constrain_request_fields(document: &mut Value) {
         (
             "Observation",
             "impact_velocity_m_s",
-            Range::NonNegative.schema(),
+            range(Rule::NonNegative),
         ),
         (
             "CalibrationSpec",
