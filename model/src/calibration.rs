@@ -689,7 +689,8 @@ impl Problem {
         });
         self.identifiable(&jacobian)?;
         let degrees_of_freedom = residuals.len() - theta.len();
-        let variance = sum_of_squares(&residuals) / degrees_of_freedom as f64;
+        let cost = sum_of_squares(&residuals);
+        let variance = cost / degrees_of_freedom as f64;
         let t = student_t_975(degrees_of_freedom as u64);
         let (jtj, _) = normal_equations(&jacobian, &residuals);
         let covariance = invert(jtj).unwrap_or_default();
@@ -713,7 +714,7 @@ impl Problem {
                     problem: self,
                     theta,
                     parameter: i,
-                    cost: sum_of_squares(&residuals),
+                    cost,
                     degrees_of_freedom: degrees_of_freedom as f64,
                     t,
                     slopes: (0..theta.len())
