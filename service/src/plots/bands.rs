@@ -8,17 +8,19 @@ use super::axes::{Frame, Legend, LinearAxis, Scale, draw_frame_axes, draw_x_tick
 use super::svg::{BAND, BLUE, INK, LABEL, RED, SMALL, Style, Svg, fmt_sig, points};
 use super::{extent, finite, limit_of, message_svg, pad, quantile, whole_valued};
 
+/// One bin of operations as the curve draws it: at its midpoint.
+struct Row {
+    x: f64,
+    p05: Option<f64>,
+    p50: Option<f64>,
+    p95: Option<f64>,
+    mean: Option<f64>,
+}
+
 /// The wear curve of `metric`: per bin of operations (at the bin's midpoint), a band from p05 to
 /// p95, the median, the mean (dashed) and the limit when there is one, with a legend.
 pub fn quantile_bands_svg(metric: &str, bins: &[Bin]) -> String {
     let title = format!("{metric}: wear curve over the test");
-    struct Row {
-        x: f64,
-        p05: Option<f64>,
-        p50: Option<f64>,
-        p95: Option<f64>,
-        mean: Option<f64>,
-    }
     let rows: Vec<Row> = bins
         .iter()
         .filter(|b| b.summary.n > 0)
@@ -62,49 +64,9 @@ pub fn quantile_bands_svg(metric: &str, bins: &[Bin]) -> String {
     svg.title(&title, 16.0, 24.0);
     draw_y_grid(&mut svg, &frame, &y_axis, &ys);
     draw_x_ticks(&mut svg, &frame, &x_axis, &xs, false);
-
-    // The band: p95 forwards, p05 backwards, over the bins that have both.
-    let band: Vec<(f64, f64, f64)> = rows
-        .iter()
-        .filter_map(|r| Some((xs.map(r.x), ys.map(r.p05?), ys.map(r.p95?))))
-        .collect();
-    match band.len() {
-        0 => {}
-        1 => {
-            let (x, y05, y95) = band[0];
-            svg.rect(
-                x - 6.0,
-                y95.min(y05),
-                12.0,
-                (y05 - y95).abs().max(1.0),
-                BAND,
-                None,
-            );
-        }
-        _ => {
-            let mut pts: Vec<(f64, f64)> = band.iter().map(|&(x, _, y95)| (x, y95)).collect();
-            pts.extend(band.iter().rev().map(|&(x, y05, _)| (x, y05)));
-            let _ = write!(
-                svg.out,
-                r#"<polygon points="{}" fill="{BAND}" stroke="{BAND}" stroke-width="1"/>"#,
-                points(&pts)
-            );
-            svg.out.push('\n');
-        }
-    }
+    draw_band(&mut svg, &rows, &xs, &ys);
     if let Some(limit) = limit {
-        let y = ys.map(limit);
-        svg.line(frame.left, y, frame.right(), y, RED, 1.5, Some("6 4"));
-        svg.text(
-            frame.right() - 4.0,
-            y - 5.0,
-            &format!("limit {}", fmt_sig(limit, 3)),
-            Style {
-                anchor: "end",
-                fill: RED,
-                ..SMALL
-            },
-        );
+        draw_limit(&mut svg, &frame, ys.map(limit), limit);
     }
     let median: Vec<(f64, f64)> = rows
         .iter()
@@ -138,6 +100,53 @@ pub fn quantile_bands_svg(metric: &str, bins: &[Bin]) -> String {
         legend.line(&mut svg, RED, Some("6 4"), "limit");
     }
     svg.finish()
+}
+
+/// The band: p95 forwards, p05 backwards, over the bins that have both; one bin's is a bar.
+fn draw_band(svg: &mut Svg, rows: &[Row], xs: &Scale, ys: &Scale) {
+    let band: Vec<(f64, f64, f64)> = rows
+        .iter()
+        .filter_map(|r| Some((xs.map(r.x), ys.map(r.p05?), ys.map(r.p95?))))
+        .collect();
+    match band.len() {
+        0 => {}
+        1 => {
+            let (x, y05, y95) = band[0];
+            svg.rect(
+                x - 6.0,
+                y95.min(y05),
+                12.0,
+                (y05 - y95).abs().max(1.0),
+                BAND,
+                None,
+            );
+        }
+        _ => {
+            let mut pts: Vec<(f64, f64)> = band.iter().map(|&(x, _, y95)| (x, y95)).collect();
+            pts.extend(band.iter().rev().map(|&(x, y05, _)| (x, y05)));
+            let _ = write!(
+                svg.out,
+                r#"<polygon points="{}" fill="{BAND}" stroke="{BAND}" stroke-width="1"/>"#,
+                points(&pts)
+            );
+            svg.out.push('\n');
+        }
+    }
+}
+
+/// The limit across the frame at height `y`, labelled with its value.
+fn draw_limit(svg: &mut Svg, frame: &Frame, y: f64, limit: f64) {
+    svg.line(frame.left, y, frame.right(), y, RED, 1.5, Some("6 4"));
+    svg.text(
+        frame.right() - 4.0,
+        y - 5.0,
+        &format!("limit {}", fmt_sig(limit, 3)),
+        Style {
+            anchor: "end",
+            fill: RED,
+            ..SMALL
+        },
+    );
 }
 
 #[cfg(test)]

@@ -9,6 +9,11 @@ use super::axes::{Frame, LinearAxis, Scale, draw_frame_axes, draw_x_ticks, draw_
 use super::svg::{BAR, BLUE, INK, LABEL, MUTED_SMALL, RED, Style, Svg, num};
 use super::{limit_of, message_svg, pad, pick_evenly, quantile, whole_valued};
 
+/// Panels of a grid are this large.
+const PANEL: (f64, f64) = (250.0, 178.0);
+/// Margins around the grid: left, top, bottom, right.
+const OUTER: [f64; 4] = [34.0, 66.0, 44.0, 12.0];
+
 /// Small multiples of the histogram of `metric` in each bin of operations (at most 12 panels,
 /// evenly spaced over the bins when there are more, as the title says), on a shared x axis. Each
 /// panel marks the median and, when the metric has a limit, the limit. The panels share their y
@@ -28,19 +33,47 @@ pub fn histograms_svg(metric: &str, bins: &[Bin]) -> String {
     if chosen.is_empty() {
         return message_svg(&title, "No bins of operations to plot.");
     }
+    let chosen: Vec<&Bin> = chosen.into_iter().map(|i| &bins[i]).collect();
 
     let n = chosen.len();
     let cols = ((n as f64).sqrt().ceil() as usize).clamp(1, 4);
     let rows = n.div_ceil(cols);
-    let (panel_w, panel_h) = (250.0, 178.0);
-    let (outer_left, outer_top, outer_bottom, outer_right) = (34.0, 66.0, 44.0, 12.0);
-    let width = outer_left + panel_w * cols as f64 + outer_right;
-    let height = outer_top + panel_h * rows as f64 + outer_bottom;
+    let [outer_left, outer_top, outer_bottom, outer_right] = OUTER;
+    let width = outer_left + PANEL.0 * cols as f64 + outer_right;
+    let height = outer_top + PANEL.1 * rows as f64 + outer_bottom;
+    let axes = shared_axes(metric, &chosen);
 
-    // A shared x axis, so the panels compare at a glance.
+    let mut svg = Svg::new(width, height, &title);
+    svg.title(&title, 12.0, 22.0);
+    let mut subtitle =
+        String::from("Bars: counts of operations in equal-width classes; dark line: median (p50)");
+    if chosen.iter().any(|bin| limit_of(&bin.summary).is_some()) {
+        subtitle.push_str("; red dashed: limit");
+    }
+    svg.text(12.0, 42.0, &subtitle, MUTED_SMALL);
+    for (k, bin) in chosen.iter().enumerate() {
+        let (col, row) = (k % cols, k / cols);
+        let px = outer_left + PANEL.0 * col as f64;
+        let py = outer_top + PANEL.1 * row as f64;
+        draw_panel(&mut svg, &axes, (px, py), bin);
+    }
+
+    // Shared axis labels.
+    svg.text(
+        outer_left + PANEL.0 * cols as f64 / 2.0,
+        height - 12.0,
+        metric,
+        LABEL,
+    );
+    svg.y_label(14.0, outer_top + PANEL.1 * rows as f64 / 2.0, "count");
+    svg.finish()
+}
+
+/// The axes every panel shares: across, every class edge and limit; up, the largest count.
+fn shared_axes(metric: &str, chosen: &[&Bin]) -> [LinearAxis; 2] {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for &i in &chosen {
-        let s = &bins[i].summary;
+    for bin in chosen {
+        let s = &bin.summary;
         for &e in s.histogram.edges.iter().chain(limit_of(s).iter()) {
             if e.is_finite() {
                 lo = lo.min(e);
@@ -52,119 +85,99 @@ pub fn histograms_svg(metric: &str, bins: &[Bin]) -> String {
     let x_axis = LinearAxis::new(lo, hi, 4, whole_valued(metric));
     let max_count = chosen
         .iter()
-        .flat_map(|&i| class_counts(&bins[i].summary).iter().copied())
+        .flat_map(|bin| class_counts(&bin.summary).iter().copied())
         .max()
         .unwrap_or(0)
         .max(1);
     let y_axis = LinearAxis::new(0.0, max_count as f64, 3, true);
-    let limit_shown = chosen.iter().any(|&i| limit_of(&bins[i].summary).is_some());
+    [x_axis, y_axis]
+}
 
-    let mut svg = Svg::new(width, height, &title);
-    svg.title(&title, 12.0, 22.0);
-    let mut subtitle =
-        String::from("Bars: counts of operations in equal-width classes; dark line: median (p50)");
-    if limit_shown {
-        subtitle.push_str("; red dashed: limit");
-    }
-    svg.text(12.0, 42.0, &subtitle, MUTED_SMALL);
-
-    for (k, &i) in chosen.iter().enumerate() {
-        let bin = &bins[i];
-        let s = &bin.summary;
-        let (col, row) = (k % cols, k / cols);
-        let px = outer_left + panel_w * col as f64;
-        let py = outer_top + panel_h * row as f64;
-        let frame = Frame::inset(px, py, panel_w, panel_h, [44.0, 24.0, 12.0, 32.0]);
-        svg.open_g(&format!(
-            r#"class="panel" data-op-start="{}" data-op-end="{}""#,
-            bin.op_start, bin.op_end
-        ));
-        svg.text(
-            px + 8.0,
-            py + 14.0,
-            &format!("operations {}\u{2013}{}", bin.op_start, bin.op_end),
-            Style {
-                anchor: "start",
-                bold: true,
-                ..LABEL
-            },
-        );
-        svg.text(
-            frame.right(),
-            py + 14.0,
-            &format!("n = {}", s.n),
-            Style {
-                anchor: "end",
-                ..MUTED_SMALL
-            },
-        );
-
-        let count = |c: u64| c as f64;
-        let bars = class_counts(s).len();
-        let xs = Scale::new(x_axis.lo, x_axis.hi, frame.left, frame.right());
-        let ys = Scale::new(y_axis.lo, y_axis.hi, frame.bottom(), frame.top);
-        draw_y_grid(&mut svg, &frame, &y_axis, &ys);
-        draw_x_ticks(&mut svg, &frame, &x_axis, &xs, false);
-
-        let mut bars_g = String::new();
-        for b in 0..bars {
-            let c = s.histogram.counts[b];
-            let (e0, e1) = (s.histogram.edges[b], s.histogram.edges[b + 1]);
-            if c == 0 || !e0.is_finite() || !e1.is_finite() {
-                continue;
-            }
-            let (mut x0, mut x1) = (xs.map(e0.min(e1)), xs.map(e0.max(e1)));
-            if x1 - x0 < 3.0 {
-                // A class of (almost) zero width, as when every value is equal: a narrow bar
-                // centred on it.
-                let mid = (x0 + x1) / 2.0;
-                x0 = mid - 3.0;
-                x1 = mid + 3.0;
-            }
-            let y = ys.map(count(c));
-            let _ = write!(
-                bars_g,
-                r#"<rect x="{}" y="{}" width="{}" height="{}" fill="{BAR}" stroke="{BLUE}" stroke-width="0.5"/>"#,
-                num(x0),
-                num(y),
-                num(x1 - x0),
-                num(frame.bottom() - y)
-            );
-        }
-        if !bars_g.is_empty() {
-            svg.raw(&bars_g);
-        }
-        if s.n == 0 {
-            svg.text(
-                frame.left + frame.width / 2.0,
-                frame.top + frame.height / 2.0,
-                "no values",
-                MUTED_SMALL,
-            );
-        }
-        if s.n > 0
-            && let Some(p50) = quantile(s, "p50")
-        {
-            let x = xs.map(p50);
-            svg.line(x, frame.top, x, frame.bottom(), INK, 1.5, None);
-        }
-        if let Some(limit) = limit_of(s) {
-            let x = xs.map(limit);
-            svg.line(x, frame.top, x, frame.bottom(), RED, 1.5, Some("5 3"));
-        }
-        draw_frame_axes(&mut svg, &frame);
-        svg.close_g();
-    }
-
-    // Shared axis labels.
+/// One bin's panel with its top left corner at `(px, py)`: its heading and count, the bars, the
+/// median and the limit.
+fn draw_panel(svg: &mut Svg, [x_axis, y_axis]: &[LinearAxis; 2], (px, py): (f64, f64), bin: &Bin) {
+    let s = &bin.summary;
+    let frame = Frame::inset(px, py, PANEL.0, PANEL.1, [44.0, 24.0, 12.0, 32.0]);
+    svg.open_g(&format!(
+        r#"class="panel" data-op-start="{}" data-op-end="{}""#,
+        bin.op_start, bin.op_end
+    ));
     svg.text(
-        outer_left + panel_w * cols as f64 / 2.0,
-        height - 12.0,
-        metric,
-        LABEL,
+        px + 8.0,
+        py + 14.0,
+        &format!("operations {}\u{2013}{}", bin.op_start, bin.op_end),
+        Style {
+            anchor: "start",
+            bold: true,
+            ..LABEL
+        },
     );
-    svg.y_label(14.0, outer_top + panel_h * rows as f64 / 2.0, "count");
-    svg.finish()
+    svg.text(
+        frame.right(),
+        py + 14.0,
+        &format!("n = {}", s.n),
+        Style {
+            anchor: "end",
+            ..MUTED_SMALL
+        },
+    );
+    let xs = Scale::new(x_axis.lo, x_axis.hi, frame.left, frame.right());
+    let ys = Scale::new(y_axis.lo, y_axis.hi, frame.bottom(), frame.top);
+    draw_y_grid(svg, &frame, y_axis, &ys);
+    draw_x_ticks(svg, &frame, x_axis, &xs, false);
+    draw_bars(svg, &frame, (&xs, &ys), s);
+    if s.n == 0 {
+        svg.text(
+            frame.left + frame.width / 2.0,
+            frame.top + frame.height / 2.0,
+            "no values",
+            MUTED_SMALL,
+        );
+    }
+    if s.n > 0
+        && let Some(p50) = quantile(s, "p50")
+    {
+        let x = xs.map(p50);
+        svg.line(x, frame.top, x, frame.bottom(), INK, 1.5, None);
+    }
+    if let Some(limit) = limit_of(s) {
+        let x = xs.map(limit);
+        svg.line(x, frame.top, x, frame.bottom(), RED, 1.5, Some("5 3"));
+    }
+    draw_frame_axes(svg, &frame);
+    svg.close_g();
+}
+
+/// A bar for each class with values, one element group for all of them.
+fn draw_bars(svg: &mut Svg, frame: &Frame, (xs, ys): (&Scale, &Scale), s: &Summary) {
+    let mut bars = String::new();
+    for b in 0..class_counts(s).len() {
+        let c = s.histogram.counts[b];
+        let (e0, e1) = (s.histogram.edges[b], s.histogram.edges[b + 1]);
+        if c == 0 || !e0.is_finite() || !e1.is_finite() {
+            continue;
+        }
+        let (mut x0, mut x1) = (xs.map(e0.min(e1)), xs.map(e0.max(e1)));
+        if x1 - x0 < 3.0 {
+            // A class of (almost) zero width, as when every value is equal: a narrow bar
+            // centred on it.
+            let mid = (x0 + x1) / 2.0;
+            x0 = mid - 3.0;
+            x1 = mid + 3.0;
+        }
+        let y = ys.map(c as f64);
+        let _ = write!(
+            bars,
+            r#"<rect x="{}" y="{}" width="{}" height="{}" fill="{BAR}" stroke="{BLUE}" stroke-width="0.5"/>"#,
+            num(x0),
+            num(y),
+            num(x1 - x0),
+            num(frame.bottom() - y)
+        );
+    }
+    if !bars.is_empty() {
+        svg.raw(&bars);
+    }
 }
 
 /// The counts of a histogram's classes: as many as it has edges for.

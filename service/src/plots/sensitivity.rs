@@ -39,21 +39,61 @@ pub fn sensitivity_svg(metric: &str, bins: &[SensitivityBin]) -> String {
         [only] => vec![only],
         [first, .., last] => vec![first, last],
     };
-    // Every parameter of the panels, the most influential at the end first.
-    let Some(last) = panels.last() else {
+    if panels.is_empty() {
         return super::message_svg(&title, "no sensitivity indices for this metric");
-    };
+    }
+    let (names, hidden) = ranked_names(&panels, sobol);
+    if names.is_empty() {
+        return super::message_svg(&title, "no scattered parameters in this analysis");
+    }
+    let layout = Layout::new(&panels, &names, hidden, sobol);
+
+    let mut svg = Svg::new(layout.width, layout.height, &title);
+    svg.title(&title, 16.0, 24.0);
+    let mut legend = Legend::new(16.0, 50.0);
+    if sobol {
+        legend.swatch(&mut svg, BLUE, "first-order index");
+        legend.swatch(&mut svg, TOTAL, "total index");
+        legend.line(&mut svg, INK, None, "95 % interval");
+    } else {
+        legend.swatch(
+            &mut svg,
+            BLUE,
+            "|standardised regression coefficient| (sign at the bar)",
+        );
+    }
+    draw_rows(&mut svg, &layout, &names);
+    for (k, bin) in panels.iter().enumerate() {
+        let heading = match (k, panels.len()) {
+            (_, 1) => operations(bin),
+            (0, _) => format!("{} (first bin)", operations(bin)),
+            _ => format!("{} (last bin)", operations(bin)),
+        };
+        draw_panel(&mut svg, &layout, k, &heading, bin, &names);
+    }
+    if hidden > 0 {
+        svg.text(
+            16.0,
+            layout.height - 10.0,
+            &format!("{hidden} more parameters with smaller indices are not shown"),
+            MUTED_START,
+        );
+    }
+    svg.finish()
+}
+
+/// Every parameter of the panels, the most influential in the last first (by its total index,
+/// or its coefficient's size), cut to [`MAX_ROWS`]; and how many were cut.
+fn ranked_names<'a>(panels: &[&'a SensitivityBin], sobol: bool) -> (Vec<&'a str>, usize) {
     let mut names: Vec<&str> = Vec::new();
-    for bin in &panels {
+    for bin in panels {
         for name in bin.indices.keys() {
             if !names.contains(&name.as_str()) {
                 names.push(name);
             }
         }
     }
-    if names.is_empty() {
-        return super::message_svg(&title, "no scattered parameters in this analysis");
-    }
+    let last = panels[panels.len() - 1];
     let weight = |name: &str| {
         last.indices
             .get(name)
@@ -69,62 +109,82 @@ pub fn sensitivity_svg(metric: &str, bins: &[SensitivityBin]) -> String {
     names.sort_by(|a, b| weight(b).total_cmp(&weight(a)));
     let hidden = names.len().saturating_sub(MAX_ROWS);
     names.truncate(MAX_ROWS);
+    (names, hidden)
+}
 
-    // The axis: 0 to 1, widened (within limits) to every value and interval drawn.
-    let mut lo: f64 = 0.0;
-    let mut hi: f64 = 1.0;
-    for bin in &panels {
-        for name in &names {
-            let Some(p) = bin.indices.get(*name) else {
-                continue;
-            };
-            for v in drawn_values(p, sobol) {
-                lo = lo.min(v);
-                hi = hi.max(v);
+/// Where the rows and panels go, and the axis they share.
+struct Layout {
+    sobol: bool,
+    axis: LinearAxis,
+    label_width: f64,
+    row_h: f64,
+    panel_w: f64,
+    gap: f64,
+    top: f64,
+    width: f64,
+    height: f64,
+}
+
+impl Layout {
+    fn new(panels: &[&SensitivityBin], names: &[&str], hidden: usize, sobol: bool) -> Self {
+        // The axis: 0 to 1, widened (within limits) to every value and interval drawn.
+        let mut lo: f64 = 0.0;
+        let mut hi: f64 = 1.0;
+        for bin in panels {
+            for name in names {
+                let Some(p) = bin.indices.get(*name) else {
+                    continue;
+                };
+                for v in drawn_values(p, sobol) {
+                    lo = lo.min(v);
+                    hi = hi.max(v);
+                }
             }
         }
-    }
-    let axis = index_axis(lo.max(AXIS_FLOOR), hi.min(AXIS_CEILING));
-
-    let label_width = names
-        .iter()
-        .map(|n| text_width(&truncate(n, 34), 12.0))
-        .fold(0.0, f64::max)
-        .clamp(90.0, 220.0)
-        + 24.0;
-    let row_h = if sobol { 30.0 } else { 24.0 };
-    let panel_w = if panels.len() == 1 { 460.0 } else { 300.0 };
-    let gap = 28.0;
-    let (top, bottom) = (96.0, 58.0);
-    let plots_w = panel_w * panels.len() as f64 + gap * (panels.len() - 1) as f64;
-    let width = (label_width + plots_w + 24.0).max(560.0);
-    let rows_h = row_h * names.len() as f64;
-    let height = top + rows_h + bottom + if hidden > 0 { 16.0 } else { 0.0 };
-
-    let mut svg = Svg::new(width, height, &title);
-    svg.title(&title, 16.0, 24.0);
-    let mut legend = Legend::new(16.0, 50.0);
-    if sobol {
-        legend.swatch(&mut svg, BLUE, "first-order index");
-        legend.swatch(&mut svg, TOTAL, "total index");
-        legend.line(&mut svg, INK, None, "95 % interval");
-    } else {
-        legend.swatch(
-            &mut svg,
-            BLUE,
-            "|standardised regression coefficient| (sign at the bar)",
-        );
+        let axis = index_axis(lo.max(AXIS_FLOOR), hi.min(AXIS_CEILING));
+        let label_width = names
+            .iter()
+            .map(|n| text_width(&truncate(n, 34), 12.0))
+            .fold(0.0, f64::max)
+            .clamp(90.0, 220.0)
+            + 24.0;
+        let row_h = if sobol { 30.0 } else { 24.0 };
+        let panel_w = if panels.len() == 1 { 460.0 } else { 300.0 };
+        let gap = 28.0;
+        let (top, bottom) = (96.0, 58.0);
+        let plots_w = panel_w * panels.len() as f64 + gap * (panels.len() - 1) as f64;
+        let width = (label_width + plots_w + 24.0).max(560.0);
+        let rows_h = row_h * names.len() as f64;
+        let height = top + rows_h + bottom + if hidden > 0 { 16.0 } else { 0.0 };
+        Self {
+            sobol,
+            axis,
+            label_width,
+            row_h,
+            panel_w,
+            gap,
+            top,
+            width,
+            height,
+        }
     }
 
-    // Rows: shading and the parameters' names.
+    /// The top of row `r`.
+    fn row(&self, r: usize) -> f64 {
+        self.top + self.row_h * r as f64
+    }
+}
+
+/// The rows' shading and the parameters' names.
+fn draw_rows(svg: &mut Svg, layout: &Layout, names: &[&str]) {
     for (r, name) in names.iter().enumerate() {
-        let y = top + row_h * r as f64;
+        let y = layout.row(r);
         if r % 2 == 1 {
-            svg.rect(16.0, y, width - 32.0, row_h, ROW_SHADE, None);
+            svg.rect(16.0, y, layout.width - 32.0, layout.row_h, ROW_SHADE, None);
         }
         svg.text(
-            label_width - 12.0,
-            y + row_h / 2.0 + 4.0,
+            layout.label_width - 12.0,
+            y + layout.row_h / 2.0 + 4.0,
             &truncate(name, 34),
             Style {
                 anchor: "end",
@@ -132,81 +192,78 @@ pub fn sensitivity_svg(metric: &str, bins: &[SensitivityBin]) -> String {
             },
         );
     }
+}
 
-    for (k, bin) in panels.iter().enumerate() {
-        let frame = Frame {
-            left: label_width + (panel_w + gap) * k as f64,
-            top,
-            width: panel_w,
-            height: rows_h,
+/// Panel `k`: its heading, the R² of a regression, the axis, and each parameter's bars.
+fn draw_panel(
+    svg: &mut Svg,
+    layout: &Layout,
+    k: usize,
+    heading: &str,
+    bin: &SensitivityBin,
+    names: &[&str],
+) {
+    let (top, axis, sobol) = (layout.top, &layout.axis, layout.sobol);
+    let frame = Frame {
+        left: layout.label_width + (layout.panel_w + layout.gap) * k as f64,
+        top,
+        width: layout.panel_w,
+        height: layout.row_h * names.len() as f64,
+    };
+    let xs = Scale::new(axis.lo, axis.hi, frame.left, frame.right());
+    svg.text(
+        frame.left + frame.width / 2.0,
+        top - 22.0,
+        heading,
+        Style {
+            bold: true,
+            ..LABEL
+        },
+    );
+    if let Some(r2) = bin.r_squared.and_then(finite).filter(|_| !sobol) {
+        let note = format!("R\u{b2} = {}", fmt_sig(r2, 3));
+        svg.text(frame.left + frame.width / 2.0, top - 8.0, &note, SMALL);
+    }
+    draw_x_ticks(svg, &frame, axis, &xs, true);
+    draw_frame_axes(svg, &frame);
+    // 0 and 1 stand out from the grid: no influence and all of the variance.
+    let x0 = xs.map(0.0);
+    svg.line(x0, frame.top, x0, frame.bottom(), AXIS, 1.0, None);
+    if sobol && axis.lo <= 1.0 && 1.0 <= axis.hi {
+        let x1 = xs.map(1.0);
+        svg.line(x1, frame.top, x1, frame.bottom(), AXIS, 1.0, Some("4 3"));
+    }
+    for (r, name) in names.iter().enumerate() {
+        let y = layout.row(r);
+        let Some(p) = bin.indices.get(*name) else {
+            svg.text(
+                x0 + 4.0,
+                y + layout.row_h / 2.0 + 4.0,
+                "\u{2013}",
+                MUTED_START,
+            );
+            continue;
         };
-        let xs = Scale::new(axis.lo, axis.hi, frame.left, frame.right());
-        let heading = match (k, panels.len()) {
-            (_, 1) => operations(bin),
-            (0, _) => format!("{} (first bin)", operations(bin)),
-            _ => format!("{} (last bin)", operations(bin)),
-        };
-        svg.text(
-            frame.left + frame.width / 2.0,
-            top - 22.0,
-            &heading,
-            Style {
-                bold: true,
-                ..LABEL
-            },
-        );
-        let note = match bin.r_squared.and_then(finite) {
-            Some(r2) if !sobol => format!("R\u{b2} = {}", fmt_sig(r2, 3)),
-            _ => String::new(),
-        };
-        if !note.is_empty() {
-            svg.text(frame.left + frame.width / 2.0, top - 8.0, &note, SMALL);
-        }
-        draw_x_ticks(&mut svg, &frame, &axis, &xs, true);
-        draw_frame_axes(&mut svg, &frame);
-        // 0 and 1 stand out from the grid: no influence and all of the variance.
-        let x0 = xs.map(0.0);
-        svg.line(x0, frame.top, x0, frame.bottom(), AXIS, 1.0, None);
-        if sobol && axis.lo <= 1.0 && 1.0 <= axis.hi {
-            let x1 = xs.map(1.0);
-            svg.line(x1, frame.top, x1, frame.bottom(), AXIS, 1.0, Some("4 3"));
-        }
-        for (r, name) in names.iter().enumerate() {
-            let y = top + row_h * r as f64;
-            let Some(p) = bin.indices.get(*name) else {
-                svg.text(x0 + 4.0, y + row_h / 2.0 + 4.0, "\u{2013}", MUTED_START);
-                continue;
-            };
-            if sobol {
-                let bars = [(p.first, BLUE, 5.0), (p.total, TOTAL, 15.0)];
-                for (estimate, colour, offset) in bars {
-                    draw_index(&mut svg, &xs, &axis, estimate, colour, y + offset, 8.0);
-                }
-            } else {
-                draw_src(&mut svg, &xs, &axis, p.src, y + 6.0, 12.0);
+        if sobol {
+            let bars = [(p.first, BLUE, 5.0), (p.total, TOTAL, 15.0)];
+            for (estimate, colour, offset) in bars {
+                draw_index(svg, &xs, axis, estimate, colour, y + offset, 8.0);
             }
-        }
-        let caption = if sobol {
-            "Sobol' index (share of the variance)"
         } else {
-            "|standardised regression coefficient|"
-        };
-        svg.text(
-            frame.left + frame.width / 2.0,
-            frame.bottom() + 36.0,
-            caption,
-            SMALL,
-        );
+            draw_src(svg, &xs, axis, p.src, y + 6.0, 12.0);
+        }
     }
-    if hidden > 0 {
-        svg.text(
-            16.0,
-            height - 10.0,
-            &format!("{hidden} more parameters with smaller indices are not shown"),
-            MUTED_START,
-        );
-    }
-    svg.finish()
+    let caption = if sobol {
+        "Sobol' index (share of the variance)"
+    } else {
+        "|standardised regression coefficient|"
+    };
+    svg.text(
+        frame.left + frame.width / 2.0,
+        frame.bottom() + 36.0,
+        caption,
+        SMALL,
+    );
 }
 
 const MUTED_START: Style = Style {

@@ -54,47 +54,8 @@ pub fn trend_svg(title: &str, x_label: &str, y_label: &str, points: &[TrendPoint
     svg.title(title, 16.0, 24.0);
     draw_y_grid(&mut svg, &frame, &y_axis, &ys);
 
-    // x labels, thinned to about one per 22 px (rotated) or per label width (flat).
-    let per_label = if rotate { 22.0 } else { longest + 10.0 };
-    let every = ((per_label / slot.max(1e-9)).ceil() as usize).max(1);
-    for (k, p) in points.iter().enumerate() {
-        let x = x_of(k);
-        svg.line(x, frame.bottom(), x, frame.bottom() + 4.0, AXIS, 1.0, None);
-        if !(n - 1 - k).is_multiple_of(every) {
-            continue;
-        }
-        let label = truncate(&p.label, 24);
-        if rotate {
-            svg.text(
-                x + 3.0,
-                frame.bottom() + 12.0,
-                &label,
-                Style {
-                    anchor: "end",
-                    rotate: -45.0,
-                    ..SMALL
-                },
-            );
-        } else {
-            svg.text(x, frame.bottom() + 18.0, &label, SMALL);
-        }
-    }
-
-    // Error bars, the line, then the points.
-    let cap = (slot * 0.2).clamp(2.0, 6.0);
-    for (k, p) in points.iter().enumerate() {
-        if let Some([a, b]) = p.ci95
-            && a.is_finite()
-            && b.is_finite()
-        {
-            let x = x_of(k);
-            let color = if p.flagged { RED } else { MUTED };
-            let (ya, yb) = (ys.map(a), ys.map(b));
-            svg.line(x, ya, x, yb, color, 1.2, None);
-            svg.line(x - cap, ya, x + cap, ya, color, 1.2, None);
-            svg.line(x - cap, yb, x + cap, yb, color, 1.2, None);
-        }
-    }
+    draw_x_labels(&mut svg, &frame, points, (slot, longest), rotate);
+    draw_error_bars(&mut svg, points, &ys, slot, x_of);
     let line: Vec<Option<(f64, f64)>> = points
         .iter()
         .enumerate()
@@ -130,6 +91,66 @@ pub fn trend_svg(title: &str, x_label: &str, y_label: &str, points: &[TrendPoint
         legend.ring(&mut svg, RED, "flagged");
     }
     svg.finish()
+}
+
+/// The nights' ticks and labels, thinned to about one per 22 px (rotated) or per label width
+/// (flat), counted from the last night; `slot` is a night's width and `longest` the widest label.
+fn draw_x_labels(
+    svg: &mut Svg,
+    frame: &Frame,
+    points: &[TrendPoint],
+    (slot, longest): (f64, f64),
+    rotate: bool,
+) {
+    let n = points.len();
+    let per_label = if rotate { 22.0 } else { longest + 10.0 };
+    let every = ((per_label / slot.max(1e-9)).ceil() as usize).max(1);
+    for (k, p) in points.iter().enumerate() {
+        let x = frame.left + slot * (k as f64 + 0.5);
+        svg.line(x, frame.bottom(), x, frame.bottom() + 4.0, AXIS, 1.0, None);
+        if !(n - 1 - k).is_multiple_of(every) {
+            continue;
+        }
+        let label = truncate(&p.label, 24);
+        if rotate {
+            svg.text(
+                x + 3.0,
+                frame.bottom() + 12.0,
+                &label,
+                Style {
+                    anchor: "end",
+                    rotate: -45.0,
+                    ..SMALL
+                },
+            );
+        } else {
+            svg.text(x, frame.bottom() + 18.0, &label, SMALL);
+        }
+    }
+}
+
+/// Each night's 95 % interval as a capped bar, red when flagged.
+fn draw_error_bars(
+    svg: &mut Svg,
+    points: &[TrendPoint],
+    ys: &Scale,
+    slot: f64,
+    x_of: impl Fn(usize) -> f64,
+) {
+    let cap = (slot * 0.2).clamp(2.0, 6.0);
+    for (k, p) in points.iter().enumerate() {
+        if let Some([a, b]) = p.ci95
+            && a.is_finite()
+            && b.is_finite()
+        {
+            let x = x_of(k);
+            let color = if p.flagged { RED } else { MUTED };
+            let (ya, yb) = (ys.map(a), ys.map(b));
+            svg.line(x, ya, x, yb, color, 1.2, None);
+            svg.line(x - cap, ya, x + cap, ya, color, 1.2, None);
+            svg.line(x - cap, yb, x + cap, yb, color, 1.2, None);
+        }
+    }
 }
 
 #[cfg(test)]

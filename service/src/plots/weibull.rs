@@ -2,7 +2,9 @@
 
 use std::fmt::Write as _;
 
-use bouncewear_model::life::{KaplanMeierPoint, LifeAnalysis, median_ranks, weibull_scale};
+use bouncewear_model::life::{
+    KaplanMeierPoint, LifeAnalysis, Weibull, median_ranks, weibull_scale,
+};
 
 use super::axes::{
     Frame, Legend, LogAxis, Scale, draw_frame_axes, draw_log_x_axis, draw_no_data, widen_log,
@@ -12,6 +14,37 @@ use super::svg::{
     wrap,
 };
 use super::{pick_evenly, segments};
+
+/// At most this many failure times are drawn, evenly picked: one point per distinct failure time
+/// can mean tens of thousands.
+const MAX_POINTS: usize = 1500;
+/// Greenwood bounds are drawn as bars up to this many points.
+const MAX_BARS: usize = 60;
+
+/// A failure time at its median rank.
+type Point<'a> = (&'a KaplanMeierPoint, f64);
+
+/// Where the plot draws: log time across, `ln(-ln(1 - F))` up, and their pixel scales.
+struct Plane {
+    frame: Frame,
+    x_axis: LogAxis,
+    xs: Scale,
+    ys: Scale,
+    /// The `ln(-ln(1 - F))` range shown.
+    y_lo: f64,
+    y_hi: f64,
+}
+
+impl Plane {
+    fn x_of_t(&self, t: f64) -> f64 {
+        self.xs.map(t.log10())
+    }
+
+    /// A point of `ln t` and `y`, in pixels.
+    fn at_ln(&self, ln_t: f64, y: f64) -> (f64, f64) {
+        (self.xs.map(ln_t / std::f64::consts::LN_10), self.ys.map(y))
+    }
+}
 
 /// A Weibull probability plot of `life`: the median rank of each failure time (Bernard's
 /// approximation on Johnson's adjusted ranks, as reliability tools plot censored data; the last
@@ -27,27 +60,73 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
         .weibull
         .as_ref()
         .filter(|w| w.beta.is_finite() && w.beta > 0.0 && w.eta.is_finite() && w.eta > 0.0);
+    let usable = usable_points(life);
+    let points: Vec<Point> = pick_evenly(usable.len(), MAX_POINTS)
+        .into_iter()
+        .map(|i| usable[i])
+        .collect();
+    let plane = plane(frame, &points, fit);
 
-    // Each failure time at its median rank, always inside 0 < F < 1.
+    let mut svg = Svg::new(width, height, title);
+    svg.title(title, 16.0, 24.0);
+    draw_percent_grid(&mut svg, &plane);
+    draw_log_x_axis(&mut svg, &plane.frame, &plane.x_axis, &plane.xs);
+    let mut legend = Legend::new(plane.frame.left, 48.0);
+    legend.dot(&mut svg, INK, "median ranks (Bernard, Johnson-adjusted)");
+    if let Some(w) = fit {
+        draw_fit(&mut svg, &mut legend, &plane, w);
+    }
+    draw_points(&mut svg, &plane, &points);
+    draw_frame_axes(&mut svg, &plane.frame);
+    let mut notes = fit_notes(life, fit);
+    let error_lines = if fit.is_none() { notes.len() } else { 0 };
+    notes.push(format!(
+        "{} failed, {} censored",
+        life.failures, life.censored
+    ));
+    if points.len() < usable.len() {
+        notes.push(format!(
+            "{} of {} failure times shown, evenly spaced",
+            points.len(),
+            usable.len()
+        ));
+    }
+    draw_notes(&mut svg, &plane.frame, &notes, error_lines);
+    if fit.is_none() && points.is_empty() {
+        draw_no_data(&mut svg, &plane.frame, "No failures to plot");
+    }
+
+    svg.text(
+        frame.left + frame.width / 2.0,
+        height - 14.0,
+        "operations to failure (log scale)",
+        LABEL,
+    );
+    svg.y_label(
+        16.0,
+        frame.top + frame.height / 2.0,
+        "unreliability F (Weibull scale)",
+    );
+    svg.finish()
+}
+
+/// Each failure time at its median rank, always inside `0 < F < 1`.
+fn usable_points(life: &LifeAnalysis) -> Vec<Point<'_>> {
     let ranks = median_ranks(&life.kaplan_meier, life.failures + life.censored);
-    let usable_points: Vec<(&KaplanMeierPoint, f64)> = life
-        .kaplan_meier
+    life.kaplan_meier
         .iter()
         .zip(ranks)
         .filter(|&(p, f)| p.time.is_finite() && p.time > 0.0 && f > 0.0 && f < 1.0)
-        .collect();
-    // One point per distinct failure time can mean tens of thousands: draw an even selection.
-    const MAX_POINTS: usize = 1500;
-    let points: Vec<(&KaplanMeierPoint, f64)> = pick_evenly(usable_points.len(), MAX_POINTS)
-        .into_iter()
-        .map(|i| usable_points[i])
-        .collect();
+        .collect()
+}
 
-    // y range: 1 % to 99 % at least, widened to the points (within 0.01 % and 99.99 %).
+/// The ranges: up, 1 % to 99 % at least, widened to the points (within 0.01 % and 99.99 %);
+/// across, the points and the fit between B10 and eta, widened to whole decades.
+fn plane(frame: Frame, points: &[Point], fit: Option<&Weibull>) -> Plane {
     let (y_min_cap, y_max_cap) = (weibull_scale(1e-4), weibull_scale(1.0 - 1e-4));
     let mut y_lo = weibull_scale(0.01);
     let mut y_hi = weibull_scale(0.99);
-    for &(_, f) in &points {
+    for &(_, f) in points {
         let y = weibull_scale(f).clamp(y_min_cap, y_max_cap);
         y_lo = y_lo.min(y);
         y_hi = y_hi.max(y);
@@ -55,10 +134,9 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
     y_lo -= 0.15;
     y_hi += 0.15;
 
-    // x range: the points, and the fit between B10 and eta; then clamped to 8 decades.
     let mut t_lo = f64::INFINITY;
     let mut t_hi = f64::NEG_INFINITY;
-    for (p, _) in &points {
+    for (p, _) in points {
         t_lo = t_lo.min(p.time);
         t_hi = t_hi.max(p.time);
     }
@@ -81,12 +159,19 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
     let x_axis = LogAxis::new(t_lo, t_hi);
     let xs = x_axis.scale(frame.left, frame.right());
     let ys = Scale::new(y_lo, y_hi, frame.bottom(), frame.top);
-    let x_of_t = |t: f64| xs.map(t.log10());
+    Plane {
+        frame,
+        x_axis,
+        xs,
+        ys,
+        y_lo,
+        y_hi,
+    }
+}
 
-    let mut svg = Svg::new(width, height, title);
-    svg.title(title, 16.0, 24.0);
-
-    // Grid: percent lines and log-time ticks.
+/// Percent lines across, labelled where they are not crowded; 63.2 % (eta) dashed.
+fn draw_percent_grid(svg: &mut Svg, plane: &Plane) {
+    let frame = &plane.frame;
     let percents = [
         0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 30.0, 50.0, 63.2, 90.0, 99.0,
         99.9, 99.99,
@@ -94,10 +179,10 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
     let mut last_label = f64::INFINITY;
     for &pc in &percents {
         let y = weibull_scale(pc / 100.0);
-        if y < y_lo || y > y_hi {
+        if y < plane.y_lo || y > plane.y_hi {
             continue;
         }
-        let py = ys.map(y);
+        let py = plane.ys.map(y);
         let dash = (pc == 63.2).then_some("2 3");
         svg.line(frame.left, py, frame.right(), py, GRID, 1.0, dash);
         if last_label - py < 13.0 {
@@ -114,85 +199,81 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
             },
         );
     }
-    draw_log_x_axis(&mut svg, &frame, &x_axis, &xs);
+}
 
-    let (lx0, lx1) = (x_axis.lo.ln(), x_axis.hi.ln());
-    let mut legend = Legend::new(frame.left, 48.0);
-    legend.dot(&mut svg, INK, "median ranks (Bernard, Johnson-adjusted)");
-
-    if let Some(w) = fit {
-        let (ln_eta, beta) = (w.eta.ln(), w.beta);
-        // Bounds first, under the line.
-        let steps = 120;
-        let mut lower = Vec::new();
-        let mut upper = Vec::new();
-        for k in 0..=steps {
-            let y = y_lo + (y_hi - y_lo) * k as f64 / steps as f64;
-            let inside = |lt: f64| (lt >= lx0 && lt <= lx1).then_some(lt);
-            let to_px = |lt: f64| (xs.map(lt / std::f64::consts::LN_10), ys.map(y));
-            let bounds = w
-                .quantile_bounds_at_scale(y)
-                .map(|[lo, hi]| (lo.ln(), hi.ln()));
-            lower.push(bounds.and_then(|(lo, _)| inside(lo)).map(to_px));
-            upper.push(bounds.and_then(|(_, hi)| inside(hi)).map(to_px));
-        }
-        let has_bounds = lower.iter().chain(&upper).any(Option::is_some);
-        for curve in [&lower, &upper] {
-            for segment in segments(curve) {
-                svg.polyline(&segment, BLUE, 1.2, Some("5 4"));
-            }
-        }
-        // The line ln(-ln(1-F)) = beta (ln t - ln eta), clipped to the frame.
-        let a = lx0.max(ln_eta + y_lo / beta);
-        let b = lx1.min(ln_eta + y_hi / beta);
-        if a < b {
-            let p0 = (
-                xs.map(a / std::f64::consts::LN_10),
-                ys.map(beta * (a - ln_eta)),
-            );
-            let p1 = (
-                xs.map(b / std::f64::consts::LN_10),
-                ys.map(beta * (b - ln_eta)),
-            );
-            svg.polyline(&[p0, p1], BLUE, 2.2, None);
-        }
-        legend.line(&mut svg, BLUE, None, "Weibull MLE");
-        if has_bounds {
-            legend.line(&mut svg, BLUE, Some("5 4"), "95 % bounds on time (Fisher)");
+/// The fitted line `ln(-ln(1 - F)) = beta (ln t - ln eta)`, clipped to the frame, over its
+/// bounds on time (drawn first, under it), with their legend entries.
+fn draw_fit(svg: &mut Svg, legend: &mut Legend, plane: &Plane, w: &Weibull) {
+    let (lx0, lx1) = (plane.x_axis.lo.ln(), plane.x_axis.hi.ln());
+    let (y_lo, y_hi) = (plane.y_lo, plane.y_hi);
+    let (ln_eta, beta) = (w.eta.ln(), w.beta);
+    let steps = 120;
+    let mut lower = Vec::new();
+    let mut upper = Vec::new();
+    for k in 0..=steps {
+        let y = y_lo + (y_hi - y_lo) * k as f64 / steps as f64;
+        let inside = |lt: f64| (lt >= lx0 && lt <= lx1).then_some(lt);
+        let to_px = |lt: f64| plane.at_ln(lt, y);
+        let bounds = w
+            .quantile_bounds_at_scale(y)
+            .map(|[lo, hi]| (lo.ln(), hi.ln()));
+        lower.push(bounds.and_then(|(lo, _)| inside(lo)).map(to_px));
+        upper.push(bounds.and_then(|(_, hi)| inside(hi)).map(to_px));
+    }
+    let has_bounds = lower.iter().chain(&upper).any(Option::is_some);
+    for curve in [&lower, &upper] {
+        for segment in segments(curve) {
+            svg.polyline(&segment, BLUE, 1.2, Some("5 4"));
         }
     }
+    let a = lx0.max(ln_eta + y_lo / beta);
+    let b = lx1.min(ln_eta + y_hi / beta);
+    if a < b {
+        let p0 = plane.at_ln(a, beta * (a - ln_eta));
+        let p1 = plane.at_ln(b, beta * (b - ln_eta));
+        svg.polyline(&[p0, p1], BLUE, 2.2, None);
+    }
+    legend.line(svg, BLUE, None, "Weibull MLE");
+    if has_bounds {
+        legend.line(svg, BLUE, Some("5 4"), "95 % bounds on time (Fisher)");
+    }
+}
 
-    // Points, with Greenwood bounds as thin bars when there are few.
-    if points.len() <= 60 {
-        for (p, _) in &points {
+/// The points, with their Greenwood bounds as thin bars when there are few.
+fn draw_points(svg: &mut Svg, plane: &Plane, points: &[Point]) {
+    let (y_lo, y_hi) = (plane.y_lo, plane.y_hi);
+    if points.len() <= MAX_BARS {
+        for (p, _) in points {
             if let Some([lo, hi]) = p.ci95 {
                 let f_lo = (1.0 - hi).clamp(1e-4, 1.0 - 1e-4);
                 let f_hi = (1.0 - lo).clamp(1e-4, 1.0 - 1e-4);
-                let x = x_of_t(p.time);
-                let y0 = ys.map(weibull_scale(f_lo).clamp(y_lo, y_hi));
-                let y1 = ys.map(weibull_scale(f_hi).clamp(y_lo, y_hi));
+                let x = plane.x_of_t(p.time);
+                let y0 = plane.ys.map(weibull_scale(f_lo).clamp(y_lo, y_hi));
+                let y1 = plane.ys.map(weibull_scale(f_hi).clamp(y_lo, y_hi));
                 svg.line(x, y0, x, y1, AXIS, 1.0, None);
             }
         }
     }
     let r = if points.len() > 200 { 2.2 } else { 3.2 };
     let mut dots = String::new();
-    for &(p, f) in &points {
+    for &(p, f) in points {
         let y = weibull_scale(f).clamp(y_lo, y_hi);
         let _ = write!(
             dots,
             r#"<circle cx="{}" cy="{}" r="{r}" fill="{INK}" fill-opacity="0.85"/>"#,
-            num(x_of_t(p.time)),
-            num(ys.map(y))
+            num(plane.x_of_t(p.time)),
+            num(plane.ys.map(y))
         );
     }
     if !dots.is_empty() {
         svg.raw(&dots);
     }
-    draw_frame_axes(&mut svg, &frame);
+}
 
-    // Annotation box, top left (where a rising line leaves room).
-    let mut notes: Vec<String> = Vec::new();
+/// What the annotation says of the fit: beta, eta and B10 with their intervals, or why there is
+/// no fit.
+fn fit_notes(life: &LifeAnalysis, fit: Option<&Weibull>) -> Vec<String> {
+    let mut notes = Vec::new();
     match fit {
         Some(w) => {
             notes.push(format!(
@@ -230,18 +311,12 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
             notes.extend(wrap(reason, 52));
         }
     }
-    let error_lines = if fit.is_none() { notes.len() } else { 0 };
-    notes.push(format!(
-        "{} failed, {} censored",
-        life.failures, life.censored
-    ));
-    if points.len() < usable_points.len() {
-        notes.push(format!(
-            "{} of {} failure times shown, evenly spaced",
-            points.len(),
-            usable_points.len()
-        ));
-    }
+    notes
+}
+
+/// The annotation box, top left (where a rising line leaves room); its first `error_lines` lines
+/// in red.
+fn draw_notes(svg: &mut Svg, frame: &Frame, notes: &[String], error_lines: usize) {
     let box_w = notes
         .iter()
         .map(|s| text_width(s, 12.0))
@@ -273,22 +348,6 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
         };
         svg.text(bx + 10.0, by + 20.0 + 17.0 * k as f64, line, style);
     }
-    if fit.is_none() && points.is_empty() {
-        draw_no_data(&mut svg, &frame, "No failures to plot");
-    }
-
-    svg.text(
-        frame.left + frame.width / 2.0,
-        height - 14.0,
-        "operations to failure (log scale)",
-        LABEL,
-    );
-    svg.y_label(
-        16.0,
-        frame.top + frame.height / 2.0,
-        "unreliability F (Weibull scale)",
-    );
-    svg.finish()
 }
 
 #[cfg(test)]
