@@ -134,32 +134,44 @@ fn range(rule: Rule) -> Value {
 /// most `operations`, a job's size against the server's limit...) are in the descriptions: JSON
 /// Schema cannot state them.
 fn constrain_request_fields(document: &mut Value) {
+    let mut fields: Vec<(&str, &str, Value)> = NUMBER_RULES
+        .iter()
+        .map(|number| (number.schema, number.field(), range(number.rule)))
+        .collect();
+    fields.extend(job_fields());
+    fields.extend(calibration_fields());
+    fields.extend(schedule_fields());
+    let schemas = &mut document["components"]["schemas"];
+    for (schema, field, rules) in fields {
+        let pointer = format!("/{schema}/properties/{field}");
+        if let (Some(Value::Object(members)), Value::Object(rules)) =
+            (schemas.pointer_mut(&pointer), rules)
+        {
+            members.extend(rules);
+        }
+    }
+    constrain_structure(schemas);
+}
+
+/// The operation metrics' names, and every metric's.
+fn metric_names() -> (Vec<&'static str>, Vec<&'static str>) {
     let operation_metrics: Vec<&str> = OperationMetric::ALL.iter().map(|m| m.name()).collect();
     let metrics: Vec<&str> = operation_metrics
         .iter()
         .copied()
         .chain(DeviceMetric::ALL.iter().map(|m| m.name()))
         .collect();
-    let quantiles: Vec<&str> = QUANTILES.iter().map(|(name, _)| *name).collect();
-    let statistic = format!(
-        "^((operations|devices)\\.({})\\.(mean|{})|life\\.(b1|b10|beta|eta))$",
-        metrics.join("|"),
-        quantiles.join("|")
-    );
+    (operation_metrics, metrics)
+}
+
+/// A job's fields beyond its scenario's numbers, as `Job::new` checks them.
+fn job_fields() -> Vec<(&'static str, &'static str, Value)> {
+    let (operation_metrics, metrics) = metric_names();
     let names = json!({"type": "string", "enum": metrics});
     let statistics: Vec<&str> = std::iter::once("mean")
-        .chain(quantiles.iter().copied())
+        .chain(QUANTILES.iter().map(|(name, _)| *name))
         .collect();
-    let mut time_zones: Vec<Value> = chrono_tz::TZ_VARIANTS
-        .iter()
-        .map(|tz| json!(tz.name()))
-        .collect();
-    time_zones.push(Value::Null);
-    let mut fields: Vec<(&str, &str, Value)> = NUMBER_RULES
-        .iter()
-        .map(|number| (number.schema, number.field(), range(number.rule)))
-        .collect();
-    fields.extend([
+    vec![
         (
             "MaterialSpec",
             "anode_erosion_fraction",
@@ -219,6 +231,23 @@ fn constrain_request_fields(document: &mut Value) {
             json!({"minimum": 1, "maximum": MAX_DEVICES}),
         ),
         (
+            "CorrelationSpec",
+            "parameters",
+            json!({"minItems": 2, "uniqueItems": true}),
+        ),
+        (
+            "CorrelationSpec",
+            "matrix",
+            json!({"minItems": 2, "items": {"type": "array",
+                   "items": {"type": "number", "minimum": -1, "maximum": 1}}}),
+        ),
+    ]
+}
+
+/// A calibration's fields, as `calibrate` checks them.
+fn calibration_fields() -> Vec<(&'static str, &'static str, Value)> {
+    let mut fields = vec![
+        (
             "CalibrationSpec",
             "fit",
             json!({"minItems": 1, "maxItems": MAX_PARAMETERS, "uniqueItems": true}),
@@ -246,17 +275,27 @@ fn constrain_request_fields(document: &mut Value) {
             "operation",
             json!({"minimum": 0, "maximum": MAX_OPERATION}),
         ),
-        (
-            "CorrelationSpec",
-            "parameters",
-            json!({"minItems": 2, "uniqueItems": true}),
-        ),
-        (
-            "CorrelationSpec",
-            "matrix",
-            json!({"minItems": 2, "items": {"type": "array",
-                   "items": {"type": "number", "minimum": -1, "maximum": 1}}}),
-        ),
+    ];
+    // A measured quantity is a positive number.
+    fields.extend(FITTED.map(|field| ("Observation", field, json!({"exclusiveMinimum": 0}))));
+    fields
+}
+
+/// A schedule's fields, as `ValidSchedule::parse` checks them.
+fn schedule_fields() -> Vec<(&'static str, &'static str, Value)> {
+    let (_, metrics) = metric_names();
+    let quantiles: Vec<&str> = QUANTILES.iter().map(|(name, _)| *name).collect();
+    let statistic = format!(
+        "^((operations|devices)\\.({})\\.(mean|{})|life\\.(b1|b10|beta|eta))$",
+        metrics.join("|"),
+        quantiles.join("|")
+    );
+    let mut time_zones: Vec<Value> = chrono_tz::TZ_VARIANTS
+        .iter()
+        .map(|tz| json!(tz.name()))
+        .collect();
+    time_zones.push(Value::Null);
+    vec![
         ("ScheduleSpec", "name", json!({"pattern": "\\S"})),
         ("ScheduleSpec", "time_zone", json!({"enum": time_zones})),
         (
@@ -264,18 +303,12 @@ fn constrain_request_fields(document: &mut Value) {
             "statistics",
             json!({"minItems": 1, "items": {"type": "string", "pattern": statistic}}),
         ),
-    ]);
-    // A measured quantity is a positive number.
-    fields.extend(FITTED.map(|field| ("Observation", field, json!({"exclusiveMinimum": 0}))));
-    let schemas = &mut document["components"]["schemas"];
-    for (schema, field, rules) in fields {
-        let pointer = format!("/{schema}/properties/{field}");
-        if let (Some(Value::Object(members)), Value::Object(rules)) =
-            (schemas.pointer_mut(&pointer), rules)
-        {
-            members.extend(rules);
-        }
-    }
+    ]
+}
+
+/// The rules of a schema's shape rather than one field's: a mechanism that can return the arm, a
+/// list of limits and its thresholds' sides.
+fn constrain_structure(schemas: &mut Value) {
     // Without a spring, a static force of 0 would never return the arm.
     if let Some(Value::Object(mechanism)) = schemas.get_mut("MechanismSpec") {
         mechanism.insert(
