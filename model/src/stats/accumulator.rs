@@ -3,7 +3,7 @@
 
 use super::sketch::{Sketch, rank};
 use super::tails::Tails;
-use super::threshold::{Threshold, ThresholdCount};
+use super::threshold::{Beyond, Threshold, ThresholdCount};
 use crate::lanes::Real;
 
 /// The sums of one run of values per lane, in the lanes: for the engine, each lane's device's
@@ -369,6 +369,58 @@ impl Accumulator {
             };
         }
         values
+    }
+}
+
+/// Queries after the run ([`super::query`]).
+impl Accumulator {
+    /// What this group says of its values beyond `threshold`: its exact count when it counted that
+    /// threshold as it ran or its kept extremes settle it ([`Tails::beyond`](super::Tails::beyond)); otherwise the exact `[min, max]` settles the threshold outside them,
+    /// and inside the sketch settles every bucket but the one holding the threshold.
+    pub(super) fn beyond(&self, threshold: Threshold) -> (Beyond, Option<[f64; 2]>) {
+        if let Some(count) = self
+            .counted_beyond(threshold)
+            .or_else(|| self.tails_beyond(threshold))
+        {
+            return (Beyond::exact(count), None);
+        }
+        let (n, min, max) = (self.count(), self.min(), self.max());
+        let t = threshold.value();
+        let settled = match threshold {
+            _ if n == 0 => Some(0),
+            Threshold::Above(_) if t >= max => Some(0),
+            Threshold::Above(_) if t < min => Some(n),
+            Threshold::Below(_) if t <= min => Some(0),
+            Threshold::Below(_) if t > max => Some(n),
+            _ => None,
+        };
+        if let Some(count) = settled {
+            return (Beyond::exact(count), None);
+        }
+        let around = self.sketch().around(t);
+        let [lo, hi] = around.bucket;
+        // The bucket's values lie within the group's exact range too.
+        let (lo, hi) = (lo.max(min), hi.min(max));
+        let share_beyond = match threshold {
+            _ if hi <= lo => f64::from(u8::from(threshold.beyond(lo))),
+            Threshold::Above(_) => ((hi - t) / (hi - lo)).clamp(0.0, 1.0),
+            Threshold::Below(_) => ((t - lo) / (hi - lo)).clamp(0.0, 1.0),
+        };
+        let sure = match threshold {
+            Threshold::Above(_) => around.above,
+            Threshold::Below(_) => around.below,
+        };
+        let within = around.within;
+        if hi <= lo || within == 0 {
+            let count = sure + if share_beyond == 1.0 { within } else { 0 };
+            return (Beyond::exact(count), None);
+        }
+        let beyond = Beyond {
+            sure,
+            unsure: within,
+            spread: sure as f64 + within as f64 * share_beyond,
+        };
+        (beyond, Some(around.bucket))
     }
 }
 

@@ -89,7 +89,7 @@ fn exceedance(merged: &Merged, threshold: Threshold) -> ThresholdExceedance {
     let counts: Vec<(Beyond, Option<[f64; 2]>)> = merged
         .filled
         .iter()
-        .map(|group| Beyond::of(group, threshold))
+        .map(|group| group.beyond(threshold))
         .collect();
     let sure: Vec<u64> = counts.iter().map(|(beyond, _)| beyond.sure).collect();
     let (probability, ci95) = merged.share(&sure);

@@ -4,8 +4,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::accumulator::Accumulator;
-
 /// One side of a threshold: the share of values above it, or below it.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
@@ -119,60 +117,11 @@ pub(super) struct Beyond {
 }
 
 impl Beyond {
-    fn exact(count: u64) -> Self {
+    pub(super) fn exact(count: u64) -> Self {
         Self {
             sure: count,
             unsure: 0,
             spread: count as f64,
         }
-    }
-
-    /// The values of `group` beyond `threshold`: its exact count when the group counted that
-    /// threshold as it ran or its kept extremes settle it ([`Tails::beyond`](super::Tails::beyond)); otherwise the exact `[min, max]` settles the threshold outside them,
-    /// and inside the sketch settles every bucket but the one holding the threshold.
-    pub(super) fn of(group: &Accumulator, threshold: Threshold) -> (Self, Option<[f64; 2]>) {
-        if let Some(count) = group
-            .counted_beyond(threshold)
-            .or_else(|| group.tails_beyond(threshold))
-        {
-            return (Self::exact(count), None);
-        }
-        let (n, min, max) = (group.count(), group.min(), group.max());
-        let t = threshold.value();
-        let settled = match threshold {
-            _ if n == 0 => Some(0),
-            Threshold::Above(_) if t >= max => Some(0),
-            Threshold::Above(_) if t < min => Some(n),
-            Threshold::Below(_) if t <= min => Some(0),
-            Threshold::Below(_) if t > max => Some(n),
-            _ => None,
-        };
-        if let Some(count) = settled {
-            return (Self::exact(count), None);
-        }
-        let around = group.sketch().around(t);
-        let [lo, hi] = around.bucket;
-        // The bucket's values lie within the group's exact range too.
-        let (lo, hi) = (lo.max(min), hi.min(max));
-        let share_beyond = match threshold {
-            _ if hi <= lo => f64::from(u8::from(threshold.beyond(lo))),
-            Threshold::Above(_) => ((hi - t) / (hi - lo)).clamp(0.0, 1.0),
-            Threshold::Below(_) => ((t - lo) / (hi - lo)).clamp(0.0, 1.0),
-        };
-        let sure = match threshold {
-            Threshold::Above(_) => around.above,
-            Threshold::Below(_) => around.below,
-        };
-        let within = around.within;
-        if hi <= lo || within == 0 {
-            let count = sure + if share_beyond == 1.0 { within } else { 0 };
-            return (Self::exact(count), None);
-        }
-        let beyond = Self {
-            sure,
-            unsure: within,
-            spread: sure as f64 + within as f64 * share_beyond,
-        };
-        (beyond, Some(around.bucket))
     }
 }
