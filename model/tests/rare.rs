@@ -286,6 +286,20 @@ fn fails_before(n: u64, limit: f64, v: f64) -> bool {
     !result.life.unwrap().devices[0].censored
 }
 
+/// Ten devices of 20 operations, the velocity drawn per device, failing once a total bounce time
+/// exceeds `limit`; `rare` asks about their life.
+fn life_job(limit: f64, rare: Value) -> Job {
+    job(json!({
+        "devices": 10, "operations": 20, "seed": 2,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                     "distribution": {"kind": "normal", "mean": MEAN, "sd": SD, "min": 0.01}}],
+        "metrics": ["total_bounce_s"],
+        "failure": {"total_bounce_s": {"above": limit}},
+        "rare_event": rare
+    }))
+}
+
 #[test]
 fn the_chance_of_failing_before_an_operation_holds_the_truth() {
     // Failing: a total bounce time above what the first operation gives at z = 3.719, within
@@ -310,15 +324,10 @@ fn the_chance_of_failing_before_an_operation_holds_the_truth() {
     }
     let truth = standard_normal_cdf(-(hi - MEAN) / SD);
     for method in ["subset", "importance"] {
-        let job = job(json!({
-            "devices": 10, "operations": 20, "seed": 2,
-            "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
-            "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
-                         "distribution": {"kind": "normal", "mean": MEAN, "sd": SD, "min": 0.01}}],
-            "metrics": ["total_bounce_s"],
-            "failure": {"total_bounce_s": {"above": limit}},
-            "rare_event": {"metric": "operations_to_failure", "below": n, "method": method}
-        }));
+        let job = life_job(
+            limit,
+            json!({"metric": "operations_to_failure", "below": n, "method": method}),
+        );
         let found = report(&job);
         assert!(
             found.ci95[0] <= truth && truth <= found.ci95[1],
@@ -329,6 +338,58 @@ fn the_chance_of_failing_before_an_operation_holds_the_truth() {
             0.0,
             "a margin of 0: failing"
         );
+    }
+}
+
+/// A threshold no input within 11.5 standard deviations of the median reaches (below
+/// probability 1e-30) is refused before the job runs, naming its field, above and below and for
+/// the life; thresholds far out in the tail but within reach, at 1e-9 and 1e-20, are accepted.
+#[test]
+fn a_threshold_no_input_reaches_is_refused_before_the_job_runs() {
+    let at = Pointer::root().child("rare_event");
+    let refused = |job: &Job, pointer: &str, words: &str| {
+        let refused = check_threshold(job, &at).unwrap_err();
+        let error = &refused.errors()[0];
+        assert_eq!(error.pointer, pointer, "{}", error.detail);
+        assert!(error.detail.contains(words), "{}", error.detail);
+    };
+    let never_above = rare_job(
+        "total_bounce_s",
+        1,
+        "operation",
+        json!({"metric": "total_bounce_s", "above": 1.0}),
+        1,
+    );
+    refused(
+        &never_above,
+        "/rare_event/above",
+        "total_bounce_s never reaches above 1 in a search of the inputs within 11.5 standard \
+         deviations",
+    );
+    let never_below = rare_job(
+        "first_bounce_s",
+        1,
+        "operation",
+        json!({"metric": "first_bounce_s", "below": 0.0}),
+        1,
+    );
+    refused(&never_below, "/rare_event/below", "never reaches below 0");
+    let never_fails = life_job(1.0, json!({"metric": "operations_to_failure", "below": 6}));
+    refused(
+        &never_fails,
+        "/rare_event/below",
+        "no device fails before operation 6",
+    );
+    for z in [5.997_807_015_007_688, 9.262_340_089_798_408] {
+        let threshold = threshold_at("total_bounce_s", 1, z);
+        let reachable = rare_job(
+            "total_bounce_s",
+            1,
+            "operation",
+            json!({"metric": "total_bounce_s", "above": threshold}),
+            1,
+        );
+        assert_eq!(check_threshold(&reachable, &at), Ok(()), "z = {z}");
     }
 }
 

@@ -87,6 +87,15 @@ fn a_rare_event_that_is_not_rare_or_ill_posed_is_refused_naming_its_field() {
         problem["errors"][0]["pointer"], "/rare_event/above",
         "{problem}"
     );
+    // No velocity within 11.5 standard deviations of the median bounces for a second: never.
+    let never = post(&url, &rare_job(1.0).to_string(), None);
+    let problem = assert_problem(&never, 422);
+    assert_eq!(
+        problem["errors"][0]["pointer"], "/rare_event/above",
+        "{problem}"
+    );
+    let detail = problem["errors"][0]["detail"].as_str().unwrap();
+    assert!(detail.contains("never reaches above 1"), "{detail}");
     let mut no_scatter = rare_job(0.014);
     no_scatter["scatter"] = json!([]);
     let problem = assert_problem(&post(&url, &no_scatter.to_string(), None), 422);

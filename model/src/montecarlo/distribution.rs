@@ -154,6 +154,23 @@ impl Window {
         draw().clamp(self.min, self.max)
     }
 
+    /// The standard score, under the untruncated normal of a normal or lognormal, of the
+    /// truncated distribution's probability `Phi(z)`, its window ending at standard score
+    /// `max_score`: `z` itself without truncation; below the median through `Phi(z)`, above it
+    /// through the survival probability `Phi(-z)`, each precise in its own tail.
+    fn score(&self, z: f64, max_score: f64) -> f64 {
+        if self.cdf_min == 0.0 && self.cdf_max == 1.0 {
+            return z;
+        }
+        let mass = self.cdf_max - self.cdf_min;
+        if z <= 0.0 {
+            standard_normal_quantile(self.cdf_min + standard_normal_cdf(z) * mass)
+        } else {
+            let above = standard_normal_cdf(-max_score);
+            -standard_normal_quantile(above + standard_normal_cdf(-z) * mass)
+        }
+    }
+
     /// The untruncated probability of the truncated distribution's probability `u`.
     fn probability(&self, u: f64) -> f64 {
         self.cdf_min + u * (self.cdf_max - self.cdf_min)
@@ -376,6 +393,55 @@ impl Distribution {
         }
     }
 
+    /// The value at standard normal `z`: `quantile(Phi(z))`, without `Phi`'s rounding in the
+    /// upper tail. `Phi(z)` rounds to 1 beyond about 8.1 standard deviations, where every `z`
+    /// would map to one value; rare events read inputs out to 11.5 (`montecarlo::rare`). A
+    /// normal or lognormal without truncation maps `z` itself (`mean + sd z`, `median
+    /// exp(sigma z)`); a truncated one, a Weibull and a triangular's upper side go through the
+    /// survival probability `Phi(-z)`, which keeps its relative precision. `z` is held within
+    /// +-37, where `Phi(-z)` is still a normal number.
+    pub fn at_normal(&self, z: f64) -> f64 {
+        let z = z.clamp(-37.0, 37.0);
+        let lower = standard_normal_cdf(z);
+        let upper = standard_normal_cdf(-z);
+        match *self {
+            Distribution::Fixed(value) => value,
+            Distribution::Normal {
+                mean, sd, window, ..
+            } => {
+                let score = window.score(z, (window.max - mean) / sd);
+                (mean + sd * score).clamp(window.min, window.max)
+            }
+            Distribution::Lognormal {
+                median,
+                sigma,
+                window,
+                ..
+            } => {
+                let score = window.score(z, (window.max / median).ln() / sigma);
+                (median * (sigma * score).exp()).clamp(window.min, window.max)
+            }
+            Distribution::Weibull {
+                scale,
+                shape,
+                window,
+                ..
+            } if z > 0.0 => {
+                // The survival exp(-(x / scale)^shape) above the window, then the window's share.
+                let above = (-(window.max / scale).powf(shape)).exp();
+                let survival = above + upper * (window.cdf_max - window.cdf_min);
+                (scale * (-survival.ln()).powf(1.0 / shape)).clamp(window.min, window.max)
+            }
+            Distribution::Triangular { min, mode, max, .. }
+                if z > 0.0 && upper < (max - mode) / (max - min) =>
+            {
+                max - (upper * (max - min) * (max - mode)).sqrt()
+            }
+            Distribution::Uniform { min, max } if z > 0.0 => max - upper * (max - min),
+            _ => self.quantile(lower.clamp(f64::MIN_POSITIVE, 1.0 - f64::EPSILON)),
+        }
+    }
+
     /// A draw at a random point of stratum `stratum` of `strata` equal-probability strata.
     pub fn stratified<R: rand::Rng + ?Sized>(&self, stratum: u32, strata: u32, rng: &mut R) -> f64 {
         self.quantile(stratified_probability(stratum, strata, rng))
@@ -547,6 +613,88 @@ mod tests {
         match Distribution::new(&parse(json), domain, &Pointer::root().child("d")) {
             Ok(_) => Vec::new(),
             Err(errors) => errors.into_iter().map(|e| e.pointer).collect(),
+        }
+    }
+
+    fn distribution(json: &str) -> Distribution {
+        Distribution::new(&parse(json), Domain::FINITE, &Pointer::root()).unwrap()
+    }
+
+    /// `at_normal(z)` is `quantile(Phi(z))` where `Phi(z)` is exact enough (|z| <= 5) and never
+    /// falls as `z` rises, for every kind, truncated or not; each value is finite out to 37
+    /// standard deviations.
+    #[test]
+    fn a_standard_normal_maps_to_its_quantile_for_every_kind() {
+        for json in [
+            r#"{"kind": "fixed", "value": 3}"#,
+            r#"{"kind": "normal", "mean": 0.224, "sd": 0.02}"#,
+            r#"{"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.01}"#,
+            r#"{"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.2, "max": 0.26}"#,
+            r#"{"kind": "lognormal", "median": 2e8, "sigma": 0.15}"#,
+            r#"{"kind": "lognormal", "median": 2e8, "sigma": 0.15, "min": 1.5e8, "max": 3e8}"#,
+            r#"{"kind": "weibull", "scale": 100, "shape": 2}"#,
+            r#"{"kind": "weibull", "scale": 100, "shape": 2, "min": 20, "max": 300}"#,
+            r#"{"kind": "uniform", "min": 1, "max": 4}"#,
+            r#"{"kind": "triangular", "min": 1, "mode": 1.5, "max": 4}"#,
+        ] {
+            let d = distribution(json);
+            for i in -50..=50 {
+                let z = f64::from(i) / 10.0;
+                assert_relative_eq!(
+                    d.at_normal(z),
+                    d.quantile(standard_normal_cdf(z)),
+                    max_relative = 1e-9
+                );
+            }
+            let mut last = f64::NEG_INFINITY;
+            for i in -400..=400 {
+                let z = f64::from(i) / 10.0;
+                let x = d.at_normal(z);
+                assert!(
+                    x.is_finite() && x >= last,
+                    "{json}: {x} at {z} after {last}"
+                );
+                last = x;
+            }
+        }
+    }
+
+    /// Where `Phi(z)` rounds to 1 (beyond about 8.1), an unbounded upper tail still maps each `z`
+    /// to its own value: the normal's `mean + sd z`, the lognormal's `median exp(sigma z)`, the
+    /// Weibull's `scale (-ln Phi(-z))^(1 / shape)` (mpmath at 40 digits: 729.597732661721 at
+    /// z = 10, 798.905088821092 at 11).
+    #[test]
+    fn an_upper_tail_keeps_its_precision_beyond_eight_standard_deviations() {
+        let normal = distribution(r#"{"kind": "normal", "mean": 0.224, "sd": 0.02}"#);
+        assert_eq!(normal.at_normal(10.0), 0.224 + 0.02 * 10.0);
+        let bounded_below =
+            distribution(r#"{"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.01}"#);
+        for z in [9.0, 10.0, 11.5] {
+            assert_relative_eq!(
+                bounded_below.at_normal(z),
+                0.224 + 0.02 * z,
+                max_relative = 1e-12
+            );
+        }
+        let lognormal = distribution(r#"{"kind": "lognormal", "median": 2e8, "sigma": 0.15}"#);
+        assert_relative_eq!(
+            lognormal.at_normal(10.0),
+            2e8 * 1.5_f64.exp(),
+            max_relative = 1e-15
+        );
+        let weibull = distribution(r#"{"kind": "weibull", "scale": 100, "shape": 2}"#);
+        assert_relative_eq!(
+            weibull.at_normal(10.0),
+            729.597_732_661_721_4,
+            max_relative = 1e-12
+        );
+        assert_relative_eq!(
+            weibull.at_normal(11.0),
+            798.905_088_821_092_2,
+            max_relative = 1e-12
+        );
+        for d in [normal, bounded_below, lognormal, weibull] {
+            assert!(d.at_normal(8.5) < d.at_normal(9.0) && d.at_normal(11.0) < d.at_normal(11.5));
         }
     }
 

@@ -4,7 +4,7 @@
 use super::correlation::{Correlation, CorrelationSpec};
 use super::distribution::{Distribution, DistributionSpec, Domain};
 use super::metric::{DeviceMetric, Metric, OperationMetric};
-use super::rare::{JobShape, RareEvent, RareEventSpec};
+use super::rare::question::{JobShape, RareEvent, RareEventSpec};
 use crate::error::{FieldError, InvalidInput, Pointer};
 use crate::operation::Fidelity;
 use crate::scenario::{Scenario, ScenarioSpec, WearLawKind};

@@ -6,22 +6,11 @@
 //! without its rare event is this function's crude Monte Carlo twin.
 
 use super::{Entries, Plan, Variant};
-use crate::montecarlo::distribution::standard_normal_cdf;
+use crate::montecarlo::rare::question::Reading;
 use crate::montecarlo::{Job, Kernel, Metric};
 use crate::operation::Outcome;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-
-/// What an evaluation reads off the device.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Reading {
-    /// A metric: an operation metric at the last operation run, a device metric after it.
-    Metric(Metric),
-    /// The job's failure criteria: the largest margin past any of them over the operations run
-    /// ([`Criterion::margin`](crate::montecarlo::job::Criterion::margin)), above 0 exactly when
-    /// the device failed by then.
-    FailureMargin,
-}
 
 /// What one device reads after `operations` operations, at standard normal inputs.
 pub struct DeviceFunction<'a> {
@@ -180,8 +169,6 @@ impl Entries<'_> {
     /// inverse CDF (inside its truncation window), correlated ones after the copula's Cholesky
     /// factor.
     fn at_normals(&self, job: &Job, u: &[f64], mut set: impl FnMut(usize, f64)) {
-        // Phi rounds to 0 or 1 beyond about 8 standard deviations; stay inside (0, 1).
-        let unit = |z: f64| standard_normal_cdf(z).clamp(f64::MIN_POSITIVE, 1.0 - f64::EPSILON);
         let mut normals = match &self.correlation {
             Some((correlation, _)) => vec![0.0; correlation.members().len()],
             None => Vec::new(),
@@ -189,16 +176,13 @@ impl Entries<'_> {
         for (k, &(index, scatter)) in self.scatter.iter().enumerate() {
             match self.correlation.as_ref().and_then(|(_, rows)| rows[k]) {
                 Some(row) => normals[row] = u[k],
-                None => set(index, scatter.distribution.quantile(unit(u[k]))),
+                None => set(index, scatter.distribution.at_normal(u[k])),
             }
         }
         if let Some((correlation, _)) = &self.correlation {
             correlation.correlate(&mut normals);
             for (&index, normal) in correlation.members().iter().zip(normals) {
-                set(
-                    index,
-                    job.scatter()[index].distribution.quantile(unit(normal)),
-                );
+                set(index, job.scatter()[index].distribution.at_normal(normal));
             }
         }
     }

@@ -4,308 +4,20 @@
 //! ([`methods`]), with the most probable failing inputs and the tail curve.
 
 pub mod methods;
+pub mod question;
 
 use super::engine::limit_state::DeviceFunction;
-pub use super::engine::limit_state::Reading;
 use super::job::Job;
-use super::metric::Metric;
 use super::{Observer, RunError};
-use crate::error::{FieldError, Pointer};
+use crate::error::Pointer;
 use crate::montecarlo::distribution::standard_normal_quantile;
-use methods::{Budget, LimitState, SAMPLES_PER_LEVEL, Stop};
+use methods::{LimitState, Stop};
+pub use question::{
+    JobShape, LIFE, MAX_DIMENSION, MAX_EVALUATIONS, MAX_IMPORTANCE_DIMENSION, MIN_EVALUATIONS,
+    RareEvent, RareEventSpec, RareMethod, Reading,
+};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-
-/// The fewest evaluations a rare-event estimate may be given: two levels of subset simulation.
-pub const MIN_EVALUATIONS: u64 = 2 * SAMPLES_PER_LEVEL as u64;
-/// The most evaluations one estimate may be given (each also counts against the server's job
-/// size by the operations it runs).
-pub const MAX_EVALUATIONS: u64 = 100_000_000;
-/// The most inputs an estimate may explore: every sample of a level is kept, `1000 x 5000`
-/// numbers (40 MB), twice.
-pub const MAX_DIMENSION: usize = 5000;
-/// The most inputs importance sampling may take: around one design point its weights stay sane
-/// only in few dimensions.
-pub const MAX_IMPORTANCE_DIMENSION: usize = 20;
-
-/// A rare-event question, as the user writes it.
-#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RareEventSpec {
-    /// The metric: an operation metric (read at `operation`) or a device metric (read at the
-    /// end of the test).
-    pub metric: String,
-    /// The event is the metric strictly above this.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub above: Option<f64>,
-    /// The event is the metric strictly below this.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub below: Option<f64>,
-    /// Which operation of a device an operation metric is read at, from 1 to `operations`
-    /// (default 1), on the surface the operations before it left; not for a device metric.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub operation: Option<u64>,
-    /// `auto` (default: importance sampling up to 20 inputs, subset simulation beyond),
-    /// `subset`, `importance` or `crude`.
-    #[serde(default)]
-    pub method: RareMethod,
-    /// The coefficient of variation sought, in (0, 1] (default 0.1); the estimate stops there or
-    /// at `max_evaluations`, whichever comes first.
-    #[serde(default = "default_target_cov")]
-    pub target_cov: f64,
-    /// The most evaluations of a device, 2000 to 100000000 (default 200000).
-    #[serde(default = "default_max_evaluations")]
-    #[cfg_attr(feature = "openapi", schema(minimum = 2000, maximum = 100_000_000))]
-    pub max_evaluations: u64,
-}
-
-fn default_target_cov() -> f64 {
-    0.1
-}
-
-fn default_max_evaluations() -> u64 {
-    200_000
-}
-
-/// How a rare-event probability is estimated.
-#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum RareMethod {
-    #[default]
-    Auto,
-    Subset,
-    Importance,
-    Crude,
-}
-
-impl RareMethod {
-    pub fn name(self) -> &'static str {
-        match self {
-            RareMethod::Auto => "auto",
-            RareMethod::Subset => "subset",
-            RareMethod::Importance => "importance",
-            RareMethod::Crude => "crude",
-        }
-    }
-}
-
-/// A validated rare-event question.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RareEvent {
-    /// A metric, or the failure criteria's margin for the life (`operations_to_failure`).
-    pub reading: Reading,
-    /// The threshold as asked, and whether the event is above it (else below).
-    pub threshold: f64,
-    pub above: bool,
-    /// Operations a device runs per evaluation: to the one read, the whole test, or (life) the
-    /// operations before the one asked.
-    pub operations: u64,
-    pub method: RareMethod,
-    pub budget: Budget,
-}
-
-/// What of a job a rare event is checked against.
-#[derive(Debug, Clone, Copy)]
-pub struct JobShape {
-    pub operations: u64,
-    /// Scattered parameters drawn per device and per operation.
-    pub device_inputs: usize,
-    pub operation_inputs: usize,
-    /// Whether the scenario gives the anode's share of the eroded mass.
-    pub polarity: bool,
-    /// Whether the job has failure criteria.
-    pub failure: bool,
-}
-
-/// The life's name as a rare event's metric.
-pub const LIFE: &str = "operations_to_failure";
-
-impl RareEvent {
-    /// Checks `spec` against the job's `shape`, each fault below `at`.
-    pub fn new(
-        spec: &RareEventSpec,
-        shape: &JobShape,
-        at: &Pointer,
-        errors: &mut Vec<FieldError>,
-    ) -> Option<Self> {
-        let before = errors.len();
-        let mut fault = |field: &str, detail: String| {
-            errors.push(FieldError {
-                pointer: if field.is_empty() {
-                    at.to_string()
-                } else {
-                    at.child(field).to_string()
-                },
-                detail,
-            });
-        };
-        let operations = shape.operations;
-        let reading = match Metric::parse(&spec.metric) {
-            None if spec.metric == LIFE => {
-                if !shape.failure {
-                    fault(
-                        "metric",
-                        format!("`{LIFE}` needs the job's `failure` criteria"),
-                    );
-                }
-                Some(Reading::FailureMargin)
-            }
-            None => {
-                fault(
-                    "metric",
-                    format!(
-                        "unknown metric `{}`; known: {}, {LIFE}",
-                        spec.metric,
-                        Metric::all_names()
-                    ),
-                );
-                None
-            }
-            Some(Metric::Device(metric)) if metric.needs_polarity() && !shape.polarity => {
-                fault(
-                    "metric",
-                    format!(
-                        "`{}` needs scenario/material/anode_erosion_fraction",
-                        spec.metric
-                    ),
-                );
-                None
-            }
-            Some(metric) => Some(Reading::Metric(metric)),
-        };
-        let (threshold, above) = match (spec.above, spec.below) {
-            (Some(t), None) => (t, true),
-            (None, Some(t)) => (t, false),
-            _ => {
-                fault("", "give exactly one of `above` and `below`".to_owned());
-                (0.0, true)
-            }
-        };
-        let side = if above { "above" } else { "below" };
-        if !threshold.is_finite() {
-            fault(side, "must be a finite number".to_owned());
-        }
-        let read = match (reading, spec.operation) {
-            (Some(Reading::Metric(Metric::Device(_)) | Reading::FailureMargin), Some(_)) => {
-                fault(
-                    "operation",
-                    "a device metric is read at the end of the test, the life by `below`; \
-                     leave `operation` out"
-                        .to_owned(),
-                );
-                operations
-            }
-            (Some(Reading::Metric(Metric::Device(_))), None) => operations,
-            (Some(Reading::FailureMargin), None) => {
-                // P(life < N): failed within the first N - 1 operations.
-                let whole = threshold.fract() == 0.0;
-                if above || !whole || !(2.0..=operations as f64 + 1.0).contains(&threshold) {
-                    fault(
-                        side,
-                        format!(
-                            "the life's event is `below` a whole number of operations from 2 to \
-                             operations + 1 ({}): P(the device fails before it)",
-                            operations + 1
-                        ),
-                    );
-                    1
-                } else {
-                    threshold as u64 - 1
-                }
-            }
-            (_, operation) => {
-                let operation = operation.unwrap_or(1);
-                if !(1..=operations).contains(&operation) {
-                    fault(
-                        "operation",
-                        format!("must be from 1 to operations ({operations}), got {operation}"),
-                    );
-                }
-                operation
-            }
-        };
-        if !(spec.target_cov > 0.0 && spec.target_cov <= 1.0) {
-            fault("target_cov", "must be above 0 and at most 1".to_owned());
-        }
-        if !(MIN_EVALUATIONS..=MAX_EVALUATIONS).contains(&spec.max_evaluations) {
-            fault(
-                "max_evaluations",
-                format!(
-                    "must be from {MIN_EVALUATIONS} (two levels of {SAMPLES_PER_LEVEL} samples) \
-                     to {MAX_EVALUATIONS}, got {}",
-                    spec.max_evaluations
-                ),
-            );
-        }
-        let (device_inputs, operation_inputs) = (shape.device_inputs, shape.operation_inputs);
-        let per_operation = u64::try_from(operation_inputs).unwrap_or(u64::MAX);
-        let dimension = u64::try_from(device_inputs)
-            .unwrap_or(u64::MAX)
-            .saturating_add(per_operation.saturating_mul(read));
-        if dimension == 0 {
-            fault(
-                "",
-                "needs a scattered input: without `scatter` every device gives the same value"
-                    .to_owned(),
-            );
-        } else if dimension > MAX_DIMENSION as u64 {
-            let field = match reading {
-                Some(Reading::Metric(Metric::Operation(_))) => "operation",
-                Some(Reading::FailureMargin) => side,
-                _ => "",
-            };
-            fault(
-                field,
-                format!(
-                    "explores {dimension} inputs ({device_inputs} per device and \
-                     {operation_inputs} per operation for {read} operations); at most \
-                     {MAX_DIMENSION}"
-                ),
-            );
-        } else if spec.method == RareMethod::Importance
-            && dimension > MAX_IMPORTANCE_DIMENSION as u64
-        {
-            fault(
-                "method",
-                format!(
-                    "importance sampling takes at most {MAX_IMPORTANCE_DIMENSION} inputs; this \
-                     event has {dimension}: use `subset`"
-                ),
-            );
-        }
-        if errors.len() > before {
-            return None;
-        }
-        Some(Self {
-            reading: reading.expect("no errors"),
-            threshold,
-            above,
-            operations: read,
-            method: spec.method,
-            budget: Budget {
-                max_evaluations: spec.max_evaluations,
-                target_cov: spec.target_cov,
-            },
-        })
-    }
-
-    /// The sign that turns the event into a response above a threshold, and that threshold:
-    /// the life's event is a failure margin above 0.
-    fn limit(&self) -> (f64, f64) {
-        match self.reading {
-            Reading::FailureMargin => (1.0, 0.0),
-            Reading::Metric(_) if self.above => (1.0, self.threshold),
-            Reading::Metric(_) => (-1.0, -self.threshold),
-        }
-    }
-
-    /// The most operations the estimate runs: what counts against a server's job size.
-    pub fn max_operations(&self) -> u64 {
-        self.budget.max_evaluations.saturating_mul(self.operations)
-    }
-}
 
 /// The Result's `rare_event`.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -437,30 +149,295 @@ pub fn estimate(job: &Job, observer: &dyn Observer) -> Result<Option<RareEventRe
     }))
 }
 
-/// The median device's reading, for a check before a job is accepted: a threshold the median
-/// device already passes asks no rare event.
+/// How far from the median inputs, in standard deviations, the check before a job is accepted
+/// looks for the threshold: the reliability index of [`methods::SMALLEST_PROBABILITY`], past
+/// which subset simulation stops.
+pub fn search_radius() -> f64 {
+    -standard_normal_quantile(methods::SMALLEST_PROBABILITY)
+}
+
+/// The most operations that search runs: it runs as the job is submitted, on one thread, about
+/// 0.7 s at this many (a 2-core Zen 4 VM, debug build with the model optimised: 1.76 s for
+/// 5e6). A larger event skips it, and learns of a threshold never reached when it runs.
+pub const SEARCH_OPERATIONS: u64 = 2_000_000;
+
+/// Steps of gradient ascent the search takes on the sphere of [`search_radius`].
+const SEARCH_STEPS: usize = 4;
+/// Points of each ray the search evaluates evenly out to the radius, before it refines the best.
+const RAY_POINTS: usize = 12;
+/// Golden-section steps that refine a ray's best point (the bracket shrinks to 0.6 %).
+const GOLDEN_STEPS: usize = 10;
+
+/// The largest response `state` was seen to give within `radius` of the origin, stopping at the
+/// first above `threshold`, or `None` when that search costs more than `budget` evaluations or
+/// met a NaN (then it says nothing).
+///
+/// It looks where a monotone or nearly linear response is largest, and along the way at where
+/// one rises and falls: along each input's ray alone, both ways; then along the direction the
+/// rays' differences give (each input's whole effect, across the steps of a counting metric);
+/// then [`SEARCH_STEPS`] steps of projected gradient ascent, `v <- g / |g|` (its fixed point is
+/// where the gradient is normal to the sphere, the largest response on it), the gradient by
+/// forward differences of one standard deviation taken one step inside the sphere. Each ray is
+/// evaluated at [`RAY_POINTS`] points out to the radius and refined around its best by a
+/// golden-section search: a response that peaks before the sphere, as the total bounce time
+/// does at eleven standard deviations of velocity, is found near its peak. It is a search, not a
+/// proof: a peak narrower than a ray's spacing, or off every ray, can be missed; so it refuses
+/// only thresholds beyond every value it saw, within a radius past which the methods stop
+/// looking anyway.
+fn highest_within(state: &dyn LimitState, radius: f64, threshold: f64, budget: u64) -> Option<f64> {
+    /// The forward differences' step, one standard deviation.
+    const STEP: f64 = 1.0;
+    let d = state.dimension();
+    let per_ray = (RAY_POINTS + 2 + GOLDEN_STEPS) as u64;
+    let evaluations = 2 * d as u64 * per_ray + SEARCH_STEPS as u64 * (per_ray + 1 + d as u64);
+    if evaluations > budget {
+        return None;
+    }
+    let mut search = Search {
+        state,
+        threshold,
+        highest: f64::NEG_INFINITY,
+        lost: false,
+    };
+    let mut direction = vec![0.0; d];
+    'search: {
+        let mut axis = vec![0.0; d];
+        for i in 0..d {
+            let mut ends = [0.0; 2];
+            for (end, way) in ends.iter_mut().zip([-1.0, 1.0]) {
+                axis[i] = way;
+                match search.ray(&axis, radius) {
+                    Some(y) => *end = y,
+                    None => break 'search,
+                }
+            }
+            axis[i] = 0.0;
+            direction[i] = ends[1] - ends[0];
+        }
+        for _ in 0..SEARCH_STEPS {
+            let norm = direction.iter().map(|g| g * g).sum::<f64>().sqrt();
+            if !(norm.is_finite() && norm > 0.0) {
+                break;
+            }
+            let unit: Vec<f64> = direction.iter().map(|g| g / norm).collect();
+            if search.ray(&unit, radius).is_none() {
+                break 'search;
+            }
+            // The gradient one step inside the sphere, so that no point tried lies beyond it.
+            let inside: Vec<f64> = unit.iter().map(|v| v * (radius - STEP)).collect();
+            let Some(here) = search.at(&inside) else {
+                break 'search;
+            };
+            let mut step = inside.clone();
+            for (i, g) in direction.iter_mut().enumerate() {
+                step[i] = inside[i] + STEP;
+                let Some(there) = search.at(&step) else {
+                    break 'search;
+                };
+                step[i] = inside[i];
+                *g = there - here;
+            }
+        }
+    }
+    (!search.lost).then_some(search.highest)
+}
+
+/// [`highest_within`]'s state: the largest response seen, and whether a NaN was.
+struct Search<'a> {
+    state: &'a dyn LimitState,
+    threshold: f64,
+    highest: f64,
+    lost: bool,
+}
+
+impl Search<'_> {
+    /// The response at `u`, or `None` when the search is over: past the threshold, or a NaN
+    /// (the model gave no value there: the search says nothing, the estimate will say why).
+    fn at(&mut self, u: &[f64]) -> Option<f64> {
+        let y = self.state.response(u);
+        if y.is_nan() {
+            self.lost = true;
+            return None;
+        }
+        self.highest = self.highest.max(y);
+        (y <= self.threshold).then_some(y)
+    }
+
+    /// The largest response found along `r v` for `0 < r <= radius` (`v` a unit vector):
+    /// [`RAY_POINTS`] evenly, then [`GOLDEN_STEPS`] of golden-section search between the best
+    /// one's neighbours.
+    fn ray(&mut self, v: &[f64], radius: f64) -> Option<f64> {
+        let point = |r: f64| -> Vec<f64> { v.iter().map(|x| r * x).collect() };
+        let spacing = radius / RAY_POINTS as f64;
+        let (mut best_r, mut best) = (spacing, f64::NEG_INFINITY);
+        for k in 1..=RAY_POINTS {
+            let r = spacing * k as f64;
+            let y = self.at(&point(r))?;
+            if y > best {
+                (best_r, best) = (r, y);
+            }
+        }
+        let ratio = (5.0_f64.sqrt() - 1.0) / 2.0;
+        let (mut a, mut b) = (best_r - spacing, (best_r + spacing).min(radius));
+        let (mut c, mut e) = (b - ratio * (b - a), a + ratio * (b - a));
+        let (mut yc, mut ye) = (self.at(&point(c))?, self.at(&point(e))?);
+        for _ in 0..GOLDEN_STEPS {
+            if yc > ye {
+                (b, e, ye) = (e, c, yc);
+                c = b - ratio * (b - a);
+                yc = self.at(&point(c))?;
+            } else {
+                (a, c, yc) = (c, e, ye);
+                e = a + ratio * (b - a);
+                ye = self.at(&point(e))?;
+            }
+        }
+        Some(best.max(yc).max(ye))
+    }
+}
+
+/// Checks before a job is accepted that its rare event asks a rare event: the device with median
+/// inputs is not already beyond the threshold (the event would have probability near one half or
+/// more), and some inputs within [`search_radius`] standard deviations of the median reach it
+/// ([`highest_within`], when it costs at most [`SEARCH_OPERATIONS`] operations). Each refusal
+/// names the threshold's field.
 pub fn check_threshold(job: &Job, at: &Pointer) -> Result<(), crate::error::InvalidInput> {
     let Some(rare) = job.rare_event() else {
         return Ok(());
     };
     let (sign, threshold) = rare.limit();
-    let function = DeviceFunction::new(job, rare.reading, rare.operations);
-    let median = function.value(&vec![0.0; function.dimension()]);
-    if sign * median < threshold {
-        return Ok(());
-    }
-    let side = if rare.above { "above" } else { "below" };
-    let detail = match rare.reading {
-        Reading::Metric(metric) => format!(
-            "the device with median inputs already gives {median} for {}: the event has \
-             probability near one half or more, not a rare event (ask for it with `limits`)",
-            metric.name()
-        ),
-        Reading::FailureMargin => format!(
-            "the device with median inputs already fails before operation {}: the event has \
-             probability near one half or more, not a rare event (see `life`)",
-            rare.threshold
-        ),
+    let state = Signed {
+        function: DeviceFunction::new(job, rare.reading, rare.operations),
+        sign,
     };
-    Err(crate::error::InvalidInput::single(&at.child(side), detail))
+    let side = if rare.above { "above" } else { "below" };
+    let refuse = |detail| Err(crate::error::InvalidInput::single(&at.child(side), detail));
+    let median = state.function.value(&vec![0.0; state.dimension()]);
+    if sign * median >= threshold {
+        return refuse(match rare.reading {
+            Reading::Metric(metric) => format!(
+                "the device with median inputs already gives {median} for {}: the event has \
+                 probability near one half or more, not a rare event (ask for it with `limits`)",
+                metric.name()
+            ),
+            Reading::FailureMargin => format!(
+                "the device with median inputs already fails before operation {}: the event has \
+                 probability near one half or more, not a rare event (see `life`)",
+                rare.threshold
+            ),
+        });
+    }
+    let radius = search_radius();
+    let budget = SEARCH_OPERATIONS / rare.operations.max(1);
+    match highest_within(&state, radius, threshold, budget) {
+        Some(highest) if highest <= threshold => {
+            let probability = methods::SMALLEST_PROBABILITY;
+            refuse(match rare.reading {
+                Reading::Metric(metric) => format!(
+                    "{} never reaches {} {} in a search of the inputs within {radius:.1} standard \
+                     deviations of the median (probability {probability:e}); the most extreme \
+                     value found is {}",
+                    metric.name(),
+                    side,
+                    rare.threshold,
+                    sign * highest
+                ),
+                Reading::FailureMargin => format!(
+                    "no device fails before operation {} in a search of the inputs within \
+                     {radius:.1} standard deviations of the median (probability {probability:e})",
+                    rare.threshold
+                ),
+            })
+        }
+        _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `y = a . u`: largest on the sphere at `radius a / |a|`, where it is `radius |a|`.
+    struct Linear(Vec<f64>);
+
+    impl LimitState for Linear {
+        fn dimension(&self) -> usize {
+            self.0.len()
+        }
+        fn response(&self, u: &[f64]) -> f64 {
+            self.0.iter().zip(u).map(|(a, x)| a * x).sum()
+        }
+    }
+
+    /// A response that only the combination of inputs lifts: `min(u_1, u_2)`, largest on the
+    /// sphere at `u_1 = u_2 = radius / sqrt 2`, which no input alone approaches.
+    struct Together;
+
+    impl LimitState for Together {
+        fn dimension(&self) -> usize {
+            2
+        }
+        fn response(&self, u: &[f64]) -> f64 {
+            u[0].min(u[1])
+        }
+    }
+
+    #[test]
+    fn the_search_radius_is_the_index_of_the_smallest_probability() {
+        // mpmath: findroot(lambda z: ncdf(-z) - 1e-30, 11.4) at 30 digits.
+        let radius = search_radius();
+        approx::assert_relative_eq!(radius, 11.464_024_688_443_616, max_relative = 1e-12);
+    }
+
+    /// `y = r exp(1 - r)` along `u_1` (`r = u_1`), largest at `r = 1` where it is 1, inside a
+    /// sphere of radius 4 where it is 0.2; and a slight rise with `u_2`, so that the largest
+    /// response in the ball is 1.039 (`u_2 = 3.87`).
+    struct Peak;
+
+    impl LimitState for Peak {
+        fn dimension(&self) -> usize {
+            2
+        }
+        fn response(&self, u: &[f64]) -> f64 {
+            u[0] * (1.0 - u[0]).exp() + 0.01 * u[1]
+        }
+    }
+
+    #[test]
+    fn the_search_finds_a_peak_inside_the_sphere() {
+        let highest = highest_within(&Peak, 4.0, f64::INFINITY, 1000).unwrap();
+        assert!(highest > 0.9999 && highest <= 1.039, "{highest}");
+    }
+
+    #[test]
+    fn the_search_finds_the_largest_response_on_the_sphere() {
+        let a = Linear(vec![3.0, -4.0, 0.0]);
+        let highest = highest_within(&a, 2.0, f64::INFINITY, 1000).unwrap();
+        approx::assert_relative_eq!(highest, 10.0, max_relative = 1e-12);
+        let highest = highest_within(&Together, 2.0, f64::INFINITY, 1000).unwrap();
+        approx::assert_relative_eq!(highest, 2.0_f64.sqrt(), max_relative = 1e-12);
+    }
+
+    #[test]
+    fn the_search_stops_at_the_first_point_past_the_threshold_or_past_its_budget() {
+        let a = Linear(vec![1.0; 4]);
+        let highest = highest_within(&a, 2.0, 1.5, 1000).unwrap();
+        assert!(highest > 1.5 && highest <= 2.0, "{highest}");
+        assert_eq!(highest_within(&a, 2.0, 1.5, 300), None);
+    }
+
+    /// A NaN response says nothing about the threshold: the search gives no verdict.
+    #[test]
+    fn a_response_without_a_value_leaves_the_search_without_a_verdict() {
+        struct Broken;
+        impl LimitState for Broken {
+            fn dimension(&self) -> usize {
+                2
+            }
+            fn response(&self, u: &[f64]) -> f64 {
+                if u[1] > 1.0 { f64::NAN } else { u[0] }
+            }
+        }
+        assert_eq!(highest_within(&Broken, 2.0, 10.0, 1000), None);
+    }
 }
