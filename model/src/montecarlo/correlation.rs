@@ -3,7 +3,7 @@
 //! through `Phi^-1`) become `y = L z`, `L` the Cholesky factor of the matrix, and each `y_i` becomes a
 //! draw `F_i^-1(Phi(y_i))` of its own (truncated) marginal.
 
-use super::job::{Parameter, Per, ScatterSpec};
+use super::scatter::{Parameter, Per, ScatterSpec};
 use crate::error::{FieldError, Pointer};
 use crate::linalg::cholesky_above;
 use serde::{Deserialize, Serialize};

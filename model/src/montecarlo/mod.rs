@@ -12,6 +12,7 @@ pub mod kernel;
 pub mod lives;
 pub mod metric;
 pub mod rare;
+pub mod scatter;
 pub mod sensitivity;
 
 pub use engine::{Cancelled, Observer, Silent, Tally, Watch};
