@@ -1,16 +1,17 @@
-//! `/v1/events`: one event stream for all of the caller's jobs. A page that shows many jobs holds
-//! one connection instead of one per job: browsers open at most six per host over HTTP/1.1, and
-//! streams that take all six leave every other request of the page waiting.
+//! The event streams: `/v1/events`, one stream for all of the caller's jobs, and
+//! `/v1/jobs/{id}/events`, one job's. A page that shows many jobs holds one connection instead of
+//! one per job: browsers open at most six per host over HTTP/1.1, and streams that take all six
+//! leave every other request of the page waiting.
 
 use super::AppState;
 use super::error::ApiError;
-use super::error::responses::{TooManyStreams, Unauthorized};
+use super::error::responses::{NoSuchJob, TooManyStreams, Unauthorized};
 use super::jobs::{JobResource, Progress, ServerSentEvent};
 use super::watch::{Snapshot, Subscription};
 use crate::domain::{JobId, JobStatus, Owner};
 use crate::store::{JobRecord, StoreError};
 use axum::Extension;
-use axum::extract::State;
+use axum::extract::{Path, State};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use futures_util::stream::Stream;
 use std::collections::{HashMap, HashSet, VecDeque};
@@ -19,7 +20,9 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 pub fn router() -> OpenApiRouter<AppState> {
-    OpenApiRouter::new().routes(routes!(events))
+    OpenApiRouter::new()
+        .routes(routes!(events))
+        .routes(routes!(job_events))
 }
 
 /// The `progress` event of a running or queued job.
@@ -136,6 +139,83 @@ pub async fn events(
             let mut shutdown = f.state.shutdown.clone();
             let snapshot = f.subscription.next(&mut shutdown).await?;
             f.look(&snapshot).await;
+        }
+    });
+    Ok(Sse::new(stream).keep_alive(KeepAlive::default()))
+}
+
+/// Server-Sent Events: `progress` events while the job runs, then one `status` event when it ends.
+///
+/// `progress` events (data: `{status, operations_done, operations_total}`) while the job is queued
+/// or runs, then one `status` event (data: the JobResource) when it ends, and the stream closes. A
+/// job that already ended gets its `status` event at once.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "An event stream: `progress` events (data: status, operations_done, operations_total) while the job runs, then one `status` event (data: the JobResource) when it ends", content_type = "text/event-stream", body = ServerSentEvent),
+        Unauthorized,
+        TooManyStreams,
+        NoSuchJob,
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn job_events(
+    State(state): State<AppState>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<JobId>,
+) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
+    let first = state.store.job(&owner, &id).await?;
+    // Subscribed after the first read; its first snapshot is taken after this point.
+    let subscription = state.watch.subscribe(&owner)?;
+    struct Follower {
+        state: AppState,
+        subscription: Subscription,
+        owner: Owner,
+        id: JobId,
+        last: Option<(JobStatus, u64)>,
+        pending: Option<JobRecord>,
+        ended: bool,
+    }
+    let follower = Follower {
+        state,
+        subscription,
+        owner,
+        id,
+        last: None,
+        pending: Some(first),
+        ended: false,
+    };
+    let stream = futures_util::stream::unfold(follower, |mut f| async move {
+        loop {
+            if f.ended {
+                return None;
+            }
+            let record = match f.pending.take() {
+                Some(record) => record,
+                None => {
+                    let mut shutdown = f.state.shutdown.clone();
+                    let snapshot = f.subscription.next(&mut shutdown).await?;
+                    match snapshot.get(&f.id) {
+                        Some(record) => record.clone(),
+                        // Neither live nor ended lately: ask the store (a stream not read for
+                        // long, or the job deleted: then the stream ends).
+                        None => match f.state.store.job(&f.owner, &f.id).await {
+                            Ok(record) => record,
+                            Err(StoreError::NotFound { .. }) => return None,
+                            Err(_) => continue,
+                        },
+                    }
+                }
+            };
+            let seen = (record.status, record.operations_done);
+            if record.status.is_terminal() {
+                f.ended = true;
+                return Some((Ok(status_event(&record)), f));
+            }
+            if f.last != Some(seen) {
+                f.last = Some(seen);
+                return Some((Ok(progress_event(&record, false)), f));
+            }
         }
     });
     Ok(Sse::new(stream).keep_alive(KeepAlive::default()))

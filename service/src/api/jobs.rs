@@ -3,12 +3,8 @@
 use super::cache::{NotModified, immutable, immutable_stream};
 use super::error::{
     ApiError, Internal, PROBLEM, Problem,
-    responses::{
-        BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, TooManyStreams, Unauthorized,
-    },
+    responses::{BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, Unauthorized},
 };
-use super::events::{progress_event, status_event};
-use super::watch::Subscription;
 use super::{AppState, JsonText, idempotency_key, replayed};
 use crate::domain::{AfterRunQuery, JobId, JobStatus, Once, Owner, QueuedJob, UnixMs, draw_seed};
 use crate::store::{JobRecord, Operations, Page, ShardRecord, StoreError};
@@ -16,7 +12,6 @@ use axum::body::{Body, Bytes};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
-use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
 use bouncewear_model::Pointer;
@@ -25,7 +20,6 @@ use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric, query_metric
 use bouncewear_model::stats::{Accumulator, QUANTILES, QueryAnswer, Summary, Threshold};
 use futures_util::stream::{Stream, StreamExt};
 use serde::{Deserialize, Serialize};
-use std::convert::Infallible;
 use std::fmt::Write as _;
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
@@ -38,7 +32,6 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(get_shards))
         .routes(routes!(get_result))
         .routes(routes!(get_distribution))
-        .routes(routes!(job_events))
         .routes(routes!(get_life))
         .routes(routes!(get_rare_event))
 }
@@ -904,81 +897,4 @@ pub async fn stored_result(state: &AppState, id: &JobId) -> Result<JobResult, Ap
 /// while the request ran (a DELETE racing this GET), so the job is not found.
 fn without_result(id: &JobId) -> ApiError {
     ApiError::NotFound(format!("job {id} was deleted while this request ran"))
-}
-
-/// Server-Sent Events: `progress` events while the job runs, then one `status` event when it ends.
-///
-/// `progress` events (data: `{status, operations_done, operations_total}`) while the job is queued
-/// or runs, then one `status` event (data: the JobResource) when it ends, and the stream closes. A
-/// job that already ended gets its `status` event at once.
-#[utoipa::path(
-    get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path, description = "Job id")),
-    responses(
-        (status = 200, description = "An event stream: `progress` events (data: status, operations_done, operations_total) while the job runs, then one `status` event (data: the JobResource) when it ends", content_type = "text/event-stream", body = ServerSentEvent),
-        Unauthorized,
-        TooManyStreams,
-        NoSuchJob,
-    ),
-    security((), ("api_key" = []))
-)]
-pub async fn job_events(
-    State(state): State<AppState>,
-    Extension(owner): Extension<Owner>,
-    Path(id): Path<JobId>,
-) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
-    let first = state.store.job(&owner, &id).await?;
-    // Subscribed after the first read; its first snapshot is taken after this point.
-    let subscription = state.watch.subscribe(&owner)?;
-    struct Follower {
-        state: AppState,
-        subscription: Subscription,
-        owner: Owner,
-        id: JobId,
-        last: Option<(JobStatus, u64)>,
-        pending: Option<JobRecord>,
-        ended: bool,
-    }
-    let follower = Follower {
-        state,
-        subscription,
-        owner,
-        id,
-        last: None,
-        pending: Some(first),
-        ended: false,
-    };
-    let stream = futures_util::stream::unfold(follower, |mut f| async move {
-        loop {
-            if f.ended {
-                return None;
-            }
-            let record = match f.pending.take() {
-                Some(record) => record,
-                None => {
-                    let mut shutdown = f.state.shutdown.clone();
-                    let snapshot = f.subscription.next(&mut shutdown).await?;
-                    match snapshot.get(&f.id) {
-                        Some(record) => record.clone(),
-                        // Neither live nor ended lately: ask the store (a stream not read for
-                        // long, or the job deleted: then the stream ends).
-                        None => match f.state.store.job(&f.owner, &f.id).await {
-                            Ok(record) => record,
-                            Err(StoreError::NotFound { .. }) => return None,
-                            Err(_) => continue,
-                        },
-                    }
-                }
-            };
-            let seen = (record.status, record.operations_done);
-            if record.status.is_terminal() {
-                f.ended = true;
-                return Some((Ok(status_event(&record)), f));
-            }
-            if f.last != Some(seen) {
-                f.last = Some(seen);
-                return Some((Ok(progress_event(&record, false)), f));
-            }
-        }
-    });
-    Ok(Sse::new(stream).keep_alive(KeepAlive::default()))
 }
