@@ -1,6 +1,7 @@
 //! The service's layers point one way: `cli` | `app` -> `api` | `worker` | `scheduler` ->
 //! `domain` | `store` | `plots` -> the model. This test reads every `crate::` path in
 //! `service/src` and fails on any arrow the table below does not allow, so a cycle cannot creep in.
+//! Within a layer, and in the model, no two files import each other.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -168,5 +169,160 @@ fn the_use_parser_sees_grouped_and_nested_paths() {
     assert_eq!(
         used.into_iter().collect::<Vec<_>>(),
         ["api", "domain", "store"]
+    );
+}
+
+/// The module path of a source file below its crate's `src` (`stats/query.rs` -> `stats/query`,
+/// `montecarlo/mod.rs` -> `montecarlo`, `lib.rs` -> the root, `""`).
+fn module_of(relative: &Path) -> String {
+    let path = relative.with_extension("");
+    let path = path.to_string_lossy().replace('\\', "/");
+    match path.as_str() {
+        "lib" | "main" => String::new(),
+        other => other.strip_suffix("/mod").unwrap_or(other).to_owned(),
+    }
+}
+
+/// Every path a `use` statement of `source` names, groups expanded (`a::{b, c::d}` -> `a::b`,
+/// `a::c::d`); the test module at the end of a file is left out.
+fn use_paths(source: &str) -> Vec<String> {
+    let source = source.split("#[cfg(test)]").next().unwrap_or_default();
+    let mut paths = Vec::new();
+    let mut offset = 0;
+    for line in source.split_inclusive('\n') {
+        let trimmed = line.trim_start();
+        let statement = ["pub use ", "pub(crate) use ", "pub(super) use ", "use "]
+            .iter()
+            .find_map(|keyword| trimmed.strip_prefix(keyword));
+        if let Some(rest) = statement {
+            let at = offset + line.len() - rest.len();
+            let end = source[at..].find(';').map_or(source.len(), |e| at + e);
+            expand("", &source[at..end], &mut paths);
+        }
+        offset += line.len();
+    }
+    paths
+}
+
+fn expand(prefix: &str, tree: &str, out: &mut Vec<String>) {
+    let tree: String = tree.chars().filter(|c| !c.is_whitespace()).collect();
+    match tree.find('{') {
+        Some(open) if tree.ends_with('}') => {
+            let head = format!("{prefix}{}", &tree[..open]);
+            for item in top_level_items(&tree[open + 1..]) {
+                expand(&head, item, out);
+            }
+        }
+        _ => out.push(format!("{prefix}{tree}")),
+    }
+}
+
+/// The module of `modules` that `path`, used in module `from`, names: its longest prefix that is
+/// a module; `None` for a path outside the crate.
+fn resolve(from: &str, path: &str, modules: &BTreeSet<String>) -> Option<String> {
+    let mut steps = path.split("::").peekable();
+    let mut at: Vec<&str> = match steps.peek() {
+        Some(&"crate") => Vec::new(),
+        Some(&"super") | Some(&"self") => from.split('/').filter(|s| !s.is_empty()).collect(),
+        _ => return None,
+    };
+    while let Some(&step) = steps.peek() {
+        match step {
+            "crate" | "self" => {}
+            "super" => {
+                at.pop();
+            }
+            _ => break,
+        }
+        steps.next();
+    }
+    let mut found = None;
+    let mut candidate = at.join("/");
+    for step in steps {
+        candidate = if candidate.is_empty() {
+            step.to_owned()
+        } else {
+            format!("{candidate}/{step}")
+        };
+        if modules.contains(&candidate) {
+            found = Some(candidate.clone());
+        }
+    }
+    found.or_else(|| modules.contains(&at.join("/")).then(|| at.join("/")))
+}
+
+/// Pairs of files of `src` that each use the other (a module using its own ancestors, as a child
+/// reads its parent's items, is not counted).
+fn mutual_imports(src: &Path) -> Vec<String> {
+    let mut files = Vec::new();
+    rust_files(src, &mut files);
+    let module = |file: &std::path::PathBuf| module_of(file.strip_prefix(src).unwrap());
+    let modules: BTreeSet<String> = files.iter().map(module).collect();
+    let mut uses: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for file in &files {
+        let from = module(file);
+        let source = std::fs::read_to_string(file).unwrap();
+        for path in use_paths(&source) {
+            if let Some(to) = resolve(&from, &path, &modules)
+                && to != from
+                && !from.starts_with(&format!("{to}/"))
+                && !to.is_empty()
+            {
+                uses.entry(from.clone()).or_default().insert(to);
+            }
+        }
+    }
+    let mut pairs = Vec::new();
+    for (a, used) in &uses {
+        for b in used {
+            if a < b && uses.get(b).is_some_and(|back| back.contains(a)) {
+                pairs.push(format!("{a} <-> {b}"));
+            }
+        }
+    }
+    pairs
+}
+
+#[test]
+fn no_two_files_import_each_other() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for src in [root.join("src"), root.join("../model/src")] {
+        let pairs = mutual_imports(&src);
+        assert!(
+            pairs.is_empty(),
+            "files of {} that import each other:\n{}",
+            src.display(),
+            pairs.join("\n")
+        );
+    }
+}
+
+#[test]
+fn the_pair_finder_resolves_parents_children_and_groups() {
+    let modules: BTreeSet<String> = ["", "stats", "stats/query", "stats/summary", "montecarlo"]
+        .into_iter()
+        .map(str::to_owned)
+        .collect();
+    let resolve = |from: &str, path: &str| resolve(from, path, &modules);
+    assert_eq!(
+        resolve("stats/query", "super::summary::Merged").as_deref(),
+        Some("stats/summary")
+    );
+    assert_eq!(
+        resolve("stats/query", "super::Accumulator").as_deref(),
+        Some("stats")
+    );
+    assert_eq!(
+        resolve("stats", "self::query::x").as_deref(),
+        Some("stats/query")
+    );
+    assert_eq!(
+        resolve("stats/query", "crate::montecarlo::Job").as_deref(),
+        Some("montecarlo")
+    );
+    assert_eq!(resolve("stats/query", "serde::Serialize"), None);
+    assert_eq!(
+        use_paths("use super::{a::{B, C}, d};\nuse crate::e::F;\n#[cfg(test)]\nuse crate::g;"),
+        ["super::a::B", "super::a::C", "super::d", "crate::e::F"]
     );
 }
