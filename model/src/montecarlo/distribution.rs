@@ -402,8 +402,9 @@ impl Distribution {
     /// +-37, where `Phi(-z)` is still a normal number.
     pub fn at_normal(&self, z: f64) -> f64 {
         let z = z.clamp(-37.0, 37.0);
-        let lower = standard_normal_cdf(z);
-        let upper = standard_normal_cdf(-z);
+        let through_phi = |z: f64| {
+            self.quantile(standard_normal_cdf(z).clamp(f64::MIN_POSITIVE, 1.0 - f64::EPSILON))
+        };
         match *self {
             Distribution::Fixed(value) => value,
             Distribution::Normal {
@@ -421,24 +422,27 @@ impl Distribution {
                 let score = window.score(z, (window.max / median).ln() / sigma);
                 (median * (sigma * score).exp()).clamp(window.min, window.max)
             }
+            _ if z <= 0.0 => through_phi(z),
             Distribution::Weibull {
                 scale,
                 shape,
                 window,
                 ..
-            } if z > 0.0 => {
+            } => {
                 // The survival exp(-(x / scale)^shape) above the window, then the window's share.
                 let above = (-(window.max / scale).powf(shape)).exp();
-                let survival = above + upper * (window.cdf_max - window.cdf_min);
+                let survival = above + standard_normal_cdf(-z) * (window.cdf_max - window.cdf_min);
                 (scale * (-survival.ln()).powf(1.0 / shape)).clamp(window.min, window.max)
             }
-            Distribution::Triangular { min, mode, max, .. }
-                if z > 0.0 && upper < (max - mode) / (max - min) =>
-            {
-                max - (upper * (max - min) * (max - mode)).sqrt()
+            Distribution::Triangular { min, mode, max, .. } => {
+                let upper = standard_normal_cdf(-z);
+                if upper < (max - mode) / (max - min) {
+                    max - (upper * (max - min) * (max - mode)).sqrt()
+                } else {
+                    through_phi(z)
+                }
             }
-            Distribution::Uniform { min, max } if z > 0.0 => max - upper * (max - min),
-            _ => self.quantile(lower.clamp(f64::MIN_POSITIVE, 1.0 - f64::EPSILON)),
+            Distribution::Uniform { min, max } => max - standard_normal_cdf(-z) * (max - min),
         }
     }
 
