@@ -1,14 +1,25 @@
 //! Storage in its own language: typed ids and times in, typed records and [`StoreError`] out, no
 //! JSON strings for callers to parse again. The traits are split by concern (the job queue, results,
-//! schedules); [`Store`] is all three, so that a backend is one `impl` per trait and the handlers,
-//! workers and scheduler never see SQL. [`open`] picks the backend from the database URL:
-//! [`sqlite::SqliteStore`] (embedded, the default) or [`postgres::PgStore`] (several instances on
-//! several machines). Each has its own SQL and migrations (`migrations/sqlite/`,
-//! `migrations/postgres/`); the row mapping they share is in `rows.rs`.
+//! schedules); [`Store`] is all three, so that the handlers, workers and scheduler never see SQL.
+//!
+//! One body of SQL serves both databases ([`SqlStore`]): `queue.rs`, `results.rs` and
+//! `schedules.rs` implement the traits once, with `$N` placeholders; `rows.rs` maps each table's
+//! rows; `sql.rs` runs a statement on either database. What truly differs (pools, locks, the
+//! clock, SQLite's file checks, PostgreSQL's announcements) is `backend.rs` with `sqlite.rs`
+//! (embedded, the default) and `postgres.rs` (several instances on several machines). Each keeps
+//! its migrations (`migrations/sqlite/`, `migrations/postgres/`). [`open`] picks one from the
+//! database URL.
 
-pub mod postgres;
+mod backend;
+mod postgres;
+mod queue;
+mod results;
 mod rows;
-pub mod sqlite;
+mod schedules;
+mod sql;
+mod sqlite;
+
+pub use backend::SqlStore;
 
 use crate::domain::{
     Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob,
@@ -463,15 +474,7 @@ pub trait Schedules: Send + Sync + 'static {
 
 /// Opens the store a database URL names, migrating it: `sqlite:` or `postgres:` (`postgresql:`).
 pub async fn open(url: &str) -> StoreResult<Arc<dyn Store>> {
-    // Only the scheme is ever repeated back: the rest of a URL may hold a password.
-    let scheme = url.split_once(':').map_or(url, |(scheme, _)| scheme);
-    match scheme {
-        "sqlite" => Ok(Arc::new(sqlite::SqliteStore::open(url).await?)),
-        "postgres" | "postgresql" => Ok(Arc::new(postgres::PgStore::open(url).await?)),
-        _ => Err(StoreError::UnsupportedUrl(
-            scheme.chars().take(32).collect(),
-        )),
-    }
+    Ok(Arc::new(SqlStore::open(url).await?))
 }
 
 /// Everything the service stores.

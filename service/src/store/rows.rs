@@ -1,6 +1,7 @@
 //! What every backend shares: the column lists, the mapping of each table's row to its record (one
 //! place per table, whatever the database), and how values are stored (counts, seeds, times, JSON).
 
+use super::sql::{AnyRow, Sql, Tx};
 use super::{
     Claim, DistributionRow, Fence, JobRecord, Operations, RunRecord, ScheduleRecord, ShardRecord,
     StoreError, StoreResult,
@@ -13,52 +14,6 @@ use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec, RunGroups};
 use bouncewear_model::stats::Accumulator;
 use sqlx::migrate::Migrator;
-use sqlx::postgres::PgRow;
-use sqlx::query::Query;
-use sqlx::sqlite::SqliteRow;
-use sqlx::{Database, Encode, Row, Type};
-
-/// A row of either backend, read by column name into the few types the schema uses.
-pub(crate) trait ReadRow {
-    fn int(&self, column: &str) -> Result<i64, sqlx::Error>;
-    fn maybe_int(&self, column: &str) -> Result<Option<i64>, sqlx::Error>;
-    fn text(&self, column: &str) -> Result<String, sqlx::Error>;
-    fn maybe_text(&self, column: &str) -> Result<Option<String>, sqlx::Error>;
-    fn flag(&self, column: &str) -> Result<bool, sqlx::Error>;
-    fn bytes(&self, column: &str) -> Result<Vec<u8>, sqlx::Error>;
-    fn maybe_bytes(&self, column: &str) -> Result<Option<Vec<u8>>, sqlx::Error>;
-}
-
-macro_rules! read_row {
-    ($row:ty) => {
-        impl ReadRow for $row {
-            fn int(&self, column: &str) -> Result<i64, sqlx::Error> {
-                self.try_get(column)
-            }
-            fn maybe_int(&self, column: &str) -> Result<Option<i64>, sqlx::Error> {
-                self.try_get(column)
-            }
-            fn text(&self, column: &str) -> Result<String, sqlx::Error> {
-                self.try_get(column)
-            }
-            fn maybe_text(&self, column: &str) -> Result<Option<String>, sqlx::Error> {
-                self.try_get(column)
-            }
-            fn flag(&self, column: &str) -> Result<bool, sqlx::Error> {
-                self.try_get(column)
-            }
-            fn bytes(&self, column: &str) -> Result<Vec<u8>, sqlx::Error> {
-                self.try_get(column)
-            }
-            fn maybe_bytes(&self, column: &str) -> Result<Option<Vec<u8>>, sqlx::Error> {
-                self.try_get(column)
-            }
-        }
-    };
-}
-
-read_row!(SqliteRow);
-read_row!(PgRow);
 
 /// SQL integers are signed 64-bit in both backends: counts saturate, seeds keep their bits (a seed
 /// of 2^63 or more reads as negative in SQL).
@@ -66,7 +21,7 @@ pub(crate) fn count_to_sql(value: u64) -> i64 {
     i64::try_from(value).unwrap_or(i64::MAX)
 }
 
-pub(crate) fn count_from_sql(row: &impl ReadRow, column: &str) -> Result<u64, sqlx::Error> {
+pub(crate) fn count_from_sql(row: &AnyRow, column: &str) -> Result<u64, sqlx::Error> {
     Ok(row.int(column)?.max(0) as u64)
 }
 
@@ -78,15 +33,15 @@ pub(crate) fn seed_from_sql(stored: i64) -> u64 {
     stored as u64
 }
 
-pub(crate) fn ms(row: &impl ReadRow, column: &str) -> Result<UnixMs, sqlx::Error> {
+pub(crate) fn ms(row: &AnyRow, column: &str) -> Result<UnixMs, sqlx::Error> {
     row.int(column).map(UnixMs)
 }
 
-pub(crate) fn optional_ms(row: &impl ReadRow, column: &str) -> Result<Option<UnixMs>, sqlx::Error> {
+pub(crate) fn optional_ms(row: &AnyRow, column: &str) -> Result<Option<UnixMs>, sqlx::Error> {
     Ok(row.maybe_int(column)?.map(UnixMs))
 }
 
-pub(crate) fn status(row: &impl ReadRow) -> Result<JobStatus, sqlx::Error> {
+pub(crate) fn status(row: &AnyRow) -> Result<JobStatus, sqlx::Error> {
     let text = row.text("status")?;
     JobStatus::parse(&text).ok_or_else(|| sqlx::Error::Decode(format!("status {text}").into()))
 }
@@ -148,24 +103,18 @@ pub(crate) const REMEMBER_KEY: &str = "INSERT INTO idempotency_keys \
      VALUES ($1, $2, $3, $4, $5, $6, $7)";
 
 /// A remembered key: the fingerprint of its first body and the id of what that created.
-pub(crate) fn remembered_from_row(row: &impl ReadRow) -> Result<(String, String), sqlx::Error> {
+pub(crate) fn remembered_from_row(row: &AnyRow) -> Result<(String, String), sqlx::Error> {
     Ok((row.text("fingerprint")?, row.text("resource")?))
 }
 
 /// Binds [`REMEMBER_KEY`]'s parameters: a job's or a schedule's key, used at `now`.
-pub(crate) fn bind_key<'q, DB>(
-    query: Statement<'q, DB>,
+pub(crate) fn bind_key(
+    query: Sql,
     owner: &Owner,
     created: Created<'_>,
     key: &IdempotencyKey,
     now: UnixMs,
-) -> Statement<'q, DB>
-where
-    DB: Database,
-    for<'t> i64: Encode<'t, DB> + Type<DB>,
-    for<'t> String: Encode<'t, DB> + Type<DB>,
-    for<'t> Option<String>: Encode<'t, DB> + Type<DB>,
-{
+) -> Sql {
     let (job, schedule) = match created {
         Created::Job(id) => (Some(id.to_string()), None),
         Created::Schedule(id) => (None, Some(id.to_string())),
@@ -205,7 +154,7 @@ pub(crate) const READINESS_WRITE: &str = "INSERT INTO readiness (id, checked_at)
 
 /// The newest migration applied to the database.
 pub(crate) const LATEST_APPLIED_MIGRATION: &str =
-    "SELECT MAX(version) FROM _sqlx_migrations WHERE success";
+    "SELECT MAX(version) AS version FROM _sqlx_migrations WHERE success";
 
 /// Not ready when the database's schema is older than this build's (`applied`, the newest
 /// migration applied): another version migrated it back, or it is another database.
@@ -220,8 +169,21 @@ pub(crate) fn schema_current(migrator: &Migrator, applied: Option<i64>) -> Store
     Ok(())
 }
 
-/// A statement of either backend, its parameters bound one after the other.
-pub(crate) type Statement<'q, DB> = Query<'q, DB, <DB as Database>::Arguments>;
+// ---- what the two databases say differently -------------------------------------------------
+
+/// The statements whose text differs between the two databases (`sqlite::DIALECT`,
+/// `postgres::DIALECT`); every other statement is the same text on both.
+pub(crate) struct Dialect {
+    /// The database's clock, in ms since the Unix epoch, as column `now`: one clock for every
+    /// instance that shares the database.
+    pub now: &'static str,
+    /// Whether a claim still holds its shard, with the lock that keeps the job from ending
+    /// meanwhile where the database has row locks.
+    pub holds: &'static str,
+    /// The claim of the next shard ([`claim_next`]).
+    pub claim: &'static str,
+    pub migrator: &'static Migrator,
+}
 
 // ---- jobs ----------------------------------------------------------------------------------
 
@@ -234,7 +196,7 @@ macro_rules! job_columns {
 
 pub(crate) use job_columns;
 
-pub(crate) fn job_from_row(row: &impl ReadRow) -> Result<JobRecord, sqlx::Error> {
+pub(crate) fn job_from_row(row: &AnyRow) -> Result<JobRecord, sqlx::Error> {
     Ok(JobRecord {
         seq: row.int("seq")?,
         id: JobId::from(row.text("id")?),
@@ -269,16 +231,7 @@ pub(crate) fn failed_too_often(retries: u64, shard: ShardId, failures: u64, erro
 
 /// Binds a new queued job's columns `id, owner, name, spec, seed, operations_total, created_at`
 /// as parameters 1 to 7.
-pub(crate) fn bind_queued_job<'q, DB>(
-    query: Statement<'q, DB>,
-    job: &QueuedJob,
-) -> StoreResult<Statement<'q, DB>>
-where
-    DB: Database,
-    for<'t> i64: Encode<'t, DB> + Type<DB>,
-    for<'t> String: Encode<'t, DB> + Type<DB>,
-    for<'t> Option<String>: Encode<'t, DB> + Type<DB>,
-{
+pub(crate) fn bind_queued_job(query: Sql, job: &QueuedJob) -> StoreResult<Sql> {
     Ok(query
         .bind(job.id.to_string())
         .bind(job.owner.as_str().to_owned())
@@ -289,14 +242,101 @@ where
         .bind(job.created_at.0))
 }
 
+/// The insert of a queued job, `$1` to `$7` bound by [`bind_queued_job`], with the condition
+/// a backend adds.
+///
+/// [`bind_queued_job`]: super::rows::bind_queued_job
+macro_rules! insert_job {
+    ($condition:literal) => {
+        concat!(
+            "INSERT INTO jobs (id, owner, name, spec, seed, status, operations_total, created_at, stored_bytes, vtime) \
+             SELECT $1, $2, $3, $4, $5, 'queued', $6, $7, octet_length($4), \
+                    COALESCE((SELECT MAX(vstart) FROM jobs), 0)",
+            $condition
+        )
+    };
+}
+
+pub(crate) use insert_job;
+
+/// Inserts a batch's shards in one statement: one round trip whatever their number.
+pub(crate) async fn insert_shards(
+    tx: &mut Tx,
+    job: &JobId,
+    shards: &[ShardPlan],
+) -> StoreResult<()> {
+    if shards.is_empty() {
+        return Ok(());
+    }
+    let rows: Vec<String> = (0..shards.len())
+        .map(|i| {
+            let n = 2 + 3 * i;
+            format!("($1, ${n}, ${}, 'queued', ${})", n + 1, n + 2)
+        })
+        .collect();
+    let insert = format!(
+        "INSERT INTO shards (job_id, batch, grp, status, operations_total) VALUES {}",
+        rows.join(", ")
+    );
+    let insert = shards
+        .iter()
+        .fold(Sql::built(insert).bind(job.as_str()), |insert, plan| {
+            insert
+                .bind(count_to_sql(plan.shard.batch))
+                .bind(group_to_sql(plan.shard))
+                .bind(count_to_sql(plan.operations))
+        });
+    insert.execute(&mut *tx).await?;
+    Ok(())
+}
+
 // ---- shards --------------------------------------------------------------------------------
+
+/// The condition of a write of one claim: only while its attempt still holds the running shard of
+/// a running job. The fence is parameters 1 to 4.
+macro_rules! fenced_shard {
+    () => {
+        "job_id = $1 AND batch = $2 AND grp = $3 AND attempt = $4 AND status = 'running' \
+         AND (SELECT status FROM jobs WHERE id = $1) = 'running'"
+    };
+}
+
+pub(crate) use fenced_shard;
+
+/// Leases the next shard (see [`super::JobQueue::claim`]): the target picks the shard's row with the
+/// lock the backend takes on it. `$1` the worker, `$2` now, `$3` the lease's duration.
+macro_rules! claim_next {
+    ($target:literal, $lock:literal) => {
+        concat!(
+            "UPDATE shards SET status = 'running', attempt = attempt + 1, lease_owner = $1, lease_until = $2 + $3, \
+             operations_done = 0, retry_at = NULL, \
+             lost_leases = lost_leases + CASE WHEN status = 'running' THEN 1 ELSE 0 END, \
+             history = history || CASE WHEN status = 'running' \
+                 THEN 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): lease lost\n' \
+                 ELSE '' END \
+             WHERE ",
+            $target,
+            " FROM shards s JOIN jobs j ON j.id = s.job_id \
+                            WHERE j.status IN ('queued', 'running') \
+                            AND ((s.status = 'queued' AND COALESCE(s.retry_at, 0) <= $2) \
+                                 OR (s.status = 'running' AND s.lease_until < $2)) \
+                            AND (s.grp >= 0 OR NOT EXISTS (SELECT 1 FROM shards o WHERE o.job_id = s.job_id \
+                                 AND o.batch = s.batch AND o.grp >= 0 AND o.status <> 'done')) \
+                            ORDER BY j.vtime, j.seq, s.batch, s.grp LIMIT 1",
+            $lock,
+            ") RETURNING job_id, batch, grp, attempt, operations_total"
+        )
+    };
+}
+
+pub(crate) use claim_next;
 
 /// The stored group of a shard: a merge step is group -1.
 pub(crate) fn group_to_sql(shard: ShardId) -> i64 {
     shard.group.map_or(-1, count_to_sql)
 }
 
-pub(crate) fn shard_id_from_row(row: &impl ReadRow) -> Result<ShardId, sqlx::Error> {
+pub(crate) fn shard_id_from_row(row: &AnyRow) -> Result<ShardId, sqlx::Error> {
     let batch = count_from_sql(row, "batch")?;
     let group = row.int("grp")?;
     Ok(ShardId {
@@ -313,7 +353,7 @@ macro_rules! shard_columns {
 
 pub(crate) use shard_columns;
 
-pub(crate) fn shard_from_row(row: &impl ReadRow) -> Result<ShardRecord, sqlx::Error> {
+pub(crate) fn shard_from_row(row: &AnyRow) -> Result<ShardRecord, sqlx::Error> {
     Ok(ShardRecord {
         shard: shard_id_from_row(row)?,
         status: row.text("status")?,
@@ -328,31 +368,8 @@ pub(crate) fn shard_from_row(row: &impl ReadRow) -> Result<ShardRecord, sqlx::Er
     })
 }
 
-/// Binds a queued shard's columns `job_id, batch, grp, operations_total` as parameters 1 to 4.
-pub(crate) fn bind_shard<'q, DB>(
-    query: Statement<'q, DB>,
-    job: &JobId,
-    plan: &ShardPlan,
-) -> Statement<'q, DB>
-where
-    DB: Database,
-    for<'t> i64: Encode<'t, DB> + Type<DB>,
-    for<'t> String: Encode<'t, DB> + Type<DB>,
-{
-    query
-        .bind(job.to_string())
-        .bind(count_to_sql(plan.shard.batch))
-        .bind(group_to_sql(plan.shard))
-        .bind(count_to_sql(plan.operations))
-}
-
 /// Binds a claim's fence `job_id, batch, grp, attempt` as parameters 1 to 4.
-pub(crate) fn bind_fence<'q, DB>(query: Statement<'q, DB>, fence: &Fence) -> Statement<'q, DB>
-where
-    DB: Database,
-    for<'t> i64: Encode<'t, DB> + Type<DB>,
-    for<'t> String: Encode<'t, DB> + Type<DB>,
-{
+pub(crate) fn bind_fence(query: Sql, fence: &Fence) -> Sql {
     query
         .bind(fence.job.to_string())
         .bind(count_to_sql(fence.shard.batch))
@@ -362,7 +379,7 @@ where
 
 /// A claim, from a row of the claimed shard joined with its job: `job_id, batch, grp, attempt,
 /// operations_total, spec, started_at`.
-pub(crate) fn claim_from_row(row: &impl ReadRow) -> StoreResult<Claim> {
+pub(crate) fn claim_from_row(row: &AnyRow) -> StoreResult<Claim> {
     Ok(Claim {
         fence: Fence {
             job: JobId::from(row.text("job_id")?),
@@ -391,8 +408,8 @@ pub(crate) const SELECT_PARTIALS: &str = "SELECT batch, grp, partial FROM shards
 /// gzipped bytes are decoded (off the async threads) and dropped before the next row is read, so
 /// a merge holds its groups once, decoded, and never all of them stored beside them (32 groups of
 /// a 1000-bin job are about 185 MB gzipped).
-pub(crate) async fn collect_partials<R: ReadRow>(
-    rows: impl futures_util::Stream<Item = Result<R, sqlx::Error>>,
+pub(crate) async fn collect_partials(
+    rows: impl futures_util::Stream<Item = Result<AnyRow, sqlx::Error>>,
 ) -> StoreResult<Vec<(ShardId, GroupStats)>> {
     use futures_util::TryStreamExt;
     let mut rows = std::pin::pin!(rows);
@@ -482,21 +499,13 @@ pub(crate) const INSERT_DISTRIBUTION: &str = "INSERT INTO distributions (job_id,
      ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16, $17) ON CONFLICT DO NOTHING";
 
 /// Binds [`INSERT_DISTRIBUTION`]'s parameters: `groups` is [`row_groups_to_sql`].
-pub(crate) fn bind_distribution<'q, DB>(
-    query: Statement<'q, DB>,
+pub(crate) fn bind_distribution(
+    query: Sql,
     job: &JobId,
     metric: &str,
     row: &DistributionRow,
     groups: Vec<u8>,
-) -> StoreResult<Statement<'q, DB>>
-where
-    DB: Database,
-    for<'t> i64: Encode<'t, DB> + Type<DB>,
-    for<'t> f64: Encode<'t, DB> + Type<DB>,
-    for<'t> Option<f64>: Encode<'t, DB> + Type<DB>,
-    for<'t> String: Encode<'t, DB> + Type<DB>,
-    for<'t> Vec<u8>: Encode<'t, DB> + Type<DB>,
-{
+) -> StoreResult<Sql> {
     let summary = &row.summary;
     let quantile = |key: &str| summary.quantiles.get(key).map_or(0.0, |q| q.value);
     Ok(query
@@ -543,17 +552,7 @@ pub(crate) const SELECT_DISTRIBUTION_GROUPS: &str = "SELECT groups FROM distribu
      WHERE job_id = $1 AND metric = $2 AND op_end > $3 AND op_start < $4 ORDER BY bin";
 
 /// Binds [`SELECT_DISTRIBUTION`]'s (or [`SELECT_DISTRIBUTION_GROUPS`]') parameters.
-pub(crate) fn bind_bins<'q, DB>(
-    query: Statement<'q, DB>,
-    job: &JobId,
-    metric: &str,
-    range: Operations,
-) -> Statement<'q, DB>
-where
-    DB: Database,
-    for<'t> i64: Encode<'t, DB> + Type<DB>,
-    for<'t> String: Encode<'t, DB> + Type<DB>,
-{
+pub(crate) fn bind_bins(query: Sql, job: &JobId, metric: &str, range: Operations) -> Sql {
     query
         .bind(job.to_string())
         .bind(metric.to_owned())
@@ -562,24 +561,14 @@ where
 }
 
 /// A row's groups' accumulators; `None` for a row stored before they were kept.
-pub(crate) fn groups_from_row(row: &impl ReadRow) -> StoreResult<Option<Vec<Accumulator>>> {
+pub(crate) fn groups_from_row(row: &AnyRow) -> StoreResult<Option<Vec<Accumulator>>> {
     row.maybe_bytes("groups")?
         .map(|stored| gunzip_json(GROUPS, &stored))
         .transpose()
 }
 
 /// Binds one `device_lives` row: `job_id, device, operations_to_failure, censored`.
-pub(crate) fn bind_life<'q, DB>(
-    query: Statement<'q, DB>,
-    job: &JobId,
-    life: &DeviceLife,
-) -> Statement<'q, DB>
-where
-    DB: Database,
-    for<'t> i64: Encode<'t, DB> + Type<DB>,
-    for<'t> bool: Encode<'t, DB> + Type<DB>,
-    for<'t> String: Encode<'t, DB> + Type<DB>,
-{
+pub(crate) fn bind_life(query: Sql, job: &JobId, life: &DeviceLife) -> Sql {
     query
         .bind(job.to_string())
         .bind(count_to_sql(life.device))
@@ -587,7 +576,7 @@ where
         .bind(life.censored)
 }
 
-pub(crate) fn distribution_from_row(row: &impl ReadRow) -> StoreResult<DistributionRow> {
+pub(crate) fn distribution_from_row(row: &AnyRow) -> StoreResult<DistributionRow> {
     Ok(DistributionRow {
         kind: row.text("kind")?,
         bin: row.int("bin")?,
@@ -597,7 +586,7 @@ pub(crate) fn distribution_from_row(row: &impl ReadRow) -> StoreResult<Distribut
     })
 }
 
-pub(crate) fn life_from_row(row: &impl ReadRow) -> Result<DeviceLife, sqlx::Error> {
+pub(crate) fn life_from_row(row: &AnyRow) -> Result<DeviceLife, sqlx::Error> {
     Ok(DeviceLife {
         device: count_from_sql(row, "device")?,
         operations_to_failure: count_from_sql(row, "operations_to_failure")?,
@@ -615,7 +604,7 @@ macro_rules! schedule_columns {
 
 pub(crate) use schedule_columns;
 
-pub(crate) fn schedule_from_row(row: &impl ReadRow) -> StoreResult<ScheduleRecord> {
+pub(crate) fn schedule_from_row(row: &AnyRow) -> StoreResult<ScheduleRecord> {
     Ok(ScheduleRecord {
         id: ScheduleId::from(row.text("id")?),
         owner: Owner::from_stored(row.text("owner")?),
@@ -635,17 +624,7 @@ pub(crate) fn schedule_from_row(row: &impl ReadRow) -> StoreResult<ScheduleRecor
 }
 
 /// Binds every column of [`schedule_columns`], in its order, as parameters 1 to 11.
-pub(crate) fn bind_schedule<'q, DB>(
-    query: Statement<'q, DB>,
-    schedule: &ScheduleRecord,
-) -> StoreResult<Statement<'q, DB>>
-where
-    DB: Database,
-    for<'t> i64: Encode<'t, DB> + Type<DB>,
-    for<'t> Option<i64>: Encode<'t, DB> + Type<DB>,
-    for<'t> bool: Encode<'t, DB> + Type<DB>,
-    for<'t> String: Encode<'t, DB> + Type<DB>,
-{
+pub(crate) fn bind_schedule(query: Sql, schedule: &ScheduleRecord) -> StoreResult<Sql> {
     let definition = &schedule.definition;
     Ok(query
         .bind(schedule.id.to_string())
@@ -661,7 +640,7 @@ where
         .bind(schedule.updated_at.0))
 }
 
-pub(crate) fn run_from_row(row: &impl ReadRow) -> Result<RunRecord, sqlx::Error> {
+pub(crate) fn run_from_row(row: &AnyRow) -> Result<RunRecord, sqlx::Error> {
     Ok(RunRecord {
         scheduled_for: ms(row, "scheduled_for")?,
         job_id: JobId::from(row.text("job_id")?),

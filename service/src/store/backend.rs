@@ -1,0 +1,145 @@
+//! The store, written once ([`SqlStore`]), and the few things its two databases do differently
+//! ([`Backend`]): how connections are pooled and transactions begun, the locks each takes, the
+//! clock, and what readiness checks beyond a write. Everything else (the queue, results,
+//! schedules) is one body of SQL in `queue.rs`, `results.rs` and `schedules.rs`.
+
+use super::postgres::PgBackend;
+use super::rows::Dialect;
+use super::sql::{Conn, Pooled, Sql, Tx};
+use super::sqlite::SqliteBackend;
+use super::{QueueEvent, StoreError, StoreResult};
+use crate::domain::{QueueBound, QueuedJob};
+use tokio::sync::broadcast;
+
+/// The store over either database.
+pub struct SqlStore {
+    pub(crate) backend: Backend,
+}
+
+/// SQLite (embedded, one writer connection) or PostgreSQL (a pool shared by many instances).
+pub(crate) enum Backend {
+    Sqlite(SqliteBackend),
+    Postgres(PgBackend),
+}
+
+impl SqlStore {
+    /// Opens the database a URL names, migrating it: `sqlite:` or `postgres:` (`postgresql:`).
+    pub async fn open(url: &str) -> StoreResult<Self> {
+        // Only the scheme is ever repeated back: the rest of a URL may hold a password.
+        let scheme = url.split_once(':').map_or(url, |(scheme, _)| scheme);
+        let backend = match scheme {
+            "sqlite" => Backend::Sqlite(SqliteBackend::open(url).await?),
+            "postgres" | "postgresql" => Backend::Postgres(PgBackend::open(url).await?),
+            _ => {
+                let scheme = scheme.chars().take(32).collect();
+                return Err(StoreError::UnsupportedUrl(scheme));
+            }
+        };
+        let store = SqlStore { backend };
+        store.backfill_shards().await?;
+        Ok(store)
+    }
+
+    pub(crate) fn dialect(&self) -> &'static Dialect {
+        match &self.backend {
+            Backend::Sqlite(_) => &super::sqlite::DIALECT,
+            Backend::Postgres(_) => &super::postgres::DIALECT,
+        }
+    }
+
+    /// Where writes go, once SQLite's file is still the one opened (a write to a deleted or
+    /// replaced file is refused, never acknowledged).
+    pub(crate) fn writer(&self) -> StoreResult<Conn<'_>> {
+        Ok(match &self.backend {
+            Backend::Sqlite(sqlite) => Conn::SqlitePool(sqlite.writer()?),
+            Backend::Postgres(postgres) => Conn::PostgresPool(&postgres.pool),
+        })
+    }
+
+    /// Where reads go: SQLite's read-only connections, which never wait for the writer.
+    pub(crate) fn readers(&self) -> Conn<'_> {
+        match &self.backend {
+            Backend::Sqlite(sqlite) => Conn::SqlitePool(&sqlite.readers),
+            Backend::Postgres(postgres) => Conn::PostgresPool(&postgres.pool),
+        }
+    }
+
+    /// One reading connection, for statements that must see the same database.
+    pub(crate) async fn reader(&self) -> StoreResult<Pooled> {
+        Ok(match &self.backend {
+            Backend::Sqlite(sqlite) => Pooled::Sqlite(sqlite.readers.acquire().await?),
+            Backend::Postgres(postgres) => Pooled::Postgres(postgres.pool.acquire().await?),
+        })
+    }
+
+    /// A write transaction.
+    pub(crate) async fn begin(&self) -> StoreResult<Tx> {
+        Ok(match &self.backend {
+            Backend::Sqlite(sqlite) => Tx::Sqlite(sqlite.writer()?.begin().await?),
+            Backend::Postgres(postgres) => Tx::Postgres(postgres.pool.begin().await?),
+        })
+    }
+
+    /// A write transaction that reads before it writes. SQLite takes the write lock first, so
+    /// that instances sharing the file wait on `busy_timeout` rather than fail to upgrade a read;
+    /// PostgreSQL locks the rows it reads ([`Dialect::claim`]).
+    pub(crate) async fn begin_reading_first(&self) -> StoreResult<Tx> {
+        Ok(match &self.backend {
+            Backend::Sqlite(sqlite) => {
+                Tx::Sqlite(sqlite.writer()?.begin_with("BEGIN IMMEDIATE").await?)
+            }
+            Backend::Postgres(postgres) => Tx::Postgres(postgres.pool.begin().await?),
+        })
+    }
+
+    /// Refuses to acknowledge a write that went into a SQLite file no longer at the database's
+    /// path: what it wrote is out of every later reader's reach.
+    pub(crate) fn acknowledge(&self) -> StoreResult<()> {
+        match &self.backend {
+            Backend::Sqlite(sqlite) => sqlite.acknowledge(),
+            Backend::Postgres(_) => Ok(()),
+        }
+    }
+
+    /// Serialises, until the transaction ends, every transaction that names the same `key`:
+    /// two instances retrying one request at once. SQLite's one writer already does.
+    pub(crate) async fn lock(&self, tx: &mut Tx, key: String) -> StoreResult<()> {
+        if let Backend::Postgres(_) = &self.backend {
+            Sql::new("SELECT pg_advisory_xact_lock(hashtextextended($1, 0))")
+                .bind(key)
+                .execute(tx)
+                .await?;
+        }
+        Ok(())
+    }
+
+    /// Inserts a queued job with its first shards unless the queue or the owner's share of it
+    /// is full ([`QueueBound`]), in `tx`: the count and the insert cannot race.
+    pub(crate) async fn insert_queued(
+        &self,
+        tx: &mut Tx,
+        job: &QueuedJob,
+        bound: QueueBound,
+    ) -> StoreResult<bool> {
+        match &self.backend {
+            Backend::Sqlite(_) => super::sqlite::insert_queued(tx, job, bound).await,
+            Backend::Postgres(_) => super::postgres::insert_queued(tx, job, bound).await,
+        }
+    }
+
+    /// What readiness checks before its write: SQLite's file and the disk beside it.
+    pub(crate) fn check_disk(&self, min_free_bytes: u64) -> StoreResult<()> {
+        match &self.backend {
+            Backend::Sqlite(sqlite) => sqlite.check_disk(min_free_bytes),
+            // PostgreSQL's disk is its server's to watch.
+            Backend::Postgres(_) => Ok(()),
+        }
+    }
+
+    pub(crate) fn subscribe(&self) -> Option<broadcast::Receiver<QueueEvent>> {
+        match &self.backend {
+            Backend::Sqlite(_) => None,
+            Backend::Postgres(postgres) => Some(postgres.events.subscribe()),
+        }
+    }
+}

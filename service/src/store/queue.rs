@@ -1,0 +1,690 @@
+//! The job queue, written once for both databases: submissions with their shards, leases with
+//! fencing, and the end of every job. What the two databases say differently is their
+//! [`Dialect`](super::rows::Dialect) and a few steps of [`SqlStore`]'s.
+
+use super::backend::SqlStore;
+use super::rows::{
+    Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, Dialect, FORGET_EXPIRED_KEY,
+    LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY,
+    REMEMBERED_KEY, bind_fence, bind_key, claim_from_row, count_from_sql, count_to_sql,
+    failed_too_often, fenced_shard, gave_up, insert_shards, job_columns, job_from_row, not_ended,
+    partial_to_sql, remembered_from_row, schema_current, shard_columns, shard_from_row,
+    shard_id_from_row, spec_from_json,
+};
+use super::sql::{Conn, Sql, Tx};
+use super::{
+    Claim, Fence, JobQueue, JobRecord, Lease, LeaseTerms, Page, QueueEvent, ShardRecord,
+    StoreError, StoreResult,
+};
+use crate::domain::{
+    IdempotencyKey, JobId, Once, Owner, QueueBound, QueuedJob, RetryBudget,
+    SHARD_OVERHEAD_OPERATIONS, ShardPlan, UnixMs, first_shards, retry_backoff_ms,
+};
+use async_trait::async_trait;
+use bouncewear_model::Pointer;
+use bouncewear_model::montecarlo::Job;
+use bouncewear_model::montecarlo::engine::GroupStats;
+use tokio::sync::broadcast;
+
+// ---- idempotency keys ----------------------------------------------------------------------
+
+impl SqlStore {
+    /// In the caller's transaction, first (two retries of one request never both miss the key):
+    /// forgets the key if it expired, then reads what it created (fingerprint, id).
+    pub(crate) async fn remembered(
+        &self,
+        tx: &mut Tx,
+        owner: &Owner,
+        collection: &str,
+        key: &IdempotencyKey,
+        now: UnixMs,
+    ) -> StoreResult<Option<(String, String)>> {
+        self.lock(tx, format!("{}/{collection}/{}", owner.as_str(), key.key))
+            .await?;
+        Sql::new(FORGET_EXPIRED_KEY)
+            .bind(owner.as_str())
+            .bind(collection)
+            .bind(key.key.as_str())
+            .bind(IdempotencyKey::expired_before(now).0)
+            .execute(&mut *tx)
+            .await?;
+        let row = Sql::new(REMEMBERED_KEY)
+            .bind(owner.as_str())
+            .bind(collection)
+            .bind(key.key.as_str())
+            .fetch_optional(&mut *tx)
+            .await?;
+        Ok(row.as_ref().map(remembered_from_row).transpose()?)
+    }
+
+    /// Cuts jobs queued or running before shards existed (migration 0005) into their first
+    /// batch's shards; a job that was running starts again from its first shard.
+    pub(crate) async fn backfill_shards(&self) -> StoreResult<()> {
+        let rows = Sql::new(
+            "SELECT id, spec FROM jobs j WHERE status IN ('queued', 'running') \
+             AND NOT EXISTS (SELECT 1 FROM shards s WHERE s.job_id = j.id)",
+        )
+        .fetch_all(self.writer()?)
+        .await?;
+        for row in rows {
+            let id = JobId::from(row.text("id")?);
+            let spec = spec_from_json(&row.text("spec")?)?;
+            let mut tx = self.begin().await?;
+            match Job::new(spec, || 0, &Pointer::root()) {
+                Ok(job) => {
+                    Sql::new(
+                        "UPDATE jobs SET status = 'queued', operations_done = 0 WHERE id = $1",
+                    )
+                    .bind(id.as_str())
+                    .execute(&mut tx)
+                    .await?;
+                    insert_shards(&mut tx, &id, &first_shards(&job)).await?;
+                }
+                Err(invalid) => {
+                    Sql::new("UPDATE jobs SET status = 'failed', error = $2 WHERE id = $1")
+                        .bind(id.as_str())
+                        .bind(format!("the stored job no longer validates: {invalid}"))
+                        .execute(&mut tx)
+                        .await?;
+                }
+            }
+            tx.commit().await?;
+        }
+        Ok(())
+    }
+}
+
+pub(crate) async fn remember(
+    tx: &mut Tx,
+    owner: &Owner,
+    created: Created<'_>,
+    key: &IdempotencyKey,
+    now: UnixMs,
+) -> StoreResult<()> {
+    bind_key(Sql::new(REMEMBER_KEY), owner, created, key, now)
+        .execute(&mut *tx)
+        .await?;
+    Ok(())
+}
+
+// ---- jobs ----------------------------------------------------------------------------------
+
+/// Sets the job's progress to the sum over its shards.
+async fn sum_progress(tx: &mut Tx, job: &JobId) -> StoreResult<()> {
+    Sql::new(
+        "UPDATE jobs SET operations_done = (SELECT COALESCE(SUM(operations_done), 0) FROM shards WHERE job_id = $1), \
+         operations_total = (SELECT CASE WHEN COALESCE(SUM(operations_total), 0) > jobs.operations_total \
+             THEN SUM(operations_total) ELSE jobs.operations_total END FROM shards WHERE job_id = $1) \
+         WHERE id = $1",
+    )
+    .bind(job.as_str())
+    .execute(&mut *tx)
+    .await?;
+    Ok(())
+}
+
+const SELECT_JOB: &str = concat!(
+    "SELECT ",
+    job_columns!(),
+    " FROM jobs WHERE id = $1 AND owner = $2"
+);
+
+pub(crate) async fn select_job(
+    on: impl Into<Conn<'_>>,
+    owner: &Owner,
+    id: &JobId,
+) -> StoreResult<JobRecord> {
+    let row = Sql::new(SELECT_JOB)
+        .bind(id.as_str())
+        .bind(owner.as_str())
+        .fetch_optional(on)
+        .await?
+        .ok_or_else(|| StoreError::job_not_found(id))?;
+    Ok(job_from_row(&row)?)
+}
+
+fn fenced(sql: &'static str, fence: &Fence) -> Sql {
+    bind_fence(Sql::new(sql), fence)
+}
+
+/// Marks the claim's shard done, if the claim still holds it.
+pub(crate) async fn finish_shard(tx: &mut Tx, fence: &Fence) -> StoreResult<bool> {
+    let updated = fenced(
+        concat!(
+            "UPDATE shards SET status = 'done', lease_owner = NULL, lease_until = NULL WHERE ",
+            fenced_shard!()
+        ),
+        fence,
+    )
+    .execute(&mut *tx)
+    .await?;
+    Ok(updated == 1)
+}
+
+/// Ends a job that has not ended yet as failed, with the reason, dropping its groups' accumulators.
+async fn end_job(tx: &mut Tx, job: &JobId, now: UnixMs, error: &str) -> StoreResult<()> {
+    Sql::new(
+        "UPDATE jobs SET status = 'failed', finished_at = $2, error = $3 WHERE id = $1 AND status IN ('queued', 'running')",
+    )
+    .bind(job.as_str())
+    .bind(now.0)
+    .bind(error)
+    .execute(&mut *tx)
+    .await?;
+    drop_unfinished(tx, job).await
+}
+
+/// Whether the claim still holds its shard, locking the job's row against ending for the rest of
+/// the transaction.
+pub(crate) async fn holds(dialect: &Dialect, tx: &mut Tx, fence: &Fence) -> StoreResult<bool> {
+    Ok(fenced(dialect.holds, fence)
+        .fetch_optional(&mut *tx)
+        .await?
+        .is_some())
+}
+
+/// Drops what an unfinished run of a job that ended left: its groups' accumulators, and the rows
+/// of a merge step that stopped while it wrote them.
+async fn drop_unfinished(tx: &mut Tx, job: &JobId) -> StoreResult<()> {
+    drop_partials(tx, job).await?;
+    for delete in [
+        "UPDATE jobs SET stored_bytes = octet_length(spec) WHERE id = $1",
+        "DELETE FROM distributions WHERE job_id = $1",
+        "DELETE FROM device_lives WHERE job_id = $1",
+    ] {
+        Sql::new(delete)
+            .bind(job.as_str())
+            .execute(&mut *tx)
+            .await?;
+    }
+    Ok(())
+}
+
+/// Drops a job's groups' accumulators: it ended, and they will never be merged.
+pub(crate) async fn drop_partials(tx: &mut Tx, job: &JobId) -> StoreResult<()> {
+    Sql::new("UPDATE shards SET partial = NULL WHERE job_id = $1 AND partial IS NOT NULL")
+        .bind(job.as_str())
+        .execute(&mut *tx)
+        .await?;
+    Ok(())
+}
+
+/// `at`, or the database's clock.
+async fn now_or(dialect: &Dialect, tx: &mut Tx, at: Option<UnixMs>) -> StoreResult<UnixMs> {
+    match at {
+        Some(at) => Ok(at),
+        None => Ok(UnixMs(
+            Sql::new(dialect.now)
+                .fetch_one(&mut *tx)
+                .await?
+                .int("now")?,
+        )),
+    }
+}
+
+/// Fails every job one of whose shards lost its lease once more than `retries` allow, with the
+/// reason.
+async fn give_up_on_exhausted(tx: &mut Tx, now: UnixMs, retries: u64) -> StoreResult<()> {
+    let exhausted = Sql::new(
+        "SELECT s.job_id, s.batch, s.grp FROM shards s JOIN jobs j ON j.id = s.job_id \
+         WHERE s.status = 'running' AND s.lease_until < $1 AND s.lost_leases >= $2 AND j.status IN ('queued', 'running')",
+    )
+    .bind(now.0)
+    .bind(count_to_sql(retries))
+    .fetch_all(&mut *tx)
+    .await?;
+    for row in exhausted {
+        let job = JobId::from(row.text("job_id")?);
+        let reason = gave_up(retries, shard_id_from_row(&row)?);
+        end_job(tx, &job, now, &reason).await?;
+    }
+    Ok(())
+}
+
+#[async_trait]
+impl JobQueue for SqlStore {
+    #[tracing::instrument(skip_all, fields(job = %job.id))]
+    async fn insert_job(
+        &self,
+        job: QueuedJob,
+        bound: QueueBound,
+    ) -> StoreResult<Option<JobRecord>> {
+        let mut tx = self.begin().await?;
+        if !self.insert_queued(&mut tx, &job, bound).await? {
+            tx.rollback().await?;
+            return Ok(None);
+        }
+        let record = select_job(&mut tx, &job.owner, &job.id).await?;
+        tx.commit().await?;
+        self.acknowledge()?;
+        Ok(Some(record))
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %job.id))]
+    async fn insert_job_once(
+        &self,
+        job: QueuedJob,
+        bound: QueueBound,
+        key: &IdempotencyKey,
+        now: UnixMs,
+    ) -> StoreResult<Option<Once<JobRecord>>> {
+        let mut tx = self.begin().await?;
+        if let Some((fingerprint, id)) = self
+            .remembered(&mut tx, &job.owner, "jobs", key, now)
+            .await?
+        {
+            let once = if fingerprint == key.fingerprint {
+                Once::Replayed(select_job(&mut tx, &job.owner, &JobId::from(id)).await?)
+            } else {
+                Once::KeyReused
+            };
+            tx.commit().await?;
+            return Ok(Some(once));
+        }
+        if !self.insert_queued(&mut tx, &job, bound).await? {
+            tx.rollback().await?;
+            return Ok(None);
+        }
+        remember(&mut tx, &job.owner, Created::Job(&job.id), key, now).await?;
+        let record = select_job(&mut tx, &job.owner, &job.id).await?;
+        tx.commit().await?;
+        self.acknowledge()?;
+        Ok(Some(Once::Created(record)))
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn job(&self, owner: &Owner, id: &JobId) -> StoreResult<JobRecord> {
+        select_job(self.readers(), owner, id).await
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn jobs(&self, owner: &Owner, page: Page) -> StoreResult<Vec<JobRecord>> {
+        let rows = Sql::new(concat!(
+            "SELECT ",
+            job_columns!(),
+            " FROM jobs WHERE owner = $1 AND seq < $2 ORDER BY seq DESC LIMIT $3"
+        ))
+        .bind(owner.as_str())
+        .bind(page.before.unwrap_or(i64::MAX))
+        .bind(i64::from(page.limit))
+        .fetch_all(self.readers())
+        .await?;
+        Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn live_jobs(&self, after: i64) -> StoreResult<(Vec<JobRecord>, i64)> {
+        let mut connection = self.reader().await?;
+        let newest = Sql::new("SELECT COALESCE(MAX(seq), 0) AS newest FROM jobs")
+            .fetch_one(&mut connection)
+            .await?
+            .int("newest")?;
+        // Two arms, so that each reads an index: the active jobs by status, the new ones by seq.
+        let rows = Sql::new(concat!(
+            "SELECT ",
+            job_columns!(),
+            " FROM jobs WHERE status IN ('queued', 'running') \
+             UNION ALL SELECT ",
+            job_columns!(),
+            " FROM jobs WHERE seq > $1 AND status NOT IN ('queued', 'running') \
+             ORDER BY seq"
+        ))
+        .bind(after)
+        .fetch_all(&mut connection)
+        .await?;
+        let jobs = rows.iter().map(job_from_row).collect::<Result<_, _>>()?;
+        Ok((jobs, newest))
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord> {
+        let row = Sql::new(concat!(
+            "UPDATE jobs SET status = 'cancelled', finished_at = $3 \
+             WHERE id = $1 AND owner = $2 AND status IN ('queued', 'running') RETURNING ",
+            job_columns!()
+        ))
+        .bind(id.as_str())
+        .bind(owner.as_str())
+        .bind(now.0)
+        .fetch_optional(self.writer()?)
+        .await?;
+        if let Some(row) = row {
+            let mut tx = self.begin().await?;
+            drop_unfinished(&mut tx, id).await?;
+            tx.commit().await?;
+            return Ok(job_from_row(&row)?);
+        }
+        let ended = select_job(self.writer()?, owner, id).await?;
+        Err(StoreError::Conflict(format!(
+            "job {id} already ended: {}",
+            ended.status.as_str()
+        )))
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn delete_job(&self, owner: &Owner, id: &JobId) -> StoreResult<()> {
+        let mut tx = self.begin().await?;
+        let deleted = Sql::new(DELETE_ENDED_JOB)
+            .bind(id.as_str())
+            .bind(owner.as_str())
+            .execute(&mut tx)
+            .await?;
+        if deleted == 0 {
+            let job = select_job(&mut tx, owner, id).await?;
+            return Err(not_ended(&job));
+        }
+        Sql::new(DELETE_RUN_OF_JOB)
+            .bind(id.as_str())
+            .execute(&mut tx)
+            .await?;
+        tx.commit().await?;
+        Ok(())
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn prune_jobs(&self, ended_before: UnixMs) -> StoreResult<u64> {
+        let mut tx = self.begin().await?;
+        Sql::new(PRUNE_RUNS)
+            .bind(ended_before.0)
+            .execute(&mut tx)
+            .await?;
+        let deleted = Sql::new(PRUNE_JOBS)
+            .bind(ended_before.0)
+            .execute(&mut tx)
+            .await?;
+        tx.commit().await?;
+        Ok(deleted)
+    }
+
+    #[tracing::instrument(skip_all, fields(worker))]
+    async fn claim(
+        &self,
+        worker: &str,
+        terms: LeaseTerms,
+        budget: RetryBudget,
+    ) -> StoreResult<Option<Claim>> {
+        let mut tx = self.begin_reading_first().await?;
+        let now = now_or(self.dialect(), &mut tx, terms.at).await?;
+        give_up_on_exhausted(&mut tx, now, budget.lost_leases).await?;
+        // Fair share: the job with the least virtual start time (docs/contract.md "Fair share");
+        // in a job, shards in order.
+        let claimed = Sql::new(self.dialect().claim)
+            .bind(worker)
+            .bind(now.0)
+            .bind(terms.duration_ms)
+            .fetch_optional(&mut tx)
+            .await?;
+        let Some(claimed) = claimed else {
+            tx.commit().await?;
+            return Ok(None);
+        };
+        let job = JobId::from(claimed.text("job_id")?);
+        // The job runs from its first claim, and is charged its shard's cost at each (fair share).
+        Sql::new(
+            "UPDATE jobs SET status = CASE WHEN status = 'queued' THEN 'running' ELSE status END, \
+             started_at = COALESCE(started_at, $2), vstart = vtime, vtime = vtime + $3 WHERE id = $1",
+        )
+        .bind(job.as_str())
+        .bind(now.0)
+        .bind(claimed.int("operations_total")? + SHARD_OVERHEAD_OPERATIONS)
+        .execute(&mut tx)
+        .await?;
+        sum_progress(&mut tx, &job).await?;
+        let row = Sql::new(
+            "SELECT s.job_id, s.batch, s.grp, s.attempt, s.operations_total, j.spec, j.started_at \
+             FROM shards s JOIN jobs j ON j.id = s.job_id WHERE s.job_id = $1 AND s.batch = $2 AND s.grp = $3",
+        )
+        .bind(job.as_str())
+        .bind(claimed.int("batch")?)
+        .bind(claimed.int("grp")?)
+        .fetch_one(&mut tx)
+        .await?;
+        tx.commit().await?;
+        claim_from_row(&row).map(Some)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
+    async fn heartbeat(
+        &self,
+        fence: &Fence,
+        terms: LeaseTerms,
+        operations_done: u64,
+    ) -> StoreResult<Lease> {
+        let mut tx = self.begin().await?;
+        let now = now_or(self.dialect(), &mut tx, terms.at).await?;
+        let updated = fenced(
+            concat!(
+                "UPDATE shards SET lease_until = $5 + $6, operations_done = $7 WHERE ",
+                fenced_shard!()
+            ),
+            fence,
+        )
+        .bind(now.0)
+        .bind(terms.duration_ms)
+        .bind(count_to_sql(operations_done))
+        .execute(&mut tx)
+        .await?;
+        if updated == 1 {
+            sum_progress(&mut tx, &fence.job).await?;
+            tx.commit().await?;
+            return Ok(Lease::Held);
+        }
+        let status = Sql::new("SELECT status FROM jobs WHERE id = $1")
+            .bind(fence.job.as_str())
+            .fetch_optional(&mut tx)
+            .await?
+            .map(|row| row.text("status"))
+            .transpose()?;
+        tx.commit().await?;
+        Ok(if status.as_deref() == Some("running") {
+            Lease::Lost
+        } else {
+            Lease::Cancelled
+        })
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
+    async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool> {
+        let partial = partial_to_sql(stats)?;
+        let partial_bytes = partial.len() as u64;
+        let mut tx = self.begin().await?;
+        let updated = fenced(
+            concat!(
+                "UPDATE shards SET status = 'done', partial = $5, operations_done = operations_total, \
+                 lease_owner = NULL, lease_until = NULL WHERE ",
+                fenced_shard!()
+            ),
+            fence,
+        )
+        .bind(partial)
+        .execute(&mut tx)
+        .await?;
+        if updated == 0 {
+            tx.rollback().await?;
+            return Ok(false);
+        }
+        Sql::new("UPDATE jobs SET stored_bytes = stored_bytes + $2 WHERE id = $1")
+            .bind(fence.job.as_str())
+            .bind(count_to_sql(partial_bytes))
+            .execute(&mut tx)
+            .await?;
+        sum_progress(&mut tx, &fence.job).await?;
+        tx.commit().await?;
+        Ok(true)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
+    async fn add_batch(
+        &self,
+        fence: &Fence,
+        shards: &[ShardPlan],
+        folded: &[GroupStats],
+    ) -> StoreResult<bool> {
+        let folded = folded
+            .iter()
+            .map(partial_to_sql)
+            .collect::<StoreResult<Vec<_>>>()?;
+        let mut tx = self.begin().await?;
+        if !finish_shard(&mut tx, fence).await? {
+            tx.rollback().await?;
+            return Ok(false);
+        }
+        let batch = count_to_sql(fence.shard.batch);
+        for (group, partial) in folded.into_iter().enumerate() {
+            Sql::new(
+                "UPDATE shards SET partial = $4 WHERE job_id = $1 AND batch = $2 AND grp = $3",
+            )
+            .bind(fence.job.as_str())
+            .bind(batch)
+            .bind(count_to_sql(group as u64))
+            .bind(partial)
+            .execute(&mut tx)
+            .await?;
+        }
+        Sql::new("UPDATE shards SET partial = NULL WHERE job_id = $1 AND batch < $2 AND partial IS NOT NULL")
+            .bind(fence.job.as_str())
+            .bind(batch)
+            .execute(&mut tx)
+            .await?;
+        Sql::new(
+            "UPDATE jobs SET stored_bytes = octet_length(spec) + \
+             (SELECT COALESCE(SUM(octet_length(partial)), 0) FROM shards WHERE job_id = $1) WHERE id = $1",
+        )
+        .bind(fence.job.as_str())
+        .execute(&mut tx)
+        .await?;
+        insert_shards(&mut tx, &fence.job, shards).await?;
+        sum_progress(&mut tx, &fence.job).await?;
+        tx.commit().await?;
+        Ok(true)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
+    async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool> {
+        let mut tx = self.begin().await?;
+        if !finish_shard(&mut tx, fence).await? {
+            tx.rollback().await?;
+            return Ok(false);
+        }
+        end_job(&mut tx, &fence.job, now, error).await?;
+        tx.commit().await?;
+        Ok(true)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
+    async fn fail_attempt(
+        &self,
+        fence: &Fence,
+        at: Option<UnixMs>,
+        error: &str,
+        retries: u64,
+    ) -> StoreResult<bool> {
+        let mut tx = self.begin().await?;
+        let now = now_or(self.dialect(), &mut tx, at).await?;
+        let failures: Option<i64> = fenced(
+            concat!(
+                "UPDATE shards SET status = 'queued', failures = failures + 1, error = $5, operations_done = 0, \
+                 history = history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): failed: ' || $5 || '\n', \
+                 lease_owner = NULL, lease_until = NULL WHERE ",
+                fenced_shard!(),
+                " RETURNING failures"
+            ),
+            fence,
+        )
+        .bind(error)
+        .fetch_optional(&mut tx)
+        .await?
+        .map(|row| row.int("failures"))
+        .transpose()?;
+        let Some(failures) = failures else {
+            tx.rollback().await?;
+            return Ok(false);
+        };
+        let failures = failures.max(0) as u64;
+        if failures > retries {
+            let reason = failed_too_often(retries, fence.shard, failures, error);
+            end_job(&mut tx, &fence.job, now, &reason).await?;
+        } else {
+            Sql::new(
+                "UPDATE shards SET retry_at = $4 WHERE job_id = $1 AND batch = $2 AND grp = $3",
+            )
+            .bind(fence.job.as_str())
+            .bind(count_to_sql(fence.shard.batch))
+            .bind(fence.shard.group.map_or(-1, count_to_sql))
+            .bind(now.0 + retry_backoff_ms(failures))
+            .execute(&mut tx)
+            .await?;
+            sum_progress(&mut tx, &fence.job).await?;
+        }
+        tx.commit().await?;
+        Ok(true)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
+    async fn release(&self, fence: &Fence) -> StoreResult<bool> {
+        let mut tx = self.begin().await?;
+        let updated = fenced(
+            concat!(
+                "UPDATE shards SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 WHERE ",
+                fenced_shard!()
+            ),
+            fence,
+        )
+        .execute(&mut tx)
+        .await?;
+        sum_progress(&mut tx, &fence.job).await?;
+        tx.commit().await?;
+        Ok(updated == 1)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn shards(&self, id: &JobId) -> StoreResult<Vec<ShardRecord>> {
+        let rows = Sql::new(concat!(
+            "SELECT ",
+            shard_columns!(),
+            " FROM shards WHERE job_id = $1 ORDER BY batch, grp < 0, grp"
+        ))
+        .bind(id.as_str())
+        .fetch_all(self.readers())
+        .await?;
+        Ok(rows.iter().map(shard_from_row).collect::<Result<_, _>>()?)
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn queue_depth(&self) -> StoreResult<(u64, u64)> {
+        let row = Sql::new(
+            "SELECT COUNT(*) FILTER (WHERE status = 'queued') AS queued, \
+             COUNT(*) FILTER (WHERE status = 'running') AS running FROM jobs",
+        )
+        .fetch_one(self.readers())
+        .await?;
+        Ok((
+            count_from_sql(&row, "queued")?,
+            count_from_sql(&row, "running")?,
+        ))
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn ping(&self) -> StoreResult<()> {
+        Sql::new("SELECT 1").execute(self.readers()).await?;
+        Ok(())
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn ready(&self, min_free_disk_bytes: u64, now: UnixMs) -> StoreResult<()> {
+        self.check_disk(min_free_disk_bytes)?;
+        Sql::new(READINESS_WRITE)
+            .bind(now.0)
+            .execute(self.writer()?)
+            .await?;
+        let applied = Sql::new(LATEST_APPLIED_MIGRATION)
+            .fetch_one(self.readers())
+            .await?
+            .maybe_int("version")?;
+        schema_current(self.dialect().migrator, applied)
+    }
+
+    fn events(&self) -> Option<broadcast::Receiver<QueueEvent>> {
+        self.subscribe()
+    }
+}

@@ -1,0 +1,184 @@
+//! What a succeeded job leaves, written once for both databases: its Result, one row per
+//! (metric, bin) with its groups' accumulators, and each listed device's life.
+
+use super::backend::SqlStore;
+use super::queue::{drop_partials, finish_shard, holds};
+use super::rows::{
+    self, INSERT_DISTRIBUTION, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, SELECT_PARTIALS,
+    bind_bins, bind_distribution, bind_life, collect_partials, count_from_sql, count_to_sql,
+    distribution_from_row, distribution_rows, groups_from_row, life_from_row, row_groups_to_sql,
+    to_json,
+};
+use super::sql::Sql;
+use super::{DistributionRow, Fence, Operations, Results, StoreResult};
+use crate::domain::{JobId, ShardId, UnixMs};
+use async_trait::async_trait;
+use bouncewear_model::montecarlo::engine::GroupStats;
+use bouncewear_model::montecarlo::{DeviceLife, JobResult, RunGroups};
+use bouncewear_model::stats::Accumulator;
+
+impl SqlStore {
+    /// Writes a result's distribution rows and listed device lives in short transactions of
+    /// bounded size ([`rows::DISTRIBUTIONS_PER_WRITE`], [`rows::LIVES_PER_WRITE`]), each only while
+    /// the claim holds the merge step, so that no result holds the database for long. A merge that
+    /// stops midway leaves rows that its rerun writes again, the same (the job is deterministic),
+    /// or that ending the job drops. The bytes written (see [`super::JobRecord::stored_bytes`]); `None`
+    /// once the claim no longer holds.
+    async fn write_rows(
+        &self,
+        fence: &Fence,
+        result: &JobResult,
+        groups: &RunGroups,
+    ) -> StoreResult<Option<u64>> {
+        let distributions: Vec<_> = distribution_rows(result).collect();
+        let mut bytes = 0;
+        for chunk in distributions.chunks(rows::DISTRIBUTIONS_PER_WRITE) {
+            let mut tx = self.begin().await?;
+            if !holds(self.dialect(), &mut tx, fence).await? {
+                tx.rollback().await?;
+                return Ok(None);
+            }
+            for (metric, row) in chunk {
+                bytes += to_json("summary", &row.summary)?.len() as u64;
+                let stored = row_groups_to_sql(groups, metric, row)?;
+                bytes += stored.len() as u64;
+                bind_distribution(
+                    Sql::new(INSERT_DISTRIBUTION),
+                    &fence.job,
+                    metric,
+                    row,
+                    stored,
+                )?
+                .execute(&mut tx)
+                .await?;
+            }
+            tx.commit().await?;
+        }
+        let lives = result
+            .life
+            .as_ref()
+            .map_or(&[][..], |life| &life.devices[..]);
+        for chunk in lives.chunks(rows::LIVES_PER_WRITE) {
+            let mut tx = self.begin().await?;
+            if !holds(self.dialect(), &mut tx, fence).await? {
+                tx.rollback().await?;
+                return Ok(None);
+            }
+            bytes += chunk.len() as u64 * rows::LIFE_ROW_BYTES;
+            for life in chunk {
+                let insert = Sql::new(
+                    "INSERT INTO device_lives (job_id, device, operations_to_failure, censored) VALUES ($1, $2, $3, $4) ON CONFLICT DO NOTHING",
+                );
+                bind_life(insert, &fence.job, life).execute(&mut tx).await?;
+            }
+            tx.commit().await?;
+        }
+        Ok(Some(bytes))
+    }
+}
+
+#[async_trait]
+impl Results for SqlStore {
+    #[tracing::instrument(skip_all, fields(job = %fence.job))]
+    async fn succeed(
+        &self,
+        fence: &Fence,
+        finished_at: UnixMs,
+        result: &JobResult,
+        groups: &RunGroups,
+    ) -> StoreResult<Option<u64>> {
+        let text = to_json("result", result)?;
+        let Some(row_bytes) = self.write_rows(fence, result, groups).await? else {
+            return Ok(None);
+        };
+        let result_bytes = text.len() as u64 + row_bytes;
+        let mut tx = self.begin().await?;
+        if !finish_shard(&mut tx, fence).await? {
+            tx.rollback().await?;
+            return Ok(None);
+        }
+        let stored = Sql::new(
+            "UPDATE jobs SET status = 'succeeded', finished_at = $2, operations_done = operations_total, \
+             stored_bytes = octet_length(spec) + $3 WHERE id = $1 RETURNING stored_bytes",
+        )
+        .bind(fence.job.as_str())
+        .bind(finished_at.0)
+        .bind(count_to_sql(result_bytes))
+        .fetch_one(&mut tx)
+        .await?;
+        let stored_bytes = count_from_sql(&stored, "stored_bytes")?;
+        drop_partials(&mut tx, &fence.job).await?;
+        Sql::new("INSERT INTO results (job_id, result) VALUES ($1, $2)")
+            .bind(fence.job.as_str())
+            .bind(text)
+            .execute(&mut tx)
+            .await?;
+        tx.commit().await?;
+        Ok(Some(stored_bytes))
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn partials(&self, id: &JobId) -> StoreResult<Vec<(ShardId, GroupStats)>> {
+        collect_partials(
+            Sql::new(SELECT_PARTIALS)
+                .bind(id.as_str())
+                .fetch(self.readers()),
+        )
+        .await
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>> {
+        Sql::new("SELECT result FROM results WHERE job_id = $1")
+            .bind(id.as_str())
+            .fetch_optional(self.readers())
+            .await?
+            .map(|row| Ok(row.text("result")?))
+            .transpose()
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id, metric))]
+    async fn distribution(
+        &self,
+        id: &JobId,
+        metric: &str,
+        range: Operations,
+    ) -> StoreResult<Vec<DistributionRow>> {
+        let rows = bind_bins(Sql::new(SELECT_DISTRIBUTION), id, metric, range)
+            .fetch_all(self.readers())
+            .await?;
+        rows.iter().map(distribution_from_row).collect()
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id, metric))]
+    async fn distribution_groups(
+        &self,
+        id: &JobId,
+        metric: &str,
+        range: Operations,
+    ) -> StoreResult<Vec<Option<Vec<Accumulator>>>> {
+        let rows = bind_bins(Sql::new(SELECT_DISTRIBUTION_GROUPS), id, metric, range)
+            .fetch_all(self.readers())
+            .await?;
+        rows.iter().map(groups_from_row).collect()
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn lives_page(
+        &self,
+        id: &JobId,
+        after: Option<u64>,
+        limit: u32,
+    ) -> StoreResult<Vec<DeviceLife>> {
+        let rows = Sql::new(
+            "SELECT device, operations_to_failure, censored FROM device_lives \
+             WHERE job_id = $1 AND device > $2 ORDER BY device LIMIT $3",
+        )
+        .bind(id.as_str())
+        .bind(after.map_or(-1, count_to_sql))
+        .bind(i64::from(limit))
+        .fetch_all(self.readers())
+        .await?;
+        Ok(rows.iter().map(life_from_row).collect::<Result<_, _>>()?)
+    }
+}

@@ -1,0 +1,187 @@
+//! Schedules and their runs, written once for both databases.
+
+use super::backend::SqlStore;
+use super::queue::{remember, select_job};
+use super::rows::{Created, bind_schedule, run_from_row, schedule_columns, schedule_from_row};
+use super::sql::Sql;
+use super::{NewRun, RunRecord, RunSlot, ScheduleRecord, Schedules, StoreError, StoreResult};
+use crate::domain::{IdempotencyKey, Once, Owner, QueueBound, QueuedJob, ScheduleId, UnixMs};
+use async_trait::async_trait;
+
+const INSERT_SCHEDULE: &str = concat!(
+    "INSERT INTO schedules (",
+    schedule_columns!(),
+    ") VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)"
+);
+
+#[async_trait]
+impl Schedules for SqlStore {
+    #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
+    async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
+        bind_schedule(Sql::new(INSERT_SCHEDULE), schedule)?
+            .execute(self.writer()?)
+            .await?;
+        Ok(())
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
+    async fn insert_schedule_once(
+        &self,
+        schedule: &ScheduleRecord,
+        key: &IdempotencyKey,
+        now: UnixMs,
+    ) -> StoreResult<Once<ScheduleRecord>> {
+        let owner = &schedule.owner;
+        let mut tx = self.begin().await?;
+        if let Some((fingerprint, id)) = self
+            .remembered(&mut tx, owner, "schedules", key, now)
+            .await?
+        {
+            tx.commit().await?;
+            if fingerprint != key.fingerprint {
+                return Ok(Once::KeyReused);
+            }
+            return Ok(Once::Replayed(
+                self.schedule(owner, &ScheduleId::from(id)).await?,
+            ));
+        }
+        bind_schedule(Sql::new(INSERT_SCHEDULE), schedule)?
+            .execute(&mut tx)
+            .await?;
+        remember(&mut tx, owner, Created::Schedule(&schedule.id), key, now).await?;
+        tx.commit().await?;
+        Ok(Once::Created(schedule.clone()))
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %id))]
+    async fn schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<ScheduleRecord> {
+        let row = Sql::new(concat!(
+            "SELECT ",
+            schedule_columns!(),
+            " FROM schedules WHERE id = $1 AND owner = $2"
+        ))
+        .bind(id.as_str())
+        .bind(owner.as_str())
+        .fetch_optional(self.writer()?)
+        .await?
+        .ok_or_else(|| StoreError::schedule_not_found(id))?;
+        schedule_from_row(&row)
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn schedules(&self, owner: &Owner) -> StoreResult<Vec<ScheduleRecord>> {
+        let rows = Sql::new(concat!(
+            "SELECT ",
+            schedule_columns!(),
+            " FROM schedules WHERE owner = $1 ORDER BY seq"
+        ))
+        .bind(owner.as_str())
+        .fetch_all(self.readers())
+        .await?;
+        rows.iter().map(schedule_from_row).collect()
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
+    async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
+        let update = Sql::new(
+            "UPDATE schedules SET name = $3, cron = $4, time_zone = $5, template = $6, statistics = $7, \
+             enabled = $8, next_run_at = $9, created_at = $10, updated_at = $11 WHERE id = $1 AND owner = $2",
+        );
+        let updated = bind_schedule(update, schedule)?
+            .execute(self.writer()?)
+            .await?;
+        if updated == 0 {
+            return Err(StoreError::schedule_not_found(&schedule.id));
+        }
+        Ok(())
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %id))]
+    async fn delete_schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<()> {
+        let deleted = Sql::new("DELETE FROM schedules WHERE id = $1 AND owner = $2")
+            .bind(id.as_str())
+            .bind(owner.as_str())
+            .execute(self.writer()?)
+            .await?;
+        if deleted == 0 {
+            return Err(StoreError::schedule_not_found(id));
+        }
+        Ok(())
+    }
+
+    #[tracing::instrument(skip_all)]
+    async fn due_schedules(&self, now: UnixMs) -> StoreResult<Vec<ScheduleRecord>> {
+        let rows = Sql::new(concat!(
+            "SELECT ",
+            schedule_columns!(),
+            " FROM schedules WHERE enabled = TRUE AND next_run_at <= $1 ORDER BY next_run_at"
+        ))
+        .bind(now.0)
+        .fetch_all(self.writer()?)
+        .await?;
+        rows.iter().map(schedule_from_row).collect()
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %slot.schedule, job = %job.id))]
+    async fn create_run(
+        &self,
+        slot: RunSlot<'_>,
+        job: QueuedJob,
+        bound: QueueBound,
+    ) -> StoreResult<NewRun> {
+        let mut tx = self.begin().await?;
+        // Claim the slot first: the primary key decides who runs this night.
+        let claimed = Sql::new(
+            "INSERT INTO schedule_runs (schedule_id, scheduled_for, job_id, manual) VALUES ($1, $2, $3, $4) \
+             ON CONFLICT DO NOTHING",
+        )
+        .bind(slot.schedule.as_str())
+        .bind(slot.scheduled_for.0)
+        .bind(job.id.as_str())
+        .bind(slot.manual)
+        .execute(&mut tx)
+        .await?;
+        if claimed == 0 {
+            tx.rollback().await?;
+            return Ok(NewRun::AlreadyExists);
+        }
+        if !self.insert_queued(&mut tx, &job, bound).await? {
+            tx.rollback().await?;
+            return Ok(NewRun::QueueFull);
+        }
+        let record = select_job(&mut tx, &job.owner, &job.id).await?;
+        tx.commit().await?;
+        Ok(NewRun::Created(record))
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %id))]
+    async fn advance_schedule(
+        &self,
+        id: &ScheduleId,
+        from: Option<UnixMs>,
+        to: Option<UnixMs>,
+    ) -> StoreResult<bool> {
+        let updated = Sql::new(
+            "UPDATE schedules SET next_run_at = $3 WHERE id = $1 AND next_run_at IS NOT DISTINCT FROM $2",
+        )
+        .bind(id.as_str())
+        .bind(from.map(|t| t.0))
+        .bind(to.map(|t| t.0))
+        .execute(self.writer()?)
+        .await?;
+        Ok(updated == 1)
+    }
+
+    #[tracing::instrument(skip_all, fields(schedule = %schedule))]
+    async fn runs(&self, schedule: &ScheduleId, limit: u32) -> StoreResult<Vec<RunRecord>> {
+        let rows = Sql::new(
+            "SELECT r.scheduled_for, r.job_id, r.manual, j.status FROM schedule_runs r JOIN jobs j ON j.id = r.job_id \
+             WHERE r.schedule_id = $1 ORDER BY r.scheduled_for DESC LIMIT $2",
+        )
+        .bind(schedule.as_str())
+        .bind(i64::from(limit))
+        .fetch_all(self.readers())
+        .await?;
+        Ok(rows.iter().map(run_from_row).collect::<Result<_, _>>()?)
+    }
+}

@@ -1,0 +1,254 @@
+//! One statement, run on either database: the store's SQL is written once, with `$N` placeholders
+//! (which SQLite reads as PostgreSQL does), its arguments collected as plain values ([`Sql`]) and
+//! bound on whichever connection runs it ([`Conn`]). Rows come back as [`AnyRow`], read through
+//! by column name. This is the only place that names both databases' sqlx types.
+
+use super::StoreResult;
+use futures_util::stream::{BoxStream, StreamExt, TryStreamExt};
+use sqlx::pool::PoolConnection;
+use sqlx::postgres::PgRow;
+use sqlx::sqlite::SqliteRow;
+use sqlx::{
+    AssertSqlSafe, Database, Encode, PgConnection, PgPool, Postgres, Sqlite, SqliteConnection,
+    SqlitePool, Transaction, Type,
+};
+use std::borrow::Cow;
+
+/// Runs `$body` with the query of `$sql` bound for the connection's database (`$query`), the
+/// executor (`$executor`) and the wrapping of its rows into [`AnyRow`] (`$row`).
+macro_rules! on_either {
+    ($conn:expr, $sql:expr, |$query:ident, $executor:ident, $row:ident| $body:expr) => {
+        match $conn {
+            Conn::Sqlite($executor) => {
+                let ($query, $row) = ($sql.on::<Sqlite>(), AnyRow::Sqlite);
+                $body
+            }
+            Conn::SqlitePool($executor) => {
+                let ($query, $row) = ($sql.on::<Sqlite>(), AnyRow::Sqlite);
+                $body
+            }
+            Conn::Postgres($executor) => {
+                let ($query, $row) = ($sql.on::<Postgres>(), AnyRow::Postgres);
+                $body
+            }
+            Conn::PostgresPool($executor) => {
+                let ($query, $row) = ($sql.on::<Postgres>(), AnyRow::Postgres);
+                $body
+            }
+        }
+    };
+}
+
+/// One value bound to a statement.
+#[derive(Debug, Clone)]
+pub(crate) enum Arg {
+    Int(Option<i64>),
+    Real(Option<f64>),
+    Text(Option<String>),
+    Bytes(Vec<u8>),
+    Flag(bool),
+}
+
+macro_rules! arg_from {
+    ($($t:ty => $variant:ident($convert:expr)),* $(,)?) => {
+        $(impl From<$t> for Arg {
+            fn from(value: $t) -> Self {
+                Arg::$variant($convert(value))
+            }
+        })*
+    };
+}
+
+arg_from! {
+    i64 => Int(Some),
+    Option<i64> => Int(std::convert::identity),
+    f64 => Real(Some),
+    Option<f64> => Real(std::convert::identity),
+    String => Text(Some),
+    &str => Text(|s: &str| Some(s.to_owned())),
+    Option<String> => Text(std::convert::identity),
+    Vec<u8> => Bytes(std::convert::identity),
+    bool => Flag(std::convert::identity),
+}
+
+/// A statement of the shared SQL and its arguments, `$1` first.
+#[derive(Debug)]
+pub(crate) struct Sql {
+    text: Cow<'static, str>,
+    args: Vec<Arg>,
+}
+
+impl Sql {
+    pub(crate) fn new(text: &'static str) -> Self {
+        Self {
+            text: Cow::Borrowed(text),
+            args: Vec::new(),
+        }
+    }
+
+    /// A statement whose text is made at run time (a list of rows of any length).
+    pub(crate) fn built(text: String) -> Self {
+        Self {
+            text: Cow::Owned(text),
+            args: Vec::new(),
+        }
+    }
+
+    /// Binds the next parameter.
+    pub(crate) fn bind(mut self, value: impl Into<Arg>) -> Self {
+        self.args.push(value.into());
+        self
+    }
+
+    /// Runs it; the rows it changed.
+    pub(crate) async fn execute(self, on: impl Into<Conn<'_>>) -> StoreResult<u64> {
+        Ok(on_either!(on.into(), self, |query, executor, _row| query
+            .execute(executor)
+            .await?
+            .rows_affected()))
+    }
+
+    pub(crate) async fn fetch_optional(
+        self,
+        on: impl Into<Conn<'_>>,
+    ) -> StoreResult<Option<AnyRow>> {
+        Ok(on_either!(on.into(), self, |query, executor, row| query
+            .fetch_optional(executor)
+            .await?
+            .map(row)))
+    }
+
+    pub(crate) async fn fetch_one(self, on: impl Into<Conn<'_>>) -> StoreResult<AnyRow> {
+        Ok(on_either!(on.into(), self, |query, executor, row| row(
+            query.fetch_one(executor).await?
+        )))
+    }
+
+    pub(crate) async fn fetch_all(self, on: impl Into<Conn<'_>>) -> StoreResult<Vec<AnyRow>> {
+        Ok(on_either!(on.into(), self, |query, executor, row| query
+            .fetch_all(executor)
+            .await?
+            .into_iter()
+            .map(row)
+            .collect()))
+    }
+
+    /// The rows as they arrive, for results too large to hold at once.
+    pub(crate) fn fetch<'c>(
+        self,
+        on: impl Into<Conn<'c>>,
+    ) -> BoxStream<'c, Result<AnyRow, sqlx::Error>> {
+        on_either!(on.into(), self, |query, executor, row| query
+            .fetch(executor)
+            .map_ok(row)
+            .boxed())
+    }
+
+    /// The sqlx query of database `DB`, its arguments bound.
+    fn on<DB: Database>(self) -> sqlx::query::Query<'static, DB, DB::Arguments>
+    where
+        for<'t> Option<i64>: Encode<'t, DB> + Type<DB>,
+        for<'t> Option<f64>: Encode<'t, DB> + Type<DB>,
+        for<'t> Option<String>: Encode<'t, DB> + Type<DB>,
+        for<'t> Vec<u8>: Encode<'t, DB> + Type<DB>,
+        for<'t> bool: Encode<'t, DB> + Type<DB>,
+    {
+        let query = match self.text {
+            Cow::Borrowed(text) => sqlx::query(text),
+            Cow::Owned(text) => sqlx::query(AssertSqlSafe(text)),
+        };
+        self.args.into_iter().fold(query, |query, arg| match arg {
+            Arg::Int(value) => query.bind(value),
+            Arg::Real(value) => query.bind(value),
+            Arg::Text(value) => query.bind(value),
+            Arg::Bytes(value) => query.bind(value),
+            Arg::Flag(value) => query.bind(value),
+        })
+    }
+}
+
+/// Where a statement runs: a connection (in a transaction or not) or a pool of either database.
+pub(crate) enum Conn<'c> {
+    Sqlite(&'c mut SqliteConnection),
+    SqlitePool(&'c SqlitePool),
+    Postgres(&'c mut PgConnection),
+    PostgresPool(&'c PgPool),
+}
+
+/// A transaction on either database.
+pub(crate) enum Tx {
+    Sqlite(Transaction<'static, Sqlite>),
+    Postgres(Transaction<'static, Postgres>),
+}
+
+impl Tx {
+    pub(crate) async fn commit(self) -> StoreResult<()> {
+        match self {
+            Tx::Sqlite(tx) => tx.commit().await?,
+            Tx::Postgres(tx) => tx.commit().await?,
+        }
+        Ok(())
+    }
+
+    pub(crate) async fn rollback(self) -> StoreResult<()> {
+        match self {
+            Tx::Sqlite(tx) => tx.rollback().await?,
+            Tx::Postgres(tx) => tx.rollback().await?,
+        }
+        Ok(())
+    }
+}
+
+impl<'c> From<&'c mut Tx> for Conn<'c> {
+    fn from(tx: &'c mut Tx) -> Self {
+        match tx {
+            Tx::Sqlite(tx) => Conn::Sqlite(tx),
+            Tx::Postgres(tx) => Conn::Postgres(tx),
+        }
+    }
+}
+
+/// One connection of either pool, held for several statements.
+pub(crate) enum Pooled {
+    Sqlite(PoolConnection<Sqlite>),
+    Postgres(PoolConnection<Postgres>),
+}
+
+impl<'c> From<&'c mut Pooled> for Conn<'c> {
+    fn from(connection: &'c mut Pooled) -> Self {
+        match connection {
+            Pooled::Sqlite(connection) => Conn::Sqlite(connection),
+            Pooled::Postgres(connection) => Conn::Postgres(connection),
+        }
+    }
+}
+
+/// A row of either database.
+pub(crate) enum AnyRow {
+    Sqlite(SqliteRow),
+    Postgres(PgRow),
+}
+
+macro_rules! delegate {
+    ($($method:ident -> $t:ty),* $(,)?) => {
+        $(pub(crate) fn $method(&self, column: &str) -> Result<$t, sqlx::Error> {
+            match self {
+                AnyRow::Sqlite(row) => sqlx::Row::try_get(row, column),
+                AnyRow::Postgres(row) => sqlx::Row::try_get(row, column),
+            }
+        })*
+    };
+}
+
+/// Read by column name into the few types the schema uses.
+impl AnyRow {
+    delegate! {
+        int -> i64,
+        maybe_int -> Option<i64>,
+        text -> String,
+        maybe_text -> Option<String>,
+        flag -> bool,
+        bytes -> Vec<u8>,
+        maybe_bytes -> Option<Vec<u8>>,
+    }
+}
