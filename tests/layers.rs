@@ -12,7 +12,6 @@ const ALLOWED: &[(&str, &[&str])] = &[
         "cli",
         &[
             "app",
-            "bench",
             "compute",
             "config",
             "domain",
@@ -40,7 +39,6 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("worker", &["domain", "store", "telemetry"]),
     ("scheduler", &["domain", "store"]),
     ("retention", &["domain", "store"]),
-    ("bench", &["plots", "progress"]),
     ("store", &["domain"]),
     ("domain", &[]),
     ("plots", &[]),

@@ -9,7 +9,6 @@
 
 pub mod api;
 pub mod app;
-pub mod bench;
 pub mod cli;
 pub mod compute;
 pub mod config;

@@ -2,12 +2,14 @@
 //!
 //! Bad input exits with code 2 and one line on stderr naming the field (a JSON pointer) and the rule.
 
+mod bench;
+
 use crate::app::StartupError;
-use crate::bench::BenchError;
 use crate::compute::PoolError;
 use crate::domain::draw_seed;
 use crate::progress::Progress;
 use crate::telemetry::{self, LogFormat};
+use bench::BenchError;
 use bouncewear_model::calibration::{CalibrationSpec, calibrate};
 use bouncewear_model::montecarlo::rare::check_threshold;
 use bouncewear_model::montecarlo::{Job, run_job};
@@ -252,9 +254,9 @@ fn run(cli: Cli) -> Result<(), CliError> {
             threads,
             quiet,
         } => {
-            let progress = Progress::steps(quiet, crate::bench::measurements(quick));
+            let progress = Progress::steps(quiet, bench::measurements(quick));
             let report = thread_pool(threads)?
-                .install(|| crate::bench::bench(&out, quick, coverage_seeds, &progress));
+                .install(|| bench::bench(&out, quick, coverage_seeds, &progress));
             progress.finish();
             let report = report?;
             if !quiet {

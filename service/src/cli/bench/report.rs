@@ -1,0 +1,584 @@
+//! The report as people read it: `report.md` (one table per measurement) and `report.svg` (the
+//! work-precision plot).
+
+use super::Report;
+use crate::plots::{Panel, Series, work_precision_svg};
+use std::fmt::Write as _;
+
+/// `report.md`: a heading, then one section per measurement, each a short text and a table.
+pub(super) fn markdown(report: &Report) -> String {
+    let machine = &report.machine;
+    let mut md = format!(
+        "# bouncewear speed against error\n\n`bouncewear bench{}` on {} threads, version {}. \
+         Regenerate with the same command.\n\n![work-precision plot](report.svg)\n\n",
+        if machine.quick { " --quick" } else { "" },
+        machine.threads,
+        machine.version
+    );
+    let sections = [
+        tiers(report),
+        sampling(report),
+        throughput(report),
+        engine(report),
+        skips(report),
+        coverage(report),
+        tail_coverage(report),
+        calibration(report),
+        rare_events(report),
+    ];
+    md.push_str(&sections.map(|section| section.to_markdown()).join("\n"));
+    md
+}
+
+/// One section of `report.md`: its heading, what it measures (may be empty), and its table.
+struct Section {
+    title: &'static str,
+    text: String,
+    columns: &'static [&'static str],
+    rows: Vec<Vec<String>>,
+}
+
+impl Section {
+    /// The heading, the text and the table, ending with the table's last row.
+    fn to_markdown(&self) -> String {
+        let mut md = format!("## {}\n\n", self.title);
+        if !self.text.is_empty() {
+            let _ = write!(md, "{}\n\n", self.text);
+        }
+        let line = |cells: &[String]| format!("| {} |\n", cells.join(" | "));
+        let header: Vec<String> = self.columns.iter().map(|c| (*c).to_owned()).collect();
+        md.push_str(&line(&header));
+        md.push_str(&format!("|{}\n", "---|".repeat(self.columns.len())));
+        for row in &self.rows {
+            md.push_str(&line(row));
+        }
+        md
+    }
+}
+
+fn tiers(report: &Report) -> Section {
+    let fidelities = report.tiers.iter().flat_map(|tier| {
+        tier.max_rel_error.iter().map(|(metric, max)| {
+            vec![
+                tier.fidelity.as_str().to_owned(),
+                format!("{:.0}", tier.ns_per_op),
+                (*metric).to_owned(),
+                format!("{:.1e}", tier.median_rel_error[metric]),
+                format!("{max:.1e}"),
+            ]
+        })
+    });
+    let forms = report.paper_forms.iter().flat_map(|form| {
+        form.max_rel_error.iter().map(|(metric, max)| {
+            vec![
+                format!("paper {} ({} scenarios)", form.form, form.scenarios),
+                format!("{:.1}", form.ns_per_op),
+                (*metric).to_owned(),
+                format!("{:.1e}", form.median_rel_error[metric]),
+                format!("{max:.1e}"),
+            ]
+        })
+    });
+    Section {
+        title: "Tiers",
+        text:
+            "Error against the exact model evaluated at 50 digits (`tools/reference.py`) over 80 \
+               scenarios; time per operation over the same scenarios, one thread."
+                .to_owned(),
+        columns: &[
+            "fidelity",
+            "ns/op",
+            "metric",
+            "median rel. error",
+            "max rel. error",
+        ],
+        rows: fidelities.chain(forms).collect(),
+    }
+}
+
+fn sampling(report: &Report) -> Section {
+    Section {
+        title: "Sampling",
+        text: "95 % CI half-width of p95 total bounce time (relative), 20 operations per device, \
+               radius and hardness scattered per device, velocity per operation."
+            .to_owned(),
+        columns: &["sampler", "devices", "wall s", "CI half-width"],
+        rows: report
+            .sampling
+            .iter()
+            .map(|row| {
+                vec![
+                    row.sampler.to_owned(),
+                    row.devices.to_string(),
+                    format!("{:.3}", row.wall_s),
+                    format!("{:.4}", row.ci_half_width_rel),
+                ]
+            })
+            .collect(),
+    }
+}
+
+fn throughput(report: &Report) -> Section {
+    Section {
+        title: "Throughput",
+        text: String::new(),
+        columns: &[
+            "job",
+            "devices x operations",
+            "metrics",
+            "million operations/s",
+        ],
+        rows: report
+            .throughput
+            .iter()
+            .map(|row| {
+                vec![
+                    row.job.to_owned(),
+                    format!("{} x {}", row.devices, row.operations),
+                    row.metrics.to_owned(),
+                    format!("{:.2}", row.operations_per_s / 1e6),
+                ]
+            })
+            .collect(),
+    }
+}
+
+fn engine(report: &Report) -> Section {
+    let optional =
+        |x: Option<f64>, digits: usize| x.map_or("-".to_owned(), |x| format!("{x:.digits$}"));
+    Section {
+        title: "Engine against the NumPy peer",
+        text: format!(
+            "ns per operation on one thread (every metric), one device at a time and in lockstep, \
+             next to the floor of square roots and divisions on an AVX-512 core; then \
+             `bouncewear run` on {} threads against `tools/numpy_peer.py` on one core, whole \
+             processes, best of three.",
+            report.machine.threads
+        ),
+        columns: &[
+            "job",
+            "devices x operations",
+            "kernel",
+            "ns/op alone",
+            "ns/op lockstep",
+            "floor scalar / 8 lanes",
+            "run s",
+            "NumPy s",
+            "ratio",
+        ],
+        rows: report
+            .engine
+            .iter()
+            .map(|row| {
+                vec![
+                    row.job.to_owned(),
+                    format!("{} x {}", row.devices, row.operations),
+                    row.kernel.clone(),
+                    format!("{:.0}", row.ns_per_op_one_device_at_a_time),
+                    format!("{:.0}", row.ns_per_op_lockstep),
+                    format!(
+                        "{:.0} / {:.0}",
+                        row.floor_ns_per_op_scalar, row.floor_ns_per_op_8_lanes
+                    ),
+                    format!("{:.3}", row.run_process_s),
+                    optional(row.numpy_peer_process_s, 3),
+                    optional(row.ratio, 1),
+                ]
+            })
+            .collect(),
+    }
+}
+
+fn skips(report: &Report) -> Section {
+    Section {
+        title: "What skipping saves",
+        text: String::new(),
+        columns: &["skip", "ns/op doing it", "ns/op skipping"],
+        rows: report
+            .skips
+            .iter()
+            .map(|row| {
+                vec![
+                    row.skip.to_owned(),
+                    format!("{:.0}", row.ns_per_op_doing_it),
+                    format!("{:.0}", row.ns_per_op_skipping),
+                ]
+            })
+            .collect(),
+    }
+}
+
+fn coverage(report: &Report) -> Section {
+    Section {
+        title: "Intervals: coverage and width",
+        text: "How often the nominal 95 % intervals of a job of 64 or 512 devices x 20 operations \
+               at 48 V / 15 A cover the truth (the same statistic of one job of 64 000 devices, \
+               `--quick`: 1280, its quantiles interpolated within their buckets), and their mean \
+               half-width relative to the truth. Radius and hardness scatter per device, the \
+               closing velocity per operation. The intervals are built for jobs of 512 devices and \
+               more (docs/contract.md); 64 devices shows what falls short below that. A quantile \
+               level a job's data cannot bound answers no interval, only the reason: `answered` \
+               counts the jobs that gave one, and the coverage is over those."
+            .to_owned(),
+        columns: &[
+            "design",
+            "devices",
+            "statistic",
+            "seeds",
+            "answered",
+            "coverage",
+            "mean rel. half-width",
+        ],
+        rows: report
+            .coverage
+            .iter()
+            .map(|row| {
+                vec![
+                    row.design.to_owned(),
+                    row.devices.to_string(),
+                    row.statistic.to_owned(),
+                    row.seeds.to_string(),
+                    row.answered.to_string(),
+                    format!("{:.3}", row.coverage),
+                    format!("{:.3}", row.mean_relative_half_width),
+                ]
+            })
+            .collect(),
+    }
+}
+
+fn tail_coverage(report: &Report) -> Section {
+    Section {
+        title: "Exceedance in the tail",
+        text: "How often the 95 % interval of a small exceedance probability covers the exact \
+               one, in jobs whose metric is the closing velocity itself, drawn N(0.224, 0.02) m/s \
+               per operation (so the truth is a normal tail). One threshold is named in the job's \
+               `limits` and counted exactly as the job runs; the other, 0.01 sd below it, is \
+               asked only after the run and counted from the most extreme values each group keeps \
+               (64 at each end): exact whenever it lies beyond every group's 64th largest value, \
+               else bucket-limited and conservative by construction."
+            .to_owned(),
+        columns: &[
+            "statistic",
+            "values per job",
+            "exact probability",
+            "seeds",
+            "answered exactly",
+            "coverage",
+            "mean rel. half-width",
+        ],
+        rows: report
+            .tail_coverage
+            .iter()
+            .map(|row| {
+                vec![
+                    row.statistic.to_owned(),
+                    format!("{:.0e}", row.values as f64),
+                    format!("{:.3e}", row.probability),
+                    row.seeds.to_string(),
+                    row.exact.to_string(),
+                    format!("{:.3}", row.coverage),
+                    format!("{:.3}", row.mean_relative_half_width),
+                ]
+            })
+            .collect(),
+    }
+}
+
+fn calibration(report: &Report) -> Section {
+    Section {
+        title: "Calibration intervals",
+        text: "How often the 95 % profile-likelihood interval of a fitted parameter holds the \
+               truth, over fits to synthetic measurements with 2 % noise, a noise draw per seed \
+               (`bouncewear_model::calibration::study`). The binomial standard deviation of a true \
+               0.95 is 0.015 over 200 draws and 0.007 over 1000."
+            .to_owned(),
+        columns: &["case", "parameter", "truth", "draws", "coverage"],
+        rows: report
+            .calibration_coverage
+            .iter()
+            .map(|row| {
+                vec![
+                    row.case.to_owned(),
+                    format!("`{}`", row.parameter),
+                    row.truth.to_string(),
+                    row.draws.to_string(),
+                    format!("{:.3}", row.coverage),
+                ]
+            })
+            .collect(),
+    }
+}
+
+fn rare_events(report: &Report) -> Section {
+    Section {
+        title: "Rare events",
+        text: "P(total bounce time of one operation above t), the closing velocity drawn \
+               N(0.224, 0.02) m/s per operation at 48 V / 15 A: the bounce time rises with the \
+               velocity, so the truth is the velocity's normal tail, exact. Each method estimates \
+               it once per seed (`rare_event` in a job, docs/contract.md \"Rare events\"). `cov` \
+               is the mean of the estimates' own coefficient of variation, `observed` the spread \
+               of the estimates about the truth; `crude` is what crude Monte Carlo needs for the \
+               same cov. Wall time per estimate on this machine's threads."
+            .to_owned(),
+        columns: &[
+            "method",
+            "exact probability",
+            "target cov",
+            "seeds",
+            "coverage",
+            "cov",
+            "observed",
+            "evaluations",
+            "crude needs",
+            "wall s",
+        ],
+        rows: report
+            .rare_events
+            .iter()
+            .map(|row| {
+                vec![
+                    row.method.to_owned(),
+                    format!("{:.1e}", row.probability),
+                    row.target_cov.to_string(),
+                    row.seeds.to_string(),
+                    format!("{:.3}", row.coverage),
+                    format!("{:.3}", row.mean_cov),
+                    format!("{:.3}", row.observed_cov),
+                    format!("{:.0}", row.mean_evaluations),
+                    format!("{:.1e}", row.crude_evaluations),
+                    format!("{:.3}", row.mean_wall_s),
+                ]
+            })
+            .collect(),
+    }
+}
+
+/// The work-precision plot: tiers (relative error of total bounce time, median to max, against ns
+/// per operation) and samplers (CI half-width against wall time, one line per sampler).
+pub(super) fn svg(report: &Report) -> String {
+    const METRIC: &str = "total_bounce_s";
+    // The exact tier's error can be 0, which a log axis cannot show: it sits at 1e-17 instead,
+    // below any rounding error of an f64 near 1.
+    let floor = |e: f64| e.max(1e-17);
+    let tiers = Panel {
+        title: format!("Tiers: error of {METRIC} vs time"),
+        x_label: "relative error (median to max)".to_owned(),
+        y_label: "ns per operation".to_owned(),
+        series: report
+            .tiers
+            .iter()
+            .map(|t| Series {
+                name: t.fidelity.as_str().to_owned(),
+                points: vec![
+                    (floor(t.median_rel_error[METRIC]), t.ns_per_op),
+                    (floor(t.max_rel_error[METRIC]), t.ns_per_op),
+                ],
+            })
+            .chain(report.paper_forms.iter().map(|f| Series {
+                name: format!("paper {}", f.form),
+                points: vec![
+                    (floor(f.median_rel_error[METRIC]), f.ns_per_op),
+                    (floor(f.max_rel_error[METRIC]), f.ns_per_op),
+                ],
+            }))
+            .collect(),
+    };
+    let sampling = Panel {
+        title: "Sampling: p95 CI half-width vs wall time".to_owned(),
+        x_label: "relative 95 % CI half-width of p95".to_owned(),
+        y_label: "wall s".to_owned(),
+        series: ["random", "lhs"]
+            .into_iter()
+            .map(|sampler| Series {
+                name: sampler.to_owned(),
+                points: report
+                    .sampling
+                    .iter()
+                    .filter(|r| r.sampler == sampler)
+                    .map(|r| (r.ci_half_width_rel, r.wall_s))
+                    .collect(),
+            })
+            .collect(),
+    };
+    work_precision_svg("bouncewear bench: speed against error", &[tiers, sampling])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::*;
+    use super::*;
+    use std::collections::BTreeMap;
+
+    /// A report with one row of each kind, as `bench` would make it.
+    fn report(numpy: bool) -> Report {
+        let errors = BTreeMap::from([("total_bounce_s", 1.5e-9), ("e1", 2.5e-12)]);
+        Report {
+            machine: Machine {
+                threads: 2,
+                quick: true,
+                version: "0.1.0",
+            },
+            tiers: vec![Tier {
+                fidelity: Fidelity::Exact,
+                ns_per_op: 61.4,
+                max_rel_error: errors.clone(),
+                median_rel_error: errors.clone(),
+            }],
+            paper_forms: vec![PaperForm {
+                form: "eq. 10",
+                scenarios: 53,
+                ns_per_op: 4.25,
+                max_rel_error: errors.clone(),
+                median_rel_error: errors,
+            }],
+            sampling: vec![Sampling {
+                sampler: "lhs",
+                devices: 1000,
+                wall_s: 0.0123,
+                ci_half_width_rel: 0.00456,
+            }],
+            throughput: vec![Throughput {
+                job: "48 V / 15 A",
+                devices: 8000,
+                operations: 1000,
+                metrics: "all",
+                operations_per_s: 2.345e7,
+            }],
+            skips: vec![Skip {
+                skip: "no wear",
+                ns_per_op_doing_it: 52.0,
+                ns_per_op_skipping: 31.0,
+            }],
+            engine: vec![EngineRow {
+                job: "mechanical",
+                devices: 2000,
+                operations: 500,
+                kernel: "avx512".to_owned(),
+                ns_per_op_one_device_at_a_time: 71.2,
+                ns_per_op_lockstep: 40.9,
+                floor_ns_per_op_scalar: 21.0,
+                floor_ns_per_op_8_lanes: 2.6,
+                run_process_s: 0.5,
+                numpy_peer_process_s: numpy.then_some(12.25),
+                ratio: numpy.then_some(24.5),
+            }],
+            coverage: vec![Coverage {
+                design: "radius, hardness",
+                devices: 512,
+                statistic: "p95",
+                seeds: 400,
+                answered: 399,
+                coverage: 0.9475,
+                mean_relative_half_width: 0.0123,
+            }],
+            tail_coverage: vec![TailCoverage {
+                statistic: "exceedance, after the run",
+                values: 10_000_000,
+                probability: 1.04e-4,
+                seeds: 200,
+                exact: 200,
+                coverage: 0.95,
+                mean_relative_half_width: 0.063,
+            }],
+            calibration_coverage: vec![CalibrationCoverage {
+                case: "wear curve",
+                parameter: "roughening_energy_j",
+                truth: 0.5,
+                draws: 1000,
+                coverage: 0.943,
+            }],
+            rare_events: vec![RareEventCoverage {
+                method: "subset",
+                probability: 1e-6,
+                target_cov: 0.1,
+                seeds: 20,
+                coverage: 0.95,
+                mean_cov: 0.11,
+                observed_cov: 0.12,
+                mean_evaluations: 22000.0,
+                crude_evaluations: 1e8,
+                mean_wall_s: 0.4,
+            }],
+        }
+    }
+
+    /// The tables of `report.md`: each as its header's cells and its rows' cells.
+    fn tables(md: &str) -> Vec<(Vec<String>, Vec<Vec<String>>)> {
+        let cells = |line: &str| -> Vec<String> {
+            let inner = line.trim().trim_start_matches('|').trim_end_matches('|');
+            inner.split('|').map(|c| c.trim().to_owned()).collect()
+        };
+        let mut tables = Vec::new();
+        let lines: Vec<&str> = md.lines().collect();
+        let mut at = 0;
+        while at < lines.len() {
+            if lines[at].starts_with('|') {
+                let header = cells(lines[at]);
+                let mut rows = Vec::new();
+                at += 2; // the separator
+                while at < lines.len() && lines[at].starts_with('|') {
+                    rows.push(cells(lines[at]));
+                    at += 1;
+                }
+                tables.push((header, rows));
+            }
+            at += 1;
+        }
+        tables
+    }
+
+    #[test]
+    fn every_section_is_a_heading_a_text_and_a_table_whose_rows_fit_its_header() {
+        let md = markdown(&report(true));
+        let headings: Vec<&str> = md.lines().filter(|l| l.starts_with("## ")).collect();
+        assert_eq!(headings.len(), 9, "{md}");
+        let tables = tables(&md);
+        assert_eq!(tables.len(), 9);
+        for (header, rows) in &tables {
+            assert!(!rows.is_empty(), "{header:?} has no rows");
+            for row in rows {
+                assert_eq!(row.len(), header.len(), "{row:?} under {header:?}");
+                assert!(row.iter().all(|cell| !cell.is_empty()), "{row:?}");
+            }
+        }
+        // Two tiers' metrics plus the paper form's.
+        assert_eq!(tables[0].1.len(), 4);
+        assert!(md.starts_with("# bouncewear speed against error\n\n`bouncewear bench --quick` on 2 threads, version 0.1.0."));
+    }
+
+    #[test]
+    fn numbers_are_written_to_their_columns_precision() {
+        let md = markdown(&report(true));
+        assert!(
+            md.contains("| exact | 61 | e1 | 2.5e-12 | 2.5e-12 |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| paper eq. 10 (53 scenarios) | 4.2 | total_bounce_s | 1.5e-9 | 1.5e-9 |"),
+            "{md}"
+        );
+        assert!(md.contains("| lhs | 1000 | 0.012 | 0.0046 |"), "{md}");
+        assert!(
+            md.contains("| 48 V / 15 A | 8000 x 1000 | all | 23.45 |"),
+            "{md}"
+        );
+        assert!(md.contains("| 21 / 3 | 0.500 | 12.250 | 24.5 |"), "{md}");
+        assert!(
+            md.contains("| wear curve | `roughening_energy_j` | 0.5 | 1000 | 0.943 |"),
+            "{md}"
+        );
+        assert!(
+            md.contains(
+                "| exceedance, after the run | 1e7 | 1.040e-4 | 200 | 200 | 0.950 | 0.063 |"
+            ),
+            "{md}"
+        );
+    }
+
+    #[test]
+    fn an_engine_row_without_the_numpy_peer_says_so_with_dashes() {
+        let md = markdown(&report(false));
+        assert!(md.contains("| 0.500 | - | - |"), "{md}");
+    }
+}

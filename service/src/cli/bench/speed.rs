@@ -1,0 +1,497 @@
+//! Speed against error: each fidelity's time per operation and its error against the
+//! 50-digit references, the paper's closed forms, random against Latin hypercube sampling, the
+//! reference jobs' throughput against the floor and the NumPy peer, and what each skip saves.
+
+use super::{BenchError, io_error};
+use crate::progress::Progress;
+use bouncewear_model::montecarlo::{
+    Job, JobResult, Kernel, OperationMetric, Silent, run_job, run_job_on,
+};
+use bouncewear_model::paper_forms::{BounceTimes, constant_restitution, simplified_electrical};
+use bouncewear_model::wear::WearLaw;
+use bouncewear_model::{Fidelity, Needs, Operation, Outcome, Pointer, Scenario};
+use serde::Serialize;
+use serde_json::{Value, json};
+use std::collections::BTreeMap;
+use std::hint::black_box;
+use std::path::Path;
+use std::time::Instant;
+
+const REFERENCE: &str = include_str!("../../../../tests/data/reference_spread.json");
+const REFERENCE_JOBS: &str = include_str!("../../../../tests/data/reference_jobs.json");
+
+#[derive(Debug, Serialize)]
+pub struct Tier {
+    pub fidelity: Fidelity,
+    pub ns_per_op: f64,
+    pub max_rel_error: BTreeMap<&'static str, f64>,
+    pub median_rel_error: BTreeMap<&'static str, f64>,
+}
+
+/// One of the paper's closed forms of the bounce times (docs/model.md section 7), over the
+/// reference scenarios it applies to: its cost and its error against the exact model.
+#[derive(Debug, Serialize)]
+pub struct PaperForm {
+    pub form: &'static str,
+    /// How many of the reference scenarios it applies to (`F_s > 0`; arcing for eq. 17/19) and
+    /// in which the exact model bounces.
+    pub scenarios: usize,
+    pub ns_per_op: f64,
+    pub max_rel_error: BTreeMap<&'static str, f64>,
+    pub median_rel_error: BTreeMap<&'static str, f64>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct Sampling {
+    pub sampler: &'static str,
+    pub devices: u64,
+    pub wall_s: f64,
+    pub ci_half_width_rel: f64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct Throughput {
+    pub job: &'static str,
+    pub devices: u64,
+    pub operations: u64,
+    pub metrics: &'static str,
+    pub operations_per_s: f64,
+}
+
+/// One reference job: the engine per operation and thread, one device at a time and in lockstep,
+/// next to the floor; then the whole `bouncewear run` process against the NumPy peer's.
+#[derive(Debug, Serialize)]
+pub struct EngineRow {
+    pub job: &'static str,
+    pub devices: u64,
+    pub operations: u64,
+    pub kernel: String,
+    pub ns_per_op_one_device_at_a_time: f64,
+    pub ns_per_op_lockstep: f64,
+    /// The issue's floor for this job on an AVX-512 core: square roots and divisions alone.
+    pub floor_ns_per_op_scalar: f64,
+    pub floor_ns_per_op_8_lanes: f64,
+    /// `bouncewear run --threads N` as a whole process, wall seconds.
+    pub run_process_s: f64,
+    /// `python3 tools/numpy_peer.py` as a whole process on one core, when NumPy is installed.
+    pub numpy_peer_process_s: Option<f64>,
+    /// The peer's wall time over ours.
+    pub ratio: Option<f64>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct Skip {
+    pub skip: &'static str,
+    pub ns_per_op_doing_it: f64,
+    pub ns_per_op_skipping: f64,
+}
+
+/// Best of `rounds` timings of `work`, in nanoseconds per item.
+fn ns_per_item(rounds: usize, items: usize, mut work: impl FnMut()) -> f64 {
+    (0..rounds)
+        .map(|_| {
+            let started = Instant::now();
+            work();
+            started.elapsed().as_nanos() as f64 / items as f64
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn reference_cases() -> Vec<(Scenario, Value)> {
+    let cases: Vec<Value> = serde_json::from_str(REFERENCE).expect("the reference spread is JSON");
+    cases
+        .into_iter()
+        .map(|case| {
+            let scenario = Scenario::from_json(&case["scenario"].to_string())
+                .expect("reference scenarios are valid");
+            (scenario, case["exact"].clone())
+        })
+        .collect()
+}
+
+pub(super) fn tier(fidelity: Fidelity, quick: bool) -> Tier {
+    let cases = reference_cases();
+    let operations: Vec<Operation> = cases
+        .iter()
+        .map(|(s, _)| Operation::nominal(s, fidelity))
+        .collect();
+    let outcomes: Vec<Outcome> = operations.iter().map(|op| op.simulate().outcome).collect();
+    let repeats = if quick { 2_000 } else { 20_000 };
+    let ns_per_op = ns_per_item(5, repeats * operations.len(), || {
+        for _ in 0..repeats {
+            for op in &operations {
+                let law = op.kappa_law();
+                black_box(op.run(
+                    law.reference_radius_m,
+                    law.reference_pressure_pa,
+                    Needs::ALL,
+                    None,
+                ));
+            }
+        }
+    });
+    // Only the fields of the `simulate` output the reference carries (not the plastic work).
+    let in_reference = |metric: &OperationMetric| cases[0].1.get(metric.name()).is_some();
+    let metrics: Vec<OperationMetric> = OperationMetric::ALL
+        .into_iter()
+        .filter(in_reference)
+        .collect();
+    let (median_rel_error, max_rel_error) = relative_errors(&metrics, |metric| {
+        outcomes
+            .iter()
+            .zip(&cases)
+            .map(|(outcome, (_, reference))| {
+                let want = reference[metric.name()].as_f64().expect("number");
+                (metric.value(outcome), want)
+            })
+            .collect()
+    });
+    Tier {
+        fidelity,
+        ns_per_op,
+        max_rel_error,
+        median_rel_error,
+    }
+}
+
+/// Relative errors by metric name.
+type Errors = BTreeMap<&'static str, f64>;
+
+/// The median and largest relative error of each metric over `(got, want)` pairs.
+fn relative_errors(
+    metrics: &[OperationMetric],
+    pairs: impl Fn(OperationMetric) -> Vec<(f64, f64)>,
+) -> (Errors, Errors) {
+    let mut median = BTreeMap::new();
+    let mut max = BTreeMap::new();
+    for &metric in metrics {
+        let mut errors: Vec<f64> = pairs(metric)
+            .into_iter()
+            .map(|(got, want)| {
+                if got == want {
+                    0.0
+                } else {
+                    (got - want).abs() / want.abs().max(f64::MIN_POSITIVE)
+                }
+            })
+            .collect();
+        errors.sort_by(f64::total_cmp);
+        median.insert(
+            metric.name(),
+            errors.get(errors.len() / 2).copied().unwrap_or(0.0),
+        );
+        max.insert(metric.name(), errors.last().copied().unwrap_or(0.0));
+    }
+    (median, max)
+}
+
+/// A closed form of the paper: the bounce times it gives for an operation, where it applies.
+type ClosedForm = fn(&Operation) -> Option<BounceTimes>;
+
+/// The paper's closed forms `bench` reports, by name.
+pub(super) const PAPER_FORMS: [(&str, ClosedForm); 2] = [
+    ("eq. 9/10, e = 0.4", |op| constant_restitution(op, 0.4)),
+    ("eq. 17/19", simplified_electrical),
+];
+
+/// A closed form of the paper over the reference scenarios it applies to.
+pub(super) fn paper_form(name: &'static str, form: ClosedForm, quick: bool) -> PaperForm {
+    let cases = reference_cases();
+    let (operations, references): (Vec<Operation>, Vec<&Value>) = cases
+        .iter()
+        .map(|(s, reference)| (Operation::nominal(s, Fidelity::Exact), reference))
+        // Where the exact model bounces: a form's relative error against no bounce at all is
+        // not a number worth printing.
+        .filter(|(op, reference)| {
+            form(op).is_some() && reference["bounce_count"].as_u64().is_some_and(|n| n > 0)
+        })
+        .unzip();
+    let times: Vec<BounceTimes> = operations.iter().filter_map(form).collect();
+    let repeats = if quick { 20_000 } else { 200_000 };
+    let ns_per_op = ns_per_item(5, repeats * operations.len().max(1), || {
+        for _ in 0..repeats {
+            for op in &operations {
+                black_box(form(black_box(op)));
+            }
+        }
+    });
+    let metrics = [OperationMetric::FirstBounce, OperationMetric::TotalBounce];
+    let (median_rel_error, max_rel_error) = relative_errors(&metrics, |metric| {
+        times
+            .iter()
+            .zip(&references)
+            .map(|(t, reference)| {
+                let got = match metric {
+                    OperationMetric::FirstBounce => t.first_bounce_s,
+                    _ => t.total_bounce_s,
+                };
+                (got, reference[metric.name()].as_f64().expect("number"))
+            })
+            .collect()
+    });
+    PaperForm {
+        form: name,
+        scenarios: operations.len(),
+        ns_per_op,
+        max_rel_error,
+        median_rel_error,
+    }
+}
+
+/// A reference job of `tests/data/reference_jobs.json` (radius and hardness scattered per device,
+/// closing velocity per operation), cut to `devices` x `operations`.
+fn reference_job(
+    devices: u64,
+    operations: u64,
+    arcing: bool,
+    sampler: &str,
+    metrics: Option<&[&str]>,
+) -> Job {
+    let jobs: Value = serde_json::from_str(REFERENCE_JOBS).expect("the reference jobs are JSON");
+    let mut job = jobs[if arcing { "48 V / 15 A" } else { "mechanical" }].clone();
+    job["devices"] = json!(devices);
+    job["operations"] = json!(operations);
+    job["sampler"] = json!(sampler);
+    if let Some(metrics) = metrics {
+        job["metrics"] = json!(metrics);
+    }
+    Job::from_json(&job.to_string(), || 0).expect("the reference job is valid")
+}
+
+pub(super) fn run(job: &Job) -> JobResult {
+    run_job(job, &Silent).expect("nothing cancels a benchmark")
+}
+
+pub(super) const SAMPLERS: [&str; 2] = ["random", "lhs"];
+
+pub(super) fn sampled_devices(quick: bool) -> &'static [u64] {
+    if quick {
+        &[100, 400, 1600, 6400]
+    } else {
+        &[100, 400, 1600, 6400, 25600, 102400]
+    }
+}
+
+pub(super) fn sampling(quick: bool, progress: &Progress) -> Vec<Sampling> {
+    let mut rows = Vec::new();
+    for sampler in SAMPLERS {
+        for &devices in sampled_devices(quick) {
+            let mut spec = reference_job(devices, 20, false, sampler, Some(&["total_bounce_s"]))
+                .spec()
+                .clone();
+            spec.bin_operations = Some(20);
+            let job = Job::new(spec, || 0, &Pointer::root()).expect("the reference job is valid");
+            let result = progress
+                .measure(format!("sampling: {sampler}, {devices} devices"), || {
+                    run(&job)
+                });
+            let p95 = &result.operations["total_bounce_s"][0].summary.quantiles["p95"];
+            rows.push(Sampling {
+                sampler: if sampler == "lhs" { "lhs" } else { "random" },
+                devices,
+                wall_s: result.timing.wall_s,
+                ci_half_width_rel: 0.5 * (p95.ci95[1] - p95.ci95[0]) / p95.value,
+            });
+        }
+    }
+    rows
+}
+
+/// The throughput jobs: a name, and whether it arcs.
+pub(super) const THROUGHPUT_JOBS: [(&str, bool); 2] =
+    [("48 V / 15 A", true), ("mechanical", false)];
+/// Each throughput job with all metrics and with one.
+pub(super) const THROUGHPUT_METRICS: [(&str, Option<&[&str]>); 2] =
+    [("all", None), ("total_bounce_s", Some(&["total_bounce_s"]))];
+
+pub(super) fn throughput(quick: bool, progress: &Progress) -> Vec<Throughput> {
+    let (devices, operations) = if quick { (400, 500) } else { (2000, 500) };
+    let mut rows = Vec::new();
+    for (name, arcing) in THROUGHPUT_JOBS {
+        for (metrics, list) in THROUGHPUT_METRICS {
+            let job = reference_job(devices, operations, arcing, "random", list);
+            let result = progress.measure(format!("throughput: {name}, {metrics}"), || run(&job));
+            rows.push(Throughput {
+                job: name,
+                devices,
+                operations,
+                metrics,
+                operations_per_s: result.timing.operations_per_s,
+            });
+        }
+    }
+    rows
+}
+
+const NUMPY_PEER: &str = include_str!("../../../../tools/numpy_peer.py");
+
+/// The issue's floor (square roots and divisions only, Zen 5): scalar and 8-lane ns per operation.
+fn floor_ns_per_op(arcing: bool) -> (f64, f64) {
+    if arcing { (78.0, 10.0) } else { (136.0, 22.0) }
+}
+
+pub(super) fn engine_row(
+    name: &'static str,
+    arcing: bool,
+    quick: bool,
+    out: &Path,
+) -> Result<EngineRow, BenchError> {
+    let (devices, operations) = if quick { (400, 100) } else { (2000, 500) };
+    let job = reference_job(devices, operations, arcing, "random", None);
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a pool of one thread");
+    let ops = (devices * operations) as usize;
+    let per_op = |kernel: Kernel| {
+        ns_per_item(3, ops, || {
+            black_box(
+                one_thread
+                    .install(|| run_job_on(kernel, &job, &Silent))
+                    .ok(),
+            );
+        })
+    };
+    let kernel = Kernel::best();
+    let (scalar, lockstep) = (per_op(Kernel::SCALAR), per_op(kernel));
+    // The job as a file, for the two processes.
+    std::fs::create_dir_all(out).map_err(|source| io_error(out, source))?;
+    let path = out.join("engine-job.json");
+    let text = serde_json::to_string(job.spec()).expect("a job serialises");
+    std::fs::write(&path, &text).map_err(|source| io_error(&path, source))?;
+    let exe = std::env::current_exe().map_err(|source| io_error(&path, source))?;
+    let threads = rayon::current_num_threads().to_string();
+    let run_process_s = best_process_s(
+        std::process::Command::new(exe)
+            .args(["run", "--quiet", "--threads", &threads])
+            .arg(&path),
+    )
+    .expect("bouncewear runs its own job");
+    let numpy_peer_process_s = numpy_available()
+        .then(|| {
+            best_process_s(
+                std::process::Command::new("python3")
+                    .args(["-c", NUMPY_PEER])
+                    .arg(&text),
+            )
+        })
+        .flatten();
+    let (floor_scalar, floor_lanes) = floor_ns_per_op(arcing);
+    Ok(EngineRow {
+        job: name,
+        devices,
+        operations,
+        kernel: format!("{} x{}", kernel.isa().as_str(), kernel.lanes()),
+        ns_per_op_one_device_at_a_time: scalar,
+        ns_per_op_lockstep: lockstep,
+        floor_ns_per_op_scalar: floor_scalar,
+        floor_ns_per_op_8_lanes: floor_lanes,
+        run_process_s,
+        numpy_peer_process_s,
+        ratio: numpy_peer_process_s.map(|peer| peer / run_process_s),
+    })
+}
+
+/// Whether `python3` can import NumPy (the peer is optional: CI need not install it).
+fn numpy_available() -> bool {
+    std::process::Command::new("python3")
+        .args(["-c", "import numpy"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|status| status.success())
+}
+
+/// Best of three wall times of a whole process, its output thrown away; `None` if it fails.
+fn best_process_s(command: &mut std::process::Command) -> Option<f64> {
+    command
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null());
+    let mut best = f64::INFINITY;
+    for _ in 0..3 {
+        let started = Instant::now();
+        if !command.status().ok()?.success() {
+            return None;
+        }
+        best = best.min(started.elapsed().as_secs_f64());
+    }
+    Some(best)
+}
+
+pub(super) fn skips(quick: bool) -> Vec<Skip> {
+    let repeats = if quick { 200_000 } else { 2_000_000 };
+    let mechanical = Operation::nominal(&Scenario::default(), Fidelity::Exact);
+    let op_ns = |op: &Operation, needs: Needs| {
+        ns_per_item(5, repeats, || {
+            for _ in 0..repeats {
+                black_box(black_box(op).run(7.7e-3, 2e8, needs, None));
+            }
+        })
+    };
+    let arcing_scenario =
+        Scenario::from_json(r#"{"circuit": {"supply_voltage_v": 48, "current_a": 15}}"#)
+            .expect("valid");
+    let arcing = Operation::nominal(&arcing_scenario, Fidelity::Exact);
+    let wear = WearLaw::new(&arcing_scenario);
+    let worn_ns = ns_per_item(5, repeats, || {
+        let mut energy = 0.0;
+        for _ in 0..repeats {
+            let radius = wear.radius_m(7.7e-3, black_box(energy));
+            energy += black_box(arcing.run(radius, 2e8, Needs::ALL, None)).arc_energy_j * 1e-9;
+        }
+    });
+    let (devices, operations) = if quick { (200, 200) } else { (1000, 500) };
+    let per_op = |result: JobResult| 1e9 / result.timing.operations_per_s;
+    vec![
+        Skip {
+            skip: "first-impact phase when neither peak_force_n nor impact_duration_s is asked for (one operation)",
+            ns_per_op_doing_it: op_ns(&mechanical, Needs::ALL),
+            ns_per_op_skipping: op_ns(&mechanical, Needs { impact: false }),
+        },
+        Skip {
+            skip: "wear radius and kappa rescaling when nothing can arc or only one operation runs (one operation at 48 V / 15 A)",
+            ns_per_op_doing_it: worn_ns,
+            ns_per_op_skipping: op_ns(&arcing, Needs::ALL),
+        },
+        Skip {
+            skip: "summaries (and impact phase) of the 13 metrics not asked for (job, 48 V / 15 A, all metrics vs total_bounce_s)",
+            ns_per_op_doing_it: per_op(run(&reference_job(
+                devices, operations, true, "random", None,
+            ))),
+            ns_per_op_skipping: per_op(run(&reference_job(
+                devices,
+                operations,
+                true,
+                "random",
+                Some(&["total_bounce_s"]),
+            ))),
+        },
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relative_errors_give_each_metrics_median_and_max_and_zero_where_exact() {
+        let metrics = [OperationMetric::FirstBounce, OperationMetric::TotalBounce];
+        let (median, max) = relative_errors(&metrics, |metric| match metric {
+            OperationMetric::FirstBounce => vec![(1.1, 1.0), (2.0, 2.0), (2.6, 2.0), (0.0, 0.0)],
+            _ => vec![(3.0, 3.0)],
+        });
+        let first = OperationMetric::FirstBounce.name();
+        // Errors 0.1, 0, 0.3, 0 sorted: 0, 0, 0.1, 0.3; the median is the upper middle one.
+        approx::assert_relative_eq!(median[first], 0.1, max_relative = 1e-12);
+        approx::assert_relative_eq!(max[first], 0.3, max_relative = 1e-12);
+        let total = OperationMetric::TotalBounce.name();
+        assert_eq!((median[total], max[total]), (0.0, 0.0));
+    }
+
+    #[test]
+    fn an_error_against_an_exact_zero_is_finite_and_large() {
+        let (_, max) = relative_errors(&[OperationMetric::FirstBounce], |_| vec![(1e-30, 0.0)]);
+        let error = max[OperationMetric::FirstBounce.name()];
+        assert!(error.is_finite() && error > 1e270, "{error}");
+    }
+}
