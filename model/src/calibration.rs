@@ -257,102 +257,8 @@ impl Problem {
             errors.extend_from_slice(invalid.errors());
         }
         let base = serde_json::to_value(&spec.scenario).expect("a scenario serialises");
-        let mut parameters = Vec::new();
-        if spec.fit.is_empty() || spec.fit.len() > MAX_PARAMETERS {
-            errors.push(FieldError {
-                pointer: "/fit".into(),
-                detail: format!("must name 1 to {MAX_PARAMETERS} scenario parameters"),
-            });
-        }
-        for (i, name) in spec.fit.iter().enumerate() {
-            let pointer = root.child("fit").child(i).to_string();
-            let path: Vec<String> = name.split('.').map(str::to_owned).collect();
-            if path.len() < 2 || path.iter().any(String::is_empty) {
-                errors.push(FieldError {
-                    pointer,
-                    detail: format!(
-                        "`{name}` is not a dotted path in the scenario, e.g. `material.kappa`"
-                    ),
-                });
-                continue;
-            }
-            match lookup(&base, &path) {
-                Some(Value::Number(n)) if n.as_f64().is_some_and(|x| x > 0.0) => {}
-                // An optional number the model derives when absent (kappa).
-                None | Some(Value::Null) if name == "material.kappa" => {}
-                _ => {
-                    errors.push(FieldError {
-                        pointer,
-                        detail: format!(
-                            "`{name}` is not a positive number of the scenario that a fit can vary"
-                        ),
-                    });
-                    continue;
-                }
-            }
-            if parameters.iter().any(|(n, _)| n == name) {
-                errors.push(FieldError {
-                    pointer,
-                    detail: format!("`{name}` is named twice"),
-                });
-                continue;
-            }
-            parameters.push((name.clone(), path));
-        }
-        if spec.observations.is_empty() || spec.observations.len() > MAX_OBSERVATIONS {
-            errors.push(FieldError {
-                pointer: "/observations".into(),
-                detail: format!("must hold 1 to {MAX_OBSERVATIONS} observations"),
-            });
-        }
-        let mut terms = Vec::new();
-        for (i, observation) in spec.observations.iter().enumerate() {
-            let at = root.child("observations").child(i);
-            let mut measured = observation.bounce_count.is_some();
-            if observation.operation.is_some_and(|j| j > MAX_OPERATION) {
-                errors.push(FieldError {
-                    pointer: at.child("operation").to_string(),
-                    detail: format!("must be from 0 to {MAX_OPERATION}"),
-                });
-            }
-            if let Some(v) = observation.impact_velocity_m_s {
-                // The scenario's rule for an impact velocity, at the observation's place.
-                let mut with_velocity = spec.scenario.clone();
-                with_velocity.mechanism.impact_velocity_m_s = Some(v);
-                if let Err(invalid) = Scenario::new(with_velocity, &root) {
-                    let velocity = "/mechanism/impact_velocity_m_s";
-                    errors.extend(
-                        invalid
-                            .errors()
-                            .iter()
-                            .filter(|e| e.pointer == velocity)
-                            .map(|e| FieldError {
-                                pointer: at.child("impact_velocity_m_s").to_string(),
-                                detail: e.detail.clone(),
-                            }),
-                    );
-                }
-            }
-            for quantity in FITTED {
-                if let Some(value) = observation.measured(quantity) {
-                    measured = true;
-                    if value.is_finite() && value > 0.0 {
-                        terms.push((i, quantity));
-                    } else {
-                        errors.push(FieldError {
-                            pointer: at.child(quantity).to_string(),
-                            detail: format!("must be a positive number, got {value}"),
-                        });
-                    }
-                }
-            }
-            if !measured {
-                errors.push(FieldError {
-                    pointer: at.to_string(),
-                    detail: "measures nothing: give at least one of first_bounce_s, second_bounce_s, total_bounce_s, bounce_count, e1, peak_force_n, arc_energy_j, eroded_mass_kg".into(),
-                });
-            }
-        }
+        let parameters = check_fit(spec, &base, &root, &mut errors);
+        let terms = check_observations(spec, &root, &mut errors);
         if errors.is_empty() && terms.len() <= parameters.len() {
             errors.push(FieldError {
                 pointer: "/observations".into(),
@@ -364,22 +270,7 @@ impl Problem {
                 ),
             });
         }
-        for (name, &[lower, upper]) in &spec.bounds {
-            let pointer = root.child("bounds").child(name.as_str()).to_string();
-            if !parameters.iter().any(|(n, _)| n == name) {
-                errors.push(FieldError {
-                    pointer,
-                    detail: format!("`{name}` is not a parameter in `fit`"),
-                });
-            } else if !(lower > 0.0 && lower < upper && upper.is_finite()) {
-                errors.push(FieldError {
-                    pointer,
-                    detail: format!(
-                        "must be [lower, upper] with 0 < lower < upper, got [{lower}, {upper}]"
-                    ),
-                });
-            }
-        }
+        check_bounds(spec, &parameters, &root, &mut errors);
         if !errors.is_empty() {
             return Err(InvalidInput::new(errors));
         }
@@ -690,73 +581,82 @@ impl Problem {
         self.identifiable(&jacobian)?;
         let degrees_of_freedom = residuals.len() - theta.len();
         let cost = sum_of_squares(&residuals);
-        let variance = cost / degrees_of_freedom as f64;
-        let t = student_t_975(degrees_of_freedom as u64);
         let (jtj, _) = normal_equations(&jacobian, &residuals);
-        let covariance = invert(jtj).unwrap_or_default();
-        let entry = |i: usize, j: usize| {
-            covariance
-                .get(i)
-                .and_then(|row| row.get(j))
-                .copied()
-                .unwrap_or(f64::NAN)
+        let optimum = Optimum {
+            theta,
+            covariance: invert(jtj).unwrap_or_default(),
+            variance: cost / degrees_of_freedom as f64,
+            cost,
+            degrees_of_freedom,
+            t: student_t_975(degrees_of_freedom as u64),
         };
-        let mut unbounded = Vec::new();
-        let estimates = self
-            .parameters
-            .iter()
-            .enumerate()
-            .map(|(i, (name, _))| {
-                let se_ln = (variance * entry(i, i)).sqrt();
-                let value = theta[i].exp();
-                let [lower, upper] = self.bounds_ln[i];
-                let profile = Profile {
-                    problem: self,
-                    theta,
-                    parameter: i,
-                    cost,
-                    degrees_of_freedom: degrees_of_freedom as f64,
-                    t,
-                    slopes: (0..theta.len())
-                        .map(|k| entry(k, i) / entry(i, i))
-                        .collect(),
-                };
-                let ends = [-1.0, 1.0].map(|side| profile.end(side, t * se_ln));
-                for ((end, side), word) in ends.iter().zip(["below", "above"]).zip([-1.0, 1.0]) {
-                    if let Bounded::Not(reach) = end {
-                        unbounded.push(format!(
-                            "`{name}` is not bounded {side} by the data: its sum of squares stays within the 95 % level out to {:.4e}, a factor {:.0} from the estimate, where the search stopped; its interval ends there",
-                            (theta[i] + word * reach).exp(),
-                            reach.exp()
-                        ));
-                    }
-                }
-                let ci95 = [
-                    (theta[i] - ends[0].reach()).max(lower).exp(),
-                    (theta[i] + ends[1].reach()).min(upper).exp(),
-                ];
-                let at_bound = theta[i] == lower || theta[i] == upper;
-                (
-                    name.clone(),
-                    Estimate {
-                        value,
-                        ci95,
-                        se_ln,
-                        at_bound,
-                    },
-                )
-            })
+        let mut warnings = Vec::new();
+        let estimates = (0..theta.len())
+            .map(|i| self.estimate(&optimum, i, &mut warnings))
             .collect();
-        // From the upper triangle only: the inverse is symmetric up to rounding, the matrix
-        // exactly.
-        let r = |i: usize, j: usize| {
-            let (i, j) = (i.min(j), i.max(j));
-            if i == j {
-                1.0
-            } else {
-                (entry(i, j) / (entry(i, i) * entry(j, j)).sqrt()).clamp(-1.0, 1.0)
-            }
+        let (correlation, trade_offs) = self.correlation(&optimum);
+        warnings.extend(trade_offs);
+        Ok(Calibration {
+            estimates,
+            scenario: self.spec(theta).expect("the optimum is a scenario"),
+            residuals: self.residuals_by_quantity(theta),
+            restitution_from_bounce_times: self.readings(theta),
+            iterations,
+            residual_sd: optimum.variance.sqrt(),
+            correlation,
+            warnings,
+        })
+    }
+
+    /// Parameter `i`'s estimate with its profile-likelihood interval; a side the data do not
+    /// bound adds a warning.
+    fn estimate(
+        &self,
+        optimum: &Optimum,
+        i: usize,
+        warnings: &mut Vec<String>,
+    ) -> (String, Estimate) {
+        let (theta, name) = (optimum.theta, &self.parameters[i].0);
+        let se_ln = (optimum.variance * optimum.entry(i, i)).sqrt();
+        let [lower, upper] = self.bounds_ln[i];
+        let profile = Profile {
+            problem: self,
+            theta,
+            parameter: i,
+            cost: optimum.cost,
+            degrees_of_freedom: optimum.degrees_of_freedom as f64,
+            t: optimum.t,
+            slopes: (0..theta.len())
+                .map(|k| optimum.entry(k, i) / optimum.entry(i, i))
+                .collect(),
         };
+        let ends = [-1.0, 1.0].map(|side| profile.end(side, optimum.t * se_ln));
+        for ((end, side), word) in ends.iter().zip(["below", "above"]).zip([-1.0, 1.0]) {
+            if let Bounded::Not(reach) = end {
+                warnings.push(format!(
+                    "`{name}` is not bounded {side} by the data: its sum of squares stays within the 95 % level out to {:.4e}, a factor {:.0} from the estimate, where the search stopped; its interval ends there",
+                    (theta[i] + word * reach).exp(),
+                    reach.exp()
+                ));
+            }
+        }
+        let estimate = Estimate {
+            value: theta[i].exp(),
+            ci95: [
+                (theta[i] - ends[0].reach()).max(lower).exp(),
+                (theta[i] + ends[1].reach()).min(upper).exp(),
+            ],
+            se_ln,
+            at_bound: theta[i] == lower || theta[i] == upper,
+        };
+        (name.clone(), estimate)
+    }
+
+    /// The parameters' correlation matrix, by name, and a warning for each pair that trades off.
+    fn correlation(
+        &self,
+        optimum: &Optimum,
+    ) -> (BTreeMap<String, BTreeMap<String, f64>>, Vec<String>) {
         let names: Vec<&str> = self.parameters.iter().map(|(n, _)| n.as_str()).collect();
         let correlation = names
             .iter()
@@ -765,15 +665,15 @@ impl Problem {
                 let row = names
                     .iter()
                     .enumerate()
-                    .map(|(j, b)| ((*b).to_owned(), r(i, j)))
+                    .map(|(j, b)| ((*b).to_owned(), optimum.r(i, j)))
                     .collect();
                 ((*a).to_owned(), row)
             })
             .collect();
-        let mut warnings = unbounded;
+        let mut warnings = Vec::new();
         for i in 0..names.len() {
             for j in i + 1..names.len() {
-                let r = r(i, j);
+                let r = optimum.r(i, j);
                 if r.abs() >= TRADE_OFF {
                     warnings.push(format!(
                         "`{}` and `{}` trade off (correlation {r:.2}): the data constrain a combination of them; their intervals are wide because each can move with the other, so measure over a wider range of conditions or more quantities, or fix one of them",
@@ -782,6 +682,12 @@ impl Problem {
                 }
             }
         }
+        (correlation, warnings)
+    }
+
+    /// The differences simulated minus measured at `theta`, by quantity, with their relative
+    /// root mean square.
+    fn residuals_by_quantity(&self, theta: &[f64]) -> BTreeMap<String, Residuals> {
         let outcomes = self.simulate_all(theta).expect("the optimum simulates");
         let mut by_quantity: BTreeMap<String, (Vec<f64>, f64)> = BTreeMap::new();
         for (i, observation) in self.observations.iter().enumerate() {
@@ -801,7 +707,7 @@ impl Problem {
                 entry.1 += (difference / f64::from(count.max(1))).powi(2);
             }
         }
-        let residuals = by_quantity
+        by_quantity
             .into_iter()
             .map(|(quantity, (values, squares))| {
                 let rms_relative = (squares / values.len() as f64).sqrt();
@@ -813,17 +719,41 @@ impl Problem {
                     },
                 )
             })
-            .collect();
-        Ok(Calibration {
-            estimates,
-            scenario: self.spec(theta).expect("the optimum is a scenario"),
-            residuals,
-            restitution_from_bounce_times: self.readings(theta),
-            iterations,
-            residual_sd: variance.sqrt(),
-            correlation,
-            warnings,
-        })
+            .collect()
+    }
+}
+
+/// The optimum's linearised statistics, where the report's intervals start.
+struct Optimum<'a> {
+    theta: &'a [f64],
+    /// `(J^T J)^-1`, empty where it is singular.
+    covariance: Vec<Vec<f64>>,
+    /// The residual variance, `cost / degrees_of_freedom`.
+    variance: f64,
+    cost: f64,
+    degrees_of_freedom: usize,
+    /// Student's t at 97.5 % for the degrees of freedom.
+    t: f64,
+}
+
+impl Optimum<'_> {
+    fn entry(&self, i: usize, j: usize) -> f64 {
+        self.covariance
+            .get(i)
+            .and_then(|row| row.get(j))
+            .copied()
+            .unwrap_or(f64::NAN)
+    }
+
+    /// The correlation of parameters `i` and `j`, from the upper triangle only: the inverse is
+    /// symmetric up to rounding, the matrix exactly.
+    fn r(&self, i: usize, j: usize) -> f64 {
+        let (i, j) = (i.min(j), i.max(j));
+        if i == j {
+            1.0
+        } else {
+            (self.entry(i, j) / (self.entry(i, i) * self.entry(j, j)).sqrt()).clamp(-1.0, 1.0)
+        }
     }
 }
 
@@ -992,6 +922,147 @@ impl Profile<'_> {
             }
         }
         Bounded::At(b)
+    }
+}
+/// The parameters `fit` names: dotted paths to positive numbers of the scenario (or kappa,
+/// which the model derives when absent), each once.
+fn check_fit(
+    spec: &CalibrationSpec,
+    base: &Value,
+    root: &Pointer,
+    errors: &mut Vec<FieldError>,
+) -> Vec<(String, Vec<String>)> {
+    let mut parameters: Vec<(String, Vec<String>)> = Vec::new();
+    if spec.fit.is_empty() || spec.fit.len() > MAX_PARAMETERS {
+        errors.push(FieldError {
+            pointer: "/fit".into(),
+            detail: format!("must name 1 to {MAX_PARAMETERS} scenario parameters"),
+        });
+    }
+    for (i, name) in spec.fit.iter().enumerate() {
+        let pointer = root.child("fit").child(i).to_string();
+        let path: Vec<String> = name.split('.').map(str::to_owned).collect();
+        if path.len() < 2 || path.iter().any(String::is_empty) {
+            errors.push(FieldError {
+                pointer,
+                detail: format!(
+                    "`{name}` is not a dotted path in the scenario, e.g. `material.kappa`"
+                ),
+            });
+            continue;
+        }
+        match lookup(base, &path) {
+            Some(Value::Number(n)) if n.as_f64().is_some_and(|x| x > 0.0) => {}
+            // An optional number the model derives when absent (kappa).
+            None | Some(Value::Null) if name == "material.kappa" => {}
+            _ => {
+                errors.push(FieldError {
+                    pointer,
+                    detail: format!(
+                        "`{name}` is not a positive number of the scenario that a fit can vary"
+                    ),
+                });
+                continue;
+            }
+        }
+        if parameters.iter().any(|(n, _)| n == name) {
+            errors.push(FieldError {
+                pointer,
+                detail: format!("`{name}` is named twice"),
+            });
+            continue;
+        }
+        parameters.push((name.clone(), path));
+    }
+    parameters
+}
+
+/// Every measured value of every observation as a term `(observation, quantity)` of the
+/// objective; each observation measures something, at a velocity the scenario allows.
+fn check_observations(
+    spec: &CalibrationSpec,
+    root: &Pointer,
+    errors: &mut Vec<FieldError>,
+) -> Vec<(usize, &'static str)> {
+    if spec.observations.is_empty() || spec.observations.len() > MAX_OBSERVATIONS {
+        errors.push(FieldError {
+            pointer: "/observations".into(),
+            detail: format!("must hold 1 to {MAX_OBSERVATIONS} observations"),
+        });
+    }
+    let mut terms = Vec::new();
+    for (i, observation) in spec.observations.iter().enumerate() {
+        let at = root.child("observations").child(i);
+        let mut measured = observation.bounce_count.is_some();
+        if observation.operation.is_some_and(|j| j > MAX_OPERATION) {
+            errors.push(FieldError {
+                pointer: at.child("operation").to_string(),
+                detail: format!("must be from 0 to {MAX_OPERATION}"),
+            });
+        }
+        if let Some(v) = observation.impact_velocity_m_s {
+            // The scenario's rule for an impact velocity, at the observation's place.
+            let mut with_velocity = spec.scenario.clone();
+            with_velocity.mechanism.impact_velocity_m_s = Some(v);
+            if let Err(invalid) = Scenario::new(with_velocity, root) {
+                let velocity = "/mechanism/impact_velocity_m_s";
+                errors.extend(
+                    invalid
+                        .errors()
+                        .iter()
+                        .filter(|e| e.pointer == velocity)
+                        .map(|e| FieldError {
+                            pointer: at.child("impact_velocity_m_s").to_string(),
+                            detail: e.detail.clone(),
+                        }),
+                );
+            }
+        }
+        for quantity in FITTED {
+            if let Some(value) = observation.measured(quantity) {
+                measured = true;
+                if value.is_finite() && value > 0.0 {
+                    terms.push((i, quantity));
+                } else {
+                    errors.push(FieldError {
+                        pointer: at.child(quantity).to_string(),
+                        detail: format!("must be a positive number, got {value}"),
+                    });
+                }
+            }
+        }
+        if !measured {
+            errors.push(FieldError {
+                pointer: at.to_string(),
+                detail: "measures nothing: give at least one of first_bounce_s, second_bounce_s, total_bounce_s, bounce_count, e1, peak_force_n, arc_energy_j, eroded_mass_kg".into(),
+            });
+        }
+    }
+    terms
+}
+
+/// Each bound names a fitted parameter and is `[lower, upper]` with `0 < lower < upper`.
+fn check_bounds(
+    spec: &CalibrationSpec,
+    parameters: &[(String, Vec<String>)],
+    root: &Pointer,
+    errors: &mut Vec<FieldError>,
+) {
+    for (name, &[lower, upper]) in &spec.bounds {
+        let pointer = root.child("bounds").child(name.as_str()).to_string();
+        if !parameters.iter().any(|(n, _)| n == name) {
+            errors.push(FieldError {
+                pointer,
+                detail: format!("`{name}` is not a parameter in `fit`"),
+            });
+        } else if !(lower > 0.0 && lower < upper && upper.is_finite()) {
+            errors.push(FieldError {
+                pointer,
+                detail: format!(
+                    "must be [lower, upper] with 0 < lower < upper, got [{lower}, {upper}]"
+                ),
+            });
+        }
     }
 }
 

@@ -225,109 +225,35 @@ impl Distribution {
         let distribution = match *spec {
             DistributionSpec::Fixed { value } => {
                 faults.lowest_in("value", value, domain);
-                Distribution::Fixed(value)
+                Some(Distribution::Fixed(value))
             }
             DistributionSpec::Normal { mean, sd, min, max } => {
-                if !mean.is_finite() {
-                    faults.fail("mean", "must be a finite number".into());
-                }
-                faults.positive("sd", sd);
-                let support = Support {
-                    name: format!("normal(mean {mean}, sd {sd})"),
-                    lowest: f64::NEG_INFINITY,
-                    missing_min: "min",
-                };
-                let window = faults.window(&support, min, max, domain, |x| {
-                    standard_normal_cdf((x - mean) / sd)
-                });
-                match Normal::new(mean, sd) {
-                    Ok(normal) if faults.errors.is_empty() => Distribution::Normal {
-                        normal,
-                        mean,
-                        sd,
-                        window,
-                    },
-                    _ => return Err(faults.errors),
-                }
+                faults.normal(mean, sd, min, max, domain)
             }
             DistributionSpec::Lognormal {
                 median,
                 sigma,
                 min,
                 max,
-            } => {
-                faults.positive("median", median);
-                faults.positive("sigma", sigma);
-                let support = Support {
-                    name: format!("lognormal(median {median}, sigma {sigma})"),
-                    lowest: 0.0,
-                    missing_min: "kind",
-                };
-                let window = faults.window(&support, min, max, domain, |x| {
-                    standard_normal_cdf((x / median).ln() / sigma)
-                });
-                match LogNormal::new(median.ln(), sigma) {
-                    Ok(lognormal) if faults.errors.is_empty() => Distribution::Lognormal {
-                        lognormal,
-                        median,
-                        sigma,
-                        window,
-                    },
-                    _ => return Err(faults.errors),
-                }
-            }
+            } => faults.lognormal(median, sigma, min, max, domain),
             DistributionSpec::Uniform { min, max } => {
                 faults.lowest_in("min", min, domain);
                 faults.max_above_min(max, min);
-                Distribution::Uniform { min, max }
+                Some(Distribution::Uniform { min, max })
             }
             DistributionSpec::Triangular { min, mode, max } => {
-                faults.lowest_in("min", min, domain);
-                faults.max_above_min(max, min);
-                if !(mode >= min && mode <= max) {
-                    faults.fail("mode", format!("must lie in [min, max], got {mode}"));
-                }
-                match Triangular::new(min, max, mode) {
-                    Ok(triangular) if faults.errors.is_empty() => Distribution::Triangular {
-                        triangular,
-                        min,
-                        mode,
-                        max,
-                    },
-                    _ => return Err(faults.errors),
-                }
+                faults.triangular(min, mode, max, domain)
             }
             DistributionSpec::Weibull {
                 scale,
                 shape,
                 min,
                 max,
-            } => {
-                faults.positive("scale", scale);
-                faults.positive("shape", shape);
-                let support = Support {
-                    name: format!("Weibull(scale {scale}, shape {shape})"),
-                    lowest: 0.0,
-                    missing_min: "kind",
-                };
-                let window = faults.window(&support, min, max, domain, |x| {
-                    -(-(x / scale).powf(shape)).exp_m1()
-                });
-                match Weibull::new(scale, shape) {
-                    Ok(weibull) if faults.errors.is_empty() => Distribution::Weibull {
-                        weibull,
-                        scale,
-                        shape,
-                        window,
-                    },
-                    _ => return Err(faults.errors),
-                }
-            }
+            } => faults.weibull(scale, shape, min, max, domain),
         };
-        if faults.errors.is_empty() {
-            Ok(distribution)
-        } else {
-            Err(faults.errors)
+        match distribution {
+            Some(distribution) if faults.errors.is_empty() => Ok(distribution),
+            _ => Err(faults.errors),
         }
     }
 
@@ -460,6 +386,113 @@ pub fn stratified_probability<R: rand::Rng + ?Sized>(
 ) -> f64 {
     let offset: f64 = rng.sample(Open01);
     (f64::from(stratum) + offset) / f64::from(strata)
+}
+
+/// Each kind's parameters checked and, when they hold, its distribution (`None` otherwise).
+impl Faults<'_> {
+    fn normal(
+        &mut self,
+        mean: f64,
+        sd: f64,
+        min: Option<f64>,
+        max: Option<f64>,
+        domain: Domain,
+    ) -> Option<Distribution> {
+        if !mean.is_finite() {
+            self.fail("mean", "must be a finite number".into());
+        }
+        self.positive("sd", sd);
+        let support = Support {
+            name: format!("normal(mean {mean}, sd {sd})"),
+            lowest: f64::NEG_INFINITY,
+            missing_min: "min",
+        };
+        let window = self.window(&support, min, max, domain, |x| {
+            standard_normal_cdf((x - mean) / sd)
+        });
+        let normal = Normal::new(mean, sd).ok()?;
+        Some(Distribution::Normal {
+            normal,
+            mean,
+            sd,
+            window,
+        })
+    }
+
+    fn lognormal(
+        &mut self,
+        median: f64,
+        sigma: f64,
+        min: Option<f64>,
+        max: Option<f64>,
+        domain: Domain,
+    ) -> Option<Distribution> {
+        self.positive("median", median);
+        self.positive("sigma", sigma);
+        let support = Support {
+            name: format!("lognormal(median {median}, sigma {sigma})"),
+            lowest: 0.0,
+            missing_min: "kind",
+        };
+        let window = self.window(&support, min, max, domain, |x| {
+            standard_normal_cdf((x / median).ln() / sigma)
+        });
+        let lognormal = LogNormal::new(median.ln(), sigma).ok()?;
+        Some(Distribution::Lognormal {
+            lognormal,
+            median,
+            sigma,
+            window,
+        })
+    }
+
+    fn triangular(
+        &mut self,
+        min: f64,
+        mode: f64,
+        max: f64,
+        domain: Domain,
+    ) -> Option<Distribution> {
+        self.lowest_in("min", min, domain);
+        self.max_above_min(max, min);
+        if !(mode >= min && mode <= max) {
+            self.fail("mode", format!("must lie in [min, max], got {mode}"));
+        }
+        let triangular = Triangular::new(min, max, mode).ok()?;
+        Some(Distribution::Triangular {
+            triangular,
+            min,
+            mode,
+            max,
+        })
+    }
+
+    fn weibull(
+        &mut self,
+        scale: f64,
+        shape: f64,
+        min: Option<f64>,
+        max: Option<f64>,
+        domain: Domain,
+    ) -> Option<Distribution> {
+        self.positive("scale", scale);
+        self.positive("shape", shape);
+        let support = Support {
+            name: format!("Weibull(scale {scale}, shape {shape})"),
+            lowest: 0.0,
+            missing_min: "kind",
+        };
+        let window = self.window(&support, min, max, domain, |x| {
+            -(-(x / scale).powf(shape)).exp_m1()
+        });
+        let weibull = Weibull::new(scale, shape).ok()?;
+        Some(Distribution::Weibull {
+            weibull,
+            scale,
+            shape,
+            window,
+        })
+    }
 }
 
 /// The errors found in one distribution, each below its pointer.

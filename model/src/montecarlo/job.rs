@@ -331,34 +331,7 @@ impl Job {
         if let Err(invalid) = &scenario {
             errors.extend_from_slice(invalid.errors());
         }
-        let mut count = |field: &str, value: u64, max: u64| {
-            if !(1..=max).contains(&value) {
-                errors.push(FieldError {
-                    pointer: root.child(field).to_string(),
-                    detail: format!("must be from 1 to {max}, got {value}"),
-                });
-            }
-        };
-        count("devices", spec.devices, MAX_DEVICES);
-        count("operations", spec.operations, MAX_OPERATIONS);
-        let bin_operations = spec.bin_operations.unwrap_or((spec.operations / 10).max(1));
-        if bin_operations == 0 || bin_operations > spec.operations.max(1) {
-            errors.push(FieldError {
-                pointer: root.child("bin_operations").to_string(),
-                detail: format!(
-                    "must be from 1 to operations ({}), got {bin_operations}",
-                    spec.operations
-                ),
-            });
-        } else if spec.operations.div_ceil(bin_operations) > MAX_BINS {
-            errors.push(FieldError {
-                pointer: root.child("bin_operations").to_string(),
-                detail: format!(
-                    "gives {} bins of operations; at most {MAX_BINS} are allowed",
-                    spec.operations.div_ceil(bin_operations)
-                ),
-            });
-        }
+        let bin_operations = check_sizes(&spec, root, &mut errors);
 
         let scatter = match &scenario {
             Ok(scenario) => {
@@ -373,61 +346,9 @@ impl Job {
         });
 
         let polarity = spec.scenario.material.anode_erosion_fraction.is_some();
-        let metrics = match &spec.metrics {
-            None => OperationMetric::ALL
-                .map(Metric::Operation)
-                .into_iter()
-                .chain(
-                    DeviceMetric::ALL
-                        .into_iter()
-                        .filter(|m| polarity || !m.needs_polarity())
-                        .map(Metric::Device),
-                )
-                .collect(),
-            Some(names) => {
-                let mut metrics: Vec<Metric> = Vec::new();
-                for (i, name) in names.iter().enumerate() {
-                    let at = root.child("metrics").child(i);
-                    match parse_metric(name, &at, polarity, &mut errors) {
-                        Some(metric) if metrics.contains(&metric) => errors.push(FieldError {
-                            pointer: at.to_string(),
-                            detail: format!("`{name}` is listed twice"),
-                        }),
-                        Some(metric) => metrics.push(metric),
-                        None => {}
-                    }
-                }
-                if names.is_empty() {
-                    errors.push(FieldError {
-                        pointer: root.child("metrics").to_string(),
-                        detail: "must name at least one metric (or be left out for all)".to_owned(),
-                    });
-                }
-                metrics
-            }
-        };
+        let metrics = check_metrics(spec.metrics.as_deref(), polarity, root, &mut errors);
 
-        let (mut limits, mut thresholds) = (BTreeMap::new(), BTreeMap::new());
-        for (name, limit) in &spec.limits {
-            let at = root.child("limits").child(name);
-            if let Some(metric) = parse_metric(name, &at, polarity, &mut errors) {
-                if !metrics.contains(&metric) {
-                    errors.push(FieldError {
-                        pointer: at.to_string(),
-                        detail: format!("`{name}` is not among the job's metrics"),
-                    });
-                } else if limit.check(&at, &mut errors) {
-                    match limit {
-                        LimitSpec::Above(limit) => {
-                            limits.insert(metric, *limit);
-                        }
-                        LimitSpec::Thresholds(list) => {
-                            thresholds.insert(metric, list.clone());
-                        }
-                    }
-                }
-            }
-        }
+        let (limits, thresholds) = check_limits(&spec, &metrics, polarity, root, &mut errors);
 
         let precision = spec
             .precision
@@ -446,21 +367,7 @@ impl Job {
             sensitivity.method
         });
 
-        let rare_event = spec.rare_event.as_ref().and_then(|rare| {
-            let inputs = |per| spec.scatter.iter().filter(|s| s.per == per).count();
-            RareEvent::new(
-                rare,
-                &JobShape {
-                    operations: spec.operations,
-                    device_inputs: inputs(Per::Device),
-                    operation_inputs: inputs(Per::Operation),
-                    polarity,
-                    failure: !spec.failure.is_empty(),
-                },
-                &root.child("rare_event"),
-                &mut errors,
-            )
-        });
+        let rare_event = check_rare_event(&spec, polarity, root, &mut errors);
 
         if !errors.is_empty() {
             return Err(InvalidInput::new(errors));
@@ -737,6 +644,142 @@ fn domain(parameter: Parameter, scenario: &Scenario, scattered: &[ScatterSpec]) 
         | Parameter::MinSeparation
         | Parameter::ErosionRate => Domain::NON_NEGATIVE,
     }
+}
+
+/// `devices` and `operations` within their limits; the bin width (default a tenth of the
+/// operations), from 1 to `operations`, giving at most [`MAX_BINS`] bins.
+fn check_sizes(spec: &JobSpec, root: &Pointer, errors: &mut Vec<FieldError>) -> u64 {
+    let mut count = |field: &str, value: u64, max: u64| {
+        if !(1..=max).contains(&value) {
+            errors.push(FieldError {
+                pointer: root.child(field).to_string(),
+                detail: format!("must be from 1 to {max}, got {value}"),
+            });
+        }
+    };
+    count("devices", spec.devices, MAX_DEVICES);
+    count("operations", spec.operations, MAX_OPERATIONS);
+    let bin_operations = spec.bin_operations.unwrap_or((spec.operations / 10).max(1));
+    if bin_operations == 0 || bin_operations > spec.operations.max(1) {
+        errors.push(FieldError {
+            pointer: root.child("bin_operations").to_string(),
+            detail: format!(
+                "must be from 1 to operations ({}), got {bin_operations}",
+                spec.operations
+            ),
+        });
+    } else if spec.operations.div_ceil(bin_operations) > MAX_BINS {
+        errors.push(FieldError {
+            pointer: root.child("bin_operations").to_string(),
+            detail: format!(
+                "gives {} bins of operations; at most {MAX_BINS} are allowed",
+                spec.operations.div_ceil(bin_operations)
+            ),
+        });
+    }
+    bin_operations
+}
+
+/// The metrics a job summarises: all (those needing polarity only with it) or the listed ones,
+/// each once.
+fn check_metrics(
+    names: Option<&[String]>,
+    polarity: bool,
+    root: &Pointer,
+    errors: &mut Vec<FieldError>,
+) -> Vec<Metric> {
+    match names {
+        None => OperationMetric::ALL
+            .map(Metric::Operation)
+            .into_iter()
+            .chain(
+                DeviceMetric::ALL
+                    .into_iter()
+                    .filter(|m| polarity || !m.needs_polarity())
+                    .map(Metric::Device),
+            )
+            .collect(),
+        Some(names) => {
+            let mut metrics: Vec<Metric> = Vec::new();
+            for (i, name) in names.iter().enumerate() {
+                let at = root.child("metrics").child(i);
+                match parse_metric(name, &at, polarity, errors) {
+                    Some(metric) if metrics.contains(&metric) => errors.push(FieldError {
+                        pointer: at.to_string(),
+                        detail: format!("`{name}` is listed twice"),
+                    }),
+                    Some(metric) => metrics.push(metric),
+                    None => {}
+                }
+            }
+            if names.is_empty() {
+                errors.push(FieldError {
+                    pointer: root.child("metrics").to_string(),
+                    detail: "must name at least one metric (or be left out for all)".to_owned(),
+                });
+            }
+            metrics
+        }
+    }
+}
+
+/// Each limit on one of the job's metrics: a scalar limit (its exceedance counted) or a list of
+/// thresholds.
+type Limits = (BTreeMap<Metric, f64>, BTreeMap<Metric, Vec<Threshold>>);
+
+fn check_limits(
+    spec: &JobSpec,
+    metrics: &[Metric],
+    polarity: bool,
+    root: &Pointer,
+    errors: &mut Vec<FieldError>,
+) -> Limits {
+    let (mut limits, mut thresholds) = (BTreeMap::new(), BTreeMap::new());
+    for (name, limit) in &spec.limits {
+        let at = root.child("limits").child(name);
+        if let Some(metric) = parse_metric(name, &at, polarity, errors) {
+            if !metrics.contains(&metric) {
+                errors.push(FieldError {
+                    pointer: at.to_string(),
+                    detail: format!("`{name}` is not among the job's metrics"),
+                });
+            } else if limit.check(&at, errors) {
+                match limit {
+                    LimitSpec::Above(limit) => {
+                        limits.insert(metric, *limit);
+                    }
+                    LimitSpec::Thresholds(list) => {
+                        thresholds.insert(metric, list.clone());
+                    }
+                }
+            }
+        }
+    }
+    (limits, thresholds)
+}
+
+/// The rare-event question, over the job's own scattered inputs.
+fn check_rare_event(
+    spec: &JobSpec,
+    polarity: bool,
+    root: &Pointer,
+    errors: &mut Vec<FieldError>,
+) -> Option<RareEvent> {
+    spec.rare_event.as_ref().and_then(|rare| {
+        let inputs = |per| spec.scatter.iter().filter(|s| s.per == per).count();
+        RareEvent::new(
+            rare,
+            &JobShape {
+                operations: spec.operations,
+                device_inputs: inputs(Per::Device),
+                operation_inputs: inputs(Per::Operation),
+                polarity,
+                failure: !spec.failure.is_empty(),
+            },
+            &root.child("rare_event"),
+            errors,
+        )
+    })
 }
 
 fn check_scatter(
