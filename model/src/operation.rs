@@ -464,22 +464,8 @@ impl Operation {
         let moving = zero.lt(u);
         let keep = |x: L| L::select(moving, x, zero);
 
-        // Pre-impact arc softens the surface for the first impact (section 5), in full under the
-        // paper law (a weight of exactly 1 changes no bit).
-        let (pre_arc_s, pre_arc_energy_j, kappa_1, pressure_1) = match &self.arc {
-            Some(arc) => {
-                let pre_arc_s = arc.pre_arc_duration_s(u);
-                let energy_j = arc.energy_j(pre_arc_s);
-                let ratio = arc.softening_ratio(c(self.arc_weight) * energy_j);
-                (
-                    pre_arc_s,
-                    energy_j,
-                    softened_kappa(kappa, ratio),
-                    pressure_pa * ratio,
-                )
-            }
-            None => (zero, zero, kappa, pressure_pa),
-        };
+        let (pre_arc_s, pre_arc_energy_j, kappa_1, pressure_1) =
+            self.pre_arc(u, kappa, pressure_pa);
         let e1 = match self.fidelity {
             Fidelity::Exact => restitution::restitution(u, kappa_1),
             Fidelity::ClosedForm => restitution::restitution_closed_form(u, kappa_1),
@@ -553,6 +539,26 @@ impl Operation {
             truncated,
             first_impact_plastic_work_j: keep(plastic_work_j),
         }
+    }
+
+    /// The pre-impact arc at impact speed `u` (section 5): its duration and energy, and the
+    /// kappa and pressure the first impact meets on the surface it softened, in full under the
+    /// paper law (a weight of exactly 1 changes no bit). Without an arc: none, and the surface as
+    /// it is.
+    #[inline(always)]
+    fn pre_arc<L: Real>(&self, u: L, kappa: L, pressure_pa: L) -> (L, L, L, L) {
+        let Some(arc) = &self.arc else {
+            return (L::splat(0.0), L::splat(0.0), kappa, pressure_pa);
+        };
+        let pre_arc_s = arc.pre_arc_duration_s(u);
+        let energy_j = arc.energy_j(pre_arc_s);
+        let ratio = arc.softening_ratio(L::splat(self.arc_weight) * energy_j);
+        (
+            pre_arc_s,
+            energy_j,
+            softened_kappa(kappa, ratio),
+            pressure_pa * ratio,
+        )
     }
 
     /// Whether a flight at separation speed `v` counts as a bounce: it opens the contact and reaches

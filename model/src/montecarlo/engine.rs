@@ -513,57 +513,14 @@ impl<'a> Plan<'a> {
             active == lanes || (active < lanes && self.sensitivity.is_none()),
             "spare lanes only without a sensitivity analysis"
         );
-        let (mut draws, mut rngs, mut inputs) = self.draw_devices(
-            chunk,
-            first_local,
-            active,
-            |device| device,
-            chunk.permutations,
-            &mut stats.truncation_rejections,
-        );
-        draws.resize(lanes, draws[0].clone());
-        rngs.resize(lanes, rngs[0].clone());
-        inputs.resize(lanes, inputs[0].clone());
-        let mut variants = vec![Variant::<L>::new(self, draws, rngs, inputs, active)];
         let sensitivity = self.sensitivity.as_ref();
         let sobol = sensitivity.filter(|s| s.method == SensitivityMethod::Sobol);
         let mut scratch = vec![0; job.scatter().len()];
-        if let Some(plan) = sobol.filter(|s| !s.device_inputs.is_empty()) {
-            let (b_draws, b_rngs, b_inputs) = self.draw_devices(
-                chunk,
-                first_local,
-                lanes,
-                |device| SOBOL_DEVICE_STREAM_BASE | device,
-                None,
-                &mut scratch,
-            );
-            let a = &variants[0];
-            let swapped: Vec<Variant<L>> = plan
-                .device_inputs
-                .iter()
-                .map(|&input| {
-                    let (mut draws, mut inputs) = (a.draws.clone(), a.inputs.clone());
-                    for k in 0..lanes {
-                        let value = b_inputs[k][input];
-                        draws[k].set(job.scatter()[input].parameter, value);
-                        inputs[k][input] = value;
-                    }
-                    Variant::new(self, draws, a.rngs.clone(), inputs, lanes)
-                })
-                .collect();
-            variants.push(Variant::new(self, b_draws, b_rngs, b_inputs, lanes));
-            variants.extend(swapped);
-        }
-        // The operation-level B' draws, from each device's own operation Sobol' stream.
-        let mut operation_rngs: Vec<ChaCha8Rng> = match sobol {
-            Some(plan) if !plan.operation_inputs.is_empty() => (0..lanes as u64)
-                .map(|k| {
-                    let mut rng = ChaCha8Rng::seed_from_u64(job.seed());
-                    rng.set_stream(SOBOL_OPERATION_STREAM_BASE | (chunk.first + first_local + k));
-                    rng
-                })
-                .collect(),
-            _ => Vec::new(),
+        let mut variants = self.variants::<L>(chunk, first_local, active, stats, &mut scratch);
+        let operation_sobol = sobol.filter(|p| !p.operation_inputs.is_empty());
+        let mut operation_rngs = match operation_sobol {
+            Some(_) => self.operation_sobol_rngs(chunk.first + first_local, lanes),
+            None => Vec::new(),
         };
         let mut cells = sensitivity.map(|plan| LaneCells::new(plan, lanes));
         let lane_draws = self.lane_draws && sensitivity.is_none();
@@ -578,6 +535,7 @@ impl<'a> Plan<'a> {
         let evaluations = variants.len() + sobol.map_or(0, |p| p.operation_evaluations());
         let mut values = vec![0.0; evaluations * lanes * metrics.len()];
         let variant_count = variants.len();
+        let swaps_at = variant_count * lanes * metrics.len();
         for bin_index in 0..bins {
             let start = job.bin_operations() * bin_index as u64;
             let end = (start + job.bin_operations()).min(operations);
@@ -589,89 +547,38 @@ impl<'a> Plan<'a> {
                     } else {
                         &mut scratch
                     };
-                    let outcomes = if lane_draws {
-                        let (speed, radius_m, pressure_pa) =
-                            variant.draw_lanes(self, rejections, operations - op);
-                        variant.evaluate_lanes(
-                            self,
-                            &variant.operation,
-                            variant.model.wear,
-                            speed,
-                            radius_m,
-                            pressure_pa,
-                        )
-                    } else {
-                        variant.draw_operation(self, rejections, operations - op);
-                        variant.evaluate(self, &variant.op_draws)
-                    };
-                    if v == 0
-                        && let Some(plan) = sobol.filter(|p| !p.operation_inputs.is_empty())
-                    {
-                        self.evaluate_operation_swaps(
-                            plan,
-                            variant,
-                            &mut operation_rngs,
-                            &mut scratch,
-                            &mut values[variant_count * lanes * metrics.len()..],
-                        );
-                    }
-                    if v == 0 && !metrics.is_empty() {
-                        // Each metric's values, one dispatch per metric: into the lanes' sums
-                        // (about the shift the first operation of the bin sets) and counted in
-                        // the sketches.
-                        let accumulators = &mut stats.operations[bin.clone()];
-                        let mut columns =
-                            [&outcomes.impact_velocity_m_s; OperationMetric::ALL.len()];
-                        for (column, metric) in columns.iter_mut().zip(metrics) {
-                            *column = metric.lanes(&outcomes);
-                        }
-                        let columns = &columns[..metrics.len()];
-                        if op == start {
-                            sums.clear();
-                            sums.extend(accumulators.iter().zip(columns).map(
-                                |(accumulator, column)| LaneSums::new(accumulator, column.lane(0)),
-                            ));
-                        }
-                        for (sums, column) in sums.iter_mut().zip(columns) {
-                            sums.push(**column);
-                        }
-                        Accumulator::count_lanes(accumulators, columns, active);
-                    }
-                    variant.wear.add_lanes(&outcomes);
+                    let outcomes = variant.step(self, lane_draws, rejections, operations - op);
                     if v == 0 {
+                        if let Some(plan) = operation_sobol {
+                            let values = &mut values[swaps_at..];
+                            let rngs = &mut operation_rngs;
+                            self.evaluate_operation_swaps(
+                                plan,
+                                variant,
+                                rngs,
+                                &mut scratch,
+                                values,
+                            );
+                        }
+                        let (into, first) = (&mut stats.operations[bin.clone()], op == start);
+                        accumulate(metrics, &outcomes, into, &mut sums, first, active);
                         stats.operations_at_max_bounces += (0..active)
                             .map(|k| u64::from(outcomes.truncated.lane(k)))
                             .sum::<u64>();
                     }
+                    variant.wear.add_lanes(&outcomes);
                     // Each lane's outcome, only for what reads it: the sensitivity cells and
                     // the failure criteria.
                     if cells.is_none() && (v != 0 || job.failure().is_empty()) {
                         continue;
                     }
-                    for (k, failed_at) in failed_at.iter_mut().enumerate() {
-                        let outcome = outcomes.lane(k);
-                        if cells.is_some() {
-                            let at = (v * lanes + k) * metrics.len();
-                            for (slot, metric) in
-                                values[at..at + metrics.len()].iter_mut().zip(metrics)
-                            {
-                                *slot = metric.value(&outcome);
-                            }
-                        }
-                        if v != 0 || k >= active {
-                            continue;
-                        }
-                        if failed_at.is_none()
-                            && self.fails(
-                                &variant.model,
-                                &outcome,
-                                &variant.draws[k],
-                                &variant.wear.lane(k),
-                            )
-                        {
-                            *failed_at = Some(op + 1);
-                        }
-                    }
+                    let lanes_read = LanesRead {
+                        variant: v,
+                        active,
+                        operation: op,
+                        cells: cells.is_some(),
+                    };
+                    self.read_lanes(lanes_read, variant, &outcomes, &mut values, &mut failed_at);
                 }
                 if let Some(cells) = &mut cells {
                     cells.push_operation(&values, &variants[0].inputs, variant_count);
@@ -684,8 +591,133 @@ impl<'a> Plan<'a> {
                 accumulator.add_lanes(sums, active);
             }
         }
+        self.finish_devices(
+            chunk.first + first_local,
+            &variants,
+            &failed_at[..active],
+            stats,
+        );
+    }
+
+    /// The devices (`A`, in `active` of the lanes) with their draws and streams, and with Sobol'
+    /// indices over device-level parameters the variants that run alongside: `B`, drawn from the
+    /// devices' Sobol' streams, and each `AB_i`, the devices with parameter `i` taken from `B`.
+    #[inline(always)]
+    fn variants<L: Real>(
+        &self,
+        chunk: &Chunk<'_>,
+        first_local: u64,
+        active: usize,
+        stats: &mut GroupStats,
+        scratch: &mut [u64],
+    ) -> Vec<Variant<'_, L>> {
+        let (job, lanes) = (self.job, L::LANES);
+        let (mut draws, mut rngs, mut inputs) = self.draw_devices(
+            chunk,
+            first_local,
+            active,
+            |device| device,
+            chunk.permutations,
+            &mut stats.truncation_rejections,
+        );
+        draws.resize(lanes, draws[0].clone());
+        rngs.resize(lanes, rngs[0].clone());
+        inputs.resize(lanes, inputs[0].clone());
+        let mut variants = vec![Variant::<L>::new(self, draws, rngs, inputs, active)];
+        let device_sobol = self
+            .sensitivity
+            .as_ref()
+            .filter(|s| s.method == SensitivityMethod::Sobol && !s.device_inputs.is_empty());
+        let Some(plan) = device_sobol else {
+            return variants;
+        };
+        let (b_draws, b_rngs, b_inputs) = self.draw_devices(
+            chunk,
+            first_local,
+            lanes,
+            |device| SOBOL_DEVICE_STREAM_BASE | device,
+            None,
+            scratch,
+        );
         let a = &variants[0];
-        for (k, failed_at) in failed_at.iter().enumerate().take(active) {
+        let swapped: Vec<Variant<L>> = plan
+            .device_inputs
+            .iter()
+            .map(|&input| {
+                let (mut draws, mut inputs) = (a.draws.clone(), a.inputs.clone());
+                for k in 0..lanes {
+                    let value = b_inputs[k][input];
+                    draws[k].set(job.scatter()[input].parameter, value);
+                    inputs[k][input] = value;
+                }
+                Variant::new(self, draws, a.rngs.clone(), inputs, lanes)
+            })
+            .collect();
+        variants.push(Variant::new(self, b_draws, b_rngs, b_inputs, lanes));
+        variants.extend(swapped);
+        variants
+    }
+
+    /// Each lane's stream of operation-level `B'` draws: the device's own operation Sobol'
+    /// stream, lane `k` being device `first + k`.
+    fn operation_sobol_rngs(&self, first: u64, lanes: usize) -> Vec<ChaCha8Rng> {
+        (0..lanes as u64)
+            .map(|k| {
+                let mut rng = ChaCha8Rng::seed_from_u64(self.job.seed());
+                rng.set_stream(SOBOL_OPERATION_STREAM_BASE | (first + k));
+                rng
+            })
+            .collect()
+    }
+
+    /// Each lane's outcome of one operation, only for what reads it: its metrics' values for
+    /// the sensitivity cells, and, for the devices themselves, whether it fails them.
+    #[inline(always)]
+    fn read_lanes<L: Real>(
+        &self,
+        read: LanesRead,
+        variant: &Variant<'_, L>,
+        outcomes: &Outcomes<L>,
+        values: &mut [f64],
+        failed_at: &mut [Option<u64>],
+    ) {
+        let metrics = self.job.operation_metrics();
+        for (k, failed_at) in failed_at.iter_mut().enumerate() {
+            let outcome = outcomes.lane(k);
+            if read.cells {
+                let at = (read.variant * L::LANES + k) * metrics.len();
+                for (slot, metric) in values[at..at + metrics.len()].iter_mut().zip(metrics) {
+                    *slot = metric.value(&outcome);
+                }
+            }
+            if read.variant != 0 || k >= read.active {
+                continue;
+            }
+            if failed_at.is_none()
+                && self.fails(
+                    &variant.model,
+                    &outcome,
+                    &variant.draws[k],
+                    &variant.wear.lane(k),
+                )
+            {
+                *failed_at = Some(read.operation + 1);
+            }
+        }
+    }
+
+    /// What the devices leave at the end of the test: their device metrics, their share of the
+    /// device-level sensitivity, and their lives (device `first + k` in lane `k`).
+    #[inline(always)]
+    fn finish_devices<L: Real>(
+        &self,
+        first: u64,
+        variants: &[Variant<'_, L>],
+        failed_at: &[Option<u64>],
+        stats: &mut GroupStats,
+    ) {
+        let (job, a) = (self.job, &variants[0]);
+        for (k, failed_at) in failed_at.iter().enumerate() {
             for (accumulator, metric) in stats.devices.iter_mut().zip(job.device_metrics()) {
                 accumulator.push(self.device_metric(
                     &a.model,
@@ -694,13 +726,13 @@ impl<'a> Plan<'a> {
                     &a.wear.lane(k),
                 ));
             }
-            if let Some(plan) = sensitivity {
-                self.push_device_sensitivity(plan, &variants, k, &mut stats.sensitivity);
+            if let Some(plan) = &self.sensitivity {
+                self.push_device_sensitivity(plan, variants, k, &mut stats.sensitivity);
             }
             if !job.failure().is_empty() {
                 stats.lives.record(DeviceLife {
-                    device: chunk.first + first_local + k as u64,
-                    operations_to_failure: failed_at.unwrap_or(operations),
+                    device: first + k as u64,
+                    operations_to_failure: failed_at.unwrap_or(job.spec().operations),
                     censored: failed_at.is_none(),
                 });
             }
@@ -927,6 +959,53 @@ impl<'a> Plan<'a> {
     }
 }
 
+/// Which lanes' outcomes [`Plan::read_lanes`] reads, and for what.
+#[derive(Clone, Copy)]
+struct LanesRead {
+    /// The variant evaluated (0 for the devices themselves).
+    variant: usize,
+    /// Lanes that hold devices.
+    active: usize,
+    /// The operation, from 0.
+    operation: u64,
+    /// Whether the sensitivity cells read the values.
+    cells: bool,
+}
+
+/// One operation's values of each metric, one dispatch per metric: into the lanes' sums (about
+/// the shift the first operation of the bin sets, `first_of_bin`) and counted in the sketches.
+#[inline(always)]
+fn accumulate<L: Real>(
+    metrics: &[OperationMetric],
+    outcomes: &Outcomes<L>,
+    accumulators: &mut [Accumulator],
+    sums: &mut Vec<LaneSums<L>>,
+    first_of_bin: bool,
+    active: usize,
+) {
+    if metrics.is_empty() {
+        return;
+    }
+    let mut columns = [&outcomes.impact_velocity_m_s; OperationMetric::ALL.len()];
+    for (column, metric) in columns.iter_mut().zip(metrics) {
+        *column = metric.lanes(outcomes);
+    }
+    let columns = &columns[..metrics.len()];
+    if first_of_bin {
+        sums.clear();
+        sums.extend(
+            accumulators
+                .iter()
+                .zip(columns)
+                .map(|(accumulator, column)| LaneSums::new(accumulator, column.lane(0))),
+        );
+    }
+    for (sums, column) in sums.iter_mut().zip(columns) {
+        sums.push(**column);
+    }
+    Accumulator::count_lanes(accumulators, columns, active);
+}
+
 /// Devices running in lockstep with their draws and state: the job's devices, or, for a
 /// sensitivity analysis, the same devices with some parameters drawn again.
 struct Variant<'p, L: Real> {
@@ -1070,6 +1149,32 @@ impl<'p, L: Real> Variant<'p, L> {
             for op in 0..self.ahead_operations {
                 draw(k, op, rng, rejections);
             }
+        }
+    }
+
+    /// Draws this operation's inputs and evaluates it in every lane: from the lanes' own draws
+    /// (`lane_draws`), or one lane after another.
+    #[inline(always)]
+    fn step(
+        &mut self,
+        plan: &Plan<'_>,
+        lane_draws: bool,
+        rejections: &mut [u64],
+        remaining: u64,
+    ) -> Outcomes<L> {
+        if lane_draws {
+            let (speed, radius_m, pressure_pa) = self.draw_lanes(plan, rejections, remaining);
+            self.evaluate_lanes(
+                plan,
+                &self.operation,
+                self.model.wear,
+                speed,
+                radius_m,
+                pressure_pa,
+            )
+        } else {
+            self.draw_operation(plan, rejections, remaining);
+            self.evaluate(plan, &self.op_draws)
         }
     }
 
