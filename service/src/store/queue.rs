@@ -7,9 +7,9 @@ use super::rows::{
     Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, Dialect, FORGET_EXPIRED_KEY,
     LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY,
     REMEMBERED_KEY, bind_fence, bind_key, claim_from_row, count_from_sql, count_to_sql,
-    failed_too_often, fenced_shard, gave_up, insert_shards, job_columns, job_from_row, not_ended,
-    partial_to_sql, remembered_from_row, schema_current, shard_columns, shard_from_row,
-    shard_id_from_row, spec_from_json,
+    failed_too_often, fenced_shard, gave_up, group_to_sql, insert_shards, job_columns,
+    job_from_row, not_ended, partial_to_sql, remembered_from_row, schema_current, shard_columns,
+    shard_from_row, shard_id_from_row, spec_from_json,
 };
 use super::sql::{Conn, Sql, Tx};
 use super::{
@@ -55,6 +55,28 @@ impl SqlStore {
             .fetch_optional(&mut *tx)
             .await?;
         Ok(row.as_ref().map(remembered_from_row).transpose()?)
+    }
+
+    /// A write transaction in which the claim's shard is marked done; `None` (rolled back) once
+    /// the claim no longer holds it.
+    pub(crate) async fn begin_finishing(&self, fence: &Fence) -> StoreResult<Option<Tx>> {
+        let mut tx = self.begin().await?;
+        if finish_shard(&mut tx, fence).await? {
+            return Ok(Some(tx));
+        }
+        tx.rollback().await?;
+        Ok(None)
+    }
+
+    /// A write transaction while the claim still holds its shard, the job's row locked against
+    /// ending; `None` (rolled back) once it does not.
+    pub(crate) async fn begin_holding(&self, fence: &Fence) -> StoreResult<Option<Tx>> {
+        let mut tx = self.begin().await?;
+        if holds(self.dialect(), &mut tx, fence).await? {
+            return Ok(Some(tx));
+        }
+        tx.rollback().await?;
+        Ok(None)
     }
 
     /// Cuts jobs queued or running before shards existed (migration 0005) into their first
@@ -148,7 +170,7 @@ fn fenced(sql: &'static str, fence: &Fence) -> Sql {
 }
 
 /// Marks the claim's shard done, if the claim still holds it.
-pub(crate) async fn finish_shard(tx: &mut Tx, fence: &Fence) -> StoreResult<bool> {
+async fn finish_shard(tx: &mut Tx, fence: &Fence) -> StoreResult<bool> {
     let updated = fenced(
         concat!(
             "UPDATE shards SET status = 'done', lease_owner = NULL, lease_until = NULL WHERE ",
@@ -176,7 +198,7 @@ async fn end_job(tx: &mut Tx, job: &JobId, now: UnixMs, error: &str) -> StoreRes
 
 /// Whether the claim still holds its shard, locking the job's row against ending for the rest of
 /// the transaction.
-pub(crate) async fn holds(dialect: &Dialect, tx: &mut Tx, fence: &Fence) -> StoreResult<bool> {
+async fn holds(dialect: &Dialect, tx: &mut Tx, fence: &Fence) -> StoreResult<bool> {
     Ok(fenced(dialect.holds, fence)
         .fetch_optional(&mut *tx)
         .await?
@@ -524,11 +546,9 @@ impl JobQueue for SqlStore {
             .iter()
             .map(partial_to_sql)
             .collect::<StoreResult<Vec<_>>>()?;
-        let mut tx = self.begin().await?;
-        if !finish_shard(&mut tx, fence).await? {
-            tx.rollback().await?;
+        let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(false);
-        }
+        };
         let batch = count_to_sql(fence.shard.batch);
         for (group, partial) in folded.into_iter().enumerate() {
             Sql::new(
@@ -561,11 +581,9 @@ impl JobQueue for SqlStore {
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool> {
-        let mut tx = self.begin().await?;
-        if !finish_shard(&mut tx, fence).await? {
-            tx.rollback().await?;
+        let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(false);
-        }
+        };
         end_job(&mut tx, &fence.job, now, error).await?;
         tx.commit().await?;
         Ok(true)
@@ -610,7 +628,7 @@ impl JobQueue for SqlStore {
             )
             .bind(fence.job.as_str())
             .bind(count_to_sql(fence.shard.batch))
-            .bind(fence.shard.group.map_or(-1, count_to_sql))
+            .bind(group_to_sql(fence.shard))
             .bind(now.0 + retry_backoff_ms(failures))
             .execute(&mut tx)
             .await?;

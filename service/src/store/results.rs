@@ -2,7 +2,7 @@
 //! (metric, bin) with its groups' accumulators, and each listed device's life.
 
 use super::backend::SqlStore;
-use super::queue::{drop_partials, finish_shard, holds};
+use super::queue::drop_partials;
 use super::rows::{
     self, INSERT_DISTRIBUTION, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, SELECT_PARTIALS,
     bind_bins, bind_distribution, bind_life, collect_partials, count_from_sql, count_to_sql,
@@ -33,11 +33,9 @@ impl SqlStore {
         let distributions: Vec<_> = distribution_rows(result).collect();
         let mut bytes = 0;
         for chunk in distributions.chunks(rows::DISTRIBUTIONS_PER_WRITE) {
-            let mut tx = self.begin().await?;
-            if !holds(self.dialect(), &mut tx, fence).await? {
-                tx.rollback().await?;
+            let Some(mut tx) = self.begin_holding(fence).await? else {
                 return Ok(None);
-            }
+            };
             for (metric, row) in chunk {
                 bytes += to_json("summary", &row.summary)?.len() as u64;
                 let stored = row_groups_to_sql(groups, metric, row)?;
@@ -59,11 +57,9 @@ impl SqlStore {
             .as_ref()
             .map_or(&[][..], |life| &life.devices[..]);
         for chunk in lives.chunks(rows::LIVES_PER_WRITE) {
-            let mut tx = self.begin().await?;
-            if !holds(self.dialect(), &mut tx, fence).await? {
-                tx.rollback().await?;
+            let Some(mut tx) = self.begin_holding(fence).await? else {
                 return Ok(None);
-            }
+            };
             bytes += chunk.len() as u64 * rows::LIFE_ROW_BYTES;
             for life in chunk {
                 let insert = Sql::new(
@@ -92,11 +88,9 @@ impl Results for SqlStore {
             return Ok(None);
         };
         let result_bytes = text.len() as u64 + row_bytes;
-        let mut tx = self.begin().await?;
-        if !finish_shard(&mut tx, fence).await? {
-            tx.rollback().await?;
+        let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(None);
-        }
+        };
         let stored = Sql::new(
             "UPDATE jobs SET status = 'succeeded', finished_at = $2, operations_done = operations_total, \
              stored_bytes = octet_length(spec) + $3 WHERE id = $1 RETURNING stored_bytes",

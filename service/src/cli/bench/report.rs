@@ -45,12 +45,10 @@ impl Section {
         if !self.text.is_empty() {
             let _ = write!(md, "{}\n\n", self.text);
         }
-        let line = |cells: &[String]| format!("| {} |\n", cells.join(" | "));
-        let header: Vec<String> = self.columns.iter().map(|c| (*c).to_owned()).collect();
-        md.push_str(&line(&header));
-        md.push_str(&format!("|{}\n", "---|".repeat(self.columns.len())));
+        let _ = writeln!(md, "| {} |", self.columns.join(" | "));
+        let _ = writeln!(md, "|{}", "---|".repeat(self.columns.len()));
         for row in &self.rows {
-            md.push_str(&line(row));
+            let _ = writeln!(md, "| {} |", row.join(" | "));
         }
         md
     }
