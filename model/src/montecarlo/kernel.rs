@@ -6,7 +6,7 @@
 //! A build runs on any x86_64 (SSE2 is the baseline) and compiles on any other architecture, where
 //! only the portable kernels exist.
 
-use crate::lanes::{Lanes, Real};
+use crate::lanes::Real;
 
 /// An instruction set the lockstep loops are compiled for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -55,15 +55,22 @@ impl Isa {
 
 /// The lockstep kernels a build holds: instruction set and devices per batch. Each is a full copy
 /// of the operation and the engine loop, optimised on its own, so every entry costs build time
-/// (about a minute each on this project's machine): the list holds the width measured fastest for
-/// each instruction set (docs/performance.md), and a second AVX-512 width, so that batch width is
-/// tested on this project's machine.
+/// (one to four minutes of the optimiser each on this project's machine): the list holds the width
+/// measured fastest for each instruction set (docs/performance.md), and a second AVX-512 width, so
+/// that batch width is tested on this project's machine.
+#[cfg(not(test))]
 pub const KERNELS: [(Isa, usize); 4] = [
     (Isa::Portable, 4),
     (Isa::Avx2, 8),
     (Isa::Avx512, 8),
     (Isa::Avx512, 32),
 ];
+
+/// The crate's unit tests are a second compilation of it: they hold the portable kernel only,
+/// which runs the same generic code. Every kernel of [`KERNELS`] is tested against one device at
+/// a time by `model/tests/kernels.rs`, on the library's own build.
+#[cfg(test)]
+pub const KERNELS: [(Isa, usize); 1] = [(Isa::Portable, 4)];
 
 /// An instruction set and a number of lanes, checked against this CPU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -119,24 +126,21 @@ impl Kernel {
     /// Runs `work` on this kernel's lanes, compiled for its instruction set.
     pub(crate) fn run<W: LaneWork>(self, work: W) {
         match (self.isa, self.lanes) {
-            (_, 1) => portable::<W, f64>(work),
-            (Isa::Portable, _) => portable::<W, Lanes<4>>(work),
-            #[cfg(target_arch = "x86_64")]
+            (_, 1) => scalar::run(work),
+            (Isa::Portable, _) => portable_4::run(work),
+            #[cfg(all(target_arch = "x86_64", not(test)))]
             // SAFETY: `Kernel::new` checked that this CPU has AVX2.
-            (Isa::Avx2, lanes) => unsafe { x86::avx2(work, lanes) },
-            #[cfg(target_arch = "x86_64")]
+            (Isa::Avx2, _) => unsafe { avx2_8::run(work) },
+            #[cfg(all(target_arch = "x86_64", not(test)))]
             // SAFETY: `Kernel::new` checked that this CPU has AVX-512F.
-            (Isa::Avx512, lanes) => unsafe { x86::avx512(work, lanes) },
-            #[cfg(not(target_arch = "x86_64"))]
-            (Isa::Avx2 | Isa::Avx512, _) => unreachable!("Kernel::new checked the instruction set"),
+            (Isa::Avx512, 8) => unsafe { avx512_8::run(work) },
+            #[cfg(all(target_arch = "x86_64", not(test)))]
+            // SAFETY: `Kernel::new` checked that this CPU has AVX-512F.
+            (Isa::Avx512, _) => unsafe { avx512_32::run(work) },
+            #[cfg(any(not(target_arch = "x86_64"), test))]
+            (Isa::Avx2 | Isa::Avx512, _) => unreachable!("Kernel::new checked KERNELS"),
         }
     }
-}
-
-/// `work` on lanes `L` in the build's baseline instruction set, optimised on its own.
-#[inline(never)]
-fn portable<W: LaneWork, L: Real>(work: W) {
-    work.run::<L>()
 }
 
 /// Work written once over [`Real`]; its `run` must be `#[inline(always)]`, so that each kernel
@@ -145,41 +149,31 @@ pub(crate) trait LaneWork {
     fn run<L: Real>(self);
 }
 
-#[cfg(target_arch = "x86_64")]
-mod x86 {
-    //! One function per instruction set and lane count: each is optimised on its own (one
-    //! function holding every width took the optimiser several times as long) and in parallel.
-    use super::{LaneWork, Lanes, Real};
+/// One kernel: `work` on lanes `$lanes`, compiled for `$feature` (or the build's baseline), in a
+/// function that is not inlined and a module of its own. rustc gives each module's functions one
+/// codegen unit, so each kernel is optimised on its own and in parallel with the others: in one
+/// module the three x86 kernels were one unit, 370 of the crate's 440 s of optimiser time on one
+/// core (`-Zllvm-time-trace`, 2-core Zen 4).
+macro_rules! kernel {
+    ($module:ident, $lanes:ty $(, $feature:literal)?) => {
+        mod $module {
+            #[allow(unused_imports)]
+            use crate::lanes::Lanes;
 
-    #[target_feature(enable = "avx2")]
-    pub(super) fn avx2<W: LaneWork>(work: W, lanes: usize) {
-        debug_assert_eq!(lanes, 8, "KERNELS holds AVX2 with 8 lanes");
-        avx2_lanes::<W, 8>(work)
-    }
-
-    #[target_feature(enable = "avx2")]
-    #[inline(never)]
-    fn avx2_lanes<W: LaneWork, const N: usize>(work: W)
-    where
-        Lanes<N>: Real,
-    {
-        work.run::<Lanes<N>>()
-    }
-
-    #[target_feature(enable = "avx512f")]
-    pub(super) fn avx512<W: LaneWork>(work: W, lanes: usize) {
-        match lanes {
-            8 => avx512_lanes::<W, 8>(work),
-            _ => avx512_lanes::<W, 32>(work),
+            $(#[target_feature(enable = $feature)])?
+            #[inline(never)]
+            pub(super) fn run<W: super::LaneWork>(work: W) {
+                work.run::<$lanes>()
+            }
         }
-    }
-
-    #[target_feature(enable = "avx512f")]
-    #[inline(never)]
-    fn avx512_lanes<W: LaneWork, const N: usize>(work: W)
-    where
-        Lanes<N>: Real,
-    {
-        work.run::<Lanes<N>>()
-    }
+    };
 }
+
+kernel!(scalar, f64);
+kernel!(portable_4, Lanes<4>);
+#[cfg(all(target_arch = "x86_64", not(test)))]
+kernel!(avx2_8, Lanes<8>, "avx2");
+#[cfg(all(target_arch = "x86_64", not(test)))]
+kernel!(avx512_8, Lanes<8>, "avx512f");
+#[cfg(all(target_arch = "x86_64", not(test)))]
+kernel!(avx512_32, Lanes<32>, "avx512f");
