@@ -63,10 +63,10 @@ pub struct ServeConfig {
     /// API keys, comma-separated; with keys, every /v1 call needs `Authorization: Bearer KEY`.
     #[arg(long = "api-key", env = "BOUNCEWEAR_API_KEYS", value_delimiter = ',')]
     pub api_keys: Vec<String>,
-    /// Queued jobs at most; further submissions get 429 with Retry-After.
+    /// Unfinished (queued or running) jobs at most; further submissions get 429 with Retry-After.
     #[arg(long, env = "BOUNCEWEAR_MAX_QUEUED", default_value_t = 1000)]
     pub max_queued: u64,
-    /// Queued jobs at most per API key (and per schedule's key), so that one key cannot fill the
+    /// Unfinished jobs at most per API key (and per schedule's key), so that one key cannot fill the
     /// queue for all (default: half of --max-queued with two keys or more, else all of it).
     #[arg(long, env = "BOUNCEWEAR_MAX_QUEUED_PER_KEY")]
     pub max_queued_per_key: Option<u64>,

@@ -61,7 +61,7 @@ pub enum ApiError {
     #[error("the request body must be application/json in UTF-8 (no charset, or charset=utf-8)")]
     UnsupportedMediaType,
     #[error(
-        "the queue is full: it holds at most {} queued jobs in all and {} per API key; retry later",
+        "the queue is full: it holds at most {} unfinished jobs in all and {} per API key; retry later",
         .0.total,
         .0.per_owner
     )]

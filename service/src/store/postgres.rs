@@ -104,8 +104,8 @@ pub(crate) async fn insert_queued(
         .await?;
     // The counts include the job just inserted.
     let within = Sql::new(
-        "SELECT (SELECT COUNT(*) FROM jobs WHERE status = 'queued') <= $1 \
-            AND (SELECT COUNT(*) FROM jobs WHERE status = 'queued' AND owner = $2) <= $3 AS within",
+        "SELECT (SELECT COUNT(*) FROM jobs WHERE status IN ('queued', 'running')) <= $1 \
+            AND (SELECT COUNT(*) FROM jobs WHERE status IN ('queued', 'running') AND owner = $2) <= $3 AS within",
     )
     .bind(count_to_sql(bound.total))
     .bind(job.owner.as_str())

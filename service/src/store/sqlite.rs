@@ -221,8 +221,8 @@ pub(crate) async fn insert_queued(
     bound: QueueBound,
 ) -> StoreResult<bool> {
     let insert = Sql::new(insert_job!(
-        " WHERE (SELECT COUNT(*) FROM jobs WHERE status = 'queued') < $8 \
-           AND (SELECT COUNT(*) FROM jobs WHERE status = 'queued' AND owner = $2) < $9"
+        " WHERE (SELECT COUNT(*) FROM jobs WHERE status IN ('queued', 'running')) < $8 \
+           AND (SELECT COUNT(*) FROM jobs WHERE status IN ('queued', 'running') AND owner = $2) < $9"
     ));
     let inserted = bind_queued_job(insert, job)?
         .bind(count_to_sql(bound.total))
