@@ -6,16 +6,16 @@ tests/data/sobol_reference.json:
     python3 tools/sobol_reference.py > tests/data/sobol_reference.json
 
 With `--job SAMPLES` it reads instead the outputs of a bouncewear job's own samples, which
-`model/tests/sensitivity.rs` evaluates outside the engine from the engine's draws, and writes
+`model/tests/integration/sensitivity.rs` evaluates outside the engine from the engine's draws, and writes
 SALib's indices of them, for tests/data/sobol_job_reference.json:
 
     BOUNCEWEAR_WRITE_SOBOL_SAMPLES=/tmp/samples.json \
-        cargo test -p bouncewear-model --test sensitivity the_indices_of_a_job_are_salibs
+        cargo test -p bouncewear-model --test integration sensitivity::the_indices_of_a_job_are_salibs
     python3 tools/sobol_reference.py --job /tmp/samples.json > tests/data/sobol_job_reference.json
 
 The file holds the model's outputs in SALib's order (per base sample: A, AB_1 .. AB_D, B) and
 `SALib.analyze.sobol`'s first-order and total indices. `model/src/stats/sobol.rs` must give the same
-indices from the same outputs to 1e-10 (`model/tests/sobol_reference.rs`): the estimators are the
+indices from the same outputs to 1e-10 (`model/tests/integration/sobol_reference.rs`): the estimators are the
 same (Saltelli 2010 first order, Jansen total), computed independently.
 """
 import json

@@ -2,7 +2,7 @@
 //! digits (see `tests/data/README.md`): every field of every case at both fidelities, to 1e-12
 //! relative.
 
-#[path = "../../tests/support/json_close.rs"]
+#[path = "../../../tests/support/json_close.rs"]
 mod json_close;
 
 use bouncewear_model::{Fidelity, Scenario, simulate};

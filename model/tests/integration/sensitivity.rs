@@ -2,14 +2,12 @@
 //! kernel and thread count and group by group, analytic answers where the model gives them, SALib's
 //! indices on the engine's own samples, and the rules of the `sensitivity` field.
 
-mod support;
-
+use crate::support::{job, run_on};
 use bouncewear_model::montecarlo::engine::{Batch, batch_draws, sobol_b_draws};
 use bouncewear_model::montecarlo::{Job, JobResult, Kernel, Silent, run_job_on};
 use serde_json::{Value, json};
-use support::{job, run_on};
 
-const JOBS: &str = include_str!("../../tests/data/reference_jobs.json");
+const JOBS: &str = include_str!("../../../tests/data/reference_jobs.json");
 
 /// The job at 48 V / 15 A (radius and hardness per device, closing velocity per
 /// operation), smaller, with Sobol' indices.
@@ -124,7 +122,7 @@ fn scenario_with(job: &Job, row: &[f64]) -> Value {
 /// One operation of a new device with the parameter values `row` (one per scatter entry): the
 /// metrics, by running it as a one-device job without scatter.
 fn evaluate(job: &Job, row: &[f64], metrics: &[&str]) -> Vec<f64> {
-    let single = support::job(json!({
+    let single = crate::support::job(json!({
         "devices": 1, "operations": 1, "seed": 1,
         "scenario": scenario_with(job, row),
         "metrics": metrics,

@@ -7,7 +7,7 @@ use bouncewear_model::{Fidelity, Needs, Operation, Outcome, Scenario};
 use proptest::prelude::*;
 use serde_json::{Value, json};
 
-const JOBS: &str = include_str!("../../tests/data/reference_jobs.json");
+const JOBS: &str = include_str!("../../../tests/data/reference_jobs.json");
 
 /// The Result without its timing, as text: equal text is equal bits (floats round-trip).
 fn result_text(kernel: Kernel, spec: &Value) -> String {

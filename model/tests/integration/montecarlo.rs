@@ -1,15 +1,13 @@
 //! The Monte Carlo engine: validation, determinism, skips that change nothing, wear, sampling,
 //! precision targets and honest confidence intervals.
 
-mod support;
-
+use crate::support::{job, pointers, run_on};
 use bouncewear_model::montecarlo::{
     Job, JobResult, JobSpec, RunGroups, Silent, engine, summarize_job,
 };
 use bouncewear_model::stats::Accumulator;
 use bouncewear_model::{FieldError, Pointer};
 use serde_json::{Value, json};
-use support::{job, pointers, run_on};
 
 fn run(job: &Job) -> JobResult {
     run_on(2, job)

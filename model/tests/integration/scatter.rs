@@ -1,12 +1,10 @@
 //! Scatter beyond the basics: scenario constants drawn per device or operation, truncated
 //! lognormal and Weibull draws and their rejection counts, and correlated draws (a Gaussian copula).
 
-mod support;
-
+use crate::support::{job, run_on};
 use bouncewear_model::montecarlo::engine::{Batch, Tally, batch_draws, run_group};
 use bouncewear_model::montecarlo::{Job, Silent, summarize_job};
 use serde_json::{Value, json};
-use support::{job, run_on};
 
 /// Every fault of a job, as `(pointer, detail)`.
 fn faults(value: Value) -> Vec<(String, String)> {

@@ -6,8 +6,8 @@
 use bouncewear_model::montecarlo::{Job, Silent, run_job};
 use serde_json::Value;
 
-const JOBS: &str = include_str!("../../tests/data/reference_jobs.json");
-const REFERENCE: &str = include_str!("../../tests/data/engine_reference.json");
+const JOBS: &str = include_str!("../../../tests/data/reference_jobs.json");
+const REFERENCE: &str = include_str!("../../../tests/data/engine_reference.json");
 
 /// Walks `want` and `got` together, collecting every number that differs by more than 1e-12
 /// relative (integers, which are counts, must be equal).

@@ -3,14 +3,12 @@
 //! device at a fixed input (the engine's own path, not the rare-event one), and the input's
 //! normal tail exact.
 
-mod support;
-
+use crate::support::{job, pointers, run_on};
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::distribution::standard_normal_cdf;
 use bouncewear_model::montecarlo::rare::{RareEventReport, check_threshold, estimate};
 use bouncewear_model::montecarlo::{Job, Silent};
 use serde_json::{Value, json};
-use support::{job, pointers, run_on};
 
 const MEAN: f64 = 0.224;
 const SD: f64 = 0.02;
@@ -212,7 +210,7 @@ fn intervals_cover_the_truth_at_1e_minus_4_over_200_seeds() {
 }
 
 /// The same at P = 1e-6 and 1e-9 (z = 4.753 and 5.998), with each estimate's cov and cost:
-/// `cargo test -p bouncewear-model --test rare deep -- --ignored --nocapture` (the model is
+/// `cargo test -p bouncewear-model --test integration rare::deep -- --ignored --nocapture` (the model is
 /// optimised in test builds).
 #[test]
 #[ignore = "two minutes; run for the figures in docs/manual.md"]
