@@ -150,9 +150,6 @@ pub(crate) trait LaneWork {
 macro_rules! kernel {
     ($module:ident, $lanes:ty $(, $feature:literal)?) => {
         mod $module {
-            #[allow(unused_imports)]
-            use crate::lanes::Lanes;
-
             $(#[target_feature(enable = $feature)])?
             #[inline(never)]
             pub(super) fn run<W: super::LaneWork>(work: W) {
@@ -163,8 +160,8 @@ macro_rules! kernel {
 }
 
 kernel!(scalar, f64);
-kernel!(portable_4, Lanes<4>);
+kernel!(portable_4, crate::lanes::Lanes<4>);
 #[cfg(all(target_arch = "x86_64", not(test)))]
-kernel!(avx2_8, Lanes<8>, "avx2");
+kernel!(avx2_8, crate::lanes::Lanes<8>, "avx2");
 #[cfg(all(target_arch = "x86_64", not(test)))]
-kernel!(avx512_32, Lanes<32>, "avx512f");
+kernel!(avx512_32, crate::lanes::Lanes<32>, "avx512f");
