@@ -6,7 +6,7 @@ mod support;
 
 use bouncewear::compute::thread_pool;
 use bouncewear::domain::idempotency::KEY_LIFETIME_MS;
-use bouncewear::domain::shards::{Merged, merge};
+use bouncewear::domain::shards::{Merged, grouped_shards, merge};
 use bouncewear::domain::{
     Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob,
     ScheduleDefinition, ScheduleId, ShardId, UnixMs,
@@ -37,9 +37,12 @@ fn single(seed: u64) -> QueuedJob {
     queued_job(r#"{"devices": 1, "operations": 3}"#, seed)
 }
 
+/// A job cut into its groups and merge step, however small: what these tests of the queue run.
 fn queued_job(text: &str, seed: u64) -> QueuedJob {
     let job = Job::from_json(text, || seed).unwrap();
-    QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1))
+    let mut queued = QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1));
+    queued.shards = grouped_shards(&job);
+    queued
 }
 
 /// Three devices at 48 V / 15 A that fail when e1 falls below 0.36: a result with lives.
@@ -489,8 +492,10 @@ async fn a_job_behind_another_is_served_next(url: &str) {
         .unwrap();
     assert_eq!(first.fence.job, large);
     let small = insert(&store, queued(2)).await;
-    let job = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || 3).unwrap();
-    let theirs = QueuedJob::new(&job, Owner::of_key("another key"), None, UnixMs(1));
+    let theirs = QueuedJob {
+        owner: Owner::of_key("another key"),
+        ..queued(3)
+    };
     let theirs = store
         .insert_job(theirs, QueueBound::total(10))
         .await
@@ -905,7 +910,8 @@ async fn a_cancelled_job_keeps_no_accumulators(url: &str) {
     );
 }
 
-/// Rows written before migration 0005 have no shards: opening the store cuts them.
+/// Rows written before migration 0005 have no shards: opening the store cuts them as a
+/// submission does.
 async fn jobs_queued_before_shards_existed_get_theirs_on_open(url: &str) {
     let store = store::open(url).await.unwrap();
     let id = insert(&store, queued(6)).await;
@@ -926,22 +932,16 @@ async fn jobs_queued_before_shards_existed_get_theirs_on_open(url: &str) {
         .iter()
         .map(|s| s.shard)
         .collect();
-    assert_eq!(
-        shards,
-        [
-            ShardId::group(0, 0),
-            ShardId::group(0, 1),
-            ShardId::merge(0)
-        ]
-    );
+    // Cut as a submission cuts it: a job this small runs whole, as its first merge step.
+    assert_eq!(shards, [ShardId::merge(0)]);
     let claim = store
         .claim("w", terms(0), budget(2))
         .await
         .unwrap()
         .unwrap();
     assert_eq!(
-        (claim.fence.job, claim.fence.shard),
-        (id, ShardId::group(0, 0))
+        (claim.fence.job, claim.fence.shard, claim.operations_total),
+        (id, ShardId::merge(0), 6)
     );
 }
 

@@ -5,7 +5,9 @@
     python3 tools/http_bench.py http://127.0.0.1:8080
 
 1. Submit to result: a 100 devices x 100 operations job, POST until the Result is fetched, 50 times.
-2. GET latency under load: 16 client threads GET /v1/jobs/{id} for 10 s while a 100-million-operation
+2. Throughput of small jobs: 4 clients each submit 50 such jobs one after another, each fetching
+   its Result before the next; jobs per second from the first POST to the last Result.
+3. GET latency under load: 16 client threads GET /v1/jobs/{id} for 10 s while a 100-million-operation
    job keeps the compute threads busy.
 """
 import http.client
@@ -29,10 +31,10 @@ def request(conn, method, path, body=None):
     return response.status, response.read()
 
 
-def submit_to_result(base, runs=50):
+def submit_to_result(base, runs=50, first_seed=0):
     conn = connection(base)
     times = []
-    for seed in range(runs):
+    for seed in range(first_seed, first_seed + runs):
         started = time.perf_counter()
         status, body = request(conn, "POST", "/v1/jobs", {"devices": 100, "operations": 100, "seed": seed})
         assert status == 202, body
@@ -45,6 +47,25 @@ def submit_to_result(base, runs=50):
             time.sleep(0.001)
         times.append(time.perf_counter() - started)
     return times
+
+
+def small_jobs_throughput(base, clients=4, jobs=50):
+    errors = []
+
+    def client(index):
+        try:
+            submit_to_result(base, runs=jobs, first_seed=1000 * (index + 1))
+        except AssertionError as error:
+            errors.append(error)
+
+    threads = [threading.Thread(target=client, args=(i,)) for i in range(clients)]
+    started = time.perf_counter()
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors, errors
+    return clients * jobs / (time.perf_counter() - started)
 
 
 def get_under_load(base, seconds=10.0, clients=16):
@@ -89,6 +110,7 @@ def main():
     times = submit_to_result(base)
     print(f"submit to result, 100 x 100 job, {len(times)} runs: median {1e3 * statistics.median(times):.1f} ms, "
           f"p90 {1e3 * quantile(times, 0.9):.1f} ms, max {1e3 * max(times):.1f} ms")
+    print(f"small jobs, 4 clients x 50 jobs of 100 x 100: {small_jobs_throughput(base):.1f} jobs/s")
     latencies, errors, busy = get_under_load(base)
     print(f"GET /v1/jobs/{{id}} under load (16 clients, 10 s, a 100 M-operation job running: {busy}): "
           f"{len(latencies) / 10:.0f} requests/s, p50 {1e3 * quantile(latencies, 0.5):.2f} ms, "

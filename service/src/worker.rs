@@ -4,14 +4,15 @@
 //!
 //! A shard is one group of devices of one batch ([`crate::domain::shards`]): its accumulators are
 //! stored when it is done. A batch's merge step, claimable once its groups are done, puts them back
-//! in order and stores the Result (or queues a precision target's next batch). A shard interrupted
+//! in order and stores the Result (or queues a precision target's next batch). A small job is its
+//! first merge step alone, which runs the whole job on the compute pool. A shard interrupted
 //! by a crash or kill keeps its lease until it expires; then any worker on any machine claims it
 //! again and reruns that shard alone. Seeds are fixed at submission and each device has its own
 //! random stream, so the Result is identical to an uninterrupted run on one machine. On a graceful
 //! shutdown the running shard is stopped and handed back to the queue at once.
 
 use crate::domain::UnixMs;
-use crate::domain::shards::{MergeError, Merged, merge};
+use crate::domain::shards::{MergeError, Merged, merge, run_whole};
 use crate::store::{Claim, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store, StoreResult};
 use crate::telemetry::{record_job_finished, record_shard_step};
 use bouncewear_model::Pointer;
@@ -218,9 +219,17 @@ impl Workers {
         };
         let last = fence.shard.batch;
         let wall_s = (UnixMs::now().0 - started_at.0).max(0) as f64 / 1000.0;
+        // A first batch without groups stored is a job that entered the queue whole.
+        let whole = last == 0 && partials.is_empty();
+        let listed_lives = self.listed_lives;
         let ran = self
             .compute(lease, move |observer| {
-                match merge(&job, last, partials, wall_s, observer) {
+                let merged = if whole {
+                    run_whole(&job, listed_lives, wall_s, observer)
+                } else {
+                    merge(&job, last, partials, wall_s, observer)
+                };
+                match merged {
                     Err(MergeError::Cancelled(cancelled)) => Err(cancelled),
                     merged => Ok(merged),
                 }
@@ -228,7 +237,12 @@ impl Workers {
             .await;
         match ran {
             Ran::Done(Ok(Merged::Result { result, groups })) => {
-                self.succeed(fence, &result, &groups, lease).await;
+                let stored = self.succeed(fence, &result, &groups, lease).await;
+                if stored && whole {
+                    let operations = result.job.devices_run() * result.job.spec().operations;
+                    metrics::counter!("bouncewear_operations_simulated_total")
+                        .increment(operations);
+                }
                 record_shard_step("merge", merging);
             }
             Ran::Done(Ok(Merged::Next { shards, folded })) => match self
@@ -376,13 +390,14 @@ impl Workers {
         }
     }
 
+    /// Stores the Result; whether it was stored.
     async fn succeed(
         &self,
         fence: &Fence,
         result: &JobResult,
         groups: &RunGroups,
         lease: &KeptLease,
-    ) {
+    ) -> bool {
         let stored = self
             .store_with_backoff(lease, || {
                 self.store.succeed(fence, UnixMs::now(), result, groups)
@@ -395,15 +410,18 @@ impl Workers {
                 let operations = result.job.devices_run() * result.job.spec().operations;
                 record_job_finished(result.timing.wall_s, operations, stored_bytes);
                 tracing::info!(wall_s = result.timing.wall_s, stored_bytes, "job succeeded");
+                true
             }
             Ok(None) => {
                 tracing::info!(
                     "result discarded: the job ended or the merge was taken over meanwhile"
-                )
+                );
+                false
             }
             Err(error) => {
                 let reason = format!("storing the result failed: {error}");
-                self.fail_attempt(fence, &reason).await
+                self.fail_attempt(fence, &reason).await;
+                false
             }
         }
     }

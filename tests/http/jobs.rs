@@ -111,6 +111,29 @@ fn a_job_goes_from_submission_to_result_with_live_progress() {
     );
 }
 
+/// A job of up to 2,000,000 operations runs whole, as one shard; one more operation per device
+/// and it runs as its 32 groups and a merge step. Both give `bouncewear run`'s Result to the bit.
+#[test]
+fn a_small_job_runs_as_one_shard_and_a_larger_one_in_groups_with_the_same_bits() {
+    let server = TestApp::start(&temp_db("whole"), &[]);
+    for (operations, shards) in [(20_000, 1), (20_001, 33)] {
+        let job = scattered_job(100, operations, 5);
+        let id = server.submit(&job);
+        server.wait_for(&id, "succeeded", Duration::from_secs(60));
+        let listed = get(&server.url(&format!("/v1/jobs/{id}/shards")), None).json();
+        let listed = listed["shards"].as_array().unwrap().clone();
+        assert_eq!(listed.len(), shards, "{listed:?}");
+        if shards == 1 {
+            assert!(listed[0].get("group").is_none(), "{listed:?}");
+            assert_eq!(listed[0]["operations_total"], 2_000_000);
+        }
+        let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
+        let local = run_job(&job, &[]);
+        assert_eq!(result["operations"], local["operations"], "{operations}");
+        assert_eq!(result["devices"], local["devices"], "{operations}");
+    }
+}
+
 #[test]
 fn jobs_are_listed_newest_first_with_cursor_paging() {
     let server = TestApp::start(&temp_db("paging"), &[]);

@@ -20,6 +20,6 @@ pub use schedules::{
 };
 pub use shards::{
     RetryBudget, SHARD_OVERHEAD_OPERATIONS, ShardId, ShardPlan, batch_shards, first_shards,
-    retry_backoff_ms,
+    grouped_shards, retry_backoff_ms,
 };
 pub use trend::TrendValue;

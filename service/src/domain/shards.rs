@@ -3,11 +3,18 @@
 //! group, alone, under its own lease; the merge step, claimable once the batch's groups are done,
 //! puts their accumulators back in group order and either stores the Result or, for a precision
 //! target not yet met, adds the next batch. Results are bit-identical to running the job whole.
+//!
+//! Sharding pays only where other workers can take groups that one worker would otherwise run in
+//! turn; each shard costs a claim and a store (about a millisecond each on SQLite, several on
+//! PostgreSQL) and the merge reads every group back. So a small job ([`runs_whole`]) enters the
+//! queue as its first batch's merge step alone, and the worker that claims it runs the whole job
+//! on its compute threads ([`run_whole`]): the same groups in the same order, so the same bits.
 
-use bouncewear_model::montecarlo::engine::{Batch, GroupStats};
+use bouncewear_model::montecarlo::engine::{Batch, GroupStats, run_on};
 use bouncewear_model::montecarlo::rare::{RareEventError, estimate};
 use bouncewear_model::montecarlo::{
-    Cancelled, Job, JobResult, Observer, RunError, RunGroups, Tally, next_batch, summarize_job,
+    Cancelled, Job, JobResult, Kernel, Observer, RunError, RunGroups, Tally, next_batch,
+    precision_met, summarize_job,
 };
 use serde::Serialize;
 use std::fmt;
@@ -69,8 +76,37 @@ pub fn batch_shards(job: &Job, batch: Batch) -> Vec<ShardPlan> {
         .collect()
 }
 
-/// The shards a job enters the queue with: those of its first batch.
+/// The most operations (devices x operations) of a job that runs whole, as one shard: about a
+/// tenth of a second of one compute thread (50-70 ns per operation), where 33 claims and stores
+/// and a merge of 32 groups would cost as much as the run itself, or more. A job of one instance
+/// runs whole on all its compute threads anyway; more instances help only a larger job.
+pub const WHOLE_JOB_OPERATIONS: u64 = 2_000_000;
+
+/// Whether `job` runs whole, as one shard: at most [`WHOLE_JOB_OPERATIONS`] operations, and no
+/// precision target (whose later batches, however many, are sharded as they come).
+pub fn runs_whole(job: &Job) -> bool {
+    job.precision().is_none()
+        && job.spec().devices.saturating_mul(job.spec().operations) <= WHOLE_JOB_OPERATIONS
+}
+
+/// The shards a job enters the queue with: its first batch's groups and merge step or, for a job
+/// that [`runs_whole`], that merge step alone, carrying the job's operations.
 pub fn first_shards(job: &Job) -> Vec<ShardPlan> {
+    let mut shards = grouped_shards(job);
+    if runs_whole(job) {
+        let merge = shards.pop().expect("a batch ends with its merge step");
+        let operations = shards.iter().map(|s| s.operations).sum::<u64>();
+        shards = vec![ShardPlan {
+            operations: merge.operations.saturating_add(operations),
+            ..merge
+        }];
+    }
+    shards
+}
+
+/// The first batch's groups and merge step, whatever the job's size: how a job larger than
+/// [`WHOLE_JOB_OPERATIONS`] is cut (and how tests of the queue cut small jobs).
+pub fn grouped_shards(job: &Job) -> Vec<ShardPlan> {
     let first = Batch::of(job, 0).expect("a valid job runs at least one device");
     batch_shards(job, first)
 }
@@ -174,24 +210,57 @@ pub fn merge(
         }
         .into());
     }
-    Ok(match next_batch(job, &tally) {
-        Some(batch) => Merged::Next {
+    match next_batch(job, &tally) {
+        Some(batch) => Ok(Merged::Next {
             shards: batch_shards(job, batch),
             folded: tally.groups,
-        },
-        None => {
-            let started = std::time::Instant::now();
-            let rare_event = estimate(job, observer).map_err(|error| match error {
-                RunError::Cancelled(cancelled) => MergeError::Cancelled(cancelled),
-                RunError::RareEvent(failed) => MergeError::RareEvent(failed),
-            })?;
-            let mut result = summarize_job(job, &tally, wall_s + started.elapsed().as_secs_f64());
-            result.rare_event = rare_event;
-            Merged::Result {
-                result: Box::new(result),
-                groups: RunGroups::new(job, tally),
-            }
-        }
+        }),
+        None => finish(job, tally, wall_s, observer),
+    }
+}
+
+/// Runs the whole job here, as the merge step of a job that entered the queue without groups
+/// ([`first_shards`]): every batch's groups on the calling compute pool, each group's listed lives
+/// cut at `listed_lives` as a group's shard cuts them, then as [`merge`] after the last batch. The
+/// Result is the one the groups' shards and merges would give, to the bit.
+pub fn run_whole(
+    job: &Job,
+    listed_lives: u64,
+    wall_s: f64,
+    observer: &dyn Observer,
+) -> Result<Merged, MergeError> {
+    let started = std::time::Instant::now();
+    let mut tally = run_on(Kernel::best(), job, observer, |tally| {
+        precision_met(job, tally)
+    })?;
+    for group in &mut tally.groups {
+        group.lives.keep_listed_below(listed_lives);
+    }
+    finish(
+        job,
+        tally,
+        wall_s + started.elapsed().as_secs_f64(),
+        observer,
+    )
+}
+
+/// The Result of a job whose batches are all in `tally`: its rare event estimated, then summed up.
+fn finish(
+    job: &Job,
+    tally: Tally,
+    wall_s: f64,
+    observer: &dyn Observer,
+) -> Result<Merged, MergeError> {
+    let started = std::time::Instant::now();
+    let rare_event = estimate(job, observer).map_err(|error| match error {
+        RunError::Cancelled(cancelled) => MergeError::Cancelled(cancelled),
+        RunError::RareEvent(failed) => MergeError::RareEvent(failed),
+    })?;
+    let mut result = summarize_job(job, &tally, wall_s + started.elapsed().as_secs_f64());
+    result.rare_event = rare_event;
+    Ok(Merged::Result {
+        result: Box::new(result),
+        groups: RunGroups::new(job, tally),
     })
 }
 
@@ -234,7 +303,7 @@ mod tests {
     #[test]
     fn a_batch_is_its_groups_and_a_merge_and_the_groups_share_its_operations() {
         let job = Job::from_json(r#"{"devices": 70, "operations": 3}"#, || 1).unwrap();
-        let shards = first_shards(&job);
+        let shards = grouped_shards(&job);
         assert_eq!(shards.len(), 33);
         assert_eq!(shards[32].shard, ShardId::merge(0));
         assert_eq!(shards.iter().map(|s| s.operations).sum::<u64>(), 210);
@@ -244,7 +313,7 @@ mod tests {
     #[test]
     fn fewer_devices_than_groups_make_one_group_per_device() {
         let job = Job::from_json(r#"{"devices": 2, "operations": 5}"#, || 1).unwrap();
-        let groups: Vec<_> = first_shards(&job)
+        let groups: Vec<_> = grouped_shards(&job)
             .iter()
             .map(|s| (s.shard.to_string(), s.operations))
             .collect();
@@ -256,5 +325,25 @@ mod tests {
                 ("batch 0 merge".to_owned(), 0)
             ]
         );
+    }
+
+    /// A job of at most [`WHOLE_JOB_OPERATIONS`] operations enters the queue as one shard carrying
+    /// them all; one more operation, or a precision target, and it is cut into groups.
+    #[test]
+    fn a_small_job_is_one_shard_and_a_larger_one_its_groups() {
+        let first = |text: &str| first_shards(&Job::from_json(text, || 1).unwrap());
+        let whole = first(r#"{"devices": 1000, "operations": 2000}"#);
+        let expected = ShardPlan {
+            shard: ShardId::merge(0),
+            operations: WHOLE_JOB_OPERATIONS,
+        };
+        assert_eq!(whole, [expected]);
+        assert_eq!(first(r#"{"devices": 1, "operations": 2000001}"#).len(), 2);
+        assert_eq!(first(r#"{"devices": 2000, "operations": 1001}"#).len(), 33);
+        let precision = first(
+            r#"{"devices": 10, "operations": 10,
+                "precision": {"metric": "e1", "relative_half_width": 0.01, "max_devices": 100}}"#,
+        );
+        assert_eq!(precision.len(), 11);
     }
 }
