@@ -126,6 +126,7 @@ fn a_small_job_runs_as_one_shard_and_a_larger_one_in_groups_with_the_same_bits()
         if shards == 1 {
             assert!(listed[0].get("group").is_none(), "{listed:?}");
             assert_eq!(listed[0]["operations_total"], 2_000_000);
+            assert_eq!(listed[0]["operations_done"], 2_000_000);
         }
         let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
         let local = run_job(&job, &[]);
@@ -308,6 +309,41 @@ fn a_second_key_gets_in_when_the_first_has_filled_its_share_of_the_queue() {
         assert_eq!(post(&jobs, job, Some("beta")).status, 202);
     }
     assert_problem(&post(&jobs, job, Some("beta")), 429);
+}
+
+/// A query parameter the operation does not take is a 400 naming it and what it does take, on
+/// every documented route; the dashboard's pages are not the API's and take any.
+#[test]
+fn unknown_query_parameters_are_refused_by_name() {
+    let server = TestApp::start(&temp_db("unknown-query"), &[]);
+    let id = server.submit(&json!({"devices": 2, "operations": 2, "seed": 1}));
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let refused = [
+        (
+            format!("/v1/jobs/{id}/distributions/total_bounce_s?quantiles=0.5&thresholds=0.011"),
+            "unknown query parameter `thresholds`: GET /v1/jobs/{id}/distributions/{metric} \
+             takes only `exceedance`, `format`, `op_end`, `op_start`, `quantiles`",
+        ),
+        (
+            "/v1/jobs?status=cancelled&limit=2".to_owned(),
+            "unknown query parameter `status`: GET /v1/jobs takes only `cursor`, `limit`",
+        ),
+        (
+            format!("/v1/jobs/{id}?verbose=1&a=2"),
+            "unknown query parameter `a`, `verbose`: GET /v1/jobs/{id} takes no query parameters",
+        ),
+    ];
+    for (path, detail) in refused {
+        let problem = assert_problem(&get(&server.url(&path), None), 400);
+        assert_eq!(problem["detail"], detail, "{path}");
+    }
+    let taken = format!("/v1/jobs/{id}/distributions/total_bounce_s?quantiles=0.5&op_start=0");
+    assert_eq!(get(&server.url(&taken), None).status, 200);
+    assert_eq!(get(&server.url("/v1/jobs?limit=2"), None).status, 200);
+    assert_eq!(
+        get(&server.url(&format!("/jobs/{id}?tab=1")), None).status,
+        200
+    );
 }
 
 #[test]

@@ -7,6 +7,7 @@ pub mod calibrations;
 pub mod error;
 pub mod events;
 pub mod jobs;
+pub mod known_query;
 pub mod limits;
 pub mod openapi;
 pub mod plots;
@@ -146,6 +147,11 @@ fn api_routes(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
         .merge(system::router())
         .split_for_parts();
     EveryRequest.modify(&mut openapi);
+    let known = known_query::KnownQueries::of(&openapi);
+    let router = router.route_layer(axum::middleware::from_fn_with_state(
+        known,
+        known_query::refuse_unknown,
+    ));
     (router.with_state(state), openapi)
 }
 

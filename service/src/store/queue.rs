@@ -169,11 +169,12 @@ fn fenced(sql: &'static str, fence: &Fence) -> Sql {
     bind_fence(Sql::new(sql), fence)
 }
 
-/// Marks the claim's shard done, if the claim still holds it.
+/// Marks the claim's shard done, all its operations with it, if the claim still holds it.
 async fn finish_shard(tx: &mut Tx, fence: &Fence) -> StoreResult<bool> {
     let updated = fenced(
         concat!(
-            "UPDATE shards SET status = 'done', lease_owner = NULL, lease_until = NULL WHERE ",
+            "UPDATE shards SET status = 'done', lease_owner = NULL, lease_until = NULL, \
+             operations_done = operations_total WHERE ",
             fenced_shard!()
         ),
         fence,

@@ -1,0 +1,156 @@
+//! Query parameters an operation does not take are refused (400, naming them), not ignored: a
+//! misspelt `?quantile=0.99` or a filter the API does not have (`?status=cancelled`) answered as if
+//! it were absent would answer a question nobody asked. What each operation takes is read from the
+//! OpenAPI document, the one place the parameters are declared.
+
+use super::error::ApiError;
+use axum::extract::{MatchedPath, Query, Request, State};
+use axum::http::Method;
+use axum::middleware::Next;
+use axum::response::Response;
+use std::collections::{BTreeSet, HashMap};
+use std::sync::Arc;
+use utoipa::openapi::path::{Operation, ParameterIn};
+use utoipa::openapi::{OpenApi, RefOr};
+
+/// Each documented operation's query parameters, by method and path template (`/v1/jobs/{id}`).
+#[derive(Debug, Clone, Default)]
+pub struct KnownQueries(Arc<HashMap<(Method, String), BTreeSet<String>>>);
+
+impl KnownQueries {
+    pub fn of(openapi: &OpenApi) -> Self {
+        let mut known = HashMap::new();
+        for (path, item) in &openapi.paths.paths {
+            let operations = [
+                (Method::GET, &item.get),
+                (Method::PUT, &item.put),
+                (Method::POST, &item.post),
+                (Method::DELETE, &item.delete),
+                (Method::PATCH, &item.patch),
+            ];
+            for (method, operation) in operations {
+                if let Some(names) = operation.as_ref().and_then(query_names) {
+                    known.insert((method, path.clone()), names);
+                }
+            }
+        }
+        Self(Arc::new(known))
+    }
+
+    /// The parameters of `query` that the operation at `method` and `path` does not take; none
+    /// for an operation the document does not describe.
+    fn unknown(&self, method: &Method, path: &str, query: &[(String, String)]) -> Vec<String> {
+        let Some(names) = self.names(method, path) else {
+            return Vec::new();
+        };
+        let unknown: BTreeSet<&String> = query
+            .iter()
+            .map(|(name, _)| name)
+            .filter(|name| !names.contains(*name))
+            .collect();
+        unknown.into_iter().cloned().collect()
+    }
+
+    fn takes(&self, method: &Method, path: &str) -> Vec<String> {
+        self.names(method, path)
+            .map(|names| names.iter().cloned().collect())
+            .unwrap_or_default()
+    }
+
+    /// The operation's parameters (a HEAD is its GET's).
+    fn names(&self, method: &Method, path: &str) -> Option<&BTreeSet<String>> {
+        let method = if method == Method::HEAD {
+            Method::GET
+        } else {
+            method.clone()
+        };
+        self.0.get(&(method, path.to_owned()))
+    }
+}
+
+/// The operation's query parameters; `None` (not checked) if one is a reference this does not
+/// follow.
+fn query_names(operation: &Operation) -> Option<BTreeSet<String>> {
+    let mut names = BTreeSet::new();
+    for parameter in operation.parameters.iter().flatten() {
+        let RefOr::T(parameter) = parameter else {
+            return None;
+        };
+        if matches!(parameter.parameter_in, ParameterIn::Query) {
+            names.insert(parameter.name.clone());
+        }
+    }
+    Some(names)
+}
+
+/// Answers 400 naming every query parameter the matched operation does not take.
+pub async fn refuse_unknown(
+    State(known): State<KnownQueries>,
+    path: MatchedPath,
+    request: Request,
+    next: Next,
+) -> Result<Response, ApiError> {
+    if request.uri().query().is_some() {
+        let Query(query) = Query::<Vec<(String, String)>>::try_from_uri(request.uri())
+            .map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+        let unknown = known.unknown(request.method(), path.as_str(), &query);
+        if !unknown.is_empty() {
+            let quoted = |names: &[String]| {
+                names
+                    .iter()
+                    .map(|n| format!("`{n}`"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            let takes = known.takes(request.method(), path.as_str());
+            let takes = if takes.is_empty() {
+                "no query parameters".to_owned()
+            } else {
+                format!("only {}", quoted(&takes))
+            };
+            return Err(ApiError::BadRequest(format!(
+                "unknown query parameter {}: {} {} takes {takes}",
+                quoted(&unknown),
+                request.method(),
+                path.as_str()
+            )));
+        }
+    }
+    Ok(next.run(request).await)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_declared_query_parameters_pass_and_head_is_get() {
+        let distribution = "/v1/jobs/{id}/distributions/{metric}";
+        let known = KnownQueries(Arc::new(HashMap::from([
+            (
+                (Method::GET, distribution.to_owned()),
+                BTreeSet::from(["quantiles".to_owned(), "op_start".to_owned()]),
+            ),
+            ((Method::GET, "/v1/jobs/{id}".to_owned()), BTreeSet::new()),
+        ])));
+        let query = |pairs: &[(&str, &str)]| -> Vec<(String, String)> {
+            pairs
+                .iter()
+                .map(|(k, v)| ((*k).to_owned(), (*v).to_owned()))
+                .collect()
+        };
+        let ok = query(&[("quantiles", "0.5"), ("op_start", "3")]);
+        assert!(known.unknown(&Method::GET, distribution, &ok).is_empty());
+        let misspelt = query(&[("thresholds", "0.011"), ("quantiles", "0.5"), ("a", "")]);
+        assert_eq!(
+            known.unknown(&Method::HEAD, distribution, &misspelt),
+            ["a", "thresholds"]
+        );
+        assert_eq!(
+            known.unknown(&Method::GET, "/v1/jobs/{id}", &query(&[("x", "1")])),
+            ["x"]
+        );
+        let undocumented = known.unknown(&Method::GET, "/jobs/{id}", &query(&[("x", "1")]));
+        assert!(undocumented.is_empty());
+    }
+}
