@@ -101,7 +101,7 @@ fn simulate_rejects_a_missing_file_and_an_unknown_fidelity() {
 }
 
 #[test]
-fn every_subcommand_has_help() {
+fn every_subcommand_has_help_and_a_version() {
     for args in [
         &["--help"][..],
         &["simulate", "--help"],
@@ -115,6 +115,19 @@ fn every_subcommand_has_help() {
         let output = bouncewear(args, "");
         assert!(output.status.success(), "{args:?}");
         assert!(String::from_utf8(output.stdout).unwrap().contains("Usage"));
+        // And its version: `bouncewear 0.1.0`, `bouncewear-run 0.1.0`, ...
+        let version = [&args[..args.len() - 1], &["--version"]].concat();
+        let output = bouncewear(&version, "");
+        assert!(output.status.success(), "{version:?}");
+        let expected = match &version[..] {
+            [_] => "bouncewear".to_owned(),
+            [command, _] => format!("bouncewear-{command}"),
+            _ => unreachable!(),
+        };
+        assert_eq!(
+            String::from_utf8(output.stdout).unwrap(),
+            format!("{expected} {}\n", env!("CARGO_PKG_VERSION")),
+        );
     }
 }
 

@@ -30,7 +30,10 @@ pub fn init_logging(format: LogFormat) {
         .with_writer(std::io::stderr);
     let _ = match format {
         LogFormat::Text => builder
-            .with_ansi(std::io::stderr().is_terminal())
+            .with_ansi(colour(
+                std::io::stderr().is_terminal(),
+                std::env::var_os("NO_COLOR"),
+            ))
             .try_init(),
         // The request's fields (method, route, request id) sit beside the event's own.
         LogFormat::Json => builder
@@ -40,6 +43,12 @@ pub fn init_logging(format: LogFormat) {
             .with_span_list(false)
             .try_init(),
     };
+}
+
+/// Whether text logs are coloured: on a terminal, unless `NO_COLOR` is set to anything but the
+/// empty string (no-color.org).
+fn colour(terminal: bool, no_color: Option<std::ffi::OsString>) -> bool {
+    terminal && no_color.is_none_or(|value| value.is_empty())
 }
 
 /// The span every request runs in: its method, route template, URI and request id.
@@ -272,6 +281,15 @@ pub async fn record_request(request: axum::extract::Request, next: Next) -> Resp
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn text_logs_are_coloured_on_a_terminal_unless_no_color_is_set() {
+        let set = |v: &str| Some(std::ffi::OsString::from(v));
+        assert!(colour(true, None));
+        assert!(colour(true, set("")));
+        assert!(!colour(true, set("1")));
+        assert!(!colour(false, None));
+    }
 
     #[test]
     fn a_finished_job_is_one_observation_of_its_duration_its_speed_and_its_bytes() {

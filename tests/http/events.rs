@@ -150,3 +150,50 @@ fn idle_streams_share_one_reader_and_each_key_has_a_cap() {
     drop(streams);
     drop(beta);
 }
+
+/// Each event has an `id` naming the job's state it tells, and the first a `retry`; a client that
+/// reconnects with `Last-Event-ID` is not told that state again. A queued job (no workers) stays
+/// `queued` with 0 done: a fresh stream tells it at once, a resumed one only its cancellation.
+#[test]
+fn events_have_ids_and_a_resumed_stream_does_not_repeat_the_last() {
+    let server = TestApp::start(&temp_db("events-resume"), &["--workers", "0"]);
+    let reply = post(
+        &server.url("/v1/jobs"),
+        r#"{"devices": 2, "operations": 2}"#,
+        None,
+    );
+    let id = reply.json()["id"].as_str().unwrap().to_owned();
+    let events = server.url(&format!("/v1/jobs/{id}/events"));
+    // The first event's fields, until the blank line that ends it.
+    let first_event = |last_event_id: Option<&str>| {
+        let mut request = agent().get(&events);
+        if let Some(last) = last_event_id {
+            request = request.header("last-event-id", last);
+        }
+        let mut stream = request.call().unwrap();
+        BufReader::new(stream.body_mut().as_reader())
+            .lines()
+            .map(Result::unwrap)
+            .take_while(|line| !line.is_empty())
+            .collect::<Vec<String>>()
+    };
+    let fresh = first_event(None);
+    let state = format!("{id}:queued:0");
+    assert_eq!(fresh[0], "event: progress", "{fresh:?}");
+    assert!(fresh.contains(&format!("id: {state}")), "{fresh:?}");
+    assert!(fresh.contains(&"retry: 2000".to_owned()), "{fresh:?}");
+    let cancel = {
+        let url = server.url(&format!("/v1/jobs/{id}"));
+        std::thread::spawn(move || {
+            std::thread::sleep(std::time::Duration::from_millis(500));
+            agent().delete(&url).call().unwrap();
+        })
+    };
+    let resumed = first_event(Some(&state));
+    cancel.join().unwrap();
+    assert_eq!(resumed[0], "event: status", "{resumed:?}");
+    assert!(
+        resumed.contains(&format!("id: {id}:cancelled:0")),
+        "{resumed:?}"
+    );
+}

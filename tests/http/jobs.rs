@@ -64,6 +64,28 @@ fn a_job_goes_from_submission_to_result_with_live_progress() {
     for field in ["created_at", "started_at", "finished_at"] {
         assert!(status[field].is_string(), "{field}");
     }
+    // The job as it runs (as submitted, defaults filled in), and the URLs of what it has.
+    let spec = &status["spec"];
+    for field in ["name", "devices", "operations", "seed", "scatter", "limits"] {
+        assert_eq!(spec[field], job[field], "{field}");
+    }
+    assert_eq!(spec["scenario"]["circuit"]["current_a"], 15.0);
+    assert_eq!(spec["scenario"]["mechanism"]["static_force_n"], 0.344);
+    let this = format!("/v1/jobs/{id}");
+    assert_eq!(
+        status["links"],
+        json!({
+            "self": this, "result": format!("{this}/result"), "events": format!("{this}/events"),
+            "shards": format!("{this}/shards"),
+            "distributions": format!("{this}/distributions/{{metric}}"),
+            "life": format!("{this}/life"), "plots": format!("{this}/plots/{{kind}}"),
+        })
+    );
+    let listed = get(&server.url("/v1/jobs"), None).json();
+    assert!(
+        listed["jobs"][0].get("spec").is_none(),
+        "listings stay small"
+    );
 
     let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None);
     assert_eq!(result.status, 200);
@@ -480,6 +502,42 @@ fn life_analysis_is_served_as_json_and_per_device_csv() {
     assert_eq!(rows[0], "device,operations_to_failure,censored");
     assert_eq!(rows.len(), 61);
     assert!(rows[1].starts_with("0,"));
+    // A failed device gives the operation it failed at; a censored one none.
+    let (mut failed, mut censored) = (0, 0);
+    for row in &rows[1..] {
+        match row.split(',').collect::<Vec<_>>()[..] {
+            [_, operations, "false"] => {
+                assert!(operations.parse::<u64>().unwrap() <= 300, "{row}");
+                failed += 1;
+            }
+            [_, "", "true"] => censored += 1,
+            _ => panic!("{row}"),
+        }
+    }
+    assert_eq!(
+        (failed, censored),
+        (
+            life["failures"].as_u64().unwrap(),
+            life["censored"].as_u64().unwrap()
+        )
+    );
+    // `Accept: text/csv` asks for the same CSV; the query's `format` wins over it.
+    let accept = |value: &str, query: &str| {
+        reply(
+            agent()
+                .get(&server.url(&format!("/v1/jobs/{id}/life{query}")))
+                .header("accept", value)
+                .call(),
+        )
+    };
+    assert_eq!(accept("text/csv", "").body, csv.body);
+    assert_eq!(
+        accept("application/json;q=0.5, text/csv", "").body,
+        csv.body
+    );
+    assert_eq!(accept("text/csv;q=0.5, application/json", "").json(), life);
+    assert_eq!(accept("text/csv", "?format=json").json(), life);
+    assert_eq!(accept("*/*", "").json(), life);
     let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
     assert_eq!(result["life"], life, "the Result carries the same life");
     let plain = server.submit(&json!({"devices": 1, "operations": 1, "seed": 1}));

@@ -59,6 +59,8 @@ fn immutable_body(
             header::CACHE_CONTROL,
             HeaderValue::from_static(cache_control),
         ),
+        // JSON or CSV, as `format` or else `Accept` asks (`jobs::Format::negotiate`).
+        (header::VARY, HeaderValue::from_static("accept")),
     ];
     if matches_any(request, &tag) {
         return (StatusCode::NOT_MODIFIED, headers).into_response();

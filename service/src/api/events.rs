@@ -12,10 +12,12 @@ use crate::domain::{JobId, JobStatus, Owner};
 use crate::store::{JobRecord, StoreError};
 use axum::Extension;
 use axum::extract::{Path, State};
+use axum::http::HeaderMap;
 use axum::response::sse::{Event, KeepAlive, Sse};
 use futures_util::stream::Stream;
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::convert::Infallible;
+use std::time::Duration;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
@@ -24,6 +26,9 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(events))
         .routes(routes!(job_events))
 }
+
+/// How long a client waits before it reconnects a dropped stream (the first event's `retry`).
+const RECONNECT: Duration = Duration::from_secs(2);
 
 /// The `progress` event of a running or queued job.
 pub(super) fn progress_event(record: &JobRecord, with_id: bool) -> Event {
@@ -36,13 +41,50 @@ pub(super) fn progress_event(record: &JobRecord, with_id: bool) -> Event {
     if with_id {
         data["id"] = record.id.to_string().into();
     }
-    Event::default().event("progress").data(data.to_string())
+    // `data` right after `event`, as before ids: a client reading line pairs still finds it.
+    Event::default()
+        .event("progress")
+        .data(data.to_string())
+        .id(event_id(record))
 }
 
 /// The `status` event of a job that ended: the job resource.
 pub(super) fn status_event(record: &JobRecord) -> Event {
     let data = serde_json::to_string(&JobResource::from_record(record)).unwrap_or_default();
-    Event::default().event("status").data(data)
+    Event::default()
+        .event("status")
+        .data(data)
+        .id(event_id(record))
+}
+
+/// An event's `id`: the job's state it tells, `JOB:STATUS:OPERATIONS_DONE`. A client that
+/// reconnects sends the last one as `Last-Event-ID`, and a job's stream then does not tell that
+/// state again.
+fn event_id(record: &JobRecord) -> String {
+    format!(
+        "{}:{}:{}",
+        record.id,
+        record.status.as_str(),
+        record.operations_done
+    )
+}
+
+/// The job state a `Last-Event-ID` of [`event_id`]'s form names for job `id`, if it does.
+fn last_seen(request: &HeaderMap, id: &JobId) -> Option<(JobStatus, u64)> {
+    let text = request.get("last-event-id")?.to_str().ok()?;
+    let mut parts = text.rsplitn(3, ':');
+    let done = parts.next()?.parse().ok()?;
+    let status = JobStatus::parse(parts.next()?)?;
+    (parts.next()? == id.as_str()).then_some((status, done))
+}
+
+/// The stream's first event also tells the client how soon to reconnect.
+fn first(event: Event, sent: &mut bool) -> Event {
+    if std::mem::replace(sent, true) {
+        event
+    } else {
+        event.retry(RECONNECT)
+    }
 }
 
 /// What one caller's stream has told so far.
@@ -56,6 +98,8 @@ struct Follower {
     /// before the first snapshot.
     newest: Option<i64>,
     ready: VecDeque<Event>,
+    /// Whether an event went out yet.
+    sent: bool,
 }
 
 impl Follower {
@@ -130,10 +174,12 @@ pub async fn events(
         active: HashMap::new(),
         newest: None,
         ready: VecDeque::new(),
+        sent: false,
     };
     let stream = futures_util::stream::unfold(follower, |mut f| async move {
         loop {
             if let Some(event) = f.ready.pop_front() {
+                let event = first(event, &mut f.sent);
                 return Some((Ok(event), f));
             }
             let mut shutdown = f.state.shutdown.clone();
@@ -163,8 +209,10 @@ pub async fn job_events(
     State(state): State<AppState>,
     Extension(owner): Extension<Owner>,
     Path(id): Path<JobId>,
+    request: HeaderMap,
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
-    let first = state.store.job(&owner, &id).await?;
+    let current = state.store.job(&owner, &id).await?;
+    let last = last_seen(&request, &id);
     // Subscribed after the first read; its first snapshot is taken after this point.
     let subscription = state.watch.subscribe(&owner)?;
     struct Follower {
@@ -175,15 +223,17 @@ pub async fn job_events(
         last: Option<(JobStatus, u64)>,
         pending: Option<JobRecord>,
         ended: bool,
+        sent: bool,
     }
     let follower = Follower {
         state,
         subscription,
         owner,
         id,
-        last: None,
-        pending: Some(first),
+        last,
+        pending: Some(current),
         ended: false,
+        sent: false,
     };
     let stream = futures_util::stream::unfold(follower, |mut f| async move {
         loop {
@@ -210,11 +260,13 @@ pub async fn job_events(
             let seen = (record.status, record.operations_done);
             if record.status.is_terminal() {
                 f.ended = true;
-                return Some((Ok(status_event(&record)), f));
+                let event = first(status_event(&record), &mut f.sent);
+                return Some((Ok(event), f));
             }
             if f.last != Some(seen) {
                 f.last = Some(seen);
-                return Some((Ok(progress_event(&record, false)), f));
+                let event = first(progress_event(&record, false), &mut f.sent);
+                return Some((Ok(event), f));
             }
         }
     });

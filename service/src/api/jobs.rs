@@ -65,8 +65,13 @@ pub struct JobResource {
     /// succeeded its result, distributions and listed device lives (database overhead aside).
     /// `DELETE` frees them.
     pub stored_bytes: u64,
-    /// URLs of the job, its result and its event stream.
+    /// URLs of the job and of what it has.
     pub links: Links,
+    /// The job as it runs (as submitted, every default filled in, its seed fixed): in
+    /// `GET /v1/jobs/{id}` only (not in the 202, a listing or an event).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<Object>)]
+    pub spec: Option<JobSpec>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, ToSchema)]
@@ -86,6 +91,15 @@ pub struct Links {
     pub result: String,
     /// Its event stream's URL.
     pub events: String,
+    /// The shards it runs as.
+    pub shards: String,
+    /// Its distributions: the template of a metric's (`{metric}`, as the Result names it).
+    pub distributions: String,
+    /// Its life analysis (404 for a job without `failure` criteria).
+    pub life: String,
+    /// Its plots: the template of a plot's (`{kind}`: `bands.svg`, `histograms.svg`,
+    /// `weibull.svg`, `sensitivity.svg`, `tail.svg`).
+    pub plots: String,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -124,8 +138,13 @@ impl JobResource {
             links: Links {
                 result: format!("{this}/result"),
                 events: format!("{this}/events"),
+                shards: format!("{this}/shards"),
+                distributions: format!("{this}/distributions/{{metric}}"),
+                life: format!("{this}/life"),
+                plots: format!("{this}/plots/{{kind}}"),
                 this,
             },
+            spec: None,
         }
     }
 }
@@ -284,7 +303,11 @@ pub async fn get_job(
     Path(id): Path<JobId>,
 ) -> Result<Json<JobResource>, ApiError> {
     let record = state.store.job(&owner, &id).await?;
-    Ok(Json(JobResource::from_record(&record)))
+    let spec = state.store.job_spec(&owner, &id).await?;
+    Ok(Json(JobResource {
+        spec: Some(spec),
+        ..JobResource::from_record(&record)
+    }))
 }
 
 /// One shard of a job: a group of devices of one batch (or the batch's merge step), as workers
@@ -494,11 +517,46 @@ pub struct DistributionQuery {
     pub exceedance: Option<String>,
 }
 
-#[derive(Debug, Clone, Copy, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Format {
     Json,
     Csv,
+}
+
+impl Format {
+    /// The representation to send: `format` when the query names one; otherwise CSV when the
+    /// request's `Accept` prefers `text/csv` to `application/json` (by quality, RFC 9110 section
+    /// 12.5.1; a client that names only CSV gets CSV); otherwise JSON.
+    pub fn negotiate(asked: Option<Format>, request: &HeaderMap) -> Format {
+        if let Some(format) = asked {
+            return format;
+        }
+        let accept = request
+            .get_all(header::ACCEPT)
+            .iter()
+            .filter_map(|value| value.to_str().ok())
+            .collect::<Vec<_>>()
+            .join(",");
+        let quality = |wanted: &str| {
+            accept
+                .split(',')
+                .filter_map(|range| {
+                    let mut parts = range.split(';');
+                    let media = parts.next()?.trim();
+                    let q = parts
+                        .filter_map(|p| p.trim().strip_prefix("q="))
+                        .find_map(|q| q.trim().parse::<f64>().ok())
+                        .unwrap_or(1.0);
+                    media.eq_ignore_ascii_case(wanted).then_some(q)
+                })
+                .reduce(f64::max)
+        };
+        match (quality("text/csv"), quality("application/json")) {
+            (Some(csv), json) if csv > 0.0 && json.is_none_or(|json| csv > json) => Format::Csv,
+            _ => Format::Json,
+        }
+    }
 }
 
 /// One stored bin: its SUMMARY and the operations it covers.
@@ -561,7 +619,7 @@ pub async fn get_distribution(
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
     let after_run = AfterRunQuery::parse(query.quantiles.as_deref(), query.exceedance.as_deref())
         .map_err(|bad| ApiError::BadRequest(bad.to_string()))?;
-    let format = query.format.unwrap_or(Format::Json);
+    let format = Format::negotiate(query.format, &headers);
     let (op_start, op_end) = (
         query.op_start.unwrap_or(0),
         query.op_end.unwrap_or(u64::MAX),
@@ -722,9 +780,10 @@ pub struct ServerSentEvent {
     pub event: Option<String>,
     /// The event's JSON document.
     pub data: String,
-    /// Not sent.
+    /// The job's state the event tells, `JOB:STATUS:OPERATIONS_DONE`: sent back as
+    /// `Last-Event-ID` on reconnecting, a job's stream does not tell that state again.
     pub id: Option<String>,
-    /// Not sent.
+    /// On the stream's first event: milliseconds to wait before reconnecting (2000).
     pub retry: Option<u64>,
 }
 
@@ -740,11 +799,12 @@ pub struct LifeQuery {
 /// Fisher-matrix bounds), B1 and B10 life, Kaplan-Meier reliability; or each device's life as CSV.
 ///
 /// Needs a job with `failure` criteria (404 otherwise). `format=json` (default) gives the analysis;
-/// `format=csv` gives one row per device: `device,operations_to_failure,censored`.
+/// `format=csv` gives one row per device: `device,operations_to_failure,censored`
+/// (`operations_to_failure` empty for a censored device: it survived the whole test).
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/life", tag = "jobs", params(("id" = String, Path, description = "Job id"), LifeQuery),
     responses(
-        (status = 200, description = "The life analysis (JSON), or with `format=csv` one row per device: `device,operations_to_failure,censored`", content((bouncewear_model::montecarlo::LifeReport = "application/json"), (String = "text/csv")), headers(("ETag" = String, description = "A tag of the content, for If-None-Match"), ("Cache-Control" = String, description = "Immutable for a year"))),
+        (status = 200, description = "The life analysis (JSON), or with `format=csv` one row per device: `device,operations_to_failure,censored` (`operations_to_failure` empty for a censored device)", content((bouncewear_model::montecarlo::LifeReport = "application/json"), (String = "text/csv")), headers(("ETag" = String, description = "A tag of the content, for If-None-Match"), ("Cache-Control" = String, description = "Immutable for a year"))),
         NotModified,
         BadQuery,
         Unauthorized,
@@ -767,7 +827,7 @@ pub async fn get_life(
             "job {id} has no failure criteria, so no life analysis"
         )));
     };
-    match query.format.unwrap_or(Format::Json) {
+    match Format::negotiate(query.format, &headers) {
         Format::Json => Ok(immutable(&state, &headers, JSON, to_json(&life)?)),
         Format::Csv => {
             let identity = format!("{id}/life.csv");
@@ -823,7 +883,7 @@ pub async fn get_rare_event(
             "job {id} asks no rare event: submit it with `rare_event`"
         )));
     };
-    Ok(match query.format.unwrap_or(Format::Json) {
+    Ok(match Format::negotiate(query.format, &headers) {
         Format::Json => immutable(&state, &headers, JSON, to_json(&rare)?),
         Format::Csv => immutable(&state, &headers, CSV, tail_csv(&rare)),
     })
@@ -862,11 +922,15 @@ fn life_csv(
             let next = (page.len() == LIVES_PER_PAGE as usize).then_some(Some(last.device));
             let mut csv = String::with_capacity(page.len() * 16);
             for device in &page {
-                let _ = writeln!(
-                    csv,
-                    "{},{},{}",
-                    device.device, device.operations_to_failure, device.censored
-                );
+                // A censored device did not fail: it has no operations to failure.
+                let _ = match device.censored {
+                    true => writeln!(csv, "{},,true", device.device),
+                    false => writeln!(
+                        csv,
+                        "{},{},false",
+                        device.device, device.operations_to_failure
+                    ),
+                };
             }
             Ok(Some((Bytes::from(csv), next)))
         }

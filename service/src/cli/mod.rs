@@ -23,10 +23,12 @@ use std::process::ExitCode;
 #[command(
     name = "bouncewear",
     version,
+    propagate_version = true,
     about = "Monte Carlo wear simulation of bouncing electrical contacts (McBride & Sharkh 1992)"
 )]
 pub struct Cli {
-    /// Log lines as `text` (coloured only when stderr is a terminal) or `json` (one object a line).
+    /// Log lines as `text` (coloured only when stderr is a terminal and `NO_COLOR` is not set) or
+    /// `json` (one object a line).
     #[arg(
         long,
         global = true,

@@ -22,8 +22,8 @@ use crate::domain::{
 };
 use async_trait::async_trait;
 use bouncewear_model::Pointer;
-use bouncewear_model::montecarlo::Job;
 use bouncewear_model::montecarlo::engine::GroupStats;
+use bouncewear_model::montecarlo::{Job, JobSpec};
 use tokio::sync::broadcast;
 
 // ---- idempotency keys ----------------------------------------------------------------------
@@ -318,6 +318,17 @@ impl JobQueue for SqlStore {
     #[tracing::instrument(skip_all, fields(job = %id))]
     async fn job(&self, owner: &Owner, id: &JobId) -> StoreResult<JobRecord> {
         select_job(self.readers(), owner, id).await
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id))]
+    async fn job_spec(&self, owner: &Owner, id: &JobId) -> StoreResult<JobSpec> {
+        let row = Sql::new("SELECT spec FROM jobs WHERE id = $1 AND owner = $2")
+            .bind(id.as_str())
+            .bind(owner.as_str())
+            .fetch_optional(self.readers())
+            .await?
+            .ok_or_else(|| StoreError::job_not_found(id))?;
+        spec_from_json(&row.text("spec")?)
     }
 
     #[tracing::instrument(skip_all)]
