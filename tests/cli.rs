@@ -111,6 +111,11 @@ fn every_subcommand_has_help_and_a_version() {
         &["worker", "--help"],
         &["health", "--help"],
         &["calibrate", "--help"],
+        &["submit", "--help"],
+        &["status", "--help"],
+        &["wait", "--help"],
+        &["fetch", "--help"],
+        &["cancel", "--help"],
     ] {
         let output = bouncewear(args, "");
         assert!(output.status.success(), "{args:?}");

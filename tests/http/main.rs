@@ -11,6 +11,7 @@ mod limits;
 mod postgres;
 mod query;
 mod rare;
+mod remote;
 mod schedules;
 mod simulate;
 mod strict;

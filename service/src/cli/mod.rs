@@ -1,8 +1,10 @@
-//! Command line: `bouncewear simulate | run | serve | worker | health | bench`.
+//! Command line: `bouncewear simulate | calibrate | run | serve | worker | health | bench`, and
+//! for a running server `submit | status | wait | fetch | cancel`.
 //!
 //! Bad input exits with code 2 and one line on stderr naming the field (a JSON pointer) and the rule.
 
 mod bench;
+mod remote;
 
 use crate::app::StartupError;
 use crate::compute::PoolError;
@@ -96,6 +98,58 @@ enum Command {
         /// Seconds to wait for the answer.
         #[arg(long, default_value_t = 2.0)]
         timeout_seconds: f64,
+    },
+    /// Queue a job on a server (`--url`, `--api-key`) and print the job resource, or with `--wait`
+    /// its Result once it succeeded, as `run` prints it.
+    Submit {
+        /// Job JSON file; `-` or nothing reads standard input.
+        #[arg(default_value = "-")]
+        file: PathBuf,
+        /// Wait for the job to end and print its Result (exit 1 if it failed or was cancelled).
+        #[arg(long)]
+        wait: bool,
+        /// With `--wait`: give up (exit 1) after this many seconds.
+        #[arg(long)]
+        timeout_seconds: Option<f64>,
+        #[command(flatten)]
+        server: remote::Server,
+    },
+    /// Print a job of a server: its status, progress and links.
+    Status {
+        /// The job's id.
+        id: String,
+        #[command(flatten)]
+        server: remote::Server,
+    },
+    /// Wait until a job of a server ends; print it (exit 0 if it succeeded, 1 otherwise).
+    Wait {
+        /// The job's id.
+        id: String,
+        /// Give up (exit 1) after this many seconds.
+        #[arg(long)]
+        timeout_seconds: Option<f64>,
+        #[command(flatten)]
+        server: remote::Server,
+    },
+    /// Print a part of a succeeded job of a server, as the API serves it.
+    Fetch {
+        /// The job's id.
+        id: String,
+        /// Which part.
+        #[arg(value_enum, default_value_t = remote::Part::Result)]
+        part: remote::Part,
+        /// CSV instead of JSON (`life`: each device; `rare-event`: the tail curve).
+        #[arg(long)]
+        csv: bool,
+        #[command(flatten)]
+        server: remote::Server,
+    },
+    /// Cancel a queued or running job of a server; print it.
+    Cancel {
+        /// The job's id.
+        id: String,
+        #[command(flatten)]
+        server: remote::Server,
     },
     /// Measure speed against error and write report.json, report.md and report.svg.
     Bench {
@@ -249,6 +303,25 @@ fn run(cli: Cli) -> Result<(), CliError> {
             println!("{}", check_health(&url, timeout_seconds)?);
             Ok(())
         }
+        Command::Submit {
+            file,
+            wait,
+            timeout_seconds,
+            server,
+        } => print_text(remote::submit(&server, &file, wait, timeout_seconds)?),
+        Command::Status { id, server } => print_text(remote::status(&server, &id)?),
+        Command::Wait {
+            id,
+            timeout_seconds,
+            server,
+        } => print_text(remote::wait_for(&server, &id, timeout_seconds)?),
+        Command::Fetch {
+            id,
+            part,
+            csv,
+            server,
+        } => print_text(remote::fetch(&server, &id, part, csv)?),
+        Command::Cancel { id, server } => print_text(remote::cancel(&server, &id)?),
         Command::Bench {
             quick,
             out,
@@ -271,13 +344,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
 
 /// The body of a 200 from `url`; anything else is a failure naming what went wrong.
 fn check_health(url: &str, timeout_seconds: f64) -> Result<String, CliError> {
-    let agent: ureq::Agent = ureq::Agent::config_builder()
-        .http_status_as_error(false)
-        .timeout_global(Some(std::time::Duration::from_secs_f64(
-            timeout_seconds.max(0.001),
-        )))
-        .build()
-        .into();
+    let agent = remote::agent(timeout_seconds);
     let unhealthy = |what: String| CliError::Failed(format!("{url}: {what}"));
     let mut response = agent
         .get(url)
@@ -366,6 +433,25 @@ pub fn read_input(path: &PathBuf) -> Result<String, CliError> {
 
 /// Prints a document to stdout, buffered (a Result is thousands of lines). A reader that stops
 /// early (`| head`) is not an error: the output simply ends there.
+/// A server's answer on stdout: JSON as `print_json` writes it (a Result field for field as `run`
+/// prints it), anything else (CSV) as it came.
+fn print_text(text: String) -> Result<(), CliError> {
+    if let Ok(result) = serde_json::from_str::<bouncewear_model::montecarlo::JobResult>(&text) {
+        return print_json(&result);
+    }
+    if let Ok(value) = serde_json::from_str::<serde_json::Value>(&text) {
+        return print_json(&value);
+    }
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{text}").and_then(|()| out.flush()) {
+        Err(error) if error.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        written => written.map_err(|source| CliError::Io {
+            path: "<stdout>".into(),
+            source,
+        }),
+    }
+}
+
 fn print_json(value: &impl serde::Serialize) -> Result<(), CliError> {
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     let written = serde_json::to_writer_pretty(&mut out, value)

@@ -1,0 +1,214 @@
+//! The commands that talk to a running server: `submit`, `status`, `wait`, `fetch`, `cancel`. They
+//! print what the API answers as it is (JSON, or CSV where asked) on stdout, and exit as the local
+//! commands do: 0 when done, 2 when the server refuses the input (its problem's errors, each with
+//! its JSON pointer, on stderr), 1 for anything else (unreachable, a job that failed, 5xx).
+
+use super::{CliError, read_input};
+use bouncewear_model::{FieldError, InvalidInput};
+use std::time::{Duration, Instant};
+
+/// The server a remote command talks to.
+#[derive(Debug, Clone, clap::Args)]
+pub struct Server {
+    /// The server's base URL.
+    #[arg(
+        long,
+        env = "BOUNCEWEAR_URL",
+        default_value = "http://127.0.0.1:8080",
+        global = true
+    )]
+    pub url: String,
+    /// The API key, when the server has keys.
+    #[arg(
+        long,
+        env = "BOUNCEWEAR_API_KEY",
+        hide_env_values = true,
+        global = true
+    )]
+    pub api_key: Option<String>,
+    /// Seconds one request may take.
+    #[arg(long, default_value_t = 60.0, global = true)]
+    pub request_timeout_seconds: f64,
+}
+
+/// What `fetch` gets of a job.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Part {
+    /// The Result (409 until the job succeeded).
+    Result,
+    /// The life analysis (JSON) or each device's life (CSV).
+    Life,
+    /// The rare event's estimate (JSON) or its tail curve (CSV).
+    RareEvent,
+    /// The shards the job runs as.
+    Shards,
+}
+
+/// How often `wait` asks.
+const POLL: Duration = Duration::from_millis(200);
+
+/// An HTTP client whose every request ends within `timeout_seconds`, and which hands any status
+/// back to the caller (a 4xx or 5xx is an answer, not an error of the client).
+pub fn agent(timeout_seconds: f64) -> ureq::Agent {
+    ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .timeout_global(Some(Duration::from_secs_f64(timeout_seconds.max(0.001))))
+        .build()
+        .into()
+}
+
+impl Server {
+    fn authorize<B>(&self, request: ureq::RequestBuilder<B>) -> ureq::RequestBuilder<B> {
+        match &self.api_key {
+            Some(key) => request.header("authorization", &format!("Bearer {key}")),
+            None => request,
+        }
+    }
+
+    fn url(&self, path: &str) -> String {
+        format!("{}{path}", self.url.trim_end_matches('/'))
+    }
+
+    /// Sends a request; the body of a 2xx, or the failure the answer means.
+    fn send(&self, method: &str, path: &str, body: Option<&str>) -> Result<String, CliError> {
+        let url = self.url(path);
+        let agent = agent(self.request_timeout_seconds);
+        let sent = match (method, body) {
+            ("POST", Some(body)) => self
+                .authorize(agent.post(&url))
+                .header("content-type", "application/json")
+                .send(body),
+            ("DELETE", _) => self.authorize(agent.delete(&url)).call(),
+            _ => self.authorize(agent.get(&url)).call(),
+        };
+        let unreachable = |e: ureq::Error| CliError::Failed(format!("{url}: {e}"));
+        let mut response = sent.map_err(unreachable)?;
+        let status = response.status().as_u16();
+        let text = response
+            .body_mut()
+            .with_config()
+            .limit(u64::MAX)
+            .read_to_string()
+            .map_err(unreachable)?;
+        match status {
+            200..=299 => Ok(text),
+            _ => Err(refused(status, &url, &text)),
+        }
+    }
+
+    fn job(&self, id: &str) -> Result<serde_json::Value, CliError> {
+        parse(&self.send("GET", &format!("/v1/jobs/{id}"), None)?)
+    }
+}
+
+/// The failure a non-2xx answer means: the input's (exit 2) for 400, 413, 415 and 422, each error
+/// of a 422 with its pointer; anything else exit 1, with the problem's detail.
+fn refused(status: u16, url: &str, body: &str) -> CliError {
+    let problem: serde_json::Value = serde_json::from_str(body).unwrap_or_default();
+    let detail = problem["detail"].as_str().unwrap_or(body).to_owned();
+    let errors: Vec<FieldError> = problem["errors"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|e| {
+            Some(FieldError {
+                pointer: e["pointer"].as_str()?.to_owned(),
+                detail: e["detail"].as_str()?.to_owned(),
+            })
+        })
+        .collect();
+    match status {
+        422 if !errors.is_empty() => CliError::Invalid(InvalidInput::new(errors)),
+        400 | 413 | 415 | 422 => CliError::Invalid(InvalidInput::single(
+            &bouncewear_model::Pointer::root(),
+            format!("{status}: {detail}"),
+        )),
+        _ => CliError::Failed(format!("{url}: {status} {detail}")),
+    }
+}
+
+fn parse(text: &str) -> Result<serde_json::Value, CliError> {
+    serde_json::from_str(text).map_err(|e| CliError::Failed(format!("the server's answer: {e}")))
+}
+
+fn id_of(job: &serde_json::Value) -> Result<String, CliError> {
+    job["id"]
+        .as_str()
+        .map(str::to_owned)
+        .ok_or_else(|| CliError::Failed(format!("the server's answer names no job: {job}")))
+}
+
+/// `submit`: queues the job in `file`; prints the job resource, or with `wait` the Result once it
+/// succeeded.
+pub fn submit(
+    server: &Server,
+    file: &std::path::PathBuf,
+    wait: bool,
+    timeout: Option<f64>,
+) -> Result<String, CliError> {
+    let body = read_input(file)?;
+    let job = parse(&server.send("POST", "/v1/jobs", Some(&body))?)?;
+    if !wait {
+        return Ok(job.to_string());
+    }
+    let id = id_of(&job)?;
+    wait_for(server, &id, timeout)?;
+    fetch(server, &id, Part::Result, false)
+}
+
+/// `status`: the job resource.
+pub fn status(server: &Server, id: &str) -> Result<String, CliError> {
+    Ok(server.job(id)?.to_string())
+}
+
+/// `wait`: asks until the job ended; the final job resource when it succeeded, exit 1 (with its
+/// error) when it failed or was cancelled, or when `timeout` seconds passed first.
+pub fn wait_for(server: &Server, id: &str, timeout: Option<f64>) -> Result<String, CliError> {
+    let started = Instant::now();
+    loop {
+        let job = server.job(id)?;
+        match job["status"].as_str() {
+            Some("succeeded") => return Ok(job.to_string()),
+            Some(ended @ ("failed" | "cancelled")) => {
+                let error = job["error"].as_str().unwrap_or("no reason given");
+                return Err(CliError::Failed(format!("job {id} {ended}: {error}")));
+            }
+            _ => {}
+        }
+        if timeout.is_some_and(|t| started.elapsed().as_secs_f64() >= t) {
+            return Err(CliError::Failed(format!(
+                "job {id} is still {} after {:.0} s",
+                job["status"].as_str().unwrap_or("?"),
+                started.elapsed().as_secs_f64()
+            )));
+        }
+        std::thread::sleep(POLL);
+    }
+}
+
+/// `fetch`: a part of a job, as the API serves it (`csv` where the part has a CSV form).
+pub fn fetch(server: &Server, id: &str, part: Part, csv: bool) -> Result<String, CliError> {
+    let path = match part {
+        Part::Result => "result",
+        Part::Life => "life",
+        Part::RareEvent => "rare_event",
+        Part::Shards => "shards",
+    };
+    let format = match (csv, part) {
+        (false, _) => "",
+        (true, Part::Life | Part::RareEvent) => "?format=csv",
+        (true, _) => {
+            return Err(CliError::Invalid(InvalidInput::single(
+                &bouncewear_model::Pointer::root(),
+                format!("--csv: the {path} has no CSV form (life and rare-event have)"),
+            )));
+        }
+    };
+    let text = server.send("GET", &format!("/v1/jobs/{id}/{path}{format}"), None)?;
+    Ok(text.trim_end().to_owned())
+}
+
+/// `cancel`: cancels a queued or running job; the job resource.
+pub fn cancel(server: &Server, id: &str) -> Result<String, CliError> {
+    server.send("DELETE", &format!("/v1/jobs/{id}"), None)
+}

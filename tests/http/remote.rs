@@ -1,0 +1,125 @@
+//! The command line against a server: `submit`, `status`, `wait`, `fetch` and `cancel` print what
+//! the API answers and exit as the local commands do.
+
+use crate::support::app::{Service, TestApp};
+use crate::support::{BIN, temp_db, temp_dir};
+use serde_json::{Value, json};
+use std::process::{Command, Output};
+
+/// The binary with `args`, pointed at `server` through the environment, as a script would be.
+fn remote(server: &TestApp, key: Option<&str>, args: &[&str]) -> Output {
+    let mut command = Command::new(BIN);
+    command.args(args).env("BOUNCEWEAR_URL", server.base());
+    match key {
+        Some(key) => command.env("BOUNCEWEAR_API_KEY", key),
+        None => command.env_remove("BOUNCEWEAR_API_KEY"),
+    };
+    command.output().expect("bouncewear runs")
+}
+
+fn stdout(output: &Output) -> String {
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8(output.stdout.clone()).unwrap()
+}
+
+/// A job file of its own.
+fn job_file(name: &str, job: &Value) -> String {
+    let path = temp_dir(name).join("job.json");
+    std::fs::write(&path, job.to_string()).unwrap();
+    path.display().to_string()
+}
+
+/// Every line of a printed Result but its timing, which differs between two runs.
+fn without_timing(text: &str) -> Vec<&str> {
+    text.lines()
+        .filter(|line| !line.contains("wall_s") && !line.contains("operations_per_s"))
+        .collect()
+}
+
+/// `submit --wait` prints the Result `run` prints for the same job and seed, line for line;
+/// `status`, `wait` and `fetch` read the same job; `fetch life --csv` gives each device's life.
+#[test]
+fn submit_wait_prints_what_run_prints_and_fetch_reads_the_parts() {
+    let server = TestApp::start(&temp_db("remote"), &["--api-key", "k1"]);
+    let job = json!({"devices": 30, "operations": 60, "seed": 7,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "failure": {"e1": {"below": 0.36}}});
+    let file = job_file("remote-job", &job);
+    let remote_result = stdout(&remote(&server, Some("k1"), &["submit", &file, "--wait"]));
+    let local = stdout(
+        &Command::new(BIN)
+            .args(["run", "-q", &file])
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(without_timing(&remote_result), without_timing(&local));
+
+    let queued: Value =
+        serde_json::from_str(&stdout(&remote(&server, Some("k1"), &["submit", &file]))).unwrap();
+    let id = queued["id"].as_str().unwrap();
+    let waited: Value =
+        serde_json::from_str(&stdout(&remote(&server, Some("k1"), &["wait", id]))).unwrap();
+    assert_eq!(waited["status"], "succeeded");
+    let status: Value =
+        serde_json::from_str(&stdout(&remote(&server, Some("k1"), &["status", id]))).unwrap();
+    assert_eq!(status["spec"]["seed"], 7);
+    let fetched = stdout(&remote(&server, Some("k1"), &["fetch", id]));
+    assert_eq!(without_timing(&fetched), without_timing(&local));
+    let lives = stdout(&remote(
+        &server,
+        Some("k1"),
+        &["fetch", id, "life", "--csv"],
+    ));
+    assert_eq!(
+        lives.lines().next(),
+        Some("device,operations_to_failure,censored")
+    );
+    assert_eq!(lives.lines().count(), 31);
+
+    // Without the key: the server's 401, exit 1.
+    let refused = remote(&server, None, &["status", id]);
+    assert_eq!(refused.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("401"));
+}
+
+/// A job the server refuses exits 2 naming the field; an unknown job, a cancelled one waited for
+/// and an unreachable server exit 1; `cancel` prints the cancelled job.
+#[test]
+fn refusals_and_failures_exit_as_the_local_commands_do() {
+    let server = TestApp::start(&temp_db("remote-refusals"), &["--workers", "0"]);
+    let bad = remote(
+        &server,
+        None,
+        &["submit", &job_file("remote-bad", &json!({"devices": 0}))],
+    );
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&bad.stderr).contains("/devices: must be from 1"),
+        "{}",
+        String::from_utf8_lossy(&bad.stderr)
+    );
+
+    let file = job_file("remote-queued", &json!({"devices": 2, "operations": 2}));
+    let queued: Value =
+        serde_json::from_str(&stdout(&remote(&server, None, &["submit", &file]))).unwrap();
+    let id = queued["id"].as_str().unwrap();
+    let cancelled: Value =
+        serde_json::from_str(&stdout(&remote(&server, None, &["cancel", id]))).unwrap();
+    assert_eq!(cancelled["status"], "cancelled");
+    let waited = remote(&server, None, &["wait", id]);
+    assert_eq!(waited.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&waited.stderr).contains("cancelled"));
+
+    let unknown = remote(&server, None, &["status", "no-such-job"]);
+    assert_eq!(unknown.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&unknown.stderr).contains("404"));
+    let unreachable = Command::new(BIN)
+        .args(["status", id, "--url", "http://127.0.0.1:1"])
+        .output()
+        .unwrap();
+    assert_eq!(unreachable.status.code(), Some(1));
+}
