@@ -1,0 +1,244 @@
+"""The client: a `Client` for a server, a `Job` for each job on it, and `BouncewearError` for every
+answer that is not a success, with the problem's detail and the JSON pointer of each field at fault.
+"""
+
+from __future__ import annotations
+
+import io
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any, Dict, Iterable, List, Optional
+
+import pandas as pd
+import requests
+
+JSON = Dict[str, Any]
+
+#: The statuses a job ends in.
+ENDED = ("succeeded", "failed", "cancelled")
+
+
+@dataclass(frozen=True)
+class FieldError:
+    """One field of a request that broke one rule: its JSON pointer and the rule in words."""
+
+    pointer: str
+    detail: str
+
+
+@dataclass
+class BouncewearError(Exception):
+    """An answer that is not a success, as the server's problem (RFC 9457) tells it."""
+
+    status: int
+    title: str
+    detail: str
+    errors: List[FieldError] = field(default_factory=list)
+    #: Seconds to wait before trying again (a full queue, a database that cannot answer now).
+    retry_after: Optional[float] = None
+
+    def __str__(self) -> str:
+        fields = "".join(f"\n  {e.pointer or '(document)'}: {e.detail}" for e in self.errors)
+        return f"{self.status} {self.title}: {self.detail}{fields}"
+
+    @property
+    def pointers(self) -> List[str]:
+        """The JSON pointers of the fields at fault, in order."""
+        return [e.pointer for e in self.errors]
+
+    @classmethod
+    def from_response(cls, response: requests.Response) -> "BouncewearError":
+        try:
+            problem = response.json()
+        except ValueError:
+            problem = {"detail": response.text}
+        retry_after = response.headers.get("Retry-After")
+        return cls(
+            status=response.status_code,
+            title=str(problem.get("title", response.reason)),
+            detail=str(problem.get("detail", "")),
+            errors=[FieldError(e.get("pointer", ""), e.get("detail", "")) for e in problem.get("errors", [])],
+            retry_after=float(retry_after) if retry_after else None,
+        )
+
+
+class JobFailed(Exception):
+    """A job waited for ended `failed` or `cancelled`; `job` is it, `job.error` why."""
+
+    def __init__(self, job: "Job") -> None:
+        super().__init__(f"job {job.id} {job.status}: {job.error or 'no reason given'}")
+        self.job = job
+
+
+class Client:
+    """A bouncewear server at `base_url`, with `api_key` when the server has keys."""
+
+    def __init__(self, base_url: str = "http://127.0.0.1:8080", api_key: Optional[str] = None,
+                 timeout: float = 60.0) -> None:
+        self.base_url = base_url.rstrip("/")
+        self.timeout = timeout
+        self._session = requests.Session()
+        if api_key is not None:
+            self._session.headers["Authorization"] = f"Bearer {api_key}"
+
+    def __repr__(self) -> str:
+        return f"Client({self.base_url!r})"
+
+    def request(self, method: str, path: str, *, json: Optional[JSON] = None,
+                params: Optional[Dict[str, Any]] = None, headers: Optional[Dict[str, str]] = None) -> requests.Response:
+        """One request; the response of a success, else `BouncewearError`."""
+        response = self._session.request(method, self.base_url + path, json=json, params=params,
+                                         headers=headers, timeout=self.timeout)
+        if not response.ok:
+            raise BouncewearError.from_response(response)
+        return response
+
+    def submit(self, job: JSON, *, idempotency_key: Optional[str] = None) -> "Job":
+        """Queues `job` (a Job document: docs/contract.md "Job"); the job, queued.
+
+        With `idempotency_key`, a retry of the same submission within 24 hours gives the same job.
+        """
+        headers = {"Idempotency-Key": idempotency_key} if idempotency_key else None
+        return Job(self, self.request("POST", "/v1/jobs", json=job, headers=headers).json())
+
+    def job(self, id: str) -> "Job":
+        """The job `id` as it stands now."""
+        return Job(self, self.request("GET", f"/v1/jobs/{id}").json())
+
+    def jobs(self, limit: Optional[int] = None) -> List["Job"]:
+        """Your jobs, newest first: every one, or the newest `limit`."""
+        found: List[Job] = []
+        cursor = None
+        while limit is None or len(found) < limit:
+            page = min(100, limit - len(found)) if limit is not None else 100
+            params: Dict[str, Any] = {"limit": page}
+            if cursor:
+                params["cursor"] = cursor
+            body = self.request("GET", "/v1/jobs", params=params).json()
+            found.extend(Job(self, resource) for resource in body["jobs"])
+            cursor = body.get("next_cursor")
+            if not cursor:
+                break
+        return found
+
+    def simulate(self, scenario: Optional[JSON] = None, fidelity: str = "exact") -> JSON:
+        """One make operation of `scenario` (every field optional): its bounces and arc energy."""
+        return self.request("POST", "/v1/simulate", json=scenario or {}, params={"fidelity": fidelity}).json()
+
+    def calibrate(self, request: JSON) -> JSON:
+        """Scenario parameters fitted to measured operations (docs/contract.md "Calibration")."""
+        return self.request("POST", "/v1/calibrations", json=request).json()
+
+
+class Job:
+    """A job on a server. Its attributes are the job resource as last read; `refresh` reads it
+    again, `wait` until it ends."""
+
+    def __init__(self, client: Client, resource: JSON) -> None:
+        self.client = client
+        self.resource = resource
+
+    def __repr__(self) -> str:
+        return f"Job({self.id!r}, status={self.status!r})"
+
+    @property
+    def id(self) -> str:
+        return str(self.resource["id"])
+
+    @property
+    def status(self) -> str:
+        """`queued`, `running`, `succeeded`, `failed` or `cancelled`, as last read."""
+        return str(self.resource["status"])
+
+    @property
+    def progress(self) -> JSON:
+        """`operations_done` and `operations_total`, as last read."""
+        return dict(self.resource["progress"])
+
+    @property
+    def error(self) -> Optional[str]:
+        """Why it failed."""
+        return self.resource.get("error")
+
+    def _path(self, part: str = "") -> str:
+        return f"/v1/jobs/{self.id}{part}"
+
+    def refresh(self) -> "Job":
+        """Reads the job again."""
+        self.resource = self.client.request("GET", self._path()).json()
+        return self
+
+    def wait(self, progress: bool = True, timeout: Optional[float] = None, poll: float = 0.2) -> "Job":
+        """Waits until the job ends; itself. With `progress`, a line on stderr shows how far it is.
+
+        Raises `JobFailed` when it failed or was cancelled, and `TimeoutError` when `timeout`
+        seconds passed first.
+        """
+        started = time.monotonic()
+        while self.refresh().status not in ENDED:
+            if progress:
+                done, total = self.progress["operations_done"], self.progress["operations_total"]
+                print(f"\r{self.id}: {self.status} {done:,}/{total:,} operations", end="", file=sys.stderr)
+            if timeout is not None and time.monotonic() - started >= timeout:
+                raise TimeoutError(f"job {self.id} is still {self.status} after {timeout} s")
+            time.sleep(poll)
+        if progress:
+            print(f"\r{self.id}: {self.status} in {time.monotonic() - started:.1f} s" + " " * 20, file=sys.stderr)
+        if self.status != "succeeded":
+            raise JobFailed(self)
+        return self
+
+    def result(self) -> JSON:
+        """The Result (docs/contract.md "Result"); 409 until the job succeeded."""
+        return self.client.request("GET", self._path("/result")).json()
+
+    def distribution(self, metric: str = "total_bounce_s", *, op_start: Optional[int] = None,
+                     op_end: Optional[int] = None, quantiles: Optional[Iterable[float]] = None,
+                     exceedance: Optional[Iterable[str]] = None) -> pd.DataFrame:
+        """A metric's bins, one row each (`op_start`, `op_end`, `n`, `mean`, ..., the histogram's
+        columns), optionally in a range of operations and with quantiles (`[0.999]`) and
+        exceedances (`["above:0.012"]`) answered after the run, each with its 95 % interval."""
+        params: Dict[str, Any] = {"format": "csv"}
+        if op_start is not None:
+            params["op_start"] = op_start
+        if op_end is not None:
+            params["op_end"] = op_end
+        if quantiles is not None:
+            params["quantiles"] = ",".join(repr(float(q)) for q in quantiles)
+        if exceedance is not None:
+            params["exceedance"] = ",".join(exceedance)
+        return _csv(self.client.request("GET", self._path(f"/distributions/{metric}"), params=params))
+
+    def life(self) -> pd.DataFrame:
+        """Each listed device's life: `device`, `operations_to_failure` (missing for a censored
+        device) and `censored`; 404 for a job without failure criteria."""
+        frame = _csv(self.client.request("GET", self._path("/life"), params={"format": "csv"}))
+        frame["operations_to_failure"] = frame["operations_to_failure"].astype("Int64")
+        frame["censored"] = frame["censored"].astype(bool)
+        return frame
+
+    def life_analysis(self) -> JSON:
+        """The life analysis: failures, censored devices, the Weibull fit with its bounds, B-lives."""
+        return self.client.request("GET", self._path("/life")).json()
+
+    def shards(self) -> pd.DataFrame:
+        """The shards the job runs as, one row each."""
+        return pd.DataFrame(self.client.request("GET", self._path("/shards")).json()["shards"])
+
+    def plot(self, kind: str = "bands.svg", metric: Optional[str] = None) -> str:
+        """A plot as SVG text (`bands.svg`, `histograms.svg`, `weibull.svg`, `sensitivity.svg`,
+        `tail.svg`); in Jupyter, `IPython.display.SVG(job.plot())` shows it."""
+        params = {"metric": metric} if metric else None
+        return self.client.request("GET", self._path(f"/plots/{kind}"), params=params).text
+
+    def cancel(self) -> "Job":
+        """Cancels the job if it is queued or running; itself, as it stands then."""
+        self.resource = self.client.request("DELETE", self._path()).json()
+        return self
+
+
+def _csv(response: requests.Response) -> pd.DataFrame:
+    return pd.read_csv(io.StringIO(response.text))
+
+

@@ -1,0 +1,106 @@
+"""The client against a live `bouncewear serve` at BOUNCEWEAR_URL (CI starts one), and the
+binary at BOUNCEWEAR_BIN for the local Result to compare with."""
+
+import json
+import os
+import subprocess
+
+import pandas as pd
+import pytest
+
+from bouncewear import BouncewearError, Client, JobFailed
+
+BASE = os.environ.get("BOUNCEWEAR_URL", "http://127.0.0.1:8080")
+BIN = os.environ.get("BOUNCEWEAR_BIN", "bouncewear")
+
+WEARING = {
+    "devices": 40, "operations": 300, "seed": 11,
+    "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+    "scatter": [{"parameter": "contact_radius_m", "per": "device",
+                 "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 0.8e-3, "min": 1e-3}}],
+    "failure": {"e1": {"below": 0.36}},
+}
+
+
+@pytest.fixture(scope="module")
+def client():
+    return Client(BASE)
+
+
+@pytest.fixture(scope="module")
+def job(client):
+    return client.submit(WEARING).wait(progress=False)
+
+
+def test_a_waited_job_has_the_result_run_gives(job, tmp_path):
+    assert job.status == "succeeded"
+    assert job.progress == {"operations_done": 12000, "operations_total": 12000}
+    path = tmp_path / "job.json"
+    path.write_text(json.dumps(WEARING))
+    local = json.loads(subprocess.run([BIN, "run", "-q", str(path)], check=True, capture_output=True).stdout)
+    served = job.result()
+    assert served["operations"] == local["operations"]
+    assert served["devices"] == local["devices"]
+    assert served["life"] == local["life"]
+
+
+def test_a_distribution_is_a_frame_of_its_bins(job):
+    frame = job.distribution("total_bounce_s")
+    assert list(frame.columns[:4]) == ["op_start", "op_end", "n", "mean"]
+    assert len(frame) == 10
+    assert frame["n"].sum() == 12000
+    assert (frame["op_end"] - frame["op_start"] == 30).all()
+    asked = job.distribution("total_bounce_s", op_start=0, op_end=30, quantiles=[0.5],
+                             exceedance=["above:0.011"])
+    assert len(asked) == 1
+    assert {"q0.5", "q0.5_ci95_lo", "q0.5_ci95_hi"} <= set(asked.columns)
+    assert asked["q0.5_ci95_lo"][0] <= asked["q0.5"][0] <= asked["q0.5_ci95_hi"][0]
+
+
+def test_lives_are_a_frame_with_censored_devices_missing_a_failure(job):
+    lives = job.life()
+    analysis = job.life_analysis()
+    assert len(lives) == 40
+    assert lives["censored"].sum() == analysis["censored"]
+    assert lives.loc[lives["censored"], "operations_to_failure"].isna().all()
+    failed = lives.loc[~lives["censored"], "operations_to_failure"]
+    assert failed.notna().all() and (failed <= 300).all()
+    assert analysis["analysis"]["weibull"]["beta"] > 0
+
+
+def test_jobs_list_and_read_again(client, job):
+    assert job.id in [j.id for j in client.jobs(limit=50)]
+    again = client.job(job.id)
+    assert again.status == "succeeded"
+    assert again.resource["spec"]["seed"] == 11
+    assert isinstance(job.shards(), pd.DataFrame)
+    assert job.plot("weibull.svg").lstrip().startswith("<svg")
+
+
+def test_a_refused_job_names_its_fields(client):
+    with pytest.raises(BouncewearError) as refused:
+        client.submit({"devices": 0, "operations": 0})
+    assert refused.value.status == 422
+    assert refused.value.pointers == ["/devices", "/operations"]
+    assert "/devices" in str(refused.value)
+
+
+def test_unknown_jobs_and_results_before_success_are_errors(client):
+    with pytest.raises(BouncewearError) as missing:
+        client.job("no-such-job")
+    assert missing.value.status == 404
+    queued = client.submit({"devices": 20000, "operations": 2000, "seed": 1})
+    queued.cancel()
+    assert queued.status == "cancelled"
+    with pytest.raises(JobFailed) as failed:
+        queued.wait(progress=False)
+    assert failed.value.job.status == "cancelled"
+    with pytest.raises(BouncewearError) as early:
+        queued.result()
+    assert early.value.status == 409
+
+
+def test_simulate_gives_one_operation(client):
+    operation = client.simulate({"circuit": {"supply_voltage_v": 48, "current_a": 15}})
+    assert operation["bounce_count"] == 2
+    assert abs(operation["first_bounce_s"] - 0.008613068539770941) < 1e-15
