@@ -13,8 +13,13 @@
 //! | Weibull `beta`, `eta` | MLE, profile equation in `beta` ([`fit_weibull`]) | Fisher matrix, log-transformed Wald |
 //! | `B_p` | `eta (-ln(1 - p))^(1/beta)` ([`Weibull::quantile`]) | delta method on `ln B_p`, same covariance ([`Weibull::quantile_bounds`]) |
 //! | `R(t)` | Kaplan-Meier ([`kaplan_meier`]) | Greenwood variance, log-log transformed |
+//! | which distribution | Weibull, lognormal, exponential ranked by AICc ([`fits`]) | |
+//! | `eta`, `B_p` with `beta` known | Weibayes ([`weibayes`]) | one-sided chi-square lower bound |
 //!
 //! Every number in the serialised results is finite: what cannot be computed is `None`.
+
+pub mod fits;
+pub mod weibayes;
 
 use crate::stats::Z_975;
 use serde::{Deserialize, Serialize};
@@ -113,6 +118,14 @@ pub struct LifeAnalysis {
     pub b10: Option<BLife>,
     /// The Kaplan-Meier steps; empty if there are no failures or the times are invalid.
     pub kaplan_meier: Vec<KaplanMeierPoint>,
+    /// The Weibull, lognormal and exponential fits that could be made, best first by AICc
+    /// ([`fits::fits`]).
+    #[serde(default)]
+    pub fits: Vec<fits::Fit>,
+    /// Said when another distribution fits clearly better than the Weibull (AICc lower by more
+    /// than 2), whose B-lives are the ones reported.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit_warning: Option<String>,
 }
 
 /// Lives grouped by time: at each distinct time, how many devices failed then and how many were
@@ -218,6 +231,8 @@ pub fn analyse(data: &[(f64, bool)]) -> LifeAnalysis {
                 b1: None,
                 b10: None,
                 kaplan_meier: Vec::new(),
+                fits: Vec::new(),
+                fit_warning: None,
             }
         }
     }
@@ -229,6 +244,7 @@ pub fn analyse_lives(lives: &Lives) -> LifeAnalysis {
         Ok(w) => (Some(w), None),
         Err(e) => (None, Some(e.to_string())),
     };
+    let fits = fits::fits(lives, weibull.as_ref());
     LifeAnalysis {
         failures: count(lives.failures()),
         censored: count(lives.censored()),
@@ -237,6 +253,8 @@ pub fn analyse_lives(lives: &Lives) -> LifeAnalysis {
         weibull,
         weibull_error,
         kaplan_meier: kaplan_meier_lives(lives),
+        fit_warning: fits::weibull_warning(&fits),
+        fits,
     }
 }
 
@@ -855,6 +873,71 @@ mod tests {
             );
             assert_eq!(data.iter().map(|d| d.0).fold(0.0, f64::max), r.max_time);
         }
+    }
+
+    /// What `tools/life_fits_reference.py` wrote to `tests/data/life_fits_reference.json`: scipy's
+    /// censored likelihood of each candidate, maximised by Nelder-Mead.
+    #[derive(Deserialize)]
+    struct FitsFile {
+        datasets: BTreeMap<String, FitsReference>,
+    }
+
+    #[derive(Deserialize)]
+    struct FitsReference {
+        best_by_aicc: String,
+        weibull: BTreeMap<String, Option<f64>>,
+        lognormal: BTreeMap<String, Option<f64>>,
+        exponential: BTreeMap<String, Option<f64>>,
+    }
+
+    /// Every candidate's parameters, log-likelihood, AICc and BIC equal scipy's to 1e-6 on the
+    /// five data sets (censored, complete, a span of eight decades), and the ranking's winner is
+    /// scipy's.
+    #[test]
+    fn candidate_fits_agree_with_scipy() {
+        let file: FitsFile = serde_json::from_str(include_str!(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tests/data/life_fits_reference.json"
+        )))
+        .expect("the fits reference table is JSON of the expected shape");
+        let data_of: BTreeMap<String, Vec<(f64, bool)>> =
+            references().into_iter().map(|r| (r.name, r.data)).collect();
+        let mut worst = BTreeMap::new();
+        for (name, reference) in &file.datasets {
+            let lives = Lives::from_pairs(&data_of[name]).unwrap();
+            let analysis = analyse_lives(&lives);
+            assert_eq!(analysis.fits.len(), 3, "{name}");
+            assert_eq!(
+                analysis.fits[0].distribution.name(),
+                reference.best_by_aicc,
+                "{name}"
+            );
+            for fit in &analysis.fits {
+                let want = match fit.distribution {
+                    fits::Family::Weibull => &reference.weibull,
+                    fits::Family::Lognormal => &reference.lognormal,
+                    fits::Family::Exponential => &reference.exponential,
+                };
+                let mut got: BTreeMap<&str, f64> = fit
+                    .parameters
+                    .iter()
+                    .map(|(k, v)| (k.as_str(), *v))
+                    .collect();
+                got.insert("log_likelihood", fit.log_likelihood);
+                got.insert("aicc", fit.aicc.unwrap());
+                got.insert("bic", fit.bic);
+                for (quantity, value) in got {
+                    let expected = want[quantity].unwrap();
+                    let d = relative_difference(&mut worst, "candidate fits", value, expected);
+                    assert!(
+                        d < 1e-6,
+                        "{name} {} {quantity}: {value} against scipy's {expected}",
+                        fit.distribution.name()
+                    );
+                }
+            }
+        }
+        eprintln!("worst relative differences: {worst:?}");
     }
 
     #[test]

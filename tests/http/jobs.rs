@@ -548,6 +548,61 @@ fn life_analysis_is_served_as_json_and_per_device_csv() {
     );
 }
 
+/// A job whose devices never fail has no Weibull fit, but a Weibayes demonstration with a known
+/// shape: 20 devices through 50 operations, beta 2, 90 % give `eta >= 50 sqrt(20 / ln 10)`, the
+/// zero-failure test. The candidate fits are listed for a job whose devices fail.
+#[test]
+fn a_job_without_failures_demonstrates_life_by_weibayes() {
+    let server = TestApp::start(&temp_db("weibayes"), &[]);
+    let id = server.submit(&json!({"devices": 20, "operations": 50, "seed": 3,
+        "failure": {"e1": {"below": 0.0001}}}));
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let life = |query: &str| get(&server.url(&format!("/v1/jobs/{id}/life{query}")), None);
+    let plain = life("").json();
+    assert_eq!(
+        (plain["failures"].as_u64(), plain["censored"].as_u64()),
+        (Some(0), Some(20))
+    );
+    assert!(plain["analysis"]["weibull"].is_null());
+    assert!(plain.get("weibayes").is_none());
+    let demonstrated = life("?weibayes_beta=2").json()["weibayes"].clone();
+    let eta_lower = 50.0 * (20.0 / 10f64.ln()).sqrt();
+    let got = demonstrated["eta_lower"].as_f64().unwrap();
+    assert!((got / eta_lower - 1.0).abs() < 1e-12, "{demonstrated}");
+    assert_eq!(demonstrated["confidence"], 0.9);
+    assert!(demonstrated["eta"].is_null());
+    let stricter = life("?weibayes_beta=2&confidence=0.99").json()["weibayes"]["eta_lower"]
+        .as_f64()
+        .unwrap();
+    assert!(stricter < got);
+    for (query, named) in [
+        ("?weibayes_beta=0", "weibayes_beta"),
+        ("?weibayes_beta=2&confidence=1", "confidence"),
+        ("?confidence=0.9", "confidence"),
+    ] {
+        let problem = assert_problem(&life(query), 400);
+        assert!(
+            problem["detail"].as_str().unwrap().contains(named),
+            "{query}: {problem}"
+        );
+    }
+
+    let wearing = server.submit(&wearing_template(48.0));
+    server.wait_for(&wearing, "succeeded", Duration::from_secs(60));
+    let analysis =
+        get(&server.url(&format!("/v1/jobs/{wearing}/life")), None).json()["analysis"].clone();
+    let fits: Vec<&str> = analysis["fits"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["distribution"].as_str().unwrap())
+        .collect();
+    assert_eq!(fits.len(), 3, "{analysis}");
+    for name in ["weibull", "lognormal", "exponential"] {
+        assert!(fits.contains(&name), "{fits:?}");
+    }
+}
+
 #[test]
 fn a_sensitivity_job_has_a_sensitivity_plot_and_a_job_without_one_gets_404() {
     let server = TestApp::start(&temp_db("sensitivity-plot"), &[]);

@@ -203,11 +203,35 @@ pub struct LifeReport {
     /// Weibull fit (maximum likelihood with censoring, Fisher-matrix bounds), B1 and B10 life, Kaplan-Meier reliability.
     #[cfg_attr(feature = "openapi", schema(value_type = Object))]
     pub analysis: crate::life::LifeAnalysis,
+    /// A Weibayes demonstration (`eta` and B-lives with the shape taken as known), where asked for
+    /// (`GET /v1/jobs/{id}/life?weibayes_beta=`); never in the Result.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(value_type = Option<Object>))]
+    pub weibayes: Option<crate::life::weibayes::Weibayes>,
     /// Each device's life, in device order, as far as the groups kept them listed (all of them
     /// unless trimmed with [`GroupLives::keep_listed_below`]); not part of the Result JSON: the
     /// service serves it as CSV.
     #[serde(skip)]
     pub devices: Vec<DeviceLife>,
+}
+
+impl LifeReport {
+    /// The lives it summarises, grouped by time: each Kaplan-Meier step's failures at its
+    /// operation, and the censored devices at `operations`, the end of the test every survivor
+    /// reached.
+    pub fn lives(&self, operations: u64) -> crate::life::Lives {
+        let mut counts: Vec<(u64, u64, u64)> = self
+            .analysis
+            .kaplan_meier
+            .iter()
+            .map(|step| (step.time as u64, step.failures as u64, 0))
+            .collect();
+        match counts.last_mut() {
+            Some(last) if last.0 == operations => last.2 += self.censored,
+            _ => counts.push((operations, 0, self.censored)),
+        }
+        crate::life::Lives::from_counts(counts)
+    }
 }
 
 /// Why a run gave no Result.
@@ -318,6 +342,7 @@ fn life_report(job: &Job, tally: &Tally) -> Option<LifeReport> {
         failures: analysis.failures as u64,
         censored: analysis.censored as u64,
         analysis,
+        weibayes: None,
         devices: lives.listed,
     })
 }

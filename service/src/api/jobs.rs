@@ -15,6 +15,7 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
 use bouncewear_model::Pointer;
+use bouncewear_model::life::weibayes::{WeibayesError, weibayes};
 use bouncewear_model::montecarlo::rare::check_threshold;
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric, query_metric};
 use bouncewear_model::stats::{Accumulator, QUANTILES, QueryAnswer, Summary, Threshold};
@@ -793,6 +794,13 @@ pub struct LifeQuery {
     /// `json` (default): the analysis; `csv`: one row per device, `device,operations_to_failure,censored`.
     #[param(inline, example = "json")]
     pub format: Option<Format>,
+    /// A Weibull shape taken as known, 0.01 to 100: the JSON adds `weibayes`, the scale and the
+    /// B1 and B10 lives' one-sided lower bounds demonstrated with it (with no failures too).
+    #[param(minimum = 0.01, maximum = 100, example = 2.0)]
+    pub weibayes_beta: Option<f64>,
+    /// The one-sided confidence of `weibayes` (default 0.9), strictly between 0 and 1.
+    #[param(exclusive_minimum = 0, exclusive_maximum = 1, example = 0.9)]
+    pub confidence: Option<f64>,
 }
 
 /// Life analysis of a job with failure criteria: Weibull (maximum likelihood with right censoring,
@@ -822,11 +830,31 @@ pub async fn get_life(
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
     let result = succeeded_result(&state, &owner, &id).await?;
-    let Some(life) = result.life else {
+    let Some(mut life) = result.life else {
         return Err(ApiError::NotFound(format!(
             "job {id} has no failure criteria, so no life analysis"
         )));
     };
+    match (query.weibayes_beta, query.confidence) {
+        (Some(beta), confidence) => {
+            let lives = life.lives(result.job.spec().operations);
+            let demonstrated = weibayes(&lives, beta, confidence.unwrap_or(0.9));
+            life.weibayes = Some(demonstrated.map_err(|error| {
+                let parameter = match error {
+                    WeibayesError::Confidence(_) => "confidence",
+                    _ => "weibayes_beta",
+                };
+                ApiError::BadRequest(format!("query parameter `{parameter}`: {error}"))
+            })?);
+        }
+        (None, Some(_)) => {
+            return Err(ApiError::BadRequest(
+                "query parameter `confidence` is the confidence of `weibayes_beta`: give both"
+                    .to_owned(),
+            ));
+        }
+        (None, None) => {}
+    }
     match Format::negotiate(query.format, &headers) {
         Format::Json => Ok(immutable(&state, &headers, JSON, to_json(&life)?)),
         Format::Csv => {

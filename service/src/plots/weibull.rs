@@ -301,6 +301,15 @@ fn fit_notes(life: &LifeAnalysis, fit: Option<&Weibull>) -> Vec<String> {
                     }
                 }
             }
+            // Another distribution fits clearly better: the line above is not the best model.
+            if life.fit_warning.is_some()
+                && let Some(best) = life.fits.first()
+            {
+                notes.push(format!(
+                    "Best fit by AICc: {}, not this Weibull",
+                    best.distribution.name()
+                ));
+            }
         }
         None => {
             let reason = life

@@ -26,6 +26,9 @@ static MIGRATOR: Migrator = sqlx::migrate!("../migrations/postgres");
 /// The channel the schema's trigger announces every job change on (`migrations/postgres/0003`).
 const JOB_CHANNEL: &str = "bouncewear_jobs";
 
+/// How long opening the store waits for the database's first connection.
+const STARTUP_WAIT: Duration = Duration::from_secs(30);
+
 /// The advisory lock every insert into the queue takes, so that counting the queued jobs and
 /// inserting one cannot interleave with another submission.
 const QUEUE_LOCK: i64 = 0x626f_756e_6365; // "bounce"
@@ -39,8 +42,19 @@ impl PgBackend {
             .max_connections(8)
             // During an outage a request gets its 503 within this, not after the pool's 30 s.
             .acquire_timeout(super::DATABASE_WAIT)
-            .connect(url)
-            .await?;
+            .connect_lazy(url)?;
+        // The first connection may take longer than a request may wait (a database still
+        // starting, a busy machine): opening tries for up to STARTUP_WAIT.
+        let started = std::time::Instant::now();
+        loop {
+            match pool.acquire().await {
+                Ok(_) => break,
+                Err(sqlx::Error::PoolTimedOut) if started.elapsed() < STARTUP_WAIT => {
+                    tracing::warn!("the database has not answered yet; trying again");
+                }
+                Err(error) => return Err(error.into()),
+            }
+        }
         MIGRATOR.run(&pool).await?;
         let mut listener = PgListener::connect_with(&pool).await?;
         listener.listen(JOB_CHANNEL).await?;

@@ -1,0 +1,346 @@
+//! Which distribution the lives follow: the two-parameter Weibull, the lognormal and the
+//! exponential, each fitted by maximum likelihood with right censoring to the same lives, and
+//! ranked by AICc (then BIC). The likelihoods are densities in time for all three, so they compare.
+//!
+//! - Exponential: `lambda = r / T`, `r` the failures and `T` the total time on test.
+//! - Lognormal (`mu`, `sigma` of `ln t`): Newton's method on `(mu, ln sigma)` with the analytic
+//!   gradient and Hessian, a step halved until the likelihood rises; the survival terms go through
+//!   `erfc` and the hazard `phi / (1 - Phi)`, both finite in the far tail.
+//! - Weibull: the fit of [`super::fit_weibull_lives`].
+//!
+//! `AICc = 2k - 2 ln L + 2k(k + 1)/(n - k - 1)`, `BIC = k ln n - 2 ln L`, `n` the devices.
+
+use super::{Lives, LivesAt, Weibull, log_likelihood};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// A candidate distribution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Family {
+    Weibull,
+    Lognormal,
+    Exponential,
+}
+
+impl Family {
+    pub fn name(self) -> &'static str {
+        match self {
+            Family::Weibull => "weibull",
+            Family::Lognormal => "lognormal",
+            Family::Exponential => "exponential",
+        }
+    }
+
+    /// The parameters it has.
+    fn parameters(self) -> f64 {
+        match self {
+            Family::Exponential => 1.0,
+            Family::Weibull | Family::Lognormal => 2.0,
+        }
+    }
+}
+
+/// One distribution fitted to the lives.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Fit {
+    pub distribution: Family,
+    /// By name: `beta` and `eta` (Weibull), `mu` and `sigma` of the log of the life (lognormal),
+    /// `lambda` failures per operation (exponential).
+    pub parameters: BTreeMap<String, f64>,
+    /// The maximised log-likelihood, a density in time.
+    pub log_likelihood: f64,
+    /// Akaike's criterion with the small-sample correction (lower is better); `None` with fewer
+    /// than `k + 2` devices.
+    pub aicc: Option<f64>,
+    /// The Bayesian information criterion (lower is better).
+    pub bic: f64,
+}
+
+/// How much lower another distribution's AICc must be than the Weibull's for the analysis to
+/// warn that the Weibull fits worse (Burnham & Anderson: a difference above 2 is support).
+pub const AICC_SUPPORT: f64 = 2.0;
+
+/// Every candidate that can be fitted, best first by AICc (BIC where AICc is undefined, then the
+/// name). The Weibull's is `weibull` as already fitted.
+pub fn fits(lives: &Lives, weibull: Option<&Weibull>) -> Vec<Fit> {
+    let devices = (lives.failures() + lives.censored()) as f64;
+    let mut found = Vec::new();
+    let mut add = |family: Family, parameters: Vec<(&str, f64)>, log_likelihood: f64| {
+        if !log_likelihood.is_finite() {
+            return;
+        }
+        let k = family.parameters();
+        let aicc = (devices - k - 1.0 > 0.0)
+            .then(|| 2.0 * k - 2.0 * log_likelihood + 2.0 * k * (k + 1.0) / (devices - k - 1.0));
+        found.push(Fit {
+            distribution: family,
+            parameters: parameters
+                .into_iter()
+                .map(|(n, v)| (n.to_owned(), v))
+                .collect(),
+            log_likelihood,
+            aicc,
+            bic: k * devices.ln() - 2.0 * log_likelihood,
+        });
+    };
+    if let Some(w) = weibull {
+        let at_fit = log_likelihood(lives.at(), w.beta, w.eta);
+        add(
+            Family::Weibull,
+            vec![("beta", w.beta), ("eta", w.eta)],
+            at_fit,
+        );
+    }
+    if let Some((mu, sigma, ll)) = fit_lognormal(lives.at()) {
+        add(Family::Lognormal, vec![("mu", mu), ("sigma", sigma)], ll);
+    }
+    if let Some((lambda, ll)) = fit_exponential(lives.at()) {
+        add(Family::Exponential, vec![("lambda", lambda)], ll);
+    }
+    found.sort_by(|a, b| {
+        let key = |f: &Fit| f.aicc.unwrap_or(f.bic);
+        key(a)
+            .total_cmp(&key(b))
+            .then(a.distribution.cmp(&b.distribution))
+    });
+    found
+}
+
+/// A warning when another distribution fits the lives clearly better than the Weibull by AICc.
+pub fn weibull_warning(fits: &[Fit]) -> Option<String> {
+    let best = fits.first()?;
+    let weibull = fits.iter().find(|f| f.distribution == Family::Weibull)?;
+    let difference = weibull.aicc? - best.aicc?;
+    (difference > AICC_SUPPORT).then(|| {
+        format!(
+            "the {} fits these lives better than the two-parameter Weibull (AICc lower by {difference:.1}): \
+             the Weibull's B-lives extrapolate a shape the lives do not have",
+            best.distribution.name()
+        )
+    })
+}
+
+/// The exponential's maximum: `lambda = r / T` and `r ln lambda - lambda T`; none without failures.
+fn fit_exponential(at: &[LivesAt]) -> Option<(f64, f64)> {
+    let failures: f64 = at.iter().map(|a| a.failures as f64).sum();
+    let time_on_test: f64 = at.iter().map(|a| a.devices() * a.time).sum();
+    (failures > 0.0 && time_on_test > 0.0).then(|| {
+        let lambda = failures / time_on_test;
+        (lambda, failures * lambda.ln() - failures)
+    })
+}
+
+/// `ln(1 - Phi(z))`, finite for every finite `z` (the asymptotic series where `erfc` underflows).
+fn ln_survival(z: f64) -> f64 {
+    if z < 37.0 {
+        (0.5 * libm::erfc(z / std::f64::consts::SQRT_2)).ln()
+    } else {
+        let z2 = z * z;
+        -0.5 * z2 - (z * (2.0 * std::f64::consts::PI).sqrt()).ln()
+            + (1.0 - 1.0 / z2 + 3.0 / (z2 * z2)).ln()
+    }
+}
+
+/// The standard normal hazard `phi(z) / (1 - Phi(z))`.
+fn hazard(z: f64) -> f64 {
+    (-0.5 * z * z - 0.5 * (2.0 * std::f64::consts::PI).ln() - ln_survival(z)).exp()
+}
+
+/// The lognormal log-likelihood of the lives at `(mu, ln sigma)`, its gradient and Hessian.
+fn lognormal_terms(at: &[LivesAt], mu: f64, ln_sigma: f64) -> (f64, [f64; 2], [[f64; 2]; 2]) {
+    let sigma = ln_sigma.exp();
+    let (mut ll, mut g, mut h) = (0.0, [0.0; 2], [[0.0; 2]; 2]);
+    for a in at {
+        let y = a.time.ln();
+        let z = (y - mu) / sigma;
+        let (r, c) = (a.failures as f64, a.censored as f64);
+        if r > 0.0 {
+            ll += r * (-0.5 * z * z - ln_sigma - y - 0.5 * (2.0 * std::f64::consts::PI).ln());
+            g[0] += r * z / sigma;
+            g[1] += r * (z * z - 1.0);
+            h[0][0] -= r / (sigma * sigma);
+            h[0][1] -= r * 2.0 * z / sigma;
+            h[1][1] -= r * 2.0 * z * z;
+        }
+        if c > 0.0 {
+            let hz = hazard(z);
+            let curvature = -hz * (hz - z); // d^2 ln S / dz^2
+            ll += c * ln_survival(z);
+            g[0] += c * hz / sigma;
+            g[1] += c * hz * z;
+            h[0][0] += c * curvature / (sigma * sigma);
+            h[0][1] += c * (curvature * z - hz) / sigma;
+            h[1][1] += c * (curvature * z * z - hz * z);
+        }
+    }
+    h[1][0] = h[0][1];
+    (ll, g, h)
+}
+
+/// The lognormal's maximum `(mu, sigma, ln L)`; none with fewer than two distinct failure times
+/// (then `sigma` runs to 0) or if Newton's method does not settle.
+fn fit_lognormal(at: &[LivesAt]) -> Option<(f64, f64, f64)> {
+    let failed: Vec<&LivesAt> = at.iter().filter(|a| a.failures > 0).collect();
+    if failed.len() < 2 {
+        return None;
+    }
+    // Start from the failures' log times: their mean and standard deviation.
+    let r: f64 = failed.iter().map(|a| a.failures as f64).sum();
+    let mean = failed
+        .iter()
+        .map(|a| a.failures as f64 * a.time.ln())
+        .sum::<f64>()
+        / r;
+    let variance = failed
+        .iter()
+        .map(|a| a.failures as f64 * (a.time.ln() - mean).powi(2))
+        .sum::<f64>()
+        / r;
+    let (mut mu, mut ln_sigma) = (mean, 0.5 * variance.max(1e-12).ln());
+    let (mut ll, mut g, mut h) = lognormal_terms(at, mu, ln_sigma);
+    for _ in 0..200 {
+        let det = h[0][0] * h[1][1] - h[0][1] * h[1][0];
+        // Newton where the Hessian is negative definite, else a gradient step.
+        let step = if h[0][0] < 0.0 && det > 0.0 {
+            [
+                -(h[1][1] * g[0] - h[0][1] * g[1]) / det,
+                -(h[0][0] * g[1] - h[1][0] * g[0]) / det,
+            ]
+        } else {
+            let scale = 0.1 / (g[0].abs() + g[1].abs()).max(1.0);
+            [g[0] * scale, g[1] * scale]
+        };
+        let mut length = 1.0;
+        let moved = loop {
+            let (m, s) = (mu + length * step[0], ln_sigma + length * step[1]);
+            let next = lognormal_terms(at, m, s);
+            if next.0.is_finite() && next.0 >= ll {
+                break Some((m, s, next));
+            }
+            length *= 0.5;
+            if length < 1e-12 {
+                break None;
+            }
+        };
+        let Some((m, s, next)) = moved else {
+            break;
+        };
+        let settled = (m - mu).abs() <= 1e-13 * mu.abs().max(1.0) && (s - ln_sigma).abs() <= 1e-13;
+        (mu, ln_sigma, (ll, g, h)) = (m, s, next);
+        if settled {
+            break;
+        }
+    }
+    let converged =
+        g[0].abs() * ln_sigma.exp() <= 1e-6 * r.max(1.0) && g[1].abs() <= 1e-6 * r.max(1.0);
+    (converged && ll.is_finite()).then(|| (mu, ln_sigma.exp(), ll))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{Lives, fit_weibull_lives};
+    use super::*;
+    use approx::assert_relative_eq;
+
+    /// The lognormal's gradient and Hessian against central differences of its log-likelihood.
+    #[test]
+    fn the_lognormal_derivatives_are_those_of_its_likelihood() {
+        let lives = Lives::from_pairs(&[
+            (120.0, true),
+            (190.0, true),
+            (250.0, false),
+            (310.0, true),
+            (400.0, false),
+            (900.0, false),
+        ])
+        .unwrap();
+        let (mu, ln_sigma, step) = (5.4, -0.3, 1e-5);
+        let ll = |m: f64, s: f64| lognormal_terms(lives.at(), m, s).0;
+        let grad = |m: f64, s: f64| lognormal_terms(lives.at(), m, s).1;
+        let (_, g, h) = lognormal_terms(lives.at(), mu, ln_sigma);
+        let numeric_g = [
+            (ll(mu + step, ln_sigma) - ll(mu - step, ln_sigma)) / (2.0 * step),
+            (ll(mu, ln_sigma + step) - ll(mu, ln_sigma - step)) / (2.0 * step),
+        ];
+        for i in 0..2 {
+            assert_relative_eq!(g[i], numeric_g[i], max_relative = 1e-6);
+        }
+        let numeric_h = [
+            [
+                (grad(mu + step, ln_sigma)[0] - grad(mu - step, ln_sigma)[0]) / (2.0 * step),
+                (grad(mu, ln_sigma + step)[0] - grad(mu, ln_sigma - step)[0]) / (2.0 * step),
+            ],
+            [
+                (grad(mu + step, ln_sigma)[1] - grad(mu - step, ln_sigma)[1]) / (2.0 * step),
+                (grad(mu, ln_sigma + step)[1] - grad(mu, ln_sigma - step)[1]) / (2.0 * step),
+            ],
+        ];
+        for i in 0..2 {
+            for j in 0..2 {
+                assert_relative_eq!(h[i][j], numeric_h[i][j], max_relative = 1e-5);
+            }
+        }
+    }
+
+    /// The far tail of the survival function: `ln(1 - Phi(z))` is continuous where the series
+    /// takes over from `erfc`, and the hazard approaches `z`.
+    #[test]
+    fn the_survival_stays_finite_in_the_far_tail() {
+        assert_relative_eq!(
+            ln_survival(36.999_999),
+            ln_survival(37.0),
+            max_relative = 1e-6
+        );
+        assert_relative_eq!(ln_survival(0.0), 0.5f64.ln(), max_relative = 1e-15);
+        assert!(ln_survival(1e3).is_finite());
+        assert_relative_eq!(hazard(60.0), 60.0, max_relative = 1e-3);
+        assert_relative_eq!(hazard(-40.0), 0.0, epsilon = 1e-300);
+    }
+
+    /// Without two distinct failure times the lognormal has no maximum; the exponential needs one
+    /// failure; no candidate at all for no failures.
+    #[test]
+    fn too_few_failures_leave_candidates_out() {
+        let one = Lives::from_pairs(&[(100.0, true), (200.0, false), (300.0, false)]).unwrap();
+        let found: Vec<Family> = fits(&one, None).iter().map(|f| f.distribution).collect();
+        assert_eq!(found, [Family::Exponential]);
+        let none = Lives::from_pairs(&[(100.0, false), (200.0, false)]).unwrap();
+        assert!(fits(&none, None).is_empty());
+        let weibull = fit_weibull_lives(&one).ok();
+        assert!(weibull.is_none() || fits(&one, weibull.as_ref()).len() <= 2);
+    }
+
+    /// A clearly lognormal sample (its log times evenly spread quantiles of a normal) ranks the
+    /// lognormal first and warns that the Weibull fits worse; a Weibull sample does not warn.
+    #[test]
+    fn a_lognormal_sample_ranks_the_lognormal_first_and_warns() {
+        let normal = |p: f64| crate::montecarlo::distribution::standard_normal_quantile(p);
+        let lognormal: Vec<(f64, bool)> = (1..=200)
+            .map(|i| ((5.0 + 1.2 * normal((i as f64 - 0.5) / 200.0)).exp(), true))
+            .collect();
+        let lives = Lives::from_pairs(&lognormal).unwrap();
+        let weibull = fit_weibull_lives(&lives).unwrap();
+        let ranked = fits(&lives, Some(&weibull));
+        assert_eq!(ranked[0].distribution, Family::Lognormal);
+        assert_relative_eq!(ranked[0].parameters["mu"], 5.0, max_relative = 1e-3);
+        assert!(
+            weibull_warning(&ranked)
+                .unwrap()
+                .contains("lognormal fits these lives better")
+        );
+        let weibull_sample: Vec<(f64, bool)> = (1..=200)
+            .map(|i| {
+                (
+                    1000.0 * (-(1.0 - (i as f64 - 0.5) / 200.0).ln()).powf(1.0 / 2.0),
+                    true,
+                )
+            })
+            .collect();
+        let lives = Lives::from_pairs(&weibull_sample).unwrap();
+        let weibull = fit_weibull_lives(&lives).unwrap();
+        let ranked = fits(&lives, Some(&weibull));
+        assert_eq!(ranked[0].distribution, Family::Weibull);
+        assert_eq!(weibull_warning(&ranked), None);
+    }
+}

@@ -1,0 +1,209 @@
+//! Weibayes: life demonstrated with few or no failures, the Weibull shape `beta` taken as known
+//! (from experience with the design, not from these lives). With `r` failures among devices whose
+//! lives (failed or censored) are `t_i`, the scale's estimate and its one-sided lower bound at
+//! confidence `C` are (Nelson, *Applied Life Data Analysis*, ch. 8; Abernethy, *The New Weibull
+//! Handbook*, ch. 6)
+//!
+//! `eta = (sum t_i^beta / r)^(1/beta)`, `eta_lower = (2 sum t_i^beta / chi2(C; 2r + 2))^(1/beta)`,
+//!
+//! and with no failures `chi2(C; 2) = -2 ln(1 - C)`: the zero-failure test. A B-life's lower bound
+//! is `eta_lower (-ln(1 - p))^(1/beta)`.
+
+use super::Lives;
+use serde::{Deserialize, Serialize};
+
+/// A Weibayes demonstration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Weibayes {
+    /// The shape taken as known.
+    pub beta: f64,
+    /// The one-sided confidence of the lower bounds.
+    pub confidence: f64,
+    pub failures: u64,
+    pub devices: u64,
+    /// The scale's estimate; none without failures.
+    pub eta: Option<f64>,
+    /// The scale's lower bound at `confidence`.
+    pub eta_lower: f64,
+    /// B1's and B10's lower bounds at `confidence`.
+    pub b1_lower: f64,
+    pub b10_lower: f64,
+}
+
+/// Why no demonstration can be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum WeibayesError {
+    #[error("the shape must be a finite number from 0.01 to 100, got {0}")]
+    Shape(f64),
+    #[error("the confidence must be between 0 and 1 (exclusive), got {0}")]
+    Confidence(f64),
+    #[error("there are no lives to demonstrate from")]
+    NoLives,
+}
+
+/// The Weibayes demonstration of `lives` with shape `beta` at one-sided `confidence`.
+pub fn weibayes(lives: &Lives, beta: f64, confidence: f64) -> Result<Weibayes, WeibayesError> {
+    if !(beta.is_finite() && (0.01..=100.0).contains(&beta)) {
+        return Err(WeibayesError::Shape(beta));
+    }
+    if !(confidence > 0.0 && confidence < 1.0) {
+        return Err(WeibayesError::Confidence(confidence));
+    }
+    let at = lives.at();
+    let t_max = at.last().ok_or(WeibayesError::NoLives)?.time;
+    // sum t^beta = t_max^beta sum (t / t_max)^beta: every term at most 1, nothing overflows.
+    let scaled: f64 = at
+        .iter()
+        .map(|a| a.devices() * (a.time / t_max).powf(beta))
+        .sum();
+    let failures = lives.failures();
+    let scale_of = |divisor: f64| t_max * (scaled / divisor).powf(1.0 / beta);
+    let eta_lower = scale_of(0.5 * chi_square_quantile(confidence, failures + 1));
+    let b_lower = |p: f64| eta_lower * (-(-p).ln_1p()).powf(1.0 / beta);
+    Ok(Weibayes {
+        beta,
+        confidence,
+        failures,
+        devices: lives.failures() + lives.censored(),
+        eta: (failures > 0).then(|| scale_of(failures as f64)),
+        eta_lower,
+        b1_lower: b_lower(0.01),
+        b10_lower: b_lower(0.10),
+    })
+}
+
+/// The `p` quantile of chi-square with `2 m` degrees of freedom: twice the `p` quantile of the
+/// gamma distribution of shape `m`, found by bisection on its CDF, the regularised lower incomplete
+/// gamma function `P(m, y)`.
+fn chi_square_quantile(p: f64, m: u64) -> f64 {
+    let m = m as f64;
+    if m == 1.0 {
+        return -2.0 * (-p).ln_1p();
+    }
+    let (mut lo, mut hi) = (0.0, m + 10.0 * m.sqrt() + 50.0);
+    while regularized_lower_gamma(m, hi) < p {
+        hi *= 2.0;
+    }
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if regularized_lower_gamma(m, mid) < p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        if hi - lo <= 1e-15 * hi {
+            break;
+        }
+    }
+    lo + hi
+}
+
+/// `P(a, x)`, the regularised lower incomplete gamma function: its series below `x = a + 1`, the
+/// continued fraction of `Q = 1 - P` above (Numerical Recipes 6.2, Lentz's method).
+fn regularized_lower_gamma(a: f64, x: f64) -> f64 {
+    if x <= 0.0 {
+        return 0.0;
+    }
+    let front = (a * x.ln() - x - libm::lgamma(a)).exp();
+    if x < a + 1.0 {
+        let (mut term, mut sum, mut n) = (1.0 / a, 1.0 / a, a);
+        for _ in 0..100_000 {
+            n += 1.0;
+            term *= x / n;
+            sum += term;
+            if term.abs() < sum.abs() * 1e-17 {
+                break;
+            }
+        }
+        sum * front
+    } else {
+        let tiny = 1e-300;
+        let mut b = x + 1.0 - a;
+        let mut c = 1.0 / tiny;
+        let mut d = 1.0 / b;
+        let mut h = d;
+        for i in 1..100_000 {
+            let an = -(i as f64) * (i as f64 - a);
+            b += 2.0;
+            d = an * d + b;
+            if d.abs() < tiny {
+                d = tiny;
+            }
+            c = b + an / c;
+            if c.abs() < tiny {
+                c = tiny;
+            }
+            d = 1.0 / d;
+            let delta = d * c;
+            h *= delta;
+            if (delta - 1.0).abs() < 1e-16 {
+                break;
+            }
+        }
+        1.0 - front * h
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    /// Zero failures: 20 devices through 1000 operations each, beta 2, 90 %: `eta_lower =
+    /// 1000 sqrt(20 / ln 10)`, the textbook zero-failure test.
+    #[test]
+    fn zero_failures_give_the_zero_failure_test() {
+        let lives = Lives::from_pairs(&[(1000.0, false); 20]).unwrap();
+        let w = weibayes(&lives, 2.0, 0.9).unwrap();
+        assert_eq!((w.failures, w.devices, w.eta), (0, 20, None));
+        let eta_lower = 1000.0 * (20.0 / 10f64.ln()).sqrt();
+        assert_relative_eq!(w.eta_lower, eta_lower, max_relative = 1e-14);
+        assert_relative_eq!(
+            w.b10_lower,
+            eta_lower * (-(0.9f64).ln()).sqrt(),
+            max_relative = 1e-14
+        );
+    }
+
+    /// Chi-square quantiles against scipy's `chi2.ppf` (scipy 1.17.1).
+    #[test]
+    fn chi_square_quantiles_are_scipys() {
+        for (p, m, scipy) in [
+            (0.9, 2, 7.779440339734858),
+            (0.9, 4, 13.36156613651173),
+            (0.95, 11, 33.92443847144381),
+            (0.5, 1, 1.386294361119891),
+            (0.99, 51, 138.13447114967263),
+            (0.9, 501, 1059.781202550823),
+        ] {
+            assert_relative_eq!(chi_square_quantile(p, m), scipy, max_relative = 1e-12);
+        }
+    }
+
+    /// With failures: the estimate is `(sum t^beta / r)^(1/beta)`; the bound lies below it and
+    /// falls as the confidence rises; bad arguments are refused.
+    #[test]
+    fn failures_give_an_estimate_above_its_bound() {
+        let lives =
+            Lives::from_pairs(&[(300.0, true), (500.0, true), (800.0, false), (800.0, false)])
+                .unwrap();
+        let w = weibayes(&lives, 1.5, 0.9).unwrap();
+        let sum = 300f64.powf(1.5) + 500f64.powf(1.5) + 2.0 * 800f64.powf(1.5);
+        assert_relative_eq!(
+            w.eta.unwrap(),
+            (sum / 2.0).powf(1.0 / 1.5),
+            max_relative = 1e-14
+        );
+        assert!(w.eta_lower < w.eta.unwrap());
+        assert!(weibayes(&lives, 1.5, 0.99).unwrap().eta_lower < w.eta_lower);
+        assert_eq!(weibayes(&lives, 0.0, 0.9), Err(WeibayesError::Shape(0.0)));
+        assert_eq!(
+            weibayes(&lives, 2.0, 1.0),
+            Err(WeibayesError::Confidence(1.0))
+        );
+        assert_eq!(
+            weibayes(&Lives::default(), 2.0, 0.9),
+            Err(WeibayesError::NoLives)
+        );
+    }
+}

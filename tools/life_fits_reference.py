@@ -1,0 +1,92 @@
+#!/usr/bin/env python3
+"""Independent reference for `model/src/life/fits.rs`: the candidate life distributions fitted by
+maximum likelihood with right censoring, and their ranking.
+
+    pip install scipy
+    python3 tools/life_fits_reference.py          # writes tests/data/life_fits_reference.json
+    python3 tools/life_fits_reference.py -        # or prints it
+
+For the data sets of `tools/weibull_reference.py` (the same splitmix64 draws as the Rust tests),
+each distribution is fitted with scipy's own censored likelihood (logpdf of the failures plus
+logsf of the suspensions), maximised by Nelder-Mead with tight
+tolerances from scipy's own start, never from the Rust module's:
+
+* `weibull`: `weibull_min(c=beta, scale=eta)`, location 0;
+* `lognormal`: `lognorm(s=sigma, scale=exp(mu))`, location 0 (mu and sigma of ln t);
+* `exponential`: `expon(scale=1/lambda)`, location 0; its maximum is also `failures / total time`.
+
+AICc = 2k - 2 lnL + 2k(k + 1)/(n - k - 1) and BIC = k ln n - 2 lnL, n the devices. Shares no code
+with the Rust module: only the data generator.
+"""
+import json
+import math
+import os
+import sys
+
+import numpy as np
+import scipy.optimize as so
+import scipy.stats as ss
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from weibull_reference import DATASETS, versions  # noqa: E402  (the shared data sets)
+
+DEFAULT_OUTPUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "data",
+                              "life_fits_reference.json")
+
+
+def maximise(data, family, start, to_kwargs):
+    """The maximum of scipy's censored log-likelihood: logpdf at the failures, logsf at the
+    suspensions."""
+    failures = np.array([t for t, failed in data if failed])
+    suspensions = np.array([t for t, failed in data if not failed])
+
+    def negative(x):
+        kwargs = to_kwargs(x)
+        value = -family.logpdf(failures, **kwargs).sum() - family.logsf(suspensions, **kwargs).sum()
+        return value if math.isfinite(value) else 1e300
+
+    best = so.fmin(negative, start, xtol=1e-12, ftol=1e-14, maxiter=100000, maxfun=200000, disp=0)
+    best = so.fmin(negative, best, xtol=1e-13, ftol=1e-15, maxiter=100000, maxfun=200000, disp=0)
+    return best, -negative(best)
+
+
+def criteria(log_likelihood, k, n):
+    aicc = 2 * k - 2 * log_likelihood + (2 * k * (k + 1) / (n - k - 1) if n - k - 1 > 0 else math.nan)
+    return {"log_likelihood": log_likelihood, "aicc": aicc if math.isfinite(aicc) else None,
+            "bic": k * math.log(n) - 2 * log_likelihood}
+
+
+def fits(data):
+    n = len(data)
+    failures = [t for t, failed in data if failed]
+    logs = [math.log(t) for t in failures]
+    mean = sum(logs) / len(logs)
+    sd = math.sqrt(sum((x - mean) ** 2 for x in logs) / max(len(logs) - 1, 1)) or 1.0
+    out = {}
+    (ln_eta, ln_beta), ll = maximise(data, ss.weibull_min, [mean, 0.0],
+                                     lambda x: {"c": math.exp(x[1]), "scale": math.exp(x[0])})
+    out["weibull"] = {"beta": math.exp(ln_beta), "eta": math.exp(ln_eta), **criteria(ll, 2, n)}
+    (mu, ln_sigma), ll = maximise(data, ss.lognorm, [mean, math.log(sd)],
+                                  lambda x: {"s": math.exp(x[1]), "scale": math.exp(x[0])})
+    out["lognormal"] = {"mu": mu, "sigma": math.exp(ln_sigma), **criteria(ll, 2, n)}
+    (ln_scale,), ll = maximise(data, ss.expon, [math.log(sum(t for t, _ in data) / len(failures))],
+                               lambda x: {"scale": math.exp(x[0])})
+    out["exponential"] = {"lambda": math.exp(-ln_scale), **criteria(ll, 1, n)}
+    out["best_by_aicc"] = min(out, key=lambda d: out[d]["aicc"] if out[d]["aicc"] is not None else math.inf)
+    return out
+
+
+def main():
+    table = {"generator": "tools/life_fits_reference.py", "versions": versions(),
+             "datasets": {name: {"n": len(data), "failures": sum(f for _, f in data), **fits(data)}
+                          for name, data in DATASETS.items()}}
+    text = json.dumps(table, indent=2, sort_keys=True) + "\n"
+    if sys.argv[1:] == ["-"]:
+        sys.stdout.write(text)
+    else:
+        with open(sys.argv[1] if sys.argv[1:] else DEFAULT_OUTPUT, "w") as f:
+            f.write(text)
+
+
+if __name__ == "__main__":
+    main()
