@@ -480,6 +480,41 @@ fn calibrate_fits_kappa_to_simulated_measurements() {
     let fitted = bouncewear(&["simulate"], &fit["scenario"].to_string());
     assert!(fitted.status.success(), "the fitted scenario simulates");
 
+    // The same measurements as CSV, a column per field, give the same fit to the byte.
+    let dir = temp_dir("calibrate-csv");
+    let mut csv = "impact_velocity_m_s,first_bounce_s,e1,bounce_count\n".to_owned();
+    for o in &observations {
+        let cells: Vec<String> = [
+            "impact_velocity_m_s",
+            "first_bounce_s",
+            "e1",
+            "bounce_count",
+        ]
+        .iter()
+        .map(|field| o[field].to_string())
+        .collect();
+        csv += &(cells.join(",") + "\n");
+    }
+    let path = dir.join("measurements.csv");
+    std::fs::write(&path, csv).unwrap();
+    let from_csv = bouncewear(
+        &["calibrate", "--observations", path.to_str().unwrap()],
+        r#"{"fit": ["material.kappa"]}"#,
+    );
+    assert_eq!(
+        String::from_utf8_lossy(&from_csv.stdout),
+        String::from_utf8_lossy(&output.stdout)
+    );
+    std::fs::write(&path, "e1,first_bounce_s\n0.4,abc\n").unwrap();
+    let line = rejected(
+        &["calibrate", "--observations", path.to_str().unwrap()],
+        r#"{"fit": ["material.kappa"]}"#,
+    );
+    assert!(
+        line.contains("column `first_bounce_s`: `abc` is not a number"),
+        "{line}"
+    );
+
     let line = rejected(
         &["calibrate"],
         r#"{"fit": ["material.kappa", "material.contact_radius_m"], "scenario": {"material": {"kappa": 0.3}},

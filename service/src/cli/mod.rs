@@ -4,6 +4,7 @@
 //! Bad input exits with code 2 and one line on stderr naming the field (a JSON pointer) and the rule.
 
 mod bench;
+mod measurements;
 mod remote;
 
 use crate::app::StartupError;
@@ -64,6 +65,11 @@ enum Command {
         /// Also write the fit as an SVG file: simulated against measured, a panel per quantity.
         #[arg(long, value_name = "FILE")]
         plot: Option<PathBuf>,
+        /// The observations from a CSV file instead, one per row, the header naming each column
+        /// after an observation's field (`operation`, `impact_velocity_m_s`, `first_bounce_s`,
+        /// `total_bounce_s`, `e1`, ...); an empty cell is a quantity not measured in that row.
+        #[arg(long, value_name = "FILE.csv")]
+        observations: Option<PathBuf>,
     },
     /// Run a Monte Carlo endurance job and print its Result as JSON.
     Run {
@@ -263,8 +269,16 @@ fn run(cli: Cli) -> Result<(), CliError> {
             let scenario = Scenario::from_json(&read_input(&file)?)?;
             print_json(&simulate(&scenario, fidelity.into()))
         }
-        Command::Calibrate { file, plot } => {
-            let spec = CalibrationSpec::from_json(&read_input(&file)?)?;
+        Command::Calibrate {
+            file,
+            plot,
+            observations,
+        } => {
+            let mut text = read_input(&file)?;
+            if let Some(csv) = observations {
+                text = with_observations(&text, &read_input(&csv)?, &csv.display().to_string())?;
+            }
+            let spec = CalibrationSpec::from_json(&text)?;
             let fit = calibrate(&spec)?;
             if let Some(path) = plot {
                 let svg =
@@ -433,6 +447,27 @@ pub fn read_input(path: &PathBuf) -> Result<String, CliError> {
 
 /// Prints a document to stdout, buffered (a Result is thousands of lines). A reader that stops
 /// early (`| head`) is not an error: the output simply ends there.
+/// The calibration request `text` with its `observations` read from CSV `csv` (at `path`).
+fn with_observations(text: &str, csv: &str, path: &str) -> Result<String, CliError> {
+    let mut request: serde_json::Value = serde_json::from_str(text).map_err(|error| {
+        CliError::Invalid(InvalidInput::single(
+            &Pointer::root(),
+            format!("the request is not JSON: {error}"),
+        ))
+    })?;
+    let object = request.as_object_mut().ok_or_else(|| {
+        CliError::Invalid(InvalidInput::single(
+            &Pointer::root(),
+            "a calibration request is a JSON object",
+        ))
+    })?;
+    object.insert(
+        "observations".to_owned(),
+        measurements::observations_from_csv(csv, path)?,
+    );
+    Ok(request.to_string())
+}
+
 /// A server's answer on stdout: JSON as `print_json` writes it (a Result field for field as `run`
 /// prints it), anything else (CSV) as it came.
 fn print_text(text: String) -> Result<(), CliError> {
