@@ -6,11 +6,11 @@
 //! - Lognormal (`mu`, `sigma` of `ln t`): Newton's method on `(mu, ln sigma)` with the analytic
 //!   gradient and Hessian, a step halved until the likelihood rises; the survival terms go through
 //!   `erfc` and the hazard `phi / (1 - Phi)`, both finite in the far tail.
-//! - Weibull: the fit of [`super::fit_weibull_lives`].
+//! - Weibull: the fit of [`super::fit_weibull_lives`], with the log-likelihood it reports.
 //!
 //! `AICc = 2k - 2 ln L + 2k(k + 1)/(n - k - 1)`, `BIC = k ln n - 2 ln L`, `n` the devices.
 
-use super::{Lives, LivesAt, Weibull, log_likelihood};
+use super::{Lives, LivesAt, Weibull};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -85,11 +85,10 @@ pub fn fits(lives: &Lives, weibull: Option<&Weibull>) -> Vec<Fit> {
         });
     };
     if let Some(w) = weibull {
-        let at_fit = log_likelihood(lives.at(), w.beta, w.eta);
         add(
             Family::Weibull,
             vec![("beta", w.beta), ("eta", w.eta)],
-            at_fit,
+            w.log_likelihood,
         );
     }
     if let Some((mu, sigma, ll)) = fit_lognormal(lives.at()) {
