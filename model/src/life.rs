@@ -18,6 +18,7 @@
 //!
 //! Every number in the serialised results is finite: what cannot be computed is `None`.
 
+pub mod compare;
 pub mod fits;
 pub mod weibayes;
 

@@ -3,6 +3,7 @@
 //! energy (docs/model.md section 6), summarised per bin of operations with honest confidence
 //! intervals.
 
+pub mod compare;
 pub mod correlation;
 pub mod diagnostics;
 pub mod distribution;

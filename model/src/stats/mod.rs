@@ -31,6 +31,7 @@
 
 pub mod accumulator;
 mod bits;
+pub mod difference;
 pub mod intervals;
 pub mod query;
 pub mod regression;
@@ -41,6 +42,7 @@ pub mod tails;
 pub mod threshold;
 
 pub use accumulator::{Accumulator, LaneSums};
+pub use difference::{Difference, Estimate, difference};
 pub use intervals::{Z_975, student_t_975, wilson_interval};
 pub use query::{QueryAnswer, QueryQuantile, query};
 pub use sketch::Sketch;

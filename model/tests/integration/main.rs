@@ -3,6 +3,7 @@
 //! `cargo test -p bouncewear-model --test integration rare::` runs one file's tests.
 
 mod arc_law;
+mod compare;
 mod engine_reference;
 mod groups;
 mod kernels;
