@@ -1,7 +1,8 @@
 // End-to-end test of the dashboard in a real browser (Debian's chromium, driven by playwright-core):
 // submit the "Quick check" preset on /, follow the job to `succeeded` on its page, check that the
 // wear-curve and histogram plots are there, and save screenshots: the jobs page, a job's page, a
-// schedule's trend over a few runs, a job's Weibull plot and a job's sensitivity analysis (its
+// schedule's trend over a few runs, a job's Weibull plot, two designs compared (through the job
+// page's form: both overlaid plots and the tables) and a job's sensitivity analysis (its
 // section shown, its Sobol' plot and table, hidden on a job without one). Then under load: with 20 active
 // jobs and a schedule, every plot of both pages loads within 5 s and a submit through the form is
 // accepted while they run (Chromium opens at most 6 connections per host: the page must not hold
@@ -263,6 +264,47 @@ await step("save dashboard-life.png", () =>
   page.locator("#life-section").screenshot({ path: join(outDir, "dashboard-life.png") }),
 );
 log(`saved ${join(outDir, "dashboard-life.png")}`);
+// Another design to compare the life job with: smaller contacts, the same criterion.
+const otherDesign = await step("submit a second design", () =>
+  call("POST", "/v1/jobs", {
+    name: "Smaller contacts",
+    scenario: { circuit: { supply_voltage_v: 48, current_a: 15 } },
+    devices: 100,
+    operations: 200,
+    seed: 6,
+    scatter: [
+      { parameter: "contact_radius_m", per: "device", distribution: { kind: "uniform", min: 0.003, max: 0.006 } },
+      { parameter: "impact_velocity_m_s", per: "operation", distribution: { kind: "uniform", min: 0.1, max: 0.6 } },
+    ],
+    failure: { cumulative_arc_energy_j: { above: 330 } },
+  }),
+);
+await step(`the second design ${otherDesign.id} succeeds`, () => succeeds(otherDesign.id));
+await step(`reload ${base}/jobs/${lifeJob.id}`, () => page.goto(`${base}/jobs/${lifeJob.id}`, { waitUntil: "load" }));
+await step("compare with the second design through the form", async () => {
+  await page.waitForSelector("#compare-section");
+  await page.fill("#compare-with", otherDesign.id);
+  await page.click("#compare-form button[type=submit]");
+});
+await step("both compared plots show an SVG", async () => {
+  await page.waitForSelector("#plot-compare-bands svg");
+  await page.waitForSelector("#plot-compare-weibull svg");
+});
+const compareRows = await step("the comparison tables are filled", async () => {
+  await page.waitForFunction(() => document.querySelectorAll("#compare-life-table tbody tr").length >= 3);
+  return page.$$eval("#compare-table tbody tr, #compare-life-table tbody tr", (rows) => rows.map((r) => r.textContent));
+});
+if (!compareRows.some((r) => r.includes("outlasts")) || !compareRows.some((r) => r.startsWith("B10"))) {
+  await fail(`the comparison lists ${compareRows.join(" | ")}`);
+}
+if (!page.url().includes(`#`) || !page.url().includes(`compare=${otherDesign.id}`)) {
+  await fail(`the page's address ${page.url()} does not link the comparison`);
+}
+await page.waitForTimeout(300);
+await step("save dashboard-compare.png", () =>
+  page.locator("#compare-section").screenshot({ path: join(outDir, "dashboard-compare.png") }),
+);
+log(`saved ${join(outDir, "dashboard-compare.png")}`);
 const sensitivityJob = await step("submit a job with a sensitivity analysis", () =>
   call("POST", "/v1/jobs", {
     name: "Sobol' indices at 48 V",

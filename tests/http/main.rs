@@ -5,6 +5,7 @@
 mod support;
 
 mod calibrations;
+mod compare;
 mod events;
 mod jobs;
 mod limits;

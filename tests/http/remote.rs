@@ -7,7 +7,7 @@ use serde_json::{Value, json};
 use std::process::{Command, Output};
 
 /// The binary with `args`, pointed at `server` through the environment, as a script would be.
-fn remote(server: &TestApp, key: Option<&str>, args: &[&str]) -> Output {
+pub(crate) fn remote(server: &TestApp, key: Option<&str>, args: &[&str]) -> Output {
     let mut command = Command::new(BIN);
     command.args(args).env("BOUNCEWEAR_URL", server.base());
     match key {
@@ -17,7 +17,7 @@ fn remote(server: &TestApp, key: Option<&str>, args: &[&str]) -> Output {
     command.output().expect("bouncewear runs")
 }
 
-fn stdout(output: &Output) -> String {
+pub(crate) fn stdout(output: &Output) -> String {
     assert!(
         output.status.success(),
         "{}",
@@ -27,7 +27,7 @@ fn stdout(output: &Output) -> String {
 }
 
 /// A job file of its own.
-fn job_file(name: &str, job: &Value) -> String {
+pub(crate) fn job_file(name: &str, job: &Value) -> String {
     let path = temp_dir(name).join("job.json");
     std::fs::write(&path, job.to_string()).unwrap();
     path.display().to_string()

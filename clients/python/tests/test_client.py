@@ -104,3 +104,18 @@ def test_simulate_gives_one_operation(client):
     operation = client.simulate({"circuit": {"supply_voltage_v": 48, "current_a": 15}})
     assert operation["bounce_count"] == 2
     assert abs(operation["first_bounce_s"] - 0.008613068539770941) < 1e-15
+
+
+def test_a_job_compared_with_itself_shows_no_difference(job):
+    comparison = job.compare(job, statistics=["mean", "p50"], b_lives=[0.1])
+    assert comparison["a"] == comparison["b"] == job.id
+    assert comparison["life"]["b_lives"][0]["ratio"] == 1.0
+    assert abs(comparison["life"]["outlasts"]["weibull"] - 0.5) < 1e-12
+    frame = job.compare_statistics(job, statistics=["mean"])
+    assert len(frame) == 10
+    assert (frame["difference"] == 0).all()
+    assert (frame["difference_lo"] < 0).all() and (frame["difference_hi"] > 0).all()
+    assert job.compare_plot(job, "weibull.svg").startswith("<svg")
+    with pytest.raises(BouncewearError) as refused:
+        job.compare(job, statistics=["median"])
+    assert refused.value.status == 400

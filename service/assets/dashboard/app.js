@@ -883,6 +883,7 @@
       renderRareEvent(result);
       renderDevices(result);
       renderRun(result);
+      setupCompare();
     }
 
     function renderOperations(result) {
@@ -1059,6 +1060,77 @@
             el("td", { class: "num" }, fmt(q(s, "p50"))),
             el("td", { class: "num" }, fmt(q(s, "p95"))));
         })));
+    }
+
+    // Comparing this job (design a) with another succeeded one (design b), linkable as
+    // #compare=ID.
+    function setupCompare() {
+      const form = $("#compare-form");
+      const input = $("#compare-with");
+      getJson("/v1/jobs?limit=100").then((page) => {
+        const options = (page.jobs || []).filter((j) => j.id !== id && j.status === "succeeded")
+          .map((j) => el("option", { value: j.id }, j.name || j.id));
+        $("#compare-jobs").replaceChildren(...options);
+      }).catch(() => {});
+      form.onsubmit = (event) => {
+        event.preventDefault();
+        const other = input.value.trim();
+        if (other) compareWith(other);
+      };
+      const wanted = new URLSearchParams(location.hash.slice(1)).get("compare");
+      if (wanted) {
+        input.value = wanted;
+        compareWith(wanted);
+      }
+    }
+
+    async function compareWith(other) {
+      const metric = $("#metric").value || "total_bounce_s";
+      const path = base + "/compare/" + encodeURIComponent(other);
+      const query = "?metric=" + encodeURIComponent(metric);
+      let comparison;
+      try {
+        comparison = await getJson(path + query + "&statistics=mean,p50,p95");
+      } catch (error) {
+        show($("#compare-result"), false);
+        setAlert($("#compare-error"), "Could not compare: " + error.message);
+        return;
+      }
+      setAlert($("#compare-error"), null);
+      show($("#compare-result"), true);
+      const hash = new URLSearchParams(location.hash.slice(1));
+      hash.set("compare", other);
+      history.replaceState(null, "", "#" + hash.toString());
+      injectSvg($("#plot-compare-bands"), path + "/plots/bands.svg" + query);
+      const both = (d) => [fmt(d.a), fmt(d.b), fmt(d.difference) + " " + fmtInterval(d.difference_ci95),
+        d.ratio === null || d.ratio === undefined ? "–" : fmt(d.ratio, 4) + " " + fmtInterval(d.ratio_ci95)];
+      const head = (first) => el("thead", {}, el("tr", {}, [first, "a", "b", "a − b (95 %)", "a / b (95 %)"]
+        .map((h, i) => el("th", { class: i ? "num" : "" }, h))));
+      const rows = [];
+      for (const bin of comparison.bins || []) {
+        for (const [name, d] of Object.entries(bin.statistics || {})) {
+          rows.push(el("tr", {}, el("td", {}, "ops " + bin.op_start + "–" + bin.op_end + ": " + name),
+            ...both(d).map((v) => el("td", { class: "num" }, v))));
+        }
+      }
+      $("#compare-table").replaceChildren(head(comparison.metric), el("tbody", {}, rows));
+      const life = comparison.life;
+      show($("#plot-compare-weibull"), Boolean(life));
+      if (life) {
+        injectSvg($("#plot-compare-weibull"), path + "/plots/weibull.svg");
+        const lifeRows = (life.b_lives || []).map((b) => el("tr", {},
+          el("td", {}, "B" + fmt(100 * b.p) + ", operations"), ...both(b).map((v) => el("td", { class: "num" }, v))));
+        const o = life.outlasts || {};
+        const modelled = o.weibull === null || o.weibull === undefined ? "–"
+          : fmt(o.weibull, 4) + " " + fmtInterval(o.weibull_ci95);
+        lifeRows.push(el("tr", {}, el("td", {}, "P(a device of a outlasts one of b)"),
+          el("td", { class: "num", colspan: "2" }, "Weibull fits: " + modelled),
+          el("td", { class: "num", colspan: "2" }, "simulated pairs: " + fmtInterval(o.observed))));
+        $("#compare-life-table").replaceChildren(head("life"), el("tbody", {}, lifeRows));
+      } else {
+        $("#compare-life-table").replaceChildren();
+      }
+      $("#compare-notes").replaceChildren(...(comparison.notes || []).map((n) => el("li", {}, n)));
     }
 
     function renderRun(result) {

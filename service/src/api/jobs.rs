@@ -700,10 +700,10 @@ async fn answer(
     .map_err(|e| Internal(e.to_string()).into())
 }
 
-const JSON: &str = "application/json";
+pub(super) const JSON: &str = "application/json";
 const CSV: &str = "text/csv; charset=utf-8";
 
-fn to_json(value: &impl Serialize) -> Result<Vec<u8>, ApiError> {
+pub(super) fn to_json(value: &impl Serialize) -> Result<Vec<u8>, ApiError> {
     serde_json::to_vec(value).map_err(|e| Internal(e.to_string()).into())
 }
 

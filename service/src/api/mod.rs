@@ -4,6 +4,7 @@
 
 pub mod cache;
 pub mod calibrations;
+pub mod compare;
 pub mod error;
 pub mod events;
 pub mod jobs;
@@ -136,6 +137,7 @@ fn api_routes(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
         .merge(events::router())
         .merge(schedules::router())
         .merge(plots::router())
+        .merge(compare::router())
         .merge(simulate::router())
         .merge(calibrations::router())
         .layer(axum::middleware::from_fn_with_state(

@@ -150,6 +150,30 @@ enum Command {
         #[command(flatten)]
         server: remote::Server,
     },
+    /// Compare two succeeded jobs of a server, design a against design b: print the comparison
+    /// (statistics per shared bin, B-lives, who outlasts whom, with intervals) as the API serves it.
+    Compare {
+        /// The first job's id (design a).
+        a: String,
+        /// The second job's id (design b).
+        b: String,
+        /// The metric compared (default `total_bounce_s`).
+        #[arg(long)]
+        metric: Option<String>,
+        /// Comma-separated statistics (default `mean,p50,p95`): `mean`, `p01` ... `p99`,
+        /// `exceedance`.
+        #[arg(long)]
+        statistics: Option<String>,
+        /// Comma-separated fractions of the B-lives compared (default `0.01,0.1`).
+        #[arg(long)]
+        b_lives: Option<String>,
+        /// Also write the overlaid plots, `bands.svg` and (with failure criteria) `weibull.svg`,
+        /// into this directory.
+        #[arg(long)]
+        plots: Option<PathBuf>,
+        #[command(flatten)]
+        server: remote::Server,
+    },
     /// Cancel a queued or running job of a server; print it.
     Cancel {
         /// The job's id.
@@ -335,6 +359,27 @@ fn run(cli: Cli) -> Result<(), CliError> {
             csv,
             server,
         } => print_text(remote::fetch(&server, &id, part, csv)?),
+        Command::Compare {
+            a,
+            b,
+            metric,
+            statistics,
+            b_lives,
+            plots,
+            server,
+        } => {
+            let asked = remote::Compared {
+                metric,
+                statistics,
+                b_lives,
+            };
+            print_text(remote::compare(
+                &server,
+                [&a, &b],
+                &asked,
+                plots.as_deref(),
+            )?)
+        }
         Command::Cancel { id, server } => print_text(remote::cancel(&server, &id)?),
         Command::Bench {
             quick,

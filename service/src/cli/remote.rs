@@ -1,10 +1,12 @@
-//! The commands that talk to a running server: `submit`, `status`, `wait`, `fetch`, `cancel`. They
-//! print what the API answers as it is (JSON, or CSV where asked) on stdout, and exit as the local
-//! commands do: 0 when done, 2 when the server refuses the input (its problem's errors, each with
-//! its JSON pointer, on stderr), 1 for anything else (unreachable, a job that failed, 5xx).
+//! The commands that talk to a running server: `submit`, `status`, `wait`, `fetch`, `compare`,
+//! `cancel`. They print what the API answers as it is (JSON, or CSV where asked) on stdout, and
+//! exit as the local commands do: 0 when done, 2 when the server refuses the input (its problem's
+//! errors, each with its JSON pointer, on stderr), 1 for anything else (unreachable, a job that
+//! failed, 5xx).
 
 use super::{CliError, read_input};
 use bouncewear_model::{FieldError, InvalidInput};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 /// The server a remote command talks to.
@@ -206,6 +208,71 @@ pub fn fetch(server: &Server, id: &str, part: Part, csv: bool) -> Result<String,
     };
     let text = server.send("GET", &format!("/v1/jobs/{id}/{path}{format}"), None)?;
     Ok(text.trim_end().to_owned())
+}
+
+/// What `compare` asks of the comparison; `None` takes the server's default.
+pub struct Compared {
+    pub metric: Option<String>,
+    pub statistics: Option<String>,
+    pub b_lives: Option<String>,
+}
+
+/// `compare`: job `a` against job `b`, the comparison as the API serves it; with `plots`, the
+/// overlaid wear curves (and Weibull plots, when both jobs have failure criteria) written there.
+pub fn compare(
+    server: &Server,
+    [a, b]: [&str; 2],
+    asked: &Compared,
+    plots: Option<&Path>,
+) -> Result<String, CliError> {
+    let mut query: Vec<String> = Vec::new();
+    for (name, value) in [
+        ("metric", &asked.metric),
+        ("statistics", &asked.statistics),
+        ("b_lives", &asked.b_lives),
+    ] {
+        if let Some(value) = value {
+            query.push(format!("{name}={}", encode(value)));
+        }
+    }
+    let query = if query.is_empty() {
+        String::new()
+    } else {
+        format!("?{}", query.join("&"))
+    };
+    let this = format!("/v1/jobs/{}/compare/{}", encode(a), encode(b));
+    let text = server.send("GET", &format!("{this}{query}"), None)?;
+    if let Some(dir) = plots {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| CliError::Failed(format!("{}: {e}", dir.display())))?;
+        let comparison = parse(&text)?;
+        let metric = asked.metric.as_deref().map(encode).unwrap_or_default();
+        let mut kinds = vec![("bands.svg", format!("?metric={metric}"))];
+        if comparison.get("life").is_some_and(|life| !life.is_null()) {
+            kinds.push(("weibull.svg", String::new()));
+        }
+        for (kind, query) in kinds {
+            let query = if query == "?metric=" { "" } else { &query };
+            let svg = server.send("GET", &format!("{this}/plots/{kind}{query}"), None)?;
+            let path = dir.join(kind);
+            std::fs::write(&path, svg)
+                .map_err(|e| CliError::Failed(format!("{}: {e}", path.display())))?;
+        }
+    }
+    Ok(text.trim_end().to_owned())
+}
+
+/// `text` with everything but unreserved characters and commas percent-encoded, for a path
+/// segment or a query value.
+fn encode(text: &str) -> String {
+    text.bytes()
+        .map(|byte| match byte {
+            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'-' | b'.' | b'_' | b'~' | b',' => {
+                (byte as char).to_string()
+            }
+            _ => format!("%{byte:02X}"),
+        })
+        .collect()
 }
 
 /// `cancel`: cancels a queued or running job; the job resource.

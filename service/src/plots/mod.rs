@@ -25,13 +25,13 @@ mod work_precision;
 use bouncewear_model::montecarlo::{JobResult, Metric};
 use bouncewear_model::stats::Summary;
 
-pub use bands::quantile_bands_svg;
+pub use bands::{Design, compared_bands_svg, quantile_bands_svg};
 pub use calibration::{FitPanel, calibration_panels, calibration_svg};
 pub use histograms::histograms_svg;
 pub use sensitivity::sensitivity_svg;
 pub use tail::tail_svg;
 pub use trend::{TrendPoint, trend_svg};
-pub use weibull::weibull_svg;
+pub use weibull::{compared_weibull_svg, weibull_svg};
 pub use work_precision::{Panel, Series, work_precision_svg};
 
 use svg::{GRID, LABEL, MUTED, Style, Svg};
@@ -51,6 +51,8 @@ pub enum PlotError {
     NoRareEvent,
     #[error("no plot `{0}`: bands.svg, histograms.svg, weibull.svg, sensitivity.svg or tail.svg")]
     NoSuchPlot(String),
+    #[error("no comparison plot `{0}`: bands.svg or weibull.svg")]
+    NoSuchComparedPlot(String),
 }
 
 /// The plot `kind` (`bands.svg`, `histograms.svg`, `weibull.svg`, `sensitivity.svg` or
@@ -94,6 +96,37 @@ pub fn job_plot(result: &JobResult, kind: &str, metric: &str) -> Result<String, 
             Ok(tail_svg(&asked.metric, beyond, report))
         }
         other => Err(PlotError::NoSuchPlot(other.to_owned())),
+    }
+}
+
+/// The plot `kind` comparing two jobs' results (`bands.svg`: the wear curves of `metric`;
+/// `weibull.svg`: the Weibull plots), each named in the legend.
+pub fn compared_plot(
+    designs: [(&str, &JobResult); 2],
+    kind: &str,
+    metric: &str,
+) -> Result<String, PlotError> {
+    match kind {
+        "bands.svg" => {
+            let mut drawn = Vec::new();
+            for (name, result) in designs {
+                let bins = result
+                    .operations
+                    .get(metric)
+                    .ok_or_else(|| PlotError::NoMetric(metric.to_owned()))?;
+                drawn.push(Design { name, bins });
+            }
+            Ok(compared_bands_svg(metric, &drawn))
+        }
+        "weibull.svg" => {
+            let mut drawn = Vec::new();
+            for (name, result) in designs {
+                let life = result.life.as_ref().ok_or(PlotError::NoLifeAnalysis)?;
+                drawn.push((name, &life.analysis));
+            }
+            Ok(compared_weibull_svg(&drawn))
+        }
+        other => Err(PlotError::NoSuchComparedPlot(other.to_owned())),
     }
 }
 

@@ -10,8 +10,8 @@ use super::axes::{
     Frame, Legend, LogAxis, Scale, draw_frame_axes, draw_log_x_axis, draw_no_data, widen_log,
 };
 use super::svg::{
-    AXIS, BLUE, GRID, INK, LABEL, RED, SMALL, Style, Svg, fmt_percent, fmt_sig, num, text_width,
-    wrap,
+    AXIS, BLUE, GRID, INK, LABEL, RED, SERIES, SMALL, Style, Svg, fmt_percent, fmt_sig, num,
+    text_width, wrap,
 };
 use super::{pick_evenly, segments};
 
@@ -53,19 +53,65 @@ impl Plane {
 /// with `covariance_ln`), on log time against `ln(-ln(1 - F))` labelled in percent. Annotated
 /// with beta, eta and B10. Without a fit, the points (if any) and `weibull_error`.
 pub fn weibull_svg(life: &LifeAnalysis) -> String {
-    let title = "Weibull probability plot: operations to failure";
-    let (width, height) = (760.0, 480.0);
-    let frame = Frame::inset(0.0, 0.0, width, height, [70.0, 70.0, 28.0, 58.0]);
-    let fit = life
-        .weibull
-        .as_ref()
-        .filter(|w| w.beta.is_finite() && w.beta > 0.0 && w.eta.is_finite() && w.eta > 0.0);
-    let usable = usable_points(life);
-    let points: Vec<Point> = pick_evenly(usable.len(), MAX_POINTS)
-        .into_iter()
-        .map(|i| usable[i])
+    weibulls_svg(
+        "Weibull probability plot: operations to failure",
+        &[("", life)],
+    )
+}
+
+/// The Weibull probability plots of several designs' lives on one plane, each in its colour,
+/// annotated with each design's beta, eta and B10.
+pub fn compared_weibull_svg(designs: &[(&str, &LifeAnalysis)]) -> String {
+    weibulls_svg("Weibull probability plots compared", designs)
+}
+
+/// One design as the plot draws it: its usable fit, its points (thinned) and its colours.
+struct Drawn<'a> {
+    name: &'a str,
+    life: &'a LifeAnalysis,
+    fit: Option<&'a Weibull>,
+    usable: usize,
+    points: Vec<Point<'a>>,
+    dots: &'static str,
+    line: &'static str,
+}
+
+fn weibulls_svg(title: &str, designs: &[(&str, &LifeAnalysis)]) -> String {
+    let alone = designs.len() == 1;
+    let drawn: Vec<Drawn> = designs
+        .iter()
+        .enumerate()
+        .map(|(i, &(name, life))| {
+            let usable = usable_points(life);
+            let colour = SERIES[i % SERIES.len()];
+            Drawn {
+                name,
+                life,
+                fit: life.weibull.as_ref().filter(|w| {
+                    w.beta.is_finite() && w.beta > 0.0 && w.eta.is_finite() && w.eta > 0.0
+                }),
+                usable: usable.len(),
+                points: pick_evenly(usable.len(), MAX_POINTS / designs.len().max(1))
+                    .into_iter()
+                    .map(|k| usable[k])
+                    .collect(),
+                dots: if alone { INK } else { colour },
+                line: if alone { BLUE } else { colour },
+            }
+        })
         .collect();
-    let plane = plane(frame, &points, fit);
+    // One design's notes go in a box over the plot's empty corner; several designs' would hide
+    // their points, so they go above the plot.
+    let notes: Vec<(String, &'static str)> =
+        drawn.iter().flat_map(|d| design_notes(d, alone)).collect();
+    let above = if alone {
+        0.0
+    } else {
+        notes.len() as f64 * 17.0 + 16.0
+    };
+    let (width, height) = (760.0, 480.0 + above);
+    let frame = Frame::inset(0.0, 0.0, width, height, [70.0, 70.0 + above, 28.0, 58.0]);
+    let plane = plane(frame, &drawn);
 
     let mut svg = Svg::new(width, height, title);
     svg.title(title, 16.0, 24.0);
@@ -73,26 +119,39 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
     draw_log_x_axis(&mut svg, &plane.frame, &plane.x_axis, &plane.xs);
     let mut legend = Legend::new(plane.frame.left, 48.0);
     legend.dot(&mut svg, INK, "median ranks (Bernard, Johnson-adjusted)");
-    if let Some(w) = fit {
-        draw_fit(&mut svg, &mut legend, &plane, w);
+    let mut bounds = false;
+    for d in &drawn {
+        if let Some(w) = d.fit {
+            bounds |= draw_fit(&mut svg, &plane, w, d.line);
+        }
     }
-    draw_points(&mut svg, &plane, &points);
+    if drawn.iter().any(|d| d.fit.is_some()) {
+        legend.line(
+            &mut svg,
+            if alone { BLUE } else { INK },
+            None,
+            "Weibull MLE",
+        );
+    }
+    if bounds {
+        let colour = if alone { BLUE } else { INK };
+        legend.line(
+            &mut svg,
+            colour,
+            Some("5 4"),
+            "95 % bounds on time (Fisher)",
+        );
+    }
+    for d in &drawn {
+        draw_points(&mut svg, &plane, &d.points, d.dots);
+    }
     draw_frame_axes(&mut svg, &plane.frame);
-    let mut notes = fit_notes(life, fit);
-    let error_lines = if fit.is_none() { notes.len() } else { 0 };
-    notes.push(format!(
-        "{} failed, {} censored",
-        life.failures, life.censored
-    ));
-    if points.len() < usable.len() {
-        notes.push(format!(
-            "{} of {} failure times shown, evenly spaced",
-            points.len(),
-            usable.len()
-        ));
+    if alone {
+        draw_notes(&mut svg, frame.left + 10.0, frame.top + 10.0, &notes);
+    } else {
+        draw_notes(&mut svg, frame.left, 62.0, &notes);
     }
-    draw_notes(&mut svg, &plane.frame, &notes, error_lines);
-    if fit.is_none() && points.is_empty() {
+    if drawn.iter().all(|d| d.fit.is_none() && d.points.is_empty()) {
         draw_no_data(&mut svg, &plane.frame, "No failures to plot");
     }
 
@@ -110,6 +169,33 @@ pub fn weibull_svg(life: &LifeAnalysis) -> String {
     svg.finish()
 }
 
+/// A design's lines of the annotation, each with its colour: its name when there are several,
+/// the fit or why there is none (red), the counts, and how many points are shown.
+fn design_notes(d: &Drawn, alone: bool) -> Vec<(String, &'static str)> {
+    let mut notes = Vec::new();
+    if !alone {
+        notes.push((d.name.to_owned(), d.line));
+    }
+    let fit_lines = fit_notes(d.life, d.fit);
+    let colour = if d.fit.is_none() { RED } else { INK };
+    notes.extend(fit_lines.into_iter().map(|line| (line, colour)));
+    notes.push((
+        format!("{} failed, {} censored", d.life.failures, d.life.censored),
+        INK,
+    ));
+    if d.points.len() < d.usable {
+        notes.push((
+            format!(
+                "{} of {} failure times shown, evenly spaced",
+                d.points.len(),
+                d.usable
+            ),
+            INK,
+        ));
+    }
+    notes
+}
+
 /// Each failure time at its median rank, always inside `0 < F < 1`.
 fn usable_points(life: &LifeAnalysis) -> Vec<Point<'_>> {
     let ranks = median_ranks(&life.kaplan_meier, life.failures + life.censored);
@@ -121,36 +207,35 @@ fn usable_points(life: &LifeAnalysis) -> Vec<Point<'_>> {
 }
 
 /// The ranges: up, 1 % to 99 % at least, widened to the points (within 0.01 % and 99.99 %);
-/// across, the points and the fit between B10 and eta, widened to whole decades.
-fn plane(frame: Frame, points: &[Point], fit: Option<&Weibull>) -> Plane {
+/// across, the points and the fits between B10 and eta, widened to whole decades.
+fn plane(frame: Frame, designs: &[Drawn]) -> Plane {
     let (y_min_cap, y_max_cap) = (weibull_scale(1e-4), weibull_scale(1.0 - 1e-4));
     let mut y_lo = weibull_scale(0.01);
     let mut y_hi = weibull_scale(0.99);
-    for &(_, f) in points {
-        let y = weibull_scale(f).clamp(y_min_cap, y_max_cap);
-        y_lo = y_lo.min(y);
-        y_hi = y_hi.max(y);
+    let mut t_lo = f64::INFINITY;
+    let mut t_hi = f64::NEG_INFINITY;
+    for d in designs {
+        for &(p, f) in &d.points {
+            let y = weibull_scale(f).clamp(y_min_cap, y_max_cap);
+            y_lo = y_lo.min(y);
+            y_hi = y_hi.max(y);
+            t_lo = t_lo.min(p.time);
+            t_hi = t_hi.max(p.time);
+        }
+        if let Some(w) = d.fit {
+            let candidates = if d.points.is_empty() {
+                [w.quantile(0.01), w.quantile(0.99)]
+            } else {
+                [w.quantile(0.10), Some(w.eta)]
+            };
+            for t in candidates.into_iter().flatten() {
+                t_lo = t_lo.min(t);
+                t_hi = t_hi.max(t);
+            }
+        }
     }
     y_lo -= 0.15;
     y_hi += 0.15;
-
-    let mut t_lo = f64::INFINITY;
-    let mut t_hi = f64::NEG_INFINITY;
-    for (p, _) in points {
-        t_lo = t_lo.min(p.time);
-        t_hi = t_hi.max(p.time);
-    }
-    if let Some(w) = fit {
-        let candidates = if points.is_empty() {
-            [w.quantile(0.01), w.quantile(0.99)]
-        } else {
-            [w.quantile(0.10), Some(w.eta)]
-        };
-        for t in candidates.into_iter().flatten() {
-            t_lo = t_lo.min(t);
-            t_hi = t_hi.max(t);
-        }
-    }
     if !(t_lo.is_finite() && t_hi.is_finite() && t_lo > 0.0) {
         t_lo = 1.0;
         t_hi = 1000.0;
@@ -201,9 +286,9 @@ fn draw_percent_grid(svg: &mut Svg, plane: &Plane) {
     }
 }
 
-/// The fitted line `ln(-ln(1 - F)) = beta (ln t - ln eta)`, clipped to the frame, over its
-/// bounds on time (drawn first, under it), with their legend entries.
-fn draw_fit(svg: &mut Svg, legend: &mut Legend, plane: &Plane, w: &Weibull) {
+/// The fitted line `ln(-ln(1 - F)) = beta (ln t - ln eta)` in `colour`, clipped to the frame,
+/// over its bounds on time (drawn first, under it); whether there were bounds to draw.
+fn draw_fit(svg: &mut Svg, plane: &Plane, w: &Weibull, colour: &str) -> bool {
     let (lx0, lx1) = (plane.x_axis.lo.ln(), plane.x_axis.hi.ln());
     let (y_lo, y_hi) = (plane.y_lo, plane.y_hi);
     let (ln_eta, beta) = (w.eta.ln(), w.beta);
@@ -223,7 +308,7 @@ fn draw_fit(svg: &mut Svg, legend: &mut Legend, plane: &Plane, w: &Weibull) {
     let has_bounds = lower.iter().chain(&upper).any(Option::is_some);
     for curve in [&lower, &upper] {
         for segment in segments(curve) {
-            svg.polyline(&segment, BLUE, 1.2, Some("5 4"));
+            svg.polyline(&segment, colour, 1.2, Some("5 4"));
         }
     }
     let a = lx0.max(ln_eta + y_lo / beta);
@@ -231,16 +316,13 @@ fn draw_fit(svg: &mut Svg, legend: &mut Legend, plane: &Plane, w: &Weibull) {
     if a < b {
         let p0 = plane.at_ln(a, beta * (a - ln_eta));
         let p1 = plane.at_ln(b, beta * (b - ln_eta));
-        svg.polyline(&[p0, p1], BLUE, 2.2, None);
+        svg.polyline(&[p0, p1], colour, 2.2, None);
     }
-    legend.line(svg, BLUE, None, "Weibull MLE");
-    if has_bounds {
-        legend.line(svg, BLUE, Some("5 4"), "95 % bounds on time (Fisher)");
-    }
+    has_bounds
 }
 
 /// The points, with their Greenwood bounds as thin bars when there are few.
-fn draw_points(svg: &mut Svg, plane: &Plane, points: &[Point]) {
+fn draw_points(svg: &mut Svg, plane: &Plane, points: &[Point], colour: &str) {
     let (y_lo, y_hi) = (plane.y_lo, plane.y_hi);
     if points.len() <= MAX_BARS {
         for (p, _) in points {
@@ -260,7 +342,7 @@ fn draw_points(svg: &mut Svg, plane: &Plane, points: &[Point]) {
         let y = weibull_scale(f).clamp(y_lo, y_hi);
         let _ = write!(
             dots,
-            r#"<circle cx="{}" cy="{}" r="{r}" fill="{INK}" fill-opacity="0.85"/>"#,
+            r#"<circle cx="{}" cy="{}" r="{r}" fill="{colour}" fill-opacity="0.85"/>"#,
             num(plane.x_of_t(p.time)),
             num(plane.ys.map(y))
         );
@@ -323,16 +405,14 @@ fn fit_notes(life: &LifeAnalysis, fit: Option<&Weibull>) -> Vec<String> {
     notes
 }
 
-/// The annotation box, top left (where a rising line leaves room); its first `error_lines` lines
-/// in red.
-fn draw_notes(svg: &mut Svg, frame: &Frame, notes: &[String], error_lines: usize) {
+/// The annotation box with its top left at `(bx, by)`, each line in its colour.
+fn draw_notes(svg: &mut Svg, bx: f64, by: f64, notes: &[(String, &'static str)]) {
     let box_w = notes
         .iter()
-        .map(|s| text_width(s, 12.0))
+        .map(|(s, _)| text_width(s, 12.0))
         .fold(0.0, f64::max)
         + 20.0;
     let box_h = notes.len() as f64 * 17.0 + 10.0;
-    let (bx, by) = (frame.left + 10.0, frame.top + 10.0);
     let _ = write!(
         svg.out,
         r##"<rect x="{}" y="{}" width="{}" height="{}" rx="4" fill="#ffffff" fill-opacity="0.92" stroke="{GRID}"/>"##,
@@ -342,18 +422,11 @@ fn draw_notes(svg: &mut Svg, frame: &Frame, notes: &[String], error_lines: usize
         num(box_h)
     );
     svg.out.push('\n');
-    for (k, line) in notes.iter().enumerate() {
-        let style = if k < error_lines {
-            Style {
-                anchor: "start",
-                fill: RED,
-                ..LABEL
-            }
-        } else {
-            Style {
-                anchor: "start",
-                ..LABEL
-            }
+    for (k, (line, colour)) in notes.iter().enumerate() {
+        let style = Style {
+            anchor: "start",
+            fill: colour,
+            ..LABEL
         };
         svg.text(bx + 10.0, by + 20.0 + 17.0 * k as f64, line, style);
     }
@@ -479,5 +552,23 @@ mod tests {
         life.kaplan_meier[0].time = f64::INFINITY;
         life.kaplan_meier[1].reliability = f64::NAN;
         check(&weibull_svg(&life));
+    }
+
+    #[test]
+    fn weibull_plots_of_two_designs_overlaid() {
+        let a = life_of(&weibull_data(200, 2.0, 800.0, 1000.0));
+        let b = life_of(&weibull_data(200, 4.0, 600.0, 1000.0));
+        let svg = compared_weibull_svg(&[("a: long", &a), ("b: short", &b)]);
+        check(&svg);
+        assert!(svg.contains("Weibull probability plots compared"));
+        assert!(svg.contains(">a: long<") && svg.contains(">b: short<"));
+        assert_eq!(svg.matches("\u{3b2} = ").count(), 2);
+        assert!(svg.contains(&format!(r#"fill="{}" fill-opacity="0.85""#, SERIES[1])));
+        // A design without failures is named with its reason; the other is drawn.
+        let none = life_of(&[(100.0, false), (100.0, false)]);
+        let svg = compared_weibull_svg(&[("a", &a), ("b", &none)]);
+        check(&svg);
+        assert!(svg.contains("No Weibull fit"));
+        assert!(!svg.contains("No failures to plot"));
     }
 }

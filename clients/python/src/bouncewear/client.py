@@ -232,6 +232,44 @@ class Job:
         params = {"metric": metric} if metric else None
         return self.client.request("GET", self._path(f"/plots/{kind}"), params=params).text
 
+    def compare(self, other: "Job", metric: Optional[str] = None,
+                statistics: Optional[Iterable[str]] = None,
+                b_lives: Optional[Iterable[float]] = None) -> JSON:
+        """This job (design a) against `other` (design b), both succeeded: per bin both share,
+        each statistic (`mean`, `p01` ... `p99`, `exceedance`) with `a - b` and `a / b` and their
+        95 % intervals; with failure criteria, B-lives and the probability that a device of a
+        outlasts one of b (docs/contract.md "Comparing designs")."""
+        params: Dict[str, Any] = {}
+        if metric:
+            params["metric"] = metric
+        if statistics is not None:
+            params["statistics"] = ",".join(statistics)
+        if b_lives is not None:
+            params["b_lives"] = ",".join(repr(float(p)) for p in b_lives)
+        return self.client.request("GET", self._path(f"/compare/{other.id}"), params=params).json()
+
+    def compare_statistics(self, other: "Job", metric: Optional[str] = None,
+                           statistics: Optional[Iterable[str]] = None) -> pd.DataFrame:
+        """`compare`'s statistics as a frame, one row per bin and statistic: `op_start`, `op_end`,
+        `statistic`, `a`, `b`, `difference`, `difference_lo`, `difference_hi`, `ratio`, `ratio_lo`,
+        `ratio_hi` (missing where there is no interval)."""
+        comparison = self.compare(other, metric=metric, statistics=statistics)
+        rows = []
+        for b in comparison["bins"]:
+            for name, d in b["statistics"].items():
+                difference = d.get("difference_ci95") or [None, None]
+                ratio = d.get("ratio_ci95") or [None, None]
+                rows.append({"op_start": b["op_start"], "op_end": b["op_end"], "statistic": name,
+                             "a": d["a"], "b": d["b"], "difference": d["difference"],
+                             "difference_lo": difference[0], "difference_hi": difference[1],
+                             "ratio": d.get("ratio"), "ratio_lo": ratio[0], "ratio_hi": ratio[1]})
+        return pd.DataFrame(rows)
+
+    def compare_plot(self, other: "Job", kind: str = "bands.svg", metric: Optional[str] = None) -> str:
+        """Both jobs' `bands.svg` (wear curves) or `weibull.svg` overlaid, as SVG text."""
+        params = {"metric": metric} if metric else None
+        return self.client.request("GET", self._path(f"/compare/{other.id}/plots/{kind}"), params=params).text
+
     def cancel(self) -> "Job":
         """Cancels the job if it is queued or running; itself, as it stands then."""
         self.resource = self.client.request("DELETE", self._path()).json()

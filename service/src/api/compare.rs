@@ -1,0 +1,253 @@
+//! Two succeeded jobs compared, design against design (docs/contract.md "Comparing designs"): the
+//! numbers as JSON and the wear curves and Weibull plots overlaid, all read from the two stored
+//! Results by `bouncewear_model::montecarlo::compare` and `crate::plots`.
+
+use super::AppState;
+use super::cache::{NotModified, immutable};
+use super::error::{
+    ApiError, PROBLEM, Problem,
+    responses::{BadQuery, NotSucceeded, Unauthorized},
+};
+use super::jobs::{JSON, succeeded_result, to_json};
+use crate::domain::{JobId, Owner};
+use crate::plots;
+use axum::Extension;
+use axum::extract::rejection::QueryRejection;
+use axum::extract::{Path, Query, State};
+use axum::http::{HeaderMap, header};
+use axum::response::{IntoResponse, Response};
+use bouncewear_model::montecarlo::JobResult;
+use bouncewear_model::montecarlo::compare::{
+    Comparison, DEFAULT_B_LIVES, DEFAULT_STATISTICS, Statistic, compare,
+};
+use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(get_comparison))
+        .routes(routes!(comparison_plot))
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct ComparisonQuery {
+    /// The metric compared (default `total_bounce_s`): an operation metric, compared per bin both
+    /// jobs have, or a device metric, compared over the whole test.
+    #[param(example = "total_bounce_s")]
+    pub metric: Option<String>,
+    /// Comma-separated statistics (default `mean,p50,p95`): `mean`, `p01` ... `p99` (the
+    /// reported quantiles) or `exceedance` (the probability beyond the metric's limit).
+    #[param(
+        pattern = "^(mean|p01|p05|p10|p25|p50|p75|p90|p95|p99|exceedance)(,(mean|p01|p05|p10|p25|p50|p75|p90|p95|p99|exceedance))*$",
+        example = "mean,p50,p99"
+    )]
+    pub statistics: Option<String>,
+    /// Comma-separated fractions failed of the B-lives compared (default `0.01,0.1`), each
+    /// strictly between 0 and 1.
+    #[param(
+        pattern = "^0?\\.[0-9]*[1-9][0-9]*(,0?\\.[0-9]*[1-9][0-9]*)*$",
+        example = "0.01,0.1"
+    )]
+    pub b_lives: Option<String>,
+}
+
+/// The comparison of job `a` against job `b`.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct JobComparison {
+    /// The first job (the path's `id`).
+    pub a: String,
+    /// The second job (the path's `other`).
+    pub b: String,
+    #[serde(flatten)]
+    pub comparison: Comparison,
+    /// The plots of the comparison.
+    pub links: ComparisonLinks,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ComparisonLinks {
+    /// The wear curves of the metric overlaid.
+    pub bands: String,
+    /// The Weibull plots overlaid (jobs with failure criteria).
+    pub weibull: String,
+}
+
+/// Job `id` (design a) compared with job `other` (design b): any statistic of a metric, B-lives,
+/// and who outlasts whom.
+///
+/// Both jobs must have succeeded. Per bin of operations both jobs have (the same `op_start` and
+/// `op_end`; a device metric: the whole test), each statistic asked with `a`, `b` and their 95 %
+/// intervals, `a - b` and `a / b` with theirs (MOVER: each side's interval keeps its shape; the
+/// jobs are independent samples). With failure criteria in both: each B-life asked from the two
+/// Weibull fits, compared the same way, and `outlasts`: `P(a device of a outlasts one of b)` from
+/// the fits with its interval (delta method on the logit), and the share of pairs of simulated
+/// devices in which it does, bounded as censoring allows. `notes` says what limits the comparison.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/compare/{other}", tag = "jobs",
+    params(("id" = String, Path, description = "The first job (design a)"), ("other" = String, Path, description = "The second job (design b)"), ComparisonQuery),
+    responses(
+        (status = 200, description = "The comparison", body = JobComparison, headers(("ETag" = String, description = "A tag of the content, for If-None-Match"), ("Cache-Control" = String, description = "Immutable for a year"))),
+        NotModified,
+        BadQuery,
+        Unauthorized,
+        (status = 404, description = "No such job, or a job without the metric", body = Problem, content_type = PROBLEM),
+        NotSucceeded,
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn get_comparison(
+    State(state): State<AppState>,
+    Extension(owner): Extension<Owner>,
+    Path((id, other)): Path<(JobId, JobId)>,
+    query: Result<Query<ComparisonQuery>, QueryRejection>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let statistics = statistics(query.statistics.as_deref())?;
+    let b_lives = b_lives(query.b_lives.as_deref())?;
+    let metric = query.metric.unwrap_or_else(|| "total_bounce_s".to_owned());
+    let (a, b) = results(&state, &owner, &id, &other).await?;
+    let comparison = compare(&a, &b, &metric, &statistics, &b_lives)
+        .map_err(|error| ApiError::NotFound(error.to_string()))?;
+    let this = format!("/v1/jobs/{id}/compare/{other}");
+    let body = JobComparison {
+        a: id.to_string(),
+        b: other.to_string(),
+        comparison,
+        links: ComparisonLinks {
+            bands: format!("{this}/plots/bands.svg?metric={metric}"),
+            weibull: format!("{this}/plots/weibull.svg"),
+        },
+    };
+    Ok(immutable(&state, &headers, JSON, to_json(&body)?))
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct ComparisonPlotQuery {
+    /// The operation metric of `bands.svg` (default `total_bounce_s`); ignored by `weibull.svg`.
+    #[param(example = "total_bounce_s")]
+    pub metric: Option<String>,
+}
+
+/// Two jobs' plots overlaid, as the dashboard's comparison shows them.
+///
+/// SVG: `bands.svg` draws the wear curves of `metric` (an operation metric of both jobs, default
+/// `total_bounce_s`): each job's p05-p95 band, median and mean in its colour; `weibull.svg` draws
+/// both Weibull probability plots with their fits and bounds, annotated with each job's beta, eta
+/// and B10 (both jobs need failure criteria). Each job is named in the legend by its name and id.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/compare/{other}/plots/{kind}", tag = "jobs",
+    params(("id" = String, Path, description = "The first job (design a)"), ("other" = String, Path, description = "The second job (design b)"), ("kind" = String, Path, description = "bands.svg or weibull.svg"), ComparisonPlotQuery),
+    responses(
+        (status = 200, description = "The plot", body = String, content_type = "image/svg+xml"),
+        BadQuery,
+        Unauthorized,
+        (status = 404, description = "No such job, plot or metric, or a job without failure criteria", body = Problem, content_type = PROBLEM),
+        NotSucceeded,
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn comparison_plot(
+    State(state): State<AppState>,
+    Extension(owner): Extension<Owner>,
+    Path((id, other, kind)): Path<(JobId, JobId, String)>,
+    query: Result<Query<ComparisonPlotQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let (a, b) = results(&state, &owner, &id, &other).await?;
+    let (name_a, name_b) = (legend_name("a", &id, &a), legend_name("b", &other, &b));
+    let svg = plots::compared_plot(
+        [(&name_a, &a), (&name_b, &b)],
+        &kind,
+        query.metric.as_deref().unwrap_or("total_bounce_s"),
+    )?;
+    Ok(([(header::CONTENT_TYPE, "image/svg+xml")], svg).into_response())
+}
+
+/// The two jobs' Results, each of which must have succeeded.
+async fn results(
+    state: &AppState,
+    owner: &Owner,
+    a: &JobId,
+    b: &JobId,
+) -> Result<(JobResult, JobResult), ApiError> {
+    Ok((
+        succeeded_result(state, owner, a).await?,
+        succeeded_result(state, owner, b).await?,
+    ))
+}
+
+/// A design in a legend: `a: its name (its id)`, or `a: its id` without a name.
+fn legend_name(letter: &str, id: &JobId, result: &JobResult) -> String {
+    match &result.job.spec().name {
+        Some(name) => format!("{letter}: {name} ({id})"),
+        None => format!("{letter}: {id}"),
+    }
+}
+
+/// The statistics asked, or the defaults.
+fn statistics(text: Option<&str>) -> Result<Vec<Statistic>, ApiError> {
+    let Some(text) = text else {
+        return Ok(DEFAULT_STATISTICS
+            .iter()
+            .map(|name| Statistic::parse(name).expect("a default statistic"))
+            .collect());
+    };
+    text.split(',')
+        .map(|name| {
+            Statistic::parse(name.trim()).map_err(|rule| {
+                ApiError::BadRequest(format!("query parameter `statistics`: {rule}"))
+            })
+        })
+        .collect()
+}
+
+/// The B-life fractions asked, or the defaults.
+fn b_lives(text: Option<&str>) -> Result<Vec<f64>, ApiError> {
+    let Some(text) = text else {
+        return Ok(DEFAULT_B_LIVES.to_vec());
+    };
+    text.split(',')
+        .map(|item| {
+            item.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|p| *p > 0.0 && *p < 1.0)
+                .ok_or_else(|| {
+                    ApiError::BadRequest(format!(
+                        "query parameter `b_lives`: `{}` is not a fraction strictly between 0 and 1",
+                        item.chars().take(40).collect::<String>()
+                    ))
+                })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn statistics_and_fractions_parse_or_name_their_parameter() {
+        assert_eq!(statistics(None).unwrap().len(), DEFAULT_STATISTICS.len());
+        assert_eq!(
+            statistics(Some("mean, p99")).unwrap(),
+            vec![Statistic::Mean, Statistic::Quantile("p99")]
+        );
+        let error = statistics(Some("mean,median")).unwrap_err().to_string();
+        assert!(
+            error.contains("`statistics`") && error.contains("`median`"),
+            "{error}"
+        );
+        assert_eq!(b_lives(None).unwrap(), DEFAULT_B_LIVES.to_vec());
+        assert_eq!(b_lives(Some("0.05")).unwrap(), vec![0.05]);
+        for bad in ["1", "0", "x", "nan", ""] {
+            let error = b_lives(Some(bad)).unwrap_err().to_string();
+            assert!(error.contains("`b_lives`"), "{error}");
+        }
+    }
+}

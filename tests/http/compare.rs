@@ -1,0 +1,126 @@
+//! Two designs compared over the API and the command line: a job against itself is a comparison
+//! whose answer is known exactly; two designs give both plots with both names; bad queries are
+//! 400s naming their parameter.
+
+use crate::remote::{job_file, remote, stdout};
+use crate::support::app::{Service, TestApp};
+use crate::support::client::{assert_problem, get};
+use crate::support::temp_db;
+use serde_json::{Value, json};
+
+/// A wearing design with scattered velocity and a failure criterion most devices meet.
+fn design(name: &str, current_a: f64) -> Value {
+    json!({"name": name, "devices": 60, "operations": 80, "bin_operations": 40, "seed": 11,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": current_a}},
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                     "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.03, "min": 0.05}}],
+        "failure": {"e1": {"below": 0.37}}})
+}
+
+#[test]
+fn a_job_against_itself_and_two_designs_over_api_and_cli() {
+    let server = TestApp::start(&temp_db("compare"), &[]);
+    let submit = |job: &Value, name: &str| -> String {
+        let queued: Value = serde_json::from_str(&stdout(&remote(
+            &server,
+            None,
+            &["submit", &job_file(name, job)],
+        )))
+        .unwrap();
+        let id = queued["id"].as_str().unwrap().to_owned();
+        stdout(&remote(&server, None, &["wait", &id]));
+        id
+    };
+    let strong = submit(&design("15 A", 15.0), "compare-a");
+    let weak = submit(&design("5 A", 5.0), "compare-b");
+
+    // Itself: no difference, a ratio of one, each as likely to outlast the other.
+    let same = get(
+        &format!(
+            "{}/v1/jobs/{strong}/compare/{strong}?statistics=mean,p50&b_lives=0.1",
+            server.base()
+        ),
+        None,
+    );
+    assert_eq!(same.status, 200, "{}", same.body);
+    let same = same.json();
+    assert_eq!(same["a"], strong.as_str());
+    assert_eq!(same["metric"], "total_bounce_s");
+    assert_eq!(same["bins"].as_array().unwrap().len(), 2);
+    for bin in same["bins"].as_array().unwrap() {
+        for statistic in ["mean", "p50"] {
+            let d = &bin["statistics"][statistic];
+            assert_eq!(d["difference"], 0.0, "{d}");
+            assert_eq!(d["ratio"], 1.0, "{d}");
+            let [lo, hi] = [
+                d["difference_ci95"][0].as_f64().unwrap(),
+                d["difference_ci95"][1].as_f64().unwrap(),
+            ];
+            assert!(lo < 0.0 && hi > 0.0 && (lo + hi).abs() <= 1e-12 * hi, "{d}");
+        }
+    }
+    let life = &same["life"];
+    assert_eq!(life["b_lives"][0]["p"], 0.1);
+    assert_eq!(life["b_lives"][0]["ratio"], 1.0);
+    let p = life["outlasts"]["weibull"].as_f64().unwrap();
+    assert!((p - 0.5).abs() < 1e-12, "{life}");
+    let [lo, hi] = [
+        life["outlasts"]["observed"][0].as_f64().unwrap(),
+        life["outlasts"]["observed"][1].as_f64().unwrap(),
+    ];
+    assert!(lo <= 0.5 && 0.5 <= hi, "{life}");
+
+    // Two designs on the command line, with the plots.
+    let dir = crate::support::temp_dir("compare-plots");
+    let printed = stdout(&remote(
+        &server,
+        None,
+        &[
+            "compare",
+            &strong,
+            &weak,
+            "--metric",
+            "e1",
+            "--plots",
+            dir.to_str().unwrap(),
+        ],
+    ));
+    let compared: Value = serde_json::from_str(&printed).unwrap();
+    assert_eq!(compared["metric"], "e1");
+    assert_eq!(compared["b"], weak.as_str());
+    assert_eq!(
+        compared["links"]["bands"],
+        format!("/v1/jobs/{strong}/compare/{weak}/plots/bands.svg?metric=e1")
+    );
+    let bands = std::fs::read_to_string(dir.join("bands.svg")).unwrap();
+    let weibull = std::fs::read_to_string(dir.join("weibull.svg")).unwrap();
+    for svg in [&bands, &weibull] {
+        assert!(svg.starts_with("<svg"), "{svg}");
+        assert!(svg.contains(&format!("a: 15 A ({strong})")), "{svg}");
+        assert!(svg.contains(&format!("b: 5 A ({weak})")), "{svg}");
+    }
+    assert!(bands.contains("e1: wear curves compared"));
+    assert!(weibull.contains("Weibull probability plots compared"));
+
+    // Refusals name what is wrong.
+    let base = format!("{}/v1/jobs/{strong}/compare/{weak}", server.base());
+    let problem = assert_problem(&get(&format!("{base}?statistics=mean,median"), None), 400);
+    assert!(
+        problem["detail"].as_str().unwrap().contains("`statistics`"),
+        "{problem}"
+    );
+    let problem = assert_problem(&get(&format!("{base}?b_lives=1.5"), None), 400);
+    assert!(
+        problem["detail"].as_str().unwrap().contains("`b_lives`"),
+        "{problem}"
+    );
+    let problem = assert_problem(&get(&format!("{base}?metrc=e1"), None), 400);
+    assert!(
+        problem["detail"].as_str().unwrap().contains("metrc"),
+        "{problem}"
+    );
+    assert_problem(&get(&format!("{base}?metric=no_such_metric"), None), 404);
+    assert_problem(&get(&format!("{base}/plots/histograms.svg"), None), 404);
+    let missing = format!("{}/v1/jobs/{strong}/compare/no-such-job", server.base());
+    assert_problem(&get(&missing, None), 404);
+}
