@@ -13,7 +13,9 @@ tolerances from scipy's own start, never from the Rust module's:
 
 * `weibull`: `weibull_min(c=beta, scale=eta)`, location 0;
 * `lognormal`: `lognorm(s=sigma, scale=exp(mu))`, location 0 (mu and sigma of ln t);
-* `exponential`: `expon(scale=1/lambda)`, location 0; its maximum is also `failures / total time`.
+* `gamma`: `gamma(a=shape, scale=scale)`, location 0, from the failures' moments;
+* `exponential`: `expon(scale=1/lambda)`, location 0; its maximum is also `failures / total time`;
+* the Weibull's likelihood-ratio 95 % bounds on B1 and B10 (`weibull_lr_bounds`).
 
 AICc = 2k - 2 lnL + 2k(k + 1)/(n - k - 1) and BIC = k ln n - 2 lnL, n the devices. Shares no code
 with the Rust module: only the data generator.
@@ -56,6 +58,41 @@ def criteria(log_likelihood, k, n):
             "bic": k * math.log(n) - 2 * log_likelihood}
 
 
+def weibull_lr_bounds(data, beta, eta, p):
+    """Likelihood-ratio 95 % bounds on B_p = eta (-ln(1 - p))^(1/beta): the times t where the
+    profile log-likelihood, maximised over beta with eta = t / (-ln(1 - p))^(1/beta), is
+    chi2(0.95; 1) / 2 below the maximum. scipy's bounded scalar minimiser for the profile, brentq
+    for the two crossings."""
+    failures = np.array([t for t, failed in data if failed])
+    suspensions = np.array([t for t, failed in data if not failed])
+    k = -math.log1p(-p)
+
+    def ll(b, e):
+        return (ss.weibull_min.logpdf(failures, b, scale=e).sum()
+                + ss.weibull_min.logsf(suspensions, b, scale=e).sum())
+
+    top = ll(beta, eta)
+    drop = ss.chi2.ppf(0.95, 1) / 2
+
+    def profile(ln_t):
+        res = so.minimize_scalar(lambda u: -ll(math.exp(u), math.exp(ln_t - math.log(k) / math.exp(u))),
+                                 bounds=(math.log(beta) - 4, math.log(beta) + 4), method="bounded",
+                                 options={"xatol": 1e-12, "maxiter": 2000})
+        return -res.fun
+
+    centre = math.log(eta) + math.log(k) / beta
+    bounds = []
+    for side in (-1.0, 1.0):
+        step = 0.01
+        while profile(centre + side * step) > top - drop:
+            step *= 2
+        far = centre + side * step
+        lo, hi = sorted((centre, far))
+        root = so.brentq(lambda x: profile(x) - (top - drop), lo, hi, xtol=1e-14, rtol=1e-14)
+        bounds.append(math.exp(root))
+    return bounds
+
+
 def fits(data):
     n = len(data)
     failures = [t for t, failed in data if failed]
@@ -66,9 +103,18 @@ def fits(data):
     (ln_eta, ln_beta), ll = maximise(data, ss.weibull_min, [mean, 0.0],
                                      lambda x: {"c": math.exp(x[1]), "scale": math.exp(x[0])})
     out["weibull"] = {"beta": math.exp(ln_beta), "eta": math.exp(ln_eta), **criteria(ll, 2, n)}
+    for p, name in ((0.01, "b1"), (0.1, "b10")):
+        lower, upper = weibull_lr_bounds(data, math.exp(ln_beta), math.exp(ln_eta), p)
+        out["weibull"][name + "_lr_lower"] = lower
+        out["weibull"][name + "_lr_upper"] = upper
     (mu, ln_sigma), ll = maximise(data, ss.lognorm, [mean, math.log(sd)],
                                   lambda x: {"s": math.exp(x[1]), "scale": math.exp(x[0])})
     out["lognormal"] = {"mu": mu, "sigma": math.exp(ln_sigma), **criteria(ll, 2, n)}
+    fm = sum(failures) / len(failures)
+    fv = sum((t - fm) ** 2 for t in failures) / len(failures)
+    (ln_shape, ln_theta), ll = maximise(data, ss.gamma, [math.log(fm * fm / fv), math.log(fv / fm)],
+                                        lambda x: {"a": math.exp(x[0]), "scale": math.exp(x[1])})
+    out["gamma"] = {"shape": math.exp(ln_shape), "scale": math.exp(ln_theta), **criteria(ll, 2, n)}
     (ln_scale,), ll = maximise(data, ss.expon, [math.log(sum(t for t, _ in data) / len(failures))],
                                lambda x: {"scale": math.exp(x[0])})
     out["exponential"] = {"lambda": math.exp(-ln_scale), **criteria(ll, 1, n)}

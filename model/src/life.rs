@@ -11,15 +11,17 @@
 //! | quantity | estimate | bounds |
 //! |---|---|---|
 //! | Weibull `beta`, `eta` | MLE, profile equation in `beta` ([`fit_weibull`]) | Fisher matrix, log-transformed Wald |
-//! | `B_p` | `eta (-ln(1 - p))^(1/beta)` ([`Weibull::quantile`]) | delta method on `ln B_p`, same covariance ([`Weibull::quantile_bounds`]) |
+//! | `B_p` | `eta (-ln(1 - p))^(1/beta)` ([`Weibull::quantile`]) | delta method on `ln B_p`, same covariance ([`Weibull::quantile_bounds`]); likelihood ratio ([`likelihood_ratio`]) |
 //! | `R(t)` | Kaplan-Meier ([`kaplan_meier`]) | Greenwood variance, log-log transformed |
-//! | which distribution | Weibull, lognormal, exponential ranked by AICc ([`fits`]) | |
+//! | which distribution | Weibull, lognormal, gamma, exponential ranked by AICc ([`fits`]) | |
+//! | two designs | B-lives compared, `P(T_a > T_b)` ([`compare`]) | MOVER; delta method on the logit |
 //! | `eta`, `B_p` with `beta` known | Weibayes ([`weibayes`]) | one-sided chi-square lower bound |
 //!
 //! Every number in the serialised results is finite: what cannot be computed is `None`.
 
 pub mod compare;
 pub mod fits;
+pub mod likelihood_ratio;
 pub mod weibayes;
 
 use crate::stats::Z_975;
@@ -83,6 +85,10 @@ pub struct BLife {
     pub value: f64,
     /// 95 % bounds `[lower, upper]` by the delta method on `ln B_p` ([`Weibull::quantile_bounds`]).
     pub ci95: [f64; 2],
+    /// 95 % likelihood-ratio bounds `[lower, upper]` ([`likelihood_ratio::b_life_lr_bounds`]):
+    /// wider and honest where few failures leave the likelihood far from quadratic.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lr_ci95: Option<[f64; 2]>,
 }
 
 /// One step of the Kaplan-Meier curve, at a distinct failure time. `R(t)` is 1 before the first
@@ -119,7 +125,7 @@ pub struct LifeAnalysis {
     pub b10: Option<BLife>,
     /// The Kaplan-Meier steps; empty if there are no failures or the times are invalid.
     pub kaplan_meier: Vec<KaplanMeierPoint>,
-    /// The Weibull, lognormal and exponential fits that could be made, best first by AICc
+    /// The Weibull, lognormal, gamma and exponential fits that could be made, best first by AICc
     /// ([`fits::fits`]).
     #[serde(default)]
     pub fits: Vec<fits::Fit>,
@@ -249,14 +255,22 @@ pub fn analyse_lives(lives: &Lives) -> LifeAnalysis {
     LifeAnalysis {
         failures: count(lives.failures()),
         censored: count(lives.censored()),
-        b1: weibull.as_ref().and_then(|w| b_life(w, 0.01)),
-        b10: weibull.as_ref().and_then(|w| b_life(w, 0.10)),
+        b1: weibull.as_ref().and_then(|w| b_life_of(lives, w, 0.01)),
+        b10: weibull.as_ref().and_then(|w| b_life_of(lives, w, 0.10)),
         weibull,
         weibull_error,
         kaplan_meier: kaplan_meier_lives(lives),
         fit_warning: fits::weibull_warning(&fits),
         fits,
     }
+}
+
+/// [`b_life`] of the Weibull fitted to `lives`, with its likelihood-ratio bounds.
+fn b_life_of(lives: &Lives, weibull: &Weibull, p: f64) -> Option<BLife> {
+    b_life(weibull, p).map(|b| BLife {
+        lr_ci95: likelihood_ratio::b_life_lr_bounds(lives, weibull, p),
+        ..b
+    })
 }
 
 /// A device count as the reports' `usize` (saturating on a 32-bit target).
@@ -374,7 +388,7 @@ pub fn weibull_log_likelihood(data: &[(f64, bool)], beta: f64, eta: f64) -> f64 
 }
 
 /// [`weibull_log_likelihood`] of lives grouped by time.
-fn log_likelihood(at: &[LivesAt], beta: f64, eta: f64) -> f64 {
+pub(crate) fn log_likelihood(at: &[LivesAt], beta: f64, eta: f64) -> f64 {
     let (ln_beta, ln_eta) = (beta.ln(), eta.ln());
     at.iter()
         .map(|a| {
@@ -568,6 +582,7 @@ pub fn b_life(weibull: &Weibull, p: f64) -> Option<BLife> {
         p,
         value: weibull.quantile(p)?,
         ci95: weibull.quantile_bounds(p)?,
+        lr_ci95: None,
     })
 }
 
@@ -888,6 +903,7 @@ mod tests {
         best_by_aicc: String,
         weibull: BTreeMap<String, Option<f64>>,
         lognormal: BTreeMap<String, Option<f64>>,
+        gamma: BTreeMap<String, Option<f64>>,
         exponential: BTreeMap<String, Option<f64>>,
     }
 
@@ -907,7 +923,7 @@ mod tests {
         for (name, reference) in &file.datasets {
             let lives = Lives::from_pairs(&data_of[name]).unwrap();
             let analysis = analyse_lives(&lives);
-            assert_eq!(analysis.fits.len(), 3, "{name}");
+            assert_eq!(analysis.fits.len(), 4, "{name}");
             assert_eq!(
                 analysis.fits[0].distribution.name(),
                 reference.best_by_aicc,
@@ -917,6 +933,7 @@ mod tests {
                 let want = match fit.distribution {
                     fits::Family::Weibull => &reference.weibull,
                     fits::Family::Lognormal => &reference.lognormal,
+                    fits::Family::Gamma => &reference.gamma,
                     fits::Family::Exponential => &reference.exponential,
                 };
                 let mut got: BTreeMap<&str, f64> = fit
@@ -934,6 +951,40 @@ mod tests {
                         d < 1e-6,
                         "{name} {} {quantity}: {value} against scipy's {expected}",
                         fit.distribution.name()
+                    );
+                }
+            }
+        }
+        eprintln!("worst relative differences: {worst:?}");
+    }
+
+    /// The likelihood-ratio bounds on B1 and B10 equal scipy's (its own profile maximiser and
+    /// root finder, `tools/life_fits_reference.py`) on the five data sets, and hold the estimate
+    /// and, where the likelihood is far from quadratic (few failures), differ from the
+    /// Fisher-matrix bounds.
+    #[test]
+    fn likelihood_ratio_bounds_agree_with_scipy() {
+        let file: FitsFile = serde_json::from_str(include_str!(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tests/data/life_fits_reference.json"
+        )))
+        .expect("the fits reference table is JSON of the expected shape");
+        let data_of: BTreeMap<String, Vec<(f64, bool)>> =
+            references().into_iter().map(|r| (r.name, r.data)).collect();
+        let mut worst = BTreeMap::new();
+        for (name, reference) in &file.datasets {
+            let analysis = analyse_lives(&Lives::from_pairs(&data_of[name]).unwrap());
+            for (key, b) in [("b1", &analysis.b1), ("b10", &analysis.b10)] {
+                let b = b.as_ref().unwrap();
+                let [lower, upper] = b.lr_ci95.unwrap();
+                assert!(lower < b.value && b.value < upper, "{name} {key}: {b:?}");
+                for (end, value) in [("lower", lower), ("upper", upper)] {
+                    let expected = reference.weibull[&format!("{key}_lr_{end}")].unwrap();
+                    let d =
+                        relative_difference(&mut worst, "likelihood-ratio bounds", value, expected);
+                    assert!(
+                        d < 1e-6,
+                        "{name} {key} {end}: {value} against scipy's {expected}"
                     );
                 }
             }

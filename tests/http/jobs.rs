@@ -597,8 +597,8 @@ fn a_job_without_failures_demonstrates_life_by_weibayes() {
         .iter()
         .map(|f| f["distribution"].as_str().unwrap())
         .collect();
-    assert_eq!(fits.len(), 3, "{analysis}");
-    for name in ["weibull", "lognormal", "exponential"] {
+    assert_eq!(fits.len(), 4, "{analysis}");
+    for name in ["weibull", "lognormal", "gamma", "exponential"] {
         assert!(fits.contains(&name), "{fits:?}");
     }
 }

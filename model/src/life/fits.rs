@@ -1,11 +1,15 @@
-//! Which distribution the lives follow: the two-parameter Weibull, the lognormal and the
+//! Which distribution the lives follow: the two-parameter Weibull, the lognormal, the gamma and the
 //! exponential, each fitted by maximum likelihood with right censoring to the same lives, and
-//! ranked by AICc (then BIC). The likelihoods are densities in time for all three, so they compare.
+//! ranked by AICc (then BIC). The likelihoods are densities in time for all four, so they compare.
 //!
 //! - Exponential: `lambda = r / T`, `r` the failures and `T` the total time on test.
 //! - Lognormal (`mu`, `sigma` of `ln t`): Newton's method on `(mu, ln sigma)` with the analytic
 //!   gradient and Hessian, a step halved until the likelihood rises; the survival terms go through
 //!   `erfc` and the hazard `phi / (1 - Phi)`, both finite in the far tail.
+//! - Gamma (`shape` k, `scale` theta): Nelder-Mead on `(ln k, ln theta)` from the failures'
+//!   moments, restarted at its own optimum until it stays; the survival terms are `ln Q(k, t /
+//!   theta)`, the regularised upper incomplete gamma function in logs
+//!   ([`super::weibayes::regularized_gamma`]).
 //! - Weibull: the fit of [`super::fit_weibull_lives`], with the log-likelihood it reports.
 //!
 //! `AICc = 2k - 2 ln L + 2k(k + 1)/(n - k - 1)`, `BIC = k ln n - 2 ln L`, `n` the devices.
@@ -20,6 +24,7 @@ use std::collections::BTreeMap;
 pub enum Family {
     Weibull,
     Lognormal,
+    Gamma,
     Exponential,
 }
 
@@ -28,6 +33,7 @@ impl Family {
         match self {
             Family::Weibull => "weibull",
             Family::Lognormal => "lognormal",
+            Family::Gamma => "gamma",
             Family::Exponential => "exponential",
         }
     }
@@ -36,7 +42,7 @@ impl Family {
     fn parameters(self) -> f64 {
         match self {
             Family::Exponential => 1.0,
-            Family::Weibull | Family::Lognormal => 2.0,
+            Family::Weibull | Family::Lognormal | Family::Gamma => 2.0,
         }
     }
 }
@@ -46,7 +52,8 @@ impl Family {
 pub struct Fit {
     pub distribution: Family,
     /// By name: `beta` and `eta` (Weibull), `mu` and `sigma` of the log of the life (lognormal),
-    /// `lambda` failures per operation (exponential).
+    /// `shape` and `scale` (gamma, mean `shape * scale`), `lambda` failures per operation
+    /// (exponential).
     pub parameters: BTreeMap<String, f64>,
     /// The maximised log-likelihood, a density in time.
     pub log_likelihood: f64,
@@ -94,6 +101,9 @@ pub fn fits(lives: &Lives, weibull: Option<&Weibull>) -> Vec<Fit> {
     if let Some((mu, sigma, ll)) = fit_lognormal(lives.at()) {
         add(Family::Lognormal, vec![("mu", mu), ("sigma", sigma)], ll);
     }
+    if let Some((shape, scale, ll)) = fit_gamma(lives.at()) {
+        add(Family::Gamma, vec![("shape", shape), ("scale", scale)], ll);
+    }
     if let Some((lambda, ll)) = fit_exponential(lives.at()) {
         add(Family::Exponential, vec![("lambda", lambda)], ll);
     }
@@ -128,6 +138,132 @@ fn fit_exponential(at: &[LivesAt]) -> Option<(f64, f64)> {
         let lambda = failures / time_on_test;
         (lambda, failures * lambda.ln() - failures)
     })
+}
+
+/// The gamma log-likelihood of the lives at shape `e^u` and scale `e^v`.
+fn gamma_log_likelihood(at: &[LivesAt], u: f64, v: f64) -> f64 {
+    let (shape, scale) = (u.exp(), v.exp());
+    let ln_gamma = libm::lgamma(shape);
+    at.iter()
+        .map(|a| {
+            let x = a.time / scale;
+            let mut ll = 0.0;
+            if a.failures > 0 {
+                ll += a.failures as f64 * ((shape - 1.0) * a.time.ln() - x - shape * v - ln_gamma);
+            }
+            if a.censored > 0 {
+                ll += a.censored as f64 * super::weibayes::regularized_gamma(shape, x).1;
+            }
+            ll
+        })
+        .sum()
+}
+
+/// The gamma's maximum `(shape, scale, ln L)`; none with fewer than two distinct failure times
+/// or if the search does not settle.
+fn fit_gamma(at: &[LivesAt]) -> Option<(f64, f64, f64)> {
+    let failed: Vec<&LivesAt> = at.iter().filter(|a| a.failures > 0).collect();
+    if failed.len() < 2 {
+        return None;
+    }
+    // Start from the failures' moments: shape mean^2 / variance, scale variance / mean.
+    let r: f64 = failed.iter().map(|a| a.failures as f64).sum();
+    let mean = failed
+        .iter()
+        .map(|a| a.failures as f64 * a.time)
+        .sum::<f64>()
+        / r;
+    let variance = failed
+        .iter()
+        .map(|a| a.failures as f64 * (a.time - mean).powi(2))
+        .sum::<f64>()
+        / r;
+    let variance = variance.max(1e-12 * mean * mean);
+    let start = [(mean * mean / variance).ln(), (variance / mean).ln()];
+    let negative = |x: &[f64; 2]| {
+        let ll = gamma_log_likelihood(at, x[0], x[1]);
+        if ll.is_finite() { -ll } else { f64::INFINITY }
+    };
+    let mut best = nelder_mead(&negative, start, 0.5);
+    for _ in 0..10 {
+        let again = nelder_mead(&negative, best.0, 0.05);
+        let settled = (again.1 - best.1).abs() <= 1e-13 * best.1.abs().max(1.0);
+        best = again;
+        if settled {
+            break;
+        }
+    }
+    let ([u, v], value) = best;
+    (value.is_finite() && u.abs() < 700.0 && v.abs() < 700.0).then(|| (u.exp(), v.exp(), -value))
+}
+
+/// The minimum of `f` by Nelder-Mead (standard coefficients) from `start` with a simplex of
+/// `step` along each axis, until the simplex is within `1e-12` across: `(x, f(x))`.
+fn nelder_mead(f: &dyn Fn(&[f64; 2]) -> f64, start: [f64; 2], step: f64) -> ([f64; 2], f64) {
+    let mut simplex = [
+        start,
+        [start[0] + step, start[1]],
+        [start[0], start[1] + step],
+    ];
+    let mut values = simplex.map(|x| f(&x));
+    for _ in 0..20_000 {
+        let mut order = [0, 1, 2];
+        order.sort_by(|&i, &j| values[i].total_cmp(&values[j]));
+        simplex = order.map(|i| simplex[i]);
+        values = order.map(|i| values[i]);
+        let size = (1..3)
+            .map(|i| {
+                (simplex[i][0] - simplex[0][0])
+                    .abs()
+                    .max((simplex[i][1] - simplex[0][1]).abs())
+            })
+            .fold(0.0, f64::max);
+        if size <= 1e-12 {
+            break;
+        }
+        let centroid = [
+            0.5 * (simplex[0][0] + simplex[1][0]),
+            0.5 * (simplex[0][1] + simplex[1][1]),
+        ];
+        let along = |t: f64| {
+            [
+                centroid[0] + t * (simplex[2][0] - centroid[0]),
+                centroid[1] + t * (simplex[2][1] - centroid[1]),
+            ]
+        };
+        let reflected = along(-1.0);
+        let fr = f(&reflected);
+        if fr < values[0] {
+            let expanded = along(-2.0);
+            let fe = f(&expanded);
+            (simplex[2], values[2]) = if fe < fr {
+                (expanded, fe)
+            } else {
+                (reflected, fr)
+            };
+        } else if fr < values[1] {
+            (simplex[2], values[2]) = (reflected, fr);
+        } else {
+            let contracted = if fr < values[2] {
+                along(-0.5)
+            } else {
+                along(0.5)
+            };
+            let fc = f(&contracted);
+            if fc < values[2].min(fr) {
+                (simplex[2], values[2]) = (contracted, fc);
+            } else {
+                for i in 1..3 {
+                    simplex[i] = [
+                        simplex[0][0] + 0.5 * (simplex[i][0] - simplex[0][0]),
+                        simplex[0][1] + 0.5 * (simplex[i][1] - simplex[0][1]),
+                    ];
+                    values[i] = f(&simplex[i]);
+                }
+            }
+        }
+    }
+    (simplex[0], values[0])
 }
 
 /// `ln(1 - Phi(z))`, finite for every finite `z` (the asymptotic series where `erfc` underflows).

@@ -98,13 +98,20 @@ fn chi_square_quantile(p: f64, m: u64) -> f64 {
     lo + hi
 }
 
-/// `P(a, x)`, the regularised lower incomplete gamma function: its series below `x = a + 1`, the
-/// continued fraction of `Q = 1 - P` above (Numerical Recipes 6.2, Lentz's method).
+/// `P(a, x)`, the regularised lower incomplete gamma function.
 fn regularized_lower_gamma(a: f64, x: f64) -> f64 {
+    regularized_gamma(a, x).0
+}
+
+/// `(P(a, x), ln Q(a, x))`, the regularised lower incomplete gamma function and the log of its
+/// complement: the series of `P` below `x = a + 1`, the continued fraction of `Q` above (Numerical
+/// Recipes 6.2, Lentz's method), so that `ln Q` keeps its digits far in the upper tail, where `Q`
+/// itself would underflow. `x <= 0` gives `(0, 0)`.
+pub(crate) fn regularized_gamma(a: f64, x: f64) -> (f64, f64) {
     if x <= 0.0 {
-        return 0.0;
+        return (0.0, 0.0);
     }
-    let front = (a * x.ln() - x - libm::lgamma(a)).exp();
+    let ln_front = a * x.ln() - x - libm::lgamma(a);
     if x < a + 1.0 {
         let (mut term, mut sum, mut n) = (1.0 / a, 1.0 / a, a);
         for _ in 0..100_000 {
@@ -115,7 +122,8 @@ fn regularized_lower_gamma(a: f64, x: f64) -> f64 {
                 break;
             }
         }
-        sum * front
+        let p = sum * ln_front.exp();
+        (p, (-p).ln_1p())
     } else {
         let tiny = 1e-300;
         let mut b = x + 1.0 - a;
@@ -140,7 +148,8 @@ fn regularized_lower_gamma(a: f64, x: f64) -> f64 {
                 break;
             }
         }
-        1.0 - front * h
+        let ln_q = h.ln() + ln_front;
+        (-ln_q.exp_m1(), ln_q)
     }
 }
 

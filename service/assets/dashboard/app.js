@@ -950,7 +950,8 @@
         rows.push(["η (scale), operations", fmt(w.eta), fmtInterval(w.eta_ci95)]);
       }
       for (const [label, b] of [["B1, operations", analysis.b1], ["B10, operations", analysis.b10]]) {
-        if (b) rows.push([label, fmt(b.value), fmtInterval(b.ci95)]);
+        if (b) rows.push([label + " (Fisher bounds)", fmt(b.value), fmtInterval(b.ci95)]);
+        if (b && b.lr_ci95) rows.push([label + " (likelihood-ratio bounds)", fmt(b.value), fmtInterval(b.lr_ci95)]);
       }
       const table = $("#life-table");
       if (!w) {

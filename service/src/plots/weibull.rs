@@ -540,6 +540,7 @@ mod tests {
             p: 0.1,
             value: f64::NAN,
             ci95: [f64::INFINITY, 0.0],
+            lr_ci95: None,
         });
         let svg = weibull_svg(&life);
         check(&svg);
