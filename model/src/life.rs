@@ -907,18 +907,23 @@ mod tests {
         exponential: BTreeMap<String, Option<f64>>,
     }
 
-    /// Every candidate's parameters, log-likelihood, AICc and BIC equal scipy's to 1e-6 on the
-    /// five data sets (censored, complete, a span of eight decades), and the ranking's winner is
-    /// scipy's.
-    #[test]
-    fn candidate_fits_agree_with_scipy() {
+    /// The fits reference table, and each of its data sets by name.
+    fn fits_reference() -> (FitsFile, BTreeMap<String, Vec<(f64, bool)>>) {
         let file: FitsFile = serde_json::from_str(include_str!(concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/../tests/data/life_fits_reference.json"
         )))
         .expect("the fits reference table is JSON of the expected shape");
-        let data_of: BTreeMap<String, Vec<(f64, bool)>> =
-            references().into_iter().map(|r| (r.name, r.data)).collect();
+        let data_of = references().into_iter().map(|r| (r.name, r.data)).collect();
+        (file, data_of)
+    }
+
+    /// Every candidate's parameters, log-likelihood, AICc and BIC equal scipy's to 1e-6 on the
+    /// five data sets (censored, complete, a span of eight decades), and the ranking's winner is
+    /// scipy's.
+    #[test]
+    fn candidate_fits_agree_with_scipy() {
+        let (file, data_of) = fits_reference();
         let mut worst = BTreeMap::new();
         for (name, reference) in &file.datasets {
             let lives = Lives::from_pairs(&data_of[name]).unwrap();
@@ -964,13 +969,7 @@ mod tests {
     /// Fisher-matrix bounds.
     #[test]
     fn likelihood_ratio_bounds_agree_with_scipy() {
-        let file: FitsFile = serde_json::from_str(include_str!(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../tests/data/life_fits_reference.json"
-        )))
-        .expect("the fits reference table is JSON of the expected shape");
-        let data_of: BTreeMap<String, Vec<(f64, bool)>> =
-            references().into_iter().map(|r| (r.name, r.data)).collect();
+        let (file, data_of) = fits_reference();
         let mut worst = BTreeMap::new();
         for (name, reference) in &file.datasets {
             let analysis = analyse_lives(&Lives::from_pairs(&data_of[name]).unwrap());

@@ -162,22 +162,8 @@ fn gamma_log_likelihood(at: &[LivesAt], u: f64, v: f64) -> f64 {
 /// The gamma's maximum `(shape, scale, ln L)`; none with fewer than two distinct failure times
 /// or if the search does not settle.
 fn fit_gamma(at: &[LivesAt]) -> Option<(f64, f64, f64)> {
-    let failed: Vec<&LivesAt> = at.iter().filter(|a| a.failures > 0).collect();
-    if failed.len() < 2 {
-        return None;
-    }
     // Start from the failures' moments: shape mean^2 / variance, scale variance / mean.
-    let r: f64 = failed.iter().map(|a| a.failures as f64).sum();
-    let mean = failed
-        .iter()
-        .map(|a| a.failures as f64 * a.time)
-        .sum::<f64>()
-        / r;
-    let variance = failed
-        .iter()
-        .map(|a| a.failures as f64 * (a.time - mean).powi(2))
-        .sum::<f64>()
-        / r;
+    let (mean, variance) = failure_moments(at, |t| t)?;
     let variance = variance.max(1e-12 * mean * mean);
     let start = [(mean * mean / variance).ln(), (variance / mean).ln()];
     let negative = |x: &[f64; 2]| {
@@ -195,6 +181,27 @@ fn fit_gamma(at: &[LivesAt]) -> Option<(f64, f64, f64)> {
     }
     let ([u, v], value) = best;
     (value.is_finite() && u.abs() < 700.0 && v.abs() < 700.0).then(|| (u.exp(), v.exp(), -value))
+}
+
+/// The mean and variance of `of(t)` over the failures; none with fewer than two distinct failure
+/// times, where neither two-parameter fit has a maximum.
+fn failure_moments(at: &[LivesAt], of: fn(f64) -> f64) -> Option<(f64, f64)> {
+    let failed: Vec<&LivesAt> = at.iter().filter(|a| a.failures > 0).collect();
+    if failed.len() < 2 {
+        return None;
+    }
+    let r: f64 = failed.iter().map(|a| a.failures as f64).sum();
+    let mean = failed
+        .iter()
+        .map(|a| a.failures as f64 * of(a.time))
+        .sum::<f64>()
+        / r;
+    let variance = failed
+        .iter()
+        .map(|a| a.failures as f64 * (of(a.time) - mean).powi(2))
+        .sum::<f64>()
+        / r;
+    Some((mean, variance))
 }
 
 /// The minimum of `f` by Nelder-Mead (standard coefficients) from `start` with a simplex of
@@ -316,22 +323,9 @@ fn lognormal_terms(at: &[LivesAt], mu: f64, ln_sigma: f64) -> (f64, [f64; 2], [[
 /// The lognormal's maximum `(mu, sigma, ln L)`; none with fewer than two distinct failure times
 /// (then `sigma` runs to 0) or if Newton's method does not settle.
 fn fit_lognormal(at: &[LivesAt]) -> Option<(f64, f64, f64)> {
-    let failed: Vec<&LivesAt> = at.iter().filter(|a| a.failures > 0).collect();
-    if failed.len() < 2 {
-        return None;
-    }
     // Start from the failures' log times: their mean and standard deviation.
-    let r: f64 = failed.iter().map(|a| a.failures as f64).sum();
-    let mean = failed
-        .iter()
-        .map(|a| a.failures as f64 * a.time.ln())
-        .sum::<f64>()
-        / r;
-    let variance = failed
-        .iter()
-        .map(|a| a.failures as f64 * (a.time.ln() - mean).powi(2))
-        .sum::<f64>()
-        / r;
+    let (mean, variance) = failure_moments(at, f64::ln)?;
+    let r: f64 = at.iter().map(|a| a.failures as f64).sum();
     let (mut mu, mut ln_sigma) = (mean, 0.5 * variance.max(1e-12).ln());
     let (mut ll, mut g, mut h) = lognormal_terms(at, mu, ln_sigma);
     for _ in 0..200 {
