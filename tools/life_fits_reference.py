@@ -2,7 +2,7 @@
 """Independent reference for `model/src/life/fits.rs`: the candidate life distributions fitted by
 maximum likelihood with right censoring, and their ranking.
 
-    pip install scipy
+    pip install scipy reliability==0.9.0
     python3 tools/life_fits_reference.py          # writes tests/data/life_fits_reference.json
     python3 tools/life_fits_reference.py -        # or prints it
 
@@ -15,7 +15,9 @@ tolerances from scipy's own start, never from the Rust module's:
 * `lognormal`: `lognorm(s=sigma, scale=exp(mu))`, location 0 (mu and sigma of ln t);
 * `gamma`: `gamma(a=shape, scale=scale)`, location 0, from the failures' moments;
 * `exponential`: `expon(scale=1/lambda)`, location 0; its maximum is also `failures / total time`;
-* the Weibull's likelihood-ratio 95 % bounds on B1 and B10 (`weibull_lr_bounds`).
+* the Weibull's likelihood-ratio 95 % bounds on B1 and B10 (`weibull_lr_bounds`);
+* each fit's Anderson-Darling statistic by the `reliability` package's own plotting positions and
+  formula (`reliability.Utils.anderson_darling`, as its fitters call it), at scipy's fit.
 
 AICc = 2k - 2 lnL + 2k(k + 1)/(n - k - 1) and BIC = k ln n - 2 lnL, n the devices. Shares no code
 with the Rust module: only the data generator.
@@ -118,6 +120,19 @@ def fits(data):
     (ln_scale,), ll = maximise(data, ss.expon, [math.log(sum(t for t, _ in data) / len(failures))],
                                lambda x: {"scale": math.exp(x[0])})
     out["exponential"] = {"lambda": math.exp(-ln_scale), **criteria(ll, 1, n)}
+    # The Anderson-Darling statistic as the reliability package computes it: its own plotting
+    # positions and its own formula, with scipy's CDF at scipy's fit.
+    from reliability.Probability_plotting import plotting_positions
+    from reliability.Utils import anderson_darling
+    x, y = plotting_positions(failures=failures, right_censored=[t for t, f in data if not f] or None)
+    cdfs = {
+        "weibull": lambda t: ss.weibull_min.cdf(t, out["weibull"]["beta"], scale=out["weibull"]["eta"]),
+        "lognormal": lambda t: ss.lognorm.cdf(t, out["lognormal"]["sigma"], scale=math.exp(out["lognormal"]["mu"])),
+        "gamma": lambda t: ss.gamma.cdf(t, out["gamma"]["shape"], scale=out["gamma"]["scale"]),
+        "exponential": lambda t: ss.expon.cdf(t, scale=1 / out["exponential"]["lambda"]),
+    }
+    for name, cdf in cdfs.items():
+        out[name]["anderson_darling"] = float(anderson_darling(fitted_cdf=cdf(np.asarray(x)), empirical_cdf=y))
     out["best_by_aicc"] = min(out, key=lambda d: out[d]["aicc"] if out[d]["aicc"] is not None else math.inf)
     return out
 

@@ -949,11 +949,21 @@ mod tests {
                 got.insert("log_likelihood", fit.log_likelihood);
                 got.insert("aicc", fit.aicc.unwrap());
                 got.insert("bic", fit.bic);
+                got.insert("anderson_darling", fit.anderson_darling.unwrap());
                 for (quantity, value) in got {
                     let expected = want[quantity].unwrap();
                     let d = relative_difference(&mut worst, "candidate fits", value, expected);
+                    // `large` has a failure and a censored device at the same time (7381): the
+                    // plotting positions put the failure first, as Kaplan-Meier does; the
+                    // `reliability` package's unstable sort puts it second, which moves the
+                    // Anderson-Darling statistic by 1e-5 relative. Everything else agrees to 1e-7.
+                    let tolerance = if quantity == "anderson_darling" {
+                        2e-5
+                    } else {
+                        1e-6
+                    };
                     assert!(
-                        d < 1e-6,
+                        d < tolerance,
                         "{name} {} {quantity}: {value} against scipy's {expected}",
                         fit.distribution.name()
                     );

@@ -259,6 +259,10 @@ const lifeJob = await step("submit a job with a failure criterion", () =>
 await step(`the life job ${lifeJob.id} succeeds`, () => succeeds(lifeJob.id));
 await step(`open ${base}/jobs/${lifeJob.id}`, () => page.goto(`${base}/jobs/${lifeJob.id}`, { waitUntil: "load" }));
 await step("#plot-weibull shows an SVG", () => page.waitForSelector("#plot-weibull svg"));
+await step("the candidate fits are listed with Anderson-Darling", () =>
+  page.waitForFunction(() => document.querySelectorAll("#fits-table tbody tr").length === 4
+    && document.querySelector("#fits-table thead").textContent.includes("Anderson-Darling")),
+);
 await page.waitForTimeout(300);
 await step("save dashboard-life.png", () =>
   page.locator("#life-section").screenshot({ path: join(outDir, "dashboard-life.png") }),

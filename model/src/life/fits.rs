@@ -12,7 +12,8 @@
 //!   ([`super::weibayes::regularized_gamma`]).
 //! - Weibull: the fit of [`super::fit_weibull_lives`], with the log-likelihood it reports.
 //!
-//! `AICc = 2k - 2 ln L + 2k(k + 1)/(n - k - 1)`, `BIC = k ln n - 2 ln L`, `n` the devices.
+//! `AICc = 2k - 2 ln L + 2k(k + 1)/(n - k - 1)`, `BIC = k ln n - 2 ln L`, `n` the devices; and
+//! each fit's goodness of fit, the adjusted Anderson-Darling statistic ([`anderson_darling`]).
 
 use super::{Lives, LivesAt, Weibull};
 use serde::{Deserialize, Serialize};
@@ -62,6 +63,11 @@ pub struct Fit {
     pub aicc: Option<f64>,
     /// The Bayesian information criterion (lower is better).
     pub bic: f64,
+    /// The Anderson-Darling statistic of the failures against the fitted CDF, adjusted for
+    /// censoring as Minitab and the `reliability` package compute it ([`anderson_darling`]): lower
+    /// fits better; `None` when it is not finite.
+    #[serde(default)]
+    pub anderson_darling: Option<f64>,
 }
 
 /// How much lower another distribution's AICc must be than the Weibull's for the analysis to
@@ -73,10 +79,12 @@ pub const AICC_SUPPORT: f64 = 2.0;
 pub fn fits(lives: &Lives, weibull: Option<&Weibull>) -> Vec<Fit> {
     let devices = (lives.failures() + lives.censored()) as f64;
     let mut found = Vec::new();
+    let positions = failure_positions(lives);
     let mut add = |family: Family, parameters: Vec<(&str, f64)>, log_likelihood: f64| {
         if !log_likelihood.is_finite() {
             return;
         }
+        let anderson_darling = anderson_darling(&positions, |t| cdf(family, &parameters, t));
         let k = family.parameters();
         let aicc = (devices - k - 1.0 > 0.0)
             .then(|| 2.0 * k - 2.0 * log_likelihood + 2.0 * k * (k + 1.0) / (devices - k - 1.0));
@@ -89,6 +97,7 @@ pub fn fits(lives: &Lives, weibull: Option<&Weibull>) -> Vec<Fit> {
             log_likelihood,
             aicc,
             bic: k * devices.ln() - 2.0 * log_likelihood,
+            anderson_darling,
         });
     };
     if let Some(w) = weibull {
@@ -114,6 +123,86 @@ pub fn fits(lives: &Lives, weibull: Option<&Weibull>) -> Vec<Fit> {
             .then(a.distribution.cmp(&b.distribution))
     });
     found
+}
+
+/// The CDF of `family` with `parameters` (named as in [`Fit::parameters`]) at `t > 0`.
+fn cdf(family: Family, parameters: &[(&str, f64)], t: f64) -> f64 {
+    let get = |name: &str| {
+        parameters
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map_or(f64::NAN, |&(_, v)| v)
+    };
+    match family {
+        Family::Weibull => -(-(t / get("eta")).powf(get("beta"))).exp_m1(),
+        Family::Lognormal => {
+            let z = (t.ln() - get("mu")) / get("sigma");
+            0.5 * libm::erfc(-z / std::f64::consts::SQRT_2)
+        }
+        Family::Gamma => super::weibayes::regularized_gamma(get("shape"), t / get("scale")).0,
+        Family::Exponential => -(-get("lambda") * t).exp_m1(),
+    }
+}
+
+/// Each failure's time and median-rank plotting position, in time order: Johnson's adjusted rank
+/// `j = j' + (n + 1 - j') / (1 + r)` (`r` still at risk, the failure included; the failures at a
+/// time before the devices censored then) and Bernard's `(j - 0.3) / (n + 0.4)`, failure by
+/// failure (`super::median_ranks` gives the last of each time).
+fn failure_positions(lives: &Lives) -> Vec<(f64, f64)> {
+    let n = (lives.failures() + lives.censored()) as f64;
+    let mut at_risk = n;
+    let mut rank = 0.0;
+    let mut positions = Vec::new();
+    for a in lives.at() {
+        for k in 0..a.failures {
+            rank += (n + 1.0 - rank) / (1.0 + at_risk - k as f64);
+            positions.push((a.time, (rank - 0.3) / (n + 0.4)));
+        }
+        at_risk -= a.devices();
+    }
+    positions
+}
+
+/// The adjusted Anderson-Darling statistic of Minitab and the `reliability` package (its
+/// `Utils.anderson_darling`): with `Z_i` the fitted CDF at the `n` failures in order, `Z_{n+1} =
+/// 1 - 1e-12`, `Z_0 = 0`, and `F_i` the plotting positions (`F_0 = 0`),
+///
+/// `AD = n sum_{i=1}^{n+1} [-Z_i - ln(1 - Z_i) + Z_{i-1} + ln(1 - Z_{i-1})
+///       + 2 F_{i-1} (ln(1 - Z_i) - ln(1 - Z_{i-1}))
+///       + F_{i-1}^2 (ln Z_i - ln(1 - Z_i) - ln Z_{i-1} + ln(1 - Z_{i-1}))]`
+///
+/// with `ln Z_0` taken as 0. `None` without failures or when the CDF is not a number.
+pub fn anderson_darling(positions: &[(f64, f64)], cdf: impl Fn(f64) -> f64) -> Option<f64> {
+    if positions.is_empty() {
+        return None;
+    }
+    // A fit far off puts failures at `Z = 0` or `1`, where the logs are infinite: held inside
+    // `[MIN_POSITIVE, 1 - 1e-12]`, the statistic stays finite and large.
+    let mut z: Vec<f64> = positions
+        .iter()
+        .map(|&(t, _)| cdf(t).clamp(f64::MIN_POSITIVE, 1.0 - 1e-12))
+        .collect();
+    z.sort_by(f64::total_cmp);
+    z.push(1.0 - 1e-12);
+    let mut f: Vec<f64> = positions.iter().map(|&(_, p)| p).collect();
+    f.sort_by(f64::total_cmp);
+    let (mut previous_z, mut previous_ln_z, mut previous_f) = (0.0f64, 0.0f64, 0.0f64);
+    let mut sum = 0.0;
+    for (i, &zi) in z.iter().enumerate() {
+        let (ln_survival, previous_ln_survival) = ((-zi).ln_1p(), (-previous_z).ln_1p());
+        let ln_z = zi.ln();
+        sum += -zi - ln_survival
+            + previous_z
+            + previous_ln_survival
+            + 2.0 * previous_f * (ln_survival - previous_ln_survival)
+            + previous_f * previous_f * (ln_z - ln_survival - previous_ln_z + previous_ln_survival);
+        (previous_z, previous_ln_z) = (zi, ln_z);
+        if let Some(&fi) = f.get(i) {
+            previous_f = fi;
+        }
+    }
+    let ad = positions.len() as f64 * sum;
+    ad.is_finite().then_some(ad)
 }
 
 /// A warning when another distribution fits the lives clearly better than the Weibull by AICc.
@@ -471,5 +560,43 @@ mod tests {
         let ranked = fits(&lives, Some(&weibull));
         assert_eq!(ranked[0].distribution, Family::Weibull);
         assert_eq!(weibull_warning(&ranked), None);
+    }
+
+    /// Failure by failure, the plotting positions end each time where `median_ranks` puts that
+    /// time's point; the Anderson-Darling statistic of a perfect fit to evenly spread positions
+    /// is small, of a bad one large.
+    #[test]
+    fn positions_follow_the_median_ranks_and_anderson_darling_tells_fits_apart() {
+        let lives = Lives::from_pairs(&[
+            (10.0, true),
+            (10.0, true),
+            (15.0, false),
+            (20.0, true),
+            (20.0, false),
+            (30.0, true),
+            (40.0, false),
+        ])
+        .unwrap();
+        let positions = failure_positions(&lives);
+        assert_eq!(positions.len(), 4);
+        let km = super::super::kaplan_meier_lives(&lives);
+        let ranks = super::super::median_ranks(&km, 7);
+        let last_of_each: Vec<f64> = [1, 2, 3].iter().map(|&i| positions[i].1).collect();
+        for (a, b) in last_of_each.iter().zip(&ranks) {
+            assert_relative_eq!(*a, *b, max_relative = 1e-15);
+        }
+        // Evenly spread exponential quantiles against the exponential they came from, and
+        // against one ten times too short.
+        let lives = Lives::from_pairs(
+            &(1..=100)
+                .map(|i| (-(1.0 - (i as f64 - 0.3) / 100.4).ln() * 1000.0, true))
+                .collect::<Vec<_>>(),
+        )
+        .unwrap();
+        let positions = failure_positions(&lives);
+        let good = anderson_darling(&positions, |t| -(-t / 1000.0).exp_m1()).unwrap();
+        let bad = anderson_darling(&positions, |t| -(-t / 100.0).exp_m1()).unwrap();
+        assert!(good < 1.0 && bad > 100.0, "{good} {bad}");
+        assert_eq!(anderson_darling(&[], |t| t), None);
     }
 }

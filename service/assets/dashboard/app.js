@@ -943,6 +943,7 @@
       injectSvg($("#plot-weibull"), base + "/plots/weibull.svg");
       keyedLink($("#life-csv"), base + "/life?format=csv", "job-" + id + "-life.csv");
 
+      renderFits(analysis);
       const w = analysis.weibull;
       const rows = [];
       if (w) {
@@ -962,6 +963,26 @@
       table.replaceChildren(
         el("thead", {}, el("tr", {}, el("th", {}, "Weibull fit"), el("th", { class: "num" }, "estimate"), el("th", { class: "num" }, "95 % interval"))),
         el("tbody", {}, rows.map(([k, v, ci]) => el("tr", {}, el("td", {}, k), el("td", { class: "num" }, v), el("td", { class: "num" }, ci)))));
+    }
+
+    // The candidate distributions, best first by AICc, with BIC and Anderson-Darling.
+    function renderFits(analysis) {
+      const fits = analysis.fits || [];
+      $("#fit-warning").textContent = analysis.fit_warning ? "Note: " + analysis.fit_warning : "";
+      if (!fits.length) {
+        $("#fits-table").replaceChildren();
+        return;
+      }
+      const parameters = (f) => Object.entries(f.parameters || {}).map(([k, v]) => k + " = " + fmt(v)).join(", ");
+      $("#fits-table").replaceChildren(
+        el("thead", {}, el("tr", {}, ["distribution (best first)", "parameters", "AICc", "BIC", "Anderson-Darling"]
+          .map((h, i) => el("th", { class: i > 1 ? "num" : "" }, h)))),
+        el("tbody", {}, fits.map((f) => el("tr", {},
+          el("td", {}, f.distribution),
+          el("td", { class: "small" }, parameters(f)),
+          el("td", { class: "num" }, fmt(f.aicc, 6)),
+          el("td", { class: "num" }, fmt(f.bic, 6)),
+          el("td", { class: "num" }, fmt(f.anderson_darling))))));
     }
 
     // A rare event: its probability with interval, the tail curve and the design point.
