@@ -6,7 +6,7 @@ use bouncewear_model::montecarlo::Bin;
 use bouncewear_model::stats::Summary;
 
 use super::axes::{Frame, LinearAxis, Scale, draw_frame_axes, draw_x_ticks, draw_y_grid};
-use super::svg::{BAR, BLUE, INK, LABEL, MUTED_SMALL, RED, Style, Svg, num};
+use super::svg::{BAR, BLUE, INK, LABEL, MUTED_SMALL, RED, Style, Svg, fmt_sig, num, text_width};
 use super::{limit_of, message_svg, pad, pick_evenly, quantile, whole_valued};
 
 /// Panels of a grid are this large.
@@ -95,6 +95,38 @@ fn shared_axes(metric: &str, chosen: &[&Bin]) -> [LinearAxis; 2] {
 
 /// One bin's panel with its top left corner at `(px, py)`: its heading and count, the bars, the
 /// median and the limit.
+/// A panel's heading and its count, shortened until both fit on one line of `room` pixels with a
+/// gap between them: `operations a-b` then `ops a-b`, `n = 12345` then `n = 12.3k`.
+fn panel_labels(bin: &Bin, room: f64) -> (String, String) {
+    let range = format!("{}\u{2013}{}", bin.op_start, bin.op_end);
+    let headings = [format!("operations {range}"), format!("ops {range}")];
+    let counts = [
+        format!("n = {}", bin.summary.n),
+        format!("n = {}", fmt_count(bin.summary.n)),
+    ];
+    // Bold text runs about 8 % wider than the estimate of `text_width`.
+    let fits = |h: &str, c: &str| text_width(h, 12.0) * 1.08 + 10.0 + text_width(c, 11.0) <= room;
+    for count in &counts {
+        for heading in &headings {
+            if fits(heading, count) {
+                return (heading.clone(), count.clone());
+            }
+        }
+    }
+    (headings[1].clone(), counts[1].clone())
+}
+
+/// `n` in at most four significant digits with a k, M or G suffix from 10,000 up.
+fn fmt_count(n: u64) -> String {
+    let v = n as f64;
+    match v {
+        v if v < 1e4 => n.to_string(),
+        v if v < 1e6 => format!("{}k", fmt_sig(v / 1e3, 3)),
+        v if v < 1e9 => format!("{}M", fmt_sig(v / 1e6, 3)),
+        v => format!("{}G", fmt_sig(v / 1e9, 3)),
+    }
+}
+
 fn draw_panel(svg: &mut Svg, [x_axis, y_axis]: &[LinearAxis; 2], (px, py): (f64, f64), bin: &Bin) {
     let s = &bin.summary;
     let frame = Frame::inset(px, py, PANEL.0, PANEL.1, [44.0, 24.0, 12.0, 32.0]);
@@ -102,10 +134,11 @@ fn draw_panel(svg: &mut Svg, [x_axis, y_axis]: &[LinearAxis; 2], (px, py): (f64,
         r#"class="panel" data-op-start="{}" data-op-end="{}""#,
         bin.op_start, bin.op_end
     ));
+    let (heading, count) = panel_labels(bin, frame.right() - (px + 8.0));
     svg.text(
         px + 8.0,
         py + 14.0,
-        &format!("operations {}\u{2013}{}", bin.op_start, bin.op_end),
+        &heading,
         Style {
             anchor: "start",
             bold: true,
@@ -115,7 +148,7 @@ fn draw_panel(svg: &mut Svg, [x_axis, y_axis]: &[LinearAxis; 2], (px, py): (f64,
     svg.text(
         frame.right(),
         py + 14.0,
-        &format!("n = {}", s.n),
+        &count,
         Style {
             anchor: "end",
             ..MUTED_SMALL
@@ -305,5 +338,27 @@ mod tests {
         ] {
             check(&histograms_svg("bounce_count", &bins));
         }
+    }
+
+    #[test]
+    fn panel_labels_never_collide() {
+        let bin = |start: u64, end: u64, n: u64| {
+            let mut b = wear_bins(1, 1, None).remove(0);
+            (b.op_start, b.op_end, b.summary.n) = (start, end, n);
+            b
+        };
+        let room = PANEL.0 - 12.0 - 8.0;
+        assert_eq!(
+            panel_labels(&bin(0, 20, 2000), room),
+            ("operations 0\u{2013}20".to_owned(), "n = 2000".to_owned())
+        );
+        let (heading, count) = panel_labels(&bin(100_000, 200_000, 2_000_000), room);
+        assert!(heading.starts_with("ops "), "{heading}");
+        assert!(
+            text_width(&heading, 12.0) * 1.08 + 10.0 + text_width(&count, 11.0) <= room,
+            "{heading} / {count}"
+        );
+        assert_eq!(fmt_count(12_345), "12.3k");
+        assert_eq!(fmt_count(2_000_000), "2.00M");
     }
 }
