@@ -9,6 +9,7 @@ use super::error::{
     responses::{BadQuery, NotSucceeded, Unauthorized},
 };
 use super::jobs::{JSON, succeeded_result, to_json};
+use crate::domain::query::{fraction, items};
 use crate::domain::{JobId, Owner};
 use crate::plots;
 use axum::Extension;
@@ -197,34 +198,19 @@ fn statistics(text: Option<&str>) -> Result<Vec<Statistic>, ApiError> {
             .map(|name| Statistic::parse(name).expect("a default statistic"))
             .collect());
     };
-    text.split(',')
-        .map(|name| {
-            Statistic::parse(name.trim()).map_err(|rule| {
-                ApiError::BadRequest(format!("query parameter `statistics`: {rule}"))
-            })
-        })
-        .collect()
+    items("statistics", Some(text), |name| {
+        Statistic::parse(name.trim())
+    })
+    .map_err(|bad| ApiError::BadRequest(bad.to_string()))
 }
 
 /// The B-life fractions asked, or the defaults.
 fn b_lives(text: Option<&str>) -> Result<Vec<f64>, ApiError> {
-    let Some(text) = text else {
-        return Ok(DEFAULT_B_LIVES.to_vec());
-    };
-    text.split(',')
-        .map(|item| {
-            item.trim()
-                .parse::<f64>()
-                .ok()
-                .filter(|p| *p > 0.0 && *p < 1.0)
-                .ok_or_else(|| {
-                    ApiError::BadRequest(format!(
-                        "query parameter `b_lives`: `{}` is not a fraction strictly between 0 and 1",
-                        item.chars().take(40).collect::<String>()
-                    ))
-                })
-        })
-        .collect()
+    match text {
+        None => Ok(DEFAULT_B_LIVES.to_vec()),
+        Some(text) => items("b_lives", Some(text), fraction)
+            .map_err(|bad| ApiError::BadRequest(bad.to_string())),
+    }
 }
 
 #[cfg(test)]
@@ -245,6 +231,9 @@ mod tests {
         );
         assert_eq!(b_lives(None).unwrap(), DEFAULT_B_LIVES.to_vec());
         assert_eq!(b_lives(Some("0.05")).unwrap(), vec![0.05]);
+        let many = vec!["mean"; 21].join(",");
+        let error = statistics(Some(&many)).unwrap_err().to_string();
+        assert!(error.contains("at most 20"), "{error}");
         for bad in ["1", "0", "x", "nan", ""] {
             let error = b_lives(Some(bad)).unwrap_err().to_string();
             assert!(error.contains("`b_lives`"), "{error}");

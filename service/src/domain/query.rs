@@ -45,8 +45,9 @@ impl AfterRunQuery {
     }
 }
 
-/// The comma-separated items of `parameter`, each read by `read` (an absent parameter has none).
-fn items<T>(
+/// The comma-separated items of `parameter`, each read by `read` (an absent parameter has none),
+/// at most [`MAX_ITEMS`] of them; the error names the parameter, the item and its rule.
+pub fn items<T>(
     parameter: &'static str,
     text: Option<&str>,
     read: fn(&str) -> Result<T, String>,
@@ -73,6 +74,13 @@ fn level(item: &str) -> Result<f64, String> {
     number(item)
         .filter(|q| *q > 0.0 && *q < 1.0)
         .ok_or_else(|| "a quantile level must be a number strictly between 0 and 1".to_owned())
+}
+
+/// A fraction: a number strictly between 0 and 1, spaces around it allowed.
+pub fn fraction(item: &str) -> Result<f64, String> {
+    number(item.trim())
+        .filter(|p| *p > 0.0 && *p < 1.0)
+        .ok_or_else(|| "a fraction must be a number strictly between 0 and 1".to_owned())
 }
 
 /// A threshold: `above:X` or `below:X` with X a finite number.
