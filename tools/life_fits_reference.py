@@ -15,6 +15,11 @@ tolerances from scipy's own start, never from the Rust module's:
 * `lognormal`: `lognorm(s=sigma, scale=exp(mu))`, location 0 (mu and sigma of ln t);
 * `gamma`: `gamma(a=shape, scale=scale)`, location 0, from the failures' moments;
 * `exponential`: `expon(scale=1/lambda)`, location 0; its maximum is also `failures / total time`;
+* `weibull_3p`: `weibull_min(c=beta, loc=gamma, scale=eta)` (`weibull_3p`): the profile over gamma
+  scanned for a local maximum inside (0, t_1) with beta > 1, polished by Nelder-Mead over all three
+  parameters; null where there is none, with the reason. `reliability`'s `Fit_Weibull_3P` on the
+  same lives is recorded beside it (`reliability_weibull_3p`): its bounded search ends at the
+  boundary gamma -> t_1 where the likelihood grows without bound;
 * the Weibull's likelihood-ratio 95 % bounds on B1 and B10 (`weibull_lr_bounds`);
 * each fit's Anderson-Darling statistic by the `reliability` package's own plotting positions and
   formula (`reliability.Utils.anderson_darling`, as its fitters call it), at scipy's fit.
@@ -32,7 +37,7 @@ import scipy.optimize as so
 import scipy.stats as ss
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from weibull_reference import DATASETS, versions  # noqa: E402  (the shared data sets)
+from weibull_reference import DATASETS, SplitMix, versions  # noqa: E402  (the shared data sets)
 
 DEFAULT_OUTPUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "data",
                               "life_fits_reference.json")
@@ -95,6 +100,78 @@ def weibull_lr_bounds(data, beta, eta, p):
     return bounds
 
 
+def shifted(seed, n, gamma, beta, eta, end):
+    """n devices with a failure-free life: floor(gamma + a Weibull(beta, eta) draw) + 1 operations,
+    censored at `end` (the splitmix64 draws of `tools/weibull_reference.py`)."""
+    rng = SplitMix(seed)
+    data = []
+    for _ in range(n):
+        life = math.floor(gamma + eta * (-math.log1p(-rng.uniform())) ** (1.0 / beta)) + 1.0
+        data.append((life, True) if life <= end else (end, False))
+    return data
+
+
+# Data sets of this table only, written into it with their lives: a failure-free life of 800
+# operations under a Weibull(2, 400), censored at 1300.
+LOCATION_DATASETS = {"shifted": shifted(6, 30, 800.0, 2.0, 400.0, 1300.0)}
+
+
+def weibull_3p(data):
+    """The three-parameter Weibull's maximum, or None and why. The profile log-likelihood over
+    gamma (scipy's two-parameter censored fit of t - gamma) on a grid of t_1 - gamma, t_1 the
+    earliest life, evenly in its logarithm from t_1 down to t_1 e^-14; the best grid point inside
+    with a neighbour on each side lower and beta > 1 is refined by scipy's bounded scalar
+    minimiser between its neighbours and polished by Nelder-Mead over (ln eta, ln beta, gamma)."""
+    failures = np.array([t for t, failed in data if failed])
+    suspensions = np.array([t for t, failed in data if not failed])
+    first = min(t for t, _ in data)
+
+    def ll(beta, eta, gamma):
+        if not (0 <= gamma < first):
+            return -math.inf
+        return (ss.weibull_min.logpdf(failures, beta, loc=gamma, scale=eta).sum()
+                + ss.weibull_min.logsf(suspensions, beta, loc=gamma, scale=eta).sum())
+
+    def profile(gamma):
+        def negative(x):
+            value = -ll(math.exp(x[1]), math.exp(x[0]), gamma)
+            return value if math.isfinite(value) else 1e300
+        x = so.fmin(negative, [np.log(failures - gamma).mean(), 0.0], xtol=1e-10, ftol=1e-12,
+                    maxiter=100000, maxfun=200000, disp=0)
+        return -negative(x), math.exp(x[1]), math.exp(x[0])
+
+    grid = [0.0] + [first - first * math.exp(-14.0 * j / 70) for j in range(1, 71)]
+    values = [profile(g) for g in grid]
+    peaks = [j for j in range(1, 70)
+             if values[j][0] >= values[j - 1][0] and values[j][0] >= values[j + 1][0] and values[j][1] > 1]
+    if not peaks:
+        return None, "no local maximum inside (0, t_1) with beta > 1"
+    j = max(peaks, key=lambda j: values[j][0])
+    gamma = so.minimize_scalar(lambda g: -profile(g)[0], bounds=(grid[j - 1], grid[j + 1]),
+                               method="bounded", options={"xatol": 1e-9 * first}).x
+    _, beta, eta = profile(gamma)
+
+    def negative(x):
+        value = -ll(math.exp(x[1]), math.exp(x[0]), x[2])
+        return value if math.isfinite(value) else 1e300
+
+    x = [math.log(eta), math.log(beta), gamma]
+    for _ in range(3):
+        x = so.fmin(negative, x, xtol=1e-12, ftol=1e-15, maxiter=100000, maxfun=200000, disp=0)
+    if not (x[2] > 0 and -negative(x) > values[0][0]):
+        return None, "the best location is 0: the two-parameter Weibull"
+    return {"beta": math.exp(x[1]), "eta": math.exp(x[0]), "gamma": x[2]}, -negative(x)
+
+
+def reliability_weibull_3p(data):
+    """`reliability`'s own three-parameter fit, for the record."""
+    from reliability.Fitters import Fit_Weibull_3P
+    fit = Fit_Weibull_3P(failures=[t for t, f in data if f],
+                         right_censored=[t for t, f in data if not f] or None,
+                         show_probability_plot=False, print_results=False)
+    return {"beta": fit.beta, "eta": fit.alpha, "gamma": fit.gamma, "log_likelihood": fit.loglik}
+
+
 def fits(data):
     n = len(data)
     failures = [t for t, failed in data if failed]
@@ -120,6 +197,13 @@ def fits(data):
     (ln_scale,), ll = maximise(data, ss.expon, [math.log(sum(t for t, _ in data) / len(failures))],
                                lambda x: {"scale": math.exp(x[0])})
     out["exponential"] = {"lambda": math.exp(-ln_scale), **criteria(ll, 1, n)}
+    location, ll = weibull_3p(data)
+    if location is None:
+        out["weibull_3p"] = None
+        out["weibull_3p_absent"] = ll
+    else:
+        out["weibull_3p"] = {**location, **criteria(ll, 3, n)}
+    out["reliability_weibull_3p"] = reliability_weibull_3p(data)
     # The Anderson-Darling statistic as the reliability package computes it: its own plotting
     # positions and its own formula, with scipy's CDF at scipy's fit.
     from reliability.Probability_plotting import plotting_positions
@@ -131,16 +215,21 @@ def fits(data):
         "gamma": lambda t: ss.gamma.cdf(t, out["gamma"]["shape"], scale=out["gamma"]["scale"]),
         "exponential": lambda t: ss.expon.cdf(t, scale=1 / out["exponential"]["lambda"]),
     }
+    if out["weibull_3p"] is not None:
+        w = out["weibull_3p"]
+        cdfs["weibull_3p"] = lambda t: ss.weibull_min.cdf(t, w["beta"], loc=w["gamma"], scale=w["eta"])
     for name, cdf in cdfs.items():
         out[name]["anderson_darling"] = float(anderson_darling(fitted_cdf=cdf(np.asarray(x)), empirical_cdf=y))
-    out["best_by_aicc"] = min(out, key=lambda d: out[d]["aicc"] if out[d]["aicc"] is not None else math.inf)
+    candidates = [d for d in cdfs]
+    out["best_by_aicc"] = min(candidates, key=lambda d: out[d]["aicc"] if out[d]["aicc"] is not None else math.inf)
     return out
 
 
 def main():
     table = {"generator": "tools/life_fits_reference.py", "versions": versions(),
-             "datasets": {name: {"n": len(data), "failures": sum(f for _, f in data), **fits(data)}
-                          for name, data in DATASETS.items()}}
+             "datasets": {name: {"n": len(data), "failures": sum(f for _, f in data), **fits(data),
+                                 **({"data": data} if name in LOCATION_DATASETS else {})}
+                          for name, data in {**DATASETS, **LOCATION_DATASETS}.items()}}
     text = json.dumps(table, indent=2, sort_keys=True) + "\n"
     if sys.argv[1:] == ["-"]:
         sys.stdout.write(text)

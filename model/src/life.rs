@@ -22,6 +22,7 @@
 pub mod compare;
 pub mod fits;
 pub mod likelihood_ratio;
+pub mod location;
 pub mod weibayes;
 
 use crate::stats::Z_975;
@@ -905,6 +906,14 @@ mod tests {
         lognormal: BTreeMap<String, Option<f64>>,
         gamma: BTreeMap<String, Option<f64>>,
         exponential: BTreeMap<String, Option<f64>>,
+        /// Null where the three-parameter likelihood has no maximum inside.
+        #[serde(default)]
+        weibull_3p: Option<BTreeMap<String, Option<f64>>>,
+        /// `reliability`'s `Fit_Weibull_3P` on the same lives.
+        reliability_weibull_3p: BTreeMap<String, f64>,
+        /// The lives of a data set of this table only (`LOCATION_DATASETS`).
+        #[serde(default)]
+        data: Option<Vec<(f64, bool)>>,
     }
 
     /// The fits reference table, and each of its data sets by name.
@@ -914,7 +923,13 @@ mod tests {
             "/../tests/data/life_fits_reference.json"
         )))
         .expect("the fits reference table is JSON of the expected shape");
-        let data_of = references().into_iter().map(|r| (r.name, r.data)).collect();
+        let mut data_of: BTreeMap<String, Vec<(f64, bool)>> =
+            references().into_iter().map(|r| (r.name, r.data)).collect();
+        for (name, reference) in &file.datasets {
+            if let Some(data) = &reference.data {
+                data_of.insert(name.clone(), data.clone());
+            }
+        }
         (file, data_of)
     }
 
@@ -928,7 +943,8 @@ mod tests {
         for (name, reference) in &file.datasets {
             let lives = Lives::from_pairs(&data_of[name]).unwrap();
             let analysis = analyse_lives(&lives);
-            assert_eq!(analysis.fits.len(), 4, "{name}");
+            let expected = 4 + usize::from(reference.weibull_3p.is_some());
+            assert_eq!(analysis.fits.len(), expected, "{name}: {:?}", analysis.fits);
             assert_eq!(
                 analysis.fits[0].distribution.name(),
                 reference.best_by_aicc,
@@ -937,6 +953,7 @@ mod tests {
             for fit in &analysis.fits {
                 let want = match fit.distribution {
                     fits::Family::Weibull => &reference.weibull,
+                    fits::Family::Weibull3p => reference.weibull_3p.as_ref().unwrap(),
                     fits::Family::Lognormal => &reference.lognormal,
                     fits::Family::Gamma => &reference.gamma,
                     fits::Family::Exponential => &reference.exponential,
@@ -970,6 +987,57 @@ mod tests {
                 }
             }
         }
+        eprintln!("worst relative differences: {worst:?}");
+    }
+
+    /// The three-parameter Weibull: where scipy finds a maximum inside `(0, t_1)` (`complete`,
+    /// and `shifted`, drawn with a failure-free life of 800), the fit equals the `reliability`
+    /// package's `Fit_Weibull_3P` to 1e-5 and its slope in `gamma` vanishes while the profile is
+    /// lower on either side; where scipy finds none (shapes below 1 towards `t_1`), there is no
+    /// fit, and `reliability`'s bounded search ends at its bound `t_1 - 1e-4`.
+    #[test]
+    fn three_parameter_weibull_agrees_with_reliability_where_it_has_a_maximum() {
+        let (file, data_of) = fits_reference();
+        let mut worst = BTreeMap::new();
+        for (name, reference) in &file.datasets {
+            let lives = Lives::from_pairs(&data_of[name]).unwrap();
+            let fit = location::fit_weibull_3p(&lives);
+            let theirs = &reference.reliability_weibull_3p;
+            let first = lives.at()[0].time;
+            let Some(fit) = fit else {
+                assert!(reference.weibull_3p.is_none(), "{name}");
+                assert!(
+                    (theirs["gamma"] - (first - 1e-4)).abs() < 1e-9,
+                    "{name}: {theirs:?}"
+                );
+                continue;
+            };
+            assert!(
+                fit.gamma > 0.0 && fit.gamma < first && fit.beta > 1.0,
+                "{name}"
+            );
+            for (quantity, value) in [
+                ("beta", fit.beta),
+                ("eta", fit.eta),
+                ("gamma", fit.gamma),
+                ("log_likelihood", fit.log_likelihood),
+            ] {
+                let d = relative_difference(&mut worst, "reliability", value, theirs[quantity]);
+                assert!(
+                    d < 1e-5,
+                    "{name} {quantity}: {value} against {}",
+                    theirs[quantity]
+                );
+            }
+            for step in [-1e-3, 1e-3] {
+                let gamma = fit.gamma * (1.0 + step);
+                let shifted: Vec<(f64, bool)> =
+                    data_of[name].iter().map(|&(t, f)| (t - gamma, f)).collect();
+                let beside = fit_weibull(&shifted).unwrap().log_likelihood;
+                assert!(beside < fit.log_likelihood, "{name} at gamma {gamma}");
+            }
+        }
+        assert!(worst.contains_key("reliability"), "no data set has a fit");
         eprintln!("worst relative differences: {worst:?}");
     }
 

@@ -597,7 +597,9 @@ fn a_job_without_failures_demonstrates_life_by_weibayes() {
         .iter()
         .map(|f| f["distribution"].as_str().unwrap())
         .collect();
-    assert_eq!(fits.len(), 4, "{analysis}");
+    // The three-parameter Weibull is there only where its likelihood has a maximum inside.
+    let location = usize::from(fits.contains(&"weibull_3p"));
+    assert_eq!(fits.len(), 4 + location, "{analysis}");
     for name in ["weibull", "lognormal", "gamma", "exponential"] {
         assert!(fits.contains(&name), "{fits:?}");
     }

@@ -1,6 +1,7 @@
-//! Which distribution the lives follow: the two-parameter Weibull, the lognormal, the gamma and the
-//! exponential, each fitted by maximum likelihood with right censoring to the same lives, and
-//! ranked by AICc (then BIC). The likelihoods are densities in time for all four, so they compare.
+//! Which distribution the lives follow: the two- and three-parameter Weibull, the lognormal, the
+//! gamma and the exponential, each fitted by maximum likelihood with right censoring to the same
+//! lives, and ranked by AICc (then BIC). The likelihoods are densities in time for all five, so
+//! they compare.
 //!
 //! - Exponential: `lambda = r / T`, `r` the failures and `T` the total time on test.
 //! - Lognormal (`mu`, `sigma` of `ln t`): Newton's method on `(mu, ln sigma)` with the analytic
@@ -11,6 +12,9 @@
 //!   theta)`, the regularised upper incomplete gamma function in logs
 //!   ([`super::weibayes::regularized_gamma`]).
 //! - Weibull: the fit of [`super::fit_weibull_lives`], with the log-likelihood it reports.
+//! - Three-parameter Weibull (`beta`, `eta` and the failure-free life `gamma`): the profile
+//!   likelihood's maximum in `gamma` ([`super::location`]); absent where the likelihood has no
+//!   maximum inside `(0, t_1)`.
 //!
 //! `AICc = 2k - 2 ln L + 2k(k + 1)/(n - k - 1)`, `BIC = k ln n - 2 ln L`, `n` the devices; and
 //! each fit's goodness of fit, the adjusted Anderson-Darling statistic ([`anderson_darling`]).
@@ -24,6 +28,8 @@ use std::collections::BTreeMap;
 #[serde(rename_all = "lowercase")]
 pub enum Family {
     Weibull,
+    #[serde(rename = "weibull_3p")]
+    Weibull3p,
     Lognormal,
     Gamma,
     Exponential,
@@ -33,6 +39,7 @@ impl Family {
     pub fn name(self) -> &'static str {
         match self {
             Family::Weibull => "weibull",
+            Family::Weibull3p => "weibull_3p",
             Family::Lognormal => "lognormal",
             Family::Gamma => "gamma",
             Family::Exponential => "exponential",
@@ -44,6 +51,7 @@ impl Family {
         match self {
             Family::Exponential => 1.0,
             Family::Weibull | Family::Lognormal | Family::Gamma => 2.0,
+            Family::Weibull3p => 3.0,
         }
     }
 }
@@ -52,7 +60,8 @@ impl Family {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Fit {
     pub distribution: Family,
-    /// By name: `beta` and `eta` (Weibull), `mu` and `sigma` of the log of the life (lognormal),
+    /// By name: `beta` and `eta` (Weibull; with `gamma`, the failure-free life, for the
+    /// three-parameter Weibull), `mu` and `sigma` of the log of the life (lognormal),
     /// `shape` and `scale` (gamma, mean `shape * scale`), `lambda` failures per operation
     /// (exponential).
     pub parameters: BTreeMap<String, f64>,
@@ -68,6 +77,18 @@ pub struct Fit {
     /// fits better; `None` when it is not finite.
     #[serde(default)]
     pub anderson_darling: Option<f64>,
+}
+
+impl Fit {
+    /// The fitted CDF at `t > 0`.
+    pub fn cdf(&self, t: f64) -> f64 {
+        let parameters: Vec<(&str, f64)> = self
+            .parameters
+            .iter()
+            .map(|(n, &v)| (n.as_str(), v))
+            .collect();
+        cdf(self.distribution, &parameters, t)
+    }
 }
 
 /// How much lower another distribution's AICc must be than the Weibull's for the analysis to
@@ -107,6 +128,13 @@ pub fn fits(lives: &Lives, weibull: Option<&Weibull>) -> Vec<Fit> {
             w.log_likelihood,
         );
     }
+    if let Some(w) = super::location::fit_weibull_3p(lives) {
+        add(
+            Family::Weibull3p,
+            vec![("beta", w.beta), ("eta", w.eta), ("gamma", w.gamma)],
+            w.log_likelihood,
+        );
+    }
     if let Some((mu, sigma, ll)) = fit_lognormal(lives.at()) {
         add(Family::Lognormal, vec![("mu", mu), ("sigma", sigma)], ll);
     }
@@ -135,6 +163,7 @@ fn cdf(family: Family, parameters: &[(&str, f64)], t: f64) -> f64 {
     };
     match family {
         Family::Weibull => -(-(t / get("eta")).powf(get("beta"))).exp_m1(),
+        Family::Weibull3p => super::location::cdf(get("beta"), get("eta"), get("gamma"), t),
         Family::Lognormal => {
             let z = (t.ln() - get("mu")) / get("sigma");
             0.5 * libm::erfc(-z / std::f64::consts::SQRT_2)

@@ -2,6 +2,7 @@
 
 use std::fmt::Write as _;
 
+use bouncewear_model::life::fits::Fit;
 use bouncewear_model::life::{
     KaplanMeierPoint, LifeAnalysis, Weibull, median_ranks, weibull_scale,
 };
@@ -20,6 +21,8 @@ use super::{pick_evenly, segments};
 const MAX_POINTS: usize = 1500;
 /// Greenwood bounds are drawn as bars up to this many points.
 const MAX_BARS: usize = 60;
+/// The colour of the best fit's curve when it is not the two-parameter Weibull.
+const BEST: &str = SERIES[1];
 
 /// A failure time at its median rank.
 type Point<'a> = (&'a KaplanMeierPoint, f64);
@@ -133,6 +136,14 @@ fn weibulls_svg(title: &str, designs: &[(&str, &LifeAnalysis)]) -> String {
             "Weibull MLE",
         );
     }
+    // One design whose lives another distribution fits clearly better: that fit's curve too,
+    // named in the notes in its colour.
+    if alone
+        && let [d] = drawn.as_slice()
+        && let Some(best) = better_fit(d.life)
+    {
+        draw_cdf(&mut svg, &plane, best);
+    }
     if bounds {
         let colour = if alone { BLUE } else { INK };
         legend.line(
@@ -179,6 +190,22 @@ fn design_notes(d: &Drawn, alone: bool) -> Vec<(String, &'static str)> {
     let fit_lines = fit_notes(d.life, d.fit);
     let colour = if d.fit.is_none() { RED } else { INK };
     notes.extend(fit_lines.into_iter().map(|line| (line, colour)));
+    if d.fit.is_some()
+        && let Some(best) = better_fit(d.life)
+    {
+        let (how, colour) = if alone {
+            (" (dotted)", BEST)
+        } else {
+            ("", INK)
+        };
+        notes.push((
+            format!(
+                "Best fit by AICc: {}{how}, not this Weibull",
+                best.distribution.name()
+            ),
+            colour,
+        ));
+    }
     notes.push((
         format!("{} failed, {} censored", d.life.failures, d.life.censored),
         INK,
@@ -321,6 +348,27 @@ fn draw_fit(svg: &mut Svg, plane: &Plane, w: &Weibull, colour: &str) -> bool {
     has_bounds
 }
 
+/// The distribution that fits the lives clearly better than the Weibull line (`fit_warning`).
+fn better_fit(life: &LifeAnalysis) -> Option<&Fit> {
+    life.fit_warning.as_ref().and(life.fits.first())
+}
+
+/// `fit`'s CDF as a curve on the Weibull scale, clipped to the frame.
+fn draw_cdf(svg: &mut Svg, plane: &Plane, fit: &Fit) {
+    let (lx0, lx1) = (plane.x_axis.lo.ln(), plane.x_axis.hi.ln());
+    let steps = 240;
+    let curve: Vec<Option<(f64, f64)>> = (0..=steps)
+        .map(|k| {
+            let ln_t = lx0 + (lx1 - lx0) * f64::from(k) / f64::from(steps);
+            let y = (-(-fit.cdf(ln_t.exp())).ln_1p()).ln();
+            (y.is_finite() && y >= plane.y_lo && y <= plane.y_hi).then(|| plane.at_ln(ln_t, y))
+        })
+        .collect();
+    for segment in segments(&curve) {
+        svg.polyline(&segment, BEST, 2.0, Some("2 3"));
+    }
+}
+
 /// The points, with their Greenwood bounds as thin bars when there are few.
 fn draw_points(svg: &mut Svg, plane: &Plane, points: &[Point], colour: &str) {
     let (y_lo, y_hi) = (plane.y_lo, plane.y_hi);
@@ -382,15 +430,6 @@ fn fit_notes(life: &LifeAnalysis, fit: Option<&Weibull>) -> Vec<String> {
                         notes.push(format!("B10 = {} operations", fmt_sig(t, 4)));
                     }
                 }
-            }
-            // Another distribution fits clearly better: the line above is not the best model.
-            if life.fit_warning.is_some()
-                && let Some(best) = life.fits.first()
-            {
-                notes.push(format!(
-                    "Best fit by AICc: {}, not this Weibull",
-                    best.distribution.name()
-                ));
             }
         }
         None => {
@@ -480,6 +519,34 @@ mod tests {
         }
         assert!(svg.contains(">1000<") || svg.contains(">100<"));
         assert!(svg.matches("<circle").count() > 20);
+    }
+
+    /// Lives with a failure-free 800 operations: the three-parameter Weibull fits them clearly
+    /// better, and the plot draws its curve, dotted in its colour, named in the notes in that
+    /// colour; the straight line stays the two-parameter Weibull's.
+    #[test]
+    fn weibull_plot_draws_a_clearly_better_fit() {
+        let data: Vec<(f64, bool)> = weibull_data(300, 2.0, 300.0, 700.0)
+            .into_iter()
+            .map(|(t, failed)| (t + 800.0, failed))
+            .collect();
+        let life = life_of(&data);
+        assert!(life.fit_warning.is_some(), "{:?}", life.fits);
+        assert_eq!(life.fits[0].distribution.name(), "weibull_3p");
+        let svg = weibull_svg(&life);
+        check(&svg);
+        assert!(svg.contains("Best fit by AICc: weibull_3p (dotted), not this Weibull"));
+        assert!(
+            svg.contains(&format!(r#"fill="{BEST}""#)),
+            "the note in the curve's colour"
+        );
+        assert!(
+            svg.matches(&format!(r#"stroke="{BEST}""#)).count() >= 1,
+            "the curve"
+        );
+        // Without the warning, no curve.
+        let plain = weibull_svg(&life_of(&weibull_data(300, 2.0, 800.0, 1000.0)));
+        assert!(!plain.contains(BEST), "{plain}");
     }
 
     #[test]
