@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The README's examples (or another document's), run as written against a live server.
 
-    python3 tests/readme/check.py BASE_URL [README.md | docs/manual.md]
+    python3 tests/readme/check.py BASE_URL [README.md | docs/manual.md] [--write]
 
 Every fenced ```sh block that follows a `<!-- readme-test -->` line is run with bash (`set -euo
 pipefail`) in a fresh directory holding `target/release`, a link to the directory of the binary
@@ -13,6 +13,9 @@ under `<!-- readme-output -->`, the output must have the documented shape, line 
 JSON keys and value types (numbers may differ), or for other lines the same fields with the same
 words (numbers may differ). Under `<!-- readme-output exact -->` the output must be the one shown,
 to the character (deterministic commands: what the README shows is what a user gets).
+
+With `--write`, each output block whose example ran and kept its shape is replaced by the output
+of this run, so that the document shows what the build under test prints.
 """
 
 import json
@@ -27,7 +30,8 @@ NUMBER = re.compile(r"-?\d+(\.\d+)?([eE][-+]?\d+)?")
 
 
 def blocks(text):
-    """(script, expected output or None, exact?, line number) for each marked block."""
+    """(script, expected output or None, exact?, line number, the output's line span or None) for
+    each marked block."""
     lines = text.split("\n")
     found = []
     for i, line in enumerate(lines):
@@ -37,7 +41,7 @@ def blocks(text):
         assert lines[start].startswith("```sh"), f"line {start + 1}: a ```sh block must follow"
         end = lines.index("```", start + 1)
         script = "\n".join(lines[start + 1:end])
-        expected, exact = None, False
+        expected, exact, span = None, False, None
         rest = [j for j in range(end + 1, min(end + 4, len(lines))) if lines[j].strip()]
         marker = lines[rest[0]].strip() if rest else ""
         if marker in ("<!-- readme-output -->", "<!-- readme-output exact -->"):
@@ -46,7 +50,8 @@ def blocks(text):
             assert lines[out_start].startswith("```"), f"line {out_start + 1}: an output block must follow"
             out_end = lines.index("```", out_start + 1)
             expected = lines[out_start + 1:out_end]
-        found.append((script, expected, exact, start + 1))
+            span = (out_start + 1, out_end)
+        found.append((script, expected, exact, start + 1, span))
     return found
 
 
@@ -72,16 +77,20 @@ def same_shape(actual, documented):
 
 
 def main():
-    base = sys.argv[1].rstrip("/")
-    readme = sys.argv[2] if len(sys.argv) > 2 else "README.md"
+    args = [a for a in sys.argv[1:] if a != "--write"]
+    write = "--write" in sys.argv[1:]
+    base = args[0].rstrip("/")
+    readme = args[1] if len(args) > 1 else "README.md"
     # The repository's root (this file is tests/readme/check.py), whichever document is checked.
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     bin_dir = os.path.abspath(os.environ.get("BOUNCEWEAR_BIN_DIR", os.path.join(root, "target", "release")))
     env = {**os.environ, "PATH": bin_dir + os.pathsep + os.environ["PATH"]}
-    found = blocks(open(readme, encoding="utf-8").read())
+    text = open(readme, encoding="utf-8").read()
+    found = blocks(text)
     assert found, "no README example is marked for testing"
     failures = 0
-    for script, expected, exact, line in found:
+    replacements = []
+    for script, expected, exact, line, span in found:
         with tempfile.TemporaryDirectory(prefix="bouncewear-readme-") as scratch:
             os.mkdir(os.path.join(scratch, "target"))
             os.symlink(bin_dir, os.path.join(scratch, "target", "release"))
@@ -100,11 +109,20 @@ def main():
                 if not same_shape(got, documented):
                     problem = f"output {got!r} does not have the shape of {documented!r}"
                     break
+        if problem is None and span is not None and output != expected:
+            replacements.append((span, output))
         status = "ok" if problem is None else f"FAILED: {problem}"
         print(f"{readme}:{line}: {status}")
         if problem:
             print("\n".join(output), file=sys.stderr)
             failures += 1
+    if write and replacements:
+        lines = text.split("\n")
+        for (start, end), output in sorted(replacements, reverse=True):
+            lines[start:end] = output
+        with open(readme, "w", encoding="utf-8") as f:
+            f.write("\n".join(lines))
+        print(f"{readme}: {len(replacements)} output blocks rewritten")
     sys.exit(1 if failures else 0)
 
 
