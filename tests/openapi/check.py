@@ -4,6 +4,9 @@
 - every operation has a summary and a description;
 - every request body has an example, which validates against its schema and which the server
   accepts (2xx) as sent; every query and header parameter has an example;
+- every success response has an example for each of its content types (a server's real answer,
+  `tools/openapi_examples.py`); a JSON one validates against the response's schema, a text one is
+  text, an SVG one is well-formed XML;
 - every property of every schema has a description;
 - times are `date-time`, ids `uuid`; 201/202 document `Location`, 429 and 503 `Retry-After`, and
   the immutable representations `ETag`;
@@ -15,6 +18,7 @@ import json
 import sys
 import urllib.error
 import urllib.request
+import xml.etree.ElementTree as ElementTree
 
 import jsonschema
 
@@ -90,6 +94,31 @@ for method, path, operation in operations:
     elif operation.get("operationId") == "create_schedule":
         created_schedule = json.loads(text)["id"]
     print(f"{name}: example accepted ({status})")
+
+# An example of every success response, in each content type, of the shape it documents.
+response_examples = 0
+for method, path, operation in operations:
+    name = f"{method} {path}"
+    for status, response in operation["responses"].items():
+        if not status.startswith("2"):
+            continue
+        for media, content in response.get("content", {}).items():
+            if "example" not in content:
+                fail(f"{name} {status} {media}: no example")
+                continue
+            response_examples += 1
+            example = content["example"]
+            if media == "application/json":
+                for error in validate(example, content["schema"]):
+                    fail(f"{name} {status}: the example breaks its schema: {error}")
+            elif not isinstance(example, str) or not example:
+                fail(f"{name} {status} {media}: the example is not text")
+            elif media == "image/svg+xml":
+                try:
+                    ElementTree.fromstring(example)
+                except ElementTree.ParseError as error:
+                    fail(f"{name} {status}: the SVG example is not well-formed: {error}")
+print(f"{response_examples} success examples checked")
 
 # A description on every property of every schema, at any depth.
 def walk(schema, where):

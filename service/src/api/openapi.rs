@@ -1,6 +1,7 @@
 //! The OpenAPI document as served: utoipa's, built from the handlers and the types' doc comments,
 //! with what its attributes cannot say added here, each part once: a working example of every
-//! request body, the links from a created resource to the operations on it (so a client, or
+//! request body and of every success response (real answers of a server to those requests,
+//! `assets/openapi_examples.json`, written by `tools/openapi_examples.py`), the links from a created resource to the operations on it (so a client, or
 //! schemathesis' stateful phase, can follow them), the length limit on all text a client sends,
 //! and descriptions of the simulation's output types, whose Rust docs are written for the physics.
 
@@ -20,6 +21,7 @@ use std::collections::BTreeSet;
 pub fn document(openapi: &utoipa::openapi::OpenApi) -> Value {
     let mut document = serde_json::to_value(openapi).expect("an OpenAPI document serialises");
     add_request_examples(&mut document);
+    add_response_examples(&mut document);
     constrain_request_fields(&mut document);
     limit_request_text(&mut document);
     add_links(&mut document);
@@ -111,6 +113,30 @@ fn add_request_examples(document: &mut Value) {
             && let Some(media) = operation.pointer_mut("/requestBody/content/application~1json")
         {
             media["example"] = example.clone();
+        }
+    }
+}
+
+/// A live server's answers to the request examples, by operation, status and media type:
+/// `tools/openapi_examples.py` writes them, `tests/openapi/check.py` validates each against its
+/// response's schema.
+const RESPONSE_EXAMPLES: &str = include_str!("../../assets/openapi_examples.json");
+
+fn add_response_examples(document: &mut Value) {
+    let examples: Value =
+        serde_json::from_str(RESPONSE_EXAMPLES).expect("the response examples are JSON");
+    for (_, operation) in operations_mut(document) {
+        let id = operation["operationId"].as_str().unwrap_or_default();
+        let Some(statuses) = examples.get(id).and_then(Value::as_object) else {
+            continue;
+        };
+        for (status, media_types) in statuses {
+            for (media, example) in media_types.as_object().into_iter().flatten() {
+                let pointer = format!("/responses/{status}/content/{}", media.replace('/', "~1"));
+                if let Some(content) = operation.pointer_mut(&pointer) {
+                    content["example"] = example.clone();
+                }
+            }
         }
     }
 }
