@@ -69,6 +69,13 @@ fn a_job_against_itself_and_two_designs_over_api_and_cli() {
         life["outlasts"]["observed"][1].as_f64().unwrap(),
     ];
     assert!(lo <= 0.5 && 0.5 <= hi, "{life}");
+    // A job against itself: the share's interval holds the bounds and is symmetric about 0.5.
+    let [clo, chi] = [
+        life["outlasts"]["observed_ci95"][0].as_f64().unwrap(),
+        life["outlasts"]["observed_ci95"][1].as_f64().unwrap(),
+    ];
+    assert!(clo < lo && hi < chi, "{life}");
+    assert!((clo + chi - 1.0).abs() < 1e-12, "{life}");
 
     // Two designs on the command line, with the plots.
     let dir = crate::support::temp_dir("compare-plots");

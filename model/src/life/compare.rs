@@ -38,8 +38,16 @@ pub struct Outlasts {
     pub weibull_ci95: Option<[f64; 2]>,
     /// The share of pairs of simulated devices, one of each design, in which the first outlasts
     /// the second (ties count half), as far as censoring lets it be known: at least the first
-    /// number, at most the second. No model, no sampling interval.
+    /// number, at most the second. No model.
     pub observed: [f64; 2],
+    /// The 95 % interval of that share in the designs' populations: `observed` widened by the
+    /// sampling error of the simulated devices ([`observed_outlasts_ci95`]).
+    #[serde(default = "unit_interval")]
+    pub observed_ci95: [f64; 2],
+}
+
+fn unit_interval() -> [f64; 2] {
+    [0.0, 1.0]
 }
 
 /// Two designs' lives compared.
@@ -96,6 +104,7 @@ pub fn compare_lives(
             weibull: modelled.map(|m| m.0),
             weibull_ci95: modelled.and_then(|m| m.1),
             observed: observed_outlasts(a.1, b.1),
+            observed_ci95: observed_outlasts_ci95(a.1, b.1),
         },
         notes,
     }
@@ -203,6 +212,65 @@ pub fn observed_outlasts(a: &Lives, b: &Lives) -> [f64; 2] {
     if na == 0 || nb == 0 {
         return [0.0, 1.0];
     }
+    let (wins, unknown) = against(a, b).iter().fold((0.0, 0.0), |(w, u), g| {
+        (w + g.devices * g.wins, u + g.devices * g.unknown)
+    });
+    // Each group's shares are of b's devices already: the mean over a's devices.
+    let na = na as f64;
+    [wins / na, (wins + unknown) / na]
+}
+
+/// The 95 % interval of the share of pairs in which a device of the population behind `a`
+/// outlasts one behind `b`: the observed bounds widened by 1.96 standard errors of the
+/// two-sample U-statistic (DeLong et al. 1988: the variance of each device's share against the
+/// other set, over `n_a`, plus the same of the other side over `n_b`; a pair whose order
+/// censoring hides counted half), within `[0, 1]`. `[0, 1]` with fewer than two devices a side.
+pub fn observed_outlasts_ci95(a: &Lives, b: &Lives) -> [f64; 2] {
+    let (na, nb) = (
+        (a.failures() + a.censored()) as f64,
+        (b.failures() + b.censored()) as f64,
+    );
+    if na < 2.0 || nb < 2.0 {
+        return [0.0, 1.0];
+    }
+    // Each device's share of the other side it outlasts, unknown pairs half; b's side as
+    // `1 - share`, so that both are shares of `a` outlasting.
+    let side = |groups: &[Group], flip: bool| -> Vec<(f64, f64)> {
+        groups
+            .iter()
+            .map(|g| {
+                let share = g.wins + 0.5 * g.unknown;
+                (g.devices, if flip { 1.0 - share } else { share })
+            })
+            .collect()
+    };
+    let variance = |shares: &[(f64, f64)], n: f64| {
+        let mean = shares.iter().map(|&(d, x)| d * x).sum::<f64>() / n;
+        shares
+            .iter()
+            .map(|&(d, x)| d * (x - mean).powi(2))
+            .sum::<f64>()
+            / (n - 1.0)
+    };
+    let se = (variance(&side(&against(a, b), false), na) / na
+        + variance(&side(&against(b, a), true), nb) / nb)
+        .sqrt();
+    let [lower, upper] = observed_outlasts(a, b);
+    let z = crate::stats::Z_975;
+    [(lower - z * se).max(0.0), (upper + z * se).min(1.0)]
+}
+
+/// The devices of one time of a set of lives, failed or censored, against the other set: the
+/// share of the other set each outlasts for certain and the share whose order censoring hides.
+struct Group {
+    devices: f64,
+    wins: f64,
+    unknown: f64,
+}
+
+/// [`Group`]s of `a` against `b`, both non-empty.
+fn against(a: &Lives, b: &Lives) -> Vec<Group> {
+    let nb = (b.failures() + b.censored()) as f64;
     let times: Vec<f64> = b.at().iter().map(|x| x.time).collect();
     // Prefix sums of b's failures and censorings over its sorted times.
     let mut failed_before = vec![0u64; times.len() + 1];
@@ -212,7 +280,7 @@ pub fn observed_outlasts(a: &Lives, b: &Lives) -> [f64; 2] {
         censored_before[i + 1] = censored_before[i] + x.censored;
     }
     let (b_failed, b_censored) = (b.failures(), b.censored());
-    let (mut wins, mut unknown) = (0.0f64, 0.0f64);
+    let mut groups = Vec::new();
     for x in a.at() {
         let below = times.partition_point(|&s| s < x.time);
         let through = times.partition_point(|&s| s <= x.time);
@@ -220,20 +288,23 @@ pub fn observed_outlasts(a: &Lives, b: &Lives) -> [f64; 2] {
         if x.failures > 0 {
             // Failed at t: beats b's failures before t, ties b's at t; b's censored before t
             // may have lived longer or not; b's censored at or after t outlived it.
-            let f = x.failures as f64;
-            wins += f * (failed_before[below] as f64 + 0.5 * failed_at);
-            unknown += f * censored_before[below] as f64;
+            groups.push(Group {
+                devices: x.failures as f64,
+                wins: (failed_before[below] as f64 + 0.5 * failed_at) / nb,
+                unknown: censored_before[below] as f64 / nb,
+            });
         }
         if x.censored > 0 {
             // Censored at t, so alive after t: beats b's failures up to t; against b's later
             // failures and every censored b, unknown.
-            let c = x.censored as f64;
-            wins += c * failed_before[through] as f64;
-            unknown += c * ((b_failed - failed_before[through]) + b_censored) as f64;
+            groups.push(Group {
+                devices: x.censored as f64,
+                wins: failed_before[through] as f64 / nb,
+                unknown: ((b_failed - failed_before[through]) + b_censored) as f64 / nb,
+            });
         }
     }
-    let pairs = na as f64 * nb as f64;
-    [wins / pairs, (wins + unknown) / pairs]
+    groups
 }
 
 #[cfg(test)]
@@ -286,6 +357,56 @@ mod tests {
         for &(ea, ba, eb, bb, truth) in &REFERENCE {
             assert_relative_eq!(outlasts(ea, ba, eb, bb), truth, max_relative = 1e-9);
         }
+    }
+
+    /// Without censoring the interval is `share -+ 1.96 se` with DeLong's variance, here
+    /// computed pair by pair from its definition: each device's share of the other side it
+    /// outlasts (ties half), their sample variances over `n_a` and `n_b`.
+    #[test]
+    fn observed_interval_is_delongs_without_censoring() {
+        let a_times = [3.0, 5.0, 5.0, 9.0, 12.0, 13.0, 20.0, 21.0];
+        let b_times = [1.0, 2.0, 5.0, 6.0, 7.0, 8.0];
+        let lives = |t: &[f64]| {
+            Lives::from_pairs(&t.iter().map(|&t| (t, true)).collect::<Vec<_>>()).unwrap()
+        };
+        let beats = |x: f64, y: f64| match x.total_cmp(&y) {
+            std::cmp::Ordering::Greater => 1.0,
+            std::cmp::Ordering::Equal => 0.5,
+            std::cmp::Ordering::Less => 0.0,
+        };
+        let v10: Vec<f64> = a_times
+            .iter()
+            .map(|&x| b_times.iter().map(|&y| beats(x, y)).sum::<f64>() / 6.0)
+            .collect();
+        let v01: Vec<f64> = b_times
+            .iter()
+            .map(|&y| a_times.iter().map(|&x| beats(x, y)).sum::<f64>() / 8.0)
+            .collect();
+        let share = v10.iter().sum::<f64>() / 8.0;
+        let sample_variance = |v: &[f64]| {
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64
+        };
+        let se = (sample_variance(&v10) / 8.0 + sample_variance(&v01) / 6.0).sqrt();
+        let (a, b) = (lives(&a_times), lives(&b_times));
+        assert_eq!(observed_outlasts(&a, &b), [share, share]);
+        let [lo, hi] = observed_outlasts_ci95(&a, &b);
+        assert_relative_eq!(lo, share - crate::stats::Z_975 * se, max_relative = 1e-12);
+        assert_relative_eq!(
+            hi,
+            (share + crate::stats::Z_975 * se).min(1.0),
+            max_relative = 1e-12
+        );
+        // Censoring widens it by the pairs it hides, at least.
+        let mut censored: Vec<(f64, bool)> = a_times.iter().map(|&t| (t, true)).collect();
+        censored[7].1 = false;
+        censored[6] = (20.0, false);
+        let c = Lives::from_pairs(&censored).unwrap();
+        let [known, bound] = observed_outlasts(&c, &b);
+        let [clo, chi] = observed_outlasts_ci95(&c, &b);
+        assert!(clo < known && bound < chi, "{clo} {known} {bound} {chi}");
+        // Too few devices: nothing known.
+        assert_eq!(observed_outlasts_ci95(&lives(&[4.0]), &b), [0.0, 1.0]);
     }
 
     #[test]

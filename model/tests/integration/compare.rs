@@ -34,7 +34,8 @@ fn design(seed: u64) -> JobResult {
 /// three bins, lives censored at the end for a few percent of the devices: how often each
 /// interval holds the truth. Each coverage should be 95 %; over 300 pairs its binomial standard
 /// error is 1.3 %, so the test allows three of them either side (measured: mean 0.959, p50 0.951,
-/// p95 0.964 over 900 bins; B1 ratio 0.963, B10 ratio 0.993, P(a outlasts b) 0.973 over 300).
+/// p95 0.964 over 900 bins; B1 ratio 0.963, B10 ratio 0.993, P(a outlasts b) 0.973 and the
+/// observed share 0.947 over 300).
 #[test]
 fn the_same_design_twice_is_covered_as_no_difference() {
     let pairs = 300u64;
@@ -76,6 +77,8 @@ fn the_same_design_twice_is_covered_as_no_difference() {
         }
         let [lo, hi] = life.outlasts.weibull_ci95.unwrap();
         count("P(a outlasts b)", lo <= 0.5 && 0.5 <= hi);
+        let [lo, hi] = life.outlasts.observed_ci95;
+        count("observed share", lo <= 0.5 && 0.5 <= hi);
     }
     eprintln!(
         "censored devices per design: {:.1} of 200",

@@ -1147,7 +1147,8 @@
           : fmt(o.weibull, 4) + " " + fmtInterval(o.weibull_ci95);
         lifeRows.push(el("tr", {}, el("td", {}, "P(a device of a outlasts one of b)"),
           el("td", { class: "num", colspan: "2" }, "Weibull fits: " + modelled),
-          el("td", { class: "num", colspan: "2" }, "simulated pairs: " + fmtInterval(o.observed))));
+          el("td", { class: "num", colspan: "2" }, "simulated pairs: " + fmtInterval(o.observed) +
+            (o.observed_ci95 ? ", 95 % interval " + fmtInterval(o.observed_ci95) : ""))));
         $("#compare-life-table").replaceChildren(head("life"), el("tbody", {}, lifeRows));
       } else {
         $("#compare-life-table").replaceChildren();

@@ -85,7 +85,8 @@ pub struct ComparisonLinks {
 /// jobs are independent samples). With failure criteria in both: each B-life asked from the two
 /// Weibull fits, compared the same way, and `outlasts`: `P(a device of a outlasts one of b)` from
 /// the fits with its interval (delta method on the logit), and the share of pairs of simulated
-/// devices in which it does, bounded as censoring allows. `notes` says what limits the comparison.
+/// devices in which it does, bounded as censoring allows, with its 95 % interval (DeLong's
+/// variance of the two-sample U-statistic). `notes` says what limits the comparison.
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/compare/{other}", tag = "jobs",
     params(("id" = String, Path, description = "The first job (design a)"), ("other" = String, Path, description = "The second job (design b)"), ComparisonQuery),
