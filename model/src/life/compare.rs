@@ -212,12 +212,16 @@ pub fn observed_outlasts(a: &Lives, b: &Lives) -> [f64; 2] {
     if na == 0 || nb == 0 {
         return [0.0, 1.0];
     }
-    let (wins, unknown) = against(a, b).iter().fold((0.0, 0.0), |(w, u), g| {
+    bounds(&against(a, b), na as f64)
+}
+
+/// `[known, known + unknown]` over `n` devices of the groups' side.
+fn bounds(groups: &[Group], n: f64) -> [f64; 2] {
+    let (wins, unknown) = groups.iter().fold((0.0, 0.0), |(w, u), g| {
         (w + g.devices * g.wins, u + g.devices * g.unknown)
     });
-    // Each group's shares are of b's devices already: the mean over a's devices.
-    let na = na as f64;
-    [wins / na, (wins + unknown) / na]
+    // Each group's shares are of the other side's devices already: the mean over this side's.
+    [wins / n, (wins + unknown) / n]
 }
 
 /// The 95 % interval of the share of pairs in which a device of the population behind `a`
@@ -233,29 +237,20 @@ pub fn observed_outlasts_ci95(a: &Lives, b: &Lives) -> [f64; 2] {
     if na < 2.0 || nb < 2.0 {
         return [0.0, 1.0];
     }
-    // Each device's share of the other side it outlasts, unknown pairs half; b's side as
-    // `1 - share`, so that both are shares of `a` outlasting.
-    let side = |groups: &[Group], flip: bool| -> Vec<(f64, f64)> {
+    // The sample variance of each device's share of the other side it outlasts, unknown pairs
+    // half (b's side counts b outlasting: `1 - share` of a outlasting has the same variance).
+    let variance = |groups: &[Group], n: f64| {
+        let share = |g: &Group| g.wins + 0.5 * g.unknown;
+        let mean = groups.iter().map(|g| g.devices * share(g)).sum::<f64>() / n;
         groups
             .iter()
-            .map(|g| {
-                let share = g.wins + 0.5 * g.unknown;
-                (g.devices, if flip { 1.0 - share } else { share })
-            })
-            .collect()
-    };
-    let variance = |shares: &[(f64, f64)], n: f64| {
-        let mean = shares.iter().map(|&(d, x)| d * x).sum::<f64>() / n;
-        shares
-            .iter()
-            .map(|&(d, x)| d * (x - mean).powi(2))
+            .map(|g| g.devices * (share(g) - mean).powi(2))
             .sum::<f64>()
             / (n - 1.0)
     };
-    let se = (variance(&side(&against(a, b), false), na) / na
-        + variance(&side(&against(b, a), true), nb) / nb)
-        .sqrt();
-    let [lower, upper] = observed_outlasts(a, b);
+    let a_against_b = against(a, b);
+    let se = (variance(&a_against_b, na) / na + variance(&against(b, a), nb) / nb).sqrt();
+    let [lower, upper] = bounds(&a_against_b, na);
     let z = crate::stats::Z_975;
     [(lower - z * se).max(0.0), (upper + z * se).min(1.0)]
 }
