@@ -391,6 +391,7 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
     assert_eq!(calibration.len(), 3, "{calibration:?}");
     for row in calibration {
         assert_eq!(row["draws"], 20, "{row}");
+        assert_eq!(row["first_seed"], 1000, "{row}");
         assert!(row["coverage"].as_f64().unwrap() >= 0.8, "{row}");
     }
     let markdown = std::fs::read_to_string(out.join("report.md")).unwrap();

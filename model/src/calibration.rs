@@ -1433,21 +1433,29 @@ mod tests {
     }
 
     /// As `the_intervals_cover_the_truth` over 1000 noise draws, in the band 0.93 to 0.97 (the
-    /// binomial standard deviation of a true 0.95 over 1000 draws is 0.007; over 200 it is 0.015,
-    /// and the first 200 of these draws give the roughening energy 0.915). Measured: 0.952;
-    /// 0.951 and 0.943. About 145 s in release:
+    /// binomial standard deviation of a true 0.95 over 1000 draws is 0.007), and each disjoint
+    /// block of 200 within three of its standard deviations (0.015): 0.90 to 0.99. Measured over
+    /// the 1000: 0.952; 0.951 and 0.943; the roughening energy's blocks 0.915, 0.95, 0.955, 0.95
+    /// and 0.945, the first block 1.9 standard deviations low by chance (the estimates' spread is
+    /// 1.04 times the intervals' and normal-tailed, kurtosis 3.2: no fit lost its way). About
+    /// 145 s in release:
     /// `cargo test --release -p bouncewear-model --lib calibration -- --ignored --nocapture`.
     #[test]
     #[ignore = "1000 fits of each case: run with --release -- --ignored"]
     fn the_intervals_cover_the_truth_95_percent_of_the_time() {
-        for seeds in [200, 1000] {
-            let together = coverage(&CASES[0], 1000..1000 + seeds);
-            let wear = coverage(&CASES[1], 1000..1000 + seeds);
-            eprintln!("coverage over {seeds} draws: together {together:?}, wear curve {wear:?}");
-            if seeds == 1000 {
-                for c in together.into_iter().chain(wear) {
-                    assert!((0.93..=0.97).contains(&c), "{c}");
+        for case in &CASES {
+            let mut covered = vec![0.0; case.truths.len()];
+            for first in (1000..2000).step_by(200) {
+                let block = coverage(case, first..first + 200);
+                eprintln!("{}, seeds {first}..{}: {block:?}", case.name, first + 200);
+                for (total, c) in covered.iter_mut().zip(block) {
+                    assert!((0.90..=0.99).contains(&c), "{c}");
+                    *total += c / 5.0;
                 }
+            }
+            eprintln!("{}, seeds 1000..2000: {covered:?}", case.name);
+            for c in covered {
+                assert!((0.93..=0.97).contains(&c), "{c}");
             }
         }
     }
