@@ -1,0 +1,391 @@
+//! Runs a [`Job`]: devices in parallel, each on its own random stream, merged in a fixed order.
+//!
+//! Determinism: device `d` draws from ChaCha8 seeded with the job seed on stream `d`, whatever thread
+//! runs it. Each batch of devices is cut into `G` contiguous chunks (at most [`GROUPS`]); chunk `g` runs
+//! its devices in index order into its own accumulators and is merged into group `g` in batch order.
+//! Nothing depends on the number of threads, so results are bit-identical for any `--threads`.
+//!
+//! Independence: a device's operations share its scatter and wear state, so they are not independent
+//! samples; groups of devices are. Confidence intervals come from the spread between the groups
+//! (see [`crate::stats`]).
+//!
+//! Its rooms: `plan` works a job out once for the hot loop and runs its batches, each group on
+//! its own thread; `draws` draws a device's or an operation's scattered parameters; `lanes`
+//! runs devices in lockstep on a kernel's lanes, operation after operation; `accumulate` counts
+//! each operation's values into the bins and each device's into the sensitivity cells. Here: the
+//! public surface (batches, groups, their tally) that the service and the summaries see.
+
+use super::correlation::Correlation;
+use super::distribution::{standard_normal_cdf, standard_normal_quantile, stratified_probability};
+use super::job::{Job, Parameter, Per, SamplerKind, Scatter, SensitivityMethod};
+use super::kernel::{Kernel, LaneWork};
+use super::lives::{DeviceLife, GroupLives};
+use super::metric::{DeviceMetric, Metric, OperationMetric};
+use super::sensitivity::{LaneCells, SensitivityPlan, SensitivityStats};
+use crate::lanes::{Mask, Real};
+use crate::operation::{Conditions, Needs, Operation, Outcome, Outcomes, Setup};
+use crate::scenario::Scenario;
+use crate::stats::{Accumulator, LaneSums, tails};
+use crate::wear::{DeviceWear, WearLaw};
+use rand::seq::SliceRandom;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use rayon::prelude::*;
+use std::borrow::Cow;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+mod accumulate;
+mod draws;
+mod lanes;
+pub mod limit_state;
+mod plan;
+
+use accumulate::*;
+use draws::*;
+use lanes::*;
+use plan::*;
+
+/// The most groups (independent units for confidence intervals) a summary is built from.
+pub const GROUPS: u64 = 32;
+
+/// LHS permutations draw from streams at and above this; device streams are below it.
+const LHS_STREAM_BASE: u64 = 1 << 63;
+
+/// Sensitivity analysis: device `d`'s `B` draws come from stream `2^62 + d`, its operations' `B'`
+/// draws from stream `2^62 + 2^61 + d` (devices are fewer than `2^61`).
+const SOBOL_DEVICE_STREAM_BASE: u64 = 1 << 62;
+const SOBOL_OPERATION_STREAM_BASE: u64 = (1 << 62) | (1 << 61);
+
+/// What the engine reports while it runs, and how it is stopped.
+pub trait Observer: Sync {
+    /// Called from worker threads as devices finish; keep it cheap.
+    fn progress(&self, _operations_done: u64, _operations_total: u64) {}
+    /// Checked before every device: cooperative cancellation.
+    fn cancelled(&self) -> bool {
+        false
+    }
+}
+
+/// An observer that ignores progress and never cancels.
+pub struct Silent;
+impl Observer for Silent {}
+
+/// A cancellation flag and a progress callback.
+pub struct Watch<'a, F: Fn(u64, u64) + Sync> {
+    pub cancel: &'a AtomicBool,
+    pub on_progress: F,
+}
+
+impl<F: Fn(u64, u64) + Sync> Observer for Watch<'_, F> {
+    fn progress(&self, done: u64, total: u64) {
+        (self.on_progress)(done, total);
+    }
+    fn cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+}
+
+/// The run was cancelled through its [`Observer`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("the job was cancelled")]
+pub struct Cancelled;
+
+/// Accumulators of every requested metric for one group of devices: operation metrics by
+/// `[bin][metric]`, then device metrics. Serialisable exactly (every float by its bits), so a group
+/// run on one machine merges on another into the same numbers.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GroupStats {
+    pub operations: Vec<Accumulator>,
+    pub devices: Vec<Accumulator>,
+    /// With failure criteria: the devices' lives.
+    pub lives: GroupLives,
+    /// Operations whose bounce sequence reached `max_bounces` with another bounce to come.
+    #[serde(default)]
+    pub operations_at_max_bounces: u64,
+    /// Per scatter entry, in the job's order: draws of its truncated distribution that fell
+    /// outside the window and were drawn again.
+    #[serde(default)]
+    pub truncation_rejections: Vec<u64>,
+    /// With a sensitivity analysis: its sums.
+    #[serde(default)]
+    pub sensitivity: SensitivityStats,
+}
+
+impl GroupStats {
+    fn new(job: &Job, sensitivity: Option<&SensitivityPlan>) -> Self {
+        // A metric's limit and list of thresholds, both counted exactly as the values arrive, and
+        // its most extreme values, kept within a budget per metric over the bins.
+        let empty = |metric, keep| {
+            let thresholds = job.thresholds().get(&metric).map_or(&[][..], Vec::as_slice);
+            Accumulator::new(job.limits().get(&metric).copied())
+                .counting(thresholds)
+                .keeping(keep)
+        };
+        let keep = tails::keep_for_bins(job.bins());
+        let per_bin: Vec<Accumulator> = job
+            .operation_metrics()
+            .iter()
+            .map(|m| empty(Metric::Operation(*m), keep))
+            .collect();
+        let bins = usize::try_from(job.bins()).expect("bins fit in memory");
+        Self {
+            operations: (0..bins).flat_map(|_| per_bin.iter().cloned()).collect(),
+            devices: job
+                .device_metrics()
+                .iter()
+                .map(|m| empty(Metric::Device(*m), Some(tails::MAX_KEEP)))
+                .collect(),
+            lives: GroupLives::default(),
+            operations_at_max_bounces: 0,
+            truncation_rejections: vec![0; job.scatter().len()],
+            sensitivity: sensitivity
+                .map(|plan| SensitivityStats::new(plan, bins))
+                .unwrap_or_default(),
+        }
+    }
+
+    fn merge(&mut self, other: &GroupStats) {
+        for (mine, theirs) in self.operations.iter_mut().zip(&other.operations) {
+            mine.merge(theirs);
+        }
+        for (mine, theirs) in self.devices.iter_mut().zip(&other.devices) {
+            mine.merge(theirs);
+        }
+        self.lives.merge(&other.lives);
+        self.operations_at_max_bounces += other.operations_at_max_bounces;
+        add_counts(
+            &mut self.truncation_rejections,
+            &other.truncation_rejections,
+        );
+        self.sensitivity.merge(&other.sensitivity);
+    }
+}
+
+/// Adds `other` to `counts` entry by entry (a missing entry counts 0).
+pub fn add_counts(counts: &mut Vec<u64>, other: &[u64]) {
+    if counts.len() < other.len() {
+        counts.resize(other.len(), 0);
+    }
+    for (count, add) in counts.iter_mut().zip(other) {
+        *count += add;
+    }
+}
+
+/// Everything a run produced before it is summarised: one [`GroupStats`] per group.
+#[derive(Debug, Clone)]
+pub struct Tally {
+    pub groups: Vec<GroupStats>,
+    pub devices: u64,
+}
+
+/// The devices one batch runs: `first..first + size`. Every job runs batch 0 (its `devices`); a
+/// precision target adds batches of the same size, the last one cut to `max_devices`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Batch {
+    pub index: u64,
+    pub first: u64,
+    pub size: u64,
+}
+
+impl Batch {
+    /// Batch `index` of `job`, or `None` when the job can never run that many devices.
+    pub fn of(job: &Job, index: u64) -> Option<Self> {
+        let size = job.spec().devices;
+        let max_devices = job.precision().map_or(size, |p| p.max_devices);
+        let first = index
+            .checked_mul(size)
+            .filter(|first| *first < max_devices)?;
+        Some(Self {
+            index,
+            first,
+            size: size.min(max_devices - first),
+        })
+    }
+
+    /// The groups the batch is cut into: the unit one machine runs alone.
+    pub fn groups(&self) -> u64 {
+        GROUPS.min(self.size)
+    }
+
+    /// The devices of group `group`: a contiguous share of the batch.
+    pub fn group_devices(&self, group: u64) -> std::ops::Range<u64> {
+        let groups = self.groups();
+        self.first + self.size * group / groups..self.first + self.size * (group + 1) / groups
+    }
+}
+
+/// Runs group `group` of `batch` alone: exactly the accumulators [`run`] builds for it, so groups
+/// run anywhere, in any order, and put back with [`Tally::add_batch`] in order give the same
+/// Result to the bit.
+pub fn run_group(
+    job: &Job,
+    batch: Batch,
+    group: u64,
+    observer: &dyn Observer,
+) -> Result<GroupStats, Cancelled> {
+    assert!(
+        group < batch.groups() && Batch::of(job, batch.index) == Some(batch),
+        "group {group} of {batch:?} is not part of the job"
+    );
+    let plan = Plan::new(job, Kernel::best());
+    let permutations = plan.batch_permutations(batch.index, batch.size);
+    let chunk = Chunk {
+        first: batch.first,
+        size: batch.size,
+        permutations: permutations.as_deref(),
+    };
+    let devices = batch.group_devices(group);
+    let total = (devices.end - devices.start) * job.spec().operations;
+    plan.run_chunk(&chunk, group, observer, &AtomicU64::new(0), total)
+}
+
+/// The device-level values each device of `batch` draws, as the run draws them: one row per
+/// device, one value per scatter entry in the job's order (NaN where the entry is per operation):
+/// what an analysis of the inputs, or a test of the sampler, reads.
+pub fn batch_draws(job: &Job, batch: Batch) -> Vec<Vec<f64>> {
+    let plan = Plan::new(job, Kernel::SCALAR);
+    let permutations = plan.batch_permutations(batch.index, batch.size);
+    draws_of(&plan, batch, |device| device, permutations.as_deref())
+}
+
+/// The device-level values of the devices' `B` samples in a Sobol' analysis, as
+/// [`batch_draws`] gives the devices' own (the `A` samples): what a check of the indices against
+/// another implementation on the same samples reads.
+pub fn sobol_b_draws(job: &Job, batch: Batch) -> Vec<Vec<f64>> {
+    let plan = Plan::new(job, Kernel::SCALAR);
+    draws_of(
+        &plan,
+        batch,
+        |device| SOBOL_DEVICE_STREAM_BASE | device,
+        None,
+    )
+}
+
+fn draws_of(
+    plan: &Plan<'_>,
+    batch: Batch,
+    stream_of: impl Fn(u64) -> u64,
+    strata: Option<&[Vec<u32>]>,
+) -> Vec<Vec<f64>> {
+    let chunk = Chunk {
+        first: batch.first,
+        size: batch.size,
+        permutations: strata,
+    };
+    let lanes = usize::try_from(batch.size).expect("batch fits in memory");
+    let mut rejections = vec![0; plan.job.scatter().len()];
+    plan.draw_devices(&chunk, 0, lanes, stream_of, strata, &mut rejections)
+        .2
+}
+
+impl Tally {
+    pub fn new() -> Self {
+        Self {
+            groups: Vec::new(),
+            devices: 0,
+        }
+    }
+
+    /// Adds the next batch's groups, in group order (a batch smaller than [`GROUPS`] devices has
+    /// fewer groups, merged into the first ones).
+    pub fn add_batch(&mut self, batch: Batch, groups: Vec<GroupStats>) {
+        debug_assert_eq!(batch.first, self.devices, "batches are added in order");
+        if self.groups.is_empty() {
+            self.groups = groups;
+        } else {
+            for (group, stats) in self.groups.iter_mut().zip(&groups) {
+                group.merge(stats);
+            }
+        }
+        self.devices += batch.size;
+    }
+}
+
+impl Default for Tally {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Runs the job on the current rayon pool with the best kernel this CPU has: the first batch of
+/// `devices`, then, with a precision target, more batches of the same size until `accept` says the
+/// target is met or `max_devices` ran.
+pub fn run(
+    job: &Job,
+    observer: &dyn Observer,
+    accept: impl FnMut(&Tally) -> bool,
+) -> Result<Tally, Cancelled> {
+    run_on(Kernel::best(), job, observer, accept)
+}
+
+/// [`run`] with the given kernel: every kernel gives the same bits.
+pub fn run_on(
+    kernel: Kernel,
+    job: &Job,
+    observer: &dyn Observer,
+    mut accept: impl FnMut(&Tally) -> bool,
+) -> Result<Tally, Cancelled> {
+    let plan = Plan::new(job, kernel);
+    let done = AtomicU64::new(0);
+    let mut tally = Tally::new();
+    let mut next = Batch::of(job, 0);
+    while let Some(batch) = next {
+        let total = (batch.first + batch.size) * job.spec().operations;
+        let stats = plan.run_batch(batch.index, batch.first, batch.size, observer, &done, total)?;
+        tally.add_batch(batch, stats);
+        next = Batch::of(job, batch.index + 1).filter(|_| !accept(&tally));
+    }
+    Ok(tally)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::{Value, json};
+
+    /// Group 0 of the job's first batch on `kernel`, each operation's draws going straight into
+    /// lanes or through a [`Draws`] per lane.
+    fn group_zero(job: &Job, kernel: Kernel, lane_draws: bool) -> GroupStats {
+        let mut plan = Plan::new(job, kernel);
+        assert!(plan.lane_draws, "the job draws lane values per operation");
+        plan.lane_draws = lane_draws;
+        let batch = Batch::of(job, 0).expect("a first batch");
+        let chunk = Chunk {
+            first: batch.first,
+            size: batch.size,
+            permutations: None,
+        };
+        plan.run_chunk(&chunk, 0, &Silent, &AtomicU64::new(0), 0)
+            .expect("not cancelled")
+    }
+
+    #[test]
+    fn operations_drawn_straight_into_lanes_give_the_bits_of_draws_per_lane() {
+        let reference: Value =
+            serde_json::from_str(include_str!("../../../../tests/data/reference_jobs.json"))
+                .unwrap();
+        let mut spec = reference["mechanical"].clone();
+        // Group 0 holds 45 devices: a full batch of every width, and a remainder. 70 operations
+        // draw ahead twice. The velocity's window rejects about a quarter of its draws; the
+        // radius is drawn per operation as well, after it.
+        spec["devices"] = json!(45 * GROUPS);
+        spec["operations"] = json!(70);
+        spec["scatter"][2]["distribution"]["min"] = json!(0.21);
+        let radius = json!({"parameter": "contact_radius_m", "per": "operation",
+            "distribution": {"kind": "normal", "mean": 0.0077, "sd": 0.0008, "min": 0.001}});
+        spec["scatter"][0] = radius;
+        let job = Job::from_json(&spec.to_string(), || 0).unwrap();
+        for kernel in Kernel::all() {
+            let straight = group_zero(&job, kernel, true);
+            assert!(
+                straight.truncation_rejections[2] > 0,
+                "{kernel:?}: no rejection"
+            );
+            assert!(
+                straight == group_zero(&job, kernel, false),
+                "{kernel:?}: lane draws differ from draws per lane"
+            );
+        }
+    }
+}

@@ -1,0 +1,264 @@
+//! The plan: the job worked out once for the hot loop, and its batches, each cut into groups
+//! that run in parallel, each group's devices in index order.
+
+use super::*;
+
+/// The job worked out for the hot loop.
+pub(super) struct Plan<'a> {
+    pub(super) job: &'a Job,
+    /// The nominal scenario's model.
+    pub(super) model: Model,
+    pub(super) nominal: Draws,
+    pub(super) device_scatter: Entries<'a>,
+    pub(super) operation_scatter: Entries<'a>,
+    /// Per-operation scatter touches only the velocity, radius or pressure: no operation rebuild.
+    pub(super) cheap_operation_scatter: bool,
+    /// Per-operation scatter draws a constant of the scenario: a model for every operation.
+    pub(super) operation_constants: bool,
+    /// Per-operation scatter draws lane values only, none correlated: without a sensitivity
+    /// analysis, which reads the draws, they go straight into lanes ([`Variant::draw_lanes`]).
+    pub(super) lane_draws: bool,
+    pub(super) needs: Needs,
+    /// Wear changes the radius only if an arc can burn and a later operation exists.
+    pub(super) track_wear: bool,
+    /// Only lane parameters (speed, radius, pressure) scatter, so devices can run in lockstep.
+    pub(super) lockstep: bool,
+    pub(super) kernel: Kernel,
+    pub(super) sensitivity: Option<SensitivityPlan>,
+}
+
+impl<'a> Plan<'a> {
+    pub(super) fn new(job: &'a Job, kernel: Kernel) -> Self {
+        let scenario = job.scenario();
+        let spec = scenario.spec();
+        let model = Model::new(scenario);
+        let nominal = Draws {
+            radius_m: spec.material.contact_radius_m,
+            pressure_pa: spec.material.dynamic_yield_pressure_pa,
+            conditions: Conditions::nominal(scenario),
+            constants: Vec::new(),
+        };
+        let (device_scatter, operation_scatter) = (
+            Entries::new(job, Per::Device),
+            Entries::new(job, Per::Operation),
+        );
+        let cheap_operation_scatter = operation_scatter
+            .scatter
+            .iter()
+            .all(|(_, s)| s.parameter.is_lane_value());
+        let operation_constants = operation_scatter
+            .scatter
+            .iter()
+            .any(|(_, s)| s.parameter.is_scenario_constant());
+        let lane_draws = !operation_scatter.is_empty()
+            && cheap_operation_scatter
+            && operation_scatter.correlation.is_none();
+        let arcs_scattered = job
+            .scatter()
+            .iter()
+            .any(|s| matches!(s.parameter, Parameter::Current | Parameter::SupplyVoltage));
+        let can_arc = model
+            .setup
+            .operation(&nominal.conditions, job.spec().fidelity)
+            .arcs()
+            || arcs_scattered;
+        let wear = model.wear;
+        let mut plan = Self {
+            job,
+            model,
+            nominal,
+            device_scatter,
+            operation_scatter,
+            cheap_operation_scatter,
+            operation_constants,
+            lane_draws,
+            needs: Needs {
+                impact: job.operation_metrics().iter().any(|m| m.needs_impact())
+                    || job
+                        .device_metrics()
+                        .iter()
+                        .any(|m| Metric::Device(*m).needs_impact())
+                    || job.failure().iter().any(|(m, _)| m.needs_impact()),
+            },
+            track_wear: can_arc && job.spec().operations > 1 && wear.changes_surface(),
+            lockstep: job.scatter().iter().all(|s| s.parameter.is_lane_value()),
+            kernel,
+            sensitivity: None,
+        };
+        plan.sensitivity = job.sensitivity().map(|method| {
+            // Sums are taken about the nominal scenario's values: a new device's operation.
+            let fidelity = job.spec().fidelity;
+            let nominal = &plan.nominal;
+            let operation = plan.model.setup.operation(&nominal.conditions, fidelity);
+            let outcome = operation
+                .run_lanes(
+                    operation.impact_velocity_m_s(),
+                    nominal.radius_m,
+                    nominal.pressure_pa,
+                    plan.needs,
+                    |_, _, _, _| {},
+                )
+                .lane(0);
+            let operation_shifts = job
+                .operation_metrics()
+                .iter()
+                .map(|m| m.value(&outcome))
+                .collect();
+            let device_shifts = job
+                .device_metrics()
+                .iter()
+                .map(|m| plan.device_metric(&plan.model, *m, nominal, &DeviceWear::default()))
+                .collect();
+            SensitivityPlan::new(job, method, operation_shifts, device_shifts)
+        });
+        plan
+    }
+
+    /// The model of the scenario with the constants `draws` holds: the nominal one when it holds none.
+    pub(super) fn model(&self, draws: &Draws) -> Cow<'_, Model> {
+        if draws.constants.is_empty() {
+            return Cow::Borrowed(&self.model);
+        }
+        let scenario = self.job.scenario().with_draws(|spec| {
+            for &(parameter, value) in &draws.constants {
+                parameter.set_in(spec, value);
+            }
+        });
+        Cow::Owned(Model::new(&scenario))
+    }
+
+    /// Draws the device-level scatter of `lanes` devices from `stream_of(device)`, each from its
+    /// own stream: their draws, their streams as the operations go on to use them, and the drawn
+    /// values by scatter entry (NaN for entries drawn per operation).
+    pub(super) fn draw_devices(
+        &self,
+        chunk: &Chunk<'_>,
+        first_local: u64,
+        lanes: usize,
+        stream_of: impl Fn(u64) -> u64,
+        strata: Option<&[Vec<u32>]>,
+        rejections: &mut [u64],
+    ) -> (Vec<Draws>, Vec<ChaCha8Rng>, Vec<Vec<f64>>) {
+        let job = self.job;
+        let mut drawn = (
+            Vec::with_capacity(lanes),
+            Vec::with_capacity(lanes),
+            Vec::with_capacity(lanes),
+        );
+        for local in first_local..first_local + lanes as u64 {
+            let mut rng = ChaCha8Rng::seed_from_u64(job.seed());
+            rng.set_stream(stream_of(chunk.first + local));
+            let local_index = usize::try_from(local).expect("batch fits in memory");
+            let mut device = self.nominal.clone();
+            let mut values = vec![f64::NAN; job.scatter().len()];
+            self.device_scatter.draw(
+                job,
+                strata.map(|p| (p, local_index)),
+                &mut rng,
+                rejections,
+                |index, value| {
+                    device.set(job.scatter()[index].parameter, value);
+                    values[index] = value;
+                },
+            );
+            drawn.0.push(device);
+            drawn.1.push(rng);
+            drawn.2.push(values);
+        }
+        drawn
+    }
+}
+
+impl<'a> Plan<'a> {
+    /// LHS permutations of one batch: one per device-level parameter, from the batch's own stream.
+    pub(super) fn lhs_permutations(&self, batch: u64, size: u64) -> Vec<Vec<u32>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(self.job.seed());
+        rng.set_stream(LHS_STREAM_BASE | batch);
+        let size = u32::try_from(size).expect("an LHS batch has fewer than 2^32 devices");
+        self.device_scatter
+            .scatter
+            .iter()
+            .map(|_| {
+                let mut permutation: Vec<u32> = (0..size).collect();
+                permutation.shuffle(&mut rng);
+                permutation
+            })
+            .collect()
+    }
+
+    /// The LHS permutations of batch `batch` of `size` devices, when the job samples that way.
+    pub(super) fn batch_permutations(&self, batch: u64, size: u64) -> Option<Vec<Vec<u32>>> {
+        (self.job.spec().sampler == SamplerKind::Lhs && !self.device_scatter.is_empty())
+            .then(|| self.lhs_permutations(batch, size))
+    }
+
+    /// Runs devices `first..first + size` as batch `batch`, one chunk per group, in parallel.
+    pub(super) fn run_batch(
+        &self,
+        batch: u64,
+        first: u64,
+        size: u64,
+        observer: &dyn Observer,
+        done: &AtomicU64,
+        total: u64,
+    ) -> Result<Vec<GroupStats>, Cancelled> {
+        let permutations = self.batch_permutations(batch, size);
+        let chunk = Chunk {
+            first,
+            size,
+            permutations: permutations.as_deref(),
+        };
+        (0..GROUPS.min(size))
+            .into_par_iter()
+            .map(|group| self.run_chunk(&chunk, group, observer, done, total))
+            .collect()
+    }
+
+    /// Runs group `group`'s contiguous share of a batch, its devices in index order.
+    pub(super) fn run_chunk(
+        &self,
+        chunk: &Chunk<'_>,
+        group: u64,
+        observer: &dyn Observer,
+        done: &AtomicU64,
+        total: u64,
+    ) -> Result<GroupStats, Cancelled> {
+        let operations = self.job.spec().operations;
+        let groups = GROUPS.min(chunk.size);
+        let mut stats = GroupStats::new(self.job, self.sensitivity.as_ref());
+        let (start, end) = (
+            chunk.size * group / groups,
+            chunk.size * (group + 1) / groups,
+        );
+        let mut local = start;
+        while local < end {
+            if observer.cancelled() {
+                return Err(Cancelled);
+            }
+            let left = end - local;
+            let lanes = self.kernel.lanes() as u64;
+            // A batch of lanes, full or (without a sensitivity analysis) at least half full, its
+            // spare lanes computing a copy of its first device, whose values nobody reads: half a
+            // batch costs less in lockstep than its devices one by one (docs/performance.md).
+            // Fewer devices run one by one, through the same code.
+            let (kernel, devices) = if self.lockstep
+                && (left >= lanes || (2 * left >= lanes && self.sensitivity.is_none()))
+            {
+                (self.kernel, left.min(lanes))
+            } else {
+                (Kernel::SCALAR, 1)
+            };
+            kernel.run(Devices {
+                plan: self,
+                chunk,
+                first_local: local,
+                active: usize::try_from(devices).expect("a batch fits in memory"),
+                stats: &mut stats,
+            });
+            let ran = operations * devices;
+            observer.progress(done.fetch_add(ran, Ordering::Relaxed) + ran, total);
+            local += devices;
+        }
+        Ok(stats)
+    }
+}
