@@ -111,6 +111,18 @@ impl Kernel {
             .collect()
     }
 
+    /// This kernel and every other of this CPU with fewer lanes and no wider instruction set
+    /// (never [`Kernel::SCALAR`]), widest first: on AVX-512, 32 lanes, then AVX2's 8, then the
+    /// portable 4.
+    pub fn narrower(self) -> Vec<Kernel> {
+        let mut kernels: Vec<Kernel> = Kernel::all()
+            .into_iter()
+            .filter(|k| k.lanes > 1 && k.lanes <= self.lanes && k.isa.width() <= self.isa.width())
+            .collect();
+        kernels.sort_by_key(|k| std::cmp::Reverse((k.lanes, k.isa.width())));
+        kernels
+    }
+
     pub fn isa(self) -> Isa {
         self.isa
     }

@@ -92,6 +92,28 @@ fn every_kernel_on_this_cpu_gives_the_bits_of_one_device_at_a_time() {
     }
 }
 
+/// A group's last devices, too few for a kernel's lanes, fall to the narrower kernels: each
+/// kernel lists itself first, then the narrower ones of this CPU, widest first, never one device
+/// at a time (whose bits they all give, above).
+#[test]
+fn a_kernel_falls_back_to_narrower_kernels_widest_first() {
+    assert!(Kernel::SCALAR.narrower().is_empty());
+    for kernel in Kernel::all().into_iter().filter(|k| k.lanes() > 1) {
+        let narrower = kernel.narrower();
+        assert_eq!(narrower[0], kernel, "{narrower:?}");
+        assert!(
+            narrower.windows(2).all(|w| w[0].lanes() > w[1].lanes()),
+            "{narrower:?}"
+        );
+        assert!(
+            narrower
+                .iter()
+                .all(|k| 1 < k.lanes() && k.lanes() <= kernel.lanes()),
+            "{narrower:?}"
+        );
+    }
+}
+
 const SCENARIOS: [&str; 4] = [
     "{}",
     r#"{"circuit": {"supply_voltage_v": 48, "current_a": 15}}"#,

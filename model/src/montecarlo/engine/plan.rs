@@ -23,7 +23,9 @@ pub(super) struct Plan<'a> {
     pub(super) track_wear: bool,
     /// Only lane parameters (speed, radius, pressure) scatter, so devices can run in lockstep.
     pub(super) lockstep: bool,
-    pub(super) kernel: Kernel,
+    /// The job's kernel and the narrower ones of this CPU, widest first ([`Kernel::narrower`]): a
+    /// group's last devices, too few for the kernel's lanes, fill a narrower kernel's.
+    pub(super) kernels: Vec<Kernel>,
     pub(super) sensitivity: Option<SensitivityPlan>,
 }
 
@@ -82,7 +84,7 @@ impl<'a> Plan<'a> {
             },
             track_wear: can_arc && job.spec().operations > 1 && wear.changes_surface(),
             lockstep: job.scatter().iter().all(|s| s.parameter.is_lane_value()),
-            kernel,
+            kernels: kernel.narrower(),
             sensitivity: None,
         };
         plan.sensitivity = job.sensitivity().map(|method| {
@@ -236,18 +238,21 @@ impl<'a> Plan<'a> {
                 return Err(Cancelled);
             }
             let left = end - local;
-            let lanes = self.kernel.lanes() as u64;
             // A batch of lanes, full or (without a sensitivity analysis) at least half full, its
             // spare lanes computing a copy of its first device, whose values nobody reads: half a
-            // batch costs less in lockstep than its devices one by one (docs/performance.md).
-            // Fewer devices run one by one, through the same code.
-            let (kernel, devices) = if self.lockstep
-                && (left >= lanes || (2 * left >= lanes && self.sensitivity.is_none()))
-            {
-                (self.kernel, left.min(lanes))
-            } else {
-                (Kernel::SCALAR, 1)
+            // batch costs less in lockstep than its devices one by one (docs/performance.md). A
+            // group's last devices (a small job's groups hold only a few) take the widest kernel
+            // they fill so; fewer devices run one by one, through the same code. Every kernel
+            // gives the same bits, so the choice changes nothing but the time.
+            let fills = |kernel: &&Kernel| {
+                let lanes = kernel.lanes() as u64;
+                left >= lanes || (2 * left >= lanes && self.sensitivity.is_none())
             };
+            let kernel = match self.kernels.iter().find(fills) {
+                Some(&kernel) if self.lockstep => kernel,
+                _ => Kernel::SCALAR,
+            };
+            let devices = left.min(kernel.lanes() as u64);
             kernel.run(Devices {
                 plan: self,
                 chunk,
