@@ -536,7 +536,7 @@ pub(crate) fn row_groups_to_sql(
 ) -> StoreResult<Vec<u8>> {
     let of_row = u64::try_from(row.bin)
         .ok()
-        .and_then(|bin| groups.of(metric, bin))
+        .and_then(|bin| groups.borrowed(metric, bin))
         .ok_or_else(|| corrupt(GROUPS, format!("the run has no {metric} bin {}", row.bin)))?;
     gzip_json(GROUPS, &of_row)
 }
