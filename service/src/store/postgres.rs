@@ -94,6 +94,7 @@ pub(crate) static DIALECT: Dialect = Dialect {
     ),
     claim: claim_next!(
         "(job_id, batch, grp) = (SELECT s.job_id, s.batch, s.grp",
+        "jobs j",
         " FOR UPDATE OF s SKIP LOCKED"
     ),
     migrator: &MIGRATOR,

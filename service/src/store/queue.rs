@@ -249,8 +249,11 @@ async fn now_or(dialect: &Dialect, tx: &mut Tx, at: Option<UnixMs>) -> StoreResu
 /// reason.
 async fn give_up_on_exhausted(tx: &mut Tx, now: UnixMs, retries: u64) -> StoreResult<()> {
     let exhausted = Sql::new(
-        "SELECT s.job_id, s.batch, s.grp FROM shards s JOIN jobs j ON j.id = s.job_id \
-         WHERE s.status = 'running' AND s.lease_until < $1 AND s.lost_leases >= $2 AND j.status IN ('queued', 'running')",
+        // From the running shards (`shards_open`), not from every open job's: 16 ms a claim with
+        // 1000 jobs queued, when SQLite started from the jobs.
+        "SELECT s.job_id, s.batch, s.grp FROM shards s CROSS JOIN jobs j \
+         WHERE j.id = s.job_id AND s.status <> 'done' AND s.status = 'running' AND s.lease_until < $1 \
+         AND s.lost_leases >= $2 AND j.status IN ('queued', 'running')",
     )
     .bind(now.0)
     .bind(count_to_sql(retries))

@@ -304,9 +304,11 @@ macro_rules! fenced_shard {
 pub(crate) use fenced_shard;
 
 /// Leases the next shard (see [`super::JobQueue::claim`]): the target picks the shard's row with the
-/// lock the backend takes on it. `$1` the worker, `$2` now, `$3` the lease's duration.
+/// lock the backend takes on it; `$jobs` names the jobs table, with the index that walks the open
+/// ones in fair-share order where the backend must be told. `$1` the worker, `$2` now, `$3` the
+/// lease's duration.
 macro_rules! claim_next {
-    ($target:literal, $lock:literal) => {
+    ($target:literal, $jobs:literal, $lock:literal) => {
         concat!(
             "UPDATE shards SET status = 'running', attempt = attempt + 1, lease_owner = $1, lease_until = $2 + $3, \
              operations_done = 0, retry_at = NULL, \
@@ -316,8 +318,10 @@ macro_rules! claim_next {
                  ELSE '' END \
              WHERE ",
             $target,
-            " FROM shards s JOIN jobs j ON j.id = s.job_id \
-                            WHERE j.status IN ('queued', 'running') \
+            " FROM ",
+            $jobs,
+            " CROSS JOIN shards s \
+                            WHERE s.job_id = j.id AND j.status IN ('queued', 'running') AND s.status <> 'done' \
                             AND ((s.status = 'queued' AND COALESCE(s.retry_at, 0) <= $2) \
                                  OR (s.status = 'running' AND s.lease_until < $2)) \
                             AND (s.grp >= 0 OR NOT EXISTS (SELECT 1 FROM shards o WHERE o.job_id = s.job_id \

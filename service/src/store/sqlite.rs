@@ -209,7 +209,13 @@ pub(crate) static DIALECT: Dialect = Dialect {
         fenced_shard!(),
         ")"
     ),
-    claim: claim_next!("rowid = (SELECT s.rowid", ""),
+    // Open jobs in fair-share order, each one's open shards in order (migration 0012): named,
+    // since without statistics the planner takes `jobs_by_status` and sorts the whole queue.
+    claim: claim_next!(
+        "rowid = (SELECT s.rowid",
+        "jobs j INDEXED BY jobs_open_by_vtime",
+        ""
+    ),
     migrator: &MIGRATOR,
 };
 
