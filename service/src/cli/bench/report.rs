@@ -485,6 +485,7 @@ mod tests {
                 case: "wear curve",
                 parameter: "roughening_energy_j",
                 truth: 0.5,
+                first_seed: 1000,
                 draws: 1000,
                 coverage: 0.943,
             }],
@@ -565,7 +566,7 @@ mod tests {
         );
         assert!(md.contains("| 21 / 3 | 0.500 | 12.250 | 24.5 |"), "{md}");
         assert!(
-            md.contains("| wear curve | `roughening_energy_j` | 0.5 | 1000 | 0.943 |"),
+            md.contains("| wear curve | `roughening_energy_j` | 0.5 | 1000-1999 | 0.943 |"),
             "{md}"
         );
         assert!(
