@@ -19,7 +19,7 @@ use bouncewear_model::montecarlo::{Job, run_job};
 use bouncewear_model::{Fidelity, InvalidInput, Pointer, Scenario, simulate};
 use clap::{Parser, Subcommand, ValueEnum};
 use std::io::{Read, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
@@ -297,41 +297,13 @@ fn run(cli: Cli) -> Result<(), CliError> {
             file,
             plot,
             observations,
-        } => {
-            let mut text = read_input(&file)?;
-            if let Some(csv) = observations {
-                text = with_observations(&text, &read_input(&csv)?, &csv.display().to_string())?;
-            }
-            let spec = CalibrationSpec::from_json(&text)?;
-            let fit = calibrate(&spec)?;
-            if let Some(path) = plot {
-                let svg =
-                    crate::plots::calibration_svg(&crate::plots::calibration_panels(&spec, &fit));
-                std::fs::write(&path, svg).map_err(|source| CliError::Io {
-                    path: path.display().to_string(),
-                    source,
-                })?;
-            }
-            print_json(&fit)
-        }
+        } => calibrate_command(&file, plot.as_deref(), observations.as_deref()),
         Command::Run {
             file,
             threads,
             plots,
             quiet,
-        } => {
-            let job = Job::from_json(&read_input(&file)?, draw_seed)?;
-            check_threshold(&job, &Pointer::root().child("rare_event"))?;
-            let pool = thread_pool(threads)?;
-            let progress = Progress::operations(quiet);
-            let result = pool.install(|| run_job(&job, &progress));
-            progress.finish();
-            let result = result.map_err(|cancelled| CliError::Failed(cancelled.to_string()))?;
-            if let Some(dir) = plots {
-                write_plots(&result, &dir)?;
-            }
-            print_json(&result)
-        }
+        } => run_command(&file, threads, plots.as_deref(), quiet),
         Command::Serve(config) => Ok(async_runtime()?.block_on(crate::app::serve(config))?),
         Command::Worker(config) => Ok(async_runtime()?.block_on(crate::app::work(config))?),
         Command::Health {
@@ -399,6 +371,50 @@ fn run(cli: Cli) -> Result<(), CliError> {
             print_json(&report)
         }
     }
+}
+
+/// `bouncewear calibrate`: the fit of `file` (with the measurements of the CSV `observations`,
+/// if given) as JSON, and its plot written to `plot`.
+fn calibrate_command(
+    file: &Path,
+    plot: Option<&Path>,
+    observations: Option<&Path>,
+) -> Result<(), CliError> {
+    let mut text = read_input(file)?;
+    if let Some(csv) = observations {
+        text = with_observations(&text, &read_input(csv)?, &csv.display().to_string())?;
+    }
+    let spec = CalibrationSpec::from_json(&text)?;
+    let fit = calibrate(&spec)?;
+    if let Some(path) = plot {
+        let svg = crate::plots::calibration_svg(&crate::plots::calibration_panels(&spec, &fit));
+        std::fs::write(path, svg).map_err(|source| CliError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+    }
+    print_json(&fit)
+}
+
+/// `bouncewear run`: the job of `file` on `threads` compute threads, its Result as JSON and its
+/// plots written into `plots`.
+fn run_command(
+    file: &Path,
+    threads: Option<usize>,
+    plots: Option<&Path>,
+    quiet: bool,
+) -> Result<(), CliError> {
+    let job = Job::from_json(&read_input(file)?, draw_seed)?;
+    check_threshold(&job, &Pointer::root().child("rare_event"))?;
+    let pool = thread_pool(threads)?;
+    let progress = Progress::operations(quiet);
+    let result = pool.install(|| run_job(&job, &progress));
+    progress.finish();
+    let result = result.map_err(|cancelled| CliError::Failed(cancelled.to_string()))?;
+    if let Some(dir) = plots {
+        write_plots(&result, dir)?;
+    }
+    print_json(&result)
 }
 
 /// The body of a 200 from `url`; anything else is a failure naming what went wrong.
@@ -476,7 +492,7 @@ fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool, CliError> {
 }
 
 /// Reads a file, or standard input for `-`.
-pub fn read_input(path: &PathBuf) -> Result<String, CliError> {
+pub fn read_input(path: &Path) -> Result<String, CliError> {
     let mut text = String::new();
     let result = if path.as_os_str() == "-" {
         std::io::stdin().read_to_string(&mut text).map(|_| ())

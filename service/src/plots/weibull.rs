@@ -79,9 +79,11 @@ struct Drawn<'a> {
     line: &'static str,
 }
 
-fn weibulls_svg(title: &str, designs: &[(&str, &LifeAnalysis)]) -> String {
+/// Each design's fit (if drawable), its usable points thinned to its share of [`MAX_POINTS`],
+/// and its colours: ink and blue alone, a series colour each among several.
+fn drawn_designs<'a>(designs: &[(&'a str, &'a LifeAnalysis)]) -> Vec<Drawn<'a>> {
     let alone = designs.len() == 1;
-    let drawn: Vec<Drawn> = designs
+    designs
         .iter()
         .enumerate()
         .map(|(i, &(name, life))| {
@@ -102,7 +104,12 @@ fn weibulls_svg(title: &str, designs: &[(&str, &LifeAnalysis)]) -> String {
                 line: if alone { BLUE } else { colour },
             }
         })
-        .collect();
+        .collect()
+}
+
+fn weibulls_svg(title: &str, designs: &[(&str, &LifeAnalysis)]) -> String {
+    let alone = designs.len() == 1;
+    let drawn = drawn_designs(designs);
     // One design's notes go in a box over the plot's empty corner; several designs' would hide
     // their points, so they go above the plot.
     let notes: Vec<(String, &'static str)> =
