@@ -144,7 +144,7 @@ fn id_of(job: &serde_json::Value) -> Result<String, CliError> {
 /// succeeded.
 pub fn submit(
     server: &Server,
-    file: &std::path::PathBuf,
+    file: &std::path::Path,
     wait: bool,
     timeout: Option<f64>,
 ) -> Result<String, CliError> {
