@@ -305,8 +305,9 @@ pub(crate) use fenced_shard;
 
 /// Leases the next shard (see [`super::JobQueue::claim`]): the target picks the shard's row with the
 /// lock the backend takes on it; `$jobs` names the jobs table, with the index that walks the open
-/// ones in fair-share order where the backend must be told. `$1` the worker, `$2` now, `$3` the
-/// lease's duration.
+/// ones in fair-share order where the backend must be told. `s.status <> 'done'`, implied by the
+/// terms after it, is there for the partial index `shards_open_by_job`, which a planner uses only
+/// where the query states its condition. `$1` the worker, `$2` now, `$3` the lease's duration.
 macro_rules! claim_next {
     ($target:literal, $jobs:literal, $lock:literal) => {
         concat!(
