@@ -13,8 +13,8 @@ use bouncewear::domain::{
 };
 use bouncewear::scheduler::tick;
 use bouncewear::store::{
-    self, JobRecord, Lease, LeaseTerms, NewRun, Operations, RetryBudget, RunSlot, ScheduleRecord,
-    Store, StoreError,
+    self, EncodedResult, JobRecord, Lease, LeaseTerms, NewRun, Operations, RetryBudget, RunSlot,
+    ScheduleRecord, Store, StoreError,
 };
 use bouncewear::worker::Workers;
 use bouncewear_model::Pointer;
@@ -545,9 +545,10 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
                 let partials = store.partials(&fence.job).await.unwrap();
                 match merge(&job, fence.shard.batch, partials, 1.0, &Silent).unwrap() {
                     Merged::Result { result, groups } => {
+                        let encoded = EncodedResult::new(&result, groups).unwrap();
                         assert!(
                             store
-                                .succeed(fence, UnixMs(5), &result, &groups)
+                                .succeed(fence, UnixMs(5), &encoded)
                                 .await
                                 .unwrap()
                                 .is_some()

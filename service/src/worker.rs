@@ -12,12 +12,14 @@
 //! shutdown the running shard is stopped and handed back to the queue at once.
 
 use crate::domain::UnixMs;
-use crate::domain::shards::{MergeError, Merged, merge, run_whole};
-use crate::store::{Claim, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store, StoreResult};
+use crate::domain::shards::{MergeError, Merged, ShardPlan, merge, run_whole};
+use crate::store::{
+    Claim, EncodedResult, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store, StoreResult,
+};
 use crate::telemetry::{record_job_finished, record_shard_step};
 use bouncewear_model::Pointer;
-use bouncewear_model::montecarlo::engine::{Batch, run_group};
-use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Observer, RunGroups, Watch};
+use bouncewear_model::montecarlo::engine::{Batch, GroupStats, run_group};
+use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Observer, Watch};
 use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -63,6 +65,19 @@ impl Drop for KeptLease {
     fn drop(&mut self) {
         self.keeper.abort();
     }
+}
+
+/// What a merge step's computation leaves to write: the Result, encoded for the store, or a
+/// precision target's next batch.
+enum Outcome {
+    Result {
+        result: Box<JobResult>,
+        encoded: StoreResult<EncodedResult>,
+    },
+    Next {
+        shards: Vec<ShardPlan>,
+        folded: Vec<GroupStats>,
+    },
 }
 
 /// How a computation under a lease ended.
@@ -231,13 +246,30 @@ impl Workers {
                 };
                 match merged {
                     Err(MergeError::Cancelled(cancelled)) => Err(cancelled),
-                    merged => Ok(merged),
+                    Ok(Merged::Result { result, groups }) => {
+                        // Encoded here, on the compute pool and its rows in parallel, so that the
+                        // writes bind bytes; each bin's groups go once encoded.
+                        let encoded = EncodedResult::new(&result, groups);
+                        Ok(Ok(Outcome::Result { result, encoded }))
+                    }
+                    Ok(Merged::Next { shards, folded }) => Ok(Ok(Outcome::Next { shards, folded })),
+                    Err(other) => Ok(Err(other)),
                 }
             })
             .await;
         match ran {
-            Ran::Done(Ok(Merged::Result { result, groups })) => {
-                let stored = self.succeed(fence, &result, &groups, lease).await;
+            Ran::Done(Ok(Outcome::Result {
+                encoded: Err(error),
+                ..
+            })) => {
+                let reason = format!("encoding the result failed: {error}");
+                self.fail_attempt(fence, &reason).await
+            }
+            Ran::Done(Ok(Outcome::Result {
+                result,
+                encoded: Ok(encoded),
+            })) => {
+                let stored = self.succeed(fence, &result, &encoded, lease).await;
                 if stored && whole {
                     let operations = result.job.devices_run() * result.job.spec().operations;
                     metrics::counter!("bouncewear_operations_simulated_total")
@@ -245,7 +277,7 @@ impl Workers {
                 }
                 record_shard_step("merge", merging);
             }
-            Ran::Done(Ok(Merged::Next { shards, folded })) => match self
+            Ran::Done(Ok(Outcome::Next { shards, folded })) => match self
                 .store_with_backoff(lease, || self.store.add_batch(fence, &shards, &folded))
                 .await
             {
@@ -395,13 +427,11 @@ impl Workers {
         &self,
         fence: &Fence,
         result: &JobResult,
-        groups: &RunGroups,
+        encoded: &EncodedResult,
         lease: &KeptLease,
     ) -> bool {
         let stored = self
-            .store_with_backoff(lease, || {
-                self.store.succeed(fence, UnixMs::now(), result, groups)
-            })
+            .store_with_backoff(lease, || self.store.succeed(fence, UnixMs::now(), encoded))
             .await;
         match stored {
             Ok(Some(stored_bytes)) => {

@@ -458,17 +458,9 @@ impl RunGroups {
     /// 0), as its groups' accumulators in group order; `None` for a (metric, bin) the run did not
     /// summarise.
     pub fn of(&self, metric: &str, bin: u64) -> Option<Vec<Accumulator>> {
-        self.borrowed(metric, bin)
-            .map(|groups| groups.into_iter().cloned().collect())
-    }
-
-    /// [`RunGroups::of`] without copying the accumulators: what storing each bin's groups
-    /// serialises (a copy of every bin's 32 sketches cost a small job's merge about a tenth of
-    /// its time).
-    pub fn borrowed(&self, metric: &str, bin: u64) -> Option<Vec<&Accumulator>> {
         let bin = usize::try_from(bin).ok()?;
         let take = |pick: &dyn Fn(&engine::GroupStats) -> Option<&Accumulator>| {
-            self.groups.iter().map(pick).collect()
+            self.groups.iter().map(|g| pick(g).cloned()).collect()
         };
         match Metric::parse(metric)? {
             Metric::Operation(m) => {
@@ -482,6 +474,35 @@ impl RunGroups {
             }
             Metric::Device(_) => None,
         }
+    }
+
+    /// Every (metric, bin) with its groups' accumulators in group order, moved out one at a time:
+    /// each bin of the operation metrics, then each device metric (bin 0). Storing a Result
+    /// encodes and drops each before taking the next, so the groups are never held twice (decoded
+    /// and encoded), whatever the job's size.
+    pub fn into_bins(self) -> impl Iterator<Item = (Metric, u64, Vec<Accumulator>)> {
+        let (operation_metrics, device_metrics) = (self.operation_metrics, self.device_metrics);
+        let (mut operations, mut devices): (Vec<_>, Vec<_>) = self
+            .groups
+            .into_iter()
+            .map(|group| (group.operations.into_iter(), group.devices.into_iter()))
+            .unzip();
+        let bins = operations.first().map_or(0, |o| o.len()) / operation_metrics.len().max(1);
+        let per_bin = (0..bins as u64).flat_map(move |bin| {
+            operation_metrics
+                .clone()
+                .into_iter()
+                .map(move |m| (Metric::Operation(m), bin))
+        });
+        let of_bins = per_bin.map(move |(metric, bin)| {
+            let groups = operations.iter_mut().filter_map(Iterator::next).collect();
+            (metric, bin, groups)
+        });
+        let of_devices = device_metrics.into_iter().map(move |m| {
+            let groups = devices.iter_mut().filter_map(Iterator::next).collect();
+            (Metric::Device(m), 0, groups)
+        });
+        of_bins.chain(of_devices)
     }
 }
 

@@ -89,12 +89,14 @@ pub struct Accumulator {
     #[serde(with = "super::bits")]
     threshold: f64,
     above: u64,
-    /// A metric's list of thresholds, each with its exact count of values beyond.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    /// A metric's list of thresholds, each with its exact count of values beyond. Always written,
+    /// even empty, as is `tails`: the store's binary format has no field names to skip by (JSON
+    /// stored before they existed reads as empty).
+    #[serde(default)]
     thresholds: Vec<ThresholdCount>,
     sketch: Sketch,
     /// The most extreme values, exactly; none in accumulators stored before they were kept.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(default)]
     tails: Option<Tails>,
 }
 

@@ -1,14 +1,23 @@
-//! Floats serialised by their bits: exact, and infinities and NaNs included, which JSON numbers
-//! cannot carry.
+//! Floats serialised by their bits in human-readable formats (JSON): exact, and infinities and
+//! NaNs included, which JSON numbers cannot carry. A binary format (the store's postcard) takes
+//! the float itself, its eight bytes, which are its bits already.
 
 use serde::{Deserialize, Deserializer, Serializer};
 
 pub fn serialize<S: Serializer>(value: &f64, serializer: S) -> Result<S::Ok, S::Error> {
-    serializer.serialize_u64(value.to_bits())
+    if serializer.is_human_readable() {
+        serializer.serialize_u64(value.to_bits())
+    } else {
+        serializer.serialize_f64(*value)
+    }
 }
 
 pub fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
-    u64::deserialize(deserializer).map(f64::from_bits)
+    if deserializer.is_human_readable() {
+        u64::deserialize(deserializer).map(f64::from_bits)
+    } else {
+        f64::deserialize(deserializer)
+    }
 }
 
 /// The same for an optional float.
@@ -17,7 +26,10 @@ pub mod optional {
 
     pub fn serialize<S: Serializer>(value: &Option<f64>, serializer: S) -> Result<S::Ok, S::Error> {
         match value {
-            Some(value) => serializer.serialize_some(&value.to_bits()),
+            Some(value) if serializer.is_human_readable() => {
+                serializer.serialize_some(&value.to_bits())
+            }
+            Some(value) => serializer.serialize_some(value),
             None => serializer.serialize_none(),
         }
     }
@@ -25,7 +37,11 @@ pub mod optional {
     pub fn deserialize<'de, D: Deserializer<'de>>(
         deserializer: D,
     ) -> Result<Option<f64>, D::Error> {
-        Option::<u64>::deserialize(deserializer).map(|bits| bits.map(f64::from_bits))
+        if deserializer.is_human_readable() {
+            Option::<u64>::deserialize(deserializer).map(|bits| bits.map(f64::from_bits))
+        } else {
+            Option::<f64>::deserialize(deserializer)
+        }
     }
 }
 
@@ -34,11 +50,19 @@ pub mod list {
     use serde::{Deserialize, Deserializer, Serializer};
 
     pub fn serialize<S: Serializer>(values: &[f64], serializer: S) -> Result<S::Ok, S::Error> {
-        serializer.collect_seq(values.iter().map(|value| value.to_bits()))
+        if serializer.is_human_readable() {
+            serializer.collect_seq(values.iter().map(|value| value.to_bits()))
+        } else {
+            serializer.collect_seq(values)
+        }
     }
 
     pub fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<Vec<f64>, D::Error> {
-        Vec::<u64>::deserialize(deserializer)
-            .map(|bits| bits.into_iter().map(f64::from_bits).collect())
+        if deserializer.is_human_readable() {
+            Vec::<u64>::deserialize(deserializer)
+                .map(|bits| bits.into_iter().map(f64::from_bits).collect())
+        } else {
+            Vec::<f64>::deserialize(deserializer)
+        }
     }
 }

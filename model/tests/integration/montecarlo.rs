@@ -587,6 +587,31 @@ fn a_query_after_the_run_at_the_standard_levels_answers_the_results_summaries() 
     }
     assert!(groups.of("total_bounce_s", 4).is_none());
     assert!(groups.of("eroded_mass_kg", 1).is_none());
+    // Moved out one (metric, bin) at a time, every summary's groups come once, the same.
+    let expected: Vec<_> = summaries_of(&result)
+        .map(|(metric, bin)| (metric.clone(), bin, groups.of(metric, bin).unwrap()))
+        .collect();
+    let mut moved: Vec<_> = groups
+        .into_bins()
+        .map(|(metric, bin, at)| (metric.name().to_owned(), bin, at))
+        .collect();
+    moved.sort_by(|a, b| (&a.0, a.1).cmp(&(&b.0, b.1)));
+    assert_eq!(moved, expected);
+}
+
+/// Every (metric, bin) a Result summarises, by metric name then bin.
+fn summaries_of(
+    result: &bouncewear_model::montecarlo::JobResult,
+) -> impl Iterator<Item = (&String, u64)> {
+    let bins = result
+        .operations
+        .iter()
+        .flat_map(|(metric, bins)| (0..bins.len() as u64).map(move |bin| (metric, bin)));
+    let mut all: Vec<_> = bins
+        .chain(result.devices.keys().map(|metric| (metric, 0)))
+        .collect();
+    all.sort();
+    all.into_iter()
 }
 
 #[test]

@@ -20,6 +20,7 @@ mod sql;
 mod sqlite;
 
 pub use backend::SqlStore;
+pub use rows::EncodedResult;
 
 use crate::domain::{
     Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob,
@@ -27,7 +28,7 @@ use crate::domain::{
 };
 use async_trait::async_trait;
 use bouncewear_model::montecarlo::engine::GroupStats;
-use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec, RunGroups};
+use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
 use bouncewear_model::stats::{Accumulator, Summary};
 use std::sync::Arc;
 
@@ -374,16 +375,15 @@ pub trait JobQueue: Send + Sync + 'static {
 pub trait Results: Send + Sync + 'static {
     /// Stores the result, marks the merge step done and the job succeeded, and drops the groups'
     /// accumulators, if the claim still holds the merge step: the distributions (each with the
-    /// final groups' accumulators of its (metric, bin), from `groups`, for queries after the run)
-    /// and device lives first, in short transactions, then the rest in one. The job's stored bytes
+    /// final groups' accumulators of its (metric, bin), for queries after the run) and device
+    /// lives first, in short transactions, then the rest in one. The job's stored bytes
     /// ([`JobRecord::stored_bytes`]); `None` if the claim no longer holds (the job stays
     /// unsucceeded; rows already written go when it ends, or its next merge writes them again).
     async fn succeed(
         &self,
         fence: &Fence,
         finished_at: UnixMs,
-        result: &JobResult,
-        groups: &RunGroups,
+        result: &EncodedResult,
     ) -> StoreResult<Option<u64>>;
     /// The accumulators of the job's done groups, in batch and group order.
     async fn partials(&self, id: &JobId) -> StoreResult<Vec<(ShardId, GroupStats)>>;

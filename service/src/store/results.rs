@@ -4,17 +4,16 @@
 use super::backend::SqlStore;
 use super::queue::drop_partials;
 use super::rows::{
-    self, INSERT_DISTRIBUTION, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, SELECT_PARTIALS,
-    bind_bins, bind_distribution, bind_life, collect_partials, count_from_sql, count_to_sql,
-    distribution_from_row, distribution_rows, groups_from_row, life_from_row, row_groups_to_sql,
-    to_json,
+    self, EncodedResult, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, SELECT_PARTIALS,
+    bind_bins, collect_partials, count_from_sql, count_to_sql, distribution_from_row,
+    groups_from_row, insert_distributions, insert_lives, life_from_row,
 };
 use super::sql::Sql;
 use super::{DistributionRow, Fence, Operations, Results, StoreResult};
 use crate::domain::{JobId, ShardId, UnixMs};
 use async_trait::async_trait;
+use bouncewear_model::montecarlo::DeviceLife;
 use bouncewear_model::montecarlo::engine::GroupStats;
-use bouncewear_model::montecarlo::{DeviceLife, JobResult, RunGroups};
 use bouncewear_model::stats::Accumulator;
 
 impl SqlStore {
@@ -22,54 +21,23 @@ impl SqlStore {
     /// bounded size ([`rows::DISTRIBUTIONS_PER_WRITE`], [`rows::LIVES_PER_WRITE`]), each only while
     /// the claim holds the merge step, so that no result holds the database for long. A merge that
     /// stops midway leaves rows that its rerun writes again, the same (the job is deterministic),
-    /// or that ending the job drops. The bytes written (see [`super::JobRecord::stored_bytes`]); `None`
-    /// once the claim no longer holds.
-    async fn write_rows(
-        &self,
-        fence: &Fence,
-        result: &JobResult,
-        groups: &RunGroups,
-    ) -> StoreResult<Option<u64>> {
-        let distributions: Vec<_> = distribution_rows(result).collect();
-        let mut bytes = 0;
-        for chunk in distributions.chunks(rows::DISTRIBUTIONS_PER_WRITE) {
+    /// or that ending the job drops. `None` once the claim no longer holds.
+    async fn write_rows(&self, fence: &Fence, result: &EncodedResult) -> StoreResult<Option<()>> {
+        for chunk in result.rows.chunks(rows::DISTRIBUTIONS_PER_WRITE) {
             let Some(mut tx) = self.begin_holding(fence).await? else {
                 return Ok(None);
             };
-            for (metric, row) in chunk {
-                bytes += to_json("summary", &row.summary)?.len() as u64;
-                let stored = row_groups_to_sql(groups, metric, row)?;
-                bytes += stored.len() as u64;
-                bind_distribution(
-                    Sql::new(INSERT_DISTRIBUTION),
-                    &fence.job,
-                    metric,
-                    row,
-                    stored,
-                )?
-                .execute(&mut tx)
-                .await?;
-            }
+            insert_distributions(&mut tx, &fence.job, chunk).await?;
             tx.commit().await?;
         }
-        let lives = result
-            .life
-            .as_ref()
-            .map_or(&[][..], |life| &life.devices[..]);
-        for chunk in lives.chunks(rows::LIVES_PER_WRITE) {
+        for chunk in result.lives.chunks(rows::LIVES_PER_WRITE) {
             let Some(mut tx) = self.begin_holding(fence).await? else {
                 return Ok(None);
             };
-            bytes += chunk.len() as u64 * rows::LIFE_ROW_BYTES;
-            for life in chunk {
-                let insert = Sql::new(
-                    "INSERT INTO device_lives (job_id, device, operations_to_failure, censored) VALUES ($1, $2, $3, $4) ON CONFLICT DO NOTHING",
-                );
-                bind_life(insert, &fence.job, life).execute(&mut tx).await?;
-            }
+            insert_lives(&mut tx, &fence.job, chunk).await?;
             tx.commit().await?;
         }
-        Ok(Some(bytes))
+        Ok(Some(()))
     }
 }
 
@@ -80,14 +48,11 @@ impl Results for SqlStore {
         &self,
         fence: &Fence,
         finished_at: UnixMs,
-        result: &JobResult,
-        groups: &RunGroups,
+        result: &EncodedResult,
     ) -> StoreResult<Option<u64>> {
-        let text = to_json("result", result)?;
-        let Some(row_bytes) = self.write_rows(fence, result, groups).await? else {
+        if self.write_rows(fence, result).await?.is_none() {
             return Ok(None);
-        };
-        let result_bytes = text.len() as u64 + row_bytes;
+        }
         let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(None);
         };
@@ -97,14 +62,14 @@ impl Results for SqlStore {
         )
         .bind(fence.job.as_str())
         .bind(finished_at.0)
-        .bind(count_to_sql(result_bytes))
+        .bind(count_to_sql(result.bytes()))
         .fetch_one(&mut tx)
         .await?;
         let stored_bytes = count_from_sql(&stored, "stored_bytes")?;
         drop_partials(&mut tx, &fence.job).await?;
         Sql::new("INSERT INTO results (job_id, result) VALUES ($1, $2)")
             .bind(fence.job.as_str())
-            .bind(text)
+            .bind(result.text.clone())
             .execute(&mut tx)
             .await?;
         tx.commit().await?;
