@@ -11,6 +11,7 @@
 //! database URL.
 
 mod backend;
+mod migrations;
 mod postgres;
 mod queue;
 mod results;

@@ -9,9 +9,8 @@ use super::rows::{
     Dialect, bind_queued_job, claim_next, count_to_sql, fenced_shard, insert_job, insert_shards,
 };
 use super::sql::{Sql, Tx};
-use super::{QueueEvent, StoreResult};
+use super::{QueueEvent, StoreResult, migrations};
 use crate::domain::{JobId, QueueBound, QueuedJob};
-use sqlx::migrate::Migrator;
 use sqlx::postgres::{PgListener, PgPool, PgPoolOptions};
 use std::time::Duration;
 use tokio::sync::broadcast;
@@ -20,8 +19,6 @@ pub(crate) struct PgBackend {
     pub(crate) pool: PgPool,
     pub(crate) events: broadcast::Sender<QueueEvent>,
 }
-
-static MIGRATOR: Migrator = sqlx::migrate!("../migrations/postgres");
 
 /// The channel the schema's trigger announces every job change on (`migrations/postgres/0003`).
 const JOB_CHANNEL: &str = "bouncewear_jobs";
@@ -55,7 +52,7 @@ impl PgBackend {
                 Err(error) => return Err(error.into()),
             }
         }
-        MIGRATOR.run(&pool).await?;
+        migrations::POSTGRES.run(&pool).await?;
         let mut listener = PgListener::connect_with(&pool).await?;
         listener.listen(JOB_CHANNEL).await?;
         let (events, _) = broadcast::channel(1024);
@@ -97,7 +94,7 @@ pub(crate) static DIALECT: Dialect = Dialect {
         "jobs j",
         " FOR UPDATE OF s SKIP LOCKED"
     ),
-    migrator: &MIGRATOR,
+    migrator: &migrations::POSTGRES,
 };
 
 /// Inserts a queued job with its first shards unless the queue or the owner's share of it is

@@ -14,6 +14,7 @@ use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec, Metric, RunGroups};
 use bouncewear_model::stats::Accumulator;
 use sqlx::migrate::Migrator;
+use std::sync::LazyLock;
 
 /// SQL integers are signed 64-bit in both backends: counts saturate, seeds keep their bits (a seed
 /// of 2^63 or more reads as negative in SQL).
@@ -182,7 +183,7 @@ pub(crate) struct Dialect {
     pub holds: &'static str,
     /// The claim of the next shard ([`claim_next`]).
     pub claim: &'static str,
-    pub migrator: &'static Migrator,
+    pub migrator: &'static LazyLock<Migrator>,
 }
 
 // ---- jobs ----------------------------------------------------------------------------------

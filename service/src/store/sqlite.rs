@@ -9,9 +9,8 @@ use super::rows::{
     seed_to_sql, spec_from_json,
 };
 use super::sql::{Sql, Tx};
-use super::{StoreError, StoreResult};
+use super::{StoreError, StoreResult, migrations};
 use crate::domain::{QueueBound, QueuedJob};
-use sqlx::migrate::Migrator;
 use sqlx::sqlite::{
     SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
 };
@@ -31,8 +30,6 @@ pub(crate) struct SqliteBackend {
     file: Option<DatabaseFile>,
 }
 
-static MIGRATOR: Migrator = sqlx::migrate!("../migrations/sqlite");
-
 impl SqliteBackend {
     /// Opens (creating if missing) and migrates the database at `url`.
     #[tracing::instrument(skip_all)]
@@ -47,7 +44,7 @@ impl SqliteBackend {
             .max_connections(1)
             .connect_with(options.clone())
             .await?;
-        MIGRATOR.run(&writer).await?;
+        migrations::SQLITE.run(&writer).await?;
         backfill_seeds(&writer).await?;
         let file = DatabaseFile::opened(options.get_filename());
         let writer = match &file {
@@ -216,7 +213,7 @@ pub(crate) static DIALECT: Dialect = Dialect {
         "jobs j INDEXED BY jobs_open_by_vtime",
         ""
     ),
-    migrator: &MIGRATOR,
+    migrator: &migrations::SQLITE,
 };
 
 /// Inserts a queued job with its first shards unless the queue or the owner's share of it is
