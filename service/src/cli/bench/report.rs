@@ -144,14 +144,19 @@ fn throughput(report: &Report) -> Section {
 fn engine(report: &Report) -> Section {
     let optional =
         |x: Option<f64>, digits: usize| x.map_or("-".to_owned(), |x| format!("{x:.digits$}"));
+    let cpu = report
+        .engine
+        .first()
+        .map_or("this machine", |row| row.cpu.as_str());
     Section {
-        title: "Engine against the NumPy peer",
+        title: "Engine against the NumPy and Numba peers",
         text: format!(
             "ns per operation on one thread (every metric), one device at a time and in lockstep, \
-             next to the floor of square roots and divisions on an AVX-512 core; then \
-             `bouncewear run` on {} threads against `tools/numpy_peer.py` on one core, whole \
-             processes, best of three.",
-            report.machine.threads
+             next to the floor of square roots and divisions on an AVX-512 core; then, on {cpu}, \
+             `bouncewear run` on {threads} threads against `tools/numpy_peer.py` on one core and \
+             `tools/numba_peer.py` on {threads} threads (its machine code compiled by an earlier \
+             run), whole processes, best of three; the ratio is against the faster peer.",
+            threads = report.machine.threads
         ),
         columns: &[
             "job",
@@ -162,6 +167,8 @@ fn engine(report: &Report) -> Section {
             "floor scalar / 8 lanes",
             "run s",
             "NumPy s",
+            "Numba s",
+            "faster peer",
             "ratio",
         ],
         rows: report
@@ -180,6 +187,8 @@ fn engine(report: &Report) -> Section {
                     ),
                     format!("{:.3}", row.run_process_s),
                     optional(row.numpy_peer_process_s, 3),
+                    optional(row.numba_peer_process_s, 3),
+                    row.peer.unwrap_or("-").to_owned(),
                     optional(row.ratio, 1),
                 ]
             })
@@ -410,8 +419,9 @@ mod tests {
     use super::*;
     use std::collections::BTreeMap;
 
-    /// A report with one row of each kind, as `bench` would make it.
-    fn report(numpy: bool) -> Report {
+    /// A report with one row of each kind, as `bench` would make it, with the peers' times.
+    fn report(numpy: Option<f64>, numba: Option<f64>) -> Report {
+        let faster = speed::faster_peer(&[("numpy", numpy), ("numba", numba)]);
         let errors = BTreeMap::from([("total_bounce_s", 1.5e-9), ("e1", 2.5e-12)]);
         Report {
             machine: Machine {
@@ -459,9 +469,13 @@ mod tests {
                 ns_per_op_lockstep: 40.9,
                 floor_ns_per_op_scalar: 21.0,
                 floor_ns_per_op_8_lanes: 2.6,
+                cpu: "AMD EPYC 9B45".to_owned(),
                 run_process_s: 0.5,
-                numpy_peer_process_s: numpy.then_some(12.25),
-                ratio: numpy.then_some(24.5),
+                numpy_peer_process_s: numpy,
+                numba_peer_process_s: numba,
+                peer: faster.map(|(name, _)| name),
+                peer_process_s: faster.map(|(_, seconds)| seconds),
+                ratio: faster.map(|(_, seconds)| seconds / 0.5),
             }],
             coverage: vec![Coverage {
                 design: "radius, hardness",
@@ -531,7 +545,7 @@ mod tests {
 
     #[test]
     fn every_section_is_a_heading_a_text_and_a_table_whose_rows_fit_its_header() {
-        let md = markdown(&report(true));
+        let md = markdown(&report(Some(12.25), Some(14.0)));
         let headings: Vec<&str> = md.lines().filter(|l| l.starts_with("## ")).collect();
         assert_eq!(headings.len(), 9, "{md}");
         let tables = tables(&md);
@@ -550,7 +564,7 @@ mod tests {
 
     #[test]
     fn numbers_are_written_to_their_columns_precision() {
-        let md = markdown(&report(true));
+        let md = markdown(&report(Some(12.25), Some(14.0)));
         assert!(
             md.contains("| exact | 61 | e1 | 2.5e-12 | 2.5e-12 |"),
             "{md}"
@@ -564,7 +578,10 @@ mod tests {
             md.contains("| 48 V / 15 A | 8000 x 1000 | all | 23.45 |"),
             "{md}"
         );
-        assert!(md.contains("| 21 / 3 | 0.500 | 12.250 | 24.5 |"), "{md}");
+        assert!(
+            md.contains("| 21 / 3 | 0.500 | 12.250 | 14.000 | numpy | 24.5 |"),
+            "{md}"
+        );
         assert!(
             md.contains("| wear curve | `roughening_energy_j` | 0.5 | 1000-1999 | 0.943 |"),
             "{md}"
@@ -578,8 +595,23 @@ mod tests {
     }
 
     #[test]
-    fn an_engine_row_without_the_numpy_peer_says_so_with_dashes() {
-        let md = markdown(&report(false));
-        assert!(md.contains("| 0.500 | - | - |"), "{md}");
+    fn an_engine_row_without_the_peers_says_so_with_dashes() {
+        let md = markdown(&report(None, None));
+        assert!(md.contains("| 0.500 | - | - | - | - |"), "{md}");
+    }
+
+    #[test]
+    fn the_ratio_is_against_the_faster_peer_which_the_row_names() {
+        let md = markdown(&report(Some(12.25), Some(3.5)));
+        assert!(
+            md.contains("| 0.500 | 12.250 | 3.500 | numba | 7.0 |"),
+            "{md}"
+        );
+        let md = markdown(&report(None, Some(3.5)));
+        assert!(md.contains("| 0.500 | - | 3.500 | numba | 7.0 |"), "{md}");
+        assert!(
+            md.contains("then, on AMD EPYC 9B45, `bouncewear run` on 2 threads"),
+            "{md}"
+        );
     }
 }

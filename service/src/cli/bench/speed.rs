@@ -1,6 +1,7 @@
 //! Speed against error: each fidelity's time per operation and its error against the
 //! 50-digit references, the paper's closed forms, random against Latin hypercube sampling, the
-//! reference jobs' throughput against the floor and the NumPy peer, and what each skip saves.
+//! reference jobs' throughput against the floor and the faster of the NumPy and Numba peers, and
+//! what each skip saves.
 
 use super::{BenchError, io_error};
 use crate::progress::Progress;
@@ -59,7 +60,7 @@ pub struct Throughput {
 }
 
 /// One reference job: the engine per operation and thread, one device at a time and in lockstep,
-/// next to the floor; then the whole `bouncewear run` process against the NumPy peer's.
+/// next to the floor; then the whole `bouncewear run` process against the faster of the peers.
 #[derive(Debug, Serialize)]
 pub struct EngineRow {
     pub job: &'static str,
@@ -71,11 +72,19 @@ pub struct EngineRow {
     /// The issue's floor for this job on an AVX-512 core: square roots and divisions alone.
     pub floor_ns_per_op_scalar: f64,
     pub floor_ns_per_op_8_lanes: f64,
+    /// The CPU all of it ran on (`model name` of `/proc/cpuinfo`).
+    pub cpu: String,
     /// `bouncewear run --threads N` as a whole process, wall seconds.
     pub run_process_s: f64,
     /// `python3 tools/numpy_peer.py` as a whole process on one core, when NumPy is installed.
     pub numpy_peer_process_s: Option<f64>,
-    /// The peer's wall time over ours.
+    /// `python3 tools/numba_peer.py` as a whole process on N threads, when Numba is installed. The
+    /// first of the three runs compiles and caches the machine code, so the best loads it.
+    pub numba_peer_process_s: Option<f64>,
+    /// The faster peer, `numpy` or `numba`, and its wall time.
+    pub peer: Option<&'static str>,
+    pub peer_process_s: Option<f64>,
+    /// The faster peer's wall time over ours.
     pub ratio: Option<f64>,
 }
 
@@ -323,7 +332,20 @@ pub(super) fn throughput(quick: bool, progress: &Progress) -> Vec<Throughput> {
     rows
 }
 
-const NUMPY_PEER: &str = include_str!("../../../../tools/numpy_peer.py");
+/// The peers: a name, which is also the Python module it needs, its file and its source. The Numba
+/// peer imports the NumPy peer's file, so both are written side by side.
+const PEERS: [(&str, &str, &str); 2] = [
+    (
+        "numpy",
+        "numpy_peer.py",
+        include_str!("../../../../tools/numpy_peer.py"),
+    ),
+    (
+        "numba",
+        "numba_peer.py",
+        include_str!("../../../../tools/numba_peer.py"),
+    ),
+];
 
 /// The issue's floor (square roots and divisions only, Zen 5): scalar and 8-lane ns per operation.
 fn floor_ns_per_op(arcing: bool) -> (f64, f64) {
@@ -354,7 +376,7 @@ pub(super) fn engine_row(
     };
     let kernel = Kernel::best();
     let (scalar, lockstep) = (per_op(Kernel::SCALAR), per_op(kernel));
-    // The job as a file, for the two processes.
+    // The job as a file, for `bouncewear run`.
     std::fs::create_dir_all(out).map_err(|source| io_error(out, source))?;
     let path = out.join("engine-job.json");
     let text = serde_json::to_string(job.spec()).expect("a job serialises");
@@ -367,15 +389,9 @@ pub(super) fn engine_row(
             .arg(&path),
     )
     .expect("bouncewear runs its own job");
-    let numpy_peer_process_s = numpy_available()
-        .then(|| {
-            best_process_s(
-                std::process::Command::new("python3")
-                    .args(["-c", NUMPY_PEER])
-                    .arg(&text),
-            )
-        })
-        .flatten();
+    let peers = run_peers(&text, &threads)?;
+    let [numpy_peer_process_s, numba_peer_process_s] = peers.map(|(_, seconds)| seconds);
+    let faster = faster_peer(&peers);
     let (floor_scalar, floor_lanes) = floor_ns_per_op(arcing);
     Ok(EngineRow {
         job: name,
@@ -386,16 +402,72 @@ pub(super) fn engine_row(
         ns_per_op_lockstep: lockstep,
         floor_ns_per_op_scalar: floor_scalar,
         floor_ns_per_op_8_lanes: floor_lanes,
+        cpu: cpu_name(),
         run_process_s,
         numpy_peer_process_s,
-        ratio: numpy_peer_process_s.map(|peer| peer / run_process_s),
+        numba_peer_process_s,
+        peer: faster.map(|(name, _)| name),
+        peer_process_s: faster.map(|(_, seconds)| seconds),
+        ratio: faster.map(|(_, seconds)| seconds / run_process_s),
     })
 }
 
-/// Whether `python3` can import NumPy (the peer is optional: CI need not install it).
-fn numpy_available() -> bool {
+/// Each peer's best whole process on `job` (JSON), by name, `None` where Python cannot import what
+/// it needs or the peer fails. The peers run from a directory of their own under the system's
+/// temporary one, removed afterwards; the Numba peer on `threads` threads.
+fn run_peers(job: &str, threads: &str) -> Result<[(&'static str, Option<f64>); 2], BenchError> {
+    let dir = std::env::temp_dir().join(format!("bouncewear-peers-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|source| io_error(&dir, source))?;
+    for (_, file, source) in PEERS {
+        let path = dir.join(file);
+        std::fs::write(&path, source).map_err(|source| io_error(&path, source))?;
+    }
+    let times = PEERS.map(|(name, file, _)| {
+        let seconds = python_imports(name)
+            .then(|| {
+                best_process_s(
+                    std::process::Command::new("python3")
+                        .arg(dir.join(file))
+                        .arg(job)
+                        .env("NUMBA_NUM_THREADS", threads),
+                )
+            })
+            .flatten();
+        (name, seconds)
+    });
+    // Tidiness only: what a failure leaves behind is the peers and Numba's cache.
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(times)
+}
+
+/// The faster of the peers that ran, by name, with its time.
+pub(super) fn faster_peer(peers: &[(&'static str, Option<f64>)]) -> Option<(&'static str, f64)> {
+    peers
+        .iter()
+        .filter_map(|&(name, seconds)| Some((name, seconds?)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+}
+
+/// The CPU's `model name` from `/proc/cpuinfo`, or the architecture where there is none.
+fn cpu_name() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|info| model_name(&info))
+        .unwrap_or_else(|| std::env::consts::ARCH.to_owned())
+}
+
+/// The first `model name` of a `/proc/cpuinfo` text.
+fn model_name(cpuinfo: &str) -> Option<String> {
+    cpuinfo.lines().find_map(|line| {
+        let (key, value) = line.split_once(':')?;
+        (key.trim() == "model name").then(|| value.trim().to_owned())
+    })
+}
+
+/// Whether `python3` can import `module` (the peers are optional: CI need not install them).
+fn python_imports(module: &str) -> bool {
     std::process::Command::new("python3")
-        .args(["-c", "import numpy"])
+        .args(["-c", &format!("import {module}")])
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .status()
@@ -486,6 +558,27 @@ mod tests {
         approx::assert_relative_eq!(max[first], 0.3, max_relative = 1e-12);
         let total = OperationMetric::TotalBounce.name();
         assert_eq!((median[total], max[total]), (0.0, 0.0));
+    }
+
+    #[test]
+    fn the_faster_peer_is_the_one_that_ran_fastest_and_none_ran_is_none() {
+        assert_eq!(
+            faster_peer(&[("numpy", Some(0.5)), ("numba", Some(0.25))]),
+            Some(("numba", 0.25))
+        );
+        assert_eq!(
+            faster_peer(&[("numpy", Some(0.5)), ("numba", None)]),
+            Some(("numpy", 0.5))
+        );
+        assert_eq!(faster_peer(&[("numpy", None), ("numba", None)]), None);
+    }
+
+    #[test]
+    fn the_cpu_is_the_first_model_name() {
+        let info = "processor\t: 0\nvendor_id\t: AuthenticAMD\nmodel name\t: AMD EPYC 7B13\n\n\
+                    processor\t: 1\nmodel name\t: other\n";
+        assert_eq!(model_name(info).as_deref(), Some("AMD EPYC 7B13"));
+        assert_eq!(model_name("processor\t: 0\n"), None);
     }
 
     #[test]
