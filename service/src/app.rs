@@ -178,6 +178,7 @@ async fn start_workers(config: &WorkerConfig) -> Result<Workers, StartupError> {
         instance: format!("{}-{}", std::process::id(), uuid::Uuid::new_v4().simple()),
         wake: Arc::new(Notify::new()),
         listed_lives: config.max_listed_lives,
+        large_merges: tokio::sync::Semaphore::new(1),
     })
 }
 

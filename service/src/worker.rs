@@ -12,19 +12,23 @@
 //! shutdown the running shard is stopped and handed back to the queue at once.
 
 use crate::domain::UnixMs;
-use crate::domain::shards::{MergeError, Merged, ShardPlan, merge, run_whole};
+use crate::domain::shards::{
+    Folding, LARGE_MERGE_ACCUMULATORS, MergeError, Merged, ShardPlan, merge, merge_accumulators,
+    run_whole,
+};
 use crate::store::{
-    Claim, EncodedResult, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store, StoreResult,
+    Claim, EncodedGroups, EncodedResult, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store,
+    StoreResult,
 };
 use crate::telemetry::{record_job_finished, record_shard_step};
 use bouncewear_model::Pointer;
-use bouncewear_model::montecarlo::engine::{Batch, GroupStats, run_group};
+use bouncewear_model::montecarlo::engine::{Batch, run_group};
 use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Observer, Watch};
 use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
-use tokio::sync::{Notify, broadcast, oneshot, watch};
+use tokio::sync::{Notify, Semaphore, broadcast, oneshot, watch};
 use tokio::task::JoinHandle;
 
 /// Progress and the lease are written at most this often per running shard.
@@ -48,6 +52,9 @@ pub struct Workers {
     pub wake: Arc<Notify>,
     /// Devices whose own life a job lists (the life CSV); the life analysis counts every device.
     pub listed_lives: u64,
+    /// Held by a merge step beyond [`LARGE_MERGE_ACCUMULATORS`] from reading its groups to storing
+    /// what it made: one such merge at a time in this instance (one permit).
+    pub large_merges: Semaphore,
 }
 
 /// A shard's lease, heartbeated by a task of its own for as long as this lives.
@@ -76,7 +83,7 @@ enum Outcome {
     },
     Next {
         shards: Vec<ShardPlan>,
-        folded: Vec<GroupStats>,
+        folded: StoreResult<EncodedGroups>,
     },
 }
 
@@ -225,24 +232,33 @@ impl Workers {
     /// Puts the done groups back in order: the Result, or the next batch of a precision target.
     async fn merge(&self, fence: &Fence, job: Job, started_at: UnixMs, lease: &KeptLease) {
         let merging = Instant::now();
-        let partials = match self.store.partials(&fence.job).await {
+        let _alone = if merge_accumulators(&job) > LARGE_MERGE_ACCUMULATORS {
+            match self.large_merges.acquire().await {
+                Ok(permit) => Some(permit),
+                Err(closed) => return self.fail_attempt(fence, &closed.to_string()).await,
+            }
+        } else {
+            None
+        };
+        let last = fence.shard.batch;
+        let partials = Folding::new(job, last);
+        let partials = match self.store.partials(&fence.job, partials).await {
             Ok(partials) => partials,
             Err(error) => {
                 let reason = format!("reading the groups' accumulators failed: {error}");
                 return self.fail_attempt(fence, &reason).await;
             }
         };
-        let last = fence.shard.batch;
         let wall_s = (UnixMs::now().0 - started_at.0).max(0) as f64 / 1000.0;
         // A first batch without groups stored is a job that entered the queue whole.
-        let whole = last == 0 && partials.is_empty();
+        let whole = last == 0 && partials.read().is_empty();
         let listed_lives = self.listed_lives;
         let ran = self
             .compute(lease, move |observer| {
                 let merged = if whole {
-                    run_whole(&job, listed_lives, wall_s, observer)
+                    run_whole(partials.job(), listed_lives, wall_s, observer)
                 } else {
-                    merge(&job, last, partials, wall_s, observer)
+                    merge(partials, wall_s, observer)
                 };
                 match merged {
                     Err(MergeError::Cancelled(cancelled)) => Err(cancelled),
@@ -252,7 +268,11 @@ impl Workers {
                         let encoded = EncodedResult::new(&result, groups);
                         Ok(Ok(Outcome::Result { result, encoded }))
                     }
-                    Ok(Merged::Next { shards, folded }) => Ok(Ok(Outcome::Next { shards, folded })),
+                    Ok(Merged::Next { shards, folded }) => {
+                        // Each folded group goes once encoded, as the Result's groups do.
+                        let folded = EncodedGroups::new(folded);
+                        Ok(Ok(Outcome::Next { shards, folded }))
+                    }
                     Err(other) => Ok(Err(other)),
                 }
             })
@@ -277,7 +297,16 @@ impl Workers {
                 }
                 record_shard_step("merge", merging);
             }
-            Ran::Done(Ok(Outcome::Next { shards, folded })) => match self
+            Ran::Done(Ok(Outcome::Next {
+                folded: Err(error), ..
+            })) => {
+                let reason = format!("encoding the folded groups failed: {error}");
+                self.fail_attempt(fence, &reason).await
+            }
+            Ran::Done(Ok(Outcome::Next {
+                shards,
+                folded: Ok(folded),
+            })) => match self
                 .store_with_backoff(lease, || self.store.add_batch(fence, &shards, &folded))
                 .await
             {

@@ -19,7 +19,7 @@ pub use schedules::{
     ScheduleDefinition, ScheduleLimits, ScheduleSpec, Statistic, Timetable, ValidSchedule,
 };
 pub use shards::{
-    RetryBudget, SHARD_OVERHEAD_OPERATIONS, ShardId, ShardPlan, batch_shards, first_shards,
-    grouped_shards, retry_backoff_ms,
+    Folding, RetryBudget, SHARD_OVERHEAD_OPERATIONS, ShardId, ShardPlan, batch_shards,
+    first_shards, grouped_shards, retry_backoff_ms,
 };
 pub use trend::TrendValue;

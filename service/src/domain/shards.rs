@@ -151,71 +151,152 @@ pub enum MergeError {
     Cancelled(#[from] Cancelled),
 }
 
-/// The merge step of batch `last`: puts every done group of batches `0..=last` back in batch and
-/// group order (`partials` as the store lists them) and decides as [`run_job`] does after that
-/// batch: the Result, after `wall_s` seconds of running, or the next batch. The first batch
-/// listed may be the fold of every batch up to it ([`Merged::Next`]); the sequence of merges, and
-/// so every bit, is the same as from each batch's own groups.
+/// A merge step's done groups as the store reads them, in batch and group order, folded as they
+/// arrive: the first batch listed (batch 0, or the fold of every batch up to it that an earlier
+/// merge stored, [`Merged::Next`]) is kept, and each group of a later batch is merged into its
+/// own group at once and dropped, as [`Tally::add_batch`] merges them. A merge holds one batch's
+/// groups and the one being read, however many batches it reads; the sequence of merges, and so
+/// every bit, is the same as from each batch's own groups.
+#[derive(Debug)]
+pub struct Folding {
+    job: Job,
+    last: u64,
+    tally: Tally,
+    /// The first batch listed, whose groups are kept as they come.
+    first: Option<u64>,
+    /// The batch being read and how many of its groups are in.
+    reading: Option<(Batch, u64)>,
+    /// Every group read, in order.
+    read: Vec<ShardId>,
+    /// The first group that did not fit: the rest are ignored.
+    error: Option<Incomplete>,
+}
+
+impl Folding {
+    /// Ready for the groups of `job`'s batches up to `last`, the merge step's batch.
+    pub fn new(job: Job, last: u64) -> Self {
+        Self {
+            job,
+            last,
+            tally: Tally::new(),
+            first: None,
+            reading: None,
+            read: Vec::new(),
+            error: None,
+        }
+    }
+
+    /// The job whose groups these are.
+    pub fn job(&self) -> &Job {
+        &self.job
+    }
+
+    /// The groups read so far, in order.
+    pub fn read(&self) -> &[ShardId] {
+        &self.read
+    }
+
+    /// Takes the next group the store lists.
+    pub fn push(&mut self, shard: ShardId, stats: GroupStats) {
+        self.read.push(shard);
+        if self.error.is_none()
+            && let Err(error) = self.fold(shard, stats)
+        {
+            self.error = Some(error);
+        }
+    }
+
+    fn fold(&mut self, shard: ShardId, stats: GroupStats) -> Result<(), Incomplete> {
+        if shard.batch > self.last {
+            return Err(Incomplete {
+                batch: shard.batch,
+                detail: format!("{shard} is stored after batch {}'s merge", self.last),
+            });
+        }
+        let (batch, count) = match self.reading {
+            Some((batch, count)) if batch.index == shard.batch => (batch, count),
+            Some((batch, count)) => {
+                self.complete(batch, count)?;
+                (self.batch(batch.index + 1)?, 0)
+            }
+            None => {
+                self.first = Some(shard.batch);
+                (self.batch(shard.batch)?, 0)
+            }
+        };
+        let expected = ShardId::group(batch.index, count);
+        if shard != expected {
+            let detail = format!("found {shard} where {expected} belongs");
+            return Err(Incomplete {
+                batch: batch.index,
+                detail,
+            });
+        }
+        if self.first == Some(batch.index) {
+            self.tally.groups.push(stats);
+        } else if let Some(group) = self.tally.groups.get_mut(count as usize) {
+            group.merge(&stats);
+        }
+        self.reading = Some((batch, count + 1));
+        Ok(())
+    }
+
+    /// Batch `index` of the job, or why it has none.
+    fn batch(&self, index: u64) -> Result<Batch, Incomplete> {
+        Batch::of(&self.job, index).ok_or_else(|| Incomplete {
+            batch: index,
+            detail: "the job runs no such batch".to_owned(),
+        })
+    }
+
+    /// Checks that `batch` has all its groups (`count` read); counts its devices.
+    fn complete(&mut self, batch: Batch, count: u64) -> Result<(), Incomplete> {
+        if count != batch.groups() {
+            return Err(Incomplete {
+                batch: batch.index,
+                detail: format!("{count} of its {} groups are stored", batch.groups()),
+            });
+        }
+        self.tally.devices = batch.first + batch.size;
+        Ok(())
+    }
+
+    /// The job and the fold of every batch up to `last`, or why the groups read do not make them up.
+    pub fn finish(mut self) -> Result<(Job, Tally), Incomplete> {
+        if let Some(error) = self.error.take() {
+            return Err(error);
+        }
+        let (mut batch, mut count) = match self.reading {
+            Some(reading) => reading,
+            None => (self.batch(0)?, 0),
+        };
+        loop {
+            self.complete(batch, count)?;
+            if batch.index >= self.last {
+                return Ok((self.job, self.tally));
+            }
+            (batch, count) = (self.batch(batch.index + 1)?, 0);
+        }
+    }
+}
+
+/// The merge step of batch `last`, from its groups as [`Folding`] read them: decides as
+/// [`run_job`] does after that batch: the Result, after `wall_s` seconds of running, or the next
+/// batch.
 ///
 /// [`run_job`]: bouncewear_model::montecarlo::run_job
 pub fn merge(
-    job: &Job,
-    last: u64,
-    partials: Vec<(ShardId, GroupStats)>,
+    partials: Folding,
     wall_s: f64,
     observer: &dyn Observer,
 ) -> Result<Merged, MergeError> {
-    let mut tally = Tally::new();
-    let mut partials = partials.into_iter().peekable();
-    // Batches before the first listed were folded into it: it stands for all of them.
-    let first = partials
-        .peek()
-        .map_or(0, |(shard, _)| shard.batch.min(last));
-    for index in first..=last {
-        let incomplete = |detail: String| Incomplete {
-            batch: index,
-            detail,
-        };
-        let batch = Batch::of(job, index)
-            .ok_or_else(|| incomplete("the job runs no such batch".to_owned()))?;
-        let mut groups = Vec::new();
-        while let Some((shard, stats)) = partials.next_if(|(shard, _)| shard.batch == index) {
-            let expected = ShardId::group(index, groups.len() as u64);
-            if shard != expected {
-                return Err(incomplete(format!("found {shard} where {expected} belongs")).into());
-            }
-            groups.push(stats);
-        }
-        if groups.len() as u64 != batch.groups() {
-            let detail = format!(
-                "{} of its {} groups are stored",
-                groups.len(),
-                batch.groups()
-            );
-            return Err(incomplete(detail).into());
-        }
-        if index == first && first > 0 {
-            tally = Tally {
-                groups,
-                devices: batch.first + batch.size,
-            };
-        } else {
-            tally.add_batch(batch, groups);
-        }
-    }
-    if let Some((shard, _)) = partials.peek() {
-        return Err(Incomplete {
-            batch: shard.batch,
-            detail: format!("{shard} is stored after batch {last}'s merge"),
-        }
-        .into());
-    }
-    match next_batch(job, &tally) {
+    let (job, tally) = partials.finish()?;
+    match next_batch(&job, &tally) {
         Some(batch) => Ok(Merged::Next {
-            shards: batch_shards(job, batch),
+            shards: batch_shards(&job, batch),
             folded: tally.groups,
         }),
-        None => finish(job, tally, wall_s, observer),
+        None => finish(&job, tally, wall_s, observer),
     }
 }
 
@@ -263,6 +344,21 @@ fn finish(
         groups: RunGroups::new(job, tally),
     })
 }
+
+/// The accumulators a merge step of `job` holds decoded: one batch's groups, each with every
+/// (bin, operation metric) and every device metric. What its memory follows (about 900 bytes an
+/// accumulator with the README's scatter, so 0.5 GB for the largest job the defaults accept).
+pub fn merge_accumulators(job: &Job) -> u64 {
+    let groups = Batch::of(job, 0).map_or(0, |batch| batch.groups());
+    let per_group =
+        job.bins() * job.operation_metrics().len() as u64 + job.device_metrics().len() as u64;
+    groups.saturating_mul(per_group)
+}
+
+/// Beyond this many [`merge_accumulators`], a merge step runs alone on its instance (other large
+/// merges wait for it), so that an instance's memory holds one large merge at a time however many
+/// workers it runs: 32 groups of 180 bins x 18 metrics, about 90 MB with the README's scatter.
+pub const LARGE_MERGE_ACCUMULATORS: u64 = 100_000;
 
 /// What a shard costs beyond its operations, in operations, for fair share: a claim and a store
 /// take about as long as simulating this many (1-2 ms each on SQLite at 5-10 M operations/s per
@@ -345,5 +441,143 @@ mod tests {
                 "precision": {"metric": "e1", "relative_half_width": 0.01, "max_devices": 100}}"#,
         );
         assert_eq!(precision.len(), 11);
+    }
+
+    #[test]
+    fn a_merge_holds_one_batchs_groups_of_every_bin_and_metric() {
+        let accumulators = |text: &str| merge_accumulators(&Job::from_json(text, || 1).unwrap());
+        // 32 groups x (1000 bins x 3 operation metrics + 1 device metric).
+        let largest = accumulators(
+            r#"{"devices": 2000000, "operations": 1000, "bin_operations": 1,
+                "metrics": ["e1", "total_bounce_s", "bounce_count", "eroded_mass_kg"]}"#,
+        );
+        assert_eq!(largest, 32 * 3001);
+        assert!(largest < LARGE_MERGE_ACCUMULATORS);
+        let every = accumulators(
+            r#"{"devices": 64, "operations": 1000, "bin_operations": 1,
+                "metrics": ["impact_velocity_m_s", "kappa", "e1", "first_bounce_s",
+                            "total_bounce_s", "bounce_count", "pre_arc_s", "arc_energy_j",
+                            "peak_force_n", "impact_duration_s", "first_impact_plastic_work_j",
+                            "cumulative_arc_energy_j", "eroded_mass_kg", "final_radius_m",
+                            "final_kappa", "cumulative_plastic_work_j"]}"#,
+        );
+        assert!(every > LARGE_MERGE_ACCUMULATORS);
+        // Two devices make two groups.
+        assert_eq!(accumulators(r#"{"devices": 2, "operations": 10}"#) % 2, 0);
+    }
+
+    /// A precision job of three batches of 3 devices (3 groups each): its groups as a worker runs
+    /// them, and the engine's own tally of all three batches.
+    fn three_batches() -> (Job, Vec<Vec<GroupStats>>, Tally) {
+        use bouncewear_model::montecarlo::Silent;
+        use bouncewear_model::montecarlo::engine::run_group;
+        let job = Job::from_json(
+            r#"{"devices": 3, "operations": 4,
+                "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+                "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+                             "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.05}}],
+                "precision": {"metric": "total_bounce_s", "relative_half_width": 1e-9, "max_devices": 9}}"#,
+            || 7,
+        )
+        .unwrap();
+        let batches: Vec<Vec<GroupStats>> = (0..3)
+            .map(|index| {
+                let batch = Batch::of(&job, index).unwrap();
+                (0..batch.groups())
+                    .map(|group| run_group(&job, batch, group, &Silent).unwrap())
+                    .collect()
+            })
+            .collect();
+        let whole = run_on(Kernel::SCALAR, &job, &Silent, |_| false).unwrap();
+        (job, batches, whole)
+    }
+
+    fn fold(job: &Job, last: u64, groups: &[(ShardId, &GroupStats)]) -> Result<Tally, Incomplete> {
+        let mut folding = Folding::new(job.clone(), last);
+        for (shard, stats) in groups {
+            folding.push(*shard, (*stats).clone());
+        }
+        assert_eq!(
+            folding.read(),
+            groups.iter().map(|(shard, _)| *shard).collect::<Vec<_>>()
+        );
+        folding.finish().map(|(_, tally)| tally)
+    }
+
+    fn listed(batch: u64, groups: &[GroupStats]) -> Vec<(ShardId, &GroupStats)> {
+        (0..)
+            .map(|g| ShardId::group(batch, g))
+            .zip(groups)
+            .collect()
+    }
+
+    /// Folding the groups as they are read gives the engine's tally to the bit, from each batch's
+    /// own groups or from the fold an earlier merge stored.
+    #[test]
+    fn groups_folded_as_read_give_the_engines_tally() {
+        let (job, batches, whole) = three_batches();
+        let every: Vec<_> = (0..3)
+            .flat_map(|b| listed(b, &batches[b as usize]))
+            .collect();
+        let folded = fold(&job, 2, &every).unwrap();
+        assert_eq!((folded.devices, &folded.groups), (9, &whole.groups));
+
+        let first_two = fold(&job, 1, &every[..6]).unwrap();
+        assert_eq!(first_two.devices, 6);
+        let mut resumed = listed(1, &first_two.groups);
+        resumed.extend(listed(2, &batches[2]));
+        let folded = fold(&job, 2, &resumed).unwrap();
+        assert_eq!((folded.devices, &folded.groups), (9, &whole.groups));
+    }
+
+    #[test]
+    fn groups_that_do_not_make_up_the_batches_are_named() {
+        let (job, batches, _) = three_batches();
+        let every: Vec<_> = (0..3)
+            .flat_map(|b| listed(b, &batches[b as usize]))
+            .collect();
+        let detail = |last, groups: &[(ShardId, &GroupStats)]| {
+            let error = fold(&job, last, groups).unwrap_err();
+            (error.batch, error.detail)
+        };
+        assert_eq!(
+            detail(0, &[]),
+            (0, "0 of its 3 groups are stored".to_owned())
+        );
+        assert_eq!(
+            detail(2, &every[..5]),
+            (1, "2 of its 3 groups are stored".to_owned())
+        );
+        assert_eq!(
+            detail(2, &every[..6]),
+            (2, "0 of its 3 groups are stored".to_owned())
+        );
+        let skipped = [every[0], every[2]];
+        assert_eq!(
+            detail(0, &skipped),
+            (
+                0,
+                "found batch 0 group 2 where batch 0 group 1 belongs".to_owned()
+            )
+        );
+        assert_eq!(
+            detail(0, &every[..4]),
+            (
+                1,
+                "batch 1 group 0 is stored after batch 0's merge".to_owned()
+            )
+        );
+        let gap = [&every[..3], &every[6..]].concat();
+        assert_eq!(
+            detail(2, &gap),
+            (
+                1,
+                "found batch 2 group 0 where batch 1 group 0 belongs".to_owned()
+            )
+        );
+        assert_eq!(
+            detail(5, &every),
+            (3, "the job runs no such batch".to_owned())
+        );
     }
 }

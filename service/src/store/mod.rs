@@ -21,10 +21,10 @@ mod sql;
 mod sqlite;
 
 pub use backend::SqlStore;
-pub use rows::EncodedResult;
+pub use rows::{EncodedGroups, EncodedResult};
 
 use crate::domain::{
-    Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob,
+    Attempt, Folding, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob,
     ScheduleDefinition, ScheduleId, ShardId, ShardPlan, UnixMs,
 };
 use async_trait::async_trait;
@@ -337,7 +337,7 @@ pub trait JobQueue: Send + Sync + 'static {
         &self,
         fence: &Fence,
         shards: &[ShardPlan],
-        folded: &[GroupStats],
+        folded: &EncodedGroups,
     ) -> StoreResult<bool>;
     /// Marks the job failed with `error` at once (a failure no retry can mend), if the claim still
     /// holds its shard.
@@ -386,8 +386,9 @@ pub trait Results: Send + Sync + 'static {
         finished_at: UnixMs,
         result: &EncodedResult,
     ) -> StoreResult<Option<u64>>;
-    /// The accumulators of the job's done groups, in batch and group order.
-    async fn partials(&self, id: &JobId) -> StoreResult<Vec<(ShardId, GroupStats)>>;
+    /// The accumulators of the job's done groups, in batch and group order, read into `into`
+    /// one at a time.
+    async fn partials(&self, id: &JobId, into: Folding) -> StoreResult<Folding>;
     /// The Result JSON as stored, to be served as it is.
     async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>>;
 

@@ -13,8 +13,8 @@ use super::rows::{
 };
 use super::sql::{Conn, Sql, Tx};
 use super::{
-    Claim, Fence, JobQueue, JobRecord, Lease, LeaseTerms, Page, QueueEvent, ShardRecord,
-    StoreError, StoreResult,
+    Claim, EncodedGroups, Fence, JobQueue, JobRecord, Lease, LeaseTerms, Page, QueueEvent,
+    ShardRecord, StoreError, StoreResult,
 };
 use crate::domain::{
     IdempotencyKey, JobId, Once, Owner, QueueBound, QueuedJob, RetryBudget,
@@ -556,24 +556,20 @@ impl JobQueue for SqlStore {
         &self,
         fence: &Fence,
         shards: &[ShardPlan],
-        folded: &[GroupStats],
+        folded: &EncodedGroups,
     ) -> StoreResult<bool> {
-        let folded = folded
-            .iter()
-            .map(partial_to_sql)
-            .collect::<StoreResult<Vec<_>>>()?;
         let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(false);
         };
         let batch = count_to_sql(fence.shard.batch);
-        for (group, partial) in folded.into_iter().enumerate() {
+        for (group, partial) in folded.0.iter().enumerate() {
             Sql::new(
                 "UPDATE shards SET partial = $4 WHERE job_id = $1 AND batch = $2 AND grp = $3",
             )
             .bind(fence.job.as_str())
             .bind(batch)
             .bind(count_to_sql(group as u64))
-            .bind(partial)
+            .bind(partial.clone())
             .execute(&mut tx)
             .await?;
         }

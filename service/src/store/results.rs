@@ -10,10 +10,9 @@ use super::rows::{
 };
 use super::sql::Sql;
 use super::{DistributionRow, Fence, Operations, Results, StoreResult};
-use crate::domain::{JobId, ShardId, UnixMs};
+use crate::domain::{Folding, JobId, UnixMs};
 use async_trait::async_trait;
 use bouncewear_model::montecarlo::DeviceLife;
-use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::stats::Accumulator;
 
 impl SqlStore {
@@ -77,11 +76,12 @@ impl Results for SqlStore {
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn partials(&self, id: &JobId) -> StoreResult<Vec<(ShardId, GroupStats)>> {
+    async fn partials(&self, id: &JobId, into: Folding) -> StoreResult<Folding> {
         collect_partials(
             Sql::new(SELECT_PARTIALS)
                 .bind(id.as_str())
                 .fetch(self.readers()),
+            into,
         )
         .await
     }

@@ -7,8 +7,8 @@ use super::{
     StoreError, StoreResult,
 };
 use crate::domain::{
-    Attempt, IdempotencyKey, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition, ScheduleId,
-    ShardId, ShardPlan, UnixMs,
+    Attempt, Folding, IdempotencyKey, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition,
+    ScheduleId, ShardId, ShardPlan, UnixMs,
 };
 use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec, Metric, RunGroups};
@@ -403,32 +403,54 @@ pub(crate) fn partial_to_sql(stats: &GroupStats) -> StoreResult<Vec<u8>> {
     encode("group accumulators", stats)
 }
 
+/// A precision target's folded groups ([`crate::domain::shards::Merged::Next`]) as stored, encoded on the
+/// compute pool in parallel, each group dropped once encoded: never held both decoded and encoded.
+pub struct EncodedGroups(pub(crate) Vec<Vec<u8>>);
+
+impl EncodedGroups {
+    pub fn new(groups: Vec<GroupStats>) -> StoreResult<Self> {
+        use rayon::prelude::*;
+        let groups = groups.into_par_iter().map(|group| partial_to_sql(&group));
+        Ok(Self(groups.collect::<StoreResult<_>>()?))
+    }
+
+    /// How many groups.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+}
+
 /// The query that lists a job's done groups' accumulators, in batch and group order, as rows
 /// `batch, grp, partial` (for [`collect_partials`]).
 pub(crate) const SELECT_PARTIALS: &str = "SELECT batch, grp, partial FROM shards \
      WHERE job_id = $1 AND grp >= 0 AND status = 'done' AND partial IS NOT NULL ORDER BY batch, grp";
 
-/// The done groups' accumulators from [`SELECT_PARTIALS`]' rows as they stream in: each row's
-/// stored bytes are decoded (off the async threads) and dropped before the next row is read, so
-/// a merge holds its groups once, decoded, and never all of them stored beside them.
+/// The done groups' accumulators from [`SELECT_PARTIALS`]' rows as they stream in, into `into`:
+/// each row's stored bytes are decoded and folded (off the async threads), then dropped before the
+/// next row is read, so that a merge holds one batch's groups decoded and never the stored bytes
+/// beside them.
 pub(crate) async fn collect_partials(
     rows: impl futures_util::Stream<Item = Result<AnyRow, sqlx::Error>>,
-) -> StoreResult<Vec<(ShardId, GroupStats)>> {
+    mut into: Folding,
+) -> StoreResult<Folding> {
     use futures_util::TryStreamExt;
     let mut rows = std::pin::pin!(rows);
-    let mut partials = Vec::new();
     while let Some(row) = rows.try_next().await? {
         let shard = shard_id_from_row(&row)?;
         let stored = row.bytes("partial")?;
         drop(row);
-        let stats = tokio::task::spawn_blocking(move || {
-            decode::<GroupStats>("group accumulators", &stored)
+        into = tokio::task::spawn_blocking(move || {
+            into.push(shard, decode::<GroupStats>("group accumulators", &stored)?);
+            Ok::<_, StoreError>(into)
         })
         .await
         .map_err(|e| corrupt("group accumulators", e))??;
-        partials.push((shard, stats));
     }
-    Ok(partials)
+    Ok(into)
 }
 
 /// The first bytes of accumulators as stored since the binary format: [`encode`].

@@ -145,7 +145,8 @@ impl GroupStats {
         }
     }
 
-    fn merge(&mut self, other: &GroupStats) {
+    /// Adds `other`'s accumulators to these, entry by entry: the same group of a later batch.
+    pub fn merge(&mut self, other: &GroupStats) {
         for (mine, theirs) in self.operations.iter_mut().zip(&other.operations) {
             mine.merge(theirs);
         }
