@@ -112,7 +112,7 @@ pub fn bench(
         engine: THROUGHPUT_JOBS
             .iter()
             .map(|&(name, arcing)| {
-                progress.measure(format!("engine and NumPy peer: {name}"), || {
+                progress.measure(format!("engine and its peers: {name}"), || {
                     engine_row(name, arcing, quick, out)
                 })
             })
