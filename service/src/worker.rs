@@ -75,16 +75,18 @@ impl Drop for KeptLease {
 }
 
 /// What a merge step's computation leaves to write: the Result, encoded for the store, or a
-/// precision target's next batch.
+/// precision target's next batch with the fold of its groups, encoded; or why it could not be
+/// encoded.
 enum Outcome {
     Result {
         result: Box<JobResult>,
-        encoded: StoreResult<EncodedResult>,
+        encoded: EncodedResult,
     },
     Next {
         shards: Vec<ShardPlan>,
-        folded: StoreResult<EncodedGroups>,
+        folded: EncodedGroups,
     },
+    Unencodable(String),
 }
 
 /// How a computation under a lease ended.
@@ -265,30 +267,29 @@ impl Workers {
                     Ok(Merged::Result { result, groups }) => {
                         // Encoded here, on the compute pool and its rows in parallel, so that the
                         // writes bind bytes; each bin's groups go once encoded.
-                        let encoded = EncodedResult::new(&result, groups);
-                        Ok(Ok(Outcome::Result { result, encoded }))
+                        Ok(Ok(match EncodedResult::new(&result, groups) {
+                            Ok(encoded) => Outcome::Result { result, encoded },
+                            Err(error) => {
+                                Outcome::Unencodable(format!("encoding the result failed: {error}"))
+                            }
+                        }))
                     }
+                    // Each folded group goes once encoded, as the Result's groups do.
                     Ok(Merged::Next { shards, folded }) => {
-                        // Each folded group goes once encoded, as the Result's groups do.
-                        let folded = EncodedGroups::new(folded);
-                        Ok(Ok(Outcome::Next { shards, folded }))
+                        Ok(Ok(match EncodedGroups::new(folded) {
+                            Ok(folded) => Outcome::Next { shards, folded },
+                            Err(error) => Outcome::Unencodable(format!(
+                                "encoding the folded groups failed: {error}"
+                            )),
+                        }))
                     }
                     Err(other) => Ok(Err(other)),
                 }
             })
             .await;
         match ran {
-            Ran::Done(Ok(Outcome::Result {
-                encoded: Err(error),
-                ..
-            })) => {
-                let reason = format!("encoding the result failed: {error}");
-                self.fail_attempt(fence, &reason).await
-            }
-            Ran::Done(Ok(Outcome::Result {
-                result,
-                encoded: Ok(encoded),
-            })) => {
+            Ran::Done(Ok(Outcome::Unencodable(reason))) => self.fail_attempt(fence, &reason).await,
+            Ran::Done(Ok(Outcome::Result { result, encoded })) => {
                 let stored = self.succeed(fence, &result, &encoded, lease).await;
                 if stored && whole {
                     let operations = result.job.devices_run() * result.job.spec().operations;
@@ -297,16 +298,7 @@ impl Workers {
                 }
                 record_shard_step("merge", merging);
             }
-            Ran::Done(Ok(Outcome::Next {
-                folded: Err(error), ..
-            })) => {
-                let reason = format!("encoding the folded groups failed: {error}");
-                self.fail_attempt(fence, &reason).await
-            }
-            Ran::Done(Ok(Outcome::Next {
-                shards,
-                folded: Ok(folded),
-            })) => match self
+            Ran::Done(Ok(Outcome::Next { shards, folded })) => match self
                 .store_with_backoff(lease, || self.store.add_batch(fence, &shards, &folded))
                 .await
             {
