@@ -10,18 +10,26 @@
 //! variance of the later levels' product, and the interval takes Student's t on the effective
 //! number of lineages left at the last level: coverage 0.95-0.96 on the same study.
 //!
+//! Every method is a sequence of rounds ([`Estimator`]). A round is independent work: samples
+//! drawn afresh (a first level, a batch of importance or crude samples) or a level's Markov
+//! chains, each a pure function of the estimator's state. [`Estimator::tasks`] cuts a round into
+//! any number of [`Task`]s, which may run anywhere and in any order ([`Estimator::run`]);
+//! [`Estimator::advance`] takes their [`Outcome`]s in task order and decides the next round. The
+//! estimator, its tasks and their outcomes serialize, so that a round can be spread over
+//! processes; however a round is cut, the estimate is the same to the bit.
+//!
 //! Every sample draws its normals from its own ChaCha8 stream, named by what it is (method,
 //! replicate, level, index), and each step that adapts (a level's threshold, the conditional
 //! sampler's scale) reads the samples in their index order, so a seed gives the same bits on any
-//! number of threads.
+//! number of threads, tasks and processes.
 
-use crate::montecarlo::Cancelled;
 use crate::montecarlo::Observer;
 use crate::stats::{Z_975, student_t_975, wilson_interval};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 /// A response of independent standard normal inputs.
 pub trait LimitState: Sync {
@@ -39,15 +47,24 @@ pub const LEVEL_PROBABILITY: f64 = 0.1;
 pub const CRUDE_BATCH: usize = 10_000;
 /// The acceptance rate the conditional sampler's scale is steered to (Papaioannou et al. 2015).
 const TARGET_ACCEPTANCE: f64 = 0.44;
+/// The conditional sampler's scale at a run's first conditional level (Papaioannou et al. 2015).
+const FIRST_SCALE: f64 = 0.6;
+/// The groups of chains of a level, run one after another, the scale steered after each: with
+/// the scale steered only between levels, a one-input tail at 1e-9 covered 0.55 and took 3.6 times
+/// the evaluations (200 seeds).
+const GROUPS_PER_LEVEL: usize = 10;
 /// Below this, subset simulation stops looking: the threshold is never reached or rarer than
 /// any reliability question.
 pub const SMALLEST_PROBABILITY: f64 = 1e-30;
+/// Subset simulation's most runs, and most levels per run.
+const MAX_RUNS: usize = 1 << 12;
+const MAX_LEVEL: u64 = 255;
 
 /// Rare-event samples draw from streams at and above this (device streams, LHS and Sobol' streams
 /// are elsewhere, see `engine`): `2^60 + kind 2^56 + replicate 2^44 + level 2^36 + index`.
 const RARE_STREAM_BASE: u64 = 1 << 60;
 
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Stream {
     LevelZero,
     Chain,
@@ -76,8 +93,8 @@ pub enum Stop {
     Failed(String),
 }
 
-impl From<Cancelled> for Stop {
-    fn from(_: Cancelled) -> Self {
+impl From<crate::montecarlo::Cancelled> for Stop {
+    fn from(_: crate::montecarlo::Cancelled) -> Self {
         Stop::Cancelled
     }
 }
@@ -97,47 +114,56 @@ pub struct Estimate {
 }
 
 /// The budget and the precision sought.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Budget {
     pub max_evaluations: u64,
     pub target_cov: f64,
 }
 
-/// Counts evaluations against the budget and tells the observer.
-struct Counter<'a> {
-    done: u64,
-    budget: Budget,
-    observer: &'a dyn Observer,
+/// The estimators.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Method {
+    /// Subset simulation: independent runs until the combined coefficient of variation is at most
+    /// the target or another run would not fit the budget. The runs average; the variance of the
+    /// average is theirs summed over the count squared, its degrees of freedom
+    /// Welch-Satterthwaite's. Each run's conditional sampler steers its scale towards 44 %
+    /// acceptance after each tenth of a level's chains.
+    Subset,
+    /// Importance sampling around the design point: a first subset simulation run reaches the
+    /// failure domain (and gives the tail curve), and the mean of its failing samples is the
+    /// centre `u*` (a mean, not one sample: the directions that do not matter average out, which
+    /// keeps the weights sane); then batches of `u* + xi`, `xi` standard normal, each weighed by
+    /// `phi(u) / phi(u - u*) = exp(-u*.xi - |u*|^2 / 2)`, until the estimate's coefficient of
+    /// variation is at most the target or the budget is spent. The interval is the normal one of
+    /// the weighted mean.
+    Importance,
+    /// Crude Monte Carlo: batches of independent inputs until the count beyond the threshold
+    /// gives a coefficient of variation at most the target, or the budget is spent; Wilson's
+    /// interval. The tail curve's points before the last are read from the first batch.
+    Crude,
 }
 
-impl<'a> Counter<'a> {
-    fn new(budget: Budget, observer: &'a dyn Observer) -> Self {
-        Self {
-            done: 0,
-            budget,
-            observer,
+impl Method {
+    /// `P(Y > threshold)` by this method, every round run here.
+    pub fn estimate(
+        self,
+        state: &dyn LimitState,
+        threshold: f64,
+        budget: Budget,
+        seed: u64,
+        observer: &dyn Observer,
+    ) -> Result<Estimate, Stop> {
+        let estimator = Estimator::new(self, state.dimension(), threshold, budget, seed);
+        run_locally(estimator, state, observer)
+    }
+
+    /// Its name in a Result's `rare_event.method`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Subset => "subset",
+            Method::Importance => "importance",
+            Method::Crude => "crude",
         }
-    }
-
-    fn add(&mut self, evaluations: usize) -> Result<(), Cancelled> {
-        self.done += evaluations as u64;
-        self.observer
-            .progress(self.done, self.budget.max_evaluations);
-        if self.observer.cancelled() {
-            return Err(Cancelled);
-        }
-        Ok(())
-    }
-
-    fn left(&self) -> u64 {
-        self.budget.max_evaluations.saturating_sub(self.done)
-    }
-
-    /// The size of the next batch of at most `size`: what the budget has left, `None` once it
-    /// is spent.
-    fn next_batch(&self, size: usize) -> Option<usize> {
-        let n = size.min(usize::try_from(self.left()).unwrap_or(usize::MAX));
-        (n > 0).then_some(n)
     }
 }
 
@@ -151,28 +177,6 @@ fn weighted_mean(sum: f64, sum2: f64, n: u64) -> (f64, f64) {
 /// Crude Monte Carlo's coefficient of variation at `p` over `n` samples.
 fn binomial_cov(p: f64, n: u64) -> f64 {
     ((1.0 - p) / (n as f64 * p)).sqrt()
-}
-
-/// `n` inputs drawn from the streams `stream(index)` for `index` from `first`, each moved by
-/// `centre` if given, and their responses, counted against the budget.
-fn draw_batch(
-    state: &dyn LimitState,
-    (n, first): (usize, u64),
-    stream: impl Fn(u64) -> u64 + Sync,
-    (seed, centre): (u64, Option<&[f64]>),
-    counter: &mut Counter<'_>,
-) -> Result<(Vec<f64>, Vec<f64>), Stop> {
-    let d = state.dimension();
-    let mut us = vec![0.0; n * d];
-    us.par_chunks_mut(d).enumerate().for_each(|(i, u)| {
-        normals(seed, stream(first + i as u64), u);
-        for (x, c) in u.iter_mut().zip(centre.unwrap_or_default()) {
-            *x += c;
-        }
-    });
-    let ys = responses(state, &us, d)?;
-    counter.add(n)?;
-    Ok((us, ys))
 }
 
 /// The responses at the rows of `us` (`d` values each), in row order, on the rayon pool.
@@ -231,6 +235,7 @@ fn lognormal_interval(p: f64, cov: f64, dof: f64) -> [f64; 2] {
 }
 
 /// One run of subset simulation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct SubsetRun {
     probability: f64,
     /// The variance of `ln probability`: the first level's binomial variance plus the lineages'
@@ -248,6 +253,7 @@ struct SubsetRun {
 
 /// A level's samples (chain after chain), and each sample's lineage: the index of the first
 /// level's seed it descends from (level 0: none).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 struct Level {
     us: Vec<f64>,
     ys: Vec<f64>,
@@ -258,7 +264,7 @@ struct Level {
 const NO_ROOT: u32 = u32::MAX;
 
 /// What the levels so far tell about the estimate's variance.
-#[derive(Default)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 struct Spread {
     /// The first level's binomial variance of `ln p`.
     first: f64,
@@ -329,234 +335,6 @@ fn next_threshold(level: &Level) -> Option<(f64, Vec<usize>)> {
     Some((b, seeds))
 }
 
-/// Subset simulation's next level: a chain from each seed (its first sample), `n` samples in
-/// all, by adaptive conditional sampling: proposals `rho_k u_k + sigma_k xi_k`, accepted when
-/// the response stays above `b`, `sigma_k = min(1, lambda s_k)` with `s_k` the seeds' spread,
-/// `lambda` steered after each tenth of the chains towards 44 % acceptance.
-#[allow(clippy::too_many_arguments)]
-fn conditional_level(
-    state: &dyn LimitState,
-    level: &Level,
-    seeds: &[usize],
-    b: f64,
-    lambda: &mut f64,
-    seed: u64,
-    replicate: u64,
-    index: u64,
-) -> Result<Level, Stop> {
-    let d = state.dimension();
-    let n = level.ys.len();
-    let m = seeds.len();
-    let spread: Vec<f64> = (0..d)
-        .map(|k| {
-            if m < 2 {
-                return 1.0;
-            }
-            let mean = seeds.iter().map(|&s| level.us[s * d + k]).sum::<f64>() / m as f64;
-            let var = seeds
-                .iter()
-                .map(|&s| (level.us[s * d + k] - mean).powi(2))
-                .sum::<f64>()
-                / (m - 1) as f64;
-            var.sqrt()
-        })
-        .collect();
-    let lengths: Vec<usize> = (0..m).map(|j| n / m + usize::from(j < n % m)).collect();
-    let group = m.div_ceil(10).max(1);
-    let mut next = Level {
-        us: Vec::with_capacity(n * d),
-        ys: Vec::with_capacity(n),
-        roots: Vec::with_capacity(n),
-    };
-    for (g, chains) in (0..m).collect::<Vec<_>>().chunks(group).enumerate() {
-        let sigma: Vec<f64> = spread.iter().map(|s| (*lambda * s).min(1.0)).collect();
-        let rho: Vec<f64> = sigma.iter().map(|s| (1.0 - s * s).sqrt()).collect();
-        let ran: Vec<(Vec<f64>, Vec<f64>, usize)> = chains
-            .par_iter()
-            .map(|&j| {
-                let start = seeds[j];
-                let mut u = level.us[start * d..(start + 1) * d].to_vec();
-                let mut y = level.ys[start];
-                let mut rng = ChaCha8Rng::seed_from_u64(seed);
-                rng.set_stream(stream(Stream::Chain, replicate, index, j as u64));
-                let (mut us, mut ys) = (u.clone(), vec![y]);
-                let mut accepted = 0;
-                let mut candidate = vec![0.0; d];
-                for _ in 1..lengths[j] {
-                    for k in 0..d {
-                        let xi: f64 = rng.sample(StandardNormal);
-                        candidate[k] = rho[k].mul_add(u[k], sigma[k] * xi);
-                    }
-                    let response = state.response(&candidate);
-                    if response > b {
-                        u.copy_from_slice(&candidate);
-                        y = response;
-                        accepted += 1;
-                    }
-                    us.extend_from_slice(&u);
-                    ys.push(y);
-                }
-                (us, ys, accepted)
-            })
-            .collect();
-        let (mut accepted, mut proposed) = (0, 0);
-        for (j, (us, ys, chain_accepted)) in chains.iter().zip(ran) {
-            if let Some(bad) = ys.iter().position(|y| y.is_nan()) {
-                return Err(Stop::Failed(format!(
-                    "the model gave no value (NaN) at the inputs {:?}",
-                    &us[bad * d..(bad + 1) * d]
-                )));
-            }
-            let root = match level.roots[seeds[*j]] {
-                NO_ROOT => u32::try_from(*j).expect("fewer seeds than 2^32"),
-                root => root,
-            };
-            next.roots.extend(std::iter::repeat_n(root, ys.len()));
-            next.us.extend_from_slice(&us);
-            next.ys.extend_from_slice(&ys);
-            accepted += chain_accepted;
-            proposed += lengths[*j] - 1;
-        }
-        if proposed > 0 {
-            let rate = accepted as f64 / proposed as f64;
-            *lambda *= ((rate - TARGET_ACCEPTANCE) / ((g + 1) as f64).sqrt()).exp();
-        }
-    }
-    Ok(next)
-}
-
-/// One run of subset simulation to `threshold`, within what `counter` has left.
-fn subset_run(
-    state: &dyn LimitState,
-    threshold: f64,
-    seed: u64,
-    replicate: u64,
-    counter: &mut Counter<'_>,
-) -> Result<SubsetRun, Stop> {
-    let (d, n) = (state.dimension(), SAMPLES_PER_LEVEL);
-    let started = counter.done;
-    let (us, ys) = draw_batch(
-        state,
-        (n, 0),
-        |i| stream(Stream::LevelZero, replicate, 0, i),
-        (seed, None),
-        counter,
-    )?;
-    let mut level = Level {
-        us,
-        ys,
-        roots: vec![NO_ROOT; n],
-    };
-    let (mut probability, mut lambda) = (1.0_f64, 0.6);
-    let mut spread = Spread::default();
-    let mut levels = Vec::new();
-    for index in 1_u64.. {
-        let failing = level.ys.iter().filter(|&&y| y > threshold).count();
-        let share = failing as f64 / n as f64;
-        if share >= LEVEL_PROBABILITY {
-            spread.add(&level, threshold);
-            let (var_ln, dof) = spread.variance(&level);
-            probability *= share;
-            levels.push((threshold, probability));
-            return Ok(SubsetRun {
-                probability,
-                var_ln,
-                dof,
-                evaluations: counter.done - started,
-                levels,
-                design_point: closest_failing(&level.us, &level.ys, d, threshold),
-                failing_mean: failing_mean(&level, d, threshold),
-            });
-        }
-        let Some((b, seeds)) = next_threshold(&level) else {
-            return Err(Stop::Failed(format!(
-                "the metric is {} on every input explored at probability {probability:.3e} and \
-                 never reaches the threshold",
-                level.ys[0]
-            )));
-        };
-        let share = seeds.len() as f64 / n as f64;
-        spread.add(&level, b);
-        probability *= share;
-        levels.push((b, probability));
-        if probability < SMALLEST_PROBABILITY || index >= 255 {
-            return Err(Stop::Failed(format!(
-                "the threshold is not reached with probability above {SMALLEST_PROBABILITY:e}: \
-                 the metric reached {b} at probability {probability:.3e}"
-            )));
-        }
-        let cost = (n - seeds.len()) as u64;
-        if cost > counter.left() {
-            return Err(Stop::Failed(format!(
-                "max_evaluations ran out after {} evaluations at level {index}, where P(metric \
-                 beyond {b}) is about {probability:.3e}; each further level costs about {cost}",
-                counter.done
-            )));
-        }
-        level = conditional_level(
-            state,
-            &level,
-            &seeds,
-            b,
-            &mut lambda,
-            seed,
-            replicate,
-            index,
-        )?;
-        counter.add(n - seeds.len())?;
-    }
-    unreachable!("levels are bounded above")
-}
-
-/// Subset simulation: independent runs until the combined coefficient of variation is at most
-/// the target or another run would not fit the budget. The runs average; the variance of the
-/// average is theirs summed over the count squared, its degrees of freedom Welch-Satterthwaite's.
-pub fn subset(
-    state: &dyn LimitState,
-    threshold: f64,
-    budget: Budget,
-    seed: u64,
-    observer: &dyn Observer,
-) -> Result<Estimate, Stop> {
-    let mut counter = Counter::new(budget, observer);
-    let mut runs: Vec<SubsetRun> = Vec::new();
-    loop {
-        let run = subset_run(state, threshold, seed, runs.len() as u64, &mut counter)?;
-        let cost = run.evaluations;
-        runs.push(run);
-        let count = runs.len() as f64;
-        let probability = runs.iter().map(|r| r.probability).sum::<f64>() / count;
-        // Each run's variance of its probability, from that of its logarithm.
-        let variances: Vec<f64> = runs
-            .iter()
-            .map(|r| r.probability * r.probability * r.var_ln.exp_m1())
-            .collect();
-        let total: f64 = variances.iter().sum();
-        let cov = total.sqrt() / count / probability;
-        let dof = total * total
-            / variances
-                .iter()
-                .zip(&runs)
-                .map(|(v, r)| v * v / r.dof)
-                .sum::<f64>();
-        if cov <= budget.target_cov || cost > counter.left() || runs.len() >= 1 << 12 {
-            let design_point = runs
-                .iter()
-                .filter_map(|r| r.design_point.as_ref())
-                .min_by(|a, b| norm2(a).total_cmp(&norm2(b)))
-                .cloned();
-            return Ok(Estimate {
-                probability,
-                ci95: lognormal_interval(probability, cov, dof),
-                cov: Some(cov),
-                evaluations: counter.done,
-                design_point,
-                tail: first_run_tail(&runs[0], probability),
-            });
-        }
-    }
-}
-
 /// The tail curve: the first run's levels, one point per level, then the estimate at the
 /// threshold; an earlier point below the estimate (a run's noise) is raised to it, so the curve
 /// never rises.
@@ -569,139 +347,696 @@ fn first_run_tail(run: &SubsetRun, probability: f64) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// Importance sampling around the design point: a first subset simulation run reaches the
-/// failure domain (and gives the tail curve), and the mean of its failing samples is the centre
-/// `u*` (a mean, not one sample: the directions that do not matter average out, which keeps the
-/// weights sane); then batches of `u* + xi`, `xi` standard normal, each weighed by
-/// `phi(u) / phi(u - u*) = exp(-u*.xi - |u*|^2 / 2)`, until the estimate's coefficient of
-/// variation is at most the target or the budget is spent. The interval is the normal one of the
-/// weighted mean.
-pub fn importance(
-    state: &dyn LimitState,
+/// One task of a round, independent of the round's other tasks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Task {
+    /// The round's fresh samples `start..end`.
+    Draws { start: u64, end: u64 },
+    /// The level's chains `start..end`.
+    Chains { start: usize, end: usize },
+}
+
+/// What a task gives back: its samples' inputs (rows of the dimension) and responses in order,
+/// and the conditional sampler's proposals its chains accepted.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Outcome {
+    us: Vec<f64>,
+    ys: Vec<f64>,
+    accepted: u64,
+}
+
+/// A rare-event estimate between rounds: everything the next round's tasks and the estimate
+/// need, and nothing of the rounds before but what they left (a level's seeds, sums, counts).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Estimator {
+    method: Method,
+    dimension: usize,
     threshold: f64,
     budget: Budget,
     seed: u64,
-    observer: &dyn Observer,
-) -> Result<Estimate, Stop> {
-    let d = state.dimension();
-    let mut counter = Counter::new(budget, observer);
-    let pilot = subset_run(state, threshold, seed, 0, &mut counter)?;
-    let centre = pilot.failing_mean.clone();
-    let shift = norm2(&centre);
-    let (mut sum, mut sum2, mut samples) = (0.0, 0.0, 0_u64);
-    let mut design_point = pilot
-        .design_point
-        .clone()
-        .expect("a finished subset run has failing samples");
-    let mut closest = norm2(&design_point);
-    for batch in 0_u64.. {
-        let Some(n) = counter.next_batch(SAMPLES_PER_LEVEL) else {
-            break;
+    /// Evaluations so far.
+    done: u64,
+    /// Subset simulation's finished runs; importance sampling's pilot.
+    runs: Vec<SubsetRun>,
+    stage: Stage,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+enum Stage {
+    /// The first level of subset run `replicate`, which started at `started` evaluations.
+    FirstLevel { replicate: u64, started: u64 },
+    /// A conditional level of a subset run.
+    Level(Box<Descent>),
+    /// Importance sampling's batches around the pilot's failing mean.
+    Importance(Box<Weighing>),
+    /// Crude Monte Carlo's batches.
+    Crude(Box<Counting>),
+    /// The estimate was made: no round is left.
+    Done,
+}
+
+/// A subset run between its levels.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Descent {
+    replicate: u64,
+    /// The level its chains sample (1 for the first conditional level).
+    index: u64,
+    /// Evaluations when the run started.
+    started: u64,
+    /// `P(Y > b)` so far.
+    probability: f64,
+    spread: Spread,
+    /// `(b, P(Y > b))` of each level so far.
+    levels: Vec<(f64, f64)>,
+    /// The conditional sampler's scale, steered after each group of chains.
+    lambda: f64,
+    /// The level's threshold.
+    b: f64,
+    /// The chains' first samples, their lineages resolved.
+    seeds: Level,
+    /// The group of chains the next round runs: the level's chains in [`GROUPS_PER_LEVEL`]
+    /// groups, one after another, so that the scale adapts within the level.
+    group: usize,
+    /// The samples of the groups run so far, chain after chain.
+    sampled: Level,
+}
+
+/// Importance sampling's weighted sums so far.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Weighing {
+    centre: Vec<f64>,
+    sum: f64,
+    sum2: f64,
+    samples: u64,
+    batch: u64,
+    design_point: Vec<f64>,
+}
+
+/// Crude Monte Carlo's counts so far.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+struct Counting {
+    hits: u64,
+    samples: u64,
+    batch: u64,
+    tail: Vec<(f64, f64)>,
+    design_point: Option<Vec<f64>>,
+}
+
+/// A round's fresh samples: indices `first..first + n` of the streams of `kind`, moved by
+/// `centre` if given.
+struct Draws<'a> {
+    kind: Stream,
+    replicate: u64,
+    first: u64,
+    n: u64,
+    centre: Option<&'a [f64]>,
+}
+
+impl Estimator {
+    /// `method` ready for its first round, for `P(Y > threshold)` of a response of `dimension`
+    /// inputs.
+    pub fn new(
+        method: Method,
+        dimension: usize,
+        threshold: f64,
+        budget: Budget,
+        seed: u64,
+    ) -> Self {
+        let stage = match method {
+            Method::Crude => Stage::Crude(Box::default()),
+            Method::Subset | Method::Importance => Stage::FirstLevel {
+                replicate: 0,
+                started: 0,
+            },
         };
-        let (us, ys) = draw_batch(
-            state,
-            (n, batch * SAMPLES_PER_LEVEL as u64),
-            |i| stream(Stream::Importance, 0, 0, i),
-            (seed, Some(&centre)),
-            &mut counter,
-        )?;
-        for (u, &y) in us.chunks(d).zip(&ys) {
-            if y > threshold {
-                let dot: f64 = u.iter().zip(&centre).map(|(x, c)| x * c).sum();
-                // u = u* + xi: -u*.xi - |u*|^2/2 = -u*.u + |u*|^2/2.
+        Self {
+            method,
+            dimension,
+            threshold,
+            budget,
+            seed,
+            done: 0,
+            runs: Vec::new(),
+            stage,
+        }
+    }
+
+    /// The method it runs.
+    pub fn method(&self) -> Method {
+        self.method
+    }
+
+    /// Evaluations so far.
+    pub fn evaluations(&self) -> u64 {
+        self.done
+    }
+
+    /// The evaluations the next round makes (0 once the estimate is made).
+    pub fn round_evaluations(&self) -> u64 {
+        match (&self.stage, self.draws()) {
+            (_, Some(draws)) => draws.n,
+            (Stage::Level(descent), None) => descent
+                .group_chains()
+                .map(|j| chain_length(j, descent.seeds.ys.len()) as u64 - 1)
+                .sum(),
+            _ => 0,
+        }
+    }
+
+    /// The evaluations `task` of the next round makes.
+    pub fn task_evaluations(&self, task: Task) -> u64 {
+        match (task, &self.stage) {
+            (Task::Draws { start, end }, _) => end.saturating_sub(start),
+            (Task::Chains { start, end }, Stage::Level(descent)) => (start..end)
+                .map(|j| chain_length(j, descent.seeds.ys.len()) as u64 - 1)
+                .sum(),
+            (Task::Chains { .. }, _) => 0,
+        }
+    }
+
+    /// The next round cut into at most `pieces` tasks of nearly equal size, in order (none once
+    /// the estimate is made).
+    pub fn tasks(&self, pieces: usize) -> Vec<Task> {
+        let cut = |total: u64| -> Vec<(u64, u64)> {
+            let pieces = (pieces.max(1) as u64).min(total);
+            (0..pieces)
+                .map(|p| (total * p / pieces, total * (p + 1) / pieces))
+                .collect()
+        };
+        if let Some(draws) = self.draws() {
+            return cut(draws.n)
+                .into_iter()
+                .map(|(start, end)| Task::Draws { start, end })
+                .collect();
+        }
+        match &self.stage {
+            Stage::Level(descent) => {
+                let chains = descent.group_chains();
+                cut((chains.end - chains.start) as u64)
+                    .into_iter()
+                    .map(|(start, end)| Task::Chains {
+                        start: chains.start + start as usize,
+                        end: chains.start + end as usize,
+                    })
+                    .collect()
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// The fresh samples of the next round, if it draws them.
+    fn draws(&self) -> Option<Draws<'_>> {
+        let left = self.budget.max_evaluations.saturating_sub(self.done);
+        let (kind, replicate, first, n, centre) = match &self.stage {
+            Stage::FirstLevel { replicate, .. } => (
+                Stream::LevelZero,
+                *replicate,
+                0,
+                SAMPLES_PER_LEVEL as u64,
+                None,
+            ),
+            Stage::Importance(w) => {
+                let n = left.min(SAMPLES_PER_LEVEL as u64);
+                let first = w.batch * SAMPLES_PER_LEVEL as u64;
+                (Stream::Importance, 0, first, n, Some(w.centre.as_slice()))
+            }
+            Stage::Crude(c) => {
+                let n = left.min(CRUDE_BATCH as u64);
+                (Stream::Crude, 0, c.batch * CRUDE_BATCH as u64, n, None)
+            }
+            Stage::Level(_) | Stage::Done => return None,
+        };
+        Some(Draws {
+            kind,
+            replicate,
+            first,
+            n,
+            centre,
+        })
+    }
+
+    /// Runs one task of the next round on the calling rayon pool: the same bits on any number of
+    /// threads, in any process holding this estimator.
+    pub fn run(&self, state: &dyn LimitState, task: Task) -> Result<Outcome, Stop> {
+        let d = self.dimension;
+        match (task, &self.stage) {
+            (Task::Draws { start, end }, _) => {
+                let draws = self
+                    .draws()
+                    .filter(|draws| start <= end && end <= draws.n)
+                    .ok_or_else(|| mismatch(task))?;
+                let mut us = vec![0.0; (end - start) as usize * d];
+                us.par_chunks_mut(d.max(1)).enumerate().for_each(|(i, u)| {
+                    let index = draws.first + start + i as u64;
+                    normals(self.seed, stream(draws.kind, draws.replicate, 0, index), u);
+                    for (x, c) in u.iter_mut().zip(draws.centre.unwrap_or_default()) {
+                        *x += c;
+                    }
+                });
+                let ys = responses(state, &us, d)?;
+                Ok(Outcome {
+                    us,
+                    ys,
+                    accepted: 0,
+                })
+            }
+            (Task::Chains { start, end }, Stage::Level(descent))
+                if descent.group_chains().start <= start
+                    && start <= end
+                    && end <= descent.group_chains().end =>
+            {
+                descent.chains(state, start..end, self.seed)
+            }
+            (Task::Chains { .. }, _) => Err(mismatch(task)),
+        }
+    }
+
+    /// Takes the outcomes of every task of the round, in task order, and moves on: the estimate
+    /// once it is made (then no round is left), or `None` with the next round ready. Progress is
+    /// told in evaluations, and a cancelled observer stops it.
+    pub fn advance(
+        &mut self,
+        outcomes: Vec<Outcome>,
+        observer: &dyn Observer,
+    ) -> Result<Option<Estimate>, Stop> {
+        let expected = self.round_evaluations()
+            + match &self.stage {
+                Stage::Level(descent) => descent.group_chains().len() as u64,
+                _ => 0,
+            };
+        let mut round = Level::default();
+        let mut accepted = 0;
+        for outcome in outcomes {
+            round.us.extend_from_slice(&outcome.us);
+            round.ys.extend_from_slice(&outcome.ys);
+            accepted += outcome.accepted;
+        }
+        if round.ys.len() as u64 != expected || round.us.len() != round.ys.len() * self.dimension {
+            return Err(Stop::Failed(format!(
+                "a rare-event round gave {} samples where it has {expected}",
+                round.ys.len()
+            )));
+        }
+        let evaluations = self.round_evaluations();
+        self.done += evaluations;
+        observer.progress(self.done, self.budget.max_evaluations);
+        if observer.cancelled() {
+            return Err(Stop::Cancelled);
+        }
+        let estimate = match std::mem::replace(&mut self.stage, Stage::Done) {
+            Stage::FirstLevel { replicate, started } => {
+                round.roots = vec![NO_ROOT; round.ys.len()];
+                let descent = Descent {
+                    replicate,
+                    index: 1,
+                    started,
+                    probability: 1.0,
+                    spread: Spread::default(),
+                    levels: Vec::new(),
+                    lambda: FIRST_SCALE,
+                    b: f64::NEG_INFINITY,
+                    seeds: Level::default(),
+                    group: 0,
+                    sampled: Level::default(),
+                };
+                self.descend(descent, round)?
+            }
+            Stage::Level(mut descent) => {
+                round.roots = descent.chain_roots();
+                descent.sampled.us.append(&mut round.us);
+                descent.sampled.ys.append(&mut round.ys);
+                descent.sampled.roots.append(&mut round.roots);
+                if evaluations > 0 {
+                    let rate = accepted as f64 / evaluations as f64;
+                    descent.lambda *=
+                        ((rate - TARGET_ACCEPTANCE) / ((descent.group + 1) as f64).sqrt()).exp();
+                }
+                descent.group += 1;
+                if descent.group_chains().is_empty() {
+                    let level = std::mem::take(&mut descent.sampled);
+                    descent.index += 1;
+                    self.descend(*descent, level)?
+                } else {
+                    self.stage = Stage::Level(descent);
+                    None
+                }
+            }
+            Stage::Importance(weighing) => self.weigh(*weighing, &round),
+            Stage::Crude(counting) => self.count(*counting, &round),
+            Stage::Done => return Err(Stop::Failed("the estimate is already made".to_owned())),
+        };
+        Ok(estimate)
+    }
+
+    /// A subset run's level `descent.index - 1` sampled: the run ends if enough of it is beyond
+    /// the threshold, otherwise its top tenth seeds the next level's chains.
+    fn descend(&mut self, mut run: Descent, level: Level) -> Result<Option<Estimate>, Stop> {
+        let n = level.ys.len();
+        let failing = level.ys.iter().filter(|&&y| y > self.threshold).count();
+        let share = failing as f64 / n as f64;
+        if share >= LEVEL_PROBABILITY {
+            run.spread.add(&level, self.threshold);
+            let (var_ln, dof) = run.spread.variance(&level);
+            run.probability *= share;
+            run.levels.push((self.threshold, run.probability));
+            let d = self.dimension;
+            let finished = SubsetRun {
+                probability: run.probability,
+                var_ln,
+                dof,
+                evaluations: self.done - run.started,
+                levels: run.levels,
+                design_point: closest_failing(&level.us, &level.ys, d, self.threshold),
+                failing_mean: failing_mean(&level, d, self.threshold),
+            };
+            return Ok(self.run_finished(finished));
+        }
+        let Some((b, seeds)) = next_threshold(&level) else {
+            return Err(Stop::Failed(format!(
+                "the metric is {} on every input explored at probability {:.3e} and never \
+                 reaches the threshold",
+                level.ys[0], run.probability
+            )));
+        };
+        let share = seeds.len() as f64 / n as f64;
+        run.spread.add(&level, b);
+        run.probability *= share;
+        run.levels.push((b, run.probability));
+        let probability = run.probability;
+        if probability < SMALLEST_PROBABILITY || run.index >= MAX_LEVEL {
+            return Err(Stop::Failed(format!(
+                "the threshold is not reached with probability above {SMALLEST_PROBABILITY:e}: \
+                 the metric reached {b} at probability {probability:.3e}"
+            )));
+        }
+        let cost = (n - seeds.len()) as u64;
+        if cost > self.budget.max_evaluations.saturating_sub(self.done) {
+            return Err(Stop::Failed(format!(
+                "max_evaluations ran out after {} evaluations at level {}, where P(metric \
+                 beyond {b}) is about {probability:.3e}; each further level costs about {cost}",
+                self.done, run.index
+            )));
+        }
+        let d = self.dimension;
+        run.b = b;
+        run.group = 0;
+        run.seeds = Level {
+            us: seeds
+                .iter()
+                .flat_map(|&s| &level.us[s * d..(s + 1) * d])
+                .copied()
+                .collect(),
+            ys: seeds.iter().map(|&s| level.ys[s]).collect(),
+            roots: seeds.iter().map(|&s| level.roots[s]).collect(),
+        };
+        self.stage = Stage::Level(Box::new(run));
+        Ok(None)
+    }
+
+    /// A subset run finished: subset simulation combines its runs and stops at its target or its
+    /// budget; importance sampling takes it as its pilot.
+    fn run_finished(&mut self, run: SubsetRun) -> Option<Estimate> {
+        let cost = run.evaluations;
+        let left = self.budget.max_evaluations.saturating_sub(self.done);
+        self.runs.push(run);
+        if self.method == Method::Importance {
+            let pilot = &self.runs[0];
+            let weighing = Weighing {
+                centre: pilot.failing_mean.clone(),
+                sum: 0.0,
+                sum2: 0.0,
+                samples: 0,
+                batch: 0,
+                design_point: pilot
+                    .design_point
+                    .clone()
+                    .expect("a finished subset run has failing samples"),
+            };
+            if left == 0 {
+                return Some(self.weighed(weighing));
+            }
+            self.stage = Stage::Importance(Box::new(weighing));
+            return None;
+        }
+        let runs = &self.runs;
+        let count = runs.len() as f64;
+        let probability = runs.iter().map(|r| r.probability).sum::<f64>() / count;
+        // Each run's variance of its probability, from that of its logarithm.
+        let variances: Vec<f64> = runs
+            .iter()
+            .map(|r| r.probability * r.probability * r.var_ln.exp_m1())
+            .collect();
+        let total: f64 = variances.iter().sum();
+        let cov = total.sqrt() / count / probability;
+        let dof = total * total
+            / variances
+                .iter()
+                .zip(runs)
+                .map(|(v, r)| v * v / r.dof)
+                .sum::<f64>();
+        if cov <= self.budget.target_cov || cost > left || runs.len() >= MAX_RUNS {
+            let design_point = runs
+                .iter()
+                .filter_map(|r| r.design_point.as_ref())
+                .min_by(|a, b| norm2(a).total_cmp(&norm2(b)))
+                .cloned();
+            self.stage = Stage::Done;
+            return Some(Estimate {
+                probability,
+                ci95: lognormal_interval(probability, cov, dof),
+                cov: Some(cov),
+                evaluations: self.done,
+                design_point,
+                tail: first_run_tail(&runs[0], probability),
+            });
+        }
+        self.stage = Stage::FirstLevel {
+            replicate: runs.len() as u64,
+            started: self.done,
+        };
+        None
+    }
+
+    /// An importance-sampling batch weighed: `phi(u) / phi(u - u*) = exp(-u*.u + |u*|^2 / 2)`
+    /// for each failing sample `u = u* + xi`.
+    fn weigh(&mut self, mut w: Weighing, batch: &Level) -> Option<Estimate> {
+        let d = self.dimension;
+        let shift = norm2(&w.centre);
+        let mut closest = norm2(&w.design_point);
+        for (u, &y) in batch.us.chunks(d.max(1)).zip(&batch.ys) {
+            if y > self.threshold {
+                let dot: f64 = u.iter().zip(&w.centre).map(|(x, c)| x * c).sum();
                 let weight = (shift / 2.0 - dot).exp();
-                sum += weight;
-                sum2 += weight * weight;
+                w.sum += weight;
+                w.sum2 += weight * weight;
                 let norm = norm2(u);
                 if norm < closest {
-                    (design_point, closest) = (u.to_vec(), norm);
+                    (w.design_point, closest) = (u.to_vec(), norm);
                 }
             }
         }
-        samples += n as u64;
-        let (mean, se) = weighted_mean(sum, sum2, samples);
-        if sum > 0.0 && se / mean <= budget.target_cov {
-            break;
+        w.samples += batch.ys.len() as u64;
+        w.batch += 1;
+        let (mean, se) = weighted_mean(w.sum, w.sum2, w.samples);
+        let spent = self.done >= self.budget.max_evaluations;
+        if (w.sum > 0.0 && se / mean <= self.budget.target_cov) || spent {
+            return Some(self.weighed(w));
+        }
+        self.stage = Stage::Importance(Box::new(w));
+        None
+    }
+
+    /// Importance sampling's estimate: the normal interval of the weighted mean, the pilot's
+    /// levels as the tail curve.
+    fn weighed(&mut self, w: Weighing) -> Estimate {
+        self.stage = Stage::Done;
+        let (probability, se) = weighted_mean(w.sum, w.sum2, w.samples);
+        let pilot = &self.runs[0];
+        let mut tail = pilot.levels[..pilot.levels.len() - 1].to_vec();
+        tail.push((self.threshold, probability));
+        Estimate {
+            probability,
+            ci95: [
+                (probability - Z_975 * se).max(0.0),
+                (probability + Z_975 * se).min(1.0),
+            ],
+            cov: (probability > 0.0).then(|| se / probability),
+            evaluations: self.done,
+            design_point: (probability > 0.0).then_some(w.design_point),
+            tail,
         }
     }
-    let (probability, se) = weighted_mean(sum, sum2, samples);
-    let mut tail = pilot.levels[..pilot.levels.len() - 1].to_vec();
-    tail.push((threshold, probability));
-    Ok(Estimate {
-        probability,
-        ci95: [
-            (probability - Z_975 * se).max(0.0),
-            (probability + Z_975 * se).min(1.0),
-        ],
-        cov: (probability > 0.0).then(|| se / probability),
-        evaluations: counter.done,
-        design_point: (probability > 0.0).then_some(design_point),
-        tail,
-    })
-}
 
-/// Crude Monte Carlo: batches of independent inputs until the count beyond the threshold gives a
-/// coefficient of variation at most the target, or the budget is spent; Wilson's interval. The
-/// tail curve's points before the last are read from the first batch.
-pub fn crude(
-    state: &dyn LimitState,
-    threshold: f64,
-    budget: Budget,
-    seed: u64,
-    observer: &dyn Observer,
-) -> Result<Estimate, Stop> {
-    let d = state.dimension();
-    let mut counter = Counter::new(budget, observer);
-    let (mut hits, mut samples) = (0_u64, 0_u64);
-    let mut tail = Vec::new();
-    let mut design_point: Option<Vec<f64>> = None;
-    for batch in 0_u64.. {
-        let Some(n) = counter.next_batch(CRUDE_BATCH) else {
-            break;
-        };
-        let (us, ys) = draw_batch(
-            state,
-            (n, batch * CRUDE_BATCH as u64),
-            |i| stream(Stream::Crude, 0, 0, i),
-            (seed, None),
-            &mut counter,
-        )?;
-        if batch == 0 {
-            let mut sorted = ys.clone();
+    /// A crude batch counted; the first also gives the tail curve's points before the last.
+    fn count(&mut self, mut c: Counting, batch: &Level) -> Option<Estimate> {
+        let n = batch.ys.len();
+        if c.batch == 0 {
+            let mut sorted = batch.ys.clone();
             sorted.sort_by(|a, b| b.total_cmp(a));
             let mut p = LEVEL_PROBABILITY;
             while p * n as f64 >= 10.0 {
                 let b = sorted[(p * n as f64) as usize];
-                if b < threshold {
-                    tail.push((b, p));
+                if b < self.threshold {
+                    c.tail.push((b, p));
                 }
                 p *= LEVEL_PROBABILITY;
             }
-            tail.sort_by(|a, b| a.0.total_cmp(&b.0));
+            c.tail.sort_by(|a, b| a.0.total_cmp(&b.0));
         }
-        hits += ys.iter().filter(|&&y| y > threshold).count() as u64;
-        samples += n as u64;
-        if let Some(closest) = closest_failing(&us, &ys, d, threshold)
-            && design_point
+        c.hits += batch.ys.iter().filter(|&&y| y > self.threshold).count() as u64;
+        c.samples += n as u64;
+        c.batch += 1;
+        let d = self.dimension;
+        if let Some(closest) = closest_failing(&batch.us, &batch.ys, d, self.threshold)
+            && c.design_point
                 .as_ref()
                 .is_none_or(|best| norm2(&closest) < norm2(best))
         {
-            design_point = Some(closest);
+            c.design_point = Some(closest);
         }
-        if hits > 0 && binomial_cov(hits as f64 / samples as f64, samples) <= budget.target_cov {
-            break;
+        let met = c.hits > 0
+            && binomial_cov(c.hits as f64 / c.samples as f64, c.samples) <= self.budget.target_cov;
+        if !met && self.done < self.budget.max_evaluations {
+            self.stage = Stage::Crude(Box::new(c));
+            return None;
+        }
+        self.stage = Stage::Done;
+        let probability = c.hits as f64 / c.samples.max(1) as f64;
+        c.tail.push((self.threshold, probability));
+        Some(Estimate {
+            probability,
+            ci95: wilson_interval(probability, c.samples as f64, Z_975),
+            cov: (c.hits > 0).then(|| binomial_cov(probability, c.samples)),
+            evaluations: self.done,
+            design_point: c.design_point,
+            tail: c.tail,
+        })
+    }
+}
+
+/// A task that is not one of the round's.
+fn mismatch(task: Task) -> Stop {
+    Stop::Failed(format!(
+        "{task:?} is not a task of the estimate's next round"
+    ))
+}
+
+impl Descent {
+    /// The chains of the group the next round runs (empty past the last group).
+    fn group_chains(&self) -> std::ops::Range<usize> {
+        let m = self.seeds.ys.len();
+        let size = m.div_ceil(GROUPS_PER_LEVEL).max(1);
+        (self.group * size).min(m)..((self.group + 1) * size).min(m)
+    }
+
+    /// The lineage of each sample of the group's chains: its seed's, or the chain's own index on
+    /// the first conditional level.
+    fn chain_roots(&self) -> Vec<u32> {
+        let m = self.seeds.ys.len();
+        self.group_chains()
+            .flat_map(|j| {
+                let root = match self.seeds.roots[j] {
+                    NO_ROOT => u32::try_from(j).expect("fewer seeds than 2^32"),
+                    root => root,
+                };
+                std::iter::repeat_n(root, chain_length(j, m))
+            })
+            .collect()
+    }
+
+    /// The level's chains `chains`, by adaptive conditional sampling: proposals
+    /// `rho_k u_k + sigma_k xi_k`, accepted when the response stays above `b`,
+    /// `sigma_k = min(1, lambda s_k)` with `s_k` the seeds' spread; the samples chain after chain.
+    fn chains(
+        &self,
+        state: &dyn LimitState,
+        chains: std::ops::Range<usize>,
+        seed: u64,
+    ) -> Result<Outcome, Stop> {
+        let d = state.dimension();
+        let m = self.seeds.ys.len();
+        let sigma: Vec<f64> = (0..d)
+            .map(|k| {
+                let spread = if m < 2 {
+                    1.0
+                } else {
+                    let column = || self.seeds.us.chunks(d).map(|u| u[k]);
+                    let mean = column().sum::<f64>() / m as f64;
+                    let var = column().map(|x| (x - mean).powi(2)).sum::<f64>() / (m - 1) as f64;
+                    var.sqrt()
+                };
+                (self.lambda * spread).min(1.0)
+            })
+            .collect();
+        let rho: Vec<f64> = sigma.iter().map(|s| (1.0 - s * s).sqrt()).collect();
+        let ran: Vec<(Vec<f64>, Vec<f64>, u64)> = chains
+            .into_par_iter()
+            .map(|j| {
+                let mut u = self.seeds.us[j * d..(j + 1) * d].to_vec();
+                let mut y = self.seeds.ys[j];
+                let mut rng = ChaCha8Rng::seed_from_u64(seed);
+                rng.set_stream(stream(Stream::Chain, self.replicate, self.index, j as u64));
+                let (mut us, mut ys) = (u.clone(), vec![y]);
+                let mut accepted = 0;
+                let mut candidate = vec![0.0; d];
+                for _ in 1..chain_length(j, m) {
+                    for k in 0..d {
+                        let xi: f64 = rng.sample(StandardNormal);
+                        candidate[k] = rho[k].mul_add(u[k], sigma[k] * xi);
+                    }
+                    let response = state.response(&candidate);
+                    if response > self.b {
+                        u.copy_from_slice(&candidate);
+                        y = response;
+                        accepted += 1;
+                    }
+                    us.extend_from_slice(&u);
+                    ys.push(y);
+                }
+                (us, ys, accepted)
+            })
+            .collect();
+        let mut outcome = Outcome {
+            us: Vec::new(),
+            ys: Vec::new(),
+            accepted: 0,
+        };
+        for (us, ys, accepted) in ran {
+            if let Some(bad) = ys.iter().position(|y| y.is_nan()) {
+                return Err(Stop::Failed(format!(
+                    "the model gave no value (NaN) at the inputs {:?}",
+                    &us[bad * d..(bad + 1) * d]
+                )));
+            }
+            outcome.us.extend_from_slice(&us);
+            outcome.ys.extend_from_slice(&ys);
+            outcome.accepted += accepted;
+        }
+        Ok(outcome)
+    }
+}
+
+/// Samples in chain `j` of `m` making up a level of [`SAMPLES_PER_LEVEL`].
+fn chain_length(j: usize, m: usize) -> usize {
+    SAMPLES_PER_LEVEL / m + usize::from(j < SAMPLES_PER_LEVEL % m)
+}
+
+/// Runs `estimator` to its estimate here, each round one task on the calling rayon pool.
+pub fn run_locally(
+    mut estimator: Estimator,
+    state: &dyn LimitState,
+    observer: &dyn Observer,
+) -> Result<Estimate, Stop> {
+    loop {
+        let outcomes = estimator
+            .tasks(1)
+            .into_iter()
+            .map(|task| estimator.run(state, task))
+            .collect::<Result<Vec<_>, Stop>>()?;
+        if let Some(estimate) = estimator.advance(outcomes, observer)? {
+            return Ok(estimate);
         }
     }
-    let probability = hits as f64 / samples.max(1) as f64;
-    tail.push((threshold, probability));
-    Ok(Estimate {
-        probability,
-        ci95: wilson_interval(probability, samples as f64, Z_975),
-        cov: (hits > 0).then(|| binomial_cov(probability, samples)),
-        evaluations: counter.done,
-        design_point,
-        tail,
-    })
 }
 
 #[cfg(test)]
@@ -734,14 +1069,14 @@ mod tests {
         }
     }
 
-    type Method = fn(&dyn LimitState, f64, Budget, u64, &dyn Observer) -> Result<Estimate, Stop>;
-
     fn coverage(method: Method, d: usize, beta: f64, budget: Budget, seeds: u64) -> (f64, f64) {
         let state = Linear::new(d);
         let truth = standard_normal_cdf(-beta);
         let (mut covered, mut cov) = (0, 0.0);
         for seed in 0..seeds {
-            let estimate = method(&state, beta, budget, seed, &Silent).unwrap();
+            let estimate = method
+                .estimate(&state, beta, budget, seed, &Silent)
+                .unwrap();
             covered += u64::from(estimate.ci95[0] <= truth && truth <= estimate.ci95[1]);
             cov += estimate.cov.unwrap_or(f64::NAN);
         }
@@ -755,7 +1090,7 @@ mod tests {
             max_evaluations: 20_000,
             target_cov: 1.0,
         };
-        let (covered, cov) = coverage(subset, 100, 3.719, budget, 100);
+        let (covered, cov) = coverage(Method::Subset, 100, 3.719, budget, 100);
         assert!((0.88..=0.99).contains(&covered), "{covered}");
         assert!(cov < 0.5, "{cov}");
     }
@@ -766,7 +1101,7 @@ mod tests {
             max_evaluations: 20_000,
             target_cov: 0.1,
         };
-        let (covered, cov) = coverage(importance, 2, 4.753, budget, 100);
+        let (covered, cov) = coverage(Method::Importance, 2, 4.753, budget, 100);
         assert!((0.88..=0.99).contains(&covered), "{covered}");
         assert!(cov <= 0.1 + 1e-12, "{cov}");
     }
@@ -778,7 +1113,9 @@ mod tests {
             max_evaluations: 1_000_000,
             target_cov: 0.1,
         };
-        let estimate = crude(&state, 1.2816, budget, 7, &Silent).unwrap();
+        let estimate = Method::Crude
+            .estimate(&state, 1.2816, budget, 7, &Silent)
+            .unwrap();
         // P = 0.1: cov 0.1 needs 900 samples; the first batch of 10,000 already gives 0.03.
         assert_eq!(estimate.evaluations, CRUDE_BATCH as u64);
         let truth = standard_normal_cdf(-1.2816);
@@ -800,16 +1137,136 @@ mod tests {
             .num_threads(4)
             .build()
             .unwrap();
-        for method in [subset as Method, importance, crude] {
+        for method in [Method::Subset, Method::Importance, Method::Crude] {
             let a = one
-                .install(|| method(&state, 3.0, budget, 5, &Silent))
+                .install(|| method.estimate(&state, 3.0, budget, 5, &Silent))
                 .unwrap();
             let b = four
-                .install(|| method(&state, 3.0, budget, 5, &Silent))
+                .install(|| method.estimate(&state, 3.0, budget, 5, &Silent))
                 .unwrap();
             assert_eq!(a.probability.to_bits(), b.probability.to_bits());
             assert_eq!(a.evaluations, b.evaluations);
         }
+    }
+
+    /// Through serialization, as processes that share only the estimator's state would pass it.
+    fn passed<T: Serialize + serde::de::DeserializeOwned>(value: &T) -> T {
+        postcard::from_bytes(&postcard::to_allocvec(value).unwrap()).unwrap()
+    }
+
+    /// Every round cut into `pieces` tasks, run last first, each by its own copy of the
+    /// estimator passed through bytes, the outcomes passed back the same way.
+    fn run_in_pieces(
+        mut estimator: Estimator,
+        state: &dyn LimitState,
+        pieces: usize,
+    ) -> (Estimate, usize) {
+        let mut rounds = 0;
+        loop {
+            rounds += 1;
+            let tasks = estimator.tasks(pieces);
+            assert!(!tasks.is_empty() && tasks.len() <= pieces);
+            assert_eq!(
+                tasks
+                    .iter()
+                    .map(|&task| estimator.task_evaluations(task))
+                    .sum::<u64>(),
+                estimator.round_evaluations()
+            );
+            let mut outcomes: Vec<Outcome> = tasks
+                .iter()
+                .rev()
+                .map(|&task| passed(&passed(&estimator).run(state, task).unwrap()))
+                .collect();
+            outcomes.reverse();
+            estimator = passed(&estimator);
+            if let Some(estimate) = estimator.advance(outcomes, &Silent).unwrap() {
+                assert!(estimator.tasks(pieces).is_empty());
+                return (estimate, rounds);
+            }
+        }
+    }
+
+    #[test]
+    fn a_round_cut_into_any_pieces_anywhere_gives_the_same_estimate() {
+        let state = Linear::new(5);
+        let budget = Budget {
+            max_evaluations: 60_000,
+            target_cov: 0.15,
+        };
+        for (method, threshold) in [
+            (Method::Subset, 3.5),
+            (Method::Importance, 3.5),
+            (Method::Crude, 3.0),
+        ] {
+            let estimator = Estimator::new(method, 5, threshold, budget, 11);
+            let whole = run_locally(estimator.clone(), &state, &Silent).unwrap();
+            for pieces in [1, 3, 7, 1000] {
+                let (cut, rounds) = run_in_pieces(estimator.clone(), &state, pieces);
+                assert_eq!(cut, whole, "{method:?} in {pieces} pieces");
+                assert!(rounds > 1, "{method:?}: {rounds} rounds");
+            }
+            assert_eq!(
+                whole.evaluations,
+                estimator_evaluations(&state, method, threshold, budget)
+            );
+        }
+    }
+
+    /// The evaluations the estimate reports are those its rounds made.
+    fn estimator_evaluations(
+        state: &dyn LimitState,
+        method: Method,
+        threshold: f64,
+        budget: Budget,
+    ) -> u64 {
+        let mut estimator = Estimator::new(method, state.dimension(), threshold, budget, 11);
+        let mut made = 0;
+        loop {
+            made += estimator.round_evaluations();
+            let outcomes = estimator
+                .tasks(2)
+                .into_iter()
+                .map(|task| estimator.run(state, task).unwrap())
+                .collect();
+            if estimator.advance(outcomes, &Silent).unwrap().is_some() {
+                assert_eq!(estimator.evaluations(), made);
+                return made;
+            }
+        }
+    }
+
+    #[test]
+    fn outcomes_that_are_not_the_rounds_are_refused() {
+        let state = Linear::new(2);
+        let budget = Budget {
+            max_evaluations: 10_000,
+            target_cov: 0.2,
+        };
+        let estimator = Estimator::new(Method::Subset, 2, 3.0, budget, 1);
+        let tasks = estimator.tasks(4);
+        let mut outcomes: Vec<Outcome> = tasks
+            .iter()
+            .map(|&task| estimator.run(&state, task).unwrap())
+            .collect();
+        outcomes.pop();
+        let Err(Stop::Failed(reason)) = estimator.clone().advance(outcomes, &Silent) else {
+            panic!("a missing task's samples are noticed");
+        };
+        assert!(reason.contains("samples"), "{reason}");
+        let chains = Task::Chains { start: 0, end: 1 };
+        assert!(matches!(
+            estimator.run(&state, chains),
+            Err(Stop::Failed(_))
+        ));
+        let beyond = Task::Draws {
+            start: 0,
+            end: 1001,
+        };
+        assert!(matches!(
+            estimator.run(&state, beyond),
+            Err(Stop::Failed(_))
+        ));
     }
 
     #[test]
@@ -827,7 +1284,8 @@ mod tests {
             max_evaluations: 1_000_000,
             target_cov: 0.1,
         };
-        let Err(Stop::Failed(reason)) = subset(&Bounded, 1.5, budget, 1, &Silent) else {
+        let Err(Stop::Failed(reason)) = Method::Subset.estimate(&Bounded, 1.5, budget, 1, &Silent)
+        else {
             panic!("tanh never exceeds 1");
         };
         assert!(reason.contains("threshold"), "{reason}");
@@ -840,7 +1298,8 @@ mod tests {
             max_evaluations: 2_500,
             target_cov: 0.1,
         };
-        let Err(Stop::Failed(reason)) = subset(&state, 6.0, budget, 1, &Silent) else {
+        let Err(Stop::Failed(reason)) = Method::Subset.estimate(&state, 6.0, budget, 1, &Silent)
+        else {
             panic!("1e-9 needs nine levels");
         };
         assert!(reason.contains("max_evaluations"), "{reason}");

@@ -11,6 +11,7 @@ use super::job::Job;
 use super::{Observer, RunError};
 use crate::error::Pointer;
 use crate::montecarlo::distribution::standard_normal_quantile;
+pub use methods::{Estimator, Method, Outcome, Task};
 use methods::{LimitState, Stop};
 pub use question::{
     JobShape, LIFE, MAX_DIMENSION, MAX_EVALUATIONS, MAX_IMPORTANCE_DIMENSION, MIN_EVALUATIONS,
@@ -89,35 +90,96 @@ impl Observer for InOperations<'_> {
 }
 
 /// The job's rare event estimated, if it asks one: deterministic for its seed on any number of
-/// threads.
+/// threads. Every round runs here; [`start`], [`run_task`] and [`advance`] let the rounds be
+/// spread over processes, with the same bits.
 pub fn estimate(job: &Job, observer: &dyn Observer) -> Result<Option<RareEventReport>, RunError> {
-    let Some(rare) = job.rare_event() else {
+    let Some(mut estimator) = start(job) else {
         return Ok(None);
     };
-    let (sign, threshold) = rare.limit();
-    let state = Signed {
-        function: DeviceFunction::new(job, rare.reading, rare.operations),
-        sign,
-    };
+    loop {
+        let outcomes = estimator
+            .tasks(1)
+            .into_iter()
+            .map(|task| run_task(job, &estimator, task))
+            .collect::<Result<Vec<_>, RunError>>()?;
+        if let Some(report) = advance(job, &mut estimator, outcomes, observer)? {
+            return Ok(Some(report));
+        }
+    }
+}
+
+/// The job's rare event ready for its first round, if it asks one (`auto` resolved: importance
+/// sampling up to [`MAX_IMPORTANCE_DIMENSION`] inputs, subset simulation beyond).
+pub fn start(job: &Job) -> Option<Estimator> {
+    let rare = job.rare_event()?;
+    let (_, threshold) = rare.limit();
+    let dimension = limit_state(job, rare).dimension();
     let method = match rare.method {
-        RareMethod::Auto if state.dimension() <= MAX_IMPORTANCE_DIMENSION => RareMethod::Importance,
-        RareMethod::Auto => RareMethod::Subset,
-        other => other,
+        RareMethod::Auto if dimension <= MAX_IMPORTANCE_DIMENSION => Method::Importance,
+        RareMethod::Auto | RareMethod::Subset => Method::Subset,
+        RareMethod::Importance => Method::Importance,
+        RareMethod::Crude => Method::Crude,
     };
-    let run = match method {
-        RareMethod::Importance => methods::importance,
-        RareMethod::Crude => methods::crude,
-        _ => methods::subset,
-    };
+    Some(Estimator::new(
+        method,
+        dimension,
+        threshold,
+        rare.budget,
+        job.seed(),
+    ))
+}
+
+/// The operations one evaluation of the job's rare event runs (the device's operations up to
+/// the one read), 0 if it asks none.
+pub fn operations_per_evaluation(job: &Job) -> u64 {
+    job.rare_event().map_or(0, |rare| rare.operations)
+}
+
+/// The signed device function of the job's rare event.
+fn limit_state<'a>(job: &'a Job, rare: &RareEvent) -> Signed<'a> {
+    Signed {
+        function: DeviceFunction::new(job, rare.reading, rare.operations),
+        sign: rare.limit().0,
+    }
+}
+
+fn stopped(stop: Stop) -> RunError {
+    match stop {
+        Stop::Cancelled => RunError::Cancelled(super::Cancelled),
+        Stop::Failed(reason) => RunError::RareEvent(RareEventError(reason)),
+    }
+}
+
+/// Runs one task of the round `estimator` is at, for `job`'s rare event, on the calling rayon pool.
+pub fn run_task(job: &Job, estimator: &Estimator, task: Task) -> Result<Outcome, RunError> {
+    let rare = job
+        .rare_event()
+        .ok_or_else(|| RunError::RareEvent(RareEventError("the job asks no rare event".into())))?;
+    estimator
+        .run(&limit_state(job, rare), task)
+        .map_err(stopped)
+}
+
+/// Takes a round's outcomes, in task order: the report once the estimate is made, or `None` with
+/// the next round ready. Progress is told in operations.
+pub fn advance(
+    job: &Job,
+    estimator: &mut Estimator,
+    outcomes: Vec<Outcome>,
+    observer: &dyn Observer,
+) -> Result<Option<RareEventReport>, RunError> {
+    let rare = job
+        .rare_event()
+        .ok_or_else(|| RunError::RareEvent(RareEventError("the job asks no rare event".into())))?;
     let observer = InOperations {
         inner: observer,
         per_evaluation: rare.operations,
     };
-    let estimate =
-        run(&state, threshold, rare.budget, job.seed(), &observer).map_err(|stop| match stop {
-            Stop::Cancelled => RunError::Cancelled(super::Cancelled),
-            Stop::Failed(reason) => RunError::RareEvent(RareEventError(reason)),
-        })?;
+    let Some(estimate) = estimator.advance(outcomes, &observer).map_err(stopped)? else {
+        return Ok(None);
+    };
+    let state = limit_state(job, rare);
+    let sign = state.sign;
     let design_point = estimate
         .design_point
         .as_ref()
@@ -135,7 +197,7 @@ pub fn estimate(job: &Job, observer: &dyn Observer) -> Result<Option<RareEventRe
         ci95: estimate.ci95,
         cov: estimate.cov,
         evaluations: estimate.evaluations,
-        method: method.name().to_owned(),
+        method: estimator.method().name().to_owned(),
         beta: (estimate.probability > 0.0).then(|| -standard_normal_quantile(estimate.probability)),
         design_point,
         tail: estimate
