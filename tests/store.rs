@@ -6,6 +6,7 @@ mod support;
 
 use bouncewear::compute::thread_pool;
 use bouncewear::domain::idempotency::KEY_LIFETIME_MS;
+use bouncewear::domain::rare::{RARE_ROUNDS, SHARDED_ROUND_OPERATIONS, is_round};
 use bouncewear::domain::shards::{Folding, Merged, grouped_shards, merge};
 use bouncewear::domain::{
     Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob,
@@ -82,6 +83,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_claim_whose_lease_expired_is_fenced_out_by_its_successor(&database("fence")).await;
     a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(&database("shards")).await;
     a_precision_target_queues_its_next_batch_from_the_merge(&database("batches")).await;
+    a_rare_events_rounds_run_as_shards_give_the_whole_result(&database("rounds")).await;
     a_poison_job_fails_after_the_retry_limit_with_the_reason(&database("poison")).await;
     a_cancelled_job_keeps_no_accumulators(&database("cancel-partials")).await;
     a_result_the_database_refuses_for_a_while_is_stored_without_running_again(&database("refused"))
@@ -550,7 +552,7 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
             None => {
                 let partials = Folding::new(job.clone(), fence.shard.batch);
                 let partials = store.partials(&fence.job, partials).await.unwrap();
-                match merge(partials, 1.0, &Silent).unwrap() {
+                match merge(partials, SHARDED_ROUND_OPERATIONS, 1.0, &Silent).unwrap() {
                     Merged::Result { result, groups } => {
                         let encoded = EncodedResult::new(&result, groups).unwrap();
                         assert!(
@@ -563,12 +565,18 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
                     }
                     Merged::Next { shards, folded } => {
                         let folded = EncodedGroups::new(folded).unwrap();
-                        assert!(store.add_batch(fence, &shards, &folded).await.unwrap());
+                        assert!(
+                            store
+                                .add_batch(fence, &shards, &folded, None)
+                                .await
+                                .unwrap()
+                        );
                         // Only the merged batch keeps accumulators: the fold of all so far.
                         let kept = stored_groups(store, &fence.job, &job).await;
                         assert!(kept.iter().all(|shard| shard.batch == fence.shard.batch));
                         assert_eq!(kept.len(), folded.len());
                     }
+                    round @ Merged::Round { .. } => panic!("no rare event asked: {round:?}"),
                 }
             }
         }
@@ -671,6 +679,57 @@ async fn a_precision_target_queues_its_next_batch_from_the_merge(url: &str) {
     );
 }
 
+/// A rare event's rounds, each run as shards by two real workers (every round sharded), give the
+/// Result of the job run whole; nothing of them is kept once the Result is stored.
+async fn a_rare_events_rounds_run_as_shards_give_the_whole_result(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let text = r#"{"devices": 3, "operations": 2, "seed": 9,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+                     "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.01}}],
+        "rare_event": {"metric": "total_bounce_s", "above": 0.014, "operation": 2,
+                       "method": "subset", "target_cov": 0.5}}"#;
+    let id = insert(&store, queued_job(text, 9)).await;
+    let mut workers = Arc::into_inner(workers(&store, 3, u64::MAX)).unwrap();
+    workers.sharded_round_operations = 1;
+    let (stop, stopping) = watch::channel(false);
+    let handles = Arc::new(workers).spawn(2, stopping);
+    let started = Instant::now();
+    let ended = loop {
+        let job = store.job(&Owner::anonymous(), &id).await.unwrap();
+        if job.status.is_terminal() {
+            break job;
+        }
+        assert!(started.elapsed() < Duration::from_secs(120), "{job:?}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    stop.send(true).unwrap();
+    for handle in handles {
+        handle.await.unwrap();
+    }
+    assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
+    let shards = store.shards(&id).await.unwrap();
+    let rounds: Vec<ShardId> = shards
+        .iter()
+        .map(|s| s.shard)
+        .filter(|s| is_round(s.batch))
+        .collect();
+    assert!(rounds.len() > 30, "{rounds:?}");
+    assert!(
+        rounds.contains(&ShardId::group(RARE_ROUNDS, 1)),
+        "{rounds:?}"
+    );
+    assert!(shards.iter().all(|s| s.status == "done"));
+    let whole = run_job(&Job::from_json(text, || 0).unwrap(), &Silent).unwrap();
+    assert!(whole.rare_event.is_some());
+    assert_eq!(
+        without_timing(&store.result_json(&id).await.unwrap().unwrap()),
+        without_timing(&serde_json::to_string(&whole).unwrap())
+    );
+    let job = Job::from_json(text, || 0).unwrap();
+    assert!(stored_groups(store.as_ref(), &id, &job).await.is_empty());
+}
+
 /// Runs one statement on the database behind a store, as an operator (or a failing disk) could:
 /// `sqlite` on SQLite, `postgres` on PostgreSQL.
 async fn execute(url: &str, sqlite: &'static str, postgres: &'static str) {
@@ -756,6 +815,7 @@ fn workers(store: &Arc<dyn Store>, retries: u64, listed_lives: u64) -> Arc<Worke
         wake: Arc::new(Notify::new()),
         listed_lives,
         large_merges: tokio::sync::Semaphore::new(1),
+        sharded_round_operations: SHARDED_ROUND_OPERATIONS,
     })
 }
 

@@ -179,6 +179,7 @@ async fn start_workers(config: &WorkerConfig) -> Result<Workers, StartupError> {
         wake: Arc::new(Notify::new()),
         listed_lives: config.max_listed_lives,
         large_merges: tokio::sync::Semaphore::new(1),
+        sharded_round_operations: crate::domain::rare::SHARDED_ROUND_OPERATIONS,
     })
 }
 

@@ -5,30 +5,34 @@
 //! A shard is one group of devices of one batch ([`crate::domain::shards`]): its accumulators are
 //! stored when it is done. A batch's merge step, claimable once its groups are done, puts them back
 //! in order and stores the Result (or queues a precision target's next batch). A small job is its
-//! first merge step alone, which runs the whole job on the compute pool. A shard interrupted
+//! first merge step alone, which runs the whole job on the compute pool. A rare event's large
+//! rounds ([`crate::domain::rare`]) are batches too: any worker runs a round's tasks as it runs
+//! groups, and the round's merge step takes their outcomes. A shard interrupted
 //! by a crash or kill keeps its lease until it expires; then any worker on any machine claims it
 //! again and reruns that shard alone. Seeds are fixed at submission and each device has its own
 //! random stream, so the Result is identical to an uninterrupted run on one machine. On a graceful
 //! shutdown the running shard is stopped and handed back to the queue at once.
 
 use crate::domain::UnixMs;
+use crate::domain::rare::{Rounds, is_round};
 use crate::domain::shards::{
-    Folding, LARGE_MERGE_ACCUMULATORS, MergeError, Merged, ShardPlan, merge, merge_accumulators,
-    run_whole,
+    Folding, LARGE_MERGE_ACCUMULATORS, MergeError, Merged, RoundMerged, ShardPlan, estimated,
+    merge, merge_accumulators, merge_round, run_whole,
 };
 use crate::store::{
     Claim, EncodedGroups, EncodedResult, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store,
-    StoreResult,
+    StoreResult, encode,
 };
 use crate::telemetry::{record_job_finished, record_shard_step};
 use bouncewear_model::Pointer;
-use bouncewear_model::montecarlo::engine::{Batch, run_group};
-use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Observer, Watch};
+use bouncewear_model::montecarlo::engine::{Batch, GroupStats, run_group};
+use bouncewear_model::montecarlo::rare;
+use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Observer, RunError, Watch};
 use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
-use tokio::sync::{Notify, Semaphore, broadcast, oneshot, watch};
+use tokio::sync::{Notify, Semaphore, SemaphorePermit, broadcast, oneshot, watch};
 use tokio::task::JoinHandle;
 
 /// Progress and the lease are written at most this often per running shard.
@@ -55,6 +59,10 @@ pub struct Workers {
     /// Held by a merge step beyond [`LARGE_MERGE_ACCUMULATORS`] from reading its groups to storing
     /// what it made: one such merge at a time in this instance (one permit).
     pub large_merges: Semaphore,
+    /// The fewest operations of a rare event's round that goes to the queue as shards
+    /// ([`crate::domain::rare::SHARDED_ROUND_OPERATIONS`]); smaller rounds run in the merge step.
+    /// Where a round runs changes no bit.
+    pub sharded_round_operations: u64,
 }
 
 /// A shard's lease, heartbeated by a task of its own for as long as this lives.
@@ -74,9 +82,9 @@ impl Drop for KeptLease {
     }
 }
 
-/// What a merge step's computation leaves to write: the Result, encoded for the store, or a
-/// precision target's next batch with the fold of its groups, encoded; or why it could not be
-/// encoded.
+/// What a merge step's computation leaves to write: the Result, encoded for the store, or the next
+/// step (a precision target's next batch, or a rare event's round with its state) with the fold of
+/// the groups, encoded; or why it could not be encoded.
 enum Outcome {
     Result {
         result: Box<JobResult>,
@@ -85,8 +93,55 @@ enum Outcome {
     Next {
         shards: Vec<ShardPlan>,
         folded: EncodedGroups,
+        state: Option<Vec<u8>>,
     },
     Unencodable(String),
+}
+
+/// What a merge step made, encoded on the compute pool so that the writes bind bytes (each group
+/// goes once encoded); `Err` for a cancelled computation.
+fn encoded(merged: Result<Merged, MergeError>) -> Result<Result<Outcome, MergeError>, Cancelled> {
+    let outcome = match merged {
+        Err(MergeError::Cancelled(cancelled)) => return Err(cancelled),
+        Err(other) => return Ok(Err(other)),
+        Ok(Merged::Result { result, groups }) => match EncodedResult::new(&result, groups) {
+            Ok(encoded) => Outcome::Result { result, encoded },
+            Err(error) => Outcome::Unencodable(format!("encoding the result failed: {error}")),
+        },
+        Ok(Merged::Next { shards, folded }) => match EncodedGroups::new(folded) {
+            Ok(folded) => Outcome::Next {
+                shards,
+                folded,
+                state: None,
+            },
+            Err(error) => {
+                Outcome::Unencodable(format!("encoding the folded groups failed: {error}"))
+            }
+        },
+        Ok(Merged::Round {
+            rounds,
+            shards,
+            folded,
+        }) => round_outcome(&rounds, shards, folded),
+    };
+    Ok(Ok(outcome))
+}
+
+/// A rare event's round to queue, its shards and `folded`, encoded.
+fn round_outcome(rounds: &Rounds, shards: Vec<ShardPlan>, folded: Vec<GroupStats>) -> Outcome {
+    match (
+        encode("rare-event round", rounds),
+        EncodedGroups::new(folded),
+    ) {
+        (Ok(state), Ok(folded)) => Outcome::Next {
+            shards,
+            folded,
+            state: Some(state),
+        },
+        (Err(error), _) | (_, Err(error)) => {
+            Outcome::Unencodable(format!("encoding the rare event's round failed: {error}"))
+        }
+    }
 }
 
 /// How a computation under a lease ended.
@@ -176,9 +231,11 @@ impl Workers {
         };
         // The lease is kept from here to the last write: reading, computing and storing.
         let lease = self.keep_lease(fence, shutdown.clone());
-        match fence.shard.group {
-            Some(group) => self.run_group(fence, job, group, &lease).await,
-            None => self.merge(fence, job, claim.started_at, &lease).await,
+        match (fence.shard.group, is_round(fence.shard.batch)) {
+            (Some(group), false) => self.run_group(fence, job, group, &lease).await,
+            (None, false) => self.merge(fence, job, claim.started_at, &lease).await,
+            (Some(group), true) => self.run_task(fence, job, group, &lease).await,
+            (None, true) => self.merge_round(fence, job, claim.started_at, &lease).await,
         }
     }
 
@@ -212,116 +269,268 @@ impl Workers {
         let mut stats = stats;
         stats.lives.keep_listed_below(self.listed_lives);
         let storing = Instant::now();
-        let stored = self
-            .store_with_backoff(lease, || self.store.complete(fence, &stats))
-            .await;
-        match stored {
-            Ok(true) => {
-                record_shard_step("store", storing);
-                metrics::counter!("bouncewear_operations_simulated_total").increment(operations);
-                tracing::debug!("group done");
-            }
-            Ok(false) => {
-                tracing::info!("group discarded: the job ended or the shard was taken over")
-            }
-            Err(error) => {
-                let reason = format!("storing the group's accumulators failed: {error}");
-                self.fail_attempt(fence, &reason).await
-            }
+        let complete = || self.store.complete(fence, &stats);
+        if self
+            .stored(fence, lease, "the group's accumulators", complete)
+            .await
+        {
+            record_shard_step("store", storing);
+            metrics::counter!("bouncewear_operations_simulated_total").increment(operations);
+            tracing::debug!("group done");
         }
     }
 
     /// Puts the done groups back in order: the Result, or the next batch of a precision target.
     async fn merge(&self, fence: &Fence, job: Job, started_at: UnixMs, lease: &KeptLease) {
         let merging = Instant::now();
-        let _alone = if merge_accumulators(&job) > LARGE_MERGE_ACCUMULATORS {
-            match self.large_merges.acquire().await {
-                Ok(permit) => Some(permit),
-                Err(closed) => return self.fail_attempt(fence, &closed.to_string()).await,
-            }
-        } else {
-            None
-        };
         let last = fence.shard.batch;
-        let partials = Folding::new(job, last);
-        let partials = match self.store.partials(&fence.job, partials).await {
-            Ok(partials) => partials,
-            Err(error) => {
-                let reason = format!("reading the groups' accumulators failed: {error}");
-                return self.fail_attempt(fence, &reason).await;
-            }
+        let Some((_alone, partials)) = self.read_groups(fence, job, last).await else {
+            return;
         };
         let wall_s = (UnixMs::now().0 - started_at.0).max(0) as f64 / 1000.0;
         // A first batch without groups stored is a job that entered the queue whole.
         let whole = last == 0 && partials.read().is_empty();
-        let listed_lives = self.listed_lives;
+        let spec = partials.job().spec();
+        let simulated = if whole {
+            spec.devices * spec.operations
+        } else {
+            0
+        };
+        let (listed_lives, sharded_from) = (self.listed_lives, self.sharded_round_operations);
         let ran = self
             .compute(lease, move |observer| {
                 let merged = if whole {
-                    run_whole(partials.job(), listed_lives, wall_s, observer)
+                    run_whole(partials.job(), listed_lives, sharded_from, wall_s, observer)
                 } else {
-                    merge(partials, wall_s, observer)
+                    merge(partials, sharded_from, wall_s, observer)
                 };
-                match merged {
-                    Err(MergeError::Cancelled(cancelled)) => Err(cancelled),
-                    Ok(Merged::Result { result, groups }) => {
-                        // Encoded here, on the compute pool and its rows in parallel, so that the
-                        // writes bind bytes; each bin's groups go once encoded.
-                        Ok(Ok(match EncodedResult::new(&result, groups) {
-                            Ok(encoded) => Outcome::Result { result, encoded },
-                            Err(error) => {
-                                Outcome::Unencodable(format!("encoding the result failed: {error}"))
-                            }
-                        }))
-                    }
-                    // Each folded group goes once encoded, as the Result's groups do.
-                    Ok(Merged::Next { shards, folded }) => {
-                        Ok(Ok(match EncodedGroups::new(folded) {
-                            Ok(folded) => Outcome::Next { shards, folded },
-                            Err(error) => Outcome::Unencodable(format!(
-                                "encoding the folded groups failed: {error}"
-                            )),
-                        }))
-                    }
-                    Err(other) => Ok(Err(other)),
+                encoded(merged)
+            })
+            .await;
+        self.write(fence, ran, simulated, lease).await;
+        record_shard_step("merge", merging);
+    }
+
+    /// Writes what a merge step made: the Result, the next batch, or a rare event's round; the
+    /// devices' operations it `simulated` itself (a job run whole) are counted once it is stored.
+    async fn write(
+        &self,
+        fence: &Fence,
+        ran: Ran<Result<Outcome, MergeError>>,
+        simulated: u64,
+        lease: &KeptLease,
+    ) {
+        let count = || {
+            metrics::counter!("bouncewear_operations_simulated_total").increment(simulated);
+        };
+        let next = match ran {
+            Ran::Done(Ok(Outcome::Unencodable(reason))) => {
+                return self.fail_attempt(fence, &reason).await;
+            }
+            Ran::Done(Ok(Outcome::Result { result, encoded })) => {
+                if self.succeed(fence, &result, &encoded, lease).await {
+                    count();
+                }
+                return;
+            }
+            Ran::Done(Ok(Outcome::Next {
+                shards,
+                folded,
+                state,
+            })) => (shards, folded, state),
+            Ran::Done(Err(MergeError::RareEvent(failed))) => {
+                return self.fail(fence, &failed.to_string()).await;
+            }
+            Ran::Done(Err(other)) => return self.fail_attempt(fence, &other.to_string()).await,
+            Ran::Stopped { shutdown } => return self.stopped(fence, shutdown).await,
+            Ran::Panicked => {
+                return self
+                    .fail_attempt(fence, "internal error: merging the groups panicked")
+                    .await;
+            }
+        };
+        let (shards, folded, state) = next;
+        let queue = || {
+            self.store
+                .add_batch(fence, &shards, &folded, state.as_deref())
+        };
+        if self.stored(fence, lease, "the next step", queue).await {
+            count();
+            tracing::info!("next step queued (a precision target's batch or a rare event's round)");
+        }
+    }
+
+    /// Writes what a shard made (`what`), trying again while the database cannot take it;
+    /// whether it was written. A write the claim no longer holds is dropped; one that failed
+    /// counts against the shard's retries.
+    async fn stored<F>(
+        &self,
+        fence: &Fence,
+        lease: &KeptLease,
+        what: &str,
+        write: impl FnMut() -> F,
+    ) -> bool
+    where
+        F: Future<Output = StoreResult<bool>>,
+    {
+        match self.store_with_backoff(lease, write).await {
+            Ok(written) => {
+                if !written {
+                    tracing::info!("{what} discarded: the job ended or the shard was taken over");
+                }
+                written
+            }
+            Err(error) => {
+                let reason = format!("storing {what} failed: {error}");
+                self.fail_attempt(fence, &reason).await;
+                false
+            }
+        }
+    }
+
+    /// Runs one task of a rare event's round and stores its outcome.
+    async fn run_task(&self, fence: &Fence, job: Job, group: u64, lease: &KeptLease) {
+        let rounds = match self.store.round(&fence.job, fence.shard.batch).await {
+            Ok(rounds) => rounds,
+            Err(error) => {
+                let reason = format!("reading the rare event's round failed: {error}");
+                return self.fail_attempt(fence, &reason).await;
+            }
+        };
+        let Some(task) = rounds.task(group) else {
+            let reason = format!("{} is not part of the job", fence.shard);
+            return self.fail(fence, &reason).await;
+        };
+        let running = Instant::now();
+        let ran = self
+            .compute(lease, move |observer| {
+                if observer.cancelled() {
+                    return Err(Cancelled);
+                }
+                match rare::run_task(&job, &rounds.estimator, task) {
+                    Ok(outcome) => Ok(Ok(encode("rare-event task outcome", &outcome))),
+                    Err(RunError::Cancelled(cancelled)) => Err(cancelled),
+                    Err(RunError::RareEvent(failed)) => Ok(Err(failed)),
                 }
             })
             .await;
-        match ran {
-            Ran::Done(Ok(Outcome::Unencodable(reason))) => self.fail_attempt(fence, &reason).await,
-            Ran::Done(Ok(Outcome::Result { result, encoded })) => {
-                let stored = self.succeed(fence, &result, &encoded, lease).await;
-                if stored && whole {
-                    let operations = result.job.devices_run() * result.job.spec().operations;
-                    metrics::counter!("bouncewear_operations_simulated_total")
-                        .increment(operations);
-                }
-                record_shard_step("merge", merging);
+        let outcome = match ran {
+            Ran::Done(Ok(Ok(outcome))) => outcome,
+            Ran::Done(Ok(Err(unencodable))) => {
+                let reason = format!("encoding the task's outcome failed: {unencodable}");
+                return self.fail_attempt(fence, &reason).await;
             }
-            Ran::Done(Ok(Outcome::Next { shards, folded })) => match self
-                .store_with_backoff(lease, || self.store.add_batch(fence, &shards, &folded))
-                .await
-            {
-                Ok(true) => tracing::info!(
-                    batch = last + 1,
-                    "precision target not met: next batch queued"
-                ),
-                Ok(false) => tracing::info!(
-                    "next batch discarded: the job ended or the shard was taken over"
-                ),
-                Err(error) => {
-                    let reason = format!("queueing the next batch failed: {error}");
-                    self.fail_attempt(fence, &reason).await
-                }
-            },
-            Ran::Done(Err(MergeError::RareEvent(failed))) => {
-                self.fail(fence, &failed.to_string()).await
-            }
-            Ran::Done(Err(other)) => self.fail_attempt(fence, &other.to_string()).await,
-            Ran::Stopped { shutdown } => self.stopped(fence, shutdown).await,
+            Ran::Done(Err(failed)) => return self.fail(fence, &failed.to_string()).await,
+            Ran::Stopped { shutdown } => return self.stopped(fence, shutdown).await,
             Ran::Panicked => {
-                self.fail_attempt(fence, "internal error: merging the groups panicked")
-                    .await
+                return self
+                    .fail_attempt(fence, "internal error: the rare-event task panicked")
+                    .await;
+            }
+        };
+        record_shard_step("run", running);
+        let complete = || self.store.complete_encoded(fence, outcome.clone());
+        if self
+            .stored(fence, lease, "the task's outcome", complete)
+            .await
+        {
+            tracing::debug!("rare-event task done");
+        }
+    }
+
+    /// A rare event's round's merge step: takes its tasks' outcomes, runs the next rounds while
+    /// they are small, and queues the next large one or, the estimate made, stores the Result
+    /// from the devices' groups.
+    async fn merge_round(&self, fence: &Fence, job: Job, started_at: UnixMs, lease: &KeptLease) {
+        let merging = Instant::now();
+        let read = async {
+            let rounds = self.store.round(&fence.job, fence.shard.batch).await?;
+            let outcomes = self
+                .store
+                .round_outcomes(&fence.job, fence.shard.batch)
+                .await?;
+            StoreResult::Ok((rounds, outcomes))
+        };
+        let (rounds, outcomes) = match read.await {
+            Ok(read) => read,
+            Err(error) => {
+                let reason = format!("reading the rare event's round failed: {error}");
+                return self.fail_attempt(fence, &reason).await;
+            }
+        };
+        let devices_last = rounds.devices_last;
+        let sharded_from = self.sharded_round_operations;
+        let round_job = job.clone();
+        let ran = self
+            .compute(lease, move |observer| {
+                match merge_round(&round_job, rounds, outcomes, sharded_from, observer) {
+                    Err(MergeError::Cancelled(cancelled)) => Err(cancelled),
+                    Err(other) => Ok(Err(other)),
+                    Ok(RoundMerged::Next { rounds, shards }) => {
+                        Ok(Ok(Ok(round_outcome(&rounds, shards, Vec::new()))))
+                    }
+                    Ok(RoundMerged::Estimated(report)) => Ok(Ok(Err(report))),
+                }
+            })
+            .await;
+        let report = match ran {
+            Ran::Done(Ok(Ok(next))) => {
+                self.write(fence, Ran::Done(Ok(next)), 0, lease).await;
+                return record_shard_step("merge", merging);
+            }
+            Ran::Done(Ok(Err(report))) => report,
+            Ran::Done(Err(error)) => {
+                return self.write(fence, Ran::Done(Err(error)), 0, lease).await;
+            }
+            Ran::Stopped { shutdown } => return self.stopped(fence, shutdown).await,
+            Ran::Panicked => {
+                return self
+                    .fail_attempt(fence, "internal error: merging the round panicked")
+                    .await;
+            }
+        };
+        // The estimate is made: the Result from the devices' groups.
+        let Some((_alone, devices)) = self.read_groups(fence, job, devices_last).await else {
+            return;
+        };
+        let wall_s = (UnixMs::now().0 - started_at.0).max(0) as f64 / 1000.0;
+        let ran = self
+            .compute(lease, move |_| encoded(estimated(devices, report, wall_s)))
+            .await;
+        self.write(fence, ran, 0, lease).await;
+        record_shard_step("merge", merging);
+    }
+
+    /// The job's groups up to batch `last`, read into a [`Folding`], with this instance's
+    /// large-merge permit held for a merge beyond [`LARGE_MERGE_ACCUMULATORS`]; `None` once the
+    /// attempt failed.
+    async fn read_groups(
+        &self,
+        fence: &Fence,
+        job: Job,
+        last: u64,
+    ) -> Option<(Option<SemaphorePermit<'_>>, Folding)> {
+        let alone = if merge_accumulators(&job) > LARGE_MERGE_ACCUMULATORS {
+            match self.large_merges.acquire().await {
+                Ok(permit) => Some(permit),
+                Err(closed) => {
+                    self.fail_attempt(fence, &closed.to_string()).await;
+                    return None;
+                }
+            }
+        } else {
+            None
+        };
+        match self
+            .store
+            .partials(&fence.job, Folding::new(job, last))
+            .await
+        {
+            Ok(partials) => Some((alone, partials)),
+            Err(error) => {
+                let reason = format!("reading the groups' accumulators failed: {error}");
+                self.fail_attempt(fence, &reason).await;
+                None
             }
         }
     }

@@ -7,6 +7,7 @@ pub mod idempotency;
 mod ids;
 pub mod jobs;
 pub mod query;
+pub mod rare;
 pub mod schedules;
 pub mod shards;
 pub mod trend;

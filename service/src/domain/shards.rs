@@ -10,8 +10,9 @@
 //! queue as its first batch's merge step alone, and the worker that claims it runs the whole job
 //! on its compute threads ([`run_whole`]): the same groups in the same order, so the same bits.
 
+use super::rare::{self, Estimated, Rounds};
 use bouncewear_model::montecarlo::engine::{Batch, GroupStats, run_on};
-use bouncewear_model::montecarlo::rare::{RareEventError, estimate};
+use bouncewear_model::montecarlo::rare::{Outcome, RareEventError, RareEventReport};
 use bouncewear_model::montecarlo::{
     Cancelled, Job, JobResult, Kernel, Observer, RunError, RunGroups, Tally, next_batch,
     precision_met, summarize_job,
@@ -20,7 +21,8 @@ use serde::Serialize;
 use std::fmt;
 use utoipa::ToSchema;
 
-/// One shard of a job: a group of a batch, or that batch's merge step.
+/// One shard of a job: a group of a batch, or that batch's merge step (a rare event's round is a
+/// batch too, [`rare::RARE_ROUNDS`] on: its tasks and its merge step).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, ToSchema)]
 pub struct ShardId {
     pub batch: u64,
@@ -43,9 +45,11 @@ impl ShardId {
 
 impl fmt::Display for ShardId {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self.group {
-            Some(group) => write!(f, "batch {} group {group}", self.batch),
-            None => write!(f, "batch {} merge", self.batch),
+        match (self.group, self.batch.checked_sub(rare::RARE_ROUNDS)) {
+            (Some(task), Some(round)) => write!(f, "rare-event round {round} task {task}"),
+            (None, Some(round)) => write!(f, "rare-event round {round} merge"),
+            (Some(group), None) => write!(f, "batch {} group {group}", self.batch),
+            (None, None) => write!(f, "batch {} merge", self.batch),
         }
     }
 }
@@ -128,6 +132,14 @@ pub enum Merged {
         shards: Vec<ShardPlan>,
         folded: Vec<GroupStats>,
     },
+    /// The devices are done and the job's rare event goes on in a round of shards
+    /// ([`super::rare`]): the round, its shards to queue, and the devices' groups folded, to store
+    /// in place of theirs until the estimate is made.
+    Round {
+        rounds: Rounds,
+        shards: Vec<ShardPlan>,
+        folded: Vec<GroupStats>,
+    },
 }
 
 /// Stored accumulators that do not make up the batches they should.
@@ -189,6 +201,11 @@ impl Folding {
     /// The job whose groups these are.
     pub fn job(&self) -> &Job {
         &self.job
+    }
+
+    /// The last batch it reads.
+    pub fn last(&self) -> u64 {
+        self.last
     }
 
     /// The groups read so far, in order.
@@ -281,22 +298,24 @@ impl Folding {
 }
 
 /// The merge step of batch `last`, from its groups as [`Folding`] read them: decides as
-/// [`run_job`] does after that batch: the Result, after `wall_s` seconds of running, or the next
-/// batch.
+/// [`run_job`] does after that batch: the Result, after `wall_s` seconds of running, the next
+/// batch, or the rare event's first round of at least `sharded_from` operations.
 ///
 /// [`run_job`]: bouncewear_model::montecarlo::run_job
 pub fn merge(
     partials: Folding,
+    sharded_from: u64,
     wall_s: f64,
     observer: &dyn Observer,
 ) -> Result<Merged, MergeError> {
+    let last = partials.last();
     let (job, tally) = partials.finish()?;
     match next_batch(&job, &tally) {
         Some(batch) => Ok(Merged::Next {
             shards: batch_shards(&job, batch),
             folded: tally.groups,
         }),
-        None => finish(&job, tally, wall_s, observer),
+        None => finish(&job, tally, last, sharded_from, wall_s, observer),
     }
 }
 
@@ -307,6 +326,7 @@ pub fn merge(
 pub fn run_whole(
     job: &Job,
     listed_lives: u64,
+    sharded_from: u64,
     wall_s: f64,
     observer: &dyn Observer,
 ) -> Result<Merged, MergeError> {
@@ -317,32 +337,118 @@ pub fn run_whole(
     for group in &mut tally.groups {
         group.lives.keep_listed_below(listed_lives);
     }
+    // A job without a precision target runs one batch.
     finish(
         job,
         tally,
+        0,
+        sharded_from,
         wall_s + started.elapsed().as_secs_f64(),
         observer,
     )
 }
 
-/// The Result of a job whose batches are all in `tally`: its rare event estimated, then summed up.
+/// The job's devices are all in `tally` (batches up to `devices_last`): its rare event, if it asks
+/// one, estimated here while its rounds are small, then the Result; or the first round that is
+/// not, with the devices' groups to keep until the estimate is made.
 fn finish(
     job: &Job,
     tally: Tally,
+    devices_last: u64,
+    sharded_from: u64,
     wall_s: f64,
     observer: &dyn Observer,
 ) -> Result<Merged, MergeError> {
     let started = std::time::Instant::now();
-    let rare_event = estimate(job, observer).map_err(|error| match error {
-        RunError::Cancelled(cancelled) => MergeError::Cancelled(cancelled),
-        RunError::RareEvent(failed) => MergeError::RareEvent(failed),
-    })?;
-    let mut result = summarize_job(job, &tally, wall_s + started.elapsed().as_secs_f64());
-    result.rare_event = rare_event;
-    Ok(Merged::Result {
+    match rare::first_round(job, devices_last, sharded_from, observer)? {
+        Estimated::Made(report) => {
+            let wall_s = wall_s + started.elapsed().as_secs_f64();
+            Ok(result(job, tally, report, wall_s))
+        }
+        Estimated::Queued(rounds) => Ok(Merged::Round {
+            shards: round_shards(job, &rounds),
+            rounds,
+            folded: tally.groups,
+        }),
+    }
+}
+
+/// What a rare event's round's merge step leads to.
+#[derive(Debug)]
+pub enum RoundMerged {
+    /// The estimate is made: the Result follows from the devices' groups.
+    Estimated(RareEventReport),
+    /// The next round, and its shards to queue.
+    Next {
+        rounds: Rounds,
+        shards: Vec<ShardPlan>,
+    },
+}
+
+/// A rare event's round's merge step ([`rare::merge_round`]).
+pub fn merge_round(
+    job: &Job,
+    rounds: Rounds,
+    outcomes: Vec<Outcome>,
+    sharded_from: u64,
+    observer: &dyn Observer,
+) -> Result<RoundMerged, MergeError> {
+    Ok(
+        match rare::merge_round(job, rounds, outcomes, sharded_from, observer)? {
+            Estimated::Made(report) => RoundMerged::Estimated(report.ok_or_else(|| {
+                MergeError::RareEvent(RareEventError("the job asks no rare event".to_owned()))
+            })?),
+            Estimated::Queued(rounds) => RoundMerged::Next {
+                shards: round_shards(job, &rounds),
+                rounds,
+            },
+        },
+    )
+}
+
+/// A round's shards: its tasks as groups of its batch, each with its operations, then its merge
+/// step.
+fn round_shards(job: &Job, rounds: &Rounds) -> Vec<ShardPlan> {
+    let batch = rounds.batch();
+    (0..)
+        .zip(rounds.task_operations(job))
+        .map(|(group, operations)| ShardPlan {
+            shard: ShardId::group(batch, group),
+            operations,
+        })
+        .chain([ShardPlan {
+            shard: ShardId::merge(batch),
+            operations: 0,
+        }])
+        .collect()
+}
+
+/// The Result from the devices' groups as [`Folding`] read them and the rare event's report.
+pub fn estimated(
+    devices: Folding,
+    report: RareEventReport,
+    wall_s: f64,
+) -> Result<Merged, MergeError> {
+    let (job, tally) = devices.finish()?;
+    Ok(result(&job, tally, Some(report), wall_s))
+}
+
+fn result(job: &Job, tally: Tally, report: Option<RareEventReport>, wall_s: f64) -> Merged {
+    let mut result = summarize_job(job, &tally, wall_s);
+    result.rare_event = report;
+    Merged::Result {
         result: Box::new(result),
         groups: RunGroups::new(job, tally),
-    })
+    }
+}
+
+impl From<RunError> for MergeError {
+    fn from(error: RunError) -> Self {
+        match error {
+            RunError::Cancelled(cancelled) => MergeError::Cancelled(cancelled),
+            RunError::RareEvent(failed) => MergeError::RareEvent(failed),
+        }
+    }
 }
 
 /// The accumulators a merge step of `job` holds decoded: one batch's groups, each with every

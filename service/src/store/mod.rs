@@ -21,14 +21,16 @@ mod sql;
 mod sqlite;
 
 pub use backend::SqlStore;
-pub use rows::{EncodedGroups, EncodedResult};
+pub use rows::{EncodedGroups, EncodedResult, encode};
 
+use crate::domain::rare::Rounds;
 use crate::domain::{
     Attempt, Folding, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob,
     ScheduleDefinition, ScheduleId, ShardId, ShardPlan, UnixMs,
 };
 use async_trait::async_trait;
 use bouncewear_model::montecarlo::engine::GroupStats;
+use bouncewear_model::montecarlo::rare::Outcome;
 use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec};
 use bouncewear_model::stats::{Accumulator, Summary};
 use std::sync::Arc;
@@ -329,15 +331,22 @@ pub trait JobQueue: Send + Sync + 'static {
     ) -> StoreResult<Lease>;
     /// Marks a group done with its accumulators, in one transaction, if the claim still holds it.
     async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool>;
-    /// Marks a merge step done and queues the next batch's shards, in one transaction, if the
-    /// claim still holds it (a precision target not met yet). `folded` (the groups of every batch
-    /// so far, folded) replaces the accumulators of the merged batch's groups, and those of
-    /// earlier batches are dropped: see [`crate::domain::Merged::Next`].
+    /// Marks a group done with what it made, encoded ([`encode`]): a rare event's task's
+    /// outcome.
+    async fn complete_encoded(&self, fence: &Fence, partial: Vec<u8>) -> StoreResult<bool>;
+    /// Marks a merge step done and queues the next step's shards, in one transaction, if the
+    /// claim still holds it: a precision target's next batch, or a rare event's round with
+    /// `state`, encoded ([`encode`]), as its merge step's partial. `folded` (the groups of every
+    /// batch so far, folded) replaces the accumulators of the merged batch's groups (inserted, for
+    /// a job that ran whole), and what the next step no longer reads is dropped: the groups of
+    /// earlier batches ([`crate::domain::Merged::Next`]), or a round's outcomes and state (the
+    /// devices' groups are kept for the Result).
     async fn add_batch(
         &self,
         fence: &Fence,
         shards: &[ShardPlan],
         folded: &EncodedGroups,
+        state: Option<&[u8]>,
     ) -> StoreResult<bool>;
     /// Marks the job failed with `error` at once (a failure no retry can mend), if the claim still
     /// holds its shard.
@@ -389,6 +398,10 @@ pub trait Results: Send + Sync + 'static {
     /// The accumulators of the job's done groups, in batch and group order, read into `into`
     /// one at a time.
     async fn partials(&self, id: &JobId, into: Folding) -> StoreResult<Folding>;
+    /// The state a rare event's round `batch` starts from, its merge step's partial.
+    async fn round(&self, id: &JobId, batch: u64) -> StoreResult<Rounds>;
+    /// The outcomes of round `batch`'s done tasks, in task order.
+    async fn round_outcomes(&self, id: &JobId, batch: u64) -> StoreResult<Vec<Outcome>>;
     /// The Result JSON as stored, to be served as it is.
     async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>>;
 

@@ -16,6 +16,7 @@ use super::{
     Claim, EncodedGroups, Fence, JobQueue, JobRecord, Lease, LeaseTerms, Page, QueueEvent,
     ShardRecord, StoreError, StoreResult,
 };
+use crate::domain::rare::{RARE_ROUNDS, is_round};
 use crate::domain::{
     IdempotencyKey, JobId, Once, Owner, QueueBound, QueuedJob, RetryBudget,
     SHARD_OVERHEAD_OPERATIONS, ShardPlan, UnixMs, first_shards, retry_backoff_ms,
@@ -523,7 +524,11 @@ impl JobQueue for SqlStore {
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool> {
-        let partial = partial_to_sql(stats)?;
+        self.complete_encoded(fence, partial_to_sql(stats)?).await
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
+    async fn complete_encoded(&self, fence: &Fence, partial: Vec<u8>) -> StoreResult<bool> {
         let partial_bytes = partial.len() as u64;
         let mut tx = self.begin().await?;
         let updated = fenced(
@@ -557,6 +562,7 @@ impl JobQueue for SqlStore {
         fence: &Fence,
         shards: &[ShardPlan],
         folded: &EncodedGroups,
+        state: Option<&[u8]>,
     ) -> StoreResult<bool> {
         let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(false);
@@ -564,7 +570,9 @@ impl JobQueue for SqlStore {
         let batch = count_to_sql(fence.shard.batch);
         for (group, partial) in folded.0.iter().enumerate() {
             Sql::new(
-                "UPDATE shards SET partial = $4 WHERE job_id = $1 AND batch = $2 AND grp = $3",
+                "INSERT INTO shards (job_id, batch, grp, status, operations_total, partial) \
+                 VALUES ($1, $2, $3, 'done', 0, $4) \
+                 ON CONFLICT (job_id, batch, grp) DO UPDATE SET partial = excluded.partial",
             )
             .bind(fence.job.as_str())
             .bind(batch)
@@ -573,11 +581,34 @@ impl JobQueue for SqlStore {
             .execute(&mut tx)
             .await?;
         }
-        Sql::new("UPDATE shards SET partial = NULL WHERE job_id = $1 AND batch < $2 AND partial IS NOT NULL")
+        // A batch of devices holds the fold of every batch before it; a round's next round holds
+        // all its merge step needs, and the devices' fold is kept for the Result.
+        let dropped = if is_round(fence.shard.batch) {
+            RARE_ROUNDS..fence.shard.batch + 1
+        } else {
+            0..fence.shard.batch
+        };
+        Sql::new(
+            "UPDATE shards SET partial = NULL \
+             WHERE job_id = $1 AND batch >= $2 AND batch < $3 AND partial IS NOT NULL",
+        )
+        .bind(fence.job.as_str())
+        .bind(count_to_sql(dropped.start))
+        .bind(count_to_sql(dropped.end))
+        .execute(&mut tx)
+        .await?;
+        insert_shards(&mut tx, &fence.job, shards).await?;
+        if let (Some(state), Some(merge)) = (state, shards.last()) {
+            Sql::new(
+                "UPDATE shards SET partial = $4 WHERE job_id = $1 AND batch = $2 AND grp = $3",
+            )
             .bind(fence.job.as_str())
-            .bind(batch)
+            .bind(count_to_sql(merge.shard.batch))
+            .bind(group_to_sql(merge.shard))
+            .bind(state.to_vec())
             .execute(&mut tx)
             .await?;
+        }
         Sql::new(
             "UPDATE jobs SET stored_bytes = octet_length(spec) + \
              (SELECT COALESCE(SUM(octet_length(partial)), 0) FROM shards WHERE job_id = $1) WHERE id = $1",
@@ -585,7 +616,6 @@ impl JobQueue for SqlStore {
         .bind(fence.job.as_str())
         .execute(&mut tx)
         .await?;
-        insert_shards(&mut tx, &fence.job, shards).await?;
         sum_progress(&mut tx, &fence.job).await?;
         tx.commit().await?;
         Ok(true)

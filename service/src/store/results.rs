@@ -10,9 +10,11 @@ use super::rows::{
 };
 use super::sql::Sql;
 use super::{DistributionRow, Fence, Operations, Results, StoreResult};
+use crate::domain::rare::Rounds;
 use crate::domain::{Folding, JobId, UnixMs};
 use async_trait::async_trait;
 use bouncewear_model::montecarlo::DeviceLife;
+use bouncewear_model::montecarlo::rare::Outcome;
 use bouncewear_model::stats::Accumulator;
 
 impl SqlStore {
@@ -80,10 +82,44 @@ impl Results for SqlStore {
         collect_partials(
             Sql::new(SELECT_PARTIALS)
                 .bind(id.as_str())
+                .bind(count_to_sql(into.last()))
                 .fetch(self.readers()),
             into,
         )
         .await
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id, batch))]
+    async fn round(&self, id: &JobId, batch: u64) -> StoreResult<Rounds> {
+        let stored = Sql::new(
+            "SELECT partial FROM shards WHERE job_id = $1 AND batch = $2 AND grp = -1 \
+             AND partial IS NOT NULL",
+        )
+        .bind(id.as_str())
+        .bind(count_to_sql(batch))
+        .fetch_optional(self.readers())
+        .await?
+        .map(|row| row.bytes("partial"))
+        .transpose()?
+        .ok_or_else(|| rows::corrupt("rare-event round", format!("batch {batch} has no state")))?;
+        decoded("rare-event round", stored).await
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %id, batch))]
+    async fn round_outcomes(&self, id: &JobId, batch: u64) -> StoreResult<Vec<Outcome>> {
+        let rows = Sql::new(
+            "SELECT partial FROM shards WHERE job_id = $1 AND batch = $2 AND grp >= 0 \
+             AND status = 'done' AND partial IS NOT NULL ORDER BY grp",
+        )
+        .bind(id.as_str())
+        .bind(count_to_sql(batch))
+        .fetch_all(self.readers())
+        .await?;
+        let mut outcomes = Vec::with_capacity(rows.len());
+        for row in rows {
+            outcomes.push(decoded("rare-event task outcome", row.bytes("partial")?).await?);
+        }
+        Ok(outcomes)
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]
@@ -140,4 +176,14 @@ impl Results for SqlStore {
         .await?;
         Ok(rows.iter().map(life_from_row).collect::<Result<_, _>>()?)
     }
+}
+
+/// `stored` decoded off the async threads.
+async fn decoded<T: serde::de::DeserializeOwned + Send + 'static>(
+    what: &'static str,
+    stored: Vec<u8>,
+) -> StoreResult<T> {
+    tokio::task::spawn_blocking(move || rows::decode(what, &stored))
+        .await
+        .map_err(|e| rows::corrupt(what, e))?
 }
