@@ -714,11 +714,11 @@ async fn a_rare_events_rounds_run_as_shards_give_the_whole_result(url: &str) {
         .map(|s| s.shard)
         .filter(|s| is_round(s.batch))
         .collect();
-    assert!(rounds.len() > 30, "{rounds:?}");
-    assert!(
-        rounds.contains(&ShardId::group(RARE_ROUNDS, 1)),
-        "{rounds:?}"
-    );
+    // A first level, then levels of chains: each round two tasks and a merge step.
+    assert!(rounds.len() >= 9, "{rounds:?}");
+    for round in [RARE_ROUNDS, RARE_ROUNDS + 1] {
+        assert!(rounds.contains(&ShardId::group(round, 1)), "{rounds:?}");
+    }
     assert!(shards.iter().all(|s| s.status == "done"));
     let whole = run_job(&Job::from_json(text, || 0).unwrap(), &Silent).unwrap();
     assert!(whole.rare_event.is_some());

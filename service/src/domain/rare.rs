@@ -17,15 +17,16 @@ use serde::{Deserialize, Serialize};
 /// Batches at and above this are a rare event's rounds: round `r` is batch `RARE_ROUNDS + r`.
 pub const RARE_ROUNDS: u64 = 1 << 40;
 
-/// The fewest operations of a round that runs as shards (about 60 ms of one compute thread): a
+/// The fewest operations of a round that runs as shards (about 30 ms of one compute thread): a
 /// smaller round runs in the merge step that reaches it, on that process's compute threads, where
-/// each task's claim and store (1-5 ms) would cost about what the task does. A subset level's
-/// first samples or a batch of importance samples of a device read at operation 1000 is this.
-pub const SHARDED_ROUND_OPERATIONS: u64 = 1_000_000;
+/// each task's claim and store (1-5 ms) would cost about what the task does. Every level of
+/// subset simulation (900 or 1000 evaluations) and every batch of importance samples of a device
+/// read at operation 1000 is larger.
+pub const SHARDED_ROUND_OPERATIONS: u64 = 500_000;
 
 /// Operations per task of a sharded round, about: a round is cut into as many tasks, at least two
 /// and at most [`MAX_ROUND_TASKS`].
-const TASK_OPERATIONS: u64 = 500_000;
+const TASK_OPERATIONS: u64 = 250_000;
 const MAX_ROUND_TASKS: u64 = 32;
 
 /// A rare event between rounds: what a round's tasks and its merge step take up.
@@ -188,9 +189,9 @@ mod tests {
         )
         .unwrap();
         let rounds = queued(&job, rare::start(&job).unwrap(), 0, 3);
-        assert_eq!((rounds.tasks, rounds.batch()), (4, RARE_ROUNDS + 3));
-        assert_eq!(rounds.task_operations(&job), [500_000; 4]);
-        assert!(rounds.task(3).is_some() && rounds.task(4).is_none());
+        assert_eq!((rounds.tasks, rounds.batch()), (8, RARE_ROUNDS + 3));
+        assert_eq!(rounds.task_operations(&job), [250_000; 8]);
+        assert!(rounds.task(7).is_some() && rounds.task(8).is_none());
         assert!(is_round(RARE_ROUNDS) && !is_round(RARE_ROUNDS - 1));
     }
 }

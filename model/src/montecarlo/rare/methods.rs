@@ -12,7 +12,8 @@
 //!
 //! Every method is a sequence of rounds ([`Estimator`]). A round is independent work: samples
 //! drawn afresh (a first level, a batch of importance or crude samples) or a level's Markov
-//! chains, each a pure function of the estimator's state. [`Estimator::tasks`] cuts a round into
+//! chains in ten strands that each steer their own sampler, each a pure function of the
+//! estimator's state. [`Estimator::tasks`] cuts a round into
 //! any number of [`Task`]s, which may run anywhere and in any order ([`Estimator::run`]);
 //! [`Estimator::advance`] takes their [`Outcome`]s in task order and decides the next round. The
 //! estimator, its tasks and their outcomes serialize, so that a round can be spread over
@@ -49,10 +50,11 @@ pub const CRUDE_BATCH: usize = 10_000;
 const TARGET_ACCEPTANCE: f64 = 0.44;
 /// The conditional sampler's scale at a run's first conditional level (Papaioannou et al. 2015).
 const FIRST_SCALE: f64 = 0.6;
-/// The groups of chains of a level, run one after another, the scale steered after each: with
-/// the scale steered only between levels, a one-input tail at 1e-9 covered 0.55 and took 3.6 times
-/// the evaluations (200 seeds).
-const GROUPS_PER_LEVEL: usize = 10;
+/// The strands of a level's chains: each strand runs its chains one after another, steering its
+/// own scale after each, from the scale the level starts with; the strands are independent, so a
+/// level runs as one round. (With the scale steered only between levels, a one-input tail at 1e-9
+/// covered 0.55 and took 3.6 times the evaluations, 200 seeds.)
+const STRANDS_PER_LEVEL: usize = 10;
 /// Below this, subset simulation stops looking: the threshold is never reached or rarer than
 /// any reliability question.
 pub const SMALLEST_PROBABILITY: f64 = 1e-30;
@@ -126,8 +128,8 @@ pub enum Method {
     /// Subset simulation: independent runs until the combined coefficient of variation is at most
     /// the target or another run would not fit the budget. The runs average; the variance of the
     /// average is theirs summed over the count squared, its degrees of freedom
-    /// Welch-Satterthwaite's. Each run's conditional sampler steers its scale towards 44 %
-    /// acceptance after each tenth of a level's chains.
+    /// Welch-Satterthwaite's. A level's chains run in ten independent strands, each steering its
+    /// conditional sampler's scale towards 44 % acceptance after every chain.
     Subset,
     /// Importance sampling around the design point: a first subset simulation run reaches the
     /// failure domain (and gives the tail curve), and the mean of its failing samples is the
@@ -352,17 +354,17 @@ fn first_run_tail(run: &SubsetRun, probability: f64) -> Vec<(f64, f64)> {
 pub enum Task {
     /// The round's fresh samples `start..end`.
     Draws { start: u64, end: u64 },
-    /// The level's chains `start..end`.
-    Chains { start: usize, end: usize },
+    /// The level's strands of chains `start..end`.
+    Strands { start: usize, end: usize },
 }
 
 /// What a task gives back: its samples' inputs (rows of the dimension) and responses in order,
-/// and the conditional sampler's proposals its chains accepted.
+/// and each of its strands' conditional sampler's scale at its end.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Outcome {
     us: Vec<f64>,
     ys: Vec<f64>,
-    accepted: u64,
+    scales: Vec<f64>,
 }
 
 /// A rare-event estimate between rounds: everything the next round's tasks and the estimate
@@ -408,17 +410,12 @@ struct Descent {
     spread: Spread,
     /// `(b, P(Y > b))` of each level so far.
     levels: Vec<(f64, f64)>,
-    /// The conditional sampler's scale, steered after each group of chains.
+    /// The conditional sampler's scale each strand of the level starts with.
     lambda: f64,
     /// The level's threshold.
     b: f64,
     /// The chains' first samples, their lineages resolved.
     seeds: Level,
-    /// The group of chains the next round runs: the level's chains in [`GROUPS_PER_LEVEL`]
-    /// groups, one after another, so that the scale adapts within the level.
-    group: usize,
-    /// The samples of the groups run so far, chain after chain.
-    sampled: Level,
 }
 
 /// Importance sampling's weighted sums so far.
@@ -495,10 +492,7 @@ impl Estimator {
     pub fn round_evaluations(&self) -> u64 {
         match (&self.stage, self.draws()) {
             (_, Some(draws)) => draws.n,
-            (Stage::Level(descent), None) => descent
-                .group_chains()
-                .map(|j| chain_length(j, descent.seeds.ys.len()) as u64 - 1)
-                .sum(),
+            (Stage::Level(descent), None) => (SAMPLES_PER_LEVEL - descent.seeds.ys.len()) as u64,
             _ => 0,
         }
     }
@@ -507,10 +501,11 @@ impl Estimator {
     pub fn task_evaluations(&self, task: Task) -> u64 {
         match (task, &self.stage) {
             (Task::Draws { start, end }, _) => end.saturating_sub(start),
-            (Task::Chains { start, end }, Stage::Level(descent)) => (start..end)
+            (Task::Strands { start, end }, Stage::Level(descent)) => (start..end)
+                .flat_map(|strand| descent.strand_chains(strand))
                 .map(|j| chain_length(j, descent.seeds.ys.len()) as u64 - 1)
                 .sum(),
-            (Task::Chains { .. }, _) => 0,
+            (Task::Strands { .. }, _) => 0,
         }
     }
 
@@ -530,16 +525,13 @@ impl Estimator {
                 .collect();
         }
         match &self.stage {
-            Stage::Level(descent) => {
-                let chains = descent.group_chains();
-                cut((chains.end - chains.start) as u64)
-                    .into_iter()
-                    .map(|(start, end)| Task::Chains {
-                        start: chains.start + start as usize,
-                        end: chains.start + end as usize,
-                    })
-                    .collect()
-            }
+            Stage::Level(descent) => cut(descent.strands() as u64)
+                .into_iter()
+                .map(|(start, end)| Task::Strands {
+                    start: start as usize,
+                    end: end as usize,
+                })
+                .collect(),
             _ => Vec::new(),
         }
     }
@@ -597,17 +589,15 @@ impl Estimator {
                 Ok(Outcome {
                     us,
                     ys,
-                    accepted: 0,
+                    scales: Vec::new(),
                 })
             }
-            (Task::Chains { start, end }, Stage::Level(descent))
-                if descent.group_chains().start <= start
-                    && start <= end
-                    && end <= descent.group_chains().end =>
+            (Task::Strands { start, end }, Stage::Level(descent))
+                if start <= end && end <= descent.strands() =>
             {
-                descent.chains(state, start..end, self.seed)
+                descent.run_strands(state, start..end, self.seed)
             }
-            (Task::Chains { .. }, _) => Err(mismatch(task)),
+            (Task::Strands { .. }, _) => Err(mismatch(task)),
         }
     }
 
@@ -619,17 +609,22 @@ impl Estimator {
         outcomes: Vec<Outcome>,
         observer: &dyn Observer,
     ) -> Result<Option<Estimate>, Stop> {
-        let expected = self.round_evaluations()
-            + match &self.stage {
-                Stage::Level(descent) => descent.group_chains().len() as u64,
-                _ => 0,
-            };
+        let (expected, strands) = match &self.stage {
+            Stage::Level(descent) => (SAMPLES_PER_LEVEL as u64, descent.strands()),
+            _ => (self.round_evaluations(), 0),
+        };
         let mut round = Level::default();
-        let mut accepted = 0;
+        let mut scales = Vec::new();
         for outcome in outcomes {
             round.us.extend_from_slice(&outcome.us);
             round.ys.extend_from_slice(&outcome.ys);
-            accepted += outcome.accepted;
+            scales.extend_from_slice(&outcome.scales);
+        }
+        if scales.len() != strands {
+            return Err(Stop::Failed(format!(
+                "a rare-event round gave {} strands where it has {strands}",
+                scales.len()
+            )));
         }
         if round.ys.len() as u64 != expected || round.us.len() != round.ys.len() * self.dimension {
             return Err(Stop::Failed(format!(
@@ -656,30 +651,16 @@ impl Estimator {
                     lambda: FIRST_SCALE,
                     b: f64::NEG_INFINITY,
                     seeds: Level::default(),
-                    group: 0,
-                    sampled: Level::default(),
                 };
                 self.descend(descent, round)?
             }
             Stage::Level(mut descent) => {
                 round.roots = descent.chain_roots();
-                descent.sampled.us.append(&mut round.us);
-                descent.sampled.ys.append(&mut round.ys);
-                descent.sampled.roots.append(&mut round.roots);
-                if evaluations > 0 {
-                    let rate = accepted as f64 / evaluations as f64;
-                    descent.lambda *=
-                        ((rate - TARGET_ACCEPTANCE) / ((descent.group + 1) as f64).sqrt()).exp();
-                }
-                descent.group += 1;
-                if descent.group_chains().is_empty() {
-                    let level = std::mem::take(&mut descent.sampled);
-                    descent.index += 1;
-                    self.descend(*descent, level)?
-                } else {
-                    self.stage = Stage::Level(descent);
-                    None
-                }
+                // The next level starts from the strands' scales' geometric mean.
+                let logs = scales.iter().map(|scale| scale.ln()).sum::<f64>();
+                descent.lambda = (logs / scales.len().max(1) as f64).exp();
+                descent.index += 1;
+                self.descend(*descent, round)?
             }
             Stage::Importance(weighing) => self.weigh(*weighing, &round),
             Stage::Crude(counting) => self.count(*counting, &round),
@@ -739,7 +720,6 @@ impl Estimator {
         }
         let d = self.dimension;
         run.b = b;
-        run.group = 0;
         run.seeds = Level {
             us: seeds
                 .iter()
@@ -922,18 +902,22 @@ fn mismatch(task: Task) -> Stop {
 }
 
 impl Descent {
-    /// The chains of the group the next round runs (empty past the last group).
-    fn group_chains(&self) -> std::ops::Range<usize> {
-        let m = self.seeds.ys.len();
-        let size = m.div_ceil(GROUPS_PER_LEVEL).max(1);
-        (self.group * size).min(m)..((self.group + 1) * size).min(m)
+    /// The level's strands of chains: [`STRANDS_PER_LEVEL`], or one per chain if fewer.
+    fn strands(&self) -> usize {
+        self.seeds.ys.len().min(STRANDS_PER_LEVEL)
     }
 
-    /// The lineage of each sample of the group's chains: its seed's, or the chain's own index on
+    /// The chains of strand `strand`: a contiguous share of the level's.
+    fn strand_chains(&self, strand: usize) -> std::ops::Range<usize> {
+        let (m, strands) = (self.seeds.ys.len(), self.strands());
+        m * strand / strands..m * (strand + 1) / strands
+    }
+
+    /// The lineage of each sample of the level: its chain's seed's, or the chain's own index on
     /// the first conditional level.
     fn chain_roots(&self) -> Vec<u32> {
         let m = self.seeds.ys.len();
-        self.group_chains()
+        (0..m)
             .flat_map(|j| {
                 let root = match self.seeds.roots[j] {
                     NO_ROOT => u32::try_from(j).expect("fewer seeds than 2^32"),
@@ -944,64 +928,79 @@ impl Descent {
             .collect()
     }
 
-    /// The level's chains `chains`, by adaptive conditional sampling: proposals
-    /// `rho_k u_k + sigma_k xi_k`, accepted when the response stays above `b`,
-    /// `sigma_k = min(1, lambda s_k)` with `s_k` the seeds' spread; the samples chain after chain.
-    fn chains(
+    /// The level's strands `strands`, in parallel, each its chains one after another by adaptive
+    /// conditional sampling: proposals `rho_k u_k + sigma_k xi_k`, accepted when the response
+    /// stays above `b`, `sigma_k = min(1, lambda s_k)` with `s_k` the seeds' spread, `lambda`
+    /// steered after each chain towards 44 % acceptance (Papaioannou et al. 2015); the samples
+    /// chain after chain.
+    fn run_strands(
         &self,
         state: &dyn LimitState,
-        chains: std::ops::Range<usize>,
+        strands: std::ops::Range<usize>,
         seed: u64,
     ) -> Result<Outcome, Stop> {
         let d = state.dimension();
         let m = self.seeds.ys.len();
-        let sigma: Vec<f64> = (0..d)
+        let spread: Vec<f64> = (0..d)
             .map(|k| {
-                let spread = if m < 2 {
-                    1.0
-                } else {
-                    let column = || self.seeds.us.chunks(d).map(|u| u[k]);
-                    let mean = column().sum::<f64>() / m as f64;
-                    let var = column().map(|x| (x - mean).powi(2)).sum::<f64>() / (m - 1) as f64;
-                    var.sqrt()
-                };
-                (self.lambda * spread).min(1.0)
+                if m < 2 {
+                    return 1.0;
+                }
+                let column = || self.seeds.us.chunks(d).map(|u| u[k]);
+                let mean = column().sum::<f64>() / m as f64;
+                let var = column().map(|x| (x - mean).powi(2)).sum::<f64>() / (m - 1) as f64;
+                var.sqrt()
             })
             .collect();
-        let rho: Vec<f64> = sigma.iter().map(|s| (1.0 - s * s).sqrt()).collect();
-        let ran: Vec<(Vec<f64>, Vec<f64>, u64)> = chains
-            .into_par_iter()
-            .map(|j| {
-                let mut u = self.seeds.us[j * d..(j + 1) * d].to_vec();
-                let mut y = self.seeds.ys[j];
-                let mut rng = ChaCha8Rng::seed_from_u64(seed);
-                rng.set_stream(stream(Stream::Chain, self.replicate, self.index, j as u64));
-                let (mut us, mut ys) = (u.clone(), vec![y]);
-                let mut accepted = 0;
-                let mut candidate = vec![0.0; d];
-                for _ in 1..chain_length(j, m) {
-                    for k in 0..d {
-                        let xi: f64 = rng.sample(StandardNormal);
-                        candidate[k] = rho[k].mul_add(u[k], sigma[k] * xi);
-                    }
-                    let response = state.response(&candidate);
-                    if response > self.b {
-                        u.copy_from_slice(&candidate);
-                        y = response;
-                        accepted += 1;
-                    }
-                    us.extend_from_slice(&u);
-                    ys.push(y);
+        let chain = |j: usize, lambda: f64| {
+            let sigma: Vec<f64> = spread.iter().map(|s| (lambda * s).min(1.0)).collect();
+            let rho: Vec<f64> = sigma.iter().map(|s| (1.0 - s * s).sqrt()).collect();
+            let mut u = self.seeds.us[j * d..(j + 1) * d].to_vec();
+            let mut y = self.seeds.ys[j];
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            rng.set_stream(stream(Stream::Chain, self.replicate, self.index, j as u64));
+            let (mut us, mut ys) = (u.clone(), vec![y]);
+            let mut accepted = 0;
+            let mut candidate = vec![0.0; d];
+            for _ in 1..chain_length(j, m) {
+                for k in 0..d {
+                    let xi: f64 = rng.sample(StandardNormal);
+                    candidate[k] = rho[k].mul_add(u[k], sigma[k] * xi);
                 }
-                (us, ys, accepted)
+                let response = state.response(&candidate);
+                if response > self.b {
+                    u.copy_from_slice(&candidate);
+                    y = response;
+                    accepted += 1;
+                }
+                us.extend_from_slice(&u);
+                ys.push(y);
+            }
+            (us, ys, accepted)
+        };
+        let ran: Vec<(Vec<f64>, Vec<f64>, f64)> = strands
+            .into_par_iter()
+            .map(|strand| {
+                let (mut us, mut ys, mut lambda) = (Vec::new(), Vec::new(), self.lambda);
+                for (i, j) in self.strand_chains(strand).enumerate() {
+                    let (chain_us, chain_ys, accepted) = chain(j, lambda);
+                    let proposed = chain_length(j, m) - 1;
+                    if proposed > 0 {
+                        let rate = accepted as f64 / proposed as f64;
+                        lambda *= ((rate - TARGET_ACCEPTANCE) / ((i + 1) as f64).sqrt()).exp();
+                    }
+                    us.extend_from_slice(&chain_us);
+                    ys.extend_from_slice(&chain_ys);
+                }
+                (us, ys, lambda)
             })
             .collect();
         let mut outcome = Outcome {
             us: Vec::new(),
             ys: Vec::new(),
-            accepted: 0,
+            scales: Vec::new(),
         };
-        for (us, ys, accepted) in ran {
+        for (us, ys, lambda) in ran {
             if let Some(bad) = ys.iter().position(|y| y.is_nan()) {
                 return Err(Stop::Failed(format!(
                     "the model gave no value (NaN) at the inputs {:?}",
@@ -1010,7 +1009,7 @@ impl Descent {
             }
             outcome.us.extend_from_slice(&us);
             outcome.ys.extend_from_slice(&ys);
-            outcome.accepted += accepted;
+            outcome.scales.push(lambda);
         }
         Ok(outcome)
     }
@@ -1254,7 +1253,7 @@ mod tests {
             panic!("a missing task's samples are noticed");
         };
         assert!(reason.contains("samples"), "{reason}");
-        let chains = Task::Chains { start: 0, end: 1 };
+        let chains = Task::Strands { start: 0, end: 1 };
         assert!(matches!(
             estimator.run(&state, chains),
             Err(Stop::Failed(_))
