@@ -1168,6 +1168,38 @@ async fn postgres_keeps_every_promise() {
     };
     every_promise(|name| cluster.database(name)).await;
     postgres_announces_queued_jobs_and_their_progress(&cluster.database("events")).await;
+    a_dropped_store_closes_every_connection(&cluster.database("dropped")).await;
+}
+
+/// A store that is dropped leaves no connection open: its pool and the connection that listens
+/// for announcements close with it (they once lived on, so the tests' many stores on one server
+/// ran out of connections when the machine was busy).
+async fn a_dropped_store_closes_every_connection(url: &str) {
+    use sqlx::Connection;
+    let store = store::open(url).await.unwrap();
+    insert(&store, queued(1)).await;
+    store.queue_depth().await.unwrap();
+    let database = url.rsplit_once('/').unwrap().1.to_owned();
+    let mut watcher = sqlx::PgConnection::connect(url).await.unwrap();
+    let mut open = async || -> i64 {
+        sqlx::query_scalar(
+            "SELECT COUNT(*) FROM pg_stat_activity WHERE datname = $1 AND pid <> pg_backend_pid()",
+        )
+        .bind(&database)
+        .fetch_one(&mut watcher)
+        .await
+        .unwrap()
+    };
+    assert!(open().await >= 2, "the pool and the listener are connected");
+    drop(store);
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    while open().await > 0 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "a dropped store still holds connections after 10 s"
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
 }
 
 /// PostgreSQL announces every change to a job: idle workers and progress streams need not poll.

@@ -14,10 +14,24 @@ use crate::domain::{JobId, QueueBound, QueuedJob};
 use sqlx::postgres::{PgListener, PgPool, PgPoolOptions};
 use std::time::Duration;
 use tokio::sync::broadcast;
+use tokio::task::AbortHandle;
 
 pub(crate) struct PgBackend {
     pub(crate) pool: PgPool,
     pub(crate) events: broadcast::Sender<QueueEvent>,
+    /// The task that passes announcements on: it holds a connection of the pool and the pool
+    /// itself, so it ends with the store, or neither would ever be closed.
+    announcements: AbortHandle,
+}
+
+impl Drop for PgBackend {
+    fn drop(&mut self) {
+        self.announcements.abort();
+        let pool = self.pool.clone();
+        if let Ok(runtime) = tokio::runtime::Handle::try_current() {
+            runtime.spawn(async move { pool.close().await });
+        }
+    }
 }
 
 /// The channel the schema's trigger announces every job change on (`migrations/postgres/0003`).
@@ -56,8 +70,12 @@ impl PgBackend {
         let mut listener = PgListener::connect_with(&pool).await?;
         listener.listen(JOB_CHANNEL).await?;
         let (events, _) = broadcast::channel(1024);
-        tokio::spawn(forward_announcements(listener, events.clone()));
-        Ok(Self { pool, events })
+        let announcements = tokio::spawn(forward_announcements(listener, events.clone()));
+        Ok(Self {
+            pool,
+            events,
+            announcements: announcements.abort_handle(),
+        })
     }
 }
 
