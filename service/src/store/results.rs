@@ -22,8 +22,12 @@ impl SqlStore {
     /// bounded size ([`rows::DISTRIBUTIONS_PER_WRITE`], [`rows::LIVES_PER_WRITE`]), each only while
     /// the claim holds the merge step, so that no result holds the database for long. A merge that
     /// stops midway leaves rows that its rerun writes again, the same (the job is deterministic),
-    /// or that ending the job drops. `None` once the claim no longer holds.
+    /// or that ending the job drops. `None` once the claim no longer holds. A result that fits in
+    /// one write ([`fits_one_write`]) writes none here: its rows go with the job's end.
     async fn write_rows(&self, fence: &Fence, result: &EncodedResult) -> StoreResult<Option<()>> {
+        if fits_one_write(result) {
+            return Ok(Some(()));
+        }
         for chunk in result.rows.chunks(rows::DISTRIBUTIONS_PER_WRITE) {
             let Some(mut tx) = self.begin_holding(fence).await? else {
                 return Ok(None);
@@ -40,6 +44,13 @@ impl SqlStore {
         }
         Ok(Some(()))
     }
+}
+
+/// Whether `result`'s rows fit in one write of [`SqlStore::write_rows`]: then they are written in
+/// the transaction that ends the job, one commit for a small job's whole Result rather than two.
+fn fits_one_write(result: &EncodedResult) -> bool {
+    result.rows.len() <= rows::DISTRIBUTIONS_PER_WRITE
+        && result.lives.len() <= rows::LIVES_PER_WRITE
 }
 
 #[async_trait]
@@ -67,6 +78,10 @@ impl Results for SqlStore {
         .fetch_one(&mut tx)
         .await?;
         let stored_bytes = count_from_sql(&stored, "stored_bytes")?;
+        if fits_one_write(result) {
+            insert_distributions(&mut tx, &fence.job, &result.rows).await?;
+            insert_lives(&mut tx, &fence.job, &result.lives).await?;
+        }
         drop_partials(&mut tx, &fence.job).await?;
         Sql::new("INSERT INTO results (job_id, result) VALUES ($1, $2)")
             .bind(fence.job.as_str())
