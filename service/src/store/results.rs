@@ -22,12 +22,8 @@ impl SqlStore {
     /// bounded size ([`rows::DISTRIBUTIONS_PER_WRITE`], [`rows::LIVES_PER_WRITE`]), each only while
     /// the claim holds the merge step, so that no result holds the database for long. A merge that
     /// stops midway leaves rows that its rerun writes again, the same (the job is deterministic),
-    /// or that ending the job drops. `None` once the claim no longer holds. A result that fits in
-    /// one write ([`fits_one_write`]) writes none here: its rows go with the job's end.
+    /// or that ending the job drops. `None` once the claim no longer holds.
     async fn write_rows(&self, fence: &Fence, result: &EncodedResult) -> StoreResult<Option<()>> {
-        if fits_one_write(result) {
-            return Ok(Some(()));
-        }
         for chunk in result.rows.chunks(rows::DISTRIBUTIONS_PER_WRITE) {
             let Some(mut tx) = self.begin_holding(fence).await? else {
                 return Ok(None);
@@ -47,7 +43,7 @@ impl SqlStore {
 }
 
 /// Whether `result`'s rows fit in one write of [`SqlStore::write_rows`]: then they are written in
-/// the transaction that ends the job, one commit for a small job's whole Result rather than two.
+/// the transaction that ends the job rather than in one of their own before it.
 fn fits_one_write(result: &EncodedResult) -> bool {
     result.rows.len() <= rows::DISTRIBUTIONS_PER_WRITE
         && result.lives.len() <= rows::LIVES_PER_WRITE
@@ -62,7 +58,9 @@ impl Results for SqlStore {
         finished_at: UnixMs,
         result: &EncodedResult,
     ) -> StoreResult<Option<u64>> {
-        if self.write_rows(fence, result).await?.is_none() {
+        // A Result that fits in one write goes in the transaction that ends the job: one commit.
+        let with_the_end = fits_one_write(result);
+        if !with_the_end && self.write_rows(fence, result).await?.is_none() {
             return Ok(None);
         }
         let Some(mut tx) = self.begin_finishing(fence).await? else {
@@ -78,7 +76,7 @@ impl Results for SqlStore {
         .fetch_one(&mut tx)
         .await?;
         let stored_bytes = count_from_sql(&stored, "stored_bytes")?;
-        if fits_one_write(result) {
+        if with_the_end {
             insert_distributions(&mut tx, &fence.job, &result.rows).await?;
             insert_lives(&mut tx, &fence.job, &result.lives).await?;
         }
