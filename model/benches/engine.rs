@@ -5,7 +5,8 @@
 //!
 //! `cargo bench -p bouncewear-model --bench engine`, once per kernel this CPU runs.
 
-use bouncewear_model::montecarlo::{Job, Kernel, Silent, run_job_on};
+use bouncewear_model::montecarlo::engine::run;
+use bouncewear_model::montecarlo::{Job, Kernel, Silent, run_job_on, summarize_job};
 use divan::{Bencher, black_box, counter::ItemsCount};
 use serde_json::Value;
 
@@ -60,4 +61,34 @@ fn arcing_48v_15a(bencher: Bencher, kernel: &str) {
 #[divan::bench(args = kernels(), sample_count = 5, sample_size = 1)]
 fn mechanical(bencher: Bencher, kernel: &str) {
     job_on_one_thread(bencher, "mechanical", kernel);
+}
+
+/// The service's small job, `{"devices": 100, "operations": 100}` (the default scenario, every
+/// metric), on one thread: the run alone, and the summaries of its 32 groups alone, the two
+/// parts of a small job's compute that `tools/http_bench.py` times end to end.
+fn small_job() -> Job {
+    Job::from_json(r#"{"devices": 100, "operations": 100, "seed": 1}"#, || 0)
+        .expect("the small job is valid")
+}
+
+fn one_thread() -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a pool of one thread")
+}
+
+#[divan::bench(sample_count = 200)]
+fn small_job_run(bencher: Bencher) {
+    let (job, pool) = (small_job(), one_thread());
+    bencher.bench_local(|| pool.install(|| run(black_box(&job), &Silent, |_| true)));
+}
+
+#[divan::bench(sample_count = 200)]
+fn small_job_summaries(bencher: Bencher) {
+    let (job, pool) = (small_job(), one_thread());
+    let tally = pool
+        .install(|| run(&job, &Silent, |_| true))
+        .expect("not cancelled");
+    bencher.bench_local(|| pool.install(|| summarize_job(black_box(&job), &tally, 0.0)));
 }

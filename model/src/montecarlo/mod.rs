@@ -356,48 +356,55 @@ fn statistic_name(statistic: Statistic) -> &'static str {
 }
 
 /// The groups' accumulators of one (bin, metric), in group order.
-fn operation_groups(job: &Job, tally: &Tally, bin: usize, metric: usize) -> Vec<Accumulator> {
+fn operation_groups<'t>(
+    job: &Job,
+    tally: &'t Tally,
+    bin: usize,
+    metric: usize,
+) -> Vec<&'t Accumulator> {
     let index = bin * job.operation_metrics().len() + metric;
-    tally
-        .groups
-        .iter()
-        .map(|g| g.operations[index].clone())
-        .collect()
+    tally.groups.iter().map(|g| &g.operations[index]).collect()
 }
 
 /// Every bin of every operation metric, the bins of a metric in parallel (each summary is computed
 /// alone, so the threads change no number).
 fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> {
     let bins = usize::try_from(job.bins()).expect("bins fit in memory");
-    job.operation_metrics()
+    let metrics = job.operation_metrics();
+    // Every (metric, bin) in one parallel loop, metric after metric: a small job's few bins
+    // per metric would leave a thread idle at each metric's end.
+    let mut summaries = (0..metrics.len() * bins)
+        .into_par_iter()
+        .map(|at| {
+            let (m, b) = (at / bins, at % bins);
+            let metric = metrics[m];
+            let op_start = job.bin_operations() * b as u64;
+            let groups = operation_groups(job, tally, b, m);
+            let mut summary = summarize(&groups);
+            if metric.is_integer() {
+                round_quantiles(&mut summary);
+            }
+            answer_thresholds(job, Metric::Operation(metric), &groups, &mut summary);
+            Bin {
+                summary,
+                op_start,
+                op_end: (op_start + job.bin_operations()).min(job.spec().operations),
+            }
+        })
+        .collect::<Vec<Bin>>()
+        .into_iter();
+    metrics
         .iter()
-        .enumerate()
-        .map(|(m, metric)| {
-            let summaries = (0..bins)
-                .into_par_iter()
-                .map(|b| {
-                    let op_start = job.bin_operations() * b as u64;
-                    let groups = operation_groups(job, tally, b, m);
-                    let mut summary = summarize(&groups);
-                    if metric.is_integer() {
-                        round_quantiles(&mut summary);
-                    }
-                    answer_thresholds(job, Metric::Operation(*metric), &groups, &mut summary);
-                    Bin {
-                        summary,
-                        op_start,
-                        op_end: (op_start + job.bin_operations()).min(job.spec().operations),
-                    }
-                })
-                .collect();
-            (metric.name().to_owned(), summaries)
+        .map(|metric| {
+            let of_metric = summaries.by_ref().take(bins).collect();
+            (metric.name().to_owned(), of_metric)
         })
         .collect()
 }
 
 /// The summary's `exceedances`: the metric's thresholds, if the job lists any, answered as a query
 /// after the run answers them.
-fn answer_thresholds(job: &Job, metric: Metric, groups: &[Accumulator], summary: &mut Summary) {
+fn answer_thresholds(job: &Job, metric: Metric, groups: &[&Accumulator], summary: &mut Summary) {
     if let Some(thresholds) = job.thresholds().get(&metric) {
         summary.exceedances = query(groups, &[], thresholds).exceedance;
     }
@@ -511,8 +518,7 @@ fn summarize_devices(job: &Job, tally: &Tally) -> BTreeMap<String, Summary> {
         .iter()
         .enumerate()
         .map(|(m, metric)| {
-            let groups: Vec<Accumulator> =
-                tally.groups.iter().map(|g| g.devices[m].clone()).collect();
+            let groups: Vec<&Accumulator> = tally.groups.iter().map(|g| &g.devices[m]).collect();
             let mut summary = summarize(&groups);
             answer_thresholds(job, Metric::Device(*metric), &groups, &mut summary);
             (metric.name().to_owned(), summary)

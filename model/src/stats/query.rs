@@ -1,6 +1,7 @@
 //! Any quantile and any threshold of one (metric, bin), asked after the run from its groups'
 //! accumulators, with the intervals of [`summarize`](super::summarize).
 
+use std::borrow::Borrow;
 use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
@@ -67,7 +68,11 @@ pub struct QueryAnswer {
 /// bucket count as spread evenly over the bucket's width for the probability, and the interval runs
 /// from the lower end of the interval with none of them beyond to the upper end of the interval
 /// with all of them beyond, so the store's resolution never puts the truth outside it.
-pub fn query(groups: &[Accumulator], levels: &[f64], thresholds: &[Threshold]) -> QueryAnswer {
+pub fn query<A: Borrow<Accumulator>>(
+    groups: &[A],
+    levels: &[f64],
+    thresholds: &[Threshold],
+) -> QueryAnswer {
     let merged = Merged::of(groups);
     let quantiles = levels
         .iter()
@@ -162,7 +167,7 @@ mod tests {
 
     #[test]
     fn no_values_give_zeros() {
-        let answer = query(&[], &[0.5], &[Threshold::Above(1.0)]);
+        let answer = query::<Accumulator>(&[], &[0.5], &[Threshold::Above(1.0)]);
         assert_eq!(answer.quantiles["0.5"].value, Some(0.0));
         assert_eq!(answer.exceedance[0].probability, 0.0);
         assert_eq!(answer.exceedance[0].ci95, [0.0, 0.0]);

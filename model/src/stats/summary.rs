@@ -1,5 +1,6 @@
 //! The contract's `SUMMARY` and how it is built from the groups of one (metric, bin).
 
+use std::borrow::Borrow;
 use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
@@ -148,7 +149,7 @@ pub struct Summary {
 ///
 /// # Panics
 /// If the groups have different limits.
-pub fn summarize(groups: &[Accumulator]) -> Summary {
+pub fn summarize<A: Borrow<Accumulator>>(groups: &[A]) -> Summary {
     let merged = Merged::of(groups);
     let all = &merged.all;
     let (min, max) = (all.min(), all.max());
@@ -199,13 +200,15 @@ pub(super) struct Merged<'a> {
 }
 
 impl<'a> Merged<'a> {
-    /// Merges `groups` in slice order; they must all have the same limit.
-    pub(super) fn of(groups: &'a [Accumulator]) -> Self {
-        let mut all = groups
-            .first()
+    /// Merges `groups` in slice order; they must all have the same limit. The groups are
+    /// borrowed, owned or not: a Result's summaries read the run's groups where they lie.
+    pub(super) fn of<A: Borrow<Accumulator>>(groups: &'a [A]) -> Self {
+        let groups = || groups.iter().map(Borrow::borrow);
+        let mut all = groups()
+            .next()
             .map_or_else(|| Accumulator::new(None), Accumulator::empty_like);
-        groups.iter().for_each(|group| all.merge(group));
-        let filled = groups.iter().filter(|g| g.count() > 0).collect();
+        groups().for_each(|group| all.merge(group));
+        let filled = groups().filter(|g| g.count() > 0).collect();
         Self { all, filled }
     }
 
