@@ -1,7 +1,8 @@
 //! Whole jobs on one thread: the reference jobs of `tests/data/reference_jobs.json` (radius and
 //! hardness scattered per device, closing velocity per operation, every metric), 48 V / 15 A and
 //! mechanical. Divan reports the
-//! time per job and, through the item counter, per operation.
+//! time per job and, through the item counter, per operation. Then the service's small job, its
+//! run and its summaries apart.
 //!
 //! `cargo bench -p bouncewear-model --bench engine`, once per kernel this CPU runs.
 
