@@ -366,8 +366,8 @@ fn operation_groups<'t>(
     tally.groups.iter().map(|g| &g.operations[index]).collect()
 }
 
-/// Every bin of every operation metric, the bins of a metric in parallel (each summary is computed
-/// alone, so the threads change no number).
+/// Every bin of every operation metric, all of them in parallel (each summary is computed alone,
+/// so the threads change no number).
 fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> {
     let bins = usize::try_from(job.bins()).expect("bins fit in memory");
     let metrics = job.operation_metrics();
