@@ -44,11 +44,7 @@ fn kernel(name: &str) -> Kernel {
 
 fn job_on_one_thread(bencher: Bencher, scenario: &str, kernel_name: &str) {
     let (job, operations) = reference_job(scenario);
-    let kernel = kernel(kernel_name);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .expect("a pool of one thread");
+    let (kernel, pool) = (kernel(kernel_name), one_thread());
     bencher
         .counter(ItemsCount::new(operations))
         .bench_local(|| pool.install(|| run_job_on(kernel, black_box(&job), &Silent)));
