@@ -370,13 +370,23 @@ impl Store {
 
     /// The sum of the counts of the keys `keys` (those the store holds).
     fn sum_keys(&self, keys: std::ops::Range<u32>) -> u64 {
-        let end = self.offset + self.len() as u32;
-        let (lo, hi) = (
-            keys.start.clamp(self.offset, end),
-            keys.end.clamp(self.offset, end),
-        );
-        let slots = (lo - self.offset) as usize..(hi.max(lo) - self.offset) as usize;
+        let slots = slots(self.offset, self.len(), keys);
         with_counts!(&self.counts, c => c[slots].iter().map(|&x| x.wide()).sum())
+    }
+
+    /// The running totals of the counts, for sums of many ranges.
+    fn cumulative(&self) -> Cumulative {
+        let mut below = Vec::with_capacity(self.len() + 1);
+        below.push(0);
+        let mut total = 0;
+        with_counts!(&self.counts, c => below.extend(c.iter().map(|&x| {
+            total += x.wide();
+            total
+        })));
+        Cumulative {
+            offset: self.offset,
+            below,
+        }
     }
 
     /// Non-empty buckets as `(key, count)`, by increasing key.
@@ -385,6 +395,29 @@ impl Store {
             let count = self.get(i);
             (count != 0).then_some((self.offset + i as u32, count))
         })
+    }
+}
+
+/// The slots of a store of `len` slots from key `offset` that hold the keys `keys`.
+fn slots(offset: u32, len: usize, keys: std::ops::Range<u32>) -> std::ops::Range<usize> {
+    let end = offset + len as u32;
+    let (lo, hi) = (keys.start.clamp(offset, end), keys.end.clamp(offset, end));
+    (lo - offset) as usize..(hi.max(lo) - offset) as usize
+}
+
+/// A store's running totals ([`Store::cumulative`]): the sum of the counts of any keys in two
+/// reads, where [`Store::sum_keys`] adds up each slot.
+struct Cumulative {
+    offset: u32,
+    /// The sum of the counts of the slots before each slot, and of all of them last.
+    below: Vec<u64>,
+}
+
+impl Cumulative {
+    /// The sum of the counts of the keys `keys`, as [`Store::sum_keys`] gives it.
+    fn sum_keys(&self, keys: std::ops::Range<u32>) -> u64 {
+        let slots = slots(self.offset, self.below.len() - 1, keys);
+        self.below[slots.end] - self.below[slots.start]
     }
 }
 
@@ -578,35 +611,36 @@ impl Sketch {
     /// below it (exact zeros at 0): a sum over the slots below the value's key, no scan of the
     /// buckets.
     pub fn counts_at_or_below(&self, values: &[f64]) -> Vec<u64> {
+        // The stores' running totals once, then a few reads a value: a summary asks this of
+        // each group for every quantile, and summed slot by slot each took a scan of the store.
+        let (negative, positive) = (self.negative.cumulative(), self.positive.cumulative());
         values
             .iter()
-            .map(|&value| self.count_at_or_below(value))
+            .map(|&value| {
+                if value < 0.0 {
+                    // Negative buckets of midpoint `-m <= value`, i.e. `m >= |value|`.
+                    let k = key(value);
+                    negative.sum_keys(k + 1..KEY_END)
+                        + if midpoint(k) >= -value {
+                            negative.sum_keys(k..k + 1)
+                        } else {
+                            0
+                        }
+                } else if value > 0.0 {
+                    let k = key(value);
+                    negative.sum_keys(0..KEY_END)
+                        + self.zeros
+                        + positive.sum_keys(0..k)
+                        + if midpoint(k) <= value {
+                            positive.sum_keys(k..k + 1)
+                        } else {
+                            0
+                        }
+                } else {
+                    negative.sum_keys(0..KEY_END) + self.zeros
+                }
+            })
             .collect()
-    }
-
-    fn count_at_or_below(&self, value: f64) -> u64 {
-        if value < 0.0 {
-            // Negative buckets of midpoint `-m <= value`, i.e. `m >= |value|`.
-            let k = key(value);
-            self.negative.sum_keys(k + 1..KEY_END)
-                + if midpoint(k) >= -value {
-                    self.negative.sum_keys(k..k + 1)
-                } else {
-                    0
-                }
-        } else if value > 0.0 {
-            let k = key(value);
-            self.negative.sum_keys(0..KEY_END)
-                + self.zeros
-                + self.positive.sum_keys(0..k)
-                + if midpoint(k) <= value {
-                    self.positive.sum_keys(k..k + 1)
-                } else {
-                    0
-                }
-        } else {
-            self.negative.sum_keys(0..KEY_END) + self.zeros
-        }
     }
 
     /// The values around `t`: how many lie surely below it, how many share its bucket (below it,
