@@ -271,22 +271,21 @@ pub(crate) async fn insert_shards(
     }
     let rows: Vec<String> = (0..shards.len())
         .map(|i| {
-            let n = 2 + 3 * i;
-            format!("($1, ${n}, ${}, 'queued', ${})", n + 1, n + 2)
+            let n = 1 + 4 * i;
+            format!("(${n}, ${}, ${}, 'queued', ${})", n + 1, n + 2, n + 3)
         })
         .collect();
     let insert = format!(
         "INSERT INTO shards (job_id, batch, grp, status, operations_total) VALUES {}",
         rows.join(", ")
     );
-    let insert = shards
-        .iter()
-        .fold(Sql::built(insert).bind(job.as_str()), |insert, plan| {
-            insert
-                .bind(count_to_sql(plan.shard.batch))
-                .bind(group_to_sql(plan.shard))
-                .bind(count_to_sql(plan.operations))
-        });
+    let insert = shards.iter().fold(Sql::in_order(insert), |insert, plan| {
+        insert
+            .bind(job.as_str())
+            .bind(count_to_sql(plan.shard.batch))
+            .bind(group_to_sql(plan.shard))
+            .bind(count_to_sql(plan.operations))
+    });
     insert.execute(&mut *tx).await?;
     Ok(())
 }
@@ -660,24 +659,24 @@ impl EncodedResult {
     }
 }
 
-/// `count` rows of `width` parameters each after the shared `$1`: `($1, $2, .., $w+1), ($1, ..)`.
+/// `count` rows of `width` parameters each, in order: `($1, .., $w), ($w+1, ..)`.
 fn rows_of_parameters(count: usize, width: usize) -> String {
     (0..count)
         .map(|row| {
-            let first = 2 + row * width;
+            let first = 1 + row * width;
             let parameters: Vec<String> = (first..first + width).map(|n| format!("${n}")).collect();
-            format!("($1, {})", parameters.join(", "))
+            format!("({})", parameters.join(", "))
         })
         .collect::<Vec<_>>()
         .join(", ")
 }
 
-/// Rows one `INSERT` takes. SQLite finds each `$N` of a statement by a scan of the statement's
-/// parameter names when sqlx binds it, so binding grows with the square of a statement's
-/// parameters: one statement of a small job's 115 rows (1841 parameters) spent 12 % of the
-/// server's CPU there. Statements of a few hundred parameters keep that small and still save most
-/// round trips to the database's thread.
-const DISTRIBUTIONS_PER_STATEMENT: usize = 16;
+/// Rows one `INSERT` takes: a small job's 115 in one round trip to the database's thread, a large
+/// job's in statements of a few thousand parameters (SQLite takes 32,766, PostgreSQL 65,535). Its
+/// placeholders go in order ([`Sql::in_order`]): with the job's `$1` shared by every row, SQLite
+/// found each parameter by a scan of the statement's names, and 16 rows a statement were the most
+/// that kept that small.
+const DISTRIBUTIONS_PER_STATEMENT: usize = 128;
 
 /// Inserts a transaction's `distributions` rows, [`DISTRIBUTIONS_PER_STATEMENT`] a statement
 /// (rather than one round trip to the database per row; a merge step that reruns writes the same
@@ -719,9 +718,8 @@ pub(crate) async fn insert_distributions(
     .await
 }
 
-/// Device lives one statement inserts: 3 parameters each after the job's (see
-/// [`DISTRIBUTIONS_PER_STATEMENT`]).
-const LIVES_PER_STATEMENT: usize = 100;
+/// Device lives one statement inserts: 4 parameters each (see [`DISTRIBUTIONS_PER_STATEMENT`]).
+const LIVES_PER_STATEMENT: usize = 1000;
 
 /// Inserts a transaction's `device_lives` rows, [`LIVES_PER_STATEMENT`] a statement.
 pub(crate) async fn insert_lives(
@@ -747,8 +745,8 @@ pub(crate) async fn insert_lives(
 }
 
 /// Inserts `rows` into `into` (a table and its columns, `job_id` first), `per_statement` rows a
-/// statement, each row's `width` parameters bound by `bind` after the job's `$1`; a row already
-/// there is kept.
+/// statement, each row's job and then its `width` parameters bound by `bind`; a row already there
+/// is kept.
 async fn insert_rows<T>(
     tx: &mut Tx,
     job: &JobId,
@@ -760,11 +758,11 @@ async fn insert_rows<T>(
     for chunk in rows.chunks(per_statement) {
         let insert = format!(
             "INSERT INTO {into} VALUES {} ON CONFLICT DO NOTHING",
-            rows_of_parameters(chunk.len(), width)
+            rows_of_parameters(chunk.len(), 1 + width)
         );
-        let insert = chunk
-            .iter()
-            .fold(Sql::built(insert).bind(job.as_str()), &bind);
+        let insert = chunk.iter().fold(Sql::in_order(insert), |insert, row| {
+            bind(insert.bind(job.as_str()), row)
+        });
         insert.execute(&mut *tx).await?;
     }
     Ok(())
