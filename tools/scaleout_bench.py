@@ -159,8 +159,9 @@ def main():
             result = json.loads(output)
             results.append(json.dumps([result["operations"], result["devices"]], sort_keys=True))
     try:
-        for count in [int(n) for n in args.workers.split(",")]:
-            database = new_database(f"scaleout_{count}")
+        # A count may repeat (--workers 1,1,2,2: repeated runs show the machine's spread).
+        for index, count in enumerate(int(n) for n in args.workers.split(",")):
+            database = new_database(f"scaleout_{index}_{count}")
             api, base = serve(args.bin, database, 0)
             workers = [start(args.bin, ["worker", "--database", database, "--workers", "1", "--compute-threads", "1"],
                              "bouncewear worker running")[0] for _ in range(count)]
