@@ -1169,6 +1169,28 @@ async fn postgres_keeps_every_promise() {
     every_promise(|name| cluster.database(name)).await;
     postgres_announces_queued_jobs_and_their_progress(&cluster.database("events")).await;
     a_dropped_store_closes_every_connection(&cluster.database("dropped")).await;
+    compressed_accumulators_are_stored_without_pglz(&cluster.database("storage")).await;
+}
+
+/// The accumulators are LZ4-compressed before they are stored: PostgreSQL keeps them out of line
+/// as they are (`EXTERNAL`), without its default attempt at pglz, which could not shrink them and
+/// cost a third of its CPU time on a sharded job (`migrations/postgres/0012`).
+async fn compressed_accumulators_are_stored_without_pglz(url: &str) {
+    use sqlx::Connection;
+    let store = store::open(url).await.unwrap();
+    let mut connection = sqlx::PgConnection::connect(url).await.unwrap();
+    for (table, column) in [("shards", "partial"), ("distributions", "groups")] {
+        let storage: i8 = sqlx::query_scalar(
+            "SELECT attstorage FROM pg_attribute WHERE attrelid = $1::regclass AND attname = $2",
+        )
+        .bind(table)
+        .bind(column)
+        .fetch_one(&mut connection)
+        .await
+        .unwrap();
+        assert_eq!(storage as u8, b'e', "{table}.{column}");
+    }
+    drop(store);
 }
 
 /// A store that is dropped leaves no connection open: its pool and the connection that listens

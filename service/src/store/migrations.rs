@@ -46,6 +46,7 @@ const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
     "0009_distribution_groups.sql",
     "0010_fair_share_and_retries.sql",
     "0011_claim_indexes.sql",
+    "0012_compressed_bytes_stored_as_they_are.sql",
 );
 
 /// `migrations/sqlite/`.
