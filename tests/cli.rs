@@ -49,8 +49,7 @@ fn simulate_reproduces_every_validation_case_through_the_binary() {
 
 #[test]
 fn simulate_reads_a_file_and_defaults_to_exact() {
-    let dir = std::env::temp_dir().join(format!("bouncewear-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = temp_dir("simulate-file");
     let path = dir.join("scenario.json");
     std::fs::write(&path, "{}").unwrap();
     let from_file = bouncewear(&["simulate", path.to_str().unwrap()], "");

@@ -10,8 +10,9 @@ pub mod postgres;
 
 use serde_json::{Value, json};
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
+use std::sync::OnceLock;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 pub const BIN: &str = env!("CARGO_BIN_EXE_bouncewear");
@@ -32,12 +33,32 @@ pub fn on_own_runtime<T: Send + 'static>(
     .expect("the thread finishes")
 }
 
-/// A fresh directory for one test, named after it.
+/// A fresh directory for one test, named after it, inside the test binary's own directory.
 pub fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("bouncewear-test-{}-{name}", std::process::id()));
+    let dir = binary_dir().join(name);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
+}
+
+/// The test binary's directory, `bouncewear-test-PID` in the system's temporary one, removed when
+/// the binary exits (each run left a hundred directories behind before), unless
+/// `BOUNCEWEAR_KEEP_TEST_DIRS` is set, to look at what a failing test left. The servers and
+/// PostgreSQL clusters the tests start are stopped when their tests end, before it goes.
+fn binary_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    extern "C" fn remove() {
+        if let Some(dir) = DIR.get() {
+            let _ = std::fs::remove_dir_all(dir);
+        }
+    }
+    DIR.get_or_init(|| {
+        if std::env::var_os("BOUNCEWEAR_KEEP_TEST_DIRS").is_none() {
+            // SAFETY: `remove` is a plain function that runs once, when the process exits.
+            unsafe { libc::atexit(remove) };
+        }
+        std::env::temp_dir().join(format!("bouncewear-test-{}", std::process::id()))
+    })
 }
 
 /// A database file of its own for one test.

@@ -246,13 +246,14 @@ mod tests {
     use crate::store::{JobQueue, SqlStore};
     use bouncewear_model::montecarlo::Job;
 
-    async fn open_named(name: &str) -> (SqlStore, String) {
+    /// A store in a fresh directory of its own, and the directory (to remove at the test's end).
+    async fn open_named(name: &str) -> (SqlStore, String, std::path::PathBuf) {
         let dir =
             std::env::temp_dir().join(format!("bouncewear-store-{}-{name}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let url = format!("sqlite://{}", dir.join("store.db").display());
-        (SqlStore::open(&url).await.unwrap(), url)
+        (SqlStore::open(&url).await.unwrap(), url, dir)
     }
 
     fn queued(seed: u64) -> QueuedJob {
@@ -262,7 +263,7 @@ mod tests {
 
     #[tokio::test]
     async fn every_u64_seed_reads_back_exactly_even_for_rows_older_than_the_seed_column() {
-        let (store, url) = open_named("seeds").await;
+        let (store, url, dir) = open_named("seeds").await;
         let seeds = [0, 1 << 53, i64::MAX as u64 + 1, u64::MAX];
         let mut ids = Vec::new();
         for seed in seeds {
@@ -286,5 +287,7 @@ mod tests {
             let record = store.job(&Owner::anonymous(), id).await.unwrap();
             assert_eq!(record.seed, seed);
         }
+        drop(store);
+        std::fs::remove_dir_all(dir).unwrap();
     }
 }
