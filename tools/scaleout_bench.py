@@ -4,6 +4,7 @@ processes, and what sharding costs per shard.
 
     cargo build --release
     python3 tools/scaleout_bench.py [--bin target/release/bouncewear] [--database postgres://...]
+                                    [--workers 1,2,4] [--rounds 3]
 
 Without --database it starts a throwaway PostgreSQL cluster (Debian's `postgresql`: initdb and
 pg_ctl in a temporary directory, as the `postgres` user when run as root) and removes it after.
@@ -11,8 +12,10 @@ pg_ctl in a temporary directory, as the `postgres` user when run as root) and re
 Each worker process runs one shard at a time on one compute thread (`worker --workers 1
 --compute-threads 1`), so N processes use N cores: on a 2-core machine expect a plateau at 2.
 Throughput is operations over the wall time from submission to the stored Result, seen by polling
-the API every 20 ms. The per-shard overhead comes from the workers' own clocks, the
-`bouncewear_shard_step_seconds` histogram of a `serve --workers 1` node running the same job:
+the API every 5 ms. Each round runs `run --threads 1` and `--threads 2` and then every worker count
+in turn, and each wall is compared with its own round's `run --threads 1`: this machine's speed
+drifts by a quarter within minutes, so figures from different moments do not compare. The per-shard overhead comes from the workers' own clocks, the
+`bouncewear_shard_step_seconds` histogram of a `serve --workers 1` node running the same job twice:
 `claim` (finding and leasing a shard), `store` (writing a group's accumulators in the transaction
 that counts it done) and `merge` (reading every group back, merging in order, summarising and
 storing the Result), beside `run` (the simulation itself).
@@ -24,6 +27,7 @@ import os
 import re
 import shutil
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -125,7 +129,7 @@ def run_job(base, job):
             return time.perf_counter() - started, call(f"{base}/v1/jobs/{job_id}/result"), job_id
         if status in ("failed", "cancelled"):
             sys.exit(f"job {job_id} {status}")
-        time.sleep(0.02)
+        time.sleep(0.005)
 
 
 def step_means(metrics):
@@ -138,41 +142,68 @@ def step_means(metrics):
     return {step: (sums[step] / counts[step], int(counts[step])) for step in sums if counts.get(step)}
 
 
+def run_baseline(binary, job_file, threads):
+    """`bouncewear run` on `job_file`: (wall seconds of the whole process, its Result's statistics)."""
+    started = time.perf_counter()
+    output = subprocess.run([binary, "run", job_file, "--threads", str(threads)],
+                            check=True, capture_output=True, text=True).stdout
+    wall = time.perf_counter() - started
+    result = json.loads(output)
+    return wall, json.dumps([result["operations"], result["devices"]], sort_keys=True)
+
+
+def run_workers(binary, database, count):
+    """The job twice on an API node and `count` worker processes, new on a new database: the first
+    time's wall seconds, the second's (warm: processes, connections and tables as a running
+    service has them), and the Results' statistics."""
+    api, base = serve(binary, database, 0)
+    workers = [start(binary, ["worker", "--database", database, "--workers", "1", "--compute-threads", "1"],
+                     "bouncewear worker running")[0] for _ in range(count)]
+    try:
+        first, result, _ = run_job(base, JOB)
+        warm, again, _ = run_job(base, JOB)
+    finally:
+        for process in [*workers, api]:
+            process.terminate()
+            process.wait()
+    statistics_of = lambda r: json.dumps([r["operations"], r["devices"]], sort_keys=True)
+    return first, warm, {statistics_of(result), statistics_of(again)}
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--bin", default="target/release/bouncewear")
     parser.add_argument("--database", help="a PostgreSQL server's admin URL (postgres://USER@HOST:PORT)")
     parser.add_argument("--workers", default="1,2,4")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="rounds, each running `run` and every worker count in turn (a machine whose "
+                             "speed drifts is compared within a round)")
     args = parser.parse_args()
     cluster = None if args.database else Cluster()
     new_database = (lambda name: cluster.database(name)) if cluster else (lambda name: args.database)
     operations = JOB["devices"] * JOB["operations"]
-    rows, results, baseline = [], [], []
-    with tempfile.NamedTemporaryFile("w", suffix=".json") as job_file:
-        json.dump(JOB, job_file)
-        job_file.flush()
-        for threads in (1, 2):
-            started = time.perf_counter()
-            output = subprocess.run([args.bin, "run", job_file.name, "--threads", str(threads)],
-                                    check=True, capture_output=True, text=True).stdout
-            baseline.append((threads, time.perf_counter() - started))
-            result = json.loads(output)
-            results.append(json.dumps([result["operations"], result["devices"]], sort_keys=True))
+    counts = [int(n) for n in args.workers.split(",")]
+    configurations = ["run 1", "run 2", *[f"{kind} {count}" for count in counts for kind in ("first", "warm")]]
+    walls = {name: [] for name in configurations}
+    results = set()
     try:
-        # A count may repeat (--workers 1,1,2,2: repeated runs show the machine's spread).
-        for index, count in enumerate(int(n) for n in args.workers.split(",")):
-            database = new_database(f"scaleout_{index}_{count}")
-            api, base = serve(args.bin, database, 0)
-            workers = [start(args.bin, ["worker", "--database", database, "--workers", "1", "--compute-threads", "1"],
-                             "bouncewear worker running")[0] for _ in range(count)]
-            wall, result, _ = run_job(base, JOB)
-            results.append(json.dumps([result["operations"], result["devices"]], sort_keys=True))
-            rows.append((count, wall, operations / wall))
-            for process in [*workers, api]:
-                process.terminate()
-                process.wait()
+        with tempfile.NamedTemporaryFile("w", suffix=".json") as job_file:
+            json.dump(JOB, job_file)
+            job_file.flush()
+            for round_ in range(args.rounds):
+                for threads in (1, 2):
+                    wall, result = run_baseline(args.bin, job_file.name, threads)
+                    walls[f"run {threads}"].append(wall)
+                    results.add(result)
+                for count in counts:
+                    database = new_database(f"scaleout_{round_}_{count}")
+                    first, warm, result = run_workers(args.bin, database, count)
+                    walls[f"first {count}"].append(first)
+                    walls[f"warm {count}"].append(warm)
+                    results |= result
         node, base = serve(args.bin, new_database("scaleout_steps"), 1)
-        _, _, job_id = run_job(base, JOB)
+        run_job(base, JOB)
+        run_job(base, JOB)
         steps = step_means(call(f"{base}/metrics"))
         node.terminate()
         node.wait()
@@ -180,16 +211,26 @@ def main():
         if cluster:
             cluster.stop()
     print(f"one job of {operations:.0e} operations (48 V / 15 A, radius and velocity scattered), "
-          f"{os.cpu_count()} cores, PostgreSQL\n")
-    print("| run by | wall (s) | operations/s | speed-up |")
-    print("|---|---|---|---|")
-    for threads, wall in baseline:
-        print(f"| `bouncewear run --threads {threads}` (no database) | {wall:.2f} | {operations / wall / 1e6:.2f} M | "
-              f"{baseline[0][1] / wall:.2f}x |")
-    for count, wall, rate in rows:
-        print(f"| {count} worker process{'es' if count > 1 else ''} | {wall:.2f} | {rate / 1e6:.2f} M | "
-              f"{baseline[0][1] / wall:.2f}x |")
-    print(f"\nResults identical to `run` for every worker count: {len(set(results)) == 1}\n")
+          f"{os.cpu_count()} cores, PostgreSQL, {args.rounds} rounds\n")
+    print("Wall time min and median over the rounds; the ratio is each round's wall over the same round's "
+          "`run --threads 1` (median, and min..max).\n")
+    print("| run by | wall min (s) | wall median (s) | operations/s (median) | wall / `run --threads 1` |")
+    print("|---|---|---|---|---|")
+    for name in configurations:
+        kind, number = name.split()
+        label = (f"`bouncewear run --threads {number}` (no database)" if kind == "run"
+                 else f"{number} worker process{'es' if int(number) > 1 else ''}, "
+                 + ("first job (new processes and database)" if kind == "first" else "next job"))
+        ratios = sorted(wall / base for wall, base in zip(walls[name], walls["run 1"]))
+        print(f"| {label} | {min(walls[name]):.2f} | {statistics.median(walls[name]):.2f} | "
+              f"{operations / statistics.median(walls[name]) / 1e6:.2f} M | "
+              f"{statistics.median(ratios):.2f}x ({ratios[0]:.2f}..{ratios[-1]:.2f}) |")
+    if 1 in counts and 2 in counts:
+        for kind in ("first", "warm"):
+            ratios = sorted(two / one for two, one in zip(walls[f"{kind} 2"], walls[f"{kind} 1"]))
+            print(f"\nTwo workers over one, {'first' if kind == 'first' else 'next'} job, round by round: "
+                  f"median {statistics.median(ratios):.2f}x ({ratios[0]:.2f}..{ratios[-1]:.2f})")
+    print(f"\nResults identical to `run` for every worker count: {len(results) == 1}\n")
     print("| shard step | mean (ms) | count |")
     print("|---|---|---|")
     for step in ("claim", "run", "store", "merge"):
