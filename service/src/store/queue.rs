@@ -6,7 +6,7 @@ use super::backend::SqlStore;
 use super::rows::{
     Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, Dialect, FORGET_EXPIRED_KEY,
     LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY,
-    REMEMBERED_KEY, bind_fence, bind_key, claim_from_row, count_from_sql, count_to_sql,
+    REMEMBERED_KEY, bind_fence, bind_key, claim_from_rows, count_from_sql, count_to_sql,
     failed_too_often, fenced_shard, gave_up, group_to_sql, insert_shards, job_columns,
     job_from_row, not_ended, partial_to_sql, remembered_from_row, schema_current, shard_columns,
     shard_from_row, shard_id_from_row, spec_from_json,
@@ -132,14 +132,23 @@ pub(crate) async fn remember(
 
 // ---- jobs ----------------------------------------------------------------------------------
 
+/// The assignments of an `UPDATE jobs ... WHERE id = $1` that set the job's progress to the sum
+/// over its shards.
+macro_rules! progress_sums {
+    () => {
+        "operations_done = (SELECT COALESCE(SUM(operations_done), 0) FROM shards WHERE job_id = $1), \
+         operations_total = (SELECT CASE WHEN COALESCE(SUM(operations_total), 0) > jobs.operations_total \
+             THEN SUM(operations_total) ELSE jobs.operations_total END FROM shards WHERE job_id = $1)"
+    };
+}
+
 /// Sets the job's progress to the sum over its shards.
 async fn sum_progress(tx: &mut Tx, job: &JobId) -> StoreResult<()> {
-    Sql::new(
-        "UPDATE jobs SET operations_done = (SELECT COALESCE(SUM(operations_done), 0) FROM shards WHERE job_id = $1), \
-         operations_total = (SELECT CASE WHEN COALESCE(SUM(operations_total), 0) > jobs.operations_total \
-             THEN SUM(operations_total) ELSE jobs.operations_total END FROM shards WHERE job_id = $1) \
-         WHERE id = $1",
-    )
+    Sql::new(concat!(
+        "UPDATE jobs SET ",
+        progress_sums!(),
+        " WHERE id = $1"
+    ))
     .bind(job.as_str())
     .execute(&mut *tx)
     .await?;
@@ -457,29 +466,22 @@ impl JobQueue for SqlStore {
             tx.commit().await?;
             return Ok(None);
         };
-        let job = JobId::from(claimed.text("job_id")?);
-        // The job runs from its first claim, and is charged its shard's cost at each (fair share).
-        Sql::new(
+        // The job runs from its first claim, is charged its shard's cost at each (fair share), and
+        // counts the claimed shard's progress afresh; the statement returns what the worker needs
+        // of the job (one round trip where three were).
+        let job = Sql::new(concat!(
             "UPDATE jobs SET status = CASE WHEN status = 'queued' THEN 'running' ELSE status END, \
-             started_at = COALESCE(started_at, $2), vstart = vtime, vtime = vtime + $3 WHERE id = $1",
-        )
-        .bind(job.as_str())
+             started_at = COALESCE(started_at, $2), vstart = vtime, vtime = vtime + $3, ",
+            progress_sums!(),
+            " WHERE id = $1 RETURNING spec, started_at"
+        ))
+        .bind(claimed.text("job_id")?)
         .bind(now.0)
         .bind(claimed.int("operations_total")? + SHARD_OVERHEAD_OPERATIONS)
-        .execute(&mut tx)
-        .await?;
-        sum_progress(&mut tx, &job).await?;
-        let row = Sql::new(
-            "SELECT s.job_id, s.batch, s.grp, s.attempt, s.operations_total, j.spec, j.started_at \
-             FROM shards s JOIN jobs j ON j.id = s.job_id WHERE s.job_id = $1 AND s.batch = $2 AND s.grp = $3",
-        )
-        .bind(job.as_str())
-        .bind(claimed.int("batch")?)
-        .bind(claimed.int("grp")?)
         .fetch_one(&mut tx)
         .await?;
         tx.commit().await?;
-        claim_from_row(&row).map(Some)
+        claim_from_rows(&claimed, &job).map(Some)
     }
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
@@ -546,12 +548,15 @@ impl JobQueue for SqlStore {
             tx.rollback().await?;
             return Ok(false);
         }
-        Sql::new("UPDATE jobs SET stored_bytes = stored_bytes + $2 WHERE id = $1")
-            .bind(fence.job.as_str())
-            .bind(count_to_sql(partial_bytes))
-            .execute(&mut tx)
-            .await?;
-        sum_progress(&mut tx, &fence.job).await?;
+        Sql::new(concat!(
+            "UPDATE jobs SET stored_bytes = stored_bytes + $2, ",
+            progress_sums!(),
+            " WHERE id = $1"
+        ))
+        .bind(fence.job.as_str())
+        .bind(count_to_sql(partial_bytes))
+        .execute(&mut tx)
+        .await?;
         tx.commit().await?;
         Ok(true)
     }

@@ -382,18 +382,18 @@ pub(crate) fn bind_fence(query: Sql, fence: &Fence) -> Sql {
         .bind(fence.attempt.0)
 }
 
-/// A claim, from a row of the claimed shard joined with its job: `job_id, batch, grp, attempt,
-/// operations_total, spec, started_at`.
-pub(crate) fn claim_from_row(row: &AnyRow) -> StoreResult<Claim> {
+/// A claim, from the claimed shard's row (`job_id, batch, grp, attempt, operations_total`) and
+/// its job's (`spec, started_at`).
+pub(crate) fn claim_from_rows(shard: &AnyRow, job: &AnyRow) -> StoreResult<Claim> {
     Ok(Claim {
         fence: Fence {
-            job: JobId::from(row.text("job_id")?),
-            shard: shard_id_from_row(row)?,
-            attempt: Attempt(row.int("attempt")?),
+            job: JobId::from(shard.text("job_id")?),
+            shard: shard_id_from_row(shard)?,
+            attempt: Attempt(shard.int("attempt")?),
         },
-        spec: spec_from_json(&row.text("spec")?)?,
-        operations_total: count_from_sql(row, "operations_total")?,
-        started_at: ms(row, "started_at")?,
+        spec: spec_from_json(&job.text("spec")?)?,
+        operations_total: count_from_sql(shard, "operations_total")?,
+        started_at: ms(job, "started_at")?,
     })
 }
 
