@@ -142,6 +142,11 @@ def step_means(metrics):
     return {step: (sums[step] / counts[step], int(counts[step])) for step in sums if counts.get(step)}
 
 
+def result_statistics(result):
+    """A Result's statistics, without its timing, as text that compares equal to the bit."""
+    return json.dumps([result["operations"], result["devices"]], sort_keys=True)
+
+
 def run_baseline(binary, job_file, threads):
     """`bouncewear run` on `job_file`: (wall seconds of the whole process, its Result's statistics)."""
     started = time.perf_counter()
@@ -149,7 +154,7 @@ def run_baseline(binary, job_file, threads):
                             check=True, capture_output=True, text=True).stdout
     wall = time.perf_counter() - started
     result = json.loads(output)
-    return wall, json.dumps([result["operations"], result["devices"]], sort_keys=True)
+    return wall, result_statistics(result)
 
 
 def run_workers(binary, database, count):
@@ -166,8 +171,7 @@ def run_workers(binary, database, count):
         for process in [*workers, api]:
             process.terminate()
             process.wait()
-    statistics_of = lambda r: json.dumps([r["operations"], r["devices"]], sort_keys=True)
-    return first, warm, {statistics_of(result), statistics_of(again)}
+    return first, warm, {result_statistics(result), result_statistics(again)}
 
 
 def main():
