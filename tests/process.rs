@@ -214,12 +214,24 @@ fn three_worker_processes_on_postgres_survive_kill_9_and_give_the_bits_of_one_ma
             let index = workers.iter().position(|w| w.child.id() == pid)?;
             shard["group"].is_u64().then_some((index, shard))
         });
-        let Some((index, shard)) = running else {
+        let Some((index, _)) = running else {
             std::thread::sleep(Duration::from_millis(20));
             continue;
         };
-        workers.swap_remove(index).kill();
-        killed.push((shard["batch"].clone(), shard["group"].clone()));
+        let worker = workers.swap_remove(index);
+        let pid = worker.child.id();
+        worker.kill();
+        // What the worker held when it died: the group it ran, and the next shard it had claimed
+        // meanwhile or the last group still being stored. Their leases outlive it by two seconds;
+        // a statement it sent before it died is done within the pause.
+        std::thread::sleep(Duration::from_millis(200));
+        let held: Vec<_> = shards(&api, &id)
+            .into_iter()
+            .filter(|s| s["status"] == "running" && worker_pid(s) == Some(pid))
+            .map(|s| (s["batch"].clone(), s["group"].clone()))
+            .collect();
+        assert!(!held.is_empty(), "the killed worker held no shard");
+        killed.push(held);
         workers.push(WorkerProcess::start(&url, &worker_args));
         std::thread::sleep(Duration::from_millis(300));
     }
@@ -231,7 +243,7 @@ fn three_worker_processes_on_postgres_survive_kill_9_and_give_the_bits_of_one_ma
         "three workers and two kills, to the bit"
     );
 
-    // Only the killed shards ran again; every other shard ran once.
+    // Only the shards the killed workers held ran again; every other shard ran once.
     let shards = shards(&api, &id);
     assert_eq!(shards.len(), 33, "32 groups and the merge");
     let rerun: Vec<_> = shards
@@ -240,6 +252,7 @@ fn three_worker_processes_on_postgres_survive_kill_9_and_give_the_bits_of_one_ma
         .map(|s| (s["batch"].clone(), s["group"].clone()))
         .collect();
     assert!(!rerun.is_empty(), "a killed shard reran: {shards:#?}");
+    let killed: Vec<_> = killed.concat();
     for shard in &rerun {
         assert!(
             killed.contains(shard),

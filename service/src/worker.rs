@@ -3,7 +3,10 @@
 //! number, and write its outcome only while the attempt still holds the shard.
 //!
 //! A shard is one group of devices of one batch ([`crate::domain::shards`]): its accumulators are
-//! stored when it is done. A batch's merge step, claimable once its groups are done, puts them back
+//! stored when it is done. A worker slot computes one shard at a time but does not wait on the
+//! database between groups: while a short group runs it claims the next shard
+//! ([`crate::domain::shards::claims_ahead`]), and a group's store goes on while the next one
+//! computes (one store at a time per slot). A batch's merge step, claimable once its groups are done, puts them back
 //! in order and stores the Result (or queues a precision target's next batch). A small job is its
 //! first merge step alone, which runs the whole job on the compute pool. A rare event's large
 //! rounds ([`crate::domain::rare`]) are batches too: any worker runs a round's tasks as it runs
@@ -16,8 +19,8 @@
 use crate::domain::UnixMs;
 use crate::domain::rare::{Rounds, is_round};
 use crate::domain::shards::{
-    Folding, LARGE_MERGE_ACCUMULATORS, MergeError, Merged, RoundMerged, ShardPlan, estimated,
-    merge, merge_accumulators, merge_round, run_whole,
+    Folding, LARGE_MERGE_ACCUMULATORS, MergeError, Merged, RoundMerged, ShardPlan, claims_ahead,
+    estimated, merge, merge_accumulators, merge_round, run_whole,
 };
 use crate::store::{
     Claim, EncodedGroups, EncodedResult, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store,
@@ -34,6 +37,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 use tokio::sync::{Notify, Semaphore, SemaphorePermit, broadcast, oneshot, watch};
 use tokio::task::JoinHandle;
+use tracing::Instrument;
 
 /// Progress and the lease are written at most this often per running shard.
 const HEARTBEAT_MAX_PERIOD: Duration = Duration::from_millis(500);
@@ -191,20 +195,34 @@ impl Workers {
         LeaseTerms::for_ms(i64::try_from(self.lease.as_millis()).unwrap_or(i64::MAX))
     }
 
-    async fn work(&self, slot: usize, mut shutdown: watch::Receiver<bool>) {
+    async fn work(self: Arc<Self>, slot: usize, shutdown: watch::Receiver<bool>) {
         let worker = format!("{}/{slot}", self.instance);
+        // The next shard, claimed while a group computes; the last group's store, still writing.
+        let mut ahead: Option<JoinHandle<StoreResult<Option<Claimed>>>> = None;
+        let mut storing: Option<JoinHandle<()>> = None;
         while !*shutdown.borrow() {
-            let claiming = Instant::now();
-            match self
-                .store
-                .claim(&worker, self.lease_terms(), self.budget)
-                .await
-            {
-                Ok(Some(claim)) => {
-                    record_shard_step("claim", claiming);
-                    self.run(claim, &mut shutdown).await
+            let claimed = match ahead.take() {
+                Some(claiming) => claiming.await.unwrap_or_else(|panicked| {
+                    tracing::error!(%panicked, "claiming ahead panicked");
+                    Ok(None)
+                }),
+                None => self.claim(&worker, &shutdown).await,
+            };
+            match claimed {
+                Ok(Some((claim, lease))) => {
+                    if claims_ahead(claim.fence.shard, claim.operations_total) {
+                        let (workers, worker) = (Arc::clone(&self), worker.clone());
+                        let shutdown = shutdown.clone();
+                        ahead = Some(tokio::spawn(async move {
+                            workers.claim(&worker, &shutdown).await
+                        }));
+                    }
+                    self.run(claim, lease, &mut storing).await
                 }
+                // A group still being stored may be what makes its batch's merge claimable.
+                Ok(None) if storing.is_some() => finish(storing.take()).await,
                 Ok(None) => {
+                    let mut shutdown = shutdown.clone();
                     tokio::select! {
                         () = self.wake.notified() => {}
                         () = tokio::time::sleep(IDLE_POLL) => {}
@@ -217,10 +235,40 @@ impl Workers {
                 }
             }
         }
+        // Stopping: the last group's store ends, a shard claimed ahead goes back to the queue.
+        finish(storing).await;
+        if let Some(claiming) = ahead
+            && let Ok(Ok(Some((claim, _lease)))) = claiming.await
+        {
+            self.stopped(&claim.fence, true).await;
+        }
+    }
+
+    /// Leases the next shard, and keeps its lease from now on; the claim's time is recorded.
+    async fn claim(
+        &self,
+        worker: &str,
+        shutdown: &watch::Receiver<bool>,
+    ) -> StoreResult<Option<Claimed>> {
+        let claiming = Instant::now();
+        let claim = self
+            .store
+            .claim(worker, self.lease_terms(), self.budget)
+            .await?;
+        Ok(claim.map(|claim| {
+            record_shard_step("claim", claiming);
+            let lease = self.keep_lease(&claim.fence, shutdown.clone());
+            (claim, lease)
+        }))
     }
 
     #[tracing::instrument(skip_all, fields(job = %claim.fence.job, shard = %claim.fence.shard, attempt = claim.fence.attempt.0))]
-    async fn run(&self, claim: Claim, shutdown: &mut watch::Receiver<bool>) {
+    async fn run(
+        self: &Arc<Self>,
+        claim: Claim,
+        lease: KeptLease,
+        storing: &mut Option<JoinHandle<()>>,
+    ) {
         let fence = &claim.fence;
         let job = match Job::new(claim.spec, || 0, &Pointer::root()) {
             Ok(job) => job,
@@ -229,18 +277,25 @@ impl Workers {
                 return self.fail(fence, &reason).await;
             }
         };
-        // The lease is kept from here to the last write: reading, computing and storing.
-        let lease = self.keep_lease(fence, shutdown.clone());
+        // The lease is kept from the claim to the last write: reading, computing and storing.
         match (fence.shard.group, is_round(fence.shard.batch)) {
-            (Some(group), false) => self.run_group(fence, job, group, &lease).await,
+            (Some(group), false) => self.run_group(fence, job, group, lease, storing).await,
             (None, false) => self.merge(fence, job, claim.started_at, &lease).await,
             (Some(group), true) => self.run_task(fence, job, group, &lease).await,
             (None, true) => self.merge_round(fence, job, claim.started_at, &lease).await,
         }
     }
 
-    /// Runs one group and stores its accumulators.
-    async fn run_group(&self, fence: &Fence, job: Job, group: u64, lease: &KeptLease) {
+    /// Runs one group, then stores its accumulators behind: the write goes on while this slot
+    /// claims and computes its next shard (`storing`, at most one write at a time per slot).
+    async fn run_group(
+        self: &Arc<Self>,
+        fence: &Fence,
+        job: Job,
+        group: u64,
+        lease: KeptLease,
+        storing: &mut Option<JoinHandle<()>>,
+    ) {
         let Some(batch) = Batch::of(&job, fence.shard.batch).filter(|b| group < b.groups()) else {
             let reason = format!("{} is not part of the job", fence.shard);
             return self.fail(fence, &reason).await;
@@ -250,7 +305,7 @@ impl Workers {
         tracing::debug!(operations, "group started");
         let running = Instant::now();
         let ran = self
-            .compute(lease, move |observer| {
+            .compute(&lease, move |observer| {
                 run_group(&job, batch, group, observer)
             })
             .await;
@@ -268,16 +323,21 @@ impl Workers {
         };
         let mut stats = stats;
         stats.lives.keep_listed_below(self.listed_lives);
-        let storing = Instant::now();
-        let complete = || self.store.complete(fence, &stats);
-        if self
-            .stored(fence, lease, "the group's accumulators", complete)
-            .await
-        {
-            record_shard_step("store", storing);
-            metrics::counter!("bouncewear_operations_simulated_total").increment(operations);
-            tracing::debug!("group done");
-        }
+        finish(storing.take()).await;
+        let (workers, fence) = (Arc::clone(self), fence.clone());
+        let store = async move {
+            let started = Instant::now();
+            let complete = || workers.store.complete(&fence, &stats);
+            if workers
+                .stored(&fence, &lease, "the group's accumulators", complete)
+                .await
+            {
+                record_shard_step("store", started);
+                metrics::counter!("bouncewear_operations_simulated_total").increment(operations);
+                tracing::debug!("group done");
+            }
+        };
+        *storing = Some(tokio::spawn(store.in_current_span()));
     }
 
     /// Puts the done groups back in order: the Result, or the next batch of a precision target.
@@ -716,6 +776,18 @@ impl Workers {
                 outcome => return outcome,
             }
         }
+    }
+}
+
+/// A claimed shard with its lease, kept from the claim on.
+type Claimed = (Claim, KeptLease);
+
+/// Waits for a store behind to end (it reports its own failure).
+async fn finish(storing: Option<JoinHandle<()>>) {
+    if let Some(storing) = storing
+        && let Err(panicked) = storing.await
+    {
+        tracing::error!(%panicked, "storing a group panicked");
     }
 }
 

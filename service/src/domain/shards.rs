@@ -86,6 +86,19 @@ pub fn batch_shards(job: &Job, batch: Batch) -> Vec<ShardPlan> {
 /// runs whole on all its compute threads anyway; more instances help only a larger job.
 pub const WHOLE_JOB_OPERATIONS: u64 = 2_000_000;
 
+/// The most operations of a shard during whose run its worker claims the next one: the claim's
+/// round trip (a few milliseconds) then overlaps the run instead of following it, a tenth of a
+/// 30 ms group. A larger shard runs long enough that its claim costs little, and a job queued
+/// meanwhile would wait for the shard claimed ahead too (fair share, docs/contract.md).
+pub const CLAIM_AHEAD_OPERATIONS: u64 = WHOLE_JOB_OPERATIONS;
+
+/// Whether a worker running `shard` of `operations` claims its next shard meanwhile: a group or
+/// a rare event's task (a merge step reads before it computes) of at most
+/// [`CLAIM_AHEAD_OPERATIONS`].
+pub fn claims_ahead(shard: ShardId, operations: u64) -> bool {
+    shard.group.is_some() && operations <= CLAIM_AHEAD_OPERATIONS
+}
+
 /// Whether `job` runs whole, as one shard: at most [`WHOLE_JOB_OPERATIONS`] operations, and no
 /// precision target (whose later batches, however many, are sharded as they come).
 pub fn runs_whole(job: &Job) -> bool {
@@ -547,6 +560,19 @@ mod tests {
                 "precision": {"metric": "e1", "relative_half_width": 0.01, "max_devices": 100}}"#,
         );
         assert_eq!(precision.len(), 11);
+    }
+
+    /// A worker claims ahead while it runs a group or a task of at most
+    /// [`CLAIM_AHEAD_OPERATIONS`], never during a merge step.
+    #[test]
+    fn only_short_groups_and_tasks_are_claimed_past() {
+        let group = ShardId::group(0, 31);
+        assert!(claims_ahead(group, 312_500));
+        assert!(claims_ahead(group, CLAIM_AHEAD_OPERATIONS));
+        assert!(!claims_ahead(group, CLAIM_AHEAD_OPERATIONS + 1));
+        assert!(claims_ahead(ShardId::group(rare::RARE_ROUNDS, 3), 1000));
+        assert!(!claims_ahead(ShardId::merge(0), 0));
+        assert!(!claims_ahead(ShardId::merge(rare::RARE_ROUNDS), 0));
     }
 
     #[test]
