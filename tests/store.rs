@@ -1026,7 +1026,21 @@ async fn every_u64_seed_reads_back_exactly(url: &str) {
             store.job(&Owner::anonymous(), &id).await.unwrap().seed,
             seed
         );
+        // The job and its spec in one read, as GET /v1/jobs/{id} shows them.
+        let (record, spec) = store.job_with_spec(&Owner::anonymous(), &id).await.unwrap();
+        assert_eq!(record, store.job(&Owner::anonymous(), &id).await.unwrap());
+        assert_eq!(
+            (spec.seed, spec.devices, spec.operations),
+            (Some(seed), 2, 3)
+        );
     }
+    let missing = store
+        .job_with_spec(&Owner::anonymous(), &JobId::from("nope"))
+        .await;
+    assert!(matches!(
+        missing,
+        Err(StoreError::NotFound { kind: "job", .. })
+    ));
 }
 
 /// A nightly schedule (03:00 UTC) of a tiny job, next due at `next_run_at`.

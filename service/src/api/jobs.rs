@@ -303,8 +303,7 @@ pub async fn get_job(
     Extension(owner): Extension<Owner>,
     Path(id): Path<JobId>,
 ) -> Result<Json<JobResource>, ApiError> {
-    let record = state.store.job(&owner, &id).await?;
-    let spec = state.store.job_spec(&owner, &id).await?;
+    let (record, spec) = state.store.job_with_spec(&owner, &id).await?;
     Ok(Json(JobResource {
         spec: Some(spec),
         ..JobResource::from_record(&record)

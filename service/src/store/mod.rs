@@ -293,8 +293,8 @@ pub trait JobQueue: Send + Sync + 'static {
         now: UnixMs,
     ) -> StoreResult<Option<Once<JobRecord>>>;
     async fn job(&self, owner: &Owner, id: &JobId) -> StoreResult<JobRecord>;
-    /// The job as submitted, seed fixed.
-    async fn job_spec(&self, owner: &Owner, id: &JobId) -> StoreResult<JobSpec>;
+    /// The job and the job as submitted, seed fixed, in one read.
+    async fn job_with_spec(&self, owner: &Owner, id: &JobId) -> StoreResult<(JobRecord, JobSpec)>;
     /// Newest first.
     async fn jobs(&self, owner: &Owner, page: Page) -> StoreResult<Vec<JobRecord>>;
     /// Every owner's queued and running jobs, and the other jobs submitted after `after` (a

@@ -335,14 +335,18 @@ impl JobQueue for SqlStore {
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn job_spec(&self, owner: &Owner, id: &JobId) -> StoreResult<JobSpec> {
-        let row = Sql::new("SELECT spec FROM jobs WHERE id = $1 AND owner = $2")
-            .bind(id.as_str())
-            .bind(owner.as_str())
-            .fetch_optional(self.readers())
-            .await?
-            .ok_or_else(|| StoreError::job_not_found(id))?;
-        spec_from_json(&row.text("spec")?)
+    async fn job_with_spec(&self, owner: &Owner, id: &JobId) -> StoreResult<(JobRecord, JobSpec)> {
+        let row = Sql::new(concat!(
+            "SELECT ",
+            job_columns!(),
+            ", spec FROM jobs WHERE id = $1 AND owner = $2"
+        ))
+        .bind(id.as_str())
+        .bind(owner.as_str())
+        .fetch_optional(self.readers())
+        .await?
+        .ok_or_else(|| StoreError::job_not_found(id))?;
+        Ok((job_from_row(&row)?, spec_from_json(&row.text("spec")?)?))
     }
 
     #[tracing::instrument(skip_all)]
