@@ -1188,7 +1188,8 @@ async fn postgres_keeps_every_promise() {
 
 /// The accumulators are LZ4-compressed before they are stored: PostgreSQL keeps them out of line
 /// as they are (`EXTERNAL`), without its default attempt at pglz, which could not shrink them and
-/// cost a third of its CPU time on a sharded job (`migrations/postgres/0012`).
+/// cost a third of its CPU time on a sharded job (`migrations/postgres/0012`). The Result's JSON,
+/// which compresses, goes through lz4 rather than pglz (`migrations/postgres/0013`).
 async fn compressed_accumulators_are_stored_without_pglz(url: &str) {
     use sqlx::Connection;
     let store = store::open(url).await.unwrap();
@@ -1204,6 +1205,21 @@ async fn compressed_accumulators_are_stored_without_pglz(url: &str) {
         .unwrap();
         assert_eq!(storage as u8, b'e', "{table}.{column}");
     }
+    // The Result's JSON is compressed with lz4 wherever the server has it (migration 0013).
+    let lz4 = sqlx::query("CREATE TEMPORARY TABLE lz4_here (x text COMPRESSION lz4)")
+        .execute(&mut connection)
+        .await
+        .is_ok();
+    let compression: i8 = sqlx::query_scalar(
+        "SELECT attcompression FROM pg_attribute \
+         WHERE attrelid = 'results'::regclass AND attname = 'result'",
+    )
+    .fetch_one(&mut connection)
+    .await
+    .unwrap();
+    // Without it the column keeps the server's default (no method of its own).
+    let expected = if lz4 { b'l' } else { 0 };
+    assert_eq!(compression as u8, expected, "results.result");
     drop(store);
 }
 

@@ -47,6 +47,7 @@ const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
     "0010_fair_share_and_retries.sql",
     "0011_claim_indexes.sql",
     "0012_compressed_bytes_stored_as_they_are.sql",
+    "0013_results_compressed_with_lz4.sql",
 );
 
 /// `migrations/sqlite/`.
