@@ -6,15 +6,17 @@
 //! stored when it is done. A worker slot computes one shard at a time but does not wait on the
 //! database between groups: while a short group runs it claims the next shard
 //! ([`crate::domain::shards::claims_ahead`]), and a group's store goes on while the next one
-//! computes (one store at a time per slot). A batch's merge step, claimable once its groups are done, puts them back
-//! in order and stores the Result (or queues a precision target's next batch). A small job is its
-//! first merge step alone, which runs the whole job on the compute pool. A rare event's large
-//! rounds ([`crate::domain::rare`]) are batches too: any worker runs a round's tasks as it runs
-//! groups, and the round's merge step takes their outcomes. A shard interrupted
-//! by a crash or kill keeps its lease until it expires; then any worker on any machine claims it
-//! again and reruns that shard alone. Seeds are fixed at submission and each device has its own
-//! random stream, so the Result is identical to an uninterrupted run on one machine. On a graceful
-//! shutdown the running shard is stopped and handed back to the queue at once.
+//! computes (one store at a time per slot). A batch's merge step, claimable once its groups are
+//! done, puts them back in order and stores the Result (or queues a precision target's next
+//! batch). A small job is its first merge step alone, which runs the whole job on the compute
+//! pool. A rare event's large rounds ([`crate::domain::rare`]) are batches too: any worker runs a
+//! round's tasks as it runs groups, and the round's merge step takes their outcomes. The shards a
+//! process held when it crashed or was killed (the one it ran, the one it claimed ahead, the group
+//! it was storing) keep their leases until they expire; then any worker on any machine claims
+//! them again and reruns those shards alone. Seeds are fixed at submission and each device has its
+//! own random stream, so the Result is identical to an uninterrupted run on one machine. On a
+//! graceful shutdown the running shard is stopped and handed back to the queue at once, with the
+//! one claimed ahead; a group being stored is stored first.
 
 use crate::domain::UnixMs;
 use crate::domain::rare::{Rounds, is_round};
