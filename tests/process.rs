@@ -221,8 +221,8 @@ fn three_worker_processes_on_postgres_survive_kill_9_and_give_the_bits_of_one_ma
         let worker = workers.swap_remove(index);
         let pid = worker.child.id();
         worker.kill();
-        // What the worker held when it died: the group it ran, and the next shard it had claimed
-        // meanwhile or the last group still being stored. Their leases outlive it by two seconds;
+        // What the worker held when it died: the group it ran, the next shard it had claimed
+        // meanwhile and the last group still being stored. Their leases outlive it by two seconds;
         // a statement it sent before it died is done within the pause.
         std::thread::sleep(Duration::from_millis(200));
         let held: Vec<_> = shards(&api, &id)

@@ -203,16 +203,21 @@ impl Workers {
         let mut ahead: Option<JoinHandle<StoreResult<Option<Claimed>>>> = None;
         let mut storing: Option<JoinHandle<()>> = None;
         while !*shutdown.borrow() {
-            let claimed = match ahead.take() {
-                Some(claiming) => claiming.await.unwrap_or_else(|panicked| {
-                    tracing::error!(%panicked, "claiming ahead panicked");
-                    Ok(None)
-                }),
-                None => self.claim(&worker, &shutdown).await,
+            let (claimed, claimed_before) = match ahead.take() {
+                Some(claiming) => (
+                    claiming.await.unwrap_or_else(|panicked| {
+                        tracing::error!(%panicked, "claiming ahead panicked");
+                        Ok(None)
+                    }),
+                    true,
+                ),
+                None => (self.claim(&worker, &shutdown).await, false),
             };
             match claimed {
                 Ok(Some((claim, lease))) => {
-                    if claims_ahead(claim.fence.shard, claim.operations_total) {
+                    if !*shutdown.borrow()
+                        && claims_ahead(claim.fence.shard, claim.operations_total)
+                    {
                         let (workers, worker) = (Arc::clone(&self), worker.clone());
                         let shutdown = shutdown.clone();
                         ahead = Some(tokio::spawn(async move {
@@ -221,8 +226,9 @@ impl Workers {
                     }
                     self.run(claim, lease, &mut storing).await
                 }
-                // A group still being stored may be what makes its batch's merge claimable.
-                Ok(None) if storing.is_some() => finish(storing.take()).await,
+                // Nothing was claimable when the shard before began: look again before sleeping,
+                // once the group still being stored (which may make its merge claimable) is in.
+                Ok(None) if claimed_before || storing.is_some() => finish(storing.take()).await,
                 Ok(None) => {
                     let mut shutdown = shutdown.clone();
                     tokio::select! {
@@ -237,13 +243,14 @@ impl Workers {
                 }
             }
         }
-        // Stopping: the last group's store ends, a shard claimed ahead goes back to the queue.
-        finish(storing).await;
+        // Stopping: a shard claimed ahead goes back to the queue at once (its heartbeat has
+        // stopped), then the last group's store ends.
         if let Some(claiming) = ahead
             && let Ok(Ok(Some((claim, _lease)))) = claiming.await
         {
             self.stopped(&claim.fence, true).await;
         }
+        finish(storing).await;
     }
 
     /// Leases the next shard, and keeps its lease from now on; the claim's time is recorded.
