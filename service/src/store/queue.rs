@@ -11,7 +11,7 @@ use super::rows::{
     job_from_row, not_ended, partial_to_sql, remembered_from_row, schema_current, shard_columns,
     shard_from_row, shard_id_from_row, spec_from_json,
 };
-use super::sql::{Conn, Sql, Tx};
+use super::sql::{AnyRow, Conn, Sql, Tx};
 use super::{
     Claim, EncodedGroups, Fence, JobQueue, JobRecord, Lease, LeaseTerms, Page, QueueEvent,
     ShardRecord, StoreError, StoreResult,
@@ -155,24 +155,34 @@ async fn sum_progress(tx: &mut Tx, job: &JobId) -> StoreResult<()> {
     Ok(())
 }
 
-const SELECT_JOB: &str = concat!(
-    "SELECT ",
-    job_columns!(),
-    " FROM jobs WHERE id = $1 AND owner = $2"
-);
+/// Job `$1` of owner `$2`: its columns, then what follows `$rest` (more columns).
+macro_rules! select_job {
+    ($($rest:literal)?) => {
+        concat!("SELECT ", job_columns!(), $($rest,)? " FROM jobs WHERE id = $1 AND owner = $2")
+    };
+}
 
 pub(crate) async fn select_job(
     on: impl Into<Conn<'_>>,
     owner: &Owner,
     id: &JobId,
 ) -> StoreResult<JobRecord> {
-    let row = Sql::new(SELECT_JOB)
+    Ok(job_from_row(&job_row(on, select_job!(), owner, id).await?)?)
+}
+
+/// The row `sql` ([`select_job!`]) reads of job `id` of `owner`, or that there is none.
+async fn job_row(
+    on: impl Into<Conn<'_>>,
+    sql: &'static str,
+    owner: &Owner,
+    id: &JobId,
+) -> StoreResult<AnyRow> {
+    Sql::new(sql)
         .bind(id.as_str())
         .bind(owner.as_str())
         .fetch_optional(on)
         .await?
-        .ok_or_else(|| StoreError::job_not_found(id))?;
-    Ok(job_from_row(&row)?)
+        .ok_or_else(|| StoreError::job_not_found(id))
 }
 
 fn fenced(sql: &'static str, fence: &Fence) -> Sql {
@@ -336,16 +346,7 @@ impl JobQueue for SqlStore {
 
     #[tracing::instrument(skip_all, fields(job = %id))]
     async fn job_with_spec(&self, owner: &Owner, id: &JobId) -> StoreResult<(JobRecord, JobSpec)> {
-        let row = Sql::new(concat!(
-            "SELECT ",
-            job_columns!(),
-            ", spec FROM jobs WHERE id = $1 AND owner = $2"
-        ))
-        .bind(id.as_str())
-        .bind(owner.as_str())
-        .fetch_optional(self.readers())
-        .await?
-        .ok_or_else(|| StoreError::job_not_found(id))?;
+        let row = job_row(self.readers(), select_job!(", spec"), owner, id).await?;
         Ok((job_from_row(&row)?, spec_from_json(&row.text("spec")?)?))
     }
 
