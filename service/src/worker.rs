@@ -203,15 +203,13 @@ impl Workers {
         let mut ahead: Option<JoinHandle<StoreResult<Option<Claimed>>>> = None;
         let mut storing: Option<JoinHandle<()>> = None;
         while !*shutdown.borrow() {
-            let (claimed, claimed_before) = match ahead.take() {
-                Some(claiming) => (
-                    claiming.await.unwrap_or_else(|panicked| {
-                        tracing::error!(%panicked, "claiming ahead panicked");
-                        Ok(None)
-                    }),
-                    true,
-                ),
-                None => (self.claim(&worker, &shutdown).await, false),
+            let claimed_before = ahead.is_some();
+            let claimed = match ahead.take() {
+                Some(claiming) => claiming.await.unwrap_or_else(|panicked| {
+                    tracing::error!(%panicked, "claiming ahead panicked");
+                    Ok(None)
+                }),
+                None => self.claim(&worker, &shutdown).await,
             };
             match claimed {
                 Ok(Some((claim, lease))) => {
