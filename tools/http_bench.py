@@ -4,9 +4,12 @@
     target/release/bouncewear serve --bind 127.0.0.1:8080 --database sqlite:///tmp/bench.db &
     python3 tools/http_bench.py http://127.0.0.1:8080
 
-1. Submit to result: a 100 devices x 100 operations job, POST until the Result is fetched, 50 times.
+1. Submit to result: a 100 devices x 100 operations job, POST until the Result is fetched, 50 times:
+   asking for the Result every millisecond until it is there, and with one request that waits for
+   it (`?wait_s=`), alternately.
 2. Throughput of small jobs: 4 clients each submit 50 such jobs one after another, each fetching
-   its Result before the next; jobs per second from the first POST to the last Result.
+   its Result before the next (a waiting request); jobs per second from the first POST to the last
+   Result.
 3. GET latency under load: 16 client threads GET /v1/jobs/{id} for 10 s while a 500-million-operation
    job keeps the compute threads busy.
 """
@@ -31,7 +34,9 @@ def request(conn, method, path, body=None):
     return response.status, response.read()
 
 
-def submit_to_result(base, runs=50, first_seed=0):
+def submit_to_result(base, runs=50, first_seed=0, wait=False):
+    """Seconds from each POST to its Result: polled every millisecond, or with `wait` one request
+    that the server answers once the job ended."""
     conn = connection(base)
     times = []
     for seed in range(first_seed, first_seed + runs):
@@ -40,7 +45,7 @@ def submit_to_result(base, runs=50, first_seed=0):
         assert status == 202, body
         job = json.loads(body)["id"]
         while True:
-            status, body = request(conn, "GET", f"/v1/jobs/{job}/result")
+            status, body = request(conn, "GET", f"/v1/jobs/{job}/result" + ("?wait_s=10" if wait else ""))
             if status == 200:
                 break
             assert status == 409, body
@@ -54,7 +59,7 @@ def small_jobs_throughput(base, clients=4, jobs=50):
 
     def client(index):
         try:
-            submit_to_result(base, runs=jobs, first_seed=1000 * (index + 1))
+            submit_to_result(base, runs=jobs, first_seed=1000 * (index + 1), wait=True)
         except AssertionError as error:
             errors.append(error)
 
@@ -109,9 +114,13 @@ def quantile(values, q):
 
 def main():
     base = sys.argv[1] if len(sys.argv) > 1 else "http://127.0.0.1:8080"
-    times = submit_to_result(base)
-    print(f"submit to result, 100 x 100 job, {len(times)} runs: median {1e3 * statistics.median(times):.1f} ms, "
-          f"p90 {1e3 * quantile(times, 0.9):.1f} ms, max {1e3 * max(times):.1f} ms")
+    polled, waited = [], []
+    for block in range(5):
+        polled += submit_to_result(base, runs=10, first_seed=100 * block)
+        waited += submit_to_result(base, runs=10, first_seed=100 * block + 50, wait=True)
+    for how, times in (("polled every ms", polled), ("one waiting GET", waited)):
+        print(f"submit to result, 100 x 100 job, {how}, {len(times)} runs: median {1e3 * statistics.median(times):.1f} ms, "
+              f"p90 {1e3 * quantile(times, 0.9):.1f} ms, max {1e3 * max(times):.1f} ms")
     print(f"small jobs, 4 clients x 50 jobs of 100 x 100: {small_jobs_throughput(base):.1f} jobs/s")
     latencies, errors, busy = get_under_load(base)
     print(f"GET /v1/jobs/{{id}} under load (16 clients, 10 s, a 500 M-operation job still running at the end: {busy}): "

@@ -80,6 +80,7 @@ impl Application {
         let watch = JobWatch::start(
             Arc::clone(&store),
             config.max_streams_per_key,
+            config.max_waits(),
             shutdown.clone(),
         );
         let state = AppState {

@@ -154,6 +154,18 @@ impl ServeConfig {
         seconds(self.request_timeout_seconds)
     }
 
+    /// Requests that may wait for a job's end at once (`wait_s`): a quarter of the request slots,
+    /// so that waiting never takes the slots other requests need.
+    pub fn max_waits(&self) -> usize {
+        (self.max_concurrent_requests / 4).max(1)
+    }
+
+    /// The longest a request waits for a job's end: half the request timeout, so that a wait
+    /// ends with the job as it is rather than a 503.
+    pub fn max_wait(&self) -> Duration {
+        self.request_timeout() / 2
+    }
+
     /// What a schedule may ask for: each run's size, and how often it runs.
     pub fn schedule_limits(&self) -> ScheduleLimits {
         ScheduleLimits {

@@ -210,6 +210,54 @@ fn cancelling_stops_a_running_job_a_retried_cancel_keeps_it_and_a_purge_deletes_
     assert_problem(&get(&server.url(&format!("/v1/jobs/{id}")), None), 404);
 }
 
+/// `wait_s`: one request answers the moment the job ends (its Result, the ended job, a cancel
+/// seen by a request already waiting), or with the job as it is once the time passed; a wait out
+/// of range is refused by name.
+#[test]
+fn a_request_with_wait_s_answers_when_the_job_ends() {
+    let server = TestApp::start(&temp_db("wait"), &[]);
+    let job = scattered_job(2000, 200, 5);
+    let id = server.submit(&job);
+    // Without the wait this would be 409: the job has only just been queued.
+    let result = get(
+        &server.url(&format!("/v1/jobs/{id}/result?wait_s=30")),
+        None,
+    );
+    assert_eq!(result.status, 200, "{}", result.body);
+    assert_eq!(
+        result.json()["operations"],
+        run_job(&job, &[])["operations"]
+    );
+    let ended = get(&server.url(&format!("/v1/jobs/{id}?wait_s=30")), None).json();
+    assert_eq!(ended["status"], "succeeded");
+
+    let long = server.submit(&scattered_job(200_000, 1000, 1));
+    let job_url = server.url(&format!("/v1/jobs/{long}"));
+    let started = Instant::now();
+    let running = get(&format!("{job_url}?wait_s=0.3"), None).json();
+    assert!(started.elapsed() >= Duration::from_millis(300), "it waited");
+    assert!(
+        ["queued", "running"].contains(&running["status"].as_str().unwrap()),
+        "{running}"
+    );
+    assert_problem(&get(&format!("{job_url}/result?wait_s=0.1"), None), 409);
+    let waiting = {
+        let url = format!("{job_url}?wait_s=30");
+        std::thread::spawn(move || get(&url, None).json())
+    };
+    std::thread::sleep(Duration::from_millis(200));
+    assert_eq!(delete(&job_url).status, 200);
+    assert_eq!(waiting.join().unwrap()["status"], "cancelled");
+
+    for bad in ["31", "-1", "NaN", "soon"] {
+        let problem = assert_problem(&get(&format!("{job_url}?wait_s={bad}"), None), 400);
+        assert!(
+            problem["detail"].as_str().unwrap().contains("wait_s"),
+            "{bad}: {problem}"
+        );
+    }
+}
+
 /// One number from the database file, read beside the running server; `?1` is the job's id.
 fn sql_number(database: &std::path::Path, sql: &'static str, job: &str) -> i64 {
     let url = format!("sqlite://{}", database.display());
@@ -352,7 +400,7 @@ fn unknown_query_parameters_are_refused_by_name() {
         ),
         (
             format!("/v1/jobs/{id}?verbose=1&a=2"),
-            "unknown query parameter `a`, `verbose`: GET /v1/jobs/{id} takes no query parameters",
+            "unknown query parameter `a`, `verbose`: GET /v1/jobs/{id} takes only `wait_s`",
         ),
     ];
     for (path, detail) in refused {

@@ -5,6 +5,7 @@ use super::error::{
     ApiError, Internal, PROBLEM, Problem,
     responses::{BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, Unauthorized},
 };
+use super::watch::MAX_WAIT_S;
 use super::{AppState, JsonText, idempotency_key, replayed};
 use crate::domain::{AfterRunQuery, JobId, JobStatus, Once, Owner, QueuedJob, UnixMs, draw_seed};
 use crate::store::{JobRecord, Operations, Page, ShardRecord, StoreError};
@@ -285,14 +286,65 @@ pub async fn list_jobs(
     }))
 }
 
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct WaitQuery {
+    /// Seconds to wait, at most 30 (and half the server's request timeout), for the job to end
+    /// before answering: the answer comes the moment it succeeds, fails or is cancelled, or
+    /// with the job as it is when the time passed. Without it (or 0), the answer is at once.
+    #[param(minimum = 0, maximum = 30, example = 10)]
+    pub wait_s: Option<f64>,
+}
+
+impl WaitQuery {
+    /// How long to wait: `wait_s` checked, then cut to what the server allows.
+    fn wait(
+        query: Result<Query<WaitQuery>, QueryRejection>,
+        state: &AppState,
+    ) -> Result<std::time::Duration, ApiError> {
+        let Query(query) =
+            query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+        let wait_s = query.wait_s.unwrap_or(0.0);
+        if !(0.0..=MAX_WAIT_S).contains(&wait_s) {
+            return Err(ApiError::BadRequest(format!(
+                "wait_s must be from 0 to {MAX_WAIT_S} seconds, got {wait_s}"
+            )));
+        }
+        Ok(std::time::Duration::from_secs_f64(wait_s).min(state.config.max_wait()))
+    }
+}
+
+/// The job once it ended, or as it is after `wait` ([`super::watch::JobWatch::until_ended`]).
+async fn ended_within(
+    state: &AppState,
+    owner: &Owner,
+    id: &JobId,
+    wait: std::time::Duration,
+) -> Result<JobRecord, ApiError> {
+    Ok(state
+        .watch
+        .until_ended(
+            state.store.as_ref(),
+            owner,
+            id,
+            wait,
+            state.shutdown.clone(),
+        )
+        .await?)
+}
+
 /// A job's status and progress.
 ///
 /// The JobResource: status (`queued`, `running`, `succeeded`, `failed`, `cancelled`), progress in
-/// operations, times (RFC 3339), the seed, and links to the result and the event stream.
+/// operations, times (RFC 3339), the seed, and links to the result and the event stream. With
+/// `wait_s`, the answer waits for the job to end (for at most that long): one request instead of
+/// asking again and again.
 #[utoipa::path(
-    get, path = "/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "Job id")),
+    get, path = "/v1/jobs/{id}", tag = "jobs",
+    params(("id" = String, Path, description = "Job id"), WaitQuery),
     responses(
         (status = 200, description = "The job", body = JobResource),
+        BadQuery,
         Unauthorized,
         NoSuchJob,
     ),
@@ -302,7 +354,12 @@ pub async fn get_job(
     State(state): State<AppState>,
     Extension(owner): Extension<Owner>,
     Path(id): Path<JobId>,
+    query: Result<Query<WaitQuery>, QueryRejection>,
 ) -> Result<Json<JobResource>, ApiError> {
+    let wait = WaitQuery::wait(query, &state)?;
+    if !wait.is_zero() {
+        ended_within(&state, &owner, &id, wait).await?;
+    }
     let (record, spec) = state.store.job_with_spec(&owner, &id).await?;
     Ok(Json(JobResource {
         spec: Some(spec),
@@ -463,12 +520,15 @@ pub async fn succeeded(state: &AppState, owner: &Owner, id: &JobId) -> Result<Jo
 ///
 /// The whole Result: the resolved job, per-bin summaries of every operation metric, device
 /// summaries, life analysis, precision, counts, diagnostics and timing. It never changes, so it
-/// carries an `ETag` and `Cache-Control: immutable`; `If-None-Match` gets 304.
+/// carries an `ETag` and `Cache-Control: immutable`; `If-None-Match` gets 304. With `wait_s`, the
+/// answer waits for the job to end (for at most that long): the Result the moment it is stored.
 #[utoipa::path(
-    get, path = "/v1/jobs/{id}/result", tag = "jobs", params(("id" = String, Path, description = "Job id")),
+    get, path = "/v1/jobs/{id}/result", tag = "jobs",
+    params(("id" = String, Path, description = "Job id"), WaitQuery),
     responses(
         (status = 200, description = "The result", body = JobResult, headers(("ETag" = String, description = "A tag of the content, for If-None-Match"), ("Cache-Control" = String, description = "Immutable for a year"))),
         NotModified,
+        BadQuery,
         Unauthorized,
         NoSuchJob,
         NotSucceeded,
@@ -479,8 +539,13 @@ pub async fn get_result(
     State(state): State<AppState>,
     Extension(owner): Extension<Owner>,
     Path(id): Path<JobId>,
+    query: Result<Query<WaitQuery>, QueryRejection>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
+    let wait = WaitQuery::wait(query, &state)?;
+    if !wait.is_zero() {
+        ended_within(&state, &owner, &id, wait).await?;
+    }
     succeeded(&state, &owner, &id).await?;
     let result = state
         .store

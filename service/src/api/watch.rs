@@ -12,7 +12,7 @@ use crate::telemetry::EVENT_WATCH_LOOKS;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use tokio::sync::{broadcast, watch};
+use tokio::sync::{Semaphore, broadcast, watch};
 
 /// The shortest time between two looks, however many jobs change; without announcements
 /// (SQLite), how often the watcher looks.
@@ -62,14 +62,25 @@ pub struct JobWatch {
     snapshots: watch::Sender<Arc<Snapshot>>,
     streams: Mutex<HashMap<Owner, usize>>,
     per_key: usize,
+    /// Places of the requests waiting for a job's end ([`JobWatch::until_ended`]).
+    waits: Semaphore,
 }
+
+/// The longest a request may wait for a job's end (`wait_s`): within the request timeout's
+/// default of 60 s, so that a wait always ends with the job as it is, never a 503.
+pub const MAX_WAIT_S: f64 = 30.0;
+
+/// How often a waiting request reads its job again when nothing was announced: another process
+/// on the same SQLite file, or PostgreSQL's listener reconnecting, announces nothing here.
+const RECHECK: Duration = Duration::from_millis(500);
 
 impl JobWatch {
     /// Starts the watcher over `store`; it runs until `shutdown` turns true. At most `per_key`
-    /// streams per owner.
+    /// streams per owner, and at most `waits` requests waiting for a job's end at once.
     pub fn start(
         store: Arc<dyn Store>,
         per_key: usize,
+        waits: usize,
         shutdown: watch::Receiver<bool>,
     ) -> Arc<Self> {
         let (snapshots, _) = watch::channel(Arc::new(Snapshot::default()));
@@ -77,6 +88,7 @@ impl JobWatch {
             snapshots,
             streams: Mutex::new(HashMap::new()),
             per_key,
+            waits: Semaphore::new(waits),
         });
         tokio::spawn(Arc::clone(&watch).run(store, shutdown));
         watch
@@ -96,6 +108,47 @@ impl JobWatch {
             owner: owner.clone(),
             watch: Arc::clone(self),
         })
+    }
+
+    /// `owner`'s job `id` once it ended, or as it is when `wait` passed: a request that waits
+    /// instead of asking again and again. The store's announcements ([`Store::ends`]) wake it the
+    /// moment the job ends, and it reads the job again every [`RECHECK`] in case one was missed.
+    /// With every place taken, at shutdown, or for a job that already ended it answers at once.
+    pub async fn until_ended(
+        &self,
+        store: &dyn Store,
+        owner: &Owner,
+        id: &JobId,
+        wait: Duration,
+        mut shutdown: watch::Receiver<bool>,
+    ) -> StoreResult<JobRecord> {
+        let deadline = Instant::now() + wait;
+        // Listening before the first read: an end between the two is not missed.
+        let mut ends = Some(store.ends());
+        let mut record = store.job(owner, id).await?;
+        let Ok(_place) = self.waits.try_acquire() else {
+            return Ok(record);
+        };
+        while !record.status.is_terminal() && Instant::now() < deadline && !*shutdown.borrow() {
+            let recheck = tokio::time::sleep_until((deadline.min(Instant::now() + RECHECK)).into());
+            tokio::pin!(recheck);
+            loop {
+                tokio::select! {
+                    () = &mut recheck => break,
+                    // Shutting down (or its sender gone): the job as it is, so the server drains.
+                    _ = shutdown.changed() => return store.job(owner, id).await,
+                    event = next_end(&mut ends) => match event {
+                        Ok(QueueEvent::Changed(changed)) if changed == *id => break,
+                        Ok(_) => {}
+                        // Some ends were passed over, perhaps this one's.
+                        Err(broadcast::error::RecvError::Lagged(_)) => break,
+                        Err(broadcast::error::RecvError::Closed) => ends = None,
+                    },
+                }
+            }
+            record = store.job(owner, id).await?;
+        }
+        Ok(record)
     }
 
     async fn run(self: Arc<Self>, store: Arc<dyn Store>, mut shutdown: watch::Receiver<bool>) {
@@ -142,6 +195,16 @@ impl JobWatch {
                 next_announcement(&mut announcements).await;
             }
         }
+    }
+}
+
+/// The next announcement, or never once there are none.
+async fn next_end(
+    ends: &mut Option<broadcast::Receiver<QueueEvent>>,
+) -> Result<QueueEvent, broadcast::error::RecvError> {
+    match ends {
+        Some(ends) => ends.recv().await,
+        None => std::future::pending().await,
     }
 }
 

@@ -46,7 +46,10 @@ pub enum Part {
     Shards,
 }
 
-/// How often `wait` asks.
+/// The longest one of `wait`'s requests waits for the job's end (`wait_s`): well within the
+/// server's and the client's request timeouts.
+const WAIT_PER_REQUEST: f64 = 10.0;
+/// The least time between two of `wait`'s requests, should a server answer at once anyway.
 const POLL: Duration = Duration::from_millis(200);
 
 /// An HTTP client whose every request ends within `timeout_seconds`, and which hands any status
@@ -100,6 +103,11 @@ impl Server {
 
     fn job(&self, id: &str) -> Result<serde_json::Value, CliError> {
         parse(&self.send("GET", &format!("/v1/jobs/{id}"), None)?)
+    }
+
+    /// The job once it ended, or as it is after `wait_s` seconds (the server's `wait_s`).
+    fn job_within(&self, id: &str, wait_s: f64) -> Result<serde_json::Value, CliError> {
+        parse(&self.send("GET", &format!("/v1/jobs/{id}?wait_s={wait_s}"), None)?)
     }
 }
 
@@ -168,7 +176,13 @@ pub fn status(server: &Server, id: &str) -> Result<String, CliError> {
 pub fn wait_for(server: &Server, id: &str, timeout: Option<f64>) -> Result<String, CliError> {
     let started = Instant::now();
     loop {
-        let job = server.job(id)?;
+        let left = timeout.map_or(WAIT_PER_REQUEST, |t| t - started.elapsed().as_secs_f64());
+        let wait_s = left
+            .min(WAIT_PER_REQUEST)
+            .min(server.request_timeout_seconds / 2.0)
+            .max(0.0);
+        let asked = Instant::now();
+        let job = server.job_within(id, wait_s)?;
         match job["status"].as_str() {
             Some("succeeded") => return Ok(job.to_string()),
             Some(ended @ ("failed" | "cancelled")) => {
@@ -184,7 +198,8 @@ pub fn wait_for(server: &Server, id: &str, timeout: Option<f64>) -> Result<Strin
                 started.elapsed().as_secs_f64()
             )));
         }
-        std::thread::sleep(POLL);
+        // A server that did not wait (all its places taken) is asked again after a pause.
+        std::thread::sleep(POLL.saturating_sub(asked.elapsed()));
     }
 }
 

@@ -8,7 +8,7 @@ use super::rows::Dialect;
 use super::sql::{Conn, Pooled, Sql, Tx};
 use super::sqlite::SqliteBackend;
 use super::{QueueEvent, StoreError, StoreResult};
-use crate::domain::{QueueBound, QueuedJob};
+use crate::domain::{JobId, QueueBound, QueuedJob};
 use tokio::sync::broadcast;
 
 /// The store over either database.
@@ -140,6 +140,24 @@ impl SqlStore {
         match &self.backend {
             Backend::Sqlite(_) => None,
             Backend::Postgres(postgres) => Some(postgres.events.subscribe()),
+        }
+    }
+
+    /// [`super::JobQueue::ends`]: PostgreSQL's announcements of every change, or the ends of jobs
+    /// this process wrote to SQLite.
+    pub(crate) fn subscribe_ends(&self) -> broadcast::Receiver<QueueEvent> {
+        match &self.backend {
+            Backend::Sqlite(sqlite) => sqlite.ends.subscribe(),
+            Backend::Postgres(postgres) => postgres.events.subscribe(),
+        }
+    }
+
+    /// Tells this process's waiters that job `id` ended (or is gone), once its transaction
+    /// committed. PostgreSQL's trigger announces it to every instance already.
+    pub(crate) fn ended(&self, id: &JobId) {
+        if let Backend::Sqlite(sqlite) = &self.backend {
+            // No receiver is no waiter: nothing to tell.
+            let _ = sqlite.ends.send(QueueEvent::Changed(id.clone()));
         }
     }
 }

@@ -405,6 +405,7 @@ impl JobQueue for SqlStore {
             let mut tx = self.begin().await?;
             drop_unfinished(&mut tx, id).await?;
             tx.commit().await?;
+            self.ended(id);
             return Ok(job_from_row(&row)?);
         }
         let ended = select_job(self.writer()?, owner, id).await?;
@@ -431,6 +432,7 @@ impl JobQueue for SqlStore {
             .execute(&mut tx)
             .await?;
         tx.commit().await?;
+        self.ended(id);
         Ok(())
     }
 
@@ -638,6 +640,7 @@ impl JobQueue for SqlStore {
         };
         end_job(&mut tx, &fence.job, now, error).await?;
         tx.commit().await?;
+        self.ended(&fence.job);
         Ok(true)
     }
 
@@ -671,7 +674,8 @@ impl JobQueue for SqlStore {
             return Ok(false);
         };
         let failures = failures.max(0) as u64;
-        if failures > retries {
+        let ends = failures > retries;
+        if ends {
             let reason = failed_too_often(retries, fence.shard, failures, error);
             end_job(&mut tx, &fence.job, now, &reason).await?;
         } else {
@@ -687,6 +691,9 @@ impl JobQueue for SqlStore {
             sum_progress(&mut tx, &fence.job).await?;
         }
         tx.commit().await?;
+        if ends {
+            self.ended(&fence.job);
+        }
         Ok(true)
     }
 
@@ -756,5 +763,9 @@ impl JobQueue for SqlStore {
 
     fn events(&self) -> Option<broadcast::Receiver<QueueEvent>> {
         self.subscribe()
+    }
+
+    fn ends(&self) -> broadcast::Receiver<QueueEvent> {
+        self.subscribe_ends()
     }
 }

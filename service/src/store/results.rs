@@ -87,6 +87,7 @@ impl Results for SqlStore {
             .execute(&mut tx)
             .await?;
         tx.commit().await?;
+        self.ended(&fence.job);
         Ok(Some(stored_bytes))
     }
 

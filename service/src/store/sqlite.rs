@@ -28,6 +28,9 @@ pub(crate) struct SqliteBackend {
     pub(crate) readers: SqlitePool,
     /// The file opened; none for an in-memory database.
     file: Option<DatabaseFile>,
+    /// The ends of jobs this process wrote ([`super::SqlStore::ended`]): SQLite announces
+    /// nothing itself.
+    pub(crate) ends: tokio::sync::broadcast::Sender<super::QueueEvent>,
 }
 
 impl SqliteBackend {
@@ -67,6 +70,7 @@ impl SqliteBackend {
             writer,
             readers,
             file,
+            ends: tokio::sync::broadcast::channel(1024).0,
         })
     }
 

@@ -169,20 +169,29 @@ class Job:
         self.resource = self.client.request("GET", self._path()).json()
         return self
 
-    def wait(self, progress: bool = True, timeout: Optional[float] = None, poll: float = 0.2) -> "Job":
+    def wait(self, progress: bool = True, timeout: Optional[float] = None, poll: float = 1.0) -> "Job":
         """Waits until the job ends; itself. With `progress`, a line on stderr shows how far it is.
 
-        Raises `JobFailed` when it failed or was cancelled, and `TimeoutError` when `timeout`
-        seconds passed first.
+        Each read asks the server to answer the moment the job ends (`wait_s`), or with its
+        progress after `poll` seconds (10 s without `progress`). Raises `JobFailed` when it failed
+        or was cancelled, and `TimeoutError` when `timeout` seconds passed first.
         """
         started = time.monotonic()
-        while self.refresh().status not in ENDED:
+        while True:
+            wait_s = min(poll if progress else 10.0, self.client.timeout / 2)
+            if timeout is not None:
+                wait_s = min(wait_s, timeout - (time.monotonic() - started))
+            asked = time.monotonic()
+            self.resource = self.client.request("GET", self._path(), params={"wait_s": max(wait_s, 0.0)}).json()
+            if self.status in ENDED:
+                break
             if progress:
                 done, total = self.progress["operations_done"], self.progress["operations_total"]
                 print(f"\r{self.id}: {self.status} {done:,}/{total:,} operations", end="", file=sys.stderr)
             if timeout is not None and time.monotonic() - started >= timeout:
                 raise TimeoutError(f"job {self.id} is still {self.status} after {timeout} s")
-            time.sleep(poll)
+            # A server that did not wait (all its places taken) is asked again after a pause.
+            time.sleep(max(0.0, 0.2 - (time.monotonic() - asked)))
         if progress:
             print(f"\r{self.id}: {self.status} in {time.monotonic() - started:.1f} s" + " " * 20, file=sys.stderr)
         if self.status != "succeeded":
