@@ -11,8 +11,8 @@ pg_ctl in a temporary directory, as the `postgres` user when run as root) and re
 
 Each worker process runs one shard at a time on one compute thread (`worker --workers 1
 --compute-threads 1`), so N processes use N cores: on a 2-core machine expect a plateau at 2.
-Throughput is operations over the wall time from submission to the stored Result, seen by polling
-the API every 5 ms. Each round runs `run --threads 1` and `--threads 2` and then every worker count
+Throughput is operations over the wall time from submission to the stored Result, seen by a
+request that waits for the job's end (`?wait_s=`). Each round runs `run --threads 1` and `--threads 2` and then every worker count
 in turn, and each wall is compared with its own round's `run --threads 1`: this machine's speed
 drifts by a quarter within minutes, so figures from different moments do not compare. The per-shard overhead comes from the workers' own clocks, the
 `bouncewear_shard_step_seconds` histogram of a `serve --workers 1` node running the same job twice:
@@ -124,12 +124,12 @@ def run_job(base, job):
     started = time.perf_counter()
     job_id = call(f"{base}/v1/jobs", job)["id"]
     while True:
-        status = call(f"{base}/v1/jobs/{job_id}")["status"]
+        # One request the API node answers when the job ends (PostgreSQL announces it).
+        status = call(f"{base}/v1/jobs/{job_id}?wait_s=20")["status"]
         if status == "succeeded":
             return time.perf_counter() - started, call(f"{base}/v1/jobs/{job_id}/result"), job_id
         if status in ("failed", "cancelled"):
             sys.exit(f"job {job_id} {status}")
-        time.sleep(0.005)
 
 
 def step_means(metrics):
