@@ -48,11 +48,14 @@ pub trait Service {
         }
     }
 
-    /// Polls the job until it has `status`; returns the job resource.
+    /// Asks for the job until it has `status`; returns the job resource. For an end, each
+    /// request waits for it (`wait_s`).
     fn wait_for(&self, id: &str, status: &str, timeout: Duration) -> Value {
         let started = Instant::now();
+        let ends = ["succeeded", "failed", "cancelled"].contains(&status);
         loop {
-            let job = get(&self.url(&format!("/v1/jobs/{id}")), None).json();
+            let wait_s = if ends { 5.0 } else { 0.0 };
+            let job = get(&self.url(&format!("/v1/jobs/{id}?wait_s={wait_s}")), None).json();
             if job["status"] == status {
                 return job;
             }

@@ -178,7 +178,7 @@ class Job:
         """
         started = time.monotonic()
         while True:
-            wait_s = min(poll if progress else 10.0, self.client.timeout / 2)
+            wait_s = min(poll if progress else 10.0, self.client.timeout / 2 if self.client.timeout else 30.0)
             if timeout is not None:
                 wait_s = min(wait_s, timeout - (time.monotonic() - started))
             asked = time.monotonic()
