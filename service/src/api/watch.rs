@@ -12,11 +12,15 @@ use crate::telemetry::EVENT_WATCH_LOOKS;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use tokio::sync::{Semaphore, broadcast, watch};
+use tokio::sync::{Notify, Semaphore, broadcast, watch};
 
 /// The shortest time between two looks, however many jobs change; without announcements
-/// (SQLite), how often the watcher looks.
+/// (SQLite), how often the watcher looks, unless a job of this process ended sooner.
 const LOOK_INTERVAL: Duration = Duration::from_millis(200);
+/// Without announcements, the shortest time between two looks when jobs of this process end
+/// ([`Store::ends`]): a stream hears of an end at once, and many ends cost at most 50 looks a
+/// second.
+const END_LOOK_INTERVAL: Duration = Duration::from_millis(20);
 /// With announcements (PostgreSQL), the watcher looks when a job changed, and at least this often
 /// in case an announcement was missed (a dropped listening connection).
 const FALLBACK_INTERVAL: Duration = Duration::from_secs(2);
@@ -64,6 +68,8 @@ pub struct JobWatch {
     per_key: usize,
     /// Places of the requests waiting for a job's end ([`JobWatch::until_ended`]).
     waits: Semaphore,
+    /// Told of each new stream, so that an idle watcher looks at once.
+    listening: Notify,
 }
 
 /// The longest a request may wait for a job's end (`wait_s`): within the request timeout's
@@ -89,6 +95,7 @@ impl JobWatch {
             streams: Mutex::new(HashMap::new()),
             per_key,
             waits: Semaphore::new(waits),
+            listening: Notify::new(),
         });
         tokio::spawn(Arc::clone(&watch).run(store, shutdown));
         watch
@@ -103,8 +110,11 @@ impl JobWatch {
             return Err(ApiError::TooManyStreams(self.per_key));
         }
         *held += 1;
+        let receiver = self.snapshots.subscribe();
+        // After the receiver counts: the watcher that wakes sees a listener.
+        self.listening.notify_one();
         Ok(Subscription {
-            receiver: self.snapshots.subscribe(),
+            receiver,
             owner: owner.clone(),
             watch: Arc::clone(self),
         })
@@ -153,6 +163,7 @@ impl JobWatch {
 
     async fn run(self: Arc<Self>, store: Arc<dyn Store>, mut shutdown: watch::Receiver<bool>) {
         let mut announcements = store.events();
+        let mut ends = announcements.is_none().then(|| store.ends());
         let mut tracked = Tracked::default();
         let mut failures = 0_u32;
         loop {
@@ -160,11 +171,14 @@ impl JobWatch {
                 return;
             }
             if self.snapshots.receiver_count() == 0 {
-                // Nobody listens: read nothing, and start afresh when somebody does.
+                // Nobody listens: read nothing, and start afresh as soon as somebody does.
                 tracked = Tracked::default();
                 failures = 0;
-                if !pause(LOOK_INTERVAL, &mut shutdown).await {
-                    return;
+                tokio::select! {
+                    () = self.listening.notified() => {}
+                    paused = pause(LOOK_INTERVAL, &mut shutdown) => if !paused {
+                        return;
+                    },
                 }
                 continue;
             }
@@ -188,7 +202,11 @@ impl JobWatch {
                         .min(MAX_BACKOFF)
                 }
             };
-            if !pause(wait, &mut shutdown).await {
+            let paused = match (failures, &mut ends) {
+                (0, Some(ends)) => pause_until_end(wait, ends, &mut shutdown).await,
+                _ => pause(wait, &mut shutdown).await,
+            };
+            if !paused {
                 return;
             }
             if failures == 0 && !*shutdown.borrow() {
@@ -214,6 +232,23 @@ async fn pause(wait: Duration, shutdown: &mut watch::Receiver<bool>) -> bool {
         () = tokio::time::sleep(wait) => true,
         changed = shutdown.changed() => changed.is_ok(),
     }
+}
+
+/// [`pause`], or less when a job of this process ends: then [`END_LOOK_INTERVAL`] after the
+/// pause began.
+async fn pause_until_end(
+    wait: Duration,
+    ends: &mut broadcast::Receiver<QueueEvent>,
+    shutdown: &mut watch::Receiver<bool>,
+) -> bool {
+    let began = Instant::now();
+    tokio::select! {
+        () = tokio::time::sleep(wait) => return true,
+        changed = shutdown.changed() => return changed.is_ok(),
+        // An end, or ends passed over (never closed: this task holds the store).
+        _ = ends.recv() => {}
+    }
+    pause(END_LOOK_INTERVAL.saturating_sub(began.elapsed()), shutdown).await
 }
 
 /// With announcements, waits for one or [`FALLBACK_INTERVAL`]; without, returns at once. Once
