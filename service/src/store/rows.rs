@@ -616,20 +616,26 @@ impl EncodedRow {
 
 impl EncodedResult {
     /// Encodes `result` and the final `groups` of each of its (metric, bin), [`ROWS_PER_ENCODING`]
-    /// rows at a time in parallel on the current rayon pool, each bin's groups dropped once
-    /// encoded: the groups are never held both decoded and encoded.
+    /// rows at a time in parallel on the current rayon pool (the Result's JSON beside them), each
+    /// bin's groups dropped once encoded: the groups are never held both decoded and encoded.
     pub fn new(result: &JobResult, groups: RunGroups) -> StoreResult<Self> {
         use rayon::prelude::*;
-        let mut bins = groups.into_bins().peekable();
-        let mut rows = Vec::new();
-        while bins.peek().is_some() {
-            let chunk: Vec<_> = bins.by_ref().take(ROWS_PER_ENCODING).collect();
-            let encoded = chunk
-                .into_par_iter()
-                .map(|(metric, bin, groups)| EncodedRow::new(result, metric, bin, &groups))
-                .collect::<StoreResult<Vec<_>>>()?;
-            rows.extend(encoded);
-        }
+        let rows = || -> StoreResult<Vec<EncodedRow>> {
+            let mut bins = groups.into_bins().peekable();
+            let mut rows = Vec::new();
+            while bins.peek().is_some() {
+                let chunk: Vec<_> = bins.by_ref().take(ROWS_PER_ENCODING).collect();
+                let encoded = chunk
+                    .into_par_iter()
+                    .map(|(metric, bin, groups)| EncodedRow::new(result, metric, bin, &groups))
+                    .collect::<StoreResult<Vec<_>>>()?;
+                rows.extend(encoded);
+            }
+            Ok(rows)
+        };
+        // The Result's JSON beside the rows, not after them.
+        let (text, rows) = rayon::join(|| to_json("result", result), rows);
+        let (text, rows) = (text?, rows?);
         let summaries =
             result.operations.values().map(Vec::len).sum::<usize>() + result.devices.len();
         if rows.len() != summaries {
@@ -640,11 +646,7 @@ impl EncodedResult {
             .life
             .as_ref()
             .map_or_else(Vec::new, |life| life.devices.clone());
-        Ok(Self {
-            text: to_json("result", result)?,
-            rows,
-            lives,
-        })
+        Ok(Self { text, rows, lives })
     }
 
     /// What the result counts towards its job's stored bytes ([`super::JobRecord::stored_bytes`]):
