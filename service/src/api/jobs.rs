@@ -506,10 +506,15 @@ pub async fn cancel_job(
 
 /// The job, if it succeeded: results exist only then (409 before).
 pub async fn succeeded(state: &AppState, owner: &Owner, id: &JobId) -> Result<JobRecord, ApiError> {
-    let record = state.store.job(owner, id).await?;
+    has_succeeded(state.store.job(owner, id).await?)
+}
+
+/// The job's record, if it succeeded (409 before).
+fn has_succeeded(record: JobRecord) -> Result<JobRecord, ApiError> {
     if record.status != JobStatus::Succeeded {
         return Err(ApiError::Conflict(format!(
-            "job {id} is {}; results exist once it succeeds",
+            "job {} is {}; results exist once it succeeds",
+            record.id,
             record.status.as_str()
         )));
     }
@@ -543,10 +548,7 @@ pub async fn get_result(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let wait = WaitQuery::wait(query, &state)?;
-    if !wait.is_zero() {
-        ended_within(&state, &owner, &id, wait).await?;
-    }
-    succeeded(&state, &owner, &id).await?;
+    has_succeeded(ended_within(&state, &owner, &id, wait).await?)?;
     let result = state
         .store
         .result_json(&id)

@@ -136,6 +136,9 @@ impl JobWatch {
         // Listening before the first read: an end between the two is not missed.
         let mut ends = Some(store.ends());
         let mut record = store.job(owner, id).await?;
+        if record.status.is_terminal() || wait.is_zero() {
+            return Ok(record);
+        }
         let Ok(_place) = self.waits.try_acquire() else {
             return Ok(record);
         };
