@@ -134,7 +134,7 @@ impl JobWatch {
     ) -> StoreResult<JobRecord> {
         let deadline = Instant::now() + wait;
         // Listening before the first read: an end between the two is not missed.
-        let mut ends = Some(store.ends());
+        let mut ends = store.ends();
         let mut record = store.job(owner, id).await?;
         if record.status.is_terminal() || wait.is_zero() {
             return Ok(record);
@@ -150,12 +150,12 @@ impl JobWatch {
                     () = &mut recheck => break,
                     // Shutting down (or its sender gone): the job as it is, so the server drains.
                     _ = shutdown.changed() => return store.job(owner, id).await,
-                    event = next_end(&mut ends) => match event {
+                    event = ends.recv() => match event {
                         Ok(QueueEvent::Changed(changed)) if changed == *id => break,
                         Ok(_) => {}
-                        // Some ends were passed over, perhaps this one's.
-                        Err(broadcast::error::RecvError::Lagged(_)) => break,
-                        Err(broadcast::error::RecvError::Closed) => ends = None,
+                        // Ends passed over, perhaps this one's (never closed: the store holds
+                        // the sender).
+                        Err(_) => break,
                     },
                 }
             }
@@ -216,16 +216,6 @@ impl JobWatch {
                 next_announcement(&mut announcements).await;
             }
         }
-    }
-}
-
-/// The next announcement, or never once there are none.
-async fn next_end(
-    ends: &mut Option<broadcast::Receiver<QueueEvent>>,
-) -> Result<QueueEvent, broadcast::error::RecvError> {
-    match ends {
-        Some(ends) => ends.recv().await,
-        None => std::future::pending().await,
     }
 }
 
