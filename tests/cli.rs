@@ -157,6 +157,79 @@ fn run_is_bit_identical_for_threads_1_2_3_and_on_a_rerun() {
     }
 }
 
+/// The kernels the binary runs on this CPU, as its refusal of an unknown `--kernel` lists them.
+fn kernels() -> Vec<String> {
+    let line = rejected(&["--kernel", "sse9", "simulate"], "{}");
+    assert!(
+        line.contains("--kernel (BOUNCEWEAR_KERNEL) `sse9`"),
+        "{line}"
+    );
+    let names = line.trim_end().rsplit_once("one of ").unwrap().1;
+    names.split(", ").map(str::to_owned).collect()
+}
+
+/// A Result without its timing: every other number is the same bits on any kernel.
+fn without_timing(mut result: Value) -> Value {
+    result.as_object_mut().unwrap().remove("timing");
+    result
+}
+
+/// `--kernel NAME` (or `BOUNCEWEAR_KERNEL`) runs the process's jobs on that kernel, and every
+/// kernel this CPU runs (one device at a time, then each instruction set's lockstep batches)
+/// gives the same Result to the bit: both reference jobs at 37 devices, so that every batch width
+/// leaves a remainder, and one with wear that softens, a failure criterion and a limit. The
+/// model's own test (`model/tests/integration/kernels.rs`) compares more jobs in one process;
+/// this is the switch a person or an outside check uses on the binary.
+#[test]
+fn every_kernel_gives_the_same_result_through_the_binary() {
+    let names = kernels();
+    assert_eq!(names[0], "scalar", "{names:?}");
+    assert!(
+        names.len() >= 2,
+        "a lockstep kernel runs everywhere: {names:?}"
+    );
+    let reference: Value = serde_json::from_str(include_str!("data/reference_jobs.json")).unwrap();
+    let mut jobs: Vec<Value> = ["48 V / 15 A", "mechanical"]
+        .iter()
+        .map(|name| {
+            let mut job = reference[name].clone();
+            job["devices"] = serde_json::json!(37);
+            job["operations"] = serde_json::json!(40);
+            job
+        })
+        .collect();
+    let mut wearing = jobs[0].clone();
+    wearing["scenario"]["material"] =
+        serde_json::json!({"wear_law": {"law": "roughening_and_softening"}});
+    wearing["scatter"].as_array_mut().unwrap().remove(1);
+    wearing["failure"] = serde_json::json!({"total_bounce_s": {"above": 2e-3}});
+    wearing["limits"] = serde_json::json!({"e1": 0.5});
+    jobs.push(wearing);
+    for job in &jobs {
+        let scalar = without_timing(run_job(job, &["--kernel", "scalar"]));
+        for name in &names[1..] {
+            let result = without_timing(run_job(job, &["--kernel", name]));
+            assert!(result == scalar, "{name} differs from scalar on {job}");
+        }
+    }
+    // The environment variable is the same switch.
+    let dir = temp_dir("kernel-env");
+    let path = dir.join("job.json");
+    std::fs::write(&path, jobs[0].to_string()).unwrap();
+    let output = std::process::Command::new(support::BIN)
+        .args(["run", "--quiet", path.to_str().unwrap()])
+        .env("BOUNCEWEAR_KERNEL", names.last().unwrap())
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let result = without_timing(serde_json::from_slice(&output.stdout).unwrap());
+    assert!(result == without_timing(run_job(&jobs[0], &["--kernel", "scalar"])));
+}
+
 /// `--plots DIR` writes the dashboard's plots: per operation metric its bands and histograms, and
 /// with a sensitivity analysis its chart per metric of the analysis.
 #[test]

@@ -124,7 +124,8 @@ impl Application {
         let config = &state.config;
         let queue = &config.queue;
         let slots = workers.slots(queue.workers);
-        tracing::info!(%address, database = %describe(&queue.database), workers = slots, "serving");
+        let kernel = bouncewear_model::montecarlo::Kernel::active().name();
+        tracing::info!(%address, database = %describe(&queue.database), workers = slots, kernel, "serving");
         let stopping = state.shutdown.clone();
         let scheduler = tokio::spawn(crate::scheduler::run(
             Arc::clone(&state.store),

@@ -7,6 +7,7 @@
 //! only the portable kernels exist.
 
 use crate::lanes::Real;
+use std::sync::OnceLock;
 
 /// An instruction set the lockstep loops are compiled for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -74,6 +75,9 @@ pub const KERNELS: [(Isa, usize); 2] = [(Isa::Portable, 4), (Isa::Avx2, 8)];
 #[cfg(test)]
 pub const KERNELS: [(Isa, usize); 1] = [(Isa::Portable, 4)];
 
+/// The kernel of this process, once chosen or first used ([`Kernel::active`]).
+static CHOSEN: OnceLock<Kernel> = OnceLock::new();
+
 /// An instruction set and a number of lanes, checked against this CPU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct Kernel {
@@ -95,6 +99,39 @@ impl Kernel {
             return Some(Kernel::SCALAR);
         }
         (isa.available() && KERNELS.contains(&(isa, lanes))).then_some(Kernel { isa, lanes })
+    }
+
+    /// The kernel called `name`: `scalar` (one device at a time), or an instruction set of
+    /// [`KERNELS`] (`portable`, `avx2`, `avx512`) with its lanes; `None` when this build does not
+    /// hold it or this CPU does not run it ([`Kernel::names`] lists those it does).
+    pub fn named(name: &str) -> Option<Kernel> {
+        Kernel::all().into_iter().find(|k| k.name() == name)
+    }
+
+    /// The names of every kernel this CPU runs ([`Kernel::all`]), for [`Kernel::named`].
+    pub fn names() -> Vec<&'static str> {
+        Kernel::all().into_iter().map(Kernel::name).collect()
+    }
+
+    /// `scalar`, or the kernel's instruction set.
+    pub fn name(self) -> &'static str {
+        if self.lanes == 1 {
+            "scalar"
+        } else {
+            self.isa.as_str()
+        }
+    }
+
+    /// Makes `kernel` the one every job of this process runs on ([`Kernel::active`]), once,
+    /// before the first job: a switch for tests and benchmarks that compare kernels through the
+    /// binary, as the choice never changes a number. `Err` with the kernel already in use.
+    pub fn choose(kernel: Kernel) -> Result<(), Kernel> {
+        CHOSEN.set(kernel).map_err(|_| Kernel::active())
+    }
+
+    /// The kernel jobs run on: the one chosen ([`Kernel::choose`]), else [`Kernel::best`].
+    pub fn active() -> Kernel {
+        *CHOSEN.get_or_init(Kernel::best)
     }
 
     /// The fastest kernel on this CPU, as measured (docs/performance.md): the widest instruction
@@ -184,3 +221,25 @@ kernel!(portable_4, crate::lanes::Lanes<4>);
 kernel!(avx2_8, crate::lanes::Lanes<8>, "avx2");
 #[cfg(all(avx512_kernel, not(test)))]
 kernel!(avx512_32, crate::lanes::Lanes<32>, "avx512f");
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every kernel this CPU runs is found by its name, and only those.
+    #[test]
+    fn a_kernel_is_named_by_its_instruction_set_or_scalar() {
+        assert_eq!(Kernel::named("scalar"), Some(Kernel::SCALAR));
+        assert_eq!(
+            Kernel::named("portable").map(|k| (k.isa(), k.lanes())),
+            Some((Isa::Portable, 4))
+        );
+        for kernel in Kernel::all() {
+            assert_eq!(Kernel::named(kernel.name()), Some(kernel));
+        }
+        assert_eq!(Kernel::names(), ["scalar", "portable"]);
+        for unknown in ["", "Scalar", "avx", "sse2", "portable x4"] {
+            assert_eq!(Kernel::named(unknown), None, "{unknown}");
+        }
+    }
+}

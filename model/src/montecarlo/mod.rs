@@ -244,9 +244,9 @@ pub enum RunError {
     RareEvent(#[from] rare::RareEventError),
 }
 
-/// Runs a job on the current rayon pool with the best kernel this CPU has, and summarises it.
+/// Runs a job on the current rayon pool on [`Kernel::active`] and summarises it.
 pub fn run_job(job: &Job, observer: &dyn Observer) -> Result<JobResult, RunError> {
-    run_job_on(Kernel::best(), job, observer)
+    run_job_on(Kernel::active(), job, observer)
 }
 
 /// [`run_job`] with the given kernel: every kernel gives the same Result, to the bit.

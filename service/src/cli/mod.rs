@@ -15,7 +15,7 @@ use crate::telemetry::{self, LogFormat};
 use bench::BenchError;
 use bouncewear_model::calibration::{CalibrationSpec, calibrate};
 use bouncewear_model::montecarlo::rare::check_threshold;
-use bouncewear_model::montecarlo::{Job, run_job};
+use bouncewear_model::montecarlo::{Job, Kernel, run_job};
 use bouncewear_model::{Fidelity, InvalidInput, Pointer, Scenario, simulate};
 use clap::{Parser, Subcommand, ValueEnum};
 use std::io::{Read, Write};
@@ -40,6 +40,11 @@ pub struct Cli {
         default_value_t = LogFormat::Text
     )]
     log_format: LogFormat,
+    /// The kernel every job of this process runs on: `scalar` (one device at a time) or an
+    /// instruction set this CPU runs (`portable`, `avx2`, `avx512`); the fastest when not given.
+    /// Every kernel gives the same bits: a switch for comparing them, not for speed.
+    #[arg(long, global = true, env = "BOUNCEWEAR_KERNEL", value_name = "NAME")]
+    kernel: Option<String>,
     #[command(subcommand)]
     command: Command,
 }
@@ -219,6 +224,22 @@ impl From<FidelityArg> for Fidelity {
     }
 }
 
+/// Runs every job of this process on the kernel `name` (`--kernel`, `BOUNCEWEAR_KERNEL`).
+fn choose_kernel(name: &str) -> Result<(), CliError> {
+    let kernel = Kernel::named(name).ok_or_else(|| {
+        let names = Kernel::names().join(", ");
+        CliError::Invalid(InvalidInput::single(
+            &Pointer::root(),
+            format!(
+                "--kernel (BOUNCEWEAR_KERNEL) `{name}` is not a kernel this build runs on this \
+                 CPU: one of {names}"
+            ),
+        ))
+    })?;
+    Kernel::choose(kernel)
+        .map_err(|active| CliError::Failed(format!("the kernel is already {}", active.name())))
+}
+
 /// Why a command failed, and so which exit code it gets.
 #[derive(Debug, thiserror::Error)]
 pub enum CliError {
@@ -288,6 +309,9 @@ pub fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<(), CliError> {
     telemetry::init_logging(cli.log_format);
+    if let Some(name) = &cli.kernel {
+        choose_kernel(name)?;
+    }
     match cli.command {
         Command::Simulate { fidelity, file } => {
             let scenario = Scenario::from_json(&read_input(&file)?)?;

@@ -344,7 +344,7 @@ pub fn run_whole(
     observer: &dyn Observer,
 ) -> Result<Merged, MergeError> {
     let started = std::time::Instant::now();
-    let mut tally = run_on(Kernel::best(), job, observer, |tally| {
+    let mut tally = run_on(Kernel::active(), job, observer, |tally| {
         precision_met(job, tally)
     })?;
     for group in &mut tally.groups {

@@ -229,7 +229,7 @@ pub fn run_group(
         group < batch.groups() && Batch::of(job, batch.index) == Some(batch),
         "group {group} of {batch:?} is not part of the job"
     );
-    let plan = Plan::new(job, Kernel::best());
+    let plan = Plan::new(job, Kernel::active());
     let permutations = plan.batch_permutations(batch.index, batch.size);
     let chunk = Chunk {
         first: batch.first,
@@ -309,7 +309,7 @@ impl Default for Tally {
     }
 }
 
-/// Runs the job on the current rayon pool with the best kernel this CPU has: the first batch of
+/// Runs the job on the current rayon pool on [`Kernel::active`]: the first batch of
 /// `devices`, then, with a precision target, more batches of the same size until `accept` says the
 /// target is met or `max_devices` ran.
 pub fn run(
@@ -317,7 +317,7 @@ pub fn run(
     observer: &dyn Observer,
     accept: impl FnMut(&Tally) -> bool,
 ) -> Result<Tally, Cancelled> {
-    run_on(Kernel::best(), job, observer, accept)
+    run_on(Kernel::active(), job, observer, accept)
 }
 
 /// [`run`] with the given kernel: every kernel gives the same bits.

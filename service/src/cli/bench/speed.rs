@@ -374,7 +374,7 @@ pub(super) fn engine_row(
             );
         })
     };
-    let kernel = Kernel::best();
+    let kernel = Kernel::active();
     let (scalar, lockstep) = (per_op(Kernel::SCALAR), per_op(kernel));
     // The job as a file, for `bouncewear run`.
     std::fs::create_dir_all(out).map_err(|source| io_error(out, source))?;
