@@ -61,9 +61,9 @@ impl Isa {
 /// 32), so that batch width is tested wherever AVX2 runs; AVX-512F at 8 lanes, which tested it
 /// before, cost 76 s of the optimiser per build and ran the same generic code as the other two.
 ///
-/// The AVX-512 kernel is most of the crate's build (5.5 of its 8.4 minutes on 2 cores): a test or
-/// debug build holds it only where it can run, on a host with AVX-512F (`build.rs`,
-/// `cfg(avx512_kernel)`); a release build always does.
+/// The AVX-512 kernel is most of the crate's build (5.5 of its 8.4 minutes on 2 cores): a build
+/// holds it only where it can run, on a host with AVX-512F, or when `BOUNCEWEAR_ALL_KERNELS` is
+/// set (`build.rs`, `cfg(avx512_kernel)`).
 #[cfg(all(not(test), avx512_kernel))]
 pub const KERNELS: [(Isa, usize); 3] = [(Isa::Portable, 4), (Isa::Avx2, 8), (Isa::Avx512, 32)];
 #[cfg(all(not(test), not(avx512_kernel)))]
