@@ -397,7 +397,7 @@ pub(super) fn engine_row(
         job: name,
         devices,
         operations,
-        kernel: format!("{} x{}", kernel.isa().as_str(), kernel.lanes()),
+        kernel: format!("{} x{}", kernel.name(), kernel.lanes()),
         ns_per_op_one_device_at_a_time: scalar,
         ns_per_op_lockstep: lockstep,
         floor_ns_per_op_scalar: floor_scalar,
