@@ -26,7 +26,7 @@ use chrono::{DateTime, Utc};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use support::postgres::Postgres;
-use support::temp_dir;
+use support::{temp_dir, without_timing};
 use tokio::sync::{Notify, watch};
 
 fn queued(seed: u64) -> QueuedJob {
@@ -589,12 +589,6 @@ fn every_operation() -> Operations {
         start: 0,
         end: u64::MAX,
     }
-}
-
-fn without_timing(result: &str) -> serde_json::Value {
-    let mut result: serde_json::Value = serde_json::from_str(result).unwrap();
-    result.as_object_mut().unwrap().remove("timing");
-    result
 }
 
 async fn a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(url: &str) {
