@@ -91,6 +91,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_result_the_database_keeps_refusing_fails_its_job_at_the_retry_limit(&database("refusing"))
         .await;
     lives_beyond_the_listing_cap_are_counted_not_listed(&database("listed")).await;
+    a_result_is_stored_once_and_one_stored_whole_before_reads_as_it_was(&database("whole")).await;
     jobs_queued_before_shards_existed_get_theirs_on_open(&database("backfill")).await;
     concurrent_submissions_never_overshoot_the_queue_bound(&database("bound")).await;
     one_owner_fills_only_its_share_of_the_queue(&database("share")).await;
@@ -553,8 +554,8 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
                 let partials = Folding::new(job.clone(), fence.shard.batch);
                 let partials = store.partials(&fence.job, partials).await.unwrap();
                 match merge(partials, SHARDED_ROUND_OPERATIONS, 1.0, &Silent).unwrap() {
-                    Merged::Result { result, groups } => {
-                        let encoded = EncodedResult::new(&result, groups).unwrap();
+                    Merged::Result { mut result, groups } => {
+                        let encoded = EncodedResult::new(&mut result, groups).unwrap();
                         assert!(
                             store
                                 .succeed(fence, UnixMs(5), &encoded)
@@ -917,6 +918,56 @@ async fn lives_beyond_the_listing_cap_are_counted_not_listed(url: &str) {
         "{} bytes stored for a result of {result_bytes}",
         ended.stored_bytes
     );
+}
+
+/// The Result is stored without its summaries, each kept once in its distribution's row, and read
+/// back whole; one stored whole, as builds before that wrote it, reads as it was (here a job
+/// without device metrics, whose `devices` is empty either way).
+async fn a_result_is_stored_once_and_one_stored_whole_before_reads_as_it_was(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let text =
+        r#"{"devices": 20, "operations": 12, "seed": 3, "metrics": ["total_bounce_s", "e1"]}"#;
+    let id = insert(&store, queued_job(text, 3)).await;
+    let ended = run_until_ended(&store, workers(&store, 1, 25), &id, async || {}).await;
+    assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
+    let whole = store.result_json(&id).await.unwrap().unwrap();
+    let expected = run_job(&Job::from_json(text, || 3).unwrap(), &Silent).unwrap();
+    assert_eq!(
+        without_timing(&whole),
+        without_timing(&serde_json::to_string(&expected).unwrap())
+    );
+    // The row as stored, then put back whole as before (SQLite numbers `$N` in order too).
+    macro_rules! stored_then_whole {
+        ($pool:expr) => {{
+            let pool = $pool.unwrap();
+            let select = "SELECT result FROM results WHERE job_id = $1";
+            let stored: String = sqlx::query_scalar(select)
+                .bind(id.as_str())
+                .fetch_one(&pool)
+                .await
+                .unwrap();
+            let update = "UPDATE results SET result = $1 WHERE job_id = $2";
+            let query = sqlx::query(update).bind(&whole).bind(id.as_str());
+            query.execute(&pool).await.unwrap();
+            stored
+        }};
+    }
+    let stored = if url.starts_with("sqlite:") {
+        stored_then_whole!(sqlx::SqlitePool::connect(url).await)
+    } else {
+        stored_then_whole!(sqlx::PgPool::connect(url).await)
+    };
+    assert!(
+        stored.contains(r#""operations":{},"devices":{}"#),
+        "{stored}"
+    );
+    assert!(
+        stored.len() * 4 < whole.len(),
+        "{} of {} bytes",
+        stored.len(),
+        whole.len()
+    );
+    assert_eq!(store.result_json(&id).await.unwrap().unwrap(), whole);
 }
 
 async fn one_owner_fills_only_its_share_of_the_queue(url: &str) {

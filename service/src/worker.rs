@@ -110,10 +110,12 @@ fn encoded(merged: Result<Merged, MergeError>) -> Result<Result<Outcome, MergeEr
     let outcome = match merged {
         Err(MergeError::Cancelled(cancelled)) => return Err(cancelled),
         Err(other) => return Ok(Err(other)),
-        Ok(Merged::Result { result, groups }) => match EncodedResult::new(&result, groups) {
-            Ok(encoded) => Outcome::Result { result, encoded },
-            Err(error) => Outcome::Unencodable(format!("encoding the result failed: {error}")),
-        },
+        Ok(Merged::Result { mut result, groups }) => {
+            match EncodedResult::new(&mut result, groups) {
+                Ok(encoded) => Outcome::Result { result, encoded },
+                Err(error) => Outcome::Unencodable(format!("encoding the result failed: {error}")),
+            }
+        }
         Ok(Merged::Next { shards, folded }) => match EncodedGroups::new(folded) {
             Ok(folded) => Outcome::Next {
                 shards,

@@ -1,12 +1,14 @@
-//! What a succeeded job leaves, written once for both databases: its Result, one row per
-//! (metric, bin) with its groups' accumulators, and each listed device's life.
+//! What a succeeded job leaves, written once for both databases: one row per (metric, bin) with
+//! its summary and its groups' accumulators, its Result without those summaries (each is stored
+//! once, and put back when the Result is read), and each listed device's life.
 
 use super::backend::SqlStore;
 use super::queue::drop_partials;
 use super::rows::{
     self, EncodedResult, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, SELECT_PARTIALS,
-    bind_bins, collect_partials, count_from_sql, count_to_sql, distribution_from_row,
-    groups_from_row, insert_distributions, insert_lives, life_from_row,
+    SELECT_RESULT, bind_bins, collect_partials, count_from_sql, count_to_sql,
+    distribution_from_row, groups_from_row, insert_distributions, insert_lives, life_from_row,
+    result_from_row,
 };
 use super::sql::Sql;
 use super::{DistributionRow, Fence, Operations, Results, StoreResult};
@@ -138,11 +140,11 @@ impl Results for SqlStore {
 
     #[tracing::instrument(skip_all, fields(job = %id))]
     async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>> {
-        Sql::new("SELECT result FROM results WHERE job_id = $1")
+        Sql::new(SELECT_RESULT)
             .bind(id.as_str())
             .fetch_optional(self.readers())
             .await?
-            .map(|row| Ok(row.text("result")?))
+            .map(|row| result_from_row(&row))
             .transpose()
     }
 

@@ -535,11 +535,13 @@ pub(crate) const LIVES_PER_WRITE: usize = 5_000;
 /// What a device life counts towards a job's stored bytes: its three numbers.
 pub(crate) const LIFE_ROW_BYTES: u64 = 24;
 
-/// A Result as the store writes it, encoded before the first write: its JSON, one
-/// `distributions` row per bin of every operation metric and one per device metric (each with its
-/// summary's JSON and its groups' accumulators [`encode`]d), and the listed devices' lives.
-/// Made on the compute pool, the rows in parallel ([`EncodedResult::new`]), so that the
-/// database's transactions bind bytes and no async thread serialises.
+/// A Result as the store writes it, encoded before the first write: one `distributions` row per
+/// bin of every operation metric and one per device metric (each with its summary's JSON and its
+/// groups' accumulators [`encode`]d), the Result's JSON without those summaries (its
+/// `operations` and `devices` empty: each summary is stored once, in its row, and
+/// [`result_from_row`] puts them back), and the listed devices' lives. Made on the compute pool,
+/// the rows in parallel ([`EncodedResult::new`]), so that the database's transactions bind bytes
+/// and no async thread serialises.
 pub struct EncodedResult {
     pub(crate) text: String,
     pub(crate) rows: Vec<EncodedRow>,
@@ -616,26 +618,25 @@ impl EncodedRow {
 
 impl EncodedResult {
     /// Encodes `result` and the final `groups` of each of its (metric, bin), [`ROWS_PER_ENCODING`]
-    /// rows at a time in parallel on the current rayon pool (the Result's JSON beside them), each
-    /// bin's groups dropped once encoded: the groups are never held both decoded and encoded.
-    pub fn new(result: &JobResult, groups: RunGroups) -> StoreResult<Self> {
+    /// rows at a time in parallel on the current rayon pool, each bin's groups dropped once
+    /// encoded: the groups are never held both decoded and encoded. `result` is as it was after.
+    pub fn new(result: &mut JobResult, groups: RunGroups) -> StoreResult<Self> {
         use rayon::prelude::*;
-        let rows = || -> StoreResult<Vec<EncodedRow>> {
-            let mut bins = groups.into_bins().peekable();
-            let mut rows = Vec::new();
-            while bins.peek().is_some() {
-                let chunk: Vec<_> = bins.by_ref().take(ROWS_PER_ENCODING).collect();
-                let encoded = chunk
-                    .into_par_iter()
-                    .map(|(metric, bin, groups)| EncodedRow::new(result, metric, bin, &groups))
-                    .collect::<StoreResult<Vec<_>>>()?;
-                rows.extend(encoded);
-            }
-            Ok(rows)
-        };
-        // The Result's JSON beside the rows, not after them.
-        let (text, rows) = rayon::join(|| to_json("result", result), rows);
-        let (text, rows) = (text?, rows?);
+        let mut bins = groups.into_bins().peekable();
+        let mut rows = Vec::new();
+        while bins.peek().is_some() {
+            let chunk: Vec<_> = bins.by_ref().take(ROWS_PER_ENCODING).collect();
+            let encoded = chunk
+                .into_par_iter()
+                .map(|(metric, bin, groups)| EncodedRow::new(result, metric, bin, &groups))
+                .collect::<StoreResult<Vec<_>>>()?;
+            rows.extend(encoded);
+        }
+        let operations = std::mem::take(&mut result.operations);
+        let devices = std::mem::take(&mut result.devices);
+        let text = to_json("result", &*result);
+        (result.operations, result.devices) = (operations, devices);
+        let text = text?;
         let summaries =
             result.operations.values().map(Vec::len).sum::<usize>() + result.devices.len();
         if rows.len() != summaries {
@@ -650,7 +651,7 @@ impl EncodedResult {
     }
 
     /// What the result counts towards its job's stored bytes ([`super::JobRecord::stored_bytes`]):
-    /// its JSON, each row's summary and groups, each life's numbers.
+    /// its JSON without the summaries, each row's summary and groups, each life's numbers.
     pub fn bytes(&self) -> u64 {
         let rows: usize = self
             .rows
@@ -787,6 +788,128 @@ pub(crate) fn bind_bins(query: Sql, job: &JobId, metric: &str, range: Operations
         .bind(metric.to_owned())
         .bind(count_to_sql(range.start))
         .bind(count_to_sql(range.end))
+}
+
+/// The members of a Result stored apart, each as `{}` in its JSON ([`EncodedResult`]), with the
+/// kind of the `distributions` rows that hold them: `devices` first, since it follows
+/// `operations`, whose place in the text so stays where [`empty_member`] found it. A Result
+/// stored whole (before summaries were stored once) has neither empty, but a job's without device
+/// metrics, whose rows are none: [`member_json`] gives it `{}` again.
+pub(crate) const STORED_APART: [(&str, &str); 2] =
+    [("devices", "device"), ("operations", "operation")];
+
+/// One summary row as [`member_json`] reads it: metric, bin, first and end operation, summary.
+pub(crate) type SummaryRow<'a> = (&'a str, i64, u64, u64, &'a str);
+
+/// Job `$1`'s stored Result and every summary row of it, the row's columns joined by tabs and
+/// the rows by newlines (neither is ever raw in compact JSON nor in a metric's name), in no
+/// particular order: one statement, so one snapshot of the database (a job deleted meanwhile is
+/// wholly there or wholly gone), and one value to read however many rows.
+pub(crate) const SELECT_RESULT: &str = "SELECT result, (SELECT string_agg(kind || '\t' || \
+     metric || '\t' || bin || '\t' || op_start || '\t' || op_end || '\t' || summary, '\n') \
+     FROM distributions d WHERE d.job_id = r.job_id) AS summaries FROM results r WHERE r.job_id = $1";
+
+/// The Result's JSON from [`SELECT_RESULT`]'s row, its summaries put back.
+pub(crate) fn result_from_row(row: &AnyRow) -> StoreResult<String> {
+    let mut text = row.text("result")?;
+    let joined = row.maybe_text("summaries")?.unwrap_or_default();
+    let mut summaries: [Vec<SummaryRow>; 2] = Default::default();
+    for line in joined.split('\n').filter(|line| !line.is_empty()) {
+        let bad = || corrupt("summary", format!("a row read as {:.80}", line));
+        let columns: Vec<&str> = line.splitn(6, '\t').collect();
+        let &[kind, metric, bin, op_start, op_end, summary] = columns.as_slice() else {
+            return Err(bad());
+        };
+        let at = STORED_APART.iter().position(|(_, apart)| *apart == kind);
+        let at = at.ok_or_else(bad)?;
+        let number = |text: &str| text.parse::<i64>().map_err(|_| bad());
+        summaries[at].push((
+            metric,
+            number(bin)?,
+            number(op_start)?.max(0) as u64,
+            number(op_end)?.max(0) as u64,
+            summary,
+        ));
+    }
+    for ((key, kind), rows) in STORED_APART.into_iter().zip(summaries) {
+        if let Some(at) = empty_member(&text, key) {
+            text = put_back(&text, at, &member_json(kind, rows)?);
+        }
+    }
+    Ok(text)
+}
+
+/// `text` with the bytes `at` replaced by `member`, in one copy (`String::replace_range` moved a
+/// long member in byte by byte: a fifth of a large Result's read).
+pub(crate) fn put_back(text: &str, at: std::ops::Range<usize>, member: &str) -> String {
+    [&text[..at.start], member, &text[at.end..]].concat()
+}
+
+/// The JSON of a Result's member of `kind` from its rows, to the byte what `serde_json` writes
+/// for the Result: its metrics in key order; a device metric's summary; an operation metric's
+/// bins in order, each its summary's members followed by `op_start` and `op_end` (`Bin`'s
+/// flattened summary).
+pub(crate) fn member_json(kind: &str, mut rows: Vec<SummaryRow>) -> StoreResult<String> {
+    rows.sort_unstable_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+    let mut member = String::with_capacity(rows.iter().map(|row| row.4.len() + 48).sum());
+    member.push('{');
+    for (m, bins) in rows.chunk_by(|a, b| a.0 == b.0).enumerate() {
+        if m > 0 {
+            member.push(',');
+        }
+        member.push_str(&to_json("metric name", &bins[0].0)?);
+        member.push(':');
+        if kind == "device" {
+            member.push_str(bins[0].4);
+            continue;
+        }
+        member.push('[');
+        for (b, (metric, _, op_start, op_end, summary)) in bins.iter().enumerate() {
+            let members = summary
+                .strip_suffix('}')
+                .ok_or_else(|| corrupt("summary", format!("{metric}'s is not an object")))?;
+            if b > 0 {
+                member.push(',');
+            }
+            member.push_str(members);
+            member.push_str(&format!(r#","op_start":{op_start},"op_end":{op_end}}}"#));
+        }
+        member.push(']');
+    }
+    member.push('}');
+    Ok(member)
+}
+
+/// Where the top-level member `key` of the JSON object `text` (compact, as `serde_json` writes
+/// it) is `{}`: those two bytes. Strings are skipped whole, so a key inside one never matches;
+/// the scan stops at the member, which a skeleton has early (after `job`).
+pub(crate) fn empty_member(text: &str, key: &str) -> Option<std::ops::Range<usize>> {
+    let bytes = text.as_bytes();
+    let (mut depth, mut i) = (0_usize, 0);
+    while i < bytes.len() {
+        match bytes[i] {
+            b'"' => {
+                let start = i + 1;
+                i += 1;
+                while i < bytes.len() && bytes[i] != b'"' {
+                    i += if bytes[i] == b'\\' { 2 } else { 1 };
+                }
+                let end = i.min(bytes.len());
+                let after = end + 1;
+                if depth == 1 && text.get(after..after + 1) == Some(":") && &text[start..end] == key
+                {
+                    // The member, empty or not: nothing after it can be it.
+                    let empty = text.get(after + 1..after + 3) == Some("{}");
+                    return empty.then_some(after + 1..after + 3);
+                }
+            }
+            b'{' | b'[' => depth += 1,
+            b'}' | b']' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+        i += 1;
+    }
+    None
 }
 
 /// A row's groups' accumulators; `None` for a row stored before they were kept.
@@ -976,5 +1099,83 @@ mod tests {
                 "{case}: {decoded:?}"
             );
         }
+    }
+
+    /// The Result's JSON as stored with its members put back from its rows, as
+    /// `Results::result_json` does.
+    fn stored_and_put_back(encoded: &EncodedResult) -> String {
+        let mut text = encoded.text.clone();
+        for (key, kind) in STORED_APART {
+            let at = empty_member(&text, key).expect("stored without its summaries");
+            let rows = encoded
+                .rows
+                .iter()
+                .filter(|row| row.kind == kind)
+                .map(|row| {
+                    let summary = row.summary.as_str();
+                    (
+                        row.metric.as_str(),
+                        row.bin,
+                        row.op_start,
+                        row.op_end,
+                        summary,
+                    )
+                })
+                .rev()
+                .collect();
+            text = put_back(&text, at, &member_json(kind, rows).unwrap());
+        }
+        text
+    }
+
+    #[test]
+    fn a_result_is_stored_without_its_summaries_and_put_back_to_the_byte() {
+        use crate::domain::shards::{Merged, run_whole};
+        // Device and operation metrics, listed thresholds, a life analysis, a name that holds
+        // the members' keys, and a metric ordered differently by name than by the job.
+        let jobs = [
+            r#"{"devices": 12, "operations": 30, "seed": 4, "name": "\"operations\":{}",
+                "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+                "limits": {"total_bounce_s": [{"above": 0.002}]},
+                "failure": {"e1": {"below": 0.4}}}"#,
+            r#"{"devices": 40, "operations": 7, "seed": 5, "metrics": ["total_bounce_s", "e1"]}"#,
+        ];
+        for text in jobs {
+            let job =
+                Job::new(serde_json::from_str(text).unwrap(), || 0, &Pointer::root()).unwrap();
+            let Merged::Result { mut result, groups } =
+                run_whole(&job, 100, u64::MAX, 0.0, &Silent).unwrap()
+            else {
+                panic!("a job without a rare event ends in its Result");
+            };
+            let whole = serde_json::to_string(&result).unwrap();
+            let encoded = EncodedResult::new(&mut result, groups).unwrap();
+            assert_eq!(serde_json::to_string(&result).unwrap(), whole, "{text}");
+            assert!(encoded.text.len() < whole.len() / 4, "{}", encoded.text);
+            assert_eq!(stored_and_put_back(&encoded), whole, "{text}");
+        }
+    }
+
+    #[test]
+    fn only_a_top_level_member_is_found() {
+        let text = r#"{"job":{"name":"\"devices\":{}","x":{"devices":{}}},"operations":{"a":[]},"devices":{},"t":1}"#;
+        let at = text.find(r#""devices":{},"t""#).unwrap() + r#""devices":"#.len();
+        assert_eq!(empty_member(text, "devices"), Some(at..at + 2));
+        // Not empty: stored whole, nothing to put back, and the scan ends there.
+        assert_eq!(empty_member(text, "operations"), None);
+        assert_eq!(empty_member(text, "absent"), None);
+        assert_eq!(empty_member(r#"{"devices""#, "devices"), None);
+        assert_eq!(empty_member(r#"{"devices":{"#, "devices"), None);
+        assert_eq!(empty_member(r#"{"a":"\"#, "devices"), None);
+    }
+
+    #[test]
+    fn a_summary_that_is_not_an_object_is_corrupt_not_a_panic() {
+        let rows = vec![("e1", 0, 0, 1, "[]")];
+        assert!(matches!(
+            member_json("operation", rows),
+            Err(StoreError::Corrupt { .. })
+        ));
+        assert_eq!(member_json("device", vec![]).unwrap(), "{}");
     }
 }
