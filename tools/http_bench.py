@@ -113,7 +113,12 @@ def quantile(values, q):
 
 
 def main():
+    if any(arg in ("-h", "--help") for arg in sys.argv[1:]):
+        print(__doc__)
+        return
     base = sys.argv[1] if len(sys.argv) > 1 else "http://127.0.0.1:8080"
+    if urlparse(base).hostname is None:
+        sys.exit(f"http_bench.py: {base!r} is not a server's URL (http://HOST:PORT)")
     polled, waited = [], []
     for block in range(5):
         polled += submit_to_result(base, runs=10, first_seed=100 * block)
