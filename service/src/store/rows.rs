@@ -792,9 +792,9 @@ pub(crate) fn bind_bins(query: Sql, job: &JobId, metric: &str, range: Operations
 
 /// The members of a Result stored apart, each as `{}` in its JSON ([`EncodedResult`]), with the
 /// kind of the `distributions` rows that hold them: `devices` first, since it follows
-/// `operations`, whose place in the text so stays where [`empty_member`] found it. A Result
-/// stored whole (before summaries were stored once) has neither empty, but a job's without device
-/// metrics, whose rows are none: [`member_json`] gives it `{}` again.
+/// `operations`, so that looking for it never scans `operations` put back. A Result stored whole
+/// (before summaries were stored once) has neither empty, but a job's without device metrics,
+/// whose rows are none: [`member_json`] gives it `{}` again (its rows are read for nothing).
 pub(crate) const STORED_APART: [(&str, &str); 2] =
     [("devices", "device"), ("operations", "operation")];
 
