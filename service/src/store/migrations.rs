@@ -32,6 +32,7 @@ const SQLITE_FILES: &[(&str, &str)] = embed!("sqlite":
     "0010_distribution_groups.sql",
     "0011_fair_share_and_retries.sql",
     "0012_claim_indexes.sql",
+    "0013_results_without_summaries.sql",
 );
 
 const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
@@ -48,6 +49,7 @@ const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
     "0011_claim_indexes.sql",
     "0012_compressed_bytes_stored_as_they_are.sql",
     "0013_results_compressed_with_lz4.sql",
+    "0014_results_without_summaries.sql",
 );
 
 /// `migrations/sqlite/`.
