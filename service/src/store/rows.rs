@@ -158,13 +158,20 @@ pub(crate) const LATEST_APPLIED_MIGRATION: &str =
     "SELECT MAX(version) AS version FROM _sqlx_migrations WHERE success";
 
 /// Not ready when the database's schema is older than this build's (`applied`, the newest
-/// migration applied): another version migrated it back, or it is another database.
+/// migration applied): another version migrated it back, or it is another database; nor when it
+/// is newer: a later build migrated it while this one ran, and may store what this one misreads.
 pub(crate) fn schema_current(migrator: &Migrator, applied: Option<i64>) -> StoreResult<()> {
     let known = migrator.iter().map(|m| m.version).max().unwrap_or(0);
     let applied = applied.unwrap_or(0);
     if applied < known {
         return Err(StoreError::NotReady(format!(
             "the database's schema is at migration {applied}; this build needs {known}"
+        )));
+    }
+    if applied > known {
+        return Err(StoreError::NotReady(format!(
+            "the database's schema is at migration {applied}, newer than this build's {known}: \
+             a later build migrated it; run that one here too"
         )));
     }
     Ok(())
@@ -1177,5 +1184,19 @@ mod tests {
             Err(StoreError::Corrupt { .. })
         ));
         assert_eq!(member_json("device", vec![]).unwrap(), "{}");
+    }
+
+    #[test]
+    fn ready_only_at_the_schema_this_build_knows() {
+        let migrator = &*super::super::migrations::SQLITE;
+        let known = migrator.iter().map(|m| m.version).max().unwrap();
+        assert!(schema_current(migrator, Some(known)).is_ok());
+        for applied in [None, Some(known - 1), Some(known + 1)] {
+            let checked = schema_current(migrator, applied);
+            assert!(
+                matches!(checked, Err(StoreError::NotReady(_))),
+                "{applied:?}: {checked:?}"
+            );
+        }
     }
 }
