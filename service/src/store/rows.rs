@@ -818,7 +818,7 @@ pub(crate) const SELECT_RESULT: &str = "SELECT result, (SELECT string_agg(kind |
 
 /// The Result's JSON from [`SELECT_RESULT`]'s row, its summaries put back.
 pub(crate) fn result_from_row(row: &AnyRow) -> StoreResult<String> {
-    let mut text = row.text("result")?;
+    let text = row.text("result")?;
     let joined = row.maybe_text("summaries")?.unwrap_or_default();
     let mut summaries: [Vec<SummaryRow>; 2] = Default::default();
     for line in joined.split('\n').filter(|line| !line.is_empty()) {
@@ -838,25 +838,28 @@ pub(crate) fn result_from_row(row: &AnyRow) -> StoreResult<String> {
             summary,
         ));
     }
+    put_back(text, summaries)
+}
+
+/// `text`, a stored Result, with each member stored apart put back from its rows (`summaries`
+/// in [`STORED_APART`]'s order). Each in one copy: `String::replace_range` moved a long member
+/// in byte by byte, a fifth of a large Result's read.
+fn put_back(mut text: String, summaries: [Vec<SummaryRow>; 2]) -> StoreResult<String> {
     for ((key, kind), rows) in STORED_APART.into_iter().zip(summaries) {
         if let Some(at) = empty_member(&text, key) {
-            text = put_back(&text, at, &member_json(kind, rows)?);
+            let member = member_json(kind, rows)?;
+            text = [&text[..at.start], &member, &text[at.end..]].concat();
         }
     }
     Ok(text)
-}
-
-/// `text` with the bytes `at` replaced by `member`, in one copy (`String::replace_range` moved a
-/// long member in byte by byte: a fifth of a large Result's read).
-pub(crate) fn put_back(text: &str, at: std::ops::Range<usize>, member: &str) -> String {
-    [&text[..at.start], member, &text[at.end..]].concat()
 }
 
 /// The JSON of a Result's member of `kind` from its rows, to the byte what `serde_json` writes
 /// for the Result: its metrics in key order; a device metric's summary; an operation metric's
 /// bins in order, each its summary's members followed by `op_start` and `op_end` (`Bin`'s
 /// flattened summary).
-pub(crate) fn member_json(kind: &str, mut rows: Vec<SummaryRow>) -> StoreResult<String> {
+fn member_json(kind: &str, mut rows: Vec<SummaryRow>) -> StoreResult<String> {
+    use std::fmt::Write;
     rows.sort_unstable_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
     let mut member = String::with_capacity(rows.iter().map(|row| row.4.len() + 48).sum());
     member.push('{');
@@ -879,7 +882,8 @@ pub(crate) fn member_json(kind: &str, mut rows: Vec<SummaryRow>) -> StoreResult<
                 member.push(',');
             }
             member.push_str(members);
-            member.push_str(&format!(r#","op_start":{op_start},"op_end":{op_end}}}"#));
+            // Writing to a String cannot fail.
+            let _ = write!(member, r#","op_start":{op_start},"op_end":{op_end}}}"#);
         }
         member.push(']');
     }
@@ -890,7 +894,7 @@ pub(crate) fn member_json(kind: &str, mut rows: Vec<SummaryRow>) -> StoreResult<
 /// Where the top-level member `key` of the JSON object `text` (compact, as `serde_json` writes
 /// it) is `{}`: those two bytes. Strings are skipped whole, so a key inside one never matches;
 /// the scan stops at the member, which a skeleton has early (after `job`).
-pub(crate) fn empty_member(text: &str, key: &str) -> Option<std::ops::Range<usize>> {
+fn empty_member(text: &str, key: &str) -> Option<std::ops::Range<usize>> {
     let bytes = text.as_bytes();
     let (mut depth, mut i) = (0_usize, 0);
     while i < bytes.len() {
@@ -1111,28 +1115,31 @@ mod tests {
     /// The Result's JSON as stored with its members put back from its rows, as
     /// `Results::result_json` does.
     fn stored_and_put_back(encoded: &EncodedResult) -> String {
-        let mut text = encoded.text.clone();
-        for (key, kind) in STORED_APART {
-            let at = empty_member(&text, key).expect("stored without its summaries");
-            let rows = encoded
-                .rows
-                .iter()
-                .filter(|row| row.kind == kind)
-                .map(|row| {
-                    let summary = row.summary.as_str();
-                    (
-                        row.metric.as_str(),
-                        row.bin,
-                        row.op_start,
-                        row.op_end,
-                        summary,
-                    )
-                })
-                .rev()
-                .collect();
-            text = put_back(&text, at, &member_json(kind, rows).unwrap());
+        let mut summaries: [Vec<SummaryRow>; 2] = Default::default();
+        for ((key, kind), rows) in STORED_APART.into_iter().zip(&mut summaries) {
+            assert!(
+                empty_member(&encoded.text, key).is_some(),
+                "stored without {key}"
+            );
+            rows.extend(
+                encoded
+                    .rows
+                    .iter()
+                    .rev()
+                    .filter(|row| row.kind == kind)
+                    .map(|row| {
+                        let summary = row.summary.as_str();
+                        (
+                            row.metric.as_str(),
+                            row.bin,
+                            row.op_start,
+                            row.op_end,
+                            summary,
+                        )
+                    }),
+            );
         }
-        text
+        put_back(encoded.text.clone(), summaries).unwrap()
     }
 
     #[test]
