@@ -92,6 +92,30 @@ impl SqlStore {
         })
     }
 
+    /// A write transaction, reading first, whose commit does not wait for the disk: for writes a
+    /// power cut may undo without losing anything acknowledged, because the queue does their work
+    /// again to the same bits (a claim, a lease renewed, a group's accumulators). The next commit
+    /// that does wait for the disk takes them with it: both databases write their log in order.
+    /// A crash of the process alone loses nothing, as the operating system holds what was written.
+    /// SQLite sets `synchronous = NORMAL` for it; its writer goes back to `FULL` when released
+    /// ([`super::sqlite`]). PostgreSQL turns `synchronous_commit` off for the transaction alone.
+    pub(crate) async fn begin_redoable(&self) -> StoreResult<Tx> {
+        Ok(match &self.backend {
+            Backend::Sqlite(sqlite) => Tx::Sqlite(
+                sqlite
+                    .writer()?
+                    .begin_with("PRAGMA synchronous = NORMAL; BEGIN IMMEDIATE")
+                    .await?,
+            ),
+            Backend::Postgres(postgres) => Tx::Postgres(
+                postgres
+                    .pool
+                    .begin_with("BEGIN; SET LOCAL synchronous_commit = off")
+                    .await?,
+            ),
+        })
+    }
+
     /// Refuses to acknowledge a write that went into a SQLite file no longer at the database's
     /// path: what it wrote is out of every later reader's reach.
     pub(crate) fn acknowledge(&self) -> StoreResult<()> {

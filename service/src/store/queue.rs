@@ -265,10 +265,10 @@ async fn now_or(dialect: &Dialect, tx: &mut Tx, at: Option<UnixMs>) -> StoreResu
     }
 }
 
-/// Fails every job one of whose shards lost its lease once more than `retries` allow, with the
-/// reason.
-async fn give_up_on_exhausted(tx: &mut Tx, now: UnixMs, retries: u64) -> StoreResult<()> {
-    let exhausted = Sql::new(
+/// The jobs to fail, each with the reason: one of their running shards lost its lease once
+/// more than `retries` allow.
+async fn exhausted(tx: &mut Tx, now: UnixMs, retries: u64) -> StoreResult<Vec<(JobId, String)>> {
+    let rows = Sql::new(
         // From the running shards (`shards_open`, whose condition `s.status <> 'done'` is stated
         // for the planner to use it), not from every open job's: 16 ms a claim with 1000 jobs
         // queued, when SQLite started from the jobs.
@@ -280,12 +280,12 @@ async fn give_up_on_exhausted(tx: &mut Tx, now: UnixMs, retries: u64) -> StoreRe
     .bind(count_to_sql(retries))
     .fetch_all(&mut *tx)
     .await?;
-    for row in exhausted {
-        let job = JobId::from(row.text("job_id")?);
-        let reason = gave_up(retries, shard_id_from_row(&row)?);
-        end_job(tx, &job, now, &reason).await?;
-    }
-    Ok(())
+    rows.iter()
+        .map(|row| {
+            let job = JobId::from(row.text("job_id")?);
+            Ok((job, gave_up(retries, shard_id_from_row(row)?)))
+        })
+        .collect()
 }
 
 #[async_trait]
@@ -458,9 +458,21 @@ impl JobQueue for SqlStore {
         terms: LeaseTerms,
         budget: RetryBudget,
     ) -> StoreResult<Option<Claim>> {
-        let mut tx = self.begin_reading_first().await?;
-        let now = now_or(self.dialect(), &mut tx, terms.at).await?;
-        give_up_on_exhausted(&mut tx, now, budget.lost_leases).await?;
+        // A claim that a power cut undoes is claimed again, so its commit does not wait for the
+        // disk; unless it also fails a job whose shard ran out of retries (an end is acknowledged
+        // to whoever asks), which is rare: then the claim starts again, durable.
+        let mut tx = self.begin_redoable().await?;
+        let mut now = now_or(self.dialect(), &mut tx, terms.at).await?;
+        let mut ending = exhausted(&mut tx, now, budget.lost_leases).await?;
+        if !ending.is_empty() {
+            tx.rollback().await?;
+            tx = self.begin_reading_first().await?;
+            now = now_or(self.dialect(), &mut tx, terms.at).await?;
+            ending = exhausted(&mut tx, now, budget.lost_leases).await?;
+        }
+        for (job, reason) in ending {
+            end_job(&mut tx, &job, now, &reason).await?;
+        }
         // Fair share: the job with the least virtual start time (docs/contract.md "Fair share");
         // in a job, shards in order.
         let claimed = Sql::new(self.dialect().claim)
@@ -498,7 +510,8 @@ impl JobQueue for SqlStore {
         terms: LeaseTerms,
         operations_done: u64,
     ) -> StoreResult<Lease> {
-        let mut tx = self.begin().await?;
+        // A renewal that a power cut undoes leaves a lease that runs out: the shard runs again.
+        let mut tx = self.begin_redoable().await?;
         let now = now_or(self.dialect(), &mut tx, terms.at).await?;
         let updated = fenced(
             concat!(
@@ -539,7 +552,8 @@ impl JobQueue for SqlStore {
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn complete_encoded(&self, fence: &Fence, partial: Vec<u8>) -> StoreResult<bool> {
         let partial_bytes = partial.len() as u64;
-        let mut tx = self.begin().await?;
+        // Accumulators that a power cut undoes are computed again, to the same bits.
+        let mut tx = self.begin_redoable().await?;
         let updated = fenced(
             concat!(
                 "UPDATE shards SET status = 'done', partial = $5, operations_done = operations_total, \

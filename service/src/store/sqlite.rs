@@ -105,15 +105,21 @@ impl SqliteBackend {
 /// every later BEGIN would then be a savepoint inside a transaction that never commits,
 /// acknowledging writes that vanish. A fresh connection starts clean, and never creates a missing
 /// file (the store checks the file before each write: [`SqliteBackend::writer`]).
+///
+/// Released, the writer is back at `synchronous = FULL`, whatever its last transaction was
+/// ([`super::SqlStore::begin_redoable`] sets `NORMAL`), so every other commit reaches the disk
+/// before it is acknowledged; a writer that cannot be set back is closed.
 async fn recovering_writer(options: SqliteConnectOptions) -> StoreResult<SqlitePool> {
     let pool = SqlitePoolOptions::new()
         .max_connections(1)
         .test_before_acquire(false)
         .after_release(|connection, _| {
             Box::pin(async move {
-                // The ping runs behind any rollback a dropped transaction queued, so the count
-                // of open transactions is settled when it answers.
-                if connection.ping().await.is_err() {
+                // The statement runs behind any rollback a dropped transaction queued, so the
+                // count of open transactions is settled when it answers (and SQLite refuses to
+                // change `synchronous` inside a transaction).
+                let durable = sqlx::query("PRAGMA synchronous = FULL");
+                if durable.execute(&mut *connection).await.is_err() {
                     return Ok(false);
                 }
                 Ok(!connection.is_in_transaction())
@@ -268,6 +274,54 @@ mod tests {
     fn queued(seed: u64) -> QueuedJob {
         let job = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || seed).unwrap();
         QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1))
+    }
+
+    /// SQLite's `synchronous` on the writer: 1 is `NORMAL`, 2 `FULL`.
+    async fn synchronous<'c>(on: impl Into<crate::store::sql::Conn<'c>>) -> i64 {
+        let row = Sql::new("PRAGMA synchronous").fetch_one(on).await.unwrap();
+        row.int("synchronous").unwrap()
+    }
+
+    /// Only a redoable transaction commits without waiting for the disk: the writer is back at
+    /// `FULL` after it, whether it committed, rolled back or was dropped unfinished, and after a
+    /// claim, which is one.
+    #[tokio::test]
+    async fn only_redoable_transactions_commit_without_waiting_for_the_disk() {
+        let (store, _, dir) = open_named("synchronous").await;
+        assert_eq!(synchronous(store.writer().unwrap()).await, 2);
+        let mut tx = store.begin().await.unwrap();
+        assert_eq!(synchronous(&mut tx).await, 2);
+        tx.commit().await.unwrap();
+        for end in ["commit", "rollback", "drop"] {
+            let mut tx = store.begin_redoable().await.unwrap();
+            assert_eq!(synchronous(&mut tx).await, 1, "{end}");
+            match end {
+                "commit" => tx.commit().await.unwrap(),
+                "rollback" => tx.rollback().await.unwrap(),
+                _ => drop(tx),
+            }
+            assert_eq!(synchronous(store.writer().unwrap()).await, 2, "after {end}");
+            let mut tx = store.begin().await.unwrap();
+            assert_eq!(synchronous(&mut tx).await, 2, "a transaction after {end}");
+            tx.rollback().await.unwrap();
+        }
+        store
+            .insert_job(queued(1), QueueBound::total(10))
+            .await
+            .unwrap()
+            .unwrap();
+        let terms = crate::store::LeaseTerms {
+            at: None,
+            duration_ms: 60_000,
+        };
+        let budget = crate::domain::shards::RetryBudget {
+            failures: 0,
+            lost_leases: 0,
+        };
+        assert!(store.claim("w", terms, budget).await.unwrap().is_some());
+        assert_eq!(synchronous(store.writer().unwrap()).await, 2);
+        drop(store);
+        std::fs::remove_dir_all(dir).unwrap();
     }
 
     #[tokio::test]
