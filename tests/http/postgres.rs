@@ -132,7 +132,12 @@ fn postgres_stopped_and_restarted_under_workers_fails_fast_and_loses_nothing() {
     let Some(cluster) = Postgres::start(&temp_dir("http-postgres-down")) else {
         return;
     };
-    let server = TestApp::on(&cluster.database("down"), &["--workers", "2"]);
+    // Leases of 5 s: a shard whose worker lost the database keeps its lease until it expires, and
+    // the default 30 s made the test wait 16 s for the second job after the restart.
+    let server = TestApp::on(
+        &cluster.database("down"),
+        &["--workers", "2", "--lease-seconds", "5"],
+    );
     assert_eq!(get(&server.url("/readyz"), None).status, 200);
     let jobs: Vec<_> = (0..2)
         .map(|seed| scattered_job(20_000, 500, seed))
