@@ -1,8 +1,9 @@
 //! The SQLite backend: WAL, foreign keys, `synchronous = FULL` (a submitted job survives a crash or
-//! a power cut once its 202 is sent), one writer connection (writes never race for the lock inside
-//! the process, and every write transaction starts with a write, so instances sharing the file wait
-//! on `busy_timeout` instead of failing with "database is locked"), and a pool of readers. The SQL
-//! is the store's one body; what is SQLite's own is here.
+//! a power cut once its 202 is sent; only writes the queue can redo do not wait for the disk, see
+//! [`super::SqlStore::begin_redoable`]), one writer connection (writes never race for the lock
+//! inside the process, and every write transaction starts with a write, so instances sharing the
+//! file wait on `busy_timeout` instead of failing with "database is locked"), and a pool of
+//! readers. The SQL is the store's one body; what is SQLite's own is here.
 
 use super::rows::{
     Dialect, bind_queued_job, claim_next, count_to_sql, fenced_shard, insert_job, insert_shards,
