@@ -315,12 +315,16 @@ pub struct CalibrationCoverage {
     /// Noise draws (seeds `first_seed` onwards).
     pub draws: u64,
     pub coverage: f64,
+    /// The share of the same draws on which the exact interval of the model linearised at the
+    /// truth holds it: 0.95 in expectation, so its departure is the draws' own luck.
+    pub linear_reference: f64,
 }
 
 /// The calibration studies of the model (issue 29's two cases): each disjoint block of 200 noise
 /// draws from seed 1000 on, five blocks, then the 1000 together (quick: one block of 20). The
 /// blocks show how far a 200-draw coverage strays from the 1000-draw one by chance alone (its
-/// binomial standard deviation at a true 0.95 is 0.015).
+/// binomial standard deviation at a true 0.95 is 0.015), and the exact linearised interval on
+/// the same draws how much of that is the draws.
 pub(super) fn calibration_coverage(quick: bool, progress: &Progress) -> Vec<CalibrationCoverage> {
     use bouncewear_model::calibration::study::{CASES, coverage};
     const FIRST: u64 = 1000;
@@ -328,27 +332,45 @@ pub(super) fn calibration_coverage(quick: bool, progress: &Progress) -> Vec<Cali
     let mut rows = Vec::new();
     for case in &CASES {
         progress.measure(format!("calibration coverage: {}", case.name), || {
-            let row = |(&(parameter, truth), coverage), first_seed, draws| CalibrationCoverage {
-                case: case.name,
-                parameter,
-                truth,
-                first_seed,
-                draws,
-                coverage,
+            let rows_of = |profile: &[f64], linear: &[f64], first_seed, draws| {
+                let truths = case.truths.iter().zip(profile.iter().zip(linear));
+                truths
+                    .map(|(&(parameter, truth), (&coverage, &linear_reference))| {
+                        CalibrationCoverage {
+                            case: case.name,
+                            parameter,
+                            truth,
+                            first_seed,
+                            draws,
+                            coverage,
+                            linear_reference,
+                        }
+                    })
+                    .collect::<Vec<_>>()
             };
-            // Covered fits per parameter over every block.
-            let mut covered = vec![0.0; case.truths.len()];
+            // The shares' sums over every block.
+            let mut profile = vec![0.0; case.truths.len()];
+            let mut linear = vec![0.0; case.truths.len()];
             for first in (0..blocks).map(|b| FIRST + b * block) {
                 let shares = coverage(case, first..first + block);
-                for (total, share) in covered.iter_mut().zip(&shares) {
-                    *total += share * block as f64;
+                for (sum, share) in profile.iter_mut().zip(&shares.profile) {
+                    *sum += share;
                 }
-                rows.extend(case.truths.iter().zip(shares).map(|p| row(p, first, block)));
+                for (sum, share) in linear.iter_mut().zip(&shares.linear_reference) {
+                    *sum += share;
+                }
+                rows.extend(rows_of(
+                    &shares.profile,
+                    &shares.linear_reference,
+                    first,
+                    block,
+                ));
             }
             if blocks > 1 {
-                let draws = block * blocks;
-                let shares = covered.iter().map(|c| c / draws as f64);
-                rows.extend(case.truths.iter().zip(shares).map(|p| row(p, FIRST, draws)));
+                let mean = |sums: Vec<f64>| sums.into_iter().map(|s| s / blocks as f64);
+                let (profile, linear): (Vec<f64>, Vec<f64>) =
+                    (mean(profile).collect(), mean(linear).collect());
+                rows.extend(rows_of(&profile, &linear, FIRST, block * blocks));
             }
         });
     }
