@@ -1442,7 +1442,7 @@ mod tests {
     /// block's luck). Measured over the 1000: 0.952; 0.951 and 0.943 (the reference 0.958; 0.948
     /// and 0.945); the roughening energy's blocks 0.915, 0.95, 0.955, 0.95 and 0.945 against
     /// the reference's 0.92, 0.95, 0.96, 0.95 and 0.945: its first block's draws are unlucky for
-    /// any exact interval. About 150 s in release:
+    /// any exact interval. About 175 s in release:
     /// `cargo test --release -p bouncewear-model --lib calibration -- --ignored --nocapture`.
     #[test]
     #[ignore = "1000 fits of each case: run with --release -- --ignored"]
