@@ -18,7 +18,8 @@ drifts by a quarter within minutes, so figures from different moments do not com
 `bouncewear_shard_step_seconds` histogram of a `serve --workers 1` node running the same job twice:
 `claim` (finding and leasing a shard), `store` (writing a group's accumulators in the transaction
 that counts it done) and `merge` (reading every group back, merging in order, summarising and
-storing the Result), beside `run` (the simulation itself).
+storing the Result; its parts `merge_read`, `merge_compute` and `merge_write`), beside `run` (the
+simulation itself).
 """
 
 import argparse
@@ -237,7 +238,7 @@ def main():
     print(f"\nResults identical to `run` for every worker count: {len(results) == 1}\n")
     print("| shard step | mean (ms) | count |")
     print("|---|---|---|")
-    for step in ("claim", "run", "store", "merge"):
+    for step in ("claim", "run", "store", "merge", "merge_read", "merge_compute", "merge_write"):
         if step in steps:
             mean, count = steps[step]
             print(f"| {step} | {mean * 1e3:.2f} | {count} |")

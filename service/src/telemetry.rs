@@ -237,8 +237,10 @@ pub fn record_job_finished(wall_s: f64, operations: u64, stored_bytes: u64) {
     }
 }
 
-/// Records how long one step of a shard took, from `since`: `claim`, `run`, `store` or `merge`.
-/// What sharding costs is all but `run`.
+/// Records how long one step of a shard took, from `since`: `claim`, `run`, `store` or `merge`,
+/// and a batch's merge in parts, `merge_read` (the groups read back), `merge_compute` (merged,
+/// summarised and encoded; a job run whole runs here) and `merge_write` (the Result or the next
+/// batch stored). What sharding costs is all but `run`.
 pub fn record_shard_step(step: &'static str, since: std::time::Instant) {
     metrics::histogram!(SHARD_STEP, "step" => step).record(since.elapsed().as_secs_f64());
 }

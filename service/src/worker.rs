@@ -356,6 +356,7 @@ impl Workers {
         let Some((_alone, partials)) = self.read_groups(fence, job, last).await else {
             return;
         };
+        record_shard_step("merge_read", merging);
         let wall_s = (UnixMs::now().0 - started_at.0).max(0) as f64 / 1000.0;
         // A first batch without groups stored is a job that entered the queue whole.
         let whole = last == 0 && partials.read().is_empty();
@@ -366,6 +367,7 @@ impl Workers {
             0
         };
         let (listed_lives, sharded_from) = (self.listed_lives, self.sharded_round_operations);
+        let computing = Instant::now();
         let ran = self
             .compute(lease, move |observer| {
                 let merged = if whole {
@@ -376,7 +378,10 @@ impl Workers {
                 encoded(merged)
             })
             .await;
+        record_shard_step("merge_compute", computing);
+        let writing = Instant::now();
         self.write(fence, ran, simulated, lease).await;
+        record_shard_step("merge_write", writing);
         record_shard_step("merge", merging);
     }
 

@@ -252,6 +252,22 @@ fn every_metric_family_has_help_and_type_and_latency_is_a_histogram() {
             .iter()
             .any(|l| l.contains(r#"route="/healthz""#) && l.contains(r#"le="+Inf""#))
     );
+    // The small job ran whole, as its batch's merge step: claimed, its (no) groups read, run,
+    // summarised and encoded, then written; each part on the workers' own clock.
+    let steps = scrape.labels_of("bouncewear_shard_step_seconds_count");
+    for step in [
+        "claim",
+        "merge",
+        "merge_read",
+        "merge_compute",
+        "merge_write",
+    ] {
+        let label = format!(r#"step="{step}""#);
+        assert!(
+            steps.iter().any(|l| l.contains(&label)),
+            "{step}: {steps:?}"
+        );
+    }
     let version = format!(r#"version="{}""#, env!("CARGO_PKG_VERSION"));
     assert!(
         scrape
