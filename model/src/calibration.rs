@@ -1196,7 +1196,7 @@ fn normal_equations(columns: &[Vec<f64>], residuals: &[f64]) -> (Vec<Vec<f64>>, 
 
 #[cfg(test)]
 mod tests {
-    use super::study::{CASES, bounce_times, coverage, together, wear_curve};
+    use super::study::{CASES, bounce_times, coverage, coverage_by_block, together, wear_curve};
     use super::*;
     use crate::stats::test_util::SplitMix;
     use approx::assert_relative_eq;
@@ -1448,29 +1448,17 @@ mod tests {
     #[ignore = "1000 fits of each case: run with --release -- --ignored"]
     fn the_intervals_cover_the_truth_95_percent_of_the_time() {
         for case in &CASES {
-            let mut profile = vec![0.0; case.truths.len()];
-            let mut linear = vec![0.0; case.truths.len()];
-            for first in (1000..2000).step_by(200) {
-                let block = coverage(case, first..first + 200);
-                eprintln!("{}, seeds {first}..{}: {block:?}", case.name, first + 200);
-                for (i, (c, r)) in block
-                    .profile
-                    .iter()
-                    .zip(&block.linear_reference)
-                    .enumerate()
-                {
+            let study = coverage_by_block(case, 1000, 200, 5);
+            for (seeds, block) in &study.blocks {
+                eprintln!("{}, seeds {seeds:?}: {block:?}", case.name);
+                for (c, r) in block.profile.iter().zip(&block.linear_reference) {
                     assert!((0.90..=0.99).contains(c), "{c}");
                     assert!((c - r).abs() <= 0.03, "{c} against the reference's {r}");
-                    profile[i] += c / 5.0;
-                    linear[i] += r / 5.0;
                 }
             }
-            eprintln!(
-                "{}, seeds 1000..2000: {profile:?}, reference {linear:?}",
-                case.name
-            );
-            for c in profile.into_iter().chain(linear) {
-                assert!((0.93..=0.97).contains(&c), "{c}");
+            eprintln!("{}, seeds 1000..2000: {:?}", case.name, study.all);
+            for c in study.all.profile.iter().chain(&study.all.linear_reference) {
+                assert!((0.93..=0.97).contains(c), "{c}");
             }
         }
     }

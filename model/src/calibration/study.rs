@@ -79,6 +79,36 @@ pub fn coverage(case: &Case, seeds: Range<u64>) -> Coverage {
     }
 }
 
+/// A coverage study in disjoint blocks of draws: how far a block's coverage strays from all
+/// of them together by chance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Blocks {
+    /// Each block's seeds and coverage, in order.
+    pub blocks: Vec<(Range<u64>, Coverage)>,
+    /// Every block's draws together.
+    pub all: Coverage,
+}
+
+/// The coverage of `case`'s intervals over `count` disjoint blocks of `size` draws, seeds
+/// `first` onwards, each block's and all together.
+pub fn coverage_by_block(case: &Case, first: u64, size: u64, count: u64) -> Blocks {
+    let blocks: Vec<(Range<u64>, Coverage)> = (0..count)
+        .map(|b| first + b * size..first + (b + 1) * size)
+        .map(|seeds| (seeds.clone(), coverage(case, seeds)))
+        .collect();
+    // Blocks of equal size: all the draws' share is the blocks' mean share.
+    let mean = |share: fn(&Coverage) -> &Vec<f64>| -> Vec<f64> {
+        (0..case.truths.len())
+            .map(|i| blocks.iter().map(|(_, c)| share(c)[i]).sum::<f64>() / count.max(1) as f64)
+            .collect()
+    };
+    let all = Coverage {
+        profile: mean(|c| &c.profile),
+        linear_reference: mean(|c| &c.linear_reference),
+    };
+    Blocks { blocks, all }
+}
+
 /// Whether the exact 95 % interval of the model linearised at the truth holds the truth, per
 /// parameter, for the measurements `spec` of `case`.
 ///

@@ -326,51 +326,26 @@ pub struct CalibrationCoverage {
 /// binomial standard deviation at a true 0.95 is 0.015), and the exact linearised interval on
 /// the same draws how much of that is the draws.
 pub(super) fn calibration_coverage(quick: bool, progress: &Progress) -> Vec<CalibrationCoverage> {
-    use bouncewear_model::calibration::study::{CASES, coverage};
-    const FIRST: u64 = 1000;
-    let (block, blocks) = if quick { (20, 1) } else { (200, 5) };
+    use bouncewear_model::calibration::study::{CASES, coverage_by_block};
+    let (size, count) = if quick { (20, 1) } else { (200, 5) };
     let mut rows = Vec::new();
     for case in &CASES {
         progress.measure(format!("calibration coverage: {}", case.name), || {
-            let rows_of = |profile: &[f64], linear: &[f64], first_seed, draws| {
-                let truths = case.truths.iter().zip(profile.iter().zip(linear));
-                truths
-                    .map(|(&(parameter, truth), (&coverage, &linear_reference))| {
-                        CalibrationCoverage {
-                            case: case.name,
-                            parameter,
-                            truth,
-                            first_seed,
-                            draws,
-                            coverage,
-                            linear_reference,
-                        }
-                    })
-                    .collect::<Vec<_>>()
-            };
-            // The shares' sums over every block.
-            let mut profile = vec![0.0; case.truths.len()];
-            let mut linear = vec![0.0; case.truths.len()];
-            for first in (0..blocks).map(|b| FIRST + b * block) {
-                let shares = coverage(case, first..first + block);
-                for (sum, share) in profile.iter_mut().zip(&shares.profile) {
-                    *sum += share;
-                }
-                for (sum, share) in linear.iter_mut().zip(&shares.linear_reference) {
-                    *sum += share;
-                }
-                rows.extend(rows_of(
-                    &shares.profile,
-                    &shares.linear_reference,
-                    first,
-                    block,
+            let study = coverage_by_block(case, 1000, size, count);
+            let whole = (count > 1).then(|| (1000..1000 + size * count, study.all));
+            for (seeds, coverage) in study.blocks.into_iter().chain(whole) {
+                let shares = coverage.profile.into_iter().zip(coverage.linear_reference);
+                rows.extend(case.truths.iter().zip(shares).map(
+                    |(&(parameter, truth), (coverage, linear_reference))| CalibrationCoverage {
+                        case: case.name,
+                        parameter,
+                        truth,
+                        first_seed: seeds.start,
+                        draws: seeds.end - seeds.start,
+                        coverage,
+                        linear_reference,
+                    },
                 ));
-            }
-            if blocks > 1 {
-                let mean = |sums: Vec<f64>| sums.into_iter().map(|s| s / blocks as f64);
-                let (profile, linear): (Vec<f64>, Vec<f64>) =
-                    (mean(profile).collect(), mean(linear).collect());
-                rows.extend(rows_of(&profile, &linear, FIRST, block * blocks));
             }
         });
     }
