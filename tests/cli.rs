@@ -1,12 +1,9 @@
 //! The `bouncewear` binary through its outside contract (docs/contract.md "Build and binary",
 //! "Scenario").
 
-#[path = "support/mod.rs"]
-mod support;
-
+use crate::support::{bouncewear, run_job, temp_dir, without_timing};
 use bouncewear_model::{Fidelity, Scenario, simulate};
 use serde_json::Value;
-use support::{bouncewear, run_job, temp_dir, without_timing};
 
 /// Runs a command that must fail with exit code 2 and one stderr line; returns that line.
 fn rejected(args: &[&str], stdin: &str) -> String {
@@ -39,7 +36,7 @@ fn simulate_reproduces_every_validation_case_through_the_binary() {
             );
             let actual: Value = serde_json::from_slice(&output.stdout).unwrap();
             let differences =
-                support::json_close::json_differences(&actual, &case[fidelity], 1e-12);
+                crate::support::json_close::json_differences(&actual, &case[fidelity], 1e-12);
             assert!(
                 differences.is_empty(),
                 "{name} {fidelity}: {differences:#?}"
@@ -216,7 +213,7 @@ fn every_kernel_gives_the_same_result_through_the_binary() {
     let dir = temp_dir("kernel-env");
     let path = dir.join("job.json");
     std::fs::write(&path, jobs[0].to_string()).unwrap();
-    let output = std::process::Command::new(support::BIN)
+    let output = std::process::Command::new(crate::support::BIN)
         .args(["run", "--quiet", path.to_str().unwrap()])
         .env("BOUNCEWEAR_KERNEL", names.last().unwrap())
         .output()
@@ -234,7 +231,7 @@ fn every_kernel_gives_the_same_result_through_the_binary() {
 /// with a sensitivity analysis its chart per metric of the analysis.
 #[test]
 fn run_writes_the_dashboards_plots_sensitivity_included() {
-    let mut job = support::scattered_job(24, 20, 3);
+    let mut job = crate::support::scattered_job(24, 20, 3);
     job["metrics"] = serde_json::json!(["total_bounce_s", "final_radius_m"]);
     job["sensitivity"] = serde_json::json!({"method": "sobol"});
     let dir = temp_dir("plots");
@@ -348,7 +345,7 @@ fn a_reader_that_stops_early_is_not_an_error() {
         r#"{"devices": 20, "operations": 1000, "bin_operations": 1, "seed": 1}"#,
     )
     .unwrap();
-    let child = Command::new(support::BIN)
+    let child = Command::new(crate::support::BIN)
         .args(["run", job.to_str().unwrap()])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -366,7 +363,7 @@ fn a_reader_that_stops_early_is_not_an_error() {
 /// Runs the binary with `args` on a terminal (util-linux `script` gives it one), its stdout
 /// thrown away: what the terminal showed.
 fn on_a_terminal(args: &[&str]) -> String {
-    let quoted: Vec<String> = std::iter::once(support::BIN)
+    let quoted: Vec<String> = std::iter::once(crate::support::BIN)
         .chain(args.iter().copied())
         .map(|arg| format!("'{arg}'"))
         .collect();

@@ -1,17 +1,14 @@
 //! The service as a process: what only a real process shows (SIGKILL, SIGTERM, refusing to
 //! start, its log on stderr), through the binary.
 
-#[path = "support/mod.rs"]
-mod support;
-
+use crate::support::app::{Service, Spawned, WorkerProcess};
+use crate::support::client::{agent, delete, get, reply};
+use crate::support::postgres::Postgres;
+use crate::support::{BIN, run_job, scattered_job, temp_db, temp_dir};
 use serde_json::{Value, json};
 use std::process::Command;
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
-use support::app::{Service, Spawned, WorkerProcess};
-use support::client::{agent, delete, get, reply};
-use support::postgres::Postgres;
-use support::{BIN, run_job, scattered_job, temp_db, temp_dir};
 
 #[test]
 fn a_job_killed_mid_run_finishes_after_restart_with_the_identical_result() {

@@ -1,9 +1,8 @@
 //! The store's promises, kept by every backend: the same checks against SQLite and against a real
 //! PostgreSQL (a throwaway cluster; skipped where PostgreSQL is not installed, required in CI).
 
-#[path = "support/mod.rs"]
-mod support;
-
+use crate::support::postgres::Postgres;
+use crate::support::{temp_dir, without_timing};
 use bouncewear::compute::thread_pool;
 use bouncewear::domain::idempotency::KEY_LIFETIME_MS;
 use bouncewear::domain::rare::{RARE_ROUNDS, SHARDED_ROUND_OPERATIONS, is_round};
@@ -25,8 +24,6 @@ use bouncewear_model::stats::summarize;
 use chrono::{DateTime, Utc};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use support::postgres::Postgres;
-use support::{temp_dir, without_timing};
 use tokio::sync::{Notify, watch};
 
 fn queued(seed: u64) -> QueuedJob {

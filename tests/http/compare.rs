@@ -2,7 +2,7 @@
 //! whose answer is known exactly; two designs give both plots with both names; bad queries are
 //! 400s naming their parameter.
 
-use crate::remote::{job_file, remote, stdout};
+use super::remote::{job_file, remote, stdout};
 use crate::support::app::{Service, TestApp};
 use crate::support::client::{assert_problem, get};
 use crate::support::temp_db;

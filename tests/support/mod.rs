@@ -1,5 +1,5 @@
 //! What the integration tests share: the binary, temporary files, an HTTP client, the service run
-//! in-process or as a child process, and the jobs the tests submit. Each test binary uses a part
+//! in-process or as a child process, and the jobs the tests submit. Each test module uses a part
 //! of it.
 #![allow(dead_code)]
 

@@ -1,9 +1,6 @@
 //! The HTTP API of docs/contract.md against the real application, run in-process on a real
 //! database file and port, one module per resource.
 
-#[path = "../support/mod.rs"]
-mod support;
-
 mod calibrations;
 mod compare;
 mod events;
