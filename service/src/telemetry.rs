@@ -238,11 +238,16 @@ pub fn record_job_finished(wall_s: f64, operations: u64, stored_bytes: u64) {
 }
 
 /// Records how long one step of a shard took, from `since`: `claim`, `run`, `store` or `merge`,
-/// and a batch's merge in parts, `merge_read` (the groups read back), `merge_compute` (merged,
-/// summarised and encoded; a job run whole runs here) and `merge_write` (the Result or the next
-/// batch stored). What sharding costs is all but `run`.
+/// and a merge step in parts, `merge_read` (the groups, or a rare event's round, read back),
+/// `merge_compute` (merged, summarised and encoded; a job run whole runs here) and `merge_write`
+/// (the Result, the next batch or the next round stored). What sharding costs is all but `run`.
 pub fn record_shard_step(step: &'static str, since: std::time::Instant) {
-    metrics::histogram!(SHARD_STEP, "step" => step).record(since.elapsed().as_secs_f64());
+    record_shard_time(step, since.elapsed());
+}
+
+/// Records `took` as the time of shard step `step` ([`record_shard_step`]).
+pub fn record_shard_time(step: &'static str, took: std::time::Duration) {
+    metrics::histogram!(SHARD_STEP, "step" => step).record(took.as_secs_f64());
 }
 
 /// A label value for a request's method: the standard ones by name, any other `other`, so a

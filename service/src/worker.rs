@@ -28,7 +28,7 @@ use crate::store::{
     Claim, EncodedGroups, EncodedResult, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store,
     StoreResult, encode,
 };
-use crate::telemetry::{record_job_finished, record_shard_step};
+use crate::telemetry::{record_job_finished, record_shard_step, record_shard_time};
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::{Batch, GroupStats, run_group};
 use bouncewear_model::montecarlo::rare;
@@ -133,6 +133,48 @@ fn encoded(merged: Result<Merged, MergeError>) -> Result<Result<Outcome, MergeEr
         }) => round_outcome(&rounds, shards, folded),
     };
     Ok(Ok(outcome))
+}
+
+/// A part of a merge step, as `bouncewear_shard_step_seconds` names it.
+#[derive(Clone, Copy)]
+enum Part {
+    Read,
+    Compute,
+    Write,
+}
+
+/// A merge step's time in its parts, each summed over the times it comes back (a rare event's
+/// round reads and computes twice once its estimate is made), recorded with the whole step as
+/// `merge` ([`crate::telemetry::record_shard_step`]).
+struct MergeClock {
+    started: Instant,
+    parts: [Duration; 3],
+}
+
+impl MergeClock {
+    const NAMES: [&'static str; 3] = ["merge_read", "merge_compute", "merge_write"];
+
+    fn start() -> Self {
+        Self {
+            started: Instant::now(),
+            parts: [Duration::ZERO; 3],
+        }
+    }
+
+    /// Awaits `work`, its time counted to `part`.
+    async fn time<T>(&mut self, part: Part, work: impl Future<Output = T>) -> T {
+        let started = Instant::now();
+        let out = work.await;
+        self.parts[part as usize] += started.elapsed();
+        out
+    }
+
+    fn record(self) {
+        for (name, took) in Self::NAMES.into_iter().zip(self.parts) {
+            record_shard_time(name, took);
+        }
+        record_shard_step("merge", self.started);
+    }
 }
 
 /// A rare event's round to queue, its shards and `folded`, encoded.
@@ -351,12 +393,12 @@ impl Workers {
 
     /// Puts the done groups back in order: the Result, or the next batch of a precision target.
     async fn merge(&self, fence: &Fence, job: Job, started_at: UnixMs, lease: &KeptLease) {
-        let merging = Instant::now();
+        let mut clock = MergeClock::start();
         let last = fence.shard.batch;
-        let Some((_alone, partials)) = self.read_groups(fence, job, last).await else {
+        let read = clock.time(Part::Read, self.read_groups(fence, job, last));
+        let Some((_alone, partials)) = read.await else {
             return;
         };
-        record_shard_step("merge_read", merging);
         let wall_s = (UnixMs::now().0 - started_at.0).max(0) as f64 / 1000.0;
         // A first batch without groups stored is a job that entered the queue whole.
         let whole = last == 0 && partials.read().is_empty();
@@ -367,22 +409,18 @@ impl Workers {
             0
         };
         let (listed_lives, sharded_from) = (self.listed_lives, self.sharded_round_operations);
-        let computing = Instant::now();
-        let ran = self
-            .compute(lease, move |observer| {
-                let merged = if whole {
-                    run_whole(partials.job(), listed_lives, sharded_from, wall_s, observer)
-                } else {
-                    merge(partials, sharded_from, wall_s, observer)
-                };
-                encoded(merged)
-            })
-            .await;
-        record_shard_step("merge_compute", computing);
-        let writing = Instant::now();
-        self.write(fence, ran, simulated, lease).await;
-        record_shard_step("merge_write", writing);
-        record_shard_step("merge", merging);
+        let compute = self.compute(lease, move |observer| {
+            let merged = if whole {
+                run_whole(partials.job(), listed_lives, sharded_from, wall_s, observer)
+            } else {
+                merge(partials, sharded_from, wall_s, observer)
+            };
+            encoded(merged)
+        });
+        let ran = clock.time(Part::Compute, compute).await;
+        let write = self.write(fence, ran, simulated, lease);
+        clock.time(Part::Write, write).await;
+        clock.record();
     }
 
     /// Writes what a merge step made: the Result, the next batch, or a rare event's round; the
@@ -516,7 +554,7 @@ impl Workers {
     /// they are small, and queues the next large one or, the estimate made, stores the Result
     /// from the devices' groups.
     async fn merge_round(&self, fence: &Fence, job: Job, started_at: UnixMs, lease: &KeptLease) {
-        let merging = Instant::now();
+        let mut clock = MergeClock::start();
         let read = async {
             let rounds = self.store.round(&fence.job, fence.shard.batch).await?;
             let outcomes = self
@@ -525,7 +563,7 @@ impl Workers {
                 .await?;
             StoreResult::Ok((rounds, outcomes))
         };
-        let (rounds, outcomes) = match read.await {
+        let (rounds, outcomes) = match clock.time(Part::Read, read).await {
             Ok(read) => read,
             Err(error) => {
                 let reason = format!("reading the rare event's round failed: {error}");
@@ -535,22 +573,21 @@ impl Workers {
         let devices_last = rounds.devices_last;
         let sharded_from = self.sharded_round_operations;
         let round_job = job.clone();
-        let ran = self
-            .compute(lease, move |observer| {
-                match merge_round(&round_job, rounds, outcomes, sharded_from, observer) {
-                    Err(MergeError::Cancelled(cancelled)) => Err(cancelled),
-                    Err(other) => Ok(Err(other)),
-                    Ok(RoundMerged::Next { rounds, shards }) => {
-                        Ok(Ok(Ok(round_outcome(&rounds, shards, Vec::new()))))
-                    }
-                    Ok(RoundMerged::Estimated(report)) => Ok(Ok(Err(report))),
+        let compute = self.compute(lease, move |observer| {
+            match merge_round(&round_job, rounds, outcomes, sharded_from, observer) {
+                Err(MergeError::Cancelled(cancelled)) => Err(cancelled),
+                Err(other) => Ok(Err(other)),
+                Ok(RoundMerged::Next { rounds, shards }) => {
+                    Ok(Ok(Ok(round_outcome(&rounds, shards, Vec::new()))))
                 }
-            })
-            .await;
-        let report = match ran {
+                Ok(RoundMerged::Estimated(report)) => Ok(Ok(Err(report))),
+            }
+        });
+        let report = match clock.time(Part::Compute, compute).await {
             Ran::Done(Ok(Ok(next))) => {
-                self.write(fence, Ran::Done(Ok(next)), 0, lease).await;
-                return record_shard_step("merge", merging);
+                let write = self.write(fence, Ran::Done(Ok(next)), 0, lease);
+                clock.time(Part::Write, write).await;
+                return clock.record();
             }
             Ran::Done(Ok(Err(report))) => report,
             Ran::Done(Err(error)) => {
@@ -564,15 +601,17 @@ impl Workers {
             }
         };
         // The estimate is made: the Result from the devices' groups.
-        let Some((_alone, devices)) = self.read_groups(fence, job, devices_last).await else {
+        let read = clock.time(Part::Read, self.read_groups(fence, job, devices_last));
+        let Some((_alone, devices)) = read.await else {
             return;
         };
         let wall_s = (UnixMs::now().0 - started_at.0).max(0) as f64 / 1000.0;
-        let ran = self
-            .compute(lease, move |_| encoded(estimated(devices, report, wall_s)))
+        let compute = self.compute(lease, move |_| encoded(estimated(devices, report, wall_s)));
+        let ran = clock.time(Part::Compute, compute).await;
+        clock
+            .time(Part::Write, self.write(fence, ran, 0, lease))
             .await;
-        self.write(fence, ran, 0, lease).await;
-        record_shard_step("merge", merging);
+        clock.record();
     }
 
     /// The job's groups up to batch `last`, read into a [`Folding`], with this instance's
@@ -821,5 +860,58 @@ async fn wake_on_announcements(
             },
             _ = shutdown.changed() => return,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use metrics_exporter_prometheus::PrometheusBuilder;
+
+    /// The recorded `bouncewear_shard_step_seconds` of `step`: its count and sum.
+    fn recorded(text: &str, step: &str) -> (u64, f64) {
+        let value = |suffix: &str| {
+            let name = format!("bouncewear_shard_step_seconds_{suffix}{{step=\"{step}\"}} ");
+            let line = text.lines().find_map(|line| line.strip_prefix(&name));
+            line.unwrap_or_else(|| panic!("{name} in {text}"))
+        };
+        (
+            value("count").parse().unwrap(),
+            value("sum").parse().unwrap(),
+        )
+    }
+
+    #[test]
+    fn a_merge_records_each_part_summed_over_its_returns_and_the_whole() {
+        let recorder = PrometheusBuilder::new().build_recorder();
+        let handle = recorder.handle();
+        let pause = Duration::from_millis(30);
+        metrics::with_local_recorder(&recorder, || {
+            let runtime = tokio::runtime::Builder::new_current_thread()
+                .enable_time()
+                .build()
+                .unwrap();
+            runtime.block_on(async {
+                // As a rare event's round once its estimate is made: read, compute, read again.
+                let mut clock = MergeClock::start();
+                clock.time(Part::Read, tokio::time::sleep(pause)).await;
+                clock.time(Part::Compute, async {}).await;
+                clock.time(Part::Read, tokio::time::sleep(pause)).await;
+                clock.time(Part::Write, tokio::time::sleep(pause)).await;
+                clock.record();
+            });
+        });
+        let text = handle.render();
+        let [read, compute, write, merge] =
+            ["merge_read", "merge_compute", "merge_write", "merge"].map(|s| recorded(&text, s));
+        assert!(
+            [read, compute, write, merge]
+                .iter()
+                .all(|(count, _)| *count == 1)
+        );
+        // A sleep lasts at least its pause: lower bounds only, never a timing.
+        assert!(read.1 >= 2.0 * pause.as_secs_f64(), "{text}");
+        assert!(write.1 >= pause.as_secs_f64(), "{text}");
+        assert!(read.1 + compute.1 + write.1 <= merge.1, "{text}");
     }
 }
