@@ -106,7 +106,7 @@ const SHARD_STEP_BUCKETS: &[f64] = &[
 
 /// The metrics recorder's configuration: which histograms have which buckets (the others would
 /// be summaries, which cannot be aggregated across instances).
-fn prometheus_builder() -> PrometheusBuilder {
+pub(crate) fn prometheus_builder() -> PrometheusBuilder {
     [
         (HTTP_DURATION, HTTP_BUCKETS),
         (JOB_DURATION, JOB_DURATION_BUCKETS),

@@ -866,7 +866,7 @@ async fn wake_on_announcements(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use metrics_exporter_prometheus::PrometheusBuilder;
+    use crate::telemetry::prometheus_builder;
 
     /// The recorded `bouncewear_shard_step_seconds` of `step`: its count and sum.
     fn recorded(text: &str, step: &str) -> (u64, f64) {
@@ -883,7 +883,7 @@ mod tests {
 
     #[test]
     fn a_merge_records_each_part_summed_over_its_returns_and_the_whole() {
-        let recorder = PrometheusBuilder::new().build_recorder();
+        let recorder = prometheus_builder().build_recorder();
         let handle = recorder.handle();
         let pause = Duration::from_millis(30);
         metrics::with_local_recorder(&recorder, || {
