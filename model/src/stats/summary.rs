@@ -202,11 +202,15 @@ pub(super) struct Merged<'a> {
 impl<'a> Merged<'a> {
     /// Merges `groups` in slice order; they must all have the same limit. The groups are
     /// borrowed, owned or not: a Result's summaries read the run's groups where they lie.
+    ///
+    /// `all` keeps no extremes: a threshold is settled group by group, from each group's own
+    /// ([`Accumulator::beyond`]), so merging them was two fifths of a small job's summaries.
     pub(super) fn of<A: Borrow<Accumulator>>(groups: &'a [A]) -> Self {
         let groups = || groups.iter().map(Borrow::borrow);
-        let mut all = groups()
-            .next()
-            .map_or_else(|| Accumulator::new(None), Accumulator::empty_like);
+        let mut all = groups().next().map_or_else(
+            || Accumulator::new(None),
+            |first| first.empty_like().keeping(None),
+        );
         groups().for_each(|group| all.merge(group));
         let filled = groups().filter(|g| g.count() > 0).collect();
         Self { all, filled }
