@@ -5,6 +5,7 @@ use super::sketch::{Sketch, rank};
 use super::tails::Tails;
 use super::threshold::{Beyond, Threshold, ThresholdCount};
 use crate::lanes::Real;
+use std::ops::Range;
 
 /// The sums of one run of values per lane, in the lanes: for the engine, each lane's device's
 /// values of one (metric, bin), in operation order, about the shift of the [`Accumulator`] they
@@ -192,38 +193,43 @@ impl Accumulator {
         self.count_thresholds(values.iter().copied());
     }
 
-    /// Counts lanes `0..active` of each of `columns[m]` in the sketch of `accumulators[m]`
-    /// ([`Sketch::push_lanes`]), against its list of thresholds and in its tails: values whose sums join later, through [`Accumulator::add_lanes`]
-    /// (until then the counts run ahead of the sums). Counts do not depend on order.
+    /// Counts the lanes `lanes` of each of `columns[m]` in the sketch of `accumulators[m]`
+    /// ([`Sketch::push_lanes`]), against its list of thresholds and in its tails: values whose
+    /// sums join later, through [`Accumulator::add_lanes`] (until then the counts run ahead of the
+    /// sums). Counts do not depend on order.
     #[inline(always)]
-    pub fn count_lanes<L: Real>(accumulators: &mut [Accumulator], columns: &[&L], active: usize) {
+    pub fn count_lanes<L: Real>(
+        accumulators: &mut [Accumulator],
+        columns: &[&L],
+        lanes: Range<usize>,
+    ) {
         debug_assert_eq!(
             accumulators.len(),
             columns.len(),
             "a column per accumulator"
         );
         for (accumulator, column) in accumulators.iter_mut().zip(columns) {
-            accumulator.sketch.push_lanes(*column, active);
+            accumulator.sketch.push_lanes(*column, lanes.clone());
             if let Some(tails) = &mut accumulator.tails {
-                tails.push_lanes(*column, active);
+                tails.push_lanes(*column, lanes.clone());
             }
             if !accumulator.thresholds.is_empty() {
-                accumulator.count_thresholds((0..active).map(|k| column.lane(k)));
+                accumulator.count_thresholds(lanes.clone().map(|k| column.lane(k)));
             }
         }
     }
 
-    /// Adds the runs of lanes `0..active` of `sums` (made by [`LaneSums::new`] on this
+    /// Adds the runs of the lanes `lanes` of `sums` (made by [`LaneSums::new`] on this
     /// accumulator, their values already counted by [`Accumulator::count_lanes`]), lane after
     /// lane, each run's sums as one term.
     #[inline(always)]
-    pub fn add_lanes<L: Real>(&mut self, sums: &LaneSums<L>, active: usize) {
+    pub fn add_lanes<L: Real>(&mut self, sums: &LaneSums<L>, lanes: Range<usize>) {
         debug_assert!(
             sums.threshold.to_bits() == self.threshold.to_bits(),
             "sums made for another accumulator"
         );
         self.shift = sums.shift;
-        for k in 0..active {
+        for k in lanes {
             let (min, max) = (sums.min.lane(k), sums.max.lane(k));
             self.min = if min < self.min { min } else { self.min };
             self.max = if max > self.max { max } else { self.max };
@@ -526,7 +532,7 @@ mod tests {
             let mut lanes = fresh();
             for chunk in values.chunks(4) {
                 let x = Lanes::<4>::from_fn(|k| chunk.get(k).copied().unwrap_or(0.0));
-                Accumulator::count_lanes(std::slice::from_mut(&mut lanes), &[&x], chunk.len());
+                Accumulator::count_lanes(std::slice::from_mut(&mut lanes), &[&x], 0..chunk.len());
             }
             let (a, b) = values.split_at(cut.min(values.len()));
             let (mut merged, mut part) = (fresh(), fresh());
@@ -663,10 +669,10 @@ mod tests {
                 Accumulator::count_lanes(
                     std::slice::from_mut(&mut accumulator),
                     &[&x],
-                    batch.len(),
+                    0..batch.len(),
                 );
             }
-            accumulator.add_lanes(&sums, batch.len());
+            accumulator.add_lanes(&sums, 0..batch.len());
         }
         accumulator
     }

@@ -20,6 +20,7 @@
 //! most 4 MiB per store for the whole f64 range. Serialised, every count is a `u64`.
 
 use crate::lanes::Real;
+use std::ops::Range;
 
 /// Mantissa bits in the bucket key: 256 buckets per binade, relative bucket width `2^-8`.
 pub const SUB_BITS: u32 = 8;
@@ -466,16 +467,16 @@ impl Sketch {
         }
     }
 
-    /// [`Sketch::push`] on lanes `0..active` of `x`. When every value is positive (the common
+    /// [`Sketch::push`] on the lanes `lanes` of `x`. When every value is positive (the common
     /// case) the keys' range is covered once and the lanes are counted without the sign test
     /// and with the store already in place: a shift, a subtraction and an increment each. Lanes
     /// that all share one bucket (a whole-number metric, a constant) or are all zero are one
     /// addition: increments of one bucket in a row would each wait for the one before.
     #[inline(always)]
-    pub fn push_lanes<L: Real>(&mut self, x: &L, active: usize) {
-        debug_assert!(active <= L::LANES, "{active} of {} lanes", L::LANES);
+    pub fn push_lanes<L: Real>(&mut self, x: &L, lanes: Range<usize>) {
+        debug_assert!(lanes.end <= L::LANES, "{lanes:?} of {} lanes", L::LANES);
         let (mut positive, mut zero, mut lo, mut hi) = (true, true, u32::MAX, 0);
-        for k in 0..active {
+        for k in lanes.clone() {
             let x = x.lane(k);
             debug_assert!(
                 x.is_finite(),
@@ -486,16 +487,17 @@ impl Sketch {
             lo = lo.min(key(x));
             hi = hi.max(key(x));
         }
-        let n = active as u64;
+        let n = lanes.len() as u64;
         if zero {
             self.count += n;
             self.zeros += n;
         } else if !positive {
-            (0..active).for_each(|k| self.push(x.lane(k)));
+            lanes.for_each(|k| self.push(x.lane(k)));
         } else {
             self.count += n;
+            let first = lanes.start;
             self.positive
-                .add_all(lo, hi, active, |k| key(x.lane(k)), self.count);
+                .add_all(lo, hi, lanes.len(), |j| key(x.lane(first + j)), self.count);
         }
     }
 
@@ -901,7 +903,7 @@ mod tests {
             let mut pushed = one_bucket(full);
             pushed.push(1.0);
             let mut lanes = one_bucket(full);
-            lanes.push_lanes(&Lanes::<4>::splat(1.0), 3);
+            lanes.push_lanes(&Lanes::<4>::splat(1.0), 0..3);
             let mut merged = one_bucket(full);
             merged.merge(&one_bucket(full));
             for (sketch, n) in [(pushed, full + 1), (lanes, full + 3), (merged, 2 * full)] {
@@ -927,7 +929,7 @@ mod tests {
         let backward = sketch_of(&values.iter().rev().copied().collect::<Vec<_>>());
         let mut by_lanes = Sketch::new();
         for batch in values.chunks(8) {
-            by_lanes.push_lanes(&Lanes::<8>::from_fn(|k| batch[k]), 8);
+            by_lanes.push_lanes(&Lanes::<8>::from_fn(|k| batch[k]), 0..8);
         }
         let bytes = |s: &Sketch| serde_json::to_string(s).expect("serialises");
         assert_eq!(bytes(&backward), bytes(&forward));
@@ -1060,9 +1062,9 @@ mod tests {
                 for batch in values.chunks(lanes) {
                     let lane = |k: usize| batch.get(k).copied().unwrap_or(f64::NAN);
                     match lanes {
-                        1 => sketch.push_lanes(&batch[0], 1),
-                        4 => sketch.push_lanes(&Lanes::<4>::from_fn(lane), batch.len()),
-                        _ => sketch.push_lanes(&Lanes::<8>::from_fn(lane), batch.len()),
+                        1 => sketch.push_lanes(&batch[0], 0..1),
+                        4 => sketch.push_lanes(&Lanes::<4>::from_fn(lane), 0..batch.len()),
+                        _ => sketch.push_lanes(&Lanes::<8>::from_fn(lane), 0..batch.len()),
                     }
                 }
                 sketch

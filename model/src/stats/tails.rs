@@ -21,6 +21,7 @@
 
 use super::threshold::Threshold;
 use crate::lanes::{Mask, Real};
+use std::ops::Range;
 
 /// The most values kept at each end of one accumulator.
 pub const MAX_KEEP: u32 = 64;
@@ -133,12 +134,12 @@ impl Tails {
         }
     }
 
-    /// Adds lanes `0..active` of `column`, in lane order: one vector comparison with each gate
+    /// Adds the lanes `lanes` of `column`, in lane order: one vector comparison with each gate
     /// when no lane enters.
     #[inline(always)]
-    pub fn push_lanes<L: Real>(&mut self, column: &L, active: usize) {
+    pub fn push_lanes<L: Real>(&mut self, column: &L, lanes: Range<usize>) {
         if (column.lt(L::splat(self.low)) | column.gt(L::splat(self.high))).any() {
-            (0..active).for_each(|k| self.push(column.lane(k)));
+            lanes.for_each(|k| self.push(column.lane(k)));
         }
     }
 
@@ -268,7 +269,7 @@ mod tests {
         let mut all_high = Vec::new();
         for _ in 0..1_250_000 {
             let x = Lanes::<8>::from_fn(|_| rng.normal());
-            lanes.push_lanes(&x, 8);
+            lanes.push_lanes(&x, 0..8);
             all_high.extend((0..8).map(|k| x.lane(k)).filter(|&v| v > 3.0));
         }
         all_high.sort_by(f64::total_cmp);
@@ -300,7 +301,7 @@ mod tests {
             let mut lanes = Tails::new(keep);
             for chunk in values.chunks(4) {
                 let x = Lanes::<4>::from_fn(|k| chunk.get(k).copied().unwrap_or(f64::NAN));
-                lanes.push_lanes(&x, chunk.len());
+                lanes.push_lanes(&x, 0..chunk.len());
             }
             let (a, b) = values.split_at(cut.min(values.len()));
             let mut merged = kept(a, keep);

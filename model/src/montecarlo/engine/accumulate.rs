@@ -98,8 +98,9 @@ pub(super) struct LanesRead {
     pub(super) cells: bool,
 }
 
-/// One operation's values of each metric, one dispatch per metric: into the lanes' sums (about
-/// the shift the first operation of the bin sets, `first_of_bin`) and counted in the sketches.
+/// One operation's values of each metric in the lanes `lanes`, one dispatch per metric: into
+/// the lanes' sums (about the shift the first operation of the bin sets, `first_of_bin`) and
+/// counted in the sketches.
 #[inline(always)]
 pub(super) fn accumulate<L: Real>(
     metrics: &[OperationMetric],
@@ -107,7 +108,7 @@ pub(super) fn accumulate<L: Real>(
     accumulators: &mut [Accumulator],
     sums: &mut Vec<LaneSums<L>>,
     first_of_bin: bool,
-    active: usize,
+    lanes: Range<usize>,
 ) {
     if metrics.is_empty() {
         return;
@@ -123,11 +124,11 @@ pub(super) fn accumulate<L: Real>(
             accumulators
                 .iter()
                 .zip(columns)
-                .map(|(accumulator, column)| LaneSums::new(accumulator, column.lane(0))),
+                .map(|(accumulator, column)| LaneSums::new(accumulator, column.lane(lanes.start))),
         );
     }
     for (sums, column) in sums.iter_mut().zip(columns) {
         sums.push(**column);
     }
-    Accumulator::count_lanes(accumulators, columns, active);
+    Accumulator::count_lanes(accumulators, columns, lanes);
 }

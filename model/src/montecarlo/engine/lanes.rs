@@ -6,11 +6,12 @@ use super::*;
 impl<'a> Plan<'a> {
     /// Runs the `active` devices of the chunk from `first_local` on, in lockstep on `L::LANES`
     /// lanes (spare lanes compute a copy of the first device: they draw from a copy of its
-    /// stream, count no rejections, and nothing reads their values), into `stats`:
-    /// each from its own stream, with the draws and the arithmetic it would have alone. Each
-    /// lane sums its device's values of a bin in the lanes ([`LaneSums`]), and the bin's
-    /// accumulators add those sums device after device, so the sums come out the same to the bit
-    /// for any number of lanes.
+    /// stream, and nothing reads their values or their rejections), into their groups' stats
+    /// (`groups`, which may hold several small groups side by side): each from its own stream,
+    /// with the draws and the arithmetic it would have alone. Each lane sums its device's values
+    /// of a bin in the lanes ([`LaneSums`]), and each group's accumulators of the bin add those
+    /// sums device after device, so the sums come out the same to the bit for any number of
+    /// lanes, and whichever groups share them.
     ///
     /// With Sobol' indices over device-level parameters, the devices run again alongside, as
     /// variants: `B`, drawn from the devices' Sobol' streams, and `AB_i`, the devices with
@@ -24,7 +25,7 @@ impl<'a> Plan<'a> {
         chunk: &Chunk<'_>,
         first_local: u64,
         active: usize,
-        stats: &mut GroupStats,
+        groups: &mut LaneGroups<'_>,
     ) {
         let job = self.job;
         let lanes = L::LANES;
@@ -32,10 +33,14 @@ impl<'a> Plan<'a> {
             active == lanes || (active < lanes && self.sensitivity.is_none()),
             "spare lanes only without a sensitivity analysis"
         );
+        debug_assert!(
+            groups.stats.len() == 1 || self.sensitivity.is_none(),
+            "groups share lanes only without a sensitivity analysis"
+        );
         let sensitivity = self.sensitivity.as_ref();
         let sobol = sensitivity.filter(|s| s.method == SensitivityMethod::Sobol);
         let mut scratch = vec![0; job.scatter().len()];
-        let mut variants = self.variants::<L>(chunk, first_local, active, stats, &mut scratch);
+        let mut variants = self.variants::<L>(chunk, first_local, active, groups, &mut scratch);
         let operation_sobol = sobol.filter(|p| !p.operation_inputs.is_empty());
         let mut operation_rngs = match operation_sobol {
             Some(_) => self.operation_sobol_rngs(chunk.first + first_local, lanes),
@@ -47,7 +52,10 @@ impl<'a> Plan<'a> {
         let mut failed_at = vec![None; lanes];
         let metrics = job.operation_metrics();
         let operations = job.spec().operations;
-        let mut sums: Vec<LaneSums<L>> = Vec::with_capacity(metrics.len());
+        // Each group's sums of its lanes: about its own accumulators' shifts.
+        let mut sums: Vec<Vec<LaneSums<L>>> = (groups.lanes.iter())
+            .map(|_| Vec::with_capacity(metrics.len()))
+            .collect();
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
         // Per evaluation (variants, then B' and AB'_i), lane and metric: this operation's values,
         // for the sensitivity cells.
@@ -61,12 +69,7 @@ impl<'a> Plan<'a> {
             let bin = bin_index * metrics.len()..(bin_index + 1) * metrics.len();
             for op in start..end {
                 for (v, variant) in variants.iter_mut().enumerate() {
-                    let rejections: &mut [u64] = if v == 0 {
-                        &mut stats.truncation_rejections
-                    } else {
-                        &mut scratch
-                    };
-                    let outcomes = variant.step(self, lane_draws, rejections, operations - op);
+                    let outcomes = variant.step(self, lane_draws, operations - op);
                     if v == 0 {
                         if let Some(plan) = operation_sobol {
                             let values = &mut values[swaps_at..];
@@ -79,11 +82,13 @@ impl<'a> Plan<'a> {
                                 values,
                             );
                         }
-                        let (into, first) = (&mut stats.operations[bin.clone()], op == start);
-                        accumulate(metrics, &outcomes, into, &mut sums, first, active);
-                        stats.operations_at_max_bounces += (0..active)
-                            .map(|k| u64::from(outcomes.truncated.lane(k)))
-                            .sum::<u64>();
+                        for ((stats, lanes), sums) in groups.each().zip(&mut sums) {
+                            let (into, first) = (&mut stats.operations[bin.clone()], op == start);
+                            accumulate(metrics, &outcomes, into, sums, first, lanes.clone());
+                            stats.operations_at_max_bounces += lanes
+                                .map(|k| u64::from(outcomes.truncated.lane(k)))
+                                .sum::<u64>();
+                        }
                     }
                     variant.wear.add_lanes(&outcomes);
                     // Each lane's outcome, only for what reads it: the sensitivity cells and
@@ -104,45 +109,54 @@ impl<'a> Plan<'a> {
                 }
             }
             if let Some(cells) = &mut cells {
-                cells.merge_bin(&mut stats.sensitivity, bin_index);
+                cells.merge_bin(&mut groups.stats[0].sensitivity, bin_index);
             }
-            for (accumulator, sums) in stats.operations[bin].iter_mut().zip(&sums) {
-                accumulator.add_lanes(sums, active);
+            for ((stats, lanes), sums) in groups.each().zip(&sums) {
+                for (accumulator, sums) in stats.operations[bin.clone()].iter_mut().zip(sums) {
+                    accumulator.add_lanes(sums, lanes.clone());
+                }
             }
         }
-        self.finish_devices(
-            chunk.first + first_local,
-            &variants,
-            &failed_at[..active],
-            stats,
-        );
+        self.finish_devices(chunk.first + first_local, &variants, &failed_at, groups);
     }
 
     /// The devices (`A`, in `active` of the lanes) with their draws and streams, and with Sobol'
     /// indices over device-level parameters the variants that run alongside: `B`, drawn from the
     /// devices' Sobol' streams, and each `AB_i`, the devices with parameter `i` taken from `B`.
+    /// Each group's devices count their rejections in its stats.
     #[inline(always)]
     pub(super) fn variants<L: Real>(
         &self,
         chunk: &Chunk<'_>,
         first_local: u64,
         active: usize,
-        stats: &mut GroupStats,
+        groups: &mut LaneGroups<'_>,
         scratch: &mut [u64],
     ) -> Vec<Variant<'_, L>> {
         let (job, lanes) = (self.job, L::LANES);
-        let (mut draws, mut rngs, mut inputs) = self.draw_devices(
-            chunk,
-            first_local,
-            active,
-            |device| device,
-            chunk.permutations,
-            &mut stats.truncation_rejections,
+        let (mut draws, mut rngs, mut inputs) = (
+            Vec::with_capacity(lanes),
+            Vec::with_capacity(lanes),
+            Vec::with_capacity(lanes),
         );
+        for (stats, of_group) in groups.each() {
+            let (d, r, i) = self.draw_devices(
+                chunk,
+                first_local + of_group.start as u64,
+                of_group.len(),
+                |device| device,
+                chunk.permutations,
+                &mut stats.truncation_rejections,
+            );
+            draws.extend(d);
+            rngs.extend(r);
+            inputs.extend(i);
+        }
+        debug_assert_eq!(draws.len(), active, "the groups hold the active lanes");
         draws.resize(lanes, draws[0].clone());
         rngs.resize(lanes, rngs[0].clone());
         inputs.resize(lanes, inputs[0].clone());
-        let mut variants = vec![Variant::<L>::new(self, draws, rngs, inputs, active)];
+        let mut variants = vec![Variant::<L>::new(self, draws, rngs, inputs)];
         let device_sobol = self
             .sensitivity
             .as_ref()
@@ -169,10 +183,10 @@ impl<'a> Plan<'a> {
                     draws[k].set(job.scatter()[input].parameter, value);
                     inputs[k][input] = value;
                 }
-                Variant::new(self, draws, a.rngs.clone(), inputs, lanes)
+                Variant::new(self, draws, a.rngs.clone(), inputs)
             })
             .collect();
-        variants.push(Variant::new(self, b_draws, b_rngs, b_inputs, lanes));
+        variants.push(Variant::new(self, b_draws, b_rngs, b_inputs));
         variants.extend(swapped);
         variants
     }
@@ -225,35 +239,42 @@ impl<'a> Plan<'a> {
         }
     }
 
-    /// What the devices leave at the end of the test: their device metrics, their share of the
-    /// device-level sensitivity, and their lives (device `first + k` in lane `k`).
+    /// What the devices leave at the end of the test, each in its group's stats: their device
+    /// metrics, their share of the device-level sensitivity, their lives (device `first + k` in
+    /// lane `k`) and the rejections of their operations' draws.
     #[inline(always)]
     pub(super) fn finish_devices<L: Real>(
         &self,
         first: u64,
         variants: &[Variant<'_, L>],
         failed_at: &[Option<u64>],
-        stats: &mut GroupStats,
+        groups: &mut LaneGroups<'_>,
     ) {
         let (job, a) = (self.job, &variants[0]);
-        for (k, failed_at) in failed_at.iter().enumerate() {
-            for (accumulator, metric) in stats.devices.iter_mut().zip(job.device_metrics()) {
-                accumulator.push(self.device_metric(
-                    &a.model,
-                    *metric,
-                    &a.draws[k],
-                    &a.wear.lane(k),
-                ));
-            }
-            if let Some(plan) = &self.sensitivity {
-                self.push_device_sensitivity(plan, variants, k, &mut stats.sensitivity);
-            }
-            if !job.failure().is_empty() {
-                stats.lives.record(DeviceLife {
-                    device: first + k as u64,
-                    operations_to_failure: failed_at.unwrap_or(job.spec().operations),
-                    censored: failed_at.is_none(),
-                });
+        for (stats, lanes) in groups.each() {
+            for k in lanes {
+                for (accumulator, metric) in stats.devices.iter_mut().zip(job.device_metrics()) {
+                    accumulator.push(self.device_metric(
+                        &a.model,
+                        *metric,
+                        &a.draws[k],
+                        &a.wear.lane(k),
+                    ));
+                }
+                if let Some(plan) = &self.sensitivity {
+                    self.push_device_sensitivity(plan, variants, k, &mut stats.sensitivity);
+                }
+                if !job.failure().is_empty() {
+                    stats.lives.record(DeviceLife {
+                        device: first + k as u64,
+                        operations_to_failure: failed_at[k].unwrap_or(job.spec().operations),
+                        censored: failed_at[k].is_none(),
+                    });
+                }
+                let counted = stats.truncation_rejections.iter_mut();
+                counted
+                    .zip(a.rejections(k))
+                    .for_each(|(total, n)| *total += n);
             }
         }
     }
@@ -334,10 +355,10 @@ pub(super) struct Variant<'p, L: Real> {
     /// Operations per lane in `ahead` (or `lane_ahead`), and the next one to use.
     pub(super) ahead_operations: usize,
     pub(super) ahead_next: usize,
-    /// Lanes that are devices; the others are spare and count no rejections.
-    pub(super) active: usize,
-    /// The rejections spare lanes count, which nobody reads.
-    pub(super) spare_rejections: Vec<u64>,
+    /// The rejections of each lane's per-operation draws, by lane and scatter entry: a lane's
+    /// go to its device's group once it has run ([`Plan::finish_devices`]); nobody reads a spare
+    /// lane's.
+    pub(super) rejections: Vec<u64>,
 }
 
 /// Operations whose per-operation draws a lane takes from its stream in one go.
@@ -349,7 +370,6 @@ impl<'p, L: Real> Variant<'p, L> {
         draws: Vec<Draws>,
         rngs: Vec<ChaCha8Rng>,
         inputs: Vec<Vec<f64>>,
-        active: usize,
     ) -> Self {
         let model = plan.model(&draws[0]);
         let operation = model
@@ -376,9 +396,14 @@ impl<'p, L: Real> Variant<'p, L> {
             lane_ahead: Vec::new(),
             ahead_operations: 0,
             ahead_next: 0,
-            active,
-            spare_rejections: vec![0; plan.job.scatter().len()],
+            rejections: vec![0; L::LANES * plan.job.scatter().len()],
         }
+    }
+
+    /// Lane `k`'s rejections by scatter entry.
+    pub(super) fn rejections(&self, k: usize) -> &[u64] {
+        let entries = self.rejections.len() / L::LANES;
+        &self.rejections[k * entries..(k + 1) * entries]
     }
 
     /// Draws the next operation's per-operation scatter of every lane from its stream, of
@@ -387,12 +412,7 @@ impl<'p, L: Real> Variant<'p, L> {
     /// same streams in the same order as one operation at a time, and never a draw past the
     /// device's last operation, so the truncation rejections count the same.
     #[inline(always)]
-    pub(super) fn draw_operation(
-        &mut self,
-        plan: &Plan<'_>,
-        rejections: &mut [u64],
-        remaining: u64,
-    ) {
+    pub(super) fn draw_operation(&mut self, plan: &Plan<'_>, remaining: u64) {
         let entries = plan.operation_scatter.len();
         if entries == 0 {
             return;
@@ -401,7 +421,7 @@ impl<'p, L: Real> Variant<'p, L> {
         if self.start_block(remaining) {
             let mut ahead = std::mem::take(&mut self.ahead);
             ahead.clear();
-            self.draw_block(rejections, |_, _, rng, rejections| {
+            self.draw_block(|_, _, rng, rejections| {
                 plan.operation_scatter
                     .draw(job, None, rng, rejections, |index, value| {
                         ahead.push((index, value));
@@ -437,20 +457,16 @@ impl<'p, L: Real> Variant<'p, L> {
     }
 
     /// Draws the block [`Variant::start_block`] started: lane after lane, each from its own
-    /// stream, `draw(lane, operation, stream, rejections)` for each of the block's operations;
-    /// the spare lanes count their rejections apart, where nobody reads them.
+    /// stream, `draw(lane, operation, stream, rejections)` for each of the block's operations,
+    /// counting the lane's rejections.
     #[inline(always)]
     pub(super) fn draw_block(
         &mut self,
-        rejections: &mut [u64],
         mut draw: impl FnMut(usize, usize, &mut ChaCha8Rng, &mut [u64]),
     ) {
+        let entries = self.rejections.len() / L::LANES;
         for (k, rng) in self.rngs.iter_mut().enumerate() {
-            let rejections: &mut [u64] = if k < self.active {
-                &mut *rejections
-            } else {
-                &mut self.spare_rejections
-            };
+            let rejections = &mut self.rejections[k * entries..(k + 1) * entries];
             for op in 0..self.ahead_operations {
                 draw(k, op, rng, rejections);
             }
@@ -464,11 +480,10 @@ impl<'p, L: Real> Variant<'p, L> {
         &mut self,
         plan: &Plan<'_>,
         lane_draws: bool,
-        rejections: &mut [u64],
         remaining: u64,
     ) -> Outcomes<L> {
         if lane_draws {
-            let (speed, radius_m, pressure_pa) = self.draw_lanes(plan, rejections, remaining);
+            let (speed, radius_m, pressure_pa) = self.draw_lanes(plan, remaining);
             self.evaluate_lanes(
                 plan,
                 &self.operation,
@@ -478,7 +493,7 @@ impl<'p, L: Real> Variant<'p, L> {
                 pressure_pa,
             )
         } else {
-            self.draw_operation(plan, rejections, remaining);
+            self.draw_operation(plan, remaining);
             self.evaluate(plan, &self.op_draws)
         }
     }
@@ -489,18 +504,13 @@ impl<'p, L: Real> Variant<'p, L> {
     /// operation's speed, radius and pressure lanes, without a [`Draws`] and an input row per
     /// lane and operation.
     #[inline(always)]
-    pub(super) fn draw_lanes(
-        &mut self,
-        plan: &Plan<'_>,
-        rejections: &mut [u64],
-        remaining: u64,
-    ) -> (L, L, L) {
+    pub(super) fn draw_lanes(&mut self, plan: &Plan<'_>, remaining: u64) -> (L, L, L) {
         let entries = &plan.operation_scatter.scatter;
         let width = entries.len();
         if self.start_block(remaining) {
             let mut ahead = std::mem::take(&mut self.lane_ahead);
             ahead.resize(self.ahead_operations * L::LANES * width, 0.0);
-            self.draw_block(rejections, |k, op, rng, rejections| {
+            self.draw_block(|k, op, rng, rejections| {
                 let at = (op * L::LANES + k) * width;
                 for (slot, &(index, scatter)) in ahead[at..at + width].iter_mut().zip(entries) {
                     *slot = scatter
@@ -618,13 +628,28 @@ pub(super) struct Devices<'p, 'a> {
     pub(super) first_local: u64,
     /// The batch's devices: its first `active` lanes; the others copy the first device.
     pub(super) active: usize,
-    pub(super) stats: &'p mut GroupStats,
+    pub(super) groups: LaneGroups<'p>,
 }
 
 impl LaneWork for Devices<'_, '_> {
     #[inline(always)]
-    fn run<L: Real>(self) {
+    fn run<L: Real>(mut self) {
         self.plan
-            .run_devices::<L>(self.chunk, self.first_local, self.active, self.stats);
+            .run_devices::<L>(self.chunk, self.first_local, self.active, &mut self.groups);
+    }
+}
+
+/// The groups whose devices share a kernel's lanes, side by side in lane order: `stats[i]` is
+/// the stats of the group whose devices are in the lanes `lanes[i]`; together they hold the
+/// active lanes.
+pub(super) struct LaneGroups<'p> {
+    pub(super) stats: &'p mut [GroupStats],
+    pub(super) lanes: Vec<Range<usize>>,
+}
+
+impl LaneGroups<'_> {
+    /// Each group's stats with its lanes.
+    pub(super) fn each(&mut self) -> impl Iterator<Item = (&mut GroupStats, Range<usize>)> {
+        self.stats.iter_mut().zip(self.lanes.iter().cloned())
     }
 }

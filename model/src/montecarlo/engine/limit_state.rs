@@ -99,7 +99,7 @@ impl<'a> DeviceFunction<'a> {
         // The stream is never drawn from: each operation's inputs come from `u`.
         let stream = ChaCha8Rng::seed_from_u64(0);
         let inputs = vec![f64::NAN; job.scatter().len()];
-        let mut variant = Variant::<f64>::new(plan, vec![device], vec![stream], vec![inputs], 1);
+        let mut variant = Variant::<f64>::new(plan, vec![device], vec![stream], vec![inputs]);
         let width = self.per_operation();
         let mut worst = f64::NEG_INFINITY;
         for op in 0..self.operation_count() {

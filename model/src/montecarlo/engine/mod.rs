@@ -33,6 +33,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use rayon::prelude::*;
 use std::borrow::Cow;
+use std::ops::Range;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 mod accumulate;
@@ -388,5 +389,56 @@ mod tests {
                 "{kernel:?}: lane draws differ from draws per lane"
             );
         }
+    }
+
+    /// Small groups share a kernel's lanes ([`Plan::tasks`]) and each comes out as it does alone,
+    /// to the bit: accumulators and extremes, lives, the devices' and the operations' rejections.
+    #[test]
+    fn groups_sharing_lanes_give_each_group_the_stats_it_has_alone() {
+        // 50 devices: groups of 1 and 2, a few to a kernel. Both windows reject about a third
+        // of the draws.
+        let job = Job::from_json(
+            r#"{"devices": 50, "operations": 30, "bin_operations": 10, "seed": 4,
+                "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+                "scatter": [
+                  {"parameter": "contact_radius_m", "per": "device",
+                   "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 1.5e-3, "min": 7e-3}},
+                  {"parameter": "impact_velocity_m_s", "per": "operation",
+                   "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.215}}],
+                "limits": {"total_bounce_s": 0.011},
+                "failure": {"e1": {"below": 0.40}}}"#,
+            || 0,
+        )
+        .unwrap();
+        let plan = Plan::new(&job, Kernel::best());
+        let tasks = plan.tasks(50);
+        assert!(
+            tasks.iter().any(|groups| groups.end - groups.start > 1),
+            "{tasks:?}: no groups share lanes"
+        );
+        let shared = plan
+            .run_batch(0, 0, 50, &Silent, &AtomicU64::new(0), 0)
+            .unwrap();
+        assert_eq!(shared.len(), 32);
+        let chunk = Chunk {
+            first: 0,
+            size: 50,
+            permutations: None,
+        };
+        for (group, stats) in (0..).zip(&shared) {
+            let alone = plan
+                .run_chunk(&chunk, group, &Silent, &AtomicU64::new(0), 0)
+                .unwrap();
+            assert!(*stats == alone, "group {group}");
+        }
+        let rejected = |entry: usize| -> u64 {
+            (shared.iter())
+                .map(|stats| stats.truncation_rejections[entry])
+                .sum()
+        };
+        assert!(rejected(0) > 0 && rejected(1) > 0, "no rejections");
+        let failed =
+            |stats: &GroupStats| stats.lives.counts.values().any(|&[failed, _]| failed > 0);
+        assert!(shared.iter().any(failed), "no device failed");
     }
 }
