@@ -220,12 +220,12 @@ impl<'a> Plan<'a> {
     }
 
     /// The groups of a batch of `size` devices that run together, in order. Groups smaller than
-    /// the widest kernel (a small job's: 100 devices make groups of 3 and 4) run as many at a time
-    /// as it holds, side by side on its lanes: each on a narrower kernel with lanes to spare, or
-    /// one device at a time, took 2.6 of a 100 x 100 job's 6 ms on one thread (portable 4 lanes
-    /// where AVX2's 8 were idle). Each group's devices run in index order and add to its own
-    /// accumulators device after device, so sharing lanes changes no bit. A sensitivity
-    /// analysis, or a job whose devices cannot run in lockstep, runs each group alone.
+    /// the widest kernel (a small job's: 100 devices make groups of 3 and 4) run side by side on
+    /// its lanes, as many as it holds. Run alone, each on a narrower kernel with lanes to spare,
+    /// a 100 x 100 job's groups took 2.6 of its 6 ms on one thread (the portable 4 lanes, where
+    /// AVX2 has 8). Each group's devices run in index order and add to its own accumulators
+    /// device after device, so sharing lanes changes no bit. A sensitivity analysis, or a job
+    /// whose devices cannot run in lockstep, runs each group alone.
     pub(super) fn tasks(&self, size: u64) -> Vec<Range<u64>> {
         let groups = GROUPS.min(size);
         let shares = self.lockstep && self.sensitivity.is_none();
