@@ -212,9 +212,14 @@ impl Batch {
 
     /// The devices of group `group`: a contiguous share of the batch.
     pub fn group_devices(&self, group: u64) -> std::ops::Range<u64> {
-        let groups = self.groups();
-        self.first + self.size * group / groups..self.first + self.size * (group + 1) / groups
+        self.first + group_start(self.size, group)..self.first + group_start(self.size, group + 1)
     }
+}
+
+/// Where group `group` of a batch of `size` devices starts, counted from the batch's first
+/// device: the groups cut the batch into contiguous shares ([`Batch::group_devices`]).
+pub(super) fn group_start(size: u64, group: u64) -> u64 {
+    size * group / GROUPS.min(size)
 }
 
 /// Runs group `group` of `batch` alone: exactly the accumulators [`run`] builds for it, so groups

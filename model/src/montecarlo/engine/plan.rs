@@ -233,8 +233,9 @@ impl<'a> Plan<'a> {
             Some(kernel) if shares => kernel.lanes() as u64,
             _ => 1,
         };
-        let devices =
-            |groups_of: Range<u64>| size * groups_of.end / groups - size * groups_of.start / groups;
+        let devices = |groups_of: Range<u64>| {
+            group_start(size, groups_of.end) - group_start(size, groups_of.start)
+        };
         let mut tasks = Vec::new();
         let mut start = 0;
         while start < groups {
@@ -273,8 +274,7 @@ impl<'a> Plan<'a> {
         total: u64,
     ) -> Result<Vec<GroupStats>, Cancelled> {
         let operations = self.job.spec().operations;
-        let count = GROUPS.min(chunk.size);
-        let bound = |group: u64| chunk.size * group / count;
+        let bound = |group: u64| group_start(chunk.size, group);
         let mut stats: Vec<GroupStats> = (groups.clone())
             .map(|_| GroupStats::new(self.job, self.sensitivity.as_ref()))
             .collect();
