@@ -58,9 +58,14 @@ pub trait Real:
     /// (docs/performance.md "Lanes that have stopped"). A lane computes the same in either.
     type Part: Real;
 
+    // Inlined like every lane operation: a default method is compiled once, in one codegen unit,
+    // and test builds (256 units, no LTO) called it out of line from every kernel, 8.7 % of
+    // `run`'s time there; inlined, `run` of 10^7 operations took 4.1-4.3 s against 5.1-5.5 s.
+    #[inline(always)]
     fn gt(self, other: Self) -> Self::Mask {
         other.lt(self)
     }
+    #[inline(always)]
     fn ge(self, other: Self) -> Self::Mask {
         other.le(self)
     }
