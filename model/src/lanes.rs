@@ -16,7 +16,7 @@
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 
 #[cfg(target_arch = "x86_64")]
-pub(crate) mod vector;
+pub(crate) mod avx2;
 
 /// A number, or a batch of numbers computed in lockstep.
 pub trait Real:
@@ -179,7 +179,7 @@ impl Mask for bool {
 
 /// `N` devices' values of one quantity, computed lane by lane in loops the compiler vectorises for
 /// whatever instruction set the calling function enables (at opt-level 3; the AVX2 kernel's lanes
-/// are a `vector::Vector`, vectorised at any level).
+/// are `avx2::Lanes8`, vectorised at any level).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C, align(64))]
 pub struct Lanes<const N: usize>(pub [f64; N]);

@@ -218,7 +218,7 @@ macro_rules! kernel {
 kernel!(scalar, f64);
 kernel!(portable_4, crate::lanes::Lanes<4>);
 #[cfg(all(target_arch = "x86_64", not(test)))]
-kernel!(avx2_8, crate::lanes::vector::Avx2x8, "avx2");
+kernel!(avx2_8, crate::lanes::avx2::Lanes8, "avx2");
 #[cfg(all(avx512_kernel, not(test)))]
 kernel!(avx512_32, crate::lanes::Lanes<32>, "avx512f");
 
