@@ -7,11 +7,8 @@
 //! Same bits on every CPU: a [`Real`] offers only `+`, `-`, `*`, `/`, `sqrt` (all correctly rounded
 //! by IEEE 754), comparisons, `min`, `max`, selection and exact bit manipulation. No fused
 //! multiply-add (Rust never contracts `a * b + c` by itself) and no libm: `atan` and `exp` are this
-//! crate's own ([`crate::elementary`]). Whatever instruction set a [`Lanes`] loop is compiled for, and
+//! crate's own ([`crate::elementary`]). Whatever instruction set a [`Lanes`] batch is compiled for, and
 //! however many lanes it has, each lane rounds exactly as the scalar does.
-
-// Lane loops index several arrays at once: the index is the lane.
-#![allow(clippy::needless_range_loop)]
 
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 
@@ -177,9 +174,9 @@ impl Mask for bool {
     }
 }
 
-/// `N` devices' values of one quantity, computed lane by lane in loops the compiler vectorises for
-/// whatever instruction set the calling function enables (at opt-level 3; the AVX2 kernel's lanes
-/// are `avx2::Lanes8`, vectorised at any level).
+/// `N` devices' values of one quantity, computed lane by lane in straight-line code the compiler
+/// vectorises for whatever instruction set the calling function enables (at opt-level 3; the AVX2
+/// kernel's lanes are `avx2::Lanes8`, vectorised at any level).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C, align(64))]
 pub struct Lanes<const N: usize>(pub [f64; N]);
@@ -197,218 +194,200 @@ fn word(truth: bool) -> u64 {
     (truth as u64).wrapping_neg()
 }
 
-// Every lane operation below is a plain indexed loop over the arrays: after inlining into a
-// kernel compiled for an instruction set, the loop vectoriser turns each into full-width
-// instructions of that set (closures through `std::array::from_fn` were left half-vectorised,
-// and out of line they ran in the baseline instruction set).
-impl<const N: usize> Lanes<N> {
-    #[inline(always)]
-    fn map(self, f: impl Fn(f64) -> f64) -> Self {
-        let mut out = [0.0; N];
-        for i in 0..N {
-            out[i] = f(self.0[i]);
-        }
-        Self(out)
-    }
-
-    #[inline(always)]
-    fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
-        let mut out = [0.0; N];
-        for i in 0..N {
-            out[i] = f(self.0[i], other.0[i]);
-        }
-        Self(out)
-    }
-
-    #[inline(always)]
-    fn compare(self, other: Self, f: impl Fn(f64, f64) -> bool) -> LaneMask<N> {
-        let mut out = [0; N];
-        for i in 0..N {
-            out[i] = word(f(self.0[i], other.0[i]));
-        }
-        LaneMask(out)
-    }
-}
-
-macro_rules! lane_operator {
-    ($trait:ident, $method:ident, $op:tt) => {
-        impl<const N: usize> $trait for Lanes<N> {
-            type Output = Self;
+/// The lanes of each width the kernels use: `$lanes` lanes, narrowing to `$part` ([`Real::Part`]:
+/// eight lanes, one AVX-512 register, or the batch itself when it is no wider), and the list of
+/// their indices.
+///
+/// Every operation is written out lane by lane over that list, with no loop: after inlining into a
+/// kernel compiled for an instruction set, LLVM's SLP vectoriser packs the lanes into full-width
+/// instructions of that set, as it did with the loops these once were once they were unrolled.
+/// The loops cost the build that unrolling: in the portable kernel, thousands of four-lane loops
+/// inlined into one function took LLVM's loop rotation 67 s and its full unrolling 22 s of the
+/// model library's 122 s (`-Zllvm-time-trace`, test profile, 2-core EPYC VM), and again in its test
+/// binary. (Closures through `std::array::from_fn` were left half-vectorised, and out of line they
+/// ran in the baseline instruction set.)
+macro_rules! lanes {
+    ($($lanes:literal lanes, part $part:literal: [$($i:literal)*];)*) => {$(
+        impl Lanes<$lanes> {
             #[inline(always)]
-            fn $method(self, other: Self) -> Self {
-                self.zip(other, |a, b| a $op b)
+            fn map(self, f: impl Fn(f64) -> f64) -> Self {
+                Self([$(f(self.0[$i])),*])
+            }
+
+            #[inline(always)]
+            fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
+                Self([$(f(self.0[$i], other.0[$i])),*])
+            }
+
+            #[inline(always)]
+            fn compare(self, other: Self, f: impl Fn(f64, f64) -> bool) -> LaneMask<$lanes> {
+                LaneMask([$(word(f(self.0[$i], other.0[$i]))),*])
             }
         }
-    };
-}
-lane_operator!(Add, add, +);
-lane_operator!(Sub, sub, -);
-lane_operator!(Mul, mul, *);
-lane_operator!(Div, div, /);
 
-impl<const N: usize> Neg for Lanes<N> {
-    type Output = Self;
-    #[inline(always)]
-    fn neg(self) -> Self {
-        self.map(|a| -a)
-    }
-}
+        impl Add for Lanes<$lanes> {
+            type Output = Self;
+            #[inline(always)]
+            fn add(self, other: Self) -> Self {
+                self.zip(other, |a, b| a + b)
+            }
+        }
 
-/// The narrower batch of a batch ([`Real::Part`]): eight lanes, one AVX-512 register, or the
-/// batch itself when it is no wider.
-pub trait Split {
-    type Part: Real;
-}
+        impl Sub for Lanes<$lanes> {
+            type Output = Self;
+            #[inline(always)]
+            fn sub(self, other: Self) -> Self {
+                self.zip(other, |a, b| a - b)
+            }
+        }
 
-macro_rules! split {
-    ($($lanes:literal => $part:literal),*) => {
-        $(impl Split for Lanes<$lanes> {
+        impl Mul for Lanes<$lanes> {
+            type Output = Self;
+            #[inline(always)]
+            fn mul(self, other: Self) -> Self {
+                self.zip(other, |a, b| a * b)
+            }
+        }
+
+        impl Div for Lanes<$lanes> {
+            type Output = Self;
+            #[inline(always)]
+            fn div(self, other: Self) -> Self {
+                self.zip(other, |a, b| a / b)
+            }
+        }
+
+        impl Neg for Lanes<$lanes> {
+            type Output = Self;
+            #[inline(always)]
+            fn neg(self) -> Self {
+                self.map(|a| -a)
+            }
+        }
+
+        impl Real for Lanes<$lanes> {
+            type Mask = LaneMask<$lanes>;
+            const LANES: usize = $lanes;
+
+            #[inline(always)]
+            fn splat(x: f64) -> Self {
+                Self([x; $lanes])
+            }
+            /// `f` called on the lanes in order (an array expression evaluates left to right).
+            #[inline(always)]
+            fn from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
+                Self([$(f($i)),*])
+            }
+            #[inline(always)]
+            fn sqrt(self) -> Self {
+                self.map(f64::sqrt)
+            }
+            #[inline(always)]
+            fn min(self, other: Self) -> Self {
+                self.zip(other, f64::min)
+            }
+            #[inline(always)]
+            fn max(self, other: Self) -> Self {
+                self.zip(other, f64::max)
+            }
+            #[inline(always)]
+            fn abs(self) -> Self {
+                self.map(f64::abs)
+            }
+            #[inline(always)]
+            fn copysign(self, sign: Self) -> Self {
+                self.zip(sign, f64::copysign)
+            }
+            #[inline(always)]
+            fn lt(self, other: Self) -> Self::Mask {
+                self.compare(other, |a, b| a < b)
+            }
+            #[inline(always)]
+            fn le(self, other: Self) -> Self::Mask {
+                self.compare(other, |a, b| a <= b)
+            }
+            #[inline(always)]
+            fn eq(self, other: Self) -> Self::Mask {
+                self.compare(other, |a, b| a == b)
+            }
+            #[inline(always)]
+            fn select(mask: Self::Mask, yes: Self, no: Self) -> Self {
+                let pick = |m: u64, yes: f64, no: f64| {
+                    f64::from_bits((yes.to_bits() & m) | (no.to_bits() & !m))
+                };
+                Self([$(pick(mask.0[$i], yes.0[$i], no.0[$i])),*])
+            }
+            #[inline(always)]
+            fn exp2_int(self) -> Self {
+                self.map(<f64 as Real>::exp2_int)
+            }
+            #[inline(always)]
+            fn lane(&self, i: usize) -> f64 {
+                self.0[i]
+            }
+
+            #[inline(always)]
+            fn set_lane(&mut self, i: usize, x: f64) {
+                self.0[i] = x;
+            }
+
             type Part = Lanes<$part>;
-        })*
-    };
-}
-split!(1 => 1, 2 => 2, 4 => 4, 8 => 8, 16 => 8, 32 => 8, 64 => 8);
-
-impl<const N: usize> Real for Lanes<N>
-where
-    Lanes<N>: Split,
-{
-    type Mask = LaneMask<N>;
-    const LANES: usize = N;
-
-    #[inline(always)]
-    fn splat(x: f64) -> Self {
-        Self([x; N])
-    }
-    #[inline(always)]
-    fn from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
-        let mut out = [0.0; N];
-        for (i, slot) in out.iter_mut().enumerate() {
-            *slot = f(i);
         }
-        Self(out)
-    }
-    #[inline(always)]
-    fn sqrt(self) -> Self {
-        self.map(f64::sqrt)
-    }
-    #[inline(always)]
-    fn min(self, other: Self) -> Self {
-        self.zip(other, f64::min)
-    }
-    #[inline(always)]
-    fn max(self, other: Self) -> Self {
-        self.zip(other, f64::max)
-    }
-    #[inline(always)]
-    fn abs(self) -> Self {
-        self.map(f64::abs)
-    }
-    #[inline(always)]
-    fn copysign(self, sign: Self) -> Self {
-        self.zip(sign, f64::copysign)
-    }
-    #[inline(always)]
-    fn lt(self, other: Self) -> LaneMask<N> {
-        self.compare(other, |a, b| a < b)
-    }
-    #[inline(always)]
-    fn le(self, other: Self) -> LaneMask<N> {
-        self.compare(other, |a, b| a <= b)
-    }
-    #[inline(always)]
-    fn eq(self, other: Self) -> LaneMask<N> {
-        self.compare(other, |a, b| a == b)
-    }
-    #[inline(always)]
-    fn select(mask: LaneMask<N>, yes: Self, no: Self) -> Self {
-        let mut out = [0.0; N];
-        for i in 0..N {
-            let m = mask.0[i];
-            out[i] = f64::from_bits((yes.0[i].to_bits() & m) | (no.0[i].to_bits() & !m));
-        }
-        Self(out)
-    }
-    #[inline(always)]
-    fn exp2_int(self) -> Self {
-        self.map(<f64 as Real>::exp2_int)
-    }
-    #[inline(always)]
-    fn lane(&self, i: usize) -> f64 {
-        self.0[i]
-    }
 
-    #[inline(always)]
-    fn set_lane(&mut self, i: usize, x: f64) {
-        self.0[i] = x;
-    }
-
-    type Part = <Self as Split>::Part;
-}
-
-macro_rules! mask_operator {
-    ($trait:ident, $method:ident, $op:tt) => {
-        impl<const N: usize> $trait for LaneMask<N> {
+        impl BitAnd for LaneMask<$lanes> {
             type Output = Self;
             #[inline(always)]
-            fn $method(self, other: Self) -> Self {
-                let mut out = [0; N];
-                for i in 0..N {
-                    out[i] = self.0[i] $op other.0[i];
-                }
-                Self(out)
+            fn bitand(self, other: Self) -> Self {
+                Self([$(self.0[$i] & other.0[$i]),*])
             }
         }
-    };
-}
-mask_operator!(BitAnd, bitand, &);
-mask_operator!(BitOr, bitor, |);
 
-impl<const N: usize> Not for LaneMask<N> {
-    type Output = Self;
-    #[inline(always)]
-    fn not(self) -> Self {
-        let mut out = [0; N];
-        for i in 0..N {
-            out[i] = !self.0[i];
+        impl BitOr for LaneMask<$lanes> {
+            type Output = Self;
+            #[inline(always)]
+            fn bitor(self, other: Self) -> Self {
+                Self([$(self.0[$i] | other.0[$i]),*])
+            }
         }
-        Self(out)
-    }
-}
 
-impl<const N: usize> Mask for LaneMask<N> {
-    #[inline(always)]
-    fn from_fn(mut f: impl FnMut(usize) -> bool) -> Self {
-        let mut out = [0; N];
-        for i in 0..N {
-            out[i] = word(f(i));
+        impl Not for LaneMask<$lanes> {
+            type Output = Self;
+            #[inline(always)]
+            fn not(self) -> Self {
+                Self([$(!self.0[$i]),*])
+            }
         }
-        Self(out)
-    }
-    #[inline(always)]
-    fn any(self) -> bool {
-        let mut any = 0;
-        for i in 0..N {
-            any |= self.0[i];
+
+        impl Mask for LaneMask<$lanes> {
+            #[inline(always)]
+            fn from_fn(mut f: impl FnMut(usize) -> bool) -> Self {
+                Self([$(word(f($i))),*])
+            }
+            #[inline(always)]
+            fn any(self) -> bool {
+                (0 $(| self.0[$i])*) != 0
+            }
+            #[inline(always)]
+            fn count(self) -> usize {
+                0 $(+ (self.0[$i] & 1) as usize)*
+            }
+            #[inline(always)]
+            fn lane(&self, i: usize) -> bool {
+                self.0[i] != 0
+            }
+            #[inline(always)]
+            fn set_lane(&mut self, i: usize, truth: bool) {
+                self.0[i] = word(truth);
+            }
         }
-        any != 0
-    }
-    #[inline(always)]
-    fn count(self) -> usize {
-        let mut count = 0;
-        for i in 0..N {
-            count += (self.0[i] & 1) as usize;
-        }
-        count
-    }
-    #[inline(always)]
-    fn lane(&self, i: usize) -> bool {
-        self.0[i] != 0
-    }
-    #[inline(always)]
-    fn set_lane(&mut self, i: usize, truth: bool) {
-        self.0[i] = word(truth);
-    }
+    )*};
+}
+lanes! {
+    4 lanes, part 4: [0 1 2 3];
+    8 lanes, part 8: [0 1 2 3 4 5 6 7];
+    32 lanes, part 8: [
+        0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31
+    ];
 }
 
 #[cfg(test)]

@@ -11,7 +11,7 @@
 //! used only inside the AVX2 kernel (`montecarlo::kernel`), which runs only where
 //! `Kernel::new` found AVX2 on the CPU, and the module is private to the crate.
 
-use super::{EXP2_INT_BIAS, Mask, Real, word};
+use super::{EXP2_INT_BIAS, Lanes, Mask, Real, word};
 use std::arch::x86_64::*;
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 
@@ -58,15 +58,10 @@ impl Lanes8 {
         Self(unsafe { std::mem::transmute::<[f64; 8], [__m256d; 2]>(lanes) })
     }
 
-    /// `f` lane by lane, as the scalar path computes it.
+    /// The same lanes as an array batch, whose operations go lane by lane.
     #[inline(always)]
-    fn lanewise(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
-        let (a, b) = (self.array(), other.array());
-        let mut out = [0.0; 8];
-        for i in 0..8 {
-            out[i] = f(a[i], b[i]);
-        }
-        Self::of(out)
+    fn lanes(self) -> Lanes<8> {
+        Lanes(self.array())
     }
 }
 
@@ -124,12 +119,8 @@ impl Real for Lanes8 {
         Self([all, all])
     }
     #[inline(always)]
-    fn from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
-        let mut out = [0.0; 8];
-        for (i, slot) in out.iter_mut().enumerate() {
-            *slot = f(i);
-        }
-        Self::of(out)
+    fn from_fn(f: impl FnMut(usize) -> f64) -> Self {
+        Self::of(Lanes::<8>::from_fn(f).0)
     }
     #[inline(always)]
     fn sqrt(self) -> Self {
@@ -137,11 +128,11 @@ impl Real for Lanes8 {
     }
     #[inline(always)]
     fn min(self, other: Self) -> Self {
-        self.lanewise(other, f64::min)
+        Self::of(self.lanes().min(other.lanes()).0)
     }
     #[inline(always)]
     fn max(self, other: Self) -> Self {
-        self.lanewise(other, f64::max)
+        Self::of(self.lanes().max(other.lanes()).0)
     }
     /// The sign bit cleared, as `f64::abs` does.
     #[inline(always)]
@@ -261,7 +252,6 @@ impl Mask for Mask8 {
 
 #[cfg(test)]
 mod tests {
-    use super::super::Lanes;
     use super::*;
 
     /// Values where the operations differ most: zeros of both signs, infinities, NaN, the
