@@ -1,9 +1,9 @@
 //! Whether this build compiles the AVX-512 kernel (`cfg(avx512_kernel)`, see
 //! `src/montecarlo/kernel.rs`): where it can run, on an x86_64 host with AVX-512F, or when
-//! `BOUNCEWEAR_ALL_KERNELS` is set, in every profile. The 32-lane AVX-512 kernel is most of the
-//! model's build: on a 2-core Zen 3 its library took 8 min 24 s with it and 2 min 48 s without
-//! (`cargo build -p bouncewear-model --lib`, clean target directory), in a test build on a CPU
-//! that could never run it. A binary built without it runs the AVX2 kernel on an AVX-512 CPU,
+//! `BOUNCEWEAR_ALL_KERNELS` is set, in every profile. The 32-lane AVX-512 kernel is more than half
+//! of the model's build: on a 2-core EPYC VM its library took 125 s with it and 45 s without
+//! (`cargo build -p bouncewear-model --features openapi --lib`, test profile; 161 s against 90 s
+//! in release), in a test build on a CPU that could never run it. A binary built without it runs the AVX2 kernel on an AVX-512 CPU,
 //! with the same bits: one meant for other machines is built with `BOUNCEWEAR_ALL_KERNELS=1`, as
 //! the Dockerfile does.
 
