@@ -200,12 +200,13 @@ fn word(truth: bool) -> u64 {
 ///
 /// Every operation is written out lane by lane over that list, with no loop: after inlining into a
 /// kernel compiled for an instruction set, LLVM's SLP vectoriser packs the lanes into full-width
-/// instructions of that set, as it did with the loops these once were once they were unrolled.
-/// The loops cost the build that unrolling: in the portable kernel, thousands of four-lane loops
-/// inlined into one function took LLVM's loop rotation 67 s and its full unrolling 22 s of the
-/// model library's 122 s (`-Zllvm-time-trace`, test profile, 2-core EPYC VM), and again in its test
-/// binary. (Closures through `std::array::from_fn` were left half-vectorised, and out of line they
-/// ran in the baseline instruction set.)
+/// instructions of that set. These operations were indexed loops, which gave the same machine code
+/// only after LLVM had rotated and fully unrolled each of them: in the portable kernel, thousands
+/// of four-lane loops inlined into one function took 89 s of LLVM's time (rotation 67 s, unrolling
+/// 22 s; `-Zllvm-time-trace`, test profile, 2-core EPYC VM), and again in the model's test binary.
+/// The library took 122 s of rustc's time so, 45 s written out. (Closures through
+/// `std::array::from_fn` were left half-vectorised, and out of line they ran in the baseline
+/// instruction set.)
 macro_rules! lanes {
     ($($lanes:literal lanes, part $part:literal: [$($i:literal)*];)*) => {$(
         impl Lanes<$lanes> {
