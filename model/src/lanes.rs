@@ -194,6 +194,32 @@ fn word(truth: bool) -> u64 {
     (truth as u64).wrapping_neg()
 }
 
+/// `$trait` for `Lanes<$lanes>`: `$op` lane by lane.
+macro_rules! lane_operator {
+    ($lanes:literal, $trait:ident, $method:ident, $op:tt) => {
+        impl $trait for Lanes<$lanes> {
+            type Output = Self;
+            #[inline(always)]
+            fn $method(self, other: Self) -> Self {
+                self.zip(other, |a, b| a $op b)
+            }
+        }
+    };
+}
+
+/// `$trait` for `LaneMask<$lanes>`: `$op` word by word over the lane indices `$i`.
+macro_rules! mask_operator {
+    ($lanes:literal, $trait:ident, $method:ident, $op:tt, [$($i:literal)*]) => {
+        impl $trait for LaneMask<$lanes> {
+            type Output = Self;
+            #[inline(always)]
+            fn $method(self, other: Self) -> Self {
+                Self([$(self.0[$i] $op other.0[$i]),*])
+            }
+        }
+    };
+}
+
 /// The lanes of each width the kernels use: `$lanes` lanes, narrowing to `$part` ([`Real::Part`]:
 /// eight lanes, one AVX-512 register, or the batch itself when it is no wider), and the list of
 /// their indices.
@@ -226,37 +252,10 @@ macro_rules! lanes {
             }
         }
 
-        impl Add for Lanes<$lanes> {
-            type Output = Self;
-            #[inline(always)]
-            fn add(self, other: Self) -> Self {
-                self.zip(other, |a, b| a + b)
-            }
-        }
-
-        impl Sub for Lanes<$lanes> {
-            type Output = Self;
-            #[inline(always)]
-            fn sub(self, other: Self) -> Self {
-                self.zip(other, |a, b| a - b)
-            }
-        }
-
-        impl Mul for Lanes<$lanes> {
-            type Output = Self;
-            #[inline(always)]
-            fn mul(self, other: Self) -> Self {
-                self.zip(other, |a, b| a * b)
-            }
-        }
-
-        impl Div for Lanes<$lanes> {
-            type Output = Self;
-            #[inline(always)]
-            fn div(self, other: Self) -> Self {
-                self.zip(other, |a, b| a / b)
-            }
-        }
+        lane_operator!($lanes, Add, add, +);
+        lane_operator!($lanes, Sub, sub, -);
+        lane_operator!($lanes, Mul, mul, *);
+        lane_operator!($lanes, Div, div, /);
 
         impl Neg for Lanes<$lanes> {
             type Output = Self;
@@ -335,21 +334,8 @@ macro_rules! lanes {
             type Part = Lanes<$part>;
         }
 
-        impl BitAnd for LaneMask<$lanes> {
-            type Output = Self;
-            #[inline(always)]
-            fn bitand(self, other: Self) -> Self {
-                Self([$(self.0[$i] & other.0[$i]),*])
-            }
-        }
-
-        impl BitOr for LaneMask<$lanes> {
-            type Output = Self;
-            #[inline(always)]
-            fn bitor(self, other: Self) -> Self {
-                Self([$(self.0[$i] | other.0[$i]),*])
-            }
-        }
+        mask_operator!($lanes, BitAnd, bitand, &, [$($i)*]);
+        mask_operator!($lanes, BitOr, bitor, |, [$($i)*]);
 
         impl Not for LaneMask<$lanes> {
             type Output = Self;
