@@ -194,6 +194,49 @@ fn word(truth: bool) -> u64 {
     (truth as u64).wrapping_neg()
 }
 
+/// One value per lane, `$value` with `$i` bound to each lane's index in turn: an array expression
+/// over the list of indices `[..]` (the lanes written out), or a loop over `(loop N)` lanes.
+macro_rules! per_lane {
+    ([$($index:literal)*], $i:ident => $value:expr) => {
+        [$({
+            let $i: usize = $index;
+            $value
+        }),*]
+    };
+    ((loop $lanes:literal), $i:ident => $value:expr) => {{
+        let mut out = [Default::default(); $lanes];
+        for $i in 0..$lanes {
+            out[$i] = $value;
+        }
+        out
+    }};
+}
+
+/// Whether any lane's word of `$words` is set, and how many lanes hold, over the lanes as
+/// [`per_lane!`] walks them.
+macro_rules! reduce_lanes {
+    ([$($index:literal)*], $words:expr, any) => {
+        (0 $(| $words[$index])*) != 0
+    };
+    ([$($index:literal)*], $words:expr, count) => {
+        0 $(+ ($words[$index] & 1) as usize)*
+    };
+    ((loop $lanes:literal), $words:expr, any) => {{
+        let mut any = 0;
+        for i in 0..$lanes {
+            any |= $words[i];
+        }
+        any != 0
+    }};
+    ((loop $lanes:literal), $words:expr, count) => {{
+        let mut count = 0;
+        for i in 0..$lanes {
+            count += ($words[i] & 1) as usize;
+        }
+        count
+    }};
+}
+
 /// `$trait` for `Lanes<$lanes>`: `$op` lane by lane.
 macro_rules! lane_operator {
     ($lanes:literal, $trait:ident, $method:ident, $op:tt) => {
@@ -207,48 +250,52 @@ macro_rules! lane_operator {
     };
 }
 
-/// `$trait` for `LaneMask<$lanes>`: `$op` word by word over the lane indices `$i`.
+/// `$trait` for `LaneMask<$lanes>`: `$op` word by word over the lanes as [`per_lane!`] walks them.
 macro_rules! mask_operator {
-    ($lanes:literal, $trait:ident, $method:ident, $op:tt, [$($i:literal)*]) => {
+    ($lanes:literal, $trait:ident, $method:ident, $op:tt, $walk:tt) => {
         impl $trait for LaneMask<$lanes> {
             type Output = Self;
             #[inline(always)]
             fn $method(self, other: Self) -> Self {
-                Self([$(self.0[$i] $op other.0[$i]),*])
+                Self(per_lane!($walk, i => self.0[i] $op other.0[i]))
             }
         }
     };
 }
 
 /// The lanes of each width the kernels use: `$lanes` lanes, narrowing to `$part` ([`Real::Part`]:
-/// eight lanes, one AVX-512 register, or the batch itself when it is no wider), and the list of
-/// their indices.
+/// eight lanes, one AVX-512 register, or the batch itself when it is no wider), walked as `$walk`
+/// says ([`per_lane!`]).
 ///
-/// Every operation is written out lane by lane over that list, with no loop: after inlining into a
-/// kernel compiled for an instruction set, LLVM's SLP vectoriser packs the lanes into full-width
-/// instructions of that set. These operations were indexed loops, which gave the same machine code
-/// only after LLVM had rotated and fully unrolled each of them: in the portable kernel, thousands
-/// of four-lane loops inlined into one function took 89 s of LLVM's time (rotation 67 s, unrolling
-/// 22 s; `-Zllvm-time-trace`, test profile, 2-core EPYC VM), and again in the model's test binary.
-/// The library took 122 s of rustc's time so, 45 s written out. (Closures through
-/// `std::array::from_fn` were left half-vectorised, and out of line they ran in the baseline
-/// instruction set.)
+/// Four and eight lanes are written out lane by lane over the list of their indices, with no
+/// loop: after inlining into a kernel compiled for an instruction set, LLVM's SLP vectoriser packs
+/// the lanes into full-width instructions of that set. These operations were indexed loops, which
+/// gave the same machine code only after LLVM had rotated and fully unrolled each of them: in the
+/// portable kernel, thousands of four-lane loops inlined into one function took 89 s of LLVM's
+/// time (rotation 67 s, unrolling 22 s; `-Zllvm-time-trace`, test profile, 2-core EPYC VM), and
+/// again in the model's test binary. The library took 122 s of rustc's time so, 45 s written out.
+/// Thirty-two lanes stay loops, which the loop vectoriser turns into four AVX-512 registers:
+/// written out, the AVX-512 kernel ran 8-12 % slower (`cargo bench -p bouncewear-model --bench
+/// engine`, 2-core AMD EPYC Zen 5, interleaved: 15 A 79-94 ms against 74-78, mechanical 94 against
+/// 82-87), for a library that builds in the same wall time (17 s more CPU, in parallel codegen
+/// units), and only where the AVX-512 kernel is built. (Closures through `std::array::from_fn` were
+/// left half-vectorised, and out of line they ran in the baseline instruction set.)
 macro_rules! lanes {
-    ($($lanes:literal lanes, part $part:literal: [$($i:literal)*];)*) => {$(
+    ($($lanes:literal lanes, part $part:literal: $walk:tt;)*) => {$(
         impl Lanes<$lanes> {
             #[inline(always)]
             fn map(self, f: impl Fn(f64) -> f64) -> Self {
-                Self([$(f(self.0[$i])),*])
+                Self(per_lane!($walk, i => f(self.0[i])))
             }
 
             #[inline(always)]
             fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
-                Self([$(f(self.0[$i], other.0[$i])),*])
+                Self(per_lane!($walk, i => f(self.0[i], other.0[i])))
             }
 
             #[inline(always)]
             fn compare(self, other: Self, f: impl Fn(f64, f64) -> bool) -> LaneMask<$lanes> {
-                LaneMask([$(word(f(self.0[$i], other.0[$i]))),*])
+                LaneMask(per_lane!($walk, i => word(f(self.0[i], other.0[i]))))
             }
         }
 
@@ -276,7 +323,7 @@ macro_rules! lanes {
             /// `f` called on the lanes in order (an array expression evaluates left to right).
             #[inline(always)]
             fn from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
-                Self([$(f($i)),*])
+                Self(per_lane!($walk, i => f(i)))
             }
             #[inline(always)]
             fn sqrt(self) -> Self {
@@ -315,7 +362,7 @@ macro_rules! lanes {
                 let pick = |m: u64, yes: f64, no: f64| {
                     f64::from_bits((yes.to_bits() & m) | (no.to_bits() & !m))
                 };
-                Self([$(pick(mask.0[$i], yes.0[$i], no.0[$i])),*])
+                Self(per_lane!($walk, i => pick(mask.0[i], yes.0[i], no.0[i])))
             }
             #[inline(always)]
             fn exp2_int(self) -> Self {
@@ -334,29 +381,29 @@ macro_rules! lanes {
             type Part = Lanes<$part>;
         }
 
-        mask_operator!($lanes, BitAnd, bitand, &, [$($i)*]);
-        mask_operator!($lanes, BitOr, bitor, |, [$($i)*]);
+        mask_operator!($lanes, BitAnd, bitand, &, $walk);
+        mask_operator!($lanes, BitOr, bitor, |, $walk);
 
         impl Not for LaneMask<$lanes> {
             type Output = Self;
             #[inline(always)]
             fn not(self) -> Self {
-                Self([$(!self.0[$i]),*])
+                Self(per_lane!($walk, i => !self.0[i]))
             }
         }
 
         impl Mask for LaneMask<$lanes> {
             #[inline(always)]
             fn from_fn(mut f: impl FnMut(usize) -> bool) -> Self {
-                Self([$(word(f($i))),*])
+                Self(per_lane!($walk, i => word(f(i))))
             }
             #[inline(always)]
             fn any(self) -> bool {
-                (0 $(| self.0[$i])*) != 0
+                reduce_lanes!($walk, self.0, any)
             }
             #[inline(always)]
             fn count(self) -> usize {
-                0 $(+ (self.0[$i] & 1) as usize)*
+                reduce_lanes!($walk, self.0, count)
             }
             #[inline(always)]
             fn lane(&self, i: usize) -> bool {
@@ -372,9 +419,7 @@ macro_rules! lanes {
 lanes! {
     4 lanes, part 4: [0 1 2 3];
     8 lanes, part 8: [0 1 2 3 4 5 6 7];
-    32 lanes, part 8: [
-        0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31
-    ];
+    32 lanes, part 8: (loop 32);
 }
 
 #[cfg(test)]
