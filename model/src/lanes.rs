@@ -55,7 +55,7 @@ pub trait Real:
 
     /// A narrower batch the bounce loop moves its last lanes into once few of them still bounce:
     /// one vector register (eight lanes) for a batch of several, else the batch itself
-    /// (docs/performance.md "Lanes that have stopped"). A lane computes the same in either.
+    /// (docs/performance-history.md "Lanes that have stopped"). A lane computes the same in either.
     type Part: Real;
 
     // Inlined like every lane operation: a default method is compiled once, in one codegen unit,

@@ -502,8 +502,8 @@ impl Operation {
             truncated: zero.lt(zero),
         };
         // Once no more lanes bounce than a narrower batch holds, they move into one and finish
-        // there, so that the stopped lanes stop costing (docs/performance.md "Lanes that have
-        // stopped"); each lane computes the same in either.
+        // there, so that the stopped lanes stop costing (docs/performance-history.md "Lanes
+        // that have stopped"); each lane computes the same in either.
         while flights.active.any() {
             if L::LANES > L::Part::LANES && flights.active.count() <= L::Part::LANES {
                 let (lanes, mut narrow) = flights.gather();
