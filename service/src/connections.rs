@@ -1,7 +1,8 @@
 //! The accept loop: HTTP/1.1 connections served by hyper with a deadline for every request's
 //! headers, and at most a bounded number of connections open, so that clients that connect and
 //! stall (slowloris) are cut off and can never use up the process's file descriptors; at the limit,
-//! the oldest connection waiting for a request's headers is closed to make room for a new client. When
+//! the oldest connection waiting on its client for a request's headers is closed to make room for a
+//! new client. When
 //! `stopping` turns true, it stops accepting and waits for open connections to finish their
 //! responses (each gets hyper's graceful shutdown).
 
@@ -12,12 +13,13 @@ use hyper_util::rt::{TokioIo, TokioTimer};
 use hyper_util::service::TowerToHyperService;
 use std::collections::BTreeMap;
 use std::pin::Pin;
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::time::Duration;
-use tokio::net::TcpListener;
-use tokio::sync::{Notify, Semaphore, watch};
+use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::{Notify, OwnedSemaphorePermit, Semaphore, watch};
 use tokio::task::JoinSet;
 
 /// File descriptors kept back from connections: the database's connections, SQLite's WAL and
@@ -66,20 +68,54 @@ fn open_file_limit() -> Option<u64> {
     (read == 0 && limit.rlim_cur != libc::RLIM_INFINITY).then_some(limit.rlim_cur)
 }
 
+/// How often a new client waiting for a slot looks again for a connection to close, while none can
+/// be: every open one is busy, or new.
+const SHED_RETRY: Duration = Duration::from_millis(5);
+
+/// How long a connection whose client has sent nothing yet is kept from being closed for a new
+/// client: the time a client that has just connected has to send its request, however many
+/// others connect.
+const FIRST_BYTES_WITHIN: Duration = Duration::from_millis(100);
+
 /// One open connection: how many of its requests are in progress (a response counts until its
-/// body is sent), and the signal that closes it.
+/// body is sent), whether the server is waiting on its client (its last read found nothing to
+/// read), and the signal that closes it.
 struct Connection {
     in_progress: AtomicUsize,
+    waiting: AtomicBool,
+    /// Whether its client has sent any bytes.
+    heard: AtomicBool,
+    /// Whether a response's bytes were written and not yet flushed to the socket.
+    writing: AtomicBool,
+    /// When the connection started, in ms since [`Open::epoch`].
+    started_ms: u64,
     shed: Notify,
+    /// Chosen to be closed: not chosen again for the next client.
+    shedding: AtomicBool,
 }
 
-/// The open connections, oldest first: when every slot is taken, the oldest that has no request in
-/// progress (it is waiting for a request's headers: a slow or idle client) is closed for the new
-/// one, so clients that hold connections without using them cannot lock out the others.
-#[derive(Default)]
+/// The open connections, oldest first: when every slot is taken, the oldest that is waiting on
+/// its client (its last read found nothing) with no request in progress and no response still
+/// being written is closed for the new one, so clients that hold connections without using them
+/// (slow or idle clients) cannot lock out the others. A client that has sent nothing yet keeps its
+/// connection for [`FIRST_BYTES_WITHIN`] whatever else connects: a client that has just connected
+/// may not have sent its request yet. (Among hundreds of stalling clients that reconnect, a health
+/// check's connection was closed with its response written but not yet flushed, or before its
+/// request had arrived, while both counted as waiting.)
 struct Open {
+    epoch: std::time::Instant,
     next: AtomicU64,
     connections: Mutex<BTreeMap<u64, Arc<Connection>>>,
+}
+
+impl Default for Open {
+    fn default() -> Self {
+        Self {
+            epoch: std::time::Instant::now(),
+            next: AtomicU64::new(0),
+            connections: Mutex::default(),
+        }
+    }
 }
 
 impl Open {
@@ -87,7 +123,12 @@ impl Open {
         let id = self.next.fetch_add(1, Ordering::Relaxed);
         let connection = Arc::new(Connection {
             in_progress: AtomicUsize::new(0),
+            waiting: AtomicBool::new(false),
+            heard: AtomicBool::new(false),
+            writing: AtomicBool::new(false),
+            started_ms: self.now_ms(),
             shed: Notify::new(),
+            shedding: AtomicBool::new(false),
         });
         self.lock().insert(id, Arc::clone(&connection));
         (id, connection)
@@ -97,13 +138,26 @@ impl Open {
         self.lock().remove(&id);
     }
 
-    /// Closes the oldest connection without a request in progress; whether there was one.
+    /// Milliseconds since the epoch.
+    fn now_ms(&self) -> u64 {
+        u64::try_from(self.epoch.elapsed().as_millis()).unwrap_or(u64::MAX)
+    }
+
+    /// Closes the oldest connection that waits on its client, with no request in progress and
+    /// nothing left to write, and has heard from it or is older than [`FIRST_BYTES_WITHIN`];
+    /// whether there was one.
     fn shed_oldest_idle(&self) -> bool {
+        let (now, grace) = (self.now_ms(), FIRST_BYTES_WITHIN.as_millis() as u64);
         let open = self.lock();
-        let idle = open
-            .values()
-            .find(|c| c.in_progress.load(Ordering::Acquire) == 0);
+        let idle = open.values().find(|c| {
+            c.in_progress.load(Ordering::Acquire) == 0
+                && !c.writing.load(Ordering::Acquire)
+                && c.waiting.load(Ordering::Acquire)
+                && (c.heard.load(Ordering::Acquire) || now.saturating_sub(c.started_ms) >= grace)
+                && !c.shedding.load(Ordering::Acquire)
+        });
         if let Some(connection) = idle {
+            connection.shedding.store(true, Ordering::Release);
             connection.shed.notify_one();
         }
         idle.is_some()
@@ -125,7 +179,10 @@ impl InProgress {
 }
 
 impl Drop for InProgress {
+    /// The response's last bytes may still be in hyper's buffer: the connection counts as writing
+    /// until its next flush, so that it is not closed under them.
     fn drop(&mut self) {
+        self.0.writing.store(true, Ordering::Release);
         self.0.in_progress.fetch_sub(1, Ordering::AcqRel);
     }
 }
@@ -156,6 +213,91 @@ impl<B: HttpBody + Unpin> HttpBody for Counted<B> {
     }
 }
 
+/// A connection's socket, recording for [`Open`] whether the server waits on its client (a read
+/// that found nothing to read sets it, one that read bytes or the end clears it), whether the
+/// client has sent anything, and whether written bytes wait for a flush.
+struct Watched {
+    stream: TcpStream,
+    connection: Arc<Connection>,
+}
+
+impl AsyncRead for Watched {
+    fn poll_read(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<std::io::Result<()>> {
+        let before = buf.filled().len();
+        let read = Pin::new(&mut self.stream).poll_read(cx, buf);
+        if buf.filled().len() > before {
+            self.connection.heard.store(true, Ordering::Release);
+        }
+        let waiting = read.is_pending();
+        self.connection.waiting.store(waiting, Ordering::Release);
+        read
+    }
+}
+
+impl AsyncWrite for Watched {
+    fn poll_write(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<std::io::Result<usize>> {
+        self.connection.writing.store(true, Ordering::Release);
+        Pin::new(&mut self.stream).poll_write(cx, buf)
+    }
+
+    fn poll_write_vectored(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[std::io::IoSlice<'_>],
+    ) -> Poll<std::io::Result<usize>> {
+        self.connection.writing.store(true, Ordering::Release);
+        Pin::new(&mut self.stream).poll_write_vectored(cx, bufs)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.stream.is_write_vectored()
+    }
+
+    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        let flushed = Pin::new(&mut self.stream).poll_flush(cx);
+        if flushed.is_ready() {
+            self.connection.writing.store(false, Ordering::Release);
+        }
+        flushed
+    }
+
+    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        Pin::new(&mut self.stream).poll_shutdown(cx)
+    }
+}
+
+/// At the limit: closes the oldest connection that waits on its client ([`Open`]) and takes the
+/// slot that frees. While none can be closed (every open connection busy, or not read from yet),
+/// the new client waits for a slot, looking again every [`SHED_RETRY`]. `None` once `stopping`.
+async fn make_room(
+    open: &Open,
+    slots: &Arc<Semaphore>,
+    stopping: &mut watch::Receiver<bool>,
+) -> Option<OwnedSemaphorePermit> {
+    let mut shed = false;
+    loop {
+        if !shed && open.shed_oldest_idle() {
+            metrics::counter!(crate::telemetry::CONNECTIONS_SHED).increment(1);
+            shed = true;
+        }
+        tokio::select! {
+            slot = Arc::clone(slots).acquire_owned() => {
+                return Some(slot.expect("the semaphore is never closed"));
+            }
+            () = tokio::time::sleep(SHED_RETRY), if !shed => {}
+            _ = stopping.wait_for(|stop| *stop) => return None,
+        }
+    }
+}
+
 /// Serves `router` on `listener` until `stopping` turns true, then drains.
 pub async fn serve(
     listener: TcpListener,
@@ -181,20 +323,15 @@ pub async fn serve(
             },
             _ = stopping.wait_for(|stop| *stop) => break,
         };
-        // At the limit, the oldest connection waiting for a request's headers makes room; if
-        // every one is busy, the new client waits for a slot (and later ones in the kernel's
-        // backlog, not in our memory: one accepted socket at most is held beyond the limit).
+        // At the limit, the oldest connection waiting on its client makes room; while none can,
+        // the new client waits for a slot (and later ones in the kernel's backlog, not in our
+        // memory: one accepted socket at most is held beyond the limit).
         let slot = match Arc::clone(&slots).try_acquire_owned() {
             Ok(slot) => slot,
-            Err(_) => {
-                if open.shed_oldest_idle() {
-                    metrics::counter!(crate::telemetry::CONNECTIONS_SHED).increment(1);
-                }
-                tokio::select! {
-                    slot = Arc::clone(&slots).acquire_owned() => slot.expect("the semaphore is never closed"),
-                    _ = stopping.wait_for(|stop| *stop) => break,
-                }
-            }
+            Err(_) => match make_room(&open, &slots, &mut stopping).await {
+                Some(slot) => slot,
+                None => break,
+            },
         };
         let _ = stream.set_nodelay(true);
         let (id, state) = open.add();
@@ -211,7 +348,11 @@ pub async fn serve(
                 }))
             }
         });
-        let connection = http.serve_connection(TokioIo::new(stream), service);
+        let watched = Watched {
+            stream,
+            connection: Arc::clone(&state),
+        };
+        let connection = http.serve_connection(TokioIo::new(watched), service);
         let mut stop = stopping.clone();
         let open = Arc::clone(&open);
         connections.spawn(async move {
@@ -250,6 +391,43 @@ async fn pause_after(error: &std::io::Error) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// At the limit the oldest connection that waits on its client goes, once: not one the server
+    /// has not read from yet, nor one with a request in progress or a response not yet flushed,
+    /// nor a new one whose client has sent nothing yet.
+    #[test]
+    fn the_oldest_connection_waiting_on_its_client_is_shed_once() {
+        let open = Arc::new(Open::default());
+        let (_, unread) = open.add();
+        let (_, busy) = open.add();
+        let (_, flushing) = open.add();
+        let (_, silent) = open.add();
+        let (_, stalled) = open.add();
+        let (_, newer) = open.add();
+        for c in [&busy, &flushing, &silent, &stalled, &newer] {
+            c.waiting.store(true, Ordering::Release);
+        }
+        for c in [&busy, &flushing, &stalled, &newer] {
+            c.heard.store(true, Ordering::Release);
+        }
+        let _request = InProgress::enter(&busy);
+        flushing.writing.store(true, Ordering::Release);
+        assert!(open.shed_oldest_idle());
+        assert!(stalled.shedding.load(Ordering::Acquire));
+        assert!(open.shed_oldest_idle(), "the next client gets the next one");
+        assert!(newer.shedding.load(Ordering::Acquire));
+        assert!(
+            !open.shed_oldest_idle(),
+            "a new client has a moment to send"
+        );
+        std::thread::sleep(FIRST_BYTES_WITHIN + Duration::from_millis(10));
+        assert!(open.shed_oldest_idle());
+        assert!(silent.shedding.load(Ordering::Acquire));
+        assert!(!open.shed_oldest_idle());
+        for c in [&unread, &busy, &flushing] {
+            assert!(!c.shedding.load(Ordering::Acquire));
+        }
+    }
 
     #[test]
     fn connections_stay_below_the_open_file_limit() {
