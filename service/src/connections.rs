@@ -87,8 +87,8 @@ struct Connection {
     heard: AtomicBool,
     /// Whether a response's bytes were written and not yet flushed to the socket.
     writing: AtomicBool,
-    /// When the connection started, in ms since [`Open::epoch`].
-    started_ms: u64,
+    /// When the connection started.
+    started: std::time::Instant,
     shed: Notify,
     /// Chosen to be closed: not chosen again for the next client.
     shedding: AtomicBool,
@@ -102,20 +102,10 @@ struct Connection {
 /// may not have sent its request yet. (Among hundreds of stalling clients that reconnect, a health
 /// check's connection was closed with its response written but not yet flushed, or before its
 /// request had arrived, while both counted as waiting.)
+#[derive(Default)]
 struct Open {
-    epoch: std::time::Instant,
     next: AtomicU64,
     connections: Mutex<BTreeMap<u64, Arc<Connection>>>,
-}
-
-impl Default for Open {
-    fn default() -> Self {
-        Self {
-            epoch: std::time::Instant::now(),
-            next: AtomicU64::new(0),
-            connections: Mutex::default(),
-        }
-    }
 }
 
 impl Open {
@@ -126,7 +116,7 @@ impl Open {
             waiting: AtomicBool::new(false),
             heard: AtomicBool::new(false),
             writing: AtomicBool::new(false),
-            started_ms: self.now_ms(),
+            started: std::time::Instant::now(),
             shed: Notify::new(),
             shedding: AtomicBool::new(false),
         });
@@ -138,22 +128,16 @@ impl Open {
         self.lock().remove(&id);
     }
 
-    /// Milliseconds since the epoch.
-    fn now_ms(&self) -> u64 {
-        u64::try_from(self.epoch.elapsed().as_millis()).unwrap_or(u64::MAX)
-    }
-
     /// Closes the oldest connection that waits on its client, with no request in progress and
     /// nothing left to write, and has heard from it or is older than [`FIRST_BYTES_WITHIN`];
     /// whether there was one.
     fn shed_oldest_idle(&self) -> bool {
-        let (now, grace) = (self.now_ms(), FIRST_BYTES_WITHIN.as_millis() as u64);
         let open = self.lock();
         let idle = open.values().find(|c| {
             c.in_progress.load(Ordering::Acquire) == 0
                 && !c.writing.load(Ordering::Acquire)
                 && c.waiting.load(Ordering::Acquire)
-                && (c.heard.load(Ordering::Acquire) || now.saturating_sub(c.started_ms) >= grace)
+                && (c.heard.load(Ordering::Acquire) || c.started.elapsed() >= FIRST_BYTES_WITHIN)
                 && !c.shedding.load(Ordering::Acquire)
         });
         if let Some(connection) = idle {
