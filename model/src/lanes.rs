@@ -49,6 +49,9 @@ pub trait Real:
     fn exp2_int(self) -> Self;
     /// Lane `i`.
     fn lane(&self, i: usize) -> f64;
+    /// The least and the greatest lane by `f64::min` and `f64::max`: for finite lanes two of
+    /// their values, whatever order they are compared in (a zero's sign may be either's).
+    fn extremes(self) -> (f64, f64);
 
     /// Sets lane `i` to `x`.
     fn set_lane(&mut self, i: usize, x: f64);
@@ -78,8 +81,20 @@ pub trait Mask: Copy + BitAnd<Output = Self> + BitOr<Output = Self> + Not<Output
     fn any(self) -> bool;
     /// How many lanes hold.
     fn count(self) -> usize;
+    /// One bit per lane that holds, lane 0 lowest (a batch has at most 64 lanes).
+    fn bits(self) -> u64;
     fn lane(&self, i: usize) -> bool;
     fn set_lane(&mut self, i: usize, truth: bool);
+}
+
+/// The lanes `lanes` as [`Mask::bits`] gives them: one bit each, lane 0 lowest.
+#[inline(always)]
+pub fn lane_bits(lanes: std::ops::Range<usize>) -> u64 {
+    debug_assert!(lanes.end <= 64, "{lanes:?}: a batch has at most 64 lanes");
+    match lanes.end.checked_sub(lanes.start) {
+        Some(1..) => (u64::MAX >> (64 - lanes.end)) & (u64::MAX << lanes.start),
+        _ => 0,
+    }
 }
 
 /// `2^52 + 1023`: adding a whole number `n` in `[-1022, 1023]` leaves `n + 1023` in the low mantissa
@@ -142,6 +157,10 @@ impl Real for f64 {
     fn lane(&self, _: usize) -> f64 {
         *self
     }
+    #[inline(always)]
+    fn extremes(self) -> (f64, f64) {
+        (self, self)
+    }
 
     #[inline(always)]
     fn set_lane(&mut self, _: usize, x: f64) {
@@ -163,6 +182,10 @@ impl Mask for bool {
     #[inline(always)]
     fn count(self) -> usize {
         usize::from(self)
+    }
+    #[inline(always)]
+    fn bits(self) -> u64 {
+        u64::from(self)
     }
     #[inline(always)]
     fn lane(&self, _: usize) -> bool {
@@ -212,14 +235,17 @@ macro_rules! per_lane {
     }};
 }
 
-/// Whether any lane's word of `$words` is set, and how many lanes hold, over the lanes as
-/// [`per_lane!`] walks them.
+/// Whether any lane's word of `$words` is set, how many lanes hold and which (one bit each), over
+/// the lanes as [`per_lane!`] walks them.
 macro_rules! reduce_lanes {
     ([$($index:literal)*], $words:expr, any) => {
         (0 $(| $words[$index])*) != 0
     };
     ([$($index:literal)*], $words:expr, count) => {
         0 $(+ ($words[$index] & 1) as usize)*
+    };
+    ([$($index:literal)*], $words:expr, bits) => {
+        0 $(| (($words[$index] & 1) << $index))*
     };
     ((loop $lanes:literal), $words:expr, any) => {{
         let mut any = 0;
@@ -234,6 +260,13 @@ macro_rules! reduce_lanes {
             count += ($words[i] & 1) as usize;
         }
         count
+    }};
+    ((loop $lanes:literal), $words:expr, bits) => {{
+        let mut bits = 0;
+        for i in 0..$lanes {
+            bits |= ($words[i] & 1) << i;
+        }
+        bits
     }};
 }
 
@@ -372,6 +405,20 @@ macro_rules! lanes {
             fn lane(&self, i: usize) -> f64 {
                 self.0[i]
             }
+            /// Halves folded onto each other, full-width minima and maxima first.
+            #[inline(always)]
+            fn extremes(self) -> (f64, f64) {
+                let (mut least, mut greatest) = (self.0, self.0);
+                let mut width = $lanes;
+                while width > 1 {
+                    width /= 2;
+                    for i in 0..width {
+                        least[i] = least[i].min(least[i + width]);
+                        greatest[i] = greatest[i].max(greatest[i + width]);
+                    }
+                }
+                (least[0], greatest[0])
+            }
 
             #[inline(always)]
             fn set_lane(&mut self, i: usize, x: f64) {
@@ -406,6 +453,10 @@ macro_rules! lanes {
                 reduce_lanes!($walk, self.0, count)
             }
             #[inline(always)]
+            fn bits(self) -> u64 {
+                reduce_lanes!($walk, self.0, bits)
+            }
+            #[inline(always)]
             fn lane(&self, i: usize) -> bool {
                 self.0[i] != 0
             }
@@ -431,6 +482,53 @@ mod tests {
         for n in -1022..=1023 {
             assert_eq!(f64::from(n).exp2_int(), 2f64.powi(n), "2^{n}");
         }
+    }
+
+    /// `extremes` are the least and greatest lane, `bits` the lanes that hold, on every width
+    /// the kernels use, against the lanes taken one by one.
+    #[test]
+    fn a_batch_reduces_to_its_extremes_and_its_lanes_bits() {
+        fn check<L: Real>(values: &[f64]) {
+            let x = L::from_fn(|i| values[i % values.len()]);
+            let lanes = (0..L::LANES).map(|i| x.lane(i));
+            let least = lanes.clone().fold(f64::INFINITY, f64::min);
+            let greatest = lanes.fold(f64::NEG_INFINITY, f64::max);
+            assert_eq!(x.extremes(), (least, greatest), "{} lanes", L::LANES);
+            let positive = x.gt(L::splat(0.0));
+            let expected = (0..L::LANES)
+                .filter(|&i| x.lane(i) > 0.0)
+                .fold(0, |bits, i| bits | 1 << i);
+            assert_eq!(positive.bits(), expected, "{} lanes", L::LANES);
+        }
+        let values = [
+            3.0, -1.5, 0.0, 7.25, -8.0, 1e-300, 2.5, 1e300, -0.0, 4.0, 0.5,
+        ];
+        for start in 0..values.len() {
+            let values: Vec<f64> = values
+                .iter()
+                .cycle()
+                .skip(start)
+                .take(11)
+                .copied()
+                .collect();
+            check::<f64>(&values);
+            check::<Lanes<4>>(&values);
+            check::<Lanes<8>>(&values);
+            check::<Lanes<32>>(&values);
+        }
+    }
+
+    #[test]
+    fn lane_bits_are_the_lanes_of_a_range() {
+        assert_eq!(lane_bits(0..0), 0);
+        assert_eq!(lane_bits(3..3), 0);
+        assert_eq!(lane_bits(0..1), 1);
+        assert_eq!(lane_bits(0..8), 0xff);
+        assert_eq!(lane_bits(2..5), 0b1_1100);
+        assert_eq!(lane_bits(0..32), 0xffff_ffff);
+        assert_eq!(lane_bits(31..32), 1 << 31);
+        assert_eq!(lane_bits(0..64), u64::MAX);
+        assert_eq!(lane_bits(63..64), 1 << 63);
     }
 
     #[test]

@@ -78,7 +78,7 @@ impl Mask8 {
 
     /// One bit per lane, lane 0 lowest: each word's sign bit.
     #[inline(always)]
-    fn bits(self) -> u32 {
+    fn signs(self) -> u32 {
         let [low, high] = self.0;
         unsafe { (_mm256_movemask_pd(low) | (_mm256_movemask_pd(high) << 4)) as u32 }
     }
@@ -183,6 +183,10 @@ impl Real for Lanes8 {
     fn lane(&self, i: usize) -> f64 {
         self.array()[i]
     }
+    #[inline(always)]
+    fn extremes(self) -> (f64, f64) {
+        self.lanes().extremes()
+    }
 
     #[inline(always)]
     fn set_lane(&mut self, i: usize, x: f64) {
@@ -232,11 +236,15 @@ impl Mask for Mask8 {
     }
     #[inline(always)]
     fn any(self) -> bool {
-        self.bits() != 0
+        self.signs() != 0
     }
     #[inline(always)]
     fn count(self) -> usize {
-        self.bits().count_ones() as usize
+        self.signs().count_ones() as usize
+    }
+    #[inline(always)]
+    fn bits(self) -> u64 {
+        u64::from(self.signs())
     }
     #[inline(always)]
     fn lane(&self, i: usize) -> bool {
@@ -313,6 +321,12 @@ mod tests {
                 assert_eq!(bits8(x.max(y)), bits(u.max(v)));
                 assert_eq!(bits8(x.abs()), bits(u.abs()));
                 assert_eq!(bits8(x.copysign(y)), bits(u.copysign(v)));
+                let (least, greatest) = x.extremes();
+                let (lo, hi) = u.extremes();
+                assert_eq!(
+                    (least.to_bits(), greatest.to_bits()),
+                    (lo.to_bits(), hi.to_bits())
+                );
                 for (mask, array) in [
                     (x.lt(y), u.lt(v)),
                     (x.le(y), u.le(v)),
@@ -325,6 +339,7 @@ mod tests {
                     assert_eq!(lanes, std::array::from_fn(|i| array.lane(i)));
                     assert_eq!(mask.any(), array.any());
                     assert_eq!(mask.count(), array.count());
+                    assert_eq!(mask.bits(), array.bits());
                     assert_eq!(
                         bits8(Lanes8::select(mask, x, y)),
                         bits(Lanes::select(array, u, v))

@@ -19,7 +19,7 @@
 //! decades (20 binades) while a sketch holds fewer than 65,536 values, whatever the values, and at
 //! most 4 MiB per store for the whole f64 range. Serialised, every count is a `u64`.
 
-use crate::lanes::Real;
+use crate::lanes::{Mask, Real};
 use std::ops::Range;
 
 /// Mantissa bits in the bucket key: 256 buckets per binade, relative bucket width `2^-8`.
@@ -33,6 +33,9 @@ const KEY_END: u32 = 1 << (63 - KEY_SHIFT);
 
 /// The smallest growth of a store, so that the first few pushes do not each reallocate.
 const MIN_SLACK: u32 = 32;
+
+/// The most lanes a batch pushed at once has.
+const MAX_LANES: usize = 64;
 
 const SIGN_MASK: u64 = 1 << 63;
 
@@ -280,19 +283,19 @@ impl Store {
         with_counts!(&mut self.counts, c => c[i] += 1);
     }
 
-    /// Counts `n` values whose keys, all in `lo ..= hi`, `keys` gives: one addition when they
-    /// share one key.
+    /// Counts values of the keys `keys`, all in `lo ..= hi`: one addition when they share one
+    /// key.
     #[inline(always)]
-    fn add_all(&mut self, lo: u32, hi: u32, n: usize, keys: impl Fn(usize) -> u32, total: u64) {
+    fn add_all(&mut self, lo: u32, hi: u32, keys: &[u32], total: u64) {
         self.fit(total);
         self.cover(lo, hi + 1);
         let offset = self.offset;
         with_counts!(&mut self.counts, c => {
             if lo == hi {
-                add(&mut c[(lo - offset) as usize], n as u64);
+                add(&mut c[(lo - offset) as usize], keys.len() as u64);
             } else {
-                for k in 0..n {
-                    c[(keys(k) - offset) as usize] += 1;
+                for &key in keys {
+                    c[(key - offset) as usize] += 1;
                 }
             }
         });
@@ -467,37 +470,47 @@ impl Sketch {
         }
     }
 
-    /// [`Sketch::push`] on the lanes `lanes` of `x`. When every value is positive (the common
-    /// case) the keys' range is covered once and the lanes are counted without the sign test
-    /// and with the store already in place: a shift, a subtraction and an increment each. Lanes
-    /// that all share one bucket (a whole-number metric, a constant) or are all zero are one
-    /// addition: increments of one bucket in a row would each wait for the one before.
+    /// [`Sketch::push`] on the lanes `lanes` of `x`. The lanes' least and greatest values decide
+    /// the path, found by full-width minima and maxima (lanes outside `lanes` first take the
+    /// value of its first): when every value is positive (the common case) the keys' range, from
+    /// the extremes' keys, is covered once and the lanes are counted without the sign test and
+    /// with the store already in place: a shift, a subtraction and an increment each. Lanes that
+    /// all share one bucket (a whole-number metric, a constant) or are all zero are one addition:
+    /// increments of one bucket in a row would each wait for the one before. (A key never
+    /// decreases as a positive value grows, so the extremes' keys bound every lane's; they
+    /// replace a lane by lane scan of signs and keys, branches the compiler left scalar.)
     #[inline(always)]
     pub fn push_lanes<L: Real>(&mut self, x: &L, lanes: Range<usize>) {
         debug_assert!(lanes.end <= L::LANES, "{lanes:?} of {} lanes", L::LANES);
-        let (mut positive, mut zero, mut lo, mut hi) = (true, true, u32::MAX, 0);
-        for k in lanes.clone() {
-            let x = x.lane(k);
-            debug_assert!(
-                x.is_finite(),
-                "Sketch::push_lanes({x}): values must be finite"
-            );
-            positive &= x > 0.0;
-            zero &= x == 0.0;
-            lo = lo.min(key(x));
-            hi = hi.max(key(x));
+        debug_assert!(
+            lanes.clone().all(|k| x.lane(k).is_finite()),
+            "Sketch::push_lanes: values must be finite"
+        );
+        if lanes.is_empty() {
+            return;
         }
+        let (least, greatest) = if lanes.len() == L::LANES {
+            x.extremes()
+        } else {
+            let inside = L::Mask::from_fn(|k| lanes.contains(&k));
+            L::select(inside, *x, L::splat(x.lane(lanes.start))).extremes()
+        };
         let n = lanes.len() as u64;
-        if zero {
+        if least == 0.0 && greatest == 0.0 {
             self.count += n;
             self.zeros += n;
-        } else if !positive {
+        } else if least <= 0.0 {
             lanes.for_each(|k| self.push(x.lane(k)));
         } else {
             self.count += n;
-            let first = lanes.start;
-            self.positive
-                .add_all(lo, hi, lanes.len(), |j| key(x.lane(first + j)), self.count);
+            // Every lane's key at once, a few vector instructions, then one increment each.
+            debug_assert!(L::LANES <= MAX_LANES, "{} lanes", L::LANES);
+            let mut keys = [0; MAX_LANES];
+            for (i, slot) in keys.iter_mut().enumerate().take(L::LANES) {
+                *slot = key(x.lane(i));
+            }
+            let (lo, hi) = (key(least), key(greatest));
+            self.positive.add_all(lo, hi, &keys[lanes], self.count);
         }
     }
 

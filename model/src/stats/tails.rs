@@ -20,7 +20,7 @@
 //! and group.
 
 use super::threshold::Threshold;
-use crate::lanes::{Mask, Real};
+use crate::lanes::{Mask, Real, lane_bits};
 use std::ops::Range;
 
 /// The most values kept at each end of one accumulator.
@@ -134,12 +134,16 @@ impl Tails {
         }
     }
 
-    /// Adds the lanes `lanes` of `column`, in lane order: one vector comparison with each gate
-    /// when no lane enters.
+    /// Adds the lanes `lanes` of `column`, in lane order: one vector comparison with each gate,
+    /// then a push of each lane beyond a gate. A lane within them is dropped as [`Tails::push`]
+    /// would drop it: a settling among the pushes only moves the gates outwards.
     #[inline(always)]
     pub fn push_lanes<L: Real>(&mut self, column: &L, lanes: Range<usize>) {
-        if (column.lt(L::splat(self.low)) | column.gt(L::splat(self.high))).any() {
-            lanes.for_each(|k| self.push(column.lane(k)));
+        let beyond = column.lt(L::splat(self.low)) | column.gt(L::splat(self.high));
+        let mut entering = beyond.bits() & lane_bits(lanes);
+        while entering != 0 {
+            self.push(column.lane(entering.trailing_zeros() as usize));
+            entering &= entering - 1;
         }
     }
 
