@@ -405,19 +405,20 @@ macro_rules! lanes {
             fn lane(&self, i: usize) -> f64 {
                 self.0[i]
             }
-            /// Halves folded onto each other, full-width minima and maxima first.
+            /// Eight lanes at a time (one register) folded into eight, then those one by one.
             #[inline(always)]
             fn extremes(self) -> (f64, f64) {
-                let (mut least, mut greatest) = (self.0, self.0);
-                let mut width = $lanes;
-                while width > 1 {
-                    width /= 2;
-                    for i in 0..width {
-                        least[i] = least[i].min(least[i + width]);
-                        greatest[i] = greatest[i].max(greatest[i + width]);
+                const PART: usize = if $lanes < 8 { $lanes } else { 8 };
+                let mut least = [f64::INFINITY; PART];
+                let mut greatest = [f64::NEG_INFINITY; PART];
+                for part in self.0.chunks_exact(PART) {
+                    for j in 0..PART {
+                        least[j] = least[j].min(part[j]);
+                        greatest[j] = greatest[j].max(part[j]);
                     }
                 }
-                (least[0], greatest[0])
+                let least = least.into_iter().fold(f64::INFINITY, f64::min);
+                (least, greatest.into_iter().fold(f64::NEG_INFINITY, f64::max))
             }
 
             #[inline(always)]

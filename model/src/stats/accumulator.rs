@@ -1,7 +1,7 @@
 //! The running state of one (metric, bin, group): everything a [`Summary`](super::Summary) needs,
 //! in constant memory and a few nanoseconds per value.
 
-use super::sketch::{Sketch, rank};
+use super::sketch::{Sketch, fill_lanes, rank, within_lanes};
 use super::tails::Tails;
 use super::threshold::{Beyond, Threshold, ThresholdCount};
 use crate::lanes::Real;
@@ -208,8 +208,10 @@ impl Accumulator {
             columns.len(),
             "a column per accumulator"
         );
+        let within = within_lanes::<L>(&lanes);
         for (accumulator, column) in accumulators.iter_mut().zip(columns) {
-            accumulator.sketch.push_lanes(*column, lanes.clone());
+            let filled = fill_lanes(*column, &lanes, within);
+            accumulator.sketch.push_filled_lanes(&filled, lanes.clone());
             if let Some(tails) = &mut accumulator.tails {
                 tails.push_lanes(*column, lanes.clone());
             }

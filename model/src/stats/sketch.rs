@@ -37,6 +37,23 @@ const MIN_SLACK: u32 = 32;
 /// The most lanes a batch pushed at once has.
 const MAX_LANES: usize = 64;
 
+/// The lanes `lanes` of a batch as a mask, or `None` when they are all of its lanes: made once
+/// for the columns of a batch ([`fill_lanes`]).
+#[inline(always)]
+pub fn within_lanes<L: Real>(lanes: &Range<usize>) -> Option<L::Mask> {
+    (lanes.len() != L::LANES).then(|| L::Mask::from_fn(|k| lanes.contains(&k)))
+}
+
+/// `x` with the lanes outside `lanes` (`within` as [`within_lanes`] made it) set to its first
+/// lane within, so that the batch's extremes are those of `lanes`.
+#[inline(always)]
+pub fn fill_lanes<L: Real>(x: &L, lanes: &Range<usize>, within: Option<L::Mask>) -> L {
+    match within {
+        Some(inside) if !lanes.is_empty() => L::select(inside, *x, L::splat(x.lane(lanes.start))),
+        _ => *x,
+    }
+}
+
 const SIGN_MASK: u64 = 1 << 63;
 
 /// Bucket key of `|x|`.
@@ -481,6 +498,14 @@ impl Sketch {
     /// replace a lane by lane scan of signs and keys, branches the compiler left scalar.)
     #[inline(always)]
     pub fn push_lanes<L: Real>(&mut self, x: &L, lanes: Range<usize>) {
+        let within = within_lanes::<L>(&lanes);
+        self.push_filled_lanes(&fill_lanes(x, &lanes, within), lanes);
+    }
+
+    /// [`Sketch::push_lanes`] on `x` whose lanes outside `lanes` hold values of lanes within
+    /// ([`fill_lanes`]): a batch's extremes are then those of `lanes`.
+    #[inline(always)]
+    pub fn push_filled_lanes<L: Real>(&mut self, x: &L, lanes: Range<usize>) {
         debug_assert!(lanes.end <= L::LANES, "{lanes:?} of {} lanes", L::LANES);
         debug_assert!(
             lanes.clone().all(|k| x.lane(k).is_finite()),
@@ -489,12 +514,7 @@ impl Sketch {
         if lanes.is_empty() {
             return;
         }
-        let (least, greatest) = if lanes.len() == L::LANES {
-            x.extremes()
-        } else {
-            let inside = L::Mask::from_fn(|k| lanes.contains(&k));
-            L::select(inside, *x, L::splat(x.lane(lanes.start))).extremes()
-        };
+        let (least, greatest) = x.extremes();
         let n = lanes.len() as u64;
         if least == 0.0 && greatest == 0.0 {
             self.count += n;
