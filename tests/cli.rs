@@ -473,6 +473,19 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
         assert_eq!(row["first_seed"], 1000, "{row}");
         assert!(row["coverage"].as_f64().unwrap() >= 0.8, "{row}");
     }
+    // The floor is measured on this CPU: square roots and divisions alone, which the engine runs
+    // among everything else, so never above the engine's own time per operation.
+    let engine = report["engine"].as_array().unwrap();
+    assert_eq!(engine.len(), 2, "{engine:?}");
+    for row in engine {
+        for (floor, engine) in [
+            ("floor_ns_per_op_scalar", "ns_per_op_one_device_at_a_time"),
+            ("floor_ns_per_op_lockstep", "ns_per_op_lockstep"),
+        ] {
+            let (floor, engine) = (row[floor].as_f64().unwrap(), row[engine].as_f64().unwrap());
+            assert!(floor > 0.0 && floor < engine, "{row}");
+        }
+    }
     let markdown = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(markdown.contains("## Calibration intervals"), "{markdown}");
     let refused = bouncewear(&["bench", "--coverage-seeds", "0"], "");

@@ -175,6 +175,22 @@ impl Kernel {
     }
 
     /// Runs `work` on this kernel's lanes, compiled for its instruction set.
+    /// What bounds this kernel from below, for `bench` to time: `rounds` square roots (or,
+    /// with `division`, divisions) of each lane of [`FLOOR_CHAINS`] batches, in the kernel's
+    /// instruction set and lanes. The batches are independent, so the instructions overlap as
+    /// far as the core allows and the time per lane is their throughput, the cost of the
+    /// operations the physics cannot do without (docs/performance.md, "The floor"). Returns the
+    /// lanes' sum, so that none of it can be left out.
+    pub fn floor_work(self, division: bool, rounds: u64) -> f64 {
+        let mut sum = 0.0;
+        self.run(Floor {
+            division,
+            rounds,
+            sum: &mut sum,
+        });
+        sum
+    }
+
     pub(crate) fn run<W: LaneWork>(self, work: W) {
         match (self.isa, self.lanes) {
             (_, 1) => scalar::run(work),
@@ -196,6 +212,58 @@ impl Kernel {
 /// compiles it for its own instruction set.
 pub(crate) trait LaneWork {
     fn run<L: Real>(self);
+}
+
+/// Independent batches [`Kernel::floor_work`] runs side by side: more than a square root's
+/// latency over its throughput on the cores measured (about 3 on Zen 4 and 5).
+pub const FLOOR_CHAINS: usize = 8;
+
+struct Floor<'a> {
+    division: bool,
+    rounds: u64,
+    sum: &'a mut f64,
+}
+
+impl LaneWork for Floor<'_> {
+    fn run<L: Real>(self) {
+        // Square roots tend to 1 and divisions of 1.75 swap two values: every lane stays normal.
+        // Written out batch by batch: a loop over the batches was vectorised across them, each
+        // lane gathered and scattered.
+        let mut x: [L; FLOOR_CHAINS] = std::array::from_fn(|i| L::splat(1.5 + i as f64 / 8.0));
+        let n = L::splat(1.75);
+        if self.division {
+            for _ in 0..self.rounds {
+                x = [
+                    n / x[0],
+                    n / x[1],
+                    n / x[2],
+                    n / x[3],
+                    n / x[4],
+                    n / x[5],
+                    n / x[6],
+                    n / x[7],
+                ];
+            }
+        } else {
+            for _ in 0..self.rounds {
+                x = [
+                    x[0].sqrt(),
+                    x[1].sqrt(),
+                    x[2].sqrt(),
+                    x[3].sqrt(),
+                    x[4].sqrt(),
+                    x[5].sqrt(),
+                    x[6].sqrt(),
+                    x[7].sqrt(),
+                ];
+            }
+        }
+        let batches = x;
+        *self.sum = batches
+            .iter()
+            .flat_map(|x| (0..L::LANES).map(|i| x.lane(i)))
+            .sum();
+    }
 }
 
 /// One kernel: `work` on lanes `$lanes`, compiled for `$feature` (or the build's baseline), in a
@@ -225,6 +293,23 @@ kernel!(avx512_32, crate::lanes::Lanes<32>, "avx512f");
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The floor's work gives every kernel's lanes the scalar chains' values.
+    #[test]
+    fn the_floors_chains_stay_normal_on_every_kernel() {
+        for kernel in Kernel::all() {
+            for division in [false, true] {
+                let scalar = Kernel::SCALAR.floor_work(division, 1001);
+                let sum = kernel.floor_work(division, 1001);
+                let expected = scalar * kernel.lanes() as f64;
+                assert!(sum.is_normal() && scalar > 0.0, "{kernel:?}: {sum}");
+                assert!(
+                    (sum - expected).abs() <= 1e-12 * expected,
+                    "{kernel:?}: {sum} against {expected}"
+                );
+            }
+        }
+    }
 
     /// Every kernel this CPU runs is found by its name, and only those.
     #[test]

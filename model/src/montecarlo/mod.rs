@@ -18,7 +18,7 @@ pub mod sensitivity;
 
 pub use engine::{Cancelled, Observer, Silent, Tally, Watch};
 pub use job::{Job, JobSpec, LimitSpec};
-pub use kernel::{Isa, Kernel};
+pub use kernel::{FLOOR_CHAINS, Isa, Kernel};
 pub use lives::{DeviceLife, GroupLives};
 pub use metric::{DeviceMetric, Metric, OperationMetric};
 pub use rare::{RareEventReport, RareEventSpec};

@@ -152,7 +152,8 @@ fn engine(report: &Report) -> Section {
         title: "Engine against the NumPy and Numba peers",
         text: format!(
             "ns per operation on one thread (every metric), one device at a time and in lockstep, \
-             next to the floor of square roots and divisions on an AVX-512 core; then, on {cpu}, \
+             next to the floor: the job's square roots and divisions alone, at the throughput \
+             this CPU gives them one at a time and on the kernel's lanes; then, on {cpu}, \
              `bouncewear run` on {threads} threads against `tools/numpy_peer.py` on one core and \
              `tools/numba_peer.py` on {threads} threads (its machine code compiled by an earlier \
              run), whole processes, best of three; the ratio is against the faster peer.",
@@ -164,7 +165,7 @@ fn engine(report: &Report) -> Section {
             "kernel",
             "ns/op alone",
             "ns/op lockstep",
-            "floor scalar / 8 lanes",
+            "floor alone / lockstep",
             "run s",
             "NumPy s",
             "Numba s",
@@ -183,7 +184,7 @@ fn engine(report: &Report) -> Section {
                     format!("{:.0}", row.ns_per_op_lockstep),
                     format!(
                         "{:.0} / {:.0}",
-                        row.floor_ns_per_op_scalar, row.floor_ns_per_op_8_lanes
+                        row.floor_ns_per_op_scalar, row.floor_ns_per_op_lockstep
                     ),
                     format!("{:.3}", row.run_process_s),
                     optional(row.numpy_peer_process_s, 3),
@@ -480,7 +481,7 @@ mod tests {
                 ns_per_op_one_device_at_a_time: 71.2,
                 ns_per_op_lockstep: 40.9,
                 floor_ns_per_op_scalar: 21.0,
-                floor_ns_per_op_8_lanes: 2.6,
+                floor_ns_per_op_lockstep: 2.6,
                 cpu: "AMD EPYC 9B45".to_owned(),
                 run_process_s: 0.5,
                 numpy_peer_process_s: numpy,

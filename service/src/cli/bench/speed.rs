@@ -6,7 +6,7 @@
 use super::{BenchError, io_error};
 use crate::progress::Progress;
 use bouncewear_model::montecarlo::{
-    Job, JobResult, Kernel, OperationMetric, Silent, run_job, run_job_on,
+    FLOOR_CHAINS, Job, JobResult, Kernel, OperationMetric, Silent, run_job, run_job_on,
 };
 use bouncewear_model::paper_forms::{BounceTimes, constant_restitution, simplified_electrical};
 use bouncewear_model::wear::WearLaw;
@@ -69,9 +69,10 @@ pub struct EngineRow {
     pub kernel: String,
     pub ns_per_op_one_device_at_a_time: f64,
     pub ns_per_op_lockstep: f64,
-    /// The floor for this job on an AVX-512 core: square roots and divisions alone.
+    /// The floor of this job's operation on this CPU: its square roots and divisions alone, at
+    /// the throughput measured one device at a time and on the kernel's lanes.
     pub floor_ns_per_op_scalar: f64,
-    pub floor_ns_per_op_8_lanes: f64,
+    pub floor_ns_per_op_lockstep: f64,
     /// The CPU all of it ran on (`model name` of `/proc/cpuinfo`).
     pub cpu: String,
     /// `bouncewear run --threads N` as a whole process, wall seconds.
@@ -347,9 +348,31 @@ const PEERS: [(&str, &str, &str); 2] = [
     ),
 ];
 
-/// The floor (square roots and divisions only, Zen 5): scalar and 8-lane ns per operation.
-fn floor_ns_per_op(arcing: bool) -> (f64, f64) {
-    if arcing { (78.0, 10.0) } else { (136.0, 22.0) }
+/// The square roots and divisions one operation of a reference job needs (docs/performance.md,
+/// "The floor"): the 15 A job's and the mechanical one's.
+fn floor_counts(arcing: bool) -> (f64, f64) {
+    if arcing { (20.0, 13.0) } else { (27.0, 21.0) }
+}
+
+/// ns per lane of a square root and of a division on `kernel`, on this CPU: the fastest of three
+/// timings of [`Kernel::floor_work`], 200,000 rounds each.
+fn per_lane_ns(kernel: Kernel) -> (f64, f64) {
+    const ROUNDS: u64 = 200_000;
+    let lanes = ROUNDS as usize * FLOOR_CHAINS * kernel.lanes();
+    let time = |division: bool| {
+        ns_per_item(3, lanes, || {
+            black_box(kernel.floor_work(division, black_box(ROUNDS)));
+        })
+    };
+    (time(false), time(true))
+}
+
+/// The floor of a reference job's operation on this CPU, one device at a time and on `kernel`'s
+/// lanes: its square roots and divisions at the throughput measured, nothing else.
+fn floor_ns_per_op(arcing: bool, kernel: Kernel) -> (f64, f64) {
+    let (sqrts, divisions) = floor_counts(arcing);
+    let cost = |(sqrt, division): (f64, f64)| sqrts * sqrt + divisions * division;
+    (cost(per_lane_ns(Kernel::SCALAR)), cost(per_lane_ns(kernel)))
 }
 
 pub(super) fn engine_row(
@@ -392,7 +415,7 @@ pub(super) fn engine_row(
     let peers = run_peers(&text, &threads)?;
     let [numpy_peer_process_s, numba_peer_process_s] = peers.map(|(_, seconds)| seconds);
     let faster = faster_peer(&peers);
-    let (floor_scalar, floor_lanes) = floor_ns_per_op(arcing);
+    let (floor_scalar, floor_lanes) = floor_ns_per_op(arcing, kernel);
     Ok(EngineRow {
         job: name,
         devices,
@@ -401,7 +424,7 @@ pub(super) fn engine_row(
         ns_per_op_one_device_at_a_time: scalar,
         ns_per_op_lockstep: lockstep,
         floor_ns_per_op_scalar: floor_scalar,
-        floor_ns_per_op_8_lanes: floor_lanes,
+        floor_ns_per_op_lockstep: floor_lanes,
         cpu: cpu_name(),
         run_process_s,
         numpy_peer_process_s,
