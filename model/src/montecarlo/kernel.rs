@@ -174,7 +174,6 @@ impl Kernel {
         self.lanes
     }
 
-    /// Runs `work` on this kernel's lanes, compiled for its instruction set.
     /// What bounds this kernel from below, for `bench` to time: `rounds` square roots (or,
     /// with `division`, divisions) of each lane of [`FLOOR_CHAINS`] batches, in the kernel's
     /// instruction set and lanes. The batches are independent, so the instructions overlap as
@@ -191,6 +190,7 @@ impl Kernel {
         sum
     }
 
+    /// Runs `work` on this kernel's lanes, compiled for its instruction set.
     pub(crate) fn run<W: LaneWork>(self, work: W) {
         match (self.isa, self.lanes) {
             (_, 1) => scalar::run(work),
@@ -214,8 +214,8 @@ pub(crate) trait LaneWork {
     fn run<L: Real>(self);
 }
 
-/// Independent batches [`Kernel::floor_work`] runs side by side: more than a square root's
-/// latency over its throughput on the cores measured (about 3 on Zen 4 and 5).
+/// Independent batches [`Kernel::floor_work`] runs side by side: enough for the core to start a
+/// square root or a division as often as its units allow, rather than wait on the one before.
 pub const FLOOR_CHAINS: usize = 8;
 
 struct Floor<'a> {
@@ -258,8 +258,7 @@ impl LaneWork for Floor<'_> {
                 ];
             }
         }
-        let batches = x;
-        *self.sum = batches
+        *self.sum = x
             .iter()
             .flat_map(|x| (0..L::LANES).map(|i| x.lane(i)))
             .sum();

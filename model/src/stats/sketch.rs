@@ -40,14 +40,14 @@ const MAX_LANES: usize = 64;
 /// The lanes `lanes` of a batch as a mask, or `None` when they are all of its lanes: made once
 /// for the columns of a batch ([`fill_lanes`]).
 #[inline(always)]
-pub fn within_lanes<L: Real>(lanes: &Range<usize>) -> Option<L::Mask> {
+pub(crate) fn within_lanes<L: Real>(lanes: &Range<usize>) -> Option<L::Mask> {
     (lanes.len() != L::LANES).then(|| L::Mask::from_fn(|k| lanes.contains(&k)))
 }
 
 /// `x` with the lanes outside `lanes` (`within` as [`within_lanes`] made it) set to its first
 /// lane within, so that the batch's extremes are those of `lanes`.
 #[inline(always)]
-pub fn fill_lanes<L: Real>(x: &L, lanes: &Range<usize>, within: Option<L::Mask>) -> L {
+pub(crate) fn fill_lanes<L: Real>(x: &L, lanes: &Range<usize>, within: Option<L::Mask>) -> L {
     match within {
         Some(inside) if !lanes.is_empty() => L::select(inside, *x, L::splat(x.lane(lanes.start))),
         _ => *x,
@@ -505,7 +505,7 @@ impl Sketch {
     /// [`Sketch::push_lanes`] on `x` whose lanes outside `lanes` hold values of lanes within
     /// ([`fill_lanes`]): a batch's extremes are then those of `lanes`.
     #[inline(always)]
-    pub fn push_filled_lanes<L: Real>(&mut self, x: &L, lanes: Range<usize>) {
+    pub(crate) fn push_filled_lanes<L: Real>(&mut self, x: &L, lanes: Range<usize>) {
         debug_assert!(lanes.end <= L::LANES, "{lanes:?} of {} lanes", L::LANES);
         debug_assert!(
             lanes.clone().all(|k| x.lane(k).is_finite()),
