@@ -10,7 +10,7 @@
 //! crate's own ([`crate::elementary`]). Whatever instruction set a [`Lanes`] batch is compiled for, and
 //! however many lanes it has, each lane rounds exactly as the scalar does.
 
-use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Range, Sub};
 
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod avx2;
@@ -87,13 +87,36 @@ pub trait Mask: Copy + BitAnd<Output = Self> + BitOr<Output = Self> + Not<Output
     fn set_lane(&mut self, i: usize, truth: bool);
 }
 
+/// The most lanes a batch has: one bit each in a word ([`Mask::bits`]).
+pub const MAX_LANES: usize = 64;
+
 /// The lanes `lanes` as [`Mask::bits`] gives them: one bit each, lane 0 lowest.
 #[inline(always)]
-pub fn lane_bits(lanes: std::ops::Range<usize>) -> u64 {
-    debug_assert!(lanes.end <= 64, "{lanes:?}: a batch has at most 64 lanes");
+pub fn lane_bits(lanes: Range<usize>) -> u64 {
+    debug_assert!(
+        lanes.end <= MAX_LANES,
+        "{lanes:?}: a batch has at most 64 lanes"
+    );
     match lanes.end.checked_sub(lanes.start) {
         Some(1..) => (u64::MAX >> (64 - lanes.end)) & (u64::MAX << lanes.start),
         _ => 0,
+    }
+}
+
+/// The lanes `lanes` of a batch as a mask, or `None` when they are all of its lanes: made once
+/// for the columns of a batch ([`fill_lanes`]).
+#[inline(always)]
+pub(crate) fn within_lanes<L: Real>(lanes: &Range<usize>) -> Option<L::Mask> {
+    (lanes.len() != L::LANES).then(|| L::Mask::from_fn(|k| lanes.contains(&k)))
+}
+
+/// `x` with the lanes outside `lanes` (`within` as [`within_lanes`] made it) set to its first
+/// lane within, so that the batch's [`Real::extremes`] are those of `lanes`.
+#[inline(always)]
+pub(crate) fn fill_lanes<L: Real>(x: &L, lanes: &Range<usize>, within: Option<L::Mask>) -> L {
+    match within {
+        Some(inside) if !lanes.is_empty() => L::select(inside, *x, L::splat(x.lane(lanes.start))),
+        _ => *x,
     }
 }
 
@@ -315,6 +338,7 @@ macro_rules! mask_operator {
 /// left half-vectorised, and out of line they ran in the baseline instruction set.)
 macro_rules! lanes {
     ($($lanes:literal lanes, part $part:literal: $walk:tt;)*) => {$(
+        const _: () = assert!($lanes <= MAX_LANES, "a lane's bit must fit in a word");
         impl Lanes<$lanes> {
             #[inline(always)]
             fn map(self, f: impl Fn(f64) -> f64) -> Self {

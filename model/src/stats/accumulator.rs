@@ -1,10 +1,10 @@
 //! The running state of one (metric, bin, group): everything a [`Summary`](super::Summary) needs,
 //! in constant memory and a few nanoseconds per value.
 
-use super::sketch::{Sketch, fill_lanes, rank, within_lanes};
+use super::sketch::{Sketch, rank};
 use super::tails::Tails;
 use super::threshold::{Beyond, Threshold, ThresholdCount};
-use crate::lanes::Real;
+use crate::lanes::{Real, fill_lanes, within_lanes};
 use std::ops::Range;
 
 /// The sums of one run of values per lane, in the lanes: for the engine, each lane's device's

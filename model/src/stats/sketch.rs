@@ -19,7 +19,7 @@
 //! decades (20 binades) while a sketch holds fewer than 65,536 values, whatever the values, and at
 //! most 4 MiB per store for the whole f64 range. Serialised, every count is a `u64`.
 
-use crate::lanes::{Mask, Real};
+use crate::lanes::{MAX_LANES, Real, fill_lanes, within_lanes};
 use std::ops::Range;
 
 /// Mantissa bits in the bucket key: 256 buckets per binade, relative bucket width `2^-8`.
@@ -33,26 +33,6 @@ const KEY_END: u32 = 1 << (63 - KEY_SHIFT);
 
 /// The smallest growth of a store, so that the first few pushes do not each reallocate.
 const MIN_SLACK: u32 = 32;
-
-/// The most lanes a batch pushed at once has.
-const MAX_LANES: usize = 64;
-
-/// The lanes `lanes` of a batch as a mask, or `None` when they are all of its lanes: made once
-/// for the columns of a batch ([`fill_lanes`]).
-#[inline(always)]
-pub(crate) fn within_lanes<L: Real>(lanes: &Range<usize>) -> Option<L::Mask> {
-    (lanes.len() != L::LANES).then(|| L::Mask::from_fn(|k| lanes.contains(&k)))
-}
-
-/// `x` with the lanes outside `lanes` (`within` as [`within_lanes`] made it) set to its first
-/// lane within, so that the batch's extremes are those of `lanes`.
-#[inline(always)]
-pub(crate) fn fill_lanes<L: Real>(x: &L, lanes: &Range<usize>, within: Option<L::Mask>) -> L {
-    match within {
-        Some(inside) if !lanes.is_empty() => L::select(inside, *x, L::splat(x.lane(lanes.start))),
-        _ => *x,
-    }
-}
 
 const SIGN_MASK: u64 = 1 << 63;
 
