@@ -13,11 +13,13 @@ use std::ops::Range;
 /// order, so the sums depend on the devices and their values, not on how many lanes ran side by
 /// side: one lane or thirty-two give the same bits. Per value this is a handful of vector
 /// operations on independent lanes, instead of one long chain of dependent additions per metric
-/// over every device's values in turn.
+/// over every device's values in turn. Lanes of several accumulators (small groups sharing a
+/// batch) run side by side, each lane about its own accumulator's shift and threshold
+/// ([`LaneSums::about`]).
 #[derive(Debug, Clone, Copy)]
 pub struct LaneSums<L: Real> {
-    shift: f64,
-    threshold: f64,
+    shift: L,
+    threshold: L,
     min: L,
     max: L,
     sum: L,
@@ -27,17 +29,21 @@ pub struct LaneSums<L: Real> {
 }
 
 impl<L: Real> LaneSums<L> {
-    /// Empty runs for `accumulator`, about its shift, or, while it is empty, about `first`: the
-    /// value it is going to see first (an empty accumulator takes its first value as its shift).
+    /// Empty runs for `accumulator` in every lane, about its shift, or, while it is empty, about
+    /// `first`: the value it is going to see first (an empty accumulator takes its first value as
+    /// its shift).
     pub fn new(accumulator: &Accumulator, first: f64) -> Self {
+        let mut sums = Self::empty();
+        sums.about(accumulator, first, 0..L::LANES);
+        sums
+    }
+
+    /// Empty runs whose lanes join no accumulator yet: [`LaneSums::about`] gives them theirs.
+    pub fn empty() -> Self {
         let zero = L::splat(0.0);
         Self {
-            shift: if accumulator.count() == 0 {
-                first
-            } else {
-                accumulator.shift
-            },
-            threshold: accumulator.threshold,
+            shift: zero,
+            threshold: L::splat(f64::INFINITY),
             min: L::splat(f64::INFINITY),
             max: L::splat(f64::NEG_INFINITY),
             sum: zero,
@@ -46,19 +52,29 @@ impl<L: Real> LaneSums<L> {
         }
     }
 
+    /// The lanes `lanes` run about `accumulator`'s shift (or `first`, as [`LaneSums::new`]) and
+    /// count its exceedances.
+    pub fn about(&mut self, accumulator: &Accumulator, first: f64, lanes: Range<usize>) {
+        let shift = if accumulator.count() == 0 {
+            first
+        } else {
+            accumulator.shift
+        };
+        for k in lanes {
+            self.shift.set_lane(k, shift);
+            self.threshold.set_lane(k, accumulator.threshold);
+        }
+    }
+
     /// Adds the next value of each lane's run, with [`Accumulator::push`]'s arithmetic.
     #[inline(always)]
     pub fn push(&mut self, x: L) {
         self.min = L::select(x.lt(self.min), x, self.min);
         self.max = L::select(x.gt(self.max), x, self.max);
-        let d = x - L::splat(self.shift);
+        let d = x - self.shift;
         self.sum = self.sum + d;
         self.sum_sq = self.sum_sq + d * d;
-        self.above = L::select(
-            x.gt(L::splat(self.threshold)),
-            self.above + L::splat(1.0),
-            self.above,
-        );
+        self.above = L::select(x.gt(self.threshold), self.above + L::splat(1.0), self.above);
     }
 }
 
@@ -184,13 +200,24 @@ impl Accumulator {
             sum += d;
             sum_sq += d * d;
             above += u64::from(x > threshold);
+        }
+        (self.min, self.max, self.sum, self.sum_sq, self.above) = (min, max, sum, sum_sq, above);
+        self.count_values(values.iter().copied());
+    }
+
+    /// Counts `values` in the sketch, against the list of thresholds and in the tails, one at a
+    /// time: what [`Accumulator::count_lanes`] does for a batch's lanes, for the few lanes of a
+    /// small group among others, where a pass over every lane of the batch would cost more.
+    /// Counts do not depend on order.
+    #[inline(always)]
+    pub fn count_values(&mut self, values: impl Iterator<Item = f64> + Clone) {
+        for x in values.clone() {
             self.sketch.push(x);
             if let Some(tails) = &mut self.tails {
                 tails.push(x);
             }
         }
-        (self.min, self.max, self.sum, self.sum_sq, self.above) = (min, max, sum, sum_sq, above);
-        self.count_thresholds(values.iter().copied());
+        self.count_thresholds(values);
     }
 
     /// Counts the lanes `lanes` of each of `columns[m]` in the sketch of `accumulators[m]`
@@ -221,16 +248,21 @@ impl Accumulator {
         }
     }
 
-    /// Adds the runs of the lanes `lanes` of `sums` (made by [`LaneSums::new`] on this
-    /// accumulator, their values already counted by [`Accumulator::count_lanes`]), lane after
-    /// lane, each run's sums as one term.
+    /// Adds the runs of the lanes `lanes` of `sums` (made about this accumulator in these lanes,
+    /// [`LaneSums::new`] or [`LaneSums::about`], their values already counted by
+    /// [`Accumulator::count_lanes`] or [`Accumulator::count_values`]), lane after lane, each run's
+    /// sums as one term.
     #[inline(always)]
     pub fn add_lanes<L: Real>(&mut self, sums: &LaneSums<L>, lanes: Range<usize>) {
         debug_assert!(
-            sums.threshold.to_bits() == self.threshold.to_bits(),
+            lanes
+                .clone()
+                .all(|k| sums.threshold.lane(k).to_bits() == self.threshold.to_bits()),
             "sums made for another accumulator"
         );
-        self.shift = sums.shift;
+        if let Some(k) = lanes.clone().next() {
+            self.shift = sums.shift.lane(k);
+        }
         for k in lanes {
             let (min, max) = (sums.min.lane(k), sums.max.lane(k));
             self.min = if min < self.min { min } else { self.min };
@@ -238,6 +270,14 @@ impl Accumulator {
             self.sum += sums.sum.lane(k);
             self.sum_sq += sums.sum_sq.lane(k);
             self.above += sums.above.lane(k) as u64;
+        }
+    }
+
+    /// Tidies the kept values ([`Tails::tidy`]) once no more arrive: reading and storing them
+    /// then takes no sorted copy. Nothing that counts changes.
+    pub fn tidy(&mut self) {
+        if let Some(tails) = &mut self.tails {
+            tails.tidy();
         }
     }
 
@@ -658,10 +698,17 @@ mod tests {
         }
     }
 
+    /// An accumulator keeping three values at each end, `start` pushed.
+    fn started(start: &[f64], limit: Option<f64>) -> Accumulator {
+        let mut accumulator = Accumulator::new(limit).keeping(Some(3));
+        start.iter().for_each(|&x| accumulator.push(x));
+        accumulator
+    }
+
     /// Devices' runs of values as [`LaneSums`] on `L::LANES` lanes, the spare lanes copying the
     /// first device; `start` pushed before.
     fn lane_runs<L: Real>(start: &[f64], runs: &[&[f64]], limit: Option<f64>) -> Accumulator {
-        let mut accumulator = accumulate(start, limit);
+        let mut accumulator = started(start, limit);
         for batch in runs.chunks(L::LANES) {
             let lane = |k: usize| batch.get(k).unwrap_or(&batch[0]);
             let mut sums = LaneSums::<L>::new(&accumulator, batch[0][0]);
@@ -679,7 +726,75 @@ mod tests {
         accumulator
     }
 
+    /// The runs of two accumulators side by side in one batch (`runs[..split]` and the rest, at
+    /// most `L::LANES` in all), each lane about its own accumulator ([`LaneSums::about`]), the
+    /// values counted a batch at a time or, with `one_at_a_time`, a value at a time.
+    fn shared_runs<L: Real>(
+        start: &[f64],
+        runs: &[&[f64]],
+        split: usize,
+        limit: Option<f64>,
+        one_at_a_time: bool,
+    ) -> [Accumulator; 2] {
+        let mut accumulators = [started(start, limit), started(start, limit)];
+        let lanes = [0..split, split..runs.len()];
+        let lane = |k: usize| runs.get(k).unwrap_or(&runs[0]);
+        let mut sums = LaneSums::<L>::empty();
+        for (accumulator, lanes) in accumulators.iter().zip(&lanes) {
+            sums.about(accumulator, runs[lanes.start][0], lanes.clone());
+        }
+        for i in 0..runs[0].len() {
+            let x = L::from_fn(|k| lane(k)[i]);
+            sums.push(x);
+            for (accumulator, lanes) in accumulators.iter_mut().zip(&lanes) {
+                if one_at_a_time {
+                    accumulator.count_values(lanes.clone().map(|k| x.lane(k)));
+                } else {
+                    Accumulator::count_lanes(
+                        std::slice::from_mut(accumulator),
+                        &[&x],
+                        lanes.clone(),
+                    );
+                }
+            }
+        }
+        for (accumulator, lanes) in accumulators.iter_mut().zip(lanes) {
+            accumulator.add_lanes(&sums, lanes);
+        }
+        accumulators
+    }
+
     proptest! {
+        /// Two accumulators sharing a batch's lanes, counted either way, each come out with the
+        /// bits they have with a batch of their own.
+        #[test]
+        fn accumulators_sharing_lanes_get_the_bits_they_get_alone(
+            start in prop::collection::vec(batch_value(), 0..4),
+            devices in 2..9usize,
+            split in 1..8usize,
+            len in 1..30usize,
+            values in prop::collection::vec(batch_value(), 270),
+            limit in prop::option::of(-1.0..1.0f64),
+        ) {
+            let split = split.min(devices - 1);
+            let runs: Vec<&[f64]> = values.chunks_exact(len).take(devices).collect();
+            let alone = [
+                lane_runs::<Lanes<8>>(&start, &runs[..split], limit),
+                lane_runs::<Lanes<8>>(&start, &runs[split..], limit),
+            ];
+            for one_at_a_time in [false, true] {
+                let shared = shared_runs::<Lanes<8>>(&start, &runs, split, limit, one_at_a_time);
+                for (shared, alone) in shared.iter().zip(&alone) {
+                    prop_assert_eq!(shared, alone);
+                    for (a, b) in [(shared.min, alone.min), (shared.max, alone.max),
+                        (shared.sum, alone.sum), (shared.sum_sq, alone.sum_sq),
+                        (shared.shift, alone.shift)] {
+                        prop_assert_eq!(a.to_bits(), b.to_bits());
+                    }
+                }
+            }
+        }
+
         /// The same bits on one lane, four or eight (full and partly spare batches), and what
         /// pushing every value in device order gives: the same count, extremes, exceedances and
         /// sketch, and sums apart only by their rounding.

@@ -44,6 +44,13 @@ fn jobs() -> Vec<Value> {
     assert_eq!(velocity["parameter"], "impact_velocity_m_s");
     velocity["distribution"]["min"] = json!(0.21);
     jobs.push(spare);
+    // 320 devices, groups of 10: on 32 lanes three groups share a batch, each counting its values
+    // a batch at a time, where the groups of one and two of 37 devices count one at a time.
+    let mut shared = reference["48 V / 15 A"].clone();
+    shared["devices"] = json!(320);
+    shared["operations"] = json!(12);
+    shared["limits"] = json!({"e1": 0.5});
+    jobs.push(shared);
     // Failure criteria, limits, wear that softens, Latin hypercube strata.
     let mut wearing = reference["48 V / 15 A"].clone();
     wearing["devices"] = json!(40);

@@ -52,10 +52,8 @@ impl<'a> Plan<'a> {
         let mut failed_at = vec![None; lanes];
         let metrics = job.operation_metrics();
         let operations = job.spec().operations;
-        // Each group's sums of its lanes: about its own accumulators' shifts.
-        let mut sums: Vec<Vec<LaneSums<L>>> = (groups.lanes.iter())
-            .map(|_| Vec::with_capacity(metrics.len()))
-            .collect();
+        // The lanes' sums of each metric, each group's lanes about its own accumulator's shift.
+        let mut sums: Vec<LaneSums<L>> = Vec::with_capacity(metrics.len());
         let bins = usize::try_from(job.bins()).expect("bins fit in memory");
         // Per evaluation (variants, then B' and AB'_i), lane and metric: this operation's values,
         // for the sensitivity cells.
@@ -82,9 +80,9 @@ impl<'a> Plan<'a> {
                                 values,
                             );
                         }
-                        for ((stats, lanes), sums) in groups.each().zip(&mut sums) {
-                            let (into, first) = (&mut stats.operations[bin.clone()], op == start);
-                            accumulate(metrics, &outcomes, into, sums, first, lanes.clone());
+                        let first = op == start;
+                        accumulate(metrics, &outcomes, groups, bin.clone(), &mut sums, first);
+                        for (stats, lanes) in groups.each() {
                             stats.operations_at_max_bounces += lanes
                                 .map(|k| u64::from(outcomes.truncated.lane(k)))
                                 .sum::<u64>();
@@ -111,8 +109,8 @@ impl<'a> Plan<'a> {
             if let Some(cells) = &mut cells {
                 cells.merge_bin(&mut groups.stats[0].sensitivity, bin_index);
             }
-            for ((stats, lanes), sums) in groups.each().zip(&sums) {
-                for (accumulator, sums) in stats.operations[bin.clone()].iter_mut().zip(sums) {
+            for (stats, lanes) in groups.each() {
+                for (accumulator, sums) in stats.operations[bin.clone()].iter_mut().zip(&sums) {
                     accumulator.add_lanes(sums, lanes.clone());
                 }
             }
