@@ -273,14 +273,6 @@ impl Accumulator {
         }
     }
 
-    /// Tidies the kept values ([`Tails::tidy`]) once no more arrive: reading and storing them
-    /// then takes no sorted copy. Nothing that counts changes.
-    pub fn tidy(&mut self) {
-        if let Some(tails) = &mut self.tails {
-            tails.tidy();
-        }
-    }
-
     /// Adds the values of `other`, re-expressing its sums around this shift `a`: with
     /// `delta = b - a` for its shift `b` and its count `m`,
     /// `sum(x - a) = S_b + m delta` and `sum((x - a)^2) = Q_b + 2 delta S_b + m delta^2`.

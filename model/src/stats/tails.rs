@@ -21,7 +21,6 @@
 
 use super::threshold::Threshold;
 use crate::lanes::{Mask, Real, lane_bits};
-use std::borrow::Cow;
 use std::ops::Range;
 
 /// The most values kept at each end of one accumulator.
@@ -56,33 +55,23 @@ pub struct Tails {
     /// settling). Every value dropped lies between them.
     low: f64,
     high: f64,
-    /// The values are the ends alone, sorted ([`Tails::tidy`]), until the next one enters.
-    tidy: bool,
 }
 
-/// The serialised form, as read: the values kept, settled and in increasing order, by their bits
-/// (written from a borrowed list of the same shape).
-#[derive(serde::Deserialize)]
+/// The serialised form: the values kept, settled and in increasing order, by their bits.
+#[derive(serde::Serialize, serde::Deserialize)]
 struct Stored {
     keep: u32,
     #[serde(with = "super::bits::list")]
     kept: Vec<f64>,
 }
 
-/// Written as [`Stored`] from the list itself, as it is when tidy ([`Tails::tidy`]): a small job
-/// serialises 3,680 lists, and a sorted copy of each was a twentieth of its server's time.
+/// Written as [`Stored`] from the list itself: serde's `into` would clone the list once more
+/// before [`Tails::values`] does (a small job serialises 3,680 of them).
 impl serde::Serialize for Tails {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        #[derive(serde::Serialize)]
-        #[serde(rename = "Stored")]
-        struct Kept<'a> {
-            keep: u32,
-            #[serde(with = "super::bits::list")]
-            kept: &'a [f64],
-        }
-        Kept {
+        Stored {
             keep: self.keep,
-            kept: &self.kept(),
+            kept: self.values(),
         }
         .serialize(serializer)
     }
@@ -92,9 +81,6 @@ impl From<Stored> for Tails {
     fn from(stored: Stored) -> Self {
         let mut tails = Tails::new(stored.keep);
         tails.values = stored.kept;
-        // Stored settled and sorted, unless the bytes were not written by this type.
-        tails.tidy = tails.values.len() <= tails.ends()
-            && tails.values.is_sorted_by(|a, b| a.total_cmp(b).is_le());
         let k = tails.keep as usize;
         if tails.values.len() >= tails.ends() {
             (tails.low, tails.high) = (tails.values[k - 1], tails.values[tails.values.len() - k]);
@@ -119,7 +105,6 @@ impl Tails {
             values: Vec::new(),
             low: f64::INFINITY,
             high: f64::NEG_INFINITY,
-            tidy: true,
         }
     }
 
@@ -131,29 +116,10 @@ impl Tails {
     /// The bottom and top `keep` of the values seen (all of them while there are at most
     /// `2 keep`), in increasing order.
     pub fn values(&self) -> Vec<f64> {
-        self.kept().into_owned()
-    }
-
-    /// [`Tails::values`]: the list itself when it is tidy, else a tidied copy.
-    fn kept(&self) -> Cow<'_, [f64]> {
-        if self.tidy {
-            Cow::Borrowed(&self.values)
-        } else {
-            let mut tidy = self.clone();
-            tidy.tidy();
-            Cow::Owned(tidy.values)
-        }
-    }
-
-    /// Keeps only the ends and sorts them, in place: what is kept does not change, and
-    /// [`Tails::values`] and the serialised form read the list as it is. For a list that is
-    /// complete (a group's run ended); a value pushed after makes it untidy again.
-    pub fn tidy(&mut self) {
-        if !self.tidy {
-            self.settle();
-            self.values.sort_unstable_by(f64::total_cmp);
-            self.tidy = true;
-        }
+        let mut settled = self.clone();
+        settled.settle();
+        settled.values.sort_unstable_by(f64::total_cmp);
+        settled.values
     }
 
     fn ends(&self) -> usize {
@@ -189,7 +155,6 @@ impl Tails {
         }
         // `-0.0 + 0.0` is `0.0`: equal values have equal bits, so what is kept is a multiset.
         self.values.push(x + 0.0);
-        self.tidy = false;
         if self.values.len() >= 2 * self.ends() {
             self.settle();
         }
@@ -215,10 +180,7 @@ impl Tails {
     /// Adds the values kept by `other`: what both would have kept of all their values. With a
     /// different `keep` the smaller one holds.
     pub fn merge(&mut self, other: &Tails) {
-        if other.keep < self.keep {
-            self.keep = other.keep;
-            self.tidy = false;
-        }
+        self.keep = self.keep.min(other.keep);
         // `other`'s values arrive as pushed values do: those between this list's gates are not
         // among the ends (this list holds what places its gates) and are dropped. Taken whole,
         // they made a summary of a small job's 32 groups settle every second group, a third of
@@ -235,7 +197,7 @@ impl Tails {
     /// The exact number of the `count` values seen beyond `threshold`, when the values kept settle
     /// it: every value is kept, or the threshold lies at or beyond the `keep`-th value of its end.
     pub fn beyond(&self, threshold: Threshold, count: u64) -> Option<u64> {
-        let kept = self.kept();
+        let kept = self.values();
         let k = self.keep as usize;
         let settled = kept.len() as u64 == count
             || match threshold {
@@ -302,34 +264,6 @@ mod tests {
         assert_eq!(a, b);
         let zeros = kept(&[-0.0, 0.0, -0.0], 4);
         assert!(zeros.values().iter().all(|x| x.to_bits() == 0));
-    }
-
-    /// A tidy list reads and writes as the untidy one it came from, and values that arrive
-    /// after, or a smaller `keep` merged in, untidy it again.
-    #[test]
-    fn tidying_changes_nothing_that_is_read() {
-        let mut rng = SplitMix(31);
-        for keep in [1, 3, 25] {
-            for n in [0, 5, 2 * keep as usize, 7 * keep as usize + 3] {
-                let values: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
-                let untidy = kept(&values, keep);
-                let mut tidy = untidy.clone();
-                tidy.tidy();
-                assert!(tidy.tidy && tidy.values.len() <= tidy.ends());
-                assert_eq!(tidy, untidy);
-                let json = |tails: &Tails| serde_json::to_string(tails).unwrap();
-                assert_eq!(json(&tidy), json(&untidy), "keep {keep}, {n} values");
-                let read: Tails = serde_json::from_str(&json(&tidy)).unwrap();
-                assert!(read.tidy && read == tidy);
-                let (mut more, x) = (tidy.clone(), rng.normal() * 4.0);
-                more.push(x);
-                let all: Vec<f64> = values.iter().copied().chain([x]).collect();
-                assert_eq!(more.values(), ends_of(&all, keep));
-                let mut fewer = tidy.clone();
-                fewer.merge(&Tails::new(1));
-                assert_eq!(fewer.values(), ends_of(&values, 1));
-            }
-        }
     }
 
     #[test]

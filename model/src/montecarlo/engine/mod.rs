@@ -114,13 +114,6 @@ pub struct GroupStats {
 }
 
 impl GroupStats {
-    /// The group's run has ended: its accumulators tidy their kept values
-    /// ([`Accumulator::tidy`]), which its summaries and its store then read as they are.
-    fn tidy(&mut self) {
-        self.operations.iter_mut().for_each(Accumulator::tidy);
-        self.devices.iter_mut().for_each(Accumulator::tidy);
-    }
-
     fn new(job: &Job, sensitivity: Option<&SensitivityPlan>) -> Self {
         // A metric's limit and list of thresholds, both counted exactly as the values arrive, and
         // its most extreme values, kept within a budget per metric over the bins.

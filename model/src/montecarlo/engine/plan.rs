@@ -328,7 +328,6 @@ impl<'a> Plan<'a> {
             observer.progress(done.fetch_add(ran, Ordering::Relaxed) + ran, total);
             local += devices;
         }
-        stats.iter_mut().for_each(GroupStats::tidy);
         Ok(stats)
     }
 }
