@@ -29,15 +29,6 @@ pub struct LaneSums<L: Real> {
 }
 
 impl<L: Real> LaneSums<L> {
-    /// Empty runs for `accumulator` in every lane, about its shift, or, while it is empty, about
-    /// `first`: the value it is going to see first (an empty accumulator takes its first value as
-    /// its shift).
-    pub fn new(accumulator: &Accumulator, first: f64) -> Self {
-        let mut sums = Self::empty();
-        sums.about(accumulator, first, 0..L::LANES);
-        sums
-    }
-
     /// Empty runs whose lanes join no accumulator yet: [`LaneSums::about`] gives them theirs.
     pub fn empty() -> Self {
         let zero = L::splat(0.0);
@@ -52,8 +43,9 @@ impl<L: Real> LaneSums<L> {
         }
     }
 
-    /// The lanes `lanes` run about `accumulator`'s shift (or `first`, as [`LaneSums::new`]) and
-    /// count its exceedances.
+    /// The lanes `lanes` run about `accumulator`'s shift, or, while it is empty, about `first`:
+    /// the value it is going to see first (an empty accumulator takes its first value as its
+    /// shift); and count its exceedances.
     pub fn about(&mut self, accumulator: &Accumulator, first: f64, lanes: Range<usize>) {
         let shift = if accumulator.count() == 0 {
             first
@@ -248,8 +240,8 @@ impl Accumulator {
         }
     }
 
-    /// Adds the runs of the lanes `lanes` of `sums` (made about this accumulator in these lanes,
-    /// [`LaneSums::new`] or [`LaneSums::about`], their values already counted by
+    /// Adds the runs of the lanes `lanes` of `sums` (made about this accumulator in these lanes by
+    /// [`LaneSums::about`], their values already counted by
     /// [`Accumulator::count_lanes`] or [`Accumulator::count_values`]), lane after lane, each run's
     /// sums as one term.
     #[inline(always)]
@@ -703,7 +695,8 @@ mod tests {
         let mut accumulator = started(start, limit);
         for batch in runs.chunks(L::LANES) {
             let lane = |k: usize| batch.get(k).unwrap_or(&batch[0]);
-            let mut sums = LaneSums::<L>::new(&accumulator, batch[0][0]);
+            let mut sums = LaneSums::<L>::empty();
+            sums.about(&accumulator, batch[0][0], 0..L::LANES);
             for i in 0..batch[0].len() {
                 let x = L::from_fn(|k| lane(k)[i]);
                 sums.push(x);
