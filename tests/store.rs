@@ -1296,10 +1296,13 @@ async fn a_dropped_store_closes_every_connection(url: &str) {
 }
 
 /// PostgreSQL announces every change to a job: idle workers and progress streams need not poll.
+/// Its end is announced apart as well, so that a request waiting for it wakes once, not at every
+/// claim and store.
 async fn postgres_announces_queued_jobs_and_their_progress(url: &str) {
     use bouncewear::store::QueueEvent;
     let store = store::open(url).await.unwrap();
     let mut events = store.events().expect("PostgreSQL announces changes");
+    let mut ends = store.ends();
     let id = insert(&store, queued(1)).await;
     let mut next = async || {
         tokio::time::timeout(std::time::Duration::from_secs(10), events.recv())
@@ -1316,6 +1319,20 @@ async fn postgres_announces_queued_jobs_and_their_progress(url: &str) {
         .unwrap();
     assert_eq!(next().await, QueueEvent::Changed(id.clone()));
     store.heartbeat(&claim.fence, terms(100), 7).await.unwrap();
+    assert_eq!(next().await, QueueEvent::Changed(id.clone()));
+    // Announced in order: had the submission, the claim or the heartbeat announced an end, it
+    // would have been passed on before the heartbeat's change.
+    assert!(matches!(
+        ends.try_recv(),
+        Err(tokio::sync::broadcast::error::TryRecvError::Empty)
+    ));
+    store
+        .cancel(&Owner::anonymous(), &id, UnixMs(9))
+        .await
+        .unwrap();
+    let end = tokio::time::timeout(std::time::Duration::from_secs(10), ends.recv());
+    let end = end.await.expect("the end announced within 10 s").unwrap();
+    assert_eq!(end, QueueEvent::Changed(id.clone()));
     assert_eq!(next().await, QueueEvent::Changed(id));
 }
 

@@ -167,12 +167,12 @@ impl SqlStore {
         }
     }
 
-    /// [`super::JobQueue::ends`]: PostgreSQL's announcements of every change, or the ends of jobs
-    /// this process wrote to SQLite.
+    /// [`super::JobQueue::ends`]: PostgreSQL's announcements of every instance's ends, or the ends
+    /// of jobs this process wrote to SQLite.
     pub(crate) fn subscribe_ends(&self) -> broadcast::Receiver<QueueEvent> {
         match &self.backend {
             Backend::Sqlite(sqlite) => sqlite.ends.subscribe(),
-            Backend::Postgres(postgres) => postgres.events.subscribe(),
+            Backend::Postgres(postgres) => postgres.ends.subscribe(),
         }
     }
 

@@ -50,6 +50,7 @@ const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
     "0012_compressed_bytes_stored_as_they_are.sql",
     "0013_results_compressed_with_lz4.sql",
     "0014_results_without_summaries.sql",
+    "0015_job_end_announcements.sql",
 );
 
 /// `migrations/sqlite/`.

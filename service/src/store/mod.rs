@@ -373,10 +373,10 @@ pub trait JobQueue: Send + Sync + 'static {
         None
     }
     /// Jobs that ended, as soon as the store knows: [`QueueEvent::Changed`] with the job's id
-    /// (PostgreSQL announces every instance's changes of every job, SQLite the ends of jobs this
-    /// process wrote). Not every end reaches it (another process on the same SQLite file, an
-    /// announcement missed while PostgreSQL's listener reconnected): a waiter reads the job
-    /// again now and then.
+    /// (PostgreSQL announces the ends of every instance's jobs, SQLite those of jobs this process
+    /// wrote); a job's progress is not announced here. Not every end reaches it (another process
+    /// on the same SQLite file, an announcement missed while PostgreSQL's listener reconnected): a
+    /// waiter reads the job again now and then.
     fn ends(&self) -> tokio::sync::broadcast::Receiver<QueueEvent>;
     async fn ping(&self) -> StoreResult<()>;
     /// Whether this instance can do its work (`/readyz`): the database takes a write (recorded at

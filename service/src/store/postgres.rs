@@ -18,7 +18,10 @@ use tokio::task::AbortHandle;
 
 pub(crate) struct PgBackend {
     pub(crate) pool: PgPool,
+    /// Every announcement but ends (`queued`, a job's id).
     pub(crate) events: broadcast::Sender<QueueEvent>,
+    /// Ends alone (`ended <id>`, `migrations/postgres/0015`), as [`QueueEvent::Changed`].
+    pub(crate) ends: broadcast::Sender<QueueEvent>,
     /// The task that passes announcements on: it holds a connection of the pool and the pool
     /// itself, so it ends with the store, or neither would ever be closed.
     announcements: AbortHandle,
@@ -69,28 +72,41 @@ impl PgBackend {
         migrations::POSTGRES.run(&pool).await?;
         let mut listener = PgListener::connect_with(&pool).await?;
         listener.listen(JOB_CHANNEL).await?;
-        let (events, _) = broadcast::channel(1024);
-        let announcements = tokio::spawn(forward_announcements(listener, events.clone()));
+        let (events, ends) = (broadcast::channel(1024).0, broadcast::channel(1024).0);
+        let announcements = tokio::spawn(forward_announcements(
+            listener,
+            events.clone(),
+            ends.clone(),
+        ));
         Ok(Self {
             pool,
             events,
+            ends,
             announcements: announcements.abort_handle(),
         })
     }
 }
 
-/// Passes the database's announcements on to this process's subscribers. A lost connection is
-/// re-established by the listener; what was announced meanwhile is missed, which polling covers.
-async fn forward_announcements(mut listener: PgListener, events: broadcast::Sender<QueueEvent>) {
+/// Passes the database's announcements on to this process's subscribers: a job's end to `ends`,
+/// the rest to `events`. A lost connection is re-established by the listener; what was announced
+/// meanwhile is missed, which polling covers.
+async fn forward_announcements(
+    mut listener: PgListener,
+    events: broadcast::Sender<QueueEvent>,
+    ends: broadcast::Sender<QueueEvent>,
+) {
     loop {
         match listener.recv().await {
             Ok(notification) => {
-                let event = match notification.payload() {
-                    "queued" => QueueEvent::Queued,
-                    id => QueueEvent::Changed(JobId::from(id)),
+                let (to, event) = match notification.payload() {
+                    "queued" => (&events, QueueEvent::Queued),
+                    payload => match payload.strip_prefix("ended ") {
+                        Some(id) => (&ends, QueueEvent::Changed(JobId::from(id))),
+                        None => (&events, QueueEvent::Changed(JobId::from(payload))),
+                    },
                 };
                 // No subscriber right now is fine: nobody is waiting.
-                let _ = events.send(event);
+                let _ = to.send(event);
             }
             Err(error) => {
                 tracing::warn!(%error, "listening for job announcements failed; polling meanwhile");
