@@ -16,7 +16,7 @@ request that waits for the job's end (`?wait_s=`). Each round runs `run --thread
 in turn, and each wall is compared with its own round's `run --threads 1`: this machine's speed
 drifts by a quarter within minutes, so figures from different moments do not compare. The per-shard overhead comes from the workers' own clocks, the
 `bouncewear_shard_step_seconds` histogram of a `serve --workers 1` node running the same job twice:
-`claim` (finding and leasing a shard), `store` (writing a group's accumulators in the transaction
+`claim` (finding and leasing a shard), `store` (encoding a group's accumulators and writing them in the transaction
 that counts it done) and `merge` (reading every group back, merging in order, summarising and
 storing the Result; its parts `merge_read`, `merge_compute` and `merge_write`), beside `run` (the
 simulation itself).

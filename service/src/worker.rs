@@ -26,7 +26,7 @@ use crate::domain::shards::{
 };
 use crate::store::{
     Claim, EncodedGroups, EncodedResult, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store,
-    StoreResult, encode,
+    StoreResult, encode, partial_to_sql,
 };
 use crate::telemetry::{record_job_finished, record_shard_step, record_shard_time};
 use bouncewear_model::Pointer;
@@ -337,8 +337,9 @@ impl Workers {
         }
     }
 
-    /// Runs one group, then stores its accumulators behind: the write goes on while this slot
-    /// claims and computes its next shard (`storing`, at most one write at a time per slot).
+    /// Runs one group, then encodes and stores its accumulators behind: the encoding (on the
+    /// blocking pool, never on an async thread) and the write go on while this slot claims and
+    /// computes its next shard (`storing`, at most one store at a time per slot).
     async fn run_group(
         self: &Arc<Self>,
         fence: &Fence,
@@ -360,7 +361,7 @@ impl Workers {
                 run_group(&job, batch, group, observer)
             })
             .await;
-        let stats = match ran {
+        let mut stats = match ran {
             Ran::Done(stats) => {
                 record_shard_step("run", running);
                 stats
@@ -372,13 +373,27 @@ impl Workers {
                     .await;
             }
         };
-        let mut stats = stats;
-        stats.lives.keep_listed_below(self.listed_lives);
         finish(storing.take()).await;
         let (workers, fence) = (Arc::clone(self), fence.clone());
+        let listed_lives = self.listed_lives;
         let store = async move {
             let started = Instant::now();
-            let complete = || workers.store.complete(&fence, &stats);
+            let encoding = tokio::task::spawn_blocking(move || {
+                stats.lives.keep_listed_below(listed_lives);
+                partial_to_sql(&stats)
+            });
+            let partial = match encoding.await {
+                Ok(Ok(partial)) => partial,
+                Ok(Err(error)) => {
+                    let reason = format!("encoding the group's accumulators failed: {error}");
+                    return workers.fail_attempt(&fence, &reason).await;
+                }
+                Err(_) => {
+                    let reason = "internal error: encoding the group's accumulators panicked";
+                    return workers.fail_attempt(&fence, reason).await;
+                }
+            };
+            let complete = || workers.store.complete_encoded(&fence, partial.clone());
             if workers
                 .stored(&fence, &lease, "the group's accumulators", complete)
                 .await

@@ -21,6 +21,7 @@ mod sql;
 mod sqlite;
 
 pub use backend::SqlStore;
+pub(crate) use rows::partial_to_sql;
 pub use rows::{EncodedGroups, EncodedResult, encode};
 
 use crate::domain::rare::Rounds;
