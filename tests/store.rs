@@ -89,6 +89,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
         .await;
     lives_beyond_the_listing_cap_are_counted_not_listed(&database("listed")).await;
     a_result_is_stored_once_and_one_stored_whole_before_reads_as_it_was(&database("whole")).await;
+    a_large_result_reads_back_whole(&database("large")).await;
     jobs_queued_before_shards_existed_get_theirs_on_open(&database("backfill")).await;
     concurrent_submissions_never_overshoot_the_queue_bound(&database("bound")).await;
     one_owner_fills_only_its_share_of_the_queue(&database("share")).await;
@@ -637,6 +638,22 @@ async fn a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(url: &st
         shards
             .iter()
             .all(|s| s.status == "done" && s.attempt == Attempt(1))
+    );
+}
+
+/// A Result of over a megabyte (a thousand bins' summaries), which the store puts back together
+/// off the async threads, reads back as the job run whole gives it.
+async fn a_large_result_reads_back_whole(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let text = r#"{"devices": 2, "operations": 100, "seed": 6, "bin_operations": 1}"#;
+    let id = insert(&store, queued_job(text, 6)).await;
+    run_every_shard(store.as_ref()).await;
+    let stored = store.result_json(&id).await.unwrap().unwrap();
+    assert!(stored.len() > 1 << 20, "{} bytes", stored.len());
+    let whole = run_job(&Job::from_json(text, || 0).unwrap(), &Silent).unwrap();
+    assert_eq!(
+        without_timing(&stored),
+        without_timing(&serde_json::to_string(&whole).unwrap())
     );
 }
 

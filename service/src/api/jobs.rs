@@ -1,6 +1,6 @@
 //! `/v1/jobs`: submit, list, inspect, cancel, results, distributions and live progress.
 
-use super::cache::{NotModified, immutable, immutable_stream};
+use super::cache::{NotModified, immutable, immutable_identified, not_modified};
 use super::error::{
     ApiError, Internal, PROBLEM, Problem,
     responses::{BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, Unauthorized},
@@ -549,12 +549,23 @@ pub async fn get_result(
 ) -> Result<Response, ApiError> {
     let wait = WaitQuery::wait(query, &state)?;
     has_succeeded(ended_within(&state, &owner, &id, wait).await?)?;
+    let identity = format!("{id}/result");
+    if let Some(unchanged) = not_modified(&state, &headers, identity.as_bytes()) {
+        return Ok(unchanged);
+    }
     let result = state
         .store
         .result_json(&id)
         .await?
         .ok_or_else(|| without_result(&id))?;
-    Ok(immutable(&state, &headers, JSON, result))
+    let body = Body::from(result);
+    Ok(immutable_identified(
+        &state,
+        &headers,
+        JSON,
+        identity.as_bytes(),
+        body,
+    ))
 }
 
 #[derive(Debug, Deserialize, IntoParams)]
@@ -926,7 +937,7 @@ pub async fn get_life(
         Format::Csv => {
             let identity = format!("{id}/life.csv");
             let body = Body::from_stream(life_csv(state.clone(), id));
-            Ok(immutable_stream(
+            Ok(immutable_identified(
                 &state,
                 &headers,
                 CSV,

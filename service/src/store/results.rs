@@ -140,12 +140,14 @@ impl Results for SqlStore {
 
     #[tracing::instrument(skip_all, fields(job = %id))]
     async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>> {
-        Sql::new(SELECT_RESULT)
+        let row = Sql::new(SELECT_RESULT)
             .bind(id.as_str())
             .fetch_optional(self.readers())
-            .await?
-            .map(|row| result_from_row(&row))
-            .transpose()
+            .await?;
+        match row {
+            Some(row) => result_from_row(row).await.map(Some),
+            None => Ok(None),
+        }
     }
 
     #[tracing::instrument(skip_all, fields(job = %id, metric))]

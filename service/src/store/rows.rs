@@ -848,10 +848,28 @@ pub(crate) const SELECT_RESULT: &str = "SELECT result, (SELECT string_agg(kind |
      metric || '\t' || bin || '\t' || op_start || '\t' || op_end || '\t' || summary, '\n') \
      FROM distributions d WHERE d.job_id = r.job_id) AS summaries FROM results r WHERE r.job_id = $1";
 
-/// The Result's JSON from [`SELECT_RESULT`]'s row, its summaries put back.
-pub(crate) fn result_from_row(row: &AnyRow) -> StoreResult<String> {
+/// Bytes of a stored Result and its summaries beyond which they are put back together off the
+/// async threads: a 1000-bin job's 15.7 MB took several milliseconds of a thread that answers
+/// requests; a small job's 106 kB is quicker than a hop to the blocking pool and back.
+const LARGE_RESULT_BYTES: usize = 1 << 20;
+
+/// The Result's JSON from [`SELECT_RESULT`]'s row, its summaries put back ([`result_from_parts`]),
+/// on the blocking pool when it is large.
+pub(crate) async fn result_from_row(row: AnyRow) -> StoreResult<String> {
     let text = row.text("result")?;
     let joined = row.maybe_text("summaries")?.unwrap_or_default();
+    drop(row);
+    if text.len() + joined.len() < LARGE_RESULT_BYTES {
+        return result_from_parts(text, &joined);
+    }
+    tokio::task::spawn_blocking(move || result_from_parts(text, &joined))
+        .await
+        .map_err(|e| corrupt("result", e))?
+}
+
+/// A stored Result's JSON (`text`) with its summary rows (`joined`, as [`SELECT_RESULT`] joins
+/// them) put back.
+fn result_from_parts(text: String, joined: &str) -> StoreResult<String> {
     let mut summaries: [Vec<SummaryRow>; 2] = Default::default();
     for line in joined.split('\n').filter(|line| !line.is_empty()) {
         let bad = || corrupt("summary", format!("a row read as {:.80}", line));
@@ -1206,34 +1224,24 @@ mod tests {
         }
     }
 
-    /// The Result's JSON as stored with its members put back from its rows, as
-    /// `Results::result_json` does.
+    /// The Result as the store reads it back: its stored text, and its rows' summaries joined
+    /// as [`SELECT_RESULT`] joins them, in no particular order (here the reverse).
     fn stored_and_put_back(encoded: &EncodedResult) -> String {
-        let mut summaries: [Vec<SummaryRow>; 2] = Default::default();
-        for ((key, kind), rows) in STORED_APART.into_iter().zip(&mut summaries) {
-            assert!(
-                empty_member(&encoded.text, key).is_some(),
-                "stored without {key}"
-            );
-            rows.extend(
-                encoded
-                    .rows
-                    .iter()
-                    .rev()
-                    .filter(|row| row.kind == kind)
-                    .map(|row| {
-                        let summary = row.summary.as_str();
-                        (
-                            row.metric.as_str(),
-                            row.bin,
-                            row.op_start,
-                            row.op_end,
-                            summary,
-                        )
-                    }),
-            );
+        for (key, _) in STORED_APART {
+            let empty = empty_member(&encoded.text, key);
+            assert!(empty.is_some(), "stored without {key}");
         }
-        put_back(encoded.text.clone(), summaries).unwrap()
+        let joined: Vec<String> = (encoded.rows.iter().rev())
+            .map(|r| {
+                let (metric, summary) = (&r.metric, &r.summary);
+                let (bin, op_start, op_end) = (r.bin, r.op_start, r.op_end);
+                format!(
+                    "{}\t{metric}\t{bin}\t{op_start}\t{op_end}\t{summary}",
+                    r.kind
+                )
+            })
+            .collect();
+        result_from_parts(encoded.text.clone(), &joined.join("\n")).unwrap()
     }
 
     #[test]
