@@ -642,7 +642,7 @@ async fn a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(url: &st
 }
 
 /// A Result of over a megabyte (a thousand bins' summaries), which the store puts back together
-/// off the async threads, reads back as the job run whole gives it.
+/// and parses off the async threads, reads back as the job run whole gives it.
 async fn a_large_result_reads_back_whole(url: &str) {
     let store = store::open(url).await.unwrap();
     let text = r#"{"devices": 2, "operations": 100, "seed": 6, "bin_operations": 1}"#;
@@ -650,6 +650,8 @@ async fn a_large_result_reads_back_whole(url: &str) {
     run_every_shard(store.as_ref()).await;
     let stored = store.result_json(&id).await.unwrap().unwrap();
     assert!(stored.len() > 1 << 20, "{} bytes", stored.len());
+    let parsed = store.result(&id).await.unwrap().unwrap();
+    assert_eq!(serde_json::to_string(&parsed).unwrap(), stored);
     let whole = run_job(&Job::from_json(text, || 0).unwrap(), &Silent).unwrap();
     assert_eq!(
         without_timing(&stored),

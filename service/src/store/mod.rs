@@ -412,12 +412,16 @@ pub trait Results: Send + Sync + 'static {
     /// The Result JSON as stored, to be served as it is.
     async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>>;
 
-    /// The Result, parsed.
+    /// The Result, parsed (off the async threads when it is large).
     async fn result(&self, id: &JobId) -> StoreResult<Option<JobResult>> {
-        self.result_json(id)
-            .await?
-            .map(|text| serde_json::from_str(&text).map_err(|e| rows::corrupt("result", e)))
-            .transpose()
+        let Some(text) = self.result_json(id).await? else {
+            return Ok(None);
+        };
+        let bytes = text.len();
+        let parse = move || serde_json::from_str(&text).map_err(|e| rows::corrupt("result", e));
+        rows::off_async_threads_if_large("result", bytes, parse)
+            .await
+            .map(Some)
     }
     /// The bins of `metric` that overlap `range`, in bin order.
     async fn distribution(

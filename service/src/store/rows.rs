@@ -848,23 +848,34 @@ pub(crate) const SELECT_RESULT: &str = "SELECT result, (SELECT string_agg(kind |
      metric || '\t' || bin || '\t' || op_start || '\t' || op_end || '\t' || summary, '\n') \
      FROM distributions d WHERE d.job_id = r.job_id) AS summaries FROM results r WHERE r.job_id = $1";
 
-/// Bytes of a stored Result and its summaries beyond which they are put back together off the
-/// async threads: a 1000-bin job's 15.7 MB took several milliseconds of a thread that answers
-/// requests; a small job's 106 kB is quicker than a hop to the blocking pool and back.
+/// Bytes of a stored Result beyond which it is put back together or parsed off the async
+/// threads ([`off_async_threads_if_large`]): a 1000-bin job's 15.7 MB took several milliseconds
+/// of a thread that answers requests to put together, tens to parse; a small job's 106 kB is
+/// quicker than a hop to the blocking pool and back.
 const LARGE_RESULT_BYTES: usize = 1 << 20;
 
-/// The Result's JSON from [`SELECT_RESULT`]'s row, its summaries put back ([`result_from_parts`]),
-/// on the blocking pool when it is large.
+/// `work` on `bytes` of a stored Result (`what`), on the blocking pool from
+/// [`LARGE_RESULT_BYTES`] on, else here.
+pub(crate) async fn off_async_threads_if_large<T: Send + 'static>(
+    what: &'static str,
+    bytes: usize,
+    work: impl FnOnce() -> StoreResult<T> + Send + 'static,
+) -> StoreResult<T> {
+    if bytes < LARGE_RESULT_BYTES {
+        return work();
+    }
+    tokio::task::spawn_blocking(work)
+        .await
+        .map_err(|e| corrupt(what, e))?
+}
+
+/// The Result's JSON from [`SELECT_RESULT`]'s row, its summaries put back ([`result_from_parts`]).
 pub(crate) async fn result_from_row(row: AnyRow) -> StoreResult<String> {
     let text = row.text("result")?;
     let joined = row.maybe_text("summaries")?.unwrap_or_default();
     drop(row);
-    if text.len() + joined.len() < LARGE_RESULT_BYTES {
-        return result_from_parts(text, &joined);
-    }
-    tokio::task::spawn_blocking(move || result_from_parts(text, &joined))
-        .await
-        .map_err(|e| corrupt("result", e))?
+    let bytes = text.len() + joined.len();
+    off_async_threads_if_large("result", bytes, move || result_from_parts(text, &joined)).await
 }
 
 /// A stored Result's JSON (`text`) with its summary rows (`joined`, as [`SELECT_RESULT`] joins
