@@ -44,7 +44,8 @@ pub fn immutable_identified(
 /// `If-None-Match` already names `identity`'s tag.
 pub fn not_modified(state: &AppState, request: &HeaderMap, identity: &[u8]) -> Option<Response> {
     let tag = entity_tag(identity);
-    matches_any(request, &tag).then(|| immutable_body(state, request, "", tag, Body::empty()))
+    matches_any(request, &tag)
+        .then(|| (StatusCode::NOT_MODIFIED, validators(state, tag)).into_response())
 }
 
 fn immutable_body(
@@ -54,26 +55,33 @@ fn immutable_body(
     tag: HeaderValue,
     body: Body,
 ) -> Response {
+    let unchanged = matches_any(request, &tag);
+    let headers = validators(state, tag);
+    if unchanged {
+        return (StatusCode::NOT_MODIFIED, headers).into_response();
+    }
+    let content_type = [(header::CONTENT_TYPE, HeaderValue::from_static(content_type))];
+    (headers, content_type, body).into_response()
+}
+
+/// What a 200 and a 304 of an immutable representation carry: its tag and how long it may be
+/// kept, and by whom.
+fn validators(state: &AppState, tag: HeaderValue) -> [(header::HeaderName, HeaderValue); 3] {
     // With API keys a result is its owner's alone: no shared cache may keep it for others.
     let cache_control = if state.key_owners.is_empty() {
         "public, max-age=31536000, immutable"
     } else {
         "private, max-age=31536000, immutable"
     };
-    let headers = [
-        (header::ETAG, tag.clone()),
+    [
+        (header::ETAG, tag),
         (
             header::CACHE_CONTROL,
             HeaderValue::from_static(cache_control),
         ),
         // JSON or CSV, as `format` or else `Accept` asks (`jobs::Format::negotiate`).
         (header::VARY, HeaderValue::from_static("accept")),
-    ];
-    if matches_any(request, &tag) {
-        return (StatusCode::NOT_MODIFIED, headers).into_response();
-    }
-    let content_type = [(header::CONTENT_TYPE, HeaderValue::from_static(content_type))];
-    (headers, content_type, body).into_response()
+    ]
 }
 
 /// A weak tag from the SHA-256 of the bytes: weak because compression may send other bytes for
