@@ -692,6 +692,40 @@ fn a_sensitivity_job_has_a_sensitivity_plot_and_a_job_without_one_gets_404() {
     );
 }
 
+/// A distribution of many bins is read and written off the async threads and of few bins on
+/// them: the same bins either way, each representation with its tag.
+#[test]
+fn a_distribution_of_many_bins_reads_as_one_of_few() {
+    let server = TestApp::start(&temp_db("many-bins"), &[]);
+    let mut job = scattered_job(4, 100, 5);
+    job["bin_operations"] = json!(1);
+    let id = server.submit(&job);
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let url = |query: &str| server.url(&format!("/v1/jobs/{id}/distributions/e1{query}"));
+    let many = get(&url(""), None);
+    assert_eq!(many.status, 200, "{}", many.body);
+    let bins = many.json()["bins"].as_array().unwrap().clone();
+    assert_eq!(bins.len(), 100);
+    let few = get(&url("?op_end=10"), None).json();
+    assert_eq!(few["bins"].as_array().unwrap()[..], bins[..10]);
+    let csv = get(&url("?format=csv"), None);
+    assert_eq!((csv.status, csv.body.lines().count()), (200, 101));
+    let few_csv = get(&url("?format=csv&op_end=10"), None);
+    assert!(
+        csv.body.starts_with(&few_csv.body),
+        "the first ten rows alike"
+    );
+    for reply in [&many, &csv] {
+        let tag = reply.header("etag").unwrap();
+        let url = if reply.content_type.starts_with("text/csv") {
+            url("?format=csv")
+        } else {
+            url("")
+        };
+        assert_eq!(get_if_none_match(&url, tag, None).status, 304);
+    }
+}
+
 /// A job whose result holds many rows is stored in short transactions: submissions meanwhile are
 /// all accepted (or refused with 429 once the queue is full), never failed. Its device lives are
 /// listed up to `--max-listed-lives` and streamed page by page, while the life analysis counts

@@ -22,9 +22,40 @@ pub fn immutable(
     content_type: &'static str,
     body: impl Into<Bytes>,
 ) -> Response {
-    let body = body.into();
-    let tag = entity_tag(&body);
-    immutable_body(state, request, content_type, tag, Body::from(body))
+    immutable_tagged(state, request, content_type, Tagged::new(body))
+}
+
+/// A representation's bytes with their tag, which can be made apart from the response (a large
+/// one on the blocking pool).
+pub struct Tagged {
+    tag: HeaderValue,
+    body: Bytes,
+}
+
+impl Tagged {
+    pub fn new(body: impl Into<Bytes>) -> Self {
+        let body = body.into();
+        Self {
+            tag: entity_tag(&body),
+            body,
+        }
+    }
+}
+
+/// As [`immutable`], for bytes already tagged.
+pub fn immutable_tagged(
+    state: &AppState,
+    request: &HeaderMap,
+    content_type: &'static str,
+    tagged: Tagged,
+) -> Response {
+    immutable_body(
+        state,
+        request,
+        content_type,
+        tagged.tag,
+        Body::from(tagged.body),
+    )
 }
 
 /// As [`immutable`], with a tag from `identity`, bytes that name the content once and for all

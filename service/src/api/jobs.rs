@@ -1,12 +1,15 @@
 //! `/v1/jobs`: submit, list, inspect, cancel, results, distributions and live progress.
 
-use super::cache::{NotModified, immutable, immutable_identified, not_modified};
+use super::cache::{
+    NotModified, Tagged, immutable, immutable_identified, immutable_tagged, not_modified,
+};
 use super::error::{
     ApiError, Internal, PROBLEM, Problem,
     responses::{BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, Unauthorized},
 };
 use super::watch::MAX_WAIT_S;
 use super::{AppState, JsonText, idempotency_key, replayed};
+use crate::domain::query::LARGE_DISTRIBUTION_BINS;
 use crate::domain::{AfterRunQuery, JobId, JobStatus, Once, Owner, QueuedJob, UnixMs, draw_seed};
 use crate::store::{JobRecord, Operations, Page, ShardRecord, StoreError};
 use axum::body::{Body, Bytes};
@@ -740,18 +743,30 @@ pub async fn get_distribution(
             query: answers.next(),
         })
         .collect();
-    Ok(match format {
-        Format::Json => {
-            let distribution = Distribution {
-                job_id: record.id.to_string(),
-                metric,
-                kind,
-                bins,
-            };
-            immutable(&state, &headers, JSON, to_json(&distribution)?)
-        }
-        Format::Csv => immutable(&state, &headers, CSV, to_csv(&bins)),
-    })
+    let large = bins.len() >= LARGE_DISTRIBUTION_BINS;
+    let job_id = record.id.to_string();
+    let represent = move || -> Result<_, ApiError> {
+        Ok(match format {
+            Format::Json => {
+                let distribution = Distribution {
+                    job_id,
+                    metric,
+                    kind,
+                    bins,
+                };
+                (JSON, Tagged::new(to_json(&distribution)?))
+            }
+            Format::Csv => (CSV, Tagged::new(to_csv(&bins))),
+        })
+    };
+    let (content_type, tagged) = if large {
+        tokio::task::spawn_blocking(represent)
+            .await
+            .map_err(|e| Internal(format!("writing the distribution: {e}")))??
+    } else {
+        represent()?
+    };
+    Ok(immutable_tagged(&state, &headers, content_type, tagged))
 }
 
 /// Each bin's answer to `after_run`, from its stored groups, off the async threads (a wide range

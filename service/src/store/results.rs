@@ -12,6 +12,7 @@ use super::rows::{
 };
 use super::sql::Sql;
 use super::{DistributionRow, Fence, Operations, Results, StoreResult};
+use crate::domain::query::LARGE_DISTRIBUTION_BINS;
 use crate::domain::rare::Rounds;
 use crate::domain::{Folding, JobId, UnixMs};
 use async_trait::async_trait;
@@ -160,7 +161,14 @@ impl Results for SqlStore {
         let rows = bind_bins(Sql::new(SELECT_DISTRIBUTION), id, metric, range)
             .fetch_all(self.readers())
             .await?;
-        rows.iter().map(distribution_from_row).collect()
+        let large = rows.len() >= LARGE_DISTRIBUTION_BINS;
+        let parse = move || rows.iter().map(distribution_from_row).collect();
+        if !large {
+            return parse();
+        }
+        tokio::task::spawn_blocking(parse)
+            .await
+            .map_err(|e| rows::corrupt("distribution", e))?
     }
 
     #[tracing::instrument(skip_all, fields(job = %id, metric))]
