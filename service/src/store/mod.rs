@@ -330,10 +330,15 @@ pub trait JobQueue: Send + Sync + 'static {
         terms: LeaseTerms,
         operations_done: u64,
     ) -> StoreResult<Lease>;
-    /// Marks a group done with its accumulators, in one transaction, if the claim still holds it.
-    async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool>;
-    /// Marks a group done with what it made, encoded ([`encode`]): a rare event's task's
-    /// outcome.
+    /// Marks a group done with its accumulators, encoded here, in one transaction, if the claim
+    /// still holds it. A worker encodes them off the async threads and calls
+    /// [`JobQueue::complete_encoded`].
+    async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool> {
+        self.complete_encoded(fence, rows::partial_to_sql(stats)?)
+            .await
+    }
+    /// Marks a group done with what it made, encoded: a group's accumulators
+    /// ([`partial_to_sql`]) or a rare event's task's outcome ([`encode`]).
     async fn complete_encoded(&self, fence: &Fence, partial: Vec<u8>) -> StoreResult<bool>;
     /// Marks a merge step done and queues the next step's shards, in one transaction, if the
     /// claim still holds it: a precision target's next batch, or a rare event's round with

@@ -8,8 +8,8 @@ use super::rows::{
     LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY,
     REMEMBERED_KEY, bind_fence, bind_key, claim_from_rows, count_from_sql, count_to_sql,
     failed_too_often, fenced_shard, gave_up, group_to_sql, insert_shards, job_columns,
-    job_from_row, not_ended, partial_to_sql, remembered_from_row, schema_current, shard_columns,
-    shard_from_row, shard_id_from_row, spec_from_json,
+    job_from_row, not_ended, remembered_from_row, schema_current, shard_columns, shard_from_row,
+    shard_id_from_row, spec_from_json,
 };
 use super::sql::{AnyRow, Conn, Sql, Tx};
 use super::{
@@ -23,7 +23,6 @@ use crate::domain::{
 };
 use async_trait::async_trait;
 use bouncewear_model::Pointer;
-use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::montecarlo::{Job, JobSpec};
 use tokio::sync::broadcast;
 
@@ -542,11 +541,6 @@ impl JobQueue for SqlStore {
         } else {
             Lease::Cancelled
         })
-    }
-
-    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool> {
-        self.complete_encoded(fence, partial_to_sql(stats)?).await
     }
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
