@@ -422,9 +422,9 @@ pub trait Results: Send + Sync + 'static {
         let Some(text) = self.result_json(id).await? else {
             return Ok(None);
         };
-        let bytes = text.len();
+        let large = text.len() >= rows::LARGE_RESULT_BYTES;
         let parse = move || serde_json::from_str(&text).map_err(|e| rows::corrupt("result", e));
-        rows::off_async_threads_if_large("result", bytes, parse)
+        rows::off_async_threads("result", large, parse)
             .await
             .map(Some)
     }

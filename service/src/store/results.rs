@@ -163,12 +163,7 @@ impl Results for SqlStore {
             .await?;
         let large = rows.len() >= LARGE_DISTRIBUTION_BINS;
         let parse = move || rows.iter().map(distribution_from_row).collect();
-        if !large {
-            return parse();
-        }
-        tokio::task::spawn_blocking(parse)
-            .await
-            .map_err(|e| rows::corrupt("distribution", e))?
+        rows::off_async_threads("distribution", large, parse).await
     }
 
     #[tracing::instrument(skip_all, fields(job = %id, metric))]
@@ -209,7 +204,5 @@ async fn decoded<T: serde::de::DeserializeOwned + Send + 'static>(
     what: &'static str,
     stored: Vec<u8>,
 ) -> StoreResult<T> {
-    tokio::task::spawn_blocking(move || rows::decode(what, &stored))
-        .await
-        .map_err(|e| rows::corrupt(what, e))?
+    rows::off_async_threads(what, true, move || rows::decode(what, &stored)).await
 }

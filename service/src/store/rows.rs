@@ -477,14 +477,13 @@ async fn fold_stored(
         if !read.is_empty() && (last || bytes >= budget) {
             let decoding = std::mem::take(&mut read);
             bytes = 0;
-            into = tokio::task::spawn_blocking(move || {
+            into = off_async_threads("group accumulators", true, move || {
                 for (shard, group) in decoding {
                     into.push(shard, decode::<GroupStats>("group accumulators", &group)?);
                 }
-                Ok::<_, StoreError>(into)
+                Ok(into)
             })
-            .await
-            .map_err(|e| corrupt("group accumulators", e))??;
+            .await?;
         }
         if last {
             return Ok(into);
@@ -848,20 +847,20 @@ pub(crate) const SELECT_RESULT: &str = "SELECT result, (SELECT string_agg(kind |
      metric || '\t' || bin || '\t' || op_start || '\t' || op_end || '\t' || summary, '\n') \
      FROM distributions d WHERE d.job_id = r.job_id) AS summaries FROM results r WHERE r.job_id = $1";
 
-/// Bytes of a stored Result beyond which it is put back together or parsed off the async
-/// threads ([`off_async_threads_if_large`]): a 1000-bin job's 15.7 MB took several milliseconds
-/// of a thread that answers requests to put together, tens to parse; a small job's 106 kB is
-/// quicker than a hop to the blocking pool and back.
-const LARGE_RESULT_BYTES: usize = 1 << 20;
+/// Bytes of a stored Result from which it is put back together or parsed off the async threads
+/// ([`off_async_threads`]): a 1000-bin job's 15.7 MB took several milliseconds of a thread that
+/// answers requests to put together, tens to parse; a small job's 106 kB is quicker than a hop to
+/// the blocking pool and back.
+pub(crate) const LARGE_RESULT_BYTES: usize = 1 << 20;
 
-/// `work` on `bytes` of a stored Result (`what`), on the blocking pool from
-/// [`LARGE_RESULT_BYTES`] on, else here.
-pub(crate) async fn off_async_threads_if_large<T: Send + 'static>(
+/// `work` on what was stored (`what`, for the error should the work panic): on the blocking pool
+/// when it is `large`, else here.
+pub(crate) async fn off_async_threads<T: Send + 'static>(
     what: &'static str,
-    bytes: usize,
+    large: bool,
     work: impl FnOnce() -> StoreResult<T> + Send + 'static,
 ) -> StoreResult<T> {
-    if bytes < LARGE_RESULT_BYTES {
+    if !large {
         return work();
     }
     tokio::task::spawn_blocking(work)
@@ -874,8 +873,8 @@ pub(crate) async fn result_from_row(row: AnyRow) -> StoreResult<String> {
     let text = row.text("result")?;
     let joined = row.maybe_text("summaries")?.unwrap_or_default();
     drop(row);
-    let bytes = text.len() + joined.len();
-    off_async_threads_if_large("result", bytes, move || result_from_parts(text, &joined)).await
+    let large = text.len() + joined.len() >= LARGE_RESULT_BYTES;
+    off_async_threads("result", large, move || result_from_parts(text, &joined)).await
 }
 
 /// A stored Result's JSON (`text`) with its summary rows (`joined`, as [`SELECT_RESULT`] joins
