@@ -1,12 +1,13 @@
 //! Whole jobs on one thread: the reference jobs of `tests/data/reference_jobs.json` (radius and
 //! hardness scattered per device, closing velocity per operation, every metric), 48 V / 15 A and
 //! mechanical. Divan reports the
-//! time per job and, through the item counter, per operation. Then the service's small job, its
-//! run and its summaries apart.
+//! time per job and, through the item counter, per operation; then the same jobs as the service
+//! runs them, keeping each group's extremes for queries after the run. Then the service's small
+//! job, its run and its summaries apart.
 //!
 //! `cargo bench -p bouncewear-model --bench engine`, once per kernel this CPU runs.
 
-use bouncewear_model::montecarlo::engine::run;
+use bouncewear_model::montecarlo::engine::{run, run_on};
 use bouncewear_model::montecarlo::{Job, Kernel, Silent, run_job_on, summarize_job};
 use divan::{Bencher, black_box, counter::ItemsCount};
 use serde_json::Value;
@@ -58,6 +59,34 @@ fn arcing_48v_15a(bencher: Bencher, kernel: &str) {
 #[divan::bench(args = kernels(), sample_count = 5, sample_size = 1)]
 fn mechanical(bencher: Bencher, kernel: &str) {
     job_on_one_thread(bencher, "mechanical", kernel);
+}
+
+/// The reference job of `scenario` on one thread on the active kernel as the service runs it:
+/// every group keeping its most extreme values for thresholds asked after the run
+/// (`engine::run_on`), which `run_job_on` leaves out (its Result reads none of them); then
+/// summarised, to the same Result.
+fn job_keeping_tails(bencher: Bencher, scenario: &str) {
+    let (job, operations) = reference_job(scenario);
+    let (kernel, pool) = (Kernel::active(), one_thread());
+    bencher
+        .counter(ItemsCount::new(operations))
+        .bench_local(|| {
+            pool.install(|| {
+                let tally =
+                    run_on(kernel, black_box(&job), &Silent, |_| false).expect("not cancelled");
+                summarize_job(&job, &tally, 0.0)
+            })
+        });
+}
+
+#[divan::bench(sample_count = 5, sample_size = 1)]
+fn arcing_48v_15a_keeping_tails(bencher: Bencher) {
+    job_keeping_tails(bencher, "48 V / 15 A");
+}
+
+#[divan::bench(sample_count = 5, sample_size = 1)]
+fn mechanical_keeping_tails(bencher: Bencher) {
+    job_keeping_tails(bencher, "mechanical");
 }
 
 /// The service's small job, `{"devices": 100, "operations": 100}` (the default scenario, every

@@ -256,7 +256,8 @@ pub fn run_job_on(
     observer: &dyn Observer,
 ) -> Result<JobResult, RunError> {
     let started = Instant::now();
-    let tally = engine::run_on(kernel, job, observer, |tally| precision_met(job, tally))?;
+    // The groups make the Result alone: no extremes kept for queries after the run.
+    let tally = engine::run_for_result(kernel, job, observer, |tally| precision_met(job, tally))?;
     let rare_event = rare::estimate(job, observer)?;
     let mut result = summarize_job(job, &tally, started.elapsed().as_secs_f64());
     result.rare_event = rare_event;

@@ -158,3 +158,19 @@ fn batches_cover_the_devices_once_and_groups_cut_them_contiguously() {
         );
     }
 }
+
+/// `run_job` keeps no extremes for queries after the run (`engine::run_for_result`); the groups
+/// above keep them. Thresholds counted as the job runs, limits and quantiles come out the same.
+#[test]
+fn thresholds_and_limits_without_the_extremes_kept_for_later_queries() {
+    assert_group_by_group_is_whole(
+        r#"{"devices": 64, "operations": 40, "seed": 17, "bin_operations": 20,
+            "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+            "scatter": [
+              {"parameter": "impact_velocity_m_s", "per": "operation",
+               "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.05}}],
+            "limits": {"total_bounce_s": [{"above": 0.0125}, {"below": 0.0105}],
+                       "arc_energy_j": 0.05,
+                       "final_radius_m": [{"below": 7.69e-3}]}}"#,
+    );
+}

@@ -114,10 +114,11 @@ pub struct GroupStats {
 }
 
 impl GroupStats {
-    fn new(job: &Job, sensitivity: Option<&SensitivityPlan>) -> Self {
+    fn new(job: &Job, sensitivity: Option<&SensitivityPlan>, keep_tails: bool) -> Self {
         // A metric's limit and list of thresholds, both counted exactly as the values arrive, and
-        // its most extreme values, kept within a budget per metric over the bins.
-        let empty = |metric, keep| {
+        // (`keep_tails`) its most extreme values, kept within a budget per metric over the bins.
+        let empty = |metric, keep: Option<u32>| {
+            let keep = keep.filter(|_| keep_tails);
             let thresholds = job.thresholds().get(&metric).map_or(&[][..], Vec::as_slice);
             Accumulator::new(job.limits().get(&metric).copied())
                 .counting(thresholds)
@@ -331,9 +332,34 @@ pub fn run_on(
     kernel: Kernel,
     job: &Job,
     observer: &dyn Observer,
+    accept: impl FnMut(&Tally) -> bool,
+) -> Result<Tally, Cancelled> {
+    run_plan(&Plan::new(job, kernel), observer, accept)
+}
+
+/// [`run_on`] for a run whose groups make its Result and nothing else
+/// ([`crate::montecarlo::summarize_job`]): the most extreme values each accumulator keeps for a
+/// threshold asked after the run ([`crate::stats::Tails`]) are not kept, since no summary reads
+/// them. Every summary is the same to the bit; a query of these groups after the run answers a
+/// threshold that no list counted from the sketch alone.
+pub fn run_for_result(
+    kernel: Kernel,
+    job: &Job,
+    observer: &dyn Observer,
+    accept: impl FnMut(&Tally) -> bool,
+) -> Result<Tally, Cancelled> {
+    let mut plan = Plan::new(job, kernel);
+    plan.keep_tails = false;
+    run_plan(&plan, observer, accept)
+}
+
+/// The batches of [`run_on`] as `plan` runs them.
+fn run_plan(
+    plan: &Plan<'_>,
+    observer: &dyn Observer,
     mut accept: impl FnMut(&Tally) -> bool,
 ) -> Result<Tally, Cancelled> {
-    let plan = Plan::new(job, kernel);
+    let job = plan.job;
     let done = AtomicU64::new(0);
     let mut tally = Tally::new();
     let mut next = Batch::of(job, 0);
@@ -365,6 +391,35 @@ mod tests {
         };
         plan.run_chunk(&chunk, 0, &Silent, &AtomicU64::new(0), 0)
             .expect("not cancelled")
+    }
+
+    #[test]
+    fn a_run_for_its_result_keeps_no_extremes_and_the_same_summaries() {
+        let job = Job::from_json(
+            r#"{"devices": 40, "operations": 30, "seed": 4, "bin_operations": 10,
+                "limits": {"total_bounce_s": [{"above": 0.012}]}}"#,
+            || 0,
+        )
+        .unwrap();
+        let kept = run_on(Kernel::active(), &job, &Silent, |_| false).unwrap();
+        let left_out = run_for_result(Kernel::active(), &job, &Silent, |_| false).unwrap();
+        let tails = |tally: &Tally| -> Vec<bool> {
+            let group = serde_json::to_value(&tally.groups[0]).unwrap();
+            ["operations", "devices"]
+                .iter()
+                .flat_map(|part| group[part].as_array().unwrap().clone())
+                .map(|accumulator| !accumulator["tails"].is_null())
+                .collect()
+        };
+        assert!(tails(&kept).iter().all(|&kept| kept));
+        assert!(tails(&left_out).iter().all(|&kept| !kept));
+        let summaries = |tally: &Tally| {
+            let summary = crate::montecarlo::summarize_job(&job, tally, 1.0);
+            let mut result = serde_json::to_value(summary).unwrap();
+            result.as_object_mut().unwrap().remove("timing");
+            result
+        };
+        assert_eq!(summaries(&kept), summaries(&left_out));
     }
 
     #[test]

@@ -27,6 +27,9 @@ pub(super) struct Plan<'a> {
     /// group's last devices, too few for the kernel's lanes, fill a narrower kernel's.
     pub(super) kernels: Vec<Kernel>,
     pub(super) sensitivity: Option<SensitivityPlan>,
+    /// Whether each accumulator keeps its most extreme values ([`crate::stats::Tails`]) for a
+    /// threshold asked after the run: not for a run whose groups only make its Result.
+    pub(super) keep_tails: bool,
 }
 
 impl<'a> Plan<'a> {
@@ -86,6 +89,7 @@ impl<'a> Plan<'a> {
             lockstep: job.scatter().iter().all(|s| s.parameter.is_lane_value()),
             kernels: kernel.narrower(),
             sensitivity: None,
+            keep_tails: true,
         };
         plan.sensitivity = job.sensitivity().map(|method| {
             // Sums are taken about the nominal scenario's values: a new device's operation.
@@ -276,7 +280,7 @@ impl<'a> Plan<'a> {
         let operations = self.job.spec().operations;
         let bound = |group: u64| group_start(chunk.size, group);
         let mut stats: Vec<GroupStats> = (groups.clone())
-            .map(|_| GroupStats::new(self.job, self.sensitivity.as_ref()))
+            .map(|_| GroupStats::new(self.job, self.sensitivity.as_ref(), self.keep_tails))
             .collect();
         let (mut local, end) = (bound(groups.start), bound(groups.end));
         while local < end {
