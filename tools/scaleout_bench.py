@@ -12,7 +12,9 @@ pg_ctl in a temporary directory, as the `postgres` user when run as root) and re
 Each worker process runs one shard at a time on one compute thread (`worker --workers 1
 --compute-threads 1`), so N processes use N cores: on a 2-core machine expect a plateau at 2.
 Throughput is operations over the wall time from submission to the stored Result, seen by a
-request that waits for the job's end (`?wait_s=`). Each round runs `run --threads 1` and `--threads 2` and then every worker count
+request that waits for the job's end (`?wait_s=`). The workers do a little more than `run`: their
+groups keep each bin's extreme values for queries after the run, which `run` leaves out (its
+Result reads none; about 9 % of `run --threads 1` on this job, docs/performance.md). Each round runs `run --threads 1` and `--threads 2` and then every worker count
 in turn, and each wall is compared with its own round's `run --threads 1`: this machine's speed
 drifts by a quarter within minutes, so figures from different moments do not compare. The per-shard overhead comes from the workers' own clocks, the
 `bouncewear_shard_step_seconds` histogram of a `serve --workers 1` node running the same job twice:
