@@ -530,8 +530,6 @@ pub fn read_input(path: &Path) -> Result<String, CliError> {
     Ok(text)
 }
 
-/// Prints a document to stdout, buffered (a Result is thousands of lines). A reader that stops
-/// early (`| head`) is not an error: the output simply ends there.
 /// The calibration request `text` with its `observations` read from CSV `csv` (at `path`).
 fn with_observations(text: &str, csv: &str, path: &str) -> Result<String, CliError> {
     let mut request: serde_json::Value = serde_json::from_str(text).map_err(|error| {
@@ -572,6 +570,8 @@ fn print_text(text: String) -> Result<(), CliError> {
     }
 }
 
+/// Prints a document to stdout, buffered (a Result is thousands of lines). A reader that stops
+/// early (`| head`) is not an error: the output simply ends there.
 fn print_json(value: &impl serde::Serialize) -> Result<(), CliError> {
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     let written = serde_json::to_writer_pretty(&mut out, value)
