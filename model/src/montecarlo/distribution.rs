@@ -2,6 +2,7 @@
 //! random draws (rand_distr) and inverse CDFs (for Latin hypercube sampling).
 
 use crate::error::{FieldError, Pointer};
+use crate::scenario::MAX_MAGNITUDE;
 use rand::RngExt;
 use rand::distr::{Distribution as _, Open01};
 use rand_distr::{LogNormal, Normal, Triangular, Weibull};
@@ -14,6 +15,11 @@ use serde::{Deserialize, Serialize};
 pub const MIN_ACCEPTANCE: f64 = 0.05;
 /// See [`MIN_ACCEPTANCE`].
 pub const MAX_REJECTIONS: u32 = 1000;
+
+/// The farthest standard score of any draw: [`Distribution::at_normal`] (rare events, correlated
+/// draws) holds its `z` within it, where `Phi(-z)` is still a normal number; the ziggurat's normals
+/// and the probabilities of (0, 1) that random and stratified draws invert stay well inside it.
+pub const MAX_SCORE: f64 = 37.0;
 
 /// A distribution as the user writes it.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -80,6 +86,20 @@ pub enum DistributionSpec {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         max: Option<f64>,
     },
+}
+
+impl DistributionSpec {
+    /// The `min` and `max` the spec gives, if any (for a fixed value, neither).
+    fn bounds(&self) -> (Option<f64>, Option<f64>) {
+        match *self {
+            DistributionSpec::Fixed { .. } => (None, None),
+            DistributionSpec::Uniform { min, max }
+            | DistributionSpec::Triangular { min, max, .. } => (Some(min), Some(max)),
+            DistributionSpec::Normal { min, max, .. }
+            | DistributionSpec::Lognormal { min, max, .. }
+            | DistributionSpec::Weibull { min, max, .. } => (min, max),
+        }
+    }
 }
 
 /// The values a parameter may take: above `lower` (or at it, when `inclusive`).
@@ -251,6 +271,11 @@ impl Distribution {
                 max,
             } => faults.weibull(scale, shape, min, max, domain),
         };
+        if let Some(distribution) = &distribution
+            && faults.errors.is_empty()
+        {
+            faults.within_magnitude(distribution, spec, domain);
+        }
         match distribution {
             Some(distribution) if faults.errors.is_empty() => Ok(distribution),
             _ => Err(faults.errors),
@@ -325,9 +350,9 @@ impl Distribution {
     /// normal or lognormal without truncation maps `z` itself (`mean + sd z`, `median
     /// exp(sigma z)`); a truncated one, a Weibull and a triangular's upper side go through the
     /// survival probability `Phi(-z)`, which keeps its relative precision. `z` is held within
-    /// +-37, where `Phi(-z)` is still a normal number.
+    /// +-[`MAX_SCORE`].
     pub fn at_normal(&self, z: f64) -> f64 {
-        let z = z.clamp(-37.0, 37.0);
+        let z = z.clamp(-MAX_SCORE, MAX_SCORE);
         let through_phi = |z: f64| {
             self.quantile(standard_normal_cdf(z).clamp(f64::MIN_POSITIVE, 1.0 - f64::EPSILON))
         };
@@ -525,6 +550,64 @@ impl Faults<'_> {
                     domain.describe()
                 ),
             );
+        }
+    }
+
+    /// Every value the distribution can produce within a scenario's magnitudes: its `max`, or
+    /// without one its value at the farthest score of any draw ([`MAX_SCORE`]), at most
+    /// [`MAX_MAGNITUDE`], and for a domain without a lower end its `min` (or value at `-MAX_SCORE`)
+    /// at least the negative. An untruncated distribution that reaches
+    /// beyond is told to add a `max` (or `min`), as one that reaches below its domain is.
+    fn within_magnitude(
+        &mut self,
+        distribution: &Distribution,
+        spec: &DistributionSpec,
+        domain: Domain,
+    ) {
+        let (min, max) = spec.bounds();
+        let top = max.unwrap_or_else(|| distribution.at_normal(MAX_SCORE));
+        if !(top.is_finite() && top <= MAX_MAGNITUDE) {
+            match (spec, max) {
+                (DistributionSpec::Fixed { value }, _) => self.fail(
+                    "value",
+                    format!("must be at most {MAX_MAGNITUDE:e} for this parameter, got {value:e}"),
+                ),
+                (_, Some(max)) => self.fail(
+                    "max",
+                    format!("must be at most {MAX_MAGNITUDE:e} for this parameter, got {max:e}"),
+                ),
+                (_, None) => self.fail(
+                    "max",
+                    format!(
+                        "this distribution reaches {top:e} at {MAX_SCORE} standard deviations, above \
+                         the {MAX_MAGNITUDE:e} this parameter may take; add a \"max\" of at most \
+                         {MAX_MAGNITUDE:e} to truncate it"
+                    ),
+                ),
+            }
+        }
+        let bottom = min.unwrap_or_else(|| distribution.at_normal(-MAX_SCORE));
+        if domain.lower < -MAX_MAGNITUDE && !(bottom.is_finite() && bottom >= -MAX_MAGNITUDE) {
+            match (spec, min) {
+                (DistributionSpec::Fixed { value }, _) => self.fail(
+                    "value",
+                    format!(
+                        "must be at least -{MAX_MAGNITUDE:e} for this parameter, got {value:e}"
+                    ),
+                ),
+                (_, Some(min)) => self.fail(
+                    "min",
+                    format!("must be at least -{MAX_MAGNITUDE:e} for this parameter, got {min:e}"),
+                ),
+                (_, None) => self.fail(
+                    "min",
+                    format!(
+                        "this distribution reaches {bottom:e} at -{MAX_SCORE} standard deviations, \
+                         below the -{MAX_MAGNITUDE:e} this parameter may take; add a \"min\" of at \
+                         least -{MAX_MAGNITUDE:e} to truncate it"
+                    ),
+                ),
+            }
         }
     }
 
@@ -831,6 +914,121 @@ mod tests {
             )
             .is_empty()
         );
+    }
+
+    /// No draw may leave the magnitudes a scenario admits (1e30), however far out it lies: a range
+    /// up to 1e308 was accepted, and its draws made every metric NaN. The farthest score of any
+    /// draw decides; an untruncated distribution that reaches past is told to add a `max`.
+    #[test]
+    fn a_distribution_that_reaches_past_the_largest_magnitude_is_rejected() {
+        let (positive, finite) = (Domain::POSITIVE, Domain::FINITE);
+        let cases = [
+            (
+                r#"{"kind":"uniform","min":0.007,"max":1e308}"#,
+                positive,
+                "/d/max",
+            ),
+            (
+                r#"{"kind":"uniform","min":1,"max":2e30}"#,
+                positive,
+                "/d/max",
+            ),
+            (
+                r#"{"kind":"triangular","min":0.3,"mode":0.344,"max":1e308}"#,
+                positive,
+                "/d/max",
+            ),
+            (r#"{"kind":"fixed","value":1.5e30}"#, positive, "/d/value"),
+            (
+                r#"{"kind":"lognormal","median":1e308,"sigma":1}"#,
+                positive,
+                "/d/max",
+            ),
+            (
+                r#"{"kind":"lognormal","median":1e-3,"sigma":1e308,"min":1e-5}"#,
+                positive,
+                "/d/max",
+            ),
+            // 1e14 exp(37): within reach of the rare events' farthest inputs.
+            (
+                r#"{"kind":"lognormal","median":1e14,"sigma":1}"#,
+                positive,
+                "/d/max",
+            ),
+            (
+                r#"{"kind":"lognormal","median":1e9,"sigma":2,"max":1e31}"#,
+                positive,
+                "/d/max",
+            ),
+            (
+                r#"{"kind":"weibull","scale":1e308,"shape":2}"#,
+                positive,
+                "/d/max",
+            ),
+            (
+                r#"{"kind":"weibull","scale":1,"shape":0.01}"#,
+                positive,
+                "/d/max",
+            ),
+            (
+                r#"{"kind":"normal","mean":1e30,"sd":1e28,"min":1}"#,
+                positive,
+                "/d/max",
+            ),
+            (
+                r#"{"kind":"normal","mean":1,"sd":1e29,"min":0.5}"#,
+                positive,
+                "/d/max",
+            ),
+            (
+                r#"{"kind":"normal","mean":9e29,"sd":1e28}"#,
+                finite,
+                "/d/max",
+            ),
+            (
+                r#"{"kind":"normal","mean":-1e30,"sd":1e20,"max":0}"#,
+                finite,
+                "/d/min",
+            ),
+            (
+                r#"{"kind":"uniform","min":-1e308,"max":0}"#,
+                finite,
+                "/d/min",
+            ),
+            (r#"{"kind":"fixed","value":-2e30}"#, finite, "/d/value"),
+        ];
+        for (json, domain, pointer) in cases {
+            assert_eq!(pointers(json, domain), [pointer], "{json}");
+        }
+        let told = Distribution::new(
+            &parse(r#"{"kind":"lognormal","median":1e14,"sigma":1}"#),
+            positive,
+            &Pointer::root(),
+        )
+        .unwrap_err();
+        assert!(
+            told[0].detail.contains(r#"add a "max" of at most 1e30"#),
+            "{told:?}"
+        );
+        // Wide but sane distributions, and the same ones truncated at the largest magnitude.
+        for (json, domain) in [
+            (
+                r#"{"kind":"lognormal","median":1e9,"sigma":2,"max":1e30}"#,
+                positive,
+            ),
+            (r#"{"kind":"lognormal","median":1e9,"sigma":0.5}"#, positive),
+            (
+                r#"{"kind":"normal","mean":0.224,"sd":0.02,"min":0.05}"#,
+                positive,
+            ),
+            (r#"{"kind":"weibull","scale":2e5,"shape":1.5}"#, positive),
+            (r#"{"kind":"uniform","min":1,"max":1e30}"#, positive),
+            (r#"{"kind":"fixed","value":1e30}"#, positive),
+            (r#"{"kind":"normal","mean":-5,"sd":100}"#, finite),
+            (r#"{"kind":"uniform","min":-1e30,"max":1e30}"#, finite),
+        ] {
+            assert!(pointers(json, domain).is_empty(), "{json}");
+        }
     }
 
     #[test]

@@ -166,6 +166,65 @@ fn a_distribution_that_can_leave_the_domain_names_the_min_that_would_truncate_it
     );
 }
 
+/// Jobs a sweep of the HTTP API found accepted, whose draws left the magnitudes a scenario admits
+/// and made every metric NaN (the summary then panicked): each is refused, naming the bound.
+#[test]
+fn a_distribution_that_reaches_past_1e30_names_the_max_that_would_truncate_it() {
+    let scatter = |parameter: &str, per: &str, distribution: Value| json!({"scatter": [{"parameter": parameter, "per": per, "distribution": distribution}]});
+    for (parameter, per, distribution) in [
+        (
+            "contact_radius_m",
+            "device",
+            json!({"kind": "uniform", "min": 0.007, "max": 1e308}),
+        ),
+        (
+            "static_force_n",
+            "operation",
+            json!({"kind": "triangular", "min": 0.3, "mode": 0.344, "max": 1e308}),
+        ),
+        (
+            "inertia_kg_m2",
+            "device",
+            json!({"kind": "lognormal", "median": 1.6e-5, "sigma": 1e308, "min": 1.3e-5}),
+        ),
+        (
+            "dynamic_yield_pressure_pa",
+            "device",
+            json!({"kind": "weibull", "scale": 1e9, "shape": 0.05}),
+        ),
+        (
+            "arc_restitution_b_s_per_m",
+            "device",
+            json!({"kind": "normal", "mean": -1e30, "sd": 1e28, "max": 0}),
+        ),
+    ] {
+        let faults = faults(scatter(parameter, per, distribution));
+        let bound = if parameter.starts_with("arc_") {
+            "min"
+        } else {
+            "max"
+        };
+        assert_eq!(faults.len(), 1, "{parameter}: {faults:?}");
+        assert_eq!(
+            faults[0].0,
+            format!("/scatter/0/distribution/{bound}"),
+            "{parameter}"
+        );
+        assert!(faults[0].1.contains("1e30"), "{}", faults[0].1);
+    }
+    // Truncated within it, such a distribution runs, to finite statistics.
+    let truncated =
+        json!({"kind": "weibull", "scale": 1e9, "shape": 0.05, "min": 1e8, "max": 1e30});
+    let spread = json!({"parameter": "dynamic_yield_pressure_pa", "per": "device", "distribution": truncated});
+    let scenario = json!({"circuit": {"supply_voltage_v": 48, "current_a": 15}});
+    let result = run_on(2, &job(arcing_job(scenario, Some(spread))));
+    let bins = &result.operations["total_bounce_s"];
+    assert!(
+        bins.iter()
+            .all(|bin| bin.summary.mean.is_finite() && bin.summary.max.is_finite())
+    );
+}
+
 #[test]
 fn scenario_rules_across_fields_hold_for_every_draw() {
     let both = json!({"scatter": [
