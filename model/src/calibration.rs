@@ -221,7 +221,7 @@ struct Problem {
 impl CalibrationSpec {
     /// Parses a calibration request (JSON text), naming the field at fault.
     pub fn from_json(text: &str) -> Result<Self, InvalidInput> {
-        crate::error::from_json(text, &["/fit", "/observations"])
+        crate::error::from_json(text, &["/fit", "/observations", "/bounds/*"])
     }
 }
 
@@ -1762,6 +1762,25 @@ mod tests {
         assert!(held.ci95[0] >= held.value * (1.0 - 1e-12), "{held:?}");
         let json = serde_json::to_value(&free.estimates["material.kappa"]).unwrap();
         assert!(json.get("at_bound").is_none(), "{json}");
+    }
+
+    /// The request as docs/contract.md writes it: `bounds` maps a fitted parameter to `[lower,
+    /// upper]`. The shape check took those pairs for mistaken arrays, so no request could set one.
+    #[test]
+    fn bounds_are_read_as_the_contract_writes_them() {
+        let request = |bounds: &str| {
+            CalibrationSpec::from_json(&format!(
+                r#"{{"fit": ["material.kappa"], "bounds": {bounds},
+                    "observations": [{{"first_bounce_s": 0.009}}]}}"#
+            ))
+        };
+        let spec = request(r#"{"material.kappa": [0.2, 0.5]}"#).unwrap();
+        assert_eq!(spec.bounds["material.kappa"], [0.2, 0.5]);
+        // Any other array there is still refused where it stands.
+        let nested = request(r#"{"material.kappa": [[0.2], 0.5]}"#).unwrap_err();
+        assert_eq!(nested.pointers(), ["/bounds/material.kappa/0"]);
+        let listed = request(r#"[0.2, 0.5]"#).unwrap_err();
+        assert_eq!(listed.pointers(), ["/bounds"]);
     }
 
     #[test]
