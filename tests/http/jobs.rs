@@ -210,6 +210,38 @@ fn cancelling_stops_a_running_job_a_retried_cancel_keeps_it_and_a_purge_deletes_
     assert_problem(&get(&server.url(&format!("/v1/jobs/{id}")), None), 404);
 }
 
+/// A job of few devices with many operations each: its progress moves while they run, and a
+/// cancel frees its compute threads at once. A sweep of the API found one of 20 devices x 10^8
+/// operations at progress 0 throughout, and its groups running half a minute after the cancel:
+/// a batch of devices told its progress, and looked for a cancel, only between batches. Here each
+/// group is one device of 10^8 operations, so a group part done shows progress within a batch.
+#[test]
+fn a_job_of_few_long_devices_moves_and_stops_when_cancelled() {
+    let server = TestApp::start(&temp_db("long-devices"), &[]);
+    let id = server.submit(&json!({"devices": 2, "operations": 100_000_000, "seed": 1}));
+    let started = Instant::now();
+    loop {
+        let shards = get(&server.url(&format!("/v1/jobs/{id}/shards")), None).json();
+        let part_done = shards["shards"].as_array().unwrap().iter().any(|shard| {
+            let done = shard["operations_done"].as_u64().unwrap();
+            0 < done && done < shard["operations_total"].as_u64().unwrap()
+        });
+        if part_done {
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(20),
+            "no progress: {shards}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let cancelled = delete(&server.url(&format!("/v1/jobs/{id}")));
+    assert_eq!(cancelled.json()["status"], "cancelled");
+    // The next job finds the compute threads free: no device of the cancelled one runs on.
+    let next = server.submit(&json!({"devices": 64, "operations": 200, "seed": 2}));
+    server.wait_for(&next, "succeeded", Duration::from_secs(5));
+}
+
 /// `wait_s`: one request answers the moment the job ends (its Result, the ended job, a cancel
 /// seen by a request already waiting), or with the job as it is once the time passed; a wait out
 /// of range is refused by name.

@@ -19,6 +19,9 @@ impl<'a> Plan<'a> {
     /// as the devices do. With operation-level parameters, each operation of the devices is also
     /// evaluated at `B'`, drawn from the devices' operation Sobol' streams, and at `AB'_i`, in
     /// the device's state.
+    ///
+    /// Every [`OPERATIONS_PER_LOOK`] operations it tells `watched` its progress and stops if the
+    /// job was cancelled; the rest of its operations it tells at the end.
     #[inline(always)]
     pub(super) fn run_devices<L: Real>(
         &self,
@@ -26,7 +29,8 @@ impl<'a> Plan<'a> {
         first_local: u64,
         active: usize,
         groups: &mut LaneGroups<'_>,
-    ) {
+        watched: &Watched<'_>,
+    ) -> Result<(), Cancelled> {
         let job = self.job;
         let lanes = L::LANES;
         debug_assert!(
@@ -105,6 +109,9 @@ impl<'a> Plan<'a> {
                 if let Some(cells) = &mut cells {
                     cells.push_operation(&values, &variants[0].inputs, variant_count);
                 }
+                if (op + 1) % OPERATIONS_PER_LOOK == 0 {
+                    watched.ran(active as u64, OPERATIONS_PER_LOOK)?;
+                }
             }
             if let Some(cells) = &mut cells {
                 cells.merge_bin(&mut groups.stats[0].sensitivity, bin_index);
@@ -116,6 +123,9 @@ impl<'a> Plan<'a> {
             }
         }
         self.finish_devices(chunk.first + first_local, &variants, &failed_at, groups);
+        // The operations since the last look; a cancellation now is seen before the next batch.
+        let _ = watched.ran(active as u64, operations % OPERATIONS_PER_LOOK);
+        Ok(())
     }
 
     /// The devices (`A`, in `active` of the lanes) with their draws and streams, and with Sobol'
@@ -627,13 +637,51 @@ pub(super) struct Devices<'p, 'a> {
     /// The batch's devices: its first `active` lanes; the others copy the first device.
     pub(super) active: usize,
     pub(super) groups: LaneGroups<'p>,
+    pub(super) watched: &'p Watched<'p>,
 }
 
 impl LaneWork for Devices<'_, '_> {
     #[inline(always)]
     fn run<L: Real>(mut self) {
-        self.plan
-            .run_devices::<L>(self.chunk, self.first_local, self.active, &mut self.groups);
+        let stopped = self
+            .plan
+            .run_devices::<L>(
+                self.chunk,
+                self.first_local,
+                self.active,
+                &mut self.groups,
+                self.watched,
+            )
+            .is_err();
+        self.watched.stopped.set(stopped);
+    }
+}
+
+/// Operations of a batch between two looks at its [`Observer`]: how soon a batch of devices
+/// with many operations each stops when its job is cancelled, and how often it tells its progress
+/// (a few milliseconds of a batch of 32 lanes; a look is a branch an operation and an atomic read
+/// each time).
+pub(super) const OPERATIONS_PER_LOOK: u64 = 1024;
+
+/// The observer a batch reports to as it runs, with the run's shared count of operations done;
+/// `stopped` once it saw the job cancelled.
+pub(super) struct Watched<'p> {
+    pub(super) observer: &'p dyn Observer,
+    pub(super) done: &'p AtomicU64,
+    pub(super) total: u64,
+    pub(super) stopped: std::cell::Cell<bool>,
+}
+
+impl Watched<'_> {
+    /// Tells the observer that `devices` ran `operations` more each; whether to go on.
+    fn ran(&self, devices: u64, operations: u64) -> Result<(), Cancelled> {
+        let ran = devices * operations;
+        let done = self.done.fetch_add(ran, Ordering::Relaxed) + ran;
+        self.observer.progress(done, self.total);
+        if self.observer.cancelled() {
+            return Err(Cancelled);
+        }
+        Ok(())
     }
 }
 

@@ -60,9 +60,11 @@ const SOBOL_OPERATION_STREAM_BASE: u64 = (1 << 62) | (1 << 61);
 
 /// What the engine reports while it runs, and how it is stopped.
 pub trait Observer: Sync {
-    /// Called from worker threads as devices finish; keep it cheap.
+    /// Called from worker threads as devices run (every 1024 operations of a batch,
+    /// `OPERATIONS_PER_LOOK`) and finish; keep it cheap.
     fn progress(&self, _operations_done: u64, _operations_total: u64) {}
-    /// Checked before every device: cooperative cancellation.
+    /// Checked before every batch of devices and as [`Observer::progress`] is told within one:
+    /// cooperative cancellation.
     fn cancelled(&self) -> bool {
         false
     }
@@ -391,6 +393,66 @@ mod tests {
         };
         plan.run_chunk(&chunk, 0, &Silent, &AtomicU64::new(0), 0)
             .expect("not cancelled")
+    }
+
+    /// Remembers every count of operations done it is told; cancelled once one reaches
+    /// `cancel_at`.
+    struct Counting {
+        told: std::sync::Mutex<Vec<u64>>,
+        cancel_at: u64,
+    }
+
+    impl Observer for Counting {
+        fn progress(&self, done: u64, _total: u64) {
+            self.told.lock().unwrap().push(done);
+        }
+        fn cancelled(&self) -> bool {
+            self.told
+                .lock()
+                .unwrap()
+                .iter()
+                .any(|&done| done >= self.cancel_at)
+        }
+    }
+
+    /// A batch of few devices with many operations each (a sweep of the HTTP API found one of 20
+    /// devices x 10^8 operations at progress 0 and running half a minute after its cancellation)
+    /// tells its progress every [`OPERATIONS_PER_LOOK`] operations, and stops at the first look
+    /// after its job was cancelled.
+    #[test]
+    fn a_long_batch_tells_its_progress_as_it_runs_and_stops_when_cancelled() {
+        let job = |operations: u64| {
+            Job::from_json(
+                &format!(r#"{{"devices": 4, "operations": {operations}, "seed": 2}}"#),
+                || 0,
+            )
+            .unwrap()
+        };
+        let operations = 3 * OPERATIONS_PER_LOOK + 100;
+        let whole = Counting {
+            told: Default::default(),
+            cancel_at: u64::MAX,
+        };
+        let tally = run_on(Kernel::active(), &job(operations), &whole, |_| true).unwrap();
+        let looks = (1..=3).map(|look| 4 * look * OPERATIONS_PER_LOOK);
+        let told = whole.told.into_inner().unwrap();
+        assert_eq!(told, looks.chain([4 * operations]).collect::<Vec<_>>());
+        let silent = run_on(Kernel::active(), &job(operations), &Silent, |_| true).unwrap();
+        assert_eq!(tally.groups, silent.groups, "looking changes nothing");
+
+        let cancelled = Counting {
+            told: Default::default(),
+            cancel_at: 1,
+        };
+        let long = job(100_000_000);
+        assert_eq!(
+            run_on(Kernel::active(), &long, &cancelled, |_| true).unwrap_err(),
+            Cancelled
+        );
+        assert_eq!(
+            cancelled.told.into_inner().unwrap(),
+            [4 * OPERATIONS_PER_LOOK]
+        );
     }
 
     #[test]

@@ -277,7 +277,6 @@ impl<'a> Plan<'a> {
         done: &AtomicU64,
         total: u64,
     ) -> Result<Vec<GroupStats>, Cancelled> {
-        let operations = self.job.spec().operations;
         let bound = |group: u64| group_start(chunk.size, group);
         let mut stats: Vec<GroupStats> = (groups.clone())
             .map(|_| GroupStats::new(self.job, self.sensitivity.as_ref(), self.keep_tails))
@@ -318,6 +317,12 @@ impl<'a> Plan<'a> {
                 }
             }
             let first = first.expect("the devices belong to the groups");
+            let watched = Watched {
+                observer,
+                done,
+                total,
+                stopped: false.into(),
+            };
             kernel.run(Devices {
                 plan: self,
                 chunk,
@@ -327,9 +332,11 @@ impl<'a> Plan<'a> {
                     stats: &mut stats[first..first + lanes.len()],
                     lanes,
                 },
+                watched: &watched,
             });
-            let ran = operations * devices;
-            observer.progress(done.fetch_add(ran, Ordering::Relaxed) + ran, total);
+            if watched.stopped.get() {
+                return Err(Cancelled);
+            }
             local += devices;
         }
         Ok(stats)
