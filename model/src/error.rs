@@ -78,11 +78,13 @@ impl InvalidInput {
         }
     }
 
-    /// Text that is not JSON: one error naming the whole document.
-    fn malformed(detail: String) -> Self {
+    /// Text that is not JSON: one error, at the value the reader was in when the text stopped
+    /// being JSON (a `NaN` or `0x10` given for a field names that field; the whole document
+    /// otherwise).
+    fn malformed(pointer: &Pointer, detail: String) -> Self {
         Self {
             kind: InputErrorKind::Malformed,
-            ..Self::single(&Pointer::root(), detail)
+            ..Self::single(pointer, detail)
         }
     }
 
@@ -323,7 +325,7 @@ fn invalid_from_serde(pointer: Pointer, error: &serde_json::Error) -> InvalidInp
     use serde_json::error::Category;
     match error.classify() {
         Category::Syntax | Category::Eof | Category::Io => {
-            InvalidInput::malformed(format!("malformed JSON: {error}"))
+            InvalidInput::malformed(&pointer, format!("malformed JSON: {error}"))
         }
         Category::Data => InvalidInput::single(&pointer, error.to_string()),
     }
@@ -397,6 +399,41 @@ mod tests {
     fn trailing_garbage_is_malformed() {
         let err = from_json::<serde_json::Value>("{} x", &[]).unwrap_err();
         assert!(err.is_syntax(), "{err}");
+    }
+
+    /// A number JSON does not have, given for a field, names the field (a sweep of the HTTP API
+    /// found only a line and a column); text that is not JSON from the start names the document.
+    #[test]
+    fn text_that_stops_being_json_inside_a_field_names_the_field() {
+        let field = "/scatter/0/distribution/max";
+        // `0x10` is the number 0, then text where a `,` or `}` of its object should be.
+        let its_object = "/scatter/0/distribution";
+        for (literal, at) in [
+            ("NaN", field),
+            ("Infinity", field),
+            ("-Infinity", field),
+            ("+1", field),
+            ("01", field),
+            (".5", field),
+            ("0x10", its_object),
+        ] {
+            let text = format!(r#"{{"scatter": [{{"distribution": {{"max": {literal}}}}}]}}"#);
+            let err = from_json::<serde_json::Value>(&text, &["/scatter"]).unwrap_err();
+            assert!(err.is_syntax(), "{literal}: {err}");
+            assert_eq!(err.pointers(), [at], "{literal}: {err}");
+            assert!(
+                err.errors()[0].detail.starts_with("malformed JSON: "),
+                "{err}"
+            );
+        }
+        for text in ["not JSON", "", "{} x"] {
+            let err = from_json::<serde_json::Value>(text, &[]).unwrap_err();
+            assert_eq!(
+                (err.is_syntax(), err.pointers()),
+                (true, vec![""]),
+                "{text:?}: {err}"
+            );
+        }
     }
 
     #[test]
