@@ -421,20 +421,27 @@ impl Job {
         1 + extra(count(Per::Device)) + extra(count(Per::Operation))
     }
 
-    /// Refuses a job that could run more than `limit` operations, naming (below `root`) the device
-    /// count that makes it that large.
+    /// Refuses a job that could run more than `limit` operations, naming (below `root`) what
+    /// makes it that large: the device count, or the rare event's `max_evaluations` when its
+    /// estimate could run more operations than the devices.
     pub fn check_size(&self, limit: u64, root: &Pointer) -> Result<(), InvalidInput> {
         let size = self.max_operations();
         if size <= limit {
             return Ok(());
         }
-        let pointer = match self.precision {
-            Some(_) => root.child("precision").child("max_devices"),
-            None => root.child("devices"),
+        let rare = self.rare_event.map_or(0, |rare| rare.max_operations());
+        let devices = size.saturating_sub(rare);
+        let (pointer, split) = match self.precision {
+            _ if rare > devices => (
+                root.child("rare_event").child("max_evaluations"),
+                format!(" ({rare} at most for the rare event, {devices} for the devices)"),
+            ),
+            Some(_) => (root.child("precision").child("max_devices"), String::new()),
+            None => (root.child("devices"), String::new()),
         };
         Err(InvalidInput::single(
             &pointer,
-            format!("the job would run {size} operations; this server allows {limit}"),
+            format!("the job would run {size} operations{split}; this server allows {limit}"),
         ))
     }
 
@@ -961,6 +968,24 @@ mod tests {
                 &Pointer::root().child("devices"),
                 "the job would run 300 operations; this server allows 299"
             ))
+        );
+    }
+
+    /// A sweep of the HTTP API found a job too large only by its rare event's budget blamed on
+    /// its devices.
+    #[test]
+    fn a_job_too_large_by_its_rare_event_names_its_max_evaluations() {
+        let job = job(r#"{"devices": 10, "operations": 30, "rare_event":
+                {"metric": "total_bounce_s", "above": 0.02, "max_evaluations": 1000000},
+                "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                  "distribution": {"kind": "uniform", "min": 0.2, "max": 0.3}}]}"#);
+        let error = job.check_size(1_000_000, &Pointer::root()).unwrap_err();
+        assert_eq!(error.pointers(), ["/rare_event/max_evaluations"], "{error}");
+        assert!(
+            error.errors()[0]
+                .detail
+                .contains("at most for the rare event, 300 for the devices"),
+            "{error}"
         );
     }
 
