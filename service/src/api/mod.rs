@@ -279,6 +279,15 @@ impl FromRequest<AppState> for JsonText {
             return Err(ApiError::UnsupportedMediaType);
         }
         let limit = state.config.max_body_bytes;
+        // A body declared larger than the limit is refused before any of it is read, not after
+        // waiting for bytes a client may never send.
+        let declared = request
+            .headers()
+            .get(header::CONTENT_LENGTH)
+            .and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
+        if declared.is_some_and(|length| length > limit as u64) {
+            return Err(ApiError::TooLarge(limit));
+        }
         let bytes = Bytes::from_request(request, state)
             .await
             .map_err(|rejection| {
