@@ -27,7 +27,7 @@ use crate::linalg::{invert, smallest_pivot, solve};
 use crate::operation::{Fidelity, Needs, Operation, Simulation, simulate};
 use crate::paper_forms::{e_from_bounce_times, e1_from_first_bounce};
 use crate::restitution::KappaLaw;
-use crate::scenario::{Scenario, ScenarioSpec};
+use crate::scenario::{MAX_MAGNITUDE, MIN_MAGNITUDE, Scenario, ScenarioSpec};
 use crate::stats::student_t_975;
 use crate::wear::{DeviceWear, WearLaw};
 use serde::{Deserialize, Serialize};
@@ -1021,12 +1021,15 @@ fn check_observations(
         for quantity in FITTED {
             if let Some(value) = observation.measured(quantity) {
                 measured = true;
-                if value.is_finite() && value > 0.0 {
+                // A scenario's range of magnitudes: a simulated value can be compared with it.
+                if (MIN_MAGNITUDE..=MAX_MAGNITUDE).contains(&value) {
                     terms.push((i, quantity));
                 } else {
                     errors.push(FieldError {
                         pointer: at.child(quantity).to_string(),
-                        detail: format!("must be a positive number, got {value}"),
+                        detail: format!(
+                            "must be a positive number from {MIN_MAGNITUDE:e} to {MAX_MAGNITUDE:e}, got {value:e}"
+                        ),
                     });
                 }
             }
@@ -1781,6 +1784,24 @@ mod tests {
         assert_eq!(nested.pointers(), ["/bounds/material.kappa/0"]);
         let listed = request(r#"[0.2, 0.5]"#).unwrap_err();
         assert_eq!(listed.pointers(), ["/bounds"]);
+    }
+
+    /// A measured value beyond a scenario's magnitudes is refused at its field (a sweep of the
+    /// HTTP API found `first_bounce_s: 1e308` blamed on the starting scenario).
+    #[test]
+    fn a_measured_value_beyond_the_supported_range_names_its_field() {
+        for value in ["1e308", "1e31", "1e-31"] {
+            let text = format!(
+                r#"{{"fit": ["material.kappa"], "observations":
+                    [{{"first_bounce_s": 0.009}}, {{"first_bounce_s": {value}}}]}}"#
+            );
+            let invalid = calibrate(&CalibrationSpec::from_json(&text).unwrap()).unwrap_err();
+            assert_eq!(
+                invalid.pointers(),
+                ["/observations/1/first_bounce_s"],
+                "{invalid}"
+            );
+        }
     }
 
     #[test]
