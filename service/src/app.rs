@@ -91,6 +91,7 @@ impl Application {
             wake: Arc::clone(&workers.wake),
             metrics: telemetry::prometheus(),
             shutdown,
+            fits: api::calibrations::places_for_fits(),
         };
         Ok(Self {
             listener,

@@ -99,3 +99,55 @@ fn an_ill_posed_calibration_is_refused_naming_the_field() {
         400,
     );
 }
+
+/// A fit holds its place until it ends, even when its request gave up: a client cannot pile up
+/// fits beyond the cores by letting requests time out. Each fit went on running on the blocking
+/// pool after its request's 503, and its place went at once to the next request.
+#[test]
+fn a_fit_whose_request_timed_out_keeps_its_place_until_it_ends() {
+    let server = TestApp::start(
+        &temp_db("fit-places"),
+        &["--request-timeout-seconds", "0.25"],
+    );
+    let url = server.url("/v1/calibrations");
+    // A fit along wear curves of up to 10^5 operations: most of a second on a 2-core VM.
+    let observations: Vec<Value> = (0..4)
+        .map(|i| {
+            json!({
+                "operation": 25_000 * (i + 1),
+                "impact_velocity_m_s": 0.2 + 0.3 * f64::from(i) / 7.0,
+                "first_bounce_s": 0.009 + 0.0001 * f64::from(i),
+                "total_bounce_s": 0.02, "bounce_count": 4,
+                "eroded_mass_kg": 1e-9 * f64::from(i + 1), "arc_energy_j": 1.0
+            })
+        })
+        .collect();
+    let slow = json!({
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "fit": ["material.kappa", "losses.impact_energy_loss_j"],
+        "observations": observations
+    })
+    .to_string();
+    let quick = measurements().to_string();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let gave_up: Vec<u16> = (0..cores)
+        .map(|_| {
+            let (url, slow) = (url.clone(), slow.clone());
+            std::thread::spawn(move || post(&url, &slow, None).status)
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .map(|request| request.join().unwrap())
+        .collect();
+    assert_eq!(gave_up, vec![503; cores]);
+    // Every place is still taken by a fit whose request gave up.
+    assert_eq!(post(&url, &quick, None).status, 503);
+    // Once they end, a fit runs again.
+    let started = std::time::Instant::now();
+    loop {
+        match post(&url, &quick, None).status {
+            503 => assert!(started.elapsed() < std::time::Duration::from_secs(60)),
+            status => break assert_eq!(status, 200),
+        }
+    }
+}

@@ -8,13 +8,13 @@ use super::error::{
 use super::{AppState, JsonText};
 use crate::plots::{calibration_panels, calibration_svg};
 use axum::Json;
-use axum::extract::Query;
 use axum::extract::rejection::QueryRejection;
+use axum::extract::{Query, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use bouncewear_model::calibration::{Calibration, CalibrationSpec, calibrate};
 use serde::Deserialize;
-use std::sync::LazyLock;
+use std::sync::Arc;
 use tokio::sync::Semaphore;
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
@@ -24,11 +24,16 @@ pub fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new().routes(routes!(create_calibration))
 }
 
-/// Fits run off the async runtime, at most one per core at a time: a fit is bounded (at most
-/// 1000 observations and 8 parameters, well under a second each on one core), and the rest wait
-/// their turn within the request timeout.
-static FITS: LazyLock<Semaphore> =
-    LazyLock::new(|| Semaphore::new(std::thread::available_parallelism().map_or(1, |n| n.get())));
+/// Places for fits, one per core: fits run off the async runtime, each holding its place until
+/// it ends, and the rest wait their turn within the request timeout. A fit is bounded (at most
+/// 1000 observations and 8 parameters) but may take minutes along wear curves, and it cannot be
+/// stopped: a request that gives up (503 at the request timeout) leaves its fit running, still in
+/// its place, so that clients who let requests time out cannot pile up fits beyond the cores.
+pub fn places_for_fits() -> Arc<Semaphore> {
+    Arc::new(Semaphore::new(
+        std::thread::available_parallelism().map_or(1, |n| n.get()),
+    ))
+}
 
 /// The representation of a calibration.
 #[derive(Debug, Clone, Copy, Default, Deserialize, ToSchema)]
@@ -69,16 +74,18 @@ pub struct CalibrationQuery {
     security((), ("api_key" = []))
 )]
 pub async fn create_calibration(
+    State(state): State<AppState>,
     query: Result<Query<CalibrationQuery>, QueryRejection>,
     JsonText(body): JsonText,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
     let spec = CalibrationSpec::from_json(&body)?;
-    let _turn = FITS
-        .acquire()
+    let place = Arc::clone(&state.fits)
+        .acquire_owned()
         .await
         .map_err(|_| Internal("the calibration queue is closed".into()))?;
     let (spec, fit) = tokio::task::spawn_blocking(move || {
+        let _place = place;
         let fit = calibrate(&spec);
         (spec, fit)
     })

@@ -54,6 +54,8 @@ pub struct AppState {
     pub shutdown: tokio::sync::watch::Receiver<bool>,
     /// The one watcher of the queue behind every event stream.
     pub watch: Arc<watch::JobWatch>,
+    /// Places for calibration fits ([`calibrations::places_for_fits`]).
+    pub fits: Arc<tokio::sync::Semaphore>,
 }
 
 #[derive(OpenApi)]
