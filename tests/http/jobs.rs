@@ -461,6 +461,18 @@ fn bad_requests_get_the_right_4xx_problem() {
     );
     let jobs = server.url("/v1/jobs");
     assert_problem(&post(&jobs, "{\"devices\": 1", None), 400);
+    // A path segment that is not UTF-8 once percent-decoded: a problem, not axum's plain text.
+    for path in [
+        "/v1/jobs/%FF",
+        "/v1/jobs/%C3%28/result",
+        "/v1/schedules/%FF/runs",
+    ] {
+        let problem = assert_problem(&get(&server.url(path), None), 400);
+        assert!(
+            problem["detail"].as_str().unwrap().contains("UTF-8"),
+            "{problem}"
+        );
+    }
     assert_problem(&post(&jobs, "[1, 2]", None), 422);
     assert_problem(
         &reply(

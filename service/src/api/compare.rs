@@ -3,6 +3,7 @@
 //! Results by `bouncewear_model::montecarlo::compare` and `crate::plots`.
 
 use super::AppState;
+use super::Path;
 use super::cache::{NotModified, immutable};
 use super::error::{
     ApiError, PROBLEM, Problem,
@@ -14,7 +15,7 @@ use crate::domain::{JobId, Owner};
 use crate::plots;
 use axum::Extension;
 use axum::extract::rejection::QueryRejection;
-use axum::extract::{Path, Query, State};
+use axum::extract::{Query, State};
 use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
 use bouncewear_model::montecarlo::JobResult;

@@ -4,6 +4,7 @@
 //! leave every other request of the page waiting.
 
 use super::AppState;
+use super::Path;
 use super::error::ApiError;
 use super::error::responses::{NoSuchJob, TooManyStreams, Unauthorized};
 use super::jobs::{JobResource, Progress, ServerSentEvent};
@@ -11,7 +12,7 @@ use super::watch::{Snapshot, Subscription};
 use crate::domain::{JobId, JobStatus, Owner};
 use crate::store::{JobRecord, StoreError};
 use axum::Extension;
-use axum::extract::{Path, State};
+use axum::extract::State;
 use axum::http::HeaderMap;
 use axum::response::sse::{Event, KeepAlive, Sse};
 use futures_util::stream::Stream;

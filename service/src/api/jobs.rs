@@ -1,5 +1,6 @@
 //! `/v1/jobs`: submit, list, inspect, cancel, results, distributions and live progress.
 
+use super::Path;
 use super::cache::{
     NotModified, Tagged, immutable, immutable_identified, immutable_tagged, not_modified,
 };
@@ -14,7 +15,7 @@ use crate::domain::{AfterRunQuery, JobId, JobStatus, Once, Owner, QueuedJob, Uni
 use crate::store::{JobRecord, Operations, Page, ShardRecord, StoreError};
 use axum::body::{Body, Bytes};
 use axum::extract::rejection::QueryRejection;
-use axum::extract::{Path, Query, State};
+use axum::extract::{Query, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};

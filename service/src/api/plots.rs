@@ -2,6 +2,7 @@
 //! plot and sensitivity indices, and a schedule's trend. The dashboard and `bouncewear run --plots` show the same pictures.
 
 use super::AppState;
+use super::Path;
 use super::error::{
     ApiError, PROBLEM, Problem,
     responses::{BadQuery, NotSucceeded, Unauthorized},
@@ -12,7 +13,7 @@ use crate::domain::{JobId, Owner, ScheduleId};
 use crate::plots::{self, TrendPoint};
 use axum::Extension;
 use axum::extract::rejection::QueryRejection;
-use axum::extract::{Path, Query, State};
+use axum::extract::{Query, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use chrono::DateTime;

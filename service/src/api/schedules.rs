@@ -1,5 +1,6 @@
 //! `/v1/schedules`: nightly (or any cron) runs of a job template, and their trend.
 
+use super::Path;
 use super::error::{
     ApiError,
     responses::{BadQuery, BodyRejected, NoSuchSchedule, QueueFull, Unauthorized},
@@ -12,7 +13,7 @@ use crate::domain::{
 };
 use crate::store::{NewRun, RunSlot, ScheduleRecord};
 use axum::extract::rejection::QueryRejection;
-use axum::extract::{Path, Query, State};
+use axum::extract::{Query, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
