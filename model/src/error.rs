@@ -262,6 +262,17 @@ impl<'de> serde::de::DeserializeSeed<'de> for GivenTwice {
     }
 }
 
+/// A number as an error message shows it: as Rust writes it (the shortest text that reads back to
+/// it), but in exponent form where that would be a long run of digits (`-1e308` is 309 of them).
+pub fn shown(x: f64) -> String {
+    let magnitude = x.abs();
+    if magnitude != 0.0 && !(1e-5..1e16).contains(&magnitude) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
 /// The most characters any text in a document may have: a name, a label, a cron expression, a
 /// metric's name, and the name of any member. Longer text is never a mistake worth storing.
 pub const MAX_TEXT_CHARS: usize = 200;
@@ -393,6 +404,24 @@ mod tests {
         assert_eq!(from_json::<i64>("-4.0", &[]), Ok(-4));
         assert!(from_json::<u64>("2.5", &[]).is_err());
         assert!(from_json::<u64>("1.8446744073709552e19", &[]).is_err());
+    }
+
+    #[test]
+    fn a_number_in_a_message_is_short() {
+        let cases = [
+            (1e308, "1e308"),
+            (-1e308, "-1e308"),
+            (1e16, "1e16"),
+            (123456.5, "123456.5"),
+            (-1.0, "-1"),
+            (0.0, "0"),
+            (0.00025, "0.00025"),
+            (1e-7, "1e-7"),
+            (f64::NAN, "NaN"),
+        ];
+        for (x, text) in cases {
+            assert_eq!(shown(x), text);
+        }
     }
 
     #[test]

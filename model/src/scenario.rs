@@ -5,7 +5,7 @@
 //! every rule of docs/model.md section 9; it can only be built by [`Scenario::new`], so the hot
 //! loop never re-validates.
 
-use crate::error::{FieldError, InvalidInput, Pointer};
+use crate::error::{FieldError, InvalidInput, Pointer, shown};
 use serde::{Deserialize, Serialize};
 
 /// Every positive physical quantity must lie in `[MIN_MAGNITUDE, MAX_MAGNITUDE]` (and a non-negative
@@ -388,8 +388,12 @@ fn check_number(errors: &mut Vec<FieldError>, pointer: Pointer, value: f64, rule
         Some("must be a finite number".to_owned())
     } else {
         match rule {
-            Rule::Positive if value <= 0.0 => Some(format!("must be positive, got {value}")),
-            Rule::NonNegative if value < 0.0 => Some(format!("must be non-negative, got {value}")),
+            Rule::Positive if value <= 0.0 => {
+                Some(format!("must be positive, got {}", shown(value)))
+            }
+            Rule::NonNegative if value < 0.0 => {
+                Some(format!("must be non-negative, got {}", shown(value)))
+            }
             Rule::Positive | Rule::NonNegative
                 if value != 0.0 && !(MIN_MAGNITUDE..=MAX_MAGNITUDE).contains(&value) =>
             {

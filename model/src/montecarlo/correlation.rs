@@ -4,7 +4,7 @@
 //! draw `F_i^-1(Phi(y_i))` of its own (truncated) marginal.
 
 use super::scatter::{Parameter, Per, ScatterSpec};
-use crate::error::{FieldError, Pointer};
+use crate::error::{FieldError, Pointer, shown};
 use crate::linalg::cholesky_above;
 use serde::{Deserialize, Serialize};
 
@@ -162,9 +162,9 @@ fn check_matrix(matrix: &[Vec<f64>], at: &Pointer, fail: &mut impl FnMut(Pointer
         }
         for (j, &value) in row.iter().enumerate() {
             let detail = if !(-1.0..=1.0).contains(&value) {
-                format!("must be from -1 to 1, got {value}")
+                format!("must be from -1 to 1, got {}", shown(value))
             } else if i == j && value != 1.0 {
-                format!("must be 1 (a diagonal entry), got {value}")
+                format!("must be 1 (a diagonal entry), got {}", shown(value))
             } else if j > i && matrix[j].get(i).is_some_and(|&mirror| mirror != value) {
                 format!(
                     "must equal entry [{j}][{i}] ({}): the matrix is symmetric",

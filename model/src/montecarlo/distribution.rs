@@ -1,7 +1,7 @@
 //! Scatter distributions (docs/contract.md "Job", `D`): validation against the parameter they feed,
 //! random draws (rand_distr) and inverse CDFs (for Latin hypercube sampling).
 
-use crate::error::{FieldError, Pointer};
+use crate::error::{FieldError, Pointer, shown};
 use crate::scenario::MAX_MAGNITUDE;
 use rand::RngExt;
 use rand::distr::{Distribution as _, Open01};
@@ -481,7 +481,10 @@ impl Faults<'_> {
         self.lowest_in("min", min, domain);
         self.max_above_min(max, min);
         if !(mode >= min && mode <= max) {
-            self.fail("mode", format!("must lie in [min, max], got {mode}"));
+            self.fail(
+                "mode",
+                format!("must lie in [min, max], got {}", shown(mode)),
+            );
         }
         let triangular = Triangular::new(min, max, mode).ok()?;
         Some(Distribution::Triangular {
@@ -536,7 +539,7 @@ impl Faults<'_> {
 
     fn positive(&mut self, field: &str, value: f64) {
         if !(value.is_finite() && value > 0.0) {
-            self.fail(field, format!("must be positive, got {value}"));
+            self.fail(field, format!("must be positive, got {}", shown(value)));
         }
     }
 
@@ -546,8 +549,9 @@ impl Faults<'_> {
             self.fail(
                 field,
                 format!(
-                    "must be {} for this parameter, got {value}",
-                    domain.describe()
+                    "must be {} for this parameter, got {}",
+                    domain.describe(),
+                    shown(value)
                 ),
             );
         }
@@ -613,7 +617,10 @@ impl Faults<'_> {
 
     fn max_above_min(&mut self, max: f64, min: f64) {
         if !(max.is_finite() && max > min) {
-            self.fail("max", format!("must be finite and above min, got {max}"));
+            self.fail(
+                "max",
+                format!("must be finite and above min, got {}", shown(max)),
+            );
         }
     }
 
