@@ -484,6 +484,24 @@ fn bad_requests_get_the_right_4xx_problem() {
         415,
     );
     assert_problem(&reply(agent().post(&jobs).send("{}")), 415);
+    // A compressed body is not decoded: 415 naming its encoding, not "not UTF-8".
+    let gzipped = assert_problem(
+        &reply(
+            agent()
+                .post(&jobs)
+                .header("content-type", "application/json")
+                .header("content-encoding", "gzip")
+                .send(&b"\x1f\x8b\x08\x00"[..]),
+        ),
+        415,
+    );
+    assert!(
+        gzipped["detail"]
+            .as_str()
+            .unwrap()
+            .contains("Content-Encoding: gzip"),
+        "{gzipped}"
+    );
     assert_problem(
         &post(
             &jobs,

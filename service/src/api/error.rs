@@ -60,6 +60,8 @@ pub enum ApiError {
     TooLarge(usize),
     #[error("the request body must be application/json in UTF-8 (no charset, or charset=utf-8)")]
     UnsupportedMediaType,
+    #[error("a request body is read as it is sent: send it without `Content-Encoding: {0}`")]
+    UnsupportedEncoding(String),
     #[error(
         "the queue is full: it holds at most {} unfinished jobs in all and {} per API key; retry later",
         .0.total,
@@ -131,7 +133,9 @@ impl ApiError {
             ApiError::NotFound(_) => StatusCode::NOT_FOUND,
             ApiError::Conflict(_) => StatusCode::CONFLICT,
             ApiError::TooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
-            ApiError::UnsupportedMediaType => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            ApiError::UnsupportedMediaType | ApiError::UnsupportedEncoding(_) => {
+                StatusCode::UNSUPPORTED_MEDIA_TYPE
+            }
             ApiError::QueueFull(_) | ApiError::TooManyStreams(_) => StatusCode::TOO_MANY_REQUESTS,
             ApiError::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::BodyTimeout(_) => StatusCode::REQUEST_TIMEOUT,
@@ -245,7 +249,7 @@ pub mod responses {
         TooLarge(Problem),
         #[response(
             status = 415,
-            description = "Body is not `application/json` in UTF-8 (another type, or a charset other than utf-8)",
+            description = "Body is not `application/json` in UTF-8 (another type, or a charset other than utf-8), or comes with a `Content-Encoding`",
             content_type = "application/problem+json"
         )]
         NotJson(Problem),

@@ -267,9 +267,9 @@ impl<S: Send + Sync, T: serde::de::DeserializeOwned + Send> FromRequestParts<S> 
     }
 }
 
-/// A JSON request body as text: `application/json` in UTF-8 (415 for another type or charset), at
-/// most `max_body_bytes` (413), whole within the body timeout (408), UTF-8 indeed (400). Parsing is
-/// left to the model, whose errors name the field.
+/// A JSON request body as text: `application/json` in UTF-8 (415 for another type or charset, or
+/// for a `Content-Encoding`), at most `max_body_bytes` (413), whole within the body timeout (408),
+/// UTF-8 indeed (400). Parsing is left to the model, whose errors name the field.
 pub struct JsonText(pub String);
 
 /// Whether a `Content-Type` says JSON in UTF-8: `application/json` or `application/*+json`, with
@@ -298,6 +298,14 @@ impl FromRequest<AppState> for JsonText {
             .unwrap_or("");
         if !is_utf8_json(content_type) {
             return Err(ApiError::UnsupportedMediaType);
+        }
+        // A compressed body would be read as its compressed bytes (RFC 7694: 415).
+        let encoding = request
+            .headers()
+            .get(header::CONTENT_ENCODING)
+            .map(|v| String::from_utf8_lossy(v.as_bytes()).trim().to_owned());
+        if let Some(encoding) = encoding.filter(|e| !e.eq_ignore_ascii_case("identity")) {
+            return Err(ApiError::UnsupportedEncoding(encoding));
         }
         let limit = state.config.max_body_bytes;
         // A body declared larger than the limit is refused before any of it is read, not after
