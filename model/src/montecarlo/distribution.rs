@@ -560,8 +560,8 @@ impl Faults<'_> {
     /// Every value the distribution can produce within a scenario's magnitudes: its `max`, or
     /// without one its value at the farthest score of any draw ([`MAX_SCORE`]), at most
     /// [`MAX_MAGNITUDE`], and for a domain without a lower end its `min` (or value at `-MAX_SCORE`)
-    /// at least the negative. An untruncated distribution that reaches
-    /// beyond is told to add a `max` (or `min`), as one that reaches below its domain is.
+    /// at least the negative. An untruncated distribution that reaches beyond is told to add a
+    /// `max` (or `min`), as one that reaches below its domain is.
     fn within_magnitude(
         &mut self,
         distribution: &Distribution,
@@ -569,46 +569,35 @@ impl Faults<'_> {
         domain: Domain,
     ) {
         let (min, max) = spec.bounds();
-        let top = max.unwrap_or_else(|| distribution.at_normal(MAX_SCORE));
-        if !(top.is_finite() && top <= MAX_MAGNITUDE) {
-            match (spec, max) {
-                (DistributionSpec::Fixed { value }, _) => self.fail(
-                    "value",
-                    format!("must be at most {MAX_MAGNITUDE:e} for this parameter, got {value:e}"),
-                ),
-                (_, Some(max)) => self.fail(
-                    "max",
-                    format!("must be at most {MAX_MAGNITUDE:e} for this parameter, got {max:e}"),
-                ),
-                (_, None) => self.fail(
-                    "max",
-                    format!(
-                        "this distribution reaches {top:e} at {MAX_SCORE} standard deviations, above \
-                         the {MAX_MAGNITUDE:e} this parameter may take; add a \"max\" of at most \
-                         {MAX_MAGNITUDE:e} to truncate it"
-                    ),
-                ),
+        let ends = [
+            (1.0, "max", max, "at most", "above", true),
+            (
+                -1.0,
+                "min",
+                min,
+                "at least",
+                "below",
+                domain.lower < -MAX_MAGNITUDE,
+            ),
+        ];
+        for (sign, field, given, within, beyond, checked) in ends {
+            let reach = given.unwrap_or_else(|| distribution.at_normal(sign * MAX_SCORE));
+            if !checked || (reach.is_finite() && sign * reach <= MAX_MAGNITUDE) {
+                continue;
             }
-        }
-        let bottom = min.unwrap_or_else(|| distribution.at_normal(-MAX_SCORE));
-        if domain.lower < -MAX_MAGNITUDE && !(bottom.is_finite() && bottom >= -MAX_MAGNITUDE) {
-            match (spec, min) {
-                (DistributionSpec::Fixed { value }, _) => self.fail(
-                    "value",
-                    format!(
-                        "must be at least -{MAX_MAGNITUDE:e} for this parameter, got {value:e}"
-                    ),
-                ),
-                (_, Some(min)) => self.fail(
-                    "min",
-                    format!("must be at least -{MAX_MAGNITUDE:e} for this parameter, got {min:e}"),
-                ),
+            let limit = format!("{:e}", sign * MAX_MAGNITUDE);
+            let detail =
+                |got: f64| format!("must be {within} {limit} for this parameter, got {got:e}");
+            match (spec, given) {
+                (DistributionSpec::Fixed { value }, _) => self.fail("value", detail(*value)),
+                (_, Some(bound)) => self.fail(field, detail(bound)),
                 (_, None) => self.fail(
-                    "min",
+                    field,
                     format!(
-                        "this distribution reaches {bottom:e} at -{MAX_SCORE} standard deviations, \
-                         below the -{MAX_MAGNITUDE:e} this parameter may take; add a \"min\" of at \
-                         least -{MAX_MAGNITUDE:e} to truncate it"
+                        "this distribution reaches {reach:e} at {} standard deviations, {beyond} \
+                         the {limit} this parameter may take; add a \"{field}\" of {within} \
+                         {limit} to truncate it",
+                        sign * MAX_SCORE
                     ),
                 ),
             }
