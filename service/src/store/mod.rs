@@ -71,6 +71,13 @@ impl StoreError {
         }
     }
 
+    /// Whether the database rolled the transaction back to break a deadlock between it and
+    /// another (PostgreSQL's `40P01`): run again, it goes through.
+    pub(crate) fn is_deadlock(&self) -> bool {
+        matches!(self, StoreError::Database(sqlx::Error::Database(error))
+            if error.code().as_deref() == Some("40P01"))
+    }
+
     /// Whether the database failed to answer for now (unreachable, busy, out of space, read-only,
     /// not ready): a retry later may succeed. Any other failure is the stored data's or ours.
     pub fn is_unavailable(&self) -> bool {

@@ -26,6 +26,32 @@ use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::{Job, JobSpec};
 use tokio::sync::broadcast;
 
+/// How often a job's delete is tried when the database broke a deadlock by rolling it back.
+const DELETE_ATTEMPTS: u32 = 3;
+
+impl SqlStore {
+    /// Deletes a job that ended, and its schedule run, in one transaction.
+    async fn delete_ended_job(&self, owner: &Owner, id: &JobId) -> StoreResult<()> {
+        let mut tx = self.begin().await?;
+        let deleted = Sql::new(DELETE_ENDED_JOB)
+            .bind(id.as_str())
+            .bind(owner.as_str())
+            .execute(&mut tx)
+            .await?;
+        if deleted == 0 {
+            let job = select_job(&mut tx, owner, id).await?;
+            return Err(not_ended(&job));
+        }
+        Sql::new(DELETE_RUN_OF_JOB)
+            .bind(id.as_str())
+            .execute(&mut tx)
+            .await?;
+        tx.commit().await?;
+        self.ended(id);
+        Ok(())
+    }
+}
+
 // ---- idempotency keys ----------------------------------------------------------------------
 
 impl SqlStore {
@@ -416,23 +442,20 @@ impl JobQueue for SqlStore {
 
     #[tracing::instrument(skip_all, fields(job = %id))]
     async fn delete_job(&self, owner: &Owner, id: &JobId) -> StoreResult<()> {
-        let mut tx = self.begin().await?;
-        let deleted = Sql::new(DELETE_ENDED_JOB)
-            .bind(id.as_str())
-            .bind(owner.as_str())
-            .execute(&mut tx)
-            .await?;
-        if deleted == 0 {
-            let job = select_job(&mut tx, owner, id).await?;
-            return Err(not_ended(&job));
+        // The delete locks the job, then its shards; a worker's heartbeat locks its shard, then
+        // the job (its progress): deleting a job just cancelled while a heartbeat of it is under
+        // way can deadlock, and PostgreSQL then rolls one of the two back (a 503 for the delete,
+        // seen once in CI). Run again, the heartbeat has ended.
+        let mut attempt = 1;
+        loop {
+            match self.delete_ended_job(owner, id).await {
+                Err(error) if error.is_deadlock() && attempt < DELETE_ATTEMPTS => {
+                    tracing::warn!(%error, attempt, "deleting the job met a heartbeat's locks");
+                    attempt += 1;
+                }
+                done => return done,
+            }
         }
-        Sql::new(DELETE_RUN_OF_JOB)
-            .bind(id.as_str())
-            .execute(&mut tx)
-            .await?;
-        tx.commit().await?;
-        self.ended(id);
-        Ok(())
     }
 
     #[tracing::instrument(skip_all)]
