@@ -1024,11 +1024,14 @@ async fn a_cancelled_job_keeps_no_accumulators(url: &str) {
     let stats = run_group(&job, Batch::of(&job, 0).unwrap(), 0, &Silent).unwrap();
     assert!(store.complete(&claim.fence, &stats).await.unwrap());
     assert_eq!(stored_groups(store.as_ref(), &id, &job).await.len(), 1);
-    store
-        .cancel(&Owner::anonymous(), &id, UnixMs(9))
-        .await
-        .unwrap();
+    let owner = Owner::anonymous();
+    let with_group = store.job(&owner, &id).await.unwrap().stored_bytes;
+    let cancelled = store.cancel(&owner, &id, UnixMs(9)).await.unwrap();
     assert!(stored_groups(store.as_ref(), &id, &job).await.is_empty());
+    // The answer is the job as the cancel left it: its spec alone, the group dropped.
+    let spec_only = store.job(&owner, &id).await.unwrap().stored_bytes;
+    assert!(spec_only < with_group, "{spec_only} < {with_group}");
+    assert_eq!(cancelled.stored_bytes, spec_only);
     assert!(
         store
             .claim("w", terms(0), budget(2))

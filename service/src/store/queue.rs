@@ -416,6 +416,9 @@ impl JobQueue for SqlStore {
 
     #[tracing::instrument(skip_all, fields(job = %id))]
     async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord> {
+        // The job ends and what its run left goes in one transaction: a crash between the two
+        // would have left a cancelled job's accumulators counted in its stored bytes.
+        let mut tx = self.begin().await?;
         let row = Sql::new(concat!(
             "UPDATE jobs SET status = 'cancelled', finished_at = $3 \
              WHERE id = $1 AND owner = $2 AND status IN ('queued', 'running') RETURNING ",
@@ -424,16 +427,18 @@ impl JobQueue for SqlStore {
         .bind(id.as_str())
         .bind(owner.as_str())
         .bind(now.0)
-        .fetch_optional(self.writer()?)
+        .fetch_optional(&mut tx)
         .await?;
-        if let Some(row) = row {
-            let mut tx = self.begin().await?;
+        if row.is_some() {
             drop_unfinished(&mut tx, id).await?;
+            // As it is now: its stored bytes without what was dropped.
+            let cancelled = select_job(&mut tx, owner, id).await?;
             tx.commit().await?;
             self.ended(id);
-            return Ok(job_from_row(&row)?);
+            return Ok(cancelled);
         }
-        let ended = select_job(self.writer()?, owner, id).await?;
+        let ended = select_job(&mut tx, owner, id).await?;
+        tx.rollback().await?;
         Err(StoreError::Conflict(format!(
             "job {id} already ended: {}",
             ended.status.as_str()
