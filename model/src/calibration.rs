@@ -24,6 +24,7 @@
 
 use crate::error::{FieldError, InvalidInput, Pointer};
 use crate::linalg::{invert, smallest_pivot, solve};
+use crate::montecarlo::Cancelled;
 use crate::operation::{Fidelity, Needs, Operation, Simulation, simulate};
 use crate::paper_forms::{e_from_bounce_times, e1_from_first_bounce};
 use crate::restitution::KappaLaw;
@@ -33,6 +34,7 @@ use crate::wear::{DeviceWear, WearLaw};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use std::collections::{BTreeMap, BTreeSet};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 pub mod study;
 
@@ -208,7 +210,7 @@ pub struct Calibration {
 
 /// The request, checked: the starting scenario as JSON (every field present), the parameters'
 /// places in it, and the observations.
-struct Problem {
+struct Problem<'c> {
     base: Value,
     parameters: Vec<(String, Vec<String>)>,
     observations: Vec<Observation>,
@@ -216,6 +218,8 @@ struct Problem {
     terms: Vec<(usize, &'static str)>,
     /// `[ln lower, ln upper]` of each parameter (unbounded: the whole line).
     bounds_ln: Vec<[f64; 2]>,
+    /// Set once nobody waits for the fit any more ([`calibrate_until`]).
+    cancel: Option<&'c AtomicBool>,
 }
 
 impl CalibrationSpec {
@@ -228,7 +232,30 @@ impl CalibrationSpec {
 /// Fits the request's parameters; an invalid request or an ill-posed fit is an error naming the
 /// field at fault.
 pub fn calibrate(spec: &CalibrationSpec) -> Result<Calibration, InvalidInput> {
-    let problem = Problem::new(spec)?;
+    fit(Problem::new(spec)?)
+}
+
+/// [`calibrate`], stopped once `cancel` is set: each evaluation of the fit then fails at once (one
+/// along a wear curve within 1024 simulated operations), so the fit ends within about one
+/// evaluation, with [`Cancelled`]. A fit along wear curves may take minutes; a service stops it
+/// when the request that waits for it has gone.
+pub fn calibrate_until(
+    spec: &CalibrationSpec,
+    cancel: &AtomicBool,
+) -> Result<Result<Calibration, InvalidInput>, Cancelled> {
+    let fitted = Problem::new(spec).and_then(|problem| {
+        fit(Problem {
+            cancel: Some(cancel),
+            ..problem
+        })
+    });
+    if cancel.load(Ordering::Relaxed) {
+        return Err(Cancelled);
+    }
+    Ok(fitted)
+}
+
+fn fit(problem: Problem) -> Result<Calibration, InvalidInput> {
     let start: Vec<f64> = problem
         .parameters
         .iter()
@@ -249,7 +276,7 @@ fn relative_difference(simulated: f64, measured: f64) -> f64 {
     2.0 * (simulated - measured) / (simulated + measured)
 }
 
-impl Problem {
+impl Problem<'_> {
     fn new(spec: &CalibrationSpec) -> Result<Self, InvalidInput> {
         let mut errors = Vec::new();
         let root = Pointer::root();
@@ -287,7 +314,13 @@ impl Problem {
             parameters,
             observations: spec.observations.clone(),
             terms,
+            cancel: None,
         })
+    }
+
+    fn cancelled(&self) -> bool {
+        self.cancel
+            .is_some_and(|cancel| cancel.load(Ordering::Relaxed))
     }
 
     /// `theta` moved onto its bounds where it lies beyond them (a projected step).
@@ -344,11 +377,26 @@ impl Problem {
     }
 
     /// Every observation simulated at `theta` on the surface its place in the endurance test
-    /// gives, with the eroded mass up to it; `None` where the scenario breaks a rule.
+    /// gives, with the eroded mass up to it; `None` where the scenario breaks a rule, or once the
+    /// fit is cancelled.
     fn simulate_all(&self, theta: &[f64]) -> Option<Vec<Measured>> {
+        self.simulate_until(theta, &|| self.cancelled())
+    }
+
+    /// [`Problem::simulate_all`] at the optimum, for the report, whether or not the fit was
+    /// cancelled meanwhile (its caller drops the report then).
+    fn simulate_optimum(&self, theta: &[f64]) -> Vec<Measured> {
+        self.simulate_until(theta, &|| false)
+            .expect("the optimum simulates")
+    }
+
+    fn simulate_until(&self, theta: &[f64], cancelled: &dyn Fn() -> bool) -> Option<Vec<Measured>> {
+        if cancelled() {
+            return None;
+        }
         let scenario = self.scenario(theta)?;
         let law = WearLaw::new(&scenario);
-        let energies = self.arc_energy_before(&scenario, &law);
+        let energies = self.arc_energy_before(&scenario, &law, cancelled)?;
         let operations = self.operations(theta)?;
         let reference = *operations.first()?.kappa_law();
         Some(
@@ -370,8 +418,14 @@ impl Problem {
     }
 
     /// The cumulative arc energy before each operation an observation is from: one device run
-    /// through the endurance test at the scenario's own conditions.
-    fn arc_energy_before(&self, scenario: &Scenario, law: &WearLaw) -> BTreeMap<u64, f64> {
+    /// through the endurance test at the scenario's own conditions; `None` once `cancelled`
+    /// (asked every 1024 operations).
+    fn arc_energy_before(
+        &self,
+        scenario: &Scenario,
+        law: &WearLaw,
+        cancelled: &dyn Fn() -> bool,
+    ) -> Option<BTreeMap<u64, f64>> {
         let wanted: BTreeSet<u64> = self
             .observations
             .iter()
@@ -383,6 +437,9 @@ impl Problem {
         let mut wear = DeviceWear::default();
         let mut energies = BTreeMap::new();
         for j in 0..=last {
+            if j % 1024 == 1023 && cancelled() {
+                return None;
+            }
             if wanted.contains(&j) {
                 energies.insert(j, wear.cumulative_arc_energy_j);
             }
@@ -392,12 +449,16 @@ impl Problem {
                 wear.add(&op.run(radius_m, pressure_pa, Needs::ALL, None));
             }
         }
-        energies
+        Some(energies)
     }
 
     /// The relative residual of every term at `theta`.
     fn residuals(&self, theta: &[f64]) -> Option<Vec<f64>> {
-        let outcomes = self.simulate_all(theta)?;
+        self.residuals_of(&self.simulate_all(theta)?)
+    }
+
+    /// The relative residual of every term, the observations simulated as `outcomes`.
+    fn residuals_of(&self, outcomes: &[Measured]) -> Option<Vec<f64>> {
         let residuals: Vec<f64> = self
             .terms
             .iter()
@@ -572,7 +633,8 @@ impl Problem {
     }
 
     fn report(&self, theta: &[f64], iterations: u32) -> Result<Calibration, InvalidInput> {
-        let residuals = self.residuals(theta).expect("the optimum simulates");
+        let outcomes = self.simulate_optimum(theta);
+        let residuals = self.residuals_of(&outcomes).expect("the optimum simulates");
         let all: Vec<usize> = (0..theta.len()).collect();
         let jacobian = self.jacobian(theta, &residuals, &all).unwrap_or_else(|| {
             // Neither side of the optimum simulates: no slope, refused as unidentifiable below.
@@ -599,8 +661,8 @@ impl Problem {
         Ok(Calibration {
             estimates,
             scenario: self.spec(theta).expect("the optimum is a scenario"),
-            residuals: self.residuals_by_quantity(theta),
-            restitution_from_bounce_times: self.readings(theta),
+            residuals: self.residuals_by_quantity(&outcomes),
+            restitution_from_bounce_times: self.readings(theta, outcomes),
             iterations,
             residual_sd: optimum.variance.sqrt(),
             correlation,
@@ -687,8 +749,7 @@ impl Problem {
 
     /// The differences simulated minus measured at `theta`, by quantity, with their relative
     /// root mean square.
-    fn residuals_by_quantity(&self, theta: &[f64]) -> BTreeMap<String, Residuals> {
-        let outcomes = self.simulate_all(theta).expect("the optimum simulates");
+    fn residuals_by_quantity(&self, outcomes: &[Measured]) -> BTreeMap<String, Residuals> {
         let mut by_quantity: BTreeMap<String, (Vec<f64>, f64)> = BTreeMap::new();
         for (i, observation) in self.observations.iter().enumerate() {
             for quantity in FITTED {
@@ -784,7 +845,7 @@ impl Bounded {
 /// it curves (the roughening energy's effect on a wear curve is not linear in its logarithm),
 /// the profile follows the curve and the interval grows on the side where the data bind less.
 struct Profile<'a> {
-    problem: &'a Problem,
+    problem: &'a Problem<'a>,
     /// The optimum.
     theta: &'a [f64],
     parameter: usize,
@@ -1112,10 +1173,10 @@ fn simulated(measured: &Measured, quantity: &str) -> f64 {
     }
 }
 
-impl Problem {
+impl Problem<'_> {
     /// The paper's readings of e1 and e2 off the measured bounce times, each with its bias under
-    /// the model at `theta`.
-    fn readings(&self, theta: &[f64]) -> BTreeMap<String, Reading> {
+    /// the model at `theta`, whose simulations are `outcomes`.
+    fn readings(&self, theta: &[f64], outcomes: Vec<Measured>) -> BTreeMap<String, Reading> {
         let operations = self.operations(theta).expect("the optimum simulates");
         let mut readings = BTreeMap::new();
         // e1 = u1 / u_i with u1 from T1 through eq. 4, against the model's own v1 / u_i.
@@ -1137,9 +1198,7 @@ impl Problem {
                 - second.separation_velocity_m_s / first.separation_velocity_m_s;
             Some((reading, modelled))
         };
-        let simulations: Vec<Simulation> = self
-            .simulate_all(theta)
-            .expect("the optimum simulates")
+        let simulations: Vec<Simulation> = outcomes
             .into_iter()
             .map(|measured| measured.simulation)
             .collect();
@@ -1369,6 +1428,45 @@ mod tests {
                     );
                     assert!(inside < t, "{name} inside {end}: {inside} against {t}");
                 }
+            }
+        }
+    }
+
+    /// A fit that may be cancelled but is not gives [`calibrate`]'s answer to the bit; one
+    /// cancelled before or while it runs ends with [`Cancelled`], without a panic at whatever
+    /// point the flag found it (the report at the optimum simulates whatever the flag says).
+    #[test]
+    fn a_fit_ends_with_cancelled_once_its_flag_is_set() {
+        let spec = wear_curve(2);
+        let flag = AtomicBool::new(false);
+        let fit = calibrate_until(&spec, &flag).unwrap().unwrap();
+        let alone = calibrate(&spec).unwrap();
+        assert_eq!(
+            serde_json::to_string(&fit).unwrap(),
+            serde_json::to_string(&alone).unwrap()
+        );
+        flag.store(true, Ordering::Relaxed);
+        assert_eq!(calibrate_until(&spec, &flag).unwrap_err(), Cancelled);
+        // Set from another thread at points spread over the fit's own time: whatever it was
+        // doing then, it ends with Cancelled (or, had it already ended, with its answer).
+        let started = std::time::Instant::now();
+        calibrate(&spec).unwrap();
+        let whole = started.elapsed();
+        for eighths in 0..8 {
+            let flag = AtomicBool::new(false);
+            let ended = std::thread::scope(|scope| {
+                scope.spawn(|| {
+                    std::thread::sleep(whole * eighths / 8);
+                    flag.store(true, Ordering::Relaxed);
+                });
+                calibrate_until(&spec, &flag)
+            });
+            match ended {
+                Err(Cancelled) => {}
+                Ok(fit) => assert_eq!(
+                    serde_json::to_string(&fit.unwrap()).unwrap(),
+                    serde_json::to_string(&alone).unwrap()
+                ),
             }
         }
     }

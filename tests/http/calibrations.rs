@@ -100,31 +100,24 @@ fn an_ill_posed_calibration_is_refused_naming_the_field() {
     );
 }
 
-/// A fit holds its place until it ends, even when its request gave up: a client cannot pile up
-/// fits beyond the cores by letting requests time out. Each fit went on running on the blocking
-/// pool after its request's 503, and its place went at once to the next request.
+/// A fit whose request has gone is stopped and gives its place back: a client cannot pile up
+/// fits beyond the cores by letting requests time out, nor keep the cores busy with requests it
+/// abandoned. Each fit here follows a wear curve to 60,000 operations (2.8 s alone on a 2-core
+/// Zen 4 VM); before fits could be stopped, each went on after its request's 503 and held its
+/// place to the end.
 #[test]
-fn a_fit_whose_request_timed_out_keeps_its_place_until_it_ends() {
+fn a_fit_whose_request_timed_out_is_stopped_and_frees_its_place() {
     let server = TestApp::start(
         &temp_db("fit-places"),
         &["--request-timeout-seconds", "0.25"],
     );
     let url = server.url("/v1/calibrations");
-    // A fit along wear curves of up to 10^5 operations: most of a second on a 2-core VM.
     let observations: Vec<Value> = (0..4)
-        .map(|i| {
-            json!({
-                "operation": 25_000 * (i + 1),
-                "impact_velocity_m_s": 0.2 + 0.3 * f64::from(i) / 7.0,
-                "first_bounce_s": 0.009 + 0.0001 * f64::from(i),
-                "total_bounce_s": 0.02, "bounce_count": 4,
-                "eroded_mass_kg": 1e-9 * f64::from(i + 1), "arc_energy_j": 1.0
-            })
-        })
+        .map(|i| json!({"operation": 15_000 * (i + 1), "first_bounce_s": 0.009 - 0.0005 * f64::from(i)}))
         .collect();
     let slow = json!({
         "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
-        "fit": ["material.kappa", "losses.impact_energy_loss_j"],
+        "fit": ["material.kappa", "material.roughening_energy_j"],
         "observations": observations
     })
     .to_string();
@@ -140,13 +133,15 @@ fn a_fit_whose_request_timed_out_keeps_its_place_until_it_ends() {
         .map(|request| request.join().unwrap())
         .collect();
     assert_eq!(gave_up, vec![503; cores]);
-    // Every place is still taken by a fit whose request gave up.
-    assert_eq!(post(&url, &quick, None).status, 503);
-    // Once they end, a fit runs again.
+    // The stopped fits gave their places back: a fit runs again at once, seconds before any of
+    // them would have ended on its own.
     let started = std::time::Instant::now();
     loop {
         match post(&url, &quick, None).status {
-            503 => assert!(started.elapsed() < std::time::Duration::from_secs(60)),
+            503 => assert!(
+                started.elapsed() < std::time::Duration::from_millis(1500),
+                "the places are still held"
+            ),
             status => break assert_eq!(status, 200),
         }
     }

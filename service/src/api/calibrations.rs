@@ -12,9 +12,10 @@ use axum::extract::rejection::QueryRejection;
 use axum::extract::{Query, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
-use bouncewear_model::calibration::{Calibration, CalibrationSpec, calibrate};
+use bouncewear_model::calibration::{Calibration, CalibrationSpec, calibrate_until};
 use serde::Deserialize;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use tokio::sync::Semaphore;
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
@@ -26,13 +27,25 @@ pub fn router() -> OpenApiRouter<AppState> {
 
 /// Places for fits, one per core: fits run off the async runtime, each holding its place until
 /// it ends, and the rest wait their turn within the request timeout. A fit is bounded (at most
-/// 1000 observations and 8 parameters) but may take minutes along wear curves, and it cannot be
-/// stopped: a request that gives up (503 at the request timeout) leaves its fit running, still in
-/// its place, so that clients who let requests time out cannot pile up fits beyond the cores.
+/// 1000 observations and 8 parameters) but may take minutes along wear curves: at the request
+/// timeout (503) it is stopped ([`StopOnDrop`]) and gives its place back within about one
+/// evaluation, never before, so that clients who let requests time out can neither pile up fits
+/// beyond the cores nor keep them busy past the timeout. (A client that closes its connection
+/// is not noticed before the timeout: hyper does not read a connection while it answers.)
 pub fn places_for_fits() -> Arc<Semaphore> {
     Arc::new(Semaphore::new(
         std::thread::available_parallelism().map_or(1, |n| n.get()),
     ))
+}
+
+/// Cancels a fit when dropped: when its handler ends, answered or not (the request timeout drops
+/// it unanswered).
+struct StopOnDrop(Arc<AtomicBool>);
+
+impl Drop for StopOnDrop {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
 }
 
 /// The representation of a calibration.
@@ -84,14 +97,17 @@ pub async fn create_calibration(
         .acquire_owned()
         .await
         .map_err(|_| Internal("the calibration queue is closed".into()))?;
+    let stop = StopOnDrop(Arc::new(AtomicBool::new(false)));
+    let cancel = Arc::clone(&stop.0);
     let (spec, fit) = tokio::task::spawn_blocking(move || {
         let _place = place;
-        let fit = calibrate(&spec);
+        let fit = calibrate_until(&spec, &cancel);
         (spec, fit)
     })
     .await
     .map_err(|e| Internal(format!("a calibration failed: {e}")))?;
-    let fit = fit?;
+    // Not cancelled: `stop` lives until here, and the fit has ended.
+    let fit = fit.map_err(|cancelled| Internal(cancelled.to_string()))??;
     Ok(match query.format.unwrap_or_default() {
         CalibrationFormat::Json => Json(fit).into_response(),
         CalibrationFormat::Svg => (
