@@ -297,6 +297,8 @@ impl LimitSpec {
 pub struct Job {
     spec: JobSpec,
     scenario: Scenario,
+    /// The scenario the engine runs: `scenario` with each fixed draw's value in place.
+    simulated: Scenario,
     seed: u64,
     bin_operations: u64,
     scatter: Vec<Scatter>,
@@ -375,8 +377,10 @@ impl Job {
         let seed = *spec.seed.get_or_insert_with(draw_seed);
         spec.bin_operations = Some(bin_operations);
         let (operation_metrics, device_metrics) = split_metrics(&metrics);
+        let scenario = scenario.expect("no errors");
         Ok(Self {
-            scenario: scenario.expect("no errors"),
+            simulated: with_fixed_draws(&scenario, &scatter),
+            scenario,
             spec,
             seed,
             bin_operations,
@@ -451,8 +455,19 @@ impl Job {
         &self.spec
     }
 
+    /// The scenario as the job gives it, defaults filled in.
     pub fn scenario(&self) -> &Scenario {
         &self.scenario
+    }
+
+    /// The scenario the engine runs: [`Job::scenario`] with the value of each `fixed` scatter
+    /// entry in place, so that a fixed draw gives the Result of the scenario that sets it, to the
+    /// bit (docs/contract.md, "Scatter"). A radius or a yield pressure drawn as a lane value of
+    /// the nominal scenario's operation rounds differently from the same value set in the
+    /// scenario: the nominal operation's constants (its kappa law's reference, the sums' shift)
+    /// are those of the scenario's own radius and pressure.
+    pub fn simulated_scenario(&self) -> &Scenario {
+        &self.simulated
     }
 
     pub fn seed(&self) -> u64 {
@@ -926,6 +941,17 @@ fn check_precision(
         statistic: statistic.expect("checked"),
         relative_half_width: spec.relative_half_width,
         max_devices: spec.max_devices,
+    })
+}
+
+/// `scenario` with the value of each `fixed` entry of `scatter` set in it.
+fn with_fixed_draws(scenario: &Scenario, scatter: &[Scatter]) -> Scenario {
+    scenario.with_draws(|spec| {
+        for entry in scatter {
+            if let Distribution::Fixed(value) = entry.distribution {
+                entry.parameter.set_in(spec, value);
+            }
+        }
     })
 }
 

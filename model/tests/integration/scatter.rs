@@ -100,6 +100,60 @@ fn a_fixed_draw_of_a_scenario_constant_runs_as_the_scenario_with_that_value() {
     }
 }
 
+/// The operation's arguments and conditions: drawn as a lane value of the nominal operation
+/// (radius, pressure, velocity) or as a condition, a fixed draw still gives the Result of the
+/// scenario that sets the value, to the bit, with other scatter beside it or none.
+#[test]
+fn a_fixed_draw_of_an_operation_value_runs_as_the_scenario_with_that_value() {
+    let lane_values = [
+        ("contact_radius_m", "/material/contact_radius_m", 5e-3),
+        (
+            "dynamic_yield_pressure_pa",
+            "/material/dynamic_yield_pressure_pa",
+            3e8,
+        ),
+        ("impact_velocity_m_s", "/mechanism/impact_velocity_m_s", 0.3),
+        ("drop_height_m", "/mechanism/drop_height_m", 2e-3),
+        ("static_force_n", "/mechanism/static_force_n", 0.5),
+        ("current_a", "/circuit/current_a", 10.0),
+    ];
+    for (parameter, field, value) in lane_values {
+        let scenario = json!({"circuit": {"supply_voltage_v": 48, "current_a": 15}});
+        let other = if parameter == "impact_velocity_m_s" {
+            json!({"parameter": "dynamic_yield_pressure_pa", "per": "device",
+                   "distribution": {"kind": "uniform", "min": 1.5e8, "max": 2.5e8}})
+        } else {
+            json!({"parameter": "impact_velocity_m_s", "per": "operation",
+                   "distribution": {"kind": "normal", "mean": 0.25, "sd": 0.02, "min": 0.1}})
+        };
+        for per in ["device", "operation"] {
+            for others in [vec![], vec![other.clone()]] {
+                let mut scatter = others.clone();
+                scatter.push(json!({"parameter": parameter, "per": per,
+                    "distribution": {"kind": "fixed", "value": value}}));
+                let shape = |scenario: Value, scatter: Vec<Value>| {
+                    job(
+                        json!({"devices": 9, "operations": 12, "bin_operations": 4, "seed": 5,
+                               "scenario": scenario, "scatter": scatter}),
+                    )
+                };
+                let drawn = run_on(2, &shape(scenario.clone(), scatter));
+                let given = run_on(
+                    2,
+                    &shape(with_value(scenario.clone(), field, value), others),
+                );
+                let with = if per == "device" {
+                    ""
+                } else {
+                    " per operation"
+                };
+                assert_eq!(drawn.operations, given.operations, "{parameter}{with}");
+                assert_eq!(drawn.devices, given.devices, "{parameter}{with}");
+            }
+        }
+    }
+}
+
 #[test]
 fn a_scattered_constant_changes_the_devices_it_is_drawn_for() {
     let scenario = json!({"circuit": {"supply_voltage_v": 48, "current_a": 15}});

@@ -34,7 +34,7 @@ pub(super) struct Plan<'a> {
 
 impl<'a> Plan<'a> {
     pub(super) fn new(job: &'a Job, kernel: Kernel) -> Self {
-        let scenario = job.scenario();
+        let scenario = job.simulated_scenario();
         let spec = scenario.spec();
         let model = Model::new(scenario);
         let nominal = Draws {
@@ -125,7 +125,7 @@ impl<'a> Plan<'a> {
         if draws.constants.is_empty() {
             return Cow::Borrowed(&self.model);
         }
-        let scenario = self.job.scenario().with_draws(|spec| {
+        let scenario = self.job.simulated_scenario().with_draws(|spec| {
             for &(parameter, value) in &draws.constants {
                 parameter.set_in(spec, value);
             }
