@@ -328,7 +328,7 @@ pub fn summarize_sensitivity(
         let regression = merged.regression[cell].standardised();
         let src = |input: usize| {
             let position = regressors.iter().position(|&r| r == input)?;
-            regression.as_ref().map(|r| r.coefficients[position])
+            regression.as_ref().and_then(|r| r.coefficients[position])
         };
         let levels = [
             (Per::Device, &device_inputs, merged.device.get(cell)),

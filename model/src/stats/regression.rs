@@ -13,6 +13,10 @@
 use crate::linalg::{smallest_pivot, solve};
 use serde::{Deserialize, Serialize};
 
+/// An input whose centred sum of squares is at most this share of its raw one does not vary:
+/// rounding leaves a few ulps of the raw sum where every sample is the same.
+const CONSTANT: f64 = 1e-9;
+
 /// Sums for the regression of one output on `k` inputs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RegressionAccumulator {
@@ -30,8 +34,9 @@ pub struct RegressionAccumulator {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StandardisedRegression {
-    /// `SRC_i`, in input order.
-    pub coefficients: Vec<f64>,
+    /// `SRC_i`, in input order; `None` for an input that does not vary (a fixed draw), which
+    /// has no standard deviation to scale by and is left out of the fit.
+    pub coefficients: Vec<Option<f64>>,
     /// The share of the output's variance the linear fit explains.
     pub r_squared: f64,
 }
@@ -100,7 +105,9 @@ impl RegressionAccumulator {
     }
 
     /// The standardised coefficients; `None` with no more samples than coefficients, an output
-    /// that does not vary, or inputs that are linearly dependent (one of them constant, say).
+    /// that does not vary, or inputs that are linearly dependent. An input that does not vary at
+    /// all (every sample the same value: a fixed draw) is left out of the fit, with no
+    /// coefficient, and the others are fitted without it.
     pub fn standardised(&self) -> Option<StandardisedRegression> {
         let width = self.sums.len();
         let k = width - 1;
@@ -114,28 +121,39 @@ impl RegressionAccumulator {
         if syy.is_nan() || syy <= 0.0 {
             return None;
         }
-        let sxx: Vec<Vec<f64>> = (0..k).map(|r| (0..k).map(|s| c(r, s)).collect()).collect();
+        // A constant input's centred sum of squares is rounding of its raw one (the shift need
+        // not be its value), a varying input's about the raw one (the shift is near its mean).
+        let varies = |r: usize| c(r, r) > CONSTANT * self.products[r * width + r];
+        let inputs: Vec<usize> = (0..k).filter(|&r| varies(r)).collect();
+        let sxx: Vec<Vec<f64>> = inputs
+            .iter()
+            .map(|&r| inputs.iter().map(|&s| c(r, s)).collect())
+            .collect();
         // Inputs that are (near) linear combinations of each other have no coefficients of their
         // own: their correlation matrix is singular to working precision.
-        let correlation: Vec<Vec<f64>> = (0..k)
+        let correlation: Vec<Vec<f64>> = (0..inputs.len())
             .map(|r| {
-                (0..k)
+                (0..inputs.len())
                     .map(|s| sxx[r][s] / (sxx[r][r] * sxx[s][s]).sqrt())
                     .collect()
             })
             .collect();
-        if smallest_pivot(&correlation) < 1e-12 {
+        if !inputs.is_empty() && smallest_pivot(&correlation) < 1e-12 {
             return None;
         }
-        let sxy: Vec<f64> = (0..k).map(|r| c(r, k)).collect();
-        let beta = solve(sxx, sxy)?;
-        let explained: f64 = beta.iter().enumerate().map(|(r, b)| b * c(r, k)).sum();
+        let sxy: Vec<f64> = inputs.iter().map(|&r| c(r, k)).collect();
+        let beta = if inputs.is_empty() {
+            Vec::new()
+        } else {
+            solve(sxx, sxy)?
+        };
+        let explained: f64 = beta.iter().zip(&inputs).map(|(b, &r)| b * c(r, k)).sum();
+        let mut coefficients = vec![None; k];
+        for (b, &r) in beta.iter().zip(&inputs) {
+            coefficients[r] = Some(b * (c(r, r) / syy).sqrt());
+        }
         Some(StandardisedRegression {
-            coefficients: beta
-                .iter()
-                .enumerate()
-                .map(|(r, b)| b * (c(r, r) / syy).sqrt())
-                .collect(),
+            coefficients,
             r_squared: explained / syy,
         })
     }
@@ -168,6 +186,7 @@ mod tests {
             .iter()
             .zip([3.0 / sd_y, -4.0 / sd_y, 2.0 / sd_y])
         {
+            let got = got.expect("every input varies");
             assert!((got - want).abs() < 0.01, "{got} {want}");
         }
         assert!(
@@ -202,19 +221,53 @@ mod tests {
             merged.standardised().unwrap(),
         );
         for (x, y) in a.coefficients.iter().zip(&b.coefficients) {
-            assert!((x - y).abs() < 1e-12);
+            assert!((x.unwrap() - y.unwrap()).abs() < 1e-12);
         }
     }
 
     #[test]
-    fn too_few_samples_a_constant_output_or_a_constant_input_give_nothing() {
+    fn too_few_samples_a_constant_output_or_dependent_inputs_give_nothing() {
         let mut regression = RegressionAccumulator::new(&[0.0], 0.0);
         regression.push(&[1.0], 1.0);
         assert_eq!(regression.standardised(), None);
-        let mut constant = RegressionAccumulator::new(&[0.0, 0.0], 0.0);
+        let mut flat = RegressionAccumulator::new(&[0.0], 0.0);
+        let mut dependent = RegressionAccumulator::new(&[0.0, 0.0], 0.0);
         for i in 0..10 {
-            constant.push(&[f64::from(i), 1.0], f64::from(i));
+            flat.push(&[f64::from(i)], 2.0);
+            dependent.push(&[f64::from(i), 3.0 * f64::from(i)], f64::from(i));
         }
-        assert_eq!(constant.standardised(), None);
+        assert_eq!(flat.standardised(), None);
+        assert_eq!(dependent.standardised(), None);
+    }
+
+    /// An input that does not vary (shifted by another value than its own, so that its centred
+    /// sums are rounding) is left out: the others' coefficients are those of the fit without it.
+    #[test]
+    fn a_constant_input_is_left_out_of_the_fit() {
+        let mut rng = SplitMix(5);
+        let mut with = RegressionAccumulator::new(&[0.1, 0.0, 0.0], 0.0);
+        let mut without = RegressionAccumulator::new(&[0.0, 0.0], 0.0);
+        for _ in 0..5000 {
+            let x = [rng.normal(), rng.uniform()];
+            let y = 2.0 * x[0] - x[1] + 0.1 * rng.normal();
+            with.push(&[0.3, x[0], x[1]], y);
+            without.push(&x, y);
+        }
+        let (with, without) = (
+            with.standardised().unwrap(),
+            without.standardised().unwrap(),
+        );
+        assert_eq!(with.coefficients[0], None);
+        for (a, b) in with.coefficients[1..].iter().zip(&without.coefficients) {
+            assert!((a.unwrap() - b.unwrap()).abs() < 1e-12, "{a:?} {b:?}");
+        }
+        assert!((with.r_squared - without.r_squared).abs() < 1e-12);
+        // Nothing that varies explains nothing.
+        let mut none = RegressionAccumulator::new(&[1.0], 0.0);
+        for i in 0..10 {
+            none.push(&[3.0], f64::from(i));
+        }
+        let none = none.standardised().unwrap();
+        assert_eq!((none.coefficients, none.r_squared), (vec![None], 0.0));
     }
 }

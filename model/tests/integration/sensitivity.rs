@@ -251,6 +251,36 @@ fn regression_alone_reruns_nothing_and_gives_coefficients() {
     }
 }
 
+/// A parameter held fixed beside scattered ones has no coefficient of its own, and the others
+/// keep theirs: the fit leaves out what does not vary (before, one fixed entry left every entry
+/// without `src` and the bin without `r_squared`). Its Sobol' indices are 0.
+#[test]
+fn a_fixed_parameter_leaves_the_others_coefficients() {
+    for method in ["regression", "sobol"] {
+        let mut spec = arcing_job(64, 20);
+        spec["sensitivity"] = json!({"method": method});
+        spec["scatter"]
+            .as_array_mut()
+            .unwrap()
+            .push(json!({"parameter": "current_a",
+            "per": "device", "distribution": {"kind": "fixed", "value": 15}}));
+        let result = run(Kernel::best(), 2, &job(spec));
+        for bin in &result.sensitivity.as_ref().unwrap()["total_bounce_s"] {
+            for (name, parameter) in &bin.indices {
+                if name == "current_a" {
+                    assert_eq!(parameter.src, None, "{method}");
+                    if method == "sobol" {
+                        assert_eq!(parameter.first.unwrap().value, 0.0, "{method}");
+                    }
+                } else {
+                    assert!(parameter.src.unwrap().is_finite(), "{method} {name}");
+                }
+            }
+            assert!((0.0..=1.0).contains(&bin.r_squared.unwrap()), "{method}");
+        }
+    }
+}
+
 #[test]
 fn the_rules_name_the_field() {
     let refused = |spec: Value| -> String {
