@@ -210,6 +210,43 @@ fn cancelling_stops_a_running_job_a_retried_cancel_keeps_it_and_a_purge_deletes_
     assert_problem(&get(&server.url(&format!("/v1/jobs/{id}")), None), 404);
 }
 
+/// `POST /v1/jobs/{id}/cancel` cancels a running job and answers any job with itself: one that
+/// ended, succeeded or cancelled, is left as it is, never deleted (a `DELETE` of a succeeded job
+/// deletes it). An unknown job is 404, a query it does not take 400.
+#[test]
+fn a_cancel_only_request_never_deletes() {
+    let server = TestApp::start(&temp_db("cancel-only"), &[]);
+    let cancel = |id: &str| post(&server.url(&format!("/v1/jobs/{id}/cancel")), "", None);
+    let running = server.submit(&scattered_job(200_000, 1000, 1));
+    server.wait_for(&running, "running", Duration::from_secs(10));
+    let cancelled = cancel(&running);
+    assert_eq!(
+        (cancelled.status, cancelled.json()["status"].as_str()),
+        (200, Some("cancelled"))
+    );
+    assert_eq!(cancel(&running).json()["status"], "cancelled");
+    let done = server.submit(&json!({"devices": 2, "operations": 2, "seed": 1}));
+    server.wait_for(&done, "succeeded", Duration::from_secs(20));
+    let kept = cancel(&done);
+    assert_eq!(
+        (kept.status, kept.json()["status"].as_str()),
+        (200, Some("succeeded"))
+    );
+    assert_eq!(
+        get(&server.url(&format!("/v1/jobs/{done}/result")), None).status,
+        200
+    );
+    assert_problem(&cancel("no-such-job"), 404);
+    assert_problem(
+        &post(
+            &server.url(&format!("/v1/jobs/{done}/cancel?purge=true")),
+            "",
+            None,
+        ),
+        400,
+    );
+}
+
 /// A job of few devices with many operations each: its progress moves while they run, and a
 /// cancel frees its compute threads at once. A sweep of the API found one of 20 devices x 10^8
 /// operations at progress 0 throughout, and its groups running half a minute after the cancel:

@@ -79,6 +79,13 @@ fn submit_wait_prints_what_run_prints_and_fetch_reads_the_parts() {
         Some("device,operations_to_failure,censored")
     );
     assert_eq!(lives.lines().count(), 31);
+    // `cancel` of a job that ended prints it as it is and keeps it (it never deletes).
+    let kept = remote(&server, Some("k1"), &["cancel", id]);
+    assert_eq!(kept.status.code(), Some(0));
+    let kept: Value = serde_json::from_str(&stdout(&kept)).unwrap();
+    assert_eq!(kept["status"], "succeeded");
+    let fetched = stdout(&remote(&server, Some("k1"), &["fetch", id]));
+    assert_eq!(without_timing(&fetched), without_timing(&local));
 
     // Without the key: the server's 401, exit 1.
     let refused = remote(&server, None, &["status", id]);
@@ -113,6 +120,15 @@ fn refusals_and_failures_exit_as_the_local_commands_do() {
     let waited = remote(&server, None, &["wait", id]);
     assert_eq!(waited.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&waited.stderr).contains("cancelled"));
+    // The job as it ended is printed all the same.
+    let printed: Value = serde_json::from_slice(&waited.stdout).unwrap();
+    assert_eq!(
+        (&printed["id"], &printed["status"]),
+        (&json!(id), &json!("cancelled"))
+    );
+    let again: Value =
+        serde_json::from_str(&stdout(&remote(&server, None, &["cancel", id]))).unwrap();
+    assert_eq!(again["status"], "cancelled");
 
     let unknown = remote(&server, None, &["status", "no-such-job"]);
     assert_eq!(unknown.status.code(), Some(1));

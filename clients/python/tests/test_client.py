@@ -77,6 +77,13 @@ def test_jobs_list_and_read_again(client, job):
     assert job.plot("weibull.svg").lstrip().startswith("<svg")
 
 
+def test_cancelling_an_ended_job_leaves_it_as_it_is(client):
+    ended = client.submit({"devices": 4, "operations": 10, "seed": 3}).wait(progress=False)
+    assert ended.cancel().status == "succeeded"
+    assert client.job(ended.id).status == "succeeded"
+    assert ended.result()["job"]["seed"] == 3
+
+
 def test_a_refused_job_names_its_fields(client):
     with pytest.raises(BouncewearError) as refused:
         client.submit({"devices": 0, "operations": 0})

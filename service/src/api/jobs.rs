@@ -35,6 +35,7 @@ pub fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
         .routes(routes!(submit_job, list_jobs))
         .routes(routes!(get_job, cancel_job))
+        .routes(routes!(cancel_only))
         .routes(routes!(get_shards))
         .routes(routes!(get_result))
         .routes(routes!(get_distribution))
@@ -490,22 +491,53 @@ pub async fn cancel_job(
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
     let purge = query.purge.unwrap_or(false);
-    match state.store.cancel(&owner, &id, UnixMs::now()).await {
+    let (record, had_ended) = cancel(&state, &owner, &id).await?;
+    if !had_ended || (record.status == JobStatus::Cancelled && !purge) {
+        return Ok(Json(JobResource::from_record(&record)).into_response());
+    }
+    state.store.delete_job(&owner, &id).await?;
+    Ok(StatusCode::NO_CONTENT.into_response())
+}
+
+/// Cancels the job unless it has ended: its record then, and whether it had ended before.
+async fn cancel(
+    state: &AppState,
+    owner: &Owner,
+    id: &JobId,
+) -> Result<(JobRecord, bool), ApiError> {
+    match state.store.cancel(owner, id, UnixMs::now()).await {
         Ok(record) => {
             metrics::counter!("bouncewear_jobs_finished_total", "status" => "cancelled")
                 .increment(1);
-            Ok(Json(JobResource::from_record(&record)).into_response())
+            Ok((record, false))
         }
-        Err(StoreError::Conflict(_)) => {
-            let record = state.store.job(&owner, &id).await?;
-            if record.status == JobStatus::Cancelled && !purge {
-                return Ok(Json(JobResource::from_record(&record)).into_response());
-            }
-            state.store.delete_job(&owner, &id).await?;
-            Ok(StatusCode::NO_CONTENT.into_response())
-        }
+        Err(StoreError::Conflict(_)) => Ok((state.store.job(owner, id).await?, true)),
         Err(error) => Err(error.into()),
     }
+}
+
+/// Cancel a queued or running job; never delete one.
+///
+/// A queued or running job is cancelled and its resource returned: workers stop at their next
+/// check. A job that had already ended (succeeded, failed or cancelled) is returned as it is:
+/// unlike `DELETE`, this never deletes anything, so a client may call it on a job in any state.
+#[utoipa::path(
+    post, path = "/v1/jobs/{id}/cancel", tag = "jobs", params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The job: cancelled now, or as it had ended", body = JobResource),
+        BadQuery,
+        Unauthorized,
+        NoSuchJob,
+    ),
+    security((), ("api_key" = []))
+)]
+pub async fn cancel_only(
+    State(state): State<AppState>,
+    Extension(owner): Extension<Owner>,
+    Path(id): Path<JobId>,
+) -> Result<Json<JobResource>, ApiError> {
+    let (record, _) = cancel(&state, &owner, &id).await?;
+    Ok(Json(JobResource::from_record(&record)))
 }
 
 /// The job, if it succeeded: results exist only then (409 before).

@@ -179,7 +179,7 @@ enum Command {
         #[command(flatten)]
         server: remote::Server,
     },
-    /// Cancel a queued or running job of a server; print it.
+    /// Cancel a queued or running job of a server; print it (a job that had ended, as it is: never deleted).
     Cancel {
         /// The job's id.
         id: String,
@@ -255,6 +255,10 @@ pub enum CliError {
     /// `serve` could not start: exit 2 when its configuration is at fault, 1 otherwise.
     #[error(transparent)]
     Startup(#[from] StartupError),
+    /// A job waited for ended without succeeding: the job resource is printed, then its reason,
+    /// exit 1.
+    #[error("{reason}")]
+    Ended { job: String, reason: String },
     /// Anything else: exit 1.
     #[error("{0}")]
     Failed(String),
@@ -270,7 +274,9 @@ impl CliError {
                 | StartupError::NoWorkers
                 | StartupError::Compute(PoolError::NoThreads),
             ) => ExitCode::from(2),
-            CliError::Startup(_) | CliError::Failed(_) => ExitCode::FAILURE,
+            CliError::Startup(_) | CliError::Ended { .. } | CliError::Failed(_) => {
+                ExitCode::FAILURE
+            }
         }
     }
 }
@@ -301,6 +307,10 @@ pub fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
+            if let CliError::Ended { job, .. } = &error {
+                // The job as it ended goes where a success would have gone; its reason to stderr.
+                let _ = print_text(job.clone());
+            }
             eprintln!("bouncewear: {error}");
             error.exit_code()
         }

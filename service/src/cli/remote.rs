@@ -83,7 +83,7 @@ impl Server {
                 .authorize(agent.post(&url))
                 .header("content-type", "application/json")
                 .send(body),
-            ("DELETE", _) => self.authorize(agent.delete(&url)).call(),
+            ("POST", None) => self.authorize(agent.post(&url)).send_empty(),
             _ => self.authorize(agent.get(&url)).call(),
         };
         let unreachable = |e: ureq::Error| CliError::Failed(format!("{url}: {e}"));
@@ -171,8 +171,9 @@ pub fn status(server: &Server, id: &str) -> Result<String, CliError> {
     Ok(server.job(id)?.to_string())
 }
 
-/// `wait`: asks until the job ended; the final job resource when it succeeded, exit 1 (with its
-/// error) when it failed or was cancelled, or when `timeout` seconds passed first.
+/// `wait`: asks until the job ended; the final job resource when it succeeded; when it failed or
+/// was cancelled, the job resource too, and exit 1 with its error; exit 1 when `timeout` seconds
+/// passed first.
 pub fn wait_for(server: &Server, id: &str, timeout: Option<f64>) -> Result<String, CliError> {
     let started = Instant::now();
     loop {
@@ -187,7 +188,10 @@ pub fn wait_for(server: &Server, id: &str, timeout: Option<f64>) -> Result<Strin
             Some("succeeded") => return Ok(job.to_string()),
             Some(ended @ ("failed" | "cancelled")) => {
                 let error = job["error"].as_str().unwrap_or("no reason given");
-                return Err(CliError::Failed(format!("job {id} {ended}: {error}")));
+                return Err(CliError::Ended {
+                    reason: format!("job {id} {ended}: {error}"),
+                    job: job.to_string(),
+                });
             }
             _ => {}
         }
@@ -290,7 +294,8 @@ fn encode(text: &str) -> String {
         .collect()
 }
 
-/// `cancel`: cancels a queued or running job; the job resource.
+/// `cancel`: cancels a queued or running job; the job resource. A job that had ended is printed
+/// as it is, never deleted (`POST /v1/jobs/{id}/cancel`, not `DELETE`).
 pub fn cancel(server: &Server, id: &str) -> Result<String, CliError> {
-    server.send("DELETE", &format!("/v1/jobs/{id}"), None)
+    server.send("POST", &format!("/v1/jobs/{id}/cancel"), None)
 }

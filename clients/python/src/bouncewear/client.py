@@ -280,8 +280,9 @@ class Job:
         return self.client.request("GET", self._path(f"/compare/{other.id}/plots/{kind}"), params=params).text
 
     def cancel(self) -> "Job":
-        """Cancels the job if it is queued or running; itself, as it stands then."""
-        self.resource = self.client.request("DELETE", self._path()).json()
+        """Cancels the job if it is queued or running; itself, as it stands then. A job that had
+        ended is left as it is, never deleted (`POST /v1/jobs/{id}/cancel`)."""
+        self.resource = self.client.request("POST", self._path("/cancel")).json()
         return self
 
 
