@@ -745,6 +745,13 @@ pub async fn get_distribution(
             Metric::all_names()
         )));
     };
+    if op_start >= op_end {
+        // Half-open: `[10, 10)` holds no operation, so no bin overlaps it (the store's overlap
+        // test alone would take the bin around 10).
+        return Err(ApiError::NotFound(format!(
+            "operations {op_start} to {op_end} hold no operation, so no bin: op_end must exceed op_start"
+        )));
+    }
     let range = Operations {
         start: op_start,
         end: op_end,
