@@ -95,6 +95,9 @@ fn a_job_goes_from_submission_to_result_with_live_progress() {
         "server and CLI agree to the bit"
     );
     assert_eq!(result["devices"], local["devices"]);
+    // Every default filled in, the metrics too: the list the Result has.
+    assert_eq!(status["spec"]["metrics"], result["job"]["metrics"]);
+    assert!(status["spec"]["metrics"].as_array().unwrap().len() > 10);
 
     let distribution = get(
         &server.url(&format!(
@@ -111,6 +114,14 @@ fn a_job_goes_from_submission_to_result_with_live_progress() {
     );
     assert_eq!(bins[0]["op_start"], 80);
     assert_eq!(bins[0]["exceedance"]["limit"], 0.011);
+    // A range that holds no operation has no bin, even inside one (the bin 80-120 overlapped
+    // `[100, 100)` and `[110, 90)` by the ends alone).
+    for empty in ["op_start=100&op_end=100", "op_start=110&op_end=90"] {
+        for metric in ["total_bounce_s", "eroded_mass_kg"] {
+            let url = format!("/v1/jobs/{id}/distributions/{metric}?{empty}");
+            assert_problem(&get(&server.url(&url), None), 404);
+        }
+    }
     let csv = get(
         &server.url(&format!(
             "/v1/jobs/{id}/distributions/total_bounce_s?format=csv"

@@ -377,6 +377,9 @@ impl Job {
         let seed = *spec.seed.get_or_insert_with(draw_seed);
         spec.bin_operations = Some(bin_operations);
         let (operation_metrics, device_metrics) = split_metrics(&metrics);
+        // Every default filled in: without `metrics`, every metric, as the Result lists them.
+        spec.metrics
+            .get_or_insert_with(|| metric_names(&operation_metrics, &device_metrics));
         let scenario = scenario.expect("no errors");
         Ok(Self {
             simulated: with_fixed_draws(&scenario, &scatter),
@@ -485,6 +488,11 @@ impl Job {
     /// The correlation among scatter entries, if the job gives one.
     pub fn correlation(&self) -> Option<&Correlation> {
         self.correlation.as_ref()
+    }
+
+    /// The names of the metrics the job computes, operation metrics first (its Result's order).
+    pub fn metric_names(&self) -> Vec<String> {
+        metric_names(&self.operation_metrics, &self.device_metrics)
     }
 
     /// In the order the job lists them (all metrics when it lists none): the engine's accumulators
@@ -942,6 +950,16 @@ fn check_precision(
         relative_half_width: spec.relative_half_width,
         max_devices: spec.max_devices,
     })
+}
+
+/// The metrics' names, operation metrics first: as a job's Result lists them.
+fn metric_names(operation: &[OperationMetric], device: &[DeviceMetric]) -> Vec<String> {
+    operation
+        .iter()
+        .map(|m| m.name())
+        .chain(device.iter().map(|m| m.name()))
+        .map(str::to_owned)
+        .collect()
 }
 
 /// `scenario` with the value of each `fixed` entry of `scatter` set in it.

@@ -135,14 +135,7 @@ impl ResolvedJob {
     fn new(job: &Job, devices_run: u64) -> Self {
         let mut spec = job.spec().clone();
         spec.scenario = job.scenario().spec().clone();
-        spec.metrics = Some(
-            job.operation_metrics()
-                .iter()
-                .map(|m| m.name())
-                .chain(job.device_metrics().iter().map(|m| m.name()))
-                .map(str::to_owned)
-                .collect(),
-        );
+        spec.metrics = Some(job.metric_names());
         Self {
             spec,
             devices_run,
