@@ -156,6 +156,13 @@ fn a_small_job_runs_as_one_shard_and_a_larger_one_in_groups_with_the_same_bits()
         let listed = get(&server.url(&format!("/v1/jobs/{id}/shards")), None).json();
         let listed = listed["shards"].as_array().unwrap().clone();
         assert_eq!(listed.len(), shards, "{listed:?}");
+        // Every shard names the worker that last held it, and has no error (null, present).
+        for shard in &listed {
+            let worker = shard["worker"].as_str().unwrap_or_default();
+            assert!(worker.contains('/'), "{shard}");
+            assert_eq!(shard.get("error"), Some(&Value::Null), "{shard}");
+            assert_eq!(shard["status"], "done", "{shard}");
+        }
         if shards == 1 {
             assert!(listed[0].get("group").is_none(), "{listed:?}");
             assert_eq!(listed[0]["operations_total"], 2_000_000);

@@ -390,15 +390,13 @@ pub struct ShardResource {
     /// Leases that expired before the run ended: its worker killed or stalled, or cut off from
     /// the database. Counted against a budget of their own.
     pub lost_leases: u64,
-    /// The worker holding or last holding it (`PID-INSTANCE/SLOT`).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// The worker holding or last holding it (`PID-INSTANCE/SLOT`); null before its first claim.
     pub worker: Option<String>,
     /// Operations this shard has simulated.
     pub operations_done: u64,
     /// Operations in this shard.
     pub operations_total: u64,
-    /// Why its last run failed.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// Why its last run failed; null while none has.
     pub error: Option<String>,
     /// One line per attempt that did not finish, oldest first: `attempt N (worker): failed: ...`
     /// or `attempt N (worker): lease lost`.

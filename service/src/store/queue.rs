@@ -218,7 +218,7 @@ fn fenced(sql: &'static str, fence: &Fence) -> Sql {
 async fn finish_shard(tx: &mut Tx, fence: &Fence) -> StoreResult<bool> {
     let updated = fenced(
         concat!(
-            "UPDATE shards SET status = 'done', lease_owner = NULL, lease_until = NULL, \
+            "UPDATE shards SET status = 'done', lease_until = NULL, \
              operations_done = operations_total WHERE ",
             fenced_shard!()
         ),
@@ -579,7 +579,7 @@ impl JobQueue for SqlStore {
         let updated = fenced(
             concat!(
                 "UPDATE shards SET status = 'done', partial = $5, operations_done = operations_total, \
-                 lease_owner = NULL, lease_until = NULL WHERE ",
+                 lease_until = NULL WHERE ",
                 fenced_shard!()
             ),
             fence,
@@ -694,7 +694,7 @@ impl JobQueue for SqlStore {
             concat!(
                 "UPDATE shards SET status = 'queued', failures = failures + 1, error = $5, operations_done = 0, \
                  history = history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): failed: ' || $5 || '\n', \
-                 lease_owner = NULL, lease_until = NULL WHERE ",
+                 lease_until = NULL WHERE ",
                 fenced_shard!(),
                 " RETURNING failures"
             ),
@@ -738,7 +738,7 @@ impl JobQueue for SqlStore {
         let mut tx = self.begin().await?;
         let updated = fenced(
             concat!(
-                "UPDATE shards SET status = 'queued', lease_owner = NULL, lease_until = NULL, operations_done = 0 WHERE ",
+                "UPDATE shards SET status = 'queued', lease_until = NULL, operations_done = 0 WHERE ",
                 fenced_shard!()
             ),
             fence,
