@@ -469,7 +469,8 @@ fn a_second_key_gets_in_when_the_first_has_filled_its_share_of_the_queue() {
 }
 
 /// A query parameter the operation does not take is a 400 naming it and what it does take, on
-/// every documented route; the dashboard's pages are not the API's and take any.
+/// every documented route, the document and its page too; the dashboard's pages are not the
+/// API's and take any. The document declares the 400 on every operation.
 #[test]
 fn unknown_query_parameters_are_refused_by_name() {
     let server = TestApp::start(&temp_db("unknown-query"), &[]);
@@ -493,6 +494,24 @@ fn unknown_query_parameters_are_refused_by_name() {
     for (path, detail) in refused {
         let problem = assert_problem(&get(&server.url(&path), None), 400);
         assert_eq!(problem["detail"], detail, "{path}");
+    }
+    for path in [
+        "/openapi.json",
+        "/docs",
+        "/docs/rapidoc-min.js",
+        "/healthz",
+        "/metrics",
+    ] {
+        let problem = assert_problem(&get(&server.url(&format!("{path}?foo=1")), None), 400);
+        let detail = format!("unknown query parameter `foo`: GET {path} takes no query parameters");
+        assert_eq!(problem["detail"], detail, "{path}");
+    }
+    let document = get(&server.url("/openapi.json"), None).json();
+    for (path, item) in document["paths"].as_object().unwrap() {
+        for (method, operation) in item.as_object().unwrap() {
+            let bad = &operation["responses"]["400"];
+            assert!(bad.is_object(), "{method} {path} declares no 400");
+        }
     }
     let taken = format!("/v1/jobs/{id}/distributions/total_bounce_s?quantiles=0.5&op_start=0");
     assert_eq!(get(&server.url(&taken), None).status, 200);

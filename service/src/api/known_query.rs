@@ -13,9 +13,10 @@ use std::sync::Arc;
 use utoipa::openapi::path::{Operation, ParameterIn};
 use utoipa::openapi::{OpenApi, RefOr};
 
-/// Each documented operation's query parameters, by method and path template (`/v1/jobs/{id}`).
+/// Each documented operation's query parameters, by method and path template (`/v1/jobs/{id}`);
+/// `None` for one whose parameters this does not read (a reference), which is not checked.
 #[derive(Debug, Clone, Default)]
-pub struct KnownQueries(Arc<HashMap<(Method, String), BTreeSet<String>>>);
+pub struct KnownQueries(Arc<HashMap<(Method, String), Option<BTreeSet<String>>>>);
 
 impl KnownQueries {
     pub fn of(openapi: &OpenApi) -> Self {
@@ -29,42 +30,47 @@ impl KnownQueries {
                 (Method::PATCH, &item.patch),
             ];
             for (method, operation) in operations {
-                if let Some(names) = operation.as_ref().and_then(query_names) {
-                    known.insert((method, path.clone()), names);
+                if let Some(operation) = operation {
+                    known.insert((method, path.clone()), query_names(operation));
                 }
             }
         }
         Self(Arc::new(known))
     }
 
-    /// The parameters of `query` that the operation at `method` and `path` does not take; none
-    /// for an operation the document does not describe.
+    /// The parameters of `query` that the operation at `method` and `path` does not take: every
+    /// one for a route under this layer that the document does not describe (the document
+    /// itself and its page), which take none.
     fn unknown(&self, method: &Method, path: &str, query: &[(String, String)]) -> Vec<String> {
-        let Some(names) = self.names(method, path) else {
-            return Vec::new();
+        let names = match self.names(method, path) {
+            Some(None) => return Vec::new(),
+            Some(Some(names)) => Some(names),
+            None => None,
         };
         let unknown: BTreeSet<&String> = query
             .iter()
             .map(|(name, _)| name)
-            .filter(|name| !names.contains(*name))
+            .filter(|name| !names.is_some_and(|names| names.contains(*name)))
             .collect();
         unknown.into_iter().cloned().collect()
     }
 
     fn takes(&self, method: &Method, path: &str) -> Vec<String> {
         self.names(method, path)
+            .flatten()
             .map(|names| names.iter().cloned().collect())
             .unwrap_or_default()
     }
 
-    /// The operation's parameters (a HEAD is its GET's).
-    fn names(&self, method: &Method, path: &str) -> Option<&BTreeSet<String>> {
+    /// The operation's parameters (a HEAD is its GET's); `None` for a route the document does
+    /// not describe.
+    fn names(&self, method: &Method, path: &str) -> Option<Option<&BTreeSet<String>>> {
         let method = if method == Method::HEAD {
             Method::GET
         } else {
             method.clone()
         };
-        self.0.get(&(method, path.to_owned()))
+        self.0.get(&(method, path.to_owned())).map(Option::as_ref)
     }
 }
 
@@ -129,9 +135,16 @@ mod tests {
         let known = KnownQueries(Arc::new(HashMap::from([
             (
                 (Method::GET, distribution.to_owned()),
-                BTreeSet::from(["quantiles".to_owned(), "op_start".to_owned()]),
+                Some(BTreeSet::from([
+                    "quantiles".to_owned(),
+                    "op_start".to_owned(),
+                ])),
             ),
-            ((Method::GET, "/v1/jobs/{id}".to_owned()), BTreeSet::new()),
+            (
+                (Method::GET, "/v1/jobs/{id}".to_owned()),
+                Some(BTreeSet::new()),
+            ),
+            ((Method::GET, "/v1/unread".to_owned()), None),
         ])));
         let query = |pairs: &[(&str, &str)]| -> Vec<(String, String)> {
             pairs
@@ -150,7 +163,14 @@ mod tests {
             known.unknown(&Method::GET, "/v1/jobs/{id}", &query(&[("x", "1")])),
             ["x"]
         );
+        // A route the document does not describe takes none.
         let undocumented = known.unknown(&Method::GET, "/jobs/{id}", &query(&[("x", "1")]));
-        assert!(undocumented.is_empty());
+        assert_eq!(undocumented, ["x"]);
+        // An operation whose parameters are a reference this does not follow is not checked.
+        assert!(
+            known
+                .unknown(&Method::GET, "/v1/unread", &query(&[("x", "1")]))
+                .is_empty()
+        );
     }
 }

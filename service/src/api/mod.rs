@@ -92,15 +92,7 @@ pub fn router(state: AppState) -> axum::Router {
         state.config.max_concurrent_requests,
         state.config.request_timeout(),
     );
-    let (router, openapi) = api_routes(state);
-    let openapi = Arc::new(openapi::document(&openapi));
-    router
-        .route(
-            "/openapi.json",
-            get(move || async move { axum::Json(openapi.as_ref().clone()) }),
-        )
-        .route("/docs", get(system::docs))
-        .route("/docs/rapidoc-min.js", get(system::docs_script))
+    api_routes(state)
         .route("/", get(system::dashboard))
         .route("/jobs/{id}", get(system::job_page))
         .route("/dashboard/app.js", get(system::dashboard_script))
@@ -132,8 +124,8 @@ pub fn router(state: AppState) -> axum::Router {
         .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
 }
 
-/// The documented routes, with the OpenAPI document built from the same handlers.
-fn api_routes(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
+/// The documented routes, and the OpenAPI document built from the same handlers with its page.
+fn api_routes(state: AppState) -> axum::Router {
     let v1 = OpenApiRouter::new()
         .merge(jobs::router())
         .merge(events::router())
@@ -152,11 +144,21 @@ fn api_routes(state: AppState) -> (axum::Router, utoipa::openapi::OpenApi) {
         .split_for_parts();
     EveryRequest.modify(&mut openapi);
     let known = known_query::KnownQueries::of(&openapi);
-    let router = router.route_layer(axum::middleware::from_fn_with_state(
-        known,
-        known_query::refuse_unknown,
-    ));
-    (router.with_state(state), openapi)
+    let document = Arc::new(openapi::document(&openapi));
+    // The document and its browsable page take no query parameters either: the same layer
+    // refuses any. The dashboard's pages (added after) are not the API's and take any.
+    let router = router
+        .route(
+            "/openapi.json",
+            get(move || async move { axum::Json(document.as_ref().clone()) }),
+        )
+        .route("/docs", get(system::docs))
+        .route("/docs/rapidoc-min.js", get(system::docs_script))
+        .route_layer(axum::middleware::from_fn_with_state(
+            known,
+            known_query::refuse_unknown,
+        ));
+    router.with_state(state)
 }
 
 /// The answers any request may get from the layers around the handlers (`limits`), written into
@@ -165,9 +167,11 @@ struct EveryRequest;
 
 impl Modify for EveryRequest {
     fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
-        use error::responses::{BodyTimeout, Unavailable};
+        use error::responses::{BadQuery, BodyTimeout, Unavailable};
         use utoipa::IntoResponses;
         let (unavailable, body_timeout) = (Unavailable::responses(), BodyTimeout::responses());
+        // Every route refuses a query parameter it does not take (`known_query`).
+        let bad_query = BadQuery::responses();
         for item in openapi.paths.paths.values_mut() {
             let operations = [
                 &mut item.get,
@@ -180,6 +184,7 @@ impl Modify for EveryRequest {
                 let with_body = operation.request_body.is_some();
                 let common = unavailable
                     .iter()
+                    .chain(&bad_query)
                     .chain(body_timeout.iter().filter(|_| with_body));
                 for (status, response) in common {
                     // An operation's own description of the status stays.
