@@ -722,6 +722,12 @@ fn life_analysis_is_served_as_json_and_per_device_csv() {
     assert_eq!(accept("text/csv;q=0.5, application/json", "").json(), life);
     assert_eq!(accept("text/csv", "?format=json").json(), life);
     assert_eq!(accept("*/*", "").json(), life);
+    // A range counts for the types it covers, the most specific one deciding.
+    assert_eq!(accept("text/*, application/json;q=0.5", "").body, csv.body);
+    assert_eq!(accept("text/*", "").body, csv.body);
+    assert_eq!(accept("text/csv;q=0.9, */*", "").json(), life);
+    assert_eq!(accept("*/*;q=0.1, text/*;q=0.5", "").body, csv.body);
+    assert_eq!(accept("text/*, text/csv;q=0", "").json(), life);
     let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
     assert_eq!(result["life"], life, "the Result carries the same life");
     let plain = server.submit(&json!({"devices": 1, "operations": 1, "seed": 1}));

@@ -650,19 +650,29 @@ impl Format {
             .filter_map(|value| value.to_str().ok())
             .collect::<Vec<_>>()
             .join(",");
+        // A type's quality is that of the most specific range that matches it (RFC 9110,
+        // section 12.5.1): `text/csv` before `text/*` before `*/*`.
         let quality = |wanted: &str| {
+            let (kind, _) = wanted.split_once('/').expect("a media type");
             accept
                 .split(',')
                 .filter_map(|range| {
                     let mut parts = range.split(';');
-                    let media = parts.next()?.trim();
+                    let media = parts.next()?.trim().to_ascii_lowercase();
+                    let specificity = match media.split_once('/')? {
+                        _ if media == wanted => 2,
+                        (k, "*") if k == kind => 1,
+                        ("*", "*") => 0,
+                        _ => return None,
+                    };
                     let q = parts
                         .filter_map(|p| p.trim().strip_prefix("q="))
                         .find_map(|q| q.trim().parse::<f64>().ok())
                         .unwrap_or(1.0);
-                    media.eq_ignore_ascii_case(wanted).then_some(q)
+                    Some((specificity, q))
                 })
-                .reduce(f64::max)
+                .max_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)))
+                .map(|(_, q)| q)
         };
         match (quality("text/csv"), quality("application/json")) {
             (Some(csv), json) if csv > 0.0 && json.is_none_or(|json| csv > json) => Format::Csv,
