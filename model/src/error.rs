@@ -146,6 +146,27 @@ pub fn from_json<T: DeserializeOwned>(
     })
 }
 
+/// A document's bytes that are not UTF-8, as a malformed document whose pointer names the value
+/// where the text stopped being JSON: the value the first byte that is not UTF-8 falls in (a
+/// JSON text is UTF-8, RFC 8259 section 8.1).
+pub fn not_utf8(bytes: &[u8], error: &std::str::Utf8Error) -> InvalidInput {
+    let at = error.valid_up_to();
+    let text = std::str::from_utf8(&bytes[..at]).expect("valid up to there");
+    // The valid text ends inside that value: reading it stops there.
+    let mut reader = serde_json::Deserializer::from_str(text);
+    let pointer = match serde_path_to_error::deserialize::<_, Strict>(&mut reader) {
+        Err(error) => path_to_pointer(error.path()),
+        Ok(_) => Pointer::root(),
+    };
+    InvalidInput::malformed(
+        &pointer,
+        format!(
+            "malformed JSON: the text is not UTF-8 at byte {at} (0x{:02X})",
+            bytes[at]
+        ),
+    )
+}
+
 /// Reads JSON text into a value, naming by pointer what the text itself gets wrong where a value
 /// is at fault: a number beyond f64 (`1e400`) and a member given twice in one object (which
 /// serde_json would silently resolve to the last). Other syntax errors name the whole document.
@@ -355,6 +376,29 @@ fn path_to_pointer(path: &serde_path_to_error::Path) -> Pointer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bytes_that_are_not_utf8_name_the_value_they_fall_in() {
+        let cases: [(&[u8], &str); 4] = [
+            (b"{\"name\": \"ab\xff\"}", "/name"),
+            (
+                b"{\"scenario\": {\"circuit\": {\"\xc3\x28\": 1}}}",
+                "/scenario/circuit",
+            ),
+            (b"{\"scatter\": [{}, {\"per\": \"\xfe", "/scatter/1/per"),
+            (b"\xff{}", ""),
+        ];
+        for (bytes, pointer) in cases {
+            let error = std::str::from_utf8(bytes).unwrap_err();
+            let invalid = not_utf8(bytes, &error);
+            assert!(invalid.is_syntax(), "{invalid}");
+            assert_eq!(invalid.pointers(), [pointer], "{invalid}");
+            assert!(
+                invalid.to_string().contains("not UTF-8 at byte"),
+                "{invalid}"
+            );
+        }
+    }
 
     #[test]
     fn pointer_tokens_are_escaped() {

@@ -576,6 +576,17 @@ fn bad_requests_get_the_right_4xx_problem() {
             .contains("Content-Encoding: gzip"),
         "{gzipped}"
     );
+    // Bytes that are not UTF-8: malformed, named at the value they fall in.
+    let not_utf8 = assert_problem(
+        &reply(
+            agent()
+                .post(&jobs)
+                .header("content-type", "application/json")
+                .send(&b"{\"devices\": 2, \"name\": \"ab\xff\"}"[..]),
+        ),
+        400,
+    );
+    assert_eq!(not_utf8["errors"][0]["pointer"], "/name", "{not_utf8}");
     assert_problem(
         &post(
             &jobs,

@@ -333,8 +333,9 @@ impl FromRequest<AppState> for JsonText {
                     ApiError::BadRequest(rejection.body_text())
                 }
             })?;
-        String::from_utf8(bytes.to_vec())
-            .map(JsonText)
-            .map_err(|_| ApiError::BadRequest("the request body is not UTF-8".to_owned()))
+        match std::str::from_utf8(&bytes) {
+            Ok(text) => Ok(JsonText(text.to_owned())),
+            Err(error) => Err(bouncewear_model::error::not_utf8(&bytes, &error).into()),
+        }
     }
 }
