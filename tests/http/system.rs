@@ -3,6 +3,7 @@
 use crate::support::app::{Service, TestApp};
 use crate::support::client::{agent, assert_problem, delete, get, post, reply};
 use crate::support::temp_db;
+use bouncewear_model::calibration::FITTED;
 use bouncewear_model::scenario::{MAX_MAGNITUDE, MIN_MAGNITUDE, NUMBER_RULES, Rule};
 use serde_json::json;
 use std::collections::{BTreeMap, BTreeSet};
@@ -62,6 +63,16 @@ fn every_number_of_a_scenario_has_its_one_rule_in_the_document() {
             "{}.{}: {property}",
             number.schema,
             number.field()
+        );
+    }
+    // A calibration's measured quantities: a scenario's positive magnitudes, as `calibrate`
+    // checks them (it refuses 1e-31 and 2e30).
+    for field in FITTED {
+        let property = &schemas["Observation"]["properties"][field];
+        assert_eq!(
+            (property["minimum"].as_f64(), property["maximum"].as_f64()),
+            (Some(MIN_MAGNITUDE), Some(MAX_MAGNITUDE)),
+            "Observation.{field}: {property}"
         );
     }
     let sections: BTreeSet<&str> = NUMBER_RULES.iter().map(|n| n.schema).collect();

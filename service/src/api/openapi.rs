@@ -302,8 +302,8 @@ fn calibration_fields() -> Vec<(&'static str, &'static str, Value)> {
             json!({"minimum": 0, "maximum": MAX_OPERATION}),
         ),
     ];
-    // A measured quantity is a positive number.
-    fields.extend(FITTED.map(|field| ("Observation", field, json!({"exclusiveMinimum": 0}))));
+    // A measured quantity is a positive number within a scenario's magnitudes.
+    fields.extend(FITTED.map(|field| ("Observation", field, range(Rule::Positive))));
     fields
 }
 

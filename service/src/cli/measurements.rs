@@ -6,61 +6,68 @@
 //! (`/observations/ROW/FIELD`, rows counted from 0 below the header).
 
 use super::CliError;
-use bouncewear_model::{InvalidInput, Pointer};
+use bouncewear_model::{FieldError, InvalidInput, Pointer};
 use serde_json::{Map, Value};
 
-/// The observations of CSV `text` as JSON: an array of objects, one per data row.
+/// The observations of CSV `text` as JSON: an array of objects, one per data row. Every cell
+/// that is not a number and every row of the wrong length is named at its pointer
+/// (`/observations/ROW/FIELD`, `/observations/ROW`), all of them at once.
 pub fn observations_from_csv(text: &str, path: &str) -> Result<Value, CliError> {
     let mut lines = text
         .lines()
         .map(|line| line.trim_end_matches('\r'))
         .filter(|line| !line.trim().is_empty());
+    let observations = Pointer::root().child("observations");
     let header: Vec<&str> = lines
         .next()
-        .ok_or_else(|| invalid(path, "the file has no header row".to_owned()))?
+        .ok_or_else(|| {
+            let detail = format!("{path}: the file has no header row");
+            CliError::Invalid(InvalidInput::single(&observations, detail))
+        })?
         .split(',')
         .map(str::trim)
         .collect();
-    let mut rows = Vec::new();
+    let (mut rows, mut errors) = (Vec::new(), Vec::new());
+    let mut fault = |pointer: Pointer, detail: String| {
+        errors.push(FieldError {
+            pointer: pointer.to_string(),
+            detail: format!("{path}: {detail}"),
+        });
+    };
     for (row, line) in lines.enumerate() {
+        let at = observations.child(row);
         let cells: Vec<&str> = line.split(',').map(str::trim).collect();
         if cells.len() != header.len() {
-            return Err(invalid(
-                path,
-                format!(
-                    "data row {row} has {} cells, the header {} columns",
-                    cells.len(),
-                    header.len()
-                ),
-            ));
+            let detail = format!(
+                "data row {row} has {} cells, the header {} columns",
+                cells.len(),
+                header.len()
+            );
+            fault(at, detail);
+            continue;
         }
         let mut observation = Map::new();
-        for (column, cell) in header.iter().zip(cells) {
-            if cell.is_empty() {
-                continue;
-            }
+        for (column, cell) in header.iter().zip(cells).filter(|(_, c)| !c.is_empty()) {
             let number = cell
                 .parse::<u64>()
                 .map(Value::from)
-                .or_else(|_| cell.parse::<f64>().map(Value::from))
-                .map_err(|_| {
-                    invalid(
-                        path,
-                        format!("data row {row}, column `{column}`: `{cell}` is not a number"),
-                    )
-                })?;
-            observation.insert((*column).to_owned(), number);
+                .or_else(|_| cell.parse::<f64>().map(Value::from));
+            match number {
+                Ok(number) => {
+                    observation.insert((*column).to_owned(), number);
+                }
+                Err(_) => fault(
+                    at.child(column),
+                    format!("data row {row}, column `{column}`: `{cell}` is not a number"),
+                ),
+            }
         }
         rows.push(Value::Object(observation));
     }
+    if !errors.is_empty() {
+        return Err(CliError::Invalid(InvalidInput::new(errors)));
+    }
     Ok(Value::Array(rows))
-}
-
-fn invalid(path: &str, detail: String) -> CliError {
-    CliError::Invalid(InvalidInput::single(
-        &Pointer::root().child("observations"),
-        format!("{path}: {detail}"),
-    ))
 }
 
 #[cfg(test)]
@@ -83,18 +90,27 @@ mod tests {
     }
 
     #[test]
-    fn a_cell_that_is_no_number_or_a_short_row_is_named() {
-        let bad = observations_from_csv("e1,first_bounce_s\n0.4,abc\n", "m.csv").unwrap_err();
+    fn every_cell_that_is_no_number_and_every_short_row_is_named_at_its_pointer() {
+        let bad = observations_from_csv("e1,first_bounce_s\n0.4,abc\n0.5\n,x\n", "m.csv");
+        let CliError::Invalid(bad) = bad.unwrap_err() else {
+            panic!("invalid input")
+        };
+        assert_eq!(
+            bad.pointers(),
+            [
+                "/observations/0/first_bounce_s",
+                "/observations/1",
+                "/observations/2/first_bounce_s"
+            ]
+        );
         assert!(
             bad.to_string()
                 .contains("m.csv: data row 0, column `first_bounce_s`: `abc` is not a number"),
             "{bad}"
         );
-        let short = observations_from_csv("e1,first_bounce_s\n0.4\n", "m.csv").unwrap_err();
         assert!(
-            short
-                .to_string()
-                .contains("data row 0 has 1 cells, the header 2 columns")
+            bad.to_string()
+                .contains("data row 1 has 1 cells, the header 2 columns")
         );
         assert!(observations_from_csv("", "m.csv").is_err());
     }
