@@ -190,6 +190,24 @@ fn describe_metrics() {
     );
 }
 
+/// Counters that would appear only once something happened, there from the start at 0: a
+/// scrape shows every family with its HELP and TYPE, and a rate over a series that is still 0
+/// is 0, not absent.
+fn counters_from_zero() {
+    for name in [
+        CONNECTIONS_SHED,
+        EVENT_WATCH_LOOKS,
+        "bouncewear_store_retries_total",
+        "bouncewear_jobs_submitted_total",
+        "bouncewear_operations_simulated_total",
+    ] {
+        metrics::counter!(name).increment(0);
+    }
+    for status in ["succeeded", "failed", "cancelled"] {
+        metrics::counter!("bouncewear_jobs_finished_total", "status" => status).increment(0);
+    }
+}
+
 fn process_metrics() -> &'static metrics_process::Collector {
     static COLLECTOR: OnceLock<metrics_process::Collector> = OnceLock::new();
     COLLECTOR.get_or_init(metrics_process::Collector::default)
@@ -208,6 +226,7 @@ pub fn prometheus() -> PrometheusHandle {
                 tracing::warn!("another metrics recorder is installed; /metrics will be empty");
             }
             describe_metrics();
+            counters_from_zero();
             process_metrics().describe();
             metrics::gauge!(
                 BUILD_INFO,

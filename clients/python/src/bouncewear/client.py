@@ -205,9 +205,11 @@ class Job:
     def distribution(self, metric: str = "total_bounce_s", *, op_start: Optional[int] = None,
                      op_end: Optional[int] = None, quantiles: Optional[Iterable[float]] = None,
                      exceedance: Optional[Iterable[str]] = None) -> pd.DataFrame:
-        """A metric's bins, one row each (`op_start`, `op_end`, `n`, `mean`, ..., the histogram's
-        columns), optionally in a range of operations and with quantiles (`[0.999]`) and
-        exceedances (`["above:0.012"]`) answered after the run, each with its 95 % interval."""
+        """A metric's bins, one row each (`op_start`, `op_end`, `n`, `mean` with its interval,
+        `sd`, `min`, `max`, each quantile with its interval, the exceedance of the job's limit),
+        optionally in a range of operations and with quantiles (`[0.999]`) and exceedances
+        (`["above:0.012"]`) answered after the run, each with its 95 % interval. The histograms
+        are in the JSON answer (`Client.request`) and the plots."""
         params: Dict[str, Any] = {"format": "csv"}
         if op_start is not None:
             params["op_start"] = op_start
