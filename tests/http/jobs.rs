@@ -184,6 +184,20 @@ fn jobs_are_listed_newest_first_with_cursor_paging() {
     let seen = server.list_job_ids(2);
     let newest_first: Vec<String> = ids.into_iter().rev().collect();
     assert_eq!(seen, newest_first);
+    // A page that ends the list has no cursor, however full it is: none leads to an empty page.
+    for limit in [5, 6] {
+        let page = get(&server.url(&format!("/v1/jobs?limit={limit}")), None).json();
+        assert_eq!(page["jobs"].as_array().unwrap().len(), 5);
+        assert!(page.get("next_cursor").is_none_or(Value::is_null), "{page}");
+    }
+    let first = get(&server.url("/v1/jobs?limit=4"), None).json();
+    let cursor = first["next_cursor"].as_str().unwrap();
+    let last = get(
+        &server.url(&format!("/v1/jobs?limit=4&cursor={cursor}")),
+        None,
+    )
+    .json();
+    assert_eq!(last["jobs"].as_array().unwrap().len(), 1);
 }
 
 #[test]

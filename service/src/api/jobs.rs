@@ -281,8 +281,20 @@ pub async fn list_jobs(
                 })?,
         ),
     };
-    let records = state.store.jobs(&owner, Page { before, limit }).await?;
-    let next_cursor = (records.len() == limit as usize)
+    // One more than the page: a cursor only where another page has jobs.
+    let mut records = state
+        .store
+        .jobs(
+            &owner,
+            Page {
+                before,
+                limit: limit + 1,
+            },
+        )
+        .await?;
+    let more = records.len() > limit as usize;
+    records.truncate(limit as usize);
+    let next_cursor = more
         .then(|| records.last().map(|r| r.seq.to_string()))
         .flatten();
     Ok(Json(JobList {
