@@ -13,10 +13,13 @@ use std::sync::Arc;
 use utoipa::openapi::path::{Operation, ParameterIn};
 use utoipa::openapi::{OpenApi, RefOr};
 
-/// Each documented operation's query parameters, by method and path template (`/v1/jobs/{id}`);
-/// `None` for one whose parameters this does not read (a reference), which is not checked.
+/// The query parameters an operation takes; `None` where this does not read them (a reference),
+/// and the operation is not checked.
+type Takes = Option<BTreeSet<String>>;
+
+/// Each documented operation's query parameters, by method and path template (`/v1/jobs/{id}`).
 #[derive(Debug, Clone, Default)]
-pub struct KnownQueries(Arc<HashMap<(Method, String), Option<BTreeSet<String>>>>);
+pub struct KnownQueries(Arc<HashMap<(Method, String), Takes>>);
 
 impl KnownQueries {
     pub fn of(openapi: &OpenApi) -> Self {
