@@ -167,6 +167,9 @@ def main():
     # A job cancelled while it waits or runs.
     long = submit({"devices": 1000, "operations": 20000, "seed": 7})
     json_call("cancel_job", "DELETE", f"/v1/jobs/{long}")
+    # The same with the request that never deletes.
+    other = submit({"devices": 1000, "operations": 20000, "seed": 8})
+    json_call("cancel_only", "POST", f"/v1/jobs/{other}/cancel")
     json_call("list_jobs", "GET", "/v1/jobs?limit=3")
 
     schedule = json_call("create_schedule", "POST", "/v1/schedules",
