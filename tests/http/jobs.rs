@@ -133,6 +133,22 @@ fn a_job_goes_from_submission_to_result_with_live_progress() {
     assert_eq!(rows.len(), 1 + 10);
     assert!(rows[0].starts_with("op_start,op_end,n,mean"));
     assert!(rows[1].starts_with("0,40,120000,"));
+    // The limit's exceedance with its interval, as the JSON has it.
+    let whole = get(
+        &server.url(&format!("/v1/jobs/{id}/distributions/total_bounce_s")),
+        None,
+    )
+    .json();
+    let header: Vec<&str> = rows[0].split(',').collect();
+    let first: Vec<&str> = rows[1].split(',').collect();
+    let cell = |name: &str| -> f64 {
+        let at = header.iter().position(|h| *h == name).expect(name);
+        first[at].parse().unwrap()
+    };
+    let exceedance = &whole["bins"][0]["exceedance"];
+    assert_eq!(cell("exceedance_probability"), exceedance["probability"]);
+    assert_eq!(cell("exceedance_ci95_lo"), exceedance["ci95"][0]);
+    assert_eq!(cell("exceedance_ci95_hi"), exceedance["ci95"][1]);
     let device = get(
         &server.url(&format!("/v1/jobs/{id}/distributions/final_radius_m")),
         None,

@@ -92,6 +92,24 @@ fn any_quantile_and_threshold_are_answered_after_the_run_with_intervals() {
     {
         assert_eq!(bin["query"]["exceedance"], stored["exceedances"]);
     }
+    // In CSV, each limit of the list has its columns, with the JSON's numbers.
+    let csv = get(&url("?format=csv"), None).body;
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    for (line, bin) in lines.zip(plain["bins"].as_array().unwrap()) {
+        let cells: Vec<&str> = line.split(',').collect();
+        for (k, name) in ["above:0.3", "below:0.3"].iter().enumerate() {
+            let column = |suffix: &str| -> f64 {
+                let name = format!("exceedance_{name}{suffix}");
+                let at = header.iter().position(|h| *h == name).expect("a column");
+                cells[at].parse().unwrap()
+            };
+            let stored = &bin["exceedances"][k];
+            assert_eq!(column(""), stored["probability"]);
+            assert_eq!(column("_ci95_lo"), stored["ci95"][0]);
+            assert_eq!(column("_ci95_hi"), stored["ci95"][1]);
+        }
+    }
 }
 
 /// In CSV the answers are columns after the others, with the numbers of the JSON answer.

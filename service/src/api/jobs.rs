@@ -867,17 +867,22 @@ fn to_csv(bins: &[DistributionBin]) -> String {
     for (name, _) in QUANTILES {
         let _ = write!(csv, ",{name},{name}_ci95_lo,{name}_ci95_hi");
     }
-    csv.push_str(",exceedance_limit,exceedance_probability");
+    csv.push_str(",exceedance_limit,exceedance_probability,exceedance_ci95_lo,exceedance_ci95_hi");
+    // A job's list of limits on the metric: the same in every bin.
+    let limits = bins
+        .first()
+        .map_or(&[][..], |bin| &bin.summary.exceedances[..]);
+    for limit in limits {
+        let name = format!("exceedance_{}", threshold_name(limit.threshold));
+        let _ = write!(csv, ",{name},{name}_ci95_lo,{name}_ci95_hi");
+    }
     let asked = bins.first().and_then(|bin| bin.query.as_ref());
     if let Some(answer) = asked {
         for level in answer.quantiles.keys() {
             let _ = write!(csv, ",q{level},q{level}_ci95_lo,q{level}_ci95_hi");
         }
         for item in &answer.exceedance {
-            let name = match item.threshold {
-                Threshold::Above(x) => format!("above:{x}"),
-                Threshold::Below(x) => format!("below:{x}"),
-            };
+            let name = threshold_name(item.threshold);
             let _ = write!(csv, ",{name},{name}_ci95_lo,{name}_ci95_hi");
         }
     }
@@ -903,9 +908,13 @@ fn to_csv(bins: &[DistributionBin]) -> String {
         }
         match &s.exceedance {
             Some(e) => {
-                let _ = write!(csv, ",{},{}", e.limit, e.probability);
+                let [lo, hi] = e.ci95;
+                let _ = write!(csv, ",{},{},{lo},{hi}", e.limit, e.probability);
             }
-            None => csv.push_str(",,"),
+            None => csv.push_str(",,,,"),
+        }
+        for e in &s.exceedances {
+            let _ = write!(csv, ",{},{},{}", e.probability, e.ci95[0], e.ci95[1]);
         }
         if let Some(answer) = &bin.query {
             for q in answer.quantiles.values() {
@@ -924,6 +933,14 @@ fn to_csv(bins: &[DistributionBin]) -> String {
         csv.push('\n');
     }
     csv
+}
+
+/// A threshold as a CSV column names it: `above:0.011`, `below:0.3`.
+fn threshold_name(threshold: Threshold) -> String {
+    match threshold {
+        Threshold::Above(x) => format!("above:{x}"),
+        Threshold::Below(x) => format!("below:{x}"),
+    }
 }
 
 /// One Server-Sent Event as a client parses it; `data` is a JSON document.

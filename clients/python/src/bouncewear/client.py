@@ -206,7 +206,8 @@ class Job:
                      op_end: Optional[int] = None, quantiles: Optional[Iterable[float]] = None,
                      exceedance: Optional[Iterable[str]] = None) -> pd.DataFrame:
         """A metric's bins, one row each (`op_start`, `op_end`, `n`, `mean` with its interval,
-        `sd`, `min`, `max`, each quantile with its interval, the exceedance of the job's limit),
+        `sd`, `min`, `max`, each quantile with its interval, the exceedance of the job's limit and
+        of each limit of its list, with their intervals),
         optionally in a range of operations and with quantiles (`[0.999]`) and exceedances
         (`["above:0.012"]`) answered after the run, each with its 95 % interval. The histograms
         are in the JSON answer (`Client.request`) and the plots."""
