@@ -113,14 +113,7 @@ impl<'a> Plan<'a> {
                     watched.ran(active as u64, OPERATIONS_PER_LOOK)?;
                 }
             }
-            if let Some(cells) = &mut cells {
-                cells.merge_bin(&mut groups.stats[0].sensitivity, bin_index);
-            }
-            for (stats, lanes) in groups.each() {
-                for (accumulator, sums) in stats.operations[bin.clone()].iter_mut().zip(&sums) {
-                    accumulator.add_lanes(sums, lanes.clone());
-                }
-            }
+            end_bin(cells.as_mut(), groups, bin_index, bin, &sums);
         }
         self.finish_devices(chunk.first + first_local, &variants, &failed_at, groups);
         // The operations since the last look; a cancellation now is seen before the next batch.
@@ -697,5 +690,25 @@ impl LaneGroups<'_> {
     /// Each group's stats with its lanes.
     pub(super) fn each(&mut self) -> impl Iterator<Item = (&mut GroupStats, Range<usize>)> {
         self.stats.iter_mut().zip(self.lanes.iter().cloned())
+    }
+}
+
+/// A bin's end: the sensitivity cells' sums of the bin into the group's (`bin_index`), and each
+/// group's lane sums into its accumulators of the bin (`bin`, by metric).
+#[inline(always)]
+fn end_bin<L: Real>(
+    cells: Option<&mut LaneCells<'_>>,
+    groups: &mut LaneGroups<'_>,
+    bin_index: usize,
+    bin: Range<usize>,
+    sums: &[LaneSums<L>],
+) {
+    if let Some(cells) = cells {
+        cells.merge_bin(&mut groups.stats[0].sensitivity, bin_index);
+    }
+    for (stats, lanes) in groups.each() {
+        for (accumulator, sums) in stats.operations[bin.clone()].iter_mut().zip(sums) {
+            accumulator.add_lanes(sums, lanes.clone());
+        }
     }
 }
