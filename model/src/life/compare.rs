@@ -252,7 +252,50 @@ pub fn observed_outlasts_ci95(a: &Lives, b: &Lives) -> [f64; 2] {
     let se = (variance(&a_against_b, na) / na + variance(&against(b, a), nb) / nb).sqrt();
     let [lower, upper] = bounds(&a_against_b, na);
     let z = crate::stats::Z_975;
-    [(lower - z * se).max(0.0), (upper + z * se).min(1.0)]
+    if se > 0.0 {
+        return [(lower - z * se).max(0.0), (upper + z * se).min(1.0)];
+    }
+    // Every device's share the same (one design's devices all outlast the other's, say): the
+    // U-statistic's variance estimate is 0 and its interval no wider than the observation, a
+    // certainty a sample cannot give. Newcombe's score interval takes its place there (2006,
+    // method 5: the Hanley-McNeil variance at the bound itself).
+    let variance = |theta: f64| hanley_mcneil_variance(theta, na, nb);
+    [
+        score_bound(lower, -1.0, z, &variance),
+        score_bound(upper, 1.0, z, &variance),
+    ]
+}
+
+/// The Hanley-McNeil (1982) variance of the share of pairs in which one of `m` devices outlasts
+/// one of `n`, at share `theta`, in Newcombe's (2006) form: `theta (1 - theta) [1 + (N - 1)
+/// (1 - theta) / (2 - theta) + (N - 1) theta / (1 + theta)] / (m n)`, `N = (m + n) / 2`.
+fn hanley_mcneil_variance(theta: f64, m: f64, n: f64) -> f64 {
+    let big = 0.5 * (m + n) - 1.0;
+    theta
+        * (1.0 - theta)
+        * (1.0 + big * (1.0 - theta) / (2.0 - theta) + big * theta / (1.0 + theta))
+        / (m * n)
+}
+
+/// The end of the score interval beyond `at` on `side` (-1 below, 1 above): the `theta` between
+/// `at` and 0 (or 1) where `|theta - at| = z sqrt(variance(theta))`, by bisection.
+fn score_bound(at: f64, side: f64, z: f64, variance: &dyn Fn(f64) -> f64) -> f64 {
+    let edge = if side < 0.0 { 0.0 } else { 1.0 };
+    // Inside (between `at` and the bound) the distance falls short of z standard errors.
+    let short = |theta: f64| (theta - at).abs() < z * variance(theta).sqrt();
+    let (mut inside, mut outside) = (at, edge);
+    if short(edge) {
+        return edge;
+    }
+    for _ in 0..100 {
+        let middle = 0.5 * (inside + outside);
+        if short(middle) {
+            inside = middle;
+        } else {
+            outside = middle;
+        }
+    }
+    outside
 }
 
 /// The devices of one time of a set of lives, failed or censored, against the other set: the
@@ -402,6 +445,41 @@ mod tests {
         assert!(clo < known && bound < chi, "{clo} {known} {bound} {chi}");
         // Too few devices: nothing known.
         assert_eq!(observed_outlasts_ci95(&lives(&[4.0]), &b), [0.0, 1.0]);
+    }
+
+    /// Where every device of one design outlasts every one of the other, DeLong's variance is
+    /// 0 and its interval was the point `[1, 1]` (found by an audit): the score interval of
+    /// Newcombe (2006, method 5) stands there, its bound where the distance to the observation is
+    /// 1.96 Hanley-McNeil standard errors at the bound itself; narrower with more devices. So for
+    /// devices that all fail at one time (every pair a tie, 0.5 each side).
+    #[test]
+    fn a_complete_separation_has_a_score_interval_not_a_point() {
+        let lives = |t: std::ops::Range<u32>| {
+            let pairs: Vec<(f64, bool)> = t.map(|t| (f64::from(t), true)).collect();
+            Lives::from_pairs(&pairs).unwrap()
+        };
+        let z = crate::stats::Z_975;
+        let (late, early) = (lives(10..30), lives(1..9));
+        assert_eq!(observed_outlasts(&late, &early), [1.0, 1.0]);
+        let [lo, hi] = observed_outlasts_ci95(&late, &early);
+        assert_eq!(hi, 1.0);
+        assert!(0.8 < lo && lo < 1.0, "{lo}");
+        let distance = 1.0 - lo;
+        let standard_error = hanley_mcneil_variance(lo, 20.0, 8.0).sqrt();
+        assert_relative_eq!(distance, z * standard_error, max_relative = 1e-9);
+        // The other way round, the mirror image; more devices, a narrower interval.
+        let [rlo, rhi] = observed_outlasts_ci95(&early, &late);
+        assert_eq!(rlo, 0.0);
+        assert_relative_eq!(rhi, 1.0 - lo, max_relative = 1e-9);
+        let [wide_lo, _] = observed_outlasts_ci95(&lives(100..300), &lives(1..81));
+        assert!(lo < wide_lo && wide_lo < 1.0, "{lo} {wide_lo}");
+        // All at one time: every pair a tie.
+        let one_time = |n: usize| Lives::from_pairs(&vec![(5.0, true); n]).unwrap();
+        let [tlo, thi] = observed_outlasts_ci95(&one_time(12), &one_time(9));
+        assert!(tlo < 0.5 && thi > 0.5, "{tlo} {thi}");
+        assert_relative_eq!(0.5 - tlo, thi - 0.5, max_relative = 1e-9);
+        let standard_error = hanley_mcneil_variance(tlo, 12.0, 9.0).sqrt();
+        assert_relative_eq!(0.5 - tlo, z * standard_error, max_relative = 1e-9);
     }
 
     #[test]
