@@ -152,19 +152,20 @@ pub fn from_json<T: DeserializeOwned>(
 pub fn not_utf8(bytes: &[u8], error: &std::str::Utf8Error) -> InvalidInput {
     let at = error.valid_up_to();
     let text = std::str::from_utf8(&bytes[..at]).expect("valid up to there");
-    // The valid text ends inside that value: reading it stops there.
-    let mut reader = serde_json::Deserializer::from_str(text);
-    let pointer = match serde_path_to_error::deserialize::<_, Strict>(&mut reader) {
-        Err(error) => path_to_pointer(error.path()),
-        Ok(_) => Pointer::root(),
-    };
-    InvalidInput::malformed(
-        &pointer,
-        format!(
-            "malformed JSON: the text is not UTF-8 at byte {at} (0x{:02X})",
-            bytes[at]
-        ),
-    )
+    let detail = format!(
+        "malformed JSON: the text is not UTF-8 at byte {at} (0x{:02X})",
+        bytes[at]
+    );
+    // The valid text ends inside that value: reading it stops there, and names it.
+    match read_strict(text) {
+        Err(mut invalid) => {
+            invalid.kind = InputErrorKind::Malformed;
+            invalid.errors.truncate(1);
+            invalid.errors[0].detail = detail;
+            invalid
+        }
+        Ok(_) => InvalidInput::malformed(&Pointer::root(), detail),
+    }
 }
 
 /// Reads JSON text into a value, naming by pointer what the text itself gets wrong where a value

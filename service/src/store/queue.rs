@@ -419,19 +419,18 @@ impl JobQueue for SqlStore {
         // The job ends and what its run left goes in one transaction: a crash between the two
         // would have left a cancelled job's accumulators counted in its stored bytes.
         let mut tx = self.begin().await?;
-        let row = Sql::new(concat!(
+        let cancelled = Sql::new(
             "UPDATE jobs SET status = 'cancelled', finished_at = $3 \
-             WHERE id = $1 AND owner = $2 AND status IN ('queued', 'running') RETURNING ",
-            job_columns!()
-        ))
+             WHERE id = $1 AND owner = $2 AND status IN ('queued', 'running')",
+        )
         .bind(id.as_str())
         .bind(owner.as_str())
         .bind(now.0)
-        .fetch_optional(&mut tx)
+        .execute(&mut tx)
         .await?;
-        if row.is_some() {
+        if cancelled == 1 {
             drop_unfinished(&mut tx, id).await?;
-            // As it is now: its stored bytes without what was dropped.
+            // Read once the run's leftovers are dropped: its stored bytes without them.
             let cancelled = select_job(&mut tx, owner, id).await?;
             tx.commit().await?;
             self.ended(id);
