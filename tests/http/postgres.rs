@@ -48,12 +48,11 @@ fn jobs_results_and_schedules_work_the_same_on_postgres() {
     assert_eq!(csv.body.lines().count(), 1 + 10);
 
     let long = server.submit(&scattered_job(200_000, 1000, 1));
-    assert_eq!(delete(&server.url(&format!("/v1/jobs/{long}"))).status, 200);
+    let cancelled = delete(&server.url(&format!("/v1/jobs/{long}")));
+    assert_eq!(cancelled.status, 200, "{}", cancelled.body);
     assert_eq!(server.list_job_ids(1), [long.clone(), id.clone()]);
-    assert_eq!(
-        delete(&server.url(&format!("/v1/jobs/{long}?purge=true"))).status,
-        204
-    );
+    let purged = delete(&server.url(&format!("/v1/jobs/{long}?purge=true")));
+    assert_eq!(purged.status, 204, "{}", purged.body);
     assert_eq!(server.list_job_ids(1), std::slice::from_ref(&id));
 
     let wearing = server.submit(&wearing_template(48.0));
