@@ -19,7 +19,7 @@ use bouncewear::store::{
 use bouncewear::worker::Workers;
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::{Batch, run_group};
-use bouncewear_model::montecarlo::{Job, Silent, run_job};
+use bouncewear_model::montecarlo::{Job, Metric, Silent, run_job};
 use bouncewear_model::stats::summarize;
 use chrono::{DateTime, Utc};
 use std::sync::Arc;
@@ -630,7 +630,14 @@ async fn a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(url: &st
             .unwrap();
         assert_eq!(groups.len(), bins.len());
         for (bin, groups) in bins.iter().zip(groups) {
-            assert_eq!(summarize(&groups.unwrap()), bin.summary, "{metric}");
+            let per_device = Metric::parse(metric)
+                .unwrap()
+                .values_per_device(bin.op_start..bin.op_end);
+            assert_eq!(
+                summarize(&groups.unwrap(), per_device),
+                bin.summary,
+                "{metric}"
+            );
         }
     }
     let shards = store.shards(&id).await.unwrap();

@@ -481,6 +481,15 @@ impl Job {
         self.bin_operations
     }
 
+    /// The operations of bin `bin`: `bin_operations` of them, fewer in a last bin cut short.
+    pub fn bin_range(&self, bin: u64) -> std::ops::Range<u64> {
+        let start = self.bin_operations.saturating_mul(bin);
+        start
+            ..start
+                .saturating_add(self.bin_operations)
+                .min(self.spec.operations)
+    }
+
     pub fn scatter(&self) -> &[Scatter] {
         &self.scatter
     }

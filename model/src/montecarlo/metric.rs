@@ -190,6 +190,16 @@ impl Metric {
         }
     }
 
+    /// The values one device gives a bin of this metric over `operations`: one an operation, or
+    /// its one value for a device metric. A bin's values over it are its number of devices, the
+    /// units independent whatever the scatter ([`crate::stats::summarize`]).
+    pub fn values_per_device(self, operations: std::ops::Range<u64>) -> u64 {
+        match self {
+            Metric::Operation(_) => operations.end.saturating_sub(operations.start),
+            Metric::Device(_) => 1,
+        }
+    }
+
     /// Whether the metric needs the first-impact phase (section 4), at every operation.
     pub fn needs_impact(self) -> bool {
         match self {

@@ -372,17 +372,24 @@ fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> 
         .map(|at| {
             let (m, b) = (at / bins, at % bins);
             let metric = metrics[m];
-            let op_start = job.bin_operations() * b as u64;
+            let operations = job.bin_range(b as u64);
             let groups = operation_groups(job, tally, b, m);
-            let mut summary = summarize(&groups);
+            let per_device = Metric::Operation(metric).values_per_device(operations.clone());
+            let mut summary = summarize(&groups, per_device);
             if metric.is_integer() {
                 round_quantiles(&mut summary);
             }
-            answer_thresholds(job, Metric::Operation(metric), &groups, &mut summary);
+            answer_thresholds(
+                job,
+                Metric::Operation(metric),
+                &groups,
+                per_device,
+                &mut summary,
+            );
             Bin {
                 summary,
-                op_start,
-                op_end: (op_start + job.bin_operations()).min(job.spec().operations),
+                op_start: operations.start,
+                op_end: operations.end,
             }
         })
         .collect::<Vec<Bin>>()
@@ -398,9 +405,15 @@ fn summarize_operations(job: &Job, tally: &Tally) -> BTreeMap<String, Vec<Bin>> 
 
 /// The summary's `exceedances`: the metric's thresholds, if the job lists any, answered as a query
 /// after the run answers them.
-fn answer_thresholds(job: &Job, metric: Metric, groups: &[&Accumulator], summary: &mut Summary) {
+fn answer_thresholds(
+    job: &Job,
+    metric: Metric,
+    groups: &[&Accumulator],
+    per_device: u64,
+    summary: &mut Summary,
+) {
     if let Some(thresholds) = job.thresholds().get(&metric) {
-        summary.exceedances = query(groups, &[], thresholds).exceedance;
+        summary.exceedances = query(groups, per_device, &[], thresholds).exceedance;
     }
 }
 
@@ -417,16 +430,18 @@ fn round_quantile(value: &mut f64, ci95: &mut [f64; 2]) {
     *ci95 = [ci95[0].floor(), ci95[1].ceil()];
 }
 
-/// [`query`] of one (metric, bin) after the run, from the groups [`RunGroups::of`] gave: its
-/// quantiles rounded for a whole-number metric, as in the Result's summaries, so that a standard
-/// level answers the summary's value and interval.
+/// [`query`] of one (metric, bin over `operations`) after the run, from the groups
+/// [`RunGroups::of`] gave: its quantiles rounded for a whole-number metric, as in the Result's
+/// summaries, so that a standard level answers the summary's value and interval.
 pub fn query_metric(
     metric: Metric,
+    operations: std::ops::Range<u64>,
     groups: &[Accumulator],
     levels: &[f64],
     thresholds: &[Threshold],
 ) -> QueryAnswer {
-    let mut answer = query(groups, levels, thresholds);
+    let per_device = metric.values_per_device(operations);
+    let mut answer = query(groups, per_device, levels, thresholds);
     if matches!(metric, Metric::Operation(m) if m.is_integer()) {
         for quantile in answer.quantiles.values_mut() {
             if let (Some(value), Some(ci95)) = (&mut quantile.value, &mut quantile.ci95) {
@@ -513,8 +528,8 @@ fn summarize_devices(job: &Job, tally: &Tally) -> BTreeMap<String, Summary> {
         .enumerate()
         .map(|(m, metric)| {
             let groups: Vec<&Accumulator> = tally.groups.iter().map(|g| &g.devices[m]).collect();
-            let mut summary = summarize(&groups);
-            answer_thresholds(job, Metric::Device(*metric), &groups, &mut summary);
+            let mut summary = summarize(&groups, 1);
+            answer_thresholds(job, Metric::Device(*metric), &groups, 1, &mut summary);
             (metric.name().to_owned(), summary)
         })
         .collect()
@@ -530,7 +545,9 @@ fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) ->
         .position(|m| *m == precision.metric)
         .expect("validated");
     let last_bin = usize::try_from(job.bins() - 1).expect("bins fit in memory");
-    let summary = summarize(&operation_groups(job, tally, last_bin, metric));
+    let per_device =
+        Metric::Operation(precision.metric).values_per_device(job.bin_range(last_bin as u64));
+    let summary = summarize(&operation_groups(job, tally, last_bin, metric), per_device);
     let (value, [lo, hi], bounded) = match precision.statistic {
         Statistic::Mean => (summary.mean, summary.mean_ci95, true),
         Statistic::Quantile(name) => {

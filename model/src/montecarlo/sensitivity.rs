@@ -364,11 +364,11 @@ pub fn summarize_sensitivity(
     for (m, metric) in job.operation_metrics().iter().enumerate() {
         let entries = (0..bins)
             .map(|b| {
-                let op_start = job.bin_operations() * b as u64;
+                let operations = job.bin_range(b as u64);
                 let (indices, r_squared) = cell(b * metrics + m, &all, true);
                 SensitivityBin {
-                    op_start: Some(op_start),
-                    op_end: Some((op_start + job.bin_operations()).min(job.spec().operations)),
+                    op_start: Some(operations.start),
+                    op_end: Some(operations.end),
                     indices,
                     r_squared,
                 }

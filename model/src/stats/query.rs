@@ -54,7 +54,8 @@ pub struct QueryAnswer {
 }
 
 /// The quantiles of `levels` (each in `[0, 1]`) and the probabilities beyond `thresholds` of the
-/// values of `groups`, by the estimators of [`summarize`](super::summarize) on the same groups:
+/// values of `groups` (`per_device` values from each device), by the estimators of
+/// [`summarize`](super::summarize) on the same groups:
 /// for a level of [`QUANTILES`](super::QUANTILES) the value and interval are those of the summary,
 /// to the bit. A level the data cannot bound (fewer than
 /// [`MIN_TAIL_UNITS`](super::summary::MIN_TAIL_UNITS) independent values beyond it, or one group)
@@ -70,10 +71,11 @@ pub struct QueryAnswer {
 /// with all of them beyond, so the store's resolution never puts the truth outside it.
 pub fn query<A: Borrow<Accumulator>>(
     groups: &[A],
+    per_device: u64,
     levels: &[f64],
     thresholds: &[Threshold],
 ) -> QueryAnswer {
-    let merged = Merged::of(groups);
+    let merged = Merged::of(groups, per_device);
     let quantiles = levels
         .iter()
         .zip(merged.quantiles(levels))
@@ -146,6 +148,7 @@ mod tests {
         let groups = groups_of(&[1.0, 2.0, 3.0, 4.0], 2);
         let answer = query(
             &groups,
+            1,
             &[0.5, 0.999],
             &[Threshold::Above(2.5), Threshold::Below(1.5)],
         );
@@ -167,7 +170,7 @@ mod tests {
 
     #[test]
     fn no_values_give_zeros() {
-        let answer = query::<Accumulator>(&[], &[0.5], &[Threshold::Above(1.0)]);
+        let answer = query::<Accumulator>(&[], 1, &[0.5], &[Threshold::Above(1.0)]);
         assert_eq!(answer.quantiles["0.5"].value, Some(0.0));
         assert_eq!(answer.exceedance[0].probability, 0.0);
         assert_eq!(answer.exceedance[0].ci95, [0.0, 0.0]);
@@ -184,9 +187,9 @@ mod tests {
             size in 1..100usize,
         ) {
             let groups = groups_of(&values, size);
-            let summary = summarize(&groups);
+            let summary = summarize(&groups, 1);
             let levels = QUANTILES.map(|(_, q)| q);
-            let answer = query(&groups, &levels, &[]);
+            let answer = query(&groups, 1, &levels, &[]);
             for (key, level) in QUANTILES {
                 prop_assert_eq!(
                     &answer.quantiles[&level.to_string()],
@@ -204,7 +207,7 @@ mod tests {
             // Whole values and a threshold halfway between two: no value shares its bucket.
             let values: Vec<f64> = values.into_iter().map(f64::from).collect();
             let x = f64::from(at) + 0.5;
-            let answer = query(&groups_of(&values, size), &[], &[Threshold::Above(x), Threshold::Below(x)]);
+            let answer = query(&groups_of(&values, size), 1, &[], &[Threshold::Above(x), Threshold::Below(x)]);
             let n = values.len() as f64;
             let above = values.iter().filter(|&&v| v > x).count() as f64;
             let below = values.iter().filter(|&&v| v < x).count() as f64;
@@ -233,8 +236,8 @@ mod tests {
             let probability = |answer: QueryAnswer| -> Vec<f64> {
                 answer.exceedance.iter().map(|e| e.probability).collect()
             };
-            let above = probability(query(&groups, &[], &above));
-            let below = probability(query(&groups, &[], &below));
+            let above = probability(query(&groups, 1, &[], &above));
+            let below = probability(query(&groups, 1, &[], &below));
             prop_assert!(above.windows(2).all(|w| w[0] >= w[1]));
             prop_assert!(below.windows(2).all(|w| w[0] <= w[1]));
         }
@@ -254,7 +257,7 @@ mod tests {
         ) {
             let x = values[pick % values.len()] * (1.0 + nudge);
             let threshold = if above { Threshold::Above(x) } else { Threshold::Below(x) };
-            let answer = query(&groups_of(&values, size), &[], &[threshold]);
+            let answer = query(&groups_of(&values, size), 1, &[], &[threshold]);
             let e = &answer.exceedance[0];
             let exact = values.iter().filter(|&&v| threshold.beyond(v)).count() as f64
                 / values.len() as f64;
@@ -289,7 +292,7 @@ mod tests {
             Threshold::Above(2.0),
             Threshold::Above(1.2),
         ];
-        let answer = query(&groups, &[], &asked);
+        let answer = query(&groups, 1, &[], &asked);
         let exact = |t: Threshold| {
             values.iter().filter(|&&v| t.beyond(v)).count() as f64 / values.len() as f64
         };
@@ -314,7 +317,7 @@ mod tests {
         let mut rng = SplitMix(11);
         let values: Vec<f64> = (0..200_000).map(|_| 5.0 + rng.normal()).collect();
         let groups = groups_of(&values, 200_000 / 32);
-        let answer = query(&groups, &[0.999_999, 0.000_001, 0.999, 0.5], &[]);
+        let answer = query(&groups, 1, &[0.999_999, 0.000_001, 0.999, 0.5], &[]);
         for level in ["0.999999", "0.000001"] {
             let q = &answer.quantiles[level];
             assert_eq!((q.value, q.ci95), (None, None), "{level}");
@@ -335,7 +338,7 @@ mod tests {
             assert_eq!(q.reason, None);
         }
         // One group cannot measure the spread between groups: no interval either.
-        let one = query(&groups_of(&values[..1000], 1000), &[0.5], &[]);
+        let one = query(&groups_of(&values[..1000], 1000), 1, &[0.5], &[]);
         assert!(one.quantiles["0.5"].value.is_none());
     }
 
@@ -348,6 +351,7 @@ mod tests {
         let min = values.iter().copied().fold(f64::MAX, f64::min);
         let answer = query(
             &groups,
+            1,
             &[],
             &[Threshold::Above(max), Threshold::Below(min)],
         );
@@ -404,6 +408,7 @@ mod tests {
                 .collect();
             let answer = query(
                 &accumulators,
+                1,
                 &[0.9],
                 &[Threshold::Above(0.5 * s), Threshold::Below(-s)],
             );

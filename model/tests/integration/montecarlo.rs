@@ -576,7 +576,8 @@ fn a_query_after_the_run_at_the_standard_levels_answers_the_results_summaries() 
         let at = groups
             .of(metric, bin)
             .expect("every summary has its groups");
-        let answer = query_metric(Metric::parse(metric).unwrap(), &at, &levels, &[]);
+        let metric_of = Metric::parse(metric).unwrap();
+        let answer = query_metric(metric_of, job.bin_range(bin), &at, &levels, &[]);
         for (key, level) in QUANTILES {
             assert_eq!(
                 answer.quantiles[&level.to_string()],
@@ -628,7 +629,8 @@ fn a_metric_may_have_several_limits_answered_as_a_query_after_the_run_answers_th
     let groups = RunGroups::new(&job, tally);
     let thresholds = [Threshold::Above(0.4), Threshold::Below(0.3)];
     for (bin, summary) in result.operations["e1"].iter().enumerate() {
-        let asked = query(&groups.of("e1", bin as u64).unwrap(), &[], &thresholds);
+        let groups = groups.of("e1", bin as u64).unwrap();
+        let asked = query(&groups, job.bin_operations(), &[], &thresholds);
         assert_eq!(summary.summary.exceedances, asked.exceedance);
         assert_eq!(summary.summary.exceedance, None);
     }
@@ -723,7 +725,7 @@ fn every_exceedance_interval_covers_the_exact_probability_at_ten_million_values(
         .of("impact_velocity_m_s", 0)
         .unwrap();
     let metric = Metric::parse("impact_velocity_m_s").unwrap();
-    let answer = query_metric(metric, &groups, &[], &asked);
+    let answer = query_metric(metric, job.bin_range(0), &groups, &[], &asked);
     assert_eq!(answer.exceedance[..listed.len()], summary.exceedances[..]);
     let bulk = bulk.count();
     for (i, e) in answer.exceedance[listed.len()..].iter().enumerate() {

@@ -789,7 +789,8 @@ pub async fn get_distribution(
                 .store
                 .distribution_groups(&record.id, &metric, range)
                 .await?;
-            answer(parsed, groups, after_run).await?
+            let ranges = rows.iter().map(|row| row.op_start..row.op_end).collect();
+            answer(parsed, ranges, groups, after_run).await?
         }
         None => Vec::new(),
     }
@@ -833,6 +834,7 @@ pub async fn get_distribution(
 /// of a large job decodes many accumulators); 409 for a bin stored before groups were kept.
 async fn answer(
     metric: Metric,
+    ranges: Vec<std::ops::Range<u64>>,
     groups: Vec<Option<Vec<Accumulator>>>,
     after_run: AfterRunQuery,
 ) -> Result<Vec<QueryAnswer>, ApiError> {
@@ -845,7 +847,16 @@ async fn answer(
     tokio::task::spawn_blocking(move || {
         groups
             .iter()
-            .map(|bin| query_metric(metric, bin, &after_run.levels, &after_run.thresholds))
+            .zip(ranges)
+            .map(|(bin, operations)| {
+                query_metric(
+                    metric,
+                    operations,
+                    bin,
+                    &after_run.levels,
+                    &after_run.thresholds,
+                )
+            })
             .collect()
     })
     .await

@@ -66,8 +66,7 @@ impl<'a> Plan<'a> {
         let variant_count = variants.len();
         let swaps_at = variant_count * lanes * metrics.len();
         for bin_index in 0..bins {
-            let start = job.bin_operations() * bin_index as u64;
-            let end = (start + job.bin_operations()).min(operations);
+            let std::ops::Range { start, end } = job.bin_range(bin_index as u64);
             let bin = bin_index * metrics.len()..(bin_index + 1) * metrics.len();
             for op in start..end {
                 for (v, variant) in variants.iter_mut().enumerate() {

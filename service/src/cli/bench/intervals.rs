@@ -119,6 +119,7 @@ fn coverage_run(job: &Job, exceedance_above: f64) -> (Vec<Estimate>, Accumulator
     let metric = Metric::Operation(OperationMetric::TotalBounce);
     let answer = query_metric(
         metric,
+        job.bin_range(0),
         &groups,
         &[0.99],
         &[Threshold::Above(exceedance_above)],
@@ -275,7 +276,7 @@ pub(super) fn tail_coverage(quick: bool, progress: &Progress) -> Vec<TailCoverag
                 .expect("the job has the metric");
             let metric = Metric::Operation(OperationMetric::ImpactVelocity);
             let thresholds = [Threshold::Above(counted), Threshold::Above(asked)];
-            let answer = query_metric(metric, &groups, &[], &thresholds);
+            let answer = query_metric(metric, job.bin_range(0), &groups, &[], &thresholds);
             for ((hit, exact, width), e) in hits.iter_mut().zip(&answer.exceedance) {
                 let p = truth(e.threshold.value());
                 let [lo, hi] = e.ci95;
