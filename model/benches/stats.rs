@@ -104,5 +104,5 @@ fn summary_of_32_groups(bencher: Bencher) {
             group
         })
         .collect();
-    bencher.bench_local(|| summarize(black_box(&groups)));
+    bencher.bench_local(|| summarize(black_box(&groups), 1));
 }

@@ -45,7 +45,7 @@ pub use accumulator::{Accumulator, LaneSums};
 pub use difference::{Difference, Estimate, difference};
 pub use intervals::{Z_975, student_t_975, wilson_interval};
 pub use query::{QueryAnswer, QueryQuantile, query};
-pub use sketch::Sketch;
+pub use sketch::{Interpolated, Sketch};
 pub use summary::{Exceedance, HISTOGRAM_BINS, Histogram, QuantileSummary, Summary, summarize};
 pub use tails::Tails;
 pub use threshold::{Resolution, Threshold, ThresholdExceedance};

@@ -399,6 +399,52 @@ impl Store {
     }
 }
 
+/// A quantile read off a sketch's counts ([`Sketch::interpolated`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Interpolated {
+    /// With each bucket's values spread evenly over its width.
+    pub value: f64,
+    /// Where in its bucket the exact quantile may lie, allowing for the density's slope.
+    pub range: [f64; 2],
+}
+
+impl Interpolated {
+    fn at(value: f64) -> Self {
+        Self {
+            value,
+            range: [value, value],
+        }
+    }
+}
+
+/// A non-empty bucket in value order: its lower and upper edge (equal for exact zeros) and count.
+#[derive(Debug, Clone, Copy)]
+struct Span(f64, f64, u64);
+
+impl Span {
+    fn density(self) -> f64 {
+        self.2 as f64 / (self.1 - self.0)
+    }
+
+    /// `|rho|`, the share by which the density changes across this bucket, from the densities
+    /// of the adjacent buckets `previous` and `next` (0 for either that is absent, not adjacent,
+    /// or exact zeros); 0 for exact zeros, a point. With the density linear across the bucket, a
+    /// quantile read with the values spread evenly, at the share `s` of them below it, is off by
+    /// `w |rho| s (1 - s) / 2` to first order.
+    fn slope(self, previous: Option<Span>, next: Option<Span>) -> f64 {
+        if self.1 <= self.0 {
+            return 0.0;
+        }
+        let adjacent = |span: Option<Span>, edge: f64, at: fn(Span) -> f64| {
+            span.filter(|s| at(*s) == edge && s.1 > s.0)
+                .map_or(0.0, Span::density)
+        };
+        let below = adjacent(previous, self.0, |s| s.1);
+        let above = adjacent(next, self.1, |s| s.0);
+        ((above - below) / (2.0 * self.density())).abs()
+    }
+}
+
 /// The slots of a store of `len` slots from key `offset` that hold the keys `keys`.
 fn slots(offset: u32, len: usize, keys: std::ops::Range<u32>) -> std::ops::Range<usize> {
     let end = offset + len as u32;
@@ -574,52 +620,67 @@ impl Sketch {
 
     /// The quantile of level `q` with each bucket's values spread evenly over its width (exact
     /// zeros stay a point at 0): the value where the linear interpolation of the counts reaches
-    /// `q n`. Continuous in `q`, unlike [`Sketch::quantile`]'s midpoints, so it suits an interval's
-    /// ends and a reference built from many values: with `c` values in the bucket, it is within
-    /// about `w / sqrt(c)` of the exact quantile for a smooth density (`w` the bucket's width), and
-    /// never outside the bucket that holds the exact one. 0 for an empty sketch.
+    /// `q n`. Continuous in `q`, unlike [`Sketch::quantile`]'s midpoints, so it suits a reference
+    /// built from many values; never outside the bucket that holds the exact quantile, but off it
+    /// by up to `w |rho| / 8` where the density changes by a share `rho` across the bucket's width
+    /// `w` (a curved density's values are not spread evenly): see [`Sketch::interpolated`] for
+    /// the range that allows for it. 0 for an empty sketch.
     pub fn interpolated_quantile(&self, q: f64) -> f64 {
-        self.interpolated_quantiles(&[q])[0]
+        self.interpolated(&[q])[0].value
     }
 
     /// [`Sketch::interpolated_quantile`] for several levels (in any order) in one pass over the
-    /// buckets.
-    pub fn interpolated_quantiles(&self, levels: &[f64]) -> Vec<f64> {
+    /// buckets, each with the range in its bucket where the exact quantile may lie: twice the
+    /// first-order error of the even spread either side, `w |rho| s (1 - s)` at the share `s` of
+    /// the bucket's values below it (exact at the bucket's edges, at most `w |rho| / 4`), with
+    /// `rho` the relative change of the density across the bucket that its two neighbours show
+    /// (a neighbour that is not adjacent counts as empty). Where the buckets hold many values the statistical spread of
+    /// a quantile is far below a bucket's width and this error dominates: a p95 of 1e8 normal
+    /// values with `sd / mean = 0.09` was off by up to 2.6 standard errors.
+    pub fn interpolated(&self, levels: &[f64]) -> Vec<Interpolated> {
         let n = self.count as f64;
         let targets: Vec<f64> = levels.iter().map(|q| q.clamp(0.0, 1.0) * n).collect();
         let mut order: Vec<usize> = (0..levels.len()).collect();
         order.sort_by(|&a, &b| targets[a].total_cmp(&targets[b]));
         let mut pending = order.into_iter().peekable();
-        let mut values = vec![0.0; levels.len()];
+        let mut found = vec![Interpolated::at(0.0); levels.len()];
         let edges = |key: u32| {
             let [lo, hi] = [key, key + 1].map(|k| f64::from_bits(u64::from(k) << KEY_SHIFT));
             [lo, hi.min(f64::MAX)]
         };
         let negative = self.negative.buckets().rev().map(|(key, count)| {
             let [lo, hi] = edges(key);
-            (-hi, -lo, count)
+            Span(-hi, -lo, count)
         });
-        let zeros = (self.zeros != 0).then_some((0.0, 0.0, self.zeros));
+        let zeros = (self.zeros != 0).then_some(Span(0.0, 0.0, self.zeros));
         let positive = self.positive.buckets().map(|(key, count)| {
             let [lo, hi] = edges(key);
-            (lo, hi, count)
+            Span(lo, hi, count)
         });
-        let mut before = 0.0;
-        let mut last = 0.0;
-        for (lo, hi, count) in negative.chain(zeros).chain(positive) {
+        let mut spans = negative.chain(zeros).chain(positive).peekable();
+        let (mut before, mut last, mut previous) = (0.0, 0.0, None);
+        while let Some(span @ Span(lo, hi, count)) = spans.next() {
             let count = count as f64;
-            while let Some(i) = pending.next_if(|&i| targets[i] <= before + count) {
-                let share = ((targets[i] - before) / count).clamp(0.0, 1.0);
-                values[i] = lo + share * (hi - lo);
+            let within = |i: &usize| targets[*i] <= before + count;
+            if pending.peek().is_some_and(within) {
+                let slope = span.slope(previous, spans.peek().copied());
+                while let Some(i) = pending.next_if(within) {
+                    let share = ((targets[i] - before) / count).clamp(0.0, 1.0);
+                    let value = lo + share * (hi - lo);
+                    let error = (hi - lo) * slope * share * (1.0 - share);
+                    found[i] = Interpolated {
+                        value,
+                        range: [(value - error).max(lo), (value + error).min(hi)],
+                    };
+                }
             }
             if pending.peek().is_none() {
                 break;
             }
-            before += count;
-            last = hi;
+            (before, last, previous) = (before + count, hi, Some(span));
         }
-        pending.for_each(|i| values[i] = last);
-        values
+        pending.for_each(|i| found[i] = Interpolated::at(last));
+        found
     }
 
     /// For each of `values` (in any order), the number of values whose bucket midpoint is at or

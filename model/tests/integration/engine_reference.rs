@@ -1,7 +1,9 @@
 //! Every Monte Carlo statistic of the reference jobs (`tests/data/reference_jobs.json`, 48 V / 15 A and
 //! mechanical, cut to 256 devices x 100 operations), against the values the engine gave before it ran
 //! in lockstep with its own `atan` and `exp` (commit a6c3d1d, glibc's `atan` and `exp`): within 1e-12
-//! relative, counts exactly.
+//! relative, counts exactly. A quantile's interval ends since allow for the density's slope within
+//! a sketch bucket (`Sketch::interpolated`): each may lie outside the reference's, by at most the
+//! 0.39 % width of its bucket, never inside.
 
 use bouncewear_model::montecarlo::{Job, Silent, run_job};
 use serde_json::Value;
@@ -10,7 +12,8 @@ const JOBS: &str = include_str!("../../../tests/data/reference_jobs.json");
 const REFERENCE: &str = include_str!("../../../tests/data/engine_reference.json");
 
 /// Walks `want` and `got` together, collecting every number that differs by more than 1e-12
-/// relative (integers, which are counts, must be equal).
+/// relative (integers, which are counts, must be equal), or a quantile interval's end that is not
+/// outside the reference's by at most a bucket.
 fn differences(path: &str, want: &Value, got: &Value, out: &mut Vec<String>) {
     match (want, got) {
         (Value::Object(w), Value::Object(g)) => {
@@ -35,7 +38,15 @@ fn differences(path: &str, want: &Value, got: &Value, out: &mut Vec<String>) {
         }
         (Value::Number(w), Value::Number(g)) => {
             let (w, g) = (w.as_f64().unwrap(), g.as_f64().unwrap());
-            if (w - g).abs() > 1e-12 * w.abs() {
+            let outwards = if path.contains("/quantiles/") && path.ends_with("/ci95/0") {
+                w - g
+            } else if path.contains("/quantiles/") && path.ends_with("/ci95/1") {
+                g - w
+            } else {
+                0.0
+            };
+            let bucket = w.abs() / 256.0;
+            if (w - g).abs() > 1e-12 * w.abs() && !(0.0..=bucket).contains(&outwards) {
                 out.push(format!("{path}: {w:e} != {g:e}"));
             }
         }
