@@ -46,6 +46,10 @@ pub const SAMPLES_PER_LEVEL: usize = 1000;
 pub const LEVEL_PROBABILITY: f64 = 0.1;
 /// Samples per batch of crude Monte Carlo, between checks of its precision.
 pub const CRUDE_BATCH: usize = 10_000;
+
+/// The fewest importance samples whose weighted mean stands as an estimate: one batch. A budget
+/// that leaves fewer after the pilot run gets the pilot's estimate.
+const MIN_IMPORTANCE_SAMPLES: u64 = SAMPLES_PER_LEVEL as u64;
 /// The acceptance rate the conditional sampler's scale is steered to (Papaioannou et al. 2015).
 const TARGET_ACCEPTANCE: f64 = 0.44;
 /// The conditional sampler's scale at a run's first conditional level (Papaioannou et al. 2015).
@@ -827,13 +831,26 @@ impl Estimator {
     }
 
     /// Importance sampling's estimate: the normal interval of the weighted mean, the pilot's
-    /// levels as the tail curve.
+    /// levels as the tail curve (never rising). With fewer than [`MIN_IMPORTANCE_SAMPLES`]
+    /// weighed, or none of them failing, the weighted mean says nothing (no samples gave 0 with
+    /// the interval `[0, 0]`, one sample a point), and the estimate is its pilot's, a subset
+    /// simulation run's, with that run's interval.
     fn weighed(&mut self, w: Weighing) -> Estimate {
         self.stage = Stage::Done;
-        let (probability, se) = weighted_mean(w.sum, w.sum2, w.samples);
         let pilot = &self.runs[0];
-        let mut tail = pilot.levels[..pilot.levels.len() - 1].to_vec();
-        tail.push((self.threshold, probability));
+        if w.samples < MIN_IMPORTANCE_SAMPLES || w.sum == 0.0 {
+            let cov = pilot.var_ln.exp_m1().sqrt();
+            return Estimate {
+                probability: pilot.probability,
+                ci95: lognormal_interval(pilot.probability, cov, pilot.dof),
+                cov: Some(cov),
+                evaluations: self.done,
+                design_point: pilot.design_point.clone(),
+                tail: first_run_tail(pilot, pilot.probability),
+            };
+        }
+        let (probability, se) = weighted_mean(w.sum, w.sum2, w.samples);
+        let tail = first_run_tail(pilot, probability);
         Estimate {
             probability,
             ci95: [
@@ -1103,6 +1120,57 @@ mod tests {
         let (covered, cov) = coverage(Method::Importance, 2, 4.753, budget, 100);
         assert!((0.88..=0.99).contains(&covered), "{covered}");
         assert!(cov <= 0.1 + 1e-12, "{cov}");
+    }
+
+    #[test]
+    fn importance_sampling_without_a_batch_left_answers_its_pilot() {
+        // P = Phi(-3.09) = 1e-3: the pilot run takes 2,800 or 3,700 evaluations of the 3,750, so
+        // importance sampling gets a part of a batch or none. It answered 0 in [0, 0], or a
+        // point; now the pilot's estimate and interval.
+        let state = Linear::new(2);
+        let truth = standard_normal_cdf(-3.09);
+        let budget = Budget {
+            max_evaluations: 3_750,
+            target_cov: 0.1,
+        };
+        let (mut answered, mut covered) = (0, 0);
+        for seed in 0..60 {
+            let Ok(estimate) = Method::Importance.estimate(&state, 3.09, budget, seed, &Silent)
+            else {
+                continue;
+            };
+            let [lo, hi] = estimate.ci95;
+            assert!(0.0 < lo && lo < estimate.probability && estimate.probability < hi);
+            assert!(estimate.cov.is_some_and(|cov| cov > 0.0));
+            answered += 1;
+            covered += u32::from(lo <= truth && truth <= hi);
+        }
+        assert_eq!(answered, 60);
+        let coverage = f64::from(covered) / f64::from(answered);
+        assert!(coverage >= 0.85, "{coverage} of {answered}");
+    }
+
+    #[test]
+    fn importance_samplings_tail_never_rises() {
+        let state = Linear::new(2);
+        let budget = Budget {
+            max_evaluations: 20_000,
+            target_cov: 0.1,
+        };
+        for seed in 0..50 {
+            let estimate = Method::Importance
+                .estimate(&state, 4.753, budget, seed, &Silent)
+                .unwrap();
+            assert!(
+                estimate
+                    .tail
+                    .windows(2)
+                    .all(|w| w[0].0 < w[1].0 && w[0].1 >= w[1].1),
+                "seed {seed}: {:?}",
+                estimate.tail
+            );
+            assert_eq!(estimate.tail.last().unwrap().1, estimate.probability);
+        }
     }
 
     #[test]
