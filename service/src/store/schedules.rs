@@ -140,7 +140,16 @@ impl Schedules for SqlStore {
         .bind(job.id.as_str())
         .bind(slot.manual)
         .execute(&mut tx)
-        .await?;
+        .await
+        .map_err(|error| match error {
+            // The schedule was deleted since it was read (a run asked for beside its delete).
+            StoreError::Database(sqlx::Error::Database(error))
+                if error.kind() == sqlx::error::ErrorKind::ForeignKeyViolation =>
+            {
+                StoreError::schedule_not_found(slot.schedule)
+            }
+            error => error,
+        })?;
         if claimed == 0 {
             tx.rollback().await?;
             return Ok(NewRun::AlreadyExists);
