@@ -152,7 +152,11 @@ impl Application {
             tracing::info!("shutting down: no new requests, running jobs go back to the queue");
             let _ = shutdown_sender.send(true);
         });
-        let limits = ConnectionLimits::new(config.max_connections, config.header_timeout());
+        let limits = ConnectionLimits::new(
+            config.max_connections,
+            config.header_timeout(),
+            config.body_timeout(),
+        );
         tracing::info!(
             max_connections = limits.max_connections,
             header_timeout_s = limits.header_timeout.as_secs_f64(),

@@ -34,12 +34,15 @@ pub struct ConnectionLimits {
     /// From the connection's start, or the end of its previous response, to the end of a
     /// request's headers.
     pub header_timeout: Duration,
+    /// How long a response may wait for its client to read any of it: a client that stops
+    /// reading is disconnected, and the response it pinned in memory is dropped.
+    pub write_stall: Duration,
 }
 
 impl ConnectionLimits {
     /// `wanted` connections (or as many as there are descriptors for), never more than the
     /// open-file limit allows.
-    pub fn new(wanted: Option<usize>, header_timeout: Duration) -> Self {
+    pub fn new(wanted: Option<usize>, header_timeout: Duration, write_stall: Duration) -> Self {
         let available = open_file_limit().map_or(usize::MAX, |limit| {
             usize::try_from(limit.saturating_sub(RESERVED_FDS).max(1)).unwrap_or(usize::MAX)
         });
@@ -53,6 +56,7 @@ impl ConnectionLimits {
         Self {
             max_connections: max_connections.min(Semaphore::MAX_PERMITS),
             header_timeout,
+            write_stall,
         }
     }
 }
@@ -199,10 +203,40 @@ impl<B: HttpBody + Unpin> HttpBody for Counted<B> {
 
 /// A connection's socket, recording for [`Open`] whether the server waits on its client (a read
 /// that found nothing to read sets it, one that read bytes or the end clears it), whether the
-/// client has sent anything, and whether written bytes wait for a flush.
+/// client has sent anything, and whether written bytes wait for a flush; and failing a write
+/// that has waited `write_stall` for the client to read (hyper then drops the connection).
 struct Watched {
     stream: TcpStream,
     connection: Arc<Connection>,
+    write_stall: Duration,
+    /// Runs while a write waits for the client; none while writes go through.
+    stalled: Option<Pin<Box<tokio::time::Sleep>>>,
+}
+
+impl Watched {
+    /// `written`, or the error that ends the connection once writes have waited too long.
+    fn unless_stalled<T>(
+        &mut self,
+        cx: &mut Context<'_>,
+        written: Poll<std::io::Result<T>>,
+    ) -> Poll<std::io::Result<T>> {
+        if written.is_ready() {
+            self.stalled = None;
+            return written;
+        }
+        let stall = self.write_stall;
+        let stalled = self
+            .stalled
+            .get_or_insert_with(|| Box::pin(tokio::time::sleep(stall)));
+        if stalled.as_mut().poll(cx).is_pending() {
+            return Poll::Pending;
+        }
+        metrics::counter!(crate::telemetry::CONNECTIONS_STALLED).increment(1);
+        Poll::Ready(Err(std::io::Error::new(
+            std::io::ErrorKind::TimedOut,
+            format!("the client read none of the response for {stall:?}"),
+        )))
+    }
 }
 
 impl AsyncRead for Watched {
@@ -229,7 +263,8 @@ impl AsyncWrite for Watched {
         buf: &[u8],
     ) -> Poll<std::io::Result<usize>> {
         self.connection.writing.store(true, Ordering::Release);
-        Pin::new(&mut self.stream).poll_write(cx, buf)
+        let written = Pin::new(&mut self.stream).poll_write(cx, buf);
+        self.unless_stalled(cx, written)
     }
 
     fn poll_write_vectored(
@@ -238,7 +273,8 @@ impl AsyncWrite for Watched {
         bufs: &[std::io::IoSlice<'_>],
     ) -> Poll<std::io::Result<usize>> {
         self.connection.writing.store(true, Ordering::Release);
-        Pin::new(&mut self.stream).poll_write_vectored(cx, bufs)
+        let written = Pin::new(&mut self.stream).poll_write_vectored(cx, bufs);
+        self.unless_stalled(cx, written)
     }
 
     fn is_write_vectored(&self) -> bool {
@@ -250,7 +286,7 @@ impl AsyncWrite for Watched {
         if flushed.is_ready() {
             self.connection.writing.store(false, Ordering::Release);
         }
-        flushed
+        self.unless_stalled(cx, flushed)
     }
 
     fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
@@ -335,6 +371,8 @@ pub async fn serve(
         let watched = Watched {
             stream,
             connection: Arc::clone(&state),
+            write_stall: limits.write_stall,
+            stalled: None,
         };
         let connection = http.serve_connection(TokioIo::new(watched), service);
         let mut stop = stopping.clone();
@@ -415,11 +453,15 @@ mod tests {
 
     #[test]
     fn connections_stay_below_the_open_file_limit() {
-        let limits = ConnectionLimits::new(Some(usize::MAX), Duration::from_secs(1));
+        let limits = ConnectionLimits::new(
+            Some(usize::MAX),
+            Duration::from_secs(1),
+            Duration::from_secs(1),
+        );
         if let Some(limit) = open_file_limit() {
             assert!((limits.max_connections as u64) < limit.max(2));
         }
-        let asked = ConnectionLimits::new(Some(5), Duration::from_secs(1));
+        let asked = ConnectionLimits::new(Some(5), Duration::from_secs(1), Duration::from_secs(1));
         assert_eq!(asked.max_connections, 5);
     }
 }

@@ -125,6 +125,10 @@ pub(crate) fn prometheus_builder() -> PrometheusBuilder {
 /// Connections closed for a new client at the connection limit (`connections`).
 pub const CONNECTIONS_SHED: &str = "bouncewear_connections_shed_total";
 
+/// Connections closed because their client read none of a response for the body timeout
+/// (`connections`).
+pub const CONNECTIONS_STALLED: &str = "bouncewear_connections_stalled_total";
+
 /// Reads of the job queue by the watcher behind every event stream (`api::watch`).
 pub const EVENT_WATCH_LOOKS: &str = "bouncewear_event_watch_looks_total";
 
@@ -162,6 +166,10 @@ fn describe_metrics() {
         "Connections waiting for a request's headers that were closed to make room for a new client at the connection limit."
     );
     metrics::describe_counter!(
+        CONNECTIONS_STALLED,
+        "Connections closed because their client read none of a response for the body timeout."
+    );
+    metrics::describe_counter!(
         EVENT_WATCH_LOOKS,
         "Reads of the job queue by the one watcher behind every event stream (none while no stream is open)."
     );
@@ -196,6 +204,7 @@ fn describe_metrics() {
 fn counters_from_zero() {
     for name in [
         CONNECTIONS_SHED,
+        CONNECTIONS_STALLED,
         EVENT_WATCH_LOOKS,
         "bouncewear_store_retries_total",
         "bouncewear_jobs_submitted_total",

@@ -245,6 +245,7 @@ fn every_metric_family_has_help_and_type_and_latency_is_a_histogram() {
         // Counters of what has not happened here, there from the start at 0.
         "bouncewear_store_retries_total",
         "bouncewear_connections_shed_total",
+        "bouncewear_connections_stalled_total",
         "bouncewear_event_watch_looks_total",
         "bouncewear_jobs_queued",
         "bouncewear_jobs_running",

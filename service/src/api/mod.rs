@@ -91,6 +91,8 @@ pub fn router(state: AppState) -> axum::Router {
     let admission = limits::Admission::new(
         state.config.max_concurrent_requests,
         state.config.request_timeout(),
+        max_body,
+        body_timeout,
     );
     api_routes(state)
         .route("/", get(system::dashboard))
@@ -113,6 +115,7 @@ pub fn router(state: AppState) -> axum::Router {
         }))
         // gzip or br as the client accepts; event streams, images and tiny bodies stay as they are.
         .layer(CompressionLayer::new())
+        .layer(axum::middleware::map_request(identity_acceptable))
         // One line per request at info; server errors are logged where they arise, with their cause.
         .layer(
             TraceLayer::new_for_http()
@@ -122,6 +125,52 @@ pub fn router(state: AppState) -> axum::Router {
         )
         .layer(PropagateRequestIdLayer::x_request_id())
         .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
+}
+
+/// The request with the entries of `Accept-Encoding` that refuse the uncompressed form
+/// (`identity;q=0`, `*;q=0`) dropped. For a client that accepts no coding tower-http's
+/// compression answers 406, after the handler ran: the job it created or deleted answered as a
+/// failure, so that a retry would create it twice. RFC 9110 (12.5.3) lets a server send the
+/// uncompressed form instead, which this makes it do; a coding the client accepts is still used.
+async fn identity_acceptable(mut request: Request) -> Request {
+    let Some(accepted) = request
+        .headers()
+        .get(header::ACCEPT_ENCODING)
+        .and_then(|value| value.to_str().ok())
+    else {
+        return request;
+    };
+    let items: Vec<&str> = accepted.split(',').map(str::trim).collect();
+    let kept: Vec<&str> = items
+        .iter()
+        .copied()
+        .filter(|item| !refuses_identity(item))
+        .collect();
+    if kept.len() < items.len() {
+        match header::HeaderValue::from_str(&kept.join(", ")) {
+            Ok(value) if !kept.is_empty() => {
+                request.headers_mut().insert(header::ACCEPT_ENCODING, value);
+            }
+            _ => {
+                request.headers_mut().remove(header::ACCEPT_ENCODING);
+            }
+        }
+    }
+    request
+}
+
+/// Whether one item of `Accept-Encoding` refuses the uncompressed form: `identity` or `*` with
+/// a weight of 0.
+fn refuses_identity(item: &str) -> bool {
+    let mut parts = item.split(';').map(str::trim);
+    let coding = parts.next().unwrap_or_default();
+    (coding.eq_ignore_ascii_case("identity") || coding == "*")
+        && parts.any(|parameter| {
+            parameter.split_once('=').is_some_and(|(name, weight)| {
+                name.trim().eq_ignore_ascii_case("q")
+                    && weight.trim().parse::<f64>().is_ok_and(|q| q == 0.0)
+            })
+        })
 }
 
 /// The documented routes, and the OpenAPI document built from the same handlers with its page.
