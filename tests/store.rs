@@ -1021,6 +1021,7 @@ async fn one_owner_fills_only_its_share_of_the_queue(url: &str) {
     let bound = QueueBound {
         total: 3,
         per_owner: 2,
+        min_free_disk_bytes: 0,
     };
     let of = |owner: &Owner, seed| {
         let job = Job::from_json(r#"{"devices": 1, "operations": 1}"#, || seed).unwrap();

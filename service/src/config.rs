@@ -190,6 +190,7 @@ impl ServeConfig {
                 .max_queued_per_key
                 .unwrap_or(share)
                 .min(self.max_queued),
+            min_free_disk_bytes: self.min_free_disk_bytes(),
         }
     }
 

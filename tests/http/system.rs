@@ -356,6 +356,23 @@ fn readiness_turns_503_below_the_free_disk_threshold() {
         200,
         "alive all the same"
     );
+    // Nor does it take a job (tiny legal jobs of large Results once filled the disk from a
+    // single client), nor a schedule's run; what it holds still reads.
+    let refused = post(
+        &server.url("/v1/jobs"),
+        r#"{"devices": 2, "operations": 2}"#,
+        None,
+    );
+    let problem = assert_problem(&refused, 503);
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("--min-free-disk-mb"),
+        "{problem}"
+    );
+    assert_eq!(refused.headers["retry-after"], "5");
+    assert_eq!(get(&server.url("/v1/jobs"), None).status, 200);
 }
 
 #[test]

@@ -56,19 +56,23 @@ impl JobStatus {
 }
 
 /// How many jobs may wait in the queue: `total` in all, and `per_owner` of any one owner (API
-/// key), so that one key cannot fill the queue and lock every other key out.
+/// key), so that one key cannot fill the queue and lock every other key out; and none while the
+/// disk beside a SQLite database has less than `min_free_disk_bytes` free, so that jobs already
+/// taken can still store their Results and old ones can be deleted.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct QueueBound {
     pub total: u64,
     pub per_owner: u64,
+    pub min_free_disk_bytes: u64,
 }
 
 impl QueueBound {
-    /// `total` jobs, any owner may queue them all.
+    /// `total` jobs, any owner may queue them all, whatever the free disk.
     pub fn total(total: u64) -> Self {
         Self {
             total,
             per_owner: total,
+            min_free_disk_bytes: 0,
         }
     }
 }

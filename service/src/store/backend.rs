@@ -138,13 +138,15 @@ impl SqlStore {
     }
 
     /// Inserts a queued job with its first shards unless the queue or the owner's share of it
-    /// is full ([`QueueBound`]), in `tx`: the count and the insert cannot race.
+    /// is full ([`QueueBound`]), in `tx`: the count and the insert cannot race. Below the
+    /// bound's free disk, the job is refused as the database not being ready (503).
     pub(crate) async fn insert_queued(
         &self,
         tx: &mut Tx,
         job: &QueuedJob,
         bound: QueueBound,
     ) -> StoreResult<bool> {
+        self.check_disk(bound.min_free_disk_bytes)?;
         match &self.backend {
             Backend::Sqlite(_) => super::sqlite::insert_queued(tx, job, bound).await,
             Backend::Postgres(_) => super::postgres::insert_queued(tx, job, bound).await,
