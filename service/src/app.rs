@@ -92,6 +92,7 @@ impl Application {
             metrics: telemetry::prometheus(),
             shutdown,
             fits: api::calibrations::places_for_fits(),
+            parsing: api::limits::places_per_core(),
         };
         Ok(Self {
             listener,

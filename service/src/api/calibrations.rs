@@ -33,9 +33,7 @@ pub fn router() -> OpenApiRouter<AppState> {
 /// beyond the cores nor keep them busy past the timeout. (A client that closes its connection
 /// is not noticed before the timeout: hyper does not read a connection while it answers.)
 pub fn places_for_fits() -> Arc<Semaphore> {
-    Arc::new(Semaphore::new(
-        std::thread::available_parallelism().map_or(1, |n| n.get()),
-    ))
+    super::limits::places_per_core()
 }
 
 /// Cancels a fit when dropped: when its handler ends, answered or not (the request timeout drops
@@ -93,10 +91,7 @@ pub async fn create_calibration(
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
     let spec = CalibrationSpec::from_json(&body)?;
-    let place = Arc::clone(&state.fits)
-        .acquire_owned()
-        .await
-        .map_err(|_| Internal("the calibration queue is closed".into()))?;
+    let place = super::limits::take_place(&state.fits).await?;
     let stop = StopOnDrop(Arc::new(AtomicBool::new(false)));
     let cancel = Arc::clone(&stop.0);
     let (spec, fit) = tokio::task::spawn_blocking(move || {

@@ -23,6 +23,7 @@ use bouncewear_model::montecarlo::compare::{
     Comparison, DEFAULT_B_LIVES, DEFAULT_STATISTICS, Statistic, compare,
 };
 use serde::{Deserialize, Serialize};
+use tokio::sync::OwnedSemaphorePermit;
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
@@ -112,7 +113,7 @@ pub async fn get_comparison(
     let statistics = statistics(query.statistics.as_deref())?;
     let b_lives = b_lives(query.b_lives.as_deref())?;
     let metric = query.metric.unwrap_or_else(|| "total_bounce_s".to_owned());
-    let (a, b) = results(&state, &owner, &id, &other).await?;
+    let (a, b, _place) = results(&state, &owner, &id, &other).await?;
     let comparison = compare(&a, &b, &metric, &statistics, &b_lives)
         .map_err(|error| ApiError::NotFound(error.to_string()))?;
     let this = format!("/v1/jobs/{id}/compare/{other}");
@@ -161,7 +162,7 @@ pub async fn comparison_plot(
     query: Result<Query<ComparisonPlotQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
-    let (a, b) = results(&state, &owner, &id, &other).await?;
+    let (a, b, _place) = results(&state, &owner, &id, &other).await?;
     let (name_a, name_b) = (legend_name("a", &id, &a), legend_name("b", &other, &b));
     let svg = plots::compared_plot(
         [(&name_a, &a), (&name_b, &b)],
@@ -171,16 +172,19 @@ pub async fn comparison_plot(
     Ok(([(header::CONTENT_TYPE, "image/svg+xml")], svg).into_response())
 }
 
-/// The two jobs' Results, each of which must have succeeded.
+/// The two jobs' Results, each of which must have succeeded, with the place that lets the
+/// request hold them ([`AppState::parsing`]): one place for both.
 async fn results(
     state: &AppState,
     owner: &Owner,
     a: &JobId,
     b: &JobId,
-) -> Result<(JobResult, JobResult), ApiError> {
+) -> Result<(JobResult, JobResult, OwnedSemaphorePermit), ApiError> {
+    let place = super::limits::take_place(&state.parsing).await?;
     Ok((
         succeeded_result(state, owner, a).await?,
         succeeded_result(state, owner, b).await?,
+        place,
     ))
 }
 

@@ -1009,6 +1009,7 @@ pub async fn get_life(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let _place = super::limits::take_place(&state.parsing).await?;
     let result = succeeded_result(&state, &owner, &id).await?;
     let Some(mut life) = result.life else {
         return Err(ApiError::NotFound(format!(
@@ -1085,6 +1086,7 @@ pub async fn get_rare_event(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let _place = super::limits::take_place(&state.parsing).await?;
     let result = succeeded_result(&state, &owner, &id).await?;
     let Some(rare) = result.rare_event else {
         return Err(ApiError::NotFound(format!(

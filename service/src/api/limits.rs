@@ -15,7 +15,7 @@ use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use std::sync::Arc;
 use std::time::Duration;
-use tokio::sync::Semaphore;
+use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
 #[derive(Clone)]
 pub struct Admission {
@@ -91,6 +91,23 @@ pub async fn admit(State(admission): State<Admission>, request: Request, next: N
     tokio::time::timeout(admission.timeout, handled)
         .await
         .unwrap_or_else(|_| ApiError::Timeout(admission.timeout).into_response())
+}
+
+/// Places for a kind of costly request, one per core: each holds its place until its handler
+/// ends, and the rest wait their turn within the request timeout (calibration fits; requests
+/// that parse whole Results).
+pub fn places_per_core() -> Arc<Semaphore> {
+    Arc::new(Semaphore::new(
+        std::thread::available_parallelism().map_or(1, |n| n.get()),
+    ))
+}
+
+/// A place among `places`, held until it is dropped.
+pub async fn take_place(places: &Arc<Semaphore>) -> Result<OwnedSemaphorePermit, ApiError> {
+    Arc::clone(places)
+        .acquire_owned()
+        .await
+        .map_err(|_| ApiError::Internal(super::error::Internal("the places are closed".into())))
 }
 
 /// Whether a failure to read a body was its deadline running out.

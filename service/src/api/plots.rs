@@ -71,6 +71,7 @@ pub async fn job_plot(
     query: Result<Query<PlotQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let _place = super::limits::take_place(&state.parsing).await?;
     let result = succeeded_result(&state, &owner, &id).await?;
     let svg = plots::job_plot(
         &result,
