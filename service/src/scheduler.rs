@@ -4,7 +4,7 @@
 //! key makes the job unique across restarts and across instances sharing the database.
 
 use crate::domain::{QueueBound, Timetable, UnixMs};
-use crate::store::{NewRun, RunSlot, Store, StoreResult};
+use crate::store::{NewRun, RunSlot, Store, StoreError, StoreResult};
 use chrono::{DateTime, Utc};
 use std::sync::Arc;
 use std::time::Duration;
@@ -61,7 +61,12 @@ pub async fn tick(store: &dyn Store, bound: QueueBound, now: DateTime<Utc>) -> S
             scheduled_for: due,
             manual: false,
         };
-        match store.create_run(slot, job, bound).await? {
+        let made = match store.create_run(slot, job, bound).await {
+            // Deleted since it was read: the other schedules still run this tick.
+            Err(StoreError::NotFound { .. }) => continue,
+            made => made?,
+        };
+        match made {
             NewRun::Created(_) => created += 1,
             NewRun::AlreadyExists => {}
             NewRun::QueueFull => {

@@ -234,6 +234,39 @@ fn clients_stalling_in_their_bodies_hold_up_no_request_without_one() {
     drop(stalled);
 }
 
+/// A body is read only for a request with a valid key: clients without one that stall in their
+/// bodies get their 401 at once and hold up no one's upload (they held an arriving body's place
+/// until its deadline).
+#[test]
+fn uploads_without_a_valid_key_are_refused_unread() {
+    let server = TestApp::start(
+        &temp_db("unkeyed-bodies"),
+        &[
+            "--api-key",
+            "secret",
+            "--max-concurrent-requests",
+            "2",
+            "--body-timeout-seconds",
+            "5",
+        ],
+    );
+    let started = Instant::now();
+    let stalled: Vec<TcpStream> = (0..4).map(|_| stalled_in_body(&server)).collect();
+    let created = agent()
+        .post(&server.url("/v1/jobs"))
+        .header("content-type", "application/json")
+        .header("authorization", "Bearer secret")
+        .send(r#"{"devices": 2, "operations": 2}"#)
+        .unwrap();
+    assert_eq!(created.status(), 202);
+    for stream in stalled {
+        let (answer, waited) = until_closed(stream, started);
+        assert!(answer.starts_with("HTTP/1.1 401"), "{answer}");
+        assert!(waited < Duration::from_secs(3), "{waited:?}");
+    }
+    assert!(started.elapsed() < Duration::from_secs(3));
+}
+
 /// A client that stops reading a large response is disconnected after the body timeout, and the
 /// response it pinned in memory goes (an audit: 40 such readers of a 23 MB Result held 1 GB,
 /// their connections open 5.5 minutes later).
@@ -289,6 +322,24 @@ fn a_client_refusing_every_coding_still_gets_its_answer() {
         assert_eq!(created.status(), 202, "{refusal}");
         assert!(created.headers().get("content-encoding").is_none());
     }
+    // The field's lines are one list, as the compression layer reads them.
+    let created = agent()
+        .post(&server.url("/v1/jobs"))
+        .header("content-type", "application/json")
+        .header("accept-encoding", "gzip;q=0")
+        .header("accept-encoding", "identity;q=0")
+        .send(r#"{"devices": 2, "operations": 2}"#)
+        .unwrap();
+    assert_eq!(created.status(), 202);
+    let created = agent()
+        .post(&server.url("/v1/jobs"))
+        .header("content-type", "application/json")
+        .header("accept-encoding", "identity;q=0")
+        .header("accept-encoding", "gzip")
+        .send(r#"{"devices": 2, "operations": 2, "name": "a name long enough to be worth compressing"}"#)
+        .unwrap();
+    assert_eq!(created.status(), 202);
+    assert_eq!(created.headers()["content-encoding"], "gzip");
     // A coding the client accepts is still used.
     let listed = agent()
         .get(&server.url("/v1/jobs"))

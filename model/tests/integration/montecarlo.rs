@@ -630,7 +630,8 @@ fn a_metric_may_have_several_limits_answered_as_a_query_after_the_run_answers_th
     let thresholds = [Threshold::Above(0.4), Threshold::Below(0.3)];
     for (bin, summary) in result.operations["e1"].iter().enumerate() {
         let groups = groups.of("e1", bin as u64).unwrap();
-        let asked = query(&groups, job.bin_operations(), &[], &thresholds);
+        let operations = job.bin_range(bin as u64);
+        let asked = query(&groups, operations.end - operations.start, &[], &thresholds);
         assert_eq!(summary.summary.exceedances, asked.exceedance);
         assert_eq!(summary.summary.exceedance, None);
     }

@@ -1,18 +1,21 @@
 //! What one request may take of the server: a slot among `--max-concurrent-requests`, and
 //! `--request-timeout-seconds` until its response starts (the wait for a slot included), else 503.
-//! A request's body arrives before it takes a slot, under a bound of its own (as many bodies
-//! arriving at once as there are slots), so clients that stall mid-body hold up other uploads for
-//! at most the body's deadline and never a request without a body (a probe, a read). An event
-//! stream's response starts at once, so the timeout never cuts a stream; its body runs as long as
-//! its job. The body's own deadline (`--body-timeout-seconds`, 408) is tower-http's
-//! `RequestBodyDeadlineLayer`, around this layer.
+//! The body of an API request whose key is valid arrives before the request takes a slot, under a
+//! bound of its own (as many bodies arriving, or read and waiting for a slot, as there are slots),
+//! each within `--body-timeout-seconds` from when its turn to arrive came (408): clients that stall
+//! mid-body hold up other uploads for at most that long, and never a request without a body (a
+//! probe, a read). A body the server would refuse without reading (no valid key, no API route, a
+//! declared length over the limit) is not read. An event stream's response starts at once, so the
+//! timeout never cuts a stream; its body runs as long as its job.
 
 use super::error::ApiError;
+use crate::domain::Owner;
 use axum::body::Body;
 use axum::extract::{Request, State};
 use axum::http::header;
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
+use std::collections::HashSet;
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
@@ -20,54 +23,62 @@ use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 #[derive(Clone)]
 pub struct Admission {
     slots: Arc<Semaphore>,
-    /// Bodies arriving at once, before their requests take a slot.
+    /// Bodies arriving, or read and waiting for a slot.
     arriving: Arc<Semaphore>,
     timeout: Duration,
     max_body: usize,
     body_timeout: Duration,
+    /// The API keys' owners ([`super::AppState::key_owners`]): only a valid key's body is read.
+    key_owners: Arc<HashSet<Owner>>,
 }
 
 impl Admission {
-    pub fn new(
-        max_concurrent_requests: usize,
-        timeout: Duration,
-        max_body: usize,
-        body_timeout: Duration,
-    ) -> Self {
-        let slots = max_concurrent_requests.clamp(1, Semaphore::MAX_PERMITS);
+    pub fn new(state: &super::AppState) -> Self {
+        let config = &state.config;
+        let slots = config
+            .max_concurrent_requests
+            .clamp(1, Semaphore::MAX_PERMITS);
         Self {
             slots: Arc::new(Semaphore::new(slots)),
             arriving: Arc::new(Semaphore::new(slots)),
-            timeout,
-            max_body,
-            body_timeout,
+            timeout: config.request_timeout(),
+            max_body: config.max_body_bytes,
+            body_timeout: config.body_timeout(),
+            key_owners: Arc::clone(&state.key_owners),
         }
     }
 
-    /// The request with its body read into memory, if it has one and declares no more than the
-    /// limit (one that does is refused by its handler before any of it is read).
-    async fn received(&self, request: Request) -> Result<Request, ApiError> {
-        let declared = request
-            .headers()
+    /// The request with its body read into memory and the place that lets it wait for a slot
+    /// holding it; or as it came, without a place, when it has no body or one the server refuses
+    /// unread.
+    async fn received(
+        &self,
+        request: Request,
+    ) -> Result<(Request, Option<OwnedSemaphorePermit>), ApiError> {
+        let headers = request.headers();
+        let declared = headers
             .get(header::CONTENT_LENGTH)
             .and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
-        let chunked = request.headers().contains_key(header::TRANSFER_ENCODING);
-        if !chunked && declared.is_none_or(|length| length == 0 || length > self.max_body as u64) {
-            return Ok(request);
+        let chunked = headers.contains_key(header::TRANSFER_ENCODING);
+        let has_body = chunked || declared.is_some_and(|length| length > 0);
+        let refused_unread = declared.is_some_and(|length| length > self.max_body as u64)
+            || !request.uri().path().starts_with("/v1/")
+            || super::owner_of(headers, &self.key_owners).is_err();
+        if !has_body || refused_unread {
+            return Ok((request, None));
         }
-        let _arriving = self.arriving.acquire().await;
+        let place = take_place(&self.arriving).await?;
         let (parts, body) = request.into_parts();
-        let bytes = axum::body::to_bytes(body, self.max_body)
-            .await
-            .map_err(|error| self.body_error(&error))?;
-        Ok(Request::from_parts(parts, Body::from(bytes)))
+        let bytes =
+            tokio::time::timeout(self.body_timeout, axum::body::to_bytes(body, self.max_body))
+                .await
+                .map_err(|_| ApiError::BodyTimeout(self.body_timeout))?
+                .map_err(|error| self.body_error(&error))?;
+        Ok((Request::from_parts(parts, Body::from(bytes)), Some(place)))
     }
 
-    /// Why a body could not be read: too large (413), its deadline (408), or broken (400).
+    /// Why a body could not be read: too large (413), or broken (400).
     fn body_error(&self, error: &(dyn std::error::Error + 'static)) -> ApiError {
-        if is_body_timeout(error) {
-            return ApiError::BodyTimeout(self.body_timeout);
-        }
         let mut cause = Some(error);
         while let Some(error) = cause {
             if error.is::<http_body_util::LengthLimitError>() {
@@ -81,8 +92,8 @@ impl Admission {
 
 pub async fn admit(State(admission): State<Admission>, request: Request, next: Next) -> Response {
     let handled = async {
-        let request = match admission.received(request).await {
-            Ok(request) => request,
+        let (request, _arrived) = match admission.received(request).await {
+            Ok(received) => received,
             Err(error) => return error.into_response(),
         };
         let _slot = admission.slots.acquire().await;
@@ -108,16 +119,4 @@ pub async fn take_place(places: &Arc<Semaphore>) -> Result<OwnedSemaphorePermit,
         .acquire_owned()
         .await
         .map_err(|_| ApiError::Internal(super::error::Internal("the places are closed".into())))
-}
-
-/// Whether a failure to read a body was its deadline running out.
-pub fn is_body_timeout(error: &(dyn std::error::Error + 'static)) -> bool {
-    let mut cause = Some(error);
-    while let Some(error) = cause {
-        if error.is::<tower_http::timeout::TimeoutError>() {
-            return true;
-        }
-        cause = error.source();
-    }
-    false
 }

@@ -35,7 +35,6 @@ use tokio::sync::Notify;
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::compression::CompressionLayer;
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
-use tower_http::timeout::RequestBodyDeadlineLayer;
 use tower_http::trace::TraceLayer;
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
 use utoipa::{Modify, OpenApi};
@@ -91,13 +90,7 @@ impl Modify for BearerAuth {
 /// the docs UI, the dashboard, the fallbacks, and the layers every request passes.
 pub fn router(state: AppState) -> axum::Router {
     let max_body = state.config.max_body_bytes;
-    let body_timeout = state.config.body_timeout();
-    let admission = limits::Admission::new(
-        state.config.max_concurrent_requests,
-        state.config.request_timeout(),
-        max_body,
-        body_timeout,
-    );
+    let admission = limits::Admission::new(&state);
     api_routes(state)
         .route("/", get(system::dashboard))
         .route("/jobs/{id}", get(system::job_page))
@@ -110,7 +103,6 @@ pub fn router(state: AppState) -> axum::Router {
             admission,
             limits::admit,
         ))
-        .layer(RequestBodyDeadlineLayer::new(body_timeout))
         .layer(axum::middleware::from_fn(telemetry::record_request))
         .layer(CatchPanicLayer::custom(|_| {
             IntoResponse::into_response(ApiError::Internal(error::Internal(
@@ -137,28 +129,32 @@ pub fn router(state: AppState) -> axum::Router {
 /// failure, so that a retry would create it twice. RFC 9110 (12.5.3) lets a server send the
 /// uncompressed form instead, which this makes it do; a coding the client accepts is still used.
 async fn identity_acceptable(mut request: Request) -> Request {
-    let Some(accepted) = request
-        .headers()
-        .get(header::ACCEPT_ENCODING)
-        .and_then(|value| value.to_str().ok())
+    // Every line of the field, as tower-http reads them, into one list.
+    let lines = request.headers().get_all(header::ACCEPT_ENCODING);
+    let Ok(lines) = lines
+        .iter()
+        .map(|line| line.to_str())
+        .collect::<Result<Vec<&str>, _>>()
     else {
         return request;
     };
-    let items: Vec<&str> = accepted.split(',').map(str::trim).collect();
-    let kept: Vec<&str> = items
+    let items: Vec<&str> = lines
         .iter()
-        .copied()
-        .filter(|item| !refuses_identity(item))
+        .flat_map(|line| line.split(','))
+        .map(str::trim)
         .collect();
-    if kept.len() < items.len() {
-        match header::HeaderValue::from_str(&kept.join(", ")) {
-            Ok(value) if !kept.is_empty() => {
-                request.headers_mut().insert(header::ACCEPT_ENCODING, value);
-            }
-            _ => {
-                request.headers_mut().remove(header::ACCEPT_ENCODING);
-            }
-        }
+    if !items.iter().any(|item| refuses_identity(item)) {
+        return request;
+    }
+    let kept: Vec<&str> = items
+        .into_iter()
+        .filter(|item| !item.is_empty() && !refuses_identity(item))
+        .collect();
+    let kept = header::HeaderValue::from_str(&kept.join(", ")).ok();
+    let headers = request.headers_mut();
+    headers.remove(header::ACCEPT_ENCODING);
+    if let Some(kept) = kept.filter(|kept| !kept.is_empty()) {
+        headers.insert(header::ACCEPT_ENCODING, kept);
     }
     request
 }
@@ -257,26 +253,34 @@ async fn authenticate(
     mut request: Request,
     next: Next,
 ) -> Result<Response, ApiError> {
-    let owner = if state.key_owners.is_empty() {
-        Owner::anonymous()
-    } else {
-        let presented = request
-            .headers()
-            .get(header::AUTHORIZATION)
-            .and_then(|value| value.to_str().ok())
-            // The scheme is case-insensitive (RFC 9110, section 11.1): `bearer` and `BEARER` count.
-            .and_then(|value| value.trim_start().split_once(' '))
-            .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
-            .map(|(_, token)| token.trim())
-            .ok_or(ApiError::Unauthorized)?;
-        let owner = Owner::of_key(presented);
-        if !state.key_owners.contains(&owner) {
-            return Err(ApiError::Unauthorized);
-        }
-        owner
-    };
+    let owner = owner_of(request.headers(), &state.key_owners)?;
     request.extensions_mut().insert(owner);
     Ok(next.run(request).await)
+}
+
+/// Whose request it is: the owner of the `Authorization: Bearer KEY` it presents among
+/// `key_owners`, or anyone's without API keys; 401 otherwise.
+fn owner_of(
+    headers: &axum::http::HeaderMap,
+    key_owners: &HashSet<Owner>,
+) -> Result<Owner, ApiError> {
+    if key_owners.is_empty() {
+        return Ok(Owner::anonymous());
+    }
+    let presented = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|value| value.to_str().ok())
+        // The scheme is case-insensitive (RFC 9110, section 11.1): `bearer` and `BEARER` count.
+        .and_then(|value| value.trim_start().split_once(' '))
+        .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
+        .map(|(_, token)| token.trim())
+        .ok_or(ApiError::Unauthorized)?;
+    let owner = Owner::of_key(presented);
+    if key_owners.contains(&owner) {
+        Ok(owner)
+    } else {
+        Err(ApiError::Unauthorized)
+    }
 }
 
 /// The request's `Idempotency-Key`, if it has one, with its body's fingerprint (400 if malformed).
@@ -380,8 +384,6 @@ impl FromRequest<AppState> for JsonText {
             .map_err(|rejection| {
                 if rejection.status() == axum::http::StatusCode::PAYLOAD_TOO_LARGE {
                     ApiError::TooLarge(limit)
-                } else if limits::is_body_timeout(&rejection) {
-                    ApiError::BodyTimeout(state.config.body_timeout())
                 } else {
                     ApiError::BadRequest(rejection.body_text())
                 }
