@@ -1,7 +1,7 @@
 //! The OpenAPI document, docs, health and metrics (every family described), and API keys.
 
 use crate::support::app::{Service, TestApp};
-use crate::support::client::{agent, assert_problem, delete, get, post, reply};
+use crate::support::client::{Reply, agent, assert_problem, delete, get, post, reply};
 use crate::support::temp_db;
 use bouncewear_model::calibration::FITTED;
 use bouncewear_model::scenario::{MAX_MAGNITUDE, MIN_MAGNITUDE, NUMBER_RULES, Rule};
@@ -343,34 +343,25 @@ fn readiness_turns_503_below_the_free_disk_threshold() {
         &temp_db("ready-disk"),
         &["--min-free-disk-mb", "1000000000000"],
     );
-    let problem = assert_problem(&get(&server.url("/readyz"), None), 503);
-    assert!(
-        problem["detail"]
-            .as_str()
-            .unwrap()
-            .contains("--min-free-disk-mb"),
-        "{problem}"
-    );
+    let says_why = |reply: &Reply| {
+        let problem = assert_problem(reply, 503);
+        let detail = problem["detail"].as_str().unwrap();
+        assert!(detail.contains("--min-free-disk-mb"), "{problem}");
+    };
+    says_why(&get(&server.url("/readyz"), None));
     assert_eq!(
         get(&server.url("/healthz"), None).status,
         200,
         "alive all the same"
     );
     // Nor does it take a job (tiny legal jobs of large Results once filled the disk from a
-    // single client), nor a schedule's run; what it holds still reads.
+    // single client); what it holds still reads.
     let refused = post(
         &server.url("/v1/jobs"),
         r#"{"devices": 2, "operations": 2}"#,
         None,
     );
-    let problem = assert_problem(&refused, 503);
-    assert!(
-        problem["detail"]
-            .as_str()
-            .unwrap()
-            .contains("--min-free-disk-mb"),
-        "{problem}"
-    );
+    says_why(&refused);
     assert_eq!(refused.headers["retry-after"], "5");
     assert_eq!(get(&server.url("/v1/jobs"), None).status, 200);
 }

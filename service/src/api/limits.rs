@@ -56,12 +56,10 @@ impl Admission {
         request: Request,
     ) -> Result<(Request, Option<OwnedSemaphorePermit>), ApiError> {
         let headers = request.headers();
-        let declared = headers
-            .get(header::CONTENT_LENGTH)
-            .and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
+        let declared = declared_length(headers);
         let chunked = headers.contains_key(header::TRANSFER_ENCODING);
         let has_body = chunked || declared.is_some_and(|length| length > 0);
-        let refused_unread = declared.is_some_and(|length| length > self.max_body as u64)
+        let refused_unread = declared_over(headers, self.max_body)
             || !request.uri().path().starts_with("/v1/")
             || super::owner_of(headers, &self.key_owners).is_err();
         if !has_body || refused_unread {
@@ -88,6 +86,19 @@ impl Admission {
         }
         ApiError::BadRequest(format!("the request's body could not be read: {error}"))
     }
+}
+
+/// The body's length as its `Content-Length` declares it, if it does.
+fn declared_length(headers: &axum::http::HeaderMap) -> Option<u64> {
+    headers
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok()?.parse::<u64>().ok())
+}
+
+/// Whether the request declares a body longer than `limit`: refused (413) before any of it is
+/// read, not after waiting for bytes a client may never send.
+pub fn declared_over(headers: &axum::http::HeaderMap, limit: usize) -> bool {
+    declared_length(headers).is_some_and(|length| length > limit as u64)
 }
 
 pub async fn admit(State(admission): State<Admission>, request: Request, next: Next) -> Response {

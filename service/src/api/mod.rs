@@ -129,25 +129,19 @@ pub fn router(state: AppState) -> axum::Router {
 /// failure, so that a retry would create it twice. RFC 9110 (12.5.3) lets a server send the
 /// uncompressed form instead, which this makes it do; a coding the client accepts is still used.
 async fn identity_acceptable(mut request: Request) -> Request {
-    // Every line of the field, as tower-http reads them, into one list.
-    let lines = request.headers().get_all(header::ACCEPT_ENCODING);
-    let Ok(lines) = lines
-        .iter()
-        .map(|line| line.to_str())
-        .collect::<Result<Vec<&str>, _>>()
-    else {
-        return request;
+    // Every line of the field, as tower-http reads them, as one list; most requests refuse
+    // nothing and pass on untouched, nothing allocated.
+    let items = || {
+        let lines = request.headers().get_all(header::ACCEPT_ENCODING).iter();
+        lines
+            .filter_map(|line| line.to_str().ok())
+            .flat_map(|line| line.split(','))
+            .map(str::trim)
     };
-    let items: Vec<&str> = lines
-        .iter()
-        .flat_map(|line| line.split(','))
-        .map(str::trim)
-        .collect();
-    if !items.iter().any(|item| refuses_identity(item)) {
+    if !items().any(refuses_identity) {
         return request;
     }
-    let kept: Vec<&str> = items
-        .into_iter()
+    let kept: Vec<&str> = items()
         .filter(|item| !item.is_empty() && !refuses_identity(item))
         .collect();
     let kept = header::HeaderValue::from_str(&kept.join(", ")).ok();
@@ -372,11 +366,7 @@ impl FromRequest<AppState> for JsonText {
         let limit = state.config.max_body_bytes;
         // A body declared larger than the limit is refused before any of it is read, not after
         // waiting for bytes a client may never send.
-        let declared = request
-            .headers()
-            .get(header::CONTENT_LENGTH)
-            .and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
-        if declared.is_some_and(|length| length > limit as u64) {
+        if limits::declared_over(request.headers(), limit) {
             return Err(ApiError::TooLarge(limit));
         }
         let bytes = Bytes::from_request(request, state)
