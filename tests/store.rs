@@ -93,6 +93,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     jobs_queued_before_shards_existed_get_theirs_on_open(&database("backfill")).await;
     concurrent_submissions_never_overshoot_the_queue_bound(&database("bound")).await;
     one_owner_fills_only_its_share_of_the_queue(&database("share")).await;
+    an_owner_whose_jobs_store_its_quota_gets_no_new_job(&database("quota")).await;
     every_u64_seed_reads_back_exactly(&database("seeds")).await;
     a_job_whose_lease_keeps_expiring_fails_with_the_reason(&database("retries")).await;
     leases_run_on_the_database_clock(&database("db-clock")).await;
@@ -1022,6 +1023,7 @@ async fn one_owner_fills_only_its_share_of_the_queue(url: &str) {
         total: 3,
         per_owner: 2,
         min_free_disk_bytes: 0,
+        stored_per_owner: None,
     };
     let of = |owner: &Owner, seed| {
         let job = Job::from_json(r#"{"devices": 1, "operations": 1}"#, || seed).unwrap();
@@ -1041,6 +1043,47 @@ async fn one_owner_fills_only_its_share_of_the_queue(url: &str) {
     }
     // The greedy key's third is past its share, the other key's second past the whole queue.
     assert_eq!(accepted, [true, true, false, true, false]);
+}
+
+async fn an_owner_whose_jobs_store_its_quota_gets_no_new_job(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let of = |owner: &Owner, seed| {
+        let job = Job::from_json(r#"{"devices": 1, "operations": 1}"#, || seed).unwrap();
+        QueuedJob::new(&job, owner.clone(), None, UnixMs(1))
+    };
+    let (greedy, other) = (Owner::of_key("greedy"), Owner::of_key("other"));
+    let first = store
+        .insert_job(of(&greedy, 1), QueueBound::total(10))
+        .await
+        .unwrap()
+        .unwrap();
+    // A quota of the first job's spec: it is reached, and only by that owner.
+    let bound = QueueBound {
+        stored_per_owner: Some(first.stored_bytes),
+        ..QueueBound::total(10)
+    };
+    match store.insert_job(of(&greedy, 2), bound).await {
+        Err(StoreError::OverQuota { used, quota }) => {
+            assert_eq!((used, quota), (first.stored_bytes, first.stored_bytes));
+        }
+        other => panic!("expected the quota, got {other:?}"),
+    }
+    assert!(
+        store
+            .insert_job(of(&other, 3), bound)
+            .await
+            .unwrap()
+            .is_some()
+    );
+    store.cancel(&greedy, &first.id, UnixMs(2)).await.unwrap();
+    store.delete_job(&greedy, &first.id).await.unwrap();
+    assert!(
+        store
+            .insert_job(of(&greedy, 4), bound)
+            .await
+            .unwrap()
+            .is_some()
+    );
 }
 
 async fn a_cancelled_job_keeps_no_accumulators(url: &str) {

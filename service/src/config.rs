@@ -126,6 +126,11 @@ pub struct ServeConfig {
     /// ready (`/readyz` answers 503).
     #[arg(long, env = "BOUNCEWEAR_MIN_FREE_DISK_MB", default_value_t = 100)]
     pub min_free_disk_mb: u64,
+    /// Bytes, in MB, that the jobs of one API key (and of its schedules) may store: a key whose
+    /// jobs store this much or more gets 403 for a new job until it deletes some (a job's
+    /// `stored_bytes`). Without it, no bound but the disk's.
+    #[arg(long, env = "BOUNCEWEAR_MAX_STORED_MB_PER_KEY")]
+    pub max_stored_mb_per_key: Option<u64>,
     /// Delete finished jobs, with everything stored for them, this many days after they ended
     /// (checked at start-up and every hour). Without it, they stay until deleted.
     #[arg(long, env = "BOUNCEWEAR_RETAIN_DAYS")]
@@ -191,6 +196,9 @@ impl ServeConfig {
                 .unwrap_or(share)
                 .min(self.max_queued),
             min_free_disk_bytes: self.min_free_disk_bytes(),
+            stored_per_owner: self
+                .max_stored_mb_per_key
+                .map(|mb| mb.saturating_mul(1 << 20)),
         }
     }
 

@@ -64,6 +64,10 @@ pub async fn tick(store: &dyn Store, bound: QueueBound, now: DateTime<Utc>) -> S
         let made = match store.create_run(slot, job, bound).await {
             // Deleted since it was read: the other schedules still run this tick.
             Err(StoreError::NotFound { .. }) => continue,
+            Err(StoreError::OverQuota { used, quota }) => {
+                tracing::warn!(schedule = %schedule.id, used, quota, "the schedule's key stores its quota; the scheduled run waits for the next tick");
+                continue;
+            }
             made => made?,
         };
         match made {

@@ -498,6 +498,59 @@ fn a_second_key_gets_in_when_the_first_has_filled_its_share_of_the_queue() {
     assert_problem(&post(&jobs, job, Some("beta")), 429);
 }
 
+/// A key whose jobs store its quota or more gets 403 for a new job, naming the flag; another
+/// key still gets in, a retry with the same Idempotency-Key still gets its job, and a purge
+/// frees the quota.
+#[test]
+fn a_key_whose_jobs_store_its_quota_gets_no_new_job_until_it_deletes_some() {
+    let server = TestApp::start(
+        &temp_db("stored-quota"),
+        &["--api-key", "alpha,beta", "--max-stored-mb-per-key", "1"],
+    );
+    let jobs = server.url("/v1/jobs");
+    let small = r#"{"devices": 1, "operations": 1}"#;
+    // A summary a bin for 100 bins of 50 devices: about 2 MB stored.
+    let large = r#"{"devices": 50, "operations": 100, "bin_operations": 1, "seed": 4}"#;
+    let keyed = |key: &str| {
+        let request = agent()
+            .post(&jobs)
+            .header("content-type", "application/json")
+            .header("idempotency-key", key);
+        reply(authorized(request, Some("alpha")).send(large))
+    };
+    let id = keyed("once").json()["id"].as_str().unwrap().to_owned();
+    let this = server.url(&format!("/v1/jobs/{id}"));
+    let started = Instant::now();
+    let done = loop {
+        let job = get(&format!("{this}?wait_s=5"), Some("alpha")).json();
+        if job["status"] != "queued" && job["status"] != "running" {
+            break job;
+        }
+        assert!(started.elapsed() < Duration::from_secs(120), "{job}");
+    };
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let stored = done["stored_bytes"].as_u64().unwrap();
+    assert!(stored > 1 << 20, "{stored} bytes");
+
+    let refused = post(&jobs, small, Some("alpha"));
+    let problem = assert_problem(&refused, 403);
+    assert_eq!(
+        problem["detail"],
+        format!(
+            "the jobs of this API key store {stored} bytes, at or over its quota of 1048576 \
+             bytes (--max-stored-mb-per-key): delete the jobs it no longer needs \
+             (DELETE /v1/jobs/{{id}}?purge=true) before submitting more"
+        )
+    );
+    assert_eq!(keyed("once").status, 202, "a retry gets the job it created");
+    assert_eq!(keyed("twice").status, 403);
+    assert_eq!(post(&jobs, small, Some("beta")).status, 202);
+    let purged =
+        reply(authorized(agent().delete(&format!("{this}?purge=true")), Some("alpha")).call());
+    assert_eq!(purged.status, 204, "{}", purged.body);
+    assert_eq!(post(&jobs, small, Some("alpha")).status, 202);
+}
+
 /// A query parameter the operation does not take is a 400 naming it and what it does take, on
 /// every documented route, the document and its page too; the dashboard's pages are not the
 /// API's and take any. The document declares the 400 on every operation.

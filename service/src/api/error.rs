@@ -68,6 +68,9 @@ pub enum ApiError {
         .0.per_owner
     )]
     QueueFull(QueueBound),
+    /// The key's jobs store its quota or more ([`StoreError::OverQuota`]).
+    #[error("{0}")]
+    OverQuota(String),
     #[error(
         "this API key holds {0} event streams already, the most it may; close one, or retry later"
     )]
@@ -102,6 +105,7 @@ impl From<StoreError> for ApiError {
             StoreError::NotFound { .. } => ApiError::NotFound(error.to_string()),
             StoreError::Conflict(detail) => ApiError::Conflict(detail),
             StoreError::NotReady(detail) => ApiError::NotReady(detail),
+            StoreError::OverQuota { .. } => ApiError::OverQuota(error.to_string()),
             other if other.is_unavailable() => ApiError::Unavailable(Internal(other.to_string())),
             other => ApiError::Internal(Internal(other.to_string())),
         }
@@ -130,6 +134,7 @@ impl ApiError {
             ApiError::MalformedJson(_) | ApiError::BadRequest(_) => StatusCode::BAD_REQUEST,
             ApiError::Invalid(_) | ApiError::KeyReused(_) => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::Unauthorized => StatusCode::UNAUTHORIZED,
+            ApiError::OverQuota(_) => StatusCode::FORBIDDEN,
             ApiError::NotFound(_) => StatusCode::NOT_FOUND,
             ApiError::Conflict(_) => StatusCode::CONFLICT,
             ApiError::TooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
@@ -322,6 +327,15 @@ pub mod responses {
         headers(("Retry-After" = u32, description = "Seconds to wait before retrying"))
     )]
     pub struct QueueFull(pub Problem);
+
+    /// A new job of a key whose jobs store `--max-stored-mb-per-key` or more.
+    #[derive(IntoResponses)]
+    #[response(
+        status = 403,
+        description = "The jobs of this API key store its quota (`--max-stored-mb-per-key`) or more; delete some first",
+        content_type = "application/problem+json"
+    )]
+    pub struct OverQuota(pub Problem);
 
     /// Event streams: each API key holds at most `--max-streams-per-key` at once.
     #[derive(IntoResponses)]

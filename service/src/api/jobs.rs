@@ -6,7 +6,9 @@ use super::cache::{
 };
 use super::error::{
     ApiError, Internal, PROBLEM, Problem,
-    responses::{BadQuery, BodyRejected, NoSuchJob, NotSucceeded, QueueFull, Unauthorized},
+    responses::{
+        BadQuery, BodyRejected, NoSuchJob, NotSucceeded, OverQuota, QueueFull, Unauthorized,
+    },
 };
 use super::watch::MAX_WAIT_S;
 use super::{AppState, JsonText, idempotency_key, replayed};
@@ -162,7 +164,8 @@ impl JobResource {
 /// the paper's rig. The response is the queued JobResource, with its URL in `Location`; follow
 /// `links.events` for live progress and `links.result` once it succeeded. A job larger than the
 /// server's `--max-job-operations` is 422 naming `/devices` (or `/precision/max_devices`); a full
-/// queue is 429 with `Retry-After`. Send an `Idempotency-Key` to retry safely.
+/// queue is 429 with `Retry-After`; a key whose jobs store `--max-stored-mb-per-key` or more gets
+/// 403 until it deletes some. Send an `Idempotency-Key` to retry safely.
 #[utoipa::path(
     post, path = "/v1/jobs", tag = "jobs",
     request_body(content = JobSpec, description = "The job of docs/contract.md", content_type = "application/json"),
@@ -172,6 +175,7 @@ impl JobResource {
         BodyRejected,
         Unauthorized,
         QueueFull,
+        OverQuota,
     ),
     security((), ("api_key" = []))
 )]

@@ -3,7 +3,7 @@
 use super::Path;
 use super::error::{
     ApiError,
-    responses::{BadQuery, BodyRejected, NoSuchSchedule, QueueFull, Unauthorized},
+    responses::{BadQuery, BodyRejected, NoSuchSchedule, OverQuota, QueueFull, Unauthorized},
 };
 use super::jobs::{JobResource, accepted, header_text, stored_result};
 use super::{AppState, JsonText, idempotency_key, replayed};
@@ -262,7 +262,8 @@ pub async fn delete_schedule(
 /// Run a schedule now, outside its timetable.
 ///
 /// Queues one job from the template now (202, the job's URL in `Location`); it counts in the trend
-/// as a manual run. A full queue is 429 with `Retry-After`.
+/// as a manual run. A full queue is 429 with `Retry-After`; a key whose jobs store its quota or more,
+/// 403.
 #[utoipa::path(
     post, path = "/v1/schedules/{id}/run", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     responses(
@@ -270,6 +271,7 @@ pub async fn delete_schedule(
         Unauthorized,
         NoSuchSchedule,
         QueueFull,
+        OverQuota,
     ),
     security((), ("api_key" = []))
 )]

@@ -58,21 +58,25 @@ impl JobStatus {
 /// How many jobs may wait in the queue: `total` in all, and `per_owner` of any one owner (API
 /// key), so that one key cannot fill the queue and lock every other key out; and none while the
 /// disk beside a SQLite database has less than `min_free_disk_bytes` free, so that jobs already
-/// taken can still store their Results and old ones can be deleted.
+/// taken can still store their Results and old ones can be deleted; and none of an owner whose
+/// jobs store `stored_per_owner` bytes or more (their `stored_bytes`), so that one key cannot
+/// take the disk every key shares.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct QueueBound {
     pub total: u64,
     pub per_owner: u64,
     pub min_free_disk_bytes: u64,
+    pub stored_per_owner: Option<u64>,
 }
 
 impl QueueBound {
-    /// `total` jobs, any owner may queue them all, whatever the free disk.
+    /// `total` jobs, any owner may queue them all, whatever the free disk and stored bytes.
     pub fn total(total: u64) -> Self {
         Self {
             total,
             per_owner: total,
             min_free_disk_bytes: 0,
+            stored_per_owner: None,
         }
     }
 }

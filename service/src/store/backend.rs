@@ -4,7 +4,7 @@
 //! schedules) is one body of SQL in `queue.rs`, `results.rs` and `schedules.rs`.
 
 use super::postgres::PgBackend;
-use super::rows::Dialect;
+use super::rows::{Dialect, count_from_sql};
 use super::sql::{Conn, Pooled, Sql, Tx};
 use super::sqlite::SqliteBackend;
 use super::{QueueEvent, StoreError, StoreResult};
@@ -139,7 +139,11 @@ impl SqlStore {
 
     /// Inserts a queued job with its first shards unless the queue or the owner's share of it
     /// is full ([`QueueBound`]), in `tx`: the count and the insert cannot race. Below the
-    /// bound's free disk, the job is refused as the database not being ready (503).
+    /// bound's free disk, the job is refused as the database not being ready (503); an owner
+    /// whose jobs store its quota or more gets [`StoreError::OverQuota`]. The quota is read
+    /// before the insert, unlocked: submissions at the same moment may all pass it, and jobs
+    /// already queued store their Results after it, so an owner goes over by at most what its
+    /// share of the queue stores.
     pub(crate) async fn insert_queued(
         &self,
         tx: &mut Tx,
@@ -147,6 +151,19 @@ impl SqlStore {
         bound: QueueBound,
     ) -> StoreResult<bool> {
         self.check_disk(bound.min_free_disk_bytes)?;
+        if let Some(quota) = bound.stored_per_owner {
+            let used = Sql::new(
+                "SELECT CAST(COALESCE(SUM(stored_bytes), 0) AS BIGINT) AS used \
+                 FROM jobs WHERE owner = $1",
+            )
+            .bind(job.owner.as_str())
+            .fetch_one(&mut *tx)
+            .await?;
+            let used = count_from_sql(&used, "used")?;
+            if used >= quota {
+                return Err(StoreError::OverQuota { used, quota });
+            }
+        }
         match &self.backend {
             Backend::Sqlite(_) => super::sqlite::insert_queued(tx, job, bound).await,
             Backend::Postgres(_) => super::postgres::insert_queued(tx, job, bound).await,

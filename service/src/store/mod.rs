@@ -61,6 +61,14 @@ pub enum StoreError {
     /// This instance cannot do its work now, and why (see [`JobQueue::ready`]).
     #[error("not ready: {0}")]
     NotReady(String),
+    /// The owner's jobs store `used` bytes, at or over the `quota` a new job needs below it
+    /// ([`crate::domain::QueueBound::stored_per_owner`]).
+    #[error(
+        "the jobs of this API key store {used} bytes, at or over its quota of {quota} bytes \
+         (--max-stored-mb-per-key): delete the jobs it no longer needs \
+         (DELETE /v1/jobs/{{id}}?purge=true) before submitting more"
+    )]
+    OverQuota { used: u64, quota: u64 },
 }
 
 impl StoreError {
