@@ -100,7 +100,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_job_behind_another_is_served_next(&database("fair")).await;
     two_scheduler_loops_never_duplicate_a_night(&database("race")).await;
     missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(&database("catch-up")).await;
-    a_full_queue_or_quota_leaves_the_night_due_for_the_next_tick(&database("full")).await;
+    a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(&database("full")).await;
 }
 
 async fn a_store_that_takes_writes_and_is_migrated_is_ready(url: &str) {
@@ -1281,7 +1281,7 @@ async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: 
     assert_eq!(store.runs(&id, 10).await.unwrap().len(), 2);
 }
 
-async fn a_full_queue_or_quota_leaves_the_night_due_for_the_next_tick(url: &str) {
+async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) {
     let store = store::open(url).await.unwrap();
     store
         .insert_schedule(&nightly("s1", "2026-11-22T03:00:00Z"))
@@ -1299,18 +1299,26 @@ async fn a_full_queue_or_quota_leaves_the_night_due_for_the_next_tick(url: &str)
         .await
         .unwrap();
     assert_eq!(due.len(), 1, "still due");
-    // So does a key whose jobs store its quota: the tick goes on to the other schedules.
+    // A key whose jobs store its quota skips the run (it would stay over until it deletes some),
+    // and the tick goes on to the other schedules: another key's runs.
+    insert(&store, queued(7)).await;
+    let mut other = nightly("s2", "2026-11-22T03:00:00Z");
+    other.owner = Owner::of_key("other");
+    store.insert_schedule(&other).await.unwrap();
     let over_quota = QueueBound {
-        stored_per_owner: Some(0),
+        stored_per_owner: Some(1),
         ..QueueBound::total(10)
     };
-    assert_eq!(tick(store.as_ref(), over_quota, now).await.unwrap(), 0);
-    assert_eq!(
-        tick(store.as_ref(), QueueBound::total(10), now)
-            .await
-            .unwrap(),
-        1
-    );
+    assert_eq!(tick(store.as_ref(), over_quota, now).await.unwrap(), 1);
+    let due = store
+        .due_schedules(UnixMs::from_datetime(now))
+        .await
+        .unwrap();
+    assert!(due.is_empty(), "both moved on: {due:?}");
+    for (schedule, runs) in [("s1", 0), ("s2", 1)] {
+        let made = store.runs(&ScheduleId::from(schedule), 10).await.unwrap();
+        assert_eq!(made.len(), runs, "{schedule}");
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

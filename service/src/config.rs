@@ -129,7 +129,11 @@ pub struct ServeConfig {
     /// Bytes, in MB, that the jobs of one API key (and of its schedules) may store: a key whose
     /// jobs store this much or more gets 403 for a new job until it deletes some (a job's
     /// `stored_bytes`). Without it, no bound but the disk's.
-    #[arg(long, env = "BOUNCEWEAR_MAX_STORED_MB_PER_KEY")]
+    #[arg(
+        long,
+        env = "BOUNCEWEAR_MAX_STORED_MB_PER_KEY",
+        value_parser = clap::value_parser!(u64).range(1..)
+    )]
     pub max_stored_mb_per_key: Option<u64>,
     /// Delete finished jobs, with everything stored for them, this many days after they ended
     /// (checked at start-up and every hour). Without it, they stay until deleted.

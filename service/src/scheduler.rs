@@ -64,9 +64,12 @@ pub async fn tick(store: &dyn Store, bound: QueueBound, now: DateTime<Utc>) -> S
         let made = match store.create_run(slot, job, bound).await {
             // Deleted since it was read: the other schedules still run this tick.
             Err(StoreError::NotFound { .. }) => continue,
+            // Skipped, not retried: the key stays over until it deletes some, which a retry every
+            // tick would wait for with a writer's transaction and a warning a second. The
+            // schedule moves on as past a run that exists.
             Err(StoreError::OverQuota { used, quota }) => {
-                tracing::warn!(schedule = %schedule.id, used, quota, "the schedule's key stores its quota; the scheduled run waits for the next tick");
-                continue;
+                tracing::warn!(schedule = %schedule.id, used, quota, "the schedule's key stores its quota; this run is skipped");
+                NewRun::AlreadyExists
             }
             made => made?,
         };

@@ -498,9 +498,9 @@ fn a_second_key_gets_in_when_the_first_has_filled_its_share_of_the_queue() {
     assert_problem(&post(&jobs, job, Some("beta")), 429);
 }
 
-/// A key whose jobs store its quota or more gets 403 for a new job, naming the flag; another
-/// key still gets in, a retry with the same Idempotency-Key still gets its job, and a purge
-/// frees the quota.
+/// A key whose jobs store its quota or more gets 403 for a new job (or a schedule's run now),
+/// naming the flag; another key still gets in, a retry with the same Idempotency-Key still gets
+/// its job, and a purge frees the quota.
 #[test]
 fn a_key_whose_jobs_store_its_quota_gets_no_new_job_until_it_deletes_some() {
     let server = TestApp::start(
@@ -544,11 +544,25 @@ fn a_key_whose_jobs_store_its_quota_gets_no_new_job_until_it_deletes_some() {
     );
     assert_eq!(keyed("once").status, 202, "a retry gets the job it created");
     assert_eq!(keyed("twice").status, 403);
+    // A schedule's run now is a job of the key too.
+    let schedule = post(
+        &server.url("/v1/schedules"),
+        &json!({"name": "nightly", "cron": "0 3 * * *", "template": {"devices": 1, "operations": 1}})
+            .to_string(),
+        Some("alpha"),
+    );
+    assert_eq!(schedule.status, 201, "{}", schedule.body);
+    let run = server.url(&format!(
+        "/v1/schedules/{}/run",
+        schedule.json()["id"].as_str().unwrap()
+    ));
+    assert_problem(&post(&run, "", Some("alpha")), 403);
     assert_eq!(post(&jobs, small, Some("beta")).status, 202);
     let purged =
         reply(authorized(agent().delete(&format!("{this}?purge=true")), Some("alpha")).call());
     assert_eq!(purged.status, 204, "{}", purged.body);
     assert_eq!(post(&jobs, small, Some("alpha")).status, 202);
+    assert_eq!(post(&run, "", Some("alpha")).status, 202);
 }
 
 /// A query parameter the operation does not take is a 400 naming it and what it does take, on
