@@ -1017,6 +1017,12 @@ async fn a_result_is_stored_once_and_one_stored_whole_before_reads_as_it_was(url
     assert_eq!(store.result_json(&id).await.unwrap().unwrap(), whole);
 }
 
+/// A job of one device and one operation of `owner`.
+fn of(owner: &Owner, seed: u64) -> QueuedJob {
+    let job = Job::from_json(r#"{"devices": 1, "operations": 1}"#, || seed).unwrap();
+    QueuedJob::new(&job, owner.clone(), None, UnixMs(1))
+}
+
 async fn one_owner_fills_only_its_share_of_the_queue(url: &str) {
     let store = store::open(url).await.unwrap();
     let bound = QueueBound {
@@ -1024,10 +1030,6 @@ async fn one_owner_fills_only_its_share_of_the_queue(url: &str) {
         per_owner: 2,
         min_free_disk_bytes: 0,
         stored_per_owner: None,
-    };
-    let of = |owner: &Owner, seed| {
-        let job = Job::from_json(r#"{"devices": 1, "operations": 1}"#, || seed).unwrap();
-        QueuedJob::new(&job, owner.clone(), None, UnixMs(1))
     };
     let (greedy, other) = (Owner::of_key("greedy"), Owner::of_key("other"));
     let mut accepted = Vec::new();
@@ -1047,10 +1049,6 @@ async fn one_owner_fills_only_its_share_of_the_queue(url: &str) {
 
 async fn an_owner_whose_jobs_store_its_quota_gets_no_new_job(url: &str) {
     let store = store::open(url).await.unwrap();
-    let of = |owner: &Owner, seed| {
-        let job = Job::from_json(r#"{"devices": 1, "operations": 1}"#, || seed).unwrap();
-        QueuedJob::new(&job, owner.clone(), None, UnixMs(1))
-    };
     let (greedy, other) = (Owner::of_key("greedy"), Owner::of_key("other"));
     let first = store
         .insert_job(of(&greedy, 1), QueueBound::total(10))
@@ -1068,22 +1066,11 @@ async fn an_owner_whose_jobs_store_its_quota_gets_no_new_job(url: &str) {
         }
         other => panic!("expected the quota, got {other:?}"),
     }
-    assert!(
-        store
-            .insert_job(of(&other, 3), bound)
-            .await
-            .unwrap()
-            .is_some()
-    );
+    let admitted = |job| async { store.insert_job(job, bound).await.unwrap().is_some() };
+    assert!(admitted(of(&other, 3)).await);
     store.cancel(&greedy, &first.id, UnixMs(2)).await.unwrap();
     store.delete_job(&greedy, &first.id).await.unwrap();
-    assert!(
-        store
-            .insert_job(of(&greedy, 4), bound)
-            .await
-            .unwrap()
-            .is_some()
-    );
+    assert!(admitted(of(&greedy, 4)).await);
 }
 
 async fn a_cancelled_job_keeps_no_accumulators(url: &str) {

@@ -200,13 +200,16 @@ impl ServeConfig {
                 .unwrap_or(share)
                 .min(self.max_queued),
             min_free_disk_bytes: self.min_free_disk_bytes(),
-            stored_per_owner: self
-                .max_stored_mb_per_key
-                .map(|mb| mb.saturating_mul(1 << 20)),
+            stored_per_owner: self.max_stored_mb_per_key.map(bytes_of_mb),
         }
     }
 
     pub fn min_free_disk_bytes(&self) -> u64 {
-        self.min_free_disk_mb.saturating_mul(1 << 20)
+        bytes_of_mb(self.min_free_disk_mb)
     }
+}
+
+/// The bytes of a flag given in MB (MiB), saturating.
+fn bytes_of_mb(mb: u64) -> u64 {
+    mb.saturating_mul(1 << 20)
 }
