@@ -1006,7 +1006,13 @@ mod tests {
             told[0].detail.contains(r#"add a "max" of at most 1e30"#),
             "{told:?}"
         );
-        // Wide but sane distributions, and the same ones truncated at the largest magnitude.
+    }
+
+    /// Wide but sane distributions, and the same ones truncated at the largest magnitude, stay
+    /// within what a scenario admits.
+    #[test]
+    fn a_wide_distribution_within_the_largest_magnitude_is_accepted() {
+        let (positive, finite) = (Domain::POSITIVE, Domain::FINITE);
         for (json, domain) in [
             (
                 r#"{"kind":"lognormal","median":1e9,"sigma":2,"max":1e30}"#,
