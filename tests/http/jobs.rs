@@ -537,9 +537,10 @@ fn a_key_whose_jobs_store_its_quota_gets_no_new_job_until_it_deletes_some() {
     assert_eq!(
         problem["detail"],
         format!(
-            "the jobs of this API key store {stored} bytes, at or over its quota of 1048576 \
-             bytes (--max-stored-mb-per-key): delete the jobs it no longer needs \
-             (DELETE /v1/jobs/{{id}}?purge=true) before submitting more"
+            "the jobs of this API key (of every client, where the server has no keys) store \
+             {stored} bytes, at or over its quota of 1048576 bytes (--max-stored-mb-per-key): \
+             delete the jobs it no longer needs (DELETE /v1/jobs/{{id}}?purge=true) before \
+             submitting more"
         )
     );
     assert_eq!(keyed("once").status, 202, "a retry gets the job it created");

@@ -332,7 +332,7 @@ pub mod responses {
     #[derive(IntoResponses)]
     #[response(
         status = 403,
-        description = "The jobs of this API key store its quota (`--max-stored-mb-per-key`) or more; delete some first",
+        description = "The jobs of this API key (of every client, where the server has no keys) store its quota (`--max-stored-mb-per-key`) or more; delete some first",
         content_type = "application/problem+json"
     )]
     pub struct OverQuota(pub Problem);

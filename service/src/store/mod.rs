@@ -64,9 +64,9 @@ pub enum StoreError {
     /// The owner's jobs store `used` bytes, at or over the `quota` a new job needs below it
     /// ([`crate::domain::QueueBound::stored_per_owner`]).
     #[error(
-        "the jobs of this API key store {used} bytes, at or over its quota of {quota} bytes \
-         (--max-stored-mb-per-key): delete the jobs it no longer needs \
-         (DELETE /v1/jobs/{{id}}?purge=true) before submitting more"
+        "the jobs of this API key (of every client, where the server has no keys) store {used} \
+         bytes, at or over its quota of {quota} bytes (--max-stored-mb-per-key): delete the \
+         jobs it no longer needs (DELETE /v1/jobs/{{id}}?purge=true) before submitting more"
     )]
     OverQuota { used: u64, quota: u64 },
 }
