@@ -83,6 +83,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_rare_events_rounds_run_as_shards_give_the_whole_result(&database("rounds")).await;
     a_poison_job_fails_after_the_retry_limit_with_the_reason(&database("poison")).await;
     a_cancelled_job_keeps_no_accumulators(&database("cancel-partials")).await;
+    an_ended_jobs_running_shards_stop_with_it(&database("stop")).await;
     a_result_the_database_refuses_for_a_while_is_stored_without_running_again(&database("refused"))
         .await;
     a_result_the_database_keeps_refusing_fails_its_job_at_the_retry_limit(&database("refusing"))
@@ -420,11 +421,17 @@ async fn a_job_whose_lease_keeps_expiring_fails_with_the_reason(url: &str) {
         reason,
         "gave up after 2 retries: the lease of batch 0 group 0 expired 3 times (its worker stopped or stalled, or lost the database, each time)"
     );
+    // Its shard counts the three expiries the reason names, and no longer reads as running.
     let shards = store.shards(&id).await.unwrap();
-    assert_eq!((shards[0].failures, shards[0].lost_leases), (0, 2));
+    assert_eq!((shards[0].failures, shards[0].lost_leases), (0, 3));
+    assert_eq!(shards[0].status, "queued");
     assert_eq!(
         shards[0].history,
-        ["attempt 1 (w): lease lost", "attempt 2 (w): lease lost"],
+        [
+            "attempt 1 (w): lease lost",
+            "attempt 2 (w): lease lost",
+            "attempt 3 (w): lease lost"
+        ],
         "one line per attempt that did not finish"
     );
 
@@ -1103,6 +1110,95 @@ async fn a_cancelled_job_keeps_no_accumulators(url: &str) {
     );
 }
 
+/// A job that ends stops its running shards: none reads as running afterwards, each says in its
+/// history why it stopped (a lease already run out is a lost one), and its worker's claim is gone.
+async fn an_ended_jobs_running_shards_stop_with_it(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let owner = Owner::anonymous();
+    let shard_lines = |shards: &[store::ShardRecord]| -> Vec<(String, u64, Vec<String>)> {
+        let lines = shards
+            .iter()
+            .map(|s| (s.status.clone(), s.lost_leases, s.history.clone()));
+        lines.collect()
+    };
+    let line = |text: &str| vec![text.to_owned()];
+
+    // Cancelled with both groups claimed at 0 s: `a` renewed its lease, `b`'s ran out at 1 s.
+    let id = insert(&store, queued(6)).await;
+    let a = store
+        .claim("a", terms(0), budget(2))
+        .await
+        .unwrap()
+        .unwrap();
+    let b = store
+        .claim("b", terms(0), budget(2))
+        .await
+        .unwrap()
+        .unwrap();
+    assert_ne!(a.fence.shard, b.fence.shard);
+    let renewed = store.heartbeat(&a.fence, terms(900), 2).await.unwrap();
+    assert_eq!(renewed, Lease::Held);
+    store.cancel(&owner, &id, UnixMs(1500)).await.unwrap();
+    assert_eq!(
+        shard_lines(&store.shards(&id).await.unwrap()),
+        [
+            (
+                "queued".into(),
+                0,
+                line("attempt 1 (a): stopped: job cancelled")
+            ),
+            ("queued".into(), 1, line("attempt 1 (b): lease lost")),
+            ("queued".into(), 0, vec![]),
+        ]
+    );
+    assert_eq!(
+        store.heartbeat(&a.fence, terms(1600), 3).await.unwrap(),
+        Lease::Cancelled
+    );
+    let job = Job::new(a.spec.clone(), || 0, &Pointer::root()).unwrap();
+    let stats = run_group(&job, Batch::of(&job, 0).unwrap(), 0, &Silent).unwrap();
+    assert!(
+        !store.complete(&a.fence, &stats).await.unwrap(),
+        "fenced out"
+    );
+    assert_eq!(store.job(&owner, &id).await.unwrap().operations_done, 2);
+
+    // Failed by its other group's run: the group still running stops with it.
+    let id = insert(&store, queued(7)).await;
+    let a = store
+        .claim("a", terms(0), budget(0))
+        .await
+        .unwrap()
+        .unwrap();
+    let b = store
+        .claim("b", terms(0), budget(0))
+        .await
+        .unwrap()
+        .unwrap();
+    let failed = store.fail_attempt(&b.fence, Some(UnixMs(500)), "boom", 0);
+    assert!(failed.await.unwrap());
+    assert_eq!(
+        store.job(&owner, &id).await.unwrap().status,
+        JobStatus::Failed
+    );
+    assert_eq!(
+        shard_lines(&store.shards(&id).await.unwrap()),
+        [
+            (
+                "queued".into(),
+                0,
+                line("attempt 1 (a): stopped: job failed")
+            ),
+            ("queued".into(), 0, line("attempt 1 (b): failed: boom")),
+            ("queued".into(), 0, vec![]),
+        ]
+    );
+    assert_eq!(
+        store.heartbeat(&a.fence, terms(600), 1).await.unwrap(),
+        Lease::Cancelled
+    );
+}
+
 /// Rows written before migration 0005 have no shards: opening the store cuts them as a
 /// submission does.
 async fn jobs_queued_before_shards_existed_get_theirs_on_open(url: &str) {
@@ -1430,6 +1526,9 @@ async fn postgres_announces_queued_jobs_and_their_progress(url: &str) {
     let end = tokio::time::timeout(std::time::Duration::from_secs(10), ends.recv());
     let end = end.await.expect("the end announced within 10 s").unwrap();
     assert_eq!(end, QueueEvent::Changed(id.clone()));
+    // The running shard the cancel stopped is back in the queue, which wakes idle workers as any
+    // shard handed back does (they find nothing of an ended job to claim); then the job's change.
+    assert_eq!(next().await, QueueEvent::Queued);
     assert_eq!(next().await, QueueEvent::Changed(id));
 }
 

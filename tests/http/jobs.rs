@@ -322,6 +322,19 @@ fn a_job_of_few_long_devices_moves_and_stops_when_cancelled() {
     }
     let cancelled = delete(&server.url(&format!("/v1/jobs/{id}")));
     assert_eq!(cancelled.json()["status"], "cancelled");
+    // No shard of it reads as running: the one that was says it stopped.
+    let shards = get(&server.url(&format!("/v1/jobs/{id}/shards")), None).json();
+    let shards = shards["shards"].as_array().unwrap();
+    assert!(
+        shards.iter().all(|s| s["status"] != "running"),
+        "{shards:?}"
+    );
+    assert!(
+        shards.iter().any(|s| s["history"][0]
+            .as_str()
+            .is_some_and(|line| line.ends_with("stopped: job cancelled"))),
+        "{shards:?}"
+    );
     // The next job finds the compute threads free: no device of the cancelled one runs on.
     let next = server.submit(&json!({"devices": 64, "operations": 200, "seed": 2}));
     server.wait_for(&next, "succeeded", Duration::from_secs(5));

@@ -414,8 +414,9 @@ pub struct ShardResource {
     pub operations_total: u64,
     /// Why its last run failed; null while none has.
     pub error: Option<String>,
-    /// One line per attempt that did not finish, oldest first: `attempt N (worker): failed: ...`
-    /// or `attempt N (worker): lease lost`.
+    /// One line per attempt that did not finish, oldest first: `attempt N (worker): failed: ...`,
+    /// `attempt N (worker): lease lost`, or `attempt N (worker): stopped: job cancelled` (or
+    /// `failed`) for a run its job's end stopped.
     pub history: Vec<String>,
 }
 
