@@ -208,6 +208,24 @@ pub struct ShardRecord {
     pub history: Vec<String>,
 }
 
+impl ShardRecord {
+    /// The shard as its job, of status `job`, leaves it: a job that ended cancelled or failed runs
+    /// nothing more, so a shard still stored as running (its worker stops at its next heartbeat
+    /// or store, or was gone) reads as `queued`, never to be claimed, its history ending with the
+    /// attempt the end stopped. Decided when read rather than written by the end, so that ending
+    /// a job locks none of its shards: ends, claims and heartbeats lock a shard and then its job.
+    pub fn as_ended_by(mut self, job: &str) -> Self {
+        if self.status == "running" && matches!(job, "cancelled" | "failed") {
+            let worker = self.worker.as_deref().unwrap_or("?");
+            let attempt = self.attempt.0;
+            let line = format!("attempt {attempt} ({worker}): stopped: job {job}");
+            self.history.push(line);
+            self.status = "queued".to_owned();
+        }
+        self
+    }
+}
+
 /// What a heartbeat found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Lease {

@@ -231,7 +231,6 @@ async fn finish_shard(tx: &mut Tx, fence: &Fence) -> StoreResult<bool> {
 
 /// Ends a job that has not ended yet as failed, with the reason, dropping its groups' accumulators.
 async fn end_job(tx: &mut Tx, job: &JobId, now: UnixMs, error: &str) -> StoreResult<()> {
-    stop_running(tx, job, now, "failed").await?;
     Sql::new(
         "UPDATE jobs SET status = 'failed', finished_at = $2, error = $3 WHERE id = $1 AND status IN ('queued', 'running')",
     )
@@ -250,29 +249,6 @@ async fn holds(dialect: &Dialect, tx: &mut Tx, fence: &Fence) -> StoreResult<boo
         .fetch_optional(&mut *tx)
         .await?
         .is_some())
-}
-
-/// Stops the running shards of a job that ends (`ending`: how): each goes back to `queued`, no
-/// longer held, with a line in its history, `stopped: job cancelled` (or `failed`), or `lease
-/// lost` for a lease that had already expired, which counts as lost. Its worker finds the claim
-/// gone at its next heartbeat or store, as it would with the job ended alone; the shard no longer
-/// reads as running for as long as the job is kept. Runs before the job's row is updated: a
-/// heartbeat locks its shard and then the job (its progress), and so must this, or PostgreSQL
-/// could find the two waiting on each other.
-async fn stop_running(tx: &mut Tx, job: &JobId, now: UnixMs, ending: &str) -> StoreResult<()> {
-    Sql::new(
-        "UPDATE shards SET status = 'queued', lease_until = NULL, \
-         lost_leases = lost_leases + CASE WHEN lease_until < $2 THEN 1 ELSE 0 END, \
-         history = history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): ' \
-             || CASE WHEN lease_until < $2 THEN 'lease lost' ELSE 'stopped: job ' || $3 END || '\n' \
-         WHERE job_id = $1 AND status = 'running'",
-    )
-    .bind(job.as_str())
-    .bind(now.0)
-    .bind(ending)
-    .execute(&mut *tx)
-    .await?;
-    Ok(())
 }
 
 /// Drops what an unfinished run of a job that ended left: its groups' accumulators, and the rows
@@ -443,8 +419,6 @@ impl JobQueue for SqlStore {
         // The job ends and what its run left goes in one transaction: a crash between the two
         // would have left a cancelled job's accumulators counted in its stored bytes.
         let mut tx = self.begin().await?;
-        // Undone with the rest when the job is not this owner's or has ended.
-        stop_running(&mut tx, id, now, "cancelled").await?;
         let cancelled = Sql::new(
             "UPDATE jobs SET status = 'cancelled', finished_at = $3 \
              WHERE id = $1 AND owner = $2 AND status IN ('queued', 'running')",
@@ -780,12 +754,18 @@ impl JobQueue for SqlStore {
         let rows = Sql::new(concat!(
             "SELECT ",
             shard_columns!(),
+            ", (SELECT status FROM jobs WHERE id = $1) AS job_status",
             " FROM shards WHERE job_id = $1 ORDER BY batch, grp < 0, grp"
         ))
         .bind(id.as_str())
         .fetch_all(self.readers())
         .await?;
-        Ok(rows.iter().map(shard_from_row).collect::<Result<_, _>>()?)
+        let shards = rows.iter().map(|row| {
+            let shard = shard_from_row(row)?;
+            let job = row.maybe_text("job_status")?.unwrap_or_default();
+            Ok::<_, sqlx::Error>(shard.as_ended_by(&job))
+        });
+        Ok(shards.collect::<Result<_, _>>()?)
     }
 
     #[tracing::instrument(skip_all)]
