@@ -11,7 +11,7 @@ use bouncewear::domain::{
     Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob,
     ScheduleDefinition, ScheduleId, ShardId, UnixMs,
 };
-use bouncewear::scheduler::tick;
+use bouncewear::scheduler::{Waiting, tick};
 use bouncewear::store::{
     self, EncodedGroups, EncodedResult, JobRecord, Lease, LeaseTerms, NewRun, Operations,
     RetryBudget, RunSlot, ScheduleRecord, Store, StoreError,
@@ -1300,10 +1300,16 @@ async fn two_scheduler_loops_never_duplicate_a_night(url: &str) {
     }
     let now = utc("2026-11-22T04:00:00Z");
     let mut created = 0;
+    let (mut waiting_a, mut waiting_b) = (Waiting::default(), Waiting::default());
     for _ in 0..5 {
         let (a, b) = tokio::join!(
-            tick(first.as_ref(), QueueBound::total(1000), now),
-            tick(second.as_ref(), QueueBound::total(1000), now)
+            tick(first.as_ref(), QueueBound::total(1000), now, &mut waiting_a),
+            tick(
+                second.as_ref(),
+                QueueBound::total(1000),
+                now,
+                &mut waiting_b
+            )
         );
         created += a.unwrap() + b.unwrap();
     }
@@ -1334,16 +1340,14 @@ async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: 
         .unwrap();
     // The server was down for three nights; it starts at 08:00.
     let now = utc("2026-11-22T08:00:00Z");
+    let tick_at = async |now| {
+        let mut waiting = Waiting::default();
+        let created = tick(store.as_ref(), QueueBound::total(100), now, &mut waiting);
+        created.await.unwrap()
+    };
+    assert_eq!(tick_at(now).await, 1);
     assert_eq!(
-        tick(store.as_ref(), QueueBound::total(100), now)
-            .await
-            .unwrap(),
-        1
-    );
-    assert_eq!(
-        tick(store.as_ref(), QueueBound::total(100), now)
-            .await
-            .unwrap(),
+        tick_at(now).await,
         0,
         "a restart the same morning adds nothing"
     );
@@ -1360,12 +1364,7 @@ async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: 
     );
     // The next night runs at its time, once.
     let next_night = utc("2026-11-23T03:00:01Z");
-    assert_eq!(
-        tick(store.as_ref(), QueueBound::total(100), next_night)
-            .await
-            .unwrap(),
-        1
-    );
+    assert_eq!(tick_at(next_night).await, 1);
     assert_eq!(store.runs(&id, 10).await.unwrap().len(), 2);
 }
 
@@ -1376,12 +1375,12 @@ async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) 
         .await
         .unwrap();
     let now = utc("2026-11-22T03:00:05Z");
-    assert_eq!(
-        tick(store.as_ref(), QueueBound::total(0), now)
-            .await
-            .unwrap(),
-        0
-    );
+    let mut waiting = Waiting::default();
+    for _ in 0..2 {
+        let created = tick(store.as_ref(), QueueBound::total(0), now, &mut waiting);
+        assert_eq!(created.await.unwrap(), 0);
+        assert!(waiting.contains(&ScheduleId::from("s1")), "warned of once");
+    }
     let due = store
         .due_schedules(UnixMs::from_datetime(now))
         .await
@@ -1397,7 +1396,12 @@ async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) 
         stored_per_owner: Some(1),
         ..QueueBound::total(10)
     };
-    assert_eq!(tick(store.as_ref(), over_quota, now).await.unwrap(), 1);
+    let created = tick(store.as_ref(), over_quota, now, &mut waiting);
+    assert_eq!(created.await.unwrap(), 1);
+    assert!(
+        !waiting.contains(&ScheduleId::from("s1")),
+        "no longer waiting: skipped"
+    );
     let due = store
         .due_schedules(UnixMs::from_datetime(now))
         .await

@@ -3,9 +3,10 @@
 //! night once, not three times), and its next run moves past now. The (schedule, due time) primary
 //! key makes the job unique across restarts and across instances sharing the database.
 
-use crate::domain::{QueueBound, Timetable, UnixMs};
+use crate::domain::{QueueBound, ScheduleId, Timetable, UnixMs};
 use crate::store::{NewRun, RunSlot, Store, StoreError, StoreResult};
 use chrono::{DateTime, Utc};
+use std::collections::HashSet;
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::{Notify, watch};
@@ -18,8 +19,9 @@ pub async fn run(
     wake: Arc<Notify>,
     mut shutdown: watch::Receiver<bool>,
 ) {
+    let mut waiting = Waiting::default();
     while !*shutdown.borrow() {
-        match tick(store.as_ref(), bound, Utc::now()).await {
+        match tick(store.as_ref(), bound, Utc::now(), &mut waiting).await {
             Ok(0) => {}
             Ok(created) => {
                 tracing::info!(created, "scheduled jobs created");
@@ -34,8 +36,26 @@ pub async fn run(
     }
 }
 
-/// One pass over the due schedules at `now`; returns how many jobs it created.
-pub async fn tick(store: &dyn Store, bound: QueueBound, now: DateTime<Utc>) -> StoreResult<usize> {
+/// The schedules whose run waits for room in a full queue. Each is warned of once, when it starts
+/// waiting, and noted when its run is queued, rather than warned of at every tick (a second) in
+/// between.
+#[derive(Debug, Default)]
+pub struct Waiting(HashSet<ScheduleId>);
+
+impl Waiting {
+    pub fn contains(&self, schedule: &ScheduleId) -> bool {
+        self.0.contains(schedule)
+    }
+}
+
+/// One pass over the due schedules at `now`; returns how many jobs it created. `waiting` carries
+/// the schedules waiting for room in the queue from one tick to the next.
+pub async fn tick(
+    store: &dyn Store,
+    bound: QueueBound,
+    now: DateTime<Utc>,
+    waiting: &mut Waiting,
+) -> StoreResult<usize> {
     let mut created = 0;
     for schedule in store.due_schedules(UnixMs::from_datetime(now)).await? {
         let definition = &schedule.definition;
@@ -63,7 +83,10 @@ pub async fn tick(store: &dyn Store, bound: QueueBound, now: DateTime<Utc>) -> S
         };
         let made = match store.create_run(slot, job, bound).await {
             // Deleted since it was read: the other schedules still run this tick.
-            Err(StoreError::NotFound { .. }) => continue,
+            Err(StoreError::NotFound { .. }) => {
+                waiting.0.remove(&schedule.id);
+                continue;
+            }
             // Skipped, not retried: the key stays over until it deletes some, which a retry every
             // tick would wait for with a writer's transaction and a warning a second. The
             // schedule moves on as past a run that exists.
@@ -73,13 +96,17 @@ pub async fn tick(store: &dyn Store, bound: QueueBound, now: DateTime<Utc>) -> S
             }
             made => made?,
         };
-        match made {
-            NewRun::Created(_) => created += 1,
-            NewRun::AlreadyExists => {}
-            NewRun::QueueFull => {
-                tracing::warn!(schedule = %schedule.id, "queue full; the scheduled run waits for the next tick");
-                continue;
+        if let NewRun::QueueFull = made {
+            if waiting.0.insert(schedule.id.clone()) {
+                tracing::warn!(schedule = %schedule.id, "queue full; the scheduled run waits for room");
             }
+            continue;
+        }
+        if waiting.0.remove(&schedule.id) {
+            tracing::info!(schedule = %schedule.id, "the scheduled run no longer waits for room");
+        }
+        if let NewRun::Created(_) = made {
+            created += 1;
         }
         let next = timetable.next_after(now).map(UnixMs::from_datetime);
         store
