@@ -108,6 +108,16 @@ fn a_job_against_itself_and_two_designs_over_api_and_cli() {
     }
     assert!(bands.contains("e1: wear curves compared"));
     assert!(weibull.contains("Weibull probability plots compared"));
+    // A device metric has no wear curve: its comparison is printed with the Weibull plots alone.
+    let dir = crate::support::temp_dir("compare-device-plots");
+    let (metric, plots) = ("eroded_mass_kg", dir.to_str().unwrap());
+    let args = [
+        "compare", &strong, &weak, "--metric", metric, "--plots", plots,
+    ];
+    let compared: Value = serde_json::from_str(&stdout(&remote(&server, None, &args))).unwrap();
+    assert_eq!(compared["metric"], metric);
+    assert!(dir.join("weibull.svg").is_file());
+    assert!(!dir.join("bands.svg").exists());
 
     // Refusals name what is wrong.
     let base = format!("{}/v1/jobs/{strong}/compare/{weak}", server.base());

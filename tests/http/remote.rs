@@ -133,6 +133,33 @@ fn refusals_and_failures_exit_as_the_local_commands_do() {
     let unknown = remote(&server, None, &["status", "no-such-job"]);
     assert_eq!(unknown.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&unknown.stderr).contains("404"));
+    // An id is one path segment: what follows a slash in it does not reach another resource.
+    let smuggled = remote(&server, None, &["status", &format!("{id}/shards")]);
+    assert_eq!(smuggled.status.code(), Some(1));
+
+    // A malformed document names the field the server's 400 names.
+    let nan = job_file("remote-nan", &json!(null)).replace("job.json", "nan.json");
+    std::fs::write(&nan, r#"{"devices": NaN}"#).unwrap();
+    let malformed = remote(&server, None, &["submit", &nan]);
+    assert_eq!(malformed.status.code(), Some(2));
+    let said = String::from_utf8_lossy(&malformed.stderr);
+    assert!(said.contains("invalid input: /devices: "), "{said}");
+
+    // Seconds no clock holds, or none at all, are refused by name (exit 2), never a panic or a
+    // wait without end; a timeout without --wait is refused too.
+    for args in [
+        vec!["status", id, "--request-timeout-seconds", "1e30"],
+        vec!["status", id, "--request-timeout-seconds", "inf"],
+        vec!["wait", id, "--timeout-seconds", "nan"],
+        vec!["wait", id, "--timeout-seconds", "0"],
+        vec!["submit", &file, "--timeout-seconds", "5"],
+        vec!["health", "--timeout-seconds", "-1"],
+    ] {
+        let refused = remote(&server, None, &args);
+        assert_eq!(refused.status.code(), Some(2), "{args:?}");
+        let said = String::from_utf8_lossy(&refused.stderr);
+        assert!(said.contains("--"), "{args:?}: {said}");
+    }
     let unreachable = Command::new(BIN)
         .args(["status", id, "--url", "http://127.0.0.1:1"])
         .output()

@@ -107,7 +107,7 @@ enum Command {
         )]
         url: String,
         /// Seconds to wait for the answer.
-        #[arg(long, default_value_t = 2.0)]
+        #[arg(long, default_value_t = 2.0, value_parser = remote::seconds)]
         timeout_seconds: f64,
     },
     /// Queue a job on a server (`--url`, `--api-key`) and print the job resource, or with `--wait`
@@ -120,7 +120,7 @@ enum Command {
         #[arg(long)]
         wait: bool,
         /// With `--wait`: give up (exit 1) after this many seconds.
-        #[arg(long)]
+        #[arg(long, requires = "wait", value_parser = remote::seconds)]
         timeout_seconds: Option<f64>,
         #[command(flatten)]
         server: remote::Server,
@@ -137,7 +137,7 @@ enum Command {
         /// The job's id.
         id: String,
         /// Give up (exit 1) after this many seconds.
-        #[arg(long)]
+        #[arg(long, value_parser = remote::seconds)]
         timeout_seconds: Option<f64>,
         #[command(flatten)]
         server: remote::Server,

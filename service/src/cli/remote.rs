@@ -5,6 +5,7 @@
 //! failed, 5xx).
 
 use super::{CliError, read_input};
+use bouncewear_model::montecarlo::Metric;
 use bouncewear_model::{FieldError, InvalidInput};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -29,7 +30,7 @@ pub struct Server {
     )]
     pub api_key: Option<String>,
     /// Seconds one request may take.
-    #[arg(long, default_value_t = 60.0, global = true)]
+    #[arg(long, default_value_t = 60.0, global = true, value_parser = seconds)]
     pub request_timeout_seconds: f64,
 }
 
@@ -51,6 +52,22 @@ pub enum Part {
 const WAIT_PER_REQUEST: f64 = 10.0;
 /// The least time between two of `wait`'s requests, should a server answer at once anyway.
 const POLL: Duration = Duration::from_millis(200);
+
+/// The most seconds a client waits for anything: a year.
+const MAX_SECONDS: f64 = 365.0 * 24.0 * 3600.0;
+
+/// Parses a flag's seconds: a number more than 0 and at most a year (so that NaN, infinities and
+/// values no `Duration` holds are refused by name, exit 2, rather than panicking or never ending).
+pub fn seconds(text: &str) -> Result<f64, String> {
+    let seconds: f64 = text.trim().parse().map_err(|e| format!("{e}"))?;
+    if seconds > 0.0 && seconds <= MAX_SECONDS {
+        Ok(seconds)
+    } else {
+        Err(format!(
+            "must be more than 0 and at most {MAX_SECONDS} seconds (a year)"
+        ))
+    }
+}
 
 /// An HTTP client whose every request ends within `timeout_seconds`, and which hands any status
 /// back to the caller (a 4xx or 5xx is an answer, not an error of the client).
@@ -102,17 +119,18 @@ impl Server {
     }
 
     fn job(&self, id: &str) -> Result<serde_json::Value, CliError> {
-        parse(&self.send("GET", &format!("/v1/jobs/{id}"), None)?)
+        parse(&self.send("GET", &format!("/v1/jobs/{}", encode(id)), None)?)
     }
 
     /// The job once it ended, or as it is after `wait_s` seconds (the server's `wait_s`).
     fn job_within(&self, id: &str, wait_s: f64) -> Result<serde_json::Value, CliError> {
-        parse(&self.send("GET", &format!("/v1/jobs/{id}?wait_s={wait_s}"), None)?)
+        let path = format!("/v1/jobs/{}?wait_s={wait_s}", encode(id));
+        parse(&self.send("GET", &path, None)?)
     }
 }
 
 /// The failure a non-2xx answer means: the input's (exit 2) for 400, 413, 415 and 422, each error
-/// of a 422 with its pointer; anything else exit 1, with the problem's detail.
+/// of a 400 or 422 with its pointer; anything else exit 1, with the problem's detail.
 fn refused(status: u16, url: &str, body: &str) -> CliError {
     let problem: serde_json::Value = serde_json::from_str(body).unwrap_or_default();
     let detail = problem["detail"].as_str().unwrap_or(body).to_owned();
@@ -128,7 +146,7 @@ fn refused(status: u16, url: &str, body: &str) -> CliError {
         })
         .collect();
     match status {
-        422 if !errors.is_empty() => CliError::Invalid(InvalidInput::new(errors)),
+        400 | 422 if !errors.is_empty() => CliError::Invalid(InvalidInput::new(errors)),
         400 | 413 | 415 | 422 => CliError::Invalid(InvalidInput::single(
             &bouncewear_model::Pointer::root(),
             format!("{status}: {detail}"),
@@ -225,7 +243,11 @@ pub fn fetch(server: &Server, id: &str, part: Part, csv: bool) -> Result<String,
             )));
         }
     };
-    let text = server.send("GET", &format!("/v1/jobs/{id}/{path}{format}"), None)?;
+    let text = server.send(
+        "GET",
+        &format!("/v1/jobs/{}/{path}{format}", encode(id)),
+        None,
+    )?;
     Ok(text.trim_end().to_owned())
 }
 
@@ -266,7 +288,12 @@ pub fn compare(
             .map_err(|e| CliError::Failed(format!("{}: {e}", dir.display())))?;
         let comparison = parse(&text)?;
         let metric = asked.metric.as_deref().map(encode).unwrap_or_default();
-        let mut kinds = vec![("bands.svg", format!("?metric={metric}"))];
+        // A device metric is one value a device: no wear curve to draw.
+        let device = asked.metric.as_deref().and_then(Metric::parse);
+        let mut kinds = Vec::new();
+        if !matches!(device, Some(Metric::Device(_))) {
+            kinds.push(("bands.svg", format!("?metric={metric}")));
+        }
         if comparison.get("life").is_some_and(|life| !life.is_null()) {
             kinds.push(("weibull.svg", String::new()));
         }
@@ -297,5 +324,5 @@ fn encode(text: &str) -> String {
 /// `cancel`: cancels a queued or running job; the job resource. A job that had ended is printed
 /// as it is, never deleted (`POST /v1/jobs/{id}/cancel`, not `DELETE`).
 pub fn cancel(server: &Server, id: &str) -> Result<String, CliError> {
-    server.send("POST", &format!("/v1/jobs/{id}/cancel"), None)
+    server.send("POST", &format!("/v1/jobs/{}/cancel", encode(id)), None)
 }
