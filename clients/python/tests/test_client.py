@@ -1,12 +1,15 @@
 """The client against a live `bouncewear serve` at BOUNCEWEAR_URL (CI starts one), and the
 binary at BOUNCEWEAR_BIN for the local Result to compare with."""
 
+import datetime
+import email.utils
 import json
 import os
 import subprocess
 
 import pandas as pd
 import pytest
+import requests
 
 from bouncewear import BouncewearError, Client, JobFailed
 
@@ -126,3 +129,33 @@ def test_a_job_compared_with_itself_shows_no_difference(job):
     with pytest.raises(BouncewearError) as refused:
         job.compare(job, statistics=["median"])
     assert refused.value.status == 400
+
+
+def _answer(status, body, headers=None):
+    """An answer as `requests` gives it, for what a proxy in front of the server may send."""
+    response = requests.Response()
+    response.status_code = status
+    response.reason = "Service Unavailable" if status == 503 else "Error"
+    response._content = body.encode()
+    response.headers.update(headers or {})
+    return response
+
+
+def test_any_failed_answer_is_a_bouncewear_error_with_its_text_and_wait():
+    later = email.utils.format_datetime(
+        datetime.datetime.now(datetime.timezone.utc) + datetime.timedelta(seconds=120), usegmt=True
+    )
+    dated = BouncewearError.from_response(_answer(503, "<html>busy</html>", {"Retry-After": later}))
+    assert dated.status == 503 and dated.detail == "<html>busy</html>"
+    assert 100 < dated.retry_after <= 120
+    listed = BouncewearError.from_response(_answer(500, '["oops"]', {"Retry-After": "soon"}))
+    assert (listed.detail, listed.errors, listed.retry_after) == ('["oops"]', [], None)
+    odd = BouncewearError.from_response(_answer(422, '{"detail": "bad", "errors": [1, {"pointer": "/a", "detail": "x"}]}'))
+    assert odd.pointers == ["/a"]
+    assert BouncewearError.from_response(_answer(429, "{}", {"Retry-After": "5"})).retry_after == 5.0
+
+
+def test_an_id_with_a_slash_reaches_no_other_resource(client, job):
+    with pytest.raises(BouncewearError) as unknown:
+        client.job(f"{job.id}/life")
+    assert unknown.value.status == 404

@@ -4,9 +4,12 @@ answer that is not a success, with the problem's detail and the JSON pointer of 
 
 from __future__ import annotations
 
+import datetime
+import email.utils
 import io
 import sys
 import time
+import urllib.parse
 from dataclasses import dataclass, field
 from typing import Any, Dict, Iterable, List, Optional
 
@@ -52,15 +55,45 @@ class BouncewearError(Exception):
         try:
             problem = response.json()
         except ValueError:
+            problem = None
+        if not isinstance(problem, dict):
+            # Not a problem document (a proxy's page, a JSON value of another shape): its text.
             problem = {"detail": response.text}
-        retry_after = response.headers.get("Retry-After")
+        errors = problem.get("errors")
         return cls(
             status=response.status_code,
             title=str(problem.get("title", response.reason)),
             detail=str(problem.get("detail", "")),
-            errors=[FieldError(e.get("pointer", ""), e.get("detail", "")) for e in problem.get("errors", [])],
-            retry_after=float(retry_after) if retry_after else None,
+            errors=[
+                FieldError(str(e.get("pointer", "")), str(e.get("detail", "")))
+                for e in (errors if isinstance(errors, list) else [])
+                if isinstance(e, dict)
+            ],
+            retry_after=_seconds_to_wait(response.headers.get("Retry-After")),
         )
+
+
+def _segment(id: str) -> str:
+    """A job's id as one segment of a path: a slash or `?` in it reaches no other resource."""
+    return urllib.parse.quote(str(id), safe="")
+
+
+def _seconds_to_wait(retry_after: Optional[str]) -> Optional[float]:
+    """`Retry-After` in seconds: given as seconds, or as an HTTP date (RFC 9110 10.2.3, as proxies
+    send it), counted from now and never below 0; None when absent or unreadable."""
+    if not retry_after:
+        return None
+    try:
+        return max(0.0, float(retry_after))
+    except ValueError:
+        pass
+    try:
+        when = email.utils.parsedate_to_datetime(retry_after)
+    except (TypeError, ValueError):
+        return None
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=datetime.timezone.utc)
+    return max(0.0, (when - datetime.datetime.now(datetime.timezone.utc)).total_seconds())
 
 
 class JobFailed(Exception):
@@ -104,7 +137,7 @@ class Client:
 
     def job(self, id: str) -> "Job":
         """The job `id` as it stands now."""
-        return Job(self, self.request("GET", f"/v1/jobs/{id}").json())
+        return Job(self, self.request("GET", f"/v1/jobs/{_segment(id)}").json())
 
     def jobs(self, limit: Optional[int] = None) -> List["Job"]:
         """Your jobs, newest first: every one, or the newest `limit`."""
@@ -162,7 +195,7 @@ class Job:
         return self.resource.get("error")
 
     def _path(self, part: str = "") -> str:
-        return f"/v1/jobs/{self.id}{part}"
+        return f"/v1/jobs/{_segment(self.id)}{part}"
 
     def refresh(self) -> "Job":
         """Reads the job again."""
@@ -189,6 +222,8 @@ class Job:
                 done, total = self.progress["operations_done"], self.progress["operations_total"]
                 print(f"\r{self.id}: {self.status} {done:,}/{total:,} operations", end="", file=sys.stderr)
             if timeout is not None and time.monotonic() - started >= timeout:
+                if progress:
+                    print(file=sys.stderr)
                 raise TimeoutError(f"job {self.id} is still {self.status} after {timeout} s")
             # A server that did not wait (all its places taken) is asked again after a pause.
             time.sleep(max(0.0, 0.2 - (time.monotonic() - asked)))
