@@ -80,7 +80,10 @@ pub fn agent(timeout_seconds: f64) -> ureq::Agent {
 }
 
 impl Server {
+    /// The request with the key, when there is one, asking for a gzipped answer: a 1000-bin
+    /// Result is 9.9 MB as JSON and about 110 kB gzipped.
     fn authorize<B>(&self, request: ureq::RequestBuilder<B>) -> ureq::RequestBuilder<B> {
+        let request = request.header("accept-encoding", "gzip");
         match &self.api_key {
             Some(key) => request.header("authorization", &format!("Bearer {key}")),
             None => request,
@@ -106,12 +109,25 @@ impl Server {
         let unreachable = |e: ureq::Error| CliError::Failed(format!("{url}: {e}"));
         let mut response = sent.map_err(unreachable)?;
         let status = response.status().as_u16();
-        let text = response
+        let gzipped = response
+            .headers()
+            .get("content-encoding")
+            .is_some_and(|coding| coding.as_bytes().eq_ignore_ascii_case(b"gzip"));
+        let bytes = response
             .body_mut()
             .with_config()
             .limit(u64::MAX)
-            .read_to_string()
+            .read_to_vec()
             .map_err(unreachable)?;
+        let text = if gzipped {
+            let mut text = String::new();
+            std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(&bytes[..]), &mut text)
+                .map_err(|e| CliError::Failed(format!("{url}: the gzipped answer: {e}")))?;
+            text
+        } else {
+            String::from_utf8(bytes)
+                .map_err(|e| CliError::Failed(format!("{url}: the answer: {e}")))?
+        };
         match status {
             200..=299 => Ok(text),
             _ => Err(refused(status, &url, &text)),
