@@ -7,7 +7,7 @@ use bouncewear_model::montecarlo::job::LIST_FIELDS;
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
 use bouncewear_model::stats::{QUANTILES, Summary};
 use bouncewear_model::{FieldError, InvalidInput, Pointer};
-use chrono::{DateTime, TimeDelta, TimeZone, Utc};
+use chrono::{DateTime, TimeDelta, TimeZone, Timelike, Utc};
 use chrono_tz::Tz;
 use croner::Cron;
 use serde::{Deserialize, Serialize};
@@ -261,25 +261,54 @@ impl Timetable {
         None
     }
 
-    /// The first due time strictly after `after`. Wall-clock times follow the time zone, DST
-    /// included: a fixed time in a spring-forward gap runs right after the gap, and a fixed time in
-    /// a fall-back overlap runs once, at its first occurrence (croner, after Vixie cron).
+    /// The first due time strictly after `after`, to the whole second. Wall-clock times follow the
+    /// time zone, DST included: a fixed time in a spring-forward gap runs right after the gap, and
+    /// a fixed time in a fall-back overlap runs once, at its first occurrence (croner, after Vixie
+    /// cron). Given an instant in the repeated hour, croner answers such a time with its first
+    /// occurrence, already past: the search starts again half an hour on (an overlap is at most an
+    /// hour), so that a due time is never at or before `after`.
     pub fn next_after(&self, after: DateTime<Utc>) -> Option<DateTime<Utc>> {
-        let local = self.time_zone.from_utc_datetime(&after.naive_utc());
-        self.cron
-            .find_next_occurrence(&local, false)
-            .ok()
-            .map(|t| t.with_timezone(&Utc))
+        let after = whole_seconds(after);
+        let mut from = after;
+        for _ in 0..4 {
+            let local = self.time_zone.from_utc_datetime(&from.naive_utc());
+            let next = self.cron.find_next_occurrence(&local, false).ok()?;
+            let next = whole_seconds(next.with_timezone(&Utc));
+            if next > after {
+                return Some(next);
+            }
+            from += TimeDelta::minutes(30);
+        }
+        None
     }
 
-    /// The last due time at or before `now`: the one night a catch-up runs, however many were missed.
+    /// The last due time at or before `now`: the one night a catch-up runs, however many were
+    /// missed. Found going forward with [`Timetable::next_after`] from a day before `now` (then 8,
+    /// 32, 367 and 1462 days, for weekly, monthly, yearly and leap-day crons), so that a run is
+    /// made for exactly the time the schedule listed as its next: croner's backward search lands
+    /// on the second before a spring-forward gap, or a week early where that second's weekday
+    /// does not match.
     pub fn latest_at_or_before(&self, now: DateTime<Utc>) -> Option<DateTime<Utc>> {
-        let local = self.time_zone.from_utc_datetime(&now.naive_utc());
-        self.cron
-            .find_previous_occurrence(&local, true)
-            .ok()
-            .map(|t| t.with_timezone(&Utc))
+        let now = whole_seconds(now);
+        for days in [1, 8, 32, 367, 1462] {
+            let mut latest = None;
+            let mut next = self.next_after(now - TimeDelta::days(days));
+            while let Some(due) = next.filter(|&due| due <= now) {
+                latest = Some(due);
+                next = self.next_after(due);
+            }
+            if latest.is_some() {
+                return latest;
+            }
+        }
+        None
     }
+}
+
+/// `time` without its fraction of a second: due times are whole seconds, so that the (schedule,
+/// due time) key of a run is the same whichever tick, instance or restart makes it.
+fn whole_seconds(time: DateTime<Utc>) -> DateTime<Utc> {
+    time.with_nanosecond(0).unwrap_or(time)
 }
 
 /// A statistic a schedule follows from run to run, written `operations.METRIC.STAT` (last bin),
@@ -424,6 +453,54 @@ fn describe_interval(interval: TimeDelta) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn at(text: &str) -> DateTime<Utc> {
+        DateTime::parse_from_rfc3339(text)
+            .unwrap()
+            .with_timezone(&Utc)
+    }
+
+    /// Due times are whole seconds whatever fraction `now` has, so that two ticks or instances
+    /// make the same key; and a run is made for the time the schedule listed, across DST: a fixed
+    /// time in Berlin's repeated hour once, at its first occurrence, never for a night already
+    /// past; one in the spring gap just after the gap; a weekly midnight in Havana's gap on its own
+    /// Sunday, not the one before. Truths by hand from the zones' rules (zoneinfo).
+    #[test]
+    fn due_times_are_whole_seconds_and_those_listed_across_dst() {
+        let berlin = Timetable::parse("30 2 * * *", "Europe/Berlin").unwrap();
+        let now = at("2027-05-02T09:13:20.168Z");
+        assert_eq!(
+            berlin.latest_at_or_before(now),
+            Some(at("2027-05-02T00:30:00Z"))
+        );
+        assert_eq!(berlin.next_after(now), Some(at("2027-05-03T00:30:00Z")));
+        // Fall back, 2027-10-31: 02:30 CEST is 00:30Z; at 01:10Z (02:10 CET, the repeated hour)
+        // tonight's run is past and the next is tomorrow's 02:30 CET.
+        let repeated = at("2027-10-31T01:10:00.994Z");
+        assert_eq!(
+            berlin.next_after(repeated),
+            Some(at("2027-11-01T01:30:00Z"))
+        );
+        assert_eq!(
+            berlin.latest_at_or_before(repeated),
+            Some(at("2027-10-31T00:30:00Z"))
+        );
+        // Spring forward, 2027-03-28: 02:30 does not exist; it runs at 03:00 CEST, 01:00Z.
+        let listed = berlin.next_after(at("2027-03-27T12:00:00Z"));
+        assert_eq!(listed, Some(at("2027-03-28T01:00:00Z")));
+        let made = berlin.latest_at_or_before(at("2027-03-28T01:00:05.5Z"));
+        assert_eq!(made, listed);
+        // Havana skips from 00:00 to 01:00 on Sunday 2027-03-14 (CST, UTC-5, to CDT, UTC-4).
+        let havana = Timetable::parse("0 0 * * 0", "America/Havana").unwrap();
+        let listed = havana.next_after(at("2027-03-10T00:00:00Z"));
+        assert_eq!(listed, Some(at("2027-03-14T05:00:00Z")));
+        let made = havana.latest_at_or_before(at("2027-03-14T05:00:01Z"));
+        assert_eq!(made, listed);
+        // A yearly cron looks back far enough.
+        let yearly = Timetable::parse("0 3 1 1 *", "UTC").unwrap();
+        let made = yearly.latest_at_or_before(at("2027-12-31T00:00:00Z"));
+        assert_eq!(made, Some(at("2027-01-01T03:00:00Z")));
+    }
 
     #[test]
     fn the_wall_clock_is_the_schedules_zone_to_the_minute() {
