@@ -114,11 +114,11 @@ impl ValidSchedule {
         }
         let time_zone = spec.time_zone.unwrap_or_else(|| "UTC".to_owned());
         let timetable = Timetable::parse(&spec.cron, &time_zone)
-            .map_err(|(field, detail)| {
-                errors.push(FieldError {
+            .map_err(|wrong| {
+                errors.extend(wrong.into_iter().map(|(field, detail)| FieldError {
                     pointer: root.child(field).to_string(),
                     detail,
-                })
+                }))
             })
             .ok();
         if timetable
@@ -208,20 +208,20 @@ pub struct Timetable {
 
 impl Timetable {
     /// Parses a cron expression (5 fields, or 6 with seconds first) and an IANA time zone name.
-    /// Errors are `(field, message)`.
-    pub fn parse(cron: &str, time_zone: &str) -> Result<Self, (&'static str, String)> {
+    /// Errors are `(field, message)`, one for each of the two at fault.
+    pub fn parse(cron: &str, time_zone: &str) -> Result<Self, Vec<(&'static str, String)>> {
         let parsed =
-            Cron::from_str(cron).map_err(|e| ("cron", format!("is not a cron expression: {e}")))?;
-        let time_zone = Tz::from_str(time_zone).map_err(|_| {
+            Cron::from_str(cron).map_err(|e| ("cron", format!("is not a cron expression: {e}")));
+        let zone = Tz::from_str(time_zone).map_err(|_| {
             (
                 "time_zone",
                 format!("`{time_zone}` is not an IANA time zone"),
             )
-        })?;
-        Ok(Self {
-            cron: parsed,
-            time_zone,
-        })
+        });
+        match (parsed, zone) {
+            (Ok(cron), Ok(time_zone)) => Ok(Self { cron, time_zone }),
+            (parsed, zone) => Err(parsed.err().into_iter().chain(zone.err()).collect()),
+        }
     }
 
     /// The same cron on the wall clock alone, without the time zone's DST changes: the schedule
@@ -580,13 +580,16 @@ mod tests {
     #[test]
     fn bad_cron_and_time_zone_name_their_field() {
         assert_eq!(
-            Timetable::parse("every night", "UTC").unwrap_err().0,
+            Timetable::parse("every night", "UTC").unwrap_err()[0].0,
             "cron"
         );
         assert_eq!(
-            Timetable::parse("0 3 * * *", "Mars/Olympus").unwrap_err().0,
+            Timetable::parse("0 3 * * *", "Mars/Olympus").unwrap_err()[0].0,
             "time_zone"
         );
+        let both = Timetable::parse("bad", "Mars/Olympus").unwrap_err();
+        let fields: Vec<&str> = both.iter().map(|(field, _)| *field).collect();
+        assert_eq!(fields, ["cron", "time_zone"]);
     }
 
     #[test]
