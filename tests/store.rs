@@ -1125,18 +1125,18 @@ async fn an_ended_jobs_running_shards_stop_with_it(url: &str) {
 
     // Cancelled with both groups claimed at 0 s: `a` renewed its lease, `b`'s ran out at 1 s (its
     // worker gone); both read as stopped by the end.
-    let id = insert(&store, queued(6)).await;
-    let a = store
-        .claim("a", terms(0), budget(2))
-        .await
-        .unwrap()
-        .unwrap();
-    let b = store
-        .claim("b", terms(0), budget(2))
-        .await
-        .unwrap()
-        .unwrap();
-    assert_ne!(a.fence.shard, b.fence.shard);
+    // Both groups of a new job, claimed at 0 s by `a` and `b`.
+    let claim_both = async |seed: u64, retries: u64| {
+        let id = insert(&store, queued(seed)).await;
+        let claim = async |worker: &str| {
+            let claimed = store.claim(worker, terms(0), budget(retries)).await;
+            claimed.unwrap().unwrap()
+        };
+        let (a, b) = (claim("a").await, claim("b").await);
+        assert_ne!(a.fence.shard, b.fence.shard);
+        (id, a, b)
+    };
+    let (id, a, _) = claim_both(6, 2).await;
     let renewed = store.heartbeat(&a.fence, terms(900), 2).await.unwrap();
     assert_eq!(renewed, Lease::Held);
     store.cancel(&owner, &id, UnixMs(1500)).await.unwrap();
@@ -1169,17 +1169,7 @@ async fn an_ended_jobs_running_shards_stop_with_it(url: &str) {
     assert_eq!(store.job(&owner, &id).await.unwrap().operations_done, 2);
 
     // Failed by its other group's run: the group still running stops with it.
-    let id = insert(&store, queued(7)).await;
-    let a = store
-        .claim("a", terms(0), budget(0))
-        .await
-        .unwrap()
-        .unwrap();
-    let b = store
-        .claim("b", terms(0), budget(0))
-        .await
-        .unwrap()
-        .unwrap();
+    let (id, a, b) = claim_both(7, 0).await;
     let failed = store.fail_attempt(&b.fence, Some(UnixMs(500)), "boom", 0);
     assert!(failed.await.unwrap());
     assert_eq!(

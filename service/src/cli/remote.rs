@@ -82,7 +82,7 @@ pub fn agent(timeout_seconds: f64) -> ureq::Agent {
 impl Server {
     /// The request with the key, when there is one, asking for a gzipped answer: a 1000-bin
     /// Result is 9.9 MB as JSON and about 110 kB gzipped.
-    fn authorize<B>(&self, request: ureq::RequestBuilder<B>) -> ureq::RequestBuilder<B> {
+    fn prepare<B>(&self, request: ureq::RequestBuilder<B>) -> ureq::RequestBuilder<B> {
         let request = request.header("accept-encoding", "gzip");
         match &self.api_key {
             Some(key) => request.header("authorization", &format!("Bearer {key}")),
@@ -100,11 +100,11 @@ impl Server {
         let agent = agent(self.request_timeout_seconds);
         let sent = match (method, body) {
             ("POST", Some(body)) => self
-                .authorize(agent.post(&url))
+                .prepare(agent.post(&url))
                 .header("content-type", "application/json")
                 .send(body),
-            ("POST", None) => self.authorize(agent.post(&url)).send_empty(),
-            _ => self.authorize(agent.get(&url)).call(),
+            ("POST", None) => self.prepare(agent.post(&url)).send_empty(),
+            _ => self.prepare(agent.get(&url)).call(),
         };
         let unreachable = |e: ureq::Error| CliError::Failed(format!("{url}: {e}"));
         let mut response = sent.map_err(unreachable)?;

@@ -454,12 +454,6 @@ fn describe_interval(interval: TimeDelta) -> String {
 mod tests {
     use super::*;
 
-    fn at(text: &str) -> DateTime<Utc> {
-        DateTime::parse_from_rfc3339(text)
-            .unwrap()
-            .with_timezone(&Utc)
-    }
-
     /// Due times are whole seconds whatever fraction `now` has, so that two ticks or instances
     /// make the same key; and a run is made for the time the schedule listed, across DST: a fixed
     /// time in Berlin's repeated hour once, at its first occurrence, never for a night already
@@ -468,38 +462,38 @@ mod tests {
     #[test]
     fn due_times_are_whole_seconds_and_those_listed_across_dst() {
         let berlin = Timetable::parse("30 2 * * *", "Europe/Berlin").unwrap();
-        let now = at("2027-05-02T09:13:20.168Z");
+        let now = utc("2027-05-02T09:13:20.168Z");
         assert_eq!(
             berlin.latest_at_or_before(now),
-            Some(at("2027-05-02T00:30:00Z"))
+            Some(utc("2027-05-02T00:30:00Z"))
         );
-        assert_eq!(berlin.next_after(now), Some(at("2027-05-03T00:30:00Z")));
+        assert_eq!(berlin.next_after(now), Some(utc("2027-05-03T00:30:00Z")));
         // Fall back, 2027-10-31: 02:30 CEST is 00:30Z; at 01:10Z (02:10 CET, the repeated hour)
         // tonight's run is past and the next is tomorrow's 02:30 CET.
-        let repeated = at("2027-10-31T01:10:00.994Z");
+        let repeated = utc("2027-10-31T01:10:00.994Z");
         assert_eq!(
             berlin.next_after(repeated),
-            Some(at("2027-11-01T01:30:00Z"))
+            Some(utc("2027-11-01T01:30:00Z"))
         );
         assert_eq!(
             berlin.latest_at_or_before(repeated),
-            Some(at("2027-10-31T00:30:00Z"))
+            Some(utc("2027-10-31T00:30:00Z"))
         );
         // Spring forward, 2027-03-28: 02:30 does not exist; it runs at 03:00 CEST, 01:00Z.
-        let listed = berlin.next_after(at("2027-03-27T12:00:00Z"));
-        assert_eq!(listed, Some(at("2027-03-28T01:00:00Z")));
-        let made = berlin.latest_at_or_before(at("2027-03-28T01:00:05.5Z"));
+        let listed = berlin.next_after(utc("2027-03-27T12:00:00Z"));
+        assert_eq!(listed, Some(utc("2027-03-28T01:00:00Z")));
+        let made = berlin.latest_at_or_before(utc("2027-03-28T01:00:05.5Z"));
         assert_eq!(made, listed);
         // Havana skips from 00:00 to 01:00 on Sunday 2027-03-14 (CST, UTC-5, to CDT, UTC-4).
         let havana = Timetable::parse("0 0 * * 0", "America/Havana").unwrap();
-        let listed = havana.next_after(at("2027-03-10T00:00:00Z"));
-        assert_eq!(listed, Some(at("2027-03-14T05:00:00Z")));
-        let made = havana.latest_at_or_before(at("2027-03-14T05:00:01Z"));
+        let listed = havana.next_after(utc("2027-03-10T00:00:00Z"));
+        assert_eq!(listed, Some(utc("2027-03-14T05:00:00Z")));
+        let made = havana.latest_at_or_before(utc("2027-03-14T05:00:01Z"));
         assert_eq!(made, listed);
         // A yearly cron looks back far enough.
         let yearly = Timetable::parse("0 3 1 1 *", "UTC").unwrap();
-        let made = yearly.latest_at_or_before(at("2027-12-31T00:00:00Z"));
-        assert_eq!(made, Some(at("2027-01-01T03:00:00Z")));
+        let made = yearly.latest_at_or_before(utc("2027-12-31T00:00:00Z"));
+        assert_eq!(made, Some(utc("2027-01-01T03:00:00Z")));
     }
 
     #[test]
