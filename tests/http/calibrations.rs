@@ -102,17 +102,16 @@ fn an_ill_posed_calibration_is_refused_naming_the_field() {
 
 /// A fit whose request has gone is stopped and gives its place back: a client cannot pile up
 /// fits beyond the cores by letting requests time out, nor keep the cores busy with requests it
-/// abandoned. Each fit here follows a wear curve to 60,000 operations (2.8 s alone on a 2-core
-/// Zen 4 VM); before fits could be stopped, each went on after its request's 503 and held its
-/// place to the end.
+/// abandoned. Each fit here follows a wear curve to 90,000 operations (7.6 s alone on a 2-core
+/// Xeon VM, release build); before fits could be stopped, each went on after its request's 503
+/// and held its place to the end. The timeout leaves the quick fit (5 ms alone) room to answer on
+/// a machine loaded by other tests: at 0.25 s it once timed out itself for the 1.5 s the test
+/// waited, under CI's load.
 #[test]
 fn a_fit_whose_request_timed_out_is_stopped_and_frees_its_place() {
-    let server = TestApp::start(
-        &temp_db("fit-places"),
-        &["--request-timeout-seconds", "0.25"],
-    );
+    let server = TestApp::start(&temp_db("fit-places"), &["--request-timeout-seconds", "1"]);
     let url = server.url("/v1/calibrations");
-    let observations: Vec<Value> = (0..4)
+    let observations: Vec<Value> = (0..6)
         .map(|i| json!({"operation": 15_000 * (i + 1), "first_bounce_s": 0.009 - 0.0005 * f64::from(i)}))
         .collect();
     let slow = json!({
@@ -139,7 +138,7 @@ fn a_fit_whose_request_timed_out_is_stopped_and_frees_its_place() {
     loop {
         match post(&url, &quick, None).status {
             503 => assert!(
-                started.elapsed() < std::time::Duration::from_millis(1500),
+                started.elapsed() < std::time::Duration::from_secs(3),
                 "the places are still held"
             ),
             status => break assert_eq!(status, 200),
