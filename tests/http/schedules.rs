@@ -97,6 +97,11 @@ fn bad_schedules_name_their_field() {
             "/cron",
         ),
         (
+            // A year as a seventh field: croner reads it, the API does not take it.
+            json!({"name": "x", "cron": "0 0 3 * * * 2027", "template": {}}),
+            "/cron",
+        ),
+        (
             json!({"name": "x", "cron": "0 3 * * *", "time_zone": "Mars/Olympus", "template": {}}),
             "/time_zone",
         ),

@@ -113,7 +113,7 @@ impl ValidSchedule {
             });
         }
         let time_zone = spec.time_zone.unwrap_or_else(|| "UTC".to_owned());
-        let timetable = Timetable::parse(&spec.cron, &time_zone)
+        let timetable = Timetable::parse_written(&spec.cron, &time_zone)
             .map_err(|wrong| {
                 errors.extend(wrong.into_iter().map(|(field, detail)| FieldError {
                     pointer: root.child(field).to_string(),
@@ -136,9 +136,10 @@ impl ValidSchedule {
             errors.push(FieldError {
                 pointer: "/cron".into(),
                 detail: format!(
-                    "runs {} apart at {}: runs must be at least {} apart (the server's --min-schedule-interval-seconds)",
+                    "runs {} apart at {} ({time_zone} wall clock): runs must be at least {} apart (the server's --min-schedule-interval-seconds)",
                     describe_interval(gap.1 - gap.0),
-                    gap.1.to_rfc3339(),
+                    // The wall clock's time, which `on_the_wall_clock` holds as if it were UTC.
+                    gap.1.naive_utc().format("%Y-%m-%d %H:%M:%S"),
                     describe_interval(limits.min_interval)
                 ),
             });
@@ -207,11 +208,35 @@ pub struct Timetable {
 }
 
 impl Timetable {
-    /// Parses a cron expression (5 fields, or 6 with seconds first) and an IANA time zone name.
-    /// Errors are `(field, message)`, one for each of the two at fault.
+    /// Parses a stored schedule's cron expression and IANA time zone name. Errors are `(field,
+    /// message)`, one for each of the two at fault. Whatever croner reads is taken: a schedule
+    /// written before [`Timetable::parse_written`]'s rule keeps running.
     pub fn parse(cron: &str, time_zone: &str) -> Result<Self, Vec<(&'static str, String)>> {
         let parsed =
             Cron::from_str(cron).map_err(|e| ("cron", format!("is not a cron expression: {e}")));
+        Self::with_zone(parsed, time_zone)
+    }
+
+    /// [`Timetable::parse`] for a schedule being written, whose cron must have 5 fields (minute
+    /// hour day month weekday) or 6 with seconds first, as the API describes it: croner also
+    /// reads a year as a seventh field and nicknames such as `@daily`.
+    pub fn parse_written(cron: &str, time_zone: &str) -> Result<Self, Vec<(&'static str, String)>> {
+        let fields = cron.split_whitespace().count();
+        if matches!(fields, 5 | 6) {
+            return Self::parse(cron, time_zone);
+        }
+        let wrong = format!(
+            "has {fields} field{}: a cron expression has 5 (minute hour day month weekday), or 6 with seconds first",
+            if fields == 1 { "" } else { "s" }
+        );
+        Self::with_zone(Err(("cron", wrong)), time_zone)
+    }
+
+    /// The timetable of `parsed` in `time_zone`, or the error of each at fault.
+    fn with_zone(
+        parsed: Result<Cron, (&'static str, String)>,
+        time_zone: &str,
+    ) -> Result<Self, Vec<(&'static str, String)>> {
         let zone = Tz::from_str(time_zone).map_err(|_| {
             (
                 "time_zone",
@@ -586,6 +611,29 @@ mod tests {
         assert_eq!(fields, ["cron", "time_zone"]);
     }
 
+    /// A schedule being written has 5 or 6 fields, as the API says; croner alone also reads a
+    /// year (a seventh field) and nicknames, which a stored schedule keeps.
+    #[test]
+    fn a_written_cron_has_five_or_six_fields() {
+        for cron in ["0 3 * * *", "30 0 3 * * *"] {
+            assert!(Timetable::parse_written(cron, "UTC").is_ok(), "{cron}");
+        }
+        for (cron, count) in [
+            ("0 0 3 * * * 2027", "has 7 fields"),
+            ("@daily", "has 1 field:"),
+            ("0 3 * *", "has 4 fields"),
+            ("", "has 0 fields"),
+        ] {
+            let wrong = Timetable::parse_written(cron, "Mars/Olympus").unwrap_err();
+            assert_eq!(wrong[0].0, "cron", "{cron}");
+            assert!(wrong[0].1.contains(count), "{cron}: {}", wrong[0].1);
+            assert_eq!(wrong[1].0, "time_zone", "{cron}");
+        }
+        for stored in ["0 0 3 * * * 2027", "@daily"] {
+            assert!(Timetable::parse(stored, "UTC").is_ok(), "{stored}");
+        }
+    }
+
     #[test]
     fn statistics_are_parsed_and_keep_their_name() {
         for name in [
@@ -672,14 +720,26 @@ mod tests {
             );
             ValidSchedule::parse(&body, HOURLY, now).map(|_| ())
         };
-        for (cron, zone) in [("* * * * *", "UTC"), ("0,30 3 * * 2", "UTC")] {
+        // The second run of the first pair too close, on the zone's wall clock (Tuesday 24
+        // November 2026 03:30 in Berlin is 02:30 UTC).
+        for (cron, zone, at) in [
+            (
+                "* * * * *",
+                "UTC",
+                "1 min apart at 2026-11-22 08:02:00 (UTC wall clock)",
+            ),
+            (
+                "0,30 3 * * 2",
+                "Europe/Berlin",
+                "30 min apart at 2026-11-24 03:30:00 (Europe/Berlin wall clock)",
+            ),
+        ] {
             let invalid = check(cron, zone).unwrap_err();
             assert_eq!(invalid.errors().len(), 1, "{cron}");
             assert_eq!(invalid.errors()[0].pointer, "/cron");
-            assert!(
-                invalid.errors()[0].detail.contains("at least 1 h apart"),
-                "{invalid:?}"
-            );
+            let detail = &invalid.errors()[0].detail;
+            assert!(detail.contains("at least 1 h apart"), "{invalid:?}");
+            assert!(detail.contains(at), "{detail}");
         }
         assert!(check("0 * * * *", "UTC").is_ok(), "hourly is allowed");
         assert!(check("0 3 * * *", "Europe/Berlin").is_ok());
