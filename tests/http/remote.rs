@@ -160,9 +160,65 @@ fn refusals_and_failures_exit_as_the_local_commands_do() {
         let said = String::from_utf8_lossy(&refused.stderr);
         assert!(said.contains("--"), "{args:?}: {said}");
     }
+    // No server there: tried again after 0.5 and 1 s, then exit 1.
     let unreachable = Command::new(BIN)
-        .args(["status", id, "--url", "http://127.0.0.1:1"])
+        .args([
+            "status",
+            id,
+            "--url",
+            "http://127.0.0.1:1",
+            "--retries",
+            "2",
+        ])
         .output()
         .unwrap();
     assert_eq!(unreachable.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&unreachable.stderr);
+    assert!(
+        said.contains("again in 0.5 s (1 of 2)") && said.contains("again in 1.0 s (2 of 2)"),
+        "{said}"
+    );
+}
+
+/// A full queue's 429 is asked again after its `Retry-After`: a submission made while the queue
+/// is full is queued once there is room, not lost; with `--retries 0` it fails at once.
+#[test]
+fn a_submission_to_a_full_queue_is_sent_again_once_there_is_room() {
+    let server = TestApp::start(
+        &temp_db("remote-full"),
+        &["--workers", "0", "--max-queued", "1"],
+    );
+    let file = job_file("remote-full-job", &json!({"devices": 2, "operations": 2}));
+    let first: Value =
+        serde_json::from_str(&stdout(&remote(&server, None, &["submit", &file]))).unwrap();
+    let refused = remote(&server, None, &["submit", &file, "--retries", "0"]);
+    assert_eq!(refused.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("429"));
+
+    let url = server.base().to_owned();
+    let waiting = std::thread::spawn({
+        let file = file.clone();
+        move || {
+            Command::new(BIN)
+                .args(["submit", &file, "--url", &url])
+                .env_remove("BOUNCEWEAR_API_KEY")
+                .output()
+                .unwrap()
+        }
+    });
+    std::thread::sleep(std::time::Duration::from_secs(1));
+    stdout(&remote(
+        &server,
+        None,
+        &["cancel", first["id"].as_str().unwrap()],
+    ));
+    let second = waiting.join().unwrap();
+    let said = String::from_utf8_lossy(&second.stderr);
+    assert!(
+        said.contains("429 from the server; again in 5.0 s (1 of 3)"),
+        "{said}"
+    );
+    let second: Value = serde_json::from_str(&stdout(&second)).unwrap();
+    assert_eq!(second["status"], "queued");
+    assert_ne!(second["id"], first["id"]);
 }

@@ -32,7 +32,15 @@ pub struct Server {
     /// Seconds one request may take.
     #[arg(long, default_value_t = 60.0, global = true, value_parser = seconds)]
     pub request_timeout_seconds: f64,
+    /// Times a request is sent again after a 429 or 503 (after the server's `Retry-After`, at
+    /// most a minute) or a connection that failed (after 0.5, 1, 2, ... s); 0 sends it once.
+    /// `submit` sends an `Idempotency-Key`, so a retry never queues the job twice.
+    #[arg(long, default_value_t = 3, global = true, value_parser = clap::value_parser!(u32).range(..=100))]
+    pub retries: u32,
 }
+
+/// The longest pause before a retry, whatever `Retry-After` asks.
+const MAX_RETRY_PAUSE: Duration = Duration::from_secs(60);
 
 /// What `fetch` gets of a job.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -94,43 +102,106 @@ impl Server {
         format!("{}{path}", self.url.trim_end_matches('/'))
     }
 
-    /// Sends a request; the body of a 2xx, or the failure the answer means.
+    /// Sends a request, again up to `--retries` times while the server is busy (429, 503) or
+    /// cannot be reached; the body of a 2xx, or the failure the answer means. Every request of the
+    /// remote commands may be sent again: reads and cancels change nothing the second time, and a
+    /// submission carries an `Idempotency-Key`, the same on every try.
     fn send(&self, method: &str, path: &str, body: Option<&str>) -> Result<String, CliError> {
+        let key = (method == "POST" && path == "/v1/jobs")
+            .then(|| format!("cli-{}", uuid::Uuid::new_v4().simple()));
+        let mut retried = 0;
+        loop {
+            let (pause, why) = match self.send_once(method, path, body, key.as_deref()) {
+                Ok(text) => return Ok(text),
+                Err(Failure::Final(error)) => return Err(error),
+                Err(failure) if retried == self.retries => return Err(failure.into_error()),
+                Err(Failure::Busy {
+                    status,
+                    retry_after,
+                    ..
+                }) => (
+                    retry_after.unwrap_or(Duration::from_secs(1)),
+                    format!("{status} from the server"),
+                ),
+                Err(Failure::Unreachable(error)) => {
+                    (Duration::from_millis(500) * 2u32.pow(retried.min(7)), error)
+                }
+            };
+            let pause = pause.min(MAX_RETRY_PAUSE);
+            retried += 1;
+            eprintln!(
+                "bouncewear: {why}; again in {:.1} s ({retried} of {})",
+                pause.as_secs_f64(),
+                self.retries
+            );
+            std::thread::sleep(pause);
+        }
+    }
+
+    /// Sends a request once: the body of a 2xx, or why not.
+    fn send_once(
+        &self,
+        method: &str,
+        path: &str,
+        body: Option<&str>,
+        idempotency_key: Option<&str>,
+    ) -> Result<String, Failure> {
         let url = self.url(path);
         let agent = agent(self.request_timeout_seconds);
         let sent = match (method, body) {
-            ("POST", Some(body)) => self
-                .prepare(agent.post(&url))
-                .header("content-type", "application/json")
-                .send(body),
+            ("POST", Some(body)) => {
+                let request = self
+                    .prepare(agent.post(&url))
+                    .header("content-type", "application/json");
+                match idempotency_key {
+                    Some(key) => request.header("idempotency-key", key).send(body),
+                    None => request.send(body),
+                }
+            }
             ("POST", None) => self.prepare(agent.post(&url)).send_empty(),
             _ => self.prepare(agent.get(&url)).call(),
         };
-        let unreachable = |e: ureq::Error| CliError::Failed(format!("{url}: {e}"));
-        let mut response = sent.map_err(unreachable)?;
+        let mut response = sent.map_err(|error| match error {
+            ureq::Error::Io(_) | ureq::Error::ConnectionFailed => {
+                Failure::Unreachable(format!("{url}: {error}"))
+            }
+            _ => Failure::Final(CliError::Failed(format!("{url}: {error}"))),
+        })?;
         let status = response.status().as_u16();
+        let retry_after = response
+            .headers()
+            .get("retry-after")
+            .and_then(|value| value.to_str().ok())
+            .and_then(|value| value.trim().parse::<u64>().ok())
+            .map(Duration::from_secs);
         let gzipped = response
             .headers()
             .get("content-encoding")
             .is_some_and(|coding| coding.as_bytes().eq_ignore_ascii_case(b"gzip"));
+        let failed =
+            |e: &dyn std::fmt::Display| Failure::Final(CliError::Failed(format!("{url}: {e}")));
         let bytes = response
             .body_mut()
             .with_config()
             .limit(u64::MAX)
             .read_to_vec()
-            .map_err(unreachable)?;
+            .map_err(|e| failed(&e))?;
         let text = if gzipped {
             let mut text = String::new();
             std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(&bytes[..]), &mut text)
-                .map_err(|e| CliError::Failed(format!("{url}: the gzipped answer: {e}")))?;
+                .map_err(|e| failed(&format!("the gzipped answer: {e}")))?;
             text
         } else {
-            String::from_utf8(bytes)
-                .map_err(|e| CliError::Failed(format!("{url}: the answer: {e}")))?
+            String::from_utf8(bytes).map_err(|e| failed(&format!("the answer: {e}")))?
         };
         match status {
             200..=299 => Ok(text),
-            _ => Err(refused(status, &url, &text)),
+            429 | 503 => Err(Failure::Busy {
+                retry_after,
+                refused: refused(status, &url, &text),
+                status,
+            }),
+            _ => Err(Failure::Final(refused(status, &url, &text))),
         }
     }
 
@@ -142,6 +213,31 @@ impl Server {
     fn job_within(&self, id: &str, wait_s: f64) -> Result<serde_json::Value, CliError> {
         let path = format!("/v1/jobs/{}?wait_s={wait_s}", encode(id));
         parse(&self.send("GET", &path, None)?)
+    }
+}
+
+/// Why a request has no answer to print.
+enum Failure {
+    /// The server is busy (429, 503): worth asking again after `retry_after`, its `Retry-After`
+    /// in seconds where it gave one; `refused` is the failure should it stay busy.
+    Busy {
+        status: u16,
+        retry_after: Option<Duration>,
+        refused: CliError,
+    },
+    /// No connection, or one that broke before the answer: worth trying again.
+    Unreachable(String),
+    /// An answer, or a fault, that another try would not change.
+    Final(CliError),
+}
+
+impl Failure {
+    fn into_error(self) -> CliError {
+        match self {
+            Failure::Busy { refused, .. } => refused,
+            Failure::Unreachable(error) => CliError::Failed(error),
+            Failure::Final(error) => error,
+        }
     }
 }
 
