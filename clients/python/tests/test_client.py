@@ -6,6 +6,7 @@ import email.utils
 import json
 import os
 import subprocess
+import threading
 
 import pandas as pd
 import pytest
@@ -159,3 +160,37 @@ def test_an_id_with_a_slash_reaches_no_other_resource(client, job):
     with pytest.raises(BouncewearError) as unknown:
         client.job(f"{job.id}/life")
     assert unknown.value.status == 404
+
+
+def test_a_submission_to_a_full_queue_is_sent_again_once_there_is_room(tmp_path):
+    """A server of its own whose queue holds one job and runs none: the second submission's 429 is
+    waited out (its Retry-After, 5 s) and the job queued once the first is cancelled."""
+    server = subprocess.Popen(
+        [BIN, "serve", "--bind", "127.0.0.1:0", "--workers", "0", "--max-queued", "1",
+         "--database", f"sqlite://{tmp_path}/queue.db"],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        url = server.stdout.readline().split()[-1]  # "bouncewear listening on URL"
+        small = {"devices": 2, "operations": 2}
+        client = Client(url)
+        first = client.submit(small)
+        with pytest.raises(BouncewearError) as full:
+            Client(url, retries=0).submit(small)
+        assert full.value.status == 429 and full.value.retry_after == 5.0
+        cancel = threading.Timer(1.0, first.cancel)
+        cancel.start()
+        second = client.submit(small)
+        cancel.join()
+        assert second.status == "queued" and second.id != first.id
+        assert sorted(job.status for job in client.jobs()) == ["cancelled", "queued"]
+    finally:
+        server.terminate()
+        server.wait()
+
+
+def test_a_server_that_cannot_be_reached_is_tried_again_then_raises(caplog):
+    client = Client("http://127.0.0.1:1", retries=2)
+    with pytest.raises(requests.ConnectionError):
+        client.job("any")
+    notes = [record.getMessage() for record in caplog.records if record.name == "bouncewear"]
+    assert [note.split("; ")[-1] for note in notes] == ["again in 0.5 s (1 of 2)", "again in 1.0 s (2 of 2)"]

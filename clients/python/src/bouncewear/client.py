@@ -7,9 +7,11 @@ from __future__ import annotations
 import datetime
 import email.utils
 import io
+import logging
 import sys
 import time
 import urllib.parse
+import uuid
 from dataclasses import dataclass, field
 from typing import Any, Dict, Iterable, List, Optional
 
@@ -20,6 +22,14 @@ JSON = Dict[str, Any]
 
 #: The statuses a job ends in.
 ENDED = ("succeeded", "failed", "cancelled")
+
+#: The longest pause before a request is sent again, whatever `Retry-After` asks.
+MAX_RETRY_PAUSE = 60.0
+
+#: Requests that change nothing when sent twice; a POST is sent again only with an Idempotency-Key.
+_REPEATABLE = ("GET", "HEAD", "PUT", "DELETE")
+
+_log = logging.getLogger("bouncewear")
 
 
 @dataclass(frozen=True)
@@ -105,12 +115,19 @@ class JobFailed(Exception):
 
 
 class Client:
-    """A bouncewear server at `base_url`, with `api_key` when the server has keys."""
+    """A bouncewear server at `base_url`, with `api_key` when the server has keys.
+
+    A request the server is too busy for (429, or 503 for a request that may be repeated) is sent
+    again after its `Retry-After` (at most a minute), and one that could not connect after 0.5, 1,
+    2, ... s, up to `retries` times, each noted on the `bouncewear` logger; then the last
+    `BouncewearError` (or `requests.ConnectionError`) is raised. `submit` always sends an
+    Idempotency-Key, so a job is never queued twice."""
 
     def __init__(self, base_url: str = "http://127.0.0.1:8080", api_key: Optional[str] = None,
-                 timeout: float = 60.0) -> None:
+                 timeout: float = 60.0, retries: int = 3) -> None:
         self.base_url = base_url.rstrip("/")
         self.timeout = timeout
+        self.retries = retries
         self._session = requests.Session()
         if api_key is not None:
             self._session.headers["Authorization"] = f"Bearer {api_key}"
@@ -120,19 +137,42 @@ class Client:
 
     def request(self, method: str, path: str, *, json: Optional[JSON] = None,
                 params: Optional[Dict[str, Any]] = None, headers: Optional[Dict[str, str]] = None) -> requests.Response:
-        """One request; the response of a success, else `BouncewearError`."""
-        response = self._session.request(method, self.base_url + path, json=json, params=params,
-                                         headers=headers, timeout=self.timeout)
-        if not response.ok:
-            raise BouncewearError.from_response(response)
-        return response
+        """One request, sent again while the server is busy or cannot be reached (see `Client`);
+        the response of a success, else `BouncewearError`."""
+        repeatable = method.upper() in _REPEATABLE or any(
+            name.lower() == "idempotency-key" for name in (headers or {}))
+        for attempt in range(self.retries + 1):
+            last = attempt == self.retries
+            try:
+                response = self._session.request(method, self.base_url + path, json=json,
+                                                 params=params, headers=headers, timeout=self.timeout)
+            except requests.ConnectionError as error:
+                if last or not repeatable:
+                    raise
+                pause, why = 0.5 * 2 ** attempt, str(error)
+            else:
+                if response.ok:
+                    return response
+                refused = BouncewearError.from_response(response)
+                # A 429 refused before doing anything; a 503 may have come after.
+                busy = response.status_code == 429 or (response.status_code == 503 and repeatable)
+                if last or not busy:
+                    raise refused
+                pause = 1.0 if refused.retry_after is None else refused.retry_after
+                why = f"{response.status_code} from the server"
+            pause = min(pause, MAX_RETRY_PAUSE)
+            _log.warning("%s %s: %s; again in %.1f s (%d of %d)", method, path, why, pause,
+                         attempt + 1, self.retries)
+            time.sleep(pause)
+        raise AssertionError("unreachable: the last attempt returns or raises")
 
     def submit(self, job: JSON, *, idempotency_key: Optional[str] = None) -> "Job":
         """Queues `job` (a Job document: docs/contract.md "Job"); the job, queued.
 
-        With `idempotency_key`, a retry of the same submission within 24 hours gives the same job.
+        With `idempotency_key`, a retry of the same submission within 24 hours gives the same job;
+        without, a key of its own makes this call's own retries safe.
         """
-        headers = {"Idempotency-Key": idempotency_key} if idempotency_key else None
+        headers = {"Idempotency-Key": idempotency_key or f"py-{uuid.uuid4().hex}"}
         return Job(self, self.request("POST", "/v1/jobs", json=job, headers=headers).json())
 
     def job(self, id: str) -> "Job":
