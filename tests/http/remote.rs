@@ -2,9 +2,12 @@
 //! the API answers and exit as the local commands do.
 
 use crate::support::app::{Service, TestApp};
+use crate::support::client::get;
 use crate::support::{BIN, temp_db, temp_dir};
 use serde_json::{Value, json};
-use std::process::{Command, Output};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::process::{Command, Output, Stdio};
 
 /// The binary with `args`, pointed at `server` through the environment, as a script would be.
 pub(crate) fn remote(server: &TestApp, key: Option<&str>, args: &[&str]) -> Output {
@@ -178,6 +181,21 @@ fn refusals_and_failures_exit_as_the_local_commands_do() {
         said.contains("again in 0.5 s (1 of 2)") && said.contains("again in 1.0 s (2 of 2)"),
         "{said}"
     );
+    // `wait` does not pause past its timeout: after 0.5 s, a pause of 1 s would end past 1 s.
+    let unreachable = Command::new(BIN)
+        .args([
+            "wait",
+            id,
+            "--url",
+            "http://127.0.0.1:1",
+            "--timeout-seconds",
+            "1",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(unreachable.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&unreachable.stderr);
+    assert_eq!(said.matches("again in").count(), 1, "{said}");
 }
 
 /// A full queue's 429 is asked again after its `Retry-After`: a submission made while the queue
@@ -195,30 +213,106 @@ fn a_submission_to_a_full_queue_is_sent_again_once_there_is_room() {
     assert_eq!(refused.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&refused.stderr).contains("429"));
 
-    let url = server.base().to_owned();
-    let waiting = std::thread::spawn({
-        let file = file.clone();
-        move || {
-            Command::new(BIN)
-                .args(["submit", &file, "--url", &url])
-                .env_remove("BOUNCEWEAR_API_KEY")
-                .output()
-                .unwrap()
-        }
-    });
-    std::thread::sleep(std::time::Duration::from_secs(1));
+    // The first job is cancelled once the second submission has had its 429 and waits.
+    let mut waiting = Command::new(BIN)
+        .args(["submit", &file, "--url", server.base()])
+        .env_remove("BOUNCEWEAR_API_KEY")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut said = String::new();
+    let mut stderr = BufReader::new(waiting.stderr.take().unwrap());
+    while !said.contains("again in") {
+        assert_ne!(stderr.read_line(&mut said).unwrap(), 0, "{said}");
+    }
+    assert!(
+        said.contains("429 from the server; again in 5.0 s (1 of 3)"),
+        "{said}"
+    );
     stdout(&remote(
         &server,
         None,
         &["cancel", first["id"].as_str().unwrap()],
     ));
-    let second = waiting.join().unwrap();
-    let said = String::from_utf8_lossy(&second.stderr);
-    assert!(
-        said.contains("429 from the server; again in 5.0 s (1 of 3)"),
-        "{said}"
-    );
-    let second: Value = serde_json::from_str(&stdout(&second)).unwrap();
+    let second: Value =
+        serde_json::from_str(&stdout(&waiting.wait_with_output().unwrap())).unwrap();
     assert_eq!(second["status"], "queued");
     assert_ne!(second["id"], first["id"]);
+    let listed: Value = serde_json::from_str(&get(&server.url("/v1/jobs"), None).body).unwrap();
+    assert_eq!(listed["jobs"].as_array().unwrap().len(), 2, "{listed}");
+}
+
+/// A submission whose answer was lost (the connection closed after the server queued the job) is
+/// sent again with the same `Idempotency-Key`, and the server answers with the job it queued: one
+/// job, not two.
+#[test]
+fn a_submission_whose_answer_was_lost_queues_one_job() {
+    let server = TestApp::start(&temp_db("remote-lost"), &["--workers", "0"]);
+    let proxy = losing_first_answer(server.base());
+    let file = job_file("remote-lost-job", &json!({"devices": 2, "operations": 2}));
+    let submitted = Command::new(BIN)
+        .args(["submit", &file, "--url", &proxy])
+        .env_remove("BOUNCEWEAR_API_KEY")
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&submitted.stderr).into_owned();
+    assert!(said.contains("again in 0.5 s (1 of 3)"), "{said}");
+    let job: Value = serde_json::from_str(&stdout(&submitted)).unwrap();
+    let listed: Value = serde_json::from_str(&get(&server.url("/v1/jobs"), None).body).unwrap();
+    let ids: Vec<&Value> = listed["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| &j["id"])
+        .collect();
+    assert_eq!(ids, [&job["id"]], "{listed}");
+}
+
+/// A proxy to `base` that hands the first request on, lets the server handle it, and closes the
+/// client's connection without its answer; later connections it relays both ways. Its base URL.
+fn losing_first_answer(base: &str) -> String {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let proxy = format!("http://{}", listener.local_addr().unwrap());
+    let upstream = base.trim_start_matches("http://").to_owned();
+    std::thread::spawn(move || {
+        for (n, client) in listener.incoming().enumerate() {
+            let Ok(client) = client else { return };
+            let server = TcpStream::connect(&upstream).unwrap();
+            if n == 0 {
+                let mut request = Vec::new();
+                let mut reader = BufReader::new(client.try_clone().unwrap());
+                let mut length = 0;
+                loop {
+                    let mut line = String::new();
+                    reader.read_line(&mut line).unwrap();
+                    if let Some(value) = line.to_ascii_lowercase().strip_prefix("content-length:") {
+                        length = value.trim().parse().unwrap();
+                    }
+                    request.extend_from_slice(line.as_bytes());
+                    if line == "\r\n" {
+                        break;
+                    }
+                }
+                let mut body = vec![0; length];
+                reader.read_exact(&mut body).unwrap();
+                request.extend_from_slice(&body);
+                (&server).write_all(&request).unwrap();
+                // The server's answer, read and dropped with the client's connection.
+                let mut answer = [0; 1];
+                (&server).read_exact(&mut answer).unwrap();
+                continue;
+            }
+            for (mut from, mut to) in [
+                (client.try_clone().unwrap(), server.try_clone().unwrap()),
+                (server, client),
+            ] {
+                std::thread::spawn(move || {
+                    let _ = std::io::copy(&mut from, &mut to);
+                    let _ = to.shutdown(std::net::Shutdown::Write);
+                });
+            }
+        }
+    });
+    proxy
 }

@@ -103,31 +103,49 @@ impl Server {
     }
 
     /// Sends a request, again up to `--retries` times while the server is busy (429, 503) or
-    /// cannot be reached; the body of a 2xx, or the failure the answer means. Every request of the
-    /// remote commands may be sent again: reads and cancels change nothing the second time, and a
-    /// submission carries an `Idempotency-Key`, the same on every try.
+    /// the connection fails; the body of a 2xx, or the failure the answer means. Every request of
+    /// the remote commands may be sent again: reads and cancels change nothing the second time,
+    /// and a submission carries an `Idempotency-Key`, the same on every try.
     fn send(&self, method: &str, path: &str, body: Option<&str>) -> Result<String, CliError> {
+        self.send_by(method, path, body, None)
+    }
+
+    /// [`Server::send`], giving up rather than pausing past `deadline`.
+    fn send_by(
+        &self,
+        method: &str,
+        path: &str,
+        body: Option<&str>,
+        deadline: Option<Instant>,
+    ) -> Result<String, CliError> {
         let key = (method == "POST" && path == "/v1/jobs")
             .then(|| format!("cli-{}", uuid::Uuid::new_v4().simple()));
         let mut retried = 0;
         loop {
-            let (pause, why) = match self.send_once(method, path, body, key.as_deref()) {
+            let failure = match self.send_once(method, path, body, key.as_deref()) {
                 Ok(text) => return Ok(text),
-                Err(Failure::Final(error)) => return Err(error),
-                Err(failure) if retried == self.retries => return Err(failure.into_error()),
-                Err(Failure::Busy {
+                Err(failure) => failure,
+            };
+            let (pause, why) = match &failure {
+                Failure::Final(_) => return Err(failure.into_error()),
+                Failure::Busy {
                     status,
                     retry_after,
                     ..
-                }) => (
+                } => (
                     retry_after.unwrap_or(Duration::from_secs(1)),
                     format!("{status} from the server"),
                 ),
-                Err(Failure::Unreachable(error)) => {
-                    (Duration::from_millis(500) * 2u32.pow(retried.min(7)), error)
-                }
+                Failure::Broken(error) => (
+                    Duration::from_millis(500) * 2u32.pow(retried.min(7)),
+                    error.clone(),
+                ),
             };
             let pause = pause.min(MAX_RETRY_PAUSE);
+            let past_deadline = deadline.is_some_and(|end| Instant::now() + pause > end);
+            if retried == self.retries || past_deadline {
+                return Err(failure.into_error());
+            }
             retried += 1;
             eprintln!(
                 "bouncewear: {why}; again in {:.1} s ({retried} of {})",
@@ -161,38 +179,29 @@ impl Server {
             ("POST", None) => self.prepare(agent.post(&url)).send_empty(),
             _ => self.prepare(agent.get(&url)).call(),
         };
-        let mut response = sent.map_err(|error| match error {
-            ureq::Error::Io(_) | ureq::Error::ConnectionFailed => {
-                Failure::Unreachable(format!("{url}: {error}"))
-            }
-            _ => Failure::Final(CliError::Failed(format!("{url}: {error}"))),
-        })?;
+        let failed = |error: &ureq::Error| Failure::of(&url, error);
+        let mut response = sent.map_err(|e| failed(&e))?;
         let status = response.status().as_u16();
-        let retry_after = response
-            .headers()
-            .get("retry-after")
-            .and_then(|value| value.to_str().ok())
-            .and_then(|value| value.trim().parse::<u64>().ok())
-            .map(Duration::from_secs);
-        let gzipped = response
-            .headers()
-            .get("content-encoding")
-            .is_some_and(|coding| coding.as_bytes().eq_ignore_ascii_case(b"gzip"));
-        let failed =
-            |e: &dyn std::fmt::Display| Failure::Final(CliError::Failed(format!("{url}: {e}")));
+        let header = |name: &str| {
+            let value = response.headers().get(name)?;
+            value.to_str().ok().map(str::to_owned)
+        };
+        let retry_after = header("retry-after").and_then(|value| seconds_to_wait(&value));
+        let gzipped = header("content-encoding").is_some_and(|c| c.eq_ignore_ascii_case("gzip"));
         let bytes = response
             .body_mut()
             .with_config()
             .limit(u64::MAX)
             .read_to_vec()
             .map_err(|e| failed(&e))?;
+        let unreadable = |e: String| Failure::Final(CliError::Failed(format!("{url}: {e}")));
         let text = if gzipped {
             let mut text = String::new();
             std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(&bytes[..]), &mut text)
-                .map_err(|e| failed(&format!("the gzipped answer: {e}")))?;
+                .map_err(|e| unreadable(format!("the gzipped answer: {e}")))?;
             text
         } else {
-            String::from_utf8(bytes).map_err(|e| failed(&format!("the answer: {e}")))?
+            String::from_utf8(bytes).map_err(|e| unreadable(format!("the answer: {e}")))?
         };
         match status {
             200..=299 => Ok(text),
@@ -209,10 +218,16 @@ impl Server {
         parse(&self.send("GET", &format!("/v1/jobs/{}", encode(id)), None)?)
     }
 
-    /// The job once it ended, or as it is after `wait_s` seconds (the server's `wait_s`).
-    fn job_within(&self, id: &str, wait_s: f64) -> Result<serde_json::Value, CliError> {
+    /// The job once it ended, or as it is after `wait_s` seconds (the server's `wait_s`), asked
+    /// again while the server is busy but not past `deadline`.
+    fn job_within(
+        &self,
+        id: &str,
+        wait_s: f64,
+        deadline: Option<Instant>,
+    ) -> Result<serde_json::Value, CliError> {
         let path = format!("/v1/jobs/{}?wait_s={wait_s}", encode(id));
-        parse(&self.send("GET", &path, None)?)
+        parse(&self.send_by("GET", &path, None, deadline)?)
     }
 }
 
@@ -225,20 +240,60 @@ enum Failure {
         retry_after: Option<Duration>,
         refused: CliError,
     },
-    /// No connection, or one that broke before the answer: worth trying again.
-    Unreachable(String),
+    /// No connection, or one the server closed or reset before the whole answer: worth trying
+    /// again.
+    Broken(String),
     /// An answer, or a fault, that another try would not change.
     Final(CliError),
 }
 
 impl Failure {
+    /// What `error` of a request to `url` means. A pipe broken while the request is written is
+    /// final: the server closed it having answered already (a 413 for a body over its limit),
+    /// and writing the body again would end the same way.
+    fn of(url: &str, error: &ureq::Error) -> Self {
+        use std::io::ErrorKind::{
+            ConnectionAborted, ConnectionRefused, ConnectionReset, NotConnected, UnexpectedEof,
+        };
+        let broken = match error {
+            ureq::Error::ConnectionFailed => true,
+            ureq::Error::Io(io) => matches!(
+                io.kind(),
+                ConnectionRefused
+                    | ConnectionReset
+                    | ConnectionAborted
+                    | NotConnected
+                    | UnexpectedEof
+            ),
+            _ => false,
+        };
+        let said = format!("{url}: {error}");
+        if broken {
+            Failure::Broken(said)
+        } else {
+            Failure::Final(CliError::Failed(said))
+        }
+    }
+
     fn into_error(self) -> CliError {
         match self {
             Failure::Busy { refused, .. } => refused,
-            Failure::Unreachable(error) => CliError::Failed(error),
+            Failure::Broken(error) => CliError::Failed(error),
             Failure::Final(error) => error,
         }
     }
+}
+
+/// A `Retry-After` value as a pause: seconds, or an HTTP date (RFC 9110 10.2.3, as some proxies
+/// send it) counted from now, never below 0.
+fn seconds_to_wait(value: &str) -> Option<Duration> {
+    let value = value.trim();
+    if let Ok(seconds) = value.parse::<u64>() {
+        return Some(Duration::from_secs(seconds));
+    }
+    let when = chrono::DateTime::parse_from_rfc2822(value).ok()?;
+    let left = when.with_timezone(&chrono::Utc) - chrono::Utc::now();
+    Some(left.to_std().unwrap_or(Duration::ZERO))
 }
 
 /// The failure a non-2xx answer means: the input's (exit 2) for 400, 413, 415 and 422, each error
@@ -313,7 +368,8 @@ pub fn wait_for(server: &Server, id: &str, timeout: Option<f64>) -> Result<Strin
             .min(server.request_timeout_seconds / 2.0)
             .max(0.0);
         let asked = Instant::now();
-        let job = server.job_within(id, wait_s)?;
+        let deadline = timeout.map(|t| started + Duration::from_secs_f64(t));
+        let job = server.job_within(id, wait_s, deadline)?;
         match job["status"].as_str() {
             Some("succeeded") => return Ok(job.to_string()),
             Some(ended @ ("failed" | "cancelled")) => {
@@ -437,4 +493,27 @@ fn encode(text: &str) -> String {
 /// as it is, never deleted (`POST /v1/jobs/{id}/cancel`, not `DELETE`).
 pub fn cancel(server: &Server, id: &str) -> Result<String, CliError> {
     server.send("POST", &format!("/v1/jobs/{}/cancel", encode(id)), None)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `Retry-After` as seconds or as an HTTP date, counted from now and never below 0.
+    #[test]
+    fn retry_after_is_seconds_or_a_date() {
+        assert_eq!(seconds_to_wait(" 120 "), Some(Duration::from_secs(120)));
+        let later = (chrono::Utc::now() + chrono::TimeDelta::seconds(100)).to_rfc2822();
+        let pause = seconds_to_wait(&later.replace("+0000", "GMT")).unwrap();
+        assert!(
+            (Duration::from_secs(98)..=Duration::from_secs(100)).contains(&pause),
+            "{pause:?}"
+        );
+        assert_eq!(
+            seconds_to_wait("Wed, 21 Oct 2015 07:28:00 GMT"),
+            Some(Duration::ZERO)
+        );
+        assert_eq!(seconds_to_wait("soon"), None);
+        assert_eq!(seconds_to_wait("-5"), None);
+    }
 }
