@@ -438,6 +438,8 @@ macro_rules! lanes {
             #[inline(always)]
             fn extremes(self) -> (f64, f64) {
                 const PART: usize = if $lanes < 8 { $lanes } else { 8 };
+                // The halving below reaches every lane only so.
+                const { assert!(PART.is_power_of_two() && $lanes % PART == 0) };
                 let less = |a: f64, b: f64| if a < b { a } else { b };
                 let more = |a: f64, b: f64| if a > b { a } else { b };
                 let mut least = [f64::INFINITY; PART];

@@ -5,14 +5,16 @@ import datetime
 import email.utils
 import json
 import os
+import select
 import subprocess
 import threading
+import time
 
 import pandas as pd
 import pytest
 import requests
 
-from bouncewear import BouncewearError, Client, JobFailed
+from bouncewear import BouncewearError, Client, Job, JobFailed
 
 BASE = os.environ.get("BOUNCEWEAR_URL", "http://127.0.0.1:8080")
 BIN = os.environ.get("BOUNCEWEAR_BIN", "bouncewear")
@@ -162,7 +164,13 @@ def test_an_id_with_a_slash_reaches_no_other_resource(client, job):
     assert unknown.value.status == 404
 
 
-def test_a_submission_to_a_full_queue_is_sent_again_once_there_is_room(tmp_path):
+def _notes(caplog):
+    """The retry notes the client logged, each's end: "again in S s (N of M)"."""
+    return [record.getMessage().split("; ")[-1] for record in caplog.records
+            if record.name == "bouncewear"]
+
+
+def test_a_submission_to_a_full_queue_is_sent_again_once_there_is_room(tmp_path, caplog):
     """A server of its own whose queue holds one job and runs none: the second submission's 429 is
     waited out (its Retry-After, 5 s) and the job queued once the first is cancelled."""
     server = subprocess.Popen(
@@ -170,19 +178,29 @@ def test_a_submission_to_a_full_queue_is_sent_again_once_there_is_room(tmp_path)
          "--database", f"sqlite://{tmp_path}/queue.db"],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
+        ready, _, _ = select.select([server.stdout], [], [], 60)
+        assert ready, "the server did not start within a minute"
         url = server.stdout.readline().split()[-1]  # "bouncewear listening on URL"
         small = {"devices": 2, "operations": 2}
-        client = Client(url)
-        first = client.submit(small)
+        first = Client(url).submit(small)
         with pytest.raises(BouncewearError) as full:
             Client(url, retries=0).submit(small)
         assert full.value.status == 429 and full.value.retry_after == 5.0
-        cancel = threading.Timer(1.0, first.cancel)
+        # Cancelled from a client of its own once the submission below has had its 429.
+        canceller = Client(url)
+
+        def cancel_when_waiting():
+            while not _notes(caplog):
+                time.sleep(0.05)
+            canceller.job(first.id).cancel()
+
+        cancel = threading.Thread(target=cancel_when_waiting)
         cancel.start()
-        second = client.submit(small)
+        second = Client(url).submit(small)
         cancel.join()
+        assert _notes(caplog) == ["again in 5.0 s (1 of 3)"]
         assert second.status == "queued" and second.id != first.id
-        assert sorted(job.status for job in client.jobs()) == ["cancelled", "queued"]
+        assert sorted(job.status for job in Client(url).jobs()) == ["cancelled", "queued"]
     finally:
         server.terminate()
         server.wait()
@@ -192,5 +210,22 @@ def test_a_server_that_cannot_be_reached_is_tried_again_then_raises(caplog):
     client = Client("http://127.0.0.1:1", retries=2)
     with pytest.raises(requests.ConnectionError):
         client.job("any")
-    notes = [record.getMessage() for record in caplog.records if record.name == "bouncewear"]
-    assert [note.split("; ")[-1] for note in notes] == ["again in 0.5 s (1 of 2)", "again in 1.0 s (2 of 2)"]
+    assert _notes(caplog) == ["again in 0.5 s (1 of 2)", "again in 1.0 s (2 of 2)"]
+
+
+def test_what_may_not_be_repeated_is_sent_once_and_wait_keeps_its_timeout(caplog):
+    client = Client("http://127.0.0.1:1")
+    # A second purge would delete the job the first only cancelled; a POST without a key the
+    # server honours could act twice.
+    with pytest.raises(requests.ConnectionError):
+        client.request("DELETE", "/v1/jobs/any", params={"purge": "true"})
+    with pytest.raises(requests.ConnectionError):
+        client.request("POST", "/v1/schedules/any/run", headers={"Idempotency-Key": "k"})
+    assert _notes(caplog) == []
+    # After 0.5 s, a pause of 1 s would end past the wait's timeout of 1 s.
+    job = Job(client, {"id": "any", "status": "queued"})
+    with pytest.raises(requests.ConnectionError):
+        job.wait(progress=False, timeout=1.0)
+    assert _notes(caplog) == ["again in 0.5 s (1 of 3)"]
+    with pytest.raises(ValueError):
+        Client(retries=-1)

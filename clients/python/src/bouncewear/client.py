@@ -26,8 +26,10 @@ ENDED = ("succeeded", "failed", "cancelled")
 #: The longest pause before a request is sent again, whatever `Retry-After` asks.
 MAX_RETRY_PAUSE = 60.0
 
-#: Requests that change nothing when sent twice; a POST is sent again only with an Idempotency-Key.
-_REPEATABLE = ("GET", "HEAD", "PUT", "DELETE")
+#: Requests that change nothing when sent twice. (Not DELETE: a second `?purge=true` deletes the job
+#: the first only cancelled.) A POST is sent again only where the server honours its Idempotency-Key.
+_REPEATABLE = ("GET", "HEAD", "PUT")
+_KEYED = ("/v1/jobs", "/v1/schedules")
 
 _log = logging.getLogger("bouncewear")
 
@@ -117,14 +119,17 @@ class JobFailed(Exception):
 class Client:
     """A bouncewear server at `base_url`, with `api_key` when the server has keys.
 
-    A request the server is too busy for (429, or 503 for a request that may be repeated) is sent
-    again after its `Retry-After` (at most a minute), and one that could not connect after 0.5, 1,
-    2, ... s, up to `retries` times, each noted on the `bouncewear` logger; then the last
-    `BouncewearError` (or `requests.ConnectionError`) is raised. `submit` always sends an
-    Idempotency-Key, so a job is never queued twice."""
+    A request the server is too busy for (429, or 503 for a request that may be repeated: a GET,
+    HEAD or PUT, or a POST the server honours an Idempotency-Key on) is sent again after its
+    `Retry-After` (at most a minute), and a repeatable one whose connection was refused, reset or
+    cut short after 0.5, 1, 2, ... s, up to `retries` times, each noted on the `bouncewear`
+    logger; then the last `BouncewearError` (or `requests.ConnectionError`) is raised. `submit`
+    always sends an Idempotency-Key, so a job is never queued twice."""
 
     def __init__(self, base_url: str = "http://127.0.0.1:8080", api_key: Optional[str] = None,
                  timeout: float = 60.0, retries: int = 3) -> None:
+        if retries < 0:
+            raise ValueError(f"retries must be 0 or more, got {retries}")
         self.base_url = base_url.rstrip("/")
         self.timeout = timeout
         self.retries = retries
@@ -136,35 +141,42 @@ class Client:
         return f"Client({self.base_url!r})"
 
     def request(self, method: str, path: str, *, json: Optional[JSON] = None,
-                params: Optional[Dict[str, Any]] = None, headers: Optional[Dict[str, str]] = None) -> requests.Response:
-        """One request, sent again while the server is busy or cannot be reached (see `Client`);
-        the response of a success, else `BouncewearError`."""
-        repeatable = method.upper() in _REPEATABLE or any(
-            name.lower() == "idempotency-key" for name in (headers or {}))
-        for attempt in range(self.retries + 1):
-            last = attempt == self.retries
+                params: Optional[Dict[str, Any]] = None, headers: Optional[Dict[str, str]] = None,
+                deadline: Optional[float] = None) -> requests.Response:
+        """One request, sent again while the server is busy or cannot be reached (see `Client`),
+        but never pausing past `deadline` (a `time.monotonic()` value); the response of a success,
+        else `BouncewearError`."""
+        keyed = method.upper() == "POST" and path in _KEYED and any(
+            name.lower() == "idempotency-key" and value for name, value in (headers or {}).items())
+        repeatable = method.upper() in _REPEATABLE or keyed
+        attempt = 0
+        while True:
+            failure: Exception
             try:
                 response = self._session.request(method, self.base_url + path, json=json,
                                                  params=params, headers=headers, timeout=self.timeout)
-            except requests.ConnectionError as error:
-                if last or not repeatable:
-                    raise
-                pause, why = 0.5 * 2 ** attempt, str(error)
+            except requests.exceptions.SSLError:
+                raise  # a TLS fault, which another try would meet again
+            except (requests.ConnectionError, requests.exceptions.ChunkedEncodingError) as error:
+                # Refused, reset, or closed before the whole answer.
+                failure, again = error, repeatable
+                pause, why = 0.5 * 2 ** min(attempt, 7), str(error)
             else:
                 if response.ok:
                     return response
-                refused = BouncewearError.from_response(response)
+                failure = BouncewearError.from_response(response)
                 # A 429 refused before doing anything; a 503 may have come after.
-                busy = response.status_code == 429 or (response.status_code == 503 and repeatable)
-                if last or not busy:
-                    raise refused
-                pause = 1.0 if refused.retry_after is None else refused.retry_after
+                again = response.status_code == 429 or (response.status_code == 503 and repeatable)
+                pause = 1.0 if failure.retry_after is None else failure.retry_after
                 why = f"{response.status_code} from the server"
             pause = min(pause, MAX_RETRY_PAUSE)
+            past = deadline is not None and time.monotonic() + pause > deadline
+            if not again or attempt == self.retries or past:
+                raise failure
+            attempt += 1
             _log.warning("%s %s: %s; again in %.1f s (%d of %d)", method, path, why, pause,
-                         attempt + 1, self.retries)
+                         attempt, self.retries)
             time.sleep(pause)
-        raise AssertionError("unreachable: the last attempt returns or raises")
 
     def submit(self, job: JSON, *, idempotency_key: Optional[str] = None) -> "Job":
         """Queues `job` (a Job document: docs/contract.md "Job"); the job, queued.
@@ -255,7 +267,9 @@ class Job:
             if timeout is not None:
                 wait_s = min(wait_s, timeout - (time.monotonic() - started))
             asked = time.monotonic()
-            self.resource = self.client.request("GET", self._path(), params={"wait_s": max(wait_s, 0.0)}).json()
+            deadline = None if timeout is None else started + timeout
+            self.resource = self.client.request("GET", self._path(), params={"wait_s": max(wait_s, 0.0)},
+                                                deadline=deadline).json()
             if self.status in ENDED:
                 break
             if progress:
