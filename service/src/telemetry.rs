@@ -132,6 +132,9 @@ pub const CONNECTIONS_STALLED: &str = "bouncewear_connections_stalled_total";
 /// Reads of the job queue by the watcher behind every event stream (`api::watch`).
 pub const EVENT_WATCH_LOOKS: &str = "bouncewear_event_watch_looks_total";
 
+/// Calibration fits stopped because their request ended first (`api::calibrations`).
+pub const FITS_STOPPED: &str = "bouncewear_fits_stopped_total";
+
 /// The HELP text of every metric the service records, wherever it records it.
 fn describe_metrics() {
     metrics::describe_counter!(
@@ -170,6 +173,10 @@ fn describe_metrics() {
         "Connections closed because their client read none of a response for the body timeout."
     );
     metrics::describe_counter!(
+        FITS_STOPPED,
+        "Calibration fits stopped, their place given back, because their request timed out before they ended."
+    );
+    metrics::describe_counter!(
         EVENT_WATCH_LOOKS,
         "Reads of the job queue by the one watcher behind every event stream (none while no stream is open)."
     );
@@ -206,6 +213,7 @@ fn counters_from_zero() {
         CONNECTIONS_SHED,
         CONNECTIONS_STALLED,
         EVENT_WATCH_LOOKS,
+        FITS_STOPPED,
         "bouncewear_store_retries_total",
         "bouncewear_jobs_submitted_total",
         "bouncewear_operations_simulated_total",

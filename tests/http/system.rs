@@ -247,6 +247,7 @@ fn every_metric_family_has_help_and_type_and_latency_is_a_histogram() {
         "bouncewear_connections_shed_total",
         "bouncewear_connections_stalled_total",
         "bouncewear_event_watch_looks_total",
+        "bouncewear_fits_stopped_total",
         "bouncewear_jobs_queued",
         "bouncewear_jobs_running",
         "bouncewear_build_info",

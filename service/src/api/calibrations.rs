@@ -97,6 +97,9 @@ pub async fn create_calibration(
     let (spec, fit) = tokio::task::spawn_blocking(move || {
         let _place = place;
         let fit = calibrate_until(&spec, &cancel);
+        if fit.is_err() {
+            metrics::counter!(crate::telemetry::FITS_STOPPED).increment(1);
+        }
         (spec, fit)
     })
     .await

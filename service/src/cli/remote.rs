@@ -33,8 +33,8 @@ pub struct Server {
     #[arg(long, default_value_t = 60.0, global = true, value_parser = seconds)]
     pub request_timeout_seconds: f64,
     /// Times a request is sent again after a 429 or 503 (after the server's `Retry-After`, at
-    /// most a minute) or a connection that failed (after 0.5, 1, 2, ... s); 0 sends it once.
-    /// `submit` sends an `Idempotency-Key`, so a retry never queues the job twice.
+    /// most a minute) or a connection refused, reset or cut short (after 0.5, 1, 2, ... s); 0
+    /// sends it once. `submit` sends an `Idempotency-Key`, so a retry never queues the job twice.
     #[arg(long, default_value_t = 3, global = true, value_parser = clap::value_parser!(u32).range(..=100))]
     pub retries: u32,
 }
