@@ -11,13 +11,20 @@ use std::process::{Command, Output, Stdio};
 
 /// The binary with `args`, pointed at `server` through the environment, as a script would be.
 pub(crate) fn remote(server: &TestApp, key: Option<&str>, args: &[&str]) -> Output {
+    remote_at(server.base(), key, args)
+        .output()
+        .expect("bouncewear runs")
+}
+
+/// The command `remote` runs, pointed at the server (or proxy, or nothing) at `url`.
+fn remote_at(url: &str, key: Option<&str>, args: &[&str]) -> Command {
     let mut command = Command::new(BIN);
-    command.args(args).env("BOUNCEWEAR_URL", server.base());
+    command.args(args).env("BOUNCEWEAR_URL", url);
     match key {
         Some(key) => command.env("BOUNCEWEAR_API_KEY", key),
         None => command.env_remove("BOUNCEWEAR_API_KEY"),
     };
-    command.output().expect("bouncewear runs")
+    command
 }
 
 pub(crate) fn stdout(output: &Output) -> String {
@@ -164,15 +171,8 @@ fn refusals_and_failures_exit_as_the_local_commands_do() {
         assert!(said.contains("--"), "{args:?}: {said}");
     }
     // No server there: tried again after 0.5 and 1 s, then exit 1.
-    let unreachable = Command::new(BIN)
-        .args([
-            "status",
-            id,
-            "--url",
-            "http://127.0.0.1:1",
-            "--retries",
-            "2",
-        ])
+    let nowhere = "http://127.0.0.1:1";
+    let unreachable = remote_at(nowhere, None, &["status", id, "--retries", "2"])
         .output()
         .unwrap();
     assert_eq!(unreachable.status.code(), Some(1));
@@ -182,15 +182,7 @@ fn refusals_and_failures_exit_as_the_local_commands_do() {
         "{said}"
     );
     // `wait` does not pause past its timeout: after 0.5 s, a pause of 1 s would end past 1 s.
-    let unreachable = Command::new(BIN)
-        .args([
-            "wait",
-            id,
-            "--url",
-            "http://127.0.0.1:1",
-            "--timeout-seconds",
-            "1",
-        ])
+    let unreachable = remote_at(nowhere, None, &["wait", id, "--timeout-seconds", "1"])
         .output()
         .unwrap();
     assert_eq!(unreachable.status.code(), Some(1));
@@ -214,9 +206,7 @@ fn a_submission_to_a_full_queue_is_sent_again_once_there_is_room() {
     assert!(String::from_utf8_lossy(&refused.stderr).contains("429"));
 
     // The first job is cancelled once the second submission has had its 429 and waits.
-    let mut waiting = Command::new(BIN)
-        .args(["submit", &file, "--url", server.base()])
-        .env_remove("BOUNCEWEAR_API_KEY")
+    let mut waiting = remote_at(server.base(), None, &["submit", &file])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -251,9 +241,7 @@ fn a_submission_whose_answer_was_lost_queues_one_job() {
     let server = TestApp::start(&temp_db("remote-lost"), &["--workers", "0"]);
     let proxy = losing_first_answer(server.base());
     let file = job_file("remote-lost-job", &json!({"devices": 2, "operations": 2}));
-    let submitted = Command::new(BIN)
-        .args(["submit", &file, "--url", &proxy])
-        .env_remove("BOUNCEWEAR_API_KEY")
+    let submitted = remote_at(&proxy, None, &["submit", &file])
         .output()
         .unwrap();
     let said = String::from_utf8_lossy(&submitted.stderr).into_owned();
