@@ -49,9 +49,6 @@ pub trait Real:
     fn exp2_int(self) -> Self;
     /// Lane `i`.
     fn lane(&self, i: usize) -> f64;
-    /// The least and the greatest lane by `f64::min` and `f64::max`: for finite lanes two of
-    /// their values, whatever order they are compared in (a zero's sign may be either's).
-    fn extremes(self) -> (f64, f64);
 
     /// Sets lane `i` to `x`.
     fn set_lane(&mut self, i: usize, x: f64);
@@ -111,7 +108,7 @@ pub(crate) fn within_lanes<L: Real>(lanes: &Range<usize>) -> Option<L::Mask> {
 }
 
 /// `x` with the lanes outside `lanes` (`within` as [`within_lanes`] made it) set to its first
-/// lane within, so that the batch's [`Real::extremes`] are those of `lanes`.
+/// lane within, so that the batch's least and greatest values are those of `lanes`.
 #[inline(always)]
 pub(crate) fn fill_lanes<L: Real>(x: &L, lanes: &Range<usize>, within: Option<L::Mask>) -> L {
     match within {
@@ -179,10 +176,6 @@ impl Real for f64 {
     #[inline(always)]
     fn lane(&self, _: usize) -> f64 {
         *self
-    }
-    #[inline(always)]
-    fn extremes(self) -> (f64, f64) {
-        (self, self)
     }
 
     #[inline(always)]
@@ -429,38 +422,6 @@ macro_rules! lanes {
             fn lane(&self, i: usize) -> f64 {
                 self.0[i]
             }
-            /// Eight lanes at a time (one register) folded into eight, then halved down to one.
-            /// A comparison and a selection rather than `f64::min`, whose NaN rule LLVM left as
-            /// one scalar instruction a lane (11 % of the 32-lane kernel's samples at 48 V / 15 A
-            /// went to this fold): `a < b ? a : b` is the vector `min` instruction itself, and
-            /// gives `f64::min`'s value for finite lanes (a NaN lane is skipped by both; of two
-            /// zeros either's sign).
-            #[inline(always)]
-            fn extremes(self) -> (f64, f64) {
-                const PART: usize = if $lanes < 8 { $lanes } else { 8 };
-                // The halving below reaches every lane only so.
-                const { assert!(PART.is_power_of_two() && $lanes % PART == 0) };
-                let less = |a: f64, b: f64| if a < b { a } else { b };
-                let more = |a: f64, b: f64| if a > b { a } else { b };
-                let mut least = [f64::INFINITY; PART];
-                let mut greatest = [f64::NEG_INFINITY; PART];
-                for part in self.0.chunks_exact(PART) {
-                    for j in 0..PART {
-                        least[j] = less(part[j], least[j]);
-                        greatest[j] = more(part[j], greatest[j]);
-                    }
-                }
-                let mut width = PART;
-                while width > 1 {
-                    width /= 2;
-                    for j in 0..width {
-                        least[j] = less(least[j + width], least[j]);
-                        greatest[j] = more(greatest[j + width], greatest[j]);
-                    }
-                }
-                (least[0], greatest[0])
-            }
-
             #[inline(always)]
             fn set_lane(&mut self, i: usize, x: f64) {
                 self.0[i] = x;
@@ -525,16 +486,12 @@ mod tests {
         }
     }
 
-    /// `extremes` are the least and greatest lane, `bits` the lanes that hold, on every width
-    /// the kernels use, against the lanes taken one by one.
+    /// `bits` are the lanes that hold, on every width the kernels use, against the lanes taken one
+    /// by one.
     #[test]
-    fn a_batch_reduces_to_its_extremes_and_its_lanes_bits() {
+    fn a_mask_reduces_to_its_lanes_bits() {
         fn check<L: Real>(values: &[f64]) {
             let x = L::from_fn(|i| values[i % values.len()]);
-            let lanes = (0..L::LANES).map(|i| x.lane(i));
-            let least = lanes.clone().fold(f64::INFINITY, f64::min);
-            let greatest = lanes.fold(f64::NEG_INFINITY, f64::max);
-            assert_eq!(x.extremes(), (least, greatest), "{} lanes", L::LANES);
             let positive = x.gt(L::splat(0.0));
             let expected = (0..L::LANES)
                 .filter(|&i| x.lane(i) > 0.0)
