@@ -8,10 +8,11 @@
 //! `summary`: the summary of one (metric, bin) of the reference jobs, 32 groups of 3100 values
 //! (2000 devices x 50 operations) spread over about 9 binades, with an exceedance limit.
 //!
-//! `tails`: one group's bin of the 10^7-operation scale-out job (62 devices x 500 operations,
-//! two batches of 32 lanes, the second half spare) into the exact tails a service run keeps at
-//! the default 10 bins (25 values at each end), values drifting down through the bin as a
-//! wearing contact's kappa does, or scattered without a drift; divan reports the time per value.
+//! `tails`: one group's bin of the 10^7-operation scale-out job (`tools/scaleout_bench.py`: 1000
+//! devices x 10,000 operations, so groups of 31 devices, one 32-lane batch with a spare lane, and
+//! 1000 operations a bin at the default 10 bins) into the exact tails a service run keeps (25
+//! values at each end), values drifting down 30 % through the bin as a wearing contact's kappa
+//! does, or scattered without a drift; divan reports the time per value.
 //!
 //! `cargo bench -p bouncewear-model --bench stats`
 
@@ -113,22 +114,20 @@ fn summary_of_32_groups(bencher: Bencher) {
     bencher.bench_local(|| summarize(black_box(&groups), 1));
 }
 
-const TAIL_DEVICES: usize = 62;
-const TAIL_OPERATIONS: usize = 500;
+const TAIL_DEVICES: usize = 31;
+const TAIL_OPERATIONS: usize = 1000;
 
-/// A bin's values as the engine's batches give them: `[batch][operation]` of 32 lanes, each lane a
-/// device (the second batch's lanes beyond the group's 62 devices spare).
+/// A bin's values as the engine's batch gives them, one 32-lane column an operation, each lane a
+/// device (the last lane spare).
 fn tail_batches(drift: f64) -> Vec<Lanes<32>> {
     let mut noise = uniforms(7);
-    let level: Vec<f64> = uniforms(3).take(64).map(|u| 0.5 + u).collect();
-    (0..2)
-        .flat_map(|batch| (0..TAIL_OPERATIONS).map(move |op| (batch, op)))
-        .map(|(batch, op)| {
+    let level: Vec<f64> = uniforms(3).take(32).map(|u| 0.5 + u).collect();
+    (0..TAIL_OPERATIONS)
+        .map(|op| {
             let wear = 1.0 - drift * op as f64 / TAIL_OPERATIONS as f64;
-            let lanes: [f64; 32] = std::array::from_fn(|k| {
-                level[32 * batch + k] * wear * (0.95 + 0.1 * noise.next().unwrap())
-            });
-            Lanes(lanes)
+            Lanes(std::array::from_fn(|k| {
+                level[k] * wear * (0.95 + 0.1 * noise.next().unwrap())
+            }))
         })
         .collect()
 }
@@ -140,13 +139,8 @@ fn tails(bencher: Bencher, drift: f64) {
         .counter(ItemsCount::new(TAIL_DEVICES * TAIL_OPERATIONS))
         .bench_local(|| {
             let mut tails = Tails::new(25);
-            for (i, column) in black_box(&batches).iter().enumerate() {
-                let lanes = if i < TAIL_OPERATIONS {
-                    0..32
-                } else {
-                    0..TAIL_DEVICES - 32
-                };
-                tails.push_lanes(column, lanes);
+            for column in black_box(&batches) {
+                tails.push_lanes(column, 0..TAIL_DEVICES);
             }
             tails
         });

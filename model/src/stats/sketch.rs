@@ -517,15 +517,14 @@ impl Sketch {
     }
 
     /// [`Sketch::push`] on the lanes `lanes` of `x`. One pass over the lanes' bits gives every
-    /// key, the least and greatest key and whether every lane is positive or zero, by integer
-    /// minima and maxima in vector registers (lanes outside `lanes` first take the value of its
-    /// first). When every value is positive (the common case) the keys' range is covered once and
-    /// the lanes are counted without the sign test and with the store already in place: an
-    /// increment each. Lanes that all share one bucket (a whole-number metric, a constant) or are
-    /// all zero are one addition: increments of one bucket in a row would each wait for the one
-    /// before. (A key never decreases as a positive value's bits grow, so the least and greatest
-    /// key bound every lane's; they replace a lane by lane scan of signs, branches the compiler
-    /// left scalar.)
+    /// key, the least and greatest key, whether every lane is zero and whether every lane is
+    /// positive, by integer minima and maxima in vector registers (lanes outside `lanes` first
+    /// take the value of its first). When every value is positive (the common case) the keys'
+    /// range is covered once and the lanes are counted without the sign test and with the store
+    /// already in place: an increment each. Lanes that all share one bucket (a whole-number
+    /// metric, a constant) or are all zero are one addition: increments of one bucket in a row
+    /// would each wait for the one before. Lanes of either sign, or a zero among others, go one
+    /// by one.
     #[inline(always)]
     pub fn push_lanes<L: Real>(&mut self, x: &L, lanes: Range<usize>) {
         let within = within_lanes::<L>(&lanes);
@@ -973,6 +972,46 @@ mod tests {
         assert_close_to_exact(&values);
     }
 
+    /// `push_lanes` at the ends of the keys: subnormals (key 0), the largest finite value, and
+    /// zeros of either sign among them, on 8 and 32 lanes, count what `push` counts.
+    #[test]
+    fn push_lanes_counts_the_ends_of_the_range_as_push_does() {
+        let ends = [
+            5e-324,
+            2.2e-308,
+            f64::MAX,
+            1.0,
+            -0.0,
+            0.0,
+            f64::MIN_POSITIVE,
+        ];
+        let batches: Vec<Vec<f64>> = vec![
+            vec![5e-324; 3],
+            vec![5e-324, f64::MAX, 2.2e-308],
+            vec![f64::MAX; 2],
+            vec![-0.0, 0.0, -0.0],
+            vec![-0.0, 1.0, f64::MAX],
+            vec![0.0, 1.0, 5e-324],
+            ends.iter().cycle().take(32).copied().collect(),
+            ends.iter().cycle().skip(4).take(29).copied().collect(),
+        ];
+        for batch in &batches {
+            let pushed = sketch_of(batch);
+            let lane = |k: usize| batch[k % batch.len()];
+            let mut eight = Sketch::new();
+            for part in batch.chunks(8) {
+                let lane = |k: usize| part[k % part.len()];
+                eight.push_lanes(&Lanes::<8>::from_fn(lane), 0..part.len());
+            }
+            let mut all = Sketch::new();
+            all.push_lanes(&Lanes::<32>::from_fn(lane), 0..batch.len());
+            for sketch in [&eight, &all] {
+                assert_eq!(sketch, &pushed, "{batch:?}");
+                assert_eq!(sketch.count(), batch.len() as u64, "{batch:?}");
+            }
+        }
+    }
+
     /// A sketch whose one bucket (the key of 1.0) holds `count` values, as a group's state
     /// arrives from another machine.
     fn one_bucket(count: u64) -> Sketch {
@@ -1089,6 +1128,7 @@ mod tests {
     fn finite_value() -> impl Strategy<Value = f64> {
         prop_oneof![
             Just(0.0),
+            Just(-0.0),
             -1e6..1e6f64,
             // Physical quantities: 1e-40 .. 1e40 (the full range costs 4 MiB of buckets per
             // store, slow in a property test; `extreme_values` covers it once).
@@ -1124,7 +1164,7 @@ mod tests {
         }
 
         /// Every path of `push_lanes` (all zero, some not positive, one bucket, several), on one,
-        /// four and eight lanes with spare lanes: the counts of `push` on each value, and a
+        /// four, eight and 32 lanes with spare lanes: the counts of `push` on each value, and a
         /// sketch equal to it however its stores grew.
         #[test]
         fn push_lanes_counts_what_push_counts(
@@ -1150,12 +1190,13 @@ mod tests {
                     match lanes {
                         1 => sketch.push_lanes(&batch[0], 0..1),
                         4 => sketch.push_lanes(&Lanes::<4>::from_fn(lane), 0..batch.len()),
-                        _ => sketch.push_lanes(&Lanes::<8>::from_fn(lane), 0..batch.len()),
+                        8 => sketch.push_lanes(&Lanes::<8>::from_fn(lane), 0..batch.len()),
+                        _ => sketch.push_lanes(&Lanes::<32>::from_fn(lane), 0..batch.len()),
                     }
                 }
                 sketch
             };
-            for lanes in [1, 4, 8] {
+            for lanes in [1, 4, 8, 32] {
                 let sketch = by_lanes(lanes);
                 prop_assert_eq!(sketch.count(), pushed.count());
                 prop_assert_eq!(sketch.buckets().collect::<Vec<_>>(), pushed.buckets().collect::<Vec<_>>());
