@@ -230,9 +230,9 @@ impl Accumulator {
         let within = within_lanes::<L>(&lanes);
         for (accumulator, column) in accumulators.iter_mut().zip(columns) {
             let filled = fill_lanes(*column, &lanes, within);
-            accumulator.sketch.push_filled_lanes(&filled, lanes.clone());
+            let positive = accumulator.sketch.push_filled_lanes(&filled, lanes.clone());
             if let Some(tails) = &mut accumulator.tails {
-                tails.push_lanes(*column, lanes.clone());
+                tails.push_bounded_lanes(*column, lanes.clone(), positive);
             }
             if !accumulator.thresholds.is_empty() {
                 accumulator.count_thresholds(lanes.clone().map(|k| column.lane(k)));

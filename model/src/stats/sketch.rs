@@ -43,6 +43,15 @@ fn key(x: f64) -> u32 {
     ((x.to_bits() & !SIGN_MASK) >> KEY_SHIFT) as u32
 }
 
+/// The least and greatest value of a batch of positive values, which
+/// [`Sketch::push_filled_lanes`] finds on its way (a positive value's bits, read as an integer,
+/// order as the values do): what a test of every value against two bounds needs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct PositiveExtremes {
+    pub(crate) least: f64,
+    pub(crate) greatest: f64,
+}
+
 /// Midpoint of the bucket `key`: its lower bound with the next mantissa bit set, which is exactly
 /// `lo + w/2` because the mantissa is linear within a binade.
 fn midpoint(key: u32) -> f64 {
@@ -517,11 +526,11 @@ impl Sketch {
     }
 
     /// [`Sketch::push`] on the lanes `lanes` of `x`. One pass over the lanes' bits gives every
-    /// key, the least and greatest key, whether every lane is zero and whether every lane is
-    /// positive, by integer minima and maxima in vector registers (lanes outside `lanes` first
-    /// take the value of its first). When every value is positive (the common case) the keys'
-    /// range is covered once and the lanes are counted without the sign test and with the store
-    /// already in place: an increment each. Lanes that all share one bucket (a whole-number
+    /// key, whether every lane is zero, whether every lane is positive and then the least and
+    /// greatest value and key, by integer minima and maxima in vector registers (lanes outside
+    /// `lanes` first take the value of its first). When every value is positive (the common
+    /// case) the keys' range is covered once and the lanes are counted without the sign test and
+    /// with the store already in place: an increment each. Lanes that all share one bucket (a whole-number
     /// metric, a constant) or are all zero are one addition: increments of one bucket in a row
     /// would each wait for the one before. Lanes of either sign, or a zero among others, go one
     /// by one.
@@ -532,42 +541,53 @@ impl Sketch {
     }
 
     /// [`Sketch::push_lanes`] on `x` whose lanes outside `lanes` hold values of lanes within
-    /// ([`fill_lanes`]): a batch's extremes are then those of `lanes`.
+    /// ([`fill_lanes`]): a batch's extremes are then those of `lanes`. When every value is
+    /// positive, their least and greatest.
     #[inline(always)]
-    pub(crate) fn push_filled_lanes<L: Real>(&mut self, x: &L, lanes: Range<usize>) {
+    pub(crate) fn push_filled_lanes<L: Real>(
+        &mut self,
+        x: &L,
+        lanes: Range<usize>,
+    ) -> Option<PositiveExtremes> {
         debug_assert!(lanes.end <= L::LANES, "{lanes:?} of {} lanes", L::LANES);
         debug_assert!(
             lanes.clone().all(|k| x.lane(k).is_finite()),
             "Sketch::push_lanes: values must be finite"
         );
         if lanes.is_empty() {
-            return;
+            return None;
         }
         // Integer minima and maxima, which LLVM folds in vector registers: a float `min`, with
         // its NaN rule, it left one scalar instruction a lane (7 % of the 32-lane kernel's samples
         // at 48 V / 15 A went to a fold of the values by comparisons before the keys).
         debug_assert!(L::LANES <= MAX_LANES, "{} lanes", L::LANES);
         let mut keys = [0; MAX_LANES];
-        let (mut lo, mut hi) = (u32::MAX, 0);
-        let (mut least_bits, mut magnitudes) = (i64::MAX, 0);
+        let (mut least_bits, mut greatest_bits, mut magnitudes) = (i64::MAX, i64::MIN, 0);
         for (i, slot) in keys.iter_mut().enumerate().take(L::LANES) {
             let bits = x.lane(i).to_bits();
             *slot = key(x.lane(i));
-            lo = lo.min(*slot);
-            hi = hi.max(*slot);
             // A set sign bit reads as a negative integer, +0 as 0.
             least_bits = least_bits.min(bits as i64);
+            greatest_bits = greatest_bits.max(bits as i64);
             magnitudes |= bits & !SIGN_MASK;
         }
         let n = lanes.len() as u64;
         if magnitudes == 0 {
             self.count += n;
             self.zeros += n;
+            None
         } else if least_bits <= 0 {
             lanes.for_each(|k| self.push(x.lane(k)));
+            None
         } else {
+            // Every value positive: the extreme bits are the extreme values, their keys the
+            // extreme keys.
+            let least = f64::from_bits(least_bits as u64);
+            let greatest = f64::from_bits(greatest_bits as u64);
             self.count += n;
-            self.positive.add_all(lo, hi, &keys[lanes], self.count);
+            self.positive
+                .add_all(key(least), key(greatest), &keys[lanes], self.count);
+            Some(PositiveExtremes { least, greatest })
         }
     }
 
@@ -1161,6 +1181,33 @@ mod tests {
             let whole = sketch_of(&values);
             prop_assert_eq!(merged.count(), whole.count());
             prop_assert_eq!(merged.buckets().collect::<Vec<_>>(), whole.buckets().collect::<Vec<_>>());
+        }
+
+        /// A batch's extremes, when every value is positive, and only then: the least and the
+        /// greatest value, to the bit.
+        #[test]
+        fn a_positive_batch_gives_its_extremes(
+            values in prop::collection::vec(
+                prop_oneof![
+                    20 => (-300.0..300.0f64).prop_map(|e| 10f64.powf(e)),
+                    20 => 0.999..1.001f64,
+                    1 => Just(f64::MIN_POSITIVE / 4.0),
+                    1 => Just(f64::MAX),
+                    1 => finite_value(),
+                ],
+                1..33,
+            ),
+        ) {
+            let lanes = Lanes::<32>::from_fn(|k| values[k.min(values.len() - 1)]);
+            let extremes = Sketch::new().push_filled_lanes(&lanes, 0..values.len());
+            let positive = values.iter().all(|&x| x > 0.0);
+            prop_assert_eq!(extremes.is_some(), positive);
+            if let Some(PositiveExtremes { least, greatest }) = extremes {
+                let least_value = values.iter().copied().fold(f64::INFINITY, f64::min);
+                let greatest_value = values.iter().copied().fold(0.0, f64::max);
+                prop_assert_eq!(least.to_bits(), least_value.to_bits());
+                prop_assert_eq!(greatest.to_bits(), greatest_value.to_bits());
+            }
         }
 
         /// Every path of `push_lanes` (all zero, some not positive, one bucket, several), on one,
