@@ -145,14 +145,15 @@ impl Tails {
     }
 
     /// Adds the lanes `lanes` of `column`, in lane order: one vector comparison with each gate,
-    /// then a push of each lane beyond a gate. A lane within them is dropped as [`Tails::push`]
-    /// would drop it: a settling among the pushes only moves the gates outwards.
+    /// then each lane beyond a gate enters. A lane within them is dropped as [`Tails::push`]
+    /// would drop it; one that a settling among the entries leaves between the moved gates
+    /// enters all the same and goes at the next settling.
     #[inline(always)]
     pub fn push_lanes<L: Real>(&mut self, column: &L, lanes: Range<usize>) {
         let beyond = column.lt(L::splat(self.low)) | column.gt(L::splat(self.high));
         let mut entering = beyond.bits() & lane_bits(lanes);
         while entering != 0 {
-            self.push(column.lane(entering.trailing_zeros() as usize));
+            self.enter(column.lane(entering.trailing_zeros() as usize));
             entering &= entering - 1;
         }
     }
@@ -427,13 +428,13 @@ mod tests {
                 .map(|(i, x)| x * (1.0 + drift * i as f64))
                 .collect();
             let mut sketch = crate::stats::Sketch::new();
-            let mut keyed = Tails::new(keep);
+            let mut bounded = Tails::new(keep);
             for chunk in values.chunks(8) {
                 let x = Lanes::<8>::from_fn(|k| chunk[k.min(chunk.len() - 1)]);
                 let positive = sketch.push_filled_lanes(&x, 0..chunk.len());
-                keyed.push_bounded_lanes(&x, 0..chunk.len(), positive);
+                bounded.push_bounded_lanes(&x, 0..chunk.len(), positive);
             }
-            prop_assert_eq!(keyed, kept(&values, keep));
+            prop_assert_eq!(bounded, kept(&values, keep));
         }
 
         /// Values that drift (every new one beyond a gate, on one side or, with noise, both)
