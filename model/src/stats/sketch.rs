@@ -530,10 +530,10 @@ impl Sketch {
     /// greatest value and key, by integer minima and maxima in vector registers (lanes outside
     /// `lanes` first take the value of its first). When every value is positive (the common
     /// case) the keys' range is covered once and the lanes are counted without the sign test and
-    /// with the store already in place: an increment each. Lanes that all share one bucket (a whole-number
-    /// metric, a constant) or are all zero are one addition: increments of one bucket in a row
-    /// would each wait for the one before. Lanes of either sign, or a zero among others, go one
-    /// by one.
+    /// with the store already in place: an increment each. Lanes that all share one bucket (a
+    /// whole-number metric, a constant) or are all zero are one addition: increments of one
+    /// bucket in a row would each wait for the one before. Lanes of either sign, or a zero among
+    /// others, go one by one.
     #[inline(always)]
     pub fn push_lanes<L: Real>(&mut self, x: &L, lanes: Range<usize>) {
         let within = within_lanes::<L>(&lanes);
