@@ -2,23 +2,21 @@
 //! in the far tail is counted exactly rather than to its sketch bucket.
 //!
 //! [`Tails`] keeps the `k` smallest and the `k` largest values seen (every value while there are at
-//! most `2k`). Between the two gates, the `k`-th smallest and the `k`-th largest value when it last
-//! settled, a value cannot be among them and is dropped: most values cost two comparisons. The
-//! others gather unsorted until there are `4k`; then a selection ([`slice::select_nth_unstable_by`])
-//! keeps the bottom and top `k` and moves the gates outwards (after the first, each end is
-//! selected from the values on its side of the gates only). So a value that enters costs a push and
-//! a share of a linear selection, even when every value enters (a metric that drifts through a bin
-//! as the contacts wear). Every value dropped lies between the gates, and the gates only move
-//! outwards, so a threshold `above t` with `t >= ` the `k`-th largest value (or `below t` with
-//! `t <=` the `k`-th smallest) is counted exactly from the values kept.
+//! most `2k`), the bottom `k` and the top `k` each in increasing order. Between the two gates, the
+//! `k`-th smallest and the `k`-th largest value kept, a value cannot be among them and is dropped:
+//! most values cost two comparisons. One beyond a gate takes its place in its end by insertion,
+//! pushing that end's innermost value out, and the gate moves to the new `k`-th value at once, so
+//! no value enters that the values before it already rule out. Every value dropped lies between
+//! the gates, and the gates only move outwards, so a threshold `above t` with `t >= ` the `k`-th
+//! largest value (or `below t` with `t <=` the `k`-th smallest) is counted exactly from the values
+//! kept.
 //!
-//! What is kept, settled and sorted ([`Tails::values`]), is the bottom and top `k` of all values:
-//! a multiset of them, whatever order they arrived in and however they were split and merged, so it
-//! serialises and compares to the bit (`-0.0` is kept as `0.0`, which no threshold tells apart).
+//! What is kept ([`Tails::values`]) is the bottom and top `k` of all values: a multiset of them,
+//! whatever order they arrived in and however they were split and merged, so it serialises and
+//! compares to the bit (`-0.0` is kept as `0.0`, which no threshold tells apart).
 //!
-//! Memory: at most `4k` floats per accumulator while values arrive, `2k` stored; [`keep_for_bins`]
-//! bounds `k` by the number of bins, so a job's kept values stay within a fixed budget per metric
-//! and group.
+//! Memory: `2k` floats per accumulator; [`keep_for_bins`] bounds `k` by the number of bins, so a
+//! job's kept values stay within a fixed budget per metric and group.
 
 use super::sketch::PositiveExtremes;
 use super::threshold::Threshold;
@@ -49,22 +47,18 @@ pub fn keep_for_bins(bins: u64) -> Option<u32> {
 #[serde(from = "Stored")]
 pub struct Tails {
     keep: u32,
-    /// The bottom and top `keep` of the values seen, and values since the last settling that
-    /// were beyond a gate; in no order (but see `split`).
+    /// Every value seen, in no order, while there are at most `2 keep`; once there are more
+    /// (`ranked`), the bottom `keep` and then the top `keep`, each in increasing order.
     values: Vec<f64>,
-    /// A value `x` with `low <= x <= high` is not among the ends: at least `keep` of the values
-    /// seen are at or below `low`, and at least `keep` at or above `high` (infinite until the
-    /// first settling). Every value dropped lies between them.
+    /// A value `x` with `low <= x <= high` is not among the ends: once ranked, the `keep`-th
+    /// smallest and the `keep`-th largest value kept (infinite before). Every value dropped lies
+    /// between them.
     low: f64,
     high: f64,
-    /// Whether the list begins with the ends of the last settling, the bottom `keep` and then
-    /// the top `keep` (so every value of the first at or below every value of the second), and
-    /// holds after them only values that arrived since: [`Tails::settle`] then selects each end
-    /// from its own side only.
-    split: bool,
+    ranked: bool,
 }
 
-/// The serialised form: the values kept, settled and in increasing order, by their bits.
+/// The serialised form: the values kept, in increasing order, by their bits.
 #[derive(serde::Serialize, serde::Deserialize)]
 struct Stored {
     keep: u32,
@@ -85,15 +79,11 @@ impl serde::Serialize for Tails {
 }
 
 impl From<Stored> for Tails {
+    /// The values arrive as pushed values do, so a list stored in any order (or holding more than
+    /// its ends) reads back as the ends of its values.
     fn from(stored: Stored) -> Self {
         let mut tails = Tails::new(stored.keep);
-        tails.values = stored.kept;
-        let k = tails.keep as usize;
-        if tails.values.len() >= tails.ends() {
-            (tails.low, tails.high) = (tails.values[k - 1], tails.values[tails.values.len() - k]);
-        }
-        // Settled and sorted: the bottom `keep`, then the top `keep`.
-        tails.split = tails.values.len() == tails.ends();
+        stored.kept.iter().for_each(|&x| tails.push(x));
         tails
     }
 }
@@ -114,7 +104,7 @@ impl Tails {
             values: Vec::new(),
             low: f64::INFINITY,
             high: f64::NEG_INFINITY,
-            split: false,
+            ranked: false,
         }
     }
 
@@ -126,10 +116,11 @@ impl Tails {
     /// The bottom and top `keep` of the values seen (all of them while there are at most
     /// `2 keep`), in increasing order.
     pub fn values(&self) -> Vec<f64> {
-        let mut settled = self.clone();
-        settled.settle();
-        settled.values.sort_unstable_by(f64::total_cmp);
-        settled.values
+        let mut values = self.values.clone();
+        if !self.ranked {
+            values.sort_unstable_by(f64::total_cmp);
+        }
+        values
     }
 
     fn ends(&self) -> usize {
@@ -145,9 +136,8 @@ impl Tails {
     }
 
     /// Adds the lanes `lanes` of `column`, in lane order: one vector comparison with each gate,
-    /// then each lane beyond a gate enters. A lane within them is dropped as [`Tails::push`]
-    /// would drop it; one that a settling among the entries leaves between the moved gates
-    /// enters all the same and goes at the next settling.
+    /// then each lane beyond a gate enters, or is dropped when the lanes entering before it have
+    /// moved the gate past it, as [`Tails::push`] would drop it.
     #[inline(always)]
     pub fn push_lanes<L: Real>(&mut self, column: &L, lanes: Range<usize>) {
         let beyond = column.lt(L::splat(self.low)) | column.gt(L::splat(self.high));
@@ -175,83 +165,73 @@ impl Tails {
         }
     }
 
+    /// Adds `x`, which was beyond a gate when the caller compared: it takes its place in its end
+    /// and that end's gate moves to the new `keep`-th value, or it is dropped when the gates have
+    /// moved past it since.
+    #[inline(always)]
     fn enter(&mut self, x: f64) {
-        // Room for every value that gathers before a settling, taken once: grown push by push,
-        // the list reallocated six times on its way to 4 keep, a quarter of a small job's run.
-        if self.values.capacity() == 0 {
-            self.values.reserve_exact(2 * self.ends());
-        }
         // `-0.0 + 0.0` is `0.0`: equal values have equal bits, so what is kept is a multiset.
-        self.values.push(x + 0.0);
-        if self.values.len() >= 2 * self.ends() {
-            self.settle();
+        let x = x + 0.0;
+        if !self.ranked {
+            if self.values.len() < self.ends() {
+                // Room for every value kept, taken once: grown push by push, the list
+                // reallocated six times on its way, a quarter of a small job's run.
+                self.values.reserve_exact(self.ends() - self.values.len());
+                self.values.push(x);
+                return;
+            }
+            self.rank();
+        }
+        let k = self.keep as usize;
+        let (bottom, top) = self.values.split_at_mut(k);
+        if x < self.low {
+            // Out goes the greatest of the bottom; `x` goes after the values at or below it (a
+            // count of comparisons, which vectorise: the place is as good as random, and a drifting
+            // metric's new least value would walk the whole end).
+            let i = bottom.iter().map(|&v| usize::from(v <= x)).sum::<usize>();
+            bottom.copy_within(i..k - 1, i + 1);
+            bottom[i] = x;
+            self.low = bottom[k - 1];
+        } else if x > self.high {
+            // Out goes the least of the top (below `x`); `x` goes after the others below it.
+            let i = top.iter().map(|&v| usize::from(v < x)).sum::<usize>() - 1;
+            top.copy_within(1..i + 1, 0);
+            top[i] = x;
+            self.high = top[0];
         }
     }
 
-    /// Keeps only the bottom and top `keep` of the values and moves the gates to the `keep`-th
-    /// of each end.
+    /// Sorts the values, keeps the bottom and top `keep` (there are at least `2 keep`) and sets
+    /// the gates to their innermost.
     #[cold]
-    fn settle(&mut self) {
+    fn rank(&mut self) {
         let (k, n) = (self.keep as usize, self.values.len());
-        if n <= self.ends() {
-            return;
-        }
-        if self.split {
-            return self.settle_sides(k);
-        }
-        self.values.select_nth_unstable_by(k - 1, f64::total_cmp);
-        let top = &mut self.values[k..];
-        let m = top.len();
-        top.select_nth_unstable_by(m - k, f64::total_cmp);
-        self.low = self.values[k - 1];
-        self.high = self.values[n - k];
+        debug_assert!(n >= 2 * k, "{n} values ranked to keep {k} at each end");
+        self.values.sort_unstable_by(f64::total_cmp);
         self.values.drain(k..n - k);
-        self.split = true;
-    }
-
-    /// [`Tails::settle`] of a split list: the new bottom `keep` are among the old ones and the
-    /// later values at or below `low`, the new top among the old top and those at or above `high`
-    /// (any other value lies strictly between `keep` values at or below `low` and `keep` at or
-    /// above `high`). Each end is selected from its side alone, about `4 keep` values where
-    /// selecting both ends from the whole list took `7 keep`; a side no value reached is a
-    /// selection of `keep` values.
-    fn settle_sides(&mut self, k: usize) {
-        let (low, high) = (self.low, self.high);
-        let later = &mut self.values[2 * k..];
-        let below = partition(later, |x| x <= low);
-        let above = partition(&mut later[below..], |x| x >= high);
-        // [bottom | top | below | above | between] -> [bottom | below | top | above | ..]
-        self.values[k..2 * k + below].rotate_left(k);
-        let bottom_side = k + below;
-        self.values[..bottom_side].select_nth_unstable_by(k - 1, f64::total_cmp);
-        let top_side = &mut self.values[bottom_side..bottom_side + k + above];
-        top_side.select_nth_unstable_by(above, f64::total_cmp);
-        let top = bottom_side + above;
-        self.low = self.values[k - 1];
-        self.high = self.values[top];
-        self.values.copy_within(top..top + k, k);
-        self.values.truncate(2 * k);
+        (self.low, self.high) = (self.values[k - 1], self.values[k]);
+        self.ranked = true;
     }
 
     /// Adds the values kept by `other`: what both would have kept of all their values. With a
     /// different `keep` the smaller one holds.
     pub fn merge(&mut self, other: &Tails) {
         if other.keep < self.keep {
-            // The ends at the front are of the larger `keep`.
             self.keep = other.keep;
-            self.split = false;
+            if self.ranked {
+                // The innermost of each end go: what is left is each end's `keep` outermost.
+                let (k, n) = (self.keep as usize, self.values.len());
+                self.values.drain(k..n - k);
+                (self.low, self.high) = (self.values[k - 1], self.values[k]);
+            } else if self.values.len() > self.ends() {
+                self.rank();
+            }
         }
         // `other`'s values arrive as pushed values do: those between this list's gates are not
-        // among the ends (this list holds what places its gates) and are dropped. Taken whole,
-        // they made a summary of a small job's 32 groups settle every second group, a third of
-        // its time.
+        // among the ends and are dropped.
         for &x in &other.values {
             self.push(x);
         }
-        // Each side's gates lie within the ends of all the values, and each side's dropped values
-        // between its gates.
-        self.low = self.low.min(other.low);
-        self.high = self.high.max(other.high);
     }
 
     /// The exact number of the `count` values seen beyond `threshold`, when the values kept settle
@@ -266,17 +246,6 @@ impl Tails {
             };
         settled.then(|| kept.iter().filter(|&&x| threshold.beyond(x)).count() as u64)
     }
-}
-
-/// Moves the values for which `first` holds to the front, in no order; how many there are.
-/// Without a branch on `first`: which side a value falls on is as good as random.
-fn partition(values: &mut [f64], first: impl Fn(f64) -> bool) -> usize {
-    let mut front = 0;
-    for i in 0..values.len() {
-        values.swap(front, i);
-        front += usize::from(first(values[front]));
-    }
-    front
 }
 
 #[cfg(test)]
@@ -350,7 +319,7 @@ mod tests {
         all_high.sort_by(f64::total_cmp);
         let top = &all_high[all_high.len() - MAX_KEEP as usize..];
         assert_eq!(&lanes.values()[MAX_KEEP as usize..], top);
-        assert!(lanes.values.capacity() <= 4 * MAX_KEEP as usize);
+        assert_eq!(lanes.values.capacity(), 2 * MAX_KEEP as usize);
         let t = top[0];
         assert_eq!(
             lanes.beyond(Threshold::Above(t), 10_000_000),
@@ -438,11 +407,10 @@ mod tests {
         }
 
         /// Values that drift (every new one beyond a gate, on one side or, with noise, both)
-        /// keep their ends through lists that settled, were stored and restored, and were merged,
-        /// also into a list keeping more at each end: each settling after the first selects each
-        /// end from its own side only.
+        /// keep their ends through lists that were ranked, stored and restored, and merged, also
+        /// into a list keeping more at each end: each new value is inserted at its end.
         #[test]
-        fn drifting_values_keep_their_ends_through_settled_lists(
+        fn drifting_values_keep_their_ends_through_ranked_lists(
             noise in prop::collection::vec(-1.0..1.0f64, 0..600),
             drift in prop_oneof![Just(0.0), -0.1..0.1f64],
             keep in 1..12u32,
