@@ -185,18 +185,26 @@ impl Tails {
         let k = self.keep as usize;
         let (bottom, top) = self.values.split_at_mut(k);
         if x < self.low {
-            // Out goes the greatest of the bottom; `x` goes after the values at or below it (a
-            // count of comparisons, which vectorise: the place is as good as random, and a drifting
-            // metric's new least value would walk the whole end).
-            let i = bottom.iter().map(|&v| usize::from(v <= x)).sum::<usize>();
-            bottom.copy_within(i..k - 1, i + 1);
-            bottom[i] = x;
+            // Out goes the greatest of the bottom, in goes `x`: each slot takes the least of its
+            // value and the greater of `x` and the value before it, which keeps the values at or
+            // below `x`, puts `x` after them and moves the others up one. No branch and no
+            // count: selections between neighbours, which vectorise.
+            let mut before = f64::NEG_INFINITY;
+            for slot in bottom.iter_mut() {
+                let value = *slot;
+                *slot = least(value, greatest(x, before));
+                before = value;
+            }
             self.low = bottom[k - 1];
         } else if x > self.high {
-            // Out goes the least of the top (below `x`); `x` goes after the others below it.
-            let i = top.iter().map(|&v| usize::from(v < x)).sum::<usize>() - 1;
-            top.copy_within(1..i + 1, 0);
-            top[i] = x;
+            // Out goes the least of the top, in goes `x`: each slot, from the last, takes the
+            // greater of its value and the lesser of `x` and the value after it.
+            let mut after = f64::INFINITY;
+            for slot in top.iter_mut().rev() {
+                let value = *slot;
+                *slot = greatest(value, least(x, after));
+                after = value;
+            }
             self.high = top[0];
         }
     }
@@ -246,6 +254,19 @@ impl Tails {
             };
         settled.then(|| kept.iter().filter(|&&x| threshold.beyond(x)).count() as u64)
     }
+}
+
+/// The lesser of two values that are not NaN, as a comparison and a selection (`f64::min`, with
+/// its NaN rule, does not vectorise).
+#[inline(always)]
+fn least(a: f64, b: f64) -> f64 {
+    if a < b { a } else { b }
+}
+
+/// The greater of two values that are not NaN.
+#[inline(always)]
+fn greatest(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
 }
 
 #[cfg(test)]
