@@ -55,6 +55,7 @@ pub struct Tails {
     /// between them.
     low: f64,
     high: f64,
+    /// Whether more than `2 keep` values have come: `values` holds the two sorted ends.
     ranked: bool,
 }
 
