@@ -177,7 +177,9 @@ impl Tails {
             if self.values.len() < self.ends() {
                 // Room for every value kept, taken once: grown push by push, the list
                 // reallocated six times on its way, a quarter of a small job's run.
-                self.values.reserve_exact(self.ends() - self.values.len());
+                if self.values.capacity() == 0 {
+                    self.values.reserve_exact(self.ends());
+                }
                 self.values.push(x);
                 return;
             }
@@ -226,13 +228,9 @@ impl Tails {
     /// different `keep` the smaller one holds.
     pub fn merge(&mut self, other: &Tails) {
         if other.keep < self.keep {
+            // Ranked again to the smaller `keep` (ends already sorted take one pass to tell).
             self.keep = other.keep;
-            if self.ranked {
-                // The innermost of each end go: what is left is each end's `keep` outermost.
-                let (k, n) = (self.keep as usize, self.values.len());
-                self.values.drain(k..n - k);
-                (self.low, self.high) = (self.values[k - 1], self.values[k]);
-            } else if self.values.len() > self.ends() {
+            if self.values.len() > self.ends() {
                 self.rank();
             }
         }
