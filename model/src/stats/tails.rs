@@ -11,6 +11,10 @@
 //! largest value (or `below t` with `t <=` the `k`-th smallest) is counted exactly from the values
 //! kept.
 //!
+//! Until `2k` values have come, every value enters: the bottom is padded above its values with
+//! `+inf`, the top below its values with `-inf`, so each gate is infinite until its end is full,
+//! and the value a full bottom pushes out moves to the top. No list is gathered and sorted.
+//!
 //! What is kept ([`Tails::values`]) is the bottom and top `k` of all values: a multiset of them,
 //! whatever order they arrived in and however they were split and merged, so it serialises and
 //! compares to the bit (`-0.0` is kept as `0.0`, which no threshold tells apart).
@@ -47,16 +51,17 @@ pub fn keep_for_bins(bins: u64) -> Option<u32> {
 #[serde(from = "Stored")]
 pub struct Tails {
     keep: u32,
-    /// Every value seen, in no order, while there are at most `2 keep`; once there are more
-    /// (`ranked`), the bottom `keep` and then the top `keep`, each in increasing order.
+    /// The bottom `keep` and then the top `keep`, each in increasing order (empty before the
+    /// first value): while fewer than `2 keep` values have come, the bottom's values followed by
+    /// `+inf`, the top's preceded by `-inf`.
     values: Vec<f64>,
-    /// A value `x` with `low <= x <= high` is not among the ends: once ranked, the `keep`-th
-    /// smallest and the `keep`-th largest value kept (infinite before). Every value dropped lies
-    /// between them.
+    /// The values that have come, up to `2 keep` (beyond, every slot holds a value).
+    seen: usize,
+    /// A value `x` with `low <= x <= high` is not among the ends: the `keep`-th smallest and the
+    /// `keep`-th largest value kept, the bottom's and the top's innermost slots (infinite until
+    /// their end is full). Every value dropped lies between them.
     low: f64,
     high: f64,
-    /// Whether more than `2 keep` values have come: `values` holds the two sorted ends.
-    ranked: bool,
 }
 
 /// The serialised form: the values kept, in increasing order, by their bits.
@@ -103,9 +108,9 @@ impl Tails {
         Self {
             keep: keep.max(1),
             values: Vec::new(),
+            seen: 0,
             low: f64::INFINITY,
             high: f64::NEG_INFINITY,
-            ranked: false,
         }
     }
 
@@ -117,15 +122,21 @@ impl Tails {
     /// The bottom and top `keep` of the values seen (all of them while there are at most
     /// `2 keep`), in increasing order.
     pub fn values(&self) -> Vec<f64> {
-        let mut values = self.values.clone();
-        if !self.ranked {
-            values.sort_unstable_by(f64::total_cmp);
-        }
-        values
+        let (bottom, top) = self.kept();
+        [bottom, top].concat()
     }
 
-    fn ends(&self) -> usize {
-        2 * self.keep as usize
+    /// The values of the bottom and of the top, without their padding.
+    fn kept(&self) -> (&[f64], &[f64]) {
+        let k = self.keep as usize;
+        if self.values.is_empty() {
+            return (&[], &[]);
+        }
+        let (bottom, top) = self.values.split_at(k);
+        (
+            &bottom[..self.seen.min(k)],
+            &top[k - self.seen.saturating_sub(k)..],
+        )
     }
 
     /// Adds one finite value.
@@ -168,59 +179,49 @@ impl Tails {
 
     /// Adds `x`, which was beyond a gate when the caller compared: it takes its place in its end
     /// and that end's gate moves to the new `keep`-th value, or it is dropped when the gates have
-    /// moved past it since.
+    /// moved past it since. A value the bottom pushes out moves to the top, where it enters while
+    /// the top has room and is dropped after (it lies at or below the top's gate).
     #[inline(always)]
     fn enter(&mut self, x: f64) {
         // `-0.0 + 0.0` is `0.0`: equal values have equal bits, so what is kept is a multiset.
         let x = x + 0.0;
-        if !self.ranked {
-            if self.values.len() < self.ends() {
-                // Room for every value kept, taken once: grown push by push, the list
-                // reallocated six times on its way, a quarter of a small job's run.
-                if self.values.capacity() == 0 {
-                    self.values.reserve_exact(self.ends());
-                }
-                self.values.push(x);
-                return;
-            }
-            self.rank();
-        }
         let k = self.keep as usize;
+        if self.values.is_empty() {
+            // Room for every value kept, taken once.
+            self.values.reserve_exact(2 * k);
+            self.values.resize(k, f64::INFINITY);
+            self.values.resize(2 * k, f64::NEG_INFINITY);
+        }
+        let bottom_full = self.seen >= k;
+        self.seen = (self.seen + 1).min(2 * k);
         let (bottom, top) = self.values.split_at_mut(k);
         if x < self.low {
+            let out = bottom[k - 1];
             enter_bottom(bottom, x);
             self.low = bottom[k - 1];
+            if bottom_full && out > self.high {
+                enter_top(top, out);
+                self.high = top[0];
+            }
         } else if x > self.high {
             enter_top(top, x);
             self.high = top[0];
         }
     }
 
-    /// Sorts the values, keeps the bottom and top `keep` (there are at least `2 keep`) and sets
-    /// the gates to their innermost.
-    #[cold]
-    fn rank(&mut self) {
-        let (k, n) = (self.keep as usize, self.values.len());
-        debug_assert!(n >= 2 * k, "{n} values ranked to keep {k} at each end");
-        self.values.sort_unstable_by(f64::total_cmp);
-        self.values.drain(k..n - k);
-        (self.low, self.high) = (self.values[k - 1], self.values[k]);
-        self.ranked = true;
-    }
-
     /// Adds the values kept by `other`: what both would have kept of all their values. With a
     /// different `keep` the smaller one holds.
     pub fn merge(&mut self, other: &Tails) {
         if other.keep < self.keep {
-            // Ranked again to the smaller `keep` (ends already sorted take one pass to tell).
-            self.keep = other.keep;
-            if self.values.len() > self.ends() {
-                self.rank();
-            }
+            // Kept again, to the smaller `keep`.
+            let values = self.values();
+            *self = Tails::new(other.keep);
+            values.into_iter().for_each(|x| self.push(x));
         }
         // `other`'s values arrive as pushed values do: those between this list's gates are not
         // among the ends and are dropped.
-        for &x in &other.values {
+        let (bottom, top) = other.kept();
+        for &x in bottom.iter().chain(top) {
             self.push(x);
         }
     }
@@ -463,11 +464,11 @@ mod tests {
         }
 
         /// Values that drift (every new one beyond a gate, on one side or, with noise, both)
-        /// keep their ends through lists that were ranked, stored and restored, and merged, also
+        /// keep their ends through full lists, stored and restored, and merged, also
         /// into a list keeping more at each end: each new value is inserted at its end, whatever
         /// the list's length against the slots an insertion takes at a time.
         #[test]
-        fn drifting_values_keep_their_ends_through_ranked_lists(
+        fn drifting_values_keep_their_ends_through_full_lists(
             noise in prop::collection::vec(-1.0..1.0f64, 0..600),
             drift in prop_oneof![Just(0.0), -0.1..0.1f64],
             // Lists shorter than an insertion's slots at a time, and longer, up to the most kept.
