@@ -11,17 +11,18 @@ pg_ctl in a temporary directory, as the `postgres` user when run as root) and re
 
 Each worker process runs one shard at a time on one compute thread (`worker --workers 1
 --compute-threads 1`), so N processes use N cores: on a 2-core machine expect a plateau at 2.
-Throughput is operations over the wall time from submission to the stored Result, seen by a
-request that waits for the job's end (`?wait_s=`). The workers do a little more than `run`: their
-groups keep each bin's extreme values for queries after the run, which `run` leaves out (its
-Result reads none; about 9 % of `run --threads 1` on this job, docs/performance.md). Each round runs `run --threads 1` and `--threads 2` and then every worker count
-in turn, and each wall is compared with its own round's `run --threads 1`: this machine's speed
-drifts by a quarter within minutes, so figures from different moments do not compare. The per-shard overhead comes from the workers' own clocks, the
-`bouncewear_shard_step_seconds` histogram of a `serve --workers 1` node running the same job twice:
-`claim` (finding and leasing a shard), `store` (encoding a group's accumulators and writing them in the transaction
-that counts it done) and `merge` (reading every group back, merging in order, summarising and
-storing the Result; its parts `merge_read`, `merge_compute` and `merge_write`), beside `run` (the
-simulation itself).
+Throughput is operations over the wall time from submission to the stored Result, seen by a request
+that waits for the job's end (`?wait_s=`). The workers do a little more than `run`: their groups
+keep each bin's extreme values for queries after the run, which `run` leaves out (its Result reads
+none; about 6 % of `run --threads 1` on this job, docs/performance.md). Each round runs `run
+--threads 1` and `--threads 2` and then every worker count in turn, and each wall is compared with
+its own round's `run --threads 1`: this machine's speed drifts by a quarter within minutes, so
+figures from different moments do not compare. The per-shard overhead comes from the workers' own
+clocks, the `bouncewear_shard_step_seconds` histogram of a `serve --workers 1` node running the same
+job twice: `claim` (finding and leasing a shard), `store` (encoding a group's accumulators and
+writing them in the transaction that counts it done) and `merge` (reading every group back, merging
+in order, summarising and storing the Result; its parts `merge_read`, `merge_compute` and
+`merge_write`), beside `run` (the simulation itself).
 """
 
 import argparse
