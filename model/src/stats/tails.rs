@@ -195,7 +195,10 @@ impl Tails {
         let bottom_full = self.seen >= k;
         self.seen = (self.seen + 1).min(2 * k);
         let (bottom, top) = self.values.split_at_mut(k);
-        if x < self.low {
+        // The first `keep` values go to the bottom whatever they are: an infinity among them,
+        // which no gate tells from the padding, is kept as a value (a list read from the store
+        // may hold one; the engine's values are finite).
+        if !bottom_full || x < self.low {
             let out = bottom[k - 1];
             enter_bottom(bottom, x);
             self.low = bottom[k - 1];
@@ -352,6 +355,23 @@ mod tests {
         assert_eq!(tails.beyond(Threshold::Above(996.0), 1000), None);
         assert_eq!(tails.beyond(Threshold::Below(2.0), 1000), Some(2));
         assert_eq!(tails.beyond(Threshold::Below(2.5), 1000), None);
+    }
+
+    #[test]
+    fn infinities_among_the_first_values_are_kept_as_values() {
+        let inf = f64::INFINITY;
+        for values in [
+            vec![inf, 1.0, -inf, 2.0],
+            vec![1.0, inf, inf, -inf, 3.0, -inf, 0.5],
+            vec![inf; 5],
+            vec![-inf, -inf, 1.0],
+        ] {
+            for keep in 1..5 {
+                let tails = kept(&values, keep);
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&tails.values()), bits(&ends_of(&values, keep)));
+            }
+        }
     }
 
     #[test]
