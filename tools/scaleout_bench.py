@@ -15,14 +15,15 @@ Throughput is operations over the wall time from submission to the stored Result
 that waits for the job's end (`?wait_s=`). The workers do a little more than `run`: their groups
 keep each bin's extreme values for queries after the run, which `run` leaves out (its Result reads
 none; about 6 % of `run --threads 1` on this job, docs/performance.md). Each round runs `run
---threads 1` and `--threads 2` and then every worker count in turn, and each wall is compared with
-its own round's `run --threads 1`: this machine's speed drifts by a quarter within minutes, so
-figures from different moments do not compare. The per-shard overhead comes from the workers' own
-clocks, the `bouncewear_shard_step_seconds` histogram of a `serve --workers 1` node running the same
-job twice: `claim` (finding and leasing a shard), `store` (encoding a group's accumulators and
-writing them in the transaction that counts it done) and `merge` (reading every group back, merging
-in order, summarising and storing the Result; its parts `merge_read`, `merge_compute` and
-`merge_write`), beside `run` (the simulation itself).
+--threads 1` and `--threads 2` and then every worker count in turn, with `run --threads 1` again
+after each, and each wall is compared with the mean of the `run --threads 1` just before and just
+after it (two workers with one through those ratios): this machine's speed drifts by a quarter
+within minutes, so figures from different moments do not compare. The per-shard overhead comes from
+the workers' own clocks, the `bouncewear_shard_step_seconds` histogram of a `serve --workers 1` node
+running the same job twice: `claim` (finding and leasing a shard), `store` (encoding a group's
+accumulators and writing them in the transaction that counts it done) and `merge` (reading every
+group back, merging in order, summarising and storing the Result; its parts `merge_read`,
+`merge_compute` and `merge_write`), beside `run` (the simulation itself).
 """
 
 import argparse
@@ -193,21 +194,32 @@ def main():
     counts = [int(n) for n in args.workers.split(",")]
     configurations = ["run 1", "run 2", *[f"{kind} {count}" for count in counts for kind in ("first", "warm")]]
     walls = {name: [] for name in configurations}
+    # Each wall's `run --threads 1`: the mean of the one just before it and the one just after.
+    references = {name: [] for name in configurations}
     results = set()
     try:
         with tempfile.NamedTemporaryFile("w", suffix=".json") as job_file:
             json.dump(JOB, job_file)
             job_file.flush()
+            def baseline(threads):
+                wall, result = run_baseline(args.bin, job_file.name, threads)
+                results.add(result)
+                return wall
+
             for round_ in range(args.rounds):
-                for threads in (1, 2):
-                    wall, result = run_baseline(args.bin, job_file.name, threads)
-                    walls[f"run {threads}"].append(wall)
-                    results.add(result)
+                before = baseline(1)
+                walls["run 1"].append(before)
+                references["run 1"].append(before)
+                walls["run 2"].append(baseline(2))
+                after = baseline(1)
+                references["run 2"].append((before + after) / 2)
                 for count in counts:
                     database = new_database(f"scaleout_{round_}_{count}")
                     first, warm, result = run_workers(args.bin, database, count)
-                    walls[f"first {count}"].append(first)
-                    walls[f"warm {count}"].append(warm)
+                    before, after = after, baseline(1)
+                    for kind, wall in (("first", first), ("warm", warm)):
+                        walls[f"{kind} {count}"].append(wall)
+                        references[f"{kind} {count}"].append((before + after) / 2)
                     results |= result
         node, base = serve(args.bin, new_database("scaleout_steps"), 1)
         run_job(base, JOB)
@@ -220,8 +232,8 @@ def main():
             cluster.stop()
     print(f"one job of {operations:.0e} operations (48 V / 15 A, radius and velocity scattered), "
           f"{os.cpu_count()} cores, PostgreSQL, {args.rounds} rounds\n")
-    print("Wall time min and median over the rounds; the ratio is each round's wall over the same round's "
-          "`run --threads 1` (median, and min..max).\n")
+    print("Wall time min and median over the rounds; the ratio is each wall over the mean of the "
+          "`run --threads 1` just before and just after it (median, and min..max).\n")
     print("| run by | wall min (s) | wall median (s) | operations/s (median) | wall / `run --threads 1` |")
     print("|---|---|---|---|---|")
     for name in configurations:
@@ -229,13 +241,16 @@ def main():
         label = (f"`bouncewear run --threads {number}` (no database)" if kind == "run"
                  else f"{number} worker process{'es' if int(number) > 1 else ''}, "
                  + ("first job (new processes and database)" if kind == "first" else "next job"))
-        ratios = sorted(wall / base for wall, base in zip(walls[name], walls["run 1"]))
+        ratios = sorted(wall / base for wall, base in zip(walls[name], references[name]))
         print(f"| {label} | {min(walls[name]):.2f} | {statistics.median(walls[name]):.2f} | "
               f"{operations / statistics.median(walls[name]) / 1e6:.2f} M | "
               f"{statistics.median(ratios):.2f}x ({ratios[0]:.2f}..{ratios[-1]:.2f}) |")
     if 1 in counts and 2 in counts:
         for kind in ("first", "warm"):
-            ratios = sorted(two / one for two, one in zip(walls[f"{kind} 2"], walls[f"{kind} 1"]))
+            relative = {count: [wall / base for wall, base in zip(walls[f"{kind} {count}"],
+                                                                  references[f"{kind} {count}"])]
+                        for count in (1, 2)}
+            ratios = sorted(two / one for two, one in zip(relative[2], relative[1]))
             print(f"\nTwo workers over one, {'first' if kind == 'first' else 'next'} job, round by round: "
                   f"median {statistics.median(ratios):.2f}x ({ratios[0]:.2f}..{ratios[-1]:.2f})")
     print(f"\nResults identical to `run` for every worker count: {len(results) == 1}\n")
