@@ -116,6 +116,12 @@ impl SqlStore {
         })
     }
 
+    /// Whether the database runs write transactions side by side (PostgreSQL), not one after
+    /// another (SQLite's one writer).
+    pub(crate) fn writes_side_by_side(&self) -> bool {
+        matches!(self.backend, Backend::Postgres(_))
+    }
+
     /// Refuses to acknowledge a write that went into a SQLite file no longer at the database's
     /// path: what it wrote is out of every later reader's reach.
     pub(crate) fn acknowledge(&self) -> StoreResult<()> {

@@ -20,19 +20,51 @@ use bouncewear_model::montecarlo::DeviceLife;
 use bouncewear_model::montecarlo::rare::Outcome;
 use bouncewear_model::stats::Accumulator;
 
+/// Transactions that write a large Result's rows side by side where the database runs writers
+/// side by side (PostgreSQL; SQLite's one writer would take them in turn). Two took the merge's
+/// write of the scale-out job's Result (115 rows, 2.5 MB of groups) from 56 to 38-39 ms, means
+/// over 24 merges each, alternating builds, on a 2-core VM (docs/performance.md).
+const SIDE_BY_SIDE_WRITES: usize = 2;
+
+/// The stored bytes from which a Result's rows are written side by side before the transaction
+/// that ends the job, where the database takes writers so: below, the transactions of their own
+/// cost more than they save.
+const SIDE_BY_SIDE_BYTES: u64 = 256 << 10;
+
 impl SqlStore {
     /// Writes a result's distribution rows and listed device lives in short transactions of
     /// bounded size ([`rows::DISTRIBUTIONS_PER_WRITE`], [`rows::LIVES_PER_WRITE`]), each only while
-    /// the claim holds the merge step, so that no result holds the database for long. A merge that
-    /// stops midway leaves rows that its rerun writes again, the same (the job is deterministic),
-    /// or that ending the job drops. `None` once the claim no longer holds.
+    /// the claim holds the merge step, so that no result holds the database for long; the rows
+    /// in [`SIDE_BY_SIDE_WRITES`] transactions at a time where the database runs them side by
+    /// side, cut into at least as many. A merge that stops midway leaves rows that its rerun
+    /// writes again, the same (the job is deterministic), or that ending the job drops. `None`
+    /// once the claim no longer holds.
     async fn write_rows(&self, fence: &Fence, result: &EncodedResult) -> StoreResult<Option<()>> {
-        for chunk in result.rows.chunks(rows::DISTRIBUTIONS_PER_WRITE) {
-            let Some(mut tx) = self.begin_holding(fence).await? else {
-                return Ok(None);
+        use futures_util::StreamExt;
+        let writers = if self.writes_side_by_side() {
+            SIDE_BY_SIDE_WRITES
+        } else {
+            1
+        };
+        let per_write = result
+            .rows
+            .len()
+            .div_ceil(writers)
+            .clamp(1, rows::DISTRIBUTIONS_PER_WRITE);
+        let mut chunks = result.rows.chunks(per_write);
+        let mut writes = futures_util::stream::FuturesUnordered::new();
+        loop {
+            while writes.len() < writers
+                && let Some(chunk) = chunks.next()
+            {
+                writes.push(self.write_distributions(fence, chunk));
+            }
+            let Some(written) = writes.next().await else {
+                break;
             };
-            insert_distributions(&mut tx, &fence.job, chunk).await?;
-            tx.commit().await?;
+            if written?.is_none() {
+                return Ok(None);
+            }
         }
         for chunk in result.lives.chunks(rows::LIVES_PER_WRITE) {
             let Some(mut tx) = self.begin_holding(fence).await? else {
@@ -43,13 +75,29 @@ impl SqlStore {
         }
         Ok(Some(()))
     }
+
+    /// Writes `rows` of a Result in a transaction of their own while the claim holds.
+    async fn write_distributions(
+        &self,
+        fence: &Fence,
+        rows: &[rows::EncodedRow],
+    ) -> StoreResult<Option<()>> {
+        let Some(mut tx) = self.begin_holding(fence).await? else {
+            return Ok(None);
+        };
+        insert_distributions(&mut tx, &fence.job, rows).await?;
+        tx.commit().await?;
+        Ok(Some(()))
+    }
 }
 
-/// Whether `result`'s rows fit in one write of [`SqlStore::write_rows`]: then they are written in
-/// the transaction that ends the job rather than in one of their own before it.
-fn fits_one_write(result: &EncodedResult) -> bool {
+/// Whether `result`'s rows go in the transaction that ends the job, rather than in transactions
+/// of their own before it ([`SqlStore::write_rows`]): when they fit in one write, and unless
+/// `side_by_side` (the database runs writers side by side) and they are large enough to gain.
+fn with_the_end(result: &EncodedResult, side_by_side: bool) -> bool {
     result.rows.len() <= rows::DISTRIBUTIONS_PER_WRITE
         && result.lives.len() <= rows::LIVES_PER_WRITE
+        && !(side_by_side && result.bytes() >= SIDE_BY_SIDE_BYTES)
 }
 
 #[async_trait]
@@ -62,7 +110,7 @@ impl Results for SqlStore {
         result: &EncodedResult,
     ) -> StoreResult<Option<u64>> {
         // A Result that fits in one write goes in the transaction that ends the job: one commit.
-        let with_the_end = fits_one_write(result);
+        let with_the_end = with_the_end(result, self.writes_side_by_side());
         if !with_the_end && self.write_rows(fence, result).await?.is_none() {
             return Ok(None);
         }
@@ -205,4 +253,39 @@ async fn decoded<T: serde::de::DeserializeOwned + Send + 'static>(
     stored: Vec<u8>,
 ) -> StoreResult<T> {
     rows::off_async_threads(what, true, move || rows::decode(what, &stored)).await
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn result(text_bytes: usize, lives: usize) -> EncodedResult {
+        let life = DeviceLife {
+            device: 0,
+            operations_to_failure: 1,
+            censored: false,
+        };
+        EncodedResult {
+            text: "x".repeat(text_bytes),
+            rows: Vec::new(),
+            lives: vec![life; lives],
+        }
+    }
+
+    /// A small Result ends its job in one transaction on either database; one of 256 KB or more
+    /// goes first, side by side, where the database writes so; one beyond a write's bounds goes
+    /// first on either.
+    #[test]
+    fn only_a_large_result_is_written_before_its_end() {
+        let bytes = usize::try_from(SIDE_BY_SIDE_BYTES).unwrap();
+        for side_by_side in [false, true] {
+            assert!(with_the_end(&result(bytes - 1, 0), side_by_side));
+            assert!(!with_the_end(
+                &result(0, rows::LIVES_PER_WRITE + 1),
+                side_by_side
+            ));
+        }
+        assert!(with_the_end(&result(bytes, 0), false));
+        assert!(!with_the_end(&result(bytes, 0), true));
+    }
 }
