@@ -93,11 +93,15 @@ impl SqlStore {
 
 /// Whether `result`'s rows go in the transaction that ends the job, rather than in transactions
 /// of their own before it ([`SqlStore::write_rows`]): when they fit in one write, and unless
-/// `side_by_side` (the database runs writers side by side) and they are large enough to gain.
+/// `side_by_side` (the database runs writers side by side) and there are rows enough to share
+/// out, large enough to gain.
 fn with_the_end(result: &EncodedResult, side_by_side: bool) -> bool {
+    let shared_out = side_by_side
+        && result.rows.len() >= SIDE_BY_SIDE_WRITES
+        && result.bytes() >= SIDE_BY_SIDE_BYTES;
     result.rows.len() <= rows::DISTRIBUTIONS_PER_WRITE
         && result.lives.len() <= rows::LIVES_PER_WRITE
-        && !(side_by_side && result.bytes() >= SIDE_BY_SIDE_BYTES)
+        && !shared_out
 }
 
 #[async_trait]
@@ -259,33 +263,38 @@ async fn decoded<T: serde::de::DeserializeOwned + Send + 'static>(
 mod tests {
     use super::*;
 
-    fn result(text_bytes: usize, lives: usize) -> EncodedResult {
+    /// A Result of `rows` rows of `bytes` bytes in all and `lives` listed lives.
+    fn result(rows: usize, bytes: usize, lives: usize) -> EncodedResult {
         let life = DeviceLife {
             device: 0,
             operations_to_failure: 1,
             censored: false,
         };
         EncodedResult {
-            text: "x".repeat(text_bytes),
-            rows: Vec::new(),
+            text: String::new(),
+            rows: (0..rows)
+                .map(|i| rows::EncodedRow::of_bytes(bytes / rows + usize::from(i < bytes % rows)))
+                .collect(),
             lives: vec![life; lives],
         }
     }
 
     /// A small Result ends its job in one transaction on either database; one of 256 KB or more
-    /// goes first, side by side, where the database writes so; one beyond a write's bounds goes
-    /// first on either.
+    /// in two rows or more goes first, side by side, where the database writes so; one beyond a
+    /// write's bounds goes first on either.
     #[test]
     fn only_a_large_result_is_written_before_its_end() {
         let bytes = usize::try_from(SIDE_BY_SIDE_BYTES).unwrap();
         for side_by_side in [false, true] {
-            assert!(with_the_end(&result(bytes - 1, 0), side_by_side));
-            assert!(!with_the_end(
-                &result(0, rows::LIVES_PER_WRITE + 1),
-                side_by_side
-            ));
+            assert!(with_the_end(&result(115, bytes - 1, 0), side_by_side));
+            assert!(with_the_end(&result(1, bytes, 0), side_by_side));
+            let many_lives = result(1, 0, rows::LIVES_PER_WRITE + 1);
+            assert!(!with_the_end(&many_lives, side_by_side));
+            let many_rows = result(rows::DISTRIBUTIONS_PER_WRITE + 1, 0, 0);
+            assert!(!with_the_end(&many_rows, side_by_side));
         }
-        assert!(with_the_end(&result(bytes, 0), false));
-        assert!(!with_the_end(&result(bytes, 0), true));
+        assert_eq!(result(115, bytes, 0).bytes(), SIDE_BY_SIDE_BYTES);
+        assert!(with_the_end(&result(115, bytes, 0), false));
+        assert!(!with_the_end(&result(115, bytes, 0), true));
     }
 }

@@ -605,6 +605,23 @@ pub(crate) struct EncodedRow {
 }
 
 impl EncodedRow {
+    /// A row of `groups` bytes of groups and nothing else, for tests of how rows are written.
+    #[cfg(test)]
+    pub(crate) fn of_bytes(groups: usize) -> Self {
+        Self {
+            metric: "kappa".to_owned(),
+            kind: "operation",
+            bin: 0,
+            op_start: 0,
+            op_end: 1,
+            n: 0,
+            columns: [0.0; 7],
+            exceedance: None,
+            summary: String::new(),
+            groups: vec![0; groups],
+        }
+    }
+
     /// The row of `metric`'s bin `bin` of `result` (bin 0 of a device metric), with its groups.
     fn new(
         result: &JobResult,
