@@ -23,7 +23,7 @@ use bouncewear_model::stats::Accumulator;
 /// Transactions that write a large Result's rows side by side where the database runs writers
 /// side by side (PostgreSQL; SQLite's one writer would take them in turn). Two took the merge's
 /// write of the scale-out job's Result (115 rows, 2.5 MB of groups) from 56 to 38-39 ms, means
-/// over 24 merges each, alternating builds, on a 2-core VM (docs/performance.md).
+/// of two alternating series (24 and 12 merges each) on a 2-core VM (docs/performance.md).
 const SIDE_BY_SIDE_WRITES: usize = 2;
 
 /// The stored bytes from which a Result's rows are written side by side before the transaction
@@ -113,7 +113,8 @@ impl Results for SqlStore {
         finished_at: UnixMs,
         result: &EncodedResult,
     ) -> StoreResult<Option<u64>> {
-        // A Result that fits in one write goes in the transaction that ends the job: one commit.
+        // A Result that fits in one write goes in the transaction that ends the job, one commit,
+        // unless it is large and the database writes its rows faster side by side before.
         let with_the_end = with_the_end(result, self.writes_side_by_side());
         if !with_the_end && self.write_rows(fence, result).await?.is_none() {
             return Ok(None);
