@@ -104,6 +104,9 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
         line.starts_with("bouncewear worker running 2 shard(s) at a time"),
         "{line}"
     );
+    for pid in [server.child.id(), worker.id()] {
+        assert_ne!(huge_pages(pid), Some(true), "process {pid}");
+    }
     let job = json!({"devices": 50, "operations": 40, "seed": 8});
     let id = server.submit(&job);
     server.wait_for(&id, "succeeded", Duration::from_secs(60));
@@ -115,6 +118,14 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
         .unwrap();
     assert!(status.success());
     assert!(worker.wait().unwrap().success());
+}
+
+/// Whether the kernel may back process `pid`'s memory with transparent huge pages (its
+/// `THP_enabled` line); `None` where /proc does not tell. `serve` and `worker` turn them off.
+fn huge_pages(pid: u32) -> Option<bool> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let line = status.lines().find(|l| l.starts_with("THP_enabled:"))?;
+    Some(line.split_whitespace().nth(1)? == "1")
 }
 
 #[test]
