@@ -16,7 +16,7 @@ use bouncewear::store::{
     self, EncodedGroups, EncodedResult, JobRecord, Lease, LeaseTerms, NewRun, Operations,
     RetryBudget, RunSlot, ScheduleRecord, Store, StoreError,
 };
-use bouncewear::worker::Workers;
+use bouncewear::worker::{HELD_GROUP_BYTES, HeldGroups, Workers};
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::{Batch, run_group};
 use bouncewear_model::montecarlo::{Job, Metric, Silent, run_job};
@@ -565,9 +565,11 @@ async fn stored_groups(store: &dyn Store, id: &JobId, job: &Job) -> Vec<ShardId>
 }
 
 /// Runs every claimable shard of the store's jobs the way workers do, in claim order, until none
-/// is left; returns the shards each claim ran.
+/// is left; returns the shards each claim ran. A merge holds the odd groups of its batch, as a
+/// worker holds those it ran, and reads the others back.
 async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
     let mut ran = Vec::new();
+    let mut odd_groups = Vec::new();
     while let Some(claim) = store.claim("w", terms(0), budget(3)).await.unwrap() {
         let job = Job::new(claim.spec.clone(), || 0, &Pointer::root()).unwrap();
         let fence = &claim.fence;
@@ -577,10 +579,20 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
                 let batch = Batch::of(&job, fence.shard.batch).unwrap();
                 let stats = run_group(&job, batch, group, &Silent).unwrap();
                 assert!(store.complete(fence, &stats).await.unwrap());
+                if group % 2 == 1 {
+                    odd_groups.push((fence.job.clone(), fence.shard, stats));
+                }
             }
             None => {
-                let partials = Folding::new(job.clone(), fence.shard.batch);
+                let held: Vec<_> = odd_groups
+                    .extract_if(.., |(job, shard, _)| {
+                        *job == fence.job && shard.batch == fence.shard.batch
+                    })
+                    .map(|(_, shard, stats)| (shard.group.unwrap(), stats))
+                    .collect();
+                let partials = Folding::new(job.clone(), fence.shard.batch).holding(held);
                 let partials = store.partials(&fence.job, partials).await.unwrap();
+                assert_eq!(partials.held().count(), 0, "held groups come without bytes");
                 match merge(partials, SHARDED_ROUND_OPERATIONS, 1.0, &Silent).unwrap() {
                     Merged::Result { mut result, groups } => {
                         let encoded = EncodedResult::new(&mut result, groups).unwrap();
@@ -864,6 +876,7 @@ fn workers(store: &Arc<dyn Store>, retries: u64, listed_lives: u64) -> Arc<Worke
         listed_lives,
         large_merges: tokio::sync::Semaphore::new(1),
         sharded_round_operations: SHARDED_ROUND_OPERATIONS,
+        held: HeldGroups::new(HELD_GROUP_BYTES),
     })
 }
 

@@ -11,7 +11,7 @@ use crate::connections::{self, ConnectionLimits};
 use crate::domain::Owner;
 use crate::store::{Store, StoreError};
 use crate::telemetry;
-use crate::worker::Workers;
+use crate::worker::{HELD_GROUP_BYTES, HeldGroups, Workers};
 use metrics_exporter_prometheus::PrometheusHandle;
 use std::collections::HashSet;
 use std::future::Future;
@@ -188,6 +188,7 @@ async fn start_workers(config: &WorkerConfig) -> Result<Workers, StartupError> {
         listed_lives: config.max_listed_lives,
         large_merges: tokio::sync::Semaphore::new(1),
         sharded_round_operations: crate::domain::rare::SHARDED_ROUND_OPERATIONS,
+        held: HeldGroups::new(HELD_GROUP_BYTES),
     })
 }
 

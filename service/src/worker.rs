@@ -7,8 +7,8 @@
 //! database between groups: while a short group runs it claims the next shard
 //! ([`crate::domain::shards::claims_ahead`]), and a group's store goes on while the next one
 //! computes (one store at a time per slot). A batch's merge step, claimable once its groups are
-//! done, puts them back in order and stores the Result (or queues a precision target's next
-//! batch). A small job is its first merge step alone, which runs the whole job on the compute
+//! done, puts them back in order (those this process ran from memory, [`HeldGroups`], the others
+//! read back) and stores the Result (or queues a precision target's next batch). A small job is its first merge step alone, which runs the whole job on the compute
 //! pool. A rare event's large rounds ([`crate::domain::rare`]) are batches too: any worker runs a
 //! round's tasks as it runs groups, and the round's merge step takes their outcomes. The shards a
 //! process held when it crashed or was killed (the one it ran, the one it claimed ahead, the group
@@ -18,12 +18,12 @@
 //! graceful shutdown the running shard is stopped and handed back to the queue at once, with the
 //! one claimed ahead; a group being stored is stored first.
 
-use crate::domain::UnixMs;
 use crate::domain::rare::{Rounds, is_round};
 use crate::domain::shards::{
-    Folding, LARGE_MERGE_ACCUMULATORS, MergeError, Merged, RoundMerged, ShardPlan, claims_ahead,
-    estimated, merge, merge_accumulators, merge_round, run_whole,
+    Folding, LARGE_MERGE_ACCUMULATORS, MergeError, Merged, RoundMerged, ShardId, ShardPlan,
+    claims_ahead, estimated, merge, merge_accumulators, merge_round, run_whole,
 };
+use crate::domain::{JobId, UnixMs};
 use crate::store::{
     Claim, EncodedGroups, EncodedResult, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store,
     StoreResult, encode, partial_to_sql,
@@ -33,9 +33,10 @@ use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::{Batch, GroupStats, run_group};
 use bouncewear_model::montecarlo::rare;
 use bouncewear_model::montecarlo::{Cancelled, Job, JobResult, Observer, RunError, Watch};
+use std::collections::VecDeque;
 use std::panic::AssertUnwindSafe;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 use tokio::sync::{Notify, Semaphore, SemaphorePermit, broadcast, oneshot, watch};
 use tokio::task::JoinHandle;
@@ -69,6 +70,89 @@ pub struct Workers {
     /// ([`crate::domain::rare::SHARDED_ROUND_OPERATIONS`]); smaller rounds run in the merge step.
     /// Where a round runs changes no bit.
     pub sharded_round_operations: u64,
+    /// Groups this process ran, for their merge step if it runs here too.
+    pub held: HeldGroups,
+}
+
+/// The stored bytes of the groups a worker process holds after running them ([`HeldGroups`]);
+/// decoded they take more (a sketch's counts in fixed width with room to grow, where stored
+/// they are varints): a 10^7-operation job's 32 groups are 2.5 MB stored.
+pub const HELD_GROUP_BYTES: usize = 32 << 20;
+
+/// Groups this process ran, held for their batch's merge step: a merge that runs here takes them
+/// ([`Folding::holding`]) instead of reading them back from the database and decoding them. A
+/// group's accumulators are the same bits whoever ran it and however often, so a group held here
+/// and stored by another attempt merge alike. The oldest go once their stored bytes pass the
+/// budget; a batch's go to its merge step, or age out if another process merges it.
+pub struct HeldGroups {
+    budget: usize,
+    held: Mutex<Held>,
+}
+
+#[derive(Default)]
+struct Held {
+    bytes: usize,
+    groups: VecDeque<HeldGroup>,
+}
+
+struct HeldGroup {
+    job: JobId,
+    shard: ShardId,
+    bytes: usize,
+    stats: GroupStats,
+}
+
+impl HeldGroups {
+    /// Holding at most `budget` stored bytes of groups.
+    pub fn new(budget: usize) -> Self {
+        Self {
+            budget,
+            held: Mutex::default(),
+        }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Held> {
+        self.held.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Holds group `shard` of `job`, `bytes` once stored; drops the oldest beyond the budget.
+    fn keep(&self, job: &JobId, shard: ShardId, bytes: usize, stats: GroupStats) {
+        if bytes > self.budget {
+            return;
+        }
+        let mut dropped = Vec::new();
+        {
+            let mut held = self.lock();
+            held.bytes += bytes;
+            held.groups.push_back(HeldGroup {
+                job: job.clone(),
+                shard,
+                bytes,
+                stats,
+            });
+            while held.bytes > self.budget
+                && let Some(oldest) = held.groups.pop_front()
+            {
+                held.bytes -= oldest.bytes;
+                dropped.push(oldest);
+            }
+        }
+        drop(dropped); // freed outside the lock
+    }
+
+    /// The held groups of `job`'s batch `batch`, as (group, accumulators), no longer held.
+    fn take(&self, job: &JobId, batch: u64) -> Vec<(u64, GroupStats)> {
+        let mut held = self.lock();
+        let (taken, kept): (VecDeque<_>, VecDeque<_>) = std::mem::take(&mut held.groups)
+            .into_iter()
+            .partition(|g| g.job == *job && g.shard.batch == batch && g.shard.group.is_some());
+        held.groups = kept;
+        held.bytes -= taken.iter().map(|g| g.bytes).sum::<usize>();
+        taken
+            .into_iter()
+            .filter_map(|g| Some((g.shard.group?, g.stats)))
+            .collect()
+    }
 }
 
 /// A shard's lease, heartbeated by a task of its own for as long as this lives.
@@ -380,11 +464,19 @@ impl Workers {
             let started = Instant::now();
             let encoding = tokio::task::spawn_blocking(move || {
                 stats.lives.keep_listed_below(listed_lives);
-                partial_to_sql(&stats)
+                let partial = partial_to_sql(&stats);
+                (stats, partial)
             });
             let partial = match encoding.await {
-                Ok(Ok(partial)) => partial,
-                Ok(Err(error)) => {
+                Ok((stats, Ok(partial))) => {
+                    // Held before it is written, so that the merge this store makes claimable
+                    // finds it: the same bits as any attempt's.
+                    workers
+                        .held
+                        .keep(&fence.job, fence.shard, partial.len(), stats);
+                    partial
+                }
+                Ok((_, Err(error))) => {
                     let reason = format!("encoding the group's accumulators failed: {error}");
                     return workers.fail_attempt(&fence, &reason).await;
                 }
@@ -649,9 +741,10 @@ impl Workers {
         } else {
             None
         };
+        let held = self.held.take(&fence.job, last);
         match self
             .store
-            .partials(&fence.job, Folding::new(job, last))
+            .partials(&fence.job, Folding::new(job, last).holding(held))
             .await
         {
             Ok(partials) => Some((alone, partials)),
@@ -882,6 +975,33 @@ async fn wake_on_announcements(
 mod tests {
     use super::*;
     use crate::telemetry::prometheus_builder;
+    use bouncewear_model::montecarlo::Silent;
+
+    /// Held groups go to their own batch's merge, once; the oldest go beyond the budget, and a
+    /// group larger than the budget is not held.
+    #[test]
+    fn held_groups_go_to_their_batchs_merge_and_the_oldest_beyond_the_budget() {
+        let job = Job::from_json(r#"{"devices": 4, "operations": 2, "seed": 1}"#, || 0).unwrap();
+        let batch = Batch::of(&job, 0).unwrap();
+        let stats = || run_group(&job, batch, 0, &Silent).unwrap();
+        let groups = |taken: Vec<(u64, GroupStats)>| -> Vec<u64> {
+            taken.into_iter().map(|(group, _)| group).collect()
+        };
+        let held = HeldGroups::new(100);
+        let (a, b) = (JobId::from("a"), JobId::from("b"));
+        held.keep(&a, ShardId::group(0, 0), 40, stats());
+        held.keep(&a, ShardId::group(1, 0), 40, stats());
+        held.keep(&b, ShardId::group(0, 1), 40, stats());
+        held.keep(&b, ShardId::group(0, 2), 101, stats());
+        assert!(
+            held.take(&a, 0).is_empty(),
+            "the oldest went past the budget"
+        );
+        assert_eq!(groups(held.take(&a, 1)), [0]);
+        assert_eq!(groups(held.take(&b, 0)), [1]);
+        assert!(held.take(&b, 0).is_empty(), "taken once");
+        assert_eq!(held.lock().bytes, 0);
+    }
 
     /// The recorded `bouncewear_shard_step_seconds` of `step`: its count and sum.
     fn recorded(text: &str, step: &str) -> (u64, f64) {

@@ -18,6 +18,7 @@ use bouncewear_model::montecarlo::{
     precision_met, summarize_job,
 };
 use serde::Serialize;
+use std::collections::BTreeMap;
 use std::fmt;
 use utoipa::ToSchema;
 
@@ -193,6 +194,9 @@ pub struct Folding {
     reading: Option<(Batch, u64)>,
     /// Every group read, in order.
     read: Vec<ShardId>,
+    /// Groups of batch `last` this process ran and still holds, by group: the store lists them
+    /// without their accumulators ([`Folding::push_held`]).
+    held: BTreeMap<u64, GroupStats>,
     /// The first group that did not fit: the rest are ignored.
     error: Option<Incomplete>,
 }
@@ -207,8 +211,22 @@ impl Folding {
             first: None,
             reading: None,
             read: Vec::new(),
+            held: BTreeMap::new(),
             error: None,
         }
+    }
+
+    /// With `groups` of batch `last` (group, accumulators) that this process ran and stored: the
+    /// store need not send them back nor decode them. A group's accumulators are the same bits
+    /// whoever ran it, so holding changes no bit of the merge.
+    pub fn holding(mut self, groups: impl IntoIterator<Item = (u64, GroupStats)>) -> Self {
+        self.held.extend(groups);
+        self
+    }
+
+    /// The groups of batch `last` held ([`Folding::holding`]), in order.
+    pub fn held(&self) -> impl Iterator<Item = u64> + '_ {
+        self.held.keys().copied()
     }
 
     /// The job whose groups these are.
@@ -233,6 +251,25 @@ impl Folding {
             && let Err(error) = self.fold(shard, stats)
         {
             self.error = Some(error);
+        }
+    }
+
+    /// Takes the next group the store lists as held ([`Folding::holding`]), without its
+    /// accumulators.
+    pub fn push_held(&mut self, shard: ShardId) {
+        let held = match shard.group {
+            Some(group) if shard.batch == self.last => self.held.remove(&group),
+            _ => None,
+        };
+        match held {
+            Some(stats) => self.push(shard, stats),
+            None => {
+                self.read.push(shard);
+                self.error.get_or_insert_with(|| Incomplete {
+                    batch: shard.batch,
+                    detail: format!("{shard} came without its accumulators, and none are held"),
+                });
+            }
         }
     }
 

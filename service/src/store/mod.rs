@@ -441,7 +441,7 @@ pub trait Results: Send + Sync + 'static {
         result: &EncodedResult,
     ) -> StoreResult<Option<u64>>;
     /// The accumulators of the job's done groups, in batch and group order, read into `into`
-    /// one at a time.
+    /// one at a time; those of the groups `into` holds are not sent ([`Folding::holding`]).
     async fn partials(&self, id: &JobId, into: Folding) -> StoreResult<Folding>;
     /// The state a rare event's round `batch` starts from, its merge step's partial.
     async fn round(&self, id: &JobId, batch: u64) -> StoreResult<Rounds>;

@@ -7,8 +7,8 @@ use super::queue::drop_partials;
 use super::rows::{
     self, EncodedResult, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, SELECT_PARTIALS,
     SELECT_RESULT, bind_bins, collect_partials, count_from_sql, count_to_sql,
-    distribution_from_row, groups_from_row, insert_distributions, insert_lives, life_from_row,
-    result_from_row,
+    distribution_from_row, groups_from_row, held_mask, insert_distributions, insert_lives,
+    life_from_row, result_from_row,
 };
 use super::sql::Sql;
 use super::{DistributionRow, Fence, Operations, Results, StoreResult};
@@ -153,6 +153,7 @@ impl Results for SqlStore {
             Sql::new(SELECT_PARTIALS)
                 .bind(id.as_str())
                 .bind(count_to_sql(into.last()))
+                .bind(held_mask(&into))
                 .fetch(self.readers()),
             into,
         )

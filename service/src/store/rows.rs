@@ -431,10 +431,27 @@ impl EncodedGroups {
 }
 
 /// The query that lists a job's done groups' accumulators up to batch `$2`, in batch and group
-/// order, as rows `batch, grp, partial` (for [`collect_partials`]).
-pub(crate) const SELECT_PARTIALS: &str = "SELECT batch, grp, partial FROM shards \
+/// order, as rows `batch, grp, stored` (for [`collect_partials`]); `stored` is NULL for a group
+/// of batch `$2` that the merge holds: `$3` has a `1` at its place ([`held_mask`]).
+pub(crate) const SELECT_PARTIALS: &str = "SELECT batch, grp, \
+     CASE WHEN batch = $2 AND substr($3, CAST(grp AS INTEGER) + 1, 1) = '1' THEN NULL \
+     ELSE partial END AS stored FROM shards \
      WHERE job_id = $1 AND batch <= $2 AND grp >= 0 AND status = 'done' AND partial IS NOT NULL \
      ORDER BY batch, grp";
+
+/// The groups `into` holds as [`SELECT_PARTIALS`] takes them: `1` at each held group's place
+/// (its index from 0), `0` elsewhere.
+pub(crate) fn held_mask(into: &Folding) -> String {
+    let mut mask = String::new();
+    for group in into.held() {
+        let place = usize::try_from(group).unwrap_or(usize::MAX);
+        if place >= mask.len() {
+            mask.extend(std::iter::repeat_n('0', place - mask.len() + 1));
+        }
+        mask.replace_range(place..=place, "1");
+    }
+    mask
+}
 
 /// Stored bytes of done groups a merge reads before it decodes them, off the async threads, in
 /// one go: a hop to the blocking pool and back for each group cost more than decoding it (a
@@ -451,27 +468,31 @@ pub(crate) async fn collect_partials(
     use futures_util::TryStreamExt;
     let stored = rows
         .map_err(StoreError::from)
-        .and_then(|row| async move { Ok((shard_id_from_row(&row)?, row.bytes("partial")?)) });
+        .and_then(|row| async move { Ok((shard_id_from_row(&row)?, row.maybe_bytes("stored")?)) });
     fold_stored(stored, into, PARTIAL_BYTES_PER_DECODE).await
 }
 
+/// A group as [`SELECT_PARTIALS`] lists it: its stored bytes, or none for a group held.
+type Listed = (ShardId, Option<Vec<u8>>);
+
 /// Reads stored groups until `budget` bytes (or the last), then decodes and folds them into
 /// `into` in order, off the async threads, and drops them: a merge holds one batch's groups
-/// decoded and at most `budget` stored bytes (or one group's) beside them.
+/// decoded and at most `budget` stored bytes (or one group's) beside them. A group listed
+/// without its bytes is one `into` holds.
 async fn fold_stored(
-    stored: impl futures_util::Stream<Item = StoreResult<(ShardId, Vec<u8>)>>,
+    stored: impl futures_util::Stream<Item = StoreResult<Listed>>,
     mut into: Folding,
     budget: usize,
 ) -> StoreResult<Folding> {
     use futures_util::TryStreamExt;
     let mut stored = std::pin::pin!(stored);
-    let mut read: Vec<(ShardId, Vec<u8>)> = Vec::new();
+    let mut read: Vec<Listed> = Vec::new();
     let mut bytes = 0;
     loop {
         let next = stored.try_next().await?;
         let last = next.is_none();
         if let Some((shard, group)) = next {
-            bytes += group.len();
+            bytes += group.as_ref().map_or(0, Vec::len);
             read.push((shard, group));
         }
         if !read.is_empty() && (last || bytes >= budget) {
@@ -479,7 +500,10 @@ async fn fold_stored(
             bytes = 0;
             into = off_async_threads("group accumulators", true, move || {
                 for (shard, group) in decoding {
-                    into.push(shard, decode::<GroupStats>("group accumulators", &group)?);
+                    match group {
+                        Some(group) => into.push(shard, decode("group accumulators", &group)?),
+                        None => into.push_held(shard),
+                    }
                 }
                 Ok(into)
             })
@@ -1154,7 +1178,7 @@ mod tests {
 
     /// The groups of a precision target's first two batches, stored, in the order a merge reads
     /// them, with the job.
-    fn two_batches_stored() -> (Job, Vec<(ShardId, Vec<u8>)>) {
+    fn two_batches_stored() -> (Job, Vec<Listed>) {
         let job = Job::from_json(
             r#"{"devices": 40, "operations": 3, "seed": 8, "bin_operations": 1,
                 "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
@@ -1171,7 +1195,7 @@ mod tests {
                     let stats = run_group(job, batch, group, &Silent).unwrap();
                     (
                         ShardId::group(index, group),
-                        partial_to_sql(&stats).unwrap(),
+                        Some(partial_to_sql(&stats).unwrap()),
                     )
                 })
             })
@@ -1184,7 +1208,7 @@ mod tests {
     #[tokio::test]
     async fn groups_decoded_a_few_at_a_time_or_all_at_once_merge_the_same() {
         let (job, stored) = two_batches_stored();
-        let group_bytes = stored[0].1.len();
+        let group_bytes = stored[0].1.as_ref().unwrap().len();
         let mut merged = Vec::new();
         for budget in [1, 3 * group_bytes, usize::MAX] {
             let rows = futures_util::stream::iter(stored.clone().into_iter().map(Ok));
@@ -1199,11 +1223,75 @@ mod tests {
         assert!(merged.iter().all(|m| *m == merged[0]));
     }
 
+    /// Groups of the last batch held by the merge, listed without their bytes, merge as the
+    /// stored ones do, to the bit, whichever are held and whatever the bytes decoded at a time;
+    /// a group listed without its bytes that is not held fails the merge.
+    #[tokio::test]
+    async fn groups_held_merge_as_the_stored_ones() {
+        let (job, stored) = two_batches_stored();
+        let merged = |folded: Folding| {
+            let merge = crate::domain::shards::merge(folded, u64::MAX, 0.0, &Silent);
+            format!("{merge:?}")
+        };
+        let rows = futures_util::stream::iter(stored.clone().into_iter().map(Ok));
+        let read = fold_stored(rows, Folding::new(job.clone(), 1), usize::MAX);
+        let expected = merged(read.await.unwrap());
+        let last: Vec<usize> = (0..stored.len())
+            .filter(|&i| stored[i].0.batch == 1)
+            .collect();
+        assert!(last.len() >= 2, "{} groups in the last batch", last.len());
+        for (holds, budget) in [(&last[..1], 1), (&last[1..], usize::MAX), (&last[..], 1)] {
+            let mut rows = stored.clone();
+            let mut held = Vec::new();
+            for &i in holds {
+                rows[i].1 = None;
+                let group = rows[i].0.group.unwrap();
+                let batch = Batch::of(&job, 1).unwrap();
+                held.push((group, run_group(&job, batch, group, &Silent).unwrap()));
+            }
+            let into = Folding::new(job.clone(), 1).holding(held);
+            assert_eq!(
+                held_mask(&into).chars().filter(|&c| c == '1').count(),
+                holds.len()
+            );
+            let read = fold_stored(
+                futures_util::stream::iter(rows.into_iter().map(Ok)),
+                into,
+                budget,
+            );
+            assert_eq!(merged(read.await.unwrap()), expected, "held {holds:?}");
+        }
+        let mut rows = stored.clone();
+        rows[last[0]].1 = None;
+        let read = fold_stored(
+            futures_util::stream::iter(rows.into_iter().map(Ok)),
+            Folding::new(job.clone(), 1),
+            usize::MAX,
+        );
+        let merge = crate::domain::shards::merge(read.await.unwrap(), u64::MAX, 0.0, &Silent);
+        assert!(
+            matches!(
+                &merge,
+                Err(crate::domain::shards::MergeError::Incomplete(_))
+            ),
+            "{merge:?}"
+        );
+    }
+
+    #[test]
+    fn the_held_mask_marks_each_held_group_at_its_place() {
+        let (job, stored) = two_batches_stored();
+        let stats = |i: usize| decode::<GroupStats>("held", stored[i].1.as_ref().unwrap()).unwrap();
+        assert_eq!(held_mask(&Folding::new(job.clone(), 1)), "");
+        let into = Folding::new(job, 1).holding([(3, stats(0)), (0, stats(1))]);
+        assert_eq!(held_mask(&into), "1001");
+    }
+
     /// A group that does not decode fails the read, wherever it is among those decoded together.
     #[tokio::test]
     async fn a_corrupt_group_fails_the_read() {
         let (job, mut stored) = two_batches_stored();
-        stored[2].1.truncate(10);
+        stored[2].1.as_mut().unwrap().truncate(10);
         for budget in [1, usize::MAX] {
             let rows = futures_util::stream::iter(stored.clone().into_iter().map(Ok));
             let read = fold_stored(rows, Folding::new(job.clone(), 1), budget).await;
