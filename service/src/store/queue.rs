@@ -95,9 +95,11 @@ impl SqlStore {
     }
 
     /// A write transaction while the claim still holds its shard, the job's row locked against
-    /// ending; `None` (rolled back) once it does not.
+    /// ending; `None` (rolled back) once it does not. It is redoable ([`Self::begin_redoable`]):
+    /// what it writes is part of a Result whose job ends in a later commit that waits for the
+    /// disk and takes it along, and which its merge step's rerun writes again until then.
     pub(crate) async fn begin_holding(&self, fence: &Fence) -> StoreResult<Option<Tx>> {
-        let mut tx = self.begin().await?;
+        let mut tx = self.begin_redoable().await?;
         if holds(self.dialect(), &mut tx, fence).await? {
             return Ok(Some(tx));
         }
