@@ -8,15 +8,16 @@
 //! ([`crate::domain::shards::claims_ahead`]), and a group's store goes on while the next one
 //! computes (one store at a time per slot). A batch's merge step, claimable once its groups are
 //! done, puts them back in order (those this process ran from memory, [`HeldGroups`], the others
-//! read back) and stores the Result (or queues a precision target's next batch). A small job is its first merge step alone, which runs the whole job on the compute
-//! pool. A rare event's large rounds ([`crate::domain::rare`]) are batches too: any worker runs a
-//! round's tasks as it runs groups, and the round's merge step takes their outcomes. The shards a
-//! process held when it crashed or was killed (the one it ran, the one it claimed ahead, the group
-//! it was storing) keep their leases until they expire; then any worker on any machine claims
-//! them again and reruns those shards alone. Seeds are fixed at submission and each device has its
-//! own random stream, so the Result is identical to an uninterrupted run on one machine. On a
-//! graceful shutdown the running shard is stopped and handed back to the queue at once, with the
-//! one claimed ahead; a group being stored is stored first.
+//! read back) and stores the Result (or queues a precision target's next batch). A small job is its
+//! first merge step alone, which runs the whole job on the compute pool. A rare event's large
+//! rounds ([`crate::domain::rare`]) are batches too: any worker runs a round's tasks as it runs
+//! groups, and the round's merge step takes their outcomes. The shards a process held when it
+//! crashed or was killed (the one it ran, the one it claimed ahead, the group it was storing) keep
+//! their leases until they expire; then any worker on any machine claims them again and reruns
+//! those shards alone. Seeds are fixed at submission and each device has its own random stream, so
+//! the Result is identical to an uninterrupted run on one machine. On a graceful shutdown the
+//! running shard is stopped and handed back to the queue at once, with the one claimed ahead; a
+//! group being stored is stored first.
 
 use crate::domain::rare::{Rounds, is_round};
 use crate::domain::shards::{
