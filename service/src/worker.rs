@@ -80,11 +80,16 @@ pub struct Workers {
 /// they are varints): a 10^7-operation job's 32 groups are 2.5 MB stored.
 pub const HELD_GROUP_BYTES: usize = 32 << 20;
 
+/// How long an idle worker keeps groups it holds ([`HeldGroups`]) before it gives them up: a
+/// batch's merge is claimable as soon as its last group is stored, so a group held this long
+/// is one whose merge ran elsewhere.
+const HELD_GROUP_AGE: Duration = Duration::from_secs(60);
+
 /// Groups this process ran, held for their batch's merge step: a merge that runs here takes them
 /// ([`Folding::holding`]) instead of reading them back from the database and decoding them. A
 /// group's accumulators are the same bits whoever ran it and however often, so a group held here
 /// and stored by another attempt merge alike. The oldest go once their stored bytes pass the
-/// budget; a batch's go to its merge step, or age out if another process merges it.
+/// budget; a batch's go to its merge step, or age out once another process merged it.
 pub struct HeldGroups {
     budget: usize,
     held: Mutex<Held>,
@@ -101,6 +106,7 @@ struct HeldGroup {
     shard: ShardId,
     bytes: usize,
     stats: GroupStats,
+    since: Instant,
 }
 
 impl HeldGroups {
@@ -130,8 +136,24 @@ impl HeldGroups {
                 shard,
                 bytes,
                 stats,
+                since: Instant::now(),
             });
             while held.bytes > self.budget
+                && let Some(oldest) = held.groups.pop_front()
+            {
+                held.bytes -= oldest.bytes;
+                dropped.push(oldest);
+            }
+        }
+        drop(dropped); // freed outside the lock
+    }
+
+    /// Gives up the groups held longer than `age`.
+    fn expire(&self, age: Duration) {
+        let mut dropped = Vec::new();
+        {
+            let mut held = self.lock();
+            while held.groups.front().is_some_and(|g| g.since.elapsed() > age)
                 && let Some(oldest) = held.groups.pop_front()
             {
                 held.bytes -= oldest.bytes;
@@ -357,6 +379,7 @@ impl Workers {
                 // once the group still being stored (which may make its merge claimable) is in.
                 Ok(None) if claimed_before || storing.is_some() => finish(storing.take()).await,
                 Ok(None) => {
+                    self.held.expire(HELD_GROUP_AGE);
                     let mut shutdown = shutdown.clone();
                     tokio::select! {
                         () = self.wake.notified() => {}
@@ -978,8 +1001,8 @@ mod tests {
     use crate::telemetry::prometheus_builder;
     use bouncewear_model::montecarlo::Silent;
 
-    /// Held groups go to their own batch's merge, once; the oldest go beyond the budget, and a
-    /// group larger than the budget is not held.
+    /// Held groups go to their own batch's merge, once; the oldest go beyond the budget or past
+    /// the age, and a group larger than the budget is not held.
     #[test]
     fn held_groups_go_to_their_batchs_merge_and_the_oldest_beyond_the_budget() {
         let job = Job::from_json(r#"{"devices": 4, "operations": 2, "seed": 1}"#, || 0).unwrap();
@@ -1001,6 +1024,12 @@ mod tests {
         assert_eq!(groups(held.take(&a, 1)), [0]);
         assert_eq!(groups(held.take(&b, 0)), [1]);
         assert!(held.take(&b, 0).is_empty(), "taken once");
+        assert_eq!(held.lock().bytes, 0);
+        held.keep(&a, ShardId::group(2, 0), 40, stats());
+        held.expire(Duration::from_secs(60));
+        assert_eq!(held.lock().bytes, 40, "held less than the age");
+        held.expire(Duration::ZERO);
+        assert!(held.take(&a, 2).is_empty(), "given up past the age");
         assert_eq!(held.lock().bytes, 0);
     }
 
