@@ -248,14 +248,14 @@ pub async fn serve(config: ServeConfig) -> Result<(), StartupError> {
     application.run_until_stopped(wait_for_signal()).await
 }
 
-/// mimalloc asks for transparent huge pages on its arenas (`madvise`), and the kernel zeroes each 2
-/// MiB page whole when it is first touched, again every time mimalloc has given it back. A server's
-/// or worker's memory comes and goes with every group it encodes and every merge: with huge pages,
-/// zeroing (`clear_page_erms`) took 4-5 % of a worker node's CPU running 10^7-operation jobs on
-/// PostgreSQL; without, the merge step took 47 ms against 56 and the node 491 ms of CPU a job
-/// against 518 (docs/performance-history.md, 4 December 2026). A `run` keeps them: a short process
-/// touches its memory once, and huge pages spare it two thirds of its page faults. The same as
-/// `MIMALLOC_ALLOW_THP=0`, from here on.
+/// mimalloc asks for transparent huge pages on its arenas (`madvise`), and the kernel zeroes each
+/// page of 2 MiB whole when it is first touched, again every time mimalloc has given it back. A
+/// server's or worker's memory comes and goes with every group it encodes and every merge: with
+/// huge pages, zeroing (`clear_page_erms`) took 4-5 % of a worker node's CPU running
+/// 10^7-operation jobs on PostgreSQL; without, the merge step took 47 ms against 56 and the node
+/// 491 ms of CPU a job against 518 (docs/performance-history.md, 4 December 2026). A `run` keeps
+/// them: a short process touches its memory once, and huge pages spare it two thirds of its page
+/// faults. The same as `MIMALLOC_ALLOW_THP=0`, from here on.
 fn no_transparent_huge_pages() {
     #[cfg(target_os = "linux")]
     // SAFETY: PR_SET_THP_DISABLE only sets a flag of this process's memory; its arguments are

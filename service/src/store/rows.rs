@@ -440,11 +440,17 @@ pub(crate) const SELECT_PARTIALS: &str = "SELECT batch, grp, \
      ORDER BY batch, grp";
 
 /// The groups `into` holds as [`SELECT_PARTIALS`] takes them: `1` at each held group's place
-/// (its index from 0), `0` elsewhere.
+/// (its index from 0), `0` elsewhere. A batch has at most 32 groups; a held group beyond what
+/// the statement can mark is left out, and read back.
 pub(crate) fn held_mask(into: &Folding) -> String {
     let mut mask = String::new();
     for group in into.held() {
-        let place = usize::try_from(group).unwrap_or(usize::MAX);
+        let Some(place) = usize::try_from(group)
+            .ok()
+            .filter(|&p| p < i32::MAX as usize)
+        else {
+            continue;
+        };
         if place >= mask.len() {
             mask.extend(std::iter::repeat_n('0', place - mask.len() + 1));
         }
