@@ -21,8 +21,8 @@
 
 use crate::domain::rare::{Rounds, is_round};
 use crate::domain::shards::{
-    Folding, LARGE_MERGE_ACCUMULATORS, MergeError, Merged, RoundMerged, ShardId, ShardPlan,
-    claims_ahead, estimated, merge, merge_accumulators, merge_round, run_whole,
+    Folding, LARGE_MERGE_ACCUMULATORS, MergeError, Merged, RoundMerged, ShardPlan, claims_ahead,
+    estimated, merge, merge_accumulators, merge_round, run_whole,
 };
 use crate::domain::{JobId, UnixMs};
 use crate::store::{
@@ -103,7 +103,8 @@ struct Held {
 
 struct HeldGroup {
     job: JobId,
-    shard: ShardId,
+    batch: u64,
+    group: u64,
     bytes: usize,
     stats: GroupStats,
     since: Instant,
@@ -122,8 +123,9 @@ impl HeldGroups {
         self.held.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
-    /// Holds group `shard` of `job`, `bytes` once stored; drops the oldest beyond the budget.
-    fn keep(&self, job: &JobId, shard: ShardId, bytes: usize, stats: GroupStats) {
+    /// Holds `group` of `job`'s batch `batch`, `bytes` once stored; drops the oldest beyond the
+    /// budget.
+    fn keep(&self, job: &JobId, batch: u64, group: u64, bytes: usize, stats: GroupStats) {
         if bytes > self.budget {
             return;
         }
@@ -133,7 +135,8 @@ impl HeldGroups {
             held.bytes += bytes;
             held.groups.push_back(HeldGroup {
                 job: job.clone(),
-                shard,
+                batch,
+                group,
                 bytes,
                 stats,
                 since: Instant::now(),
@@ -168,13 +171,10 @@ impl HeldGroups {
         let mut held = self.lock();
         let (taken, kept): (VecDeque<_>, VecDeque<_>) = std::mem::take(&mut held.groups)
             .into_iter()
-            .partition(|g| g.job == *job && g.shard.batch == batch && g.shard.group.is_some());
+            .partition(|g| g.job == *job && g.batch == batch);
         held.groups = kept;
         held.bytes -= taken.iter().map(|g| g.bytes).sum::<usize>();
-        taken
-            .into_iter()
-            .filter_map(|g| Some((g.shard.group?, g.stats)))
-            .collect()
+        taken.into_iter().map(|g| (g.group, g.stats)).collect()
     }
 }
 
@@ -495,9 +495,8 @@ impl Workers {
                 Ok((stats, Ok(partial))) => {
                     // Held before it is written, so that the merge this store makes claimable
                     // finds it: the same bits as any attempt's.
-                    workers
-                        .held
-                        .keep(&fence.job, fence.shard, partial.len(), stats);
+                    let (batch, bytes) = (fence.shard.batch, partial.len());
+                    workers.held.keep(&fence.job, batch, group, bytes, stats);
                     partial
                 }
                 Ok((_, Err(error))) => {
@@ -1013,10 +1012,10 @@ mod tests {
         };
         let held = HeldGroups::new(100);
         let (a, b) = (JobId::from("a"), JobId::from("b"));
-        held.keep(&a, ShardId::group(0, 0), 40, stats());
-        held.keep(&a, ShardId::group(1, 0), 40, stats());
-        held.keep(&b, ShardId::group(0, 1), 40, stats());
-        held.keep(&b, ShardId::group(0, 2), 101, stats());
+        held.keep(&a, 0, 0, 40, stats());
+        held.keep(&a, 1, 0, 40, stats());
+        held.keep(&b, 0, 1, 40, stats());
+        held.keep(&b, 0, 2, 101, stats());
         assert!(
             held.take(&a, 0).is_empty(),
             "the oldest went past the budget"
@@ -1025,7 +1024,7 @@ mod tests {
         assert_eq!(groups(held.take(&b, 0)), [1]);
         assert!(held.take(&b, 0).is_empty(), "taken once");
         assert_eq!(held.lock().bytes, 0);
-        held.keep(&a, ShardId::group(2, 0), 40, stats());
+        held.keep(&a, 2, 0, 40, stats());
         held.expire(Duration::from_secs(60));
         assert_eq!(held.lock().bytes, 40, "held less than the age");
         held.expire(Duration::ZERO);

@@ -10,7 +10,7 @@ use crate::domain::{
     Attempt, Folding, IdempotencyKey, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition,
     ScheduleId, ShardId, ShardPlan, UnixMs,
 };
-use bouncewear_model::montecarlo::engine::GroupStats;
+use bouncewear_model::montecarlo::engine::{self, GroupStats};
 use bouncewear_model::montecarlo::{DeviceLife, JobResult, JobSpec, Metric, RunGroups};
 use bouncewear_model::stats::Accumulator;
 use sqlx::migrate::Migrator;
@@ -440,23 +440,14 @@ pub(crate) const SELECT_PARTIALS: &str = "SELECT batch, grp, \
      ORDER BY batch, grp";
 
 /// The groups `into` holds as [`SELECT_PARTIALS`] takes them: `1` at each held group's place
-/// (its index from 0), `0` elsewhere. A batch has at most 32 groups; a held group beyond what
-/// the statement can mark is left out, and read back.
+/// (its index from 0) up to the last held, `0` elsewhere. A batch has at most
+/// [`engine::GROUPS`] groups.
 pub(crate) fn held_mask(into: &Folding) -> String {
-    let mut mask = String::new();
-    for group in into.held() {
-        let Some(place) = usize::try_from(group)
-            .ok()
-            .filter(|&p| p < i32::MAX as usize)
-        else {
-            continue;
-        };
-        if place >= mask.len() {
-            mask.extend(std::iter::repeat_n('0', place - mask.len() + 1));
-        }
-        mask.replace_range(place..=place, "1");
-    }
-    mask
+    let held: Vec<u64> = into.held().collect();
+    let mask: String = (0..engine::GROUPS)
+        .map(|group| if held.contains(&group) { '1' } else { '0' })
+        .collect();
+    mask.trim_end_matches('0').to_owned()
 }
 
 /// Stored bytes of done groups a merge reads before it decodes them, off the async threads, in
