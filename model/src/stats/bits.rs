@@ -50,8 +50,19 @@ pub mod list {
     use serde::{Deserialize, Deserializer, Serializer};
 
     pub fn serialize<S: Serializer>(values: &[f64], serializer: S) -> Result<S::Ok, S::Error> {
+        serialize_joined(values, &[], serializer)
+    }
+
+    /// The list of `first`'s values then `second`'s, written as [`serialize`] writes it, without
+    /// gathering it into one.
+    pub fn serialize_joined<S: Serializer>(
+        first: &[f64],
+        second: &[f64],
+        serializer: S,
+    ) -> Result<S::Ok, S::Error> {
+        let values = first.iter().chain(second);
         if serializer.is_human_readable() {
-            serializer.collect_seq(values.iter().map(|value| value.to_bits()))
+            serializer.collect_seq(values.map(|value| value.to_bits()))
         } else {
             serializer.collect_seq(values)
         }

@@ -72,13 +72,26 @@ struct Stored {
     kept: Vec<f64>,
 }
 
-/// Written as [`Stored`] from the list itself: serde's `into` would clone the list once more
-/// before [`Tails::values`] does (a small job serialises 3,680 of them).
+/// [`Stored`] as [`Tails`] writes it: the same fields and bytes, its list written from the bottom's
+/// and the top's slots where they are. Gathered into a vector first ([`Tails::values`]), the copy
+/// took about a sixth of the encoding of a small job's 3,680 accumulators.
+#[derive(serde::Serialize)]
+#[serde(rename = "Stored")]
+struct StoredEnds<'a> {
+    keep: u32,
+    #[serde(serialize_with = "joined")]
+    kept: (&'a [f64], &'a [f64]),
+}
+
+fn joined<S: serde::Serializer>(ends: &(&[f64], &[f64]), serializer: S) -> Result<S::Ok, S::Error> {
+    super::bits::list::serialize_joined(ends.0, ends.1, serializer)
+}
+
 impl serde::Serialize for Tails {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        Stored {
+        StoredEnds {
             keep: self.keep,
-            kept: self.values(),
+            kept: self.kept(),
         }
         .serialize(serializer)
     }
@@ -478,6 +491,25 @@ mod tests {
             prop_assert_eq!(state(&laid), state(&kept(&values, keep)));
             let read: Tails = Stored { keep, kept: values.clone() }.into();
             prop_assert_eq!(state(&read), state(&laid));
+        }
+
+        /// A list writes what its values gathered into [`Stored`] write, byte for byte, in the
+        /// store's binary format and in JSON: empty, filling, full and beyond.
+        #[test]
+        fn a_list_is_written_as_its_values_gathered(
+            values in prop::collection::vec(-3.0..3.0f64, 0..130),
+            keep in 1..65u32,
+        ) {
+            let tails = kept(&values, keep);
+            let gathered = Stored { keep, kept: tails.values() };
+            prop_assert_eq!(
+                postcard::to_stdvec(&tails).unwrap(),
+                postcard::to_stdvec(&gathered).unwrap()
+            );
+            prop_assert_eq!(
+                serde_json::to_string(&tails).unwrap(),
+                serde_json::to_string(&gathered).unwrap()
+            );
         }
 
         /// However the values arrive (one by one, in lanes, split and merged, serialised), the list
