@@ -73,8 +73,8 @@ struct Stored {
 }
 
 /// [`Stored`] as [`Tails`] writes it: the same fields and bytes, its list written from the bottom's
-/// and the top's slots where they are. Gathered into a vector first ([`Tails::values`]), the copy
-/// took about a sixth of the encoding of a small job's 3,680 accumulators.
+/// and the top's slots where they are, not gathered into a vector first ([`Tails::values`]): a
+/// copy and an allocation for each of a small job's 3,680 accumulators.
 #[derive(serde::Serialize)]
 #[serde(rename = "Stored")]
 struct StoredEnds<'a> {

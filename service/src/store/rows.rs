@@ -613,12 +613,13 @@ const ROWS_PER_ENCODING: usize = 256;
 
 /// The thread that encodes half of a Result's rows beside a compute pool of one thread
 /// ([`EncodedResult::new`]): one for the process, kept, so that its allocations reuse its pages.
-static ENCODING: LazyLock<rayon::ThreadPool> = LazyLock::new(|| {
+/// `None` if the system gave no thread: the compute thread encodes every row then.
+static ENCODING: LazyLock<Option<rayon::ThreadPool>> = LazyLock::new(|| {
     rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .thread_name(|_| "bouncewear-encode".to_owned())
         .build()
-        .expect("a thread to encode Results")
+        .ok()
 });
 
 /// One `distributions` row, ready to bind ([`insert_distributions`]).
@@ -715,13 +716,14 @@ impl EncodedResult {
         let mut rows = Vec::new();
         while bins.peek().is_some() {
             let mut chunk: Vec<_> = bins.by_ref().take(ROWS_PER_ENCODING).collect();
-            if rayon::current_num_threads() > 1 || chunk.len() < 2 {
+            let alone = rayon::current_num_threads() == 1 && chunk.len() > 1;
+            let Some(pool) = alone.then(|| ENCODING.as_ref()).flatten() else {
                 rows.extend(encode_rows(shared, chunk)?);
                 continue;
-            }
+            };
             let second = chunk.split_off(chunk.len() / 2);
             let (mut first, mut beside) = (Ok(Vec::new()), Ok(Vec::new()));
-            ENCODING.in_place_scope(|scope| {
+            pool.in_place_scope(|scope| {
                 scope.spawn(|_| beside = encode_rows(shared, second));
                 first = encode_rows(shared, chunk);
             });
