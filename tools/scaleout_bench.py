@@ -12,13 +12,14 @@ pg_ctl in a temporary directory, as the `postgres` user when run as root) and re
 Each worker process runs one shard at a time on one compute thread (`worker --workers 1
 --compute-threads 1`), so N processes use N cores: on a 2-core machine expect a plateau at 2.
 Throughput is operations over the wall time from submission to the stored Result, seen by a request
-that waits for the job's end (`?wait_s=`). The workers do a little more than `run`: their groups
-keep each bin's extreme values for queries after the run, which `run` leaves out (its Result reads
-none; about 6 % of `run --threads 1` on this job, docs/performance.md). Each round runs `run
---threads 1` and `--threads 2` and then every worker count in turn, with `run --threads 1` again
-after each, and each wall is compared with the mean of the `run --threads 1` just before and just
-after it (two workers with one through those ratios): this machine's speed drifts by a quarter
-within minutes, so figures from different moments do not compare. The per-shard overhead comes from
+that waits for the job's end (`?wait_s=`), for the first job new processes run, the next, and the
+median of the third to the sixth (a running service's). The workers do a little more than `run`:
+their groups keep each bin's extreme values for queries after the run, which `run` leaves out (its
+Result reads none; about 6 % of `run --threads 1` on this job, docs/performance.md). Each round
+runs `run --threads 1` and `--threads 2` and then every worker count in turn, with `run --threads
+1` again after each, and each wall is compared with the mean of the `run --threads 1` just before
+and just after it (two workers with one through those ratios): this machine's speed drifts by a
+quarter within minutes, so figures from different moments do not compare. The per-shard overhead comes from
 the workers' own clocks, the `bouncewear_shard_step_seconds` histogram of a `serve --workers 1` node
 running the same job twice: `claim` (finding and leasing a shard), `store` (encoding a group's
 accumulators and writing them in the transaction that counts it done) and `merge` (reading every
@@ -162,21 +163,30 @@ def run_baseline(binary, job_file, threads):
     return wall, result_statistics(result)
 
 
+# Jobs each worker count runs in a round, one after another: the first, the next and, from the
+# third on, a running service's (their median).
+JOBS_PER_ROUND = 6
+
+
 def run_workers(binary, database, count):
-    """The job twice on an API node and `count` worker processes, new on a new database: the first
-    time's wall seconds, the second's (warm: processes, connections and tables as a running
-    service has them), and the Results' statistics."""
+    """The job JOBS_PER_ROUND times on an API node and `count` worker processes, new on a new
+    database: the first time's wall seconds, the second's (warm: processes, connections and tables
+    as a running service has them), the median of the rest (steady: the processes' memory and
+    caches as they stay once they have run a few jobs), and the Results' statistics."""
     api, base = serve(binary, database, 0)
     workers = [start(binary, ["worker", "--database", database, "--workers", "1", "--compute-threads", "1"],
                      "bouncewear worker running")[0] for _ in range(count)]
+    walls, results = [], set()
     try:
-        first, result, _ = run_job(base, JOB)
-        warm, again, _ = run_job(base, JOB)
+        for _ in range(JOBS_PER_ROUND):
+            wall, result, _ = run_job(base, JOB)
+            walls.append(wall)
+            results.add(result_statistics(result))
     finally:
         for process in [*workers, api]:
             process.terminate()
             process.wait()
-    return first, warm, {result_statistics(result), result_statistics(again)}
+    return walls[0], walls[1], statistics.median(walls[2:]), results
 
 
 def main():
@@ -192,7 +202,8 @@ def main():
     new_database = (lambda name: cluster.database(name)) if cluster else (lambda name: args.database)
     operations = JOB["devices"] * JOB["operations"]
     counts = [int(n) for n in args.workers.split(",")]
-    configurations = ["run 1", "run 2", *[f"{kind} {count}" for count in counts for kind in ("first", "warm")]]
+    kinds = ("first", "warm", "steady")
+    configurations = ["run 1", "run 2", *[f"{kind} {count}" for count in counts for kind in kinds]]
     walls = {name: [] for name in configurations}
     # Each wall's `run --threads 1`: the mean of the one just before it and the one just after.
     references = {name: [] for name in configurations}
@@ -215,9 +226,9 @@ def main():
                 references["run 2"].append((before + after) / 2)
                 for count in counts:
                     database = new_database(f"scaleout_{round_}_{count}")
-                    first, warm, result = run_workers(args.bin, database, count)
+                    first, warm, steady, result = run_workers(args.bin, database, count)
                     before, after = after, baseline(1)
-                    for kind, wall in (("first", first), ("warm", warm)):
+                    for kind, wall in zip(kinds, (first, warm, steady)):
                         walls[f"{kind} {count}"].append(wall)
                         references[f"{kind} {count}"].append((before + after) / 2)
                     results |= result
@@ -240,18 +251,20 @@ def main():
         kind, number = name.split()
         label = (f"`bouncewear run --threads {number}` (no database)" if kind == "run"
                  else f"{number} worker process{'es' if int(number) > 1 else ''}, "
-                 + ("first job (new processes and database)" if kind == "first" else "next job"))
+                 + {"first": "first job (new processes and database)", "warm": "next job",
+                    "steady": f"jobs 3 to {JOBS_PER_ROUND} (median)"}[kind])
         ratios = sorted(wall / base for wall, base in zip(walls[name], references[name]))
         print(f"| {label} | {min(walls[name]):.2f} | {statistics.median(walls[name]):.2f} | "
               f"{operations / statistics.median(walls[name]) / 1e6:.2f} M | "
               f"{statistics.median(ratios):.2f}x ({ratios[0]:.2f}..{ratios[-1]:.2f}) |")
     if 1 in counts and 2 in counts:
-        for kind in ("first", "warm"):
+        for kind in kinds:
             relative = {count: [wall / base for wall, base in zip(walls[f"{kind} {count}"],
                                                                   references[f"{kind} {count}"])]
                         for count in (1, 2)}
             ratios = sorted(two / one for two, one in zip(relative[2], relative[1]))
-            print(f"\nTwo workers over one, {'first' if kind == 'first' else 'next'} job, round by round: "
+            what = {"first": "first job", "warm": "next job", "steady": f"jobs 3 to {JOBS_PER_ROUND}"}[kind]
+            print(f"\nTwo workers over one, {what}, round by round: "
                   f"median {statistics.median(ratios):.2f}x ({ratios[0]:.2f}..{ratios[-1]:.2f})")
     print(f"\nResults identical to `run` for every worker count: {len(results) == 1}\n")
     print("| shard step | mean (ms) | count |")
