@@ -618,6 +618,8 @@ static ENCODING: LazyLock<Option<rayon::ThreadPool>> = LazyLock::new(|| {
     rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .thread_name(|_| "bouncewear-encode".to_owned())
+        // A panic drops the job's sender: its caller reads an error, the process goes on.
+        .panic_handler(|_| ())
         .build()
         .ok()
 });
@@ -654,13 +656,9 @@ impl EncodedRow {
         }
     }
 
-    /// The row of `metric`'s bin `bin` of `result` (bin 0 of a device metric), with its groups.
-    fn new(
-        result: &JobResult,
-        metric: Metric,
-        bin: u64,
-        groups: &[Accumulator],
-    ) -> StoreResult<Self> {
+    /// The row of `metric`'s bin `bin` of `result` (bin 0 of a device metric), with its groups
+    /// [`encode`]d.
+    fn new(result: &JobResult, metric: Metric, bin: u64, groups: Vec<u8>) -> StoreResult<Self> {
         let name = metric.name();
         let missing = || corrupt(GROUPS, format!("the Result has no {name} bin {bin}"));
         let (kind, op_start, op_end, summary) = match metric {
@@ -698,7 +696,7 @@ impl EncodedRow {
             ],
             exceedance: summary.exceedance.as_ref().map(|e| e.probability),
             summary: to_json("summary", summary)?,
-            groups: encode(GROUPS, &groups)?,
+            groups,
         })
     }
 }
@@ -707,9 +705,9 @@ impl EncodedResult {
     /// Encodes `result` and the final `groups` of each of its (metric, bin), [`ROWS_PER_ENCODING`]
     /// rows at a time in parallel on the current rayon pool, each bin's groups dropped once
     /// encoded: the groups are never held both decoded and encoded. On a pool of one thread (a
-    /// worker's `--compute-threads 1`) a second thread encodes half of each chunk, as a group's
-    /// store encodes beside the compute thread: the scale-out job's 115 rows took 6.6-6.9 ms on
-    /// one thread, 3.5-3.8 on two. `result` is as it was after.
+    /// worker's `--compute-threads 1`) a second thread encodes the groups of half of each chunk,
+    /// as a group's store encodes beside the compute thread: the scale-out job's 115 rows took
+    /// 6.6-6.9 ms on one thread, 3.5-3.8 on two. `result` is as it was after.
     pub fn new(result: &mut JobResult, groups: RunGroups) -> StoreResult<Self> {
         let shared = &*result;
         let mut bins = groups.into_bins().peekable();
@@ -721,14 +719,27 @@ impl EncodedResult {
                 rows.extend(encode_rows(shared, chunk)?);
                 continue;
             };
+            // The second half's groups encoded on the encoding thread, waited for on a channel:
+            // a rayon scope would have this thread run other compute jobs while it waits.
             let second = chunk.split_off(chunk.len() / 2);
-            let (mut first, mut beside) = (Ok(Vec::new()), Ok(Vec::new()));
-            pool.in_place_scope(|scope| {
-                scope.spawn(|_| beside = encode_rows(shared, second));
-                first = encode_rows(shared, chunk);
+            let (sender, receiver) = std::sync::mpsc::sync_channel(1);
+            pool.spawn(move || {
+                let encoded: StoreResult<Vec<_>> = second
+                    .into_iter()
+                    .map(|(metric, bin, groups)| Ok((metric, bin, encode(GROUPS, &groups)?)))
+                    .collect();
+                let _ = sender.send(encoded);
             });
-            rows.extend(first?);
-            rows.extend(beside?);
+            rows.extend(encode_rows(shared, chunk)?);
+            let beside = receiver.recv().map_err(|_| {
+                corrupt(
+                    GROUPS,
+                    "the encoding thread stopped before its rows were done",
+                )
+            })??;
+            for (metric, bin, groups) in beside {
+                rows.push(EncodedRow::new(shared, metric, bin, groups)?);
+            }
         }
         let operations = std::mem::take(&mut result.operations);
         let devices = std::mem::take(&mut result.devices);
@@ -767,7 +778,10 @@ fn encode_rows(
 ) -> StoreResult<Vec<EncodedRow>> {
     use rayon::prelude::*;
     bins.into_par_iter()
-        .map(|(metric, bin, groups)| EncodedRow::new(result, metric, bin, &groups))
+        .map(|(metric, bin, groups)| {
+            let groups = encode(GROUPS, &groups)?;
+            EncodedRow::new(result, metric, bin, groups)
+        })
         .collect()
 }
 
