@@ -20,7 +20,8 @@ pub struct WorkerConfig {
     /// with `serve`, 0 serves the API without running jobs.
     #[arg(long, env = "BOUNCEWEAR_WORKERS")]
     pub workers: Option<usize>,
-    /// Compute threads (default: one per core). Compute never runs on the async runtime.
+    /// Compute threads (default: one per core). Compute never runs on the async runtime. With one,
+    /// a merge encodes half its Result's rows on a second thread, as stores encode beside it.
     #[arg(long, env = "BOUNCEWEAR_COMPUTE_THREADS")]
     pub compute_threads: Option<usize>,
     /// How long a claimed job stays leased without a heartbeat before another worker may take it.
