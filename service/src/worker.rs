@@ -101,6 +101,21 @@ struct Held {
     groups: VecDeque<HeldGroup>,
 }
 
+impl Held {
+    /// Takes out the oldest groups while `beyond` (the bytes held, the oldest group) holds.
+    fn pop_oldest_while(&mut self, beyond: impl Fn(usize, &HeldGroup) -> bool) -> Vec<HeldGroup> {
+        let mut popped = Vec::new();
+        while let Some(oldest) = self.groups.front()
+            && beyond(self.bytes, oldest)
+            && let Some(oldest) = self.groups.pop_front()
+        {
+            self.bytes -= oldest.bytes;
+            popped.push(oldest);
+        }
+        popped
+    }
+}
+
 struct HeldGroup {
     job: JobId,
     batch: u64,
@@ -129,8 +144,7 @@ impl HeldGroups {
         if bytes > self.budget {
             return;
         }
-        let mut dropped = Vec::new();
-        {
+        let dropped = {
             let mut held = self.lock();
             held.bytes += bytes;
             held.groups.push_back(HeldGroup {
@@ -141,28 +155,16 @@ impl HeldGroups {
                 stats,
                 since: Instant::now(),
             });
-            while held.bytes > self.budget
-                && let Some(oldest) = held.groups.pop_front()
-            {
-                held.bytes -= oldest.bytes;
-                dropped.push(oldest);
-            }
-        }
+            held.pop_oldest_while(|bytes, _| bytes > self.budget)
+        };
         drop(dropped); // freed outside the lock
     }
 
     /// Gives up the groups held longer than `age`.
     fn expire(&self, age: Duration) {
-        let mut dropped = Vec::new();
-        {
-            let mut held = self.lock();
-            while held.groups.front().is_some_and(|g| g.since.elapsed() > age)
-                && let Some(oldest) = held.groups.pop_front()
-            {
-                held.bytes -= oldest.bytes;
-                dropped.push(oldest);
-            }
-        }
+        let dropped = self
+            .lock()
+            .pop_oldest_while(|_, oldest| oldest.since.elapsed() > age);
         drop(dropped); // freed outside the lock
     }
 
