@@ -9,9 +9,9 @@
 //!   `erfc` and the hazard `phi / (1 - Phi)`, both finite in the far tail.
 //! - Gamma (`shape` k, `scale` theta): Nelder-Mead on `(ln k, ln theta)` from the failures'
 //!   moments, restarted at its own optimum until it stays, then Newton's steps in `(ln k, ln
-//!   mean)` ([`newton_polish`]) for the parameters on a flat ridge; the survival terms are
+//!   mean)` (`newton_polish`) for the parameters on a flat ridge; the survival terms are
 //!   `ln Q(k, t / theta)`, the regularised upper incomplete gamma function in logs
-//!   ([`super::weibayes::regularized_gamma`]).
+//!   (`weibayes::regularized_gamma`).
 //! - Weibull: the fit of [`super::fit_weibull_lives`], with the log-likelihood it reports.
 //! - Three-parameter Weibull (`beta`, `eta` and the failure-free life `gamma`): the profile
 //!   likelihood's maximum in `gamma` ([`super::location`]); absent where the likelihood has no

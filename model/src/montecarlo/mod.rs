@@ -430,7 +430,7 @@ fn round_quantile(value: &mut f64, ci95: &mut [f64; 2]) {
     *ci95 = [ci95[0].floor(), ci95[1].ceil()];
 }
 
-/// [`query`] of one (metric, bin over `operations`) after the run, from the groups
+/// [`query`](fn@query) of one (metric, bin over `operations`) after the run, from the groups
 /// [`RunGroups::of`] gave: its quantiles rounded for a whole-number metric, as in the Result's
 /// summaries, so that a standard level answers the summary's value and interval.
 pub fn query_metric(

@@ -19,7 +19,7 @@ pub const HISTOGRAM_BINS: usize = 20;
 pub struct QuantileSummary {
     pub value: f64,
     pub ci95: [f64; 2],
-    /// Present when the data cannot bound the level ([`unsupported`]): why, and what would. The
+    /// Present when the data cannot bound the level (`unsupported`): why, and what would. The
     /// value is then the sample's, and the interval claims more than the data hold.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
@@ -106,7 +106,7 @@ pub struct Summary {
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub exceedance: Option<Exceedance>,
     /// Present only for a metric with a list of thresholds: one each, in the job's order, as a
-    /// query after the run ([`super::query`]) answers them.
+    /// query after the run ([`super::query`](mod@super::query)) answers them.
     #[serde(skip_serializing_if = "Vec::is_empty", default)]
     pub exceedances: Vec<ThresholdExceedance>,
 }
@@ -202,7 +202,7 @@ pub fn summarize<A: Borrow<Accumulator>>(groups: &[A], per_device: u64) -> Summa
 
 /// The groups of one (metric, bin) merged, in slice order, with the non-empty ones kept apart for
 /// the intervals: the one home of the estimators [`summarize`] documents, which the after-run
-/// query ([`super::query`]) uses too.
+/// query ([`super::query`](mod@super::query)) uses too.
 pub(super) struct Merged<'a> {
     /// Every value, for the point estimates.
     pub(super) all: Accumulator,

@@ -1,6 +1,6 @@
 //! Thresholds of a metric and the share of values beyond them: counted exactly as a job runs
 //! ([`ThresholdCount`], kept by each [`Accumulator`](super::Accumulator)), or bounded after the
-//! run by the sketch's buckets ([`Beyond`]).
+//! run by the sketch's buckets (`Beyond`).
 
 use serde::{Deserialize, Serialize};
 

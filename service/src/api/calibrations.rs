@@ -28,7 +28,7 @@ pub fn router() -> OpenApiRouter<AppState> {
 /// Places for fits, one per core: fits run off the async runtime, each holding its place until
 /// it ends, and the rest wait their turn within the request timeout. A fit is bounded (at most
 /// 1000 observations and 8 parameters) but may take minutes along wear curves: at the request
-/// timeout (503) it is stopped ([`StopOnDrop`]) and gives its place back within about one
+/// timeout (503) it is stopped (`StopOnDrop`) and gives its place back within about one
 /// evaluation, never before, so that clients who let requests time out can neither pile up fits
 /// beyond the cores nor keep them busy past the timeout. (A client that closes its connection
 /// is not noticed before the timeout: hyper does not read a connection while it answers.)

@@ -520,7 +520,7 @@ const GZIP: &[u8; 2] = &[0x1f, 0x8b];
 /// before it is allocated.
 const LZ4_MAX_RATIO: usize = 255;
 
-/// Accumulators as stored: [`BINARY`], then their postcard encoding (serde's own shape of them,
+/// Accumulators as stored: `BINARY`, then their postcard encoding (serde's own shape of them,
 /// every float its eight bytes, so exact, counts as varints) LZ4-compressed, its length first.
 /// Against the gzipped JSON of before (every float its bits in decimal, written through deflate):
 /// a 100 x 100 job's 115 rows took 12 ms of the server's 50 ms of CPU to encode that way, and
@@ -598,7 +598,7 @@ pub(crate) const LIFE_ROW_BYTES: u64 = 24;
 /// bin of every operation metric and one per device metric (each with its summary's JSON and its
 /// groups' accumulators [`encode`]d), the Result's JSON without those summaries (its
 /// `operations` and `devices` empty: each summary is stored once, in its row, and
-/// [`result_from_row`] puts them back), and the listed devices' lives. Made on the compute pool,
+/// `result_from_row` puts them back), and the listed devices' lives. Made on the compute pool,
 /// the rows in parallel ([`EncodedResult::new`]), so that the database's transactions bind bytes
 /// and no async thread serialises.
 pub struct EncodedResult {
@@ -702,7 +702,7 @@ impl EncodedRow {
 }
 
 impl EncodedResult {
-    /// Encodes `result` and the final `groups` of each of its (metric, bin), [`ROWS_PER_ENCODING`]
+    /// Encodes `result` and the final `groups` of each of its (metric, bin), `ROWS_PER_ENCODING`
     /// rows at a time in parallel on the current rayon pool, each bin's groups dropped once
     /// encoded: the groups are never held both decoded and encoded. On a pool of one thread (a
     /// worker's `--compute-threads 1`) a second thread encodes the groups of half of each chunk,

@@ -1,7 +1,7 @@
 //! One device of a job as a function of independent standard normals: what the rare-event
 //! methods (`montecarlo::rare`) explore. Each scattered input of the device, and of each operation
 //! up to the one read, is one coordinate; it becomes the parameter's value through the same
-//! marginal, truncation and copula as the job's own draws ([`Entries::at_normals`]), and the
+//! marginal, truncation and copula as the job's own draws (`Entries::at_normals`), and the
 //! device runs through the engine's own evaluation and wear (the scalar kernel), so the job
 //! without its rare event is this function's crude Monte Carlo twin.
 

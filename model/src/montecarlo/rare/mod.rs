@@ -361,7 +361,7 @@ impl Search<'_> {
 /// Checks before a job is accepted that its rare event asks a rare event: the device with median
 /// inputs is not already beyond the threshold (the event would have probability near one half or
 /// more), and some inputs within [`search_radius`] standard deviations of the median reach it
-/// ([`highest_within`], when it costs at most [`SEARCH_OPERATIONS`] operations). Each refusal
+/// (`highest_within`, when it costs at most [`SEARCH_OPERATIONS`] operations). Each refusal
 /// names the threshold's field.
 pub fn check_threshold(job: &Job, at: &Pointer) -> Result<(), crate::error::InvalidInput> {
     let Some(rare) = job.rare_event() else {
