@@ -239,22 +239,27 @@ impl Tails {
             self.values.resize(k, f64::INFINITY);
             self.values.resize(2 * k, f64::NEG_INFINITY);
         }
-        let bottom_full = self.seen >= k;
-        self.seen = (self.seen + 1).min(2 * k);
+        let seen = self.seen;
+        let bottom_full = seen >= k;
+        self.seen = (seen + 1).min(2 * k);
         let (bottom, top) = self.values.split_at_mut(k);
+        // An end that is not full takes a value into its values and the padding slot next to
+        // them, the rest of its padding untouched: the slots an insertion would leave as they are.
+        // A small group's accumulators (a few dozen values each) are filled and never full.
+        let top_from = k.saturating_sub(seen.saturating_sub(k) + 1);
         // The first `keep` values go to the bottom whatever they are: an infinity among them,
         // which no gate tells from the padding, is kept as a value (a list read from the store
         // may hold one; the engine's values are finite).
         if !bottom_full || x < self.low {
             let out = bottom[k - 1];
-            enter_bottom(bottom, x);
+            enter_bottom(&mut bottom[..(seen + 1).min(k)], x);
             self.low = bottom[k - 1];
             if bottom_full && out > self.high {
-                enter_top(top, out);
+                enter_top(&mut top[top_from..], out);
                 self.high = top[0];
             }
         } else if x > self.high {
-            enter_top(top, x);
+            enter_top(&mut top[top_from..], x);
             self.high = top[0];
         }
     }
