@@ -1,7 +1,7 @@
 //! Two succeeded jobs compared, design `a` against design `b` (docs/contract.md "Comparing
 //! designs"): per bin of operations both share, any statistic of a metric with the difference and
-//! ratio and their intervals ([`crate::stats::difference`](mod@crate::stats::difference)); and with failure criteria, the
-//! B-lives and the probability that a device of `a` outlasts one of `b`
+//! ratio and their intervals ([`crate::stats::difference`](mod@crate::stats::difference)); and with
+//! failure criteria, the B-lives and the probability that a device of `a` outlasts one of `b`
 //! ([`crate::life::compare`]). The two jobs are independent samples (their own devices, their own
 //! seeds), which is what the intervals assume.
 

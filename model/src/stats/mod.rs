@@ -24,7 +24,7 @@
 //! | [`sobol`] | Sobol' first-order and total indices by pick-freeze, with delta-method intervals |
 //! | [`tails`] | the most extreme values of each accumulator, kept exactly |
 //! | [`threshold`] | thresholds counted exactly as values arrive, or bounded by the buckets after |
-//! | [`query`](mod@query) | any quantile and any threshold after the run, from the same groups and estimators |
+//! | [`query`](mod@query) | any quantile or threshold after the run, from the same groups |
 //!
 //! Accumulators serialise exactly, every float by its bits (infinities included), so a group's
 //! state can cross machines and merge into the same numbers.

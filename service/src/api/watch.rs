@@ -18,8 +18,8 @@ use tokio::sync::{Notify, Semaphore, broadcast, watch};
 /// (SQLite), how often the watcher looks, unless a job of this process ended sooner.
 const LOOK_INTERVAL: Duration = Duration::from_millis(200);
 /// Without announcements, the shortest time between two looks when jobs of this process end
-/// ([`JobQueue::ends`](crate::store::JobQueue::ends)): a stream hears of an end at once, and many ends cost at most 50 looks a
-/// second.
+/// ([`JobQueue::ends`](crate::store::JobQueue::ends)): a stream hears of an end at once, and many
+/// ends cost at most 50 looks a second.
 const END_LOOK_INTERVAL: Duration = Duration::from_millis(20);
 /// With announcements (PostgreSQL), the watcher looks when a job changed, and at least this often
 /// in case an announcement was missed (a dropped listening connection).
@@ -121,9 +121,10 @@ impl JobWatch {
     }
 
     /// `owner`'s job `id` once it ended, or as it is when `wait` passed: a request that waits
-    /// instead of asking again and again. The store's announcements ([`JobQueue::ends`](crate::store::JobQueue::ends)) wake it the
-    /// moment the job ends, and it reads the job again every `RECHECK` in case one was missed.
-    /// With every place taken, at shutdown, or for a job that already ended it answers at once.
+    /// instead of asking again and again. The store's announcements
+    /// ([`JobQueue::ends`](crate::store::JobQueue::ends)) wake it the moment the job ends, and it
+    /// reads the job again every `RECHECK` in case one was missed. With every place taken, at
+    /// shutdown, or for a job that already ended it answers at once.
     pub async fn until_ended(
         &self,
         store: &dyn Store,
