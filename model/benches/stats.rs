@@ -14,6 +14,10 @@
 //! values at each end), values drifting down 30 % through the bin as a wearing contact's kappa
 //! does, or scattered without a drift; divan reports the time per value.
 //!
+//! `filling_tails`: the lists of a 100 x 100 job's accumulators (32 groups of about 3 devices, 10
+//! bins: about 31 values each), none full: 31 values one by one into a list keeping 25 at each
+//! end; divan reports the time per list.
+//!
 //! `cargo bench -p bouncewear-model --bench stats`
 
 use bouncewear_model::lanes::Lanes;
@@ -144,4 +148,19 @@ fn tails(bencher: Bencher, drift: f64) {
             }
             tails
         });
+}
+
+/// Values a list of a small job's accumulator takes, fewer than fill its ends.
+const FILLING_VALUES: usize = 31;
+
+#[divan::bench(sample_count = 100)]
+fn filling_tails(bencher: Bencher) {
+    let values: Vec<f64> = uniforms(11).take(FILLING_VALUES).map(|u| 0.5 + u).collect();
+    bencher.counter(ItemsCount::new(1usize)).bench_local(|| {
+        let mut tails = Tails::new(25);
+        for &x in black_box(&values) {
+            tails.push(x);
+        }
+        tails
+    });
 }
