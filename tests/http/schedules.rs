@@ -119,6 +119,11 @@ fn bad_schedules_name_their_field() {
             "/statistics/0",
         ),
         (
+            // A statistic the template's runs never give: no failure criteria, no life.
+            json!({"name": "x", "cron": "0 3 * * *", "template": {}, "statistics": ["operations.e1.p50", "life.b1"]}),
+            "/statistics/1",
+        ),
+        (
             json!({"name": "", "cron": "0 3 * * *", "template": {}}),
             "/name",
         ),

@@ -309,11 +309,13 @@ fn calibration_fields() -> Vec<(&'static str, &'static str, Value)> {
 
 /// A schedule's fields, as `ValidSchedule::parse` checks them.
 fn schedule_fields() -> Vec<(&'static str, &'static str, Value)> {
-    let (_, metrics) = metric_names();
+    let (operation_metrics, metrics) = metric_names();
+    let device_metrics = &metrics[operation_metrics.len()..];
     let quantiles: Vec<&str> = QUANTILES.iter().map(|(name, _)| *name).collect();
     let statistic = format!(
-        "^((operations|devices)\\.({})\\.(mean|{})|life\\.(b1|b10|beta|eta))$",
-        metrics.join("|"),
+        "^((operations\\.({})|devices\\.({}))\\.(mean|{})|life\\.(b1|b10|beta|eta))$",
+        operation_metrics.join("|"),
+        device_metrics.join("|"),
         quantiles.join("|")
     );
     let mut time_zones: Vec<Value> = chrono_tz::TZ_VARIANTS
@@ -327,7 +329,7 @@ fn schedule_fields() -> Vec<(&'static str, &'static str, Value)> {
         (
             "ScheduleSpec",
             "statistics",
-            json!({"minItems": 1, "items": {"type": "string", "pattern": statistic}}),
+            json!({"minItems": 1, "uniqueItems": true, "items": {"type": "string", "pattern": statistic}}),
         ),
     ]
 }

@@ -145,11 +145,15 @@ impl ValidSchedule {
             });
         }
         let template = root.child("template");
-        let size = Job::new(spec.template.clone(), || 0, &template)
+        let job = Job::new(spec.template.clone(), || 0, &template);
+        let size = job
+            .as_ref()
+            .map_err(Clone::clone)
             .and_then(|job| job.check_size(limits.max_job_operations, &template));
         if let Err(invalid) = size {
             errors.extend_from_slice(invalid.errors());
         }
+        let defaulted = spec.statistics.is_none();
         let names = spec
             .statistics
             .unwrap_or_else(|| vec![DEFAULT_STATISTIC.to_owned()]);
@@ -159,10 +163,24 @@ impl ValidSchedule {
                 detail: "must name at least one statistic".into(),
             });
         }
-        let mut statistics = Vec::with_capacity(names.len());
+        let mut statistics: Vec<Statistic> = Vec::with_capacity(names.len());
         for (i, name) in names.iter().enumerate() {
-            match name.parse::<Statistic>() {
+            let checked = name.parse::<Statistic>().and_then(|statistic| {
+                if names[..i].contains(name) {
+                    return Err(format!("`{name}` is listed twice"));
+                }
+                // A template that is refused is reported as such; its statistics wait for it.
+                if let Ok(job) = &job {
+                    statistic.given_by(job)?;
+                }
+                Ok(statistic)
+            });
+            match checked {
                 Ok(statistic) => statistics.push(statistic),
+                Err(detail) if defaulted => errors.push(FieldError {
+                    pointer: "/statistics".into(),
+                    detail: format!("the default statistic does not fit: {detail}; name the statistics to follow"),
+                }),
                 Err(detail) => errors.push(FieldError {
                     pointer: root.child("statistics").child(i).to_string(),
                     detail,
@@ -410,6 +428,39 @@ impl FromStr for Statistic {
 impl Statistic {
     pub fn as_str(&self) -> &str {
         &self.name
+    }
+
+    /// Whether every run of `job` gives the statistic a value to follow, or why none ever would:
+    /// an operation metric under `operations`, a device metric under `devices`, each among the
+    /// metrics the job computes, and life statistics only with failure criteria. (A run may still
+    /// leave it without a value: too few failures for a B10 life.) Checked where a schedule is
+    /// written; a stored schedule's statistics are read as they were written.
+    pub fn given_by(&self, job: &Job) -> Result<(), String> {
+        let computed = |metric: Metric| match metric {
+            Metric::Operation(m) => job.operation_metrics().contains(&m),
+            Metric::Device(m) => job.device_metrics().contains(&m),
+        };
+        match self.source {
+            Source::Operations(Metric::Device(m), _) => Err(format!(
+                "`{0}` is a device metric, one value a device: write devices.{0}.STAT",
+                m.name()
+            )),
+            Source::Devices(Metric::Operation(m), _) => Err(format!(
+                "`{0}` is an operation metric, summarised per bin: write operations.{0}.STAT",
+                m.name()
+            )),
+            Source::Operations(metric, _) | Source::Devices(metric, _) if !computed(metric) => {
+                Err(format!(
+                    "the template's `metrics` leaves out `{}`: its runs have no value of it",
+                    metric.name()
+                ))
+            }
+            Source::Life(_) if job.failure().is_empty() => Err(format!(
+                "`{}` needs failure criteria: the template has no `failure`",
+                self.name
+            )),
+            _ => Ok(()),
+        }
     }
 
     /// The statistic's value and 95 % interval in a result, if the result has it.
@@ -688,6 +739,64 @@ mod tests {
             .unwrap();
         assert_eq!(read("life.eta"), Some((weibull.eta, weibull.eta_ci95)));
         assert_eq!(read("life.beta"), Some((weibull.beta, weibull.beta_ci95)));
+    }
+
+    /// Each statistic is one the template's runs give: the kind of metric its section names, a
+    /// metric the template computes, life statistics only with failure criteria, none twice; the
+    /// default statistic is checked too. Statistics that fit are taken.
+    #[test]
+    fn statistics_the_template_never_gives_are_refused() {
+        let now = utc("2026-11-22T08:00:00Z");
+        let parse = |template: &str, statistics: &str| {
+            let statistics = if statistics.is_empty() {
+                String::new()
+            } else {
+                format!(r#", "statistics": [{statistics}]"#)
+            };
+            let body = format!(
+                r#"{{"name": "n", "cron": "0 3 * * *", "template": {template}{statistics}}}"#
+            );
+            ValidSchedule::parse(&body, HOURLY, now)
+        };
+        let refused = parse(
+            r#"{"devices": 20, "operations": 50, "metrics": ["e1", "eroded_mass_kg"]}"#,
+            r#""life.b1", "devices.total_bounce_s.mean", "operations.eroded_mass_kg.mean",
+               "operations.total_bounce_s.p95", "operations.e1.p50", "operations.e1.p50",
+               "devices.eroded_mass_kg.mean""#,
+        )
+        .unwrap_err();
+        assert_eq!(
+            refused.pointers(),
+            [
+                "/statistics/0",
+                "/statistics/1",
+                "/statistics/2",
+                "/statistics/3",
+                "/statistics/5"
+            ]
+        );
+        let details: Vec<&str> = refused.errors().iter().map(|e| e.detail.as_str()).collect();
+        for (detail, says) in details.iter().zip([
+            "needs failure criteria",
+            "operation metric",
+            "device metric",
+            "leaves out `total_bounce_s`",
+            "listed twice",
+        ]) {
+            assert!(detail.contains(says), "{detail}: {says}");
+        }
+        let defaulted = parse(r#"{"metrics": ["e1"]}"#, "").unwrap_err();
+        assert_eq!(defaulted.pointers(), ["/statistics"]);
+        assert!(defaulted.errors()[0].detail.contains("default"));
+        let taken = parse(
+            r#"{"metrics": ["e1", "eroded_mass_kg"], "failure": {"e1": {"below": 0.1}}}"#,
+            r#""operations.e1.p50", "devices.eroded_mass_kg.mean", "life.b10""#,
+        );
+        assert_eq!(taken.unwrap().into_definition().statistics.len(), 3);
+        assert!(
+            parse("{}", "").is_ok(),
+            "the default fits a template of every metric"
+        );
     }
 
     const HOURLY: ScheduleLimits = ScheduleLimits {
