@@ -112,13 +112,14 @@ fn any_quantile_and_threshold_are_answered_after_the_run_with_intervals() {
     }
 }
 
-/// In CSV the answers are columns after the others, with the numbers of the JSON answer.
+/// In CSV the answers are columns after the others, in the order asked (a level asked twice
+/// once), with the numbers of the JSON answer.
 #[test]
 fn a_query_after_the_run_in_csv_has_a_column_per_answer() {
     let server = TestApp::start(&temp_db("query-csv"), &[]);
     let id = server.submit(&scattered_job(16, 20, 5));
     server.wait_for(&id, "succeeded", Duration::from_secs(60));
-    let query = "quantiles=0.5,0.999&exceedance=above:0.3,below:0.25";
+    let query = "quantiles=0.999,0.5,0.999&exceedance=above:0.3,below:0.25";
     let url = |format: &str| server.url(&format!("/v1/jobs/{id}/distributions/e1?{query}{format}"));
     let json = get(&url(""), None).json();
     let csv = get(&url("&format=csv"), None);
@@ -126,12 +127,12 @@ fn a_query_after_the_run_in_csv_has_a_column_per_answer() {
     let mut lines = csv.body.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let asked = [
-        "q0.5",
-        "q0.5_ci95_lo",
-        "q0.5_ci95_hi",
         "q0.999",
         "q0.999_ci95_lo",
         "q0.999_ci95_hi",
+        "q0.5",
+        "q0.5_ci95_lo",
+        "q0.5_ci95_hi",
         "above:0.3",
         "above:0.3_ci95_lo",
         "above:0.3_ci95_hi",
@@ -149,12 +150,12 @@ fn a_query_after_the_run_in_csv_has_a_column_per_answer() {
         let answers = &cells[cells.len() - asked.len()..];
         let q = &bin["query"];
         let expected = [
-            &q["quantiles"]["0.5"]["value"],
-            &q["quantiles"]["0.5"]["ci95"][0],
-            &q["quantiles"]["0.5"]["ci95"][1],
             &q["quantiles"]["0.999"]["value"],
             &q["quantiles"]["0.999"]["ci95"][0],
             &q["quantiles"]["0.999"]["ci95"][1],
+            &q["quantiles"]["0.5"]["value"],
+            &q["quantiles"]["0.5"]["ci95"][0],
+            &q["quantiles"]["0.5"]["ci95"][1],
             &q["exceedance"][0]["probability"],
             &q["exceedance"][0]["ci95"][0],
             &q["exceedance"][0]["ci95"][1],

@@ -53,6 +53,11 @@ pub struct QueryAnswer {
     pub exceedance: Vec<ThresholdExceedance>,
 }
 
+/// A level as [`QueryAnswer::quantiles`] keys it: its shortest decimal form (`0.50` is `"0.5"`).
+pub fn level_key(level: f64) -> String {
+    level.to_string()
+}
+
 /// The quantiles of `levels` (each in `[0, 1]`) and the probabilities beyond `thresholds` of the
 /// values of `groups` (`per_device` values from each device), by the estimators of
 /// [`summarize`](super::summarize) on the same groups:
@@ -79,7 +84,7 @@ pub fn query<A: Borrow<Accumulator>>(
     let quantiles = levels
         .iter()
         .zip(merged.quantiles(levels))
-        .map(|(level, quantile)| (level.to_string(), quantile.into()))
+        .map(|(&level, quantile)| (level_key(level), quantile.into()))
         .collect();
     let exceedance = thresholds
         .iter()

@@ -25,7 +25,7 @@ use bouncewear_model::Pointer;
 use bouncewear_model::life::weibayes::{WeibayesError, weibayes};
 use bouncewear_model::montecarlo::rare::check_threshold;
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric, query_metric};
-use bouncewear_model::stats::{Accumulator, QUANTILES, QueryAnswer, Summary, Threshold};
+use bouncewear_model::stats::{Accumulator, QUANTILES, QueryAnswer, Summary, Threshold, level_key};
 use futures_util::stream::{Stream, StreamExt};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -788,6 +788,9 @@ pub async fn get_distribution(
             "job {id} has no bins of `{metric}` in that range (was the metric requested?)"
         )));
     };
+    let levels = after_run
+        .as_ref()
+        .map_or_else(Vec::new, |q| q.levels.clone());
     let mut answers = match after_run {
         Some(after_run) => {
             let groups = state
@@ -811,6 +814,7 @@ pub async fn get_distribution(
         .collect();
     let large = bins.len() >= LARGE_DISTRIBUTION_BINS;
     let job_id = record.id.to_string();
+    let levels = asked_levels(&levels);
     let represent = move || -> Result<_, ApiError> {
         Ok(match format {
             Format::Json => {
@@ -822,7 +826,7 @@ pub async fn get_distribution(
                 };
                 (JSON, Tagged::new(to_json(&distribution)?))
             }
-            Format::Csv => (CSV, Tagged::new(to_csv(&bins))),
+            Format::Csv => (CSV, Tagged::new(to_csv(&bins, &levels))),
         })
     };
     let (content_type, tagged) = if large {
@@ -877,8 +881,9 @@ pub(super) fn to_json(value: &impl Serialize) -> Result<Vec<u8>, ApiError> {
 
 /// One row per bin: range, moments, intervals and every quantile; after them, the answers to a
 /// query after the run: per level `q{level}` with its interval, per threshold `above:{x}` (or
-/// `below:{x}`) with its interval, in the order asked.
-fn to_csv(bins: &[DistributionBin]) -> String {
+/// `below:{x}`) with its interval, in the order asked (`levels`: the answers' keys so,
+/// [`asked_levels`]).
+fn to_csv(bins: &[DistributionBin], levels: &[String]) -> String {
     let mut csv = String::from("op_start,op_end,n,mean,mean_ci95_lo,mean_ci95_hi,sd,min,max");
     for (name, _) in QUANTILES {
         let _ = write!(csv, ",{name},{name}_ci95_lo,{name}_ci95_hi");
@@ -894,7 +899,7 @@ fn to_csv(bins: &[DistributionBin]) -> String {
     }
     let asked = bins.first().and_then(|bin| bin.query.as_ref());
     if let Some(answer) = asked {
-        for level in answer.quantiles.keys() {
+        for level in levels.iter().filter(|l| answer.quantiles.contains_key(*l)) {
             let _ = write!(csv, ",q{level},q{level}_ci95_lo,q{level}_ci95_hi");
         }
         for item in &answer.exceedance {
@@ -933,7 +938,7 @@ fn to_csv(bins: &[DistributionBin]) -> String {
             let _ = write!(csv, ",{},{},{}", e.probability, e.ci95[0], e.ci95[1]);
         }
         if let Some(answer) = &bin.query {
-            for q in answer.quantiles.values() {
+            for q in levels.iter().filter_map(|l| answer.quantiles.get(l)) {
                 // A level the data cannot bound leaves its three cells empty.
                 match (q.value, q.ci95) {
                     (Some(value), Some([lo, hi])) => {
@@ -949,6 +954,18 @@ fn to_csv(bins: &[DistributionBin]) -> String {
         csv.push('\n');
     }
     csv
+}
+
+/// The levels of a query as its answers key them ([`level_key`]), in the order asked, each once
+/// (a level asked twice has one answer).
+fn asked_levels(levels: &[f64]) -> Vec<String> {
+    let mut keys: Vec<String> = Vec::with_capacity(levels.len());
+    for key in levels.iter().map(|&level| level_key(level)) {
+        if !keys.contains(&key) {
+            keys.push(key);
+        }
+    }
+    keys
 }
 
 /// A threshold as a CSV column names it: `above:0.011`, `below:0.3`.
