@@ -245,11 +245,72 @@ pub struct Precision {
 /// above it (counted exactly), or 1 to 20 thresholds `{"above": x}` / `{"below": x}`, the
 /// Result's `exceedances`, as a query after the run answers them.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum LimitSpec {
     Above(f64),
     Thresholds(Vec<Threshold>),
+}
+
+/// Read by its JSON type rather than by trying each shape in turn, so that a fault names its
+/// place (`/limits/e1/0`) and the rule, not the enum's.
+impl<'de> Deserialize<'de> for LimitSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Shapes;
+        impl<'de> serde::de::Visitor<'de> for Shapes {
+            type Value = LimitSpec;
+
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str(r#"a number, or a list of thresholds {"above": x} or {"below": x}"#)
+            }
+
+            fn visit_f64<E>(self, limit: f64) -> Result<LimitSpec, E> {
+                Ok(LimitSpec::Above(limit))
+            }
+
+            fn visit_i64<E>(self, limit: i64) -> Result<LimitSpec, E> {
+                Ok(LimitSpec::Above(limit as f64))
+            }
+
+            fn visit_u64<E>(self, limit: u64) -> Result<LimitSpec, E> {
+                Ok(LimitSpec::Above(limit as f64))
+            }
+
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut items: A,
+            ) -> Result<LimitSpec, A::Error> {
+                let mut list = Vec::new();
+                while let Some(ThresholdItem(threshold)) = items.next_element()? {
+                    list.push(threshold);
+                }
+                Ok(LimitSpec::Thresholds(list))
+            }
+        }
+        deserializer.deserialize_any(Shapes)
+    }
+}
+
+/// One item of a list of limits: `{"above": x}` or `{"below": x}`, exactly one side.
+struct ThresholdItem(Threshold);
+
+impl<'de> Deserialize<'de> for ThresholdItem {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct Sides {
+            above: Option<f64>,
+            below: Option<f64>,
+        }
+        let sides = Sides::deserialize(deserializer)?;
+        match (sides.above, sides.below) {
+            (Some(x), None) => Ok(Self(Threshold::Above(x))),
+            (None, Some(x)) => Ok(Self(Threshold::Below(x))),
+            _ => Err(serde::de::Error::custom(
+                r#"a threshold is {"above": x} or {"below": x}: exactly one of the two"#,
+            )),
+        }
+    }
 }
 
 /// At most this many thresholds per metric.

@@ -656,6 +656,30 @@ fn a_list_of_limits_holds_1_to_20_finite_thresholds() {
     let many: Vec<Value> = (0..21).map(|i| json!({"above": i})).collect();
     assert_eq!(pointers(json!({"limits": {"e1": many}})), ["/limits/e1"]);
     assert!(pointers(json!({"limits": {"e1": [{"above": 1}, {"below": 2}]}})).is_empty());
+    // A fault names its item and the rule, not the shapes tried.
+    for (limits, pointer, rule) in [
+        (
+            r#"[{"above": 1}, {"above": 1, "below": 2}]"#,
+            "/limits/e1/1",
+            "exactly one",
+        ),
+        (r#"[{}]"#, "/limits/e1/0", "exactly one"),
+        (
+            r#"[{"beyond": 1}]"#,
+            "/limits/e1/0/beyond",
+            "expected `above` or `below`",
+        ),
+        (
+            r#""x""#,
+            "/limits/e1",
+            r#"a number, or a list of thresholds"#,
+        ),
+    ] {
+        let body = format!(r#"{{"limits": {{"e1": {limits}}}}}"#);
+        let invalid = Job::from_json(&body, || 7).unwrap_err();
+        assert_eq!(invalid.pointers(), [pointer], "{invalid}");
+        assert!(invalid.errors()[0].detail.contains(rule), "{invalid}");
+    }
 }
 
 /// `P(Z > z)` for a standard normal `Z`.
