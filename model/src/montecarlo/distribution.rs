@@ -615,7 +615,8 @@ impl Faults<'_> {
 
     /// The truncation window of a distribution over `support`: `min` and `max` as given, else the
     /// support's own ends. A support reaching below `domain` needs a `min`, which the error
-    /// suggests; the window must keep at least [`MIN_ACCEPTANCE`] of the mass (`cdf` is the
+    /// suggests when the distribution's own parameters hold (a normal of sd 0 is refused for its
+    /// sd, not told to add a `min` its values would never need); the window must keep at least [`MIN_ACCEPTANCE`] of the mass (`cdf` is the
     /// untruncated CDF).
     fn window(
         &mut self,
@@ -629,7 +630,7 @@ impl Faults<'_> {
         let hi = max.unwrap_or(f64::INFINITY);
         match min {
             Some(lo) => self.lowest_in("min", lo, domain),
-            None if domain.lower > support.lowest => {
+            None if domain.lower > support.lowest && self.errors.is_empty() => {
                 self.fail(
                     support.missing_min,
                     format!(
@@ -861,6 +862,9 @@ mod tests {
                 positive,
                 "/d/sd",
             ),
+            // Refused for its sd alone: no `min` to suggest for values it cannot have.
+            (r#"{"kind":"normal","mean":0.3,"sd":0}"#, positive, "/d/sd"),
+            (r#"{"kind":"normal","mean":0.3,"sd":-1}"#, positive, "/d/sd"),
             (
                 r#"{"kind":"normal","mean":1,"sd":1,"min":0.5,"max":0.4}"#,
                 positive,
