@@ -33,6 +33,11 @@ CALIBRATION_EXAMPLE = {
         {"impact_velocity_m_s": 0.4, "first_bounce_s": 0.0136, "second_bounce_s": 0.00772, "total_bounce_s": 0.0297, "bounce_count": 5},
     ],
 }
+DEVICE_METRICS = {
+    "cumulative_arc_energy_j", "eroded_mass_kg", "final_radius_m", "final_kappa",
+    "cumulative_plastic_work_j", "anode_eroded_mass_kg", "cathode_eroded_mass_kg",
+}
+DEFAULT_STATISTIC = "operations.total_bounce_s.p95"
 DEFAULT_CONTACT_RADIUS_M = 7.7e-3
 DEFAULT_PRESSURE_PA = 2.0e8
 
@@ -119,6 +124,52 @@ def repair_job(job):
             del job["precision"]
 
 
+def computed_metrics(job):
+    """The metrics a (repaired) job computes: those it lists, else all its scenario has."""
+    polarity = (job.get("scenario") or {}).get("material", {}).get("anode_erosion_fraction") is not None
+    every = {m for m in OPERATION_METRICS | DEVICE_METRICS if polarity or m not in POLAR}
+    return set(job.get("metrics") or []) & every or every
+
+
+def repair_statistics(schedule):
+    """A schedule follows only statistics its template's runs give (docs/manual.md, schedules):
+    an operation metric under `operations`, a device metric under `devices`, among the metrics
+    the template computes; life statistics only with failure criteria; none twice. Those that do
+    not fit are dropped, and a list left empty (or a default that does not fit) gets one that
+    does."""
+    template = schedule.get("template")
+    if not isinstance(template, dict):
+        return
+    computed = computed_metrics(template)
+    life = bool(template.get("failure"))
+
+    def fits(statistic):
+        section, _, rest = statistic.partition(".")
+        metric = rest.partition(".")[0]
+        if section == "operations":
+            return metric in OPERATION_METRICS and metric in computed
+        if section == "devices":
+            return metric in DEVICE_METRICS and metric in computed
+        return section == "life" and life
+
+    statistics = schedule.get("statistics")
+    if statistics is None:
+        if fits(DEFAULT_STATISTIC):
+            return
+        statistics = []
+    if not isinstance(statistics, list):
+        return
+    kept = []
+    for statistic in statistics:
+        if isinstance(statistic, str) and fits(statistic) and statistic not in kept:
+            kept.append(statistic)
+    if not kept:
+        operation = sorted(computed & OPERATION_METRICS)
+        kept = [f"operations.{operation[0]}.p95" if operation
+                else f"devices.{sorted(computed)[0]}.mean"]
+    schedule["statistics"] = kept
+
+
 def finite(text):
     try:
         value = float(text)
@@ -173,5 +224,6 @@ def before_call(context, case, kwargs):
         body.update(CALIBRATION_EXAMPLE)
     elif operation.path.startswith("/v1/schedules"):
         repair_job(body.get("template"))
+        repair_statistics(body)
         # A cron expression's syntax (croner's) is not a regular expression worth keeping in step.
         body["cron"] = "0 3 * * *"
