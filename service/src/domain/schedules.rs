@@ -153,40 +153,7 @@ impl ValidSchedule {
         if let Err(invalid) = size {
             errors.extend_from_slice(invalid.errors());
         }
-        let defaulted = spec.statistics.is_none();
-        let names = spec
-            .statistics
-            .unwrap_or_else(|| vec![DEFAULT_STATISTIC.to_owned()]);
-        if names.is_empty() {
-            errors.push(FieldError {
-                pointer: "/statistics".into(),
-                detail: "must name at least one statistic".into(),
-            });
-        }
-        let mut statistics: Vec<Statistic> = Vec::with_capacity(names.len());
-        for (i, name) in names.iter().enumerate() {
-            let checked = name.parse::<Statistic>().and_then(|statistic| {
-                if names[..i].contains(name) {
-                    return Err(format!("`{name}` is listed twice"));
-                }
-                // A template that is refused is reported as such; its statistics wait for it.
-                if let Ok(job) = &job {
-                    statistic.given_by(job)?;
-                }
-                Ok(statistic)
-            });
-            match checked {
-                Ok(statistic) => statistics.push(statistic),
-                Err(detail) if defaulted => errors.push(FieldError {
-                    pointer: "/statistics".into(),
-                    detail: format!("the default statistic does not fit: {detail}; name the statistics to follow"),
-                }),
-                Err(detail) => errors.push(FieldError {
-                    pointer: root.child("statistics").child(i).to_string(),
-                    detail,
-                }),
-            }
-        }
+        let statistics = followed(spec.statistics, job.as_ref().ok(), &mut errors);
         match timetable {
             Some(timetable) if errors.is_empty() => Ok(Self {
                 definition: ScheduleDefinition {
@@ -346,6 +313,51 @@ impl Timetable {
         }
         None
     }
+}
+
+/// The statistics a schedule follows, `written` or the default, each one that the runs of `job`
+/// (its template, when valid) give ([`Statistic::given_by`]) and none twice; pushes the faults.
+fn followed(
+    written: Option<Vec<String>>,
+    job: Option<&Job>,
+    errors: &mut Vec<FieldError>,
+) -> Vec<Statistic> {
+    let root = Pointer::root();
+    let defaulted = written.is_none();
+    let names = written.unwrap_or_else(|| vec![DEFAULT_STATISTIC.to_owned()]);
+    if names.is_empty() {
+        errors.push(FieldError {
+            pointer: "/statistics".into(),
+            detail: "must name at least one statistic".into(),
+        });
+    }
+    let mut statistics: Vec<Statistic> = Vec::with_capacity(names.len());
+    for (i, name) in names.iter().enumerate() {
+        let checked = name.parse::<Statistic>().and_then(|statistic| {
+            if names[..i].contains(name) {
+                return Err(format!("`{name}` is listed twice"));
+            }
+            // A template that is refused is reported as such; its statistics wait for it.
+            if let Some(job) = job {
+                statistic.given_by(job)?;
+            }
+            Ok(statistic)
+        });
+        match checked {
+            Ok(statistic) => statistics.push(statistic),
+            Err(detail) if defaulted => errors.push(FieldError {
+                pointer: "/statistics".into(),
+                detail: format!(
+                    "the default statistic does not fit: {detail}; name the statistics to follow"
+                ),
+            }),
+            Err(detail) => errors.push(FieldError {
+                pointer: root.child("statistics").child(i).to_string(),
+                detail,
+            }),
+        }
+    }
+    statistics
 }
 
 /// `time` without its fraction of a second: due times are whole seconds, so that the (schedule,
