@@ -188,6 +188,25 @@ fn refusals_and_failures_exit_as_the_local_commands_do() {
     assert_eq!(unreachable.status.code(), Some(1));
     let said = String::from_utf8_lossy(&unreachable.stderr);
     assert_eq!(said.matches("again in").count(), 1, "{said}");
+    // Nor does `submit --wait`: its timeout counts from the submission, retries included.
+    let unreachable = remote_at(
+        nowhere,
+        None,
+        &[
+            "submit",
+            &file,
+            "--wait",
+            "--timeout-seconds",
+            "1",
+            "--retries",
+            "5",
+        ],
+    )
+    .output()
+    .unwrap();
+    assert_eq!(unreachable.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&unreachable.stderr);
+    assert_eq!(said.matches("again in").count(), 1, "{said}");
 }
 
 /// A full queue's 429 is asked again after its `Retry-After`: a submission made while the queue
@@ -204,6 +223,15 @@ fn a_submission_to_a_full_queue_is_sent_again_once_there_is_room() {
     let refused = remote(&server, None, &["submit", &file, "--retries", "0"]);
     assert_eq!(refused.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&refused.stderr).contains("429"));
+    // With `--wait`, no retry pauses past the timeout: the 429's 5 s would end past 2 s.
+    let hurried = remote(
+        &server,
+        None,
+        &["submit", &file, "--wait", "--timeout-seconds", "2"],
+    );
+    assert_eq!(hurried.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&hurried.stderr);
+    assert!(said.contains("429") && !said.contains("again in"), "{said}");
 
     // The first job is cancelled once the second submission has had its 429 and waits.
     let mut waiting = remote_at(server.base(), None, &["submit", &file])

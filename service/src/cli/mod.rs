@@ -119,7 +119,8 @@ enum Command {
         /// Wait for the job to end and print its Result (exit 1 if it failed or was cancelled).
         #[arg(long)]
         wait: bool,
-        /// With `--wait`: give up (exit 1) after this many seconds.
+        /// With `--wait`: give up (exit 1) this many seconds after the submission began, its
+        /// retries and the Result's fetch included.
         #[arg(long, requires = "wait", value_parser = remote::seconds)]
         timeout_seconds: Option<f64>,
         #[command(flatten)]

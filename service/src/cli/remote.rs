@@ -334,21 +334,30 @@ fn id_of(job: &serde_json::Value) -> Result<String, CliError> {
 }
 
 /// `submit`: queues the job in `file`; prints the job resource, or with `wait` the Result once it
-/// succeeded.
+/// succeeded. `timeout` counts from the start: the submission's retries, the wait and the
+/// Result's fetch pause no later than it.
 pub fn submit(
     server: &Server,
     file: &std::path::Path,
     wait: bool,
     timeout: Option<f64>,
 ) -> Result<String, CliError> {
+    let deadline = deadline_after(timeout);
     let body = read_input(file)?;
-    let job = parse(&server.send("POST", "/v1/jobs", Some(&body))?)?;
+    let job = parse(&server.send_by("POST", "/v1/jobs", Some(&body), deadline)?)?;
     if !wait {
         return Ok(job.to_string());
     }
     let id = id_of(&job)?;
-    wait_for(server, &id, timeout)?;
-    fetch(server, &id, Part::Result, false)
+    wait_until(server, &id, deadline)?;
+    let text = server.send_by("GET", &part_path(&id, Part::Result, ""), None, deadline)?;
+    Ok(text.trim_end().to_owned())
+}
+
+/// The moment `timeout` seconds from now, if given.
+fn deadline_after(timeout: Option<f64>) -> Option<Instant> {
+    let now = Instant::now();
+    timeout.map(|t| now + Duration::from_secs_f64(t.clamp(0.0, 1e9)))
 }
 
 /// `status`: the job resource.
@@ -360,15 +369,21 @@ pub fn status(server: &Server, id: &str) -> Result<String, CliError> {
 /// was cancelled, the job resource too, and exit 1 with its error; exit 1 when `timeout` seconds
 /// passed first.
 pub fn wait_for(server: &Server, id: &str, timeout: Option<f64>) -> Result<String, CliError> {
+    wait_until(server, id, deadline_after(timeout))
+}
+
+/// [`wait_for`] until `deadline` rather than for a number of seconds.
+fn wait_until(server: &Server, id: &str, deadline: Option<Instant>) -> Result<String, CliError> {
     let started = Instant::now();
     loop {
-        let left = timeout.map_or(WAIT_PER_REQUEST, |t| t - started.elapsed().as_secs_f64());
+        let left = deadline.map_or(WAIT_PER_REQUEST, |end| {
+            end.saturating_duration_since(Instant::now()).as_secs_f64()
+        });
         let wait_s = left
             .min(WAIT_PER_REQUEST)
             .min(server.request_timeout_seconds / 2.0)
             .max(0.0);
         let asked = Instant::now();
-        let deadline = timeout.map(|t| started + Duration::from_secs_f64(t));
         let job = server.job_within(id, wait_s, deadline)?;
         match job["status"].as_str() {
             Some("succeeded") => return Ok(job.to_string()),
@@ -381,7 +396,7 @@ pub fn wait_for(server: &Server, id: &str, timeout: Option<f64>) -> Result<Strin
             }
             _ => {}
         }
-        if timeout.is_some_and(|t| started.elapsed().as_secs_f64() >= t) {
+        if deadline.is_some_and(|end| Instant::now() >= end) {
             return Err(CliError::Failed(format!(
                 "job {id} is still {} after {:.0} s",
                 job["status"].as_str().unwrap_or("?"),
@@ -395,12 +410,7 @@ pub fn wait_for(server: &Server, id: &str, timeout: Option<f64>) -> Result<Strin
 
 /// `fetch`: a part of a job, as the API serves it (`csv` where the part has a CSV form).
 pub fn fetch(server: &Server, id: &str, part: Part, csv: bool) -> Result<String, CliError> {
-    let path = match part {
-        Part::Result => "result",
-        Part::Life => "life",
-        Part::RareEvent => "rare_event",
-        Part::Shards => "shards",
-    };
+    let path = part_name(part);
     let format = match (csv, part) {
         (false, _) => "",
         (true, Part::Life | Part::RareEvent) => "?format=csv",
@@ -411,12 +421,23 @@ pub fn fetch(server: &Server, id: &str, part: Part, csv: bool) -> Result<String,
             )));
         }
     };
-    let text = server.send(
-        "GET",
-        &format!("/v1/jobs/{}/{path}{format}", encode(id)),
-        None,
-    )?;
+    let text = server.send("GET", &part_path(id, part, format), None)?;
     Ok(text.trim_end().to_owned())
+}
+
+/// The path of `part` of job `id`, with `format` (a query string, or empty) after it.
+fn part_path(id: &str, part: Part, format: &str) -> String {
+    format!("/v1/jobs/{}/{}{format}", encode(id), part_name(part))
+}
+
+/// The last segment of `part`'s path.
+fn part_name(part: Part) -> &'static str {
+    match part {
+        Part::Result => "result",
+        Part::Life => "life",
+        Part::RareEvent => "rare_event",
+        Part::Shards => "shards",
+    }
 }
 
 /// What `compare` asks of the comparison; `None` takes the server's default.
