@@ -127,7 +127,7 @@ pub fn compare(
     let (ops_a, ops_b) = (a.job.spec().operations, b.job.spec().operations);
     if ops_a != ops_b {
         notes.push(format!(
-            "the tests have different lengths ({ops_a} and {ops_b} operations): device metrics and lives are read at different ends"
+            "the tests have different lengths ({ops_a} and {ops_b} operations): bins are compared where both jobs have them, and lives each at its own test's end"
         ));
     }
     let mut missing: BTreeMap<&str, usize> = BTreeMap::new();
@@ -154,9 +154,12 @@ pub fn compare(
         })
         .collect();
     if bins.is_empty() {
-        notes.push(format!(
-            "the jobs share no bin of `{metric}`: give both the same `operations` and `bin_operations`"
-        ));
+        let same = if a.devices.contains_key(metric) {
+            "a device metric is one summary of each whole test: give both the same `operations`"
+        } else {
+            "give both the same `operations` and `bin_operations`"
+        };
+        notes.push(format!("the jobs share no bin of `{metric}`: {same}"));
     }
     for (name, count) in missing {
         notes.push(format!(

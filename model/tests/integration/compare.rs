@@ -104,3 +104,40 @@ fn the_same_design_twice_is_covered_as_no_difference() {
         );
     }
 }
+
+/// Tests of different lengths: the bins both have are compared and the lives each at its own end;
+/// a device metric, one summary of each whole test, has no bin to compare, and the notes say so
+/// without contradicting each other.
+#[test]
+fn tests_of_different_lengths_compare_what_they_share() {
+    let short = |operations: u64| {
+        run_job(
+            &job(json!({
+                "devices": 40, "operations": operations, "bin_operations": 20, "seed": 3,
+                "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+                "metrics": ["total_bounce_s", "eroded_mass_kg"],
+                "failure": {"eroded_mass_kg": {"above": 1e-9}}
+            })),
+            &Silent,
+        )
+        .unwrap()
+    };
+    let (a, b) = (short(60), short(40));
+    let statistics = [Statistic::Mean];
+    let bounce = compare(&a, &b, "total_bounce_s", &statistics, &DEFAULT_B_LIVES).unwrap();
+    assert_eq!(
+        bounce.bins.len(),
+        2,
+        "the bins of operations 0-20 and 20-40"
+    );
+    assert!(bounce.life.is_some());
+    assert!(
+        bounce.notes[0].contains("lives each at its own test's end"),
+        "{:?}",
+        bounce.notes
+    );
+    let mass = compare(&a, &b, "eroded_mass_kg", &statistics, &DEFAULT_B_LIVES).unwrap();
+    assert!(mass.bins.is_empty());
+    assert_eq!(mass.notes.len(), 2, "{:?}", mass.notes);
+    assert!(mass.notes[1].contains("a device metric is one summary of each whole test"));
+}
