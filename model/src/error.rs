@@ -138,12 +138,98 @@ pub fn from_json<T: DeserializeOwned>(
     text: &str,
     array_fields: &[&str],
 ) -> Result<T, InvalidInput> {
-    let value = read_strict(text)?;
+    let (value, faults) = read_past_faults(text, array_fields)?;
+    with_faults(faults, Ok(value))
+}
+
+/// The most members [`read_past_faults`] leaves out before it stops.
+const MAX_FAULTS: usize = 20;
+
+/// [`from_json`], read on past the members serde cannot take, so that every field at fault is
+/// named, not only the first: a member of an object whose value has the wrong type or range, or
+/// which the object does not know, is named and left out, and the document read again (up to
+/// [`MAX_FAULTS`] times). The value read without them comes back with the faults, for the
+/// caller's own rules to check the rest ([`with_faults`]). A fault it cannot leave out (a
+/// missing field, an item of a list, the whole document), or one in an object it left a member
+/// out of, ends the reading: the faults so far are the error.
+pub fn read_past_faults<T: DeserializeOwned>(
+    text: &str,
+    array_fields: &[&str],
+) -> Result<(T, Vec<FieldError>), InvalidInput> {
+    let mut value = read_strict(text)?;
     check_shape(&value, &Pointer::root(), array_fields)?;
-    serde_path_to_error::deserialize(value).map_err(|error| {
+    let mut faults: Vec<FieldError> = Vec::new();
+    // The objects a member was left out of: a later fault there is the leaving out's own (an
+    // object left empty, a field it needs), not another.
+    let mut left_out: Vec<String> = Vec::new();
+    loop {
+        let error = match serde_path_to_error::deserialize(value.clone()) {
+            Ok(read) => return Ok((read, faults)),
+            Err(error) => error,
+        };
         let pointer = path_to_pointer(error.path());
-        invalid_from_serde(pointer, error.inner())
-    })
+        let at = pointer.to_string();
+        let detail = error.inner().to_string();
+        let consequence = left_out.contains(&at);
+        if !consequence {
+            faults.extend(invalid_from_serde(pointer, error.inner()).errors);
+        }
+        let removed = !consequence
+            && faults.len() < MAX_FAULTS
+            && !detail.starts_with("missing field")
+            && leave_out(&mut value, error.path());
+        if !removed {
+            return Err(InvalidInput::new(faults));
+        }
+        let parent = at.rsplit_once('/').map_or("", |(parent, _)| parent);
+        left_out.push(parent.to_owned());
+    }
+}
+
+/// Removes the object member `path` names from `value`; whether there was one to remove (an
+/// item of a list is kept: removing it would renumber the items after it).
+fn leave_out(value: &mut serde_json::Value, path: &serde_path_to_error::Path) -> bool {
+    use serde_path_to_error::Segment;
+    let segments: Vec<&Segment> = path.iter().collect();
+    let Some((Segment::Map { key }, parents)) = segments.split_last() else {
+        return false;
+    };
+    let mut at = value;
+    for segment in parents {
+        let next = match (segment, at) {
+            (
+                Segment::Map { key } | Segment::Enum { variant: key },
+                serde_json::Value::Object(m),
+            ) => m.get_mut(key.as_str()),
+            (Segment::Seq { index }, serde_json::Value::Array(items)) => items.get_mut(*index),
+            _ => None,
+        };
+        match next {
+            Some(next) => at = next,
+            None => return false,
+        }
+    }
+    match at {
+        serde_json::Value::Object(members) => members.remove(key.as_str()).is_some(),
+        _ => false,
+    }
+}
+
+/// `checked` (the caller's own rules, applied to what [`read_past_faults`] read), with the
+/// `faults` met on the way before its own.
+pub fn with_faults<T>(
+    faults: Vec<FieldError>,
+    checked: Result<T, InvalidInput>,
+) -> Result<T, InvalidInput> {
+    match (faults.is_empty(), checked) {
+        (true, checked) => checked,
+        (false, Ok(_)) => Err(InvalidInput::new(faults)),
+        (false, Err(invalid)) => {
+            let mut errors = faults;
+            errors.extend(invalid.errors);
+            Err(InvalidInput::new(errors))
+        }
+    }
 }
 
 /// A document's bytes that are not UTF-8, as a malformed document whose pointer names the value

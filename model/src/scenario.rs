@@ -260,8 +260,8 @@ impl Scenario {
 
     /// Parses and validates a scenario document (JSON text).
     pub fn from_json(text: &str) -> Result<Self, InvalidInput> {
-        let spec: ScenarioSpec = crate::error::from_json(text, &[])?;
-        Self::new(spec, &Pointer::root())
+        let (spec, faults) = crate::error::read_past_faults::<ScenarioSpec>(text, &[])?;
+        crate::error::with_faults(faults, Self::new(spec, &Pointer::root()))
     }
 
     pub fn spec(&self) -> &ScenarioSpec {

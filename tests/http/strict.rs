@@ -54,6 +54,33 @@ fn numbers_beyond_f64_name_their_pointer() {
     }
 }
 
+/// A wrong type or an unknown member does not hide the other fields at fault: each is named, in a
+/// job, a scenario and a schedule's template.
+#[test]
+fn every_field_at_fault_is_named_past_a_wrong_type() {
+    let server = TestApp::start(&temp_db("strict-every"), &[]);
+    let cases = [
+        (
+            "/v1/jobs",
+            r#"{"devices": 0, "operations": 0, "foo": 1}"#,
+            vec!["/foo", "/devices", "/operations"],
+        ),
+        (
+            "/v1/simulate",
+            r#"{"circuit": {"current_a": "15"}, "mechanism": {"static_force_n": -1}}"#,
+            vec!["/circuit/current_a", "/mechanism/static_force_n"],
+        ),
+        (
+            "/v1/schedules",
+            r#"{"name": "n", "cron": "0 3 * * *", "enabled": "yes", "template": {"devices": 0}}"#,
+            vec!["/enabled", "/template/devices"],
+        ),
+    ];
+    for (path, body, pointers) in cases {
+        assert_eq!(rejected_pointers(&server, path, body), pointers, "{body}");
+    }
+}
+
 #[test]
 fn a_member_given_twice_is_rejected_naming_it() {
     let server = TestApp::start(&temp_db("strict-duplicate"), &[]);

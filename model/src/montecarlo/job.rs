@@ -377,8 +377,8 @@ pub struct Job {
 impl Job {
     /// Parses and validates a job document; a missing seed is drawn by `draw_seed`.
     pub fn from_json(text: &str, draw_seed: impl FnOnce() -> u64) -> Result<Self, InvalidInput> {
-        let spec: JobSpec = crate::error::from_json(text, &LIST_FIELDS)?;
-        Self::new(spec, draw_seed, &Pointer::root())
+        let (spec, faults) = crate::error::read_past_faults(text, &LIST_FIELDS)?;
+        crate::error::with_faults(faults, Self::new(spec, draw_seed, &Pointer::root()))
     }
 
     /// Checks every rule before any computation; all failures are reported, each naming its field as a

@@ -644,6 +644,51 @@ fn a_metric_may_have_several_limits_answered_as_a_query_after_the_run_answers_th
     assert_eq!(json["job"]["limits"], spec["limits"]);
 }
 
+/// A member of the wrong type or unknown to the job is named and read past, so that every other
+/// field at fault is named too (the contract's "every field at fault"); a fault that cannot be
+/// read past (a missing field, an item of a list) ends the list there, and a member left out
+/// adds no fault of its own (its `missing field`).
+#[test]
+fn every_field_at_fault_is_named_past_a_wrong_type_or_an_unknown_field() {
+    let cases = [
+        (
+            json!({"devices": 0, "operations": 0, "foo": 1}),
+            vec!["/foo", "/devices", "/operations"],
+        ),
+        (
+            json!({"devices": 0, "operations": 0, "seed": -1}),
+            vec!["/seed", "/devices", "/operations"],
+        ),
+        (
+            json!({"scenario": {"circuit": {"current_a": "x", "volts": 1}}, "devices": 0}),
+            vec![
+                "/scenario/circuit/current_a",
+                "/scenario/circuit/volts",
+                "/devices",
+            ],
+        ),
+        (
+            json!({"scatter": [{"parameter": 5, "per": "device",
+                                "distribution": {"kind": "fixed", "value": 1}}], "devices": 0}),
+            vec!["/scatter/0/parameter"],
+        ),
+        (
+            json!({"metrics": [1, "e1"], "devices": 0}),
+            vec!["/metrics/0"],
+        ),
+    ];
+    for (job, expected) in cases {
+        assert_eq!(pointers(job.clone()), expected, "{job}");
+    }
+    let many: serde_json::Map<String, Value> =
+        (0..30).map(|i| (format!("x{i}"), json!(i))).collect();
+    assert_eq!(
+        pointers(Value::Object(many)).len(),
+        20,
+        "at most 20 read past"
+    );
+}
+
 #[test]
 fn a_list_of_limits_holds_1_to_20_finite_thresholds() {
     assert_eq!(pointers(json!({"limits": {"e1": []}})), ["/limits/e1"]);

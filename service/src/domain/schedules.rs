@@ -102,9 +102,10 @@ impl ValidSchedule {
         let lists: Vec<&str> = std::iter::once("/statistics")
             .chain(template_lists.iter().map(String::as_str))
             .collect();
-        let spec: ScheduleSpec = bouncewear_model::error::from_json(body, &lists)?;
+        let (spec, faults): (ScheduleSpec, _) =
+            bouncewear_model::error::read_past_faults(body, &lists)?;
         let root = Pointer::root();
-        let mut errors = Vec::new();
+        let mut errors = faults;
         // Longer text was refused before (MAX_TEXT_CHARS); a name must also say something.
         if spec.name.trim().is_empty() {
             errors.push(FieldError {
