@@ -143,7 +143,7 @@ pub fn from_json<T: DeserializeOwned>(
 }
 
 /// The most members [`read_past_faults`] leaves out before it stops.
-const MAX_FAULTS: usize = 20;
+pub const MAX_FAULTS: usize = 20;
 
 /// [`from_json`], read on past the members serde cannot take, so that every field at fault is
 /// named, not only the first: a member of an object whose value has the wrong type or range, or
