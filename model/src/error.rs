@@ -163,7 +163,7 @@ pub fn read_past_faults<T: DeserializeOwned>(
     // object left empty, a field it needs), not another.
     let mut left_out: Vec<String> = Vec::new();
     loop {
-        let error = match serde_path_to_error::deserialize(value.clone()) {
+        let error = match serde_path_to_error::deserialize(&value) {
             Ok(read) => return Ok((read, faults)),
             Err(error) => error,
         };
