@@ -790,7 +790,7 @@ pub async fn get_distribution(
     };
     let levels = after_run
         .as_ref()
-        .map_or_else(Vec::new, |q| q.levels.clone());
+        .map_or_else(Vec::new, |q| asked_levels(&q.levels));
     let mut answers = match after_run {
         Some(after_run) => {
             let groups = state
@@ -814,7 +814,6 @@ pub async fn get_distribution(
         .collect();
     let large = bins.len() >= LARGE_DISTRIBUTION_BINS;
     let job_id = record.id.to_string();
-    let levels = asked_levels(&levels);
     let represent = move || -> Result<_, ApiError> {
         Ok(match format {
             Format::Json => {
