@@ -145,19 +145,26 @@ pub fn from_json<T: DeserializeOwned>(
 /// The most members [`read_past_faults`] leaves out before it stops.
 pub const MAX_FAULTS: usize = 20;
 
+/// The text [`read_past_faults`] reads in all, its readings counted whole: a small document is
+/// read past up to [`MAX_FAULTS`] faults, a large one fewer times (a body of 1 MiB, the
+/// service's largest by default, four times), so that a hostile document costs a few readings.
+pub const READ_PAST_BYTES: usize = 4 << 20;
+
 /// [`from_json`], read on past the members serde cannot take, so that every field at fault is
 /// named, not only the first: a member of an object whose value has the wrong type or range, or
 /// which the object does not know, is named and left out, and the document read again (up to
-/// [`MAX_FAULTS`] times). The value read without them comes back with the faults, for the
-/// caller's own rules to check the rest ([`with_faults`]). A fault it cannot leave out (a
-/// missing field, an item of a list, the whole document), or one in an object it left a member
-/// out of, ends the reading: the faults so far are the error.
+/// [`MAX_FAULTS`] times, fewer for a large document: [`READ_PAST_BYTES`]). The value read
+/// without them comes back with the faults, for the caller's own rules to check the rest
+/// ([`with_faults`]). A fault it cannot leave out (a missing field, an item of a list, the whole
+/// document), or one in an object it left a member out of, ends the reading: the faults so far
+/// are the error.
 pub fn read_past_faults<T: DeserializeOwned>(
     text: &str,
     array_fields: &[&str],
 ) -> Result<(T, Vec<FieldError>), InvalidInput> {
     let mut value = read_strict(text)?;
     check_shape(&value, &Pointer::root(), array_fields)?;
+    let readings = (READ_PAST_BYTES / text.len().max(1)).clamp(1, MAX_FAULTS);
     let mut faults: Vec<FieldError> = Vec::new();
     // The objects a member was left out of: a later fault there is the leaving out's own (an
     // object left empty, a field it needs), not another.
@@ -175,7 +182,7 @@ pub fn read_past_faults<T: DeserializeOwned>(
             faults.extend(invalid_from_serde(pointer, error.inner()).errors);
         }
         let removed = !consequence
-            && faults.len() < MAX_FAULTS
+            && faults.len() < readings
             && !detail.starts_with("missing field")
             && leave_out(&mut value, error.path());
         if !removed {
@@ -463,6 +470,33 @@ fn path_to_pointer(path: &serde_path_to_error::Path) -> Pointer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Up to [`MAX_FAULTS`] members are read past in a small document, fewer in a large one, so
+    /// that a hostile body costs a few readings at most ([`READ_PAST_BYTES`]).
+    #[test]
+    fn a_large_document_is_read_past_fewer_faults() {
+        #[derive(Debug, serde::Deserialize)]
+        #[serde(deny_unknown_fields)]
+        #[allow(dead_code, reason = "only read")]
+        struct Doc {
+            #[serde(default)]
+            list: Vec<u64>,
+        }
+        let unknown: Vec<String> = (0..30).map(|i| format!(r#""x{i}": 0"#)).collect();
+        let document = |items: usize| {
+            let list = vec!["1000000"; items].join(",");
+            format!(r#"{{{}, "list": [{list}]}}"#, unknown.join(","))
+        };
+        let faults = |text: &str| match read_past_faults::<Doc>(text, &["/list"]) {
+            Ok(_) => 0,
+            Err(invalid) => invalid.errors().len(),
+        };
+        assert_eq!(faults(&document(10)), MAX_FAULTS);
+        // About 2 MB: read twice.
+        let large = document(250_000);
+        assert_eq!(READ_PAST_BYTES / large.len(), 2, "{}", large.len());
+        assert_eq!(faults(&large), 2);
+    }
 
     #[test]
     fn bytes_that_are_not_utf8_name_the_value_they_fall_in() {
