@@ -117,6 +117,22 @@ fn api_keys_are_required_and_isolate_jobs() {
             .call(),
     );
     assert_problem(&basic, 401);
+    // No route under /v1 is told apart without a key: an unknown path or method is 401 too, and
+    // 404 or 405 with one.
+    let nowhere = server.url("/v1/no-such-route");
+    assert_problem(&get(&nowhere, None), 401);
+    assert_problem(&get(&nowhere, Some("alpha")), 404);
+    let put = |key: Option<&str>| {
+        let request = agent().put(&jobs);
+        let request = match key {
+            Some(key) => request.header("authorization", &format!("Bearer {key}")),
+            None => request,
+        };
+        reply(request.send_empty())
+    };
+    assert_problem(&put(None), 401);
+    assert_problem(&put(Some("alpha")), 405);
+    assert_problem(&get(&server.url("/no-such-page"), None), 404);
     let reply = post(
         &jobs,
         &json!({"devices": 1, "operations": 1, "seed": 9}).to_string(),

@@ -91,13 +91,22 @@ impl Modify for BearerAuth {
 pub fn router(state: AppState) -> axum::Router {
     let max_body = state.config.max_body_bytes;
     let admission = limits::Admission::new(&state);
+    let (keys, keys_too) = (Arc::clone(&state.key_owners), Arc::clone(&state.key_owners));
     api_routes(state)
         .route("/", get(system::dashboard))
         .route("/jobs/{id}", get(system::job_page))
         .route("/dashboard/app.js", get(system::dashboard_script))
         .route("/dashboard/style.css", get(system::dashboard_style))
-        .fallback(|| async { ApiError::NotFound("no such resource".to_owned()) })
-        .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
+        .fallback(move |request: Request| async move {
+            unmatched(
+                &keys,
+                &request,
+                ApiError::NotFound("no such resource".to_owned()),
+            )
+        })
+        .method_not_allowed_fallback(move |request: Request| async move {
+            unmatched(&keys_too, &request, ApiError::MethodNotAllowed)
+        })
         .layer(DefaultBodyLimit::max(max_body))
         .layer(axum::middleware::from_fn_with_state(
             admission,
@@ -250,6 +259,18 @@ async fn authenticate(
     let owner = owner_of(request.headers(), &state.key_owners)?;
     request.extensions_mut().insert(owner);
     Ok(next.run(request).await)
+}
+
+/// What a request no route takes gets: under `/v1`, 401 without a key the server knows, as every
+/// `/v1` route answers (so that no one without a key can map the routes by their 404s and
+/// 405s); `otherwise` (404, 405) then, and elsewhere.
+fn unmatched(key_owners: &HashSet<Owner>, request: &Request, otherwise: ApiError) -> ApiError {
+    let path = request.uri().path();
+    let under_v1 = path == "/v1" || path.starts_with("/v1/");
+    match owner_of(request.headers(), key_owners) {
+        Err(unauthorized) if under_v1 => unauthorized,
+        _ => otherwise,
+    }
 }
 
 /// Whose request it is: the owner of the `Authorization: Bearer KEY` it presents among
