@@ -37,7 +37,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ),
     ("api", &["config", "domain", "plots", "store", "telemetry"]),
     ("worker", &["domain", "store", "telemetry"]),
-    ("scheduler", &["domain", "store"]),
+    ("scheduler", &["domain", "store", "telemetry"]),
     ("retention", &["domain", "store"]),
     ("store", &["domain"]),
     ("domain", &[]),

@@ -25,6 +25,7 @@ pub async fn run(
             Ok(0) => {}
             Ok(created) => {
                 tracing::info!(created, "scheduled jobs created");
+                crate::telemetry::record_jobs_submitted(created as u64);
                 wake.notify_waiters();
             }
             Err(error) => tracing::error!(%error, "scheduler tick failed"),

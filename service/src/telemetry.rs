@@ -135,6 +135,9 @@ pub const EVENT_WATCH_LOOKS: &str = "bouncewear_event_watch_looks_total";
 /// Calibration fits stopped because their request ended first (`api::calibrations`).
 pub const FITS_STOPPED: &str = "bouncewear_fits_stopped_total";
 
+/// Jobs accepted into the queue, schedules' runs included ([`record_jobs_submitted`]).
+const JOBS_SUBMITTED: &str = "bouncewear_jobs_submitted_total";
+
 /// The HELP text of every metric the service records, wherever it records it.
 fn describe_metrics() {
     metrics::describe_counter!(
@@ -153,8 +156,8 @@ fn describe_metrics() {
         "Jobs claimed by a worker and not yet finished."
     );
     metrics::describe_counter!(
-        "bouncewear_jobs_submitted_total",
-        "Jobs accepted into the queue by this instance."
+        JOBS_SUBMITTED,
+        "Jobs accepted into the queue by this instance, schedules' runs included."
     );
     metrics::describe_counter!(
         "bouncewear_jobs_finished_total",
@@ -215,7 +218,7 @@ fn counters_from_zero() {
         EVENT_WATCH_LOOKS,
         FITS_STOPPED,
         "bouncewear_store_retries_total",
-        "bouncewear_jobs_submitted_total",
+        JOBS_SUBMITTED,
         "bouncewear_operations_simulated_total",
     ] {
         metrics::counter!(name).increment(0);
@@ -262,6 +265,12 @@ pub fn prometheus() -> PrometheusHandle {
 pub fn render_metrics(handle: &PrometheusHandle) -> String {
     process_metrics().collect();
     handle.render()
+}
+
+/// Counts `jobs` accepted into the queue: submitted, or a schedule's runs (on its timetable or
+/// run now), whether or not they go on to succeed.
+pub fn record_jobs_submitted(jobs: u64) {
+    metrics::counter!(JOBS_SUBMITTED).increment(jobs);
 }
 
 /// Records a succeeded job's wall time and speed. `operations` is what the job simulated.

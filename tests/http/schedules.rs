@@ -1,6 +1,6 @@
 //! `/v1/schedules`: runs, the trend with drift flags, and invalid schedules.
 
-use crate::support::app::{Service, TestApp};
+use crate::support::app::{Service, Spawned, TestApp};
 use crate::support::client::{agent, assert_problem, get, post, put, reply};
 use crate::support::{temp_db, wearing_template};
 use serde_json::json;
@@ -152,4 +152,30 @@ fn bad_schedules_name_their_field() {
             );
         }
     }
+}
+
+/// A schedule's run is a job accepted into the queue, counted in `bouncewear_jobs_submitted_total`
+/// as a submission is (a server of its own: the in-process servers share one recorder).
+#[test]
+fn a_schedules_run_counts_as_a_job_submitted() {
+    let server = Spawned::start(&temp_db("schedule-counted"), &["--workers", "0"]);
+    let submitted = || {
+        let text = get(&server.url("/metrics"), None).body;
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("bouncewear_jobs_submitted_total "))
+            .unwrap_or_else(|| panic!("no submitted count:\n{text}"));
+        line.rsplit(' ').next().unwrap().parse::<f64>().unwrap()
+    };
+    let body =
+        json!({"name": "n", "cron": "0 3 * * *", "template": {"devices": 2, "operations": 2}});
+    let created = post(&server.url("/v1/schedules"), &body.to_string(), None);
+    assert_eq!(created.status, 201, "{}", created.body);
+    let id = created.json()["id"].as_str().unwrap().to_owned();
+    assert_eq!(submitted(), 0.0);
+    let run = post(&server.url(&format!("/v1/schedules/{id}/run")), "", None);
+    assert_eq!(run.status, 202, "{}", run.body);
+    let job = json!({"devices": 2, "operations": 2}).to_string();
+    assert_eq!(post(&server.url("/v1/jobs"), &job, None).status, 202);
+    assert_eq!(submitted(), 2.0);
 }

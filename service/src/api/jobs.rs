@@ -207,7 +207,7 @@ pub async fn submit_job(
     match once.ok_or(ApiError::QueueFull(bound))? {
         Once::Created(record) => {
             state.wake.notify_one();
-            metrics::counter!("bouncewear_jobs_submitted_total").increment(1);
+            crate::telemetry::record_jobs_submitted(1);
             accepted(&record)
         }
         Once::Replayed(record) => accepted(&record).map(replayed),

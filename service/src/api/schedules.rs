@@ -301,6 +301,7 @@ pub async fn run_schedule_now(
         {
             NewRun::Created(record) => {
                 state.wake.notify_one();
+                crate::telemetry::record_jobs_submitted(1);
                 return accepted(&record);
             }
             NewRun::AlreadyExists => continue,
