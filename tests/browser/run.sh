@@ -4,7 +4,8 @@
 #   tests/browser/run.sh BASE_URL OUT_DIR
 #
 # Installs Debian's chromium when /usr/bin/chromium is missing and playwright-core (which never
-# downloads a browser) into tests/browser/node_modules, then runs dashboard.mjs against a running
+# downloads a browser) into tests/browser/node_modules, then runs docs.mjs (the API's /docs page)
+# and dashboard.mjs against a running
 # `bouncewear serve` at BASE_URL. Screenshots go to OUT_DIR. Set BOUNCEWEAR_API_KEY when the server
 # has keys.
 set -euo pipefail
@@ -46,4 +47,5 @@ if [ "$installed" != "$wanted" ]; then
 fi
 
 mkdir -p "$out"
+node "$here/docs.mjs" "$base"
 exec node "$here/dashboard.mjs" "$base" "$out"

@@ -133,8 +133,12 @@ fn add_response_examples(document: &mut Value) {
         for (status, media_types) in statuses {
             for (media, example) in media_types.as_object().into_iter().flatten() {
                 let pointer = format!("/responses/{status}/content/{}", media.replace('/', "~1"));
+                // A named Example with its `value`, not `example`: RapiDoc (the `/docs` page)
+                // reads the members of an `example` object as Examples, and a `null` member
+                // (a job's `error`, its `finished_at`) left eight operations without their
+                // responses and the page with TypeErrors.
                 if let Some(content) = operation.pointer_mut(&pointer) {
-                    content["example"] = example.clone();
+                    content["examples"] = json!({"answer": {"value": example}});
                 }
             }
         }

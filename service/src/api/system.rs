@@ -107,7 +107,9 @@ pub async fn docs() -> Html<&'static str> {
     Html(concat!(
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>bouncewear API</title>",
         "<script type=\"module\" src=\"/docs/rapidoc-min.js\"></script></head><body>",
-        "<rapi-doc spec-url=\"/openapi.json\" render-style=\"read\" show-header=\"false\" allow-try=\"true\"></rapi-doc>",
+        // `load-fonts="false"`: RapiDoc would fetch Open Sans from fonts.gstatic.com; the page
+        // loads nothing from the internet, and system fonts serve.
+        "<rapi-doc spec-url=\"/openapi.json\" render-style=\"read\" show-header=\"false\" allow-try=\"true\" load-fonts=\"false\"></rapi-doc>",
         "</body></html>"
     ))
 }
