@@ -291,23 +291,18 @@ impl<'de> Deserialize<'de> for LimitSpec {
     }
 }
 
-/// One item of a list of limits: `{"above": x}` or `{"below": x}`, exactly one side.
+/// One item of a list of limits: `{"above": x}` or `{"below": x}`, exactly one side, written as
+/// a failure criterion is ([`CriterionSpec`]).
 struct ThresholdItem(Threshold);
 
 impl<'de> Deserialize<'de> for ThresholdItem {
     fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        #[derive(Deserialize)]
-        #[serde(deny_unknown_fields)]
-        struct Sides {
-            above: Option<f64>,
-            below: Option<f64>,
-        }
-        let sides = Sides::deserialize(deserializer)?;
+        let sides = CriterionSpec::deserialize(deserializer)?;
         match (sides.above, sides.below) {
             (Some(x), None) => Ok(Self(Threshold::Above(x))),
             (None, Some(x)) => Ok(Self(Threshold::Below(x))),
             _ => Err(serde::de::Error::custom(
-                r#"a threshold is {"above": x} or {"below": x}: exactly one of the two"#,
+                r#"must give exactly one of `above` or `below`: {"above": x} or {"below": x}"#,
             )),
         }
     }
