@@ -90,14 +90,13 @@ def repair_job(job):
     # So does a rare event.
     job.pop("rare_event", None)
     # The anode/cathode masses need scenario.material.anode_erosion_fraction.
-    polarity = (job.get("scenario") or {}).get("material", {}).get("anode_erosion_fraction") is not None
+    polarity = has_polarity(job)
     metrics = job.get("metrics")
     if isinstance(metrics, list) and not polarity:
         metrics[:] = [m for m in metrics if m not in POLAR]
         if not metrics:
             del job["metrics"]
-    listed = set(job.get("metrics") or []) or None
-    available = lambda name: (polarity or name not in POLAR) and (listed is None or name in listed)
+    available = lambda name: name in computed_metrics(job)
     # Limits are on the job's metrics.
     if isinstance(job.get("limits"), dict):
         job["limits"] = {k: v for k, v in job["limits"].items() if available(k)}
@@ -124,9 +123,14 @@ def repair_job(job):
             del job["precision"]
 
 
+def has_polarity(job):
+    """Whether the job's scenario splits the eroded mass by polarity (the anode/cathode metrics)."""
+    return (job.get("scenario") or {}).get("material", {}).get("anode_erosion_fraction") is not None
+
+
 def computed_metrics(job):
     """The metrics a (repaired) job computes: those it lists, else all its scenario has."""
-    polarity = (job.get("scenario") or {}).get("material", {}).get("anode_erosion_fraction") is not None
+    polarity = has_polarity(job)
     every = {m for m in OPERATION_METRICS | DEVICE_METRICS if polarity or m not in POLAR}
     return set(job.get("metrics") or []) & every or every
 
