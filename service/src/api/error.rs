@@ -63,7 +63,8 @@ pub enum ApiError {
     #[error("a request body is read as it is sent: send it without `Content-Encoding: {0}`")]
     UnsupportedEncoding(String),
     #[error(
-        "the queue is full: it holds at most {} unfinished jobs in all and {} per API key; retry later",
+        "the queue, or this API key's share of it, is full: at most {} unfinished jobs in all and {} \
+         per API key; retry later",
         .0.total,
         .0.per_owner
     )]
