@@ -740,7 +740,9 @@ async fn a_precision_target_queues_its_next_batch_from_the_merge(url: &str) {
 }
 
 /// A rare event's rounds, each run as shards by two real workers (every round sharded), give the
-/// Result of the job run whole; nothing of them is kept once the Result is stored.
+/// Result of the job run whole, whether its devices ran as groups or whole; nothing of them is
+/// kept once the Result is stored, and every shard listed was claimed (a job that ran whole keeps
+/// its devices' groups in rows of their own during the rounds, which are no shards).
 async fn a_rare_events_rounds_run_as_shards_give_the_whole_result(url: &str) {
     let store = store::open(url).await.unwrap();
     let text = r#"{"devices": 3, "operations": 2, "seed": 9,
@@ -749,14 +751,62 @@ async fn a_rare_events_rounds_run_as_shards_give_the_whole_result(url: &str) {
                      "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.01}}],
         "rare_event": {"metric": "total_bounce_s", "above": 0.014, "operation": 2,
                        "method": "subset", "target_cov": 0.5}}"#;
-    let id = insert(&store, queued_job(text, 9)).await;
-    let mut workers = Arc::into_inner(workers(&store, 3, u64::MAX)).unwrap();
+    let job = Job::from_json(text, || 0).unwrap();
+    let whole = run_job(&job, &Silent).unwrap();
+    assert!(whole.rare_event.is_some());
+    let grouped = queued_job(text, 9);
+    let ran_whole = QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1));
+    assert_eq!(ran_whole.shards.len(), 1, "a job this small runs whole");
+    for (queued, devices) in [
+        (
+            grouped,
+            (0..3).map(|g| ShardId::group(0, g)).collect::<Vec<_>>(),
+        ),
+        (ran_whole, vec![]),
+    ] {
+        let id = insert(&store, queued).await;
+        let ended = run_rounds(&store, &id).await;
+        assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
+        let shards = store.shards(&id).await.unwrap();
+        let rounds: Vec<ShardId> = shards
+            .iter()
+            .map(|s| s.shard)
+            .filter(|s| is_round(s.batch))
+            .collect();
+        // A first level, then levels of chains: each round two tasks and a merge step.
+        assert!(rounds.len() >= 9, "{rounds:?}");
+        for round in [RARE_ROUNDS, RARE_ROUNDS + 1] {
+            assert!(rounds.contains(&ShardId::group(round, 1)), "{rounds:?}");
+        }
+        let of_devices: Vec<ShardId> = shards
+            .iter()
+            .map(|s| s.shard)
+            .filter(|s| !is_round(s.batch))
+            .collect();
+        assert_eq!(of_devices, [devices, vec![ShardId::merge(0)]].concat());
+        assert!(
+            shards
+                .iter()
+                .all(|s| s.status == "done" && s.attempt.0 >= 1),
+            "{shards:?}"
+        );
+        assert_eq!(
+            without_timing(&store.result_json(&id).await.unwrap().unwrap()),
+            without_timing(&serde_json::to_string(&whole).unwrap())
+        );
+        assert!(stored_groups(store.as_ref(), &id, &job).await.is_empty());
+    }
+}
+
+/// Runs the queue with two real workers that shard every rare event's round until job `id` ends.
+async fn run_rounds(store: &Arc<dyn Store>, id: &JobId) -> JobRecord {
+    let mut workers = Arc::into_inner(workers(store, 3, u64::MAX)).unwrap();
     workers.sharded_round_operations = 1;
     let (stop, stopping) = watch::channel(false);
     let handles = Arc::new(workers).spawn(2, stopping);
     let started = Instant::now();
     let ended = loop {
-        let job = store.job(&Owner::anonymous(), &id).await.unwrap();
+        let job = store.job(&Owner::anonymous(), id).await.unwrap();
         if job.status.is_terminal() {
             break job;
         }
@@ -767,27 +817,7 @@ async fn a_rare_events_rounds_run_as_shards_give_the_whole_result(url: &str) {
     for handle in handles {
         handle.await.unwrap();
     }
-    assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
-    let shards = store.shards(&id).await.unwrap();
-    let rounds: Vec<ShardId> = shards
-        .iter()
-        .map(|s| s.shard)
-        .filter(|s| is_round(s.batch))
-        .collect();
-    // A first level, then levels of chains: each round two tasks and a merge step.
-    assert!(rounds.len() >= 9, "{rounds:?}");
-    for round in [RARE_ROUNDS, RARE_ROUNDS + 1] {
-        assert!(rounds.contains(&ShardId::group(round, 1)), "{rounds:?}");
-    }
-    assert!(shards.iter().all(|s| s.status == "done"));
-    let whole = run_job(&Job::from_json(text, || 0).unwrap(), &Silent).unwrap();
-    assert!(whole.rare_event.is_some());
-    assert_eq!(
-        without_timing(&store.result_json(&id).await.unwrap().unwrap()),
-        without_timing(&serde_json::to_string(&whole).unwrap())
-    );
-    let job = Job::from_json(text, || 0).unwrap();
-    assert!(stored_groups(store.as_ref(), &id, &job).await.is_empty());
+    ended
 }
 
 /// Runs one statement on the database behind a store, as an operator (or a failing disk) could:

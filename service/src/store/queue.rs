@@ -757,7 +757,10 @@ impl JobQueue for SqlStore {
             "SELECT ",
             shard_columns!(),
             ", (SELECT status FROM jobs WHERE id = $1) AS job_status",
-            " FROM shards WHERE job_id = $1 ORDER BY batch, grp < 0, grp"
+            // A job that ran whole keeps its devices' groups in rows of their own while its
+            // rare event's rounds run (`add_batch`): stored, never claimed, so no shard of it.
+            " FROM shards WHERE job_id = $1 AND (attempt > 0 OR status <> 'done') \
+              ORDER BY batch, grp < 0, grp"
         ))
         .bind(id.as_str())
         .fetch_all(self.readers())
