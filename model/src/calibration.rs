@@ -223,9 +223,14 @@ struct Problem<'c> {
 }
 
 impl CalibrationSpec {
-    /// Parses a calibration request (JSON text), naming the field at fault.
+    /// Parses a calibration request (JSON text) and checks its rules, naming every field at
+    /// fault: those of the wrong type or unknown, read past ([`crate::error::read_past_faults`]),
+    /// then the rules of the rest.
     pub fn from_json(text: &str) -> Result<Self, InvalidInput> {
-        crate::error::from_json(text, &["/fit", "/observations", "/bounds/*"])
+        let (spec, faults) =
+            crate::error::read_past_faults::<Self>(text, &["/fit", "/observations", "/bounds/*"])?;
+        crate::error::with_faults(faults, Problem::new(&spec).map(drop))?;
+        Ok(spec)
     }
 }
 
@@ -1872,7 +1877,7 @@ mod tests {
         let request = |bounds: &str| {
             CalibrationSpec::from_json(&format!(
                 r#"{{"fit": ["material.kappa"], "bounds": {bounds},
-                    "observations": [{{"first_bounce_s": 0.009}}]}}"#
+                    "observations": [{{"first_bounce_s": 0.009}}, {{"first_bounce_s": 0.0095}}]}}"#
             ))
         };
         let spec = request(r#"{"material.kappa": [0.2, 0.5]}"#).unwrap();
@@ -1884,6 +1889,33 @@ mod tests {
         assert_eq!(listed.pointers(), ["/bounds"]);
     }
 
+    /// A member of the wrong type or unknown is named and read past, and the rules of the rest
+    /// are checked too, as for a job (docs/contract.md, "Errors"): the request named `/bogus`
+    /// alone before.
+    #[test]
+    fn every_field_at_fault_is_named_past_a_wrong_type_or_an_unknown_member() {
+        for (text, pointers) in [
+            (
+                r#"{"fit": ["material.kappa"], "bogus": 1,
+                    "observations": [{"first_bounce_s": -1}]}"#,
+                vec!["/bogus", "/observations/0/first_bounce_s"],
+            ),
+            (
+                r#"{"fit": ["material.kappa"], "scenario": {"circuit": {"current_a": "x"}},
+                    "observations": [{"first_bounce_s": 0.009, "bogus": 1},
+                                     {"first_bounce_s": -1}]}"#,
+                vec![
+                    "/observations/0/bogus",
+                    "/scenario/circuit/current_a",
+                    "/observations/1/first_bounce_s",
+                ],
+            ),
+        ] {
+            let invalid = CalibrationSpec::from_json(text).unwrap_err();
+            assert_eq!(invalid.pointers(), pointers, "{invalid}");
+        }
+    }
+
     /// A measured value beyond a scenario's magnitudes is refused at its field (a sweep of the
     /// HTTP API found `first_bounce_s: 1e308` blamed on the starting scenario).
     #[test]
@@ -1893,7 +1925,7 @@ mod tests {
                 r#"{{"fit": ["material.kappa"], "observations":
                     [{{"first_bounce_s": 0.009}}, {{"first_bounce_s": {value}}}]}}"#
             );
-            let invalid = calibrate(&CalibrationSpec::from_json(&text).unwrap()).unwrap_err();
+            let invalid = CalibrationSpec::from_json(&text).unwrap_err();
             assert_eq!(
                 invalid.pointers(),
                 ["/observations/1/first_bounce_s"],
