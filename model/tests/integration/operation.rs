@@ -161,6 +161,35 @@ fn kappa_towards_zero_is_a_dead_impact_with_e_from_eq_18() {
     }
 }
 
+/// docs/contract.md, the `simulate` output's edge cases: with current and no bounce, the bounce
+/// times are 0 and `bounces` empty, while the pre-arc still burns before the touch: the same as
+/// in the bouncing operation (it depends on the impact speed alone), and all of the arc energy.
+#[test]
+fn with_no_bounce_the_pre_arc_still_burns() {
+    let at_15_a = |s: &mut ScenarioSpec| {
+        s.circuit.supply_voltage_v = 48.0;
+        s.circuit.current_a = 15.0;
+    };
+    let bouncing = simulate(&scenario(at_15_a), Fidelity::Exact);
+    assert!(bouncing.outcome.bounce_count > 0 && bouncing.outcome.pre_arc_s > 0.0);
+    let pre_arc_energy = bouncing.outcome.arc_energy_j
+        - bouncing.bounces.iter().map(|b| b.arc_energy_j).sum::<f64>();
+    let dead = scenario(|s| {
+        at_15_a(s);
+        s.material.kappa = Some(0.01);
+    });
+    for sim in both(&dead) {
+        let out = &sim.outcome;
+        assert_eq!(
+            (out.bounce_count, out.first_bounce_s, out.total_bounce_s),
+            (0, 0.0, 0.0)
+        );
+        assert!(sim.bounces.is_empty());
+        assert_eq!(out.pre_arc_s, bouncing.outcome.pre_arc_s);
+        assert_relative_eq!(out.arc_energy_j, pre_arc_energy, max_relative = 1e-12);
+    }
+}
+
 #[test]
 fn kappa_towards_infinity_is_elastic_and_ends_at_the_cap_or_by_losses() {
     let scenario = scenario(|s| s.material.kappa = Some(1e8));
