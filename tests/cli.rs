@@ -604,7 +604,7 @@ fn calibrate_fits_kappa_to_simulated_measurements() {
         r#"{"fit": ["material.kappa"]}"#,
     );
     assert!(
-        line.contains("column `first_bounce_s`: `abc` is not a number"),
+        line.contains("column `first_bounce_s`: `abc` is not a finite number"),
         "{line}"
     );
 

@@ -34,6 +34,12 @@ pub fn observations_from_csv(text: &str, path: &str) -> Result<Value, CliError> 
             detail: format!("{path}: {detail}"),
         });
     };
+    for (index, column) in header.iter().enumerate() {
+        if header[..index].contains(column) {
+            let detail = format!("the header names column `{column}` twice");
+            fault(observations.clone(), detail);
+        }
+    }
     for (row, line) in lines.enumerate() {
         let at = observations.child(row);
         let cells: Vec<&str> = line.split(',').map(str::trim).collect();
@@ -48,17 +54,19 @@ pub fn observations_from_csv(text: &str, path: &str) -> Result<Value, CliError> 
         }
         let mut observation = Map::new();
         for (column, cell) in header.iter().zip(cells).filter(|(_, c)| !c.is_empty()) {
-            let number = cell
-                .parse::<u64>()
-                .map(Value::from)
-                .or_else(|_| cell.parse::<f64>().map(Value::from));
+            // Rust reads `NaN`, `inf` and `1e400` (as infinity) as numbers; JSON has none of
+            // them, and a measurement is finite.
+            let number = cell.parse::<u64>().map(Value::from).ok().or_else(|| {
+                let number = cell.parse::<f64>().ok().filter(|x| x.is_finite())?;
+                Some(Value::from(number))
+            });
             match number {
-                Ok(number) => {
+                Some(number) => {
                     observation.insert((*column).to_owned(), number);
                 }
-                Err(_) => fault(
+                None => fault(
                     at.child(column),
-                    format!("data row {row}, column `{column}`: `{cell}` is not a number"),
+                    format!("data row {row}, column `{column}`: `{cell}` is not a finite number"),
                 ),
             }
         }
@@ -104,8 +112,9 @@ mod tests {
             ]
         );
         assert!(
-            bad.to_string()
-                .contains("m.csv: data row 0, column `first_bounce_s`: `abc` is not a number"),
+            bad.to_string().contains(
+                "m.csv: data row 0, column `first_bounce_s`: `abc` is not a finite number"
+            ),
             "{bad}"
         );
         assert!(
@@ -113,5 +122,41 @@ mod tests {
                 .contains("data row 1 has 1 cells, the header 2 columns")
         );
         assert!(observations_from_csv("", "m.csv").is_err());
+    }
+
+    /// Rust's `f64` parser takes `NaN`, `inf` and an overflow such as `1e400` (infinity), which
+    /// became JSON's `null`, "not measured": three of four bounce times left out without a word.
+    /// A column named twice let the last one win.
+    #[test]
+    fn a_cell_that_is_not_finite_and_a_column_named_twice_are_refused() {
+        let bad = observations_from_csv(
+            "impact_velocity_m_s,first_bounce_s\nNaN,0.01\n0.4,inf\n0.3,-inf\n0.2,1e400\n0.5,0.012\n",
+            "m.csv",
+        );
+        let CliError::Invalid(bad) = bad.unwrap_err() else {
+            panic!("invalid input")
+        };
+        assert_eq!(
+            bad.pointers(),
+            [
+                "/observations/0/impact_velocity_m_s",
+                "/observations/1/first_bounce_s",
+                "/observations/2/first_bounce_s",
+                "/observations/3/first_bounce_s"
+            ]
+        );
+        assert!(
+            bad.to_string().contains("`inf` is not a finite number"),
+            "{bad}"
+        );
+        let twice = observations_from_csv("e1,first_bounce_s,e1\n0.4,0.01,0.4\n", "m.csv");
+        let CliError::Invalid(twice) = twice.unwrap_err() else {
+            panic!("invalid input")
+        };
+        assert_eq!(twice.pointers(), ["/observations"]);
+        assert!(
+            twice.to_string().contains("names column `e1` twice"),
+            "{twice}"
+        );
     }
 }
