@@ -1018,6 +1018,17 @@ fn check_fit(
             continue;
         }
         match lookup(base, &path) {
+            // A count (`losses.max_bounces`) is stored as an integer: a fit's steps would move
+            // it off the integers, and the scenario refuses every such value.
+            Some(Value::Number(n)) if !n.is_f64() => {
+                errors.push(FieldError {
+                    pointer,
+                    detail: format!(
+                        "`{name}` is a whole number (a count) of the scenario, which a fit cannot vary"
+                    ),
+                });
+                continue;
+            }
             Some(Value::Number(n)) if n.as_f64().is_some_and(|x| x > 0.0) => {}
             // An optional number the model derives when absent (kappa).
             None | Some(Value::Null) if name == "material.kappa" => {}
@@ -1914,6 +1925,19 @@ mod tests {
             let invalid = CalibrationSpec::from_json(text).unwrap_err();
             assert_eq!(invalid.pointers(), pointers, "{invalid}");
         }
+    }
+
+    /// A count cannot be fitted: `losses.max_bounces` was refused at `/scenario` as "the starting
+    /// scenario cannot simulate every observation" (its first step left the integers).
+    #[test]
+    fn a_count_is_refused_at_its_place_in_fit() {
+        let invalid = CalibrationSpec::from_json(
+            r#"{"fit": ["material.kappa", "losses.max_bounces"], "observations": [
+                {"first_bounce_s": 0.009}, {"first_bounce_s": 0.0095}, {"e1": 0.4}]}"#,
+        )
+        .unwrap_err();
+        assert_eq!(invalid.pointers(), ["/fit/1"], "{invalid}");
+        assert!(invalid.to_string().contains("a whole number"), "{invalid}");
     }
 
     /// A measured value beyond a scenario's magnitudes is refused at its field (a sweep of the
