@@ -82,6 +82,25 @@ fn serve_refuses_a_public_bind_without_keys() {
     assert!(String::from_utf8_lossy(&output.stderr).contains("--api-key"));
 }
 
+/// A database URL of a scheme no backend takes is a bad command line (exit 2, the contract's
+/// "Exit codes"), as a public bind without keys is; it exited 1.
+#[test]
+fn serve_and_worker_refuse_an_unsupported_database_scheme_as_a_bad_command_line() {
+    for command in [&["serve", "--bind", "127.0.0.1:0"][..], &["worker"]] {
+        let output = Command::new(BIN)
+            .args(command)
+            .args(["--database", "mysql://x/y"])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{command:?}: {stderr}");
+        assert!(
+            stderr.contains("unsupported database URL scheme `mysql`"),
+            "{stderr}"
+        );
+    }
+}
+
 #[test]
 fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sigterm() {
     use std::io::{BufRead, BufReader};

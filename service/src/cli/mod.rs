@@ -11,6 +11,7 @@ use crate::app::StartupError;
 use crate::compute::PoolError;
 use crate::domain::draw_seed;
 use crate::progress::Progress;
+use crate::store::StoreError;
 use crate::telemetry::{self, LogFormat};
 use bench::BenchError;
 use bouncewear_model::calibration::{CalibrationSpec, calibrate};
@@ -273,6 +274,7 @@ impl CliError {
             | CliError::Startup(
                 StartupError::PublicWithoutKeys(_)
                 | StartupError::NoWorkers
+                | StartupError::Database(StoreError::UnsupportedUrl(_))
                 | StartupError::Compute(PoolError::NoThreads),
             ) => ExitCode::from(2),
             CliError::Startup(_) | CliError::Ended { .. } | CliError::Failed(_) => {
