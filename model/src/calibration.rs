@@ -260,6 +260,11 @@ pub fn calibrate_until(
     Ok(fitted)
 }
 
+/// How far (in the logarithm) beyond an estimate a scenario is tried, to tell whether the
+/// estimate lies on an edge of the scenarios the model takes: a fit stopped by one ends within
+/// about 1e-10 of it (its last steps, damped up to 1e12, refused).
+const EDGE_LN: f64 = 1e-8;
+
 /// The most steps of Levenberg-Marquardt a fit (or a point of a profile) takes: a fit that takes
 /// them all says so in its warnings.
 const MAX_ITERATIONS: u32 = 100;
@@ -728,7 +733,21 @@ impl Problem<'_> {
                 .map(|k| optimum.entry(k, i) / optimum.entry(i, i))
                 .collect(),
         };
-        let ends = [-1.0, 1.0].map(|side| profile.end(side, optimum.t * se_ln));
+        // The scenarios the model takes have edges of their own (a contact radius no smaller
+        // than the worn one, a yield pressure above the worn pressure): an estimate on one is held
+        // there as on a bound, and its interval cut there.
+        let on_edge = [-1.0, 1.0].map(|side| {
+            let mut beyond = theta.to_vec();
+            beyond[i] += side * EDGE_LN;
+            self.residuals(&beyond).is_none()
+        });
+        let ends = [-1.0, 1.0].map(|side| {
+            if on_edge[usize::from(side > 0.0)] {
+                Bounded::At(0.0)
+            } else {
+                profile.end(side, optimum.t * se_ln)
+            }
+        });
         for ((end, side), word) in ends.iter().zip(["below", "above"]).zip([-1.0, 1.0]) {
             if let Bounded::Not(reach) = end {
                 warnings.push(format!(
@@ -745,7 +764,7 @@ impl Problem<'_> {
                 (theta[i] + ends[1].reach()).min(upper).exp(),
             ],
             se_ln,
-            at_bound: theta[i] == lower || theta[i] == upper,
+            at_bound: theta[i] == lower || theta[i] == upper || on_edge.contains(&true),
         };
         (name.clone(), estimate)
     }
@@ -1991,6 +2010,48 @@ mod tests {
             let invalid = CalibrationSpec::from_json(text).unwrap_err();
             assert_eq!(invalid.pointers(), pointers, "{invalid}");
         }
+    }
+
+    /// An estimate that a rule of the scenario stops (the contact radius no smaller than the
+    /// worn radius) is held on that edge as on a bound, its interval cut there: it was reported
+    /// as an optimum, its interval reaching radii the scenario refuses.
+    #[test]
+    fn an_estimate_on_an_edge_of_the_scenario_is_marked_and_cut_there() {
+        let observations = [0.15, 0.25, 0.35, 0.45]
+            .iter()
+            .map(|&v| {
+                let mut truth = ScenarioSpec::default();
+                truth.material.contact_radius_m = 0.0033;
+                truth.mechanism.impact_velocity_m_s = Some(v);
+                let outcome = simulate(
+                    &Scenario::new(truth, &Pointer::root()).unwrap(),
+                    Fidelity::Exact,
+                )
+                .outcome;
+                Observation {
+                    impact_velocity_m_s: Some(v),
+                    first_bounce_s: Some(outcome.first_bounce_s),
+                    total_bounce_s: Some(outcome.total_bounce_s),
+                    ..Observation::default()
+                }
+            })
+            .collect();
+        let mut scenario = ScenarioSpec::default();
+        scenario.material.worn_radius_m = 0.0077;
+        let fit = calibrate(&CalibrationSpec {
+            scenario,
+            fit: vec!["material.contact_radius_m".into()],
+            observations,
+            bounds: BTreeMap::new(),
+        })
+        .unwrap();
+        let radius = &fit.estimates["material.contact_radius_m"];
+        assert!(radius.at_bound, "{radius:?}");
+        assert_eq!(radius.ci95[0], radius.value, "{radius:?}");
+        assert!(
+            radius.value >= 0.0077 && radius.ci95[1] > radius.value,
+            "{radius:?}"
+        );
     }
 
     /// A count cannot be fitted: `losses.max_bounces` was refused at `/scenario` as "the starting
