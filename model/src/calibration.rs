@@ -1368,6 +1368,19 @@ mod tests {
         }
     }
 
+    /// The exact outcome of `truth` at each impact velocity.
+    fn outcomes(truth: &ScenarioSpec, velocities: &[f64]) -> Vec<(f64, crate::operation::Outcome)> {
+        velocities
+            .iter()
+            .map(|&v| {
+                let mut spec = truth.clone();
+                spec.mechanism.impact_velocity_m_s = Some(v);
+                let scenario = Scenario::new(spec, &Pointer::root()).unwrap();
+                (v, simulate(&scenario, Fidelity::Exact).outcome)
+            })
+            .collect()
+    }
+
     /// The standard error of the first parameter's logarithm at `theta`, from the Jacobian
     /// `columns` there.
     fn se_ln_at(problem: &Problem, theta: &[f64], columns: &[Vec<f64>]) -> f64 {
@@ -1788,21 +1801,12 @@ mod tests {
         truth.circuit.supply_voltage_v = 48.0;
         truth.circuit.current_a = 15.0;
         truth.material.arc_restitution.a = 0.3;
-        let observations = [0.2, 0.3, 0.4, 0.5]
-            .iter()
-            .map(|&v| {
-                let mut spec = truth.clone();
-                spec.mechanism.impact_velocity_m_s = Some(v);
-                let outcome = simulate(
-                    &Scenario::new(spec, &Pointer::root()).unwrap(),
-                    Fidelity::Exact,
-                )
-                .outcome;
-                Observation {
-                    impact_velocity_m_s: Some(v),
-                    total_bounce_s: Some(outcome.total_bounce_s),
-                    ..Observation::default()
-                }
+        let observations = outcomes(&truth, &[0.2, 0.3, 0.4, 0.5])
+            .into_iter()
+            .map(|(v, outcome)| Observation {
+                impact_velocity_m_s: Some(v),
+                total_bounce_s: Some(outcome.total_bounce_s),
+                ..Observation::default()
             })
             .collect();
         let mut scenario = truth.clone();
@@ -2017,23 +2021,15 @@ mod tests {
     /// as an optimum, its interval reaching radii the scenario refuses.
     #[test]
     fn an_estimate_on_an_edge_of_the_scenario_is_marked_and_cut_there() {
-        let observations = [0.15, 0.25, 0.35, 0.45]
-            .iter()
-            .map(|&v| {
-                let mut truth = ScenarioSpec::default();
-                truth.material.contact_radius_m = 0.0033;
-                truth.mechanism.impact_velocity_m_s = Some(v);
-                let outcome = simulate(
-                    &Scenario::new(truth, &Pointer::root()).unwrap(),
-                    Fidelity::Exact,
-                )
-                .outcome;
-                Observation {
-                    impact_velocity_m_s: Some(v),
-                    first_bounce_s: Some(outcome.first_bounce_s),
-                    total_bounce_s: Some(outcome.total_bounce_s),
-                    ..Observation::default()
-                }
+        let mut truth = ScenarioSpec::default();
+        truth.material.contact_radius_m = 0.0033;
+        let observations = outcomes(&truth, &[0.15, 0.25, 0.35, 0.45])
+            .into_iter()
+            .map(|(v, outcome)| Observation {
+                impact_velocity_m_s: Some(v),
+                first_bounce_s: Some(outcome.first_bounce_s),
+                total_bounce_s: Some(outcome.total_bounce_s),
+                ..Observation::default()
             })
             .collect();
         let mut scenario = ScenarioSpec::default();
