@@ -41,6 +41,21 @@ pub enum StartupError {
     NoWorkers,
 }
 
+impl StartupError {
+    /// Whether the command line is at fault (a bad command line exits 2, docs/contract.md): a
+    /// public bind without keys, no workers for a worker process, no compute threads, or a
+    /// database URL no backend takes.
+    pub fn is_bad_command_line(&self) -> bool {
+        matches!(
+            self,
+            StartupError::PublicWithoutKeys(_)
+                | StartupError::NoWorkers
+                | StartupError::Compute(PoolError::NoThreads)
+                | StartupError::Database(StoreError::UnsupportedUrl(_))
+        )
+    }
+}
+
 /// A built service: bound, with its store open, not yet serving.
 pub struct Application {
     listener: TcpListener,

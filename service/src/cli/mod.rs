@@ -11,7 +11,6 @@ use crate::app::StartupError;
 use crate::compute::PoolError;
 use crate::domain::draw_seed;
 use crate::progress::Progress;
-use crate::store::StoreError;
 use crate::telemetry::{self, LogFormat};
 use bench::BenchError;
 use bouncewear_model::calibration::{CalibrationSpec, calibrate};
@@ -269,14 +268,8 @@ pub enum CliError {
 impl CliError {
     fn exit_code(&self) -> ExitCode {
         match self {
-            CliError::Invalid(_)
-            | CliError::Io { .. }
-            | CliError::Startup(
-                StartupError::PublicWithoutKeys(_)
-                | StartupError::NoWorkers
-                | StartupError::Database(StoreError::UnsupportedUrl(_))
-                | StartupError::Compute(PoolError::NoThreads),
-            ) => ExitCode::from(2),
+            CliError::Invalid(_) | CliError::Io { .. } => ExitCode::from(2),
+            CliError::Startup(error) if error.is_bad_command_line() => ExitCode::from(2),
             CliError::Startup(_) | CliError::Ended { .. } | CliError::Failed(_) => {
                 ExitCode::FAILURE
             }
