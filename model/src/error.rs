@@ -427,7 +427,7 @@ fn check_shape(
             {
                 return Err(InvalidInput::single(
                     at,
-                    "expected an object or a number, found an array",
+                    "expected one value here (an object, a number or text), found a list",
                 ));
             }
             items
@@ -453,8 +453,49 @@ fn invalid_from_serde(pointer: Pointer, error: &serde_json::Error) -> InvalidInp
         Category::Syntax | Category::Eof | Category::Io => {
             InvalidInput::malformed(&pointer, format!("malformed JSON: {error}"))
         }
-        Category::Data => InvalidInput::single(&pointer, error.to_string()),
+        Category::Data => InvalidInput::single(&pointer, in_plain_words(&error.to_string())),
     }
+}
+
+/// serde's message with the Rust types it names (`expected f64`, `expected u64`, `expected
+/// struct CircuitSpec`) put as a JSON document's reader knows them.
+fn in_plain_words(message: &str) -> String {
+    const TYPES: [(&str, &str); 9] = [
+        ("expected f64", "expected a number"),
+        ("expected f32", "expected a number"),
+        (
+            "expected u64",
+            "expected a whole number from 0 to 18446744073709551615",
+        ),
+        (
+            "expected usize",
+            "expected a whole number from 0 to 18446744073709551615",
+        ),
+        (
+            "expected u32",
+            "expected a whole number from 0 to 4294967295",
+        ),
+        ("expected u16", "expected a whole number from 0 to 65535"),
+        ("expected u8", "expected a whole number from 0 to 255"),
+        ("expected i64", "expected a whole number"),
+        ("expected a sequence", "expected a list"),
+    ];
+    let mut plain = message.to_owned();
+    for (rust, json) in TYPES {
+        if let Some(at) = plain.find(rust)
+            && !plain[at + rust.len()..].starts_with(|c: char| c.is_alphanumeric())
+        {
+            plain.replace_range(at..at + rust.len(), json);
+        }
+    }
+    // `expected struct CircuitSpec`: an object, whatever the Rust name of its type.
+    if let Some(at) = plain.find("expected struct ") {
+        let end = plain[at..]
+            .find(|c: char| !(c.is_alphanumeric() || c == ' ' || c == '_'))
+            .map_or(plain.len(), |n| at + n);
+        plain.replace_range(at..end, "expected an object");
+    }
+    plain
 }
 
 fn path_to_pointer(path: &serde_path_to_error::Path) -> Pointer {
@@ -470,6 +511,54 @@ fn path_to_pointer(path: &serde_path_to_error::Path) -> Pointer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Messages name JSON's types, not Rust's: `/devices: invalid type: string "x", expected u64`
+    /// told a user of a type they never wrote.
+    #[test]
+    fn a_wrong_type_is_told_in_jsons_words() {
+        #[derive(Debug, serde::Deserialize)]
+        #[allow(dead_code, reason = "only read")]
+        struct Inner {
+            x: f64,
+        }
+        #[derive(Debug, serde::Deserialize)]
+        #[allow(dead_code, reason = "only read")]
+        struct Doc {
+            count: Option<u64>,
+            small: Option<u32>,
+            inner: Option<Inner>,
+            value: Option<f64>,
+        }
+        for (text, expected) in [
+            (
+                r#"{"count": "x"}"#,
+                r#"/count: invalid type: string "x", expected a whole number from 0 to 18446744073709551615"#,
+            ),
+            (
+                r#"{"count": -1}"#,
+                "/count: invalid value: integer `-1`, expected a whole number from 0 to 18446744073709551615",
+            ),
+            (
+                r#"{"small": 1.5}"#,
+                "/small: invalid type: floating point `1.5`, expected a whole number from 0 to 4294967295",
+            ),
+            (
+                r#"{"inner": 3}"#,
+                "/inner: invalid type: integer `3`, expected an object",
+            ),
+            (
+                r#"{"value": "x"}"#,
+                r#"/value: invalid type: string "x", expected a number"#,
+            ),
+            (
+                r#"{"value": [1]}"#,
+                "/value: expected one value here (an object, a number or text), found a list",
+            ),
+        ] {
+            let invalid = from_json::<Doc>(text, &[]).unwrap_err();
+            assert_eq!(invalid.to_string(), expected);
+        }
+    }
 
     /// Up to [`MAX_FAULTS`] members are read past in a small document, fewer in a large one, so
     /// that a hostile body costs a few readings at most ([`READ_PAST_BYTES`]).
