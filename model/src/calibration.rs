@@ -538,8 +538,8 @@ impl Problem<'_> {
         let all: Vec<usize> = (0..start.len()).collect();
         let residuals = self.residuals(&start).ok_or_else(invalid_start)?;
         let (theta, _, iterations) = self
-            .minimise(start, residuals, &all, 1e-14, |jacobian| {
-                self.identifiable(jacobian)
+            .minimise(start, residuals, &all, 1e-14, |theta, jacobian| {
+                self.identifiable(theta, jacobian)
             })?
             .ok_or_else(invalid_start)?;
         Ok((theta, iterations))
@@ -555,7 +555,7 @@ impl Problem<'_> {
         mut residuals: Vec<f64>,
         free: &[usize],
         settle: f64,
-        check: impl Fn(&[Vec<f64>]) -> Result<(), InvalidInput>,
+        check: impl Fn(&[f64], &[Vec<f64>]) -> Result<(), InvalidInput>,
     ) -> Result<Option<(Vec<f64>, f64, u32)>, InvalidInput> {
         let mut cost = sum_of_squares(&residuals);
         let mut lambda = 1e-3;
@@ -563,7 +563,7 @@ impl Problem<'_> {
             let Some(jacobian) = self.jacobian(&theta, &residuals, free) else {
                 return Ok(None);
             };
-            check(&jacobian)?;
+            check(&theta, &jacobian)?;
             let (jtj, jtr) = normal_equations(&jacobian, &residuals);
             // A parameter on a bound that the descent pushes beyond it stays there, and the step
             // moves the others alone (an active set): the joint step, cut at the bound, would
@@ -620,7 +620,7 @@ impl Problem<'_> {
     }
 
     /// Refuses a fit whose parameters the data cannot tell apart, naming the first at fault.
-    fn identifiable(&self, jacobian: &[Vec<f64>]) -> Result<(), InvalidInput> {
+    fn identifiable(&self, theta: &[f64], jacobian: &[Vec<f64>]) -> Result<(), InvalidInput> {
         let norms: Vec<f64> = jacobian
             .iter()
             .map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt())
@@ -634,8 +634,11 @@ impl Problem<'_> {
             return Err(InvalidInput::single(
                 &fit.child(k),
                 format!(
-                    "`{}` changes none of the measured quantities, so the data cannot determine it",
-                    self.parameters[k].0
+                    "`{}` changes none of the measured quantities at {}, so the data cannot \
+                     determine it (a measurement beyond what the model reaches, such as an e1 \
+                     of 1 or more, draws the fit to where nothing changes)",
+                    self.parameters[k].0,
+                    crate::error::shown(theta[k].exp())
                 ),
             ));
         }
@@ -674,7 +677,7 @@ impl Problem<'_> {
             // Neither side of the optimum simulates: no slope, refused as unidentifiable below.
             vec![vec![0.0; residuals.len()]; theta.len()]
         });
-        self.identifiable(&jacobian)?;
+        self.identifiable(theta, &jacobian)?;
         let degrees_of_freedom = residuals.len() - theta.len();
         let cost = sum_of_squares(&residuals);
         let (jtj, _) = normal_equations(&jacobian, &residuals);
@@ -958,7 +961,7 @@ impl Profile<'_> {
             // The profile t needs the sum of squares to a small part of `RSS t^2 / (n - k)`.
             match self
                 .problem
-                .minimise(start, residuals, &free, 1e-9, |_| Ok(()))
+                .minimise(start, residuals, &free, 1e-9, |_, _| Ok(()))
             {
                 Ok(Some((_, cost, _))) => cost,
                 _ => return f64::INFINITY,
@@ -2047,6 +2050,27 @@ mod tests {
         assert!(
             radius.value >= 0.0077 && radius.ci95[1] > radius.value,
             "{radius:?}"
+        );
+    }
+
+    /// Data the model cannot reach (e1 of 1.5) draw kappa to where e1 saturates: refused at
+    /// `/fit/0`, the message saying where the fit had taken it and why, not only that kappa
+    /// "changes none of the measured quantities".
+    #[test]
+    fn data_beyond_the_models_reach_are_refused_saying_so() {
+        let invalid = CalibrationSpec::from_json(
+            r#"{"fit": ["material.kappa"], "observations": [
+                {"impact_velocity_m_s": 0.2, "e1": 1.5}, {"impact_velocity_m_s": 0.3, "e1": 1.5},
+                {"impact_velocity_m_s": 0.4, "e1": 1.5}]}"#,
+        )
+        .and_then(|spec| calibrate(&spec))
+        .unwrap_err();
+        assert_eq!(invalid.pointers(), ["/fit/0"], "{invalid}");
+        let detail = &invalid.errors()[0].detail;
+        assert!(detail.contains("such as an e1 of 1 or more"), "{detail}");
+        assert!(
+            !detail.contains("at 0.36"),
+            "the fit moved kappa from its start: {detail}"
         );
     }
 
