@@ -276,12 +276,14 @@ impl Timetable {
     /// time zone, DST included: a fixed time in a spring-forward gap runs right after the gap, and
     /// a fixed time in a fall-back overlap runs once, at its first occurrence (croner, after Vixie
     /// cron). Given an instant in the repeated hour, croner answers such a time with its first
-    /// occurrence, already past: the search starts again half an hour on (an overlap is at most an
-    /// hour), so that a due time is never at or before `after`.
+    /// occurrence, already past: the search starts again half an hour on, for up to a day (an
+    /// overlap is an hour in most zones and two in Antarctica/Troll), so that a due time is never
+    /// at or before `after`.
     pub fn next_after(&self, after: DateTime<Utc>) -> Option<DateTime<Utc>> {
+        const SEARCHES: usize = 49;
         let after = whole_seconds(after);
         let mut from = after;
-        for _ in 0..4 {
+        for _ in 0..SEARCHES {
             let local = self.time_zone.from_utc_datetime(&from.naive_utc());
             let next = self.cron.find_next_occurrence(&local, false).ok()?;
             let next = whole_seconds(next.with_timezone(&Utc));
@@ -644,6 +646,34 @@ mod tests {
             Some(utc("2026-10-26T01:30:00Z")),
             "not again at 01:30Z"
         );
+    }
+
+    /// Antarctica/Troll falls back two hours (03:00 +02 to 01:00 +00): from an instant in the
+    /// second pass, a time in the overlap ran at its first pass and is next due the day after. The
+    /// search gave up after an hour and a half, so the schedule's next run became none for good
+    /// and the same cron was refused as "never runs" while in the overlap (a probe found it).
+    #[test]
+    fn a_two_hour_overlap_runs_its_times_once_and_goes_on() {
+        for cron in ["50 2 * * *", "30 1 * * *"] {
+            let daily = Timetable::parse(cron, "Antarctica/Troll").unwrap();
+            let first = daily.next_after(utc("2027-10-30T12:00:00Z")).unwrap();
+            for within in [
+                "2027-10-31T01:05:00Z",
+                "2027-10-31T02:40:00Z",
+                "2027-10-31T02:59:59Z",
+            ] {
+                let next = daily.next_after(utc(within)).unwrap();
+                assert_eq!(
+                    next,
+                    daily.next_after(first).unwrap(),
+                    "{cron} from {within}"
+                );
+                assert!(
+                    next > utc(within) && next > utc("2027-11-01T00:00:00Z"),
+                    "{cron}: {next}"
+                );
+            }
+        }
     }
 
     #[test]
