@@ -68,6 +68,15 @@ fn schedules_run_now_and_report_a_trend_with_drift_flags() {
         last["values"]["operations.total_bounce_s.p95"]["drift"], true,
         "{last}"
     );
+    // A run's flag is the run's, whatever the window: the drifting run alone in `?limit=1` is
+    // still compared with the run before it (it read false as the oldest run shown).
+    let alone = get(
+        &server.url(&format!("/v1/schedules/{id}/runs?limit=1")),
+        None,
+    )
+    .json();
+    assert_eq!(alone["runs"].as_array().unwrap().len(), 1, "{alone}");
+    assert_eq!(alone["runs"][0], last, "{alone}");
     let svg = get(
         &server.url(&format!("/v1/schedules/{id}/plots/trend.svg")),
         None,

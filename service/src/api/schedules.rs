@@ -11,12 +11,13 @@ use crate::domain::trend::trend;
 use crate::domain::{
     JobStatus, Once, Owner, ScheduleId, ScheduleSpec, TrendValue, UnixMs, ValidSchedule,
 };
-use crate::store::{NewRun, RunSlot, ScheduleRecord};
+use crate::store::{NewRun, RunRecord, RunSlot, ScheduleRecord};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Query, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
+use bouncewear_model::montecarlo::JobResult;
 use chrono::Utc;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -382,30 +383,40 @@ pub async fn schedule_runs(
     Ok(Json(schedule_trend(&state, &schedule, limit).await?))
 }
 
-/// The trend of a schedule's runs, oldest first.
+/// The most runs older than the asked window that the trend looks back over for the last run
+/// with a Result, whose interval the window's oldest value is compared with.
+const DRIFT_LOOKBACK: u32 = 30;
+
+/// The trend of a schedule's `limit` latest runs, oldest first. Each value's drift flag compares
+/// it with the run before that has a value, within the window or before it (up to
+/// [`DRIFT_LOOKBACK`] runs older): a run's flag does not depend on the window asked.
 pub async fn schedule_trend(
     state: &AppState,
     schedule: &ScheduleRecord,
     limit: u32,
 ) -> Result<Trend, ApiError> {
-    let mut runs = state.store.runs(&schedule.id, limit).await?;
+    let mut runs = state
+        .store
+        .runs(&schedule.id, limit + DRIFT_LOOKBACK)
+        .await?;
+    let older = runs.split_off(runs.len().min(limit as usize));
     runs.reverse();
-    let mut results = Vec::with_capacity(runs.len());
+    // The newest run before the window that has a Result, if any.
+    let mut before = None;
+    for run in &older {
+        if let Some(result) = run_result(state, run).await? {
+            before = Some(result);
+            break;
+        }
+    }
+    let mut results = vec![before];
     for run in &runs {
-        results.push(match run.status {
-            // A run's job deleted meanwhile has no result to read, like one that failed.
-            JobStatus::Succeeded => match stored_result(state, &run.job_id).await {
-                Ok(result) => Some(result),
-                Err(ApiError::NotFound(_)) => None,
-                Err(error) => return Err(error),
-            },
-            _ => None,
-        });
+        results.push(run_result(state, run).await?);
     }
     let statistics = &schedule.definition.statistics;
     let runs = runs
         .iter()
-        .zip(trend(statistics, &results))
+        .zip(trend(statistics, &results).into_iter().skip(1))
         .map(|(run, values)| Run {
             scheduled_for: run.scheduled_for.to_rfc3339(),
             job_id: run.job_id.to_string(),
@@ -419,4 +430,17 @@ pub async fn schedule_trend(
         statistics: statistics.iter().map(ToString::to_string).collect(),
         runs,
     })
+}
+
+/// A run's Result, once its job succeeded; none before, for a failed run, or for one whose job was
+/// deleted meanwhile.
+async fn run_result(state: &AppState, run: &RunRecord) -> Result<Option<JobResult>, ApiError> {
+    if run.status != JobStatus::Succeeded {
+        return Ok(None);
+    }
+    match stored_result(state, &run.job_id).await {
+        Ok(result) => Ok(Some(result)),
+        Err(ApiError::NotFound(_)) => Ok(None),
+        Err(error) => Err(error),
+    }
 }
