@@ -76,6 +76,9 @@ pub enum ApiError {
         "this API key holds {0} event streams already, the most it may; close one, or retry later"
     )]
     TooManyStreams(usize),
+    /// Every slot of a schedule's manual runs within one instant is taken.
+    #[error("too many manual runs of this schedule at once; retry later")]
+    TooManyRuns,
     #[error("method not allowed")]
     MethodNotAllowed,
     #[error("the request body did not arrive within {} s", .0.as_secs_f64())]
@@ -142,7 +145,9 @@ impl ApiError {
             ApiError::UnsupportedMediaType | ApiError::UnsupportedEncoding(_) => {
                 StatusCode::UNSUPPORTED_MEDIA_TYPE
             }
-            ApiError::QueueFull(_) | ApiError::TooManyStreams(_) => StatusCode::TOO_MANY_REQUESTS,
+            ApiError::QueueFull(_) | ApiError::TooManyStreams(_) | ApiError::TooManyRuns => {
+                StatusCode::TOO_MANY_REQUESTS
+            }
             ApiError::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::BodyTimeout(_) => StatusCode::REQUEST_TIMEOUT,
             ApiError::Timeout(_) | ApiError::Unavailable(_) | ApiError::NotReady(_) => {
@@ -203,6 +208,7 @@ impl IntoResponse for ApiError {
         match self {
             ApiError::QueueFull(_)
             | ApiError::TooManyStreams(_)
+            | ApiError::TooManyRuns
             | ApiError::Unavailable(_)
             | ApiError::NotReady(_) => {
                 headers.insert(header::RETRY_AFTER, HeaderValue::from_static("5"));

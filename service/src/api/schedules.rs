@@ -263,8 +263,8 @@ pub async fn delete_schedule(
 /// Run a schedule now, outside its timetable.
 ///
 /// Queues one job from the template now (202, the job's URL in `Location`); it counts in the trend
-/// as a manual run. A full queue is 429 with `Retry-After`; a key whose jobs store its quota or more,
-/// 403.
+/// as a manual run. A full queue is 429 with `Retry-After`, as are more than 16 manual runs of the
+/// schedule within one millisecond; a key whose jobs store its quota or more, 403.
 #[utoipa::path(
     post, path = "/v1/schedules/{id}/run", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     responses(
@@ -309,9 +309,7 @@ pub async fn run_schedule_now(
             NewRun::QueueFull => return Err(ApiError::QueueFull(state.config.queue_bound())),
         }
     }
-    Err(ApiError::Conflict(
-        "too many manual runs at once; retry".into(),
-    ))
+    Err(ApiError::TooManyRuns)
 }
 
 #[derive(Debug, Deserialize, IntoParams)]
