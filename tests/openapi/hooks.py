@@ -109,14 +109,15 @@ def repair_job(job):
             given = {k: v for k, v in criterion.items() if v is not None}
             failure[name] = given if len(given) == 1 else {"above": next(iter(given.values()), 0)}
         job["failure"] = failure
-    # A precision target is on one of the job's operation metrics, with max_devices from devices
-    # to what the size limit allows.
+    # A precision target is on one of the job's operation metrics, in batches of at least 16
+    # devices, with max_devices from devices to what the size limit allows.
     precision = job.get("precision")
     if isinstance(precision, dict):
         fits = precision.get("max_devices", 0) * operations <= MAX_JOB_OPERATIONS
         if (
             not available(precision.get("metric"))
             or precision.get("metric") not in OPERATION_METRICS
+            or devices < 16
             or precision.get("max_devices", 0) < devices
             or not fits
         ):

@@ -188,8 +188,8 @@ fn the_resolved_jobs_keys_are_sorted_at_every_depth() {
 
 #[test]
 fn a_result_reads_back_as_it_was_written() {
-    let doc = json!({"devices": 4, "operations": 20, "metrics": ["e1", "eroded_mass_kg"],
-        "precision": {"metric": "e1", "relative_half_width": 0.5, "max_devices": 8},
+    let doc = json!({"devices": 16, "operations": 20, "metrics": ["e1", "eroded_mass_kg"],
+        "precision": {"metric": "e1", "relative_half_width": 0.5, "max_devices": 32},
         "failure": {"e1": {"below": 0.2}}, "scenario": arcing()});
     let text = serde_json::to_string(&run(&job_with(doc))).unwrap();
     let read: JobResult = serde_json::from_str(&text).unwrap();

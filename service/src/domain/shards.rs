@@ -593,10 +593,10 @@ mod tests {
         assert_eq!(first(r#"{"devices": 1, "operations": 2000001}"#).len(), 2);
         assert_eq!(first(r#"{"devices": 2000, "operations": 1001}"#).len(), 33);
         let precision = first(
-            r#"{"devices": 10, "operations": 10,
+            r#"{"devices": 16, "operations": 10,
                 "precision": {"metric": "e1", "relative_half_width": 0.01, "max_devices": 100}}"#,
         );
-        assert_eq!(precision.len(), 11);
+        assert_eq!(precision.len(), 17);
     }
 
     /// A worker claims ahead while it runs a group or a task of at most
@@ -635,17 +635,20 @@ mod tests {
         assert_eq!(accumulators(r#"{"devices": 2, "operations": 10}"#) % 2, 0);
     }
 
-    /// A precision job of three batches of 3 devices (3 groups each): its groups as a worker runs
-    /// them, and the engine's own tally of all three batches.
+    /// The groups of each batch of [`three_batches`]: one per device.
+    const G: usize = 16;
+
+    /// A precision job of three batches of [`G`] devices (one group each): its groups as a worker
+    /// runs them, and the engine's own tally of all three batches.
     fn three_batches() -> (Job, Vec<Vec<GroupStats>>, Tally) {
         use bouncewear_model::montecarlo::Silent;
         use bouncewear_model::montecarlo::engine::run_group;
         let job = Job::from_json(
-            r#"{"devices": 3, "operations": 4,
+            r#"{"devices": 16, "operations": 4,
                 "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
                 "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
                              "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.05}}],
-                "precision": {"metric": "total_bounce_s", "relative_half_width": 1e-9, "max_devices": 9}}"#,
+                "precision": {"metric": "total_bounce_s", "relative_half_width": 1e-9, "max_devices": 48}}"#,
             || 7,
         )
         .unwrap();
@@ -689,14 +692,14 @@ mod tests {
             .flat_map(|b| listed(b, &batches[b as usize]))
             .collect();
         let folded = fold(&job, 2, &every).unwrap();
-        assert_eq!((folded.devices, &folded.groups), (9, &whole.groups));
+        assert_eq!((folded.devices, &folded.groups), (48, &whole.groups));
 
-        let first_two = fold(&job, 1, &every[..6]).unwrap();
-        assert_eq!(first_two.devices, 6);
+        let first_two = fold(&job, 1, &every[..2 * G]).unwrap();
+        assert_eq!(first_two.devices, 32);
         let mut resumed = listed(1, &first_two.groups);
         resumed.extend(listed(2, &batches[2]));
         let folded = fold(&job, 2, &resumed).unwrap();
-        assert_eq!((folded.devices, &folded.groups), (9, &whole.groups));
+        assert_eq!((folded.devices, &folded.groups), (48, &whole.groups));
     }
 
     #[test]
@@ -711,15 +714,15 @@ mod tests {
         };
         assert_eq!(
             detail(0, &[]),
-            (0, "0 of its 3 groups are stored".to_owned())
+            (0, format!("0 of its {G} groups are stored"))
         );
         assert_eq!(
-            detail(2, &every[..5]),
-            (1, "2 of its 3 groups are stored".to_owned())
+            detail(2, &every[..G + 2]),
+            (1, format!("2 of its {G} groups are stored"))
         );
         assert_eq!(
-            detail(2, &every[..6]),
-            (2, "0 of its 3 groups are stored".to_owned())
+            detail(2, &every[..2 * G]),
+            (2, format!("0 of its {G} groups are stored"))
         );
         let skipped = [every[0], every[2]];
         assert_eq!(
@@ -730,13 +733,13 @@ mod tests {
             )
         );
         assert_eq!(
-            detail(0, &every[..4]),
+            detail(0, &every[..G + 1]),
             (
                 1,
                 "batch 1 group 0 is stored after batch 0's merge".to_owned()
             )
         );
-        let gap = [&every[..3], &every[6..]].concat();
+        let gap = [&every[..G], &every[2 * G..]].concat();
         assert_eq!(
             detail(2, &gap),
             (
