@@ -282,16 +282,28 @@ impl Tails {
     }
 
     /// The exact number of the `count` values seen beyond `threshold`, when the values kept settle
-    /// it: every value is kept, or the threshold lies at or beyond the `keep`-th value of its end.
+    /// it: every value is kept; or the threshold lies at or beyond the `keep`-th value of its end,
+    /// so that every value beyond it is kept; or (`above` in the bottom, `below` in the top)
+    /// strictly within the `keep`-th value of the other end, so that every value not beyond it is
+    /// kept and the others are the rest of the `count`.
     pub fn beyond(&self, threshold: Threshold, count: u64) -> Option<u64> {
         let kept = self.values();
         let k = self.keep as usize;
-        let settled = kept.len() as u64 == count
-            || match threshold {
-                Threshold::Above(t) => kept.len() >= k && t >= kept[kept.len() - k],
-                Threshold::Below(t) => kept.len() >= k && t <= kept[k - 1],
-            };
-        settled.then(|| kept.iter().filter(|&&x| threshold.beyond(x)).count() as u64)
+        let beyond = kept.iter().filter(|&&x| threshold.beyond(x)).count() as u64;
+        if kept.len() as u64 == count {
+            return Some(beyond);
+        }
+        if kept.len() < k {
+            return None;
+        }
+        let (kth_least, kth_greatest) = (kept[k - 1], kept[kept.len() - k]);
+        match threshold {
+            Threshold::Above(t) if t >= kth_greatest => Some(beyond),
+            Threshold::Below(t) if t <= kth_least => Some(beyond),
+            Threshold::Above(t) if t < kth_least => Some(count - (kept.len() as u64 - beyond)),
+            Threshold::Below(t) if t > kth_greatest => Some(count - (kept.len() as u64 - beyond)),
+            _ => None,
+        }
     }
 }
 
@@ -407,6 +419,16 @@ mod tests {
         assert_eq!(tails.beyond(Threshold::Above(996.0), 1000), None);
         assert_eq!(tails.beyond(Threshold::Below(2.0), 1000), Some(2));
         assert_eq!(tails.beyond(Threshold::Below(2.5), 1000), None);
+        // The other end settles the complement: every value not beyond is kept there.
+        assert_eq!(tails.beyond(Threshold::Above(1.0), 1000), Some(998));
+        assert_eq!(tails.beyond(Threshold::Above(1.5), 1000), Some(998));
+        assert_eq!(
+            tails.beyond(Threshold::Above(2.0), 1000),
+            None,
+            "ties may lie beyond"
+        );
+        assert_eq!(tails.beyond(Threshold::Below(998.0), 1000), Some(998));
+        assert_eq!(tails.beyond(Threshold::Below(997.0), 1000), None);
     }
 
     #[test]
