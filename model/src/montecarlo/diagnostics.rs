@@ -100,11 +100,25 @@ pub fn diagnose(job: &Job, counts: &Counts) -> Vec<Diagnostic> {
                 (nominal, [value; 2])
             }
         };
-        if let Some(value) = values.into_iter().find(|v| !(low..=high).contains(v)) {
+        // Both ends named when both lie outside (a wide lognormal's 1st and 99th percentiles).
+        let mut outside: Vec<f64> = values
+            .into_iter()
+            .filter(|v| !(low..=high).contains(v))
+            .collect();
+        outside.dedup();
+        if !outside.is_empty() {
+            let shown: Vec<String> = outside.iter().map(|v| format!("{v} {unit}")).collect();
+            let (values, verb) = match outside.len() {
+                1 => (shown.join(""), "is"),
+                _ => (
+                    format!("the 1st and 99th percentiles, {}", shown.join(" and ")),
+                    "are",
+                ),
+            };
             found.push(Diagnostic {
                 pointer: pointer.to_string(),
                 detail: format!(
-                    "{field} {value} {unit} is outside the {low} to {high} {unit} the paper's \
+                    "{field} {values} {verb} outside the {low} to {high} {unit} the paper's \
                      measurements cover: the model extrapolates there (docs/model.md section 9)"
                 ),
             });
@@ -281,6 +295,22 @@ mod tests {
         );
         assert_eq!(forces.len(), 1);
         assert_eq!(forces[0].pointer, "/scatter/0/distribution");
+        // A probe's lognormal velocity whose 1st percentile (0.0108) and 99th (3.38) both lie
+        // outside: it named the first only.
+        let wide = diagnose_json(
+            r#"{"scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+                             "distribution": {"kind": "lognormal", "median": 0.19, "sigma": 1.24}}]}"#,
+        );
+        assert_eq!(wide.len(), 1);
+        assert!(
+            wide[0]
+                .detail
+                .contains("the 1st and 99th percentiles, 0.01")
+                && wide[0].detail.contains(" m/s and 3.")
+                && wide[0].detail.contains("are outside"),
+            "{}",
+            wide[0].detail
+        );
     }
 
     #[test]
