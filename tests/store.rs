@@ -364,7 +364,7 @@ async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor(url: &str) {
     );
     assert!(
         !store
-            .fail(&first.fence, UnixMs(2100), "late")
+            .fail(&first.fence, Some(UnixMs(2100)), "late")
             .await
             .unwrap()
     );
@@ -598,7 +598,7 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
                         let encoded = EncodedResult::new(&mut result, groups).unwrap();
                         assert!(
                             store
-                                .succeed(fence, UnixMs(5), &encoded)
+                                .succeed(fence, Some(UnixMs(5)), &encoded)
                                 .await
                                 .unwrap()
                                 .is_some()

@@ -189,6 +189,17 @@ struct KeptLease {
     /// The shard's operations done so far, reported with each heartbeat.
     done: Arc<AtomicU64>,
     keeper: JoinHandle<()>,
+    /// The database's clock less this machine's, as the claim found them: times that the
+    /// database also keeps (a job's start) are read on its clock, whatever this machine's says.
+    clock_offset_ms: i64,
+}
+
+impl KeptLease {
+    /// Seconds from `started_at` (the database's clock) to now, on the database's clock.
+    fn wall_s_since(&self, started_at: UnixMs) -> f64 {
+        let now = UnixMs::now().0.saturating_add(self.clock_offset_ms);
+        now.saturating_sub(started_at.0).max(0) as f64 / 1000.0
+    }
 }
 
 impl Drop for KeptLease {
@@ -418,7 +429,8 @@ impl Workers {
             .await?;
         Ok(claim.map(|claim| {
             record_shard_step("claim", claiming);
-            let lease = self.keep_lease(&claim.fence, shutdown.clone());
+            let mut lease = self.keep_lease(&claim.fence, shutdown.clone());
+            lease.clock_offset_ms = claim.claimed_at.0 - UnixMs::now().0;
             (claim, lease)
         }))
     }
@@ -531,7 +543,7 @@ impl Workers {
         let Some((_alone, partials)) = read.await else {
             return;
         };
-        let wall_s = (UnixMs::now().0 - started_at.0).max(0) as f64 / 1000.0;
+        let wall_s = lease.wall_s_since(started_at);
         // A first batch without groups stored is a job that entered the queue whole.
         let whole = last == 0 && partials.read().is_empty();
         let spec = partials.job().spec();
@@ -737,7 +749,7 @@ impl Workers {
         let Some((_alone, devices)) = read.await else {
             return;
         };
-        let wall_s = (UnixMs::now().0 - started_at.0).max(0) as f64 / 1000.0;
+        let wall_s = lease.wall_s_since(started_at);
         let compute = self.compute(lease, move |_| encoded(estimated(devices, report, wall_s)));
         let ran = clock.time(Part::Compute, compute).await;
         clock
@@ -829,6 +841,7 @@ impl Workers {
             stopping,
             done,
             keeper,
+            clock_offset_ms: 0,
         }
     }
 
@@ -876,7 +889,7 @@ impl Workers {
     /// the lease to expire, and the shard to be rerun.
     async fn fail(&self, fence: &Fence, reason: &str) {
         tracing::error!(reason, "job failed");
-        match self.store.fail(fence, UnixMs::now(), reason).await {
+        match self.store.fail(fence, None, reason).await {
             Ok(true) => metrics::counter!("bouncewear_jobs_finished_total", "status" => "failed")
                 .increment(1),
             Ok(false) => {}
@@ -907,7 +920,7 @@ impl Workers {
         lease: &KeptLease,
     ) -> bool {
         let stored = self
-            .store_with_backoff(lease, || self.store.succeed(fence, UnixMs::now(), encoded))
+            .store_with_backoff(lease, || self.store.succeed(fence, None, encoded))
             .await;
         match stored {
             Ok(Some(stored_bytes)) => {

@@ -214,3 +214,39 @@ fn postgres_stopped_and_restarted_under_workers_fails_fast_and_loses_nothing() {
     expected.sort();
     assert_eq!(ended, expected);
 }
+
+/// A database server whose clock runs an hour ahead of the workers': a job's times are the
+/// database's (started, finished, the Result's `timing`), as its leases are. The worker stamped
+/// the end with its own clock: a job finished an hour before it was created, and its wall time
+/// read 0 s (an hour behind, 3600 s).
+#[test]
+fn a_jobs_times_are_the_databases_whatever_the_workers_clock() {
+    let Some(cluster) = Postgres::start_with_clock(&temp_dir("http-postgres-clock"), "+1h") else {
+        return;
+    };
+    let server = TestApp::on(&cluster.database("clock"), &[]);
+    // 3e6 operations: sharded, the Result stored by a merge step.
+    let id = server.submit(&scattered_job(3000, 1000, 3));
+    let job = server.wait_for(&id, "succeeded", Duration::from_secs(120));
+    let time = |field: &str| {
+        chrono::DateTime::parse_from_rfc3339(job[field].as_str().unwrap())
+            .unwrap()
+            .timestamp_millis()
+    };
+    let (created, started, finished) =
+        (time("created_at"), time("started_at"), time("finished_at"));
+    assert!(created <= started && started <= finished, "{job}");
+    // The database's clock, an hour ahead of this machine's, stamped the start and the end; the
+    // API stamped the creation with its own.
+    let ahead = started - chrono::Utc::now().timestamp_millis();
+    assert!((3_500_000..3_700_000).contains(&ahead), "{ahead} ms: {job}");
+    let wall_s =
+        get(&server.url(&format!("/v1/jobs/{id}/result")), None).json()["timing"]["wall_s"]
+            .as_f64()
+            .unwrap();
+    let took = (finished - started) as f64 / 1000.0;
+    assert!(
+        wall_s > 0.0 && wall_s <= took + 0.05 && took < 60.0,
+        "{wall_s} s, {took} s: {job}"
+    );
+}

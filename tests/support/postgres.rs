@@ -20,7 +20,12 @@ struct Cluster {
     bin: PathBuf,
     /// The server's options (port, socket directory, no fsync).
     options: String,
+    /// The server's environment beyond ours (a clock set apart by libfaketime).
+    env: Vec<(&'static str, String)>,
 }
+
+/// Debian's libfaketime (package `faketime`), which sets a process's clock apart.
+const FAKETIME: &str = "/usr/lib/x86_64-linux-gnu/faketime/libfaketime.so.1";
 
 /// The directory of PostgreSQL's programs: where `pg_ctl` really is (links followed, so that
 /// `psql` and `initdb` beside it are the same version), found on the PATH or in Debian's
@@ -53,7 +58,33 @@ impl Postgres {
     /// `BOUNCEWEAR_TEST_POSTGRES_URL` nor an installed PostgreSQL, unless
     /// `BOUNCEWEAR_REQUIRE_POSTGRES=1` (CI) makes that a failure.
     pub fn start(dir: &Path) -> Option<Self> {
-        if let Ok(admin) = std::env::var("BOUNCEWEAR_TEST_POSTGRES_URL") {
+        Self::start_with(dir, Vec::new())
+    }
+
+    /// A throwaway cluster whose clock runs `offset` (libfaketime's form, e.g. `+1h`) from this
+    /// machine's, as a database server's may from a worker's. `None`, saying why, without
+    /// PostgreSQL or libfaketime (a failure with `BOUNCEWEAR_REQUIRE_POSTGRES=1`, as in CI).
+    pub fn start_with_clock(dir: &Path, offset: &str) -> Option<Self> {
+        if !Path::new(FAKETIME).is_file() {
+            assert!(
+                std::env::var("BOUNCEWEAR_REQUIRE_POSTGRES").as_deref() != Ok("1"),
+                "BOUNCEWEAR_REQUIRE_POSTGRES=1 but libfaketime is not installed (apt install faketime)"
+            );
+            eprintln!("\n*** SKIPPED: no libfaketime (Debian: apt install faketime). ***\n");
+            return None;
+        }
+        let env = vec![
+            ("LD_PRELOAD", FAKETIME.to_owned()),
+            ("FAKETIME", offset.to_owned()),
+            ("FAKETIME_DONT_FAKE_MONOTONIC", "1".to_owned()),
+        ];
+        Self::start_with(dir, env).filter(|postgres| postgres.cluster.is_some())
+    }
+
+    fn start_with(dir: &Path, env: Vec<(&'static str, String)>) -> Option<Self> {
+        if env.is_empty()
+            && let Ok(admin) = std::env::var("BOUNCEWEAR_TEST_POSTGRES_URL")
+        {
             return Some(Self {
                 admin,
                 cluster: None,
@@ -82,6 +113,7 @@ impl Postgres {
                 "-p {port} -k {} -c listen_addresses=127.0.0.1 -c fsync=off -c synchronous_commit=off -c full_page_writes=off",
                 dir.display()
             ),
+            env,
         };
         if running_as_root() {
             let status = Command::new("chown")
@@ -200,6 +232,7 @@ impl Cluster {
         };
         command
             .args(args)
+            .envs(self.env.iter().map(|(name, value)| (name, value)))
             .stdin(Stdio::null())
             .output()
             .unwrap_or_else(|e| panic!("{}: {e}", program.display()))

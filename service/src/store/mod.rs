@@ -186,6 +186,9 @@ pub struct Claim {
     pub operations_total: u64,
     /// When the job's first shard was claimed: a merge step reports the run's wall time from it.
     pub started_at: UnixMs,
+    /// When this claim was made, on the database's clock (as `started_at`): a worker whose own
+    /// clock differs reads the database's time from it.
+    pub claimed_at: UnixMs,
 }
 
 /// A shard as stored: where it stands, and how often it ran.
@@ -389,7 +392,8 @@ pub trait JobQueue: Send + Sync + 'static {
     ) -> StoreResult<bool>;
     /// Marks the job failed with `error` at once (a failure no retry can mend), if the claim still
     /// holds its shard.
-    async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool>;
+    /// The job's end is stamped `at`, or on the database's clock.
+    async fn fail(&self, fence: &Fence, at: Option<UnixMs>, error: &str) -> StoreResult<bool>;
     /// Hands a shard whose run failed back to the queue, counting the failure, to be claimed again
     /// after [`crate::domain::retry_backoff_ms`] on the database's clock (or from `at`, as [`LeaseTerms::at`]);
     /// once it failed more than `retries` times, its job fails instead, with the reason.
@@ -434,10 +438,11 @@ pub trait Results: Send + Sync + 'static {
     /// lives first, in short transactions, then the rest in one. The job's stored bytes
     /// ([`JobRecord::stored_bytes`]); `None` if the claim no longer holds (the job stays
     /// unsucceeded; rows already written go when it ends, or its next merge writes them again).
+    /// The job's end is stamped `at`, or on the database's clock.
     async fn succeed(
         &self,
         fence: &Fence,
-        finished_at: UnixMs,
+        at: Option<UnixMs>,
         result: &EncodedResult,
     ) -> StoreResult<Option<u64>>;
     /// The accumulators of the job's done groups, in batch and group order, read into `into`

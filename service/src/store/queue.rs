@@ -280,7 +280,11 @@ pub(crate) async fn drop_partials(tx: &mut Tx, job: &JobId) -> StoreResult<()> {
 }
 
 /// `at`, or the database's clock.
-async fn now_or(dialect: &Dialect, tx: &mut Tx, at: Option<UnixMs>) -> StoreResult<UnixMs> {
+pub(super) async fn now_or(
+    dialect: &Dialect,
+    tx: &mut Tx,
+    at: Option<UnixMs>,
+) -> StoreResult<UnixMs> {
     match at {
         Some(at) => Ok(at),
         None => Ok(UnixMs(
@@ -528,7 +532,7 @@ impl JobQueue for SqlStore {
         .fetch_one(&mut tx)
         .await?;
         tx.commit().await?;
-        claim_from_rows(&claimed, &job).map(Some)
+        claim_from_rows(&claimed, &job, now).map(Some)
     }
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
@@ -671,10 +675,11 @@ impl JobQueue for SqlStore {
     }
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    async fn fail(&self, fence: &Fence, now: UnixMs, error: &str) -> StoreResult<bool> {
+    async fn fail(&self, fence: &Fence, at: Option<UnixMs>, error: &str) -> StoreResult<bool> {
         let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(false);
         };
+        let now = now_or(self.dialect(), &mut tx, at).await?;
         end_job(&mut tx, &fence.job, now, error).await?;
         tx.commit().await?;
         self.ended(&fence.job);

@@ -110,7 +110,7 @@ impl Results for SqlStore {
     async fn succeed(
         &self,
         fence: &Fence,
-        finished_at: UnixMs,
+        at: Option<UnixMs>,
         result: &EncodedResult,
     ) -> StoreResult<Option<u64>> {
         // A Result that fits in one write goes in the transaction that ends the job, one commit,
@@ -122,6 +122,7 @@ impl Results for SqlStore {
         let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(None);
         };
+        let finished_at = super::queue::now_or(self.dialect(), &mut tx, at).await?;
         let stored = Sql::new(
             "UPDATE jobs SET status = 'succeeded', finished_at = $2, operations_done = operations_total, \
              stored_bytes = octet_length(spec) + $3 WHERE id = $1 RETURNING stored_bytes",

@@ -390,8 +390,12 @@ pub(crate) fn bind_fence(query: Sql, fence: &Fence) -> Sql {
 }
 
 /// A claim, from the claimed shard's row (`job_id, batch, grp, attempt, operations_total`) and
-/// its job's (`spec, started_at`).
-pub(crate) fn claim_from_rows(shard: &AnyRow, job: &AnyRow) -> StoreResult<Claim> {
+/// its job's (`spec, started_at`), made at `claimed_at` on the database's clock.
+pub(crate) fn claim_from_rows(
+    shard: &AnyRow,
+    job: &AnyRow,
+    claimed_at: UnixMs,
+) -> StoreResult<Claim> {
     Ok(Claim {
         fence: Fence {
             job: JobId::from(shard.text("job_id")?),
@@ -401,6 +405,7 @@ pub(crate) fn claim_from_rows(shard: &AnyRow, job: &AnyRow) -> StoreResult<Claim
         spec: spec_from_json(&job.text("spec")?)?,
         operations_total: count_from_sql(shard, "operations_total")?,
         started_at: ms(job, "started_at")?,
+        claimed_at,
     })
 }
 
