@@ -5,7 +5,10 @@ use clap::Args;
 use std::net::SocketAddr;
 use std::time::Duration;
 
-/// What every process that runs jobs needs: the queue's database and how to run its jobs.
+/// What every process that runs jobs needs: the queue's database and how to run its jobs. The
+/// settings of how shards run (`--max-retries`, `--max-lost-leases`, `--max-listed-lives`) are
+/// those of the process that runs each shard: on a shared database, give every worker the same
+/// (a `serve --workers 0` runs none, and its own settings of them change nothing).
 #[derive(Debug, Clone, Args)]
 pub struct WorkerConfig {
     /// Database URL: `sqlite://FILE` (embedded; the file is created if missing) or
@@ -38,7 +41,8 @@ pub struct WorkerConfig {
     #[arg(long, env = "BOUNCEWEAR_MAX_LOST_LEASES", default_value_t = 10)]
     pub max_lost_leases: u64,
     /// Devices of a job whose own life is kept and listed (`/v1/jobs/{id}/life?format=csv`): the
-    /// first ones, in device order. The life analysis counts every device whatever this is.
+    /// first ones, in device order. The life analysis counts every device whatever this is. The
+    /// worker that runs a job's last merge applies it (with `serve --workers 0`, the workers').
     #[arg(long, env = "BOUNCEWEAR_MAX_LISTED_LIVES", default_value_t = 100_000)]
     pub max_listed_lives: u64,
 }
