@@ -108,17 +108,29 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
     let database = temp_db("worker");
     let server = Spawned::start(&database, &["--workers", "0"]);
     let mut worker = Command::new(BIN)
-        .args(["worker", "--workers", "2", "--database"])
+        .args([
+            "worker",
+            "--workers",
+            "2",
+            "--metrics-bind",
+            "127.0.0.1:0",
+            "--database",
+        ])
         .arg(format!("sqlite://{}", database.display()))
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let mut line = String::new();
-    BufReader::new(worker.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
+    let mut stdout = BufReader::new(worker.stdout.take().unwrap());
+    let (mut metrics, mut line) = (String::new(), String::new());
+    stdout.read_line(&mut metrics).unwrap();
+    stdout.read_line(&mut line).unwrap();
+    let metrics = metrics
+        .trim()
+        .strip_prefix("bouncewear worker metrics on ")
+        .unwrap_or_else(|| panic!("{metrics}"))
+        .to_owned();
     assert!(
         line.starts_with("bouncewear worker running 2 shard(s) at a time"),
         "{line}"
@@ -131,6 +143,19 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
     server.wait_for(&id, "succeeded", Duration::from_secs(60));
     let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
     assert_eq!(result["operations"], run_job(&job, &[])["operations"]);
+    // The job's metrics are the worker's, which ran it: an API-only node has none of them.
+    let scraped = get(&metrics, None);
+    assert_eq!(scraped.status, 200);
+    for line in [
+        "bouncewear_jobs_finished_total{status=\"succeeded\"} 1",
+        "bouncewear_operations_simulated_total 2000",
+    ] {
+        assert!(
+            scraped.body.lines().any(|l| l == line),
+            "{line}: {}",
+            scraped.body
+        );
+    }
     let status = Command::new("kill")
         .args(["-TERM", &worker.id().to_string()])
         .status()

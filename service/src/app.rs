@@ -6,7 +6,7 @@
 use crate::api::watch::JobWatch;
 use crate::api::{self, AppState};
 use crate::compute::{PoolError, thread_pool};
-use crate::config::{ServeConfig, WorkerConfig};
+use crate::config::{ServeConfig, WorkerConfig, WorkerProcess};
 use crate::connections::{self, ConnectionLimits};
 use crate::domain::Owner;
 use crate::store::{Store, StoreError};
@@ -222,12 +222,18 @@ async fn join_workers(handles: Vec<tokio::task::JoinHandle<()>>) {
 
 /// `bouncewear worker`: runs jobs from the queue until SIGINT or SIGTERM, without serving HTTP
 /// (scale jobs out across machines with several of these on one PostgreSQL database).
-pub async fn work(config: WorkerConfig) -> Result<(), StartupError> {
+pub async fn work(process: WorkerProcess) -> Result<(), StartupError> {
+    let config = process.config;
     if config.workers == Some(0) {
         return Err(StartupError::NoWorkers);
     }
     no_transparent_huge_pages();
     let workers = Arc::new(start_workers(&config).await?);
+    if let Some(address) = process.metrics_bind {
+        // Printed before the line below, for which tests and scripts wait.
+        let bound = serve_metrics(address).await?;
+        println!("bouncewear worker metrics on http://{bound}/metrics");
+    }
     let slots = workers.slots(config.workers);
     let (stop, stopping) = watch::channel(false);
     let handles = Arc::clone(&workers).spawn(slots, stopping);
@@ -241,6 +247,34 @@ pub async fn work(config: WorkerConfig) -> Result<(), StartupError> {
     let _ = stop.send(true);
     join_workers(handles).await;
     Ok(())
+}
+
+/// Serves this process's Prometheus metrics at `/metrics` on `address`, from now until the
+/// process ends; the address bound.
+async fn serve_metrics(address: SocketAddr) -> Result<SocketAddr, StartupError> {
+    let bind_error = |source| StartupError::Bind { address, source };
+    let listener = TcpListener::bind(address).await.map_err(bind_error)?;
+    let bound = listener.local_addr().map_err(bind_error)?;
+    let handle = telemetry::prometheus();
+    let metrics = axum::routing::get(move || {
+        let text = telemetry::render_metrics(&handle);
+        async move {
+            (
+                [(
+                    axum::http::header::CONTENT_TYPE,
+                    telemetry::METRICS_CONTENT_TYPE,
+                )],
+                text,
+            )
+        }
+    });
+    let router = axum::Router::new().route("/metrics", metrics);
+    tokio::spawn(async move {
+        if let Err(error) = axum::serve(listener, router).await {
+            tracing::error!(%error, "serving the worker's metrics failed");
+        }
+    });
+    Ok(bound)
 }
 
 /// A database URL fit for logs: its scheme and where it points, never its credentials.

@@ -5,6 +5,18 @@ use clap::Args;
 use std::net::SocketAddr;
 use std::time::Duration;
 
+/// `bouncewear worker`: a process that runs shards from the queue's database, with no API.
+#[derive(Debug, Clone, Args)]
+pub struct WorkerProcess {
+    #[command(flatten)]
+    pub config: WorkerConfig,
+    /// Serve this process's Prometheus metrics at `http://ADDRESS/metrics` (port 0 picks a free
+    /// one, printed at start-up): the jobs it ran, its shards' steps, its process. Without it
+    /// they are not served; an API-only `serve --workers 0` has none of them.
+    #[arg(long, env = "BOUNCEWEAR_METRICS_BIND")]
+    pub metrics_bind: Option<SocketAddr>,
+}
+
 /// What every process that runs jobs needs: the queue's database and how to run its jobs. The
 /// settings of how shards run (`--max-retries`, `--max-lost-leases`, `--max-listed-lives`) are
 /// those of the process that runs each shard: on a shared database, give every worker the same

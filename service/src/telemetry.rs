@@ -261,6 +261,9 @@ pub fn prometheus() -> PrometheusHandle {
         .clone()
 }
 
+/// The content type of [`render_metrics`]' text: Prometheus' text format.
+pub const METRICS_CONTENT_TYPE: &str = "text/plain; version=0.0.4";
+
 /// The text a scrape gets, with the process metrics read at this moment.
 pub fn render_metrics(handle: &PrometheusHandle) -> String {
     process_metrics().collect();

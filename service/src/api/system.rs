@@ -96,7 +96,7 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiEr
 )]
 pub async fn prometheus_metrics(State(state): State<AppState>) -> impl IntoResponse {
     (
-        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        [(header::CONTENT_TYPE, telemetry::METRICS_CONTENT_TYPE)],
         telemetry::render_metrics(&state.metrics),
     )
 }

@@ -95,7 +95,7 @@ enum Command {
     /// Serve the HTTP API, with the job queue in an embedded SQLite database (or PostgreSQL).
     Serve(crate::config::ServeConfig),
     /// Run jobs from the queue's database without serving HTTP: more machines for one queue.
-    Worker(crate::config::WorkerConfig),
+    Worker(crate::config::WorkerProcess),
     /// Ask a running server whether it is healthy: exit 0 when its `/healthz` answers 200, 1 when
     /// not (the Docker image's health check).
     Health {
