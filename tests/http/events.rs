@@ -26,6 +26,27 @@ fn on_postgres_one_stream_carries_every_job_of_its_key_and_no_other() {
     the_stream_carries_every_job_of_its_key_and_no_other(&server);
 }
 
+/// On PostgreSQL, announcements queued while no stream was open (a sharded job's progress) cost
+/// one look when a stream opens, then looks come when a job changes and every 2 s: the watcher
+/// took them one a look, five looks a second for as long as they lasted.
+#[test]
+fn on_postgres_announcements_queued_while_nobody_listened_cost_one_look() {
+    let Some(cluster) = Postgres::start(&temp_dir("http-events-backlog")) else {
+        return;
+    };
+    let server = Spawned::on(&cluster.database("service"), &["--workers", "1"]);
+    let id = server.submit(&scattered_job(3000, 1000, 5));
+    server.wait_for(&id, "succeeded", std::time::Duration::from_secs(120));
+    let stream = agent().get(&server.url("/v1/events")).call().unwrap();
+    assert_eq!(stream.status(), 200);
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let before = counter(&server, "bouncewear_event_watch_looks_total");
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    let looks = counter(&server, "bouncewear_event_watch_looks_total") - before;
+    assert!(looks <= 3.0, "{looks} looks in 3 s with no job changing");
+    drop(stream);
+}
+
 /// alpha's jobs, submitted before and after the stream opens, each show progress and then end on
 /// alpha's stream; beta's job never appears on it.
 fn the_stream_carries_every_job_of_its_key_and_no_other(server: &TestApp) {

@@ -253,7 +253,15 @@ async fn next_announcement(events: &mut Option<broadcast::Receiver<QueueEvent>>)
     };
     let changed = async {
         match receiver.recv().await {
-            Ok(_) | Err(broadcast::error::RecvError::Lagged(_)) => true,
+            Ok(_) | Err(broadcast::error::RecvError::Lagged(_)) => {
+                // One look answers every announcement queued so far: taken one a look, those
+                // queued while nobody listened (up to the channel's 1024) kept the watcher
+                // reading five times a second for minutes.
+                while let Ok(_) | Err(broadcast::error::TryRecvError::Lagged(_)) =
+                    receiver.try_recv()
+                {}
+                true
+            }
             Err(broadcast::error::RecvError::Closed) => false,
         }
     };
