@@ -20,15 +20,33 @@ pub async fn run(
     mut shutdown: watch::Receiver<bool>,
 ) {
     let mut waiting = Waiting::default();
+    // Ticks failed in a row: the first is logged as an error and the end of the run as news,
+    // not every tick (a second) between, as when the disk stays below --min-free-disk-mb.
+    let mut failing = 0_u64;
     while !*shutdown.borrow() {
-        match tick(store.as_ref(), bound, Utc::now(), &mut waiting).await {
+        let ticked = tick(store.as_ref(), bound, Utc::now(), &mut waiting).await;
+        if ticked.is_ok() && failing > 0 {
+            tracing::info!(
+                failed_ticks = failing,
+                "the scheduler's ticks succeed again"
+            );
+            failing = 0;
+        }
+        match ticked {
             Ok(0) => {}
             Ok(created) => {
                 tracing::info!(created, "scheduled jobs created");
                 crate::telemetry::record_jobs_submitted(created as u64);
                 wake.notify_waiters();
             }
-            Err(error) => tracing::error!(%error, "scheduler tick failed"),
+            Err(error) if failing == 0 => {
+                failing = 1;
+                tracing::error!(%error, "scheduler tick failed; it is tried every second, and logged again once it succeeds");
+            }
+            Err(error) => {
+                failing += 1;
+                tracing::debug!(%error, "scheduler tick failed again");
+            }
         }
         tokio::select! {
             () = tokio::time::sleep(TICK) => {}

@@ -188,3 +188,29 @@ fn a_schedules_run_counts_as_a_job_submitted() {
     assert_eq!(post(&server.url("/v1/jobs"), &job, None).status, 202);
     assert_eq!(submitted(), 2.0);
 }
+
+/// A scheduler tick that keeps failing (here the disk is below `--min-free-disk-mb` while a
+/// schedule is due every second) is logged as an error once, not every second.
+#[test]
+fn a_scheduler_tick_failing_every_second_is_logged_once() {
+    let (server, lines) = Spawned::logging(
+        &temp_db("schedules-failing-ticks"),
+        &[
+            "--min-free-disk-mb",
+            "100000000",
+            "--min-schedule-interval-seconds",
+            "1",
+        ],
+    );
+    let body = json!({"name": "each second", "cron": "* * * * * *", "time_zone": "UTC",
+                      "template": {"devices": 1, "operations": 1}});
+    let created = post(&server.url("/v1/schedules"), &body.to_string(), None);
+    assert_eq!(created.status, 201, "{}", created.body);
+    std::thread::sleep(Duration::from_millis(3500));
+    let logged: Vec<String> = lines.try_iter().collect();
+    let failed = logged
+        .iter()
+        .filter(|line| line.contains("scheduler tick failed"))
+        .count();
+    assert_eq!(failed, 1, "{logged:#?}");
+}
