@@ -193,13 +193,25 @@ pub struct Timetable {
     time_zone: Tz,
 }
 
+/// What a schedule's cron expression is, as its errors state the rule.
+const CRON_FIELDS: &str = "a cron expression has 5 fields, minute (0-59) hour (0-23) day of the \
+    month (1-31) month (1-12 or JAN-DEC) weekday (0-7 or SUN-SAT, 0 and 7 Sunday), or 6 with \
+    seconds (0-59) first; each `*`, a value, a range `a-b`, a step `*/n` or `a-b/n`, or a list of \
+    them `a,b`";
+
 impl Timetable {
     /// Parses a stored schedule's cron expression and IANA time zone name. Errors are `(field,
     /// message)`, one for each of the two at fault. Whatever croner reads is taken: a schedule
     /// written before [`Timetable::parse_written`]'s rule keeps running.
     pub fn parse(cron: &str, time_zone: &str) -> Result<Self, Vec<(&'static str, String)>> {
-        let parsed =
-            Cron::from_str(cron).map_err(|e| ("cron", format!("is not a cron expression: {e}")));
+        let parsed = Cron::from_str(cron).map_err(|e| {
+            let e = e.to_string();
+            let e = e.trim_end_matches('.');
+            (
+                "cron",
+                format!("is not a cron expression ({e}): {CRON_FIELDS}"),
+            )
+        });
         Self::with_zone(parsed, time_zone)
     }
 
@@ -212,7 +224,7 @@ impl Timetable {
             return Self::parse(cron, time_zone);
         }
         let wrong = format!(
-            "has {fields} field{}: a cron expression has 5 (minute hour day month weekday), or 6 with seconds first",
+            "has {fields} field{}: {CRON_FIELDS}",
             if fields == 1 { "" } else { "s" }
         );
         Self::with_zone(Err(("cron", wrong)), time_zone)
@@ -699,6 +711,13 @@ mod tests {
         assert_eq!(
             Timetable::parse("0 3 * * *", "Mars/Olympus").unwrap_err()[0].0,
             "time_zone"
+        );
+        // The rule is stated, not only croner's "Number out of bounds" (a probe).
+        let (field, message) = &Timetable::parse("60 * * * *", "UTC").unwrap_err()[0];
+        assert_eq!(*field, "cron");
+        assert!(
+            message.contains("out of bounds") && message.contains("minute (0-59)"),
+            "{message}"
         );
         let both = Timetable::parse("bad", "Mars/Olympus").unwrap_err();
         let fields: Vec<&str> = both.iter().map(|(field, _)| *field).collect();
