@@ -89,6 +89,13 @@ fn submit_wait_prints_what_run_prints_and_fetch_reads_the_parts() {
         Some("device,operations_to_failure,censored")
     );
     assert_eq!(lives.lines().count(), 31);
+    // A part without a CSV form is a bad command line (exit 2), said as such.
+    let shards = remote(&server, Some("k1"), &["fetch", id, "shards", "--csv"]);
+    assert_eq!(shards.status.code(), Some(2));
+    assert_eq!(
+        String::from_utf8_lossy(&shards.stderr).trim_end(),
+        "bouncewear: --csv: `shards` has no CSV form (`life` and `rare-event` have one)"
+    );
     // `cancel` of a job that ended prints it as it is and keeps it (it never deletes).
     let kept = remote(&server, Some("k1"), &["cancel", id]);
     assert_eq!(kept.status.code(), Some(0));

@@ -229,12 +229,9 @@ impl From<FidelityArg> for Fidelity {
 fn choose_kernel(name: &str) -> Result<(), CliError> {
     let kernel = Kernel::named(name).ok_or_else(|| {
         let names = Kernel::names().join(", ");
-        CliError::Invalid(InvalidInput::single(
-            &Pointer::root(),
-            format!(
-                "--kernel (BOUNCEWEAR_KERNEL) `{name}` is not a kernel this build runs on this \
-                 CPU: one of {names}"
-            ),
+        CliError::Usage(format!(
+            "--kernel (BOUNCEWEAR_KERNEL) `{name}` is not a kernel this build runs on this CPU: \
+             one of {names}"
         ))
     })?;
     Kernel::choose(kernel)
@@ -247,6 +244,10 @@ pub enum CliError {
     /// The user's document breaks a rule: exit 2.
     #[error("invalid input: {0}")]
     Invalid(#[from] InvalidInput),
+    /// A flag the command cannot take as given (`--kernel`, `--threads`, `--csv`): exit 2, a bad
+    /// command line, said as it is rather than as a document's fault.
+    #[error("{0}")]
+    Usage(String),
     /// A file could not be read or written: exit 2 too, it is the user's path.
     #[error("{path}: {source}")]
     Io {
@@ -268,7 +269,7 @@ pub enum CliError {
 impl CliError {
     fn exit_code(&self) -> ExitCode {
         match self {
-            CliError::Invalid(_) | CliError::Io { .. } => ExitCode::from(2),
+            CliError::Invalid(_) | CliError::Usage(_) | CliError::Io { .. } => ExitCode::from(2),
             CliError::Startup(error) if error.is_bad_command_line() => ExitCode::from(2),
             CliError::Startup(_) | CliError::Ended { .. } | CliError::Failed(_) => {
                 ExitCode::FAILURE
@@ -280,10 +281,7 @@ impl CliError {
 impl From<PoolError> for CliError {
     fn from(error: PoolError) -> Self {
         match error {
-            PoolError::NoThreads => CliError::Invalid(InvalidInput::single(
-                &bouncewear_model::Pointer::root(),
-                "--threads must be at least 1",
-            )),
+            PoolError::NoThreads => CliError::Usage("--threads must be at least 1".to_owned()),
             PoolError::Build(_) => CliError::Failed(error.to_string()),
         }
     }

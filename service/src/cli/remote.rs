@@ -415,9 +415,8 @@ pub fn fetch(server: &Server, id: &str, part: Part, csv: bool) -> Result<String,
         (false, _) => "",
         (true, Part::Life | Part::RareEvent) => "?format=csv",
         (true, _) => {
-            return Err(CliError::Invalid(InvalidInput::single(
-                &bouncewear_model::Pointer::root(),
-                format!("--csv: the {path} has no CSV form (life and rare-event have)"),
+            return Err(CliError::Usage(format!(
+                "--csv: `{path}` has no CSV form (`life` and `rare-event` have one)"
             )));
         }
     };
