@@ -283,9 +283,13 @@ pub async fn run_schedule_now(
 ) -> Result<Response, ApiError> {
     let schedule = state.store.schedule(&owner, &id).await?;
     let now = UnixMs::now();
-    // A manual run is keyed by its own time; two in the same millisecond take the next one.
+    // A manual run is keyed by its own time; two in the same millisecond take the next one, and
+    // none takes a due time, its scheduled run's.
     for offset in 0..16 {
         let at = now.plus_ms(offset);
+        if schedule.definition.is_due_time(at) {
+            continue;
+        }
         let job = schedule
             .definition
             .job_at(owner.clone(), at, now)

@@ -66,6 +66,16 @@ impl ScheduleDefinition {
         Ok(QueuedJob::new(&job, owner, Some(name), now))
     }
 
+    /// Whether `at` is one of the schedule's due times: the slot its run on the timetable takes,
+    /// which a manual run leaves to it (a run now at that very millisecond took it, and the
+    /// night's scheduled run was never made).
+    pub fn is_due_time(&self, at: UnixMs) -> bool {
+        Timetable::parse(&self.cron, &self.time_zone)
+            .ok()
+            .and_then(|timetable| timetable.next_after(at.plus_ms(-1).to_datetime()))
+            .is_some_and(|due| UnixMs::from_datetime(due) == at)
+    }
+
     /// `at` on the schedule's wall clock, to the minute, as its trend labels runs:
     /// `2026-11-22 03:00`. (A stored zone always parses; UTC stands in should one not.)
     pub fn wall_clock(&self, at: DateTime<Utc>) -> String {
@@ -614,6 +624,13 @@ mod tests {
             definition.wall_clock(utc("2026-11-22T00:00:00.123Z")),
             "2026-11-22 01:00"
         );
+        // The due time itself, to the millisecond, is the scheduled run's slot; a manual run
+        // takes the next millisecond.
+        let at = |text| UnixMs::from_datetime(utc(text));
+        assert!(definition.is_due_time(at("2026-11-22T00:00:00.000Z")));
+        assert!(!definition.is_due_time(at("2026-11-22T00:00:00.001Z")));
+        assert!(!definition.is_due_time(at("2026-11-21T23:59:59.999Z")));
+        assert!(!definition.is_due_time(at("2026-11-22T01:00:00.000Z")));
     }
 
     fn utc(text: &str) -> DateTime<Utc> {
