@@ -265,6 +265,10 @@ pub fn calibrate_until(
 /// about 1e-10 of it (its last steps, damped up to 1e12, refused).
 const EDGE_LN: f64 = 1e-8;
 
+/// The root mean square of the relative residuals below which a fit is exact (measurements made
+/// by the model itself): no measured value is known that well.
+const EXACT_FIT_RMS: f64 = 1e-9;
+
 /// The most steps of Levenberg-Marquardt a fit (or a point of a profile) takes: a fit that takes
 /// them all says so in its warnings.
 const MAX_ITERATIONS: u32 = 100;
@@ -695,6 +699,14 @@ impl Problem<'_> {
             .collect();
         let (correlation, trade_offs) = self.correlation(&optimum);
         warnings.extend(trade_offs);
+        if (cost / residuals.len() as f64).sqrt() < EXACT_FIT_RMS {
+            warnings.push(format!(
+                "the fit reproduces every measured value to better than {EXACT_FIT_RMS:e} of it: \
+                 the data hold no estimate of their noise, so the intervals, drawn from the \
+                 residuals' spread, are as narrow as the rounding and say nothing of the \
+                 measurements' uncertainty"
+            ));
+        }
         if iterations >= MAX_ITERATIONS {
             warnings.push(format!(
                 "the fit took all of its {MAX_ITERATIONS} iterations without settling: the \
@@ -1720,6 +1732,15 @@ mod tests {
         let fit = calibrate(&synthetic(0.3, 1e-6, 0.0)).unwrap();
         let kappa = &fit.estimates["material.kappa"];
         assert!((kappa.value / 0.3 - 1.0).abs() < 1e-6, "{kappa:?}");
+        // Its interval is as narrow as the rounding, which the fit says (a probe found exact
+        // data given zero-width intervals without a word).
+        assert!(
+            fit.warnings
+                .iter()
+                .any(|w| w.contains("no estimate of their noise")),
+            "{:?}",
+            fit.warnings
+        );
         assert_eq!(fit.scenario.material.kappa, Some(kappa.value));
         assert!(fit.residuals["e1"].rms_relative < 1e-6);
     }
