@@ -492,3 +492,36 @@ fn a_full_disk_loses_no_acknowledged_job_and_the_queue_recovers_by_itself() {
         assert_eq!(job.json()["status"], "succeeded", "{id}: {}", job.body);
     }
 }
+
+/// One accepted job whose Result the disk cannot hold (16 MB on a disk with about 12 MB free): it
+/// filled the disk half-way, and then no claim, heartbeat or end could be written, nor the job
+/// failed or cancelled, until an operator made room (a probe). Its write is now refused before it
+/// starts: the job fails, saying why, and the queue goes on.
+#[test]
+fn a_result_the_disk_cannot_hold_fails_its_job_and_the_queue_goes_on() {
+    let Some(disk) = SmallDisk::mount("result-too-large", "16m") else {
+        return;
+    };
+    let database = disk.0.join("bouncewear.db");
+    let args = [
+        "--min-free-disk-mb",
+        "1",
+        "--max-retries",
+        "0",
+        "--max-lost-leases",
+        "0",
+    ];
+    let server = TestApp::start(&database, &args);
+    let large = json!({"devices": 64, "operations": 1000, "bin_operations": 1, "seed": 1,
+                       "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}}});
+    let id = server.submit(&large);
+    let failed = server.wait_for(&id, "failed", Duration::from_secs(120));
+    let error = failed["error"].as_str().unwrap();
+    assert!(
+        error.contains("needs") && error.contains("free beside the database"),
+        "{error}"
+    );
+    let small = server.submit(&json!({"devices": 2, "operations": 20, "seed": 2}));
+    server.wait_for(&small, "succeeded", Duration::from_secs(60));
+    assert_eq!(get(&server.url("/readyz"), None).status, 200);
+}

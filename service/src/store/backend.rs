@@ -176,6 +176,14 @@ impl SqlStore {
         }
     }
 
+    /// Room for a write of `bytes` (SQLite's disk; PostgreSQL's is its server's to watch).
+    pub(crate) fn check_room(&self, bytes: u64) -> StoreResult<()> {
+        match &self.backend {
+            Backend::Sqlite(sqlite) => sqlite.check_room(bytes),
+            Backend::Postgres(_) => Ok(()),
+        }
+    }
+
     /// What readiness checks before its write: SQLite's file and the disk beside it.
     pub(crate) fn check_disk(&self, min_free_bytes: u64) -> StoreResult<()> {
         match &self.backend {

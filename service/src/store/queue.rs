@@ -579,6 +579,7 @@ impl JobQueue for SqlStore {
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn complete_encoded(&self, fence: &Fence, partial: Vec<u8>) -> StoreResult<bool> {
         let partial_bytes = partial.len() as u64;
+        self.check_room(partial_bytes)?;
         // Accumulators that a power cut undoes are computed again, to the same bits.
         let mut tx = self.begin_redoable().await?;
         let updated = fenced(
@@ -617,6 +618,7 @@ impl JobQueue for SqlStore {
         folded: &EncodedGroups,
         state: Option<&[u8]>,
     ) -> StoreResult<bool> {
+        self.check_room(folded.0.iter().map(|partial| partial.len() as u64).sum())?;
         let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(false);
         };

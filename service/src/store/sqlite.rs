@@ -98,6 +98,30 @@ impl SqliteBackend {
             None => Ok(()),
         }
     }
+
+    /// Room beside the database for a write of `bytes`: twice them free (the write-ahead log,
+    /// then the database's pages), so that a write the disk cannot hold is refused before it
+    /// starts (503-like, tried again later) instead of filling the disk half-way, where even
+    /// ending the job could not be written.
+    pub(crate) fn check_room(&self, bytes: u64) -> StoreResult<()> {
+        let Some(file) = &self.file else {
+            return Ok(());
+        };
+        let needed = bytes.saturating_mul(2);
+        let free = free_bytes(file.directory()).map_err(|error| {
+            StoreError::NotReady(format!("free disk space cannot be read ({error})"))
+        })?;
+        if free < needed {
+            return Err(StoreError::NotReady(format!(
+                "a write of {} MB needs {} MB free beside the database (the write-ahead log, then \
+                 the pages); {} MB are",
+                bytes >> 20,
+                needed >> 20,
+                free >> 20
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// The one writer connection of a database file, which recovers from any failed statement: it is
@@ -164,13 +188,17 @@ impl DatabaseFile {
         Ok(())
     }
 
-    fn check(&self, min_free_bytes: u64) -> StoreResult<()> {
-        self.still_there()?;
-        let directory = match self.path.parent() {
+    /// The directory holding the database file.
+    fn directory(&self) -> &Path {
+        match self.path.parent() {
             Some(parent) if !parent.as_os_str().is_empty() => parent,
             _ => Path::new("."),
-        };
-        let free = free_bytes(directory).map_err(|error| {
+        }
+    }
+
+    fn check(&self, min_free_bytes: u64) -> StoreResult<()> {
+        self.still_there()?;
+        let free = free_bytes(self.directory()).map_err(|error| {
             StoreError::NotReady(format!("free disk space cannot be read ({error})"))
         })?;
         if free < min_free_bytes {
