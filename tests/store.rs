@@ -102,6 +102,8 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     two_scheduler_loops_never_duplicate_a_night(&database("race")).await;
     missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(&database("catch-up")).await;
     a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(&database("full")).await;
+    a_template_that_no_longer_validates_skips_its_night_and_moves_on(&database("stale-template"))
+        .await;
 }
 
 async fn a_store_that_takes_writes_and_is_migrated_is_ready(url: &str) {
@@ -1399,6 +1401,28 @@ async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: 
     let next_night = utc("2026-11-23T03:00:01Z");
     assert_eq!(tick_at(next_night).await, 1);
     assert_eq!(store.runs(&id, 10).await.unwrap().len(), 2);
+}
+
+/// A schedule whose stored template no longer validates (a rule made since) skips its run and
+/// moves on to the next night: it stayed due, skipped and logged again at every tick (a second).
+async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let mut schedule = nightly("s1", "2026-11-22T03:00:00Z");
+    schedule.definition.template = serde_json::from_str(r#"{"devices": 0}"#).unwrap();
+    store.insert_schedule(&schedule).await.unwrap();
+    let now = utc("2026-11-22T03:00:05Z");
+    let mut waiting = Waiting::default();
+    let created = tick(store.as_ref(), QueueBound::total(100), now, &mut waiting);
+    assert_eq!(created.await.unwrap(), 0);
+    assert!(store.runs(&schedule.id, 10).await.unwrap().is_empty());
+    let stored = store
+        .schedule(&Owner::anonymous(), &schedule.id)
+        .await
+        .unwrap();
+    assert_eq!(
+        stored.next_run_at,
+        Some(UnixMs::from_datetime(utc("2026-11-23T03:00:00Z")))
+    );
 }
 
 async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) {

@@ -88,10 +88,15 @@ pub async fn tick(
         else {
             continue;
         };
+        let next = timetable.next_after(now).map(UnixMs::from_datetime);
         let job = match definition.job_at(schedule.owner.clone(), due, UnixMs::from_datetime(now)) {
             Ok(job) => job,
             Err(invalid) => {
-                tracing::error!(schedule = %schedule.id, %invalid, "stored template no longer validates; skipped");
+                // Moved past this run, so that it is said once a run, not at every tick.
+                tracing::error!(schedule = %schedule.id, %invalid, "stored template no longer validates; this run is skipped");
+                store
+                    .advance_schedule(&schedule.id, schedule.next_run_at, next)
+                    .await?;
                 continue;
             }
         };
@@ -127,7 +132,6 @@ pub async fn tick(
         if let NewRun::Created(_) = made {
             created += 1;
         }
-        let next = timetable.next_after(now).map(UnixMs::from_datetime);
         store
             .advance_schedule(&schedule.id, schedule.next_run_at, next)
             .await?;

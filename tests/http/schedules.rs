@@ -124,6 +124,12 @@ fn bad_schedules_name_their_field() {
             "/template/devices",
         ),
         (
+            // A rule of a job being written: a precision target on batches of 16 or more.
+            json!({"name": "x", "cron": "0 3 * * *", "template": {"devices": 4,
+                   "precision": {"metric": "e1", "relative_half_width": 0.1, "max_devices": 100}}}),
+            "/template/devices",
+        ),
+        (
             json!({"name": "x", "cron": "0 3 * * *", "template": {}, "statistics": ["operations.e1.p42"]}),
             "/statistics/0",
         ),

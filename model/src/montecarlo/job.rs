@@ -370,9 +370,13 @@ pub struct Job {
 }
 
 impl Job {
-    /// Parses and validates a job document; a missing seed is drawn by `draw_seed`.
+    /// Parses and validates a job document being written (submitted, or run), with the rules of
+    /// [`check_written`] too; a missing seed is drawn by `draw_seed`.
     pub fn from_json(text: &str, draw_seed: impl FnOnce() -> u64) -> Result<Self, InvalidInput> {
-        let (spec, faults) = crate::error::read_past_faults(text, &LIST_FIELDS)?;
+        let (spec, mut faults) = crate::error::read_past_faults(text, &LIST_FIELDS)?;
+        if let Err(invalid) = check_written(&spec, &Pointer::root()) {
+            faults.extend_from_slice(invalid.errors());
+        }
         crate::error::with_faults(faults, Self::new(spec, draw_seed, &Pointer::root()))
     }
 
@@ -950,6 +954,25 @@ fn check_failure(
     failure
 }
 
+/// The rules a job being written obeys beyond those of [`Job::new`], which every stored job
+/// obeys: made later, they refuse a new job, never one stored before them (a queued job, a
+/// schedule's template), which runs as it was accepted. Each fault is named below `root`.
+pub fn check_written(spec: &JobSpec, root: &Pointer) -> Result<(), InvalidInput> {
+    if spec.precision.is_some() && spec.devices < MIN_PRECISION_DEVICES {
+        return Err(InvalidInput::single(
+            &root.child("devices"),
+            format!(
+                "a precision target needs batches of at least {MIN_PRECISION_DEVICES} devices, got \
+                 {}: its interval comes from the spread between a batch's groups (one per device \
+                 below 32), and from fewer the target is met by chance (with 2 devices a batch, \
+                 the final 95 % interval held the truth in 46 % of jobs)",
+                spec.devices
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The fewest devices a batch of a job with a precision target may have: its groups (one per
 /// device up to 32) give the interval the target is checked against after each batch, and with
 /// few of them a batch stops when its spread happens to be small. Over 200 seeds the final
@@ -1004,18 +1027,6 @@ fn check_precision(
             detail: format!(
                 "must be above 0 and below 1, got {}",
                 spec.relative_half_width
-            ),
-        });
-    }
-    if job.devices < MIN_PRECISION_DEVICES {
-        errors.push(FieldError {
-            pointer: root.child("devices").to_string(),
-            detail: format!(
-                "a precision target needs batches of at least {MIN_PRECISION_DEVICES} devices, got \
-                 {}: its interval comes from the spread between a batch's groups (one per device \
-                 below 32), and from fewer the target is met by chance (with 2 devices a batch, \
-                 the final 95 % interval held the truth in 46 % of jobs)",
-                job.devices
             ),
         });
     }
@@ -1094,6 +1105,9 @@ mod tests {
             );
         }
         assert!(Job::from_json(&PRECISE.replace("20,", "16,"), || 1).is_ok());
+        // A job stored before the rule (queued, or a schedule's template) still runs.
+        let stored: JobSpec = serde_json::from_str(&PRECISE.replace("20,", "2,")).unwrap();
+        assert!(Job::new(stored, || 1, &Pointer::root()).is_ok());
     }
 
     #[test]

@@ -293,7 +293,12 @@ pub async fn run_schedule_now(
         let job = schedule
             .definition
             .job_at(owner.clone(), at, now)
-            .map_err(|e| super::error::Internal(e.to_string()))?;
+            .map_err(|invalid| {
+                ApiError::Conflict(format!(
+                    "the schedule's stored template no longer validates ({invalid}): PUT the \
+                     schedule with a valid one"
+                ))
+            })?;
         let slot = RunSlot {
             schedule: &schedule.id,
             scheduled_for: at,

@@ -3,7 +3,7 @@
 
 use super::jobs::{QueuedJob, draw_seed};
 use super::{Owner, UnixMs};
-use bouncewear_model::montecarlo::job::LIST_FIELDS;
+use bouncewear_model::montecarlo::job::{LIST_FIELDS, check_written};
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
 use bouncewear_model::stats::{QUANTILES, Summary};
 use bouncewear_model::{FieldError, InvalidInput, Pointer};
@@ -156,6 +156,9 @@ impl ValidSchedule {
             });
         }
         let template = root.child("template");
+        if let Err(invalid) = check_written(&spec.template, &template) {
+            errors.extend_from_slice(invalid.errors());
+        }
         let job = Job::new(spec.template.clone(), || 0, &template);
         let size = job
             .as_ref()
