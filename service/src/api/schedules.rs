@@ -395,8 +395,8 @@ pub async fn schedule_runs(
 const DRIFT_LOOKBACK: u32 = 30;
 
 /// The trend of a schedule's `limit` latest runs, oldest first. Each value's drift flag compares
-/// it with the run before that has a value, within the window or before it (up to
-/// [`DRIFT_LOOKBACK`] runs older): a run's flag does not depend on the window asked.
+/// it with the run before that has a value of the same statistic, within the window or before it
+/// (up to [`DRIFT_LOOKBACK`] runs older): a run's flag does not depend on the window asked.
 pub async fn schedule_trend(
     state: &AppState,
     schedule: &ScheduleRecord,
@@ -408,22 +408,30 @@ pub async fn schedule_trend(
         .await?;
     let older = runs.split_off(runs.len().min(limit as usize));
     runs.reverse();
-    // The newest run before the window that has a Result, if any.
-    let mut before = None;
+    let statistics = &schedule.definition.statistics;
+    // The runs before the window, newest first, until every statistic has a value among them
+    // (a life statistic may have none in a run of too few failures): put before the window, they
+    // give its oldest values the runs they are compared with.
+    let mut before = Vec::new();
+    let mut unmet: Vec<_> = statistics.iter().collect();
     for run in &older {
-        if let Some(result) = run_result(state, run).await? {
-            before = Some(result);
+        if unmet.is_empty() {
             break;
         }
+        if let Some(result) = run_result(state, run).await? {
+            unmet.retain(|statistic| statistic.read(&result).is_none());
+            before.push(Some(result));
+        }
     }
-    let mut results = vec![before];
+    before.reverse();
+    let looked_back = before.len();
+    let mut results = before;
     for run in &runs {
         results.push(run_result(state, run).await?);
     }
-    let statistics = &schedule.definition.statistics;
     let runs = runs
         .iter()
-        .zip(trend(statistics, &results).into_iter().skip(1))
+        .zip(trend(statistics, &results).into_iter().skip(looked_back))
         .map(|(run, values)| Run {
             scheduled_for: run.scheduled_for.to_rfc3339(),
             job_id: run.job_id.to_string(),
