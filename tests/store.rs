@@ -124,16 +124,19 @@ async fn unknown_jobs_are_not_found_and_a_second_cancel_is_a_conflict(url: &str)
         "{missing}"
     );
     let id = insert(&store, queued(1)).await;
-    let cancelled = store.cancel(&owner, &id, UnixMs(2)).await.unwrap();
+    let cancelled = store.cancel(&owner, &id, Some(UnixMs(2))).await.unwrap();
     assert_eq!(cancelled.status, JobStatus::Cancelled);
-    let again = store.cancel(&owner, &id, UnixMs(3)).await.unwrap_err();
+    let again = store
+        .cancel(&owner, &id, Some(UnixMs(3)))
+        .await
+        .unwrap_err();
     assert_eq!(
         again.to_string(),
         format!("job {id} already ended: cancelled")
     );
     let other = Owner::of_key("another key");
     assert!(matches!(
-        store.cancel(&other, &id, UnixMs(3)).await,
+        store.cancel(&other, &id, Some(UnixMs(3))).await,
         Err(StoreError::NotFound { .. })
     ));
 }
@@ -153,9 +156,15 @@ async fn live_jobs_are_every_active_one_and_any_newer_than_the_mark(url: &str) {
     };
     let active = insert(1).await;
     let ended = insert(2).await;
-    store.cancel(&owner, &ended.id, UnixMs(2)).await.unwrap();
+    store
+        .cancel(&owner, &ended.id, Some(UnixMs(2)))
+        .await
+        .unwrap();
     let newer = insert(3).await;
-    store.cancel(&owner, &newer.id, UnixMs(3)).await.unwrap();
+    store
+        .cancel(&owner, &newer.id, Some(UnixMs(3)))
+        .await
+        .unwrap();
     let job = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || 4).unwrap();
     let others = QueuedJob::new(&job, Owner::of_key("another key"), None, UnixMs(1));
     let others = store
@@ -278,11 +287,17 @@ async fn ended_jobs_are_deleted_with_everything_stored_for_them(url: &str) {
     else {
         panic!("the run is created");
     };
-    store.cancel(&owner, &run.id, UnixMs(10)).await.unwrap();
+    store
+        .cancel(&owner, &run.id, Some(UnixMs(10)))
+        .await
+        .unwrap();
     let recent = insert(&store, queued(2)).await;
-    store.cancel(&owner, &recent, UnixMs(1000)).await.unwrap();
+    store
+        .cancel(&owner, &recent, Some(UnixMs(1000)))
+        .await
+        .unwrap();
     let waiting = insert(&store, queued(3)).await;
-    assert_eq!(store.prune_jobs(UnixMs(500)).await.unwrap(), 1);
+    assert_eq!(store.prune_jobs(0, Some(UnixMs(500))).await.unwrap(), 1);
     assert!(store.runs(&schedule.id, 10).await.unwrap().is_empty());
     assert!(store.job(&owner, &run.id).await.is_err());
     assert_eq!(
@@ -1120,7 +1135,10 @@ async fn an_owner_whose_jobs_store_its_quota_gets_no_new_job(url: &str) {
     }
     let admitted = |job| async { store.insert_job(job, bound).await.unwrap().is_some() };
     assert!(admitted(of(&other, 3)).await);
-    store.cancel(&greedy, &first.id, UnixMs(2)).await.unwrap();
+    store
+        .cancel(&greedy, &first.id, Some(UnixMs(2)))
+        .await
+        .unwrap();
     store.delete_job(&greedy, &first.id).await.unwrap();
     assert!(admitted(of(&greedy, 4)).await);
 }
@@ -1139,7 +1157,7 @@ async fn a_cancelled_job_keeps_no_accumulators(url: &str) {
     assert_eq!(stored_groups(store.as_ref(), &id, &job).await.len(), 1);
     let owner = Owner::anonymous();
     let with_group = store.job(&owner, &id).await.unwrap().stored_bytes;
-    let cancelled = store.cancel(&owner, &id, UnixMs(9)).await.unwrap();
+    let cancelled = store.cancel(&owner, &id, Some(UnixMs(9))).await.unwrap();
     assert!(stored_groups(store.as_ref(), &id, &job).await.is_empty());
     // The answer is the job as the cancel left it: its spec alone, the group dropped.
     let spec_only = store.job(&owner, &id).await.unwrap().stored_bytes;
@@ -1184,7 +1202,7 @@ async fn an_ended_jobs_running_shards_stop_with_it(url: &str) {
     let (id, a, _) = claim_both(6, 2).await;
     let renewed = store.heartbeat(&a.fence, terms(900), 2).await.unwrap();
     assert_eq!(renewed, Lease::Held);
-    store.cancel(&owner, &id, UnixMs(1500)).await.unwrap();
+    store.cancel(&owner, &id, Some(UnixMs(1500))).await.unwrap();
     assert_eq!(
         shard_lines(&store.shards(&id).await.unwrap()),
         [
@@ -1586,7 +1604,7 @@ async fn postgres_announces_queued_jobs_and_their_progress(url: &str) {
         Err(tokio::sync::broadcast::error::TryRecvError::Empty)
     ));
     store
-        .cancel(&Owner::anonymous(), &id, UnixMs(9))
+        .cancel(&Owner::anonymous(), &id, Some(UnixMs(9)))
         .await
         .unwrap();
     let end = tokio::time::timeout(std::time::Duration::from_secs(10), ends.recv());

@@ -2,7 +2,6 @@
 //! stored for them, at start-up and then every hour. Every instance may run it: a job deleted by
 //! one is simply gone for the others.
 
-use crate::domain::UnixMs;
 use crate::store::Store;
 use std::sync::Arc;
 use std::time::Duration;
@@ -18,8 +17,11 @@ pub async fn run(store: Arc<dyn Store>, retain_days: u32, mut stopping: watch::R
             _ = passes.tick() => {}
             _ = stopping.wait_for(|stop| *stop) => return,
         }
-        let ended_before = UnixMs(UnixMs::now().0 - i64::from(retain_days) * DAY_MS);
-        match store.prune_jobs(ended_before).await {
+        // The ends are stamped on the database's clock, and so is their age.
+        match store
+            .prune_jobs(i64::from(retain_days) * DAY_MS, None)
+            .await
+        {
             Ok(0) => {}
             Ok(deleted) => tracing::info!(deleted, retain_days, "deleted jobs past retention"),
             Err(error) => tracing::warn!(%error, "deleting jobs past retention failed"),

@@ -249,4 +249,15 @@ fn a_jobs_times_are_the_databases_whatever_the_workers_clock() {
         wall_s > 0.0 && wall_s <= took + 0.05 && took < 60.0,
         "{wall_s} s, {took} s: {job}"
     );
+    // A cancel's end too (the API node stamped it with its own clock).
+    let long = server.submit(&scattered_job(200_000, 1000, 4));
+    let cancelled = delete(&server.url(&format!("/v1/jobs/{long}"))).json();
+    let finished = chrono::DateTime::parse_from_rfc3339(cancelled["finished_at"].as_str().unwrap())
+        .unwrap()
+        .timestamp_millis();
+    let ahead = finished - chrono::Utc::now().timestamp_millis();
+    assert!(
+        (3_500_000..3_700_000).contains(&ahead),
+        "{ahead} ms: {cancelled}"
+    );
 }

@@ -520,7 +520,7 @@ async fn cancel(
     owner: &Owner,
     id: &JobId,
 ) -> Result<(JobRecord, bool), ApiError> {
-    match state.store.cancel(owner, id, UnixMs::now()).await {
+    match state.store.cancel(owner, id, None).await {
         Ok(record) => {
             metrics::counter!("bouncewear_jobs_finished_total", "status" => "cancelled")
                 .increment(1);

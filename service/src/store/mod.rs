@@ -339,14 +339,17 @@ pub trait JobQueue: Send + Sync + 'static {
     /// meanwhile is newer than it): what the live view of jobs looks at.
     async fn live_jobs(&self, after: i64) -> StoreResult<(Vec<JobRecord>, i64)>;
     /// Cancels a queued or running job; [`StoreError::Conflict`] if it already ended.
-    async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord>;
+    /// The job's end is stamped `at`, or on the database's clock.
+    async fn cancel(&self, owner: &Owner, id: &JobId, at: Option<UnixMs>)
+    -> StoreResult<JobRecord>;
     /// Deletes a job that ended, with everything stored for it (its shards, result,
     /// distributions, device lives, its place among a schedule's runs), in one transaction;
     /// [`StoreError::Conflict`] while it is queued or running.
     async fn delete_job(&self, owner: &Owner, id: &JobId) -> StoreResult<()>;
-    /// Deletes every owner's jobs that ended before `ended_before` as [`JobQueue::delete_job`]
-    /// does, in one transaction; how many.
-    async fn prune_jobs(&self, ended_before: UnixMs) -> StoreResult<u64>;
+    /// Deletes every owner's jobs that ended `age_ms` or more before `at` (or the database's
+    /// clock, on which their ends are stamped) as [`JobQueue::delete_job`] does, in one
+    /// transaction; how many.
+    async fn prune_jobs(&self, age_ms: i64, at: Option<UnixMs>) -> StoreResult<u64>;
     /// Leases the next shard to run: a queued shard past its backoff or a running one whose lease
     /// expired (bumping its attempt), a merge step only once its batch's groups are done. Fair
     /// share: of the job with the least virtual start time (then the oldest job; in a job, shards

@@ -421,10 +421,16 @@ impl JobQueue for SqlStore {
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn cancel(&self, owner: &Owner, id: &JobId, now: UnixMs) -> StoreResult<JobRecord> {
+    async fn cancel(
+        &self,
+        owner: &Owner,
+        id: &JobId,
+        at: Option<UnixMs>,
+    ) -> StoreResult<JobRecord> {
         // The job ends and what its run left goes in one transaction: a crash between the two
         // would have left a cancelled job's accumulators counted in its stored bytes.
         let mut tx = self.begin().await?;
+        let now = now_or(self.dialect(), &mut tx, at).await?;
         let cancelled = Sql::new(
             "UPDATE jobs SET status = 'cancelled', finished_at = $3 \
              WHERE id = $1 AND owner = $2 AND status IN ('queued', 'running')",
@@ -469,8 +475,9 @@ impl JobQueue for SqlStore {
     }
 
     #[tracing::instrument(skip_all)]
-    async fn prune_jobs(&self, ended_before: UnixMs) -> StoreResult<u64> {
+    async fn prune_jobs(&self, age_ms: i64, at: Option<UnixMs>) -> StoreResult<u64> {
         let mut tx = self.begin().await?;
+        let ended_before = UnixMs(now_or(self.dialect(), &mut tx, at).await?.0 - age_ms);
         Sql::new(PRUNE_RUNS)
             .bind(ended_before.0)
             .execute(&mut tx)
