@@ -142,8 +142,9 @@ pub struct Estimate {
     pub ci95: [f64; 2],
     /// Standard error of the parameter's logarithm, linearised at the optimum.
     pub se_ln: f64,
-    /// Present and true when the estimate sits on one of its `bounds`: the data pull it beyond,
-    /// and its interval is cut at the bound.
+    /// Present and true when the estimate sits on one of its `bounds`, or on an edge of the
+    /// scenarios the model takes (a contact radius no smaller than the worn radius): the data
+    /// pull it beyond, and its interval is cut there.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub at_bound: bool,
 }
@@ -202,8 +203,10 @@ pub struct Calibration {
     /// 1, the two parameters trade off: the data fix a combination of them better than either.
     pub correlation: BTreeMap<String, BTreeMap<String, f64>>,
     /// What the fit cannot vouch for, in words: one warning per side of an interval the data do
-    /// not bound within a factor `e^10`, and one per pair of parameters whose correlation is 0.95
-    /// or more in magnitude, naming them. Absent when empty.
+    /// not bound within a factor `e^10`, one per pair of parameters whose correlation is 0.95
+    /// or more in magnitude, naming them, one when the fit took all its iterations without
+    /// settling, and one when it reproduces the data exactly (no noise to draw intervals from).
+    /// Absent when empty.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
 }
@@ -280,8 +283,8 @@ fn fit(problem: Problem) -> Result<Calibration, InvalidInput> {
         .map(|(_, path)| problem.start_value(path).ln())
         .collect();
     let start = problem.within_bounds(start);
-    let (theta, iterations) = problem.levenberg_marquardt(start)?;
-    problem.report(&theta, iterations)
+    let (theta, iterations, settled) = problem.levenberg_marquardt(start)?;
+    problem.report(&theta, iterations, settled)
 }
 
 /// The fit's residual of a measured (positive) quantity: `2 (simulated - measured) / (simulated +
@@ -531,8 +534,9 @@ impl Problem<'_> {
         Some(columns)
     }
 
-    /// Minimises the sum of squared residuals from `start`; the optimum and the iterations taken.
-    fn levenberg_marquardt(&self, start: Vec<f64>) -> Result<(Vec<f64>, u32), InvalidInput> {
+    /// Minimises the sum of squared residuals from `start`; the optimum, the iterations taken and
+    /// whether it settled (not stopped by the cap).
+    fn levenberg_marquardt(&self, start: Vec<f64>) -> Result<(Vec<f64>, u32, bool), InvalidInput> {
         let invalid_start = || {
             InvalidInput::single(
                 &Pointer::root().child("scenario"),
@@ -541,17 +545,18 @@ impl Problem<'_> {
         };
         let all: Vec<usize> = (0..start.len()).collect();
         let residuals = self.residuals(&start).ok_or_else(invalid_start)?;
-        let (theta, _, iterations) = self
+        let (theta, _, iterations, settled) = self
             .minimise(start, residuals, &all, 1e-14, |theta, jacobian| {
                 self.identifiable(theta, jacobian)
             })?
             .ok_or_else(invalid_start)?;
-        Ok((theta, iterations))
+        Ok((theta, iterations, settled))
     }
 
     /// Levenberg-Marquardt over the parameters `free` of `theta` (the others held), from
-    /// `theta` whose residuals are `residuals`: the optimum, its sum of squares and the
-    /// iterations taken, `None` if the Jacobian cannot be formed. `check` vets each Jacobian (the full fit refuses
+    /// `theta` whose residuals are `residuals`: the optimum, its sum of squares, the iterations
+    /// taken and whether it settled (`false`: the cap stopped it), `None` if the Jacobian cannot
+    /// be formed. `check` vets each Jacobian (the full fit refuses
     /// parameters the data cannot tell apart).
     fn minimise(
         &self,
@@ -560,7 +565,7 @@ impl Problem<'_> {
         free: &[usize],
         settle: f64,
         check: impl Fn(&[f64], &[Vec<f64>]) -> Result<(), InvalidInput>,
-    ) -> Result<Option<(Vec<f64>, f64, u32)>, InvalidInput> {
+    ) -> Result<Option<(Vec<f64>, f64, u32, bool)>, InvalidInput> {
         let mut cost = sum_of_squares(&residuals);
         let mut lambda = 1e-3;
         for iteration in 1..=MAX_ITERATIONS {
@@ -576,7 +581,7 @@ impl Problem<'_> {
                 .filter(|&j| !self.held_on_bound(theta[free[j]], free[j], jtr[j]))
                 .collect();
             if moving.is_empty() {
-                return Ok(Some((theta, cost, iteration)));
+                return Ok(Some((theta, cost, iteration, true)));
             }
             let jtj: Vec<Vec<f64>> = moving
                 .iter()
@@ -609,7 +614,7 @@ impl Problem<'_> {
                         lambda = (lambda / 10.0).max(1e-12);
                         improved = true;
                         if converged {
-                            return Ok(Some((theta, cost, iteration)));
+                            return Ok(Some((theta, cost, iteration, true)));
                         }
                         break;
                     }
@@ -617,10 +622,10 @@ impl Problem<'_> {
                 }
             }
             if !improved {
-                return Ok(Some((theta, cost, iteration)));
+                return Ok(Some((theta, cost, iteration, true)));
             }
         }
-        Ok(Some((theta, cost, MAX_ITERATIONS)))
+        Ok(Some((theta, cost, MAX_ITERATIONS, false)))
     }
 
     /// Refuses a fit whose parameters the data cannot tell apart, naming the first at fault.
@@ -639,10 +644,16 @@ impl Problem<'_> {
                 &fit.child(k),
                 format!(
                     "`{}` changes none of the measured quantities at {}, so the data cannot \
-                     determine it (a measurement beyond what the model reaches, such as an e1 \
-                     of 1 or more, draws the fit to where nothing changes)",
+                     determine it{}",
                     self.parameters[k].0,
-                    crate::error::shown(theta[k].exp())
+                    crate::error::shown(theta[k].exp()),
+                    // Moved there by the fit: the data drew it where nothing changes.
+                    if theta[k] == self.start_value(&self.parameters[k].1).ln() {
+                        ""
+                    } else {
+                        " (the fit moved it there: a measurement beyond what the model reaches, \
+                         such as an e1 of 1 or more, draws the fit to where nothing changes)"
+                    }
                 ),
             ));
         }
@@ -673,7 +684,12 @@ impl Problem<'_> {
         Ok(())
     }
 
-    fn report(&self, theta: &[f64], iterations: u32) -> Result<Calibration, InvalidInput> {
+    fn report(
+        &self,
+        theta: &[f64],
+        iterations: u32,
+        settled: bool,
+    ) -> Result<Calibration, InvalidInput> {
         let outcomes = self.simulate_optimum(theta);
         let residuals = self.residuals_of(&outcomes).expect("the optimum simulates");
         let all: Vec<usize> = (0..theta.len()).collect();
@@ -701,13 +717,13 @@ impl Problem<'_> {
         warnings.extend(trade_offs);
         if (cost / residuals.len() as f64).sqrt() < EXACT_FIT_RMS {
             warnings.push(format!(
-                "the fit reproduces every measured value to better than {EXACT_FIT_RMS:e} of it: \
-                 the data hold no estimate of their noise, so the intervals, drawn from the \
-                 residuals' spread, are as narrow as the rounding and say nothing of the \
-                 measurements' uncertainty"
+                "the fit reproduces the measured values exactly (the root mean square of the \
+                 relative residuals is below {EXACT_FIT_RMS:e}): the data hold no estimate of \
+                 their noise, so the intervals, drawn from the residuals' spread, are as narrow \
+                 as the rounding and say nothing of the measurements' uncertainty"
             ));
         }
-        if iterations >= MAX_ITERATIONS {
+        if !settled {
             warnings.push(format!(
                 "the fit took all of its {MAX_ITERATIONS} iterations without settling: the \
                  estimates may lie short of the optimum; start nearer to it (the scenario's \
@@ -975,7 +991,7 @@ impl Profile<'_> {
                 .problem
                 .minimise(start, residuals, &free, 1e-9, |_, _| Ok(()))
             {
-                Ok(Some((_, cost, _))) => cost,
+                Ok(Some((_, cost, _, _))) => cost,
                 _ => return f64::INFINITY,
             }
         };
@@ -1941,6 +1957,8 @@ mod tests {
         let invalid = calibrate(&spec).unwrap_err();
         assert_eq!(invalid.errors()[0].pointer, "/fit/1", "{invalid:?}");
         assert!(invalid.errors()[0].detail.contains("cannot determine"));
+        // At its start: no word of data beyond the model's reach.
+        assert!(!invalid.errors()[0].detail.contains("moved"), "{invalid}");
     }
 
     /// Bounds around the truth change nothing; bounds that leave it out hold the estimate on the
@@ -2088,7 +2106,7 @@ mod tests {
         .unwrap_err();
         assert_eq!(invalid.pointers(), ["/fit/0"], "{invalid}");
         let detail = &invalid.errors()[0].detail;
-        assert!(detail.contains("such as an e1 of 1 or more"), "{detail}");
+        assert!(detail.contains("the fit moved it there"), "{detail}");
         assert!(
             !detail.contains("at 0.36"),
             "the fit moved kappa from its start: {detail}"
