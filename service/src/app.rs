@@ -228,12 +228,13 @@ pub async fn work(process: WorkerProcess) -> Result<(), StartupError> {
         return Err(StartupError::NoWorkers);
     }
     no_transparent_huge_pages();
-    let workers = Arc::new(start_workers(&config).await?);
+    // Before the store opens: its retries are counted too, and a bad address is said at once.
     if let Some(address) = process.metrics_bind {
         // Printed before the line below, for which tests and scripts wait.
         let bound = serve_metrics(address).await?;
         println!("bouncewear worker metrics on http://{bound}/metrics");
     }
+    let workers = Arc::new(start_workers(&config).await?);
     let slots = workers.slots(config.workers);
     let (stop, stopping) = watch::channel(false);
     let handles = Arc::clone(&workers).spawn(slots, stopping);
