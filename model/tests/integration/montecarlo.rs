@@ -136,7 +136,8 @@ fn a_jobs_errors_nest_under_the_root_it_is_given() {
         json!({"scenario": {"mechanism": {"static_force_n": -1}}}),
     ];
     for document in documents {
-        let at_root = Job::from_json(&document.to_string(), || 7).unwrap_err();
+        let spec: JobSpec = serde_json::from_value(document.clone()).unwrap();
+        let at_root = Job::new(spec, || 7, &Pointer::root()).unwrap_err();
         let expected: Vec<FieldError> = at_root
             .errors()
             .iter()
