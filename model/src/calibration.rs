@@ -2052,6 +2052,13 @@ mod tests {
                     "/observations/1/first_bounce_s",
                 ],
             ),
+            (
+                // Its one measured value left out, the observation measures nothing: a
+                // consequence, said once at the value.
+                r#"{"fit": ["material.kappa"], "observations": [{"e1": "x"},
+                    {"first_bounce_s": 0.009}, {"first_bounce_s": 0.0095}]}"#,
+                vec!["/observations/0/e1"],
+            ),
         ] {
             let invalid = CalibrationSpec::from_json(text).unwrap_err();
             assert_eq!(invalid.pointers(), pointers, "{invalid}");

@@ -232,8 +232,22 @@ pub fn with_faults<T>(
         (true, checked) => checked,
         (false, Ok(_)) => Err(InvalidInput::new(faults)),
         (false, Err(invalid)) => {
+            // A rule broken at a member's ancestor (an observation with nothing measured, once
+            // its one measured value of the wrong type was left out) follows from the fault
+            // there: said once, at the member.
+            let follows = |rule: &FieldError| {
+                faults.iter().any(|fault| {
+                    fault.pointer.starts_with(&rule.pointer)
+                        && fault.pointer[rule.pointer.len()..].starts_with('/')
+                })
+            };
+            let rules: Vec<FieldError> = invalid
+                .errors
+                .into_iter()
+                .filter(|rule| !follows(rule))
+                .collect();
             let mut errors = faults;
-            errors.extend(invalid.errors);
+            errors.extend(rules);
             Err(InvalidInput::new(errors))
         }
     }
