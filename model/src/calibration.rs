@@ -272,6 +272,15 @@ const EDGE_LN: f64 = 1e-8;
 /// by the model itself): no measured value is known that well.
 const EXACT_FIT_RMS: f64 = 1e-9;
 
+/// Where Levenberg-Marquardt ended: the parameters, their sum of squares, the iterations taken
+/// and whether it settled (`false`: [`MAX_ITERATIONS`] stopped it).
+struct Minimum {
+    theta: Vec<f64>,
+    cost: f64,
+    iterations: u32,
+    settled: bool,
+}
+
 /// The most steps of Levenberg-Marquardt a fit (or a point of a profile) takes: a fit that takes
 /// them all says so in its warnings.
 const MAX_ITERATIONS: u32 = 100;
@@ -545,12 +554,12 @@ impl Problem<'_> {
         };
         let all: Vec<usize> = (0..start.len()).collect();
         let residuals = self.residuals(&start).ok_or_else(invalid_start)?;
-        let (theta, _, iterations, settled) = self
+        let minimum = self
             .minimise(start, residuals, &all, 1e-14, |theta, jacobian| {
                 self.identifiable(theta, jacobian)
             })?
             .ok_or_else(invalid_start)?;
-        Ok((theta, iterations, settled))
+        Ok((minimum.theta, minimum.iterations, minimum.settled))
     }
 
     /// Levenberg-Marquardt over the parameters `free` of `theta` (the others held), from
@@ -565,7 +574,7 @@ impl Problem<'_> {
         free: &[usize],
         settle: f64,
         check: impl Fn(&[f64], &[Vec<f64>]) -> Result<(), InvalidInput>,
-    ) -> Result<Option<(Vec<f64>, f64, u32, bool)>, InvalidInput> {
+    ) -> Result<Option<Minimum>, InvalidInput> {
         let mut cost = sum_of_squares(&residuals);
         let mut lambda = 1e-3;
         for iteration in 1..=MAX_ITERATIONS {
@@ -581,7 +590,12 @@ impl Problem<'_> {
                 .filter(|&j| !self.held_on_bound(theta[free[j]], free[j], jtr[j]))
                 .collect();
             if moving.is_empty() {
-                return Ok(Some((theta, cost, iteration, true)));
+                return Ok(Some(Minimum {
+                    theta,
+                    cost,
+                    iterations: iteration,
+                    settled: true,
+                }));
             }
             let jtj: Vec<Vec<f64>> = moving
                 .iter()
@@ -614,7 +628,12 @@ impl Problem<'_> {
                         lambda = (lambda / 10.0).max(1e-12);
                         improved = true;
                         if converged {
-                            return Ok(Some((theta, cost, iteration, true)));
+                            return Ok(Some(Minimum {
+                                theta,
+                                cost,
+                                iterations: iteration,
+                                settled: true,
+                            }));
                         }
                         break;
                     }
@@ -622,10 +641,20 @@ impl Problem<'_> {
                 }
             }
             if !improved {
-                return Ok(Some((theta, cost, iteration, true)));
+                return Ok(Some(Minimum {
+                    theta,
+                    cost,
+                    iterations: iteration,
+                    settled: true,
+                }));
             }
         }
-        Ok(Some((theta, cost, MAX_ITERATIONS, false)))
+        Ok(Some(Minimum {
+            theta,
+            cost,
+            iterations: MAX_ITERATIONS,
+            settled: false,
+        }))
     }
 
     /// Refuses a fit whose parameters the data cannot tell apart, naming the first at fault.
@@ -991,7 +1020,7 @@ impl Profile<'_> {
                 .problem
                 .minimise(start, residuals, &free, 1e-9, |_, _| Ok(()))
             {
-                Ok(Some((_, cost, _, _))) => cost,
+                Ok(Some(minimum)) => minimum.cost,
                 _ => return f64::INFINITY,
             }
         };

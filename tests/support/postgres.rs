@@ -24,8 +24,15 @@ struct Cluster {
     env: Vec<(&'static str, String)>,
 }
 
-/// Debian's libfaketime (package `faketime`), which sets a process's clock apart.
-const FAKETIME: &str = "/usr/lib/x86_64-linux-gnu/faketime/libfaketime.so.1";
+/// Debian's libfaketime (package `faketime`), which sets a process's clock apart: in the
+/// directory of this machine's multiarch triplet (`/usr/lib/x86_64-linux-gnu/faketime`, ...).
+fn faketime() -> Option<PathBuf> {
+    std::fs::read_dir("/usr/lib")
+        .ok()?
+        .flatten()
+        .map(|entry| entry.path().join("faketime/libfaketime.so.1"))
+        .find(|library| library.is_file())
+}
 
 /// The directory of PostgreSQL's programs: where `pg_ctl` really is (links followed, so that
 /// `psql` and `initdb` beside it are the same version), found on the PATH or in Debian's
@@ -65,16 +72,16 @@ impl Postgres {
     /// machine's, as a database server's may from a worker's. `None`, saying why, without
     /// PostgreSQL or libfaketime (a failure with `BOUNCEWEAR_REQUIRE_POSTGRES=1`, as in CI).
     pub fn start_with_clock(dir: &Path, offset: &str) -> Option<Self> {
-        if !Path::new(FAKETIME).is_file() {
+        let Some(library) = faketime() else {
             assert!(
                 std::env::var("BOUNCEWEAR_REQUIRE_POSTGRES").as_deref() != Ok("1"),
                 "BOUNCEWEAR_REQUIRE_POSTGRES=1 but libfaketime is not installed (apt install faketime)"
             );
             eprintln!("\n*** SKIPPED: no libfaketime (Debian: apt install faketime). ***\n");
             return None;
-        }
+        };
         let env = vec![
-            ("LD_PRELOAD", FAKETIME.to_owned()),
+            ("LD_PRELOAD", library.display().to_string()),
             ("FAKETIME", offset.to_owned()),
             ("FAKETIME_DONT_FAKE_MONOTONIC", "1".to_owned()),
         ];

@@ -300,8 +300,12 @@ impl Tails {
         match threshold {
             Threshold::Above(t) if t >= kth_greatest => Some(beyond),
             Threshold::Below(t) if t <= kth_least => Some(beyond),
-            Threshold::Above(t) if t < kth_least => Some(count - (kept.len() as u64 - beyond)),
-            Threshold::Below(t) if t > kth_greatest => Some(count - (kept.len() as u64 - beyond)),
+            Threshold::Above(t) if t < kth_least => {
+                Some(count.saturating_sub(kept.len() as u64 - beyond))
+            }
+            Threshold::Below(t) if t > kth_greatest => {
+                Some(count.saturating_sub(kept.len() as u64 - beyond))
+            }
             _ => None,
         }
     }

@@ -260,11 +260,16 @@ pub async fn delete_schedule(
     Ok(StatusCode::NO_CONTENT)
 }
 
+/// The milliseconds from its request on that a manual run may take as its key, each not taken yet
+/// by another manual run nor a due time.
+const MANUAL_RUN_SLOTS: i64 = 16;
+
 /// Run a schedule now, outside its timetable.
 ///
 /// Queues one job from the template now (202, the job's URL in `Location`); it counts in the trend
-/// as a manual run. A full queue is 429 with `Retry-After`, as are more than 16 manual runs of the
-/// schedule within one millisecond; a key whose jobs store its quota or more, 403.
+/// as a manual run. A full queue is 429 with `Retry-After`, as is a run when the schedule's manual
+/// runs took every millisecond of [`MANUAL_RUN_SLOTS`] from the request on; a key whose jobs store
+/// its quota or more, 403.
 #[utoipa::path(
     post, path = "/v1/schedules/{id}/run", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     responses(
@@ -285,7 +290,7 @@ pub async fn run_schedule_now(
     let now = UnixMs::now();
     // A manual run is keyed by its own time; two in the same millisecond take the next one, and
     // none takes a due time, its scheduled run's.
-    for offset in 0..16 {
+    for offset in 0..MANUAL_RUN_SLOTS {
         let at = now.plus_ms(offset);
         if schedule.definition.is_due_time(at) {
             continue;

@@ -35,7 +35,8 @@ pub fn observations_from_csv(text: &str, path: &str) -> Result<Value, CliError> 
         });
     };
     for (index, column) in header.iter().enumerate() {
-        if header[..index].contains(column) {
+        // Said once, at its second place, however often it is named.
+        if header[..index].iter().filter(|c| *c == column).count() == 1 {
             let detail = format!("the header names column `{column}` twice");
             fault(observations.clone(), detail);
         }
