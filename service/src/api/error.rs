@@ -297,6 +297,15 @@ pub mod responses {
     )]
     pub struct NoSuchSchedule(pub Problem);
 
+    /// A schedule stored before a rule its template now breaks: it runs no more until PUT anew.
+    #[derive(IntoResponses)]
+    #[response(
+        status = 409,
+        description = "The schedule's stored template no longer validates; PUT the schedule with a valid one",
+        content_type = "application/problem+json"
+    )]
+    pub struct StaleTemplate(pub Problem);
+
     /// Results exist once a job succeeded.
     #[derive(IntoResponses)]
     #[response(

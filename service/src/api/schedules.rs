@@ -3,7 +3,9 @@
 use super::Path;
 use super::error::{
     ApiError,
-    responses::{BadQuery, BodyRejected, NoSuchSchedule, OverQuota, QueueFull, Unauthorized},
+    responses::{
+        BadQuery, BodyRejected, NoSuchSchedule, OverQuota, QueueFull, StaleTemplate, Unauthorized,
+    },
 };
 use super::jobs::{JobResource, accepted, header_text, stored_result};
 use super::{AppState, JsonText, idempotency_key, replayed};
@@ -268,14 +270,15 @@ const MANUAL_RUN_SLOTS: i64 = 16;
 ///
 /// Queues one job from the template now (202, the job's URL in `Location`); it counts in the trend
 /// as a manual run. A full queue is 429 with `Retry-After`, as is a run when the schedule's manual
-/// runs took every millisecond of [`MANUAL_RUN_SLOTS`] from the request on; a key whose jobs store
-/// its quota or more, 403.
+/// runs took each of the 16 milliseconds from the request on; a key whose jobs store its quota or
+/// more, 403; a schedule whose stored template no longer validates, 409.
 #[utoipa::path(
     post, path = "/v1/schedules/{id}/run", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     responses(
         (status = 202, description = "The job it queued", body = JobResource, headers(("Location" = String, description = "The job's URL"))),
         Unauthorized,
         NoSuchSchedule,
+        StaleTemplate,
         QueueFull,
         OverQuota,
     ),
@@ -397,7 +400,7 @@ pub async fn schedule_runs(
 
 /// The most runs older than the asked window that the trend looks back over for the last run
 /// with a Result, whose interval the window's oldest value is compared with.
-const DRIFT_LOOKBACK: u32 = 30;
+pub const DRIFT_LOOKBACK: u32 = 30;
 
 /// The trend of a schedule's `limit` latest runs, oldest first. Each value's drift flag compares
 /// it with the run before that has a value of the same statistic, within the window or before it
