@@ -74,6 +74,13 @@ def test_lives_are_a_frame_with_censored_devices_missing_a_failure(job):
     assert analysis["analysis"]["weibull"]["beta"] > 0
 
 
+def test_a_long_poll_asks_no_more_than_the_server_waits(job):
+    """`wait_s` is at most 30 s whatever the client's timeout and `poll` (it asked 45 and got 400)."""
+    patient = Client(BASE, timeout=120)
+    again = patient.job(job.id).wait(progress=True, poll=45)
+    assert again.status == "succeeded"
+
+
 def test_jobs_list_and_read_again(client, job):
     assert job.id in [j.id for j in client.jobs(limit=50)]
     again = client.job(job.id)

@@ -21,6 +21,9 @@ import requests
 JSON = Dict[str, Any]
 
 #: The statuses a job ends in.
+# The longest `wait_s` the server takes (docs/contract.md, "HTTP API").
+MAX_WAIT_S = 30.0
+
 ENDED = ("succeeded", "failed", "cancelled")
 
 #: The longest pause before a request is sent again, whatever `Retry-After` asks.
@@ -263,7 +266,10 @@ class Job:
         """
         started = time.monotonic()
         while True:
-            wait_s = min(poll if progress else 10.0, self.client.timeout / 2 if self.client.timeout else 30.0)
+            # At most the server's 30 s (docs/contract.md), and half the client's own timeout.
+            wait_s = min(poll if progress else 10.0, MAX_WAIT_S)
+            if self.client.timeout:
+                wait_s = min(wait_s, self.client.timeout / 2)
             if timeout is not None:
                 wait_s = min(wait_s, timeout - (time.monotonic() - started))
             asked = time.monotonic()
