@@ -669,15 +669,18 @@ impl Problem<'_> {
             .iter()
             .position(|&n| n.is_nan() || n <= 1e-9 * largest.max(1e-300))
         {
+            let start = self.start_value(&self.parameters[k].1);
+            let at_start = theta[k] == start.ln();
             return Err(InvalidInput::single(
                 &fit.child(k),
                 format!(
                     "`{}` changes none of the measured quantities at {}, so the data cannot \
                      determine it{}",
                     self.parameters[k].0,
-                    crate::error::shown(theta[k].exp()),
+                    // At its start, the value as written (not its logarithm's round trip).
+                    crate::error::shown(if at_start { start } else { theta[k].exp() }),
                     // Moved there by the fit: the data drew it where nothing changes.
-                    if theta[k] == self.start_value(&self.parameters[k].1).ln() {
+                    if at_start {
                         ""
                     } else {
                         " (the fit moved it there: a measurement beyond what the model reaches, \
@@ -1215,7 +1218,8 @@ fn check_observations(
                     errors.push(FieldError {
                         pointer: at.child(quantity).to_string(),
                         detail: format!(
-                            "must be a positive number from {MIN_MAGNITUDE:e} to {MAX_MAGNITUDE:e}, got {value:e}"
+                            "must be a positive number from {MIN_MAGNITUDE:e} to {MAX_MAGNITUDE:e}, got {}",
+                            crate::error::shown(value)
                         ),
                     });
                 }

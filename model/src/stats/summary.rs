@@ -139,8 +139,9 @@ pub struct Summary {
 ///   Unlike the spread of group quantiles (sectioning), this stays honest when a group holds few
 ///   values (a group's p95 of four values is its maximum).
 /// - a quantile's interval is clipped to `[min, max]`, within which the data place it (a level
-///   the data cannot bound carries its `reason`); the mean's is not: the population's mean may lie
-///   beyond the sample's extremes.
+///   the data cannot bound carries its `reason`); the mean's is not, the population's mean may lie
+///   beyond the sample's extremes, but it stops at 0 where no value is negative (every metric of
+///   the model is a quantity that is never negative).
 /// - `exceedance.ci95`: Wilson ([`wilson_interval`]) with the design effect of the clustering:
 ///   `n_eff = p (1 - p) / V`, `V = s^2(group proportions) / G'` (the batch-means variance of `p`);
 ///   `n_eff` is the number of devices when `p` is 0 or 1 or `V = 0`: no spread seen, so the
@@ -172,7 +173,11 @@ pub fn summarize<A: Borrow<Accumulator>>(groups: &[A], per_device: u64) -> Summa
     // Not clipped to `[min, max]`: the population's mean may lie beyond the sample's extremes,
     // and with two to four groups the batch-means interval often reaches past them (clipped, it
     // covered 50 % of 200 jobs of two devices, 75 % of three).
-    let mean_ci95 = batch_interval(mean, &group_means);
+    let [lo, hi] = batch_interval(mean, &group_means);
+    // Every metric of the model is a quantity that is never negative (times, energies, counts,
+    // radii, masses): where no value is negative, neither is the mean, and the interval stops at
+    // 0 rather than claim room where the mean cannot be.
+    let mean_ci95 = [if min >= 0.0 { lo.max(0.0) } else { lo }, hi];
 
     let levels = QUANTILES.map(|(_, q)| q);
     let quantiles = QUANTILES
@@ -480,13 +485,20 @@ mod tests {
 
     /// Two devices of one value each, 1 and 2: the batch-means interval is `1.5 +- t_{0.975, 1}
     /// 0.5`, well beyond the sample's extremes, where the population's mean may lie. It was clipped
-    /// to `[1, 2]`, and covered 50 % of 200 jobs of two devices (a probe against the truth).
+    /// to `[1, 2]`, and covered 50 % of 200 jobs of two devices (a probe against the truth). Of
+    /// values none of which is negative, it stops at 0; of others, it goes on.
     #[test]
     fn the_means_interval_reaches_past_the_samples_extremes() {
-        let s = summarize(&[accumulate([1.0], None), accumulate([2.0], None)], 1);
         let half = 12.706_204_736_174_7 * 0.5;
-        for (end, expected) in s.mean_ci95.into_iter().zip([1.5 - half, 1.5 + half]) {
-            assert!((end / expected - 1.0).abs() < 1e-9, "{:?}", s.mean_ci95);
+        for (shift, lower) in [(0.0, 0.0), (-10.0, 1.5 - 10.0 - half)] {
+            let groups = [
+                accumulate([1.0 + shift], None),
+                accumulate([2.0 + shift], None),
+            ];
+            let s = summarize(&groups, 1);
+            for (end, expected) in s.mean_ci95.into_iter().zip([lower, 1.5 + shift + half]) {
+                assert!((end - expected).abs() < 1e-9, "{shift}: {:?}", s.mean_ci95);
+            }
         }
     }
 
