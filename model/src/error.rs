@@ -166,9 +166,10 @@ pub fn read_past_faults<T: DeserializeOwned>(
     check_shape(&value, &Pointer::root(), array_fields)?;
     let readings = (READ_PAST_BYTES / text.len().max(1)).clamp(1, MAX_FAULTS);
     let mut faults: Vec<FieldError> = Vec::new();
-    // The objects a member was left out of: a later fault there is the leaving out's own (an
-    // object left empty, a field it needs), not another.
-    let mut left_out: Vec<String> = Vec::new();
+    // The members left out, by the object they were left out of: a later fault there is the
+    // leaving out's own (an object left empty, the field left out now missing), not another; a
+    // field missing that was never there (beside an unknown member) is a fault of its own.
+    let mut left_out: Vec<(String, String)> = Vec::new();
     loop {
         let error = match serde_path_to_error::deserialize(&value) {
             Ok(read) => return Ok((read, faults)),
@@ -177,7 +178,15 @@ pub fn read_past_faults<T: DeserializeOwned>(
         let pointer = path_to_pointer(error.path());
         let at = pointer.to_string();
         let detail = error.inner().to_string();
-        let consequence = left_out.contains(&at);
+        let consequence = match detail
+            .strip_prefix("missing field `")
+            .and_then(|rest| rest.split_once('`'))
+        {
+            Some((field, _)) => left_out
+                .iter()
+                .any(|(object, member)| *object == at && member == field),
+            None => left_out.iter().any(|(object, _)| *object == at),
+        };
         if !consequence {
             faults.extend(invalid_from_serde(pointer, error.inner()).errors);
         }
@@ -188,9 +197,14 @@ pub fn read_past_faults<T: DeserializeOwned>(
         if !removed {
             return Err(InvalidInput::new(faults));
         }
-        let parent = at.rsplit_once('/').map_or("", |(parent, _)| parent);
-        left_out.push(parent.to_owned());
+        let (parent, member) = at.rsplit_once('/').unwrap_or(("", ""));
+        left_out.push((parent.to_owned(), unescape(member)));
     }
+}
+
+/// A JSON pointer's token as the member name it stands for (RFC 6901: `~1` is `/`, `~0` is `~`).
+fn unescape(token: &str) -> String {
+    token.replace("~1", "/").replace("~0", "~")
 }
 
 /// Removes the object member `path` names from `value`; whether there was one to remove (an
@@ -527,6 +541,25 @@ fn path_to_pointer(path: &serde_path_to_error::Path) -> Pointer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A required field missing beside an unknown member is a fault of its own (it was taken for
+    /// the leaving out's consequence, and `{"bogus": 1}` named /bogus alone); the same field left
+    /// out for its wrong type is not said missing again.
+    #[test]
+    fn a_missing_field_beside_an_unknown_member_is_named_too() {
+        #[derive(Debug, serde::Deserialize)]
+        #[serde(deny_unknown_fields)]
+        #[allow(dead_code, reason = "only read")]
+        struct Doc {
+            fit: Vec<String>,
+        }
+        let named = |text: &str| -> Vec<String> {
+            let invalid = from_json::<Doc>(text, &["/fit"]).unwrap_err();
+            invalid.pointers().into_iter().map(str::to_owned).collect()
+        };
+        assert_eq!(named(r#"{"bogus": 1}"#), ["/bogus", ""]);
+        assert_eq!(named(r#"{"fit": 5}"#), ["/fit"]);
+    }
 
     /// Messages name JSON's types, not Rust's: `/devices: invalid type: string "x", expected u64`
     /// told a user of a type they never wrote.
