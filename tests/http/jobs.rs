@@ -247,9 +247,13 @@ fn cancelling_stops_a_running_job_a_retried_cancel_keeps_it_and_a_purge_deletes_
         get(&server.url(&format!("/v1/jobs/{id}")), None).json()["status"],
         "cancelled"
     );
-    assert_problem(
+    let maybe = assert_problem(
         &delete(&server.url(&format!("/v1/jobs/{id}?purge=maybe"))),
         400,
+    );
+    assert_eq!(
+        maybe["detail"],
+        "the query string: purge: expected true or false"
     );
     assert_eq!(
         delete(&server.url(&format!("/v1/jobs/{id}?purge=true"))).status,
@@ -747,6 +751,25 @@ fn bad_requests_get_the_right_4xx_problem() {
     assert_problem(&get(&server.url("/v1/nothing-here"), None), 404);
     assert_problem(&get(&server.url("/v1/jobs?limit=0"), None), 400);
     assert_problem(&get(&server.url("/v1/jobs?cursor=abc"), None), 400);
+    // A parameter that does not parse is named in a query's words, not Rust's parser's
+    // ("Failed to deserialize query string: limit: invalid digit found in string").
+    for (query, said) in [
+        (
+            "/v1/jobs?limit=abc",
+            "the query string: limit: expected a whole number",
+        ),
+        (
+            "/v1/jobs?limit=99999999999999999999",
+            "the query string: limit: a whole number too large",
+        ),
+        (
+            "/v1/jobs/no-such-job?wait_s=",
+            "the query string: wait_s: expected a number, got nothing",
+        ),
+    ] {
+        let problem = assert_problem(&get(&server.url(query), None), 400);
+        assert_eq!(problem["detail"], said, "{query}");
+    }
     assert_problem(
         &reply(
             agent()

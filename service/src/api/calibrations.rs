@@ -89,7 +89,7 @@ pub async fn create_calibration(
     query: Result<Query<CalibrationQuery>, QueryRejection>,
     JsonText(body): JsonText,
 ) -> Result<Response, ApiError> {
-    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let Query(query) = query?;
     let spec = CalibrationSpec::from_json(&body)?;
     let place = super::limits::take_place(&state.fits).await?;
     let stop = StopOnDrop(Arc::new(AtomicBool::new(false)));

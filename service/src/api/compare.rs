@@ -109,7 +109,7 @@ pub async fn get_comparison(
     query: Result<Query<ComparisonQuery>, QueryRejection>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let Query(query) = query?;
     let statistics = statistics(query.statistics.as_deref())?;
     let b_lives = b_lives(query.b_lives.as_deref())?;
     let metric = query.metric.unwrap_or_else(|| "total_bounce_s".to_owned());
@@ -161,7 +161,7 @@ pub async fn comparison_plot(
     Path((id, other, kind)): Path<(JobId, JobId, String)>,
     query: Result<Query<ComparisonPlotQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
-    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let Query(query) = query?;
     let (a, b, _place) = results(&state, &owner, &id, &other).await?;
     let (name_a, name_b) = (legend_name("a", &id, &a), legend_name("b", &other, &b));
     let svg = plots::compared_plot(

@@ -95,6 +95,42 @@ pub enum ApiError {
     Internal(#[from] Internal),
 }
 
+/// A query string that does not read as the route's parameters: 400 naming the parameter, in
+/// words a query's writer knows (Rust's parsers say "invalid digit found in string").
+impl From<axum::extract::rejection::QueryRejection> for ApiError {
+    fn from(rejection: axum::extract::rejection::QueryRejection) -> Self {
+        const WORDS: [(&str, &str); 6] = [
+            ("invalid digit found in string", "expected a whole number"),
+            (
+                "number too large to fit in target type",
+                "a whole number too large",
+            ),
+            (
+                "cannot parse integer from empty string",
+                "expected a whole number, got nothing",
+            ),
+            (
+                "cannot parse float from empty string",
+                "expected a number, got nothing",
+            ),
+            ("invalid float literal", "expected a number"),
+            (
+                "provided string was not `true` or `false`",
+                "expected true or false",
+            ),
+        ];
+        let text = rejection.body_text();
+        let mut plain = text
+            .strip_prefix("Failed to deserialize query string: ")
+            .unwrap_or(&text)
+            .to_owned();
+        for (rust, words) in WORDS {
+            plain = plain.replace(rust, words);
+        }
+        ApiError::BadRequest(format!("the query string: {plain}"))
+    }
+}
+
 /// A cause that must not reach the client: logged, then reported as a bare 500.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]

@@ -266,7 +266,7 @@ pub async fn list_jobs(
     Extension(owner): Extension<Owner>,
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<JobList>, ApiError> {
-    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let Query(query) = query?;
     let limit = query.limit.unwrap_or(20);
     if !(1..=100).contains(&limit) {
         return Err(ApiError::BadRequest(format!(
@@ -323,8 +323,7 @@ impl WaitQuery {
         query: Result<Query<WaitQuery>, QueryRejection>,
         state: &AppState,
     ) -> Result<std::time::Duration, ApiError> {
-        let Query(query) =
-            query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+        let Query(query) = query?;
         let wait_s = query.wait_s.unwrap_or(0.0);
         if !(0.0..=MAX_WAIT_S).contains(&wait_s) {
             return Err(ApiError::BadRequest(format!(
@@ -504,7 +503,7 @@ pub async fn cancel_job(
     Path(id): Path<JobId>,
     query: Result<Query<DeleteQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
-    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let Query(query) = query?;
     let purge = query.purge.unwrap_or(false);
     let (record, had_ended) = cancel(&state, &owner, &id).await?;
     if !had_ended || (record.status == JobStatus::Cancelled && !purge) {
@@ -755,7 +754,7 @@ pub async fn get_distribution(
     query: Result<Query<DistributionQuery>, QueryRejection>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let Query(query) = query?;
     let after_run = AfterRunQuery::parse(query.quantiles.as_deref(), query.exceedance.as_deref())
         .map_err(|bad| ApiError::BadRequest(bad.to_string()))?;
     let format = Format::negotiate(query.format, &headers);
@@ -1029,7 +1028,7 @@ pub async fn get_life(
     query: Result<Query<LifeQuery>, QueryRejection>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let Query(query) = query?;
     let _place = super::limits::take_place(&state.parsing).await?;
     let result = succeeded_result(&state, &owner, &id).await?;
     let Some(mut life) = result.life else {
@@ -1106,7 +1105,7 @@ pub async fn get_rare_event(
     query: Result<Query<RareEventQuery>, QueryRejection>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let Query(query) = query?;
     let _place = super::limits::take_place(&state.parsing).await?;
     let result = succeeded_result(&state, &owner, &id).await?;
     let Some(rare) = result.rare_event else {

@@ -100,8 +100,8 @@ pub async fn refuse_unknown(
     next: Next,
 ) -> Result<Response, ApiError> {
     if request.uri().query().is_some() {
-        let Query(query) = Query::<Vec<(String, String)>>::try_from_uri(request.uri())
-            .map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+        let Query(query) =
+            Query::<Vec<(String, String)>>::try_from_uri(request.uri()).map_err(ApiError::from)?;
         let unknown = known.unknown(request.method(), path.as_str(), &query);
         if !unknown.is_empty() {
             let quoted = |names: &[String]| {

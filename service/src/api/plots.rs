@@ -70,7 +70,7 @@ pub async fn job_plot(
     Path((id, kind)): Path<(JobId, String)>,
     query: Result<Query<PlotQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
-    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let Query(query) = query?;
     let _place = super::limits::take_place(&state.parsing).await?;
     let result = succeeded_result(&state, &owner, &id).await?;
     let svg = plots::job_plot(
@@ -110,7 +110,7 @@ pub async fn schedule_trend_plot(
     Path(id): Path<ScheduleId>,
     query: Result<Query<TrendQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
-    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let Query(query) = query?;
     let schedule = state.store.schedule(&owner, &id).await?;
     let trend = schedule_trend(&state, &schedule, 60).await?;
     let statistic = match query.statistic {

@@ -387,7 +387,7 @@ pub async fn schedule_runs(
     Path(id): Path<ScheduleId>,
     query: Result<Query<RunsQuery>, QueryRejection>,
 ) -> Result<Json<Trend>, ApiError> {
-    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let Query(query) = query?;
     let limit = query.limit.unwrap_or(60);
     if !(1..=366).contains(&limit) {
         return Err(ApiError::BadRequest(format!(

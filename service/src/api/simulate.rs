@@ -46,7 +46,7 @@ pub async fn simulate_operation(
     query: Result<Query<SimulateQuery>, QueryRejection>,
     JsonText(body): JsonText,
 ) -> Result<Json<Simulation>, ApiError> {
-    let Query(query) = query.map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+    let Query(query) = query?;
     let scenario = Scenario::from_json(&body)?;
     Ok(Json(simulate(
         &scenario,
