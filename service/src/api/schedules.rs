@@ -417,26 +417,31 @@ pub async fn schedule_trend(
     let older = runs.split_off(runs.len().min(limit as usize));
     runs.reverse();
     let statistics = &schedule.definition.statistics;
-    // The runs before the window, newest first, until every statistic has a value among them
-    // (a life statistic may have none in a run of too few failures): put before the window, they
-    // give its oldest values the runs they are compared with.
-    let mut before = Vec::new();
-    let mut unmet: Vec<_> = statistics.iter().collect();
+    let mut window = Vec::with_capacity(runs.len());
+    for run in &runs {
+        window.push(run_result(state, run).await?);
+    }
+    // The runs before the window, newest first, until every statistic the window has a value of
+    // has one among them too (a life statistic may have none in a run of too few failures): put
+    // before the window, they give its oldest values the runs they are compared with. A
+    // statistic without a value in the window needs none, and costs no reading.
+    let mut unmet: Vec<_> = statistics
+        .iter()
+        .filter(|statistic| window.iter().flatten().any(|r| statistic.read(r).is_some()))
+        .collect();
+    let mut results = Vec::new();
     for run in &older {
         if unmet.is_empty() {
             break;
         }
         if let Some(result) = run_result(state, run).await? {
             unmet.retain(|statistic| statistic.read(&result).is_none());
-            before.push(Some(result));
+            results.push(Some(result));
         }
     }
-    before.reverse();
-    let looked_back = before.len();
-    let mut results = before;
-    for run in &runs {
-        results.push(run_result(state, run).await?);
-    }
+    results.reverse();
+    let looked_back = results.len();
+    results.extend(window);
     let runs = runs
         .iter()
         .zip(trend(statistics, &results).into_iter().skip(looked_back))
