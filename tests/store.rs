@@ -8,7 +8,7 @@ use bouncewear::domain::idempotency::KEY_LIFETIME_MS;
 use bouncewear::domain::rare::{RARE_ROUNDS, SHARDED_ROUND_OPERATIONS, is_round};
 use bouncewear::domain::shards::{Folding, Merged, grouped_shards, merge};
 use bouncewear::domain::{
-    Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob,
+    Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob, ScheduleBound,
     ScheduleDefinition, ScheduleId, ShardId, UnixMs,
 };
 use bouncewear::scheduler::{Waiting, tick};
@@ -227,19 +227,49 @@ async fn a_key_creates_once_and_refuses_another_body_for_24_hours(url: &str) {
     );
 
     let schedule = nightly("s1", "2026-11-22T03:00:00Z");
-    let created = store.insert_schedule_once(&schedule, &key, UnixMs(1)).await;
+    let created = store
+        .insert_schedule_once(&schedule, SCHEDULES, &key, UnixMs(1))
+        .await;
     assert!(
         matches!(created.unwrap(), Once::Created(_)),
         "keys are per collection"
     );
+    // One schedule is the most: a retry still gets the one it created, a new one is refused
+    // (with a key or without), and another owner's counts apart.
+    let one = ScheduleBound {
+        per_owner: 1,
+        ..SCHEDULES
+    };
     let retry = nightly("s2", "2026-11-22T03:00:00Z");
     let replayed = store
-        .insert_schedule_once(&retry, &key, UnixMs(2))
+        .insert_schedule_once(&retry, one, &key, UnixMs(2))
         .await
         .unwrap();
     assert!(matches!(replayed, Once::Replayed(s) if s.id == schedule.id));
+    let new_key = IdempotencyKey::new("retry-2", "body C").unwrap();
+    let refused = store
+        .insert_schedule_once(&retry, one, &new_key, UnixMs(3))
+        .await;
+    assert!(matches!(
+        refused,
+        Err(StoreError::TooManySchedules { most: 1 })
+    ));
+    let refused = store.insert_schedule(&retry, one).await;
+    assert!(matches!(
+        refused,
+        Err(StoreError::TooManySchedules { most: 1 })
+    ));
     assert_eq!(store.schedules(&Owner::anonymous()).await.unwrap().len(), 1);
+    let mut theirs = nightly("s3", "2026-11-22T03:00:00Z");
+    theirs.owner = Owner::of_key("another key");
+    store.insert_schedule(&theirs, one).await.unwrap();
 }
+
+/// Room for every schedule a test makes.
+const SCHEDULES: ScheduleBound = ScheduleBound {
+    per_owner: 100,
+    min_free_disk_bytes: 0,
+};
 
 async fn ended_jobs_are_deleted_with_everything_stored_for_them(url: &str) {
     let store = store::open(url).await.unwrap();
@@ -274,7 +304,7 @@ async fn ended_jobs_are_deleted_with_everything_stored_for_them(url: &str) {
 
     // A schedule's run goes with its job; retention takes only what ended before its time.
     let schedule = nightly("s1", "2026-11-22T03:00:00Z");
-    store.insert_schedule(&schedule).await.unwrap();
+    store.insert_schedule(&schedule, SCHEDULES).await.unwrap();
     let slot = RunSlot {
         schedule: &schedule.id,
         scheduled_for: UnixMs(5),
@@ -1349,7 +1379,7 @@ async fn two_scheduler_loops_never_duplicate_a_night(url: &str) {
     );
     for i in 0..10 {
         let schedule = nightly(&format!("s{i}"), "2026-11-21T03:00:00Z");
-        first.insert_schedule(&schedule).await.unwrap();
+        first.insert_schedule(&schedule, SCHEDULES).await.unwrap();
     }
     let now = utc("2026-11-22T04:00:00Z");
     let mut created = 0;
@@ -1388,7 +1418,7 @@ async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: 
     let store = store::open(url).await.unwrap();
     let id = ScheduleId::from("s1");
     store
-        .insert_schedule(&nightly("s1", "2026-11-19T03:00:00Z"))
+        .insert_schedule(&nightly("s1", "2026-11-19T03:00:00Z"), SCHEDULES)
         .await
         .unwrap();
     // The server was down for three nights; it starts at 08:00.
@@ -1427,7 +1457,7 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
     let store = store::open(url).await.unwrap();
     let mut schedule = nightly("s1", "2026-11-22T03:00:00Z");
     schedule.definition.template = serde_json::from_str(r#"{"devices": 0}"#).unwrap();
-    store.insert_schedule(&schedule).await.unwrap();
+    store.insert_schedule(&schedule, SCHEDULES).await.unwrap();
     let now = utc("2026-11-22T03:00:05Z");
     let mut waiting = Waiting::default();
     let created = tick(store.as_ref(), QueueBound::total(100), now, &mut waiting);
@@ -1446,7 +1476,7 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
 async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) {
     let store = store::open(url).await.unwrap();
     store
-        .insert_schedule(&nightly("s1", "2026-11-22T03:00:00Z"))
+        .insert_schedule(&nightly("s1", "2026-11-22T03:00:00Z"), SCHEDULES)
         .await
         .unwrap();
     let now = utc("2026-11-22T03:00:05Z");
@@ -1466,7 +1496,7 @@ async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) 
     insert(&store, queued(7)).await;
     let mut other = nightly("s2", "2026-11-22T03:00:00Z");
     other.owner = Owner::of_key("other");
-    store.insert_schedule(&other).await.unwrap();
+    store.insert_schedule(&other, SCHEDULES).await.unwrap();
     let over_quota = QueueBound {
         stored_per_owner: Some(1),
         ..QueueBound::total(10)

@@ -1,6 +1,6 @@
 //! `bouncewear serve` and `bouncewear worker` configuration: flags, each with an environment variable.
 
-use crate::domain::{QueueBound, RetryBudget, ScheduleLimits};
+use crate::domain::{QueueBound, RetryBudget, ScheduleBound, ScheduleLimits};
 use clap::Args;
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -139,6 +139,15 @@ pub struct ServeConfig {
     /// (without API keys: all clients together); more get 429 with Retry-After.
     #[arg(long, env = "BOUNCEWEAR_MAX_STREAMS_PER_KEY", default_value_t = 64)]
     pub max_streams_per_key: usize,
+    /// Schedules one API key may hold (without API keys: all clients together); another gets 403
+    /// until one is deleted.
+    #[arg(
+        long,
+        env = "BOUNCEWEAR_MAX_SCHEDULES_PER_KEY",
+        default_value_t = 100,
+        value_parser = clap::value_parser!(u64).range(1..)
+    )]
+    pub max_schedules_per_key: u64,
     /// Free disk space, in MB, beside a SQLite database below which the server reports itself not
     /// ready (`/readyz` answers 503).
     #[arg(long, env = "BOUNCEWEAR_MIN_FREE_DISK_MB", default_value_t = 100)]
@@ -204,6 +213,14 @@ impl ServeConfig {
     }
 
     /// The queue's bound: `--max-queued` in all, and each key's share.
+    /// How many schedules one owner may hold, and the free disk a new one needs.
+    pub fn schedule_bound(&self) -> ScheduleBound {
+        ScheduleBound {
+            per_owner: self.max_schedules_per_key,
+            min_free_disk_bytes: self.min_free_disk_bytes(),
+        }
+    }
+
     pub fn queue_bound(&self) -> QueueBound {
         let share = if self.api_keys.len() >= 2 {
             self.max_queued.div_ceil(2)

@@ -195,6 +195,53 @@ fn a_schedules_run_counts_as_a_job_submitted() {
     assert_eq!(submitted(), 2.0);
 }
 
+/// A key holds at most `--max-schedules-per-key` schedules: the next is 403 naming the flag, a
+/// retry of one it created still gets it, another key counts apart, and a delete makes room.
+#[test]
+fn a_key_holds_at_most_its_share_of_schedules() {
+    let server = TestApp::start(
+        &temp_db("schedule-bound"),
+        &["--api-key", "alpha,beta", "--max-schedules-per-key", "2"],
+    );
+    let schedules = server.url("/v1/schedules");
+    let body = |name: &str| {
+        json!({"name": name, "cron": "0 3 * * *", "template": {"devices": 2, "operations": 2}})
+            .to_string()
+    };
+    let keyed = |key: &str, name: &str| {
+        let request = agent()
+            .post(&schedules)
+            .header("content-type", "application/json")
+            .header("authorization", "Bearer alpha")
+            .header("idempotency-key", key);
+        reply(request.send(body(name).as_str()))
+    };
+    let first = keyed("first", "one");
+    assert_eq!(first.status, 201, "{}", first.body);
+    assert_eq!(post(&schedules, &body("two"), Some("alpha")).status, 201);
+    let problem = assert_problem(&post(&schedules, &body("three"), Some("alpha")), 403);
+    assert_eq!(
+        problem["detail"],
+        "this API key (every client, where the server has no keys) holds 2 schedules, the most \
+         it may (--max-schedules-per-key): delete one it no longer needs \
+         (DELETE /v1/schedules/{id}) before creating another"
+    );
+    assert_problem(&keyed("third", "three"), 403);
+    let retry = keyed("first", "one");
+    assert_eq!(retry.status, 201, "{}", retry.body);
+    assert_eq!(retry.json()["id"], first.json()["id"]);
+    assert_eq!(post(&schedules, &body("theirs"), Some("beta")).status, 201);
+    let id = first.json()["id"].as_str().unwrap().to_owned();
+    let deleted = reply(
+        agent()
+            .delete(&server.url(&format!("/v1/schedules/{id}")))
+            .header("authorization", "Bearer alpha")
+            .call(),
+    );
+    assert_eq!(deleted.status, 204, "{}", deleted.body);
+    assert_eq!(post(&schedules, &body("three"), Some("alpha")).status, 201);
+}
+
 /// A scheduler tick that keeps failing (here the disk is below `--min-free-disk-mb` while a
 /// schedule is due every second) is logged as an error once, not every second.
 #[test]

@@ -380,6 +380,9 @@ fn readiness_turns_503_below_the_free_disk_threshold() {
     );
     says_why(&refused);
     assert_eq!(refused.headers["retry-after"], "5");
+    // Nor a schedule (one was written whatever the free disk).
+    let schedule = r#"{"name": "n", "cron": "0 3 * * *", "template": {"devices": 2}}"#;
+    says_why(&post(&server.url("/v1/schedules"), schedule, None));
     assert_eq!(get(&server.url("/v1/jobs"), None).status, 200);
 }
 

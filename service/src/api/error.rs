@@ -145,7 +145,9 @@ impl From<StoreError> for ApiError {
             StoreError::NotFound { .. } => ApiError::NotFound(error.to_string()),
             StoreError::Conflict(detail) => ApiError::Conflict(detail),
             StoreError::NotReady(detail) => ApiError::NotReady(detail),
-            StoreError::OverQuota { .. } => ApiError::OverQuota(error.to_string()),
+            StoreError::OverQuota { .. } | StoreError::TooManySchedules { .. } => {
+                ApiError::OverQuota(error.to_string())
+            }
             other if other.is_unavailable() => ApiError::Unavailable(Internal(other.to_string())),
             other => ApiError::Internal(Internal(other.to_string())),
         }
@@ -388,6 +390,15 @@ pub mod responses {
         content_type = "application/problem+json"
     )]
     pub struct OverQuota(pub Problem);
+
+    /// A new schedule of a key that holds `--max-schedules-per-key` schedules.
+    #[derive(IntoResponses)]
+    #[response(
+        status = 403,
+        description = "This API key (every client, where the server has no keys) holds the most schedules it may (`--max-schedules-per-key`, default 100); delete one first",
+        content_type = "application/problem+json"
+    )]
+    pub struct TooManySchedules(pub Problem);
 
     /// Event streams: each API key holds at most `--max-streams-per-key` at once.
     #[derive(IntoResponses)]

@@ -4,7 +4,8 @@ use super::Path;
 use super::error::{
     ApiError,
     responses::{
-        BadQuery, BodyRejected, NoSuchSchedule, OverQuota, QueueFull, StaleTemplate, Unauthorized,
+        BadQuery, BodyRejected, NoSuchSchedule, OverQuota, QueueFull, StaleTemplate,
+        TooManySchedules, Unauthorized,
     },
 };
 use super::jobs::{JobResource, accepted, header_text, stored_result};
@@ -131,6 +132,7 @@ async fn resource(state: &AppState, record: &ScheduleRecord) -> Result<ScheduleR
         (status = 201, description = "Created (or, for a retry with the same Idempotency-Key, created before: then `Idempotent-Replayed: true`)", body = ScheduleResource, headers(("Location" = String, description = "The schedule's URL"))),
         BodyRejected,
         Unauthorized,
+        TooManySchedules,
     ),
     security((), ("api_key" = []))
 )]
@@ -144,10 +146,16 @@ pub async fn create_schedule(
     let valid = ValidSchedule::parse(&body, state.config.schedule_limits(), Utc::now())?;
     let now = UnixMs::now();
     let record = record(valid, ScheduleId::generate(), owner, now, now);
+    let bound = state.config.schedule_bound();
     let once = match key {
-        Some(key) => state.store.insert_schedule_once(&record, &key, now).await?,
+        Some(key) => {
+            state
+                .store
+                .insert_schedule_once(&record, bound, &key, now)
+                .await?
+        }
         None => {
-            state.store.insert_schedule(&record).await?;
+            state.store.insert_schedule(&record, bound).await?;
             Once::Created(record)
         }
     };

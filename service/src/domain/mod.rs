@@ -17,7 +17,8 @@ pub use ids::{Attempt, JobId, Owner, ScheduleId, UnixMs};
 pub use jobs::{JobStatus, QueueBound, QueuedJob, draw_seed};
 pub use query::AfterRunQuery;
 pub use schedules::{
-    ScheduleDefinition, ScheduleLimits, ScheduleSpec, Statistic, Timetable, ValidSchedule,
+    ScheduleBound, ScheduleDefinition, ScheduleLimits, ScheduleSpec, Statistic, Timetable,
+    ValidSchedule,
 };
 pub use shards::{
     Folding, RetryBudget, SHARD_OVERHEAD_OPERATIONS, ShardId, ShardPlan, batch_shards,

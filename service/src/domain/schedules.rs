@@ -84,6 +84,14 @@ impl ScheduleDefinition {
     }
 }
 
+/// The server's bound on stored schedules: how many one owner may hold, and the free disk (beside
+/// a SQLite database) a new one needs, so that no client fills the disk with schedules.
+#[derive(Debug, Clone, Copy)]
+pub struct ScheduleBound {
+    pub per_owner: u64,
+    pub min_free_disk_bytes: u64,
+}
+
 /// The server's limits on a schedule: each run's job size, and how often it may run.
 #[derive(Debug, Clone, Copy)]
 pub struct ScheduleLimits {

@@ -27,7 +27,7 @@ pub use rows::{EncodedGroups, EncodedResult, encode};
 use crate::domain::rare::Rounds;
 use crate::domain::{
     Attempt, Folding, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob,
-    ScheduleDefinition, ScheduleId, ShardId, ShardPlan, UnixMs,
+    ScheduleBound, ScheduleDefinition, ScheduleId, ShardId, ShardPlan, UnixMs,
 };
 use async_trait::async_trait;
 use bouncewear_model::montecarlo::engine::GroupStats;
@@ -69,6 +69,14 @@ pub enum StoreError {
          jobs it no longer needs (DELETE /v1/jobs/{{id}}?purge=true) before submitting more"
     )]
     OverQuota { used: u64, quota: u64 },
+    /// The owner holds `most` schedules, as many as [`crate::domain::ScheduleBound::per_owner`]
+    /// allows.
+    #[error(
+        "this API key (every client, where the server has no keys) holds {most} schedules, the \
+         most it may (--max-schedules-per-key): delete one it no longer needs \
+         (DELETE /v1/schedules/{{id}}) before creating another"
+    )]
+    TooManySchedules { most: u64 },
 }
 
 impl StoreError {
@@ -511,12 +519,21 @@ pub trait Results: Send + Sync + 'static {
 /// Schedules and their runs.
 #[async_trait]
 pub trait Schedules: Send + Sync + 'static {
-    async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()>;
+    /// Inserts a schedule unless its owner holds the most the bound allows
+    /// ([`StoreError::TooManySchedules`]); below the bound's free disk, the database is not
+    /// ready (503).
+    async fn insert_schedule(
+        &self,
+        schedule: &ScheduleRecord,
+        bound: ScheduleBound,
+    ) -> StoreResult<()>;
     /// As [`Schedules::insert_schedule`], once per key of the schedule's owner (see
-    /// [`JobQueue::insert_job_once`]).
+    /// [`JobQueue::insert_job_once`]): a retry gets the schedule the first created, whatever
+    /// the bound.
     async fn insert_schedule_once(
         &self,
         schedule: &ScheduleRecord,
+        bound: ScheduleBound,
         key: &IdempotencyKey,
         now: UnixMs,
     ) -> StoreResult<Once<ScheduleRecord>>;

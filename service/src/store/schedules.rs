@@ -2,10 +2,14 @@
 
 use super::backend::SqlStore;
 use super::queue::{remember, select_job};
-use super::rows::{Created, bind_schedule, run_from_row, schedule_columns, schedule_from_row};
-use super::sql::Sql;
+use super::rows::{
+    Created, bind_schedule, count_from_sql, run_from_row, schedule_columns, schedule_from_row,
+};
+use super::sql::{Sql, Tx};
 use super::{NewRun, RunRecord, RunSlot, ScheduleRecord, Schedules, StoreError, StoreResult};
-use crate::domain::{IdempotencyKey, Once, Owner, QueueBound, QueuedJob, ScheduleId, UnixMs};
+use crate::domain::{
+    IdempotencyKey, Once, Owner, QueueBound, QueuedJob, ScheduleBound, ScheduleId, UnixMs,
+};
 use async_trait::async_trait;
 
 const INSERT_SCHEDULE: &str = concat!(
@@ -14,13 +18,44 @@ const INSERT_SCHEDULE: &str = concat!(
     ") VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)"
 );
 
+impl SqlStore {
+    /// Inserts a schedule in `tx` unless the bound refuses it: the count and the insert in one
+    /// transaction (on PostgreSQL, inserts at the same moment may each see the count below the
+    /// bound, so an owner goes over by at most its requests in flight).
+    async fn insert_bounded(
+        &self,
+        tx: &mut Tx,
+        schedule: &ScheduleRecord,
+        bound: ScheduleBound,
+    ) -> StoreResult<()> {
+        self.check_disk(bound.min_free_disk_bytes)?;
+        let held = Sql::new("SELECT COUNT(*) AS held FROM schedules WHERE owner = $1")
+            .bind(schedule.owner.as_str())
+            .fetch_one(&mut *tx)
+            .await?;
+        if count_from_sql(&held, "held")? >= bound.per_owner {
+            return Err(StoreError::TooManySchedules {
+                most: bound.per_owner,
+            });
+        }
+        bind_schedule(Sql::new(INSERT_SCHEDULE), schedule)?
+            .execute(&mut *tx)
+            .await?;
+        Ok(())
+    }
+}
+
 #[async_trait]
 impl Schedules for SqlStore {
     #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
-    async fn insert_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
-        bind_schedule(Sql::new(INSERT_SCHEDULE), schedule)?
-            .execute(self.writer()?)
-            .await?;
+    async fn insert_schedule(
+        &self,
+        schedule: &ScheduleRecord,
+        bound: ScheduleBound,
+    ) -> StoreResult<()> {
+        let mut tx = self.begin_reading_first().await?;
+        self.insert_bounded(&mut tx, schedule, bound).await?;
+        tx.commit().await?;
         Ok(())
     }
 
@@ -28,11 +63,12 @@ impl Schedules for SqlStore {
     async fn insert_schedule_once(
         &self,
         schedule: &ScheduleRecord,
+        bound: ScheduleBound,
         key: &IdempotencyKey,
         now: UnixMs,
     ) -> StoreResult<Once<ScheduleRecord>> {
         let owner = &schedule.owner;
-        let mut tx = self.begin().await?;
+        let mut tx = self.begin_reading_first().await?;
         if let Some((fingerprint, id)) = self
             .remembered(&mut tx, owner, "schedules", key, now)
             .await?
@@ -45,9 +81,7 @@ impl Schedules for SqlStore {
                 self.schedule(owner, &ScheduleId::from(id)).await?,
             ));
         }
-        bind_schedule(Sql::new(INSERT_SCHEDULE), schedule)?
-            .execute(&mut tx)
-            .await?;
+        self.insert_bounded(&mut tx, schedule, bound).await?;
         remember(&mut tx, owner, Created::Schedule(&schedule.id), key, now).await?;
         tx.commit().await?;
         Ok(Once::Created(schedule.clone()))
