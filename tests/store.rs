@@ -259,10 +259,26 @@ async fn a_key_creates_once_and_refuses_another_body_for_24_hours(url: &str) {
         refused,
         Err(StoreError::TooManySchedules { most: 1 })
     ));
-    assert_eq!(store.schedules(&Owner::anonymous()).await.unwrap().len(), 1);
+    let anyone = Owner::anonymous();
+    assert_eq!(store.schedules(&anyone, None, 10).await.unwrap().len(), 1);
     let mut theirs = nightly("s3", "2026-11-22T03:00:00Z");
     theirs.owner = Owner::of_key("another key");
     store.insert_schedule(&theirs, one).await.unwrap();
+
+    // Pages, oldest first, each after the last one's seq.
+    for id in ["s4", "s5", "s6"] {
+        let schedule = nightly(id, "2026-11-22T03:00:00Z");
+        store.insert_schedule(&schedule, SCHEDULES).await.unwrap();
+    }
+    let ids = |page: &[(i64, ScheduleRecord)]| -> Vec<String> {
+        page.iter().map(|(_, s)| s.id.to_string()).collect()
+    };
+    let first = store.schedules(&anyone, None, 2).await.unwrap();
+    assert_eq!(ids(&first), ["s1", "s4"]);
+    let next = store.schedules(&anyone, Some(first[1].0), 2).await.unwrap();
+    assert_eq!(ids(&next), ["s5", "s6"]);
+    let last = store.schedules(&anyone, Some(next[1].0), 2).await.unwrap();
+    assert!(last.is_empty());
 }
 
 /// Room for every schedule a test makes.

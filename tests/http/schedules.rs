@@ -196,7 +196,8 @@ fn a_schedules_run_counts_as_a_job_submitted() {
 }
 
 /// A key holds at most `--max-schedules-per-key` schedules: the next is 403 naming the flag, a
-/// retry of one it created still gets it, another key counts apart, and a delete makes room.
+/// retry of one it created still gets it, another key counts apart, and a delete makes room;
+/// the list comes in pages.
 #[test]
 fn a_key_holds_at_most_its_share_of_schedules() {
     let server = TestApp::start(
@@ -240,25 +241,42 @@ fn a_key_holds_at_most_its_share_of_schedules() {
     );
     assert_eq!(deleted.status, 204, "{}", deleted.body);
     assert_eq!(post(&schedules, &body("three"), Some("alpha")).status, 201);
+
+    // The list comes in pages, oldest first; a key sees only its own.
+    let page = get(&format!("{schedules}?limit=1"), Some("alpha")).json();
+    assert_eq!(page["schedules"][0]["name"], "two", "{page}");
+    let cursor = page["next_cursor"].as_str().unwrap();
+    let next = get(
+        &format!("{schedules}?limit=1&cursor={cursor}"),
+        Some("alpha"),
+    )
+    .json();
+    assert_eq!(next["schedules"][0]["name"], "three", "{next}");
+    assert!(next.get("next_cursor").is_none(), "{next}");
+    let whole = get(&schedules, Some("alpha")).json();
+    assert_eq!(whole["schedules"].as_array().unwrap().len(), 2, "{whole}");
+    assert_problem(&get(&format!("{schedules}?limit=101"), Some("alpha")), 400);
+    assert_problem(&get(&format!("{schedules}?cursor=x"), Some("alpha")), 400);
 }
 
 /// A scheduler tick that keeps failing (here the disk is below `--min-free-disk-mb` while a
 /// schedule is due every second) is logged as an error once, not every second.
 #[test]
 fn a_scheduler_tick_failing_every_second_is_logged_once() {
-    let (server, lines) = Spawned::logging(
-        &temp_db("schedules-failing-ticks"),
-        &[
-            "--min-free-disk-mb",
-            "100000000",
-            "--min-schedule-interval-seconds",
-            "1",
-        ],
+    let database = temp_db("schedules-failing-ticks");
+    let every_second = ["--min-schedule-interval-seconds", "1"];
+    {
+        // Made while the disk had room (below the floor, a new schedule is refused).
+        let server = Spawned::start(&database, &every_second);
+        let body = json!({"name": "each second", "cron": "* * * * * *", "time_zone": "UTC",
+                          "template": {"devices": 1, "operations": 1}});
+        let created = post(&server.url("/v1/schedules"), &body.to_string(), None);
+        assert_eq!(created.status, 201, "{}", created.body);
+    }
+    let (_server, lines) = Spawned::logging(
+        &database,
+        &[&every_second[..], &["--min-free-disk-mb", "100000000"]].concat(),
     );
-    let body = json!({"name": "each second", "cron": "* * * * * *", "time_zone": "UTC",
-                      "template": {"devices": 1, "operations": 1}});
-    let created = post(&server.url("/v1/schedules"), &body.to_string(), None);
-    assert_eq!(created.status, 201, "{}", created.body);
     std::thread::sleep(Duration::from_millis(3500));
     let logged: Vec<String> = lines.try_iter().collect();
     let failed = logged

@@ -606,8 +606,14 @@
       const list = $("#schedules");
       const error = $("#schedules-error");
       try {
-        const data = await getJson("/v1/schedules");
-        const schedules = data.schedules || [];
+        // Every page: a key holds at most --max-schedules-per-key (100 by default, one page).
+        const schedules = [];
+        let cursor = null;
+        do {
+          const data = await getJson("/v1/schedules" + (cursor ? "?cursor=" + encodeURIComponent(cursor) : ""));
+          schedules.push(...(data.schedules || []));
+          cursor = data.next_cursor || null;
+        } while (cursor);
         setAlert(error, null);
         list.replaceChildren(...schedules.map(scheduleCard));
         show($("#schedules-empty"), schedules.length === 0);

@@ -240,12 +240,35 @@ pub fn accepted(record: &JobRecord) -> Result<Response, ApiError> {
 #[derive(Debug, Deserialize, IntoParams)]
 #[into_params(parameter_in = Query)]
 pub struct ListQuery {
-    /// Page size, 1 to 100 (default 20).
+    /// Page size, 1 to 100 (default 20 jobs, 100 schedules).
     #[param(minimum = 1, maximum = 100, example = 20)]
     pub limit: Option<u32>,
     /// `next_cursor` of the previous page.
     #[param(pattern = "^[1-9][0-9]{0,18}$", example = "42")]
     pub cursor: Option<String>,
+}
+
+impl ListQuery {
+    /// The page asked for: its size (`default` without `limit`) and the cursor's `seq`.
+    pub fn page(&self, default: u32) -> Result<(u32, Option<i64>), ApiError> {
+        let limit = self.limit.unwrap_or(default);
+        if !(1..=100).contains(&limit) {
+            return Err(ApiError::BadRequest(format!(
+                "limit must be from 1 to 100, got {limit}"
+            )));
+        }
+        let Some(cursor) = self.cursor.as_deref() else {
+            return Ok((limit, None));
+        };
+        let seq = cursor
+            .parse::<i64>()
+            .ok()
+            .filter(|seq| *seq > 0)
+            .ok_or_else(|| {
+                ApiError::BadRequest(format!("cursor `{cursor}` is not one this server gave"))
+            })?;
+        Ok((limit, Some(seq)))
+    }
 }
 
 /// List your jobs, newest first, with cursor paging.
@@ -267,24 +290,7 @@ pub async fn list_jobs(
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<JobList>, ApiError> {
     let Query(query) = query?;
-    let limit = query.limit.unwrap_or(20);
-    if !(1..=100).contains(&limit) {
-        return Err(ApiError::BadRequest(format!(
-            "limit must be from 1 to 100, got {limit}"
-        )));
-    }
-    let before = match query.cursor.as_deref() {
-        None => None,
-        Some(cursor) => Some(
-            cursor
-                .parse::<i64>()
-                .ok()
-                .filter(|seq| *seq > 0)
-                .ok_or_else(|| {
-                    ApiError::BadRequest(format!("cursor `{cursor}` is not one this server gave"))
-                })?,
-        ),
-    };
+    let (limit, before) = query.page(20)?;
     // One more than the page: a cursor only where another page has jobs.
     let mut records = state
         .store

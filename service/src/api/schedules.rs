@@ -8,7 +8,7 @@ use super::error::{
         TooManySchedules, Unauthorized,
     },
 };
-use super::jobs::{JobResource, accepted, header_text, stored_result};
+use super::jobs::{JobResource, ListQuery, accepted, header_text, stored_result};
 use super::{AppState, JsonText, idempotency_key, replayed};
 use crate::domain::trend::trend;
 use crate::domain::{
@@ -72,6 +72,9 @@ pub struct ScheduleResource {
 pub struct ScheduleList {
     /// Your schedules, oldest first.
     pub schedules: Vec<ScheduleResource>,
+    /// Pass as `cursor` for the next page; absent on the last page.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub next_cursor: Option<String>,
 }
 
 /// The stored form of a valid schedule document, due next after `now`.
@@ -178,13 +181,15 @@ async fn created(state: &AppState, record: &ScheduleRecord) -> Result<Response, 
         .into_response())
 }
 
-/// Your schedules, oldest first.
+/// Your schedules, oldest first, with cursor paging.
 ///
-/// With API keys, only your schedules.
+/// Pages of at most `limit` schedules (default 100, as many as a key holds by default); pass a
+/// page's `next_cursor` as `cursor` for the next. With API keys, only your schedules.
 #[utoipa::path(
-    get, path = "/v1/schedules", tag = "schedules",
+    get, path = "/v1/schedules", tag = "schedules", params(ListQuery),
     responses(
-        (status = 200, description = "Schedules", body = ScheduleList),
+        (status = 200, description = "A page of schedules", body = ScheduleList),
+        BadQuery,
         Unauthorized,
     ),
     security((), ("api_key" = []))
@@ -192,12 +197,25 @@ async fn created(state: &AppState, record: &ScheduleRecord) -> Result<Response, 
 pub async fn list_schedules(
     State(state): State<AppState>,
     Extension(owner): Extension<Owner>,
+    query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<ScheduleList>, ApiError> {
-    let mut schedules = Vec::new();
-    for record in state.store.schedules(&owner).await? {
-        schedules.push(resource(&state, &record).await?);
+    let Query(query) = query?;
+    let (limit, after) = query.page(100)?;
+    // One more than the page: a cursor only where another page has schedules.
+    let mut records = state.store.schedules(&owner, after, limit + 1).await?;
+    let more = records.len() > limit as usize;
+    records.truncate(limit as usize);
+    let next_cursor = more
+        .then(|| records.last().map(|(seq, _)| seq.to_string()))
+        .flatten();
+    let mut schedules = Vec::with_capacity(records.len());
+    for (_, record) in &records {
+        schedules.push(resource(&state, record).await?);
     }
-    Ok(Json(ScheduleList { schedules }))
+    Ok(Json(ScheduleList {
+        schedules,
+        next_cursor,
+    }))
 }
 
 /// One schedule.

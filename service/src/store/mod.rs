@@ -538,8 +538,14 @@ pub trait Schedules: Send + Sync + 'static {
         now: UnixMs,
     ) -> StoreResult<Once<ScheduleRecord>>;
     async fn schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<ScheduleRecord>;
-    /// Oldest first.
-    async fn schedules(&self, owner: &Owner) -> StoreResult<Vec<ScheduleRecord>>;
+    /// An owner's schedules after the one at `seq` `after` (from the first without it), oldest
+    /// first, at most `limit`; each with its `seq`, the cursor of the next page.
+    async fn schedules(
+        &self,
+        owner: &Owner,
+        after: Option<i64>,
+        limit: u32,
+    ) -> StoreResult<Vec<(i64, ScheduleRecord)>>;
     /// Replaces a schedule's definition and next run (its runs stay).
     async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()>;
     async fn delete_schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<()>;

@@ -103,16 +103,25 @@ impl Schedules for SqlStore {
     }
 
     #[tracing::instrument(skip_all)]
-    async fn schedules(&self, owner: &Owner) -> StoreResult<Vec<ScheduleRecord>> {
+    async fn schedules(
+        &self,
+        owner: &Owner,
+        after: Option<i64>,
+        limit: u32,
+    ) -> StoreResult<Vec<(i64, ScheduleRecord)>> {
         let rows = Sql::new(concat!(
-            "SELECT ",
+            "SELECT seq, ",
             schedule_columns!(),
-            " FROM schedules WHERE owner = $1 ORDER BY seq"
+            " FROM schedules WHERE owner = $1 AND seq > $2 ORDER BY seq LIMIT $3"
         ))
         .bind(owner.as_str())
+        .bind(after.unwrap_or(0))
+        .bind(i64::from(limit))
         .fetch_all(self.readers())
         .await?;
-        rows.iter().map(schedule_from_row).collect()
+        rows.iter()
+            .map(|row| Ok((row.int("seq")?, schedule_from_row(row)?)))
+            .collect()
     }
 
     #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
