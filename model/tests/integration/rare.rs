@@ -5,7 +5,7 @@
 
 use crate::support::{job, pointers, run_on};
 use bouncewear_model::Pointer;
-use bouncewear_model::montecarlo::distribution::standard_normal_cdf;
+use bouncewear_model::montecarlo::distribution::{standard_normal_cdf, standard_normal_quantile};
 use bouncewear_model::montecarlo::rare::{RareEventReport, check_threshold, estimate};
 use bouncewear_model::montecarlo::{Job, Silent};
 use serde_json::{Value, json};
@@ -337,6 +337,37 @@ fn the_chance_of_failing_before_an_operation_holds_the_truth() {
             "a margin of 0: failing"
         );
     }
+}
+
+/// Failing as soon as one operation's drawn velocity exceeds `t` (the metric is the draw itself),
+/// `P(T < 11) = 1 - (1 - p)^10` exactly, with `p = P(v > t)` of the lognormal. The failure
+/// domain is ten alike regions, one per operation: `auto` takes subset simulation there, and
+/// holds the truth (importance sampling around one centre gave 8.8e-7 for 1.0e-5).
+#[test]
+fn a_failure_any_of_several_operations_can_cause_is_estimated_whole() {
+    let p = 1e-6;
+    let z = standard_normal_quantile(1.0 - p);
+    let threshold = 0.3 * (0.1 * z).exp();
+    let truth = -(10.0 * (-p).ln_1p()).exp_m1();
+    let job = job(json!({
+        "devices": 2, "operations": 11, "seed": 4,
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+                     "distribution": {"kind": "lognormal", "median": 0.3, "sigma": 0.1}}],
+        "metrics": ["impact_velocity_m_s"],
+        "failure": {"impact_velocity_m_s": {"above": threshold}},
+        "rare_event": {"metric": "operations_to_failure", "below": 11}
+    }));
+    let found = report(&job);
+    assert_eq!(found.method, "subset");
+    assert!(
+        found.ci95[0] <= truth && truth <= found.ci95[1],
+        "{found:?} against {truth}"
+    );
+    assert!(
+        (found.probability / truth - 1.0).abs() < 0.5,
+        "{} against {truth}",
+        found.probability
+    );
 }
 
 /// A threshold no input within 11.5 standard deviations of the median reaches (below

@@ -39,6 +39,13 @@ impl<'a> DeviceFunction<'a> {
         self.plan.device_scatter.len() + self.per_operation() * self.operation_count()
     }
 
+    /// Whether inputs of more than one operation are scattered: an event that any of them can
+    /// cause then has a failure region for each, alike (the same parameter's draws), and
+    /// importance sampling around one centre misses all but one.
+    pub fn scatters_several_operations(&self) -> bool {
+        self.per_operation() > 0 && self.operation_count() > 1
+    }
+
     fn per_operation(&self) -> usize {
         self.plan.operation_scatter.len()
     }

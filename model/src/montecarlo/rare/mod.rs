@@ -109,13 +109,21 @@ pub fn estimate(job: &Job, observer: &dyn Observer) -> Result<Option<RareEventRe
 }
 
 /// The job's rare event ready for its first round, if it asks one (`auto` resolved: importance
-/// sampling up to [`MAX_IMPORTANCE_DIMENSION`] inputs, subset simulation beyond).
+/// sampling up to [`MAX_IMPORTANCE_DIMENSION`] inputs of one operation or the device alone,
+/// subset simulation beyond and where several operations' inputs are scattered: there the event
+/// has a failure region per operation, and importance sampling around one of them put
+/// `operations_to_failure` below 11 at 8.8e-7 against the true 1.0e-5, interval [7.1e-7,
+/// 1.05e-6], covering in 35 of 100 seeds; subset simulation 48 of 50).
 pub fn start(job: &Job) -> Option<Estimator> {
     let rare = job.rare_event()?;
     let (_, threshold) = rare.limit();
-    let dimension = limit_state(job, rare).dimension();
+    let function = limit_state(job, rare).function;
+    let dimension = function.dimension();
+    let one_region = !function.scatters_several_operations();
     let method = match rare.method {
-        RareMethod::Auto if dimension <= MAX_IMPORTANCE_DIMENSION => Method::Importance,
+        RareMethod::Auto if dimension <= MAX_IMPORTANCE_DIMENSION && one_region => {
+            Method::Importance
+        }
         RareMethod::Auto | RareMethod::Subset => Method::Subset,
         RareMethod::Importance => Method::Importance,
         RareMethod::Crude => Method::Crude,
