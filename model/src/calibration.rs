@@ -22,7 +22,7 @@
 //! The bounce count is an integer and steps as parameters change, so it does not enter the
 //! objective; its residuals are reported with the others.
 
-use crate::error::{FieldError, InvalidInput, Pointer};
+use crate::error::{FieldError, InvalidInput, Pointer, past_listing};
 use crate::linalg::{invert, smallest_pivot, solve};
 use crate::montecarlo::Cancelled;
 use crate::operation::{Fidelity, Needs, Operation, Simulation, simulate};
@@ -1119,6 +1119,9 @@ fn check_fit(
         });
     }
     for (i, name) in spec.fit.iter().enumerate() {
+        if past_listing(errors) {
+            break;
+        }
         let pointer = root.child("fit").child(i).to_string();
         let path: Vec<String> = name.split('.').map(str::to_owned).collect();
         if path.len() < 2 || path.iter().any(String::is_empty) {
@@ -1182,6 +1185,9 @@ fn check_observations(
     }
     let mut terms = Vec::new();
     for (i, observation) in spec.observations.iter().enumerate() {
+        if past_listing(errors) {
+            break;
+        }
         let at = root.child("observations").child(i);
         let mut measured = observation.bounce_count.is_some();
         if observation.operation.is_some_and(|j| j > MAX_OPERATION) {
@@ -1243,6 +1249,9 @@ fn check_bounds(
     errors: &mut Vec<FieldError>,
 ) {
     for (name, &[lower, upper]) in &spec.bounds {
+        if past_listing(errors) {
+            break;
+        }
         let pointer = root.child("bounds").child(name.as_str()).to_string();
         if !parameters.iter().any(|(n, _)| n == name) {
             errors.push(FieldError {

@@ -6,7 +6,7 @@ use super::distribution::{Distribution, Domain};
 use super::metric::{DeviceMetric, Metric, OperationMetric};
 use super::rare::question::{JobShape, RareEvent, RareEventSpec};
 pub use super::scatter::{Parameter, Per, ScatterSpec};
-use crate::error::{FieldError, InvalidInput, Pointer};
+use crate::error::{FieldError, InvalidInput, Pointer, past_listing};
 use crate::operation::Fidelity;
 use crate::scenario::{Scenario, ScenarioSpec, WearLawKind};
 use crate::stats::Threshold;
@@ -801,6 +801,9 @@ fn check_metrics(
         Some(names) => {
             let mut metrics: Vec<Metric> = Vec::new();
             for (i, name) in names.iter().enumerate() {
+                if past_listing(errors) {
+                    break;
+                }
                 let at = root.child("metrics").child(i);
                 match parse_metric(name, &at, polarity, errors) {
                     Some(metric) if metrics.contains(&metric) => errors.push(FieldError {
@@ -835,6 +838,9 @@ fn check_limits(
 ) -> Limits {
     let (mut limits, mut thresholds) = (BTreeMap::new(), BTreeMap::new());
     for (name, limit) in &spec.limits {
+        if past_listing(errors) {
+            break;
+        }
         let at = root.child("limits").child(name);
         if let Some(metric) = parse_metric(name, &at, polarity, errors) {
             if !metrics.contains(&metric) {
@@ -889,6 +895,9 @@ fn check_scatter(
 ) -> Vec<Scatter> {
     let mut scatter: Vec<Scatter> = Vec::new();
     for (i, spec) in specs.iter().enumerate() {
+        if past_listing(errors) {
+            break;
+        }
         let at = at.child(i);
         if specs[..i].iter().any(|s| s.parameter == spec.parameter) {
             errors.push(FieldError {
@@ -921,6 +930,9 @@ fn check_failure(
 ) -> Vec<(Metric, Criterion)> {
     let mut failure = Vec::new();
     for (name, spec) in specs {
+        if past_listing(errors) {
+            break;
+        }
         let at = at.child(name);
         let Some(metric) = parse_metric(name, &at, polarity, errors) else {
             continue;

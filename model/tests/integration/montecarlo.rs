@@ -820,3 +820,22 @@ fn every_exceedance_interval_covers_the_exact_probability_at_ten_million_values(
         );
     }
 }
+
+/// A body that breaks a rule in every item of a long list (200,000 unknown metric names, as a
+/// megabyte holds) lists 50 faults and says there are more: the whole list once made an answer
+/// of 145 MB.
+#[test]
+fn a_list_of_faults_stops_at_fifty() {
+    use bouncewear_model::error::MAX_LISTED_FAULTS;
+    let text = json!({"metrics": vec!["zz"; 200_000]}).to_string();
+    let error = bouncewear_model::montecarlo::Job::from_json(&text, || 1).unwrap_err();
+    let errors = error.errors();
+    assert_eq!(errors.len(), MAX_LISTED_FAULTS + 1);
+    assert_eq!(errors[0].pointer, "/metrics/0");
+    assert_eq!(errors[MAX_LISTED_FAULTS - 1].pointer, "/metrics/49");
+    assert_eq!(
+        errors[MAX_LISTED_FAULTS].detail,
+        "more faults than the 50 listed: mend these and send it again"
+    );
+    assert!(error.to_string().len() < 100_000, "{}", error.to_string().len());
+}

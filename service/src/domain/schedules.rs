@@ -3,6 +3,7 @@
 
 use super::jobs::{QueuedJob, draw_seed};
 use super::{Owner, UnixMs};
+use bouncewear_model::error::past_listing;
 use bouncewear_model::montecarlo::job::{LIST_FIELDS, check_written};
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
 use bouncewear_model::stats::{QUANTILES, Summary};
@@ -369,6 +370,9 @@ fn followed(
     }
     let mut statistics: Vec<Statistic> = Vec::with_capacity(names.len());
     for (i, name) in names.iter().enumerate() {
+        if past_listing(errors) {
+            break;
+        }
         let checked = name.parse::<Statistic>().and_then(|statistic| {
             if names[..i].contains(name) {
                 return Err(format!("`{name}` is listed twice"));
