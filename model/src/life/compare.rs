@@ -17,7 +17,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{LifeAnalysis, Lives, Weibull};
+use super::{LifeAnalysis, Lives, Weibull, likelihood_ratio};
 use crate::stats::{Difference, Estimate, Z_975, difference};
 
 /// `B_p` of two designs compared.
@@ -61,6 +61,10 @@ pub struct LifeComparison {
     pub notes: Vec<String>,
 }
 
+/// Below this many failures a design's B-life intervals are noted as approximate
+/// (`intervals_cover_nearly_as_asked_with_few_devices`).
+pub const FEW_FAILURES: usize = 10;
+
 /// `a` against `b`: the B-lives at the fractions `ps` (each in `(0, 1)`) and who outlasts whom.
 /// `lives_a` and `lives_b` are the lives each analysis was made from.
 pub fn compare_lives(
@@ -75,9 +79,17 @@ pub fn compare_lives(
                 "design {name} has no Weibull fit ({}): no B-lives, no modelled probability",
                 error.as_deref().unwrap_or("no failures")
             )),
-            (Some(_), _) => {
+            (Some(weibull), _) => {
                 if let Some(warning) = &life.fit_warning {
                     notes.push(format!("design {name}: {warning}"));
+                }
+                if weibull.failures < FEW_FAILURES {
+                    notes.push(format!(
+                        "design {name} has {} failures: with fewer than {FEW_FAILURES}, its \
+                         B-lives' 95 % intervals (by likelihood ratio) and those built on them \
+                         cover less than asked (about 91 % with 5 failures)",
+                        weibull.failures
+                    ));
                 }
             }
         }
@@ -87,11 +99,12 @@ pub fn compare_lives(
         Some((wa, wb)) => ps
             .iter()
             .filter_map(|&p| {
-                let estimate =
-                    |w: &Weibull| Some(Estimate::new(w.quantile(p)?, w.quantile_bounds(p)));
                 Some(BLifeDifference {
                     p,
-                    difference: difference(estimate(wa)?, estimate(wb)?),
+                    difference: difference(
+                        b_life_estimate(wa, a.1, p)?,
+                        b_life_estimate(wb, b.1, p)?,
+                    ),
                 })
             })
             .collect(),
@@ -108,6 +121,16 @@ pub fn compare_lives(
         },
         notes,
     }
+}
+
+/// `B_p` of the Weibull `w` fitted to `lives`, with its likelihood-ratio 95 % bounds: with few
+/// failures the delta method's bounds on `ln B_p` are too narrow (B10 of 5 devices: 84 % of 200
+/// seeds against 94.5 % by likelihood ratio), so a comparison built on them claimed more than
+/// the data hold. The delta method's stand in where the profile cannot be crossed in finite
+/// numbers.
+pub fn b_life_estimate(w: &Weibull, lives: &Lives, p: f64) -> Option<Estimate> {
+    let bounds = likelihood_ratio::b_life_lr_bounds(lives, w, p).or_else(|| w.quantile_bounds(p));
+    Some(Estimate::new(w.quantile(p)?, bounds))
 }
 
 /// `P(T_a > T_b)` of two Weibull fits and its 95 % interval; `None` when the numbers are not
@@ -558,7 +581,7 @@ mod tests {
         assert_eq!(c.b_lives.len(), 2);
         let b10 = &c.b_lives[1];
         assert_eq!(b10.difference.a, la.b10.as_ref().unwrap().value);
-        assert_eq!(b10.difference.a_ci95, Some(la.b10.as_ref().unwrap().ci95));
+        assert_eq!(b10.difference.a_ci95, la.b10.as_ref().unwrap().lr_ci95);
         assert!(c.outlasts.weibull.unwrap() > 0.5);
         let [lo, hi] = c.outlasts.observed;
         assert!(lo <= hi && lo > 0.5, "{lo} {hi}");
@@ -586,7 +609,28 @@ mod tests {
     /// replicates; the binomial standard error of a coverage over 2000 is 0.5 %.
     #[test]
     fn intervals_cover_a_known_truth() {
-        let (eta_a, eta_b, beta, devices, end) = (1000.0f64, 800.0f64, 2.0f64, 50, 1500.0);
+        for (what, c) in coverage(50, 1500.0, 2000) {
+            eprintln!("{what}: coverage {c} over 2000 replicates of 50 devices");
+            assert!((0.93..=0.965).contains(&c), "{what}: coverage {c}");
+        }
+    }
+
+    /// As [`intervals_cover_a_known_truth`] with 5 devices a design, uncensored. A design's B10
+    /// interval by likelihood ratio covers 0.910 (the delta method's covered 0.808), the
+    /// difference and ratio built from them 0.927 and 0.93 (0.945 from the delta method's), the
+    /// probability of outlasting 0.946: near 95 %, not at it, as the comparison's note says.
+    #[test]
+    fn intervals_cover_nearly_as_asked_with_few_devices() {
+        for (what, c) in coverage(5, f64::INFINITY, 2000) {
+            eprintln!("{what}: coverage {c} over 2000 replicates of 5 devices");
+            assert!((0.9..=0.97).contains(&c), "{what}: coverage {c}");
+        }
+    }
+
+    /// The coverage of each interval over `replicates` pairs of designs of `devices` each, tested
+    /// to `end` operations.
+    fn coverage(devices: usize, end: f64, replicates: usize) -> [(&'static str, f64); 4] {
+        let (eta_a, eta_b, beta) = (1000.0f64, 800.0f64, 2.0f64);
         let truth_p = eta_a.powf(beta) / (eta_a.powf(beta) + eta_b.powf(beta));
         let k = (-(0.9f64).ln()).powf(1.0 / beta);
         let (truth_difference, truth_ratio) = ((eta_a - eta_b) * k, eta_a / eta_b);
@@ -600,33 +644,30 @@ mod tests {
                 })
                 .collect()
         };
-        let replicates = 2000;
-        let (mut p_in, mut d_in, mut r_in) = (0, 0, 0);
+        let (mut p_in, mut a_in, mut d_in, mut r_in) = (0, 0, 0, 0);
         for _ in 0..replicates {
-            let (wa, wb) = (
-                fit_weibull(&draw(eta_a)).unwrap(),
-                fit_weibull(&draw(eta_b)).unwrap(),
-            );
+            let (da, db) = (draw(eta_a), draw(eta_b));
+            let (wa, wb) = (fit_weibull(&da).unwrap(), fit_weibull(&db).unwrap());
             let (_, ci) = weibull_outlasts(&wa, &wb).unwrap();
             let [lo, hi] = ci.unwrap();
             p_in += usize::from(lo <= truth_p && truth_p <= hi);
-            let estimate =
-                |w: &Weibull| Estimate::new(w.quantile(0.1).unwrap(), w.quantile_bounds(0.1));
-            let d = difference(estimate(&wa), estimate(&wb));
+            let estimate = |w: &Weibull, lives: &[(f64, bool)]| {
+                b_life_estimate(w, &Lives::from_pairs(lives).unwrap(), 0.1).unwrap()
+            };
+            let d = difference(estimate(&wa, &da), estimate(&wb, &db));
+            let [lo, hi] = d.a_ci95.unwrap();
+            a_in += usize::from(lo <= eta_a * k && eta_a * k <= hi);
             let [lo, hi] = d.difference_ci95.unwrap();
             d_in += usize::from(lo <= truth_difference && truth_difference <= hi);
             let [lo, hi] = d.ratio_ci95.unwrap();
             r_in += usize::from(lo <= truth_ratio && truth_ratio <= hi);
         }
         let coverage = |hits: usize| hits as f64 / replicates as f64;
-        for (what, hits) in [
-            ("P(a outlasts b)", p_in),
-            ("B10 difference", d_in),
-            ("B10 ratio", r_in),
-        ] {
-            let c = coverage(hits);
-            eprintln!("{what}: coverage {c} over {replicates}");
-            assert!((0.93..=0.97).contains(&c), "{what}: coverage {c}");
-        }
+        [
+            ("P(a outlasts b)", coverage(p_in)),
+            ("B10 of a", coverage(a_in)),
+            ("B10 difference", coverage(d_in)),
+            ("B10 ratio", coverage(r_in)),
+        ]
     }
 }
