@@ -837,5 +837,9 @@ fn a_list_of_faults_stops_at_fifty() {
         errors[MAX_LISTED_FAULTS].detail,
         "more faults than the 50 listed: mend these and send it again"
     );
-    assert!(error.to_string().len() < 100_000, "{}", error.to_string().len());
+    assert!(
+        error.to_string().len() < 100_000,
+        "{}",
+        error.to_string().len()
+    );
 }

@@ -716,6 +716,11 @@ impl Estimator {
         }
         let cost = (n - seeds.len()) as u64;
         if cost > self.budget.max_evaluations.saturating_sub(self.done) {
+            if self.method == Method::Subset && !self.runs.is_empty() {
+                // The runs that finished stand; this one's levels are left out (the next run's
+                // cost was guessed from the last one's, and runs differ in their levels).
+                return Ok(Some(self.combined()));
+            }
             return Err(Stop::Failed(format!(
                 "max_evaluations ran out after {} evaluations at level {}, where P(metric \
                  beyond {b}) is about {probability:.3e}; each further level costs about {cost}",
@@ -762,6 +767,20 @@ impl Estimator {
             self.stage = Stage::Importance(Box::new(weighing));
             return None;
         }
+        let (_, cov, _) = self.combination();
+        if cov <= self.budget.target_cov || cost > left || self.runs.len() >= MAX_RUNS {
+            return Some(self.combined());
+        }
+        self.stage = Stage::FirstLevel {
+            replicate: self.runs.len() as u64,
+            started: self.done,
+        };
+        None
+    }
+
+    /// The mean of the finished subset runs, its coefficient of variation, and the degrees of
+    /// freedom of its interval (Welch-Satterthwaite over the runs).
+    fn combination(&self) -> (f64, f64, f64) {
         let runs = &self.runs;
         let count = runs.len() as f64;
         let probability = runs.iter().map(|r| r.probability).sum::<f64>() / count;
@@ -778,27 +797,27 @@ impl Estimator {
                 .zip(runs)
                 .map(|(v, r)| v * v / r.dof)
                 .sum::<f64>();
-        if cov <= self.budget.target_cov || cost > left || runs.len() >= MAX_RUNS {
-            let design_point = runs
-                .iter()
-                .filter_map(|r| r.design_point.as_ref())
-                .min_by(|a, b| norm2(a).total_cmp(&norm2(b)))
-                .cloned();
-            self.stage = Stage::Done;
-            return Some(Estimate {
-                probability,
-                ci95: lognormal_interval(probability, cov, dof),
-                cov: Some(cov),
-                evaluations: self.done,
-                design_point,
-                tail: first_run_tail(&runs[0], probability),
-            });
+        (probability, cov, dof)
+    }
+
+    /// The estimate of the finished subset runs (every evaluation made counted).
+    fn combined(&mut self) -> Estimate {
+        let (probability, cov, dof) = self.combination();
+        let runs = &self.runs;
+        let design_point = runs
+            .iter()
+            .filter_map(|r| r.design_point.as_ref())
+            .min_by(|a, b| norm2(a).total_cmp(&norm2(b)))
+            .cloned();
+        self.stage = Stage::Done;
+        Estimate {
+            probability,
+            ci95: lognormal_interval(probability, cov, dof),
+            cov: Some(cov),
+            evaluations: self.done,
+            design_point,
+            tail: first_run_tail(&runs[0], probability),
         }
-        self.stage = Stage::FirstLevel {
-            replicate: runs.len() as u64,
-            started: self.done,
-        };
-        None
     }
 
     /// An importance-sampling batch weighed: `phi(u) / phi(u - u*) = exp(-u*.u + |u*|^2 / 2)`
