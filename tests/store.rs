@@ -8,8 +8,8 @@ use bouncewear::domain::idempotency::KEY_LIFETIME_MS;
 use bouncewear::domain::rare::{RARE_ROUNDS, SHARDED_ROUND_OPERATIONS, is_round};
 use bouncewear::domain::shards::{Folding, Merged, grouped_shards, merge};
 use bouncewear::domain::{
-    Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob, ScheduleBound,
-    ScheduleDefinition, ScheduleId, ShardId, UnixMs,
+    Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob, ROOM_RETRY_MS,
+    ScheduleBound, ScheduleDefinition, ScheduleId, ShardId, UnixMs,
 };
 use bouncewear::scheduler::{Waiting, tick};
 use bouncewear::store::{
@@ -82,6 +82,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_precision_target_queues_its_next_batch_from_the_merge(&database("batches")).await;
     a_rare_events_rounds_run_as_shards_give_the_whole_result(&database("rounds")).await;
     a_poison_job_fails_after_the_retry_limit_with_the_reason(&database("poison")).await;
+    a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later(&database("room")).await;
     a_cancelled_job_keeps_no_accumulators(&database("cancel-partials")).await;
     an_ended_jobs_running_shards_stop_with_it(&database("stop")).await;
     a_result_the_database_refuses_for_a_while_is_stored_without_running_again(&database("refused"))
@@ -897,6 +898,36 @@ async fn execute(url: &str, sqlite: &'static str, postgres: &'static str) {
 
 /// A job whose stored accumulators are damaged makes every merge fail: real workers retry it the
 /// configured number of times, then the job fails with the reason, instead of looping forever.
+/// A shard whose outcome the disk had no room for goes back to the queue, its failures and its
+/// job untouched, with the reason, and is claimed again only after the room wait.
+async fn a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let id = insert(&store, single(3)).await;
+    let claim = store
+        .claim("w", terms(0), budget(0))
+        .await
+        .unwrap()
+        .unwrap();
+    let waits = store.wait_for_room(&claim.fence, Some(UnixMs(100)), "no room: 2 MB");
+    assert!(waits.await.unwrap());
+    let shard = store.shards(&id).await.unwrap().remove(0);
+    assert_eq!((shard.status.as_str(), shard.failures), ("queued", 0));
+    assert_eq!(shard.error.as_deref(), Some("no room: 2 MB"));
+    assert_eq!(
+        shard.history,
+        ["attempt 1 (w): waiting for room: no room: 2 MB"]
+    );
+    let owner = Owner::anonymous();
+    assert_eq!(
+        store.job(&owner, &id).await.unwrap().status,
+        JobStatus::Running
+    );
+    let early = store.claim("w", terms(100 + ROOM_RETRY_MS - 1), budget(0));
+    assert!(early.await.unwrap().is_none(), "claimed before the wait");
+    let later = store.claim("w", terms(100 + ROOM_RETRY_MS), budget(0));
+    assert_eq!(later.await.unwrap().unwrap().fence.job, id);
+}
+
 async fn a_poison_job_fails_after_the_retry_limit_with_the_reason(url: &str) {
     let store = store::open(url).await.unwrap();
     let id = insert(&store, single(3)).await;

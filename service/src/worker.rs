@@ -27,7 +27,7 @@ use crate::domain::shards::{
 use crate::domain::{JobId, UnixMs};
 use crate::store::{
     Claim, EncodedGroups, EncodedResult, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store,
-    StoreResult, encode, partial_to_sql,
+    StoreError, StoreResult, encode, partial_to_sql,
 };
 use crate::telemetry::{record_job_finished, record_shard_step, record_shard_time};
 use bouncewear_model::Pointer;
@@ -637,8 +637,8 @@ impl Workers {
                 written
             }
             Err(error) => {
-                let reason = format!("storing {what} failed: {error}");
-                self.fail_attempt(fence, &reason).await;
+                self.write_failed(fence, &format!("storing {what}"), error)
+                    .await;
                 false
             }
         }
@@ -911,6 +911,22 @@ impl Workers {
         }
     }
 
+    /// A shard's outcome that could not be written: with no room on the disk, the shard waits for
+    /// room (nothing counted against it: the job is not at fault); any other error counts as a
+    /// failed run.
+    async fn write_failed(&self, fence: &Fence, what: &str, error: StoreError) {
+        let StoreError::NoRoom(room) = error else {
+            return self
+                .fail_attempt(fence, &format!("{what} failed: {error}"))
+                .await;
+        };
+        let reason = format!("{what} waits for room on the disk: {room}");
+        tracing::warn!(reason, "shard waits for room");
+        if let Err(error) = self.store.wait_for_room(fence, None, &reason).await {
+            tracing::error!(%error, "could not hand the shard back; its lease will expire");
+        }
+    }
+
     /// Stores the Result; whether it was stored.
     async fn succeed(
         &self,
@@ -938,8 +954,7 @@ impl Workers {
                 false
             }
             Err(error) => {
-                let reason = format!("storing the result failed: {error}");
-                self.fail_attempt(fence, &reason).await;
+                self.write_failed(fence, "storing the result", error).await;
                 false
             }
         }

@@ -499,9 +499,11 @@ fn a_full_disk_loses_no_acknowledged_job_and_the_queue_recovers_by_itself() {
 /// One accepted job whose Result the disk cannot hold (16 MB on a disk with about 12 MB free): it
 /// filled the disk half-way, and then no claim, heartbeat or end could be written, nor the job
 /// failed or cancelled, until an operator made room (a probe). Its write is now refused before it
-/// starts: the job fails, saying why, and the queue goes on.
+/// starts, and the job waits for room, saying why, without counting a failure (it had failed for
+/// good after its retries, and stayed failed once the disk grew: a later probe); the queue goes
+/// on, and once the disk has room the job succeeds.
 #[test]
-fn a_result_the_disk_cannot_hold_fails_its_job_and_the_queue_goes_on() {
+fn a_result_the_disk_cannot_hold_waits_for_room_and_the_queue_goes_on() {
     let Some(disk) = SmallDisk::mount("result-too-large", "16m") else {
         return;
     };
@@ -518,13 +520,41 @@ fn a_result_the_disk_cannot_hold_fails_its_job_and_the_queue_goes_on() {
     let large = json!({"devices": 64, "operations": 1000, "bin_operations": 1, "seed": 1,
                        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}}});
     let id = server.submit(&large);
-    let failed = server.wait_for(&id, "failed", Duration::from_secs(120));
-    let error = failed["error"].as_str().unwrap();
+    let shards = server.url(&format!("/v1/jobs/{id}/shards"));
+    let started = std::time::Instant::now();
+    let waiting = loop {
+        let listed = get(&shards, None).json();
+        let waiting = listed["shards"].as_array().unwrap().iter().find(|shard| {
+            shard["error"]
+                .as_str()
+                .is_some_and(|error| error.contains("waits for room"))
+        });
+        if let Some(shard) = waiting {
+            break shard.clone();
+        }
+        assert!(started.elapsed() < Duration::from_secs(120), "{listed}");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let error = waiting["error"].as_str().unwrap();
     assert!(
         error.contains("needs") && error.contains("free beside the database"),
         "{error}"
     );
+    assert_eq!(waiting["failures"], 0, "{waiting}");
     let small = server.submit(&json!({"devices": 2, "operations": 20, "seed": 2}));
     server.wait_for(&small, "succeeded", Duration::from_secs(60));
+    let job = get(&server.url(&format!("/v1/jobs/{id}")), None).json();
+    assert!(
+        job["status"] == "running" || job["status"] == "queued",
+        "{job}"
+    );
+    // Room: the job goes on by itself.
+    let grown = std::process::Command::new("mount")
+        .args(["-o", "remount,size=128m"])
+        .arg(&disk.0)
+        .status()
+        .unwrap();
+    assert!(grown.success());
+    server.wait_for(&id, "succeeded", Duration::from_secs(120));
     assert_eq!(get(&server.url("/readyz"), None).status, 200);
 }

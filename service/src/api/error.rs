@@ -144,7 +144,7 @@ impl From<StoreError> for ApiError {
         match error {
             StoreError::NotFound { .. } => ApiError::NotFound(error.to_string()),
             StoreError::Conflict(detail) => ApiError::Conflict(detail),
-            StoreError::NotReady(detail) => ApiError::NotReady(detail),
+            StoreError::NotReady(detail) | StoreError::NoRoom(detail) => ApiError::NotReady(detail),
             StoreError::OverQuota { .. } | StoreError::TooManySchedules { .. } => {
                 ApiError::OverQuota(error.to_string())
             }

@@ -21,7 +21,7 @@ pub use schedules::{
     ValidSchedule,
 };
 pub use shards::{
-    Folding, RetryBudget, SHARD_OVERHEAD_OPERATIONS, ShardId, ShardPlan, batch_shards,
-    first_shards, grouped_shards, retry_backoff_ms,
+    Folding, ROOM_RETRY_MS, RetryBudget, SHARD_OVERHEAD_OPERATIONS, ShardId, ShardPlan,
+    batch_shards, first_shards, grouped_shards, retry_backoff_ms,
 };
 pub use trend::TrendValue;

@@ -530,6 +530,10 @@ pub struct RetryBudget {
     pub lost_leases: u64,
 }
 
+/// The wait before a shard whose outcome the disk had no room for is claimed again (counting
+/// nothing against it: its job waits for room rather than fail).
+pub const ROOM_RETRY_MS: i64 = 15_000;
+
 /// The wait before a shard whose run failed `failures` times is claimed again: 1 s, doubling, at
 /// most a minute.
 pub fn retry_backoff_ms(failures: u64) -> i64 {

@@ -61,6 +61,9 @@ pub enum StoreError {
     /// This instance cannot do its work now, and why (see [`JobQueue::ready`]).
     #[error("not ready: {0}")]
     NotReady(String),
+    /// A write the disk beside a SQLite database has no room for now, and what it needs.
+    #[error("no room: {0}")]
+    NoRoom(String),
     /// The owner's jobs store `used` bytes, at or over the `quota` a new job needs below it
     /// ([`crate::domain::QueueBound::stored_per_owner`]).
     #[error(
@@ -98,7 +101,7 @@ impl StoreError {
     /// not ready): a retry later may succeed. Any other failure is the stored data's or ours.
     pub fn is_unavailable(&self) -> bool {
         match self {
-            StoreError::NotReady(_) => true,
+            StoreError::NotReady(_) | StoreError::NoRoom(_) => true,
             StoreError::Database(sqlx::Error::Database(error)) => {
                 matches!(error.kind(), sqlx::error::ErrorKind::Other)
             }
@@ -414,6 +417,17 @@ pub trait JobQueue: Send + Sync + 'static {
         at: Option<UnixMs>,
         error: &str,
         retries: u64,
+    ) -> StoreResult<bool>;
+    /// Hands a shard whose outcome the disk had no room for ([`StoreError::NoRoom`]) back to the
+    /// queue, counting nothing against it, to be claimed again after
+    /// [`crate::domain::ROOM_RETRY_MS`] on the database's clock (or from `at`): its job waits for
+    /// room (an operator makes some, or it is cancelled) rather than fail. `reason` is its `error`
+    /// and a line of its history meanwhile.
+    async fn wait_for_room(
+        &self,
+        fence: &Fence,
+        at: Option<UnixMs>,
+        reason: &str,
     ) -> StoreResult<bool>;
     /// Hands a running shard back to the queue (graceful shutdown), without counting a failure.
     async fn release(&self, fence: &Fence) -> StoreResult<bool>;

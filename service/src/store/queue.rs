@@ -18,7 +18,7 @@ use super::{
 };
 use crate::domain::rare::{RARE_ROUNDS, is_round};
 use crate::domain::{
-    IdempotencyKey, JobId, Once, Owner, QueueBound, QueuedJob, RetryBudget,
+    IdempotencyKey, JobId, Once, Owner, QueueBound, QueuedJob, ROOM_RETRY_MS, RetryBudget,
     SHARD_OVERHEAD_OPERATIONS, ShardPlan, UnixMs, first_shards, retry_backoff_ms,
 };
 use async_trait::async_trait;
@@ -746,6 +746,33 @@ impl JobQueue for SqlStore {
             self.ended(&fence.job);
         }
         Ok(true)
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
+    async fn wait_for_room(
+        &self,
+        fence: &Fence,
+        at: Option<UnixMs>,
+        reason: &str,
+    ) -> StoreResult<bool> {
+        let mut tx = self.begin().await?;
+        let now = now_or(self.dialect(), &mut tx, at).await?;
+        let updated = fenced(
+            concat!(
+                "UPDATE shards SET status = 'queued', error = $5, operations_done = 0, retry_at = $6, \
+                 history = history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): waiting for room: ' || $5 || '\n', \
+                 lease_until = NULL WHERE ",
+                fenced_shard!()
+            ),
+            fence,
+        )
+        .bind(reason)
+        .bind(now.0 + ROOM_RETRY_MS)
+        .execute(&mut tx)
+        .await?;
+        sum_progress(&mut tx, &fence.job).await?;
+        tx.commit().await?;
+        Ok(updated == 1)
     }
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]

@@ -112,7 +112,7 @@ impl SqliteBackend {
             StoreError::NotReady(format!("free disk space cannot be read ({error})"))
         })?;
         if free < needed {
-            return Err(StoreError::NotReady(format!(
+            return Err(StoreError::NoRoom(format!(
                 "a write of {} MB needs {} MB free beside the database (the write-ahead log, then \
                  the pages); {} MB are",
                 bytes >> 20,
