@@ -444,7 +444,7 @@ impl Workers {
     ) {
         let fence = &claim.fence;
         let job = match Job::new(claim.spec, || 0, &Pointer::root()) {
-            Ok(job) => job,
+            Ok(job) => job.with_listed_lives(self.listed_lives),
             Err(invalid) => {
                 let reason = format!("the stored job no longer validates: {invalid}");
                 return self.fail(fence, &reason).await;

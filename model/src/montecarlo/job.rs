@@ -367,6 +367,10 @@ pub struct Job {
     failure: Vec<(Metric, Criterion)>,
     sensitivity: Option<SensitivityMethod>,
     rare_event: Option<RareEvent>,
+    /// Devices numbered below this have their own life listed; every device's life is counted
+    /// whatever it is. Not part of the spec: the holder's choice (the service's
+    /// `--max-listed-lives`), every device by default.
+    listed_lives: u64,
 }
 
 impl Job {
@@ -457,7 +461,21 @@ impl Job {
             failure,
             sensitivity,
             rare_event,
+            listed_lives: u64::MAX,
         })
+    }
+
+    /// The job listing the lives of its first `devices` devices only: a group's memory for lives
+    /// then stays bounded by that and by the number of distinct lives, whatever its devices
+    /// (listing every one took 25 bytes a device and more until the holder trimmed them).
+    pub fn with_listed_lives(mut self, devices: u64) -> Self {
+        self.listed_lives = devices;
+        self
+    }
+
+    /// Devices numbered below this have their own life listed ([`Job::with_listed_lives`]).
+    pub fn listed_lives(&self) -> u64 {
+        self.listed_lives
     }
 
     /// The number of operation bins.

@@ -27,15 +27,18 @@ pub struct GroupLives {
 }
 
 impl GroupLives {
-    /// Counts a device's life and lists it. Devices come in ascending order.
-    pub fn record(&mut self, life: DeviceLife) {
+    /// Counts a device's life, and lists it if it is numbered below `listed_below`. Devices come
+    /// in ascending order.
+    pub fn record(&mut self, life: DeviceLife, listed_below: u64) {
         let [failed, censored] = self.counts.entry(life.operations_to_failure).or_default();
         if life.censored {
             *censored += 1;
         } else {
             *failed += 1;
         }
-        self.listed.push(life);
+        if life.device < listed_below {
+            self.listed.push(life);
+        }
     }
 
     /// Adds the lives of the groups after this one.
@@ -78,8 +81,9 @@ mod tests {
     }
 
     proptest! {
-        /// However the devices are split into groups and however many are listed, the merged
-        /// counts are those of all devices and the listing is a prefix in device order.
+        /// However the devices are split into groups and however many are listed (a group
+        /// trimmed after recording, or recording only those listed), the merged counts are those
+        /// of all devices and the listing is a prefix in device order.
         #[test]
         fn merged_groups_count_every_device(
             lives in prop::collection::vec((1u64..30, any::<bool>()), 0..200),
@@ -94,11 +98,10 @@ mod tests {
             let cut = cut.min(all.len());
             let (mut first, mut second, mut whole) =
                 (GroupLives::default(), GroupLives::default(), GroupLives::default());
-            all[..cut].iter().for_each(|&l| first.record(l));
-            all[cut..].iter().for_each(|&l| second.record(l));
-            all.iter().for_each(|&l| whole.record(l));
+            all[..cut].iter().for_each(|&l| first.record(l, u64::MAX));
+            all[cut..].iter().for_each(|&l| second.record(l, listed));
+            all.iter().for_each(|&l| whole.record(l, u64::MAX));
             first.keep_listed_below(listed);
-            second.keep_listed_below(listed);
             first.merge(&second);
             prop_assert_eq!(&first.counts, &whole.counts);
             prop_assert_eq!(first.devices(), all.len() as u64);

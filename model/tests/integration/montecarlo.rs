@@ -843,3 +843,24 @@ fn a_list_of_faults_stops_at_fifty() {
         error.to_string().len()
     );
 }
+
+/// A job listing the lives of its first devices only lists those, and counts every device as the
+/// job listing all of them does.
+#[test]
+fn listed_lives_are_the_first_devices_and_every_device_is_counted() {
+    let text = json!({"devices": 40, "operations": 30, "seed": 4,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "failure": {"e1": {"below": 0.36}}});
+    let all = run_on(2, &job(text.clone())).life.unwrap();
+    assert_eq!(all.devices.len(), 40);
+    let some = run_on(2, &job(text.clone()).with_listed_lives(7))
+        .life
+        .unwrap();
+    assert_eq!(some.devices, all.devices[..7]);
+    assert_eq!(some.analysis, all.analysis);
+    let none = run_on(2, &job(text.clone()).with_listed_lives(0))
+        .life
+        .unwrap();
+    assert!(none.devices.is_empty());
+    assert_eq!((none.failures, none.censored), (all.failures, all.censored));
+}

@@ -432,7 +432,8 @@ fn run_command(
     plots: Option<&Path>,
     quiet: bool,
 ) -> Result<(), CliError> {
-    let job = Job::from_json(&read_input(file)?, draw_seed)?;
+    // The Result printed lists no device's own life: none is kept.
+    let job = Job::from_json(&read_input(file)?, draw_seed)?.with_listed_lives(0);
     check_threshold(&job, &Pointer::root().child("rare_event"))?;
     let pool = thread_pool(threads)?;
     let progress = Progress::operations(quiet);

@@ -265,11 +265,12 @@ impl<'a> Plan<'a> {
                     self.push_device_sensitivity(plan, variants, k, &mut stats.sensitivity);
                 }
                 if !job.failure().is_empty() {
-                    stats.lives.record(DeviceLife {
+                    let life = DeviceLife {
                         device: first + k as u64,
                         operations_to_failure: failed_at[k].unwrap_or(job.spec().operations),
                         censored: failed_at[k].is_none(),
-                    });
+                    };
+                    stats.lives.record(life, job.listed_lives());
                 }
                 let counted = stats.truncation_rejections.iter_mut();
                 counted
