@@ -148,6 +148,16 @@ pub struct ServeConfig {
         value_parser = clap::value_parser!(u64).range(1..)
     )]
     pub max_schedules_per_key: u64,
+    /// Bytes, in MB, of responses of 64 KB or more held in memory at once until their clients
+    /// read them; another waits up to 10 s for room, then gets 503 with Retry-After (one larger
+    /// than this is served alone).
+    #[arg(
+        long,
+        env = "BOUNCEWEAR_MAX_RESPONSE_MB",
+        default_value_t = 512,
+        value_parser = clap::value_parser!(u64).range(1..)
+    )]
+    pub max_response_mb: u64,
     /// Free disk space, in MB, beside a SQLite database below which the server reports itself not
     /// ready (`/readyz` answers 503).
     #[arg(long, env = "BOUNCEWEAR_MIN_FREE_DISK_MB", default_value_t = 100)]

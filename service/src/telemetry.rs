@@ -152,6 +152,14 @@ fn describe_metrics() {
     metrics::describe_gauge!(BUILD_INFO, "Always 1; its labels name the running build.");
     metrics::describe_gauge!("bouncewear_jobs_queued", "Jobs waiting in the queue.");
     metrics::describe_gauge!(
+        crate::api::held::RESPONSE_BYTES_HELD,
+        "Bytes of large responses held until their clients read them (--max-response-mb)."
+    );
+    metrics::describe_counter!(
+        "bouncewear_responses_refused_total",
+        "Large responses refused (503) while --max-response-mb was held for unread ones."
+    );
+    metrics::describe_gauge!(
         "bouncewear_jobs_running",
         "Jobs claimed by a worker and not yet finished."
     );

@@ -1,8 +1,8 @@
 //! What slow or many clients can take of the server: a deadline for headers, for a body and for an
 //! answer, bounded connections and requests. Slow clients are raw sockets that stall mid-request.
 
-use crate::support::app::{Service, TestApp};
-use crate::support::client::{agent, delete, get};
+use crate::support::app::{Service, Spawned, TestApp};
+use crate::support::client::{agent, assert_problem, delete, get};
 use crate::support::{scattered_job, temp_db};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -365,4 +365,51 @@ fn an_event_stream_outlives_the_request_timeout() {
         assert!(!line.starts_with("event: status"), "the job ended: {line}");
     }
     assert_eq!(delete(&server.url(&format!("/v1/jobs/{id}"))).status, 200);
+}
+
+/// Large responses held for clients that have not read them are bounded by `--max-response-mb`:
+/// while one client reads none of a 23 MB Result (more than the budget of 8 MB, so served alone),
+/// another large response waits 10 s for room and is 503, small ones are answered, and once the
+/// first client is gone the Result is served again (50 clients reading slowly held 2.6 GB: a probe).
+#[test]
+fn large_responses_held_for_unread_clients_are_bounded() {
+    // A server of its own: the gauge is read from its /metrics.
+    let server = Spawned::start(&temp_db("held-responses"), &["--max-response-mb", "8"]);
+    let id = server.submit(
+        &serde_json::json!({"devices": 1, "operations": 1000, "bin_operations": 1, "seed": 1}),
+    );
+    server.wait_for(&id, "succeeded", Duration::from_secs(120));
+    let held = || {
+        let text = get(&server.url("/metrics"), None).body;
+        text.lines()
+            .find_map(|line| line.strip_prefix("bouncewear_response_bytes_held "))
+            .map_or(0.0, |value| value.trim().parse::<f64>().unwrap())
+    };
+    let result = server.url(&format!("/v1/jobs/{id}/result"));
+    let mut unread = TcpStream::connect(server.base().trim_start_matches("http://")).unwrap();
+    let request = format!("GET /v1/jobs/{id}/result HTTP/1.1\r\nhost: bouncewear\r\n\r\n");
+    unread.write_all(request.as_bytes()).unwrap();
+    let started = Instant::now();
+    while held() < 20e6 {
+        assert!(started.elapsed() < Duration::from_secs(60), "never held");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let refused = get(&result, None);
+    let problem = assert_problem(&refused, 503);
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("--max-response-mb"),
+        "{problem}"
+    );
+    assert_eq!(refused.headers["retry-after"], "5");
+    assert_eq!(
+        get(&server.url(&format!("/v1/jobs/{id}")), None).status,
+        200
+    );
+    drop(unread);
+    let read = get(&result, None);
+    assert_eq!(read.status, 200);
+    assert!(read.body.len() > 20_000_000);
 }

@@ -85,6 +85,12 @@ pub enum ApiError {
     BodyTimeout(Duration),
     #[error("no answer within {} s; retry later", .0.as_secs_f64())]
     Timeout(Duration),
+    /// Large responses held for clients still reading them fill `--max-response-mb`.
+    #[error(
+        "large responses that clients have not yet read fill the {0} MB this server holds \
+         (--max-response-mb); retry later"
+    )]
+    ResponsesHeld(u64),
     /// The storage failed for now: logged, and the client told to retry.
     #[error("the database is unavailable; retry later")]
     Unavailable(Internal),
@@ -188,9 +194,10 @@ impl ApiError {
             }
             ApiError::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::BodyTimeout(_) => StatusCode::REQUEST_TIMEOUT,
-            ApiError::Timeout(_) | ApiError::Unavailable(_) | ApiError::NotReady(_) => {
-                StatusCode::SERVICE_UNAVAILABLE
-            }
+            ApiError::Timeout(_)
+            | ApiError::Unavailable(_)
+            | ApiError::NotReady(_)
+            | ApiError::ResponsesHeld(_) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -248,7 +255,8 @@ impl IntoResponse for ApiError {
             | ApiError::TooManyStreams(_)
             | ApiError::TooManyRuns
             | ApiError::Unavailable(_)
-            | ApiError::NotReady(_) => {
+            | ApiError::NotReady(_)
+            | ApiError::ResponsesHeld(_) => {
                 headers.insert(header::RETRY_AFTER, HeaderValue::from_static("5"));
             }
             // The connection may still hold the rest of a body nobody reads: start afresh.

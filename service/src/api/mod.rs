@@ -7,6 +7,7 @@ pub mod calibrations;
 pub mod compare;
 pub mod error;
 pub mod events;
+pub mod held;
 pub mod jobs;
 pub mod known_query;
 pub mod limits;
@@ -91,6 +92,7 @@ impl Modify for BearerAuth {
 pub fn router(state: AppState) -> axum::Router {
     let max_body = state.config.max_body_bytes;
     let admission = limits::Admission::new(&state);
+    let held = held::Held::new(state.config.max_response_mb);
     let (keys, keys_too) = (Arc::clone(&state.key_owners), Arc::clone(&state.key_owners));
     api_routes(state)
         .route("/", get(system::dashboard))
@@ -107,6 +109,7 @@ pub fn router(state: AppState) -> axum::Router {
         .method_not_allowed_fallback(move |request: Request| async move {
             unmatched(&keys_too, &request, ApiError::MethodNotAllowed)
         })
+        .layer(axum::middleware::from_fn_with_state(held, held::hold))
         .layer(DefaultBodyLimit::max(max_body))
         .layer(axum::middleware::from_fn_with_state(
             admission,

@@ -1,0 +1,139 @@
+//! A bound on the bytes of responses held in memory until their clients read them. A response is
+//! built whole (a Result of 1000 bins is tens of MB) and stays in memory until the client has read
+//! it; clients that read slowly (at a byte a second, which no write-stall cut catches) each held
+//! one, and 50 of them took a server to 2.6 GB (a probe). A response of [`HELD_FROM`] bytes or more
+//! takes its size from a budget of `--max-response-mb` until it is sent or dropped; when the budget
+//! is spent it waits up to [`WAIT`] for room, then is 503 with Retry-After. One response larger
+//! than the whole budget is served alone.
+
+use super::error::ApiError;
+use axum::body::{Body, Bytes};
+use axum::extract::{Request, State};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use hyper::body::{Body as HttpBody, Frame, SizeHint};
+use std::pin::Pin;
+use std::sync::Arc;
+use std::task::{Context, Poll};
+use std::time::Duration;
+use tokio::sync::{OwnedSemaphorePermit, Semaphore};
+
+/// Responses of this many bytes or more count against the budget; smaller ones are bounded by
+/// the request slots.
+pub const HELD_FROM: u64 = 64 << 10;
+/// How long a response waits for room in the budget.
+pub const WAIT: Duration = Duration::from_secs(10);
+
+/// The budget, in KiB.
+#[derive(Clone)]
+pub struct Held {
+    kib: Arc<Semaphore>,
+    total_kib: u32,
+}
+
+impl Held {
+    pub fn new(max_mb: u64) -> Self {
+        let total_kib = u32::try_from(max_mb.saturating_mul(1024))
+            .unwrap_or(u32::MAX)
+            .clamp(1, u32::try_from(Semaphore::MAX_PERMITS).unwrap_or(u32::MAX));
+        Self {
+            kib: Arc::new(Semaphore::new(total_kib as usize)),
+            total_kib,
+        }
+    }
+}
+
+/// The middleware: a large response holds its bytes of the budget for as long as it lives.
+pub async fn hold(State(held): State<Held>, request: Request, next: Next) -> Response {
+    let response = next.run(request).await;
+    let Some(bytes) = response.body().size_hint().exact() else {
+        return response;
+    };
+    if bytes < HELD_FROM {
+        return response;
+    }
+    let kib = u32::try_from(bytes.div_ceil(1024))
+        .unwrap_or(u32::MAX)
+        .min(held.total_kib);
+    match tokio::time::timeout(WAIT, Arc::clone(&held.kib).acquire_many_owned(kib)).await {
+        Ok(Ok(permit)) => {
+            metrics::gauge!(RESPONSE_BYTES_HELD).increment(bytes as f64);
+            response.map(|body| {
+                Body::new(Holding {
+                    body,
+                    pending: Bytes::new(),
+                    bytes,
+                    _permit: permit,
+                })
+            })
+        }
+        _ => {
+            metrics::counter!("bouncewear_responses_refused_total").increment(1);
+            ApiError::ResponsesHeld(u64::from(held.total_kib) >> 10).into_response()
+        }
+    }
+}
+
+/// The bytes of large responses held now (a gauge).
+pub const RESPONSE_BYTES_HELD: &str = "bouncewear_response_bytes_held";
+
+/// How much of a held response is handed to the connection at a time: hyper asks for more only
+/// once it has written what it has, so the rest stays here, counted, until the client reads it
+/// (given whole, the body would be dropped at once while hyper still held its bytes).
+const CHUNK: usize = 256 << 10;
+
+/// A response body with its share of the budget, given back when the body is dropped: after its
+/// last chunk was taken, or with the connection.
+struct Holding {
+    body: Body,
+    /// What the body gave and the connection has not taken yet.
+    pending: Bytes,
+    bytes: u64,
+    _permit: OwnedSemaphorePermit,
+}
+
+impl Drop for Holding {
+    fn drop(&mut self) {
+        metrics::gauge!(RESPONSE_BYTES_HELD).decrement(self.bytes as f64);
+    }
+}
+
+impl HttpBody for Holding {
+    type Data = Bytes;
+    type Error = axum::Error;
+
+    fn poll_frame(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+    ) -> Poll<Option<Result<Frame<Bytes>, axum::Error>>> {
+        loop {
+            if !self.pending.is_empty() {
+                let take = self.pending.len().min(CHUNK);
+                let chunk = self.pending.split_to(take);
+                return Poll::Ready(Some(Ok(Frame::data(chunk))));
+            }
+            match Pin::new(&mut self.body).poll_frame(cx) {
+                Poll::Ready(Some(Ok(frame))) => match frame.into_data() {
+                    Ok(data) => self.pending = data,
+                    Err(frame) => return Poll::Ready(Some(Ok(frame))),
+                },
+                other => return other,
+            }
+        }
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.pending.is_empty() && self.body.is_end_stream()
+    }
+
+    fn size_hint(&self) -> SizeHint {
+        let rest = self.body.size_hint();
+        let pending = self.pending.len() as u64;
+        let mut hint = SizeHint::new();
+        hint.set_lower(rest.lower() + pending);
+        if let Some(upper) = rest.upper() {
+            hint.set_upper(upper + pending);
+        }
+        hint
+    }
+}
