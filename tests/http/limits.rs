@@ -145,6 +145,37 @@ fn a_body_that_does_not_arrive_in_time_gets_408() {
     );
 }
 
+/// A short body that stalls gets 408 after the arrival grace (2 s at 4 KB/s), not the whole body
+/// timeout: 300 such connections held every arriving body's place for 30 s, and another client's
+/// small submission waited 26 s (a probe).
+#[test]
+fn a_short_body_that_stalls_is_cut_at_its_arrival_rate() {
+    let server = TestApp::start(
+        &temp_db("short-slow-body"),
+        &[
+            "--body-timeout-seconds",
+            "30",
+            "--max-concurrent-requests",
+            "2",
+        ],
+    );
+    let started = Instant::now();
+    let stalled: Vec<TcpStream> = (0..4).map(|_| stalled_in_body(&server)).collect();
+    let job = r#"{"devices": 2, "operations": 2}"#;
+    let submitted = crate::support::client::post(&server.url("/v1/jobs"), job, None);
+    assert_eq!(submitted.status, 202, "{}", submitted.body);
+    assert!(
+        started.elapsed() < Duration::from_secs(10),
+        "{:?}",
+        started.elapsed()
+    );
+    for stream in stalled {
+        let (answer, waited) = until_closed(stream, started);
+        assert!(answer.starts_with("HTTP/1.1 408"), "{answer}");
+        assert!(waited < Duration::from_secs(10), "{waited:?}");
+    }
+}
+
 /// A body declared larger than the limit gets 413 at once, however little of it is sent (a sweep
 /// of the API found such a request held until the body timeout, then answered 408).
 #[test]
