@@ -47,6 +47,8 @@ fn a_job_against_itself_and_two_designs_over_api_and_cli() {
     assert_eq!(same["a"], strong.as_str());
     assert_eq!(same["metric"], "total_bounce_s");
     assert_eq!(same["bins"].as_array().unwrap().len(), 2);
+    let notes = same["notes"].to_string();
+    assert!(notes.contains("are the same job"), "{notes}");
     for bin in same["bins"].as_array().unwrap() {
         for statistic in ["mean", "p50"] {
             let d = &bin["statistics"][statistic];

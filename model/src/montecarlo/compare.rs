@@ -130,6 +130,19 @@ pub fn compare(
             "the tests have different lengths ({ops_a} and {ops_b} operations): bins are compared where both jobs have them, and lives each at its own test's end"
         ));
     }
+    if a.job == b.job {
+        notes.push(
+            "design a and design b are the same job (one specification and seed): every \
+             difference is 0, and the intervals, made for independent samples, say nothing of it"
+                .to_owned(),
+        );
+    } else if a.job.spec().seed == b.job.spec().seed {
+        notes.push(
+            "the jobs share their seed: their devices draw the same random numbers, not \
+             independent samples as the intervals take them to be (give the jobs different seeds)"
+                .to_owned(),
+        );
+    }
     let mut missing: BTreeMap<&str, usize> = BTreeMap::new();
     let bins: Vec<BinComparison> = bins_a
         .iter()
@@ -163,7 +176,9 @@ pub fn compare(
     }
     for (name, count) in missing {
         notes.push(format!(
-            "`{name}` is missing from {count} bin(s) of one job or both (`exceedance` needs a limit on the metric)"
+            "`{name}` is missing from {count} bin(s) of one job or both (`exceedance` compares \
+             the metric's one limit, `\"limits\": {{METRIC: x}}`; a list of thresholds is not \
+             compared)"
         ));
     }
     let life = match (&a.life, &b.life) {

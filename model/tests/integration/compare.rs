@@ -113,7 +113,7 @@ fn tests_of_different_lengths_compare_what_they_share() {
     let short = |operations: u64| {
         run_job(
             &job(json!({
-                "devices": 40, "operations": operations, "bin_operations": 20, "seed": 3,
+                "devices": 40, "operations": operations, "bin_operations": 20, "seed": operations,
                 "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
                 "metrics": ["total_bounce_s", "eroded_mass_kg"],
                 "failure": {"eroded_mass_kg": {"above": 1e-9}}
@@ -140,4 +140,48 @@ fn tests_of_different_lengths_compare_what_they_share() {
     assert!(mass.bins.is_empty());
     assert_eq!(mass.notes.len(), 2, "{:?}", mass.notes);
     assert!(mass.notes[1].contains("a device metric is one summary of each whole test"));
+}
+
+/// `exceedance` compares a metric's one limit; with a list of thresholds it has nothing to compare,
+/// and the note says so (it said the metric needs a limit, which it had). A job compared with
+/// itself, or with one of its seed, is noted as no independent sample.
+#[test]
+fn exceedance_of_a_list_of_thresholds_is_noted_as_not_compared() {
+    let listed = |seed: u64| {
+        run_job(
+            &job(json!({
+                "devices": 8, "operations": 10, "seed": seed, "metrics": ["e1"],
+                "limits": {"e1": [{"above": 0.4}, {"below": 0.3}]}
+            })),
+            &Silent,
+        )
+        .unwrap()
+    };
+    let (a, b) = (listed(1), listed(2));
+    // A job against itself, or two sharing a seed, are not independent samples: noted.
+    let alone = compare(&a, &a, "e1", &[Statistic::Mean], &DEFAULT_B_LIVES).unwrap();
+    assert!(
+        alone.notes[0].contains("are the same job"),
+        "{:?}",
+        alone.notes
+    );
+    let twin = job(json!({"devices": 8, "operations": 10, "seed": 1, "metrics": ["e1"]}));
+    let twin = run_job(&twin, &Silent).unwrap();
+    let shared = compare(&a, &twin, "e1", &[Statistic::Mean], &DEFAULT_B_LIVES).unwrap();
+    assert!(
+        shared.notes[0].contains("share their seed"),
+        "{:?}",
+        shared.notes
+    );
+    let statistics = [Statistic::parse("exceedance").unwrap()];
+    let compared = compare(&a, &b, "e1", &statistics, &DEFAULT_B_LIVES).unwrap();
+    assert!(compared.bins.iter().all(|bin| bin.statistics.is_empty()));
+    assert!(
+        compared
+            .notes
+            .iter()
+            .any(|note| note.contains("a list of thresholds is not compared")),
+        "{:?}",
+        compared.notes
+    );
 }
