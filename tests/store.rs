@@ -896,10 +896,9 @@ async fn execute(url: &str, sqlite: &'static str, postgres: &'static str) {
     }
 }
 
-/// A job whose stored accumulators are damaged makes every merge fail: real workers retry it the
-/// configured number of times, then the job fails with the reason, instead of looping forever.
 /// A shard whose outcome the disk had no room for goes back to the queue, its failures and its
-/// job untouched, with the reason, and is claimed again only after the room wait.
+/// job untouched, with the reason, and is claimed again only after the room wait; waiting again
+/// adds no line to its history.
 async fn a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later(url: &str) {
     let store = store::open(url).await.unwrap();
     let id = insert(&store, single(3)).await;
@@ -912,7 +911,10 @@ async fn a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later(url:
     assert!(waits.await.unwrap());
     let shard = store.shards(&id).await.unwrap().remove(0);
     assert_eq!((shard.status.as_str(), shard.failures), ("queued", 0));
-    assert_eq!(shard.error.as_deref(), Some("no room: 2 MB"));
+    assert_eq!(
+        shard.error.as_deref(),
+        Some("waiting for room: no room: 2 MB")
+    );
     assert_eq!(
         shard.history,
         ["attempt 1 (w): waiting for room: no room: 2 MB"]
@@ -925,9 +927,18 @@ async fn a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later(url:
     let early = store.claim("w", terms(100 + ROOM_RETRY_MS - 1), budget(0));
     assert!(early.await.unwrap().is_none(), "claimed before the wait");
     let later = store.claim("w", terms(100 + ROOM_RETRY_MS), budget(0));
-    assert_eq!(later.await.unwrap().unwrap().fence.job, id);
+    let again = later.await.unwrap().unwrap();
+    assert_eq!(again.fence.job, id);
+    // Waiting again adds no line.
+    let waits = store.wait_for_room(&again.fence, Some(UnixMs(200 + ROOM_RETRY_MS)), "no room");
+    assert!(waits.await.unwrap());
+    let shard = store.shards(&id).await.unwrap().remove(0);
+    assert_eq!(shard.history.len(), 1, "{:?}", shard.history);
+    assert_eq!(shard.error.as_deref(), Some("waiting for room: no room"));
 }
 
+/// A job whose stored accumulators are damaged makes every merge fail: real workers retry it the
+/// configured number of times, then the job fails with the reason, instead of looping forever.
 async fn a_poison_job_fails_after_the_retry_limit_with_the_reason(url: &str) {
     let store = store::open(url).await.unwrap();
     let id = insert(&store, single(3)).await;

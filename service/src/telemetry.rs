@@ -123,6 +123,8 @@ pub(crate) fn prometheus_builder() -> PrometheusBuilder {
 }
 
 /// Connections closed for a new client at the connection limit (`connections`).
+/// The bytes of large responses held until their clients read them (a gauge).
+pub const RESPONSE_BYTES_HELD: &str = "bouncewear_response_bytes_held";
 pub const CONNECTIONS_SHED: &str = "bouncewear_connections_shed_total";
 
 /// Connections closed because their client read none of a response for the body timeout
@@ -152,7 +154,7 @@ fn describe_metrics() {
     metrics::describe_gauge!(BUILD_INFO, "Always 1; its labels name the running build.");
     metrics::describe_gauge!("bouncewear_jobs_queued", "Jobs waiting in the queue.");
     metrics::describe_gauge!(
-        crate::api::held::RESPONSE_BYTES_HELD,
+        RESPONSE_BYTES_HELD,
         "Bytes of large responses held until their clients read them (--max-response-mb)."
     );
     metrics::describe_counter!(

@@ -920,7 +920,7 @@ impl Workers {
                 .fail_attempt(fence, &format!("{what} failed: {error}"))
                 .await;
         };
-        let reason = format!("{what} waits for room on the disk: {room}");
+        let reason = format!("{what}: {room}");
         tracing::warn!(reason, "shard waits for room");
         if let Err(error) = self.store.wait_for_room(fence, None, &reason).await {
             tracing::error!(%error, "could not hand the shard back; its lease will expire");
@@ -976,8 +976,10 @@ impl Workers {
         let mut tries = 0;
         loop {
             match write().await {
+                // No room on the disk is not tried again here: the shard waits for room.
                 Err(error)
                     if error.is_unavailable()
+                        && !matches!(error, StoreError::NoRoom(_))
                         && tries < self.budget.lost_leases
                         && !lease.cancel.load(Ordering::Relaxed) =>
                 {

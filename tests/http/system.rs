@@ -527,7 +527,7 @@ fn a_result_the_disk_cannot_hold_waits_for_room_and_the_queue_goes_on() {
         let waiting = listed["shards"].as_array().unwrap().iter().find(|shard| {
             shard["error"]
                 .as_str()
-                .is_some_and(|error| error.contains("waits for room"))
+                .is_some_and(|error| error.starts_with("waiting for room: storing"))
         });
         if let Some(shard) = waiting {
             break shard.clone();

@@ -617,7 +617,7 @@ mod tests {
 
     /// As [`intervals_cover_a_known_truth`] with 5 devices a design, uncensored. A design's B10
     /// interval by likelihood ratio covers 0.910 (the delta method's covered 0.808), the
-    /// difference and ratio built from them 0.927 and 0.93 (0.945 from the delta method's), the
+    /// difference and ratio built from them 0.927 and 0.923 (0.945 from the delta method's), the
     /// probability of outlasting 0.946: near 95 %, not at it, as the comparison's note says.
     #[test]
     fn intervals_cover_nearly_as_asked_with_few_devices() {

@@ -209,7 +209,7 @@ fn failure_positions(lives: &Lives) -> Vec<(f64, f64)> {
 ///
 /// with `ln Z_0` taken as 0. `None` without failures or when the CDF is not a number. The
 /// `failures` come as `positions`, one entry per distinct time with the position of its last
-/// failure ([`failure_positions`]): the terms of a tie's later failures are zero (`Z_i =
+/// failure (`failure_positions`): the terms of a tie's later failures are zero (`Z_i =
 /// Z_{i-1}`), so each time adds one term, with the `F` of the failure before it.
 pub fn anderson_darling(
     positions: &[(f64, f64)],

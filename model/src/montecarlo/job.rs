@@ -467,7 +467,7 @@ impl Job {
 
     /// The job listing the lives of its first `devices` devices only: a group's memory for lives
     /// then stays bounded by that and by the number of distinct lives, whatever its devices
-    /// (listing every one took 25 bytes a device and more until the holder trimmed them).
+    /// (listing every one took 24 bytes a device and more until the holder trimmed them).
     pub fn with_listed_lives(mut self, devices: u64) -> Self {
         self.listed_lives = devices;
         self

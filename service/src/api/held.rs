@@ -2,11 +2,16 @@
 //! built whole (a Result of 1000 bins is tens of MB) and stays in memory until the client has read
 //! it; clients that read slowly (at a byte a second, which no write-stall cut catches) each held
 //! one, and 50 of them took a server to 2.6 GB (a probe). A response of [`HELD_FROM`] bytes or more
-//! takes its size from a budget of `--max-response-mb` until it is sent or dropped; when the budget
-//! is spent it waits up to [`WAIT`] for room, then is 503 with Retry-After. One response larger
-//! than the whole budget is served alone.
+//! takes its size from a budget of `--max-response-mb` until its last chunk is handed to the
+//! connection (hyper queues a few hundred KB of a connection's output beyond that, as for any
+//! response) or it is dropped; when the budget is spent it waits up to [`WAIT`] for room, then is
+//! 503 with Retry-After, its bytes freed. So the memory of responses is at most the budget, the
+//! responses waiting for room (each holding a request slot, for 10 s at most) and each
+//! connection's queue. One response larger than the whole budget is served alone; a HEAD, whose
+//! body is never sent, takes nothing.
 
 use super::error::ApiError;
+use crate::telemetry::RESPONSE_BYTES_HELD;
 use axum::body::{Body, Bytes};
 use axum::extract::{Request, State};
 use axum::middleware::Next;
@@ -18,8 +23,8 @@ use std::task::{Context, Poll};
 use std::time::Duration;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
-/// Responses of this many bytes or more count against the budget; smaller ones are bounded by
-/// the request slots.
+/// Responses of this many bytes or more count against the budget; smaller ones fit in a
+/// connection's queue.
 pub const HELD_FROM: u64 = 64 << 10;
 /// How long a response waits for room in the budget.
 pub const WAIT: Duration = Duration::from_secs(10);
@@ -45,7 +50,11 @@ impl Held {
 
 /// The middleware: a large response holds its bytes of the budget for as long as it lives.
 pub async fn hold(State(held): State<Held>, request: Request, next: Next) -> Response {
+    let head = request.method() == axum::http::Method::HEAD;
     let response = next.run(request).await;
+    if head {
+        return response;
+    }
     let Some(bytes) = response.body().size_hint().exact() else {
         return response;
     };
@@ -74,13 +83,10 @@ pub async fn hold(State(held): State<Held>, request: Request, next: Next) -> Res
     }
 }
 
-/// The bytes of large responses held now (a gauge).
-pub const RESPONSE_BYTES_HELD: &str = "bouncewear_response_bytes_held";
-
 /// How much of a held response is handed to the connection at a time: hyper asks for more only
 /// once it has written what it has, so the rest stays here, counted, until the client reads it
 /// (given whole, the body would be dropped at once while hyper still held its bytes).
-const CHUNK: usize = 256 << 10;
+const CHUNK: usize = 64 << 10;
 
 /// A response body with its share of the budget, given back when the body is dropped: after its
 /// last chunk was taken, or with the connection.

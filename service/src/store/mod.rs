@@ -421,8 +421,8 @@ pub trait JobQueue: Send + Sync + 'static {
     /// Hands a shard whose outcome the disk had no room for ([`StoreError::NoRoom`]) back to the
     /// queue, counting nothing against it, to be claimed again after
     /// [`crate::domain::ROOM_RETRY_MS`] on the database's clock (or from `at`): its job waits for
-    /// room (an operator makes some, or it is cancelled) rather than fail. `reason` is its `error`
-    /// and a line of its history meanwhile.
+    /// room (an operator makes some, or it is cancelled) rather than fail. Its `error` is `waiting
+    /// for room: REASON` meanwhile, and its history has one line of it however often it waits.
     async fn wait_for_room(
         &self,
         fence: &Fence,

@@ -759,8 +759,12 @@ impl JobQueue for SqlStore {
         let now = now_or(self.dialect(), &mut tx, at).await?;
         let updated = fenced(
             concat!(
-                "UPDATE shards SET status = 'queued', error = $5, operations_done = 0, retry_at = $6, \
-                 history = history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): waiting for room: ' || $5 || '\n', \
+                // One line however long it waits (its error says it waits already): a shard's
+                // history would grow every 15 s.
+                "UPDATE shards SET status = 'queued', operations_done = 0, retry_at = $6, \
+                 history = CASE WHEN error LIKE 'waiting for room: %' THEN history \
+                 ELSE history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): waiting for room: ' || $5 || '\n' END, \
+                 error = 'waiting for room: ' || $5, \
                  lease_until = NULL WHERE ",
                 fenced_shard!()
             ),

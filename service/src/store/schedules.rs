@@ -20,8 +20,8 @@ const INSERT_SCHEDULE: &str = concat!(
 
 impl SqlStore {
     /// Inserts a schedule in `tx` unless the bound refuses it: the count and the insert in one
-    /// transaction (on PostgreSQL, inserts at the same moment may each see the count below the
-    /// bound, so an owner goes over by at most its requests in flight).
+    /// transaction, under the owner's lock (SQLite's one writer; an advisory lock on PostgreSQL,
+    /// whose inserts at the same moment would each see the count below the bound).
     async fn insert_bounded(
         &self,
         tx: &mut Tx,
@@ -29,6 +29,8 @@ impl SqlStore {
         bound: ScheduleBound,
     ) -> StoreResult<()> {
         self.check_disk(bound.min_free_disk_bytes)?;
+        self.lock(tx, format!("{}/schedules", schedule.owner.as_str()))
+            .await?;
         let held = Sql::new("SELECT COUNT(*) AS held FROM schedules WHERE owner = $1")
             .bind(schedule.owner.as_str())
             .fetch_one(&mut *tx)

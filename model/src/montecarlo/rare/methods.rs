@@ -717,8 +717,8 @@ impl Estimator {
         let cost = (n - seeds.len()) as u64;
         if cost > self.budget.max_evaluations.saturating_sub(self.done) {
             if self.method == Method::Subset && !self.runs.is_empty() {
-                // The runs that finished stand; this one's levels are left out (the next run's
-                // cost was guessed from the last one's, and runs differ in their levels).
+                // The runs that finished stand; this one's levels are left out (its cost was
+                // guessed from the costliest run before it, and runs differ in their levels).
                 return Ok(Some(self.combined()));
             }
             return Err(Stop::Failed(format!(
@@ -745,9 +745,11 @@ impl Estimator {
     /// A subset run finished: subset simulation combines its runs and stops at its target or its
     /// budget; importance sampling takes it as its pilot.
     fn run_finished(&mut self, run: SubsetRun) -> Option<Estimate> {
-        let cost = run.evaluations;
         let left = self.budget.max_evaluations.saturating_sub(self.done);
         self.runs.push(run);
+        // Another run only where the budget covers the costliest yet: a run that runs out
+        // part-way is left out, and those are the runs of more levels, smaller probabilities.
+        let cost = self.runs.iter().map(|r| r.evaluations).max().unwrap_or(0);
         if self.method == Method::Importance {
             let pilot = &self.runs[0];
             let weighing = Weighing {
