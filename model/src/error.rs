@@ -330,7 +330,79 @@ fn read_strict(text: &str) -> Result<serde_json::Value, InvalidInput> {
     reader
         .end()
         .map_err(|error| invalid_from_serde(Pointer::root(), &error))?;
+    if let Some((pointer, token)) = underflowing_number(text) {
+        return Err(InvalidInput::single(
+            &pointer,
+            format!(
+                "`{token}` is not 0, but nearer 0 than any number (the least is 4.9e-324) and \
+                 would read as 0: write 0, or a number within range"
+            ),
+        ));
+    }
     Ok(value)
+}
+
+/// The first number of valid JSON `text` written as not zero that reads as 0 (`1e-400`, which
+/// serde_json rounds to 0 without a word: a positive field would have taken it as 0), with its
+/// pointer.
+fn underflowing_number(text: &str) -> Option<(Pointer, String)> {
+    /// Where the scan is: an object with the member being read, or a list at an index.
+    enum At {
+        Object(Option<String>),
+        List(usize),
+    }
+    let pointer = |stack: &[At]| {
+        stack.iter().fold(Pointer::root(), |pointer, at| match at {
+            At::Object(Some(member)) => pointer.child(member),
+            At::Object(None) => pointer,
+            At::List(index) => pointer.child(index),
+        })
+    };
+    let bytes = text.as_bytes();
+    let mut stack: Vec<At> = Vec::new();
+    let mut i = 0;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'{' => stack.push(At::Object(None)),
+            b'[' => stack.push(At::List(0)),
+            b'}' | b']' => {
+                stack.pop();
+            }
+            b',' => {
+                if let Some(At::List(index)) = stack.last_mut() {
+                    *index += 1;
+                }
+            }
+            b'"' => {
+                let mut end = i + 1;
+                while bytes[end] != b'"' {
+                    end += if bytes[end] == b'\\' { 2 } else { 1 };
+                }
+                let rest = text[end + 1..].trim_start();
+                if let (Some(At::Object(member)), true) = (stack.last_mut(), rest.starts_with(':'))
+                {
+                    *member = serde_json::from_str(&text[i..=end]).ok();
+                }
+                i = end;
+            }
+            b'-' | b'0'..=b'9' => {
+                let end = text[i..]
+                    .find(|c: char| !matches!(c, '-' | '+' | '.' | 'e' | 'E' | '0'..='9'))
+                    .map_or(text.len(), |n| i + n);
+                let token = &text[i..end];
+                let mantissa = token.split(['e', 'E']).next().unwrap_or("");
+                if mantissa.contains(|c: char| matches!(c, '1'..='9'))
+                    && token.parse::<f64>().is_ok_and(|value| value == 0.0)
+                {
+                    return Some((pointer(&stack), token.to_owned()));
+                }
+                i = end - 1;
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    None
 }
 
 /// A JSON value whose objects name each member once.
@@ -706,6 +778,14 @@ mod tests {
     fn a_number_beyond_f64_breaks_a_rule_at_its_field() {
         assert_eq!(pointers(r#"{"a": {"b": 1e400}}"#), ["/a/b"]);
         assert_eq!(pointers(r#"{"a": -1e400}"#), ["/a"]);
+        // Written as not zero, read as 0: named too (serde_json rounds it to 0 without a word).
+        assert_eq!(pointers(r#"{"a": {"b": [1, 1e-400]}}"#), ["/a/b/1"]);
+        assert_eq!(
+            pointers(r#"{"x\"y": 0.0, "s": "1e-400", "c/d": -2.5e-999}"#),
+            ["/c~1d"]
+        );
+        let zeros = r#"{"a": 0e-999, "b": 0.000, "c": -0, "d": 5e-324, "e": {"1e-400": 1}}"#;
+        assert!(from_json::<serde_json::Value>(zeros, &[]).is_ok());
     }
 
     #[test]
