@@ -257,6 +257,14 @@ fn a_key_holds_at_most_its_share_of_schedules() {
     assert_eq!(whole["schedules"].as_array().unwrap().len(), 2, "{whole}");
     assert_problem(&get(&format!("{schedules}?limit=101"), Some("alpha")), 400);
     assert_problem(&get(&format!("{schedules}?cursor=x"), Some("alpha")), 400);
+    assert_problem(
+        &get(&format!("{schedules}?cursor=0{cursor}"), Some("alpha")),
+        400,
+    );
+    assert_problem(
+        &get(&format!("{schedules}?cursor=%2B{cursor}"), Some("alpha")),
+        400,
+    );
 }
 
 /// A scheduler tick that keeps failing (here the disk is below `--min-free-disk-mb` while a

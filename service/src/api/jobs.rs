@@ -260,9 +260,10 @@ impl ListQuery {
         let Some(cursor) = self.cursor.as_deref() else {
             return Ok((limit, None));
         };
-        let seq = cursor
-            .parse::<i64>()
-            .ok()
+        // As the documented pattern: digits, the first not 0 (`01` is no cursor this server gave).
+        let seq = (!cursor.starts_with('0') && cursor.bytes().all(|b| b.is_ascii_digit()))
+            .then(|| cursor.parse::<i64>().ok())
+            .flatten()
             .filter(|seq| *seq > 0)
             .ok_or_else(|| {
                 ApiError::BadRequest(format!("cursor `{cursor}` is not one this server gave"))
