@@ -483,7 +483,7 @@ impl Workers {
                 run_group(&job, batch, group, observer)
             })
             .await;
-        let mut stats = match ran {
+        let stats = match ran {
             Ran::Done(stats) => {
                 record_shard_step("run", running);
                 stats
@@ -497,11 +497,9 @@ impl Workers {
         };
         finish(storing.take()).await;
         let (workers, fence) = (Arc::clone(self), fence.clone());
-        let listed_lives = self.listed_lives;
         let store = async move {
             let started = Instant::now();
             let encoding = tokio::task::spawn_blocking(move || {
-                stats.lives.keep_listed_below(listed_lives);
                 let partial = partial_to_sql(&stats);
                 (stats, partial)
             });
@@ -552,10 +550,10 @@ impl Workers {
         } else {
             0
         };
-        let (listed_lives, sharded_from) = (self.listed_lives, self.sharded_round_operations);
+        let sharded_from = self.sharded_round_operations;
         let compute = self.compute(lease, move |observer| {
             let merged = if whole {
-                run_whole(partials.job(), listed_lives, sharded_from, wall_s, observer)
+                run_whole(partials.job(), sharded_from, wall_s, observer)
             } else {
                 merge(partials, sharded_from, wall_s, observer)
             };

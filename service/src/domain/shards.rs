@@ -370,23 +370,20 @@ pub fn merge(
 }
 
 /// Runs the whole job here, as the merge step of a job that entered the queue without groups
-/// ([`first_shards`]): every batch's groups on the calling compute pool, each group's listed lives
-/// cut at `listed_lives` as a group's shard cuts them, then as [`merge`] after the last batch. The
-/// Result is the one the groups' shards and merges would give, to the bit.
+/// ([`first_shards`]): every batch's groups on the calling compute pool, each group listing the
+/// lives the job lists ([`Job::with_listed_lives`]) as a group's shard does, then as [`merge`]
+/// after the last batch. The Result is the one the groups' shards and merges would give, to the
+/// bit.
 pub fn run_whole(
     job: &Job,
-    listed_lives: u64,
     sharded_from: u64,
     wall_s: f64,
     observer: &dyn Observer,
 ) -> Result<Merged, MergeError> {
     let started = std::time::Instant::now();
-    let mut tally = run_on(Kernel::active(), job, observer, |tally| {
+    let tally = run_on(Kernel::active(), job, observer, |tally| {
         precision_met(job, tally)
     })?;
-    for group in &mut tally.groups {
-        group.lives.keep_listed_below(listed_lives);
-    }
     // A job without a precision target runs one batch.
     finish(
         job,

@@ -1421,10 +1421,11 @@ mod tests {
             r#"{"devices": 40, "operations": 7, "seed": 5, "metrics": ["total_bounce_s", "e1"]}"#,
         ];
         for text in jobs {
-            let job =
-                Job::new(serde_json::from_str(text).unwrap(), || 0, &Pointer::root()).unwrap();
+            let job = Job::new(serde_json::from_str(text).unwrap(), || 0, &Pointer::root())
+                .unwrap()
+                .with_listed_lives(100);
             let Merged::Result { mut result, groups } =
-                run_whole(&job, 100, u64::MAX, 0.0, &Silent).unwrap()
+                run_whole(&job, u64::MAX, 0.0, &Silent).unwrap()
             else {
                 panic!("a job without a rare event ends in its Result");
             };
@@ -1443,7 +1444,9 @@ mod tests {
         use crate::domain::shards::{Merged, run_whole};
         // 30 bins of 11 operation metrics and 5 device metrics: 335 rows, two chunks.
         let text = r#"{"devices": 40, "operations": 30, "seed": 8, "bin_operations": 1}"#;
-        let job = Job::new(serde_json::from_str(text).unwrap(), || 0, &Pointer::root()).unwrap();
+        let job = Job::new(serde_json::from_str(text).unwrap(), || 0, &Pointer::root())
+            .unwrap()
+            .with_listed_lives(100);
         let encoded_on = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
@@ -1451,7 +1454,7 @@ mod tests {
                 .unwrap();
             pool.install(|| {
                 let Merged::Result { mut result, groups } =
-                    run_whole(&job, 100, u64::MAX, 0.0, &Silent).unwrap()
+                    run_whole(&job, u64::MAX, 0.0, &Silent).unwrap()
                 else {
                     panic!("a job without a rare event ends in its Result");
                 };
