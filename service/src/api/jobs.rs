@@ -270,6 +270,15 @@ impl ListQuery {
             })?;
         Ok((limit, Some(seq)))
     }
+
+    /// `records`, read one more than the page (`limit + 1`), cut to the page; the cursor of the
+    /// next page (the last record's `seq`), only where another page has records.
+    pub fn cut<T>(records: &mut Vec<T>, limit: u32, seq: impl Fn(&T) -> i64) -> Option<String> {
+        let more = records.len() > limit as usize;
+        records.truncate(limit as usize);
+        more.then(|| records.last().map(|r| seq(r).to_string()))
+            .flatten()
+    }
 }
 
 /// List your jobs, newest first, with cursor paging.
@@ -303,11 +312,7 @@ pub async fn list_jobs(
             },
         )
         .await?;
-    let more = records.len() > limit as usize;
-    records.truncate(limit as usize);
-    let next_cursor = more
-        .then(|| records.last().map(|r| r.seq.to_string()))
-        .flatten();
+    let next_cursor = ListQuery::cut(&mut records, limit, |r| r.seq);
     Ok(Json(JobList {
         jobs: records.iter().map(JobResource::from_record).collect(),
         next_cursor,

@@ -203,11 +203,7 @@ pub async fn list_schedules(
     let (limit, after) = query.page(100)?;
     // One more than the page: a cursor only where another page has schedules.
     let mut records = state.store.schedules(&owner, after, limit + 1).await?;
-    let more = records.len() > limit as usize;
-    records.truncate(limit as usize);
-    let next_cursor = more
-        .then(|| records.last().map(|(seq, _)| seq.to_string()))
-        .flatten();
+    let next_cursor = ListQuery::cut(&mut records, limit, |(seq, _)| *seq);
     let mut schedules = Vec::with_capacity(records.len());
     for (_, record) in &records {
         schedules.push(resource(&state, record).await?);
