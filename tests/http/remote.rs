@@ -274,7 +274,7 @@ fn a_submission_to_a_full_queue_is_sent_again_once_there_is_room() {
 #[test]
 fn a_submission_whose_answer_was_lost_queues_one_job() {
     let server = TestApp::start(&temp_db("remote-lost"), &["--workers", "0"]);
-    let proxy = losing_first_answer(server.base());
+    let proxy = losing_first_answer(server.base(), false);
     let file = job_file("remote-lost-job", &json!({"devices": 2, "operations": 2}));
     let submitted = remote_at(&proxy, None, &["submit", &file])
         .output()
@@ -292,9 +292,65 @@ fn a_submission_whose_answer_was_lost_queues_one_job() {
     assert_eq!(ids, [&job["id"]], "{listed}");
 }
 
+/// A submission whose answer does not come within `--request-timeout-seconds` (the server queued
+/// the job, its answer held back) is sent again with its key: one job, not two.
+#[test]
+fn a_submission_answered_too_late_queues_one_job() {
+    let server = TestApp::start(&temp_db("remote-late"), &["--workers", "0"]);
+    let proxy = losing_first_answer(server.base(), true);
+    let file = job_file("remote-late-job", &json!({"devices": 2, "operations": 2}));
+    let submitted = remote_at(
+        &proxy,
+        None,
+        &["submit", &file, "--request-timeout-seconds", "2"],
+    )
+    .output()
+    .unwrap();
+    let said = String::from_utf8_lossy(&submitted.stderr).into_owned();
+    assert!(said.contains("no answer within"), "{said}");
+    let job: Value = serde_json::from_str(&stdout(&submitted)).unwrap();
+    let listed: Value = serde_json::from_str(&get(&server.url("/v1/jobs"), None).body).unwrap();
+    assert_eq!(listed["jobs"].as_array().unwrap().len(), 1, "{listed}");
+    assert_eq!(listed["jobs"][0]["id"], job["id"]);
+}
+
+/// `wait --timeout-seconds` ends by then even where the server never answers, whatever
+/// `--request-timeout-seconds` allows one request.
+#[test]
+fn wait_ends_at_its_timeout_against_a_server_that_never_answers() {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}", listener.local_addr().unwrap());
+    std::thread::spawn(move || {
+        let held: Vec<TcpStream> = listener.incoming().map_while(Result::ok).collect();
+        drop(held);
+    });
+    let started = std::time::Instant::now();
+    let waited = remote_at(
+        &url,
+        None,
+        &[
+            "wait",
+            "j-1",
+            "--timeout-seconds",
+            "1",
+            "--request-timeout-seconds",
+            "120",
+        ],
+    )
+    .output()
+    .unwrap();
+    let took = started.elapsed();
+    assert_eq!(waited.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&waited.stderr).into_owned();
+    assert!(said.contains("no answer within"), "{said}");
+    // Bounded by its own timeout, not by a request's 120 s (a generous margin for a busy host).
+    assert!(took < std::time::Duration::from_secs(60), "{took:?}");
+}
+
 /// A proxy to `base` that hands the first request on, lets the server handle it, and closes the
-/// client's connection without its answer; later connections it relays both ways. Its base URL.
-fn losing_first_answer(base: &str) -> String {
+/// client's connection without its answer (or, with `hold`, keeps it open and silent); later
+/// connections it relays both ways. Its base URL.
+fn losing_first_answer(base: &str, hold: bool) -> String {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let proxy = format!("http://{}", listener.local_addr().unwrap());
     let upstream = base.trim_start_matches("http://").to_owned();
@@ -324,6 +380,12 @@ fn losing_first_answer(base: &str) -> String {
                 // The server's answer, read and dropped with the client's connection.
                 let mut answer = [0; 1];
                 (&server).read_exact(&mut answer).unwrap();
+                if hold {
+                    std::thread::spawn(move || {
+                        std::thread::sleep(std::time::Duration::from_secs(120));
+                        drop(client);
+                    });
+                }
                 continue;
             }
             for (mut from, mut to) in [

@@ -102,8 +102,9 @@ impl Server {
         format!("{}{path}", self.url.trim_end_matches('/'))
     }
 
-    /// Sends a request, again up to `--retries` times while the server is busy (429, 503) or
-    /// the connection fails; the body of a 2xx, or the failure the answer means. Every request of
+    /// Sends a request, again up to `--retries` times while the server is busy (429, 503), the
+    /// connection fails or no answer came within `--request-timeout-seconds`; the body of a 2xx,
+    /// or the failure the answer means. Every request of
     /// the remote commands may be sent again: reads and cancels change nothing the second time,
     /// and a submission carries an `Idempotency-Key`, the same on every try.
     fn send(&self, method: &str, path: &str, body: Option<&str>) -> Result<String, CliError> {
@@ -122,7 +123,7 @@ impl Server {
             .then(|| format!("cli-{}", uuid::Uuid::new_v4().simple()));
         let mut retried = 0;
         loop {
-            let failure = match self.send_once(method, path, body, key.as_deref()) {
+            let failure = match self.send_once(method, path, body, key.as_deref(), deadline) {
                 Ok(text) => return Ok(text),
                 Err(failure) => failure,
             };
@@ -144,7 +145,14 @@ impl Server {
             let pause = pause.min(MAX_RETRY_PAUSE);
             let past_deadline = deadline.is_some_and(|end| Instant::now() + pause > end);
             if retried == self.retries || past_deadline {
-                return Err(failure.into_error());
+                return Err(match (failure, &key) {
+                    // The server may have queued it: the key gives that job back to a retry.
+                    (Failure::Broken(error), Some(key)) => CliError::Failed(format!(
+                        "{error} (the submission's Idempotency-Key was {key}: it may have been \
+                         queued; `GET /v1/jobs` lists it)"
+                    )),
+                    (failure, _) => failure.into_error(),
+                });
             }
             retried += 1;
             eprintln!(
@@ -156,16 +164,21 @@ impl Server {
         }
     }
 
-    /// Sends a request once: the body of a 2xx, or why not.
+    /// Sends a request once, to be answered within `--request-timeout-seconds` and before
+    /// `deadline`: the body of a 2xx, or why not.
     fn send_once(
         &self,
         method: &str,
         path: &str,
         body: Option<&str>,
         idempotency_key: Option<&str>,
+        deadline: Option<Instant>,
     ) -> Result<String, Failure> {
         let url = self.url(path);
-        let agent = agent(self.request_timeout_seconds);
+        let left = deadline.map_or(f64::INFINITY, |end| {
+            end.saturating_duration_since(Instant::now()).as_secs_f64()
+        });
+        let agent = agent(self.request_timeout_seconds.min(left));
         let sent = match (method, body) {
             ("POST", Some(body)) => {
                 let request = self
@@ -256,7 +269,8 @@ impl Failure {
             ConnectionAborted, ConnectionRefused, ConnectionReset, NotConnected, UnexpectedEof,
         };
         let broken = match error {
-            ureq::Error::ConnectionFailed => true,
+            // No answer in time: a read asks again, a submission sends its key again.
+            ureq::Error::ConnectionFailed | ureq::Error::Timeout(_) => true,
             ureq::Error::Io(io) => matches!(
                 io.kind(),
                 ConnectionRefused
@@ -267,7 +281,12 @@ impl Failure {
             ),
             _ => false,
         };
-        let said = format!("{url}: {error}");
+        let said = match error {
+            ureq::Error::Timeout(_) => format!(
+                "{url}: no answer within --request-timeout-seconds (or what --timeout-seconds left)"
+            ),
+            _ => format!("{url}: {error}"),
+        };
         if broken {
             Failure::Broken(said)
         } else {
