@@ -237,3 +237,89 @@ def test_what_may_not_be_repeated_is_sent_once_and_wait_keeps_its_timeout(caplog
     assert _notes(caplog) == ["again in 0.5 s (1 of 3)"]
     with pytest.raises(ValueError):
         Client(retries=-1)
+
+
+def _listening():
+    """A socket that accepts connections and never answers; its URL and the socket."""
+    import socket
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen(16)
+    return f"http://127.0.0.1:{silent.getsockname()[1]}", silent
+
+
+def test_wait_ends_at_its_timeout_against_a_server_that_never_answers():
+    url, silent = _listening()
+    try:
+        started = time.monotonic()
+        with pytest.raises(TimeoutError):
+            Job(Client(url, timeout=120), {"id": "any", "status": "queued"}).wait(progress=False, timeout=1.0)
+        # Its own timeout bounds it, not a request's 120 s (a generous margin for a busy host).
+        assert time.monotonic() - started < 60
+    finally:
+        silent.close()
+
+
+def _holding_first_answer(base):
+    """A proxy to `base` that hands the first request on and holds its answer back; later
+    connections it relays both ways. Its URL."""
+    import socket
+    host, port = base.split("//")[1].rsplit(":", 1)
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(16)
+    held = []
+
+    def relay(source, sink):
+        try:
+            while data := source.recv(65536):
+                sink.sendall(data)
+        except OSError:
+            pass
+
+    def serve():
+        first = True
+        while True:
+            client, _ = listener.accept()
+            upstream = socket.create_connection((host, int(port)))
+            if first:
+                first = False
+                request = b""
+                while b"\r\n\r\n" not in request:
+                    request += client.recv(65536)
+                head, body = request.split(b"\r\n\r\n", 1)
+                length = next(int(line.split(b":")[1]) for line in head.split(b"\r\n")
+                              if line.lower().startswith(b"content-length:"))
+                while len(body) < length:
+                    body += client.recv(65536)
+                upstream.sendall(head + b"\r\n\r\n" + body)
+                upstream.recv(1)  # the server answered: the job is queued
+                held.append(client)
+                continue
+            for source, sink in ((client, upstream), (upstream, client)):
+                threading.Thread(target=relay, args=(source, sink), daemon=True).start()
+
+    threading.Thread(target=serve, daemon=True).start()
+    return f"http://127.0.0.1:{listener.getsockname()[1]}"
+
+
+def test_a_submission_answered_too_late_is_sent_again_and_queues_one_job(caplog):
+    proxy = _holding_first_answer(BASE)
+    before = {job.id for job in Client(BASE).jobs()}
+    submitted = Client(proxy, timeout=2).submit({"devices": 2, "operations": 2})
+    assert len(_notes(caplog)) == 1
+    new = [job.id for job in Client(BASE).jobs() if job.id not in before]
+    assert new == [submitted.id]
+
+
+def test_a_failed_job_crosses_a_process_boundary():
+    import pickle
+    failed = JobFailed(Job(Client(BASE), {"id": "j-1", "status": "failed", "error": "why"}))
+    again = pickle.loads(pickle.dumps(failed))
+    assert str(again) == str(failed) and again.job.id == "j-1"
+
+
+def test_the_other_job_of_a_comparison_reaches_no_other_resource(client, job):
+    with pytest.raises(BouncewearError) as unknown:
+        job.compare(Job(client, {"id": f"{job.id}?metric=e1", "status": "succeeded"}))
+    assert unknown.value.status == 404

@@ -118,6 +118,10 @@ class JobFailed(Exception):
         super().__init__(f"job {job.id} {job.status}: {job.error or 'no reason given'}")
         self.job = job
 
+    def __reduce__(self) -> Any:
+        # Rebuilt from its job, so that it crosses a process boundary (a process pool).
+        return (JobFailed, (self.job,))
+
 
 class Client:
     """A bouncewear server at `base_url`, with `api_key` when the server has keys.
@@ -155,13 +159,20 @@ class Client:
         attempt = 0
         while True:
             failure: Exception
+            timeout = self.timeout
+            if deadline is not None:
+                # No request outlasts the deadline, whatever the client's own timeout.
+                left = max(deadline - time.monotonic(), 0.001)
+                timeout = min(timeout, left) if timeout else left
             try:
                 response = self._session.request(method, self.base_url + path, json=json,
-                                                 params=params, headers=headers, timeout=self.timeout)
+                                                 params=params, headers=headers, timeout=timeout)
             except requests.exceptions.SSLError:
                 raise  # a TLS fault, which another try would meet again
-            except (requests.ConnectionError, requests.exceptions.ChunkedEncodingError) as error:
-                # Refused, reset, or closed before the whole answer.
+            except (requests.ConnectionError, requests.exceptions.ChunkedEncodingError,
+                    requests.exceptions.Timeout) as error:
+                # Refused, reset, closed before the whole answer, or no answer in time (a keyed
+                # submission sent again gets the job it may have queued).
                 failure, again = error, repeatable
                 pause, why = 0.5 * 2 ** min(attempt, 7), str(error)
             else:
@@ -274,8 +285,14 @@ class Job:
                 wait_s = min(wait_s, timeout - (time.monotonic() - started))
             asked = time.monotonic()
             deadline = None if timeout is None else started + timeout
-            self.resource = self.client.request("GET", self._path(), params={"wait_s": max(wait_s, 0.0)},
-                                                deadline=deadline).json()
+            try:
+                self.resource = self.client.request("GET", self._path(), params={"wait_s": max(wait_s, 0.0)},
+                                                    deadline=deadline).json()
+            except (requests.ConnectionError, requests.exceptions.Timeout) as error:
+                if deadline is None or time.monotonic() < deadline:
+                    raise
+                raise TimeoutError(f"job {self.id}: no answer from the server within {timeout} s "
+                                   f"({error})") from error
             if self.status in ENDED:
                 break
             if progress:
@@ -353,7 +370,7 @@ class Job:
             params["statistics"] = ",".join(statistics)
         if b_lives is not None:
             params["b_lives"] = ",".join(repr(float(p)) for p in b_lives)
-        return self.client.request("GET", self._path(f"/compare/{other.id}"), params=params).json()
+        return self.client.request("GET", self._path(f"/compare/{_segment(other.id)}"), params=params).json()
 
     def compare_statistics(self, other: "Job", metric: Optional[str] = None,
                            statistics: Optional[Iterable[str]] = None) -> pd.DataFrame:
@@ -375,7 +392,7 @@ class Job:
     def compare_plot(self, other: "Job", kind: str = "bands.svg", metric: Optional[str] = None) -> str:
         """Both jobs' `bands.svg` (wear curves) or `weibull.svg` overlaid, as SVG text."""
         params = {"metric": metric} if metric else None
-        return self.client.request("GET", self._path(f"/compare/{other.id}/plots/{kind}"), params=params).text
+        return self.client.request("GET", self._path(f"/compare/{_segment(other.id)}/plots/{_segment(kind)}"), params=params).text
 
     def cancel(self) -> "Job":
         """Cancels the job if it is queued or running; itself, as it stands then. A job that had
