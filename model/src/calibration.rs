@@ -804,11 +804,24 @@ impl Problem<'_> {
             beyond[i] += side * EDGE_LN;
             self.residuals(&beyond).is_none()
         });
+        let wald = optimum.t * se_ln;
         let ends = [-1.0, 1.0].map(|side| {
             if on_edge[usize::from(side > 0.0)] {
-                Bounded::At(0.0)
-            } else {
-                profile.end(side, optimum.t * se_ln)
+                return Bounded::At(0.0);
+            }
+            match profile.end(side, wald) {
+                // An end within a tenth of the Wald half-width is a refit stopped on a step of
+                // the sum of squares next to the optimum, not a bound the data set (a wear curve:
+                // 22 of 700 kappa intervals, each side so short missed the truth as often as
+                // not, where the Wald interval covered 95 %): that side is the Wald end.
+                Bounded::At(end) if end < STUCK_END * wald && wald.is_finite() => {
+                    warnings.push(format!(
+                        "`{name}`'s profile could not be followed {} the estimate (its refits stop on steps of the sum of squares); that end of its interval is the Wald one",
+                        if side < 0.0 { "below" } else { "above" }
+                    ));
+                    Bounded::At(profile.room(side).min(wald))
+                }
+                end => end,
             }
         });
         for ((end, side), word) in ends.iter().zip(["below", "above"]).zip([-1.0, 1.0]) {
@@ -936,6 +949,10 @@ impl Optimum<'_> {
     }
 }
 
+/// The share of the Wald half-width below which a profile's end is taken as a refit stuck on a
+/// step rather than an end the data set.
+const STUCK_END: f64 = 0.1;
+
 /// Where a profile-likelihood interval ends on one side of the estimate.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Bounded {
@@ -978,6 +995,17 @@ struct Profile<'a> {
 }
 
 impl Profile<'_> {
+    /// The distance to the parameter's bound on `side`, in the logarithm.
+    fn room(&self, side: f64) -> f64 {
+        let j = self.parameter;
+        let [lower, upper] = self.problem.bounds_ln[j];
+        if side > 0.0 {
+            upper - self.theta[j]
+        } else {
+            self.theta[j] - lower
+        }
+    }
+
     /// The farthest the search looks from the estimate, in the logarithm: a factor `e^10`.
     const MAX_REACH: f64 = 10.0;
 
@@ -1001,31 +1029,36 @@ impl Profile<'_> {
                 }
             })
             .collect();
-        let mut start = self.problem.within_bounds(guess);
-        start[j] = c;
-        let residuals = match self.problem.residuals(&start) {
-            Some(r) => r,
-            None => {
-                start = self.theta.to_vec();
-                start[j] = c;
-                match self.problem.residuals(&start) {
-                    Some(r) => r,
-                    None => return f64::INFINITY,
-                }
-            }
-        };
+        let mut predicted = self.problem.within_bounds(guess);
+        predicted[j] = c;
+        let mut kept = self.theta.to_vec();
+        kept[j] = c;
+        // The sum of squares steps where a bounce is gained or lost, and a refit from one start
+        // can stop on a step short of the profile's minimum (a wear curve's roughening energy:
+        // an end 0.007 % from the estimate where the profile stays inside for 2 % more): the
+        // lower of the refits from the linear prediction and from the optimum's other values.
         let free: Vec<usize> = (0..self.theta.len()).filter(|&k| k != j).collect();
-        let cost = if free.is_empty() {
-            sum_of_squares(&residuals)
-        } else {
+        let refit = |start: Vec<f64>| -> Option<f64> {
+            let residuals = self.problem.residuals(&start)?;
+            if free.is_empty() {
+                return Some(sum_of_squares(&residuals));
+            }
             // The profile t needs the sum of squares to a small part of `RSS t^2 / (n - k)`.
             match self
                 .problem
                 .minimise(start, residuals, &free, 1e-9, |_, _| Ok(()))
             {
-                Ok(Some(minimum)) => minimum.cost,
-                _ => return f64::INFINITY,
+                Ok(Some(minimum)) => Some(minimum.cost),
+                _ => None,
             }
+        };
+        let starts = if free.is_empty() || predicted == kept {
+            vec![kept]
+        } else {
+            vec![predicted, kept]
+        };
+        let Some(cost) = starts.into_iter().filter_map(refit).min_by(f64::total_cmp) else {
+            return f64::INFINITY;
         };
         ((cost - self.cost).max(0.0) * self.degrees_of_freedom / self.cost).sqrt()
     }
@@ -1035,13 +1068,7 @@ impl Profile<'_> {
     /// profile t reaches `t`, then narrowed by a safeguarded false position to within 0.2 % of
     /// `wald`, the end on the far side of the crossing (the wider interval).
     fn end(&self, side: f64, wald: f64) -> Bounded {
-        let j = self.parameter;
-        let [lower, upper] = self.problem.bounds_ln[j];
-        let room = if side > 0.0 {
-            upper - self.theta[j]
-        } else {
-            self.theta[j] - lower
-        };
+        let room = self.room(side);
         if room <= 0.0 {
             return Bounded::At(0.0);
         }
@@ -1397,8 +1424,33 @@ fn normal_equations(columns: &[Vec<f64>], residuals: &[f64]) -> (Vec<Vec<f64>>, 
 
 #[cfg(test)]
 mod tests {
-    use super::study::{CASES, bounce_times, coverage, coverage_by_block, together, wear_curve};
+    use super::study::{
+        CASES, bounce_times, coverage, coverage_by_block, one_velocity_wear_curve, together,
+        wear_curve,
+    };
     use super::*;
+
+    #[test]
+    fn an_interval_end_next_to_the_estimate_is_the_wald_one() {
+        // Of seeds 0 to 299, 15 had the roughening energy's profile stop next to the estimate
+        // below it (its refits held on a step of the sum of squares): an end 0.01-0.1 % from the
+        // estimate, against a Wald half-width of 3 %.
+        for seed in [38, 57] {
+            let fit = calibrate(&one_velocity_wear_curve(seed)).unwrap();
+            for (name, e) in &fit.estimates {
+                let wald = 0.1 * student_t_975(78) * e.se_ln;
+                let [lo, hi] = e.ci95.map(|x| (x / e.value).ln().abs());
+                assert!(lo >= wald && hi >= wald, "seed {seed}: {name} {e:?}");
+            }
+            assert!(
+                fit.warnings
+                    .iter()
+                    .any(|w| w.contains("could not be followed below")),
+                "{:?}",
+                fit.warnings
+            );
+        }
+    }
     use crate::stats::test_util::SplitMix;
     use approx::assert_relative_eq;
 
@@ -1775,11 +1827,14 @@ mod tests {
             fit.warnings
         );
         // Each moving with the other, the data bound neither far from the estimate: the other
-        // warnings say which sides run to where the search stopped, and that the search along
-        // the flat valley took all its iterations.
+        // warnings say which sides run to where the search stopped, which side's refits stopped
+        // on a step next to the estimate (its end the Wald one), and that the search along the
+        // flat valley took all its iterations.
         for warning in fit.warnings.iter().filter(|w| !w.starts_with(&trade_off)) {
             assert!(
-                warning.contains("is not bounded") || warning.starts_with("the fit took all"),
+                warning.contains("is not bounded")
+                    || warning.contains("could not be followed")
+                    || warning.starts_with("the fit took all"),
                 "{warning}"
             );
         }
