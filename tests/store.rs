@@ -13,7 +13,7 @@ use bouncewear::domain::{
 };
 use bouncewear::scheduler::{Waiting, tick};
 use bouncewear::store::{
-    self, EncodedGroups, EncodedResult, JobRecord, Lease, LeaseTerms, NewRun, Operations,
+    self, Awaited, EncodedGroups, EncodedResult, JobRecord, Lease, LeaseTerms, NewRun, Operations,
     RetryBudget, RunSlot, ScheduleRecord, Store, StoreError,
 };
 use bouncewear::worker::{HELD_GROUP_BYTES, HeldGroups, Workers};
@@ -907,7 +907,12 @@ async fn a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later(url:
         .await
         .unwrap()
         .unwrap();
-    let waits = store.wait_for_room(&claim.fence, Some(UnixMs(100)), "no room: 2 MB");
+    let waits = store.wait_for(
+        &claim.fence,
+        Some(UnixMs(100)),
+        Awaited::Room,
+        "no room: 2 MB",
+    );
     assert!(waits.await.unwrap());
     let shard = store.shards(&id).await.unwrap().remove(0);
     assert_eq!((shard.status.as_str(), shard.failures), ("queued", 0));
@@ -929,12 +934,17 @@ async fn a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later(url:
     let later = store.claim("w", terms(100 + ROOM_RETRY_MS), budget(0));
     let again = later.await.unwrap().unwrap();
     assert_eq!(again.fence.job, id);
-    // Waiting again adds no line.
-    let waits = store.wait_for_room(&again.fence, Some(UnixMs(200 + ROOM_RETRY_MS)), "no room");
+    // Waiting again adds no line, for room or for the database.
+    let at = Some(UnixMs(200 + ROOM_RETRY_MS));
+    let waits = store.wait_for(&again.fence, at, Awaited::Database, "pool timed out");
     assert!(waits.await.unwrap());
     let shard = store.shards(&id).await.unwrap().remove(0);
     assert_eq!(shard.history.len(), 1, "{:?}", shard.history);
-    assert_eq!(shard.error.as_deref(), Some("waiting for room: no room"));
+    assert_eq!(
+        shard.error.as_deref(),
+        Some("waiting for the database: pool timed out")
+    );
+    assert_eq!(shard.failures, 0);
 }
 
 /// A job whose stored accumulators are damaged makes every merge fail: real workers retry it the

@@ -192,7 +192,7 @@ impl Application {
 /// Opens the queue's store and readies the workers (not yet running) with their compute pool.
 /// Shards whose lease expired while no worker ran are claimed again as workers start.
 async fn start_workers(config: &WorkerConfig) -> Result<Workers, StartupError> {
-    let store = crate::store::open(&config.database).await?;
+    let store = crate::store::open_with(&config.database, config.database_connections).await?;
     Ok(Workers {
         store,
         compute: Arc::new(thread_pool(config.compute_threads)?),

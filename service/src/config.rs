@@ -31,6 +31,13 @@ pub struct WorkerConfig {
         default_value = "sqlite://bouncewear.db"
     )]
     pub database: String,
+    /// Connections this process keeps to a PostgreSQL database at most, besides one that listens
+    /// for announcements; idle ones close after a minute. PostgreSQL's `max_connections` must
+    /// cover every process: (this + 1) for each `serve` and `worker`, plus whatever else connects
+    /// (superuser slots aside). SQLite keeps its own (one writer, four readers).
+    #[arg(long, env = "BOUNCEWEAR_DATABASE_CONNECTIONS", default_value_t = 8,
+          value_parser = clap::value_parser!(u32).range(2..=1000))]
+    pub database_connections: u32,
     /// Shards run at the same time, each on one compute thread (default: one per compute thread);
     /// with `serve`, 0 serves the API without running jobs.
     #[arg(long, env = "BOUNCEWEAR_WORKERS")]

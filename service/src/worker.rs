@@ -26,8 +26,8 @@ use crate::domain::shards::{
 };
 use crate::domain::{JobId, UnixMs};
 use crate::store::{
-    Claim, EncodedGroups, EncodedResult, Fence, Lease, LeaseTerms, QueueEvent, RetryBudget, Store,
-    StoreError, StoreResult, encode, partial_to_sql,
+    Awaited, Claim, EncodedGroups, EncodedResult, Fence, Lease, LeaseTerms, QueueEvent,
+    RetryBudget, Store, StoreError, StoreResult, encode, partial_to_sql,
 };
 use crate::telemetry::{record_job_finished, record_shard_step, record_shard_time};
 use bouncewear_model::Pointer;
@@ -913,14 +913,20 @@ impl Workers {
     /// room (nothing counted against it: the job is not at fault); any other error counts as a
     /// failed run.
     async fn write_failed(&self, fence: &Fence, what: &str, error: StoreError) {
-        let StoreError::NoRoom(room) = error else {
-            return self
-                .fail_attempt(fence, &format!("{what} failed: {error}"))
-                .await;
+        // No room on the disk, or no connection to the database in all the write's tries (none
+        // free, unreachable): nothing is wrong with the job, which waits rather than fail. An
+        // error the database reports itself counts against the shard.
+        let (awaited, reason) = match error {
+            StoreError::NoRoom(room) => (Awaited::Room, format!("{what}: {room}")),
+            error if error.is_unreachable() => (Awaited::Database, format!("{what}: {error}")),
+            error => {
+                return self
+                    .fail_attempt(fence, &format!("{what} failed: {error}"))
+                    .await;
+            }
         };
-        let reason = format!("{what}: {room}");
-        tracing::warn!(reason, "shard waits for room");
-        if let Err(error) = self.store.wait_for_room(fence, None, &reason).await {
+        tracing::warn!(reason, ?awaited, "shard waits");
+        if let Err(error) = self.store.wait_for(fence, None, awaited, &reason).await {
             tracing::error!(%error, "could not hand the shard back; its lease will expire");
         }
     }

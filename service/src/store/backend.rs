@@ -24,12 +24,14 @@ pub(crate) enum Backend {
 
 impl SqlStore {
     /// Opens the database a URL names, migrating it: `sqlite:` or `postgres:` (`postgresql:`).
-    pub async fn open(url: &str) -> StoreResult<Self> {
+    pub async fn open(url: &str, connections: u32) -> StoreResult<Self> {
         // Only the scheme is ever repeated back: the rest of a URL may hold a password.
         let scheme = url.split_once(':').map_or(url, |(scheme, _)| scheme);
         let backend = match scheme {
             "sqlite" => Backend::Sqlite(SqliteBackend::open(url).await?),
-            "postgres" | "postgresql" => Backend::Postgres(PgBackend::open(url).await?),
+            "postgres" | "postgresql" => {
+                Backend::Postgres(PgBackend::open(url, connections).await?)
+            }
             _ => {
                 let scheme = scheme.chars().take(32).collect();
                 return Err(StoreError::UnsupportedUrl(scheme));

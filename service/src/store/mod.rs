@@ -118,6 +118,18 @@ impl StoreError {
         }
     }
 
+    /// Whether no connection reached the database (none free in the pool in time, refused,
+    /// reset): unlike an error the database itself reports (a full disk, a refused statement),
+    /// nothing says the write would fail once one does.
+    pub fn is_unreachable(&self) -> bool {
+        matches!(
+            self,
+            StoreError::Database(
+                sqlx::Error::PoolTimedOut | sqlx::Error::PoolClosed | sqlx::Error::Io(_)
+            )
+        )
+    }
+
     pub(crate) fn schedule_not_found(id: &ScheduleId) -> Self {
         Self::NotFound {
             kind: "schedule",
@@ -418,15 +430,16 @@ pub trait JobQueue: Send + Sync + 'static {
         error: &str,
         retries: u64,
     ) -> StoreResult<bool>;
-    /// Hands a shard whose outcome the disk had no room for ([`StoreError::NoRoom`]) back to the
-    /// queue, counting nothing against it, to be claimed again after
-    /// [`crate::domain::ROOM_RETRY_MS`] on the database's clock (or from `at`): its job waits for
-    /// room (an operator makes some, or it is cancelled) rather than fail. Its `error` is `waiting
-    /// for room: REASON` meanwhile, and its history has one line of it however often it waits.
-    async fn wait_for_room(
+    /// Hands a shard whose outcome could not be stored back to the queue, counting nothing
+    /// against it, to be claimed again after [`crate::domain::ROOM_RETRY_MS`] on the database's
+    /// clock (or from `at`): its job waits (an operator makes room or connections, or cancels
+    /// it) rather than fail. Its `error` is `waiting for room: REASON` (or `waiting for the
+    /// database: REASON`) meanwhile, and its history has one line of it however often it waits.
+    async fn wait_for(
         &self,
         fence: &Fence,
         at: Option<UnixMs>,
+        awaited: Awaited,
         reason: &str,
     ) -> StoreResult<bool>;
     /// Hands a running shard back to the queue (graceful shutdown), without counting a failure.
@@ -585,7 +598,34 @@ pub trait Schedules: Send + Sync + 'static {
 
 /// Opens the store a database URL names, migrating it: `sqlite:` or `postgres:` (`postgresql:`).
 pub async fn open(url: &str) -> StoreResult<Arc<dyn Store>> {
-    Ok(Arc::new(SqlStore::open(url).await?))
+    open_with(url, DEFAULT_CONNECTIONS).await
+}
+
+/// [`open`], with at most `connections` pooled connections to PostgreSQL.
+pub async fn open_with(url: &str, connections: u32) -> StoreResult<Arc<dyn Store>> {
+    Ok(Arc::new(SqlStore::open(url, connections).await?))
+}
+
+/// PostgreSQL's pooled connections per process unless told (`--database-connections`).
+pub const DEFAULT_CONNECTIONS: u32 = 8;
+
+/// What a shard handed back to the queue waits for ([`JobQueue::wait_for`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Awaited {
+    /// Room on the disk beside the database ([`StoreError::NoRoom`]).
+    Room,
+    /// The database, which did not take the write in all its tries (unreachable, no connection
+    /// free).
+    Database,
+}
+
+impl Awaited {
+    fn as_str(self) -> &'static str {
+        match self {
+            Awaited::Room => "room",
+            Awaited::Database => "the database",
+        }
+    }
 }
 
 /// Everything the service stores.

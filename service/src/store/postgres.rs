@@ -5,13 +5,15 @@
 //! (LISTEN/NOTIFY), so idle workers and progress streams on any machine wake at once. The SQL is the
 //! store's one body; what is PostgreSQL's own is here.
 
+use super::StoreError;
 use super::rows::{
     Dialect, bind_queued_job, claim_next, count_to_sql, fenced_shard, insert_job, insert_shards,
 };
 use super::sql::{Sql, Tx};
 use super::{QueueEvent, StoreResult, migrations};
 use crate::domain::{JobId, QueueBound, QueuedJob};
-use sqlx::postgres::{PgListener, PgPool, PgPoolOptions};
+use sqlx::Connection;
+use sqlx::postgres::{PgConnection, PgListener, PgPool, PgPoolOptions};
 use std::time::Duration;
 use tokio::sync::broadcast;
 use tokio::task::AbortHandle;
@@ -43,17 +45,32 @@ const JOB_CHANNEL: &str = "bouncewear_jobs";
 /// How long opening the store waits for the database's first connection.
 const STARTUP_WAIT: Duration = Duration::from_secs(30);
 
+/// A pooled connection idle this long is closed: a node that stopped working hands its slots
+/// back to PostgreSQL for the others.
+const IDLE_CONNECTION: Duration = Duration::from_secs(60);
+
 /// The advisory lock every insert into the queue takes, so that counting the queued jobs and
 /// inserting one cannot interleave with another submission.
 const QUEUE_LOCK: i64 = 0x626f_756e_6365; // "bounce"
+
+/// Why the pool has no connection to the database at `url`, which it does not say (refused, no
+/// slots left, a wrong password): a connection of its own, tried once.
+async fn why_no_connection(url: &str) -> String {
+    match tokio::time::timeout(super::DATABASE_WAIT, PgConnection::connect(url)).await {
+        Ok(Ok(_)) => "it answers now".to_owned(),
+        Ok(Err(error)) => error.to_string(),
+        Err(_) => format!("no answer within {} s", super::DATABASE_WAIT.as_secs_f64()),
+    }
+}
 
 impl PgBackend {
     /// Connects to the database at `url` and migrates it (concurrent instances wait for each
     /// other: sqlx takes an advisory lock around migrations).
     #[tracing::instrument(skip_all)]
-    pub(crate) async fn open(url: &str) -> StoreResult<Self> {
+    pub(crate) async fn open(url: &str, connections: u32) -> StoreResult<Self> {
         let pool = PgPoolOptions::new()
-            .max_connections(8)
+            .max_connections(connections)
+            .idle_timeout(IDLE_CONNECTION)
             // During an outage a request gets its 503 within this, not after the pool's 30 s.
             .acquire_timeout(super::DATABASE_WAIT)
             .connect_lazy(url)?;
@@ -64,7 +81,15 @@ impl PgBackend {
             match pool.acquire().await {
                 Ok(_) => break,
                 Err(sqlx::Error::PoolTimedOut) if started.elapsed() < STARTUP_WAIT => {
-                    tracing::warn!("the database has not answered yet; trying again");
+                    let why = why_no_connection(url).await;
+                    tracing::warn!(%why, "the database has not answered yet; trying again");
+                }
+                Err(sqlx::Error::PoolTimedOut) => {
+                    let why = why_no_connection(url).await;
+                    return Err(StoreError::NotReady(format!(
+                        "no connection to the database within {} s: {why}",
+                        STARTUP_WAIT.as_secs()
+                    )));
                 }
                 Err(error) => return Err(error.into()),
             }
@@ -119,7 +144,7 @@ async fn forward_announcements(
 pub(crate) static DIALECT: Dialect = Dialect {
     now: "SELECT (EXTRACT(EPOCH FROM clock_timestamp()) * 1000)::BIGINT AS now",
     holds: concat!(
-        "SELECT 1 AS held FROM jobs WHERE id = $1 AND EXISTS (SELECT 1 FROM shards WHERE ",
+        "SELECT 1 AS held FROM jobs WHERE id = $1 AND status = 'running' AND EXISTS (SELECT 1 FROM shards WHERE ",
         fenced_shard!(),
         ") FOR SHARE"
     ),

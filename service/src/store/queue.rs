@@ -13,7 +13,7 @@ use super::rows::{
 };
 use super::sql::{AnyRow, Conn, Sql, Tx};
 use super::{
-    Claim, EncodedGroups, Fence, JobQueue, JobRecord, Lease, LeaseTerms, Page, QueueEvent,
+    Awaited, Claim, EncodedGroups, Fence, JobQueue, JobRecord, Lease, LeaseTerms, Page, QueueEvent,
     ShardRecord, StoreError, StoreResult,
 };
 use crate::domain::rare::{RARE_ROUNDS, is_round};
@@ -604,15 +604,21 @@ impl JobQueue for SqlStore {
             tx.rollback().await?;
             return Ok(false);
         }
-        Sql::new(concat!(
+        // Only a job still running (as in `succeed`): a cancel committed since the fence was read
+        // dropped the accumulators, and these would be counted in a job that ended.
+        let counted = Sql::new(concat!(
             "UPDATE jobs SET stored_bytes = stored_bytes + $2, ",
             progress_sums!(),
-            " WHERE id = $1"
+            " WHERE id = $1 AND status = 'running'"
         ))
         .bind(fence.job.as_str())
         .bind(count_to_sql(partial_bytes))
         .execute(&mut tx)
         .await?;
+        if counted == 0 {
+            tx.rollback().await?;
+            return Ok(false);
+        }
         tx.commit().await?;
         Ok(true)
     }
@@ -671,13 +677,19 @@ impl JobQueue for SqlStore {
             .execute(&mut tx)
             .await?;
         }
-        Sql::new(
+        let counted = Sql::new(
             "UPDATE jobs SET stored_bytes = octet_length(spec) + \
-             (SELECT COALESCE(SUM(octet_length(partial)), 0) FROM shards WHERE job_id = $1) WHERE id = $1",
+             (SELECT COALESCE(SUM(octet_length(partial)), 0) FROM shards WHERE job_id = $1) \
+             WHERE id = $1 AND status = 'running'",
         )
         .bind(fence.job.as_str())
         .execute(&mut tx)
         .await?;
+        if counted == 0 {
+            // Cancelled since the fence was read (see `complete_encoded`).
+            tx.rollback().await?;
+            return Ok(false);
+        }
         sum_progress(&mut tx, &fence.job).await?;
         tx.commit().await?;
         Ok(true)
@@ -749,10 +761,11 @@ impl JobQueue for SqlStore {
     }
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    async fn wait_for_room(
+    async fn wait_for(
         &self,
         fence: &Fence,
         at: Option<UnixMs>,
+        awaited: Awaited,
         reason: &str,
     ) -> StoreResult<bool> {
         let mut tx = self.begin().await?;
@@ -762,15 +775,15 @@ impl JobQueue for SqlStore {
                 // One line however long it waits (its error says it waits already): a shard's
                 // history would grow every 15 s.
                 "UPDATE shards SET status = 'queued', operations_done = 0, retry_at = $6, \
-                 history = CASE WHEN error LIKE 'waiting for room: %' THEN history \
-                 ELSE history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): waiting for room: ' || $5 || '\n' END, \
-                 error = 'waiting for room: ' || $5, \
+                 history = CASE WHEN error LIKE 'waiting for %' THEN history \
+                 ELSE history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): ' || $5 || '\n' END, \
+                 error = $5, \
                  lease_until = NULL WHERE ",
                 fenced_shard!()
             ),
             fence,
         )
-        .bind(reason)
+        .bind(format!("waiting for {}: {reason}", awaited.as_str()))
         .bind(now.0 + ROOM_RETRY_MS)
         .execute(&mut tx)
         .await?;

@@ -124,15 +124,22 @@ impl Results for SqlStore {
             return Ok(None);
         };
         let finished_at = super::queue::now_or(self.dialect(), &mut tx, at).await?;
-        let stored = Sql::new(
+        // Only a job still running: a cancel that committed after the shard's fence was read
+        // has ended it (and dropped the rows written before), and stands.
+        let Some(stored) = Sql::new(
             "UPDATE jobs SET status = 'succeeded', finished_at = $2, operations_done = operations_total, \
-             stored_bytes = octet_length(spec) + $3 WHERE id = $1 RETURNING stored_bytes",
+             stored_bytes = octet_length(spec) + $3 WHERE id = $1 AND status = 'running' \
+             RETURNING stored_bytes",
         )
         .bind(fence.job.as_str())
         .bind(finished_at.0)
         .bind(count_to_sql(result.bytes()))
-        .fetch_one(&mut tx)
-        .await?;
+        .fetch_optional(&mut tx)
+        .await?
+        else {
+            tx.rollback().await?;
+            return Ok(None);
+        };
         let stored_bytes = count_from_sql(&stored, "stored_bytes")?;
         if with_the_end {
             insert_distributions(&mut tx, &fence.job, &result.rows).await?;

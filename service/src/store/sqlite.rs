@@ -246,7 +246,7 @@ async fn backfill_seeds(writer: &SqlitePool) -> StoreResult<()> {
 pub(crate) static DIALECT: Dialect = Dialect {
     now: "SELECT CAST((julianday('now') - 2440587.5) * 86400000.0 AS INTEGER) AS now",
     holds: concat!(
-        "SELECT 1 AS held FROM jobs WHERE id = $1 AND EXISTS (SELECT 1 FROM shards WHERE ",
+        "SELECT 1 AS held FROM jobs WHERE id = $1 AND status = 'running' AND EXISTS (SELECT 1 FROM shards WHERE ",
         fenced_shard!(),
         ")"
     ),
@@ -297,7 +297,13 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let url = format!("sqlite://{}", dir.join("store.db").display());
-        (SqlStore::open(&url).await.unwrap(), url, dir)
+        (
+            SqlStore::open(&url, crate::store::DEFAULT_CONNECTIONS)
+                .await
+                .unwrap(),
+            url,
+            dir,
+        )
     }
 
     fn queued(seed: u64) -> QueuedJob {
@@ -374,7 +380,9 @@ mod tests {
             .await
             .unwrap();
         drop(store);
-        let store = SqlStore::open(&url).await.unwrap();
+        let store = SqlStore::open(&url, crate::store::DEFAULT_CONNECTIONS)
+            .await
+            .unwrap();
         for (id, seed) in ids.iter().zip(seeds) {
             let record = store.job(&Owner::anonymous(), id).await.unwrap();
             assert_eq!(record.seed, seed);
