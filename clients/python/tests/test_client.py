@@ -61,6 +61,10 @@ def test_a_distribution_is_a_frame_of_its_bins(job):
     assert len(asked) == 1
     assert {"q0.5", "q0.5_ci95_lo", "q0.5_ci95_hi"} <= set(asked.columns)
     assert asked["q0.5_ci95_lo"][0] <= asked["q0.5"][0] <= asked["q0.5_ci95_hi"][0]
+    # A threshold no value passes: its probability and interval's low end are 0, still floats.
+    beyond = job.distribution("total_bounce_s", exceedance=["above:1"])
+    assert (beyond["above:1"] == 0).all()
+    assert all(beyond[c].dtype == float for c in beyond.columns if c not in ("op_start", "op_end", "n"))
 
 
 def test_lives_are_a_frame_with_censored_devices_missing_a_failure(job):

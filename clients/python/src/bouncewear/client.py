@@ -322,7 +322,8 @@ class Job:
         of each limit of its list, with their intervals),
         optionally in a range of operations and with quantiles (`[0.999]`) and exceedances
         (`["above:0.012"]`) answered after the run, each with its 95 % interval. The histograms
-        are in the JSON answer (`Client.request`) and the plots."""
+        are in the JSON answer (`Client.request`) and the plots, as is which numbers carry a
+        `reason` (a quantile a decision should not rest on) or a `bucket` resolution."""
         params: Dict[str, Any] = {"format": "csv"}
         if op_start is not None:
             params["op_start"] = op_start
@@ -332,7 +333,13 @@ class Job:
             params["quantiles"] = ",".join(repr(float(q)) for q in quantiles)
         if exceedance is not None:
             params["exceedance"] = ",".join(exceedance)
-        return _csv(self.client.request("GET", self._path(f"/distributions/{metric}"), params=params))
+        frame = _csv(self.client.request("GET", self._path(f"/distributions/{metric}"), params=params))
+        # Every statistic a float, whatever its values (a column of zeros reads as integers).
+        counts = {"op_start", "op_end", "n"}
+        for column in frame.columns:
+            if column not in counts and pd.api.types.is_integer_dtype(frame[column]):
+                frame[column] = frame[column].astype(float)
+        return frame
 
     def life(self) -> pd.DataFrame:
         """Each listed device's life: `device`, `operations_to_failure` (missing for a censored
