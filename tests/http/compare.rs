@@ -120,6 +120,18 @@ fn a_job_against_itself_and_two_designs_over_api_and_cli() {
     assert_eq!(compared["metric"], metric);
     assert!(dir.join("weibull.svg").is_file());
     assert!(!dir.join("bands.svg").exists());
+    // A flag the server refuses is said as the flag's fault, not a document's (exit 2).
+    let refused = remote(
+        &server,
+        None,
+        &["compare", &strong, &weak, "--statistics", "mean,p42"],
+    );
+    let said = String::from_utf8_lossy(&refused.stderr).into_owned();
+    assert_eq!(refused.status.code(), Some(2), "{said}");
+    assert!(
+        said.contains("`statistics`") && !said.contains("(document)"),
+        "{said}"
+    );
 
     // Refusals name what is wrong.
     let base = format!("{}/v1/jobs/{strong}/compare/{weak}", server.base());

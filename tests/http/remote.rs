@@ -401,3 +401,36 @@ fn losing_first_answer(base: &str, hold: bool) -> String {
     });
     proxy
 }
+
+/// With `--log-format json` every line a remote command writes to stderr is one JSON object: its
+/// retry notes and its last word.
+#[test]
+fn a_remote_commands_stderr_is_json_lines_when_asked() {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}", listener.local_addr().unwrap());
+    drop(listener); // nothing listens there now: refused
+    let output = remote_at(
+        &url,
+        None,
+        &["--log-format", "json", "status", "j-1", "--retries", "1"],
+    )
+    .output()
+    .unwrap();
+    assert_eq!(output.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    let lines: Vec<Value> = stderr
+        .lines()
+        .map(|line| serde_json::from_str(line).unwrap_or_else(|e| panic!("{e}: {line}")))
+        .collect();
+    assert_eq!(lines.len(), 2, "{stderr}");
+    assert!(
+        lines[0]["message"]
+            .as_str()
+            .unwrap()
+            .contains("again in 0.5 s (1 of 1)")
+    );
+    assert_eq!(
+        (lines[1]["level"].as_str(), lines[1]["exit_code"].as_u64()),
+        (Some("ERROR"), Some(1))
+    );
+}

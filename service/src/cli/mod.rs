@@ -268,12 +268,15 @@ pub enum CliError {
 
 impl CliError {
     fn exit_code(&self) -> ExitCode {
+        ExitCode::from(self.code())
+    }
+
+    /// The process's exit status: 2 for the user's input or command line, 1 otherwise.
+    fn code(&self) -> u8 {
         match self {
-            CliError::Invalid(_) | CliError::Usage(_) | CliError::Io { .. } => ExitCode::from(2),
-            CliError::Startup(error) if error.is_bad_command_line() => ExitCode::from(2),
-            CliError::Startup(_) | CliError::Ended { .. } | CliError::Failed(_) => {
-                ExitCode::FAILURE
-            }
+            CliError::Invalid(_) | CliError::Usage(_) | CliError::Io { .. } => 2,
+            CliError::Startup(error) if error.is_bad_command_line() => 2,
+            CliError::Startup(_) | CliError::Ended { .. } | CliError::Failed(_) => 1,
         }
     }
 }
@@ -298,6 +301,7 @@ impl From<BenchError> for CliError {
 
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
+    let log_format = cli.log_format;
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
@@ -305,7 +309,11 @@ pub fn main() -> ExitCode {
                 // The job as it ended goes where a success would have gone; its reason to stderr.
                 let _ = print_text(job.clone());
             }
-            eprintln!("bouncewear: {error}");
+            match log_format {
+                LogFormat::Text => eprintln!("bouncewear: {error}"),
+                // Every line on stderr one JSON object, the last one too.
+                LogFormat::Json => tracing::error!(exit_code = error.code(), "{error}"),
+            }
             error.exit_code()
         }
     }

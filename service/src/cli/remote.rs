@@ -155,8 +155,9 @@ impl Server {
                 });
             }
             retried += 1;
-            eprintln!(
-                "bouncewear: {why}; again in {:.1} s ({retried} of {})",
+            // A log line, in the process's `--log-format`.
+            tracing::warn!(
+                "{why}; again in {:.1} s ({retried} of {})",
                 pause.as_secs_f64(),
                 self.retries
             );
@@ -333,7 +334,9 @@ fn refused(status: u16, url: &str, body: &str) -> CliError {
         .collect();
     match status {
         400 | 422 if !errors.is_empty() => CliError::Invalid(InvalidInput::new(errors)),
-        400 | 413 | 415 | 422 => CliError::Invalid(InvalidInput::single(
+        // A fault of no field: a query parameter the command's flags made (`--statistics`).
+        400 => CliError::Usage(format!("{status}: {detail}")),
+        413 | 415 | 422 => CliError::Invalid(InvalidInput::single(
             &bouncewear_model::Pointer::root(),
             format!("{status}: {detail}"),
         )),
