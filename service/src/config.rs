@@ -32,9 +32,11 @@ pub struct WorkerConfig {
     )]
     pub database: String,
     /// Connections this process keeps to a PostgreSQL database at most, besides one that listens
-    /// for announcements; idle ones close after a minute. PostgreSQL's `max_connections` must
-    /// cover every process: (this + 1) for each `serve` and `worker`, plus whatever else connects
-    /// (superuser slots aside). SQLite keeps its own (one writer, four readers).
+    /// for announcements. One idle for a minute closes, but a node that polls the queue reuses
+    /// its connections in turn and keeps them: count on all of them. PostgreSQL's
+    /// `max_connections` must cover every process: (this + 1) for each `serve` and `worker`, plus
+    /// whatever else connects (superuser slots aside). SQLite keeps its own (one writer, four
+    /// readers).
     #[arg(long, env = "BOUNCEWEAR_DATABASE_CONNECTIONS", default_value_t = 8,
           value_parser = clap::value_parser!(u32).range(2..=1000))]
     pub database_connections: u32,
