@@ -1029,36 +1029,31 @@ impl Profile<'_> {
                 }
             })
             .collect();
-        let mut predicted = self.problem.within_bounds(guess);
-        predicted[j] = c;
-        let mut kept = self.theta.to_vec();
-        kept[j] = c;
-        // The sum of squares steps where a bounce is gained or lost, and a refit from one start
-        // can stop on a step short of the profile's minimum (a wear curve's roughening energy:
-        // an end 0.007 % from the estimate where the profile stays inside for 2 % more): the
-        // lower of the refits from the linear prediction and from the optimum's other values.
-        let free: Vec<usize> = (0..self.theta.len()).filter(|&k| k != j).collect();
-        let refit = |start: Vec<f64>| -> Option<f64> {
-            let residuals = self.problem.residuals(&start)?;
-            if free.is_empty() {
-                return Some(sum_of_squares(&residuals));
+        let mut start = self.problem.within_bounds(guess);
+        start[j] = c;
+        let residuals = match self.problem.residuals(&start) {
+            Some(r) => r,
+            None => {
+                start = self.theta.to_vec();
+                start[j] = c;
+                match self.problem.residuals(&start) {
+                    Some(r) => r,
+                    None => return f64::INFINITY,
+                }
             }
+        };
+        let free: Vec<usize> = (0..self.theta.len()).filter(|&k| k != j).collect();
+        let cost = if free.is_empty() {
+            sum_of_squares(&residuals)
+        } else {
             // The profile t needs the sum of squares to a small part of `RSS t^2 / (n - k)`.
             match self
                 .problem
                 .minimise(start, residuals, &free, 1e-9, |_, _| Ok(()))
             {
-                Ok(Some(minimum)) => Some(minimum.cost),
-                _ => None,
+                Ok(Some(minimum)) => minimum.cost,
+                _ => return f64::INFINITY,
             }
-        };
-        let starts = if free.is_empty() || predicted == kept {
-            vec![kept]
-        } else {
-            vec![predicted, kept]
-        };
-        let Some(cost) = starts.into_iter().filter_map(refit).min_by(f64::total_cmp) else {
-            return f64::INFINITY;
         };
         ((cost - self.cost).max(0.0) * self.degrees_of_freedom / self.cost).sqrt()
     }
