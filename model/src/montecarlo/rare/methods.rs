@@ -281,17 +281,12 @@ struct SubsetRun {
 }
 
 impl SubsetRun {
-    /// The thresholds of its intermediate levels, each with its sampler's scales, which the runs
-    /// after it keep (`None` for a run recorded without its scales).
-    fn fixed_levels(&self) -> Option<Vec<(f64, Vec<f64>)>> {
-        let (_, levels) = self.levels.split_last().expect("a run has a level");
-        (levels.len() == self.proposals.len()).then(|| {
-            levels
-                .iter()
-                .map(|&(b, _)| b)
-                .zip(self.proposals.iter().cloned())
-                .collect()
-        })
+    /// How many intermediate levels it has, whose thresholds and sampler's scales (level `i`:
+    /// `levels[i].0`, `proposals[i]`) the runs after it keep; `None` for a run recorded without
+    /// its scales.
+    fn fixed_levels(&self) -> Option<usize> {
+        let intermediate = self.levels.len() - 1;
+        (intermediate == self.proposals.len()).then_some(intermediate)
     }
 }
 
@@ -738,16 +733,16 @@ impl Estimator {
             Some(first) if run.replicate > 0 => first.fixed_levels(),
             _ => None,
         };
-        let ends = match &fixed {
-            Some(levels) => run.index as usize > levels.len(),
+        let ends = match fixed {
+            Some(levels) => run.index as usize > levels,
             None => share >= LEVEL_PROBABILITY,
         };
         if ends || failing == n {
             return Ok(self.finish(run, &level, self.threshold));
         }
-        let next = match &fixed {
-            Some(levels) => {
-                let b = levels[run.index as usize - 1].0;
+        let next = match fixed {
+            Some(_) => {
+                let b = self.runs[0].levels[run.index as usize - 1].0;
                 Some((b, (0..n).filter(|&i| level.ys[i] > b).collect()))
             }
             None => next_threshold(&level),
@@ -817,7 +812,7 @@ impl Estimator {
                 .collect(),
         };
         match fixed {
-            Some(mut levels) => run.proposal = Some(levels.swap_remove(run.index as usize - 1).1),
+            Some(_) => run.proposal = Some(self.runs[0].proposals[run.index as usize - 1].clone()),
             None => {
                 let scales = run.scales(&run.spread_of_seeds(d), run.lambda);
                 run.proposals.push(scales);
