@@ -18,7 +18,8 @@
 //! |---|---|
 //! | [`sketch`] | log-linear bucket histogram from the f64 bit pattern; quantiles within 0.2 % |
 //! | [`accumulator`] | count, min, max, shifted sums, exceedance count, sketch |
-//! | [`intervals`] | Student t 0.975 quantile, Wilson score interval |
+//! | [`intervals`] | Student t 0.975 quantile; Wilson's and Clopper-Pearson's for proportions |
+//! | [`beta`] | the regularised incomplete beta function and its inverse |
 //! | [`summary`] | the serialised `SUMMARY` and [`summarize`] |
 //! | [`regression`] | standardised regression coefficients, mergeable |
 //! | [`sobol`] | Sobol' first-order and total indices by pick-freeze, with delta-method intervals |
@@ -30,6 +31,7 @@
 //! state can cross machines and merge into the same numbers.
 
 pub mod accumulator;
+pub mod beta;
 mod bits;
 pub mod difference;
 pub mod intervals;
@@ -43,7 +45,7 @@ pub mod threshold;
 
 pub use accumulator::{Accumulator, LaneSums};
 pub use difference::{Difference, Estimate, difference};
-pub use intervals::{Z_975, student_t_975, wilson_interval};
+pub use intervals::{Z_975, proportion_interval, student_t_975, wilson_interval};
 pub use query::{QueryAnswer, QueryQuantile, level_key, query};
 pub use sketch::{Interpolated, Sketch};
 pub use summary::{Exceedance, HISTOGRAM_BINS, Histogram, QuantileSummary, Summary, summarize};

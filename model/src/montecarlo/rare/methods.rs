@@ -41,7 +41,7 @@
 //! number of threads, tasks and processes.
 
 use crate::montecarlo::Observer;
-use crate::stats::{Z_975, student_t_975, wilson_interval};
+use crate::stats::{Z_975, proportion_interval, student_t_975};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -1050,7 +1050,7 @@ impl Estimator {
         c.tail.push((self.threshold, probability));
         Some(Estimate {
             probability,
-            ci95: wilson_interval(probability, c.samples as f64, Z_975),
+            ci95: proportion_interval(probability, c.samples as f64, Z_975),
             cov: (c.hits > 0).then(|| binomial_cov(probability, c.samples)),
             evaluations: self.done,
             design_point: c.design_point,
