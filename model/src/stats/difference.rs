@@ -9,6 +9,13 @@
 //! and `a / b` by the same on `ln a - ln b` when both intervals are positive. With symmetric
 //! intervals this is the normal interval of a difference of independent estimates,
 //! `d +- z sqrt(se_a^2 + se_b^2)`; the two estimates must come from independent samples (two jobs).
+//!
+//! A quantile's value is its sketch bucket's representative, while its interval resolves within
+//! the bucket ([`Estimate::bucketed`]): the value can sit at one end of its interval, which MOVER
+//! would read as no error on that side. Such an estimate enters MOVER at its interval's midpoint
+//! (the interval then widened to hold `a - b`): two samples of one distribution with 10^5 values
+//! had p50 and p95 differences whose intervals held 0 in 74 % and 84 % of 200 pairs measured from
+//! the values, 96.5 % and 96 % from the midpoints (`montecarlo::compare`'s tests).
 
 use serde::{Deserialize, Serialize};
 
@@ -17,11 +24,35 @@ use serde::{Deserialize, Serialize};
 pub struct Estimate {
     pub value: f64,
     pub ci95: Option<[f64; 2]>,
+    /// Whether `value` is a bucket's representative that need not be the interval's centre.
+    bucketed: bool,
 }
 
 impl Estimate {
     pub fn new(value: f64, ci95: Option<[f64; 2]>) -> Self {
-        Self { value, ci95 }
+        Self {
+            value,
+            ci95,
+            bucketed: false,
+        }
+    }
+
+    /// A quantile's estimate: `value` its bucket's representative, `ci95` resolved within the
+    /// bucket, so that MOVER takes the interval's midpoint as its centre (see the module).
+    pub fn bucketed(value: f64, ci95: Option<[f64; 2]>) -> Self {
+        Self {
+            bucketed: true,
+            ..Self::new(value, ci95)
+        }
+    }
+
+    /// Where MOVER measures the interval's arms from.
+    fn centre(&self, [lo, hi]: [f64; 2]) -> f64 {
+        if self.bucketed {
+            0.5 * (lo + hi)
+        } else {
+            self.value
+        }
     }
 
     /// The interval, if it is finite and holds the value.
@@ -34,7 +65,11 @@ impl Estimate {
     /// The estimate on a log scale, when it and its interval are positive.
     fn ln(&self) -> Option<Estimate> {
         let [lo, hi] = self.interval()?;
-        (lo > 0.0).then(|| Estimate::new(self.value.ln(), Some([lo.ln(), hi.ln()])))
+        (lo > 0.0).then(|| Estimate {
+            value: self.value.ln(),
+            ci95: Some([lo.ln(), hi.ln()]),
+            bucketed: self.bucketed,
+        })
     }
 }
 
@@ -81,14 +116,16 @@ pub fn difference(a: Estimate, b: Estimate) -> Difference {
     }
 }
 
-/// The MOVER interval of `a - b`.
+/// The MOVER interval of `a - b`, holding `a - b`.
 fn mover(a: Estimate, b: Estimate) -> Option<[f64; 2]> {
     let [la, ua] = a.interval()?;
     let [lb, ub] = b.interval()?;
-    let d = a.value - b.value;
-    let lower = d - (a.value - la).hypot(ub - b.value);
-    let upper = d + (ua - a.value).hypot(b.value - lb);
-    (lower.is_finite() && upper.is_finite()).then_some([lower, upper])
+    let (ca, cb) = (a.centre([la, ua]), b.centre([lb, ub]));
+    let d = ca - cb;
+    let lower = d - (ca - la).hypot(ub - cb);
+    let upper = d + (ua - ca).hypot(cb - lb);
+    let value = a.value - b.value;
+    (lower.is_finite() && upper.is_finite()).then_some([lower.min(value), upper.max(value)])
 }
 
 #[cfg(test)]
