@@ -11,7 +11,7 @@ use bouncewear::domain::{
     Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob, ROOM_RETRY_MS,
     ScheduleBound, ScheduleDefinition, ScheduleId, ShardId, UnixMs,
 };
-use bouncewear::scheduler::{Waiting, tick};
+use bouncewear::scheduler::{RunLimits, Waiting, tick};
 use bouncewear::store::{
     self, Awaited, EncodedGroups, EncodedResult, JobRecord, Lease, LeaseTerms, NewRun, Operations,
     RetryBudget, RunSlot, ScheduleRecord, Store, StoreError,
@@ -1454,10 +1454,15 @@ async fn two_scheduler_loops_never_duplicate_a_night(url: &str) {
     let (mut waiting_a, mut waiting_b) = (Waiting::default(), Waiting::default());
     for _ in 0..5 {
         let (a, b) = tokio::join!(
-            tick(first.as_ref(), QueueBound::total(1000), now, &mut waiting_a),
+            tick(
+                first.as_ref(),
+                queue(QueueBound::total(1000)),
+                now,
+                &mut waiting_a
+            ),
             tick(
                 second.as_ref(),
-                QueueBound::total(1000),
+                queue(QueueBound::total(1000)),
                 now,
                 &mut waiting_b
             )
@@ -1493,7 +1498,12 @@ async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: 
     let now = utc("2026-11-22T08:00:00Z");
     let tick_at = async |now| {
         let mut waiting = Waiting::default();
-        let created = tick(store.as_ref(), QueueBound::total(100), now, &mut waiting);
+        let created = tick(
+            store.as_ref(),
+            queue(QueueBound::total(100)),
+            now,
+            &mut waiting,
+        );
         created.await.unwrap()
     };
     assert_eq!(tick_at(now).await, 1);
@@ -1519,6 +1529,14 @@ async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: 
     assert_eq!(store.runs(&id, 10).await.unwrap().len(), 2);
 }
 
+/// The scheduler's limits with room for every run and no bound on a job's size.
+fn queue(bound: QueueBound) -> RunLimits {
+    RunLimits {
+        queue: bound,
+        max_job_operations: u64::MAX,
+    }
+}
+
 /// A schedule whose stored template no longer validates (a rule made since) skips its run and
 /// moves on to the next night: it stayed due, skipped and logged again at every tick (a second).
 async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &str) {
@@ -1528,7 +1546,12 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
     store.insert_schedule(&schedule, SCHEDULES).await.unwrap();
     let now = utc("2026-11-22T03:00:05Z");
     let mut waiting = Waiting::default();
-    let created = tick(store.as_ref(), QueueBound::total(100), now, &mut waiting);
+    let created = tick(
+        store.as_ref(),
+        queue(QueueBound::total(100)),
+        now,
+        &mut waiting,
+    );
     assert_eq!(created.await.unwrap(), 0);
     assert!(store.runs(&schedule.id, 10).await.unwrap().is_empty());
     let stored = store
@@ -1538,6 +1561,30 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
     assert_eq!(
         stored.next_run_at,
         Some(UnixMs::from_datetime(utc("2026-11-23T03:00:00Z")))
+    );
+    // A template larger than the server now allows (a limit lowered since it was written, or
+    // another instance's) skips its run the same way: it ran, unbounded.
+    let mut large = nightly("s2", "2026-11-22T03:00:00Z");
+    large.definition.template =
+        serde_json::from_str(r#"{"devices": 100, "operations": 100}"#).unwrap();
+    store.insert_schedule(&large, SCHEDULES).await.unwrap();
+    let limits = RunLimits {
+        max_job_operations: 9_999,
+        ..queue(QueueBound::total(100))
+    };
+    let created = tick(store.as_ref(), limits, now, &mut waiting);
+    assert_eq!(created.await.unwrap(), 0);
+    assert!(store.runs(&large.id, 10).await.unwrap().is_empty());
+    let limits = RunLimits {
+        max_job_operations: 10_000,
+        ..limits
+    };
+    let next_night = utc("2026-11-23T03:00:05Z");
+    let created = tick(store.as_ref(), limits, next_night, &mut waiting);
+    assert_eq!(
+        created.await.unwrap(),
+        1,
+        "within the limit, the next night runs"
     );
 }
 
@@ -1550,7 +1597,12 @@ async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) 
     let now = utc("2026-11-22T03:00:05Z");
     let mut waiting = Waiting::default();
     for _ in 0..2 {
-        let created = tick(store.as_ref(), QueueBound::total(0), now, &mut waiting);
+        let created = tick(
+            store.as_ref(),
+            queue(QueueBound::total(0)),
+            now,
+            &mut waiting,
+        );
         assert_eq!(created.await.unwrap(), 0);
         assert!(waiting.contains(&ScheduleId::from("s1")), "warned of once");
     }
@@ -1569,7 +1621,7 @@ async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) 
         stored_per_owner: Some(1),
         ..QueueBound::total(10)
     };
-    let created = tick(store.as_ref(), over_quota, now, &mut waiting);
+    let created = tick(store.as_ref(), queue(over_quota), now, &mut waiting);
     assert_eq!(created.await.unwrap(), 1);
     assert!(
         !waiting.contains(&ScheduleId::from("s1")),

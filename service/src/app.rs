@@ -146,7 +146,10 @@ impl Application {
         let stopping = state.shutdown.clone();
         let scheduler = tokio::spawn(crate::scheduler::run(
             Arc::clone(&state.store),
-            config.queue_bound(),
+            crate::scheduler::RunLimits {
+                queue: config.queue_bound(),
+                max_job_operations: config.max_job_operations,
+            },
             Arc::clone(&state.wake),
             stopping.clone(),
         ));

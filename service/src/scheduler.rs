@@ -15,7 +15,7 @@ const TICK: Duration = Duration::from_secs(1);
 
 pub async fn run(
     store: Arc<dyn Store>,
-    bound: QueueBound,
+    limits: RunLimits,
     wake: Arc<Notify>,
     mut shutdown: watch::Receiver<bool>,
 ) {
@@ -24,7 +24,7 @@ pub async fn run(
     // not every tick (a second) between, as when the disk stays below --min-free-disk-mb.
     let mut failing = 0_u64;
     while !*shutdown.borrow() {
-        let ticked = tick(store.as_ref(), bound, Utc::now(), &mut waiting).await;
+        let ticked = tick(store.as_ref(), limits, Utc::now(), &mut waiting).await;
         if ticked.is_ok() && failing > 0 {
             tracing::info!(
                 failed_ticks = failing,
@@ -67,11 +67,19 @@ impl Waiting {
     }
 }
 
+/// What the server allows the jobs its schedules make: room in the queue, and each one's size (a
+/// run larger than `max_job_operations` is skipped, as a job submitted now would be refused).
+#[derive(Debug, Clone, Copy)]
+pub struct RunLimits {
+    pub queue: QueueBound,
+    pub max_job_operations: u64,
+}
+
 /// One pass over the due schedules at `now`; returns how many jobs it created. `waiting` carries
 /// the schedules waiting for room in the queue from one tick to the next.
 pub async fn tick(
     store: &dyn Store,
-    bound: QueueBound,
+    limits: RunLimits,
     now: DateTime<Utc>,
     waiting: &mut Waiting,
 ) -> StoreResult<usize> {
@@ -89,7 +97,12 @@ pub async fn tick(
             continue;
         };
         let next = timetable.next_after(now).map(UnixMs::from_datetime);
-        let job = match definition.job_at(schedule.owner.clone(), due, UnixMs::from_datetime(now)) {
+        let job = match definition.job_at(
+            schedule.owner.clone(),
+            due,
+            UnixMs::from_datetime(now),
+            limits.max_job_operations,
+        ) {
             Ok(job) => job,
             Err(invalid) => {
                 // Moved past this run, so that it is said once a run, not at every tick.
@@ -105,7 +118,7 @@ pub async fn tick(
             scheduled_for: due,
             manual: false,
         };
-        let made = match store.create_run(slot, job, bound).await {
+        let made = match store.create_run(slot, job, limits.queue).await {
             // Deleted since it was read: the other schedules still run this tick.
             Err(StoreError::NotFound { .. }) => {
                 waiting.0.remove(&schedule.id);

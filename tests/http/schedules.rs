@@ -293,3 +293,31 @@ fn a_scheduler_tick_failing_every_second_is_logged_once() {
         .count();
     assert_eq!(failed, 1, "{logged:#?}");
 }
+
+/// A run now is refused, as a job submitted now would be, when the stored template is larger than
+/// this server allows: another instance on the database, or this one restarted with a lower
+/// `--max-job-operations`, ran it unbounded.
+#[test]
+fn a_run_larger_than_this_server_allows_is_refused() {
+    let db = temp_db("schedule-size");
+    let roomy = TestApp::start(&db, &["--workers", "0"]);
+    let body = json!({"name": "n", "cron": "0 3 * * *",
+                      "template": {"devices": 100, "operations": 100}});
+    let created = post(&roomy.url("/v1/schedules"), &body.to_string(), None);
+    assert_eq!(created.status, 201, "{}", created.body);
+    let id = created.json()["id"].as_str().unwrap().to_owned();
+    let strict = TestApp::start(&db, &["--workers", "0", "--max-job-operations", "1000"]);
+    let refused = post(&strict.url(&format!("/v1/schedules/{id}/run")), "", None);
+    let problem = assert_problem(&refused, 409);
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(
+        detail.contains("/template/devices") && detail.contains("1000"),
+        "{problem}"
+    );
+    assert!(
+        get(&strict.url("/v1/jobs"), None).json()["jobs"]
+            .as_array()
+            .unwrap()
+            .is_empty()
+    );
+}

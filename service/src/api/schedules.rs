@@ -322,7 +322,7 @@ pub async fn run_schedule_now(
         }
         let job = schedule
             .definition
-            .job_at(owner.clone(), at, now)
+            .job_at(owner.clone(), at, now, state.config.max_job_operations)
             .map_err(|invalid| {
                 ApiError::Conflict(format!(
                     "the schedule's stored template no longer validates ({invalid}): PUT the \

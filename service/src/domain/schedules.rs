@@ -55,14 +55,20 @@ pub struct ScheduleDefinition {
 
 impl ScheduleDefinition {
     /// The job this schedule runs at `due`: its template (a seed is drawn for each run when the
-    /// template has none), named after the schedule and the due time.
+    /// template has none), named after the schedule and the due time. Refused, as a job submitted
+    /// now would be, when the template no longer validates or is larger than the server allows
+    /// (`max_job_operations`: a limit lowered since the schedule was written, or another
+    /// instance's on a shared database).
     pub fn job_at(
         &self,
         owner: Owner,
         due: UnixMs,
         now: UnixMs,
+        max_job_operations: u64,
     ) -> Result<QueuedJob, InvalidInput> {
-        let job = Job::new(self.template.clone(), draw_seed, &Pointer::root())?;
+        let template = Pointer::root().child("template");
+        let job = Job::new(self.template.clone(), draw_seed, &template)?;
+        job.check_size(max_job_operations, &template)?;
         let name = format!("{} @ {}", self.name, due.to_rfc3339());
         Ok(QueuedJob::new(&job, owner, Some(name), now))
     }
