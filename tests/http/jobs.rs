@@ -1351,3 +1351,41 @@ fn a_small_job_behind_a_large_one_finishes_in_seconds_for_any_key() {
     );
     assert_eq!(reply(cancel.call()).status, 200);
 }
+
+/// A job that asks no life analysis or rare event is 404 at those parts whatever its status: they
+/// never come, so a client waiting out a 409 would wait in vain. One that asks is 409 until it
+/// succeeds.
+#[test]
+fn parts_a_job_never_has_are_404_before_it_ends() {
+    let server = TestApp::start(&temp_db("never-parts"), &["--workers", "0"]);
+    let plain = post(
+        &server.url("/v1/jobs"),
+        r#"{"devices": 2, "operations": 2}"#,
+        None,
+    );
+    assert_eq!(plain.status, 202, "{}", plain.body);
+    let plain = plain.json()["id"].as_str().unwrap().to_owned();
+    let life = get(&server.url(&format!("/v1/jobs/{plain}/life")), None);
+    assert!(
+        assert_problem(&life, 404)["detail"]
+            .as_str()
+            .unwrap()
+            .contains("no failure criteria")
+    );
+    let rare = get(&server.url(&format!("/v1/jobs/{plain}/rare_event")), None);
+    assert!(
+        assert_problem(&rare, 404)["detail"]
+            .as_str()
+            .unwrap()
+            .contains("asks no rare event")
+    );
+    let failing = post(
+        &server.url("/v1/jobs"),
+        r#"{"devices": 2, "operations": 2, "failure": {"total_bounce_s": {"above": 0.001}}}"#,
+        None,
+    );
+    assert_eq!(failing.status, 202, "{}", failing.body);
+    let failing = failing.json()["id"].as_str().unwrap().to_owned();
+    let life = get(&server.url(&format!("/v1/jobs/{failing}/life")), None);
+    assert_problem(&life, 409);
+}

@@ -1042,11 +1042,21 @@ pub async fn get_life(
 ) -> Result<Response, ApiError> {
     let Query(query) = query?;
     let _place = super::limits::take_place(&state.parsing).await?;
-    let result = succeeded_result(&state, &owner, &id).await?;
-    let Some(mut life) = result.life else {
-        return Err(ApiError::NotFound(format!(
+    let no_life = || {
+        ApiError::NotFound(format!(
             "job {id} has no failure criteria, so no life analysis"
-        )));
+        ))
+    };
+    let result = result_asking(
+        &state,
+        &owner,
+        &id,
+        |spec| !spec.failure.is_empty(),
+        no_life,
+    )
+    .await?;
+    let Some(mut life) = result.life else {
+        return Err(no_life());
     };
     match (query.weibayes_beta, query.confidence) {
         (Some(beta), confidence) => {
@@ -1119,11 +1129,21 @@ pub async fn get_rare_event(
 ) -> Result<Response, ApiError> {
     let Query(query) = query?;
     let _place = super::limits::take_place(&state.parsing).await?;
-    let result = succeeded_result(&state, &owner, &id).await?;
-    let Some(rare) = result.rare_event else {
-        return Err(ApiError::NotFound(format!(
+    let no_rare_event = || {
+        ApiError::NotFound(format!(
             "job {id} asks no rare event: submit it with `rare_event`"
-        )));
+        ))
+    };
+    let result = result_asking(
+        &state,
+        &owner,
+        &id,
+        |spec| spec.rare_event.is_some(),
+        no_rare_event,
+    )
+    .await?;
+    let Some(rare) = result.rare_event else {
+        return Err(no_rare_event());
     };
     Ok(match Format::negotiate(query.format, &headers) {
         Format::Json => immutable(&state, &headers, JSON, to_json(&rare)?),
@@ -1187,6 +1207,23 @@ pub async fn succeeded_result(
     id: &JobId,
 ) -> Result<JobResult, ApiError> {
     succeeded(state, owner, id).await?;
+    stored_result(state, id).await
+}
+
+/// The Result of a succeeded job whose spec `asks` for a part of it: `missing` (a 404) when it
+/// does not, whatever the job's status, since it never will; 409 before the job succeeds.
+async fn result_asking(
+    state: &AppState,
+    owner: &Owner,
+    id: &JobId,
+    asks: impl FnOnce(&JobSpec) -> bool,
+    missing: impl FnOnce() -> ApiError,
+) -> Result<JobResult, ApiError> {
+    let (record, spec) = state.store.job_with_spec(owner, id).await?;
+    if !asks(&spec) {
+        return Err(missing());
+    }
+    has_succeeded(record)?;
     stored_result(state, id).await
 }
 
