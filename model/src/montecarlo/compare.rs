@@ -144,6 +144,8 @@ pub fn compare(
         );
     }
     let mut missing: BTreeMap<&str, usize> = BTreeMap::new();
+    // An exceedance beyond a different limit in each job: two different probabilities.
+    let mut different_limits = None;
     let bins: Vec<BinComparison> = bins_a
         .iter()
         .filter_map(|(start, end, sa)| {
@@ -151,6 +153,13 @@ pub fn compare(
             let statistics = statistics
                 .iter()
                 .filter_map(|&statistic| {
+                    if let (Statistic::Exceedance, Some(ea), Some(eb)) =
+                        (statistic, &sa.exceedance, &sb.exceedance)
+                        && ea.limit != eb.limit
+                    {
+                        different_limits = Some((ea.limit, eb.limit));
+                        return None;
+                    }
                     let pair = statistic.of(sa).zip(statistic.of(sb));
                     if pair.is_none() {
                         *missing.entry(statistic.name()).or_default() += 1;
@@ -179,6 +188,12 @@ pub fn compare(
             "`{name}` is missing from {count} bin(s) of one job or both (`exceedance` compares \
              the metric's one limit, `\"limits\": {{METRIC: x}}`; a list of thresholds is not \
              compared)"
+        ));
+    }
+    if let Some((limit_a, limit_b)) = different_limits {
+        notes.push(format!(
+            "the jobs' limits on `{metric}` differ ({limit_a} and {limit_b}): `exceedance`, the \
+             probability beyond each job's own limit, is not compared (give both the same limit)"
         ));
     }
     let life = match (&a.life, &b.life) {

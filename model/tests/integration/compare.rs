@@ -185,3 +185,40 @@ fn exceedance_of_a_list_of_thresholds_is_noted_as_not_compared() {
         compared.notes
     );
 }
+
+/// Two jobs with different limits on the metric have exceedances of different events: not
+/// compared, and noted (it answered a significant difference between two jobs of one design).
+#[test]
+fn exceedances_beyond_different_limits_are_noted_not_compared() {
+    let limited = |seed: u64, limit: f64| {
+        run_job(
+            &job(json!({
+                "devices": 8, "operations": 10, "seed": seed, "metrics": ["e1"],
+                "limits": {"e1": limit}
+            })),
+            &Silent,
+        )
+        .unwrap()
+    };
+    let statistics = [Statistic::Mean, Statistic::parse("exceedance").unwrap()];
+    let (a, b) = (limited(1, 0.6), limited(2, 0.55));
+    let compared = compare(&a, &b, "e1", &statistics, &DEFAULT_B_LIVES).unwrap();
+    assert!(compared.bins.iter().all(|bin| {
+        bin.statistics.contains_key("mean") && !bin.statistics.contains_key("exceedance")
+    }));
+    assert!(
+        compared
+            .notes
+            .iter()
+            .any(|note| note.contains("limits on `e1` differ (0.6 and 0.55)")),
+        "{:?}",
+        compared.notes
+    );
+    let same = compare(&a, &limited(3, 0.6), "e1", &statistics, &DEFAULT_B_LIVES).unwrap();
+    assert!(same.notes.is_empty(), "{:?}", same.notes);
+    assert!(
+        same.bins
+            .iter()
+            .all(|bin| bin.statistics.contains_key("exceedance"))
+    );
+}
