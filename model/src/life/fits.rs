@@ -248,18 +248,23 @@ pub fn anderson_darling(
     ad.is_finite().then_some(ad)
 }
 
-/// A warning when another distribution fits the lives clearly better than the Weibull by AICc.
-/// The exponential is never that one: it is the Weibull of shape 1, so it wins by AICc only
-/// through its one parameter fewer (by up to about 2.04, when the Weibull's shape comes out near
-/// 1, in 16 % of exponential samples), and the Weibull's B-lives then have the very shape the
-/// lives have.
-pub fn weibull_warning(fits: &[Fit]) -> Option<String> {
+/// The distribution that fits the lives clearly better than the Weibull by AICc (by more than
+/// [`AICC_SUPPORT`]), with its AICc's lead, if one does. The exponential is never that one: it is
+/// the Weibull of shape 1, so it wins by AICc only through its one parameter fewer (by up to about
+/// 2.04, when the Weibull's shape comes out near 1, in 16 % of exponential samples), and the
+/// Weibull's B-lives then have the very shape the lives have.
+pub fn better_than_weibull(fits: &[Fit]) -> Option<(&Fit, f64)> {
     let best = fits
         .iter()
         .find(|fit| fit.distribution != Family::Exponential)?;
     let weibull = fits.iter().find(|f| f.distribution == Family::Weibull)?;
     let difference = weibull.aicc? - best.aicc?;
-    (difference > AICC_SUPPORT).then(|| {
+    (difference > AICC_SUPPORT).then_some((best, difference))
+}
+
+/// The warning that [`better_than_weibull`] found a better fit.
+pub fn weibull_warning(fits: &[Fit]) -> Option<String> {
+    better_than_weibull(fits).map(|(best, difference)| {
         format!(
             "the {} fits these lives better than the two-parameter Weibull (AICc lower by {difference:.1}): \
              the Weibull's B-lives extrapolate a shape the lives do not have",

@@ -355,9 +355,9 @@ fn draw_fit(svg: &mut Svg, plane: &Plane, w: &Weibull, colour: &str) -> bool {
     has_bounds
 }
 
-/// The distribution that fits the lives clearly better than the Weibull line (`fit_warning`).
+/// The distribution that fits the lives clearly better than the Weibull line (`fit_warning`'s).
 fn better_fit(life: &LifeAnalysis) -> Option<&Fit> {
-    life.fit_warning.as_ref().and(life.fits.first())
+    bouncewear_model::life::fits::better_than_weibull(&life.fits).map(|(fit, _)| fit)
 }
 
 /// `fit`'s CDF as a curve on the Weibull scale, clipped to the frame.
