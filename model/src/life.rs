@@ -43,7 +43,11 @@ pub enum LifeError {
     /// All failures at one time. Then either no device outlived it and the likelihood grows without
     /// bound as `beta` grows, or `beta` is fixed by where the censoring falls rather than by the
     /// spread of the failures: a 2-parameter fit needs two distinct failure times.
-    #[error("all {failures} failures at the same time {time}: need two distinct failure times")]
+    #[error(
+        "all {failures} failures at the same time {time}: with no spread of failure times the \
+         Weibull's shape is set by where the censoring falls alone (or grows without bound), so \
+         this fit needs two distinct failure times"
+    )]
     SingleFailureTime { failures: usize, time: f64 },
     /// A guard against overflow in a pathological data set; not expected for operation counts.
     #[error("the Weibull fit is not finite (beta {beta}, eta {eta})")]
