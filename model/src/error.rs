@@ -177,7 +177,7 @@ pub const READ_PAST_BYTES: usize = 4 << 20;
 /// without them comes back with the faults, for the caller's own rules to check the rest
 /// ([`with_faults`]). A fault it cannot leave out (a missing field, an item of a list, the whole
 /// document), or one in an object it left a member out of, ends the reading: the faults so far
-/// are the error.
+/// are the error. So does one more after the last reading, with a last entry at `""` saying so.
 pub fn read_past_faults<T: DeserializeOwned>(
     text: &str,
     array_fields: &[&str],
@@ -210,11 +210,20 @@ pub fn read_past_faults<T: DeserializeOwned>(
         if !consequence {
             faults.extend(invalid_from_serde(pointer, error.inner()).errors);
         }
-        let removed = !consequence
-            && faults.len() < readings
-            && !detail.starts_with("missing field")
-            && leave_out(&mut value, error.path());
-        if !removed {
+        let removable = !consequence && !detail.starts_with("missing field");
+        if removable && faults.len() >= readings {
+            // Read past as often as it may be: the rest of the document is unread, and the list
+            // says so rather than look whole.
+            faults.push(FieldError {
+                pointer: String::new(),
+                detail: format!(
+                    "read past {readings} faults and stopped: the rest of the document is not \
+                     checked yet; mend these and send it again"
+                ),
+            });
+            return Err(InvalidInput::new(faults));
+        }
+        if !(removable && leave_out(&mut value, error.path())) {
             return Err(InvalidInput::new(faults));
         }
         let (parent, member) = at.rsplit_once('/').unwrap_or(("", ""));
@@ -726,15 +735,26 @@ mod tests {
             let list = vec!["1000000"; items].join(",");
             format!(r#"{{{}, "list": [{list}]}}"#, unknown.join(","))
         };
+        // The members named, and whether a last entry says the reading stopped with more to read.
         let faults = |text: &str| match read_past_faults::<Doc>(text, &["/list"]) {
-            Ok(_) => 0,
-            Err(invalid) => invalid.errors().len(),
+            Ok((_, faults)) => (faults.len(), false),
+            Err(invalid) => {
+                let errors = invalid.errors();
+                let stopped = errors.last().is_some_and(|last| {
+                    last.pointer.is_empty() && last.detail.starts_with("read past")
+                });
+                (errors.len() - usize::from(stopped), stopped)
+            }
         };
-        assert_eq!(faults(&document(10)), MAX_FAULTS);
+        assert_eq!(faults(&document(10)), (MAX_FAULTS, true));
         // About 2 MB: read twice.
         let large = document(250_000);
         assert_eq!(READ_PAST_BYTES / large.len(), 2, "{}", large.len());
-        assert_eq!(faults(&large), 2);
+        assert_eq!(faults(&large), (2, true));
+        // One fault fewer than the readings: all of it read, so no last entry.
+        let fewer: Vec<String> = (1..MAX_FAULTS).map(|i| format!(r#""x{i}": 0"#)).collect();
+        let whole = format!(r#"{{{}, "list": [1]}}"#, fewer.join(","));
+        assert_eq!(faults(&whole), (MAX_FAULTS - 1, false));
     }
 
     #[test]
