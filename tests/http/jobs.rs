@@ -1247,6 +1247,24 @@ fn a_retry_with_the_same_idempotency_key_gets_the_first_resource_and_another_bod
     );
     assert_key_reused(&changed);
     assert_problem(&post_with("/v1/jobs", "two words", &job), 400);
+    // Two keys in one request: which one was meant is not the server's to guess (it keyed on
+    // the first, and replayed it to a request that sent the first alone).
+    let twice = reply(
+        agent()
+            .post(&server.url("/v1/jobs"))
+            .header("content-type", "application/json")
+            .header("idempotency-key", "retry-1")
+            .header("idempotency-key", "retry-2")
+            .send(&job.to_string()),
+    );
+    let problem = assert_problem(&twice, 400);
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("more than once"),
+        "{problem}"
+    );
 
     // Keys are per collection: the same key makes one schedule.
     let schedule = json!({"name": "n", "cron": "0 3 * * *", "time_zone": "UTC",

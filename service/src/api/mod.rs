@@ -306,9 +306,17 @@ pub fn idempotency_key(
     headers: &axum::http::HeaderMap,
     body: &str,
 ) -> Result<Option<IdempotencyKey>, ApiError> {
-    let Some(value) = headers.get(IDEMPOTENCY_KEY) else {
+    let mut values = headers.get_all(IDEMPOTENCY_KEY).iter();
+    let Some(value) = values.next() else {
         return Ok(None);
     };
+    if values.next().is_some() {
+        // Which one the client meant is not ours to guess: keying on the first replayed it for a
+        // request that sent the first alone.
+        return Err(ApiError::BadRequest(
+            "Idempotency-Key is given more than once: send one key".to_owned(),
+        ));
+    }
     let key = value
         .to_str()
         .map_err(|_| ApiError::BadRequest("Idempotency-Key must be visible ASCII".to_owned()))?;
