@@ -1383,6 +1383,13 @@ fn parts_a_job_never_has_are_404_before_it_ends() {
     );
     assert_eq!(plain.status, 202, "{}", plain.body);
     let plain = plain.json()["id"].as_str().unwrap().to_owned();
+    // A UUID is case-insensitive on input: the uppercase id names the same job.
+    let upper = get(
+        &server.url(&format!("/v1/jobs/{}", plain.to_uppercase())),
+        None,
+    );
+    assert_eq!(upper.status, 200, "{}", upper.body);
+    assert_eq!(upper.json()["id"], plain.as_str());
     let life = get(&server.url(&format!("/v1/jobs/{plain}/life")), None);
     assert!(
         assert_problem(&life, 404)["detail"]

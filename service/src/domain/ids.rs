@@ -5,13 +5,21 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 
 /// Declares a string identity: built from any text (a path segment or a stored row may name
-/// something that does not exist; the store says so), generated as a UUID v4 for new things.
+/// something that does not exist; the store says so), generated as a UUID v4 for new things. Text
+/// that is a UUID is read in its canonical form, lowercase and hyphenated, since UUIDs are
+/// case-insensitive on input (RFC 9562): `E0B5...` names the job `e0b5...`.
 macro_rules! text_id {
     ($(#[$doc:meta])* $name:ident) => {
         $(#[$doc])*
-        #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+        #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
         #[serde(transparent)]
         pub struct $name(String);
+
+        impl<'de> Deserialize<'de> for $name {
+            fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+                String::deserialize(deserializer).map(Self::from)
+            }
+        }
 
         impl $name {
             /// A fresh, unique id.
@@ -26,13 +34,16 @@ macro_rules! text_id {
 
         impl From<String> for $name {
             fn from(text: String) -> Self {
-                Self(text)
+                match uuid::Uuid::try_parse(&text) {
+                    Ok(uuid) => Self(uuid.hyphenated().to_string()),
+                    Err(_) => Self(text),
+                }
             }
         }
 
         impl From<&str> for $name {
             fn from(text: &str) -> Self {
-                Self(text.to_owned())
+                Self::from(text.to_owned())
             }
         }
 
@@ -122,6 +133,16 @@ impl UnixMs {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_uuid_in_any_case_names_the_same_id_and_other_text_stays_as_it_is() {
+        let id = JobId::generate();
+        let upper = id.as_str().to_uppercase();
+        assert_eq!(JobId::from(upper.as_str()), id);
+        let read: ScheduleId = serde_json::from_str(&format!("\"{upper}\"")).unwrap();
+        assert_eq!(read.as_str(), id.as_str());
+        assert_eq!(JobId::from("Nightly-1").as_str(), "Nightly-1");
+    }
 
     #[test]
     fn an_owner_is_the_sha256_of_its_key() {
