@@ -582,7 +582,15 @@ fn invalid_from_serde(pointer: Pointer, error: &serde_json::Error) -> InvalidInp
         Category::Syntax | Category::Eof | Category::Io => {
             InvalidInput::malformed(&pointer, format!("malformed JSON: {error}"))
         }
-        Category::Data => InvalidInput::single(&pointer, in_plain_words(&error.to_string())),
+        Category::Data => {
+            let message = in_plain_words(&error.to_string());
+            // A missing field is named by its own pointer, not its object's.
+            let missing = message
+                .strip_prefix("missing field `")
+                .and_then(|rest| rest.split_once('`'))
+                .map(|(field, _)| pointer.child(field));
+            InvalidInput::single(missing.as_ref().unwrap_or(&pointer), message)
+        }
     }
 }
 
@@ -658,7 +666,7 @@ mod tests {
             let invalid = from_json::<Doc>(text, &["/fit"]).unwrap_err();
             invalid.pointers().into_iter().map(str::to_owned).collect()
         };
-        assert_eq!(named(r#"{"bogus": 1}"#), ["/bogus", ""]);
+        assert_eq!(named(r#"{"bogus": 1}"#), ["/bogus", "/fit"]);
         assert_eq!(named(r#"{"fit": 5}"#), ["/fit"]);
     }
 
