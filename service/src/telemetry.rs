@@ -125,6 +125,8 @@ pub(crate) fn prometheus_builder() -> PrometheusBuilder {
 /// Connections closed for a new client at the connection limit (`connections`).
 /// The bytes of large responses held until their clients read them (a gauge).
 pub const RESPONSE_BYTES_HELD: &str = "bouncewear_response_bytes_held";
+/// Large responses built and waiting for room among the bytes held (a gauge).
+pub const RESPONSES_WAITING: &str = "bouncewear_responses_waiting";
 pub const CONNECTIONS_SHED: &str = "bouncewear_connections_shed_total";
 
 /// Connections closed because their client read none of a response for the body timeout
@@ -156,6 +158,10 @@ fn describe_metrics() {
     metrics::describe_gauge!(
         RESPONSE_BYTES_HELD,
         "Bytes of large responses held until their clients read them (--max-response-mb)."
+    );
+    metrics::describe_gauge!(
+        RESPONSES_WAITING,
+        "Large responses built and waiting for room among the bytes held (at most 4)."
     );
     metrics::describe_counter!(
         "bouncewear_responses_refused_total",

@@ -439,6 +439,36 @@ fn large_responses_held_for_unread_clients_are_bounded() {
         get(&server.url(&format!("/v1/jobs/{id}")), None).status,
         200
     );
+    // Four built responses wait for room at a time; a fifth is refused at once, while the four
+    // still wait, rather than held built for 10 s (100 such clients took 3.3 GB: a probe).
+    let (done, waited) = std::sync::mpsc::channel();
+    let waiting: Vec<_> = (0..4)
+        .map(|_| {
+            let (result, done) = (result.clone(), done.clone());
+            std::thread::spawn(move || done.send(get(&result, None).status).unwrap())
+        })
+        .collect();
+    let gauge = |name: &str| {
+        let text = get(&server.url("/metrics"), None).body;
+        text.lines()
+            .find_map(|line| line.strip_prefix(name))
+            .map_or(0.0, |value| value.trim().parse::<f64>().unwrap())
+    };
+    let started = Instant::now();
+    while gauge("bouncewear_responses_waiting ") < 4.0 {
+        assert!(started.elapsed() < Duration::from_secs(60), "never waiting");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let fifth = get(&result, None);
+    assert_problem(&fifth, 503);
+    assert!(
+        waited.try_recv().is_err(),
+        "the fifth was refused while the four still waited"
+    );
+    for waiter in waiting {
+        waiter.join().unwrap();
+    }
+    assert_eq!(waited.iter().take(4).collect::<Vec<_>>(), [503; 4]);
     drop(unread);
     let read = get(&result, None);
     assert_eq!(read.status, 200);

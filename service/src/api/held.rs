@@ -5,13 +5,15 @@
 //! takes its size from a budget of `--max-response-mb` until its last chunk is handed to the
 //! connection (hyper queues a few hundred KB of a connection's output beyond that, as for any
 //! response) or it is dropped; when the budget is spent it waits up to [`WAIT`] for room, then is
-//! 503 with Retry-After, its bytes freed. So the memory of responses is at most the budget, the
-//! responses waiting for room (each holding a request slot, for 10 s at most) and each
-//! connection's queue. One response larger than the whole budget is served alone; a HEAD, whose
-//! body is never sent, takes nothing.
+//! 503 with Retry-After, its bytes freed. At most [`WAITING`] responses wait at a time, each
+//! built whole: one more is 503 at once, its bytes freed (100 clients asking for a 44 MB Result
+//! took a server to 3.3 GB, each response built and waiting: a probe). So the memory of responses
+//! is at most the budget, [`WAITING`] responses and each connection's queue, besides those being
+//! built (the handlers that build large ones take a place, one per core). One response larger
+//! than the whole budget is served alone; a HEAD, whose body is never sent, takes nothing.
 
 use super::error::ApiError;
-use crate::telemetry::RESPONSE_BYTES_HELD;
+use crate::telemetry::{RESPONSE_BYTES_HELD, RESPONSES_WAITING};
 use axum::body::{Body, Bytes};
 use axum::extract::{Request, State};
 use axum::middleware::Next;
@@ -28,12 +30,15 @@ use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 pub const HELD_FROM: u64 = 64 << 10;
 /// How long a response waits for room in the budget.
 pub const WAIT: Duration = Duration::from_secs(10);
+/// How many built responses may wait for room at a time.
+pub const WAITING: usize = 4;
 
-/// The budget, in KiB.
+/// The budget, in KiB, and the places to wait for it.
 #[derive(Clone)]
 pub struct Held {
     kib: Arc<Semaphore>,
     total_kib: u32,
+    waiting: Arc<Semaphore>,
 }
 
 impl Held {
@@ -44,6 +49,7 @@ impl Held {
         Self {
             kib: Arc::new(Semaphore::new(total_kib as usize)),
             total_kib,
+            waiting: Arc::new(Semaphore::new(WAITING)),
         }
     }
 }
@@ -64,8 +70,25 @@ pub async fn hold(State(held): State<Held>, request: Request, next: Next) -> Res
     let kib = u32::try_from(bytes.div_ceil(1024))
         .unwrap_or(u32::MAX)
         .min(held.total_kib);
-    match tokio::time::timeout(WAIT, Arc::clone(&held.kib).acquire_many_owned(kib)).await {
-        Ok(Ok(permit)) => {
+    let permit = match Arc::clone(&held.kib).try_acquire_many_owned(kib) {
+        Ok(permit) => Ok(permit),
+        // No room now: wait for it in one of the few places to wait, or be refused at once.
+        Err(_) => match Arc::clone(&held.waiting).try_acquire_owned() {
+            Ok(_waiting) => {
+                metrics::gauge!(RESPONSES_WAITING).increment(1.0);
+                let waited =
+                    tokio::time::timeout(WAIT, Arc::clone(&held.kib).acquire_many_owned(kib)).await;
+                metrics::gauge!(RESPONSES_WAITING).decrement(1.0);
+                match waited {
+                    Ok(Ok(permit)) => Ok(permit),
+                    _ => Err(()),
+                }
+            }
+            Err(_) => Err(()),
+        },
+    };
+    match permit {
+        Ok(permit) => {
             metrics::gauge!(RESPONSE_BYTES_HELD).increment(bytes as f64);
             response.map(|body| {
                 Body::new(Holding {

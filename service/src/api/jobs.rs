@@ -615,6 +615,10 @@ pub async fn get_result(
     if let Some(unchanged) = not_modified(&state, &headers, identity.as_bytes()) {
         return Ok(unchanged);
     }
+    // A Result can be tens of MB once decompressed: one read at a time per core, so that many
+    // clients asking at once neither build them all (100 took 3.3 GB) nor take every connection
+    // to the database from the health check.
+    let _place = super::limits::take_place(&state.parsing).await?;
     let result = state
         .store
         .result_json(&id)
