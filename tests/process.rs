@@ -62,6 +62,22 @@ fn sigterm_hands_a_running_job_back_to_the_queue() {
         job["status"] == "queued" || job["status"] == "running",
         "{job}"
     );
+    // The attempt handed back is in its shard's history (one line per attempt that did not
+    // finish; it had none).
+    let shards = get(&server.url(&format!("/v1/jobs/{id}/shards")), None).json();
+    let handed_back = shards["shards"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|shard| {
+            shard["history"].as_array().is_some_and(|lines| {
+                lines
+                    .iter()
+                    .any(|line| line.as_str().unwrap().ends_with("handed back at shutdown"))
+            })
+        })
+        .count();
+    assert!(handed_back >= 1, "{shards}");
     delete(&server.url(&format!("/v1/jobs/{id}")));
 }
 

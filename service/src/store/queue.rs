@@ -797,7 +797,9 @@ impl JobQueue for SqlStore {
         let mut tx = self.begin().await?;
         let updated = fenced(
             concat!(
-                "UPDATE shards SET status = 'queued', lease_until = NULL, operations_done = 0 WHERE ",
+                "UPDATE shards SET status = 'queued', lease_until = NULL, operations_done = 0, \
+                 history = history || 'attempt ' || attempt || ' (' || \
+                 COALESCE(lease_owner, '?') || '): handed back at shutdown\n' WHERE ",
                 fenced_shard!()
             ),
             fence,
