@@ -1,8 +1,8 @@
 //! Two estimates compared, each with its own 95 % interval: their difference and their ratio with
 //! intervals by the method of variance estimates recovery (MOVER; Zou & Donner, *Statistics in
 //! Medicine* 27, 2008; Donner & Zou, *Stat. Methods Med. Res.* 21, 2012). Each side's interval keeps
-//! its own shape (a Woodruff interval of a quantile, a log-Wald interval of a B-life, Wilson's of a
-//! probability), so the comparison claims no more than the two intervals do:
+//! its own shape (a Woodruff interval of a quantile, a log-Wald interval of a B-life, Wilson's or
+//! Clopper and Pearson's of a probability), so the comparison claims no more than the two intervals do:
 //!
 //! `a - b`: `[d - sqrt((a - l_a)^2 + (u_b - b)^2), d + sqrt((u_a - a)^2 + (b - l_b)^2)]`,
 //!

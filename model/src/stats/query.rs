@@ -66,7 +66,8 @@ pub fn level_key(level: f64) -> String {
 /// [`MIN_TAIL_UNITS`](super::summary::MIN_TAIL_UNITS) independent values beyond it, or one group)
 /// has no value, only the reason: its interval would end at the sample's extreme.
 ///
-/// A threshold's probability is exact, `c / n` with Wilson's interval and the design effect of the
+/// A threshold's probability is exact, `c / n` with its proportion interval
+/// ([`super::intervals::proportion_interval`]) and the design effect of the
 /// groups' shares (as the summary's `exceedance`), when every value was compared with it: a
 /// threshold the groups counted as they ran (the job's limit, or one of its list), or one that no
 /// value shares a sketch bucket with (each group's exact `[min, max]` settles the values outside

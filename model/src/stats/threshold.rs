@@ -70,7 +70,8 @@ pub struct ThresholdExceedance {
     /// The share of values beyond the threshold. Bucket-limited, the values in the threshold's
     /// bucket count as spread evenly over its width (within each group's exact min and max).
     pub probability: f64,
-    /// Its 95 % confidence interval: Wilson's, with the design effect of the groups; bucket-limited,
+    /// Its 95 % confidence interval: Wilson's (Clopper and Pearson's below 100 effective events),
+    /// with the design effect of the groups; bucket-limited,
     /// widened to both ends of the bucket (see [`Resolution::Bucket`]).
     pub ci95: [f64; 2],
     /// `exact` or `bucket`.

@@ -162,7 +162,7 @@ pub enum Method {
     Importance,
     /// Crude Monte Carlo: batches of independent inputs until the count beyond the threshold
     /// gives a coefficient of variation at most the target, or the budget is spent; Wilson's
-    /// interval. The tail curve's points before the last are read from the first batch.
+    /// interval (Clopper and Pearson's below 100 hits: [`crate::stats::proportion_interval`]). The tail curve's points before the last are read from the first batch.
     Crude,
 }
 
