@@ -1390,20 +1390,17 @@ fn parts_a_job_never_has_are_404_before_it_ends() {
     );
     assert_eq!(upper.status, 200, "{}", upper.body);
     assert_eq!(upper.json()["id"], plain.as_str());
-    let life = get(&server.url(&format!("/v1/jobs/{plain}/life")), None);
-    assert!(
-        assert_problem(&life, 404)["detail"]
-            .as_str()
-            .unwrap()
-            .contains("no failure criteria")
-    );
-    let rare = get(&server.url(&format!("/v1/jobs/{plain}/rare_event")), None);
-    assert!(
-        assert_problem(&rare, 404)["detail"]
-            .as_str()
-            .unwrap()
-            .contains("asks no rare event")
-    );
+    for (part, why) in [
+        ("life", "no failure criteria"),
+        ("rare_event", "asks no rare event"),
+    ] {
+        let reply = get(&server.url(&format!("/v1/jobs/{plain}/{part}")), None);
+        let problem = assert_problem(&reply, 404);
+        assert!(
+            problem["detail"].as_str().unwrap().contains(why),
+            "{problem}"
+        );
+    }
     let failing = post(
         &server.url("/v1/jobs"),
         r#"{"devices": 2, "operations": 2, "failure": {"total_bounce_s": {"above": 0.001}}}"#,

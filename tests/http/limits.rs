@@ -410,12 +410,14 @@ fn large_responses_held_for_unread_clients_are_bounded() {
         &serde_json::json!({"devices": 1, "operations": 1000, "bin_operations": 1, "seed": 1}),
     );
     server.wait_for(&id, "succeeded", Duration::from_secs(120));
-    let held = || {
+    // A gauge of the server's /metrics, by its name and the space after it.
+    let gauge = |name: &str| {
         let text = get(&server.url("/metrics"), None).body;
         text.lines()
-            .find_map(|line| line.strip_prefix("bouncewear_response_bytes_held "))
+            .find_map(|line| line.strip_prefix(name))
             .map_or(0.0, |value| value.trim().parse::<f64>().unwrap())
     };
+    let held = || gauge("bouncewear_response_bytes_held ");
     let result = server.url(&format!("/v1/jobs/{id}/result"));
     let mut unread = TcpStream::connect(server.base().trim_start_matches("http://")).unwrap();
     let request = format!("GET /v1/jobs/{id}/result HTTP/1.1\r\nhost: bouncewear\r\n\r\n");
@@ -448,12 +450,6 @@ fn large_responses_held_for_unread_clients_are_bounded() {
             std::thread::spawn(move || done.send(get(&result, None).status).unwrap())
         })
         .collect();
-    let gauge = |name: &str| {
-        let text = get(&server.url("/metrics"), None).body;
-        text.lines()
-            .find_map(|line| line.strip_prefix(name))
-            .map_or(0.0, |value| value.trim().parse::<f64>().unwrap())
-    };
     let started = Instant::now();
     while gauge("bouncewear_responses_waiting ") < 4.0 {
         assert!(started.elapsed() < Duration::from_secs(60), "never waiting");
