@@ -689,6 +689,12 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
     ran
 }
 
+/// The shards of job `id`, in order.
+async fn shard_ids(store: &dyn Store, id: &JobId) -> Vec<ShardId> {
+    let shards = store.shards(id).await.unwrap();
+    shards.iter().map(|s| s.shard).collect()
+}
+
 fn every_operation() -> Operations {
     Operations {
         start: 0,
@@ -797,6 +803,27 @@ async fn a_precision_target_queues_its_next_batch_from_the_merge(url: &str) {
         (job.status, job.operations_done, job.operations_total),
         (JobStatus::Succeeded, 200, 200)
     );
+    assert_eq!(
+        without_timing(&store.result_json(&id).await.unwrap().unwrap()),
+        without_timing(&serde_json::to_string(&whole).unwrap())
+    );
+    // Entered as a submission enters it, the job's batches are too small to shard: one worker
+    // runs them all in its one merge step, to the same Result and the same count of operations.
+    let queued = QueuedJob::new(
+        &Job::from_json(text, || 8).unwrap(),
+        Owner::anonymous(),
+        None,
+        UnixMs(1),
+    );
+    assert_eq!(queued.shards.len(), 1, "batches of 80 operations run whole");
+    let id = insert(&store, queued).await;
+    let ended = run_until_ended(&store, workers(&store, 1, u64::MAX), &id, async || {}).await;
+    assert_eq!(
+        (ended.status, ended.operations_done, ended.operations_total),
+        (JobStatus::Succeeded, 200, 200)
+    );
+    let shards = shard_ids(store.as_ref(), &id).await;
+    assert_eq!(shards, [ShardId::merge(0)]);
     assert_eq!(
         without_timing(&store.result_json(&id).await.unwrap().unwrap()),
         without_timing(&serde_json::to_string(&whole).unwrap())
@@ -1370,13 +1397,7 @@ async fn jobs_queued_before_shards_existed_get_theirs_on_open(url: &str) {
     );
     drop(store);
     let store = store::open(url).await.unwrap();
-    let shards: Vec<ShardId> = store
-        .shards(&id)
-        .await
-        .unwrap()
-        .iter()
-        .map(|s| s.shard)
-        .collect();
+    let shards = shard_ids(store.as_ref(), &id).await;
     // Cut as a submission cuts it: a job this small runs whole, as its first merge step.
     assert_eq!(shards, [ShardId::merge(0)]);
     let claim = store

@@ -545,11 +545,7 @@ impl Workers {
         // A first batch without groups stored is a job that entered the queue whole.
         let whole = last == 0 && partials.read().is_empty();
         let spec = partials.job().spec();
-        let simulated = if whole {
-            spec.devices * spec.operations
-        } else {
-            0
-        };
+        let batch_operations = spec.devices * spec.operations;
         let sharded_from = self.sharded_round_operations;
         let compute = self.compute(lease, move |observer| {
             let merged = if whole {
@@ -560,6 +556,12 @@ impl Workers {
             encoded(merged)
         });
         let ran = clock.time(Part::Compute, compute).await;
+        // A job run whole ran its operations here: a precision target's every batch.
+        let simulated = match &ran {
+            _ if !whole => 0,
+            Ran::Done(Ok(Outcome::Result { result, .. })) => result.counts.operations,
+            _ => batch_operations,
+        };
         let write = self.write(fence, ran, simulated, lease);
         clock.time(Part::Write, write).await;
         clock.record();

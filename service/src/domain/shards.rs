@@ -100,10 +100,17 @@ pub fn claims_ahead(shard: ShardId, operations: u64) -> bool {
     shard.group.is_some() && operations <= CLAIM_AHEAD_OPERATIONS
 }
 
-/// Whether `job` runs whole, as one shard: at most [`WHOLE_JOB_OPERATIONS`] operations, and no
-/// precision target (whose later batches, however many, are sharded as they come).
+/// Whether `job` runs whole, as one shard: its batch of devices is at most
+/// [`WHOLE_JOB_OPERATIONS`] operations and, with a precision target, it asks no rare event. A
+/// precision target adds batches of that size one after another, each too small to pay for its
+/// shards: cut into them, a target of batches of 16 devices of one operation took 25 ms of claims
+/// and stores a batch, growing with every batch (the job's progress is summed over its shards), so
+/// 10^8 devices never ended where `bouncewear run` takes minutes. Run whole, the merge step runs
+/// its batches one after another and checks the target after each, as [`run_on`] does. A rare
+/// event after a precision target keeps its batches sharded: its rounds read the devices' groups
+/// back from the store by their last batch.
 pub fn runs_whole(job: &Job) -> bool {
-    job.precision().is_none()
+    (job.precision().is_none() || job.rare_event().is_none())
         && job.spec().devices.saturating_mul(job.spec().operations) <= WHOLE_JOB_OPERATIONS
 }
 
@@ -384,7 +391,8 @@ pub fn run_whole(
     let tally = run_on(Kernel::active(), job, observer, |tally| {
         precision_met(job, tally)
     })?;
-    // A job without a precision target runs one batch.
+    // Its devices' groups, for a rare event's rounds, are stored at batch 0: a job with a
+    // precision target runs whole only without one ([`runs_whole`]).
     finish(
         job,
         tally,
@@ -581,7 +589,8 @@ mod tests {
     }
 
     /// A job of at most [`WHOLE_JOB_OPERATIONS`] operations enters the queue as one shard carrying
-    /// them all; one more operation, or a precision target, and it is cut into groups.
+    /// them all; one more operation and it is cut into groups. With a precision target, the size
+    /// of a batch decides, unless a rare event follows.
     #[test]
     fn a_small_job_is_one_shard_and_a_larger_one_its_groups() {
         let first = |text: &str| first_shards(&Job::from_json(text, || 1).unwrap());
@@ -593,11 +602,24 @@ mod tests {
         assert_eq!(whole, [expected]);
         assert_eq!(first(r#"{"devices": 1, "operations": 2000001}"#).len(), 2);
         assert_eq!(first(r#"{"devices": 2000, "operations": 1001}"#).len(), 33);
-        let precision = first(
-            r#"{"devices": 16, "operations": 10,
-                "precision": {"metric": "e1", "relative_half_width": 0.01, "max_devices": 100}}"#,
+        let precision = |devices: u64, rare: &str| {
+            let text = format!(
+                r#"{{"devices": {devices}, "operations": 1000, {rare}
+                    "precision": {{"metric": "e1", "relative_half_width": 0.01,
+                                   "max_devices": 100000}}}}"#
+            );
+            first(&text).len()
+        };
+        assert_eq!(
+            precision(2000, ""),
+            1,
+            "batches of 2e6 operations run whole"
         );
-        assert_eq!(precision.len(), 17);
+        assert_eq!(precision(2001, ""), 33);
+        let rare = r#""rare_event": {"metric": "e1", "below": 0.1, "operation": 1},
+            "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                         "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.05, "min": 0}}],"#;
+        assert_eq!(precision(16, rare), 17);
     }
 
     /// A worker claims ahead while it runs a group or a task of at most

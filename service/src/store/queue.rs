@@ -554,7 +554,10 @@ impl JobQueue for SqlStore {
         let now = now_or(self.dialect(), &mut tx, terms.at).await?;
         let updated = fenced(
             concat!(
-                "UPDATE shards SET lease_until = $5 + $6, operations_done = $7 WHERE ",
+                // A job run whole with a precision target runs more than its first batch.
+                "UPDATE shards SET lease_until = $5 + $6, operations_done = $7, \
+                 operations_total = CASE WHEN $7 > operations_total THEN $7 ELSE operations_total END \
+                 WHERE ",
                 fenced_shard!()
             ),
             fence,

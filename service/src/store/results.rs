@@ -127,13 +127,16 @@ impl Results for SqlStore {
         // Only a job still running: a cancel that committed after the shard's fence was read
         // has ended it (and dropped the rows written before), and stands.
         let Some(stored) = Sql::new(
-            "UPDATE jobs SET status = 'succeeded', finished_at = $2, operations_done = operations_total, \
+            "UPDATE jobs SET status = 'succeeded', finished_at = $2, \
+             operations_total = CASE WHEN $4 > operations_total THEN $4 ELSE operations_total END, \
+             operations_done = CASE WHEN $4 > operations_total THEN $4 ELSE operations_total END, \
              stored_bytes = octet_length(spec) + $3 WHERE id = $1 AND status = 'running' \
              RETURNING stored_bytes",
         )
         .bind(fence.job.as_str())
         .bind(finished_at.0)
         .bind(count_to_sql(result.bytes()))
+        .bind(count_to_sql(result.operations))
         .fetch_optional(&mut tx)
         .await?
         else {
@@ -287,6 +290,7 @@ mod tests {
                 .map(|i| rows::EncodedRow::of_bytes(bytes / rows + usize::from(i < bytes % rows)))
                 .collect(),
             lives: vec![life; lives],
+            operations: 0,
         }
     }
 

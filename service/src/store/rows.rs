@@ -610,6 +610,9 @@ pub struct EncodedResult {
     pub(crate) text: String,
     pub(crate) rows: Vec<EncodedRow>,
     pub(crate) lives: Vec<DeviceLife>,
+    /// The operations the devices ran ([`JobResult::counts`]), at least the job's progress at
+    /// its end: a job run whole with a precision target counts its batches only as it runs them.
+    pub(crate) operations: u64,
 }
 
 /// Rows [`EncodedResult::new`] encodes at a time, in parallel: the most bins' groups out of the
@@ -761,7 +764,13 @@ impl EncodedResult {
             .life
             .as_ref()
             .map_or_else(Vec::new, |life| life.devices.clone());
-        Ok(Self { text, rows, lives })
+        let operations = result.counts.operations;
+        Ok(Self {
+            text,
+            rows,
+            lives,
+            operations,
+        })
     }
 
     /// What the result counts towards its job's stored bytes ([`super::JobRecord::stored_bytes`]):
