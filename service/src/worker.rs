@@ -594,7 +594,7 @@ impl Workers {
                 folded,
                 state,
             })) => (shards, folded, state),
-            Ran::Done(Err(MergeError::RareEvent(failed))) => {
+            Ran::Done(Err(failed @ (MergeError::RareEvent(_) | MergeError::OutOfRange(_)))) => {
                 return self.fail(fence, &failed.to_string()).await;
             }
             Ran::Done(Err(other)) => return self.fail_attempt(fence, &other.to_string()).await,
@@ -666,7 +666,7 @@ impl Workers {
                 match rare::run_task(&job, &rounds.estimator, task) {
                     Ok(outcome) => Ok(Ok(encode("rare-event task outcome", &outcome))),
                     Err(RunError::Cancelled(cancelled)) => Err(cancelled),
-                    Err(RunError::RareEvent(failed)) => Ok(Err(failed)),
+                    Err(failed) => Ok(Err(failed)),
                 }
             })
             .await;

@@ -344,6 +344,29 @@ fn a_job_of_few_long_devices_moves_and_stops_when_cancelled() {
     server.wait_for(&next, "succeeded", Duration::from_secs(5));
 }
 
+/// A job whose valid inputs combine past f64 fails at once with the metric named, on the
+/// server as on the command line, instead of a Result of `null`s (on the server, a database that
+/// refused them three times).
+#[test]
+fn a_job_beyond_f64_fails_once_with_the_metric_named() {
+    let text = include_str!("../data/beyond_f64_job.json");
+    let job: Value = serde_json::from_str(text).unwrap();
+    let reason = "first_impact_plastic_work_j leaves the range of f64 (beyond 1.8e308)";
+    let server = TestApp::start(&temp_db("beyond-f64"), &[]);
+    let id = server.submit(&job);
+    let failed = server.wait_for(&id, "failed", Duration::from_secs(30));
+    let error = failed["error"].as_str().unwrap();
+    assert!(error.contains(reason), "{error}");
+    let shards = get(&server.url(&format!("/v1/jobs/{id}/shards")), None).json();
+    assert_eq!(shards["shards"][0]["attempt"], 1, "not retried: {shards}");
+    let ran = crate::support::bouncewear(&["run", "-"], &job.to_string());
+    assert_eq!(ran.status.code(), Some(1), "{ran:?}");
+    assert!(
+        String::from_utf8_lossy(&ran.stderr).contains(reason),
+        "{ran:?}"
+    );
+}
+
 /// `wait_s`: one request answers the moment the job ends (its Result, the ended job, a cancel
 /// seen by a request already waiting), or with the job as it is once the time passed; a wait out
 /// of range is refused by name.

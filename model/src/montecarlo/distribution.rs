@@ -2,7 +2,7 @@
 //! random draws (rand_distr) and inverse CDFs (for Latin hypercube sampling).
 
 use crate::error::{FieldError, Pointer, shown};
-use crate::scenario::MAX_MAGNITUDE;
+use crate::scenario::{MAX_MAGNITUDE, MIN_MAGNITUDE};
 use rand::RngExt;
 use rand::distr::{Distribution as _, Open01};
 use rand_distr::{LogNormal, Normal, Triangular, Weibull};
@@ -275,6 +275,9 @@ impl Distribution {
             && faults.errors.is_empty()
         {
             faults.within_magnitude(distribution, spec, domain);
+            if domain.lower >= 0.0 {
+                faults.above_least_magnitude(distribution, spec);
+            }
         }
         match distribution {
             Some(distribution) if faults.errors.is_empty() => Ok(distribution),
@@ -602,6 +605,38 @@ impl Faults<'_> {
                 ),
             }
         }
+    }
+
+    /// Every positive value the distribution can draw at least [`MIN_MAGNITUDE`], as a scenario's
+    /// own values must be: its fixed value or `min` (a uniform's or triangular's lower end) zero or
+    /// from there, and, without a `min`, a lognormal's value at `-MAX_SCORE` and a Weibull's scale.
+    /// A Weibull's lower tail is left to its draws (docs/model.md section 9).
+    fn above_least_magnitude(&mut self, distribution: &Distribution, spec: &DistributionSpec) {
+        let tiny = |value: f64| value > 0.0 && value < MIN_MAGNITUDE;
+        let (min, _) = spec.bounds();
+        let (field, lowest, reached) = match (spec, min) {
+            (DistributionSpec::Fixed { value }, _) => ("value", *value, false),
+            (_, Some(min)) => ("min", min, false),
+            (DistributionSpec::Lognormal { .. }, None) => {
+                ("min", distribution.at_normal(-MAX_SCORE), true)
+            }
+            (DistributionSpec::Weibull { scale, .. }, None) => ("scale", *scale, false),
+            _ => return,
+        };
+        if !tiny(lowest) {
+            return;
+        }
+        let detail = if reached {
+            format!(
+                "this distribution reaches {lowest:e} at {} standard deviations, below the \
+                 {MIN_MAGNITUDE:e} a positive value of this parameter may take; add a \"min\" of \
+                 at least {MIN_MAGNITUDE:e} to truncate it",
+                -MAX_SCORE
+            )
+        } else {
+            format!("must be 0 or at least {MIN_MAGNITUDE:e} (the supported range), got {lowest:e}")
+        };
+        self.fail(field, detail);
     }
 
     fn max_above_min(&mut self, max: f64, min: f64) {
@@ -1010,6 +1045,72 @@ mod tests {
             told[0].detail.contains(r#"add a "max" of at most 1e30"#),
             "{told:?}"
         );
+    }
+
+    /// No positive draw may fall below the least magnitude a scenario admits (1e-30) either: a
+    /// fixed breakdown field of 1e-300 ran, to an arc energy of 2.9e304 J and plastic work beyond
+    /// f64. A fixed value or a `min` there is refused, as is a lognormal that reaches there
+    /// untruncated and a Weibull of that scale; zero, where the parameter takes it, stays.
+    #[test]
+    fn a_distribution_that_reaches_below_the_least_magnitude_is_rejected() {
+        let (positive, non_negative) = (Domain::POSITIVE, Domain::NON_NEGATIVE);
+        let cases = [
+            (r#"{"kind":"fixed","value":1e-300}"#, positive, "/d/value"),
+            (
+                r#"{"kind":"fixed","value":1e-40}"#,
+                non_negative,
+                "/d/value",
+            ),
+            (
+                r#"{"kind":"uniform","min":1e-300,"max":2e-300}"#,
+                positive,
+                "/d/min",
+            ),
+            (
+                r#"{"kind":"triangular","min":1e-31,"mode":0.3,"max":1}"#,
+                non_negative,
+                "/d/min",
+            ),
+            (
+                r#"{"kind":"normal","mean":1e-29,"sd":1e-31,"min":1e-35}"#,
+                positive,
+                "/d/min",
+            ),
+            (
+                r#"{"kind":"lognormal","median":1e-300,"sigma":1}"#,
+                positive,
+                "/d/min",
+            ),
+            // 1e-5 exp(-74): within reach of the rare events' farthest inputs.
+            (
+                r#"{"kind":"lognormal","median":1e-5,"sigma":2}"#,
+                positive,
+                "/d/min",
+            ),
+            (
+                r#"{"kind":"weibull","scale":1e-300,"shape":2}"#,
+                positive,
+                "/d/scale",
+            ),
+        ];
+        for (json, domain, pointer) in cases {
+            assert_eq!(pointers(json, domain), [pointer], "{json}");
+        }
+        for (json, domain) in [
+            (r#"{"kind":"fixed","value":0}"#, non_negative),
+            (r#"{"kind":"fixed","value":1e-30}"#, positive),
+            (r#"{"kind":"uniform","min":0,"max":1e-29}"#, non_negative),
+            (
+                r#"{"kind":"lognormal","median":1e-5,"sigma":2,"min":1e-30}"#,
+                positive,
+            ),
+            (
+                r#"{"kind":"lognormal","median":1e-3,"sigma":0.5}"#,
+                positive,
+            ),
+        ] {
+            assert!(pointers(json, domain).is_empty(), "{json}");
+        }
     }
 
     /// Wide but sane distributions, and the same ones truncated at the largest magnitude, stay

@@ -235,6 +235,48 @@ pub enum RunError {
     Cancelled(#[from] Cancelled),
     #[error(transparent)]
     RareEvent(#[from] rare::RareEventError),
+    #[error(transparent)]
+    OutOfRange(#[from] OutOfRange),
+}
+
+/// A summary the run cannot state: a metric's values, or their spread, beyond f64's range. The
+/// magnitudes a scenario admits keep every input within 1e-30 to 1e30, but their products can
+/// still combine past 1.8e308 (1e30 N pressing contacts of 1e-30 m at 1e-30 Pa: a first impact's
+/// plastic work of 1e314 J), and such a job ends with this instead of a Result of `null`s.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "{metric} leaves the range of f64 (beyond 1.8e308) {at}: the scenario's magnitudes combine \
+     past what the model can represent (docs/model.md section 9)"
+)]
+pub struct OutOfRange {
+    pub metric: String,
+    /// Where: the bin's operations, or the devices at the end of the test.
+    pub at: String,
+}
+
+/// Every operation bin's and device metric's summary stated in finite numbers (its mean, interval,
+/// spread and extremes), or the first that is not.
+pub fn check_in_range(result: &JobResult) -> Result<(), OutOfRange> {
+    let finite = |s: &Summary| {
+        [s.mean, s.mean_ci95[0], s.mean_ci95[1], s.sd, s.min, s.max]
+            .iter()
+            .all(|v| v.is_finite())
+    };
+    for (metric, bins) in &result.operations {
+        if let Some(bin) = bins.iter().find(|bin| !finite(&bin.summary)) {
+            return Err(OutOfRange {
+                metric: metric.clone(),
+                at: format!("in the bin from operation {}", bin.op_start),
+            });
+        }
+    }
+    match result.devices.iter().find(|(_, summary)| !finite(summary)) {
+        Some((metric, _)) => Err(OutOfRange {
+            metric: metric.clone(),
+            at: "over the devices at the end of the test".to_owned(),
+        }),
+        None => Ok(()),
+    }
 }
 
 /// Runs a job on the current rayon pool on [`Kernel::active`] and summarises it.
@@ -253,6 +295,7 @@ pub fn run_job_on(
     let tally = engine::run_for_result(kernel, job, observer, |tally| precision_met(job, tally))?;
     let rare_event = rare::estimate(job, observer)?;
     let mut result = summarize_job(job, &tally, started.elapsed().as_secs_f64());
+    check_in_range(&result)?;
     result.rare_event = rare_event;
     Ok(result)
 }

@@ -869,3 +869,19 @@ fn listed_lives_are_the_first_devices_and_every_device_is_counted() {
     assert!(none.devices.is_empty());
     assert_eq!((none.failures, none.censored), (all.failures, all.censored));
 }
+
+/// Inputs each within the magnitudes a scenario admits can still combine past f64 (1e30 N on
+/// contacts of 1e-30 m at 1e-30 Pa: a first impact's plastic work of about 1e314 J). The run says
+/// which metric and where, instead of a Result whose summaries are `null`.
+#[test]
+fn a_metric_beyond_f64_ends_the_run_with_its_name() {
+    let text = include_str!("../../../tests/data/beyond_f64_job.json");
+    let job = Job::from_json(text, || 1).unwrap();
+    let error = bouncewear_model::montecarlo::run_job(&job, &Silent).unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        "first_impact_plastic_work_j leaves the range of f64 (beyond 1.8e308) in the bin from \
+         operation 0: the scenario's magnitudes combine past what the model can represent \
+         (docs/model.md section 9)"
+    );
+}

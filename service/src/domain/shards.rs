@@ -14,8 +14,8 @@ use super::rare::{self, Estimated, Rounds};
 use bouncewear_model::montecarlo::engine::{Batch, GroupStats, run_on};
 use bouncewear_model::montecarlo::rare::{Outcome, RareEventError, RareEventReport};
 use bouncewear_model::montecarlo::{
-    Cancelled, Job, JobResult, Kernel, Observer, RunError, RunGroups, Tally, next_batch,
-    precision_met, summarize_job,
+    Cancelled, Job, JobResult, Kernel, Observer, OutOfRange, RunError, RunGroups, Tally,
+    check_in_range, next_batch, precision_met, summarize_job,
 };
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -180,6 +180,9 @@ pub enum MergeError {
     /// The job's rare event has no answer (the same on every attempt).
     #[error(transparent)]
     RareEvent(#[from] RareEventError),
+    /// A summary beyond f64 (the same on every attempt).
+    #[error(transparent)]
+    OutOfRange(#[from] OutOfRange),
     #[error(transparent)]
     Cancelled(#[from] Cancelled),
 }
@@ -418,7 +421,7 @@ fn finish(
     match rare::first_round(job, devices_last, sharded_from, observer)? {
         Estimated::Made(report) => {
             let wall_s = wall_s + started.elapsed().as_secs_f64();
-            Ok(result(job, tally, report, wall_s))
+            result(job, tally, report, wall_s)
         }
         Estimated::Queued(rounds) => Ok(Merged::Round {
             shards: round_shards(job, &rounds),
@@ -485,16 +488,22 @@ pub fn estimated(
     wall_s: f64,
 ) -> Result<Merged, MergeError> {
     let (job, tally) = devices.finish()?;
-    Ok(result(&job, tally, Some(report), wall_s))
+    result(&job, tally, Some(report), wall_s)
 }
 
-fn result(job: &Job, tally: Tally, report: Option<RareEventReport>, wall_s: f64) -> Merged {
+fn result(
+    job: &Job,
+    tally: Tally,
+    report: Option<RareEventReport>,
+    wall_s: f64,
+) -> Result<Merged, MergeError> {
     let mut result = summarize_job(job, &tally, wall_s);
+    check_in_range(&result)?;
     result.rare_event = report;
-    Merged::Result {
+    Ok(Merged::Result {
         result: Box::new(result),
         groups: RunGroups::new(job, tally),
-    }
+    })
 }
 
 impl From<RunError> for MergeError {
@@ -502,6 +511,7 @@ impl From<RunError> for MergeError {
         match error {
             RunError::Cancelled(cancelled) => MergeError::Cancelled(cancelled),
             RunError::RareEvent(failed) => MergeError::RareEvent(failed),
+            RunError::OutOfRange(beyond) => MergeError::OutOfRange(beyond),
         }
     }
 }
