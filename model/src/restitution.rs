@@ -144,8 +144,10 @@ fn quartic_root<L: Real>(a: L) -> L {
 
 /// The paper's approximation (eq. 18): `e ~= min(1, kappa u^(-1/4))`, i.e. `min(1, eps0)`.
 ///
-/// It neglects the `(1 - 3e^2/8)^(3/8)` factor of eq. 7, so it overestimates `e` by up to
-/// `(8/5)^(3/8) - 1 = 19 %` just below the elastic limit and by `3 eps0^2 / 64` for small `eps0`.
+/// It neglects the `(1 - 3e^2/8)^(3/8)` factor of eq. 7, so it overestimates `e`: by 13.7 % at
+/// most, at `eps0 = 1` (`u = kappa^4`, about twice the critical speed, where the `min` stops
+/// capping it), and by `3 eps0^2 / 64` for small `eps0`. Without the `min` the overestimate would
+/// reach `(8/5)^(3/8) - 1 = 19.3 %` at the elastic limit.
 #[inline(always)]
 pub fn restitution_closed_form<L: Real>(impact_speed_m_s: L, kappa: L) -> L {
     scaled_speed(impact_speed_m_s, kappa).min(L::splat(1.0))
@@ -260,6 +262,13 @@ mod tests {
         assert_eq!(restitution_closed_form(1e-6, 0.363), 1.0);
         for u in [1e-3, 0.01, 0.1, 1.0, 10.0] {
             assert!(restitution_closed_form(u, 0.3625) >= restitution(u, 0.3625));
+        }
+        // The largest overestimate, at eps0 = 1: e = sqrt(z) with z^4 = (1 - 3z/8)^3, z =
+        // 0.773438... (SciPy's brentq), so 1/e - 1 = 0.13707.
+        let over = |eps0: f64| restitution_closed_form(1.0, eps0) / restitution(1.0, eps0) - 1.0;
+        assert_relative_eq!(over(1.0), 0.13707, max_relative = 1e-4);
+        for eps0 in [0.5, 0.9, 0.99, 1.01, 1.1, 1.19] {
+            assert!(over(eps0) < over(1.0), "eps0 {eps0}: {}", over(eps0));
         }
     }
 
