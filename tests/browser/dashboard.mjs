@@ -305,6 +305,20 @@ if (!compareRows.some((r) => r.includes("outlasts")) || !compareRows.some((r) =>
 if (!page.url().includes(`#`) || !page.url().includes(`compare=${otherDesign.id}`)) {
   await fail(`the page's address ${page.url()} does not link the comparison`);
 }
+// The address links the comparison: opened anew, the page compares at once and keeps the link
+// (the metric written into the address used to drop it before the comparison read it).
+const linked = page.url();
+await step(`open the linked comparison ${linked}`, async () => {
+  await page.goto("about:blank");
+  await page.goto(linked, { waitUntil: "load" });
+});
+await step("the linked comparison opens with its plots and tables", async () => {
+  await page.waitForSelector("#plot-compare-bands svg");
+  await page.waitForFunction(() => document.querySelectorAll("#compare-life-table tbody tr").length >= 3);
+});
+if (!page.url().includes(`compare=${otherDesign.id}`) || !page.url().includes("metric=")) {
+  await fail(`the reopened page's address ${page.url()} lost the comparison or the metric`);
+}
 await page.waitForTimeout(300);
 await step("save dashboard-compare.png", () =>
   page.locator("#compare-section").screenshot({ path: join(outDir, "dashboard-compare.png") }),

@@ -910,7 +910,12 @@
         injectSvg($("#plot-bands"), base + "/plots/bands.svg" + q);
         injectSvg($("#plot-histograms"), base + "/plots/histograms.svg" + q);
         renderBins(result.operations[metric] || []);
-        history.replaceState(null, "", "#metric=" + encodeURIComponent(metric));
+        // The address keeps what else it links (#compare=ID), and a comparison follows the metric.
+        const hash = new URLSearchParams(location.hash.slice(1));
+        hash.set("metric", metric);
+        history.replaceState(null, "", "#" + hash.toString());
+        const comparing = hash.get("compare");
+        if (comparing && compareReady) compareWith(comparing);
       };
       select.onchange = showMetric;
       showMetric();
@@ -1091,8 +1096,10 @@
     }
 
     // Comparing this job (design a) with another succeeded one (design b), linkable as
-    // #compare=ID.
+    // #compare=ID; a change of metric compares again once the form is set up.
+    let compareReady = false;
     function setupCompare() {
+      compareReady = true;
       const form = $("#compare-form");
       const input = $("#compare-with");
       getJson("/v1/jobs?limit=100").then((page) => {
