@@ -22,6 +22,10 @@ try {
   const errors = [];
   const outside = [];
   page.on("pageerror", (error) => errors.push(String(error)));
+  // A console error counts too (a missing /favicon.ico logged one).
+  page.on("console", (message) => {
+    if (message.type() === "error") errors.push(message.text());
+  });
   page.on("request", (request) => {
     if (!request.url().startsWith(base)) outside.push(request.url());
   });

@@ -105,7 +105,9 @@ const RAPIDOC: &str = include_str!("../../assets/rapidoc-min.js");
 
 pub async fn docs() -> Html<&'static str> {
     Html(concat!(
+        // No icon to fetch: the browser would ask for /favicon.ico and log its 404 as an error.
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>bouncewear API</title>",
+        "<link rel=\"icon\" href=\"data:,\">",
         "<script type=\"module\" src=\"/docs/rapidoc-min.js\"></script></head><body>",
         // `load-fonts="false"`: RapiDoc would fetch Open Sans from fonts.gstatic.com; the page
         // loads nothing from the internet, and system fonts serve.
