@@ -41,6 +41,35 @@ fn openapi_docs_health_and_metrics_are_served() {
     );
 }
 
+/// A comma-separated query parameter takes at most `MAX_ITEMS` items, and its pattern in the
+/// document says so: `b_lives` and `statistics` had no bound there, so a schema-valid request of
+/// 25 items was refused.
+#[test]
+fn every_list_parameters_pattern_bounds_its_items() {
+    let server = TestApp::start(&temp_db("patterns"), &[]);
+    let openapi = get(&server.url("/openapi.json"), None).json();
+    let bound = format!("){{0,{}}}$", bouncewear::domain::query::MAX_ITEMS - 1);
+    let mut lists = BTreeSet::new();
+    for operation in openapi["paths"].as_object().unwrap().values() {
+        for parameter in operation["get"]["parameters"]
+            .as_array()
+            .into_iter()
+            .flatten()
+        {
+            let Some(pattern) = parameter["schema"]["pattern"].as_str() else {
+                continue;
+            };
+            if pattern.contains('(') && pattern.contains(",") {
+                let name = parameter["name"].as_str().unwrap();
+                assert!(pattern.ends_with(&bound), "{name}: {pattern}");
+                lists.insert(name.to_owned());
+            }
+        }
+    }
+    let expected = ["b_lives", "exceedance", "quantiles", "statistics"];
+    assert_eq!(lists, BTreeSet::from(expected.map(String::from)));
+}
+
 /// The scenario's number rules have one home, `NUMBER_RULES` in the model: validation applies
 /// them and the document states each as its field's range. A number of a scenario section with
 /// no rule, or a rule whose field the document does not have, fails here.

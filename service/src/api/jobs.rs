@@ -171,7 +171,7 @@ impl JobResource {
     request_body(content = JobSpec, description = "The job of docs/contract.md", content_type = "application/json"),
     params(("Idempotency-Key" = Option<String>, Header, description = "Retries with the same key and body within 24 hours get the job the first created (422 for another body); 1 to 255 visible ASCII characters (400 otherwise)", pattern = "^[!-~]{1,255}$", example = "4f1c2b9e-nightly-2026-11-22")),
     responses(
-        (status = 202, description = "Queued (or, for a retry with the same Idempotency-Key, queued before: then `Idempotent-Replayed: true`)", body = JobResource, headers(("Location" = String, description = "The job's URL"))),
+        (status = 202, description = "Queued (or, for a retry with the same Idempotency-Key, queued before: then `Idempotent-Replayed: true`)", body = JobResource, headers(("Location" = String, description = "The job's URL"), ("Idempotent-Replayed" = String, description = "`true` when an earlier request with the same Idempotency-Key created it"))),
         BodyRejected,
         Unauthorized,
         QueueFull,
@@ -1014,7 +1014,8 @@ pub struct LifeQuery {
     /// B1 and B10 lives' one-sided lower bounds demonstrated with it (with no failures too).
     #[param(minimum = 0.01, maximum = 100, example = 2.0)]
     pub weibayes_beta: Option<f64>,
-    /// The one-sided confidence of `weibayes` (default 0.9), strictly between 0 and 1.
+    /// The one-sided confidence of `weibayes` (default 0.9), strictly between 0 and 1: given only
+    /// with `weibayes_beta` (alone it is 400).
     #[param(exclusive_minimum = 0, exclusive_maximum = 1, example = 0.9)]
     pub confidence: Option<f64>,
 }

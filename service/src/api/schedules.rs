@@ -132,7 +132,7 @@ async fn resource(state: &AppState, record: &ScheduleRecord) -> Result<ScheduleR
     request_body(content = ScheduleSpec, content_type = "application/json"),
     params(("Idempotency-Key" = Option<String>, Header, description = "Retries with the same key and body within 24 hours get the schedule the first created (422 for another body); 1 to 255 visible ASCII characters (400 otherwise)", pattern = "^[!-~]{1,255}$", example = "4f1c2b9e-nightly-2026-11-22")),
     responses(
-        (status = 201, description = "Created (or, for a retry with the same Idempotency-Key, created before: then `Idempotent-Replayed: true`)", body = ScheduleResource, headers(("Location" = String, description = "The schedule's URL"))),
+        (status = 201, description = "Created (or, for a retry with the same Idempotency-Key, created before: then `Idempotent-Replayed: true`)", body = ScheduleResource, headers(("Location" = String, description = "The schedule's URL"), ("Idempotent-Replayed" = String, description = "`true` when an earlier request with the same Idempotency-Key created it"))),
         BodyRejected,
         Unauthorized,
         TooManySchedules,
