@@ -158,7 +158,7 @@ impl SqlStore {
         job: &QueuedJob,
         bound: QueueBound,
     ) -> StoreResult<bool> {
-        self.check_disk(bound.min_free_disk_bytes)?;
+        self.check_disk(bound.min_free_disk_bytes).await?;
         if let Some(quota) = bound.stored_per_owner {
             let used = Sql::new(
                 "SELECT CAST(COALESCE(SUM(stored_bytes), 0) AS BIGINT) AS used \
@@ -179,17 +179,17 @@ impl SqlStore {
     }
 
     /// Room for a write of `bytes` (SQLite's disk; PostgreSQL's is its server's to watch).
-    pub(crate) fn check_room(&self, bytes: u64) -> StoreResult<()> {
+    pub(crate) async fn check_room(&self, bytes: u64) -> StoreResult<()> {
         match &self.backend {
-            Backend::Sqlite(sqlite) => sqlite.check_room(bytes),
+            Backend::Sqlite(sqlite) => sqlite.check_room(bytes).await,
             Backend::Postgres(_) => Ok(()),
         }
     }
 
     /// What readiness checks before its write: SQLite's file and the disk beside it.
-    pub(crate) fn check_disk(&self, min_free_bytes: u64) -> StoreResult<()> {
+    pub(crate) async fn check_disk(&self, min_free_bytes: u64) -> StoreResult<()> {
         match &self.backend {
-            Backend::Sqlite(sqlite) => sqlite.check_disk(min_free_bytes),
+            Backend::Sqlite(sqlite) => sqlite.check_disk(min_free_bytes).await,
             // PostgreSQL's disk is its server's to watch.
             Backend::Postgres(_) => Ok(()),
         }

@@ -589,7 +589,7 @@ impl JobQueue for SqlStore {
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn complete_encoded(&self, fence: &Fence, partial: Vec<u8>) -> StoreResult<bool> {
         let partial_bytes = partial.len() as u64;
-        self.check_room(partial_bytes)?;
+        self.check_room(partial_bytes).await?;
         // Accumulators that a power cut undoes are computed again, to the same bits.
         let mut tx = self.begin_redoable().await?;
         let updated = fenced(
@@ -634,7 +634,8 @@ impl JobQueue for SqlStore {
         folded: &EncodedGroups,
         state: Option<&[u8]>,
     ) -> StoreResult<bool> {
-        self.check_room(folded.0.iter().map(|partial| partial.len() as u64).sum())?;
+        self.check_room(folded.0.iter().map(|partial| partial.len() as u64).sum())
+            .await?;
         let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(false);
         };
@@ -858,7 +859,7 @@ impl JobQueue for SqlStore {
 
     #[tracing::instrument(skip_all)]
     async fn ready(&self, min_free_disk_bytes: u64, now: UnixMs) -> StoreResult<()> {
-        self.check_disk(min_free_disk_bytes)?;
+        self.check_disk(min_free_disk_bytes).await?;
         Sql::new(READINESS_WRITE)
             .bind(now.0)
             .execute(self.writer()?)

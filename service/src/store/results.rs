@@ -115,7 +115,7 @@ impl Results for SqlStore {
     ) -> StoreResult<Option<u64>> {
         // A Result that fits in one write goes in the transaction that ends the job, one commit,
         // unless it is large and the database writes its rows faster side by side before.
-        self.check_room(result.bytes())?;
+        self.check_room(result.bytes()).await?;
         let with_the_end = with_the_end(result, self.writes_side_by_side());
         if !with_the_end && self.write_rows(fence, result).await?.is_none() {
             return Ok(None);

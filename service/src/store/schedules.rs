@@ -28,7 +28,7 @@ impl SqlStore {
         schedule: &ScheduleRecord,
         bound: ScheduleBound,
     ) -> StoreResult<()> {
-        self.check_disk(bound.min_free_disk_bytes)?;
+        self.check_disk(bound.min_free_disk_bytes).await?;
         self.lock(tx, format!("{}/schedules", schedule.owner.as_str()))
             .await?;
         let held = Sql::new("SELECT COUNT(*) AS held FROM schedules WHERE owner = $1")

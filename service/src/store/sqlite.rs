@@ -91,36 +91,95 @@ impl SqliteBackend {
         Ok(&self.writer)
     }
 
-    /// The file is still the one opened, with at least `min_free_bytes` free beside it.
-    pub(crate) fn check_disk(&self, min_free_bytes: u64) -> StoreResult<()> {
-        match &self.file {
-            Some(file) => file.check(min_free_bytes),
-            None => Ok(()),
-        }
-    }
-
-    /// Room beside the database for a write of `bytes`: twice them free (the write-ahead log,
-    /// then the database's pages), so that a write the disk cannot hold is refused before it
-    /// starts (503-like, tried again later) instead of filling the disk half-way, where even
-    /// ending the job could not be written.
-    pub(crate) fn check_room(&self, bytes: u64) -> StoreResult<()> {
+    /// The file is still the one opened, with at least `min_free_bytes` of room beside it
+    /// ([`SqliteBackend::room`]).
+    pub(crate) async fn check_disk(&self, min_free_bytes: u64) -> StoreResult<()> {
         let Some(file) = &self.file else {
             return Ok(());
         };
-        let needed = bytes.saturating_mul(2);
-        let free = free_bytes(file.directory()).map_err(|error| {
-            StoreError::NotReady(format!("free disk space cannot be read ({error})"))
-        })?;
-        if free < needed {
-            return Err(StoreError::NoRoom(format!(
-                "a write of {} MB needs {} MB free beside the database (the write-ahead log, then \
-                 the pages); {} MB are",
-                bytes >> 20,
-                needed >> 20,
-                free >> 20
+        file.still_there()?;
+        let room = self.room(file).await?;
+        if room.bytes() < min_free_bytes {
+            return Err(StoreError::NotReady(format!(
+                "{}, below the {} MB required (--min-free-disk-mb)",
+                room,
+                min_free_bytes >> 20
             )));
         }
         Ok(())
+    }
+
+    /// What the database can still write: the disk's free bytes beside it and its own free pages
+    /// (the pages of deleted jobs, which it reuses before it grows its file). Without the pages, a
+    /// disk that filled stayed full to the queue however many jobs an operator deleted.
+    async fn room(&self, file: &DatabaseFile) -> StoreResult<Room> {
+        let disk = free_bytes(file.directory()).map_err(|error| {
+            StoreError::NotReady(format!("free disk space cannot be read ({error})"))
+        })?;
+        let pages: i64 = sqlx::query_scalar(
+            "SELECT (SELECT freelist_count FROM pragma_freelist_count()) * \
+             (SELECT page_size FROM pragma_page_size())",
+        )
+        .fetch_one(&self.readers)
+        .await?;
+        Ok(Room {
+            disk,
+            pages: u64::try_from(pages).unwrap_or(0),
+        })
+    }
+
+    /// Room beside the database for a write of `bytes`: twice them (the write-ahead log, then the
+    /// database's pages) and [`KEPT_FOR_DELETES`], so that a write the disk cannot hold is refused
+    /// before it starts (503-like, tried again later) instead of filling the disk half-way, where
+    /// even ending the job could not be written, nor a job deleted to make room.
+    pub(crate) async fn check_room(&self, bytes: u64) -> StoreResult<()> {
+        let Some(file) = &self.file else {
+            return Ok(());
+        };
+        let needed = bytes.saturating_mul(2).saturating_add(KEPT_FOR_DELETES);
+        let room = self.room(file).await?;
+        if room.bytes() < needed {
+            return Err(StoreError::NoRoom(format!(
+                "a write of {} MB needs {} MB of room beside the database (the write-ahead log, \
+                 the pages, and {} MB kept for deletes); {}",
+                bytes >> 20,
+                needed >> 20,
+                KEPT_FOR_DELETES >> 20,
+                room
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Room a Result or a group's accumulators leave free beside a SQLite database: a `DELETE` of a
+/// job writes its freed pages' list and the tables' pages to the write-ahead log first (for a
+/// Result of 40 MB, ten pages of the list and a few of each table: well under a megabyte), so jobs
+/// can still be deleted to make room once the queue's writes have taken what they may. Found from
+/// outside: accepted jobs filled a disk to its last bytes, and then `DELETE` was 503 (SQLite could
+/// not write its log).
+pub(crate) const KEPT_FOR_DELETES: u64 = 4 << 20;
+
+/// The room [`SqliteBackend::room`] finds.
+struct Room {
+    disk: u64,
+    pages: u64,
+}
+
+impl Room {
+    fn bytes(&self) -> u64 {
+        self.disk.saturating_add(self.pages)
+    }
+}
+
+impl std::fmt::Display for Room {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} MB free beside the database and {} MB of its free pages",
+            self.disk >> 20,
+            self.pages >> 20
+        )
     }
 }
 
@@ -194,21 +253,6 @@ impl DatabaseFile {
             Some(parent) if !parent.as_os_str().is_empty() => parent,
             _ => Path::new("."),
         }
-    }
-
-    fn check(&self, min_free_bytes: u64) -> StoreResult<()> {
-        self.still_there()?;
-        let free = free_bytes(self.directory()).map_err(|error| {
-            StoreError::NotReady(format!("free disk space cannot be read ({error})"))
-        })?;
-        if free < min_free_bytes {
-            return Err(StoreError::NotReady(format!(
-                "{} MB free beside the database, below the {} MB required (--min-free-disk-mb)",
-                free >> 20,
-                min_free_bytes >> 20
-            )));
-        }
-        Ok(())
     }
 }
 
@@ -355,6 +399,44 @@ mod tests {
         };
         assert!(store.claim("w", terms, budget).await.unwrap().is_some());
         assert_eq!(synchronous(store.writer().unwrap()).await, 2);
+        drop(store);
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    /// The room a write finds counts the pages of what was deleted, which the database reuses:
+    /// 8 MB written and deleted are 8 MB more room, though the disk's free bytes are no more.
+    /// A write needs twice its bytes and the 4 MB kept for deletes.
+    #[tokio::test]
+    async fn deleted_pages_are_room_and_a_write_keeps_room_for_deletes() {
+        let (store, _, dir) = open_named("room").await;
+        let crate::store::backend::Backend::Sqlite(sqlite) = &store.backend else {
+            unreachable!("a SQLite URL")
+        };
+        let file = sqlite.file.as_ref().unwrap();
+        let before = sqlite.room(file).await.unwrap();
+        for statement in [
+            "CREATE TABLE scratch (b BLOB)",
+            "INSERT INTO scratch VALUES (zeroblob(8388608))",
+            "DELETE FROM scratch",
+        ] {
+            sqlx::query(statement)
+                .execute(&sqlite.writer)
+                .await
+                .unwrap();
+        }
+        let after = sqlite.room(file).await.unwrap();
+        assert!(
+            after.pages >= before.pages + (8 << 20) - (64 << 10),
+            "{before} then {after}"
+        );
+        assert!(sqlite.check_room(1 << 20).await.is_ok());
+        // Past the room by 256 MB, whatever else on the machine frees meanwhile.
+        let huge = after.bytes() / 2 - KEPT_FOR_DELETES / 2 + (256 << 20);
+        let refused = sqlite.check_room(huge).await.unwrap_err().to_string();
+        assert!(
+            refused.contains("4 MB kept for deletes") && refused.contains("MB of its free pages"),
+            "{refused}"
+        );
         drop(store);
         std::fs::remove_dir_all(dir).unwrap();
     }
