@@ -333,7 +333,16 @@ fn run_rejects_bad_jobs_naming_the_field() {
     }
     // A flag at fault is a bad command line, said as it is, not as a document's fault.
     let line = rejected(&["run", "-", "--threads", "0"], "{}");
-    assert_eq!(line.trim_end(), "bouncewear: --threads must be at least 1");
+    assert_eq!(
+        line.trim_end(),
+        "bouncewear: --threads must be from 1 to 1024, got 0"
+    );
+    // Thousands of threads on two cores: refused before one is started.
+    let line = rejected(&["run", "-", "--threads", "100000"], "{}");
+    assert_eq!(
+        line.trim_end(),
+        "bouncewear: --threads must be from 1 to 1024, got 100000"
+    );
 }
 
 #[test]

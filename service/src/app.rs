@@ -50,7 +50,7 @@ impl StartupError {
             self,
             StartupError::PublicWithoutKeys(_)
                 | StartupError::NoWorkers
-                | StartupError::Compute(PoolError::NoThreads)
+                | StartupError::Compute(PoolError::NoThreads | PoolError::TooMany(_))
                 | StartupError::Database(StoreError::UnsupportedUrl(_))
         )
     }

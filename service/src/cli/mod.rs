@@ -284,7 +284,14 @@ impl CliError {
 impl From<PoolError> for CliError {
     fn from(error: PoolError) -> Self {
         match error {
-            PoolError::NoThreads => CliError::Usage("--threads must be at least 1".to_owned()),
+            PoolError::NoThreads | PoolError::TooMany(_) => {
+                let given = match error {
+                    PoolError::TooMany(threads) => threads,
+                    _ => 0,
+                };
+                let most = crate::compute::MAX_THREADS;
+                CliError::Usage(format!("--threads must be from 1 to {most}, got {given}"))
+            }
             PoolError::Build(_) => CliError::Failed(error.to_string()),
         }
     }
