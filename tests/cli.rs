@@ -345,6 +345,50 @@ fn run_rejects_bad_jobs_naming_the_field() {
     );
 }
 
+/// What a local command is given and where it writes, found wanting from outside: an output
+/// directory that cannot be one is refused before the run (it threw the Result away after it),
+/// an input is read up to 64 MB (`/dev/zero` took 9.4 GB), a byte-order mark is no part of the
+/// text, a name with control characters stays on one inert line, and an output the machine
+/// cannot write is a failure (1), not bad input (2).
+#[test]
+fn inputs_are_bounded_and_outputs_checked_before_the_work() {
+    let dir = temp_dir("outputs");
+    let file = dir.join("a-file");
+    std::fs::write(&file, "").unwrap();
+    let job = r#"{"devices": 2, "operations": 3, "seed": 1}"#;
+    let line = rejected(&["run", "-q", "--plots", file.to_str().unwrap(), "-"], job);
+    assert!(
+        line.starts_with("bouncewear: --plots ") && line.contains("cannot be made a directory"),
+        "{line}"
+    );
+    let huge = " ".repeat((64 << 20) + 1);
+    let line = rejected(&["simulate", "-"], &huge);
+    assert!(line.contains("more than 64 MB"), "{line}");
+    let marked = bouncewear(&["simulate", "-"], "\u{feff}{}");
+    assert!(marked.status.success(), "{marked:?}");
+    let line = rejected(&["simulate", "-"], r#"{"a\nb\u001b[31m": 1}"#);
+    assert!(line.contains(r"a\nb\u{1b}[31m"), "{line}");
+    // Run to /dev/full: an empty job is bad input (2); a good one whose Result cannot be
+    // written fails (1).
+    let to_full = |job: &str| {
+        std::fs::write(&file, job).unwrap();
+        let full = std::fs::OpenOptions::new().write(true).open("/dev/full");
+        std::process::Command::new(crate::support::BIN)
+            .args(["run", "-q", file.to_str().unwrap()])
+            .stdout(full.unwrap())
+            .output()
+            .unwrap()
+    };
+    assert_eq!(to_full("").status.code(), Some(2));
+    let full = to_full(job);
+    let stderr = String::from_utf8_lossy(&full.stderr);
+    assert_eq!(full.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("<stdout>: No space left on device"),
+        "{stderr}"
+    );
+}
+
 #[test]
 fn a_reader_that_stops_early_is_not_an_error() {
     use std::process::{Command, Stdio};

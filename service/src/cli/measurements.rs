@@ -12,11 +12,22 @@ use serde_json::{Map, Value};
 /// The observations of CSV `text` as JSON: an array of objects, one per data row. Every cell
 /// that is not a number and every row of the wrong length is named at its pointer
 /// (`/observations/ROW/FIELD`, `/observations/ROW`), all of them at once.
+/// A cell as written, without the spaces around it and the double quotes a spreadsheet may put
+/// around any cell (`"0.2"`).
+fn cell(text: &str) -> &str {
+    let text = text.trim();
+    text.strip_prefix('"')
+        .and_then(|inner| inner.strip_suffix('"'))
+        .map_or(text, str::trim)
+}
+
 pub fn observations_from_csv(text: &str, path: &str) -> Result<Value, CliError> {
+    // Each line with its number in the file, as a spreadsheet numbers its rows.
     let mut lines = text
         .lines()
-        .map(|line| line.trim_end_matches('\r'))
-        .filter(|line| !line.trim().is_empty());
+        .enumerate()
+        .map(|(index, line)| (index + 1, line.trim_end_matches('\r')))
+        .filter(|(_, line)| !line.trim().is_empty());
     let observations = Pointer::root().child("observations");
     let header: Vec<&str> = lines
         .next()
@@ -24,8 +35,9 @@ pub fn observations_from_csv(text: &str, path: &str) -> Result<Value, CliError> 
             let detail = format!("{path}: the file has no header row");
             CliError::Invalid(InvalidInput::single(&observations, detail))
         })?
+        .1
         .split(',')
-        .map(str::trim)
+        .map(cell)
         .collect();
     let (mut rows, mut errors) = (Vec::new(), Vec::new());
     let mut fault = |pointer: Pointer, detail: String| {
@@ -41,12 +53,12 @@ pub fn observations_from_csv(text: &str, path: &str) -> Result<Value, CliError> 
             fault(observations.clone(), detail);
         }
     }
-    for (row, line) in lines.enumerate() {
+    for (row, (line_number, line)) in lines.enumerate() {
         let at = observations.child(row);
-        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        let cells: Vec<&str> = line.split(',').map(cell).collect();
         if cells.len() != header.len() {
             let detail = format!(
-                "data row {row} has {} cells, the header {} columns",
+                "line {line_number} (data row {row}) has {} cells, the header {} columns",
                 cells.len(),
                 header.len()
             );
@@ -67,7 +79,10 @@ pub fn observations_from_csv(text: &str, path: &str) -> Result<Value, CliError> 
                 }
                 None => fault(
                     at.child(column),
-                    format!("data row {row}, column `{column}`: `{cell}` is not a finite number"),
+                    format!(
+                        "line {line_number} (data row {row}), column `{column}`: `{cell}` is not a \
+                         finite number"
+                    ),
                 ),
             }
         }
@@ -114,13 +129,20 @@ mod tests {
         );
         assert!(
             bad.to_string().contains(
-                "m.csv: data row 0, column `first_bounce_s`: `abc` is not a finite number"
+                "m.csv: line 2 (data row 0), column `first_bounce_s`: `abc` is not a finite number"
             ),
             "{bad}"
         );
         assert!(
             bad.to_string()
-                .contains("data row 1 has 1 cells, the header 2 columns")
+                .contains("line 3 (data row 1) has 1 cells, the header 2 columns")
+        );
+        // Quoted cells and header names, as spreadsheets write them, read as the plain ones.
+        let quoted =
+            observations_from_csv("\"e1\",\"first_bounce_s\"\n\"0.4\",\" 0.0086\"\n", "q.csv");
+        assert_eq!(
+            quoted.unwrap(),
+            serde_json::json!([{"e1": 0.4, "first_bounce_s": 0.0086}])
         );
         assert!(observations_from_csv("", "m.csv").is_err());
     }

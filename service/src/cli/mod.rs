@@ -248,9 +248,16 @@ pub enum CliError {
     /// command line, said as it is rather than as a document's fault.
     #[error("{0}")]
     Usage(String),
-    /// A file could not be read or written: exit 2 too, it is the user's path.
+    /// A file could not be read: exit 2 too, it is the user's path.
     #[error("{path}: {source}")]
     Io {
+        path: String,
+        source: std::io::Error,
+    },
+    /// An output could not be written (a full disk, a closed file): exit 1, a failure of the
+    /// machine rather than of the input.
+    #[error("{path}: {source}")]
+    Write {
         path: String,
         source: std::io::Error,
     },
@@ -276,7 +283,10 @@ impl CliError {
         match self {
             CliError::Invalid(_) | CliError::Usage(_) | CliError::Io { .. } => 2,
             CliError::Startup(error) if error.is_bad_command_line() => 2,
-            CliError::Startup(_) | CliError::Ended { .. } | CliError::Failed(_) => 1,
+            CliError::Startup(_)
+            | CliError::Ended { .. }
+            | CliError::Write { .. }
+            | CliError::Failed(_) => 1,
         }
     }
 }
@@ -297,13 +307,40 @@ impl From<PoolError> for CliError {
     }
 }
 
-/// The report's directory is the user's path, so a file it cannot write exits 2 like any other.
+/// The report's directory was made before the bench ran ([`output_directory`]): a file of it
+/// that cannot be written then is a failure, exit 1.
 impl From<BenchError> for CliError {
     fn from(error: BenchError) -> Self {
         match error {
-            BenchError::Write { path, source } => CliError::Io { path, source },
+            BenchError::Write { path, source } => CliError::Write { path, source },
         }
     }
+}
+
+/// Makes the directory a command writes its outputs into (`--plots`, `--out`) before any work:
+/// a path that cannot be one is a bad command line (exit 2) at once, not after a run of hours
+/// whose Result it would throw away (found from outside: `run --plots FILE` ran the job, then
+/// exited with "File exists" and printed nothing).
+fn output_directory(flag: &str, dir: &Path) -> Result<(), CliError> {
+    std::fs::create_dir_all(dir).map_err(|source| {
+        CliError::Usage(format!(
+            "{flag} {}: cannot be made a directory for the outputs ({source})",
+            dir.display()
+        ))
+    })
+}
+
+/// `text` on one line and inert on a terminal: its control characters escaped (`\n`,
+/// `\u{1b}`). An unknown member's name is quoted as the input spelled it: `{"a\nb": 1}` split the
+/// one line stderr gets, and an escape sequence in a name reached the terminal (found from
+/// outside).
+fn one_line(text: &str) -> String {
+    text.chars()
+        .map(|c| match c {
+            c if c.is_control() => c.escape_default().to_string(),
+            c => c.to_string(),
+        })
+        .collect()
 }
 
 pub fn main() -> ExitCode {
@@ -317,7 +354,7 @@ pub fn main() -> ExitCode {
                 let _ = print_text(job.clone());
             }
             match log_format {
-                LogFormat::Text => eprintln!("bouncewear: {error}"),
+                LogFormat::Text => eprintln!("bouncewear: {}", one_line(&error.to_string())),
                 // Every line on stderr one JSON object, the last one too.
                 LogFormat::Json => tracing::error!(exit_code = error.code(), "{error}"),
             }
@@ -403,6 +440,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             threads,
             quiet,
         } => {
+            output_directory("--out", &out)?;
             let progress = Progress::steps(quiet, bench::measurements(quick));
             let report = thread_pool(threads)?
                 .install(|| bench::bench(&out, quick, coverage_seeds, &progress));
@@ -431,7 +469,7 @@ fn calibrate_command(
     let fit = calibrate(&spec)?;
     if let Some(path) = plot {
         let svg = crate::plots::calibration_svg(&crate::plots::calibration_panels(&spec, &fit));
-        std::fs::write(path, svg).map_err(|source| CliError::Io {
+        std::fs::write(path, svg).map_err(|source| CliError::Write {
             path: path.display().to_string(),
             source,
         })?;
@@ -451,14 +489,19 @@ fn run_command(
     let job = Job::from_json(&read_input(file)?, draw_seed)?.with_listed_lives(0);
     check_threshold(&job, &Pointer::root().child("rare_event"))?;
     let pool = thread_pool(threads)?;
+    if let Some(dir) = plots {
+        output_directory("--plots", dir)?;
+    }
     let progress = Progress::operations(quiet);
     let result = pool.install(|| run_job(&job, &progress));
     progress.finish();
     let result = result.map_err(|cancelled| CliError::Failed(cancelled.to_string()))?;
-    if let Some(dir) = plots {
-        write_plots(&result, dir)?;
+    // The Result first: plots that cannot be written then lose nothing of the run.
+    print_json(&result)?;
+    match plots {
+        Some(dir) => write_plots(&result, dir),
+        None => Ok(()),
     }
-    print_json(&result)
 }
 
 /// The body of a 200 from `url`; anything else is a failure naming what went wrong.
@@ -486,7 +529,7 @@ fn write_plots(
 ) -> Result<(), CliError> {
     let io = |path: &std::path::Path| {
         let path = path.display().to_string();
-        move |source| CliError::Io { path, source }
+        move |source| CliError::Write { path, source }
     };
     std::fs::create_dir_all(dir).map_err(io(dir))?;
     let mut files = Vec::new();
@@ -537,18 +580,39 @@ fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool, CliError> {
 
 /// Reads a file, or standard input for `-`.
 pub fn read_input(path: &Path) -> Result<String, CliError> {
-    let mut text = String::new();
-    let result = if path.as_os_str() == "-" {
-        std::io::stdin().read_to_string(&mut text).map(|_| ())
-    } else {
-        std::fs::read_to_string(path).map(|read| text = read)
-    };
-    result.map_err(|source| CliError::Io {
+    let io = |source| CliError::Io {
         path: path.display().to_string(),
         source,
-    })?;
-    Ok(text)
+    };
+    let mut bytes = Vec::new();
+    let limit = MAX_INPUT_BYTES as u64 + 1;
+    if path.as_os_str() == "-" {
+        std::io::stdin().lock().take(limit).read_to_end(&mut bytes)
+    } else {
+        std::fs::File::open(path).and_then(|file| file.take(limit).read_to_end(&mut bytes))
+    }
+    .map_err(io)?;
+    if bytes.len() > MAX_INPUT_BYTES {
+        return Err(CliError::Usage(format!(
+            "{}: more than {} MB; a job, scenario or calibration request is far smaller",
+            path.display(),
+            MAX_INPUT_BYTES >> 20
+        )));
+    }
+    // A byte-order mark (a spreadsheet's "CSV UTF-8", some editors' JSON) is not part of the text.
+    let text = bytes.strip_prefix(b"\xef\xbb\xbf").unwrap_or(&bytes);
+    String::from_utf8(text.to_vec()).map_err(|error| {
+        let at = error.utf8_error().valid_up_to();
+        io(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("not UTF-8 text: byte {at} is not"),
+        ))
+    })
 }
+
+/// The largest input [`read_input`] reads: `/dev/zero` took 9.4 GB in ten seconds before (found
+/// from outside), where the server takes 1 MB a request by default.
+pub const MAX_INPUT_BYTES: usize = 64 << 20;
 
 /// The calibration request `text` with its `observations` read from CSV `csv` (at `path`).
 fn with_observations(text: &str, csv: &str, path: &str) -> Result<String, CliError> {
@@ -583,7 +647,7 @@ fn print_text(text: String) -> Result<(), CliError> {
     let mut out = std::io::stdout().lock();
     match writeln!(out, "{text}").and_then(|()| out.flush()) {
         Err(error) if error.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
-        written => written.map_err(|source| CliError::Io {
+        written => written.map_err(|source| CliError::Write {
             path: "<stdout>".into(),
             source,
         }),
@@ -600,7 +664,7 @@ fn print_json(value: &impl serde::Serialize) -> Result<(), CliError> {
         .and_then(|()| out.flush());
     match written {
         Err(error) if error.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
-        written => written.map_err(|source| CliError::Io {
+        written => written.map_err(|source| CliError::Write {
             path: "<stdout>".into(),
             source,
         }),
