@@ -326,9 +326,16 @@ impl Folding {
         })
     }
 
-    /// Checks that `batch` has all its groups (`count` read); counts its devices.
+    /// Checks that `batch` has all its groups (`count` read); counts its devices. The first batch
+    /// listed may be a fold an earlier merge stored in its place ([`Merged::Next`], a rare event's
+    /// [`Merged::Round`]), which has as many groups as the job's first batch: more than the batch
+    /// itself when it is a last batch cut short by `max_devices` (16 groups stored at a batch of
+    /// 8 devices failed every rare event's last merge, found from outside).
     fn complete(&mut self, batch: Batch, count: u64) -> Result<(), Incomplete> {
-        if count != batch.groups() {
+        let fold = (self.first == Some(batch.index))
+            .then(|| Batch::of(&self.job, 0).map(|first| first.groups()))
+            .flatten();
+        if count != batch.groups() && Some(count) != fold {
             return Err(Incomplete {
                 batch: batch.index,
                 detail: format!("{count} of its {} groups are stored", batch.groups()),
@@ -733,6 +740,33 @@ mod tests {
         resumed.extend(listed(2, &batches[2]));
         let folded = fold(&job, 2, &resumed).unwrap();
         assert_eq!((folded.devices, &folded.groups), (48, &whole.groups));
+    }
+
+    /// A last batch cut short by `max_devices` (8 devices, 8 groups) holds, once merged, the fold
+    /// of every batch: 16 groups, which a rare event's last merge reads back at that batch.
+    #[test]
+    fn a_fold_stored_at_a_short_last_batch_reads_back() {
+        use bouncewear_model::montecarlo::Silent;
+        use bouncewear_model::montecarlo::engine::run_group;
+        let job = Job::from_json(
+            r#"{"devices": 16, "operations": 4,
+                "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+                             "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.05}}],
+                "precision": {"metric": "total_bounce_s", "relative_half_width": 1e-9, "max_devices": 40}}"#,
+            || 7,
+        )
+        .unwrap();
+        let last = Batch::of(&job, 2).unwrap();
+        assert_eq!((last.size, last.groups()), (8, 8));
+        let whole = run_on(Kernel::SCALAR, &job, &Silent, |_| false).unwrap();
+        assert_eq!((whole.devices, whole.groups.len()), (40, G));
+        let folded = fold(&job, 2, &listed(2, &whole.groups)).unwrap();
+        assert_eq!((folded.devices, &folded.groups), (40, &whole.groups));
+        // The batch's own groups still count as its own: 8, not more nor fewer.
+        let own: Vec<GroupStats> = (0..8)
+            .map(|g| run_group(&job, last, g, &Silent).unwrap())
+            .collect();
+        assert_eq!(fold(&job, 2, &listed(2, &own[..7])).unwrap_err().batch, 2);
     }
 
     #[test]
