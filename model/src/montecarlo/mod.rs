@@ -68,6 +68,10 @@ pub struct PrecisionReport {
     /// Whether the target was met within `max_devices`: never while the data cannot bound the
     /// statistic (a quantile level with a `reason`), whatever its interval's width.
     pub met: bool,
+    /// Why the target counts as not met though the half-width reached is within it: the
+    /// quantile's own `reason` (its level beyond what the data bound).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
     /// Devices that ran.
     pub devices: u64,
 }
@@ -303,8 +307,8 @@ pub fn run_job_on(
 /// Whether the job's precision target is met by what `tally` holds (never, without a target).
 pub fn precision_met(job: &Job, tally: &Tally) -> bool {
     job.precision().is_some_and(|p| {
-        let (achieved, bounded) = precision_half_width(job, tally, p);
-        bounded && achieved <= p.relative_half_width
+        let (achieved, unbounded) = precision_half_width(job, tally, p);
+        unbounded.is_none() && achieved <= p.relative_half_width
     })
 }
 
@@ -341,13 +345,14 @@ pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
         operations: summarize_operations(job, tally),
         devices: summarize_devices(job, tally),
         precision: job.precision().map(|p| {
-            let (achieved, bounded) = precision_half_width(job, tally, p);
+            let (achieved, unbounded) = precision_half_width(job, tally, p);
             PrecisionReport {
                 metric: p.metric.name().to_owned(),
                 statistic: statistic_name(p.statistic).to_owned(),
                 target_relative_half_width: p.relative_half_width,
                 achieved_relative_half_width: achieved,
-                met: bounded && achieved <= p.relative_half_width,
+                met: unbounded.is_none() && achieved <= p.relative_half_width,
+                reason: unbounded,
                 devices: tally.devices,
             }
         }),
@@ -581,7 +586,13 @@ fn summarize_devices(job: &Job, tally: &Tally) -> BTreeMap<String, Summary> {
 /// The relative 95 % CI half-width of the precision statistic in the last bin (infinite when the
 /// statistic is 0 and the interval is not), and whether the data bound the statistic at all (a
 /// quantile level with a `reason` does not meet any target).
-fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) -> (f64, bool) {
+/// The relative half-width of the target's statistic in the last bin, and why the data cannot
+/// bound it (a quantile's `reason`), if they cannot.
+fn precision_half_width(
+    job: &Job,
+    tally: &Tally,
+    precision: &job::Precision,
+) -> (f64, Option<String>) {
     let metric = job
         .operation_metrics()
         .iter()
@@ -591,11 +602,11 @@ fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) ->
     let per_device =
         Metric::Operation(precision.metric).values_per_device(job.bin_range(last_bin as u64));
     let summary = summarize(&operation_groups(job, tally, last_bin, metric), per_device);
-    let (value, [lo, hi], bounded) = match precision.statistic {
-        Statistic::Mean => (summary.mean, summary.mean_ci95, true),
+    let (value, [lo, hi], unbounded) = match precision.statistic {
+        Statistic::Mean => (summary.mean, summary.mean_ci95, None),
         Statistic::Quantile(name) => {
             let quantile = &summary.quantiles[name];
-            (quantile.value, quantile.ci95, quantile.reason.is_none())
+            (quantile.value, quantile.ci95, quantile.reason.clone())
         }
     };
     let half_width = 0.5 * (hi - lo);
@@ -604,5 +615,5 @@ fn precision_half_width(job: &Job, tally: &Tally, precision: &job::Precision) ->
     } else {
         half_width / value.abs()
     };
-    (relative, bounded)
+    (relative, unbounded)
 }

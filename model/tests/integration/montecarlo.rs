@@ -326,8 +326,27 @@ fn precision_target_adds_device_batches_until_met() {
 
     doc["precision"]["max_devices"] = json!(100);
     doc["precision"]["relative_half_width"] = json!(1e-6);
-    let capped = run(&job(doc)).precision.unwrap();
+    let capped = run(&job(doc.clone())).precision.unwrap();
     assert!(!capped.met && capped.devices == 100, "{capped:?}");
+    assert_eq!(capped.reason, None, "a mean is always bounded");
+
+    // A p99 of 32 devices of one operation lies beyond what they bound: not met, however narrow
+    // its interval, and the report says why (it said only `met: false` beside a width within the
+    // target).
+    let mut doc = scattered(16, 1, 11);
+    doc["metrics"] = json!(["total_bounce_s"]);
+    doc["precision"] = json!({"metric": "total_bounce_s", "statistic": "p99",
+                              "relative_half_width": 0.5, "max_devices": 32});
+    let beyond = run(&job(doc)).precision.unwrap();
+    assert!(beyond.achieved_relative_half_width <= 0.5, "{beyond:?}");
+    assert!(!beyond.met, "{beyond:?}");
+    assert!(
+        beyond
+            .reason
+            .as_deref()
+            .is_some_and(|r| r.starts_with("beyond the data")),
+        "{beyond:?}"
+    );
 }
 
 #[test]
