@@ -626,6 +626,16 @@ fn calibrate_fits_kappa_to_simulated_measurements() {
     assert_eq!(fit["residuals"]["bounce_count"]["rms_relative"], 0.0);
     let fitted = bouncewear(&["simulate"], &fit["scenario"].to_string());
     assert!(fitted.status.success(), "the fitted scenario simulates");
+    // A plot that cannot be written fails the command (1), the fit printed first.
+    let nowhere = temp_dir("calibrate-plot")
+        .join("no-such-dir")
+        .join("fit.svg");
+    let plotted = bouncewear(
+        &["calibrate", "--plot", nowhere.to_str().unwrap()],
+        &request.to_string(),
+    );
+    assert_eq!(plotted.status.code(), Some(1), "{plotted:?}");
+    assert_eq!(plotted.stdout, output.stdout);
 
     // The same measurements as CSV, a column per field, give the same fit to the byte.
     let dir = temp_dir("calibrate-csv");

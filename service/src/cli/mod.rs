@@ -467,6 +467,8 @@ fn calibrate_command(
     }
     let spec = CalibrationSpec::from_json(&text)?;
     let fit = calibrate(&spec)?;
+    // The fit first, as `run` prints its Result first: a plot that cannot be written loses it not.
+    print_json(&fit)?;
     if let Some(path) = plot {
         let svg = crate::plots::calibration_svg(&crate::plots::calibration_panels(&spec, &fit));
         std::fs::write(path, svg).map_err(|source| CliError::Write {
@@ -474,7 +476,7 @@ fn calibrate_command(
             source,
         })?;
     }
-    print_json(&fit)
+    Ok(())
 }
 
 /// `bouncewear run`: the job of `file` on `threads` compute threads, its Result as JSON and its
@@ -603,9 +605,12 @@ pub fn read_input(path: &Path) -> Result<String, CliError> {
     let text = bytes.strip_prefix(b"\xef\xbb\xbf").unwrap_or(&bytes);
     String::from_utf8(text.to_vec()).map_err(|error| {
         let at = error.utf8_error().valid_up_to();
+        let byte = error.as_bytes()[at];
         io(std::io::Error::new(
             std::io::ErrorKind::InvalidData,
-            format!("not UTF-8 text: byte {at} is not"),
+            format!(
+                "not UTF-8 text: the byte at offset {at} ({byte:#04x}) starts no UTF-8 character"
+            ),
         ))
     })
 }
