@@ -75,8 +75,14 @@ pub fn batch_shards(job: &Job, batch: Batch) -> Vec<ShardPlan> {
         })
         .chain([ShardPlan {
             shard: ShardId::merge(batch.index),
-            // The last merge estimates the job's rare event, if it asks one.
-            operations: job.rare_event().map_or(0, |rare| rare.max_operations()),
+            // The last merge estimates the job's rare event, if it asks one: planned on the batch
+            // that must be the last. A precision target's other batches plan none (each planned
+            // the whole budget, and a probe's progress read 600,048,000 of 601,048,000 within
+            // 50 ms of the start); one that meets the target early counts the estimate as it runs.
+            operations: job
+                .rare_event()
+                .filter(|_| Batch::of(job, batch.index + 1).is_none())
+                .map_or(0, |rare| rare.max_operations()),
         }])
         .collect()
 }
@@ -637,6 +643,28 @@ mod tests {
             "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
                          "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.05, "min": 0}}],"#;
         assert_eq!(precision(16, rare), 17);
+    }
+
+    /// A precision target's batches before its last plan no rare-event operations for their merge
+    /// step; the last possible batch plans the estimate's whole budget.
+    #[test]
+    fn only_the_last_possible_batch_plans_the_rare_event() {
+        let job = Job::from_json(
+            r#"{"devices": 16, "operations": 10,
+                "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                             "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.05, "min": 0}}],
+                "precision": {"metric": "e1", "relative_half_width": 0.01, "max_devices": 40},
+                "rare_event": {"metric": "e1", "below": 0.1, "operation": 1}}"#,
+            || 1,
+        )
+        .unwrap();
+        let merge = |index| {
+            let shards = batch_shards(&job, Batch::of(&job, index).unwrap());
+            shards.last().unwrap().operations
+        };
+        assert_eq!((merge(0), merge(1)), (0, 0));
+        assert_eq!(merge(2), job.rare_event().unwrap().max_operations());
+        assert!(merge(2) > 0);
     }
 
     /// A worker claims ahead while it runs a group or a task of at most
