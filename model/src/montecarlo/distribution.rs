@@ -133,17 +133,17 @@ impl Domain {
             (f64::NEG_INFINITY, _) => "finite".to_owned(),
             (0.0, false) => "positive".to_owned(),
             (0.0, true) => "non-negative".to_owned(),
-            (lower, true) => format!("at least {lower}"),
-            (lower, false) => format!("above {lower}"),
+            (lower, true) => format!("at least {}", shown(lower)),
+            (lower, false) => format!("above {}", shown(lower)),
         }
     }
 
     /// The `min` to suggest for truncating a distribution that reaches below the domain.
     fn suggested_min(&self) -> String {
         if self.inclusive {
-            format!("\"min\": {}", self.lower)
+            format!("\"min\": {}", shown(self.lower))
         } else {
-            format!("a \"min\" above {}", self.lower)
+            format!("a \"min\" above {}", shown(self.lower))
         }
     }
 }
@@ -431,7 +431,7 @@ impl Faults<'_> {
         }
         self.positive("sd", sd);
         let support = Support {
-            name: format!("normal(mean {mean}, sd {sd})"),
+            name: format!("normal(mean {}, sd {})", shown(mean), shown(sd)),
             lowest: f64::NEG_INFINITY,
             missing_min: "min",
         };
@@ -458,7 +458,11 @@ impl Faults<'_> {
         self.positive("median", median);
         self.positive("sigma", sigma);
         let support = Support {
-            name: format!("lognormal(median {median}, sigma {sigma})"),
+            name: format!(
+                "lognormal(median {}, sigma {})",
+                shown(median),
+                shown(sigma)
+            ),
             lowest: 0.0,
             missing_min: "kind",
         };
@@ -509,7 +513,7 @@ impl Faults<'_> {
         self.positive("scale", scale);
         self.positive("shape", shape);
         let support = Support {
-            name: format!("Weibull(scale {scale}, shape {shape})"),
+            name: format!("Weibull(scale {}, shape {})", shown(scale), shown(shape)),
             lowest: 0.0,
             missing_min: "kind",
         };
@@ -671,7 +675,7 @@ impl Faults<'_> {
                     format!(
                         "a {} reaches below {} (this parameter must be {}); add {} to truncate it",
                         support.name,
-                        domain.lower,
+                        shown(domain.lower),
                         domain.describe(),
                         domain.suggested_min()
                     ),
@@ -1096,6 +1100,19 @@ mod tests {
         for (json, domain, pointer) in cases {
             assert_eq!(pointers(json, domain), [pointer], "{json}");
         }
+        // A tiny number is written as one, not in 300 decimals.
+        let told = Distribution::new(
+            &parse(r#"{"kind":"normal","mean":1e-300,"sd":1e-301}"#),
+            positive,
+            &Pointer::root(),
+        )
+        .unwrap_err();
+        assert!(
+            told[0]
+                .detail
+                .starts_with("a normal(mean 1e-300, sd 1e-301) reaches below 0"),
+            "{told:?}"
+        );
         for (json, domain) in [
             (r#"{"kind":"fixed","value":0}"#, non_negative),
             (r#"{"kind":"fixed","value":1e-30}"#, positive),

@@ -198,7 +198,7 @@ fn a_distribution_that_can_leave_the_domain_names_the_min_that_would_truncate_it
     assert!(
         inertia[0]
             .1
-            .starts_with("a normal(mean 0.000016, sd 0.000002) reaches below 0"),
+            .starts_with("a normal(mean 0.000016, sd 2e-6) reaches below 0"),
         "{}",
         inertia[0].1
     );
