@@ -154,6 +154,14 @@ fn a_charset_other_than_utf8_is_415_and_utf8_is_accepted() {
     ] {
         assert_eq!(send(accepted).status, 200, "{accepted}");
     }
+    // A byte-order mark before the JSON is no part of it (RFC 8259 8.1), as on the command line.
+    let marked = reply(
+        agent()
+            .post(&server.url("/v1/simulate"))
+            .header("content-type", "application/json")
+            .send("\u{feff}{}"),
+    );
+    assert_eq!(marked.status, 200, "{}", marked.body);
 }
 
 #[test]

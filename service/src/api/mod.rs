@@ -411,7 +411,11 @@ impl FromRequest<AppState> for JsonText {
                 }
             })?;
         match std::str::from_utf8(&bytes) {
-            Ok(text) => Ok(JsonText(text.to_owned())),
+            // RFC 8259 (8.1) lets a parser ignore a byte-order mark; the command line drops it
+            // too, so a file that `bouncewear submit` sends is one a client may post as it is.
+            Ok(text) => Ok(JsonText(
+                text.strip_prefix('\u{feff}').unwrap_or(text).to_owned(),
+            )),
             Err(error) => Err(bouncewear_model::error::not_utf8(&bytes, &error).into()),
         }
     }
