@@ -92,14 +92,13 @@ impl SqliteBackend {
     }
 
     /// The file is still the one opened, with at least `min_free_bytes` of room beside it
-    /// ([`SqliteBackend::room`]).
+    /// ([`SqliteBackend::short_of`]).
     pub(crate) async fn check_disk(&self, min_free_bytes: u64) -> StoreResult<()> {
         let Some(file) = &self.file else {
             return Ok(());
         };
         file.still_there()?;
-        let room = self.room(file).await?;
-        if room.bytes() < min_free_bytes {
+        if let Some(room) = self.short_of(file, min_free_bytes).await? {
             return Err(StoreError::NotReady(format!(
                 "{}, below the {} MB required (--min-free-disk-mb)",
                 room,
@@ -112,20 +111,31 @@ impl SqliteBackend {
     /// What the database can still write: the disk's free bytes beside it and its own free pages
     /// (the pages of deleted jobs, which it reuses before it grows its file). Without the pages, a
     /// disk that filled stayed full to the queue however many jobs an operator deleted.
-    async fn room(&self, file: &DatabaseFile) -> StoreResult<Room> {
-        let disk = free_bytes(file.directory()).map_err(|error| {
-            StoreError::NotReady(format!("free disk space cannot be read ({error})"))
-        })?;
+    ///
+    /// That room when it is less than `needed`, else `None`. The free pages are read only when the
+    /// disk alone falls short: every store of a group checks, and the disk's figure is a system
+    /// call where the pages' are a round trip to a reader.
+    async fn short_of(&self, file: &DatabaseFile, needed: u64) -> StoreResult<Option<Room>> {
+        let disk = disk_free(file)?;
+        if disk >= needed {
+            return Ok(None);
+        }
+        let room = Room {
+            disk,
+            pages: self.free_pages().await?,
+        };
+        Ok((room.bytes() < needed).then_some(room))
+    }
+
+    /// The bytes of the database's free pages.
+    async fn free_pages(&self) -> StoreResult<u64> {
         let pages: i64 = sqlx::query_scalar(
             "SELECT (SELECT freelist_count FROM pragma_freelist_count()) * \
              (SELECT page_size FROM pragma_page_size())",
         )
         .fetch_one(&self.readers)
         .await?;
-        Ok(Room {
-            disk,
-            pages: u64::try_from(pages).unwrap_or(0),
-        })
+        Ok(u64::try_from(pages).unwrap_or(0))
     }
 
     /// Room beside the database for a write of `bytes`: twice them (the write-ahead log, then the
@@ -137,8 +147,7 @@ impl SqliteBackend {
             return Ok(());
         };
         let needed = bytes.saturating_mul(2).saturating_add(KEPT_FOR_DELETES);
-        let room = self.room(file).await?;
-        if room.bytes() < needed {
+        if let Some(room) = self.short_of(file, needed).await? {
             return Err(StoreError::NoRoom(format!(
                 "a write of {} MB needs {} MB of room beside the database (the write-ahead log, \
                  the pages, and {} MB kept for deletes); {}",
@@ -160,7 +169,7 @@ impl SqliteBackend {
 /// not write its log).
 pub(crate) const KEPT_FOR_DELETES: u64 = 4 << 20;
 
-/// The room [`SqliteBackend::room`] finds.
+/// The room [`SqliteBackend::short_of`] finds.
 struct Room {
     disk: u64,
     pages: u64,
@@ -254,6 +263,12 @@ impl DatabaseFile {
             _ => Path::new("."),
         }
     }
+}
+
+/// [`free_bytes`] beside the database `file`.
+fn disk_free(file: &DatabaseFile) -> StoreResult<u64> {
+    free_bytes(file.directory())
+        .map_err(|error| StoreError::NotReady(format!("free disk space cannot be read ({error})")))
 }
 
 /// Bytes an unprivileged process may still write on the file system of `directory` (statvfs).
@@ -413,7 +428,9 @@ mod tests {
             unreachable!("a SQLite URL")
         };
         let file = sqlite.file.as_ref().unwrap();
-        let before = sqlite.room(file).await.unwrap();
+        // Short of everything: the room as it is.
+        let room = async || sqlite.short_of(file, u64::MAX).await.unwrap().unwrap();
+        let before = room().await;
         for statement in [
             "CREATE TABLE scratch (b BLOB)",
             "INSERT INTO scratch VALUES (zeroblob(8388608))",
@@ -424,7 +441,7 @@ mod tests {
                 .await
                 .unwrap();
         }
-        let after = sqlite.room(file).await.unwrap();
+        let after = room().await;
         assert!(
             after.pages >= before.pages + (8 << 20) - (64 << 10),
             "{before} then {after}"
