@@ -335,12 +335,15 @@ fn output_directory(flag: &str, dir: &Path) -> Result<(), CliError> {
 /// one line stderr gets, and an escape sequence in a name reached the terminal (found from
 /// outside).
 fn one_line(text: &str) -> String {
-    text.chars()
-        .map(|c| match c {
-            c if c.is_control() => c.escape_default().to_string(),
-            c => c.to_string(),
-        })
-        .collect()
+    let mut line = String::with_capacity(text.len());
+    for c in text.chars() {
+        if c.is_control() {
+            line.extend(c.escape_default());
+        } else {
+            line.push(c);
+        }
+    }
+    line
 }
 
 pub fn main() -> ExitCode {
@@ -602,8 +605,10 @@ pub fn read_input(path: &Path) -> Result<String, CliError> {
         )));
     }
     // A byte-order mark (a spreadsheet's "CSV UTF-8", some editors' JSON) is not part of the text.
-    let text = bytes.strip_prefix(b"\xef\xbb\xbf").unwrap_or(&bytes);
-    String::from_utf8(text.to_vec()).map_err(|error| {
+    if bytes.starts_with(b"\xef\xbb\xbf") {
+        bytes.drain(..3);
+    }
+    String::from_utf8(bytes).map_err(|error| {
         let at = error.utf8_error().valid_up_to();
         let byte = error.as_bytes()[at];
         io(std::io::Error::new(
