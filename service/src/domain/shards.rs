@@ -639,25 +639,23 @@ mod tests {
             "batches of 2e6 operations run whole"
         );
         assert_eq!(precision(2001, ""), 33);
-        let rare = r#""rare_event": {"metric": "e1", "below": 0.1, "operation": 1},
-            "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
-                         "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.05, "min": 0}}],"#;
-        assert_eq!(precision(16, rare), 17);
+        assert_eq!(precision(16, RARE_EVENT), 17);
     }
+
+    /// A rare event of e1 and the scattered input it needs, as members of a job.
+    const RARE_EVENT: &str = r#""rare_event": {"metric": "e1", "below": 0.1, "operation": 1},
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                     "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.05, "min": 0}}],"#;
 
     /// A precision target's batches before its last plan no rare-event operations for their merge
     /// step; the last possible batch plans the estimate's whole budget.
     #[test]
     fn only_the_last_possible_batch_plans_the_rare_event() {
-        let job = Job::from_json(
-            r#"{"devices": 16, "operations": 10,
-                "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
-                             "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.05, "min": 0}}],
-                "precision": {"metric": "e1", "relative_half_width": 0.01, "max_devices": 40},
-                "rare_event": {"metric": "e1", "below": 0.1, "operation": 1}}"#,
-            || 1,
-        )
-        .unwrap();
+        let text = format!(
+            r#"{{"devices": 16, "operations": 10, {RARE_EVENT}
+                "precision": {{"metric": "e1", "relative_half_width": 0.01, "max_devices": 40}}}}"#
+        );
+        let job = Job::from_json(&text, || 1).unwrap();
         let merge = |index| {
             let shards = batch_shards(&job, Batch::of(&job, index).unwrap());
             shards.last().unwrap().operations
