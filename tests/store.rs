@@ -80,6 +80,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_claim_whose_lease_expired_is_fenced_out_by_its_successor(&database("fence")).await;
     a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(&database("shards")).await;
     a_precision_target_queues_its_next_batch_from_the_merge(&database("batches")).await;
+    a_job_run_whole_raises_its_total_as_its_batches_are_added(&database("growing")).await;
     a_rare_events_rounds_run_as_shards_give_the_whole_result(&database("rounds")).await;
     a_rare_events_last_merge_reads_the_fold_not_a_held_group(&database("held-fold")).await;
     a_poison_job_fails_after_the_retry_limit_with_the_reason(&database("poison")).await;
@@ -424,7 +425,10 @@ async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor(url: &str) {
         "fenced out"
     );
     assert_eq!(
-        store.heartbeat(&first.fence, terms(2100), 5).await.unwrap(),
+        store
+            .heartbeat(&first.fence, terms(2100), 5, 5)
+            .await
+            .unwrap(),
         Lease::Lost
     );
     assert!(
@@ -435,7 +439,7 @@ async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor(url: &str) {
     );
     assert_eq!(
         store
-            .heartbeat(&second.fence, terms(2100), 5)
+            .heartbeat(&second.fence, terms(2100), 5, 5)
             .await
             .unwrap(),
         Lease::Held
@@ -564,11 +568,11 @@ async fn leases_run_on_the_database_clock(url: &str) {
     let second = store.claim("b", lease, budget(3)).await.unwrap().unwrap();
     assert_eq!(second.fence.shard, first.fence.shard);
     assert_eq!(
-        store.heartbeat(&first.fence, lease, 1).await.unwrap(),
+        store.heartbeat(&first.fence, lease, 1, 1).await.unwrap(),
         Lease::Lost
     );
     assert_eq!(
-        store.heartbeat(&second.fence, lease, 1).await.unwrap(),
+        store.heartbeat(&second.fence, lease, 1, 1).await.unwrap(),
         Lease::Held
     );
 }
@@ -1106,6 +1110,37 @@ async fn refuse_results(url: &str) {
 }
 
 /// Inserts a queued job into a queue of ten; its id.
+/// A job run whole with a precision target enters the queue with its first batch's operations
+/// and learns the rest as its batches are added: each heartbeat raises its total to the end of
+/// the batch running, so its progress reads the work still to do (it read done of done).
+async fn a_job_run_whole_raises_its_total_as_its_batches_are_added(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let owner = Owner::anonymous();
+    let text = r#"{"devices": 16, "operations": 3, "precision":
+        {"metric": "e1", "relative_half_width": 1e-9, "max_devices": 64}}"#;
+    let job = Job::from_json(text, || 1).unwrap();
+    let id = insert(&store, QueuedJob::new(&job, owner.clone(), None, UnixMs(1))).await;
+    let claim = store.claim("w", terms(0), budget(2));
+    let claim = claim.await.unwrap().expect("the job's one shard");
+    let progress = async || {
+        let record = store.job(&owner, &id).await.unwrap();
+        (record.operations_done, record.operations_total)
+    };
+    assert_eq!(progress().await, (0, 48), "the first batch, run whole");
+    let beat = async |at: i64, done: u64, total: u64| {
+        let lease = store.heartbeat(&claim.fence, terms(at), done, total);
+        assert_eq!(lease.await.unwrap(), Lease::Held);
+    };
+    beat(100, 30, 48).await;
+    assert_eq!(progress().await, (30, 48));
+    beat(200, 60, 96).await;
+    assert_eq!(progress().await, (60, 96), "the second batch's end");
+    beat(300, 70, 0).await;
+    assert_eq!(progress().await, (70, 96), "a total is never lowered");
+    beat(400, 150, 144).await;
+    assert_eq!(progress().await, (150, 150), "never below what is done");
+}
+
 async fn insert(store: &Arc<dyn Store>, job: QueuedJob) -> JobId {
     let bound = QueueBound::total(10);
     store.insert_job(job, bound).await.unwrap().unwrap().id
@@ -1400,7 +1435,7 @@ async fn an_ended_jobs_running_shards_stop_with_it(url: &str) {
         (id, a, b)
     };
     let (id, a, _) = claim_both(6, 2).await;
-    let renewed = store.heartbeat(&a.fence, terms(900), 2).await.unwrap();
+    let renewed = store.heartbeat(&a.fence, terms(900), 2, 2).await.unwrap();
     assert_eq!(renewed, Lease::Held);
     store.cancel(&owner, &id, Some(UnixMs(1500))).await.unwrap();
     assert_eq!(
@@ -1420,7 +1455,7 @@ async fn an_ended_jobs_running_shards_stop_with_it(url: &str) {
         ]
     );
     assert_eq!(
-        store.heartbeat(&a.fence, terms(1600), 3).await.unwrap(),
+        store.heartbeat(&a.fence, terms(1600), 3, 3).await.unwrap(),
         Lease::Cancelled
     );
     let job = Job::new(a.spec.clone(), || 0, &Pointer::root()).unwrap();
@@ -1452,7 +1487,7 @@ async fn an_ended_jobs_running_shards_stop_with_it(url: &str) {
         ]
     );
     assert_eq!(
-        store.heartbeat(&a.fence, terms(600), 1).await.unwrap(),
+        store.heartbeat(&a.fence, terms(600), 1, 1).await.unwrap(),
         Lease::Cancelled
     );
 }
@@ -1841,7 +1876,10 @@ async fn postgres_announces_queued_jobs_and_their_progress(url: &str) {
         .unwrap()
         .unwrap();
     assert_eq!(next().await, QueueEvent::Changed(id.clone()));
-    store.heartbeat(&claim.fence, terms(100), 7).await.unwrap();
+    store
+        .heartbeat(&claim.fence, terms(100), 7, 7)
+        .await
+        .unwrap();
     assert_eq!(next().await, QueueEvent::Changed(id.clone()));
     // Announced in order: had the submission, the claim or the heartbeat announced an end, it
     // would have been passed on before the heartbeat's change.

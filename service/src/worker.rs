@@ -195,6 +195,17 @@ enum Holding {
     Stale,
 }
 
+/// What a computation's progress says of its shard's work.
+#[derive(Debug, Clone, Copy)]
+enum Work {
+    /// Its operations done so far, of the total planned for the shard (a rare event's budget
+    /// is a cap, not a plan: its rounds end sooner).
+    Planned,
+    /// Its operations done so far and its total as it learns it: a job run whole, whose
+    /// precision target adds a batch at a time.
+    Growing,
+}
+
 /// A shard's lease, heartbeated by a task of its own for as long as this lives.
 struct KeptLease {
     /// Set when the computation must stop: the job ended, the lease was lost, or shutdown.
@@ -203,6 +214,8 @@ struct KeptLease {
     stopping: Arc<AtomicBool>,
     /// The shard's operations done so far, reported with each heartbeat.
     done: Arc<AtomicU64>,
+    /// Its operations in all as its computation learns them ([`Work::Growing`]), else 0.
+    total: Arc<AtomicU64>,
     keeper: JoinHandle<()>,
     /// The database's clock less this machine's, as the claim found them: times that the
     /// database also keeps (a job's start) are read on its clock, whatever this machine's says.
@@ -494,7 +507,7 @@ impl Workers {
         tracing::debug!(operations, "group started");
         let running = Instant::now();
         let ran = self
-            .compute(&lease, move |observer| {
+            .compute(&lease, Work::Planned, move |observer| {
                 run_group(&job, batch, group, observer)
             })
             .await;
@@ -562,7 +575,9 @@ impl Workers {
         let spec = partials.job().spec();
         let batch_operations = spec.devices * spec.operations;
         let sharded_from = self.sharded_round_operations;
-        let compute = self.compute(lease, move |observer| {
+        // A job run whole learns its total as its precision target adds batches.
+        let work = if whole { Work::Growing } else { Work::Planned };
+        let compute = self.compute(lease, work, move |observer| {
             let merged = if whole {
                 run_whole(partials.job(), sharded_from, wall_s, observer)
             } else {
@@ -674,7 +689,7 @@ impl Workers {
         };
         let running = Instant::now();
         let ran = self
-            .compute(lease, move |observer| {
+            .compute(lease, Work::Planned, move |observer| {
                 if observer.cancelled() {
                     return Err(Cancelled);
                 }
@@ -732,7 +747,7 @@ impl Workers {
         let devices_last = rounds.devices_last;
         let sharded_from = self.sharded_round_operations;
         let round_job = job.clone();
-        let compute = self.compute(lease, move |observer| {
+        let compute = self.compute(lease, Work::Planned, move |observer| {
             match merge_round(&round_job, rounds, outcomes, sharded_from, observer) {
                 Err(MergeError::Cancelled(cancelled)) => Err(cancelled),
                 Err(other) => Ok(Err(other)),
@@ -768,7 +783,9 @@ impl Workers {
             return;
         };
         let wall_s = lease.wall_s_since(started_at);
-        let compute = self.compute(lease, move |_| encoded(estimated(devices, report, wall_s)));
+        let compute = self.compute(lease, Work::Planned, move |_| {
+            encoded(estimated(devices, report, wall_s))
+        });
         let ran = clock.time(Part::Compute, compute).await;
         clock
             .time(Part::Write, self.write(fence, ran, 0, lease))
@@ -823,13 +840,15 @@ impl Workers {
         let cancel = Arc::new(AtomicBool::new(false));
         let stopping = Arc::new(AtomicBool::new(false));
         let done = Arc::new(AtomicU64::new(0));
+        let total = Arc::new(AtomicU64::new(0));
         let period = (self.lease / 3).min(HEARTBEAT_MAX_PERIOD);
         let keeper = {
             let (store, fence) = (Arc::clone(&self.store), fence.clone());
-            let (cancel, stopping, done) = (
+            let (cancel, stopping, done, total) = (
                 Arc::clone(&cancel),
                 Arc::clone(&stopping),
                 Arc::clone(&done),
+                Arc::clone(&total),
             );
             let duration_ms = i64::try_from(self.lease.as_millis()).unwrap_or(i64::MAX);
             tokio::spawn(async move {
@@ -840,7 +859,8 @@ impl Workers {
                         _ = heartbeat.tick() => {
                             let terms = LeaseTerms::for_ms(duration_ms);
                             let progress = done.load(Ordering::Relaxed);
-                            match store.heartbeat(&fence, terms, progress).await {
+                            let total = total.load(Ordering::Relaxed).max(progress);
+                            match store.heartbeat(&fence, terms, progress, total).await {
                                 Ok(Lease::Held) => {}
                                 Ok(lease @ (Lease::Cancelled | Lease::Lost)) => {
                                     tracing::info!(?lease, "stopping: the shard is no longer ours to run");
@@ -863,24 +883,32 @@ impl Workers {
             cancel,
             stopping,
             done,
+            total,
             keeper,
             clock_offset_ms: 0,
         }
     }
 
-    /// Runs `task` on the compute pool, reporting its progress to the lease and stopping when the
-    /// lease says so.
+    /// Runs `task` on the compute pool, reporting its progress to the lease (of the `work` it
+    /// has) and stopping when the lease says so.
     async fn compute<T: Send + 'static>(
         &self,
         lease: &KeptLease,
+        work: Work,
         task: impl FnOnce(&dyn Observer) -> Result<T, Cancelled> + Send + 'static,
     ) -> Ran<T> {
         let (sender, finished) = oneshot::channel();
         let (cancel, done) = (Arc::clone(&lease.cancel), Arc::clone(&lease.done));
+        let total = Arc::clone(&lease.total);
         self.compute.spawn(move || {
             let observer = Watch {
                 cancel: &cancel,
-                on_progress: |d, _| done.store(d, Ordering::Relaxed),
+                on_progress: |d, t| {
+                    done.store(d, Ordering::Relaxed);
+                    if matches!(work, Work::Growing) {
+                        total.store(t, Ordering::Relaxed);
+                    }
+                },
             };
             let _ = sender.send(std::panic::catch_unwind(AssertUnwindSafe(|| {
                 task(&observer)

@@ -385,12 +385,15 @@ pub trait JobQueue: Send + Sync + 'static {
         budget: RetryBudget,
     ) -> StoreResult<Option<Claim>>;
     /// Extends the shard's lease and records its progress (the job's is the sum over its
-    /// shards), if the claim still holds it and the job still runs.
+    /// shards), if the claim still holds it and the job still runs: its operations done, and
+    /// `operations_total` where that is more than the shard's total (a job run whole learns its
+    /// next batch as it goes).
     async fn heartbeat(
         &self,
         fence: &Fence,
         terms: LeaseTerms,
         operations_done: u64,
+        operations_total: u64,
     ) -> StoreResult<Lease>;
     /// Marks a group done with its accumulators, encoded here, in one transaction, if the claim
     /// still holds it. A worker encodes them off the async threads and calls

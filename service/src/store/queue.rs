@@ -548,6 +548,7 @@ impl JobQueue for SqlStore {
         fence: &Fence,
         terms: LeaseTerms,
         operations_done: u64,
+        operations_total: u64,
     ) -> StoreResult<Lease> {
         // A renewal that a power cut undoes leaves a lease that runs out: the shard runs again.
         let mut tx = self.begin_redoable().await?;
@@ -556,7 +557,7 @@ impl JobQueue for SqlStore {
             concat!(
                 // A job run whole with a precision target runs more than its first batch.
                 "UPDATE shards SET lease_until = $5 + $6, operations_done = $7, \
-                 operations_total = CASE WHEN $7 > operations_total THEN $7 ELSE operations_total END \
+                 operations_total = CASE WHEN $8 > operations_total THEN $8 ELSE operations_total END \
                  WHERE ",
                 fenced_shard!()
             ),
@@ -565,6 +566,7 @@ impl JobQueue for SqlStore {
         .bind(now.0)
         .bind(terms.duration_ms)
         .bind(count_to_sql(operations_done))
+        .bind(count_to_sql(operations_total.max(operations_done)))
         .execute(&mut tx)
         .await?;
         if updated == 1 {
