@@ -140,6 +140,12 @@ impl ResolvedJob {
         let mut spec = job.spec().clone();
         spec.scenario = job.scenario().spec().clone();
         spec.metrics = Some(job.metric_names());
+        // The operation a rare event reads an operation metric at (1 unless asked).
+        if let (Some(asked), Some(rare)) = (spec.rare_event.as_mut(), job.rare_event())
+            && matches!(rare.reading, rare::Reading::Metric(Metric::Operation(_)))
+        {
+            asked.operation = Some(rare.operations);
+        }
         Self {
             spec,
             devices_run,

@@ -174,6 +174,18 @@ fn defaults_are_filled_in_and_the_seed_is_reported() {
     assert!(
         result.job.versions().contains_key("rand_chacha") && !result.job.generator().is_empty()
     );
+    // A rare event's defaults, the operation it reads at among them.
+    let rare = job_with(json!({"devices": 1, "operations": 5,
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+            "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.01}}],
+        "rare_event": {"metric": "total_bounce_s", "above": 1e-3, "method": "crude",
+            "max_evaluations": 2000}}));
+    let rare = serde_json::to_value(run(&rare).job).unwrap();
+    assert_eq!(
+        rare["rare_event"],
+        json!({"metric": "total_bounce_s", "above": 1e-3, "method": "crude", "operation": 1,
+            "target_cov": 0.1, "max_evaluations": 2000})
+    );
 }
 
 #[test]
