@@ -127,6 +127,8 @@ pub(crate) fn prometheus_builder() -> PrometheusBuilder {
 pub const RESPONSE_BYTES_HELD: &str = "bouncewear_response_bytes_held";
 /// Large responses built and waiting for room among the bytes held (a gauge).
 pub const RESPONSES_WAITING: &str = "bouncewear_responses_waiting";
+/// Large responses refused while the bytes held were at their limit (`api::held`).
+pub const RESPONSES_REFUSED: &str = "bouncewear_responses_refused_total";
 pub const CONNECTIONS_SHED: &str = "bouncewear_connections_shed_total";
 
 /// Connections closed because their client read none of a response for the body timeout
@@ -164,7 +166,7 @@ fn describe_metrics() {
         "Large responses built and waiting for room among the bytes held (at most 4)."
     );
     metrics::describe_counter!(
-        "bouncewear_responses_refused_total",
+        RESPONSES_REFUSED,
         "Large responses refused (503) while --max-response-mb was held for unread ones."
     );
     metrics::describe_gauge!(
@@ -224,9 +226,9 @@ fn describe_metrics() {
     );
 }
 
-/// Counters that would appear only once something happened, there from the start at 0: a
-/// scrape shows every family with its HELP and TYPE, and a rate over a series that is still 0
-/// is 0, not absent.
+/// Counters and gauges that would appear only once something happened, there from the start at
+/// 0: a scrape shows every family with its HELP and TYPE, and a rate over a series that is still
+/// 0 is 0, not absent.
 fn counters_from_zero() {
     for name in [
         CONNECTIONS_SHED,
@@ -236,8 +238,12 @@ fn counters_from_zero() {
         "bouncewear_store_retries_total",
         JOBS_SUBMITTED,
         "bouncewear_operations_simulated_total",
+        RESPONSES_REFUSED,
     ] {
         metrics::counter!(name).increment(0);
+    }
+    for name in [RESPONSE_BYTES_HELD, RESPONSES_WAITING] {
+        metrics::gauge!(name).increment(0.0);
     }
     for status in ["succeeded", "failed", "cancelled"] {
         metrics::counter!("bouncewear_jobs_finished_total", "status" => status).increment(0);

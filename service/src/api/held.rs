@@ -13,7 +13,7 @@
 //! than the whole budget is served alone; a HEAD, whose body is never sent, takes nothing.
 
 use super::error::ApiError;
-use crate::telemetry::{RESPONSE_BYTES_HELD, RESPONSES_WAITING};
+use crate::telemetry::{RESPONSE_BYTES_HELD, RESPONSES_REFUSED, RESPONSES_WAITING};
 use axum::body::{Body, Bytes};
 use axum::extract::{Request, State};
 use axum::middleware::Next;
@@ -100,7 +100,7 @@ pub async fn hold(State(held): State<Held>, request: Request, next: Next) -> Res
             })
         }
         _ => {
-            metrics::counter!("bouncewear_responses_refused_total").increment(1);
+            metrics::counter!(RESPONSES_REFUSED).increment(1);
             ApiError::ResponsesHeld(u64::from(held.total_kib) >> 10).into_response()
         }
     }
