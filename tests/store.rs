@@ -6,7 +6,7 @@ use crate::support::{temp_dir, without_timing};
 use bouncewear::compute::thread_pool;
 use bouncewear::domain::idempotency::KEY_LIFETIME_MS;
 use bouncewear::domain::rare::{RARE_ROUNDS, SHARDED_ROUND_OPERATIONS, is_round};
-use bouncewear::domain::shards::{Folding, Merged, grouped_shards, merge};
+use bouncewear::domain::shards::{Folding, Merged, WHOLE_STEP, grouped_shards, merge};
 use bouncewear::domain::{
     Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob, ROOM_RETRY_MS,
     ScheduleBound, ScheduleDefinition, ScheduleId, ShardId, UnixMs,
@@ -81,6 +81,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(&database("shards")).await;
     a_precision_target_queues_its_next_batch_from_the_merge(&database("batches")).await;
     a_job_run_whole_raises_its_total_as_its_batches_are_added(&database("growing")).await;
+    a_job_run_whole_in_steps_gives_the_whole_result(&database("steps")).await;
     a_rare_events_rounds_run_as_shards_give_the_whole_result(&database("rounds")).await;
     a_rare_events_last_merge_reads_the_fold_not_a_held_group(&database("held-fold")).await;
     a_poison_job_fails_after_the_retry_limit_with_the_reason(&database("poison")).await;
@@ -916,6 +917,52 @@ async fn run_rounds(store: &Arc<dyn Store>, id: &JobId) -> JobRecord {
     ended
 }
 
+/// A job run whole with a precision target hands itself on after each step of `whole_step`
+/// (here every batch), so that it never holds its worker long: each step is a merge step
+/// of its own, the fold of its batches stored at the last one it ran, and the Result is the
+/// job's to the bit, its last batch cut short by `max_devices` included.
+async fn a_job_run_whole_in_steps_gives_the_whole_result(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let text = r#"{"devices": 16, "operations": 2, "seed": 9,
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+                     "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.01}}],
+        "precision": {"metric": "total_bounce_s", "relative_half_width": 1e-9, "max_devices": 88}}"#;
+    let job = Job::from_json(text, || 9).unwrap();
+    let whole = run_job(&job, &Silent).unwrap();
+    assert_eq!(
+        whole.job.devices_run(),
+        88,
+        "five batches of 16 and one of 8"
+    );
+    let id = insert(
+        &store,
+        QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1)),
+    )
+    .await;
+    let mut workers = Arc::into_inner(workers(&store, 3, u64::MAX)).unwrap();
+    workers.whole_step = Duration::ZERO;
+    let ended = run_until_ended(&store, Arc::new(workers), &id, async || {}).await;
+    assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
+    assert_eq!((ended.operations_done, ended.operations_total), (176, 176));
+    let shards = store.shards(&id).await.unwrap();
+    let steps: Vec<ShardId> = shards
+        .iter()
+        .map(|s| s.shard)
+        .filter(|s| s.group.is_none())
+        .collect();
+    assert_eq!(
+        steps,
+        (0..6).map(ShardId::merge).collect::<Vec<_>>(),
+        "a batch a step"
+    );
+    assert!(shards.iter().all(|s| s.status == "done"), "{shards:?}");
+    assert_eq!(
+        without_timing(&store.result_json(&id).await.unwrap().unwrap()),
+        without_timing(&serde_json::to_string(&whole).unwrap())
+    );
+    assert!(stored_groups(store.as_ref(), &id, &job).await.is_empty());
+}
+
 /// A worker process that ran a group of a precision target's last batch, but not the batch's
 /// merge, still holds that group when it later makes the rare event's last merge, which reads the
 /// devices' groups back at that batch: their rows hold the fold of every batch then, and the
@@ -1158,6 +1205,7 @@ fn workers(store: &Arc<dyn Store>, retries: u64, listed_lives: u64) -> Arc<Worke
         listed_lives,
         large_merges: tokio::sync::Semaphore::new(1),
         sharded_round_operations: SHARDED_ROUND_OPERATIONS,
+        whole_step: WHOLE_STEP,
         held: HeldGroups::new(HELD_GROUP_BYTES),
     })
 }

@@ -206,6 +206,7 @@ async fn start_workers(config: &WorkerConfig) -> Result<Workers, StartupError> {
         listed_lives: config.max_listed_lives,
         large_merges: tokio::sync::Semaphore::new(1),
         sharded_round_operations: crate::domain::rare::SHARDED_ROUND_OPERATIONS,
+        whole_step: crate::domain::shards::WHOLE_STEP,
         held: HeldGroups::new(HELD_GROUP_BYTES),
     })
 }

@@ -71,6 +71,9 @@ pub struct Workers {
     /// ([`crate::domain::rare::SHARDED_ROUND_OPERATIONS`]); smaller rounds run in the merge step.
     /// Where a round runs changes no bit.
     pub sharded_round_operations: u64,
+    /// How long a merge step running a job whole runs batches before it hands the job on
+    /// ([`crate::domain::shards::WHOLE_STEP`]). Where a step ends changes no bit.
+    pub whole_step: Duration,
     /// Groups this process ran, for their merge step if it runs here too.
     pub held: HeldGroups,
 }
@@ -570,26 +573,36 @@ impl Workers {
             return;
         };
         let wall_s = lease.wall_s_since(started_at);
-        // A first batch without groups stored is a job that entered the queue whole.
-        let whole = last == 0 && partials.read().is_empty();
+        // A batch without groups stored is a job that entered the queue whole, at its first
+        // batch or handed on after a step.
+        let whole = !partials.read().iter().any(|shard| shard.batch == last);
         let spec = partials.job().spec();
         let batch_operations = spec.devices * spec.operations;
-        let sharded_from = self.sharded_round_operations;
+        let (sharded_from, step) = (self.sharded_round_operations, self.whole_step);
         // A job run whole learns its total as its precision target adds batches.
         let work = if whole { Work::Growing } else { Work::Planned };
         let compute = self.compute(lease, work, move |observer| {
             let merged = if whole {
-                run_whole(partials.job(), sharded_from, wall_s, observer)
+                partials
+                    .finish_before_last()
+                    .map_err(MergeError::from)
+                    .and_then(|(job, ran)| {
+                        run_whole(&job, ran, step, sharded_from, wall_s, observer)
+                    })
             } else {
                 merge(partials, sharded_from, wall_s, observer)
             };
             encoded(merged)
         });
         let ran = clock.time(Part::Compute, compute).await;
-        // A job run whole ran its operations here: a precision target's every batch.
+        // A job run whole ran its operations here: its batches from this one on.
+        let before = last * batch_operations;
         let simulated = match &ran {
             _ if !whole => 0,
-            Ran::Done(Ok(Outcome::Result { result, .. })) => result.counts.operations,
+            Ran::Done(Ok(Outcome::Result { result, .. })) => result.counts.operations - before,
+            Ran::Done(Ok(Outcome::Next { shards, .. })) => {
+                shards[0].shard.batch * batch_operations - before
+            }
             _ => batch_operations,
         };
         let write = self.write(fence, ran, simulated, lease);

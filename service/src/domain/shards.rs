@@ -11,7 +11,7 @@
 //! on its compute threads ([`run_whole`]): the same groups in the same order, so the same bits.
 
 use super::rare::{self, Estimated, Rounds};
-use bouncewear_model::montecarlo::engine::{Batch, GroupStats, run_on};
+use bouncewear_model::montecarlo::engine::{Batch, GroupStats, run_on_from};
 use bouncewear_model::montecarlo::rare::{Outcome, RareEventError, RareEventReport};
 use bouncewear_model::montecarlo::{
     Cancelled, Job, JobResult, Kernel, Observer, OutOfRange, RunError, RunGroups, Tally,
@@ -20,6 +20,7 @@ use bouncewear_model::montecarlo::{
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt;
+use std::time::{Duration, Instant};
 use utoipa::ToSchema;
 
 /// One shard of a job: a group of a batch, or that batch's merge step (a rare event's round is a
@@ -133,6 +134,15 @@ pub fn first_shards(job: &Job) -> Vec<ShardPlan> {
         }];
     }
     shards
+}
+
+/// The merge step alone of `batch`, carrying its operations: a job run whole from there.
+fn whole_shards(job: &Job, batch: Batch) -> Vec<ShardPlan> {
+    let merge = ShardPlan {
+        shard: ShardId::merge(batch.index),
+        operations: batch.size.saturating_mul(job.spec().operations),
+    };
+    vec![merge]
 }
 
 /// The first batch's groups and merge step, whatever the job's size: how a job larger than
@@ -351,6 +361,22 @@ impl Folding {
         Ok(())
     }
 
+    /// The job and the fold of every batch before `last`, for a merge step that runs batch
+    /// `last` on itself ([`run_whole`]): none for batch 0, else the fold an earlier step stored.
+    pub fn finish_before_last(mut self) -> Result<(Job, Tally), Incomplete> {
+        match self.last.checked_sub(1) {
+            Some(before) => {
+                self.last = before;
+                self.finish()
+            }
+            None if self.read.is_empty() => Ok((self.job, Tally::new())),
+            None => Err(Incomplete {
+                batch: 0,
+                detail: "a job run whole from its start has groups stored".to_owned(),
+            }),
+        }
+    }
+
     /// The job and the fold of every batch up to `last`, or why the groups read do not make them up.
     pub fn finish(mut self) -> Result<(Job, Tally), Incomplete> {
         if let Some(error) = self.error.take() {
@@ -393,20 +419,34 @@ pub fn merge(
 }
 
 /// Runs the whole job here, as the merge step of a job that entered the queue without groups
-/// ([`first_shards`]): every batch's groups on the calling compute pool, each group listing the
-/// lives the job lists ([`Job::with_listed_lives`]) as a group's shard does, then as [`merge`]
-/// after the last batch. The Result is the one the groups' shards and merges would give, to the
-/// bit.
+/// ([`first_shards`]): every batch's groups after those `ran` holds on the calling compute pool,
+/// each group listing the lives the job lists ([`Job::with_listed_lives`]) as a group's shard
+/// does, then as [`merge`] after the last batch. The Result is the one the groups' shards and
+/// merges would give, to the bit.
+///
+/// A precision target's batches stop after the first that ends `step` or more after the start
+/// with a batch still to run: the next batch's merge step alone is queued with the fold of every
+/// batch so far, and the worker that claims it goes on from there
+/// ([`Folding::finish_before_last`]), so that a long run does not hold its worker while other
+/// jobs wait (fair share, docs/contract.md). Where a step ends changes no bit.
 pub fn run_whole(
     job: &Job,
+    ran: Tally,
+    step: Duration,
     sharded_from: u64,
     wall_s: f64,
     observer: &dyn Observer,
 ) -> Result<Merged, MergeError> {
-    let started = std::time::Instant::now();
-    let tally = run_on(Kernel::active(), job, observer, |tally| {
-        precision_met(job, tally)
+    let started = Instant::now();
+    let tally = run_on_from(Kernel::active(), job, ran, observer, |tally| {
+        precision_met(job, tally) || started.elapsed() >= step
     })?;
+    if let Some(batch) = next_batch(job, &tally) {
+        return Ok(Merged::Next {
+            shards: whole_shards(job, batch),
+            folded: tally.groups,
+        });
+    }
     // Its devices' groups, for a rare event's rounds, are stored at batch 0: a job with a
     // precision target runs whole only without one ([`runs_whole`]).
     finish(
@@ -419,6 +459,13 @@ pub fn run_whole(
     )
 }
 
+/// How long a merge step running a job whole ([`run_whole`]) runs batches before it hands the
+/// job on: a job queued behind waits about this long, and each step costs a few milliseconds to
+/// store and read back the fold of its batches' groups. By operations it would not do: a batch
+/// of 16 operations costs about 80 us, its precision check most of it, so 2e7 operations of
+/// them took about 100 s.
+pub const WHOLE_STEP: Duration = Duration::from_secs(1);
+
 /// The job's devices are all in `tally` (batches up to `devices_last`): its rare event, if it asks
 /// one, estimated here while its rounds are small, then the Result; or the first round that is
 /// not, with the devices' groups to keep until the estimate is made.
@@ -430,7 +477,7 @@ fn finish(
     wall_s: f64,
     observer: &dyn Observer,
 ) -> Result<Merged, MergeError> {
-    let started = std::time::Instant::now();
+    let started = Instant::now();
     match rare::first_round(job, devices_last, sharded_from, observer)? {
         Estimated::Made(report) => {
             let wall_s = wall_s + started.elapsed().as_secs_f64();
@@ -709,6 +756,7 @@ mod tests {
     fn three_batches() -> (Job, Vec<Vec<GroupStats>>, Tally) {
         use bouncewear_model::montecarlo::Silent;
         use bouncewear_model::montecarlo::engine::run_group;
+        use bouncewear_model::montecarlo::engine::run_on;
         let job = Job::from_json(
             r#"{"devices": 16, "operations": 4,
                 "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
@@ -773,7 +821,7 @@ mod tests {
     #[test]
     fn a_fold_stored_at_a_short_last_batch_reads_back() {
         use bouncewear_model::montecarlo::Silent;
-        use bouncewear_model::montecarlo::engine::run_group;
+        use bouncewear_model::montecarlo::engine::{run_group, run_on};
         let job = Job::from_json(
             r#"{"devices": 16, "operations": 4,
                 "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",

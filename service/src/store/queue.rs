@@ -641,7 +641,13 @@ impl JobQueue for SqlStore {
         let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(false);
         };
-        let batch = count_to_sql(fence.shard.batch);
+        // The fold is the last batch run's: the merge step's own, or (a job run whole, handed on
+        // after several batches) the one before the next step's.
+        let last_run = match shards.first() {
+            Some(next) if !is_round(next.shard.batch) => next.shard.batch - 1,
+            _ => fence.shard.batch,
+        };
+        let batch = count_to_sql(last_run);
         for (group, partial) in folded.0.iter().enumerate() {
             Sql::new(
                 "INSERT INTO shards (job_id, batch, grp, status, operations_total, partial) \
@@ -660,7 +666,7 @@ impl JobQueue for SqlStore {
         let dropped = if is_round(fence.shard.batch) {
             RARE_ROUNDS..fence.shard.batch + 1
         } else {
-            0..fence.shard.batch
+            0..last_run
         };
         Sql::new(
             "UPDATE shards SET partial = NULL \

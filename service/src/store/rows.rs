@@ -1420,6 +1420,8 @@ mod tests {
     #[test]
     fn a_result_is_stored_without_its_summaries_and_put_back_to_the_byte() {
         use crate::domain::shards::{Merged, run_whole};
+        use bouncewear_model::montecarlo::Tally;
+        use std::time::Duration;
         // Device and operation metrics, listed thresholds, a life analysis, a name that holds
         // the members' keys, and a metric ordered differently by name than by the job.
         let jobs = [
@@ -1434,7 +1436,7 @@ mod tests {
                 .unwrap()
                 .with_listed_lives(100);
             let Merged::Result { mut result, groups } =
-                run_whole(&job, u64::MAX, 0.0, &Silent).unwrap()
+                run_whole(&job, Tally::new(), Duration::MAX, u64::MAX, 0.0, &Silent).unwrap()
             else {
                 panic!("a job without a rare event ends in its Result");
             };
@@ -1451,6 +1453,8 @@ mod tests {
     #[test]
     fn a_result_encodes_the_same_rows_on_one_thread_as_on_several() {
         use crate::domain::shards::{Merged, run_whole};
+        use bouncewear_model::montecarlo::Tally;
+        use std::time::Duration;
         // 30 bins of 11 operation metrics and 5 device metrics: 335 rows, two chunks.
         let text = r#"{"devices": 40, "operations": 30, "seed": 8, "bin_operations": 1}"#;
         let job = Job::new(serde_json::from_str(text).unwrap(), || 0, &Pointer::root())
@@ -1463,7 +1467,7 @@ mod tests {
                 .unwrap();
             pool.install(|| {
                 let Merged::Result { mut result, groups } =
-                    run_whole(&job, u64::MAX, 0.0, &Silent).unwrap()
+                    run_whole(&job, Tally::new(), Duration::MAX, u64::MAX, 0.0, &Silent).unwrap()
                 else {
                     panic!("a job without a rare event ends in its Result");
                 };

@@ -343,7 +343,20 @@ pub fn run_on(
     observer: &dyn Observer,
     accept: impl FnMut(&Tally) -> bool,
 ) -> Result<Tally, Cancelled> {
-    run_plan(&Plan::new(job, kernel), observer, accept)
+    run_plan(&Plan::new(job, kernel), Tally::new(), observer, accept)
+}
+
+/// [`run_on`] from the batches in `tally` on, as if they had just run here: the batches after
+/// them until `accept` says so, and the same bits as one run of them all. Progress counts the
+/// operations of this run alone.
+pub fn run_on_from(
+    kernel: Kernel,
+    job: &Job,
+    tally: Tally,
+    observer: &dyn Observer,
+    accept: impl FnMut(&Tally) -> bool,
+) -> Result<Tally, Cancelled> {
+    run_plan(&Plan::new(job, kernel), tally, observer, accept)
 }
 
 /// [`run_on`] for a run whose groups make its Result and nothing else
@@ -359,21 +372,22 @@ pub fn run_for_result(
 ) -> Result<Tally, Cancelled> {
     let mut plan = Plan::new(job, kernel);
     plan.keep_tails = false;
-    run_plan(&plan, observer, accept)
+    run_plan(&plan, Tally::new(), observer, accept)
 }
 
-/// The batches of [`run_on`] as `plan` runs them.
+/// The batches of [`run_on`] after those in `tally` as `plan` runs them.
 fn run_plan(
     plan: &Plan<'_>,
+    mut tally: Tally,
     observer: &dyn Observer,
     mut accept: impl FnMut(&Tally) -> bool,
 ) -> Result<Tally, Cancelled> {
     let job = plan.job;
     let done = AtomicU64::new(0);
-    let mut tally = Tally::new();
-    let mut next = Batch::of(job, 0);
+    let start = tally.devices;
+    let mut next = Batch::of(job, start.div_ceil(job.spec().devices));
     while let Some(batch) = next {
-        let total = (batch.first + batch.size) * job.spec().operations;
+        let total = (batch.first + batch.size - start) * job.spec().operations;
         let stats = plan.run_batch(batch.index, batch.first, batch.size, observer, &done, total)?;
         tally.add_batch(batch, stats);
         next = Batch::of(job, batch.index + 1).filter(|_| !accept(&tally));
@@ -420,6 +434,42 @@ mod tests {
                 .iter()
                 .any(|&done| done >= self.cancel_at)
         }
+    }
+
+    /// A run continued from the batches an earlier one ran is the run of them all, to the bit,
+    /// wherever the earlier one stopped (the service's job run whole hands its work on so), a
+    /// last batch cut short by `max_devices` included; its progress counts its own operations.
+    #[test]
+    fn a_run_continued_from_its_batches_is_the_run_of_them_all() {
+        let job = Job::from_json(
+            r#"{"devices": 16, "operations": 3, "seed": 5,
+                "scatter": [{"parameter": "contact_radius_m", "per": "device",
+                    "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 1e-3, "min": 1e-3}}],
+                "precision": {"metric": "e1", "relative_half_width": 1e-9, "max_devices": 72}}"#,
+            || 0,
+        )
+        .unwrap();
+        let kernel = Kernel::active();
+        let all = run_on(kernel, &job, &Silent, |_| false).unwrap();
+        assert_eq!(all.devices, 72);
+        for stop in [16, 48, 64] {
+            let first = run_on(kernel, &job, &Silent, |tally| tally.devices >= stop).unwrap();
+            assert_eq!(first.devices, stop);
+            let told = Counting {
+                told: Default::default(),
+                cancel_at: u64::MAX,
+            };
+            let rest = run_on_from(kernel, &job, first, &told, |_| false).unwrap();
+            assert_eq!(
+                (rest.devices, &rest.groups),
+                (72, &all.groups),
+                "from {stop}"
+            );
+            let told = told.told.into_inner().unwrap();
+            assert_eq!(told.last(), Some(&((72 - stop) * 3)), "from {stop}");
+        }
+        let ended = run_on_from(kernel, &job, all.clone(), &Silent, |_| false).unwrap();
+        assert_eq!(ended.groups, all.groups, "nothing left to run");
     }
 
     /// A batch of few devices with many operations each (a sweep of the HTTP API found one of 20
