@@ -93,8 +93,22 @@ fn simulate_rejects_malformed_json_wrong_types_and_unknown_fields() {
 fn simulate_rejects_a_missing_file_and_an_unknown_fidelity() {
     let line = rejected(&["simulate", "/nonexistent/scenario.json"], "");
     assert!(line.contains("/nonexistent/scenario.json"), "{line}");
-    let output = bouncewear(&["simulate", "--fidelity", "approximate"], "{}");
-    assert_eq!(output.status.code(), Some(2));
+    // A bad command line is bad input too: one line, exit 2 (clap's own message spans five).
+    let line = rejected(&["simulate", "--fidelity", "approximate"], "{}");
+    assert!(
+        line.contains("'approximate'") && line.contains("--fidelity"),
+        "{line}"
+    );
+    let line = rejected(&["run", "--bogus", "job.json"], "");
+    assert!(
+        line.starts_with("bouncewear: unexpected argument '--bogus' found; ")
+            && line.contains("Usage: bouncewear run"),
+        "{line}"
+    );
+    let line = rejected(&["run"], "");
+    assert!(line.contains("not provided: <FILE>; "), "{line}");
+    let line = rejected(&[], "");
+    assert!(line.contains("no command given"), "{line}");
 }
 
 #[test]
@@ -131,6 +145,16 @@ fn every_subcommand_has_help_and_a_version() {
             format!("{expected} {}\n", env!("CARGO_PKG_VERSION")),
         );
     }
+    // Help that cannot be written is a failure, as any output is.
+    let full = std::fs::OpenOptions::new().write(true).open("/dev/full");
+    let output = std::process::Command::new(crate::support::BIN)
+        .arg("--help")
+        .stdout(full.unwrap())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("No space left on device"), "{stderr}");
 }
 
 #[test]

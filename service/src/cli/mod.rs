@@ -346,8 +346,52 @@ fn one_line(text: &str) -> String {
     line
 }
 
+/// A command line clap does not run: the help or version asked for, to stdout (exit 0, or 1 when
+/// it cannot be written), or why the line is wrong, one line on stderr with exit 2 as for any bad
+/// input (clap's own message spans five lines: the fault, a tip, the usage and a pointer to
+/// `--help`; found from outside).
+fn not_run(error: &clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    match error.kind() {
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
+            let mut stdout = std::io::stdout().lock();
+            let written = write!(stdout, "{error}").and_then(|()| stdout.flush());
+            match written {
+                Err(error) if error.kind() != std::io::ErrorKind::BrokenPipe => {
+                    eprintln!("bouncewear: writing to <stdout>: {error}");
+                    ExitCode::FAILURE
+                }
+                _ => ExitCode::SUCCESS,
+            }
+        }
+        ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+            eprintln!("bouncewear: no command given: `bouncewear --help` lists them");
+            ExitCode::from(2)
+        }
+        _ => {
+            let text = error.to_string();
+            let mut line = String::new();
+            let parts = text
+                .lines()
+                .map(str::trim)
+                .filter(|part| !part.is_empty() && !part.starts_with("For more information"));
+            for part in parts {
+                if !line.is_empty() {
+                    line.push_str(if line.ends_with(':') { " " } else { "; " });
+                }
+                line.push_str(part.strip_prefix("error: ").unwrap_or(part));
+            }
+            eprintln!("bouncewear: {} (--help for more)", one_line(&line));
+            ExitCode::from(2)
+        }
+    }
+}
+
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(error) => return not_run(&error),
+    };
     let log_format = cli.log_format;
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
