@@ -386,6 +386,41 @@ fn readiness_turns_503_when_the_database_file_is_replaced_or_deleted() {
     );
 }
 
+/// A lock another process holds on the SQLite file (a backup, a tool) makes a submission answer
+/// 503 with Retry-After within the database's wait, not wait for the lock (it waited 49 s for a
+/// lock held 50 s, found from outside); reads go on, and once the lock is gone the submission is
+/// taken.
+#[test]
+fn a_submission_behind_another_processs_lock_answers_503_at_once() {
+    use sqlx::Connection;
+    let database = temp_db("locked");
+    let server = TestApp::start(&database, &[]);
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let url = format!("sqlite://{}", database.display());
+    let mut lock = runtime.block_on(async {
+        let mut connection = sqlx::SqliteConnection::connect(&url).await.unwrap();
+        let exclusive = sqlx::query("BEGIN EXCLUSIVE").execute(&mut connection);
+        exclusive.await.unwrap();
+        connection
+    });
+    let job = r#"{"devices": 2, "operations": 3, "seed": 1}"#;
+    let started = std::time::Instant::now();
+    let refused = post(&server.url("/v1/jobs"), job, None);
+    let waited = started.elapsed();
+    assert_problem(&refused, 503);
+    assert!(refused.header("retry-after").is_some());
+    // The lock is never let go meanwhile: before, the wait was SQLite's 30 s busy timeout.
+    assert!(waited < Duration::from_secs(10), "{waited:?}");
+    assert_eq!(get(&server.url("/v1/jobs"), None).status, 200);
+    runtime
+        .block_on(sqlx::query("ROLLBACK").execute(&mut lock))
+        .unwrap();
+    assert_eq!(post(&server.url("/v1/jobs"), job, None).status, 202);
+}
+
 #[test]
 fn readiness_turns_503_below_the_free_disk_threshold() {
     let server = TestApp::start(

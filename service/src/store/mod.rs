@@ -119,15 +119,25 @@ impl StoreError {
     }
 
     /// Whether no connection reached the database (none free in the pool in time, refused,
-    /// reset): unlike an error the database itself reports (a full disk, a refused statement),
-    /// nothing says the write would fail once one does.
+    /// reset), or SQLite's file stayed locked by another process for all of `busy_timeout`:
+    /// unlike an error the database itself reports (a full disk, a refused statement), nothing
+    /// says the write would fail once one does.
     pub fn is_unreachable(&self) -> bool {
-        matches!(
-            self,
+        match self {
             StoreError::Database(
-                sqlx::Error::PoolTimedOut | sqlx::Error::PoolClosed | sqlx::Error::Io(_)
-            )
-        )
+                sqlx::Error::PoolTimedOut | sqlx::Error::PoolClosed | sqlx::Error::Io(_),
+            ) => true,
+            StoreError::Database(sqlx::Error::Database(error)) => error
+                .try_downcast_ref::<sqlx::sqlite::SqliteError>()
+                .and_then(|sqlite| {
+                    sqlx::error::DatabaseError::code(sqlite)?
+                        .parse::<i32>()
+                        .ok()
+                })
+                // SQLITE_BUSY and its extended codes.
+                .is_some_and(|code| code & 0xff == 5),
+            _ => false,
+        }
     }
 
     pub(crate) fn schedule_not_found(id: &ScheduleId) -> Self {

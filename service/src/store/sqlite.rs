@@ -54,7 +54,7 @@ impl SqliteBackend {
         let writer = match &file {
             Some(_) => {
                 writer.close().await;
-                recovering_writer(options.clone().create_if_missing(false)).await?
+                recovering_writer(options.clone().create_if_missing(false))
             }
             // An in-memory database lives in its one connection: never closed, never reopened.
             None => writer,
@@ -202,10 +202,28 @@ impl std::fmt::Display for Room {
 /// Released, the writer is back at `synchronous = FULL`, whatever its last transaction was
 /// ([`super::SqlStore::begin_redoable`] sets `NORMAL`), so every other commit reaches the disk
 /// before it is acknowledged; a writer that cannot be set back is closed.
-async fn recovering_writer(options: SqliteConnectOptions) -> StoreResult<SqlitePool> {
-    let pool = SqlitePoolOptions::new()
+///
+/// A write waits at most [`super::DATABASE_WAIT`] for the writer, and as long for a lock another
+/// process holds on the file (`busy_timeout`): then it answers 503 with Retry-After, or a worker
+/// tries again later (a lock held for 50 s made a submission wait 49 s, found from outside). A
+/// connection that opens the file read-only (SQLite does so, silently, for a file it may not
+/// write) is refused at once and opened again at the next write, so the store recovers when the
+/// file may be written again (it stayed read-only until a restart). Connected lazily: a server
+/// started on a file it cannot write yet serves reads and says why it is not ready.
+fn recovering_writer(options: SqliteConnectOptions) -> SqlitePool {
+    SqlitePoolOptions::new()
         .max_connections(1)
         .test_before_acquire(false)
+        .acquire_timeout(super::DATABASE_WAIT)
+        .after_connect(|connection, _| {
+            Box::pin(async move {
+                // A write that changes nothing: refused on a read-only connection.
+                sqlx::query("DELETE FROM readiness WHERE 0")
+                    .execute(&mut *connection)
+                    .await
+                    .map(drop)
+            })
+        })
         .after_release(|connection, _| {
             Box::pin(async move {
                 // The statement runs behind any rollback a dropped transaction queued, so the
@@ -218,9 +236,7 @@ async fn recovering_writer(options: SqliteConnectOptions) -> StoreResult<SqliteP
                 Ok(!connection.is_in_transaction())
             })
         })
-        .connect_with(options)
-        .await?;
-    Ok(pool)
+        .connect_lazy_with(options.busy_timeout(super::DATABASE_WAIT))
 }
 
 /// The database file as the store opened it: connections keep writing to the file they opened,
