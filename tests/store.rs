@@ -934,33 +934,45 @@ async fn a_job_run_whole_in_steps_gives_the_whole_result(url: &str) {
         88,
         "five batches of 16 and one of 8"
     );
-    let id = insert(
-        &store,
-        QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1)),
-    )
-    .await;
-    let mut workers = Arc::into_inner(workers(&store, 3, u64::MAX)).unwrap();
-    workers.whole_step = Duration::ZERO;
-    let ended = run_until_ended(&store, Arc::new(workers), &id, async || {}).await;
-    assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
-    assert_eq!((ended.operations_done, ended.operations_total), (176, 176));
-    let shards = store.shards(&id).await.unwrap();
-    let steps: Vec<ShardId> = shards
-        .iter()
-        .map(|s| s.shard)
-        .filter(|s| s.group.is_none())
-        .collect();
-    assert_eq!(
-        steps,
-        (0..6).map(ShardId::merge).collect::<Vec<_>>(),
-        "a batch a step"
-    );
-    assert!(shards.iter().all(|s| s.status == "done"), "{shards:?}");
-    assert_eq!(
-        without_timing(&store.result_json(&id).await.unwrap().unwrap()),
-        without_timing(&serde_json::to_string(&whole).unwrap())
-    );
-    assert!(stored_groups(store.as_ref(), &id, &job).await.is_empty());
+    // A batch a step, and all of them in one: each step counts the operations it ran (a step
+    // of a second was counted by its last heartbeat, about half of it).
+    for (step, last_batches) in [
+        (Duration::ZERO, vec![0, 1, 2, 3, 4, 5]),
+        (Duration::MAX, vec![0]),
+    ] {
+        let id = insert(
+            &store,
+            QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1)),
+        )
+        .await;
+        let mut workers = Arc::into_inner(workers(&store, 3, u64::MAX)).unwrap();
+        workers.whole_step = step;
+        let ended = run_until_ended(&store, Arc::new(workers), &id, async || {}).await;
+        assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
+        assert_eq!((ended.operations_done, ended.operations_total), (176, 176));
+        let shards = store.shards(&id).await.unwrap();
+        let steps: Vec<(ShardId, u64, u64)> = shards
+            .iter()
+            .filter(|s| s.shard.group.is_none())
+            .map(|s| (s.shard, s.operations_done, s.operations_total))
+            .collect();
+        let ran = |batch: u64| if batch == 5 { 16 } else { 32 };
+        let expected: Vec<_> = last_batches
+            .iter()
+            .zip(last_batches.iter().skip(1).chain([&6]))
+            .map(|(&from, &to)| {
+                let operations = (from..to).map(ran).sum();
+                (ShardId::merge(from), operations, operations)
+            })
+            .collect();
+        assert_eq!(steps, expected, "steps from batches {last_batches:?}");
+        assert!(shards.iter().all(|s| s.status == "done"), "{shards:?}");
+        assert_eq!(
+            without_timing(&store.result_json(&id).await.unwrap().unwrap()),
+            without_timing(&serde_json::to_string(&whole).unwrap())
+        );
+        assert!(stored_groups(store.as_ref(), &id, &job).await.is_empty());
+    }
 }
 
 /// A worker process that ran a group of a precision target's last batch, but not the batch's

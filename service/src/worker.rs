@@ -605,9 +605,32 @@ impl Workers {
             }
             _ => batch_operations,
         };
+        if whole
+            && matches!(
+                &ran,
+                Ran::Done(Ok(Outcome::Result { .. } | Outcome::Next { .. }))
+            )
+        {
+            self.counted(fence, simulated).await;
+        }
         let write = self.write(fence, ran, simulated, lease);
         clock.time(Part::Write, write).await;
         clock.record();
+    }
+
+    /// Counts the `operations` a merge step running a job whole ran as its shard's own, all done,
+    /// before it writes what it made: its heartbeats tell its progress at most every half second,
+    /// and a step of a second ended with half of it counted (found from outside). A count the
+    /// store does not take leaves the last one told.
+    async fn counted(&self, fence: &Fence, operations: u64) {
+        let terms = LeaseTerms::for_ms(i64::try_from(self.lease.as_millis()).unwrap_or(i64::MAX));
+        if let Err(error) = self
+            .store
+            .heartbeat(fence, terms, operations, operations)
+            .await
+        {
+            tracing::warn!(%error, "the step's operations were not counted");
+        }
     }
 
     /// Writes what a merge step made: the Result, the next batch, or a rare event's round; the
