@@ -1110,6 +1110,15 @@ async fn a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later(url:
         Some("waiting for the database: pool timed out")
     );
     assert_eq!(shard.failures, 0);
+    // Done at last: no error stays, the history keeps the wait.
+    let last = store.claim("w", terms(300 + 2 * ROOM_RETRY_MS), budget(0));
+    let last = last.await.unwrap().unwrap();
+    let job = Job::new(last.spec.clone(), || 0, &Pointer::root()).unwrap();
+    let stats = run_group(&job, Batch::of(&job, 0).unwrap(), 0, &Silent).unwrap();
+    assert!(store.complete(&last.fence, &stats).await.unwrap());
+    let shard = store.shards(&id).await.unwrap().remove(0);
+    assert_eq!((shard.status.as_str(), shard.error), ("done", None));
+    assert_eq!(shard.history.len(), 1, "{:?}", shard.history);
 }
 
 /// A job whose stored accumulators are damaged makes every merge fail: real workers retry it the

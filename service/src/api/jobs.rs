@@ -423,7 +423,8 @@ pub struct ShardResource {
     pub operations_done: u64,
     /// Operations in this shard.
     pub operations_total: u64,
-    /// Why its last run failed; null while none has.
+    /// Why its last run did not finish (it failed, or waits for the database or for room); null
+    /// while none has, and once the shard is done.
     pub error: Option<String>,
     /// One line per attempt that did not finish, oldest first: `attempt N (worker): failed: ...`,
     /// `attempt N (worker): lease lost`, or `attempt N (worker): stopped: job cancelled` (or

@@ -216,11 +216,13 @@ fn fenced(sql: &'static str, fence: &Fence) -> Sql {
     bind_fence(Sql::new(sql), fence)
 }
 
-/// Marks the claim's shard done, all its operations with it, if the claim still holds it.
+/// Marks the claim's shard done, all its operations with it, if the claim still holds it. Its
+/// `error` goes: its last run did not fail (a shard that waited for the database kept "waiting
+/// for the database" once done, found from outside); the history keeps every attempt's.
 async fn finish_shard(tx: &mut Tx, fence: &Fence) -> StoreResult<bool> {
     let updated = fenced(
         concat!(
-            "UPDATE shards SET status = 'done', lease_until = NULL, \
+            "UPDATE shards SET status = 'done', lease_until = NULL, error = NULL, \
              operations_done = operations_total WHERE ",
             fenced_shard!()
         ),
@@ -596,7 +598,7 @@ impl JobQueue for SqlStore {
         let mut tx = self.begin_redoable().await?;
         let updated = fenced(
             concat!(
-                "UPDATE shards SET status = 'done', partial = $5, operations_done = operations_total, \
+                "UPDATE shards SET status = 'done', partial = $5, operations_done = operations_total, error = NULL, \
                  lease_until = NULL WHERE ",
                 fenced_shard!()
             ),
