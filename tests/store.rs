@@ -1853,6 +1853,32 @@ async fn postgres_keeps_every_promise() {
     postgres_announces_queued_jobs_and_their_progress(&cluster.database("events")).await;
     a_dropped_store_closes_every_connection(&cluster.database("dropped")).await;
     compressed_accumulators_are_stored_without_pglz(&cluster.database("storage")).await;
+    postgres_says_why_it_gives_no_connection(&cluster.database("why")).await;
+}
+
+/// A pool that gets no connection says only that it timed out: the store asks PostgreSQL itself
+/// why, for the log (a node out of slots logged `pool timed out` 190 times, never PostgreSQL's
+/// `remaining connection slots are reserved`, found from outside), at most once every ten
+/// seconds. Here a role allowed the two connections a store keeps and no third.
+async fn postgres_says_why_it_gives_no_connection(url: &str) {
+    let (server, database) = url.rsplit_once('/').unwrap();
+    let role = format!("limited_{}", std::process::id());
+    let admin = sqlx::PgPool::connect(url).await.unwrap();
+    for statement in [
+        format!("CREATE ROLE {role} LOGIN CONNECTION LIMIT 2"),
+        format!("ALTER DATABASE {database} OWNER TO {role}"),
+    ] {
+        let statement = sqlx::query(sqlx::AssertSqlSafe(statement));
+        statement.execute(&admin).await.unwrap();
+    }
+    let limited = format!(
+        "{}/{database}",
+        server.replace("postgres@", &format!("{role}@"))
+    );
+    let store = store::open(&limited).await.unwrap();
+    let why = store.why_unreachable().await.expect("asked");
+    assert!(why.contains("too many connections"), "{why}");
+    assert_eq!(store.why_unreachable().await, None, "asked again at once");
 }
 
 /// The accumulators are LZ4-compressed before they are stored: PostgreSQL keeps them out of line

@@ -432,7 +432,14 @@ impl Workers {
                     }
                 }
                 Err(error) => {
-                    tracing::error!(%error, "claiming a shard failed");
+                    let why = match error.is_unreachable() {
+                        true => self.store.why_unreachable().await,
+                        false => None,
+                    };
+                    match why {
+                        Some(why) => tracing::error!(%error, why, "claiming a shard failed"),
+                        None => tracing::error!(%error, "claiming a shard failed"),
+                    }
                     tokio::time::sleep(IDLE_POLL).await;
                 }
             }
@@ -1014,7 +1021,13 @@ impl Workers {
                     .await;
             }
         };
-        tracing::warn!(reason, ?awaited, "shard waits");
+        match awaited {
+            Awaited::Database => match self.store.why_unreachable().await {
+                Some(why) => tracing::warn!(reason, why, ?awaited, "shard waits"),
+                None => tracing::warn!(reason, ?awaited, "shard waits"),
+            },
+            Awaited::Room => tracing::warn!(reason, ?awaited, "shard waits"),
+        }
         if let Err(error) = self.store.wait_for(fence, None, awaited, &reason).await {
             tracing::error!(%error, "could not hand the shard back; its lease will expire");
         }

@@ -58,6 +58,15 @@ impl SqlStore {
         })
     }
 
+    /// PostgreSQL's own reason it gives no connection ([`super::JobQueue::why_unreachable`]);
+    /// SQLite, embedded, has none to give.
+    pub(crate) async fn why_no_connection(&self) -> Option<String> {
+        match &self.backend {
+            Backend::Postgres(postgres) => postgres.why_unreachable().await,
+            Backend::Sqlite(_) => None,
+        }
+    }
+
     /// Where reads go: SQLite's read-only connections, which never wait for the writer.
     pub(crate) fn readers(&self) -> Conn<'_> {
         match &self.backend {

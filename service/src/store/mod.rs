@@ -383,6 +383,13 @@ pub trait JobQueue: Send + Sync + 'static {
     /// clock, on which their ends are stamped) as [`JobQueue::delete_job`] does, in one
     /// transaction; how many.
     async fn prune_jobs(&self, age_ms: i64, at: Option<UnixMs>) -> StoreResult<u64>;
+    /// Why no connection reached the database, in the database's own words where it gave them
+    /// (PostgreSQL refuses a connection with its reason, `remaining connection slots are
+    /// reserved ...`, which the pool's time-out drops): for a log line, asked at most once every
+    /// ten seconds; `None` otherwise, or for a database that gives none.
+    async fn why_unreachable(&self) -> Option<String> {
+        None
+    }
     /// Leases the next shard to run: a queued shard past its backoff or a running one whose lease
     /// expired (bumping its attempt), a merge step only once its batch's groups are done. Fair
     /// share: of the job with the least virtual start time (then the oldest job; in a job, shards

@@ -27,6 +27,10 @@ pub(crate) struct PgBackend {
     /// The task that passes announcements on: it holds a connection of the pool and the pool
     /// itself, so it ends with the store, or neither would ever be closed.
     announcements: AbortHandle,
+    /// Where the database is, to ask it why the pool reaches it not ([`PgBackend::why_unreachable`]).
+    url: String,
+    /// When that was last asked.
+    asked_why: std::sync::Mutex<Option<std::time::Instant>>,
 }
 
 impl Drop for PgBackend {
@@ -108,9 +112,28 @@ impl PgBackend {
             events,
             ends,
             announcements: announcements.abort_handle(),
+            url: url.to_owned(),
+            asked_why: std::sync::Mutex::new(None),
         })
     }
+
+    /// Why the pool reaches the database not, from a connection of its own ([`why_no_connection`]),
+    /// at most once every [`WHY_INTERVAL`]: while the database refuses, every request and claim
+    /// would otherwise knock too.
+    pub(crate) async fn why_unreachable(&self) -> Option<String> {
+        {
+            let mut asked = self.asked_why.lock().unwrap_or_else(|e| e.into_inner());
+            if asked.is_some_and(|at| at.elapsed() < WHY_INTERVAL) {
+                return None;
+            }
+            *asked = Some(std::time::Instant::now());
+        }
+        Some(why_no_connection(&self.url).await)
+    }
 }
+
+/// How often [`PgBackend::why_unreachable`] asks the database.
+const WHY_INTERVAL: Duration = Duration::from_secs(10);
 
 /// Passes the database's announcements on to this process's subscribers: a job's end to `ends`,
 /// the rest to `events`. A lost connection is re-established by the listener; what was announced

@@ -323,6 +323,10 @@ async fn exhausted(tx: &mut Tx, now: UnixMs, retries: u64) -> StoreResult<Vec<(J
 
 #[async_trait]
 impl JobQueue for SqlStore {
+    async fn why_unreachable(&self) -> Option<String> {
+        self.why_no_connection().await
+    }
+
     #[tracing::instrument(skip_all, fields(job = %job.id))]
     async fn insert_job(
         &self,
