@@ -1207,6 +1207,30 @@ async fn a_job_run_whole_raises_its_total_as_its_batches_are_added(url: &str) {
     assert_eq!(progress().await, (70, 96), "a total is never lowered");
     beat(400, 150, 144).await;
     assert_eq!(progress().await, (150, 150), "never below what is done");
+    // The step's end counts what it ran, all done, and charges the job (fair share) what it
+    // ran beyond the first batch of 48 operations its claim was charged for.
+    let vtime = async || -> i64 {
+        let sql = "SELECT vtime FROM jobs WHERE id = $1";
+        if url.starts_with("sqlite:") {
+            let pool = sqlx::SqlitePool::connect(url).await.unwrap();
+            sqlx::query_scalar(sql)
+                .bind(id.as_str())
+                .fetch_one(&pool)
+                .await
+                .unwrap()
+        } else {
+            let pool = sqlx::PgPool::connect(url).await.unwrap();
+            sqlx::query_scalar(sql)
+                .bind(id.as_str())
+                .fetch_one(&pool)
+                .await
+                .unwrap()
+        }
+    };
+    let claimed = vtime().await;
+    store.count_run(&claim.fence, 1000, 48).await.unwrap();
+    assert_eq!(progress().await, (1000, 1000));
+    assert_eq!(vtime().await - claimed, 1000 - 48);
 }
 
 async fn insert(store: &Arc<dyn Store>, job: QueuedJob) -> JobId {

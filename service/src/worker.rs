@@ -585,6 +585,7 @@ impl Workers {
         let whole = !partials.read().iter().any(|shard| shard.batch == last);
         let spec = partials.job().spec();
         let batch_operations = spec.devices * spec.operations;
+        let first_batch = Batch::of(partials.job(), last).map_or(0, |b| b.size * spec.operations);
         let (sharded_from, step) = (self.sharded_round_operations, self.whole_step);
         // A job run whole learns its total as its precision target adds batches.
         let work = if whole { Work::Growing } else { Work::Planned };
@@ -618,7 +619,8 @@ impl Workers {
                 Ran::Done(Ok(Outcome::Result { .. } | Outcome::Next { .. }))
             )
         {
-            self.counted(fence, simulated).await;
+            // Its claim was charged its first batch (`first_shards`, `run_whole`).
+            self.counted(fence, simulated, first_batch).await;
         }
         let write = self.write(fence, ran, simulated, lease);
         clock.time(Part::Write, write).await;
@@ -626,16 +628,12 @@ impl Workers {
     }
 
     /// Counts the `operations` a merge step running a job whole ran as its shard's own, all done,
-    /// before it writes what it made: its heartbeats tell its progress at most every half second,
-    /// and a step of a second ended with half of it counted (found from outside). A count the
-    /// store does not take leaves the last one told.
-    async fn counted(&self, fence: &Fence, operations: u64) {
-        let terms = LeaseTerms::for_ms(i64::try_from(self.lease.as_millis()).unwrap_or(i64::MAX));
-        if let Err(error) = self
-            .store
-            .heartbeat(fence, terms, operations, operations)
-            .await
-        {
+    /// and charges its job for them ([`crate::store::JobQueue::count_run`]), before it writes what
+    /// it made: its heartbeats tell its progress at most every half second, and a step of a
+    /// second ended with half of it counted (found from outside). A count the store does not
+    /// take leaves the last one told.
+    async fn counted(&self, fence: &Fence, operations: u64, charged: u64) {
+        if let Err(error) = self.store.count_run(fence, operations, charged).await {
             tracing::warn!(%error, "the step's operations were not counted");
         }
     }

@@ -401,6 +401,11 @@ pub trait JobQueue: Send + Sync + 'static {
         terms: LeaseTerms,
         budget: RetryBudget,
     ) -> StoreResult<Option<Claim>>;
+    /// Counts `operations`, run by a merge step that runs its job whole, as all its shard's, done,
+    /// if the claim still holds it and the job still runs; fair share charges the job what they
+    /// exceed of the `charged` operations its claim was charged (the step's first batch), so that
+    /// a job run a second at a time is charged its seconds (docs/contract.md "Fair share").
+    async fn count_run(&self, fence: &Fence, operations: u64, charged: u64) -> StoreResult<()>;
     /// Extends the shard's lease and records its progress (the job's is the sum over its
     /// shards), if the claim still holds it and the job still runs: its operations done, and
     /// `operations_total` where that is more than the shard's total (a job run whole learns its

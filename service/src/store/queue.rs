@@ -549,6 +549,36 @@ impl JobQueue for SqlStore {
     }
 
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
+    async fn count_run(&self, fence: &Fence, operations: u64, charged: u64) -> StoreResult<()> {
+        let mut tx = self.begin_redoable().await?;
+        let ran = count_to_sql(operations);
+        let counted = fenced(
+            concat!(
+                "UPDATE shards SET operations_done = $5, \
+                 operations_total = CASE WHEN $5 > operations_total THEN $5 ELSE operations_total END \
+                 WHERE ",
+                fenced_shard!()
+            ),
+            fence,
+        )
+        .bind(ran)
+        .execute(&mut tx)
+        .await?;
+        if counted != 1 {
+            tx.rollback().await?;
+            return Ok(());
+        }
+        Sql::new("UPDATE jobs SET vtime = vtime + $2 WHERE id = $1")
+            .bind(fence.job.as_str())
+            .bind(count_to_sql(operations.saturating_sub(charged)))
+            .execute(&mut tx)
+            .await?;
+        sum_progress(&mut tx, &fence.job).await?;
+        tx.commit().await?;
+        Ok(())
+    }
+
+    #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     async fn heartbeat(
         &self,
         fence: &Fence,
