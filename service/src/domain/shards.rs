@@ -113,7 +113,7 @@ pub fn claims_ahead(shard: ShardId, operations: u64) -> bool {
 /// shards: cut into them, a target of batches of 16 devices of one operation took 25 ms of claims
 /// and stores a batch, growing with every batch (the job's progress is summed over its shards), so
 /// 10^8 devices never ended where `bouncewear run` takes minutes. Run whole, the merge step runs
-/// its batches one after another and checks the target after each, as [`run_on`] does. A rare
+/// its batches one after another and checks the target after each, as [`run_on_from`] does. A rare
 /// event after a precision target keeps its batches sharded: its rounds read the devices' groups
 /// back from the store by their last batch.
 pub fn runs_whole(job: &Job) -> bool {
