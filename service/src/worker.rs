@@ -613,13 +613,16 @@ impl Workers {
             }
             _ => batch_operations,
         };
+        // Its claim was charged its first batch (`first_shards`, `run_whole`), as its shard
+        // counts it: a step of one batch (any small job without a precision target) is counted
+        // already, with no round trip to the database for it.
         if whole
+            && simulated > first_batch
             && matches!(
                 &ran,
                 Ran::Done(Ok(Outcome::Result { .. } | Outcome::Next { .. }))
             )
         {
-            // Its claim was charged its first batch (`first_shards`, `run_whole`).
             self.counted(fence, simulated, first_batch).await;
         }
         let write = self.write(fence, ran, simulated, lease);
