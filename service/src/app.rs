@@ -188,7 +188,15 @@ impl Application {
             let _ = retention.await;
         }
         join_workers(handles).await;
+        checkpoint(state.store.as_ref()).await;
         Ok(())
+    }
+}
+
+/// The store's log folded into its file as the process ends ([`crate::store::JobQueue::checkpoint`]).
+async fn checkpoint(store: &dyn Store) {
+    if let Err(error) = store.checkpoint().await {
+        tracing::warn!(%error, "the database's log was not folded into its file");
     }
 }
 
@@ -251,6 +259,7 @@ pub async fn work(process: WorkerProcess) -> Result<(), StartupError> {
     tracing::info!("shutting down: running shards go back to the queue");
     let _ = stop.send(true);
     join_workers(handles).await;
+    checkpoint(workers.store.as_ref()).await;
     Ok(())
 }
 

@@ -421,6 +421,28 @@ fn a_submission_behind_another_processs_lock_answers_503_at_once() {
     assert_eq!(post(&server.url("/v1/jobs"), job, None).status, 202);
 }
 
+/// A stopped server's database file holds every write it acknowledged without its log beside
+/// it: the write-ahead log is folded into the file as the server stops (a copy of the file
+/// alone, a stopped server's backup, lacked the last jobs, found from outside).
+#[test]
+fn a_stopped_servers_file_holds_every_write_without_its_log() {
+    let database = temp_db("stopped");
+    let id = {
+        let server = TestApp::start(&database, &[]);
+        let id = server.submit(&json!({"devices": 2, "operations": 3, "seed": 1}));
+        server.wait_for(&id, "succeeded", Duration::from_secs(60));
+        id
+    };
+    let log = database.with_extension("db-wal");
+    let left = std::fs::metadata(&log).map_or(0, |m| m.len());
+    assert_eq!(left, 0, "{} bytes left in {}", left, log.display());
+    let copy = temp_db("stopped-copy");
+    std::fs::copy(&database, &copy).unwrap();
+    let server = TestApp::start(&copy, &[]);
+    let job = get(&server.url(&format!("/v1/jobs/{id}")), None);
+    assert_eq!(job.json()["status"], "succeeded", "{}", job.body);
+}
+
 #[test]
 fn readiness_turns_503_below_the_free_disk_threshold() {
     let server = TestApp::start(

@@ -58,6 +58,17 @@ impl SqlStore {
         })
     }
 
+    /// SQLite's write-ahead log folded into the database's file and emptied
+    /// ([`super::JobQueue::checkpoint`]).
+    pub(crate) async fn fold_log(&self) -> StoreResult<()> {
+        if let Backend::Sqlite(sqlite) = &self.backend {
+            sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+                .execute(sqlite.writer()?)
+                .await?;
+        }
+        Ok(())
+    }
+
     /// PostgreSQL's own reason it gives no connection ([`super::JobQueue::why_unreachable`]);
     /// SQLite, embedded, has none to give.
     pub(crate) async fn why_no_connection(&self) -> Option<String> {

@@ -383,6 +383,13 @@ pub trait JobQueue: Send + Sync + 'static {
     /// clock, on which their ends are stamped) as [`JobQueue::delete_job`] does, in one
     /// transaction; how many.
     async fn prune_jobs(&self, age_ms: i64, at: Option<UnixMs>) -> StoreResult<u64>;
+    /// Folds what the database keeps beside its main file into it, as the process ends: SQLite's
+    /// write-ahead log, checkpointed and emptied, so that a copy of the file alone (a stopped
+    /// server's backup) holds every write it acknowledged (it lacked the last ones, found from
+    /// outside). Nothing for PostgreSQL, whose files are its own.
+    async fn checkpoint(&self) -> StoreResult<()> {
+        Ok(())
+    }
     /// Why no connection reached the database, in the database's own words where it gave them
     /// (PostgreSQL refuses a connection with its reason, `remaining connection slots are
     /// reserved ...`, which the pool's time-out drops): for a log line, asked at most once every

@@ -327,6 +327,10 @@ impl JobQueue for SqlStore {
         self.why_no_connection().await
     }
 
+    async fn checkpoint(&self) -> StoreResult<()> {
+        self.fold_log().await
+    }
+
     #[tracing::instrument(skip_all, fields(job = %job.id))]
     async fn insert_job(
         &self,
