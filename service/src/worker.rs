@@ -711,7 +711,7 @@ impl Workers {
                 written
             }
             Err(error) => {
-                self.write_failed(fence, &format!("storing {what}"), error)
+                self.database_failed(fence, &format!("storing {what}"), error)
                     .await;
                 false
             }
@@ -723,8 +723,8 @@ impl Workers {
         let rounds = match self.store.round(&fence.job, fence.shard.batch).await {
             Ok(rounds) => rounds,
             Err(error) => {
-                let reason = format!("reading the rare event's round failed: {error}");
-                return self.fail_attempt(fence, &reason).await;
+                let what = "reading the rare event's round";
+                return self.database_failed(fence, what, error).await;
             }
         };
         let Some(task) = rounds.task(group) else {
@@ -784,8 +784,8 @@ impl Workers {
         let (rounds, outcomes) = match clock.time(Part::Read, read).await {
             Ok(read) => read,
             Err(error) => {
-                let reason = format!("reading the rare event's round failed: {error}");
-                return self.fail_attempt(fence, &reason).await;
+                let what = "reading the rare event's round";
+                return self.database_failed(fence, what, error).await;
             }
         };
         let devices_last = rounds.devices_last;
@@ -870,8 +870,8 @@ impl Workers {
         {
             Ok(partials) => Some((alone, partials)),
             Err(error) => {
-                let reason = format!("reading the groups' accumulators failed: {error}");
-                self.fail_attempt(fence, &reason).await;
+                let what = "reading the groups' accumulators";
+                self.database_failed(fence, what, error).await;
                 None
             }
         }
@@ -1006,10 +1006,12 @@ impl Workers {
         }
     }
 
-    /// A shard's outcome that could not be written: with no room on the disk, the shard waits for
-    /// room (nothing counted against it: the job is not at fault); any other error counts as a
+    /// A shard's step the database could not serve (`what`: reading what it needs, or storing what
+    /// it made): with no room on the disk, or no connection, the shard waits (nothing counted
+    /// against it: the job is not at fault; a merge step's read that found no free PostgreSQL
+    /// connection counted as a failed run, found from outside); any other error counts as a
     /// failed run.
-    async fn write_failed(&self, fence: &Fence, what: &str, error: StoreError) {
+    async fn database_failed(&self, fence: &Fence, what: &str, error: StoreError) {
         // No room on the disk, or no connection to the database in all the write's tries (none
         // free, unreachable): nothing is wrong with the job, which waits rather than fail. An
         // error the database reports itself counts against the shard.
@@ -1061,7 +1063,8 @@ impl Workers {
                 false
             }
             Err(error) => {
-                self.write_failed(fence, "storing the result", error).await;
+                self.database_failed(fence, "storing the result", error)
+                    .await;
                 false
             }
         }

@@ -54,7 +54,7 @@ impl SqliteBackend {
         let writer = match &file {
             Some(_) => {
                 writer.close().await;
-                recovering_writer(options.clone().create_if_missing(false))
+                recovering_writer(options.clone().create_if_missing(false)).await?
             }
             // An in-memory database lives in its one connection: never closed, never reopened.
             None => writer,
@@ -203,27 +203,19 @@ impl std::fmt::Display for Room {
 /// ([`super::SqlStore::begin_redoable`] sets `NORMAL`), so every other commit reaches the disk
 /// before it is acknowledged; a writer that cannot be set back is closed.
 ///
-/// A write waits at most [`super::DATABASE_WAIT`] for the writer, and as long for a lock another
-/// process holds on the file (`busy_timeout`): then it answers 503 with Retry-After, or a worker
-/// tries again later (a lock held for 50 s made a submission wait 49 s, found from outside). A
-/// connection that opens the file read-only (SQLite does so, silently, for a file it may not
-/// write) is refused at once and opened again at the next write, so the store recovers when the
-/// file may be written again (it stayed read-only until a restart). Connected lazily: a server
-/// started on a file it cannot write yet serves reads and says why it is not ready.
-fn recovering_writer(options: SqliteConnectOptions) -> SqlitePool {
-    SqlitePoolOptions::new()
+/// A write waits at most [`super::DATABASE_WAIT`] for the writer and [`LOCK_WAIT`] for a lock
+/// another process holds on the file: then it answers 503 with Retry-After, or a worker tries
+/// again later (a lock held for 50 s made a submission wait 49 s, found from outside).
+///
+/// A writer opened while the file could not be written stays read-only (SQLite opens such a
+/// file read-only, silently, and reuses that descriptor for any connection of this process
+/// while another is open): writes answer 503 until the process is restarted once the file can
+/// be written (docs/manual.md, "Operating it").
+async fn recovering_writer(options: SqliteConnectOptions) -> StoreResult<SqlitePool> {
+    let pool = SqlitePoolOptions::new()
         .max_connections(1)
         .test_before_acquire(false)
         .acquire_timeout(super::DATABASE_WAIT)
-        .after_connect(|connection, _| {
-            Box::pin(async move {
-                // A write that changes nothing: refused on a read-only connection.
-                sqlx::query("DELETE FROM readiness WHERE 0")
-                    .execute(&mut *connection)
-                    .await
-                    .map(drop)
-            })
-        })
         .after_release(|connection, _| {
             Box::pin(async move {
                 // The statement runs behind any rollback a dropped transaction queued, so the
@@ -236,8 +228,15 @@ fn recovering_writer(options: SqliteConnectOptions) -> SqlitePool {
                 Ok(!connection.is_in_transaction())
             })
         })
-        .connect_lazy_with(options.busy_timeout(super::DATABASE_WAIT))
+        .connect_with(options.busy_timeout(LOCK_WAIT))
+        .await?;
+    Ok(pool)
 }
+
+/// How long a write waits for a lock another process holds on the file before it gives up (503
+/// with Retry-After; a worker tries again later): with the wait for the writer itself, a
+/// request answers within about two seconds.
+const LOCK_WAIT: Duration = Duration::from_secs(1);
 
 /// The database file as the store opened it: connections keep writing to the file they opened,
 /// so a file deleted or replaced under a running server would take its writes into nowhere.
