@@ -58,11 +58,11 @@ impl SqlStore {
         })
     }
 
-    /// SQLite's write-ahead log folded into the database's file and emptied
+    /// SQLite's write-ahead log checkpointed whole into the database's file
     /// ([`super::JobQueue::checkpoint`]).
     pub(crate) async fn fold_log(&self) -> StoreResult<()> {
         if let Backend::Sqlite(sqlite) = &self.backend {
-            sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+            sqlx::query("PRAGMA wal_checkpoint(FULL)")
                 .execute(sqlite.writer()?)
                 .await?;
         }

@@ -384,9 +384,10 @@ pub trait JobQueue: Send + Sync + 'static {
     /// transaction; how many.
     async fn prune_jobs(&self, age_ms: i64, at: Option<UnixMs>) -> StoreResult<u64>;
     /// Folds what the database keeps beside its main file into it, as the process ends: SQLite's
-    /// write-ahead log, checkpointed and emptied, so that a copy of the file alone (a stopped
-    /// server's backup) holds every write it acknowledged (it lacked the last ones, found from
-    /// outside). Nothing for PostgreSQL, whose files are its own.
+    /// write-ahead log, checkpointed whole, so that a copy of the file alone (a stopped server's
+    /// backup) holds every write it acknowledged (it lacked the last ones, found from outside).
+    /// The log's file keeps its size: emptied, a file the next start may not write could not be
+    /// opened at all (SQLite needs a log to read one read-only). Nothing for PostgreSQL.
     async fn checkpoint(&self) -> StoreResult<()> {
         Ok(())
     }
