@@ -1883,26 +1883,22 @@ async fn postgres_keeps_every_promise() {
 /// A pool that gets no connection says only that it timed out: the store asks PostgreSQL itself
 /// why, for the log (a node out of slots logged `pool timed out` 190 times, never PostgreSQL's
 /// `remaining connection slots are reserved`, found from outside), at most once every ten
-/// seconds. Here a role allowed the two connections a store keeps and no third.
+/// seconds. Here the database stops taking new connections under a store that has its own.
 async fn postgres_says_why_it_gives_no_connection(url: &str) {
     let (server, database) = url.rsplit_once('/').unwrap();
-    let role = format!("limited_{}", std::process::id());
-    let admin = sqlx::PgPool::connect(url).await.unwrap();
-    for statement in [
-        format!("CREATE ROLE {role} LOGIN CONNECTION LIMIT 2"),
-        format!("ALTER DATABASE {database} OWNER TO {role}"),
-    ] {
-        let statement = sqlx::query(sqlx::AssertSqlSafe(statement));
-        statement.execute(&admin).await.unwrap();
-    }
-    let limited = format!(
-        "{}/{database}",
-        server.replace("postgres@", &format!("{role}@"))
-    );
-    let store = store::open(&limited).await.unwrap();
+    let store = store::open(url).await.unwrap();
+    let admin = sqlx::PgPool::connect(&format!("{server}/postgres"))
+        .await
+        .unwrap();
+    let allow = |allowed: bool| {
+        let statement = format!("ALTER DATABASE {database} ALLOW_CONNECTIONS {allowed}");
+        sqlx::query(sqlx::AssertSqlSafe(statement))
+    };
+    allow(false).execute(&admin).await.unwrap();
     let why = store.why_unreachable().await.expect("asked");
-    assert!(why.contains("too many connections"), "{why}");
+    assert!(why.contains("not currently accepting connections"), "{why}");
     assert_eq!(store.why_unreachable().await, None, "asked again at once");
+    allow(true).execute(&admin).await.unwrap();
 }
 
 /// The accumulators are LZ4-compressed before they are stored: PostgreSQL keeps them out of line

@@ -203,9 +203,11 @@ impl std::fmt::Display for Room {
 /// ([`super::SqlStore::begin_redoable`] sets `NORMAL`), so every other commit reaches the disk
 /// before it is acknowledged; a writer that cannot be set back is closed.
 ///
-/// A write waits at most [`super::DATABASE_WAIT`] for the writer and [`LOCK_WAIT`] for a lock
-/// another process holds on the file: then it answers 503 with Retry-After, or a worker tries
-/// again later (a lock held for 50 s made a submission wait 49 s, found from outside).
+/// A write waits [`LOCK_WAIT`] for a lock another process holds on the file: then it answers 503
+/// with Retry-After, or a worker tries again later (a lock held for 50 s made a submission wait
+/// 49 s, found from outside). For the writer itself it waits as long as the pool lets it (30
+/// s): writes queued behind others of this process under load are not refused (with 2 s, a
+/// submission during CI's API fuzzing on two busy cores got 503).
 ///
 /// A writer opened while the file could not be written stays read-only (SQLite opens such a
 /// file read-only, silently, and reuses that descriptor for any connection of this process
@@ -215,7 +217,6 @@ async fn recovering_writer(options: SqliteConnectOptions) -> StoreResult<SqliteP
     let pool = SqlitePoolOptions::new()
         .max_connections(1)
         .test_before_acquire(false)
-        .acquire_timeout(super::DATABASE_WAIT)
         .after_release(|connection, _| {
             Box::pin(async move {
                 // The statement runs behind any rollback a dropped transaction queued, so the
@@ -234,8 +235,7 @@ async fn recovering_writer(options: SqliteConnectOptions) -> StoreResult<SqliteP
 }
 
 /// How long a write waits for a lock another process holds on the file before it gives up (503
-/// with Retry-After; a worker tries again later): with the wait for the writer itself, a
-/// request answers within about two seconds.
+/// with Retry-After; a worker tries again later).
 const LOCK_WAIT: Duration = Duration::from_secs(1);
 
 /// The database file as the store opened it: connections keep writing to the file they opened,
