@@ -47,6 +47,13 @@ use tracing::Instrument;
 const HEARTBEAT_MAX_PERIOD: Duration = Duration::from_millis(500);
 /// An idle worker looks for expired leases at least this often.
 const IDLE_POLL: Duration = Duration::from_millis(500);
+
+/// How long a worker waits before it claims again after `failed` claims in a row failed:
+/// [`IDLE_POLL`], doubling to 8 s. A database that cannot answer (PostgreSQL down, a SQLite file
+/// it may not write) was asked, and its error logged, twice a second by every worker slot.
+fn claim_retry_delay(failed: u32) -> Duration {
+    IDLE_POLL.saturating_mul(1 << failed.min(4))
+}
 /// A write the database could not take is tried again after this, doubling up to
 /// [`STORE_RETRY_MAX_DELAY`], at most `budget.lost_leases` times, with the lease kept meanwhile.
 const STORE_RETRY_FIRST_DELAY: Duration = Duration::from_millis(250);
@@ -397,6 +404,8 @@ impl Workers {
         // The next shard, claimed while a group computes; the last group's store, still writing.
         let mut ahead: Option<JoinHandle<StoreResult<Option<Claimed>>>> = None;
         let mut storing: Option<JoinHandle<()>> = None;
+        // Claims that failed in a row: a database that cannot answer is asked less and less often.
+        let mut failed_claims = 0;
         while !*shutdown.borrow() {
             let claimed_before = ahead.is_some();
             let claimed = match ahead.take() {
@@ -406,6 +415,9 @@ impl Workers {
                 }),
                 None => self.claim(&worker, &shutdown).await,
             };
+            if claimed.is_ok() {
+                failed_claims = 0;
+            }
             match claimed {
                 Ok(Some((claim, lease))) => {
                     if !*shutdown.borrow()
@@ -436,11 +448,20 @@ impl Workers {
                         true => self.store.why_unreachable().await,
                         false => None,
                     };
+                    let wait = claim_retry_delay(failed_claims);
+                    failed_claims += 1;
+                    let wait_s = wait.as_secs_f64();
                     match why {
-                        Some(why) => tracing::error!(%error, why, "claiming a shard failed"),
-                        None => tracing::error!(%error, "claiming a shard failed"),
+                        Some(why) => {
+                            tracing::error!(%error, why, wait_s, "claiming a shard failed")
+                        }
+                        None => tracing::error!(%error, wait_s, "claiming a shard failed"),
                     }
-                    tokio::time::sleep(IDLE_POLL).await;
+                    let mut shutdown = shutdown.clone();
+                    tokio::select! {
+                        () = tokio::time::sleep(wait) => {}
+                        _ = shutdown.changed() => {}
+                    }
                 }
             }
         }
@@ -1144,6 +1165,13 @@ mod tests {
 
     /// Held groups go to their own batch's merge, once; the oldest go beyond the budget or past
     /// the age, and a group larger than the budget is not held.
+    #[test]
+    fn a_failing_claim_is_retried_less_often_up_to_eight_seconds() {
+        let waits: Vec<f64> = (0..7).map(|n| claim_retry_delay(n).as_secs_f64()).collect();
+        assert_eq!(waits, [0.5, 1.0, 2.0, 4.0, 8.0, 8.0, 8.0]);
+        assert_eq!(claim_retry_delay(u32::MAX), Duration::from_secs(8));
+    }
+
     #[test]
     fn held_groups_go_to_their_batchs_merge_and_the_oldest_beyond_the_budget() {
         let job = Job::from_json(r#"{"devices": 4, "operations": 2, "seed": 1}"#, || 0).unwrap();
