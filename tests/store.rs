@@ -2021,6 +2021,28 @@ async fn sqlite_announces_nothing_so_its_readers_poll() {
     assert!(store.events().is_none());
 }
 
+/// A stopping process's checkpoint that another process's lock cuts short is an error, not a
+/// checkpoint done (SQLite answers it with a row saying so, which passed for done, found from
+/// outside).
+#[tokio::test]
+async fn sqlite_says_when_a_lock_cuts_its_checkpoint_short() {
+    use sqlx::Connection;
+    let dir = temp_dir("store-sqlite-checkpoint");
+    let url = format!("sqlite://{}", dir.join("checkpoint.db").display());
+    let store = store::open(&url).await.unwrap();
+    insert(&store, queued(1)).await;
+    store.checkpoint().await.expect("nothing in the way");
+    insert(&store, queued(2)).await;
+    let mut lock = sqlx::SqliteConnection::connect(&url).await.unwrap();
+    sqlx::query("BEGIN EXCLUSIVE")
+        .execute(&mut lock)
+        .await
+        .unwrap();
+    assert!(store.checkpoint().await.is_err(), "cut short by the lock");
+    sqlx::query("ROLLBACK").execute(&mut lock).await.unwrap();
+    store.checkpoint().await.expect("the lock is gone");
+}
+
 #[tokio::test]
 async fn an_unknown_url_scheme_names_the_supported_ones_and_never_the_password() {
     let Err(error) = store::open("mysql://user:secret@host/db").await else {

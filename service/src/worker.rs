@@ -451,11 +451,13 @@ impl Workers {
                     let wait = claim_retry_delay(failed_claims);
                     failed_claims += 1;
                     let wait_s = wait.as_secs_f64();
-                    match why {
-                        Some(why) => {
-                            tracing::error!(%error, why, wait_s, "claiming a shard failed")
+                    // A database that cannot answer for now is a warning: it is waited for.
+                    match (why, error.is_unavailable()) {
+                        (Some(why), _) => {
+                            tracing::warn!(%error, why, wait_s, "claiming a shard failed")
                         }
-                        None => tracing::error!(%error, wait_s, "claiming a shard failed"),
+                        (None, true) => tracing::warn!(%error, wait_s, "claiming a shard failed"),
+                        (None, false) => tracing::error!(%error, wait_s, "claiming a shard failed"),
                     }
                     let mut shutdown = shutdown.clone();
                     tokio::select! {

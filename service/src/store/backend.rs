@@ -59,12 +59,19 @@ impl SqlStore {
     }
 
     /// SQLite's write-ahead log checkpointed whole into the database's file
-    /// ([`super::JobQueue::checkpoint`]).
+    /// ([`super::JobQueue::checkpoint`]). A checkpoint that another process's lock cut short
+    /// answers, rather than fails: that is an error here (it passed for done, found from outside).
     pub(crate) async fn fold_log(&self) -> StoreResult<()> {
         if let Backend::Sqlite(sqlite) = &self.backend {
-            sqlx::query("PRAGMA wal_checkpoint(FULL)")
-                .execute(sqlite.writer()?)
+            let row = sqlx::query("PRAGMA wal_checkpoint(FULL)")
+                .fetch_one(sqlite.writer()?)
                 .await?;
+            let busy: i64 = sqlx::Row::try_get(&row, 0)?;
+            if busy != 0 {
+                return Err(StoreError::NotReady(
+                    "another process holds the database: its log is not folded whole".to_owned(),
+                ));
+            }
         }
         Ok(())
     }
