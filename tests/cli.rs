@@ -5,6 +5,16 @@ use crate::support::{bouncewear, run_job, temp_dir, without_timing};
 use bouncewear_model::{Fidelity, Scenario, simulate};
 use serde_json::Value;
 
+/// Runs the binary with `args`, its standard output a disk that is always full.
+fn to_dev_full(args: &[&str]) -> std::process::Output {
+    let full = std::fs::OpenOptions::new().write(true).open("/dev/full");
+    std::process::Command::new(crate::support::BIN)
+        .args(args)
+        .stdout(full.unwrap())
+        .output()
+        .unwrap()
+}
+
 /// Runs a command that must fail with exit code 2 and one stderr line; returns that line.
 fn rejected(args: &[&str], stdin: &str) -> String {
     let output = bouncewear(args, stdin);
@@ -146,12 +156,7 @@ fn every_subcommand_has_help_and_a_version() {
         );
     }
     // Help that cannot be written is a failure, as any output is.
-    let full = std::fs::OpenOptions::new().write(true).open("/dev/full");
-    let output = std::process::Command::new(crate::support::BIN)
-        .arg("--help")
-        .stdout(full.unwrap())
-        .output()
-        .unwrap();
+    let output = to_dev_full(&["--help"]);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("No space left on device"), "{stderr}");
@@ -396,12 +401,7 @@ fn inputs_are_bounded_and_outputs_checked_before_the_work() {
     // written fails (1).
     let to_full = |job: &str| {
         std::fs::write(&file, job).unwrap();
-        let full = std::fs::OpenOptions::new().write(true).open("/dev/full");
-        std::process::Command::new(crate::support::BIN)
-            .args(["run", "-q", file.to_str().unwrap()])
-            .stdout(full.unwrap())
-            .output()
-            .unwrap()
+        to_dev_full(&["run", "-q", file.to_str().unwrap()])
     };
     assert_eq!(to_full("").status.code(), Some(2));
     let full = to_full(job);

@@ -926,7 +926,7 @@ impl Workers {
                         _ = heartbeat.tick() => {
                             let terms = LeaseTerms::for_ms(duration_ms);
                             let progress = done.load(Ordering::Relaxed);
-                            let total = total.load(Ordering::Relaxed).max(progress);
+                            let total = total.load(Ordering::Relaxed);
                             match store.heartbeat(&fence, terms, progress, total).await {
                                 Ok(Lease::Held) => {}
                                 Ok(lease @ (Lease::Cancelled | Lease::Lost)) => {

@@ -466,12 +466,10 @@ fn deleting_a_finished_job_deletes_every_row_stored_for_it_and_frees_its_pages()
 #[test]
 fn jobs_that_ended_before_the_retention_are_deleted_at_start_up() {
     let database = temp_db("retention");
-    let done = {
-        let server = TestApp::start(&database, &[]);
-        let done = server.submit(&json!({"devices": 2, "operations": 2, "seed": 1}));
-        server.wait_for(&done, "succeeded", Duration::from_secs(20));
-        done
-    };
+    let done = TestApp::ran(
+        &database,
+        &json!({"devices": 2, "operations": 2, "seed": 1}),
+    );
     let server = TestApp::start(&database, &["--retain-days", "0", "--workers", "0"]);
     let queued = server.submit(&json!({"devices": 2, "operations": 2, "seed": 2}));
     let started = Instant::now();

@@ -427,12 +427,10 @@ fn a_submission_behind_another_processs_lock_answers_503_at_once() {
 #[test]
 fn a_stopped_servers_file_holds_every_write_without_its_log() {
     let database = temp_db("stopped");
-    let id = {
-        let server = TestApp::start(&database, &[]);
-        let id = server.submit(&json!({"devices": 2, "operations": 3, "seed": 1}));
-        server.wait_for(&id, "succeeded", Duration::from_secs(60));
-        id
-    };
+    let id = TestApp::ran(
+        &database,
+        &json!({"devices": 2, "operations": 3, "seed": 1}),
+    );
     let copy = temp_db("stopped-copy");
     std::fs::copy(&database, &copy).unwrap();
     let server = TestApp::start(&copy, &[]);

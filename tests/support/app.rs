@@ -93,6 +93,15 @@ impl TestApp {
         Self::on(&format!("sqlite://{}", database.display()), args)
     }
 
+    /// Runs `job` to success on a service over the SQLite file `database`, then stops it as
+    /// SIGTERM would: the job's id.
+    pub fn ran(database: &Path, job: &Value) -> String {
+        let server = Self::start(database, &[]);
+        let id = server.submit(job);
+        server.wait_for(&id, "succeeded", Duration::from_secs(60));
+        id
+    }
+
     /// The service on the database at `url`, any backend.
     pub fn on(url: &str, args: &[&str]) -> Self {
         let flags = ["serve", "--bind", "127.0.0.1:0", "--database", url];
