@@ -179,6 +179,9 @@ fn a_small_job_runs_as_one_shard_and_a_larger_one_in_groups_with_the_same_bits()
             assert_eq!(shard.get("error"), Some(&Value::Null), "{shard}");
             assert_eq!(shard["status"], "done", "{shard}");
         }
+        if shards == 33 {
+            assert_pages_of_shards(&server, &id, &listed);
+        }
         if shards == 1 {
             assert!(listed[0].get("group").is_none(), "{listed:?}");
             assert_eq!(listed[0]["operations_total"], 2_000_000);
@@ -189,6 +192,50 @@ fn a_small_job_runs_as_one_shard_and_a_larger_one_in_groups_with_the_same_bits()
         assert_eq!(result["operations"], local["operations"], "{operations}");
         assert_eq!(result["devices"], local["devices"], "{operations}");
     }
+}
+
+/// `/shards` in pages of 10 and of 33: the same shards in the same order as the whole list, a
+/// cursor only where another page has shards; a bad page is a 400 naming what is wrong.
+fn assert_pages_of_shards(server: &TestApp, id: &str, whole: &[Value]) {
+    for limit in [10, 33] {
+        let mut paged = Vec::new();
+        let mut cursor: Option<String> = None;
+        loop {
+            let at = cursor.as_ref().map(|c| format!("&cursor={c}"));
+            let path = format!(
+                "/v1/jobs/{id}/shards?limit={limit}{}",
+                at.unwrap_or_default()
+            );
+            let page = get(&server.url(&path), None).json();
+            paged.extend(page["shards"].as_array().unwrap().iter().cloned());
+            match page.get("next_cursor") {
+                Some(next) => cursor = Some(next.as_str().unwrap().to_owned()),
+                None => break,
+            }
+        }
+        assert_eq!(paged, whole, "limit {limit}");
+    }
+    for (query, says) in [
+        ("limit=0", "limit must be from 1 to 1000"),
+        ("limit=1001", "limit must be from 1 to 1000"),
+        ("cursor=0", "is not one this server gave"),
+        ("cursor=x", "is not one this server gave"),
+    ] {
+        let reply = get(&server.url(&format!("/v1/jobs/{id}/shards?{query}")), None);
+        assert_eq!(reply.status, 400, "{query}");
+        let detail = reply.json()["detail"]
+            .as_str()
+            .unwrap_or_default()
+            .to_owned();
+        assert!(detail.contains(says), "{query}: {detail}");
+    }
+    // Past the end: an empty page, no cursor.
+    let beyond = get(
+        &server.url(&format!("/v1/jobs/{id}/shards?cursor=500")),
+        None,
+    )
+    .json();
+    assert_eq!(beyond, json!({"shards": []}));
 }
 
 #[test]

@@ -257,18 +257,8 @@ impl ListQuery {
                 "limit must be from 1 to 100, got {limit}"
             )));
         }
-        let Some(cursor) = self.cursor.as_deref() else {
-            return Ok((limit, None));
-        };
-        // As the documented pattern: digits, the first not 0 (`01` is no cursor this server gave).
-        let seq = (!cursor.starts_with('0') && cursor.bytes().all(|b| b.is_ascii_digit()))
-            .then(|| cursor.parse::<i64>().ok())
-            .flatten()
-            .filter(|seq| *seq > 0)
-            .ok_or_else(|| {
-                ApiError::BadRequest(format!("cursor `{cursor}` is not one this server gave"))
-            })?;
-        Ok((limit, Some(seq)))
+        let seq = self.cursor.as_deref().map(cursor_seq).transpose()?;
+        Ok((limit, seq))
     }
 
     /// `records`, read one more than the page (`limit + 1`), cut to the page; the cursor of the
@@ -279,6 +269,18 @@ impl ListQuery {
         more.then(|| records.last().map(|r| seq(r).to_string()))
             .flatten()
     }
+}
+
+/// The number a cursor this server gave stands for: as the documented pattern, digits, the first
+/// not 0 (`01` is no cursor this server gave).
+fn cursor_seq(cursor: &str) -> Result<i64, ApiError> {
+    (!cursor.starts_with('0') && cursor.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| cursor.parse::<i64>().ok())
+        .flatten()
+        .filter(|seq| *seq > 0)
+        .ok_or_else(|| {
+            ApiError::BadRequest(format!("cursor `{cursor}` is not one this server gave"))
+        })
 }
 
 /// List your jobs, newest first, with cursor paging.
@@ -450,22 +452,42 @@ impl ShardResource {
     }
 }
 
-/// A job's shards.
+/// A job's shards, a page of them.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ShardList {
     /// In batch order; in each batch its groups, then its merge step.
     pub shards: Vec<ShardResource>,
+    /// Pass as `cursor` for the next page; absent on the last page.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub next_cursor: Option<String>,
+}
+
+/// Most shards in a page, and the default: a job of one batch has at most 33.
+const SHARDS_PAGE: u32 = 1000;
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct ShardsQuery {
+    /// Page size, 1 to 1000 (default 1000).
+    #[param(minimum = 1, maximum = 1000, example = 1000)]
+    pub limit: Option<u32>,
+    /// `next_cursor` of the previous page.
+    #[param(pattern = "^[1-9][0-9]{0,18}$", example = "1000")]
+    pub cursor: Option<String>,
 }
 
 /// The shards a job runs as, on any worker of any machine: where each stands and how often it
 /// ran. An operator's view: a shard with more than one attempt was rerun.
 ///
 /// Each shard's status (`queued`, `running`, `done`), attempts, failures, the worker that holds or
-/// held it, and its operations.
+/// held it, and its operations. Pages of at most `limit` shards (default and most 1000); pass a
+/// page's `next_cursor` as `cursor` for the next.
 #[utoipa::path(
-    get, path = "/v1/jobs/{id}/shards", tag = "jobs", params(("id" = String, Path, description = "Job id")),
+    get, path = "/v1/jobs/{id}/shards", tag = "jobs",
+    params(("id" = String, Path, description = "Job id"), ShardsQuery),
     responses(
-        (status = 200, description = "The job's shards", body = ShardList),
+        (status = 200, description = "A page of the job's shards", body = ShardList),
+        BadQuery,
         Unauthorized,
         NoSuchJob,
     ),
@@ -475,11 +497,35 @@ pub async fn get_shards(
     State(state): State<AppState>,
     Extension(owner): Extension<Owner>,
     Path(id): Path<JobId>,
+    query: Result<Query<ShardsQuery>, QueryRejection>,
 ) -> Result<Json<ShardList>, ApiError> {
+    let Query(query) = query?;
+    let limit = query.limit.unwrap_or(SHARDS_PAGE);
+    if !(1..=SHARDS_PAGE).contains(&limit) {
+        return Err(ApiError::BadRequest(format!(
+            "limit must be from 1 to {SHARDS_PAGE}, got {limit}"
+        )));
+    }
+    // The cursor is the place of the next page's first shard in the list.
+    let skip = query
+        .cursor
+        .as_deref()
+        .map(cursor_seq)
+        .transpose()?
+        .unwrap_or(0);
+    let skip = skip.unsigned_abs();
     state.store.job(&owner, &id).await?;
-    let shards = state.store.shards(&id).await?;
+    // One more than the page: a cursor only where another page has shards.
+    let mut shards = state
+        .store
+        .shards_from(&id, skip, u64::from(limit) + 1)
+        .await?;
+    let more = shards.len() > limit as usize;
+    shards.truncate(limit as usize);
+    let next_cursor = more.then(|| (skip + u64::from(limit)).to_string());
     Ok(Json(ShardList {
         shards: shards.into_iter().map(ShardResource::from_record).collect(),
+        next_cursor,
     }))
 }
 

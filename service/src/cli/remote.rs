@@ -442,8 +442,34 @@ pub fn fetch(server: &Server, id: &str, part: Part, csv: bool) -> Result<String,
             )));
         }
     };
+    if matches!(part, Part::Shards) {
+        return all_shards(server, id);
+    }
     let text = server.send("GET", &part_path(id, part, format), None)?;
     Ok(text.trim_end().to_owned())
+}
+
+/// Every shard of job `id`, read page by page (the API serves at most 1000 a page) and printed as
+/// one list: a job of one page as the API answers, the pages of a larger one joined.
+fn all_shards(server: &Server, id: &str) -> Result<String, CliError> {
+    let mut shards = Vec::new();
+    let mut query = String::new();
+    loop {
+        let text = server.send("GET", &part_path(id, Part::Shards, &query), None)?;
+        let mut page = parse(&text)?;
+        if query.is_empty() && page.get("next_cursor").is_none() {
+            return Ok(text.trim_end().to_owned());
+        }
+        match page["shards"].take() {
+            serde_json::Value::Array(page) => shards.extend(page),
+            _ => return Err(CliError::Failed(format!("the server's answer: {text}"))),
+        }
+        match page["next_cursor"].as_str() {
+            Some(cursor) => query = format!("?cursor={}", encode(cursor)),
+            None => break,
+        }
+    }
+    Ok(serde_json::json!({ "shards": shards }).to_string())
 }
 
 /// The path of `part` of job `id`, with `format` (a query string, or empty) after it.

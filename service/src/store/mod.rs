@@ -478,8 +478,14 @@ pub trait JobQueue: Send + Sync + 'static {
     ) -> StoreResult<bool>;
     /// Hands a running shard back to the queue (graceful shutdown), without counting a failure.
     async fn release(&self, fence: &Fence) -> StoreResult<bool>;
-    /// The job's shards, in order.
-    async fn shards(&self, id: &JobId) -> StoreResult<Vec<ShardRecord>>;
+    /// The job's shards, in order: at most `limit` of them, after the first `skip`. Shards are
+    /// only ever added after those already there, so pages read one after another miss none.
+    async fn shards_from(&self, id: &JobId, skip: u64, limit: u64)
+    -> StoreResult<Vec<ShardRecord>>;
+    /// The job's shards, in order, all of them.
+    async fn shards(&self, id: &JobId) -> StoreResult<Vec<ShardRecord>> {
+        self.shards_from(id, 0, u64::MAX).await
+    }
     /// `(queued, running)` job counts, for metrics.
     async fn queue_depth(&self) -> StoreResult<(u64, u64)>;
     /// Announcements of changes to the queue, where the backend makes them (PostgreSQL's

@@ -864,7 +864,12 @@ impl JobQueue for SqlStore {
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn shards(&self, id: &JobId) -> StoreResult<Vec<ShardRecord>> {
+    async fn shards_from(
+        &self,
+        id: &JobId,
+        skip: u64,
+        limit: u64,
+    ) -> StoreResult<Vec<ShardRecord>> {
         let rows = Sql::new(concat!(
             "SELECT ",
             shard_columns!(),
@@ -872,9 +877,11 @@ impl JobQueue for SqlStore {
             // A job that ran whole keeps its devices' groups in rows of their own while its
             // rare event's rounds run (`add_batch`): stored, never claimed, so no shard of it.
             " FROM shards WHERE job_id = $1 AND (attempt > 0 OR status <> 'done') \
-              ORDER BY batch, grp < 0, grp"
+              ORDER BY batch, grp < 0, grp LIMIT $2 OFFSET $3"
         ))
         .bind(id.as_str())
+        .bind(count_to_sql(limit))
+        .bind(count_to_sql(skip))
         .fetch_all(self.readers())
         .await?;
         let shards = rows.iter().map(|row| {

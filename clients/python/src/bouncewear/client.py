@@ -354,8 +354,15 @@ class Job:
         return self.client.request("GET", self._path("/life")).json()
 
     def shards(self) -> pd.DataFrame:
-        """The shards the job runs as, one row each."""
-        return pd.DataFrame(self.client.request("GET", self._path("/shards")).json()["shards"])
+        """The shards the job runs as, one row each (read page by page: at most 1000 a page)."""
+        shards: List[JSON] = []
+        params: Dict[str, Any] = {}
+        while True:
+            body = self.client.request("GET", self._path("/shards"), params=params).json()
+            shards.extend(body["shards"])
+            if not body.get("next_cursor"):
+                return pd.DataFrame(shards)
+            params = {"cursor": body["next_cursor"]}
 
     def plot(self, kind: str = "bands.svg", metric: Optional[str] = None) -> str:
         """A plot as SVG text (`bands.svg`, `histograms.svg`, `weibull.svg`, `sensitivity.svg`,
