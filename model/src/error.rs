@@ -445,17 +445,18 @@ impl<'de> serde::de::Visitor<'de> for StrictVisitor {
     }
 
     /// A number written with a fraction or exponent but integral (`2.0`, `1e3`) is an integer, as
-    /// JSON Schema counts it: it may fill an integer field.
+    /// JSON Schema counts it: it may fill an integer field. Only below 2^53 in magnitude, where
+    /// every integer has its own f64: from there, the number read may not be the one written
+    /// (`12345678901234567.5` reads as 12345678901234568, `9007199254740993.0` as ...992), so it
+    /// stays a fraction, and an integer field there takes digits alone.
     fn visit_f64<E>(self, value: f64) -> Result<Self::Value, E> {
-        const TWO_TO_64: f64 = 18_446_744_073_709_551_616.0;
-        Ok(if value.fract() != 0.0 || !value.is_finite() {
+        const TWO_TO_53: f64 = 9_007_199_254_740_992.0;
+        Ok(if value.fract() != 0.0 || value.abs() >= TWO_TO_53 {
             value.into()
-        } else if (0.0..TWO_TO_64).contains(&value) {
+        } else if value >= 0.0 {
             (value as u64).into()
-        } else if value >= i64::MIN as f64 && value < 0.0 {
-            (value as i64).into()
         } else {
-            value.into()
+            (value as i64).into()
         })
     }
 
@@ -844,6 +845,27 @@ mod tests {
         assert_eq!(from_json::<i64>("-4.0", &[]), Ok(-4));
         assert!(from_json::<u64>("2.5", &[]).is_err());
         assert!(from_json::<u64>("1.8446744073709552e19", &[]).is_err());
+        // Above 2^53 an f64 is not the integer written: a seed of 12345678901234567.5 ran as
+        // 12345678901234568, one of 9007199254740993.0 as ...992. Digits alone are exact.
+        assert_eq!(
+            from_json::<u64>("9007199254740991.0", &[]),
+            Ok((1 << 53) - 1)
+        );
+        assert_eq!(
+            from_json::<i64>("-9007199254740991.0", &[]),
+            Ok(1 - (1 << 53))
+        );
+        for written in [
+            "12345678901234567.5",
+            "9007199254740993.0",
+            "9.007199254740992e15",
+        ] {
+            assert!(from_json::<u64>(written, &[]).is_err(), "{written}");
+        }
+        assert_eq!(
+            from_json::<u64>("9007199254740993", &[]),
+            Ok(9_007_199_254_740_993)
+        );
     }
 
     #[test]

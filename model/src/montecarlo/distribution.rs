@@ -278,6 +278,9 @@ impl Distribution {
             if domain.lower >= 0.0 {
                 faults.above_least_magnitude(distribution, spec);
             }
+            if faults.errors.is_empty() && domain.lower >= 0.0 {
+                faults.reaches_least_magnitude(distribution, spec);
+            }
         }
         match distribution {
             Some(distribution) if faults.errors.is_empty() => Ok(distribution),
@@ -614,7 +617,8 @@ impl Faults<'_> {
     /// Every positive value the distribution can draw at least [`MIN_MAGNITUDE`], as a scenario's
     /// own values must be: its fixed value or `min` (a uniform's or triangular's lower end) zero or
     /// from there, and, without a `min`, a lognormal's value at `-MAX_SCORE` and a Weibull's scale.
-    /// A Weibull's lower tail is left to its draws (docs/model.md section 9).
+    /// The lower tail of one from 0 that reaches above (a uniform's first draws above 0, a
+    /// Weibull's tail) is left to its draws (docs/model.md section 9).
     fn above_least_magnitude(&mut self, distribution: &Distribution, spec: &DistributionSpec) {
         let tiny = |value: f64| value > 0.0 && value < MIN_MAGNITUDE;
         let (min, _) = spec.bounds();
@@ -641,6 +645,31 @@ impl Faults<'_> {
             format!("must be 0 or at least {MIN_MAGNITUDE:e} (the supported range), got {lowest:e}")
         };
         self.fail(field, detail);
+    }
+
+    /// From 0 (a lower end of 0 or none), the distribution's upper end: `max`, or its value at
+    /// `MAX_SCORE`, at least [`MIN_MAGNITUDE`], else every positive value it draws is below.
+    fn reaches_least_magnitude(&mut self, distribution: &Distribution, spec: &DistributionSpec) {
+        let (_, max) = spec.bounds();
+        let highest = max.unwrap_or_else(|| distribution.at_normal(MAX_SCORE));
+        if matches!(spec, DistributionSpec::Fixed { .. })
+            || !(highest > 0.0 && highest < MIN_MAGNITUDE)
+        {
+            return;
+        }
+        let field = match (spec, max) {
+            (_, Some(_)) => "max",
+            (DistributionSpec::Lognormal { .. }, None) => "median",
+            (DistributionSpec::Weibull { .. }, None) => "scale",
+            _ => "mean",
+        };
+        self.fail(
+            field,
+            format!(
+                "every positive value this distribution draws is below the {MIN_MAGNITUDE:e} a \
+                 non-zero value of this parameter must reach (it reaches at most {highest:e})"
+            ),
+        );
     }
 
     fn max_above_min(&mut self, max: f64, min: f64) {
@@ -1095,6 +1124,28 @@ mod tests {
                 r#"{"kind":"weibull","scale":1e-300,"shape":2}"#,
                 positive,
                 "/d/scale",
+            ),
+            // From 0, every positive draw below 1e-30: a velocity of 1e-35 m/s ran to an arc
+            // energy of 4.6e28 J; and a draw of 5e-324 past f64.
+            (
+                r#"{"kind":"uniform","min":0,"max":5e-324}"#,
+                non_negative,
+                "/d/max",
+            ),
+            (
+                r#"{"kind":"triangular","min":0,"mode":0,"max":1e-31}"#,
+                non_negative,
+                "/d/max",
+            ),
+            (
+                r#"{"kind":"normal","mean":0,"sd":1e-300,"min":0}"#,
+                non_negative,
+                "/d/mean",
+            ),
+            (
+                r#"{"kind":"normal","mean":1e-35,"sd":1e-36,"min":0}"#,
+                non_negative,
+                "/d/mean",
             ),
         ];
         for (json, domain, pointer) in cases {

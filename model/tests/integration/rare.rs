@@ -454,6 +454,13 @@ fn bad_rare_events_name_their_field() {
             1,
             "/rare_event/operation",
         ),
+        // Only the operation: an operation of 0 was also told the job needs a scatter it has.
+        (
+            json!({"metric": "total_bounce_s", "above": 0.02, "operation": 0}),
+            velocity.clone(),
+            4,
+            "/rare_event/operation",
+        ),
         (
             json!({"metric": "cumulative_arc_energy_j", "above": 1, "operation": 1}),
             velocity.clone(),

@@ -325,6 +325,7 @@ impl RareEvent {
         let mut faults = Faults { at, errors };
         let reading = check_reading(spec, shape, &mut faults);
         let (threshold, above) = check_side(spec, &mut faults);
+        let faults_before = faults.errors.len();
         let read = operations_read(
             spec,
             reading,
@@ -332,8 +333,13 @@ impl RareEvent {
             shape.operations,
             &mut faults,
         );
+        // The inputs explored depend on the operations read: none to count where those are at
+        // fault (an `operation` of 0 read no operation, and was told it needs a scatter).
+        let read_is_valid = faults.errors.len() == faults_before;
         check_budget(spec, &mut faults);
-        check_inputs(spec, shape, (reading, above), read, &mut faults);
+        if read_is_valid {
+            check_inputs(spec, shape, (reading, above), read, &mut faults);
+        }
         if errors.len() > before {
             return None;
         }
