@@ -57,16 +57,18 @@ pub fn weibayes(lives: &Lives, beta: f64, confidence: f64) -> Result<Weibayes, W
         .map(|a| a.devices() * (a.time / t_max).powf(beta))
         .sum();
     let failures = lives.failures();
-    let scale_of = |divisor: f64| t_max * (scaled / divisor).powf(1.0 / beta);
-    let eta_lower = scale_of(0.5 * chi_square_quantile(confidence, failures + 1));
-    let b_lower = |p: f64| eta_lower * (-(-p).ln_1p()).powf(1.0 / beta);
+    // In logarithms, so that a B-life below f64's largest is kept where the scale is beyond it
+    // (beta 0.01 at 95 %: eta_lower about 1e331, B1's about 1e131).
+    let ln_scale_of = |divisor: f64| t_max.ln() + (scaled / divisor).ln() / beta;
+    let ln_eta_lower = ln_scale_of(0.5 * chi_square_quantile(confidence, failures + 1));
+    let b_lower = |p: f64| (ln_eta_lower + (-(-p).ln_1p()).ln() / beta).exp();
     Ok(Weibayes {
         beta,
         confidence,
         failures,
         devices: lives.failures() + lives.censored(),
-        eta: (failures > 0).then(|| scale_of(failures as f64)),
-        eta_lower,
+        eta: (failures > 0).then(|| ln_scale_of(failures as f64).exp()),
+        eta_lower: ln_eta_lower.exp(),
         b1_lower: b_lower(0.01),
         b10_lower: b_lower(0.10),
     })
@@ -172,6 +174,22 @@ mod tests {
             eta_lower * (-(0.9f64).ln()).sqrt(),
             max_relative = 1e-14
         );
+    }
+
+    /// A shape of 0.01 and 5 % confidence, no failures among 100 devices through 200 operations:
+    /// the scale's bound, `200 (100 / -ln 0.95)^100`, is about 1e331, beyond f64; the B-lives' are
+    /// not, `200 (100 (-ln(1 - p)) / -ln 0.95)^100` (B1 about 3e131), and are kept.
+    #[test]
+    fn a_b_life_within_f64_is_kept_where_the_scale_is_beyond() {
+        let lives = Lives::from_pairs(&[(200.0, false); 100]).unwrap();
+        let w = weibayes(&lives, 0.01, 0.05).unwrap();
+        assert_eq!(w.eta_lower, f64::INFINITY);
+        let zero_failure = -(0.95f64).ln();
+        for (p, bound) in [(0.01, w.b1_lower), (0.10, w.b10_lower)] {
+            let expected = 200.0 * (100.0 * -(1.0f64 - p).ln() / zero_failure).powf(100.0);
+            assert!(expected.is_finite() && expected > 1e100, "{expected:e}");
+            assert_relative_eq!(bound, expected, max_relative = 1e-12);
+        }
     }
 
     /// Chi-square quantiles against scipy's `chi2.ppf` (scipy 1.17.1).
