@@ -302,6 +302,11 @@ fn fit(problem: Problem) -> Result<Calibration, InvalidInput> {
 /// multiplicative noise of relative size `s` it pulls the fit low by about `2 s^2` (0.08 % at 2 %,
 /// 0.19 standard errors of kappa in `study::wear_curve`); the symmetric form's pull is `s^2 / 2`
 /// and it stays bounded (-2) where a simulated quantity is 0 (no bounce), as the log ratio does not.
+/// A relative difference this near its end (2) is a simulated value over 2000 times its
+/// measurement (or under a 2000th of it): far enough that a small step of a parameter moves it by
+/// less than its rounding.
+const FAR_RESIDUAL: f64 = 1.998;
+
 fn relative_difference(simulated: f64, measured: f64) -> f64 {
     2.0 * (simulated - measured) / (simulated + measured)
 }
@@ -671,21 +676,30 @@ impl Problem<'_> {
         {
             let start = self.start_value(&self.parameters[k].1);
             let at_start = theta[k] == start.ln();
+            // Every simulated value thousands of times its measurement (or a thousandth of it):
+            // the relative differences sit at their ends (+-2), where no small move shows.
+            let far = self
+                .residuals(theta)
+                .is_some_and(|r| r.iter().all(|r| r.abs() > FAR_RESIDUAL));
+            let why = if far {
+                " there (every simulated value is over 2000 times its measurement, or under a \
+                 2000th of it, where the relative differences no longer move): start the fit \
+                 nearer, from the scenario's value of it"
+            } else if at_start {
+                ", so the data cannot determine it"
+            } else {
+                // Moved there by the fit: the data drew it where nothing changes.
+                ", so the data cannot determine it (the fit moved it there: a measurement beyond \
+                 what the model reaches, such as an e1 of 1 or more, draws the fit to where \
+                 nothing changes)"
+            };
             return Err(InvalidInput::single(
                 &fit.child(k),
                 format!(
-                    "`{}` changes none of the measured quantities at {}, so the data cannot \
-                     determine it{}",
+                    "`{}` changes none of the measured quantities at {}{why}",
                     self.parameters[k].0,
                     // At its start, the value as written (not its logarithm's round trip).
                     crate::error::shown(if at_start { start } else { theta[k].exp() }),
-                    // Moved there by the fit: the data drew it where nothing changes.
-                    if at_start {
-                        ""
-                    } else {
-                        " (the fit moved it there: a measurement beyond what the model reaches, \
-                         such as an e1 of 1 or more, draws the fit to where nothing changes)"
-                    }
                 ),
             ));
         }
@@ -2210,6 +2224,31 @@ mod tests {
             !detail.contains("at 0.36"),
             "the fit moved kappa from its start: {detail}"
         );
+    }
+
+    /// Measurements 1e11 times below the start's (an e1 of 1e-12 against 0.5) leave the relative
+    /// differences at their end, where no step moves them: refused saying so, not that kappa
+    /// changes nothing; from a start near them (kappa 1e-11) the same data fit.
+    #[test]
+    fn measurements_far_from_the_start_are_refused_saying_so() {
+        let data = r#""observations": [{"e1": 1e-12}, {"e1": 1.01e-12}]"#;
+        let invalid =
+            CalibrationSpec::from_json(&format!(r#"{{"fit": ["material.kappa"], {data}}}"#))
+                .and_then(|spec| calibrate(&spec))
+                .unwrap_err();
+        assert_eq!(invalid.pointers(), ["/fit/0"], "{invalid}");
+        let detail = &invalid.errors()[0].detail;
+        assert!(
+            detail.contains("over 2000 times its measurement"),
+            "{detail}"
+        );
+        let near = CalibrationSpec::from_json(&format!(
+            r#"{{"scenario": {{"material": {{"kappa": 1e-11}}}}, "fit": ["material.kappa"],
+                {data}}}"#
+        ))
+        .unwrap();
+        let kappa = calibrate(&near).unwrap().estimates["material.kappa"].value;
+        assert!(kappa > 1e-13 && kappa < 1e-11, "{kappa:e}");
     }
 
     /// A count cannot be fitted: `losses.max_bounces` was refused at `/scenario` as "the starting
