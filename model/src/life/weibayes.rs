@@ -33,9 +33,9 @@ pub struct Weibayes {
 /// Why no demonstration can be made.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum WeibayesError {
-    #[error("the shape must be a finite number from 0.01 to 100, got {0}")]
+    #[error("the shape must be a finite number from 0.01 to 100, got {}", crate::error::shown(*.0))]
     Shape(f64),
-    #[error("the confidence must be between 0 and 1 (exclusive), got {0}")]
+    #[error("the confidence must be between 0 and 1 (exclusive), got {}", crate::error::shown(*.0))]
     Confidence(f64),
     #[error("there are no lives to demonstrate from")]
     NoLives,

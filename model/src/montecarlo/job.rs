@@ -1056,7 +1056,7 @@ fn check_precision(
             pointer: at.child("relative_half_width").to_string(),
             detail: format!(
                 "must be above 0 and below 1, got {}",
-                spec.relative_half_width
+                crate::error::shown(spec.relative_half_width)
             ),
         });
     }

@@ -341,7 +341,8 @@ impl WaitQuery {
         let wait_s = query.wait_s.unwrap_or(0.0);
         if !(0.0..=MAX_WAIT_S).contains(&wait_s) {
             return Err(ApiError::BadRequest(format!(
-                "wait_s must be from 0 to {MAX_WAIT_S} seconds, got {wait_s}"
+                "wait_s must be from 0 to {MAX_WAIT_S} seconds, got {}",
+                bouncewear_model::error::shown(wait_s)
             )));
         }
         Ok(std::time::Duration::from_secs_f64(wait_s).min(state.config.max_wait()))
