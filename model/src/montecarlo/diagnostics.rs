@@ -107,7 +107,10 @@ pub fn diagnose(job: &Job, counts: &Counts) -> Vec<Diagnostic> {
             .collect();
         outside.dedup();
         if !outside.is_empty() {
-            let shown: Vec<String> = outside.iter().map(|v| format!("{v} {unit}")).collect();
+            let shown: Vec<String> = outside
+                .iter()
+                .map(|&v| format!("{} {unit}", crate::error::shown(v)))
+                .collect();
             let (values, verb) = match outside.len() {
                 1 => (shown.join(""), "is"),
                 _ => (
@@ -226,10 +229,11 @@ fn paper_law_far_from_calibration(job: &Job) -> Option<Diagnostic> {
     far.map(|current_a| Diagnostic {
         pointer: pointer.to_string(),
         detail: format!(
-            "arcs burn at {current_a} A, more than a factor {PAPER_LAW_CURRENT_FACTOR} from the \
+            "arcs burn at {} A, more than a factor {PAPER_LAW_CURRENT_FACTOR} from the \
              {calibration_a} A at which the paper fitted its post-arc law (eq. 16): its restitution \
              is an extrapolation here. \"material.arc_restitution.law\": \"continuous\" fades the \
-             arc's effect out towards the minimum arc current (docs/model.md section 5)"
+             arc's effect out towards the minimum arc current (docs/model.md section 5)",
+            crate::error::shown(current_a)
         ),
     })
 }

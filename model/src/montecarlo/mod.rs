@@ -255,11 +255,13 @@ pub enum RunError {
 /// plastic work of 1e314 J), and such a job ends with this instead of a Result of `null`s.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "{metric} leaves the range of f64 (beyond 1.8e308) {at}: the scenario's magnitudes combine \
-     past what the model can represent (docs/model.md section 9)"
+    "{metric} leaves the range of f64 (beyond 1.8e308) {at}{what}: the scenario's magnitudes \
+     combine past what the model can represent (docs/model.md section 9)"
 )]
 pub struct OutOfRange {
     pub metric: String,
+    /// Empty where the values themselves leave it; else which of their summary does.
+    pub what: String,
     /// Where: the bin's operations, or the devices at the end of the test.
     pub at: String,
 }
@@ -272,17 +274,30 @@ pub fn check_in_range(result: &JobResult) -> Result<(), OutOfRange> {
             .iter()
             .all(|v| v.is_finite())
     };
+    // Values within f64 whose spread is not: their squares pass it from about 1.3e154.
+    let what = |s: &Summary| {
+        if [s.mean, s.min, s.max].iter().all(|v| v.is_finite()) {
+            format!(
+                " in its spread (values reach {:e}, whose squares pass 1.8e308)",
+                s.min.abs().max(s.max.abs())
+            )
+        } else {
+            String::new()
+        }
+    };
     for (metric, bins) in &result.operations {
         if let Some(bin) = bins.iter().find(|bin| !finite(&bin.summary)) {
             return Err(OutOfRange {
                 metric: metric.clone(),
+                what: what(&bin.summary),
                 at: format!("in the bin from operation {}", bin.op_start),
             });
         }
     }
     match result.devices.iter().find(|(_, summary)| !finite(summary)) {
-        Some((metric, _)) => Err(OutOfRange {
+        Some((metric, summary)) => Err(OutOfRange {
             metric: metric.clone(),
+            what: what(summary),
             at: "over the devices at the end of the test".to_owned(),
         }),
         None => Ok(()),

@@ -915,4 +915,24 @@ fn a_metric_beyond_f64_ends_the_run_with_its_name() {
          operation 0: the scenario's magnitudes combine past what the model can represent \
          (docs/model.md section 9)"
     );
+    // Values within f64 (impacts of about 1e156 s, the current scattered) whose squares are
+    // not: the spread is what leaves, and the run says so (it read as if the values had).
+    let mut spread = serde_json::from_str::<serde_json::Value>(text).unwrap();
+    spread["metrics"] = serde_json::json!(["impact_duration_s"]);
+    spread["devices"] = serde_json::json!(64);
+    spread["operations"] = serde_json::json!(1);
+    spread["scenario"]["circuit"]["supply_voltage_v"] = serde_json::json!(1e14);
+    spread["scenario"]["material"]["min_arc_voltage_v"] = serde_json::json!(5e13);
+    spread["scatter"] = serde_json::json!([{"parameter": "current_a", "per": "device",
+        "distribution": {"kind": "uniform", "min": 1e29, "max": 1e30}}]);
+    let job = Job::from_json(&spread.to_string(), || 1).unwrap();
+    let error = bouncewear_model::montecarlo::run_job(&job, &Silent).unwrap_err();
+    let told = error.to_string();
+    assert!(
+        told.starts_with(
+            "impact_duration_s leaves the range of f64 (beyond 1.8e308) in the bin from operation \
+             0 in its spread (values reach 2."
+        ) && told.contains("e156, whose squares pass 1.8e308)"),
+        "{told}"
+    );
 }
