@@ -743,11 +743,6 @@ fn domain(parameter: Parameter, scenario: &Scenario, scattered: &[ScatterSpec]) 
                 inclusive: true,
             }
         }
-        Parameter::DynamicYieldPressure
-        | Parameter::BreakdownField
-        | Parameter::Inertia
-        | Parameter::RougheningEnergy
-        | Parameter::Kappa => Domain::POSITIVE,
         // Without a spring, a zero static force would never return the arm.
         Parameter::StaticForce if mech.spring_stiffness_n_per_m == 0.0 => Domain::POSITIVE,
         // Nor, without a static force, a zero spring (a scattered force may be 0).
@@ -756,21 +751,12 @@ fn domain(parameter: Parameter, scenario: &Scenario, scattered: &[ScatterSpec]) 
         {
             Domain::POSITIVE
         }
-        Parameter::ArcRestitutionA | Parameter::ArcRestitutionB => Domain::FINITE,
-        Parameter::ImpactVelocity
-        | Parameter::DropHeight
-        | Parameter::StaticForce
-        | Parameter::Current
-        | Parameter::SpringStiffness
-        | Parameter::SupplyVoltage
-        | Parameter::ImpactEnergyLoss
-        | Parameter::MinSeparation
-        | Parameter::ErosionRate => Domain::NON_NEGATIVE,
+        _ => loosest_domain(parameter),
     }
 }
 
 /// The values `parameter` may take whatever the rest of the scenario: the loosest of
-/// [`domain`]'s answers for it.
+/// [`domain`]'s answers for it, and its answer where nothing else in the scenario matters.
 fn loosest_domain(parameter: Parameter) -> Domain {
     match parameter {
         Parameter::ContactRadius
