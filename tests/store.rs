@@ -881,6 +881,16 @@ async fn a_rare_events_rounds_run_as_shards_give_the_whole_result(url: &str) {
             .filter(|s| !is_round(s.batch))
             .collect();
         assert_eq!(of_devices, [devices, vec![ShardId::merge(0)]].concat());
+        // Progress counts the devices' operations and the rounds' (a job run whole counted
+        // 2^40 times its operations: the round's batch number taken for a batch of devices).
+        let step = shards
+            .iter()
+            .find(|s| s.shard == ShardId::merge(0))
+            .unwrap();
+        assert_eq!(step.operations_done, step.operations_total, "{step:?}");
+        assert!(step.operations_total < 1 << 30, "{step:?}");
+        assert_eq!(ended.operations_done, ended.operations_total, "{ended:?}");
+        assert!(ended.operations_total < 1 << 30, "{ended:?}");
         assert!(
             shards
                 .iter()

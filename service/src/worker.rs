@@ -631,9 +631,13 @@ impl Workers {
         let simulated = match &ran {
             _ if !whole => 0,
             Ran::Done(Ok(Outcome::Result { result, .. })) => result.counts.operations - before,
-            Ran::Done(Ok(Outcome::Next { shards, .. })) => {
-                shards[0].shard.batch * batch_operations - before
-            }
+            // A rare event's round follows the devices, every batch of them run (a job run whole
+            // with a rare event has no precision target: its one batch); another batch follows
+            // those before it.
+            Ran::Done(Ok(Outcome::Next { shards, .. })) => match shards[0].shard.batch {
+                batch if is_round(batch) => (last + 1) * batch_operations - before,
+                batch => batch * batch_operations - before,
+            },
             _ => batch_operations,
         };
         // Its claim was charged its first batch (`first_shards`, `run_whole`), as its shard
