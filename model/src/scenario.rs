@@ -459,12 +459,17 @@ fn check_spec(spec: &ScenarioSpec, root: &Pointer, errors: &mut Vec<FieldError>)
             ),
         });
     }
+    // A non-zero fraction at least the least magnitude, as every other number: 5e-324 left an
+    // anode's mass of exactly 0.
     if let Some(fraction) = mat.anode_erosion_fraction
-        && !(0.0..=1.0).contains(&fraction)
+        && !(fraction == 0.0 || (MIN_MAGNITUDE..=1.0).contains(&fraction))
     {
         errors.push(FieldError {
             pointer: at.child("anode_erosion_fraction").to_string(),
-            detail: format!("must be from 0 to 1, got {fraction}"),
+            detail: format!(
+                "must be 0, or from {MIN_MAGNITUDE:e} to 1, got {}",
+                crate::error::shown(fraction)
+            ),
         });
     }
 
@@ -631,6 +636,10 @@ mod tests {
         ),
         (
             r#"{"material":{"anode_erosion_fraction":1.5}}"#,
+            "/material/anode_erosion_fraction",
+        ),
+        (
+            r#"{"material":{"anode_erosion_fraction":5e-324}}"#,
             "/material/anode_erosion_fraction",
         ),
         (

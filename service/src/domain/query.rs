@@ -101,12 +101,17 @@ fn threshold(item: &str) -> Result<Threshold, String> {
     }
 }
 
-/// A finite decimal number (not `inf`, `NaN` or beyond f64).
+/// A finite decimal number (not `inf`, `NaN` or beyond f64), and not one nearer 0 than any
+/// (`1e-400`, which reads as 0 and was taken as a threshold of 0; a job's body refuses it too).
 fn number(text: &str) -> Option<f64> {
     let plain = text
         .bytes()
         .all(|b| b.is_ascii_digit() || b"+-.eE".contains(&b));
-    text.parse::<f64>().ok().filter(|x| plain && x.is_finite())
+    let mantissa = text.split(['e', 'E']).next().unwrap_or_default();
+    let written_zero = !mantissa.bytes().any(|b| (b'1'..=b'9').contains(&b));
+    text.parse::<f64>()
+        .ok()
+        .filter(|x| plain && x.is_finite() && (*x != 0.0 || written_zero))
 }
 
 /// An item as repeated in an error: at most 40 characters of it.
@@ -134,6 +139,14 @@ mod tests {
         );
         assert_eq!(AfterRunQuery::parse(None, None), Ok(None));
         assert!(parse(None, Some("above:-1")).unwrap().levels.is_empty());
+        // Zero written as zero, in any form, is a threshold.
+        assert_eq!(
+            parse(None, Some("above:0,below:-0.0e5"))
+                .unwrap()
+                .thresholds
+                .len(),
+            2
+        );
     }
 
     #[test]
@@ -146,6 +159,8 @@ mod tests {
             (Some("NaN"), None, "quantiles"),
             (Some("inf"), None, "quantiles"),
             (None, Some("above:1e400"), "exceedance"),
+            (None, Some("above:1e-400"), "exceedance"),
+            (Some("1e-400"), None, "quantiles"),
             (None, Some("above:inf"), "exceedance"),
             (None, Some("over:1"), "exceedance"),
             (None, Some("above"), "exceedance"),
