@@ -690,8 +690,8 @@ impl Problem<'_> {
             } else {
                 // Moved there by the fit: the data drew it where nothing changes.
                 ", so the data cannot determine it (the fit moved it there: a measurement beyond \
-                 what the model reaches, such as an e1 of 1 or more, draws the fit to where \
-                 nothing changes)"
+                 what the model reaches, such as an e1 of 1 or more, or a start far from the \
+                 data's value of it, draws the fit to where nothing changes; start it nearer)"
             };
             return Err(InvalidInput::single(
                 &fit.child(k),
@@ -828,7 +828,10 @@ impl Problem<'_> {
                 // the sum of squares next to the optimum, not a bound the data set (a wear curve:
                 // 22 of 700 kappa intervals, each side so short missed the truth as often as
                 // not, where the Wald interval covered 95 %): that side is the Wald end.
-                Bounded::At(end) if end < STUCK_END * wald && wald.is_finite() => {
+                // (An end at the parameter's bound is the bound's: no step stopped it.)
+                Bounded::At(end)
+                    if end < STUCK_END * wald && wald.is_finite() && end < profile.room(side) =>
+                {
                     warnings.push(format!(
                         "`{name}`'s profile could not be followed {} the estimate (its refits stop on steps of the sum of squares); that end of its interval is the Wald one",
                         if side < 0.0 { "below" } else { "above" }
@@ -838,6 +841,10 @@ impl Problem<'_> {
                 end => end,
             }
         });
+        // An end past an edge of the scenarios the model takes (a Wald end, or a search that
+        // stepped over it) is cut at the edge: a radius interval reached 0.00071011 for a worn
+        // radius of 0.000711, a value the model refuses.
+        let ends = [0, 1].map(|k| self.within_edges(theta, i, [-1.0, 1.0][k], ends[k], warnings));
         for ((end, side), word) in ends.iter().zip(["below", "above"]).zip([-1.0, 1.0]) {
             if let Bounded::Not(reach) = end {
                 warnings.push(format!(
@@ -857,6 +864,45 @@ impl Problem<'_> {
             at_bound: theta[i] == lower || theta[i] == upper || on_edge.contains(&true),
         };
         (name.clone(), estimate)
+    }
+
+    /// `end`, on `side` of parameter `i`'s estimate, or the edge of the scenarios the model takes
+    /// before it (found by bisection to a part in 1e-12 of the logarithm), with a warning.
+    fn within_edges(
+        &self,
+        theta: &[f64],
+        i: usize,
+        side: f64,
+        end: Bounded,
+        warnings: &mut Vec<String>,
+    ) -> Bounded {
+        let valid = |reach: f64| {
+            let mut moved = theta.to_vec();
+            moved[i] += side * reach;
+            self.residuals(&moved).is_some()
+        };
+        let reach = end.reach();
+        if reach == 0.0 || !reach.is_finite() || valid(reach) {
+            return end;
+        }
+        let (mut inside, mut outside) = (0.0, reach);
+        while outside - inside > 1e-12 * outside.max(1.0) {
+            let middle = 0.5 * (inside + outside);
+            if valid(middle) {
+                inside = middle;
+            } else {
+                outside = middle;
+            }
+        }
+        warnings.push(format!(
+            "`{}` is not bounded {} by the data before an edge of the scenarios the model takes \
+             (such as a contact radius no smaller than the worn one): its interval ends at the \
+             edge, {:.6e}",
+            self.parameters[i].0,
+            if side < 0.0 { "below" } else { "above" },
+            (theta[i] + side * inside).exp()
+        ));
+        Bounded::At(inside)
     }
 
     /// The parameters' correlation matrix, by name, and a warning for each pair that trades off.
@@ -2249,6 +2295,101 @@ mod tests {
         .unwrap();
         let kappa = calibrate(&near).unwrap().estimates["material.kappa"].value;
         assert!(kappa > 1e-13 && kappa < 1e-11, "{kappa:e}");
+    }
+
+    /// Noisy e1 data (40 %) that do not bound a parameter before an edge of the scenarios the
+    /// model takes: an outside check found the radius interval ending at 0.00071011 for a worn
+    /// radius of 0.000711, and a yield pressure's at 9.99e7 under a worn pressure of 1e8, values
+    /// the model refuses, with no warning. Each ends at its edge now, saying so.
+    #[test]
+    fn an_interval_the_data_do_not_bound_ends_at_the_scenarios_edge() {
+        let e1 = |values: [f64; 7]| {
+            let velocities = [0.12, 0.2, 0.28, 0.36, 0.45, 0.55, 0.65];
+            let observations: Vec<String> = velocities
+                .iter()
+                .zip(values)
+                .map(|(v, e1)| format!(r#"{{"impact_velocity_m_s": {v}, "e1": {e1}}}"#))
+                .collect();
+            observations.join(",")
+        };
+        let radius = format!(
+            r#"{{"fit": ["material.contact_radius_m"], "observations": [{}]}}"#,
+            e1([
+                0.6291476617474576,
+                0.4117722683708596,
+                0.4019885679704418,
+                0.010629931071048128,
+                0.7408018486272392,
+                0.5986548376422403,
+                0.34328541465837087
+            ])
+        );
+        let pressure = format!(
+            r#"{{"scenario": {{"material": {{"wear_law": {{"law": "roughening_and_softening"}}}}}},
+                "fit": ["material.dynamic_yield_pressure_pa"], "observations": [{}]}}"#,
+            e1([
+                0.4324184423515469,
+                0.4842514504626833,
+                0.8020222366731249,
+                0.5737232390848098,
+                0.14792971120875217,
+                0.4098392299587084,
+                0.2962357642294031
+            ])
+        );
+        let defaults = ScenarioSpec::default();
+        for (text, name, edge) in [
+            (
+                radius,
+                "material.contact_radius_m",
+                defaults.material.worn_radius_m,
+            ),
+            (
+                pressure,
+                "material.dynamic_yield_pressure_pa",
+                defaults.material.wear_law.worn_pressure_pa,
+            ),
+        ] {
+            let fit = calibrate(&CalibrationSpec::from_json(&text).unwrap()).unwrap();
+            let lower = fit.estimates[name].ci95[0];
+            assert!(
+                lower >= edge && lower < edge * (1.0 + 1e-9),
+                "{name}: {lower:e}"
+            );
+            assert!(
+                fit.warnings
+                    .iter()
+                    .any(|w| w.contains("before an edge of the scenarios")),
+                "{:?}",
+                fit.warnings
+            );
+        }
+    }
+
+    /// An estimate on its bound (kappa within [0.2, 0.3], the data pulling above) ends its
+    /// interval there: it was told its profile "could not be followed above the estimate" and
+    /// that the end was the Wald one, which it was not.
+    #[test]
+    fn an_end_at_a_bound_is_not_taken_for_a_stuck_profile() {
+        let text = r#"{"fit": ["material.kappa"], "bounds": {"material.kappa": [0.2, 0.3]},
+            "observations": [{"impact_velocity_m_s": 0.12, "e1": 0.5426886419685151},
+            {"impact_velocity_m_s": 0.2, "e1": 0.48898186270611427},
+            {"impact_velocity_m_s": 0.28, "e1": 0.445326146428378},
+            {"impact_velocity_m_s": 0.36, "e1": 0.3992272230593513},
+            {"impact_velocity_m_s": 0.45, "e1": 0.4046538968763057},
+            {"impact_velocity_m_s": 0.55, "e1": 0.38049985705326805},
+            {"impact_velocity_m_s": 0.65, "e1": 0.35488431826240147}]}"#;
+        let fit = calibrate(&CalibrationSpec::from_json(text).unwrap()).unwrap();
+        let kappa = &fit.estimates["material.kappa"];
+        assert!(kappa.at_bound, "{kappa:?}");
+        assert_eq!(kappa.ci95[1], 0.3, "{kappa:?}");
+        assert!(
+            !fit.warnings
+                .iter()
+                .any(|w| w.contains("could not be followed")),
+            "{:?}",
+            fit.warnings
+        );
     }
 
     /// A count cannot be fitted: `losses.max_bounces` was refused at `/scenario` as "the starting
