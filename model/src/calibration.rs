@@ -948,7 +948,8 @@ impl Problem<'_> {
                     let entry = by_quantity.entry(quantity.to_owned()).or_default();
                     let simulated = simulated(&outcomes[i], quantity);
                     entry.0.push(simulated - measured);
-                    entry.1 += ((simulated - measured) / measured).powi(2);
+                    // The relative residual the fit minimises, not `(s - m) / m`.
+                    entry.1 += relative_difference(simulated, measured).powi(2);
                 }
             }
             if let Some(count) = observation.bounce_count {
