@@ -296,17 +296,17 @@ fn fit(problem: Problem) -> Result<Calibration, InvalidInput> {
     problem.report(&theta, iterations, settled)
 }
 
+/// A relative difference this near its end (2) is a simulated value over 2000 times its
+/// measurement (or under a 2000th of it): far enough that a small step of a parameter moves it by
+/// less than its rounding.
+const FAR_RESIDUAL: f64 = 1.998;
+
 /// The fit's residual of a measured (positive) quantity: `2 (simulated - measured) / (simulated +
 /// measured)`, the log ratio `ln(simulated / measured)` to third order. The plain relative
 /// difference `(simulated - measured) / measured` divides by the noisy value, and with
 /// multiplicative noise of relative size `s` it pulls the fit low by about `2 s^2` (0.08 % at 2 %,
 /// 0.19 standard errors of kappa in `study::wear_curve`); the symmetric form's pull is `s^2 / 2`
 /// and it stays bounded (-2) where a simulated quantity is 0 (no bounce), as the log ratio does not.
-/// A relative difference this near its end (2) is a simulated value over 2000 times its
-/// measurement (or under a 2000th of it): far enough that a small step of a parameter moves it by
-/// less than its rounding.
-const FAR_RESIDUAL: f64 = 1.998;
-
 fn relative_difference(simulated: f64, measured: f64) -> f64 {
     2.0 * (simulated - measured) / (simulated + measured)
 }
