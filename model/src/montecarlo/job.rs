@@ -1003,6 +1003,20 @@ fn check_failure(
 /// obeys: made later, they refuse a new job, never one stored before them (a queued job, a
 /// schedule's template), which runs as it was accepted. Each fault is named below `root`.
 pub fn check_written(spec: &JobSpec, root: &Pointer) -> Result<(), InvalidInput> {
+    // A threshold listed twice (`0.4` and `4e-1`) gave CSV columns of the same name.
+    for (metric, limit) in &spec.limits {
+        let LimitSpec::Thresholds(list) = limit else {
+            continue;
+        };
+        for (i, threshold) in list.iter().enumerate() {
+            if let Some(first) = list[..i].iter().position(|earlier| earlier == threshold) {
+                return Err(InvalidInput::single(
+                    &root.child("limits").child(metric).child(i),
+                    format!("repeats item {first}: list each threshold once"),
+                ));
+            }
+        }
+    }
     if spec.precision.is_some() && spec.devices < MIN_PRECISION_DEVICES {
         return Err(InvalidInput::single(
             &root.child("devices"),
@@ -1147,6 +1161,19 @@ mod tests {
             ],
             "{invalid}"
         );
+    }
+
+    /// A threshold listed twice, in any spelling, is refused where the job is written: its CSV
+    /// columns had the same name (an outside check).
+    #[test]
+    fn a_threshold_listed_twice_is_refused_at_its_second_place() {
+        let spec: JobSpec = serde_json::from_str(
+            r#"{"limits": {"e1": [{"above": 0.4}, {"below": 0.4}, {"above": 4e-1}]}}"#,
+        )
+        .unwrap();
+        let invalid = check_written(&spec, &Pointer::root()).unwrap_err();
+        assert_eq!(invalid.pointers(), ["/limits/e1/2"], "{invalid}");
+        assert!(invalid.to_string().contains("repeats item 0"), "{invalid}");
     }
 
     #[test]
