@@ -1225,6 +1225,28 @@ fn a_succeeded_jobs_results_are_immutable_with_an_etag_and_a_current_tag_gets_30
         let again = get_if_none_match(&url, &tag, None);
         assert_eq!((again.status, again.body.as_str()), (304, ""), "{path}");
         assert_eq!(again.header("etag"), Some(tag.as_str()), "{path}");
+        // A 304 carries the Vary its 200 would (RFC 9110 15.4.5): it lacked accept-encoding.
+        let varies = |reply: &Reply| -> Vec<String> {
+            let mut names: Vec<String> = reply
+                .headers
+                .get_all("vary")
+                .iter()
+                .flat_map(|v| {
+                    v.to_str()
+                        .unwrap()
+                        .split(',')
+                        .map(|n| n.trim().to_lowercase())
+                })
+                .collect();
+            names.sort();
+            names.dedup();
+            names
+        };
+        assert_eq!(varies(&again), varies(&first), "{path}");
+        assert!(
+            varies(&again).contains(&"accept-encoding".to_owned()),
+            "{path}"
+        );
         let listed = get_if_none_match(&url, &format!("W/\"0\", {tag}"), None);
         assert_eq!(listed.status, 304, "{path}: a tag among others");
         let stale = get_if_none_match(&url, "W/\"0\"", None);

@@ -75,8 +75,18 @@ pub fn immutable_identified(
 /// `If-None-Match` already names `identity`'s tag.
 pub fn not_modified(state: &AppState, request: &HeaderMap, identity: &[u8]) -> Option<Response> {
     let tag = entity_tag(identity);
-    matches_any(request, &tag)
-        .then(|| (StatusCode::NOT_MODIFIED, validators(state, tag)).into_response())
+    matches_any(request, &tag).then(|| unchanged(validators(state, tag)))
+}
+
+/// A 304 with `validators`, and the `Vary` its 200 would carry (RFC 9110 section 15.4.5): the
+/// compression layer adds `accept-encoding` to a 200 only, and the route's `accept` is set by its
+/// own layer on both.
+fn unchanged(validators: [(header::HeaderName, HeaderValue); 3]) -> Response {
+    let mut response = (StatusCode::NOT_MODIFIED, validators).into_response();
+    response
+        .headers_mut()
+        .append(header::VARY, HeaderValue::from_static("accept-encoding"));
+    response
 }
 
 fn immutable_body(
@@ -89,7 +99,7 @@ fn immutable_body(
     let unchanged = matches_any(request, &tag);
     let headers = validators(state, tag);
     if unchanged {
-        return (StatusCode::NOT_MODIFIED, headers).into_response();
+        return self::unchanged(headers);
     }
     let content_type = [(header::CONTENT_TYPE, HeaderValue::from_static(content_type))];
     (headers, content_type, body).into_response()
