@@ -361,7 +361,11 @@ class Job:
             body = self.client.request("GET", self._path("/shards"), params=params).json()
             shards.extend(body["shards"])
             if not body.get("next_cursor"):
-                return pd.DataFrame(shards)
+                frame = pd.DataFrame(shards)
+                # A merge step has no group: integers with gaps, not floats.
+                if "group" in frame:
+                    frame["group"] = frame["group"].astype("Int64")
+                return frame
             params = {"cursor": body["next_cursor"]}
 
     def plot(self, kind: str = "bands.svg", metric: Optional[str] = None) -> str:
