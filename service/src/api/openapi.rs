@@ -363,6 +363,8 @@ fn constrain_structure(schemas: &mut Value) {
         list.extend([
             ("minItems".to_owned(), json!(1)),
             ("maxItems".to_owned(), json!(MAX_THRESHOLDS)),
+            // None listed twice (`job::check_written`): JSON Schema's equality is the rule's.
+            ("uniqueItems".to_owned(), json!(true)),
         ]);
     }
     for side in schemas

@@ -47,15 +47,6 @@ impl AfterRunQuery {
         }
         let levels = items("quantiles", quantiles, level)?;
         let thresholds = items("exceedance", exceedance, threshold)?;
-        // A threshold asked twice (`above:0.005,above:5e-3`) gave CSV columns of the same name.
-        for (i, threshold) in thresholds.iter().enumerate() {
-            if thresholds[..i].contains(threshold) {
-                return Err(BadQuery {
-                    parameter: "exceedance",
-                    rule: format!("item {i} repeats an earlier one: ask for each threshold once"),
-                });
-            }
-        }
         Ok(Some(Self { levels, thresholds }))
     }
 }
@@ -169,7 +160,6 @@ mod tests {
             (Some("inf"), None, "quantiles"),
             (None, Some("above:1e400"), "exceedance"),
             (None, Some("above:1e-400"), "exceedance"),
-            (None, Some("above:0.005,below:1,above:5e-3"), "exceedance"),
             (Some("1e-400"), None, "quantiles"),
             (None, Some("above:inf"), "exceedance"),
             (None, Some("over:1"), "exceedance"),
