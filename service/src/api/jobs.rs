@@ -521,9 +521,9 @@ pub async fn get_shards(
         .store
         .shards_from(&id, skip, u64::from(limit) + 1)
         .await?;
-    let more = shards.len() > limit as usize;
-    shards.truncate(limit as usize);
-    let next_cursor = more.then(|| (skip + u64::from(limit)).to_string());
+    // The next page starts where this one ends, whatever its last shard.
+    let next = i64::try_from(skip + u64::from(limit)).unwrap_or(i64::MAX);
+    let next_cursor = ListQuery::cut(&mut shards, limit, |_| next);
     Ok(Json(ShardList {
         shards: shards.into_iter().map(ShardResource::from_record).collect(),
         next_cursor,
