@@ -232,7 +232,7 @@ impl Timetable {
     /// message)`, one for each of the two at fault. Whatever croner reads is taken: a schedule
     /// written before [`Timetable::parse_written`]'s rule keeps running.
     pub fn parse(cron: &str, time_zone: &str) -> Result<Self, Vec<(&'static str, String)>> {
-        let parsed = Cron::from_str(cron).map_err(|e| {
+        let parsed = Cron::from_str(&sunday_as_zero(cron)).map_err(|e| {
             let e = e.to_string();
             let e = e.trim_end_matches('.');
             (
@@ -247,14 +247,19 @@ impl Timetable {
     /// hour day month weekday) or 6 with seconds first, as the API describes it: croner also
     /// reads a year as a seventh field and nicknames such as `@daily`.
     pub fn parse_written(cron: &str, time_zone: &str) -> Result<Self, Vec<(&'static str, String)>> {
-        let fields = cron.split_whitespace().count();
-        if matches!(fields, 5 | 6) {
+        let fields: Vec<&str> = cron.split_whitespace().collect();
+        let wrong = if !matches!(fields.len(), 5 | 6) {
+            let count = fields.len();
+            format!(
+                "has {count} field{}: {CRON_FIELDS}",
+                if count == 1 { "" } else { "s" }
+            )
+        } else if let Some(field) = fields.iter().find(|f| f.split(',').any(str::is_empty)) {
+            // croner reads `,1` and `1,,2` as `1` and `1,2`: most likely a value left out.
+            format!("has an empty item in the list `{field}`: {CRON_FIELDS}")
+        } else {
             return Self::parse(cron, time_zone);
-        }
-        let wrong = format!(
-            "has {fields} field{}: {CRON_FIELDS}",
-            if fields == 1 { "" } else { "s" }
-        );
+        };
         Self::with_zone(Err(("cron", wrong)), time_zone)
     }
 
@@ -314,25 +319,51 @@ impl Timetable {
 
     /// The first due time strictly after `after`, to the whole second. Wall-clock times follow the
     /// time zone, DST included: a fixed time in a spring-forward gap runs right after the gap, and
-    /// a fixed time in a fall-back overlap runs once, at its first occurrence (croner, after Vixie
-    /// cron). Given an instant in the repeated hour, croner answers such a time with its first
-    /// occurrence, already past: the search starts again half an hour on, for up to a day (an
-    /// overlap is an hour in most zones and two in Antarctica/Troll), so that a due time is never
-    /// at or before `after`.
+    /// a wall-clock time in a fall-back overlap runs once, at its first pass (croner, after Vixie
+    /// cron). Croner searches the wall clock: given an instant in the second pass, it answers
+    /// with a time's first pass, already past. Every wall-clock time of the overlap ran then, so
+    /// the search goes on from the overlap's end (an every-minute cron at 00:58 of Havana's
+    /// second pass is next due at 01:00, not half an hour on, as a fixed step once made it).
     pub fn next_after(&self, after: DateTime<Utc>) -> Option<DateTime<Utc>> {
-        const SEARCHES: usize = 49;
         let after = whole_seconds(after);
-        let mut from = after;
-        for _ in 0..SEARCHES {
-            let local = self.time_zone.from_utc_datetime(&from.naive_utc());
-            let next = self.cron.find_next_occurrence(&local, false).ok()?;
-            let next = whole_seconds(next.with_timezone(&Utc));
-            if next > after {
-                return Some(next);
+        let mut from = self.time_zone.from_utc_datetime(&after.naive_utc());
+        let mut inclusive = false;
+        // A search from an overlap's end finds a time past the overlap; the bound is a guard.
+        for _ in 0..3 {
+            let next = self.cron.find_next_occurrence(&from, inclusive).ok()?;
+            let due = whole_seconds(next.with_timezone(&Utc));
+            if due > after {
+                return Some(due);
             }
-            from += TimeDelta::minutes(30);
+            from = self.overlap_end(from.with_timezone(&Utc), utc_offset(&next))?;
+            inclusive = true;
         }
         None
+    }
+
+    /// The end of the fall-back overlap whose second pass holds `at`, its first pass at the UTC
+    /// offset `first`: the instant the wall clock passes the last repeated time. Found by halving
+    /// the offset change, which lies between `at` less the overlap's length and `at`.
+    fn overlap_end(&self, at: DateTime<Utc>, first: TimeDelta) -> Option<DateTime<Tz>> {
+        let offset_at = |instant: DateTime<Utc>| {
+            utc_offset(&self.time_zone.from_utc_datetime(&instant.naive_utc()))
+        };
+        let second = offset_at(at);
+        let length = first - second;
+        if length <= TimeDelta::zero() {
+            return None;
+        }
+        let (mut before, mut change) = (at - length, at);
+        while change - before > TimeDelta::seconds(1) {
+            let middle = before + (change - before) / 2;
+            if offset_at(middle) == second {
+                change = middle;
+            } else {
+                before = middle;
+            }
+        }
+        let end = change + length;
+        Some(self.time_zone.from_utc_datetime(&end.naive_utc()))
     }
 
     /// The last due time at or before `now`: the one night a catch-up runs, however many were
@@ -404,6 +435,36 @@ fn followed(
         }
     }
     statistics
+}
+
+/// `cron` with a last Sunday written `7L` in its weekday field as `0L`: croner reads 7 as Sunday
+/// everywhere but before `L`, where it never matches (a probe found `0 0 * * 7L` refused as never
+/// running). The weekday is the fifth field of five and the sixth of six or seven.
+fn sunday_as_zero(cron: &str) -> String {
+    let mut fields: Vec<&str> = cron.split_whitespace().collect();
+    let weekday = match fields.len() {
+        5 => 4,
+        6 | 7 => 5,
+        _ => return cron.to_owned(),
+    };
+    let items: Vec<&str> = fields[weekday]
+        .split(',')
+        .map(|item| {
+            if item.eq_ignore_ascii_case("7L") {
+                "0L"
+            } else {
+                item
+            }
+        })
+        .collect();
+    let written = items.join(",");
+    fields[weekday] = &written;
+    fields.join(" ")
+}
+
+/// How far `time`'s wall clock is ahead of UTC.
+fn utc_offset(time: &DateTime<Tz>) -> TimeDelta {
+    time.naive_local() - time.naive_utc()
 }
 
 /// `time` without its fraction of a second: due times are whole seconds, so that the (schedule,
@@ -618,6 +679,10 @@ mod tests {
         assert_eq!(listed, Some(utc("2027-03-28T01:00:00Z")));
         let made = berlin.latest_at_or_before(utc("2027-03-28T01:00:05.5Z"));
         assert_eq!(made, listed);
+        // Seconds that are not one value follow real time: none of them runs that night.
+        let thrice = Timetable::parse("*/20 30 2 * * *", "Europe/Berlin").unwrap();
+        let next = thrice.next_after(utc("2027-03-27T12:00:00Z"));
+        assert_eq!(next, Some(utc("2027-03-29T00:30:00Z")));
         // Havana skips from 00:00 to 01:00 on Sunday 2027-03-14 (CST, UTC-5, to CDT, UTC-4).
         let havana = Timetable::parse("0 0 * * 0", "America/Havana").unwrap();
         let listed = havana.next_after(utc("2027-03-10T00:00:00Z"));
@@ -726,6 +791,50 @@ mod tests {
         }
     }
 
+    /// Havana falls back from 01:00 CDT (UTC-4) to 00:00 CST (UTC-5) on 2027-11-07: 00:00-00:59
+    /// runs at 04:00-04:59Z and again at 05:00-05:59Z. An every-minute cron runs each wall-clock
+    /// minute once, at its first pass; asked from the second pass, its next is 01:00 CST
+    /// (06:00Z). A fixed step of half an hour past croner's answer made it 06:29Z (a probe
+    /// against a brute-force reference). Truths by hand from the zone's rule.
+    #[test]
+    fn from_the_second_pass_of_an_overlap_the_next_run_follows_it() {
+        let every_minute = Timetable::parse("* * * * *", "America/Havana").unwrap();
+        for asked in [
+            "2027-11-07T05:58:00Z",
+            "2027-11-07T05:00:00Z",
+            "2027-11-07T05:59:59Z",
+        ] {
+            assert_eq!(
+                every_minute.next_after(utc(asked)),
+                Some(utc("2027-11-07T06:00:00Z")),
+                "{asked}"
+            );
+        }
+        let mut due = utc("2027-11-07T03:59:00Z");
+        let mut runs = Vec::new();
+        while due < utc("2027-11-07T06:03:00Z") {
+            due = every_minute.next_after(due).unwrap();
+            runs.push(due);
+        }
+        assert_eq!(
+            runs.len(),
+            64,
+            "60 minutes at the first pass, then 06:00-06:03Z"
+        );
+        assert_eq!(runs[59], utc("2027-11-07T04:59:00Z"));
+        assert_eq!(runs[60], utc("2027-11-07T06:00:00Z"));
+        let made = every_minute.latest_at_or_before(utc("2027-11-07T06:00:05Z"));
+        assert_eq!(made, Some(utc("2027-11-07T06:00:00Z")));
+        // Every quarter hour; and a half-hour overlap (Lord Howe, 02:00 +11 to 01:30 +10:30 on
+        // 2027-04-04, 15:00Z): from 01:40 of the second pass the next is 02:00 +10:30.
+        let quarterly = Timetable::parse("*/15 * * * *", "America/Havana").unwrap();
+        let next = quarterly.next_after(utc("2027-11-07T05:20:00Z"));
+        assert_eq!(next, Some(utc("2027-11-07T06:00:00Z")));
+        let lord_howe = Timetable::parse("*/10 * * * *", "Australia/Lord_Howe").unwrap();
+        let next = lord_howe.next_after(utc("2027-04-03T15:10:00Z"));
+        assert_eq!(next, Some(utc("2027-04-03T15:30:00Z")));
+    }
+
     #[test]
     fn catch_up_runs_only_the_latest_missed_night() {
         let nightly = Timetable::parse("0 3 * * *", "UTC").unwrap();
@@ -783,6 +892,44 @@ mod tests {
         for stored in ["0 0 3 * * * 2027", "@daily"] {
             assert!(Timetable::parse(stored, "UTC").is_ok(), "{stored}");
         }
+        // croner reads an empty item of a list as if it were not there.
+        for (cron, field) in [(",1 * * * *", "`,1`"), ("0 1,,2 * * *", "`1,,2`")] {
+            let wrong = Timetable::parse_written(cron, "UTC").unwrap_err();
+            assert_eq!(wrong[0].0, "cron", "{cron}");
+            assert!(
+                wrong[0]
+                    .1
+                    .contains(&format!("empty item in the list {field}")),
+                "{cron}"
+            );
+        }
+    }
+
+    /// The last Sunday of a month is `0L` or `7L`, as 0 and 7 are Sunday elsewhere; croner
+    /// matched no day for `7L` (2027-03-28 and 2027-10-31 are last Sundays, by the calendar).
+    #[test]
+    fn a_last_sunday_is_written_with_zero_or_seven() {
+        for cron in ["0 0 * * 7L", "0 0 * * 0L", "0 0 * * SUNL"] {
+            let last_sunday = Timetable::parse_written(cron, "UTC").unwrap();
+            let next = last_sunday.next_after(utc("2027-03-01T00:00:00Z"));
+            assert_eq!(next, Some(utc("2027-03-28T00:00:00Z")), "{cron}");
+            let later = last_sunday.next_after(next.unwrap());
+            assert_eq!(later, Some(utc("2027-04-25T00:00:00Z")), "{cron}");
+        }
+        // A day of the month and a weekday run on either, as in Vixie cron: after Monday
+        // 2027-03-29 comes Thursday the 1st (both at once would be Monday 2027-11-01).
+        let first_or_monday = Timetable::parse_written("0 3 1 * MON", "UTC").unwrap();
+        let next = first_or_monday.next_after(utc("2027-03-29T04:00:00Z"));
+        assert_eq!(next, Some(utc("2027-04-01T03:00:00Z")));
+        let second_monday = Timetable::parse_written("0 3 * * 1#2", "UTC").unwrap();
+        let next = second_monday.next_after(utc("2027-03-01T04:00:00Z"));
+        assert_eq!(next, Some(utc("2027-03-08T03:00:00Z")));
+        // In a list, with seconds: Mondays and the last Sunday.
+        let with_mondays = Timetable::parse_written("0 0 0 * * 1,7l", "UTC").unwrap();
+        let next = with_mondays.next_after(utc("2027-03-25T00:00:00Z"));
+        assert_eq!(next, Some(utc("2027-03-28T00:00:00Z")));
+        let next = with_mondays.next_after(next.unwrap());
+        assert_eq!(next, Some(utc("2027-03-29T00:00:00Z")));
     }
 
     #[test]
