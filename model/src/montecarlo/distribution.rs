@@ -23,7 +23,8 @@ pub const MAX_SCORE: f64 = 37.0;
 
 /// A distribution as the user writes it.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// Read by [`DistributionSpec`]'s own `Deserialize` (below), so that a fault names its member.
+#[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum DistributionSpec {
     /// Always `value`.
@@ -99,6 +100,161 @@ impl DistributionSpec {
             | DistributionSpec::Lognormal { min, max, .. }
             | DistributionSpec::Weibull { min, max, .. } => (min, max),
         }
+    }
+}
+
+/// A distribution's kind, the value of its `kind` member.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(rename_all = "snake_case")]
+enum Kind {
+    Fixed,
+    Normal,
+    Lognormal,
+    Uniform,
+    Triangular,
+    Weibull,
+}
+
+impl Kind {
+    /// Its members besides `kind`, those it needs first.
+    fn members(self) -> (&'static [&'static str], &'static [&'static str]) {
+        match self {
+            Kind::Fixed => (&["value"], &[]),
+            Kind::Normal => (&["mean", "sd"], &["min", "max"]),
+            Kind::Lognormal => (&["median", "sigma"], &["min", "max"]),
+            Kind::Uniform => (&["min", "max"], &[]),
+            Kind::Triangular => (&["min", "mode", "max"], &[]),
+            Kind::Weibull => (&["scale", "shape"], &["min", "max"]),
+        }
+    }
+
+    /// Whether a distribution of this kind has the member `name`.
+    fn has(self, name: &str) -> bool {
+        let (needed, optional) = self.members();
+        needed.contains(&name) || optional.contains(&name)
+    }
+
+    /// Its members, `kind` first, as an unknown member's error lists them.
+    fn listed(self) -> &'static [&'static str] {
+        match self {
+            Kind::Fixed => &["kind", "value"],
+            Kind::Normal => &["kind", "mean", "sd", "min", "max"],
+            Kind::Lognormal => &["kind", "median", "sigma", "min", "max"],
+            Kind::Uniform => &["kind", "min", "max"],
+            Kind::Triangular => &["kind", "min", "mode", "max"],
+            Kind::Weibull => &["kind", "scale", "shape", "min", "max"],
+        }
+    }
+}
+
+/// Every number member of any kind of distribution.
+const NUMBER_MEMBERS: [&str; 10] = [
+    "value", "mean", "sd", "median", "sigma", "min", "max", "mode", "scale", "shape",
+];
+
+/// Every member of any kind of distribution, as an error lists them before `kind` is known.
+const ANY_MEMBER: [&str; 11] = [
+    "kind", "value", "mean", "sd", "median", "sigma", "min", "max", "mode", "scale", "shape",
+];
+
+/// serde's internally tagged enums read an object whole before they know its variant, so a fault
+/// in `mean` was named at the distribution (a probe); this reads it member by member, so that a
+/// wrong type or a member its kind does not have is named where it is.
+impl<'de> Deserialize<'de> for DistributionSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        deserializer.deserialize_map(SpecVisitor)
+    }
+}
+
+struct SpecVisitor;
+
+impl<'de> serde::de::Visitor<'de> for SpecVisitor {
+    type Value = DistributionSpec;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a distribution: an object with its `kind` and its numbers")
+    }
+
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+        use serde::de::Error;
+        let mut kind: Option<Kind> = None;
+        let mut numbers = [None::<f64>; NUMBER_MEMBERS.len()];
+        while let Some(name) = map.next_key::<String>()? {
+            if name == "kind" {
+                kind = Some(map.next_value()?);
+                continue;
+            }
+            let slot = NUMBER_MEMBERS.iter().position(|member| *member == name);
+            match (slot, kind) {
+                (Some(slot), None) => numbers[slot] = Some(map.next_value()?),
+                (Some(slot), Some(kind)) if kind.has(&name) => {
+                    numbers[slot] = Some(map.next_value()?);
+                }
+                // Named at the member itself, once the kind is known.
+                (_, Some(kind)) => {
+                    map.next_value_seed(NotAMember(name, kind.listed()))?;
+                }
+                (None, None) => map.next_value_seed(NotAMember(name, &ANY_MEMBER))?,
+            }
+        }
+        let kind = kind.ok_or_else(|| A::Error::missing_field("kind"))?;
+        let given = |name: &str| {
+            let slot = NUMBER_MEMBERS.iter().position(|member| *member == name);
+            slot.and_then(|slot| numbers[slot])
+        };
+        // A member read before `kind` that this kind does not have (members come in their
+        // names' order from a document read whole, so only `extra`-like names precede `kind`).
+        if let Some(name) = NUMBER_MEMBERS
+            .iter()
+            .find(|name| given(name).is_some() && !kind.has(name))
+        {
+            return Err(A::Error::unknown_field(name, kind.listed()));
+        }
+        let needed = |name: &'static str| given(name).ok_or_else(|| A::Error::missing_field(name));
+        Ok(match kind {
+            Kind::Fixed => DistributionSpec::Fixed {
+                value: needed("value")?,
+            },
+            Kind::Normal => DistributionSpec::Normal {
+                mean: needed("mean")?,
+                sd: needed("sd")?,
+                min: given("min"),
+                max: given("max"),
+            },
+            Kind::Lognormal => DistributionSpec::Lognormal {
+                median: needed("median")?,
+                sigma: needed("sigma")?,
+                min: given("min"),
+                max: given("max"),
+            },
+            Kind::Uniform => DistributionSpec::Uniform {
+                min: needed("min")?,
+                max: needed("max")?,
+            },
+            Kind::Triangular => DistributionSpec::Triangular {
+                min: needed("min")?,
+                mode: needed("mode")?,
+                max: needed("max")?,
+            },
+            Kind::Weibull => DistributionSpec::Weibull {
+                scale: needed("scale")?,
+                shape: needed("shape")?,
+                min: given("min"),
+                max: given("max"),
+            },
+        })
+    }
+}
+
+/// A member a distribution's kind does not have: its error is raised reading its value, so that
+/// it is named at the member.
+struct NotAMember(String, &'static [&'static str]);
+
+impl<'de> serde::de::DeserializeSeed<'de> for NotAMember {
+    type Value = ();
+
+    fn deserialize<D: serde::Deserializer<'de>>(self, _: D) -> Result<Self::Value, D::Error> {
+        Err(serde::de::Error::unknown_field(&self.0, self.1))
     }
 }
 

@@ -588,3 +588,103 @@ fn operation_draws_are_each_devices_stream_one_operation_at_a_time() {
         approx::assert_relative_eq!(summary.mean, mean, max_relative = 1e-12);
     }
 }
+
+/// A distribution's member of the wrong type, or one its kind does not have, is named at the
+/// member, whichever order they come in; serde's tagged enum named the whole distribution (a
+/// probe: `{"kind": "fixed", "value": null}` at `/scatter/0/distribution`). Every fault of the
+/// distribution is named at once, as elsewhere in a job.
+#[test]
+fn a_distributions_faults_are_named_at_their_members() {
+    let scatter = |distribution: Value| json!({"scatter": [{"parameter": "contact_radius_m", "per": "device", "distribution": distribution}]});
+    let at = |member: &str| format!("/scatter/0/distribution{member}");
+    for (distribution, expected) in [
+        (
+            json!({"kind": "fixed", "value": null}),
+            vec![(at("/value"), "invalid type: null, expected a number")],
+        ),
+        (
+            json!({"value": "a", "kind": "fixed"}),
+            vec![(at("/value"), "invalid type: string")],
+        ),
+        (
+            json!({"kind": "normal", "mean": null, "sd": "x", "min": 1e-3}),
+            vec![
+                (at("/mean"), "invalid type: null"),
+                (at("/sd"), "invalid type: string"),
+            ],
+        ),
+        (
+            json!({"kind": "uniform", "min": 1e-3, "max": 2e-3, "sd": 1}),
+            vec![(
+                at("/sd"),
+                "unknown field `sd`, expected one of `kind`, `min`, `max`",
+            )],
+        ),
+        (
+            json!({"kind": "uniform", "min": 1e-3, "max": 2e-3, "zeta": 1}),
+            vec![(
+                at("/zeta"),
+                "unknown field `zeta`, expected one of `kind`, `min`, `max`",
+            )],
+        ),
+        // Members are read in their names' order: `extra` before `kind`, `sd` after it.
+        (
+            json!({"extra": 1, "kind": "fixed", "value": 1e-3}),
+            vec![(
+                at("/extra"),
+                "unknown field `extra`, expected one of `kind`, `value`, `mean`",
+            )],
+        ),
+        (
+            json!({"sd": 1, "kind": "fixed", "value": 1e-3}),
+            vec![(at("/sd"), "unknown field `sd`, expected `kind` or `value`")],
+        ),
+        (
+            json!({"kind": "uniform", "min": 1e-3}),
+            vec![(at("/max"), "missing field `max`")],
+        ),
+        (
+            json!({"min": 1e-3, "max": 2e-3}),
+            vec![(at("/kind"), "missing field `kind`")],
+        ),
+        (
+            json!({"kind": "gamma", "min": 1e-3}),
+            vec![(
+                at("/kind"),
+                "unknown value `gamma`, expected one of `fixed`",
+            )],
+        ),
+        (
+            json!(1e-3),
+            vec![(at(""), "expected a distribution: an object with its `kind`")],
+        ),
+    ] {
+        let found = faults(scatter(distribution.clone()));
+        let found: Vec<(&str, &str)> = found
+            .iter()
+            .map(|(p, d)| (p.as_str(), d.as_str()))
+            .collect();
+        assert_eq!(found.len(), expected.len(), "{distribution}: {found:?}");
+        for ((pointer, detail), (want_pointer, want_detail)) in found.iter().zip(&expected) {
+            assert_eq!(pointer, want_pointer, "{distribution}: {detail}");
+            assert!(detail.contains(want_detail), "{distribution}: {detail}");
+        }
+    }
+    // Every kind still reads what it wrote.
+    for distribution in [
+        json!({"kind": "fixed", "value": 1e-3}),
+        json!({"kind": "normal", "mean": 1e-3, "sd": 1e-4, "min": 8e-4}),
+        json!({"kind": "lognormal", "median": 1e-3, "sigma": 0.1, "min": 8e-4, "max": 2e-3}),
+        json!({"kind": "uniform", "min": 8e-4, "max": 2e-3}),
+        json!({"kind": "triangular", "min": 8e-4, "mode": 1e-3, "max": 2e-3}),
+        json!({"kind": "weibull", "scale": 1e-3, "shape": 8.0, "min": 8e-4}),
+    ] {
+        assert_eq!(
+            faults(scatter(distribution.clone())),
+            Vec::<(String, String)>::new()
+        );
+        let spec: bouncewear_model::montecarlo::distribution::DistributionSpec =
+            serde_json::from_value(distribution.clone()).unwrap();
+        assert_eq!(serde_json::to_value(&spec).unwrap(), distribution);
+    }
+}
