@@ -7,5 +7,6 @@ mod support;
 mod cli;
 mod http;
 mod layers;
+mod migrations;
 mod process;
 mod store;
