@@ -84,6 +84,8 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_job_run_whole_in_steps_gives_the_whole_result(&database("steps")).await;
     a_rare_events_rounds_run_as_shards_give_the_whole_result(&database("rounds")).await;
     a_rare_events_last_merge_reads_the_fold_not_a_held_group(&database("held-fold")).await;
+    a_precision_target_and_a_rare_event_run_whole_give_the_whole_result(&database("whole-rare"))
+        .await;
     a_poison_job_fails_after_the_retry_limit_with_the_reason(&database("poison")).await;
     a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later(&database("room")).await;
     a_cancelled_job_keeps_no_accumulators(&database("cancel-partials")).await;
@@ -663,7 +665,9 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
                 let partials = Folding::new(job.clone(), fence.shard.batch).holding(held);
                 let partials = store.partials(&fence.job, partials).await.unwrap();
                 assert_eq!(partials.held().count(), 0, "held groups come without bytes");
-                match merge(partials, SHARDED_ROUND_OPERATIONS, 1.0, &Silent).unwrap() {
+                let merged = merge(partials, SHARDED_ROUND_OPERATIONS, 1.0, &Silent).unwrap();
+                let through = merged.folded_through();
+                match merged {
                     Merged::Result { mut result, groups } => {
                         let encoded = EncodedResult::new(&mut result, groups).unwrap();
                         assert!(
@@ -678,7 +682,7 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
                         let folded = EncodedGroups::new(folded).unwrap();
                         assert!(
                             store
-                                .add_batch(fence, &shards, &folded, None)
+                                .add_batch(fence, &shards, &folded, through.unwrap(), None)
                                 .await
                                 .unwrap()
                         );
@@ -1025,7 +1029,9 @@ async fn a_rare_events_last_merge_reads_the_fold_not_a_held_group(url: &str) {
             None => {
                 let partials = Folding::new(job.clone(), fence.shard.batch);
                 let partials = store.partials(&fence.job, partials).await.unwrap();
-                let (shards, folded, state) = match merge(partials, 1, 1.0, &Silent).unwrap() {
+                let merged = merge(partials, 1, 1.0, &Silent).unwrap();
+                let through = merged.folded_through().unwrap();
+                let (shards, folded, state) = match merged {
                     Merged::Next { shards, folded } => (shards, folded, None),
                     Merged::Round {
                         rounds,
@@ -1041,7 +1047,7 @@ async fn a_rare_events_last_merge_reads_the_fold_not_a_held_group(url: &str) {
                     }
                 };
                 let folded = EncodedGroups::new(folded).unwrap();
-                let added = store.add_batch(fence, &shards, &folded, state.as_deref());
+                let added = store.add_batch(fence, &shards, &folded, through, state.as_deref());
                 assert!(added.await.unwrap());
             }
         }
@@ -1057,6 +1063,70 @@ async fn a_rare_events_last_merge_reads_the_fold_not_a_held_group(url: &str) {
         without_timing(&store.result_json(&id).await.unwrap().unwrap()),
         without_timing(&serde_json::to_string(&whole).unwrap())
     );
+}
+
+/// A precision target followed by a rare event runs whole too, in steps, its rounds after the
+/// last step reading the devices' fold from the last batch it ran (cut short by `max_devices`):
+/// kept sharded, such a job of 16 devices a batch slowed to 31 devices a second as its shards'
+/// rows grew (a probe). The Result is the job's to the bit and progress counts what ran, whether
+/// each batch is a step of its own or all are one, and whether the rare event's rounds are run
+/// by the last step or sharded.
+async fn a_precision_target_and_a_rare_event_run_whole_give_the_whole_result(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let text = r#"{"devices": 16, "operations": 2, "seed": 9,
+        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+                     "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.01}}],
+        "precision": {"metric": "total_bounce_s", "relative_half_width": 1e-9, "max_devices": 40},
+        "rare_event": {"metric": "total_bounce_s", "above": 0.014, "operation": 2,
+                       "method": "subset", "target_cov": 0.5}}"#;
+    let job = Job::from_json(text, || 9).unwrap();
+    let whole = run_job(&job, &Silent).unwrap();
+    assert_eq!(
+        whole.job.devices_run(),
+        40,
+        "two batches of 16 and one of 8"
+    );
+    let queued = QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1));
+    assert_eq!(queued.shards.len(), 1, "it runs whole");
+    for (step, sharded_from) in [
+        (Duration::ZERO, 1),
+        (Duration::MAX, 1),
+        (Duration::ZERO, SHARDED_ROUND_OPERATIONS),
+    ] {
+        let id = insert(
+            &store,
+            QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1)),
+        )
+        .await;
+        let mut workers = Arc::into_inner(workers(&store, 3, u64::MAX)).unwrap();
+        workers.whole_step = step;
+        workers.sharded_round_operations = sharded_from;
+        let ended = run_until_ended(&store, Arc::new(workers), &id, async || {}).await;
+        assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
+        assert_eq!(ended.operations_done, ended.operations_total, "{ended:?}");
+        let shards = store.shards(&id).await.unwrap();
+        let rounds = shards.iter().filter(|s| is_round(s.shard.batch)).count();
+        assert_eq!(rounds > 0, sharded_from == 1, "{step:?}: {shards:?}");
+        let devices: u64 = shards
+            .iter()
+            .filter(|s| !is_round(s.shard.batch))
+            .map(|s| s.operations_done)
+            .sum();
+        if sharded_from == 1 {
+            // Every round is sharded: the steps ran the devices alone.
+            assert_eq!(
+                devices, 80,
+                "{step:?}: 40 devices of 2 operations: {shards:?}"
+            );
+        }
+        assert_eq!(
+            without_timing(&store.result_json(&id).await.unwrap().unwrap()),
+            without_timing(&serde_json::to_string(&whole).unwrap()),
+            "{step:?}, rounds sharded from {sharded_from}"
+        );
+        assert!(stored_groups(store.as_ref(), &id, &job).await.is_empty());
+    }
 }
 
 /// Runs one statement on the database behind a store, as an operator (or a failing disk) could:

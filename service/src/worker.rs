@@ -257,6 +257,8 @@ enum Outcome {
     Next {
         shards: Vec<ShardPlan>,
         folded: EncodedGroups,
+        /// The last batch of devices `folded` holds ([`Merged::folded_through`]).
+        folded_through: u64,
         state: Option<Vec<u8>>,
     },
     Unencodable(String),
@@ -265,6 +267,7 @@ enum Outcome {
 /// What a merge step made, encoded on the compute pool so that the writes bind bytes (each group
 /// goes once encoded); `Err` for a cancelled computation.
 fn encoded(merged: Result<Merged, MergeError>) -> Result<Result<Outcome, MergeError>, Cancelled> {
+    let folded_through = merged.as_ref().ok().and_then(Merged::folded_through);
     let outcome = match merged {
         Err(MergeError::Cancelled(cancelled)) => return Err(cancelled),
         Err(other) => return Ok(Err(other)),
@@ -276,6 +279,7 @@ fn encoded(merged: Result<Merged, MergeError>) -> Result<Result<Outcome, MergeEr
         }
         Ok(Merged::Next { shards, folded }) => match EncodedGroups::new(folded) {
             Ok(folded) => Outcome::Next {
+                folded_through: folded_through.unwrap_or_default(),
                 shards,
                 folded,
                 state: None,
@@ -344,6 +348,8 @@ fn round_outcome(rounds: &Rounds, shards: Vec<ShardPlan>, folded: Vec<GroupStats
         (Ok(state), Ok(folded)) => Outcome::Next {
             shards,
             folded,
+            // The devices' fold, or (a round after a round) none.
+            folded_through: rounds.devices_last,
             state: Some(state),
         },
         (Err(error), _) | (_, Err(error)) => {
@@ -609,6 +615,13 @@ impl Workers {
         let spec = partials.job().spec();
         let batch_operations = spec.devices * spec.operations;
         let first_batch = Batch::of(partials.job(), last).map_or(0, |b| b.size * spec.operations);
+        // The operations of the devices' batches up to `through`, the last run.
+        let run_through = {
+            let job = partials.job().clone();
+            move |through: u64| {
+                Batch::of(&job, through).map_or(0, |b| (b.first + b.size) * job.spec().operations)
+            }
+        };
         let (sharded_from, step) = (self.sharded_round_operations, self.whole_step);
         // A job run whole learns its total as its precision target adds batches.
         let work = if whole { Work::Growing } else { Work::Planned };
@@ -631,11 +644,14 @@ impl Workers {
         let simulated = match &ran {
             _ if !whole => 0,
             Ran::Done(Ok(Outcome::Result { result, .. })) => result.counts.operations - before,
-            // A rare event's round follows the devices, every batch of them run (a job run whole
-            // with a rare event has no precision target: its one batch); another batch follows
-            // those before it.
-            Ran::Done(Ok(Outcome::Next { shards, .. })) => match shards[0].shard.batch {
-                batch if is_round(batch) => (last + 1) * batch_operations - before,
+            // A rare event's round follows the devices, every batch of them run, up to the last
+            // (cut short by `max_devices`, perhaps); another batch follows those before it.
+            Ran::Done(Ok(Outcome::Next {
+                shards,
+                folded_through,
+                ..
+            })) => match shards[0].shard.batch {
+                batch if is_round(batch) => run_through(*folded_through).saturating_sub(before),
                 batch => batch * batch_operations - before,
             },
             _ => batch_operations,
@@ -693,8 +709,9 @@ impl Workers {
             Ran::Done(Ok(Outcome::Next {
                 shards,
                 folded,
+                folded_through,
                 state,
-            })) => (shards, folded, state),
+            })) => (shards, folded, folded_through, state),
             Ran::Done(Err(failed @ (MergeError::RareEvent(_) | MergeError::OutOfRange(_)))) => {
                 return self.fail(fence, &failed.to_string()).await;
             }
@@ -706,10 +723,10 @@ impl Workers {
                     .await;
             }
         };
-        let (shards, folded, state) = next;
+        let (shards, folded, folded_through, state) = next;
         let queue = || {
             self.store
-                .add_batch(fence, &shards, &folded, state.as_deref())
+                .add_batch(fence, &shards, &folded, folded_through, state.as_deref())
         };
         if self.stored(fence, lease, "the next step", queue).await {
             count();

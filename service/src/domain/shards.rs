@@ -108,17 +108,17 @@ pub fn claims_ahead(shard: ShardId, operations: u64) -> bool {
 }
 
 /// Whether `job` runs whole, as one shard: its batch of devices is at most
-/// [`WHOLE_JOB_OPERATIONS`] operations and, with a precision target, it asks no rare event. A
-/// precision target adds batches of that size one after another, each too small to pay for its
-/// shards: cut into them, a target of batches of 16 devices of one operation took 25 ms of claims
-/// and stores a batch, growing with every batch (the job's progress is summed over its shards), so
-/// 10^8 devices never ended where `bouncewear run` takes minutes. Run whole, the merge step runs
-/// its batches one after another and checks the target after each, as [`run_on_from`] does. A rare
-/// event after a precision target keeps its batches sharded: its rounds read the devices' groups
-/// back from the store by their last batch.
+/// [`WHOLE_JOB_OPERATIONS`] operations. A precision target adds batches of that size one after
+/// another, each too small to pay for its shards: cut into them, a target of batches of 16
+/// devices of one operation took 25 ms of claims and stores a batch, growing with every batch
+/// (the job's progress is summed over its shards), so 10^8 devices never ended where `bouncewear
+/// run` takes minutes. Run whole, the merge step runs its batches one after another and checks
+/// the target after each, as [`run_on_from`] does; a rare event after them reads the devices'
+/// groups from the last batch run, where the step keeps their fold ([`Merged::folded_through`]).
+/// With a rare event such a job was kept sharded, and slowed to 31 devices a second as its
+/// shards' rows grew (7,888 rows and 20 MB after 100 s, a probe).
 pub fn runs_whole(job: &Job) -> bool {
-    (job.precision().is_none() || job.rare_event().is_none())
-        && job.spec().devices.saturating_mul(job.spec().operations) <= WHOLE_JOB_OPERATIONS
+    job.spec().devices.saturating_mul(job.spec().operations) <= WHOLE_JOB_OPERATIONS
 }
 
 /// The shards a job enters the queue with: its first batch's groups and merge step or, for a job
@@ -177,6 +177,19 @@ pub enum Merged {
         shards: Vec<ShardPlan>,
         folded: Vec<GroupStats>,
     },
+}
+
+impl Merged {
+    /// The last batch of devices whose groups a merge step's fold holds, where the store keeps it
+    /// (the store's `JobQueue::add_batch`): the batch before the next one, or the devices'
+    /// last batch ahead of a rare event's round; none for a Result.
+    pub fn folded_through(&self) -> Option<u64> {
+        match self {
+            Merged::Result { .. } => None,
+            Merged::Next { shards, .. } => shards.first().map(|next| next.shard.batch - 1),
+            Merged::Round { rounds, .. } => Some(rounds.devices_last),
+        }
+    }
 }
 
 /// Stored accumulators that do not make up the batches they should.
@@ -447,12 +460,12 @@ pub fn run_whole(
             folded: tally.groups,
         });
     }
-    // Its devices' groups, for a rare event's rounds, are stored at batch 0: a job with a
-    // precision target runs whole only without one ([`runs_whole`]).
+    // Its devices' groups, for a rare event's rounds, are kept at the last batch it ran.
+    let last_run = tally.devices.saturating_sub(1) / job.spec().devices;
     finish(
         job,
         tally,
-        0,
+        last_run,
         sharded_from,
         wall_s + started.elapsed().as_secs_f64(),
         observer,
@@ -660,7 +673,7 @@ mod tests {
 
     /// A job of at most [`WHOLE_JOB_OPERATIONS`] operations enters the queue as one shard carrying
     /// them all; one more operation and it is cut into groups. With a precision target, the size
-    /// of a batch decides, unless a rare event follows.
+    /// of a batch decides, a rare event after it or not.
     #[test]
     fn a_small_job_is_one_shard_and_a_larger_one_its_groups() {
         let first = |text: &str| first_shards(&Job::from_json(text, || 1).unwrap());
@@ -686,7 +699,8 @@ mod tests {
             "batches of 2e6 operations run whole"
         );
         assert_eq!(precision(2001, ""), 33);
-        assert_eq!(precision(16, RARE_EVENT), 17);
+        assert_eq!(precision(16, RARE_EVENT), 1);
+        assert_eq!(precision(2001, RARE_EVENT), 33);
     }
 
     /// A rare event of e1 and the scattered input it needs, as members of a job.

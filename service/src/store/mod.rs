@@ -438,16 +438,17 @@ pub trait JobQueue: Send + Sync + 'static {
     /// Marks a merge step done and queues the next step's shards, in one transaction, if the claim
     /// still holds it: a precision target's next batch, or a rare event's round with `state`,
     /// encoded ([`encode`]), as its merge step's partial. `folded` (the groups of every batch so
-    /// far, folded) replaces the accumulators of the last batch run's groups (inserted, for a job
-    /// that ran whole: that batch is the one before the next step's, or the merge step's own for
-    /// a round), and what the next step no longer reads is dropped: the groups of earlier
-    /// batches ([`crate::domain::shards::Merged::Next`]), or a round's outcomes and state (the
+    /// far, folded) replaces the accumulators of batch `folded_through`'s groups, the last batch
+    /// run (inserted, for a job that ran whole;
+    /// [`crate::domain::shards::Merged::folded_through`]), and what the next step no longer
+    /// reads is dropped: the groups of earlier batches, or a round's outcomes and state (the
     /// devices' groups are kept for the Result).
     async fn add_batch(
         &self,
         fence: &Fence,
         shards: &[ShardPlan],
         folded: &EncodedGroups,
+        folded_through: u64,
         state: Option<&[u8]>,
     ) -> StoreResult<bool>;
     /// Marks the job failed with `error` at once (a failure no retry can mend), if the claim still

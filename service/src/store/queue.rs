@@ -674,18 +674,13 @@ impl JobQueue for SqlStore {
         fence: &Fence,
         shards: &[ShardPlan],
         folded: &EncodedGroups,
+        last_run: u64,
         state: Option<&[u8]>,
     ) -> StoreResult<bool> {
         self.check_room(folded.0.iter().map(|partial| partial.len() as u64).sum())
             .await?;
         let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(false);
-        };
-        // The fold is the last batch run's: the merge step's own, or (a job run whole, handed on
-        // after several batches) the one before the next step's.
-        let last_run = match shards.first() {
-            Some(next) if !is_round(next.shard.batch) => next.shard.batch - 1,
-            _ => fence.shard.batch,
         };
         let batch = count_to_sql(last_run);
         for (group, partial) in folded.0.iter().enumerate() {
