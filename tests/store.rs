@@ -989,6 +989,16 @@ async fn a_job_run_whole_in_steps_gives_the_whole_result(url: &str) {
     }
 }
 
+/// A precision target of batches of 16 devices (the last cut to 8 by `max_devices`), then a rare
+/// event.
+const PRECISION_THEN_RARE_EVENT: &str = r#"{"devices": 16, "operations": 2, "seed": 9,
+    "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+    "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+                 "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.01}}],
+    "precision": {"metric": "total_bounce_s", "relative_half_width": 1e-9, "max_devices": 40},
+    "rare_event": {"metric": "total_bounce_s", "above": 0.014, "operation": 2,
+                   "method": "subset", "target_cov": 0.5}}"#;
+
 /// A worker process that ran a group of a precision target's last batch, but not the batch's
 /// merge, still holds that group when it later makes the rare event's last merge, which reads the
 /// devices' groups back at that batch: their rows hold the fold of every batch then, and the
@@ -999,13 +1009,7 @@ async fn a_job_run_whole_in_steps_gives_the_whole_result(url: &str) {
 /// short by `max_devices` (8 of 16 devices), whose fold of 16 groups failed every last merge.
 async fn a_rare_events_last_merge_reads_the_fold_not_a_held_group(url: &str) {
     let store = store::open(url).await.unwrap();
-    let text = r#"{"devices": 16, "operations": 2, "seed": 9,
-        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
-        "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
-                     "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.01}}],
-        "precision": {"metric": "total_bounce_s", "relative_half_width": 1e-9, "max_devices": 40},
-        "rare_event": {"metric": "total_bounce_s", "above": 0.014, "operation": 2,
-                       "method": "subset", "target_cov": 0.5}}"#;
+    let text = PRECISION_THEN_RARE_EVENT;
     let job = Job::from_json(text, || 9).unwrap();
     let whole = run_job(&job, &Silent).unwrap();
     assert_eq!(whole.job.devices_run(), 40);
@@ -1073,13 +1077,7 @@ async fn a_rare_events_last_merge_reads_the_fold_not_a_held_group(url: &str) {
 /// by the last step or sharded.
 async fn a_precision_target_and_a_rare_event_run_whole_give_the_whole_result(url: &str) {
     let store = store::open(url).await.unwrap();
-    let text = r#"{"devices": 16, "operations": 2, "seed": 9,
-        "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
-        "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
-                     "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.01}}],
-        "precision": {"metric": "total_bounce_s", "relative_half_width": 1e-9, "max_devices": 40},
-        "rare_event": {"metric": "total_bounce_s", "above": 0.014, "operation": 2,
-                       "method": "subset", "target_cov": 0.5}}"#;
+    let text = PRECISION_THEN_RARE_EVENT;
     let job = Job::from_json(text, || 9).unwrap();
     let whole = run_job(&job, &Silent).unwrap();
     assert_eq!(
