@@ -360,23 +360,25 @@ pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
             .sum(),
         truncation_rejections,
     };
-    let diagnostics = diagnostics::diagnose(job, &counts);
+    let mut diagnostics = diagnostics::diagnose(job, &counts);
+    let precision = job.precision().map(|p| {
+        let (achieved, unbounded) = precision_half_width(job, tally, p);
+        PrecisionReport {
+            metric: p.metric.name().to_owned(),
+            statistic: statistic_name(p.statistic).to_owned(),
+            target_relative_half_width: p.relative_half_width,
+            achieved_relative_half_width: achieved,
+            met: unbounded.is_none() && achieved <= p.relative_half_width,
+            reason: unbounded,
+            devices: tally.devices,
+        }
+    });
+    diagnostics.extend(precision.as_ref().and_then(diagnostics::stopped_early));
     JobResult {
         job: ResolvedJob::new(job, tally.devices),
         operations: summarize_operations(job, tally),
         devices: summarize_devices(job, tally),
-        precision: job.precision().map(|p| {
-            let (achieved, unbounded) = precision_half_width(job, tally, p);
-            PrecisionReport {
-                metric: p.metric.name().to_owned(),
-                statistic: statistic_name(p.statistic).to_owned(),
-                target_relative_half_width: p.relative_half_width,
-                achieved_relative_half_width: achieved,
-                met: unbounded.is_none() && achieved <= p.relative_half_width,
-                reason: unbounded,
-                devices: tally.devices,
-            }
-        }),
+        precision,
         life: life_report(job, tally),
         sensitivity: job.sensitivity().map(|_| {
             let groups: Vec<_> = tally.groups.iter().map(|g| &g.sensitivity).collect();

@@ -332,13 +332,31 @@ fn precision_target_adds_device_batches_until_met() {
         "{report:?}"
     );
     assert!(report.achieved_relative_half_width <= 0.01);
+    // A target met stopped the run when the interval was narrow enough: the Result says how far
+    // to trust such an interval, where a decision reads it.
+    let stopped: Vec<_> = result
+        .diagnostics
+        .iter()
+        .filter(|d| d.pointer == "/precision")
+        .collect();
+    assert_eq!(stopped.len(), 1, "{:?}", result.diagnostics);
+    assert!(
+        stopped[0].detail.contains("about 90 % of runs, not 95 %")
+            && stopped[0]
+                .detail
+                .contains(&format!("run {} devices again", report.devices)),
+        "{}",
+        stopped[0].detail
+    );
     let bin = &result.operations["total_bounce_s"][0].summary;
     assert_eq!(bin.n, report.devices * 10);
     assert_eq!(result.job.devices_run(), report.devices);
 
     doc["precision"]["max_devices"] = json!(100);
     doc["precision"]["relative_half_width"] = json!(1e-6);
-    let capped = run(&job(doc.clone())).precision.unwrap();
+    let capped = run(&job(doc.clone()));
+    assert!(capped.diagnostics.iter().all(|d| d.pointer != "/precision"));
+    let capped = capped.precision.unwrap();
     assert!(!capped.met && capped.devices == 100, "{capped:?}");
     assert_eq!(capped.reason, None, "a mean is always bounded");
 
