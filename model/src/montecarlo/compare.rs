@@ -123,6 +123,30 @@ pub fn compare(
     let (bins_a, bins_b) = (bins_of(a, metric), bins_of(b, metric));
     let bins_a = bins_a.ok_or_else(|| CompareError::NoMetric("a", metric.to_owned()))?;
     let bins_b = bins_b.ok_or_else(|| CompareError::NoMetric("b", metric.to_owned()))?;
+    let mut notes = jobs_notes(a, b);
+    let mut bins_notes = Vec::new();
+    let bins = compare_bins(&bins_a, &bins_b, statistics, metric, &mut bins_notes);
+    if bins.is_empty() {
+        let same = if a.devices.contains_key(metric) {
+            "a device metric is one summary of each whole test: give both the same `operations`"
+        } else {
+            "give both the same `operations` and `bin_operations`"
+        };
+        notes.push(format!("the jobs share no bin of `{metric}`: {same}"));
+    }
+    notes.extend(bins_notes);
+    let life = life_comparison(a, b, b_lives, &mut notes);
+    Ok(Comparison {
+        metric: metric.to_owned(),
+        bins,
+        life,
+        notes,
+    })
+}
+
+/// What the two jobs themselves limit: tests of different lengths, the same job on both sides,
+/// or a shared seed.
+fn jobs_notes(a: &JobResult, b: &JobResult) -> Vec<String> {
     let mut notes = Vec::new();
     let (ops_a, ops_b) = (a.job.spec().operations, b.job.spec().operations);
     if ops_a != ops_b {
@@ -143,6 +167,18 @@ pub fn compare(
                 .to_owned(),
         );
     }
+    notes
+}
+
+/// The `statistics` compared in every bin both jobs have; pushes a note for statistics a bin
+/// lacks and for exceedances beyond different limits.
+fn compare_bins(
+    bins_a: &[(u64, u64, &Summary)],
+    bins_b: &[(u64, u64, &Summary)],
+    statistics: &[Statistic],
+    metric: &str,
+    notes: &mut Vec<String>,
+) -> Vec<BinComparison> {
     let mut missing: BTreeMap<&str, usize> = BTreeMap::new();
     // An exceedance beyond a different limit in each job: two different probabilities.
     let mut different_limits = None;
@@ -175,14 +211,6 @@ pub fn compare(
             })
         })
         .collect();
-    if bins.is_empty() {
-        let same = if a.devices.contains_key(metric) {
-            "a device metric is one summary of each whole test: give both the same `operations`"
-        } else {
-            "give both the same `operations` and `bin_operations`"
-        };
-        notes.push(format!("the jobs share no bin of `{metric}`: {same}"));
-    }
     for (name, count) in missing {
         notes.push(format!(
             "`{name}` is missing from {count} bin(s) of one job or both (`exceedance` compares \
@@ -196,11 +224,23 @@ pub fn compare(
              probability beyond each job's own limit, is not compared (give both the same limit)"
         ));
     }
-    let life = match (&a.life, &b.life) {
+    bins
+}
+
+/// The two designs' lives compared, when both have failure criteria; pushes a note where only
+/// one has, or their criteria differ.
+fn life_comparison(
+    a: &JobResult,
+    b: &JobResult,
+    b_lives: &[f64],
+    notes: &mut Vec<String>,
+) -> Option<LifeComparison> {
+    match (&a.life, &b.life) {
         (Some(la), Some(lb)) => {
             if la.criteria != lb.criteria {
                 notes.push("the jobs fail by different criteria".to_owned());
             }
+            let (ops_a, ops_b) = (a.job.spec().operations, b.job.spec().operations);
             let (lives_a, lives_b) = (la.lives(ops_a), lb.lives(ops_b));
             Some(compare_lives(
                 (&la.analysis, &lives_a),
@@ -213,13 +253,7 @@ pub fn compare(
             notes.push("only one of the jobs has failure criteria: no life comparison".to_owned());
             None
         }
-    };
-    Ok(Comparison {
-        metric: metric.to_owned(),
-        bins,
-        life,
-        notes,
-    })
+    }
 }
 
 /// The summaries of `metric` in `result` with their operations: an operation metric's bins, or a
