@@ -329,14 +329,18 @@ impl Timetable {
         let mut from = self.time_zone.from_utc_datetime(&after.naive_utc());
         let mut inclusive = false;
         // A search from an overlap's end finds a time past the overlap; the bound is a guard.
-        for _ in 0..3 {
+        for _ in 0..4 {
             let next = self.cron.find_next_occurrence(&from, inclusive).ok()?;
             let due = whole_seconds(next.with_timezone(&Utc));
             if due > after {
                 return Some(due);
             }
-            from = self.overlap_end(from.with_timezone(&Utc), utc_offset(&next))?;
-            inclusive = true;
+            // No overlap found (not met): half an hour on, as before the overlap's end was sought.
+            let at = from.with_timezone(&Utc);
+            (from, inclusive) = match self.overlap_end(at, utc_offset(&next)) {
+                Some(end) => (end, true),
+                None => (from + TimeDelta::minutes(30), false),
+            };
         }
         None
     }
@@ -833,6 +837,44 @@ mod tests {
         let lord_howe = Timetable::parse("*/10 * * * *", "Australia/Lord_Howe").unwrap();
         let next = lord_howe.next_after(utc("2027-04-03T15:10:00Z"));
         assert_eq!(next, Some(utc("2027-04-03T15:30:00Z")));
+    }
+
+    /// In every IANA zone that falls back in 2027, around its change, the next run asked at any
+    /// instant is the first of the runs listed from before the change that lies after it: the
+    /// schedule's runs are one sequence, whenever it is asked (the half-hour step answered 06:29Z
+    /// from Havana's second pass where the sequence goes on at 06:00Z).
+    #[test]
+    fn the_next_run_is_the_listed_one_whenever_asked_across_every_fall_back() {
+        let mut zones = 0;
+        for zone in chrono_tz::TZ_VARIANTS {
+            let offset = |at: DateTime<Utc>| utc_offset(&zone.from_utc_datetime(&at.naive_utc()));
+            let year = utc("2027-01-01T00:00:00Z");
+            let Some(day) = (0..365)
+                .map(|d| year + TimeDelta::days(d))
+                .find(|&d| offset(d + TimeDelta::days(1)) < offset(d))
+            else {
+                continue;
+            };
+            zones += 1;
+            for cron in ["* * * * *", "*/7 * * * *", "30 * * * *", "15 1 * * *"] {
+                let timetable = Timetable::parse(cron, zone.name()).unwrap();
+                let mut listed = vec![timetable.next_after(day - TimeDelta::days(1)).unwrap()];
+                while *listed.last().unwrap() < day + TimeDelta::days(3) {
+                    let next = timetable.next_after(*listed.last().unwrap()).unwrap();
+                    listed.push(next);
+                }
+                for step in 0..(48 * 12) {
+                    let asked = day + TimeDelta::minutes(5 * step) + TimeDelta::seconds(17);
+                    let expected = listed.iter().find(|&&due| due > asked).copied();
+                    assert_eq!(
+                        timetable.next_after(asked),
+                        expected,
+                        "{cron} in {zone} at {asked}"
+                    );
+                }
+            }
+        }
+        assert!(zones > 50, "{zones} zones fall back in 2027");
     }
 
     #[test]
