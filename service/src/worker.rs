@@ -259,6 +259,8 @@ enum Outcome {
         folded: EncodedGroups,
         /// The last batch of devices `folded` holds ([`Merged::folded_through`]).
         folded_through: u64,
+        /// The rare event's evaluations so far, before a round it queues.
+        rare_evaluations: u64,
         state: Option<Vec<u8>>,
     },
     Unencodable(String),
@@ -280,6 +282,7 @@ fn encoded(merged: Result<Merged, MergeError>) -> Result<Result<Outcome, MergeEr
         Ok(Merged::Next { shards, folded }) => match EncodedGroups::new(folded) {
             Ok(folded) => Outcome::Next {
                 folded_through: folded_through.unwrap_or_default(),
+                rare_evaluations: 0,
                 shards,
                 folded,
                 state: None,
@@ -350,6 +353,7 @@ fn round_outcome(rounds: &Rounds, shards: Vec<ShardPlan>, folded: Vec<GroupStats
             folded,
             // The devices' fold, or (a round after a round) none.
             folded_through: rounds.devices_last,
+            rare_evaluations: rounds.estimator.evaluations(),
             state: Some(state),
         },
         (Err(error), _) | (_, Err(error)) => {
@@ -615,6 +619,8 @@ impl Workers {
         let spec = partials.job().spec();
         let batch_operations = spec.devices * spec.operations;
         let first_batch = Batch::of(partials.job(), last).map_or(0, |b| b.size * spec.operations);
+        // A rare event's evaluations, in operations.
+        let per_evaluation = rare::operations_per_evaluation(partials.job());
         // The operations of the devices' batches up to `through`, the last run.
         let run_through = {
             let job = partials.job().clone();
@@ -641,17 +647,25 @@ impl Workers {
         let ran = clock.time(Part::Compute, compute).await;
         // A job run whole ran its operations here: its batches from this one on.
         let before = last * batch_operations;
+        // A rare event estimated in the step counts as it ran: its whole estimate, or the rounds
+        // before the one it queues.
         let simulated = match &ran {
             _ if !whole => 0,
-            Ran::Done(Ok(Outcome::Result { result, .. })) => result.counts.operations - before,
+            Ran::Done(Ok(Outcome::Result { result, .. })) => {
+                let estimated = result.rare_event.as_ref().map_or(0, |r| r.evaluations);
+                (result.counts.operations + estimated * per_evaluation).saturating_sub(before)
+            }
             // A rare event's round follows the devices, every batch of them run, up to the last
             // (cut short by `max_devices`, perhaps); another batch follows those before it.
             Ran::Done(Ok(Outcome::Next {
                 shards,
                 folded_through,
+                rare_evaluations,
                 ..
             })) => match shards[0].shard.batch {
-                batch if is_round(batch) => run_through(*folded_through).saturating_sub(before),
+                batch if is_round(batch) => (run_through(*folded_through)
+                    + rare_evaluations * per_evaluation)
+                    .saturating_sub(before),
                 batch => batch * batch_operations - before,
             },
             _ => batch_operations,
@@ -673,7 +687,8 @@ impl Workers {
         clock.record();
     }
 
-    /// Counts the `operations` a merge step running a job whole ran as its shard's own, all done,
+    /// Counts the `operations` a merge step running a job whole (or a rare event's rounds) ran as
+    /// its shard's own, all done,
     /// and charges its job for them ([`crate::store::JobQueue::count_run`]), before it writes what
     /// it made: its heartbeats tell its progress at most every half second, and a step of a
     /// second ended with half of it counted (found from outside). A count the store does not
@@ -711,6 +726,7 @@ impl Workers {
                 folded,
                 folded_through,
                 state,
+                ..
             })) => (shards, folded, folded_through, state),
             Ran::Done(Err(failed @ (MergeError::RareEvent(_) | MergeError::OutOfRange(_)))) => {
                 return self.fail(fence, &failed.to_string()).await;
@@ -839,19 +855,29 @@ impl Workers {
             match merge_round(&round_job, rounds, outcomes, sharded_from, observer) {
                 Err(MergeError::Cancelled(cancelled)) => Err(cancelled),
                 Err(other) => Ok(Err(other)),
-                Ok(RoundMerged::Next { rounds, shards }) => {
-                    Ok(Ok(Ok(round_outcome(&rounds, shards, Vec::new()))))
+                Ok((RoundMerged::Next { rounds, shards }, ran)) => {
+                    Ok(Ok(Ok((round_outcome(&rounds, shards, Vec::new()), ran))))
                 }
-                Ok(RoundMerged::Estimated(report)) => Ok(Ok(Err(report))),
+                Ok((RoundMerged::Estimated(report), ran)) => Ok(Ok(Err((report, ran)))),
             }
         });
+        // The rounds the step estimated itself count as it ran them, before what it made is
+        // written (their progress reached the store at its heartbeats alone).
         let report = match clock.time(Part::Compute, compute).await {
-            Ran::Done(Ok(Ok(next))) => {
+            Ran::Done(Ok(Ok((next, ran)))) => {
+                if ran > 0 {
+                    self.counted(fence, ran, 0).await;
+                }
                 let write = self.write(fence, Ran::Done(Ok(next)), 0, lease);
                 clock.time(Part::Write, write).await;
                 return clock.record();
             }
-            Ran::Done(Ok(Err(report))) => report,
+            Ran::Done(Ok(Err((report, ran)))) => {
+                if ran > 0 {
+                    self.counted(fence, ran, 0).await;
+                }
+                report
+            }
             Ran::Done(Err(error)) => {
                 return self.write(fence, Ran::Done(Err(error)), 0, lease).await;
             }
