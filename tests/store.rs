@@ -1129,6 +1129,51 @@ async fn a_precision_target_and_a_rare_event_run_whole_give_the_whole_result(url
         );
         assert!(stored_groups(store.as_ref(), &id, &job).await.is_empty());
     }
+    // Cut into groups (as batches beyond WHOLE_JOB_OPERATIONS are): run to `max_devices`, the
+    // last batch's merge keeps the budget it planned; a target met sooner counts the estimate as
+    // it ran, in the merge or in rounds of their own (it counted what a heartbeat caught, often
+    // nothing: a probe).
+    let early = PRECISION_THEN_RARE_EVENT.replace(
+        r#""relative_half_width": 1e-9"#,
+        r#""statistic": "mean", "relative_half_width": 0.5"#,
+    );
+    let early_job = Job::from_json(&early, || 9).unwrap();
+    let early_whole = run_job(&early_job, &Silent).unwrap();
+    let stopped = early_whole.job.devices_run();
+    assert!(stopped < 40, "the target stops it early: {stopped}");
+    let evaluations = early_whole.rare_event.as_ref().unwrap().evaluations;
+    let budget = job.rare_event().unwrap().max_operations();
+    for (text, result, sharded_from, ran) in [
+        (
+            PRECISION_THEN_RARE_EVENT,
+            &whole,
+            SHARDED_ROUND_OPERATIONS,
+            80 + budget,
+        ),
+        (
+            early.as_str(),
+            &early_whole,
+            SHARDED_ROUND_OPERATIONS,
+            2 * (stopped + evaluations),
+        ),
+        (early.as_str(), &early_whole, 1, 2 * (stopped + evaluations)),
+    ] {
+        let id = insert(&store, queued_job(text, 9)).await;
+        let mut workers = Arc::into_inner(workers(&store, 3, u64::MAX)).unwrap();
+        workers.sharded_round_operations = sharded_from;
+        let ended = run_until_ended(&store, Arc::new(workers), &id, async || {}).await;
+        assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
+        let progress = (ended.operations_done, ended.operations_total);
+        assert_eq!(
+            progress,
+            (ran, ran),
+            "{text}, rounds sharded from {sharded_from}"
+        );
+        assert_eq!(
+            without_timing(&store.result_json(&id).await.unwrap().unwrap()),
+            without_timing(&serde_json::to_string(result).unwrap())
+        );
+    }
 }
 
 /// Runs one statement on the database behind a store, as an operator (or a failing disk) could:

@@ -22,7 +22,7 @@
 use crate::domain::rare::{Rounds, is_round};
 use crate::domain::shards::{
     Folding, LARGE_MERGE_ACCUMULATORS, MergeError, Merged, RoundMerged, ShardPlan, claims_ahead,
-    estimated, merge, merge_accumulators, merge_round, run_whole,
+    estimated, merge, merge_accumulators, merge_plan, merge_round, run_whole,
 };
 use crate::domain::{JobId, UnixMs};
 use crate::store::{
@@ -628,6 +628,7 @@ impl Workers {
                 Batch::of(&job, through).map_or(0, |b| (b.first + b.size) * job.spec().operations)
             }
         };
+        let merge_planned = merge_plan(partials.job(), last);
         let (sharded_from, step) = (self.sharded_round_operations, self.whole_step);
         // A job run whole learns its total as its precision target adds batches.
         let work = if whole { Work::Growing } else { Work::Planned };
@@ -649,38 +650,49 @@ impl Workers {
         let before = last * batch_operations;
         // A rare event estimated in the step counts as it ran: its whole estimate, or the rounds
         // before the one it queues.
+        let rare_here = per_evaluation
+            * match &ran {
+                Ran::Done(Ok(Outcome::Result { result, .. })) => {
+                    result.rare_event.as_ref().map_or(0, |r| r.evaluations)
+                }
+                Ran::Done(Ok(Outcome::Next {
+                    rare_evaluations, ..
+                })) => *rare_evaluations,
+                _ => 0,
+            };
         let simulated = match &ran {
-            _ if !whole => 0,
+            _ if !whole => rare_here,
             Ran::Done(Ok(Outcome::Result { result, .. })) => {
-                let estimated = result.rare_event.as_ref().map_or(0, |r| r.evaluations);
-                (result.counts.operations + estimated * per_evaluation).saturating_sub(before)
+                (result.counts.operations + rare_here).saturating_sub(before)
             }
             // A rare event's round follows the devices, every batch of them run, up to the last
             // (cut short by `max_devices`, perhaps); another batch follows those before it.
             Ran::Done(Ok(Outcome::Next {
                 shards,
                 folded_through,
-                rare_evaluations,
                 ..
             })) => match shards[0].shard.batch {
-                batch if is_round(batch) => (run_through(*folded_through)
-                    + rare_evaluations * per_evaluation)
-                    .saturating_sub(before),
+                batch if is_round(batch) => {
+                    (run_through(*folded_through) + rare_here).saturating_sub(before)
+                }
                 batch => batch * batch_operations - before,
             },
             _ => batch_operations,
         };
-        // Its claim was charged its first batch (`first_shards`, `run_whole`), as its shard
-        // counts it: a step of one batch (any small job without a precision target) is counted
-        // already, with no round trip to the database for it.
-        if whole
-            && simulated > first_batch
+        // Its claim was charged what its shard planned: a whole step its first batch
+        // (`first_shards`, `run_whole`), as its shard counts it (a step of one batch, any small
+        // job without a precision target, is counted already, with no round trip to the
+        // database for it); a batch's merge the rare event's budget on the last possible batch
+        // ([`merge_plan`]), which stays its total: a target met sooner counts the estimate as it
+        // ran (it counted nothing but what a heartbeat caught, a probe).
+        let charged = if whole { first_batch } else { merge_planned };
+        if simulated > charged
             && matches!(
                 &ran,
                 Ran::Done(Ok(Outcome::Result { .. } | Outcome::Next { .. }))
             )
         {
-            self.counted(fence, simulated, first_batch).await;
+            self.counted(fence, simulated, charged).await;
         }
         let write = self.write(fence, ran, simulated, lease);
         clock.time(Part::Write, write).await;

@@ -76,16 +76,20 @@ pub fn batch_shards(job: &Job, batch: Batch) -> Vec<ShardPlan> {
         })
         .chain([ShardPlan {
             shard: ShardId::merge(batch.index),
-            // The last merge estimates the job's rare event, if it asks one: planned on the batch
-            // that must be the last. A precision target's other batches plan none (each planned
-            // the whole budget, and a probe's progress read 600,048,000 of 601,048,000 within
-            // 50 ms of the start); one that meets the target early counts the estimate as it runs.
-            operations: job
-                .rare_event()
-                .filter(|_| Batch::of(job, batch.index + 1).is_none())
-                .map_or(0, |rare| rare.max_operations()),
+            operations: merge_plan(job, batch.index),
         }])
         .collect()
+}
+
+/// The operations batch `batch`'s merge step plans: the last merge estimates the job's rare event,
+/// if it asks one, planned on the batch that must be the last. A precision target's other
+/// batches plan none (each planned the whole budget, and a probe's progress read 600,048,000 of
+/// 601,048,000 within 50 ms of the start); one that meets the target early counts the estimate as
+/// it runs.
+pub fn merge_plan(job: &Job, batch: u64) -> u64 {
+    job.rare_event()
+        .filter(|_| Batch::of(job, batch + 1).is_none())
+        .map_or(0, |rare| rare.max_operations())
 }
 
 /// The most operations (devices x operations) of a job that runs whole, as one shard: about a
