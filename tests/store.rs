@@ -954,14 +954,8 @@ async fn a_job_run_whole_in_steps_gives_the_whole_result(url: &str) {
         (Duration::ZERO, vec![0, 1, 2, 3, 4, 5]),
         (Duration::MAX, vec![0]),
     ] {
-        let id = insert(
-            &store,
-            QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1)),
-        )
-        .await;
-        let mut workers = Arc::into_inner(workers(&store, 3, u64::MAX)).unwrap();
-        workers.whole_step = step;
-        let ended = run_until_ended(&store, Arc::new(workers), &id, async || {}).await;
+        let queued = QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1));
+        let (id, ended) = run_queued(&store, queued, step, SHARDED_ROUND_OPERATIONS).await;
         assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
         assert_eq!((ended.operations_done, ended.operations_total), (176, 176));
         let shards = store.shards(&id).await.unwrap();
@@ -1092,15 +1086,8 @@ async fn a_precision_target_and_a_rare_event_run_whole_give_the_whole_result(url
         (Duration::MAX, 1),
         (Duration::ZERO, SHARDED_ROUND_OPERATIONS),
     ] {
-        let id = insert(
-            &store,
-            QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1)),
-        )
-        .await;
-        let mut workers = Arc::into_inner(workers(&store, 3, u64::MAX)).unwrap();
-        workers.whole_step = step;
-        workers.sharded_round_operations = sharded_from;
-        let ended = run_until_ended(&store, Arc::new(workers), &id, async || {}).await;
+        let queued = QueuedJob::new(&job, Owner::anonymous(), None, UnixMs(1));
+        let (id, ended) = run_queued(&store, queued, step, sharded_from).await;
         assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
         // Every operation run counted once: 40 devices of 2 and each of the estimate's
         // evaluations of 2 (the budget's 400,000, or the estimate's rounds again, before).
@@ -1158,10 +1145,8 @@ async fn a_precision_target_and_a_rare_event_run_whole_give_the_whole_result(url
         ),
         (early.as_str(), &early_whole, 1, 2 * (stopped + evaluations)),
     ] {
-        let id = insert(&store, queued_job(text, 9)).await;
-        let mut workers = Arc::into_inner(workers(&store, 3, u64::MAX)).unwrap();
-        workers.sharded_round_operations = sharded_from;
-        let ended = run_until_ended(&store, Arc::new(workers), &id, async || {}).await;
+        let queued = queued_job(text, 9);
+        let (id, ended) = run_queued(&store, queued, WHOLE_STEP, sharded_from).await;
         assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
         let progress = (ended.operations_done, ended.operations_total);
         assert_eq!(
@@ -1380,6 +1365,23 @@ fn workers(store: &Arc<dyn Store>, retries: u64, listed_lives: u64) -> Arc<Worke
         whole_step: WHOLE_STEP,
         held: HeldGroups::new(HELD_GROUP_BYTES),
     })
+}
+
+/// Inserts `queued` and runs it with three workers whose whole-run steps take `step` and whose
+/// rare events shard rounds of `sharded_from` operations or more, until it ends: its id, and the
+/// job as it ended.
+async fn run_queued(
+    store: &Arc<dyn Store>,
+    queued: QueuedJob,
+    step: Duration,
+    sharded_from: u64,
+) -> (JobId, JobRecord) {
+    let id = insert(store, queued).await;
+    let mut workers = Arc::into_inner(workers(store, 3, u64::MAX)).unwrap();
+    workers.whole_step = step;
+    workers.sharded_round_operations = sharded_from;
+    let ended = run_until_ended(store, Arc::new(workers), &id, async || {}).await;
+    (id, ended)
 }
 
 /// Runs `workers` until job `id` ends, and stops them; the job as it ended.
