@@ -700,11 +700,10 @@ impl Workers {
     }
 
     /// Counts the `operations` a merge step running a job whole (or a rare event's rounds) ran as
-    /// its shard's own, all done,
-    /// and charges its job for them ([`crate::store::JobQueue::count_run`]), before it writes what
-    /// it made: its heartbeats tell its progress at most every half second, and a step of a
-    /// second ended with half of it counted (found from outside). A count the store does not
-    /// take leaves the last one told.
+    /// its shard's own, all done, and charges its job for them
+    /// ([`crate::store::JobQueue::count_run`]), before it writes what it made: its heartbeats tell
+    /// its progress at most every half second, and a step of a second ended with half of it
+    /// counted (found from outside). A count the store does not take leaves the last one told.
     async fn counted(&self, fence: &Fence, operations: u64, charged: u64) {
         if let Err(error) = self.store.count_run(fence, operations, charged).await {
             tracing::warn!(%error, "the step's operations were not counted");
