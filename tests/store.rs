@@ -631,7 +631,7 @@ async fn a_job_behind_another_is_served_next(url: &str) {
 }
 
 /// The shards whose accumulators `store` keeps for `job`, in the order a merge reads them.
-async fn stored_groups(store: &dyn Store, id: &JobId, job: &Job) -> Vec<ShardId> {
+async fn stored_groups(store: &Store, id: &JobId, job: &Job) -> Vec<ShardId> {
     let read = store.partials(id, Folding::new(job.clone(), u64::MAX));
     read.await.unwrap().read().to_vec()
 }
@@ -639,7 +639,7 @@ async fn stored_groups(store: &dyn Store, id: &JobId, job: &Job) -> Vec<ShardId>
 /// Runs every claimable shard of the store's jobs the way workers do, in claim order, until none
 /// is left; returns the shards each claim ran. A merge holds the odd groups of its batch, as a
 /// worker holds those it ran, and reads the others back.
-async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
+async fn run_every_shard(store: &Store) -> Vec<ShardId> {
     let mut ran = Vec::new();
     let mut odd_groups = Vec::new();
     while let Some(claim) = store.claim("w", terms(0), budget(3)).await.unwrap() {
@@ -700,7 +700,7 @@ async fn run_every_shard(store: &dyn Store) -> Vec<ShardId> {
 }
 
 /// The shards of job `id`, in order.
-async fn shard_ids(store: &dyn Store, id: &JobId) -> Vec<ShardId> {
+async fn shard_ids(store: &Store, id: &JobId) -> Vec<ShardId> {
     let shards = store.shards(id).await.unwrap();
     shards.iter().map(|s| s.shard).collect()
 }
@@ -910,7 +910,7 @@ async fn a_rare_events_rounds_run_as_shards_give_the_whole_result(url: &str) {
 }
 
 /// Runs the queue with two real workers that shard every rare event's round until job `id` ends.
-async fn run_rounds(store: &Arc<dyn Store>, id: &JobId) -> JobRecord {
+async fn run_rounds(store: &Arc<Store>, id: &JobId) -> JobRecord {
     let mut workers = Arc::into_inner(workers(store, 3, u64::MAX)).unwrap();
     workers.sharded_round_operations = 1;
     let (stop, stopping) = watch::channel(false);
@@ -1345,13 +1345,13 @@ async fn a_job_run_whole_raises_its_total_as_its_batches_are_added(url: &str) {
     assert_eq!(vtime().await - claimed, 1000 - 48);
 }
 
-async fn insert(store: &Arc<dyn Store>, job: QueuedJob) -> JobId {
+async fn insert(store: &Arc<Store>, job: QueuedJob) -> JobId {
     let bound = QueueBound::total(10);
     store.insert_job(job, bound).await.unwrap().unwrap().id
 }
 
 /// Real workers with `retries` of each kind, on `store`.
-fn workers(store: &Arc<dyn Store>, retries: u64, listed_lives: u64) -> Arc<Workers> {
+fn workers(store: &Arc<Store>, retries: u64, listed_lives: u64) -> Arc<Workers> {
     Arc::new(Workers {
         store: Arc::clone(store),
         compute: Arc::new(thread_pool(Some(1)).unwrap()),
@@ -1371,7 +1371,7 @@ fn workers(store: &Arc<dyn Store>, retries: u64, listed_lives: u64) -> Arc<Worke
 /// rare events shard rounds of `sharded_from` operations or more, until it ends: its id, and the
 /// job as it ended.
 async fn run_queued(
-    store: &Arc<dyn Store>,
+    store: &Arc<Store>,
     queued: QueuedJob,
     step: Duration,
     sharded_from: u64,
@@ -1386,7 +1386,7 @@ async fn run_queued(
 
 /// Runs `workers` until job `id` ends, and stops them; the job as it ended.
 async fn run_until_ended(
-    store: &Arc<dyn Store>,
+    store: &Arc<Store>,
     workers: Arc<Workers>,
     id: &JobId,
     meanwhile: impl AsyncFnOnce(),
@@ -1794,7 +1794,7 @@ fn nightly(id: &str, next_run_at: &str) -> ScheduleRecord {
 }
 
 async fn two_scheduler_loops_never_duplicate_a_night(url: &str) {
-    let (first, second): (Arc<dyn Store>, Arc<dyn Store>) = (
+    let (first, second): (Arc<Store>, Arc<Store>) = (
         store::open(url).await.unwrap(),
         store::open(url).await.unwrap(),
     );

@@ -193,8 +193,8 @@ impl Application {
     }
 }
 
-/// The store's log folded into its file as the process ends ([`crate::store::JobQueue::checkpoint`]).
-async fn checkpoint(store: &dyn Store) {
+/// The store's log folded into its file as the process ends ([`crate::store::Store::checkpoint`]).
+async fn checkpoint(store: &Store) {
     if let Err(error) = store.checkpoint().await {
         tracing::warn!(%error, "the database's log was not folded into its file");
     }
@@ -328,7 +328,7 @@ fn no_transparent_huge_pages() {
     }
 }
 
-async fn report_queue_depth(store: Arc<dyn Store>, metrics: PrometheusHandle) {
+async fn report_queue_depth(store: Arc<Store>, metrics: PrometheusHandle) {
     let mut tick = tokio::time::interval(Duration::from_secs(1));
     loop {
         tick.tick().await;

@@ -10,7 +10,7 @@ use tokio::sync::watch;
 const PASS: Duration = Duration::from_secs(3600);
 const DAY_MS: i64 = 86_400_000;
 
-pub async fn run(store: Arc<dyn Store>, retain_days: u32, mut stopping: watch::Receiver<bool>) {
+pub async fn run(store: Arc<Store>, retain_days: u32, mut stopping: watch::Receiver<bool>) {
     let mut passes = tokio::time::interval(PASS);
     loop {
         tokio::select! {

@@ -14,7 +14,7 @@ use tokio::sync::{Notify, watch};
 const TICK: Duration = Duration::from_secs(1);
 
 pub async fn run(
-    store: Arc<dyn Store>,
+    store: Arc<Store>,
     limits: RunLimits,
     wake: Arc<Notify>,
     mut shutdown: watch::Receiver<bool>,
@@ -89,7 +89,7 @@ pub struct RunLimits {
 /// One pass over the due schedules at `now`; returns how many jobs it created. `waiting` carries
 /// the schedules waiting for room in the queue from one tick to the next.
 pub async fn tick(
-    store: &dyn Store,
+    store: &Store,
     limits: RunLimits,
     now: DateTime<Utc>,
     waiting: &mut Waiting,

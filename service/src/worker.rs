@@ -60,7 +60,7 @@ const STORE_RETRY_FIRST_DELAY: Duration = Duration::from_millis(250);
 const STORE_RETRY_MAX_DELAY: Duration = Duration::from_secs(8);
 
 pub struct Workers {
-    pub store: Arc<dyn Store>,
+    pub store: Arc<Store>,
     pub compute: Arc<rayon::ThreadPool>,
     pub lease: Duration,
     /// Times a shard is run again after it failed, or apart after its lease expired, before its
@@ -701,7 +701,7 @@ impl Workers {
 
     /// Counts the `operations` a merge step running a job whole (or a rare event's rounds) ran as
     /// its shard's own, all done, and charges its job for them
-    /// ([`crate::store::JobQueue::count_run`]), before it writes what it made: its heartbeats tell
+    /// ([`crate::store::Store::count_run`]), before it writes what it made: its heartbeats tell
     /// its progress at most every half second, and a step of a second ended with half of it
     /// counted (found from outside). A count the store does not take leaves the last one told.
     async fn counted(&self, fence: &Fence, operations: u64, charged: u64) {

@@ -43,7 +43,7 @@ use utoipa_axum::router::OpenApiRouter;
 
 #[derive(Clone)]
 pub struct AppState {
-    pub store: Arc<dyn Store>,
+    pub store: Arc<Store>,
     pub config: Arc<ServeConfig>,
     /// The owner (the SHA-256) of every accepted API key: keys themselves are never kept.
     pub key_owners: Arc<HashSet<Owner>>,

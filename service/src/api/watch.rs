@@ -18,7 +18,7 @@ use tokio::sync::{Notify, Semaphore, broadcast, watch};
 /// (SQLite), how often the watcher looks, unless a job of this process ended sooner.
 const LOOK_INTERVAL: Duration = Duration::from_millis(200);
 /// Without announcements, the shortest time between two looks when jobs of this process end
-/// ([`JobQueue::ends`](crate::store::JobQueue::ends)): a stream hears of an end at once, and many
+/// ([`Store::ends`](crate::store::Store::ends)): a stream hears of an end at once, and many
 /// ends cost at most 50 looks a second.
 const END_LOOK_INTERVAL: Duration = Duration::from_millis(20);
 /// With announcements (PostgreSQL), the watcher looks when a job changed, and at least this often
@@ -84,7 +84,7 @@ impl JobWatch {
     /// Starts the watcher over `store`; it runs until `shutdown` turns true. At most `per_key`
     /// streams per owner, and at most `waits` requests waiting for a job's end at once.
     pub fn start(
-        store: Arc<dyn Store>,
+        store: Arc<Store>,
         per_key: usize,
         waits: usize,
         shutdown: watch::Receiver<bool>,
@@ -122,12 +122,12 @@ impl JobWatch {
 
     /// `owner`'s job `id` once it ended, or as it is when `wait` passed: a request that waits
     /// instead of asking again and again. The store's announcements
-    /// ([`JobQueue::ends`](crate::store::JobQueue::ends)) wake it the moment the job ends, and it
+    /// ([`Store::ends`](crate::store::Store::ends)) wake it the moment the job ends, and it
     /// reads the job again every `RECHECK` in case one was missed. With every place taken, at
     /// shutdown, or for a job that already ended it answers at once.
     pub async fn until_ended(
         &self,
-        store: &dyn Store,
+        store: &Store,
         owner: &Owner,
         id: &JobId,
         wait: Duration,
@@ -165,7 +165,7 @@ impl JobWatch {
         Ok(record)
     }
 
-    async fn run(self: Arc<Self>, store: Arc<dyn Store>, mut shutdown: watch::Receiver<bool>) {
+    async fn run(self: Arc<Self>, store: Arc<Store>, mut shutdown: watch::Receiver<bool>) {
         let mut announcements = store.events();
         let mut ends = announcements.is_none().then(|| store.ends());
         let mut tracked = Tracked::default();
@@ -282,7 +282,7 @@ struct Tracked {
 
 impl Tracked {
     /// One look at the store; on an error nothing changes.
-    async fn look(&mut self, store: &dyn Store) -> StoreResult<()> {
+    async fn look(&mut self, store: &Store) -> StoreResult<()> {
         let (rows, newest) = store.live_jobs(self.newest.unwrap_or(i64::MAX)).await?;
         let mut live = HashMap::new();
         let mut ended = Vec::new();

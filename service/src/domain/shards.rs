@@ -185,7 +185,7 @@ pub enum Merged {
 
 impl Merged {
     /// The last batch of devices whose groups a merge step's fold holds, where the store keeps it
-    /// (the store's `JobQueue::add_batch`): the batch before the next one, or the devices'
+    /// (the store's `Store::add_batch`): the batch before the next one, or the devices'
     /// last batch ahead of a rare event's round; none for a Result.
     pub fn folded_through(&self) -> Option<u64> {
         match self {

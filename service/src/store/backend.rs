@@ -1,4 +1,4 @@
-//! The store, written once ([`SqlStore`]), and the few things its two databases do differently
+//! The store, written once ([`Store`]), and the few things its two databases do differently
 //! ([`Backend`]): how connections are pooled and transactions begun, the locks each takes, the
 //! clock, and what readiness checks beyond a write. Everything else (the queue, results,
 //! schedules) is one body of SQL in `queue.rs`, `results.rs` and `schedules.rs`.
@@ -12,7 +12,7 @@ use crate::domain::{JobId, QueueBound, QueuedJob};
 use tokio::sync::broadcast;
 
 /// The store over either database.
-pub struct SqlStore {
+pub struct Store {
     pub(crate) backend: Backend,
 }
 
@@ -22,7 +22,7 @@ pub(crate) enum Backend {
     Postgres(PgBackend),
 }
 
-impl SqlStore {
+impl Store {
     /// Opens the database a URL names, migrating it: `sqlite:` or `postgres:` (`postgresql:`).
     pub async fn open(url: &str, connections: u32) -> StoreResult<Self> {
         // Only the scheme is ever repeated back: the rest of a URL may hold a password.
@@ -37,7 +37,7 @@ impl SqlStore {
                 return Err(StoreError::UnsupportedUrl(scheme));
             }
         };
-        let store = SqlStore { backend };
+        let store = Store { backend };
         store.backfill_shards().await?;
         Ok(store)
     }
@@ -59,7 +59,7 @@ impl SqlStore {
     }
 
     /// SQLite's write-ahead log checkpointed whole into the database's file
-    /// ([`super::JobQueue::checkpoint`]). A checkpoint that another process's lock cut short
+    /// ([`super::Store::checkpoint`]). A checkpoint that another process's lock cut short
     /// answers, rather than fails: that is an error here (it passed for done, found from outside).
     pub(crate) async fn fold_log(&self) -> StoreResult<()> {
         if let Backend::Sqlite(sqlite) = &self.backend {
@@ -76,7 +76,7 @@ impl SqlStore {
         Ok(())
     }
 
-    /// PostgreSQL's own reason it gives no connection ([`super::JobQueue::why_unreachable`]);
+    /// PostgreSQL's own reason it gives no connection ([`super::Store::why_unreachable`]);
     /// SQLite, embedded, has none to give.
     pub(crate) async fn why_no_connection(&self) -> Option<String> {
         match &self.backend {
@@ -229,7 +229,7 @@ impl SqlStore {
         }
     }
 
-    /// [`super::JobQueue::ends`]: PostgreSQL's announcements of every instance's ends, or the ends
+    /// [`super::Store::ends`]: PostgreSQL's announcements of every instance's ends, or the ends
     /// of jobs this process wrote to SQLite.
     pub(crate) fn subscribe_ends(&self) -> broadcast::Receiver<QueueEvent> {
         match &self.backend {

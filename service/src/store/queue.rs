@@ -1,10 +1,10 @@
 //! The job queue, written once for both databases: submissions with their shards, leases with
 //! fencing, and the end of every job. What the two databases say differently is their
-//! [`Dialect`](super::rows::Dialect) and a few steps of [`SqlStore`]'s.
+//! [`Dialect`](super::rows::Dialect) and a few steps of [`Store`]'s.
 
-use super::backend::SqlStore;
+use super::backend::Store;
 use super::rows::{
-    Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, Dialect, FORGET_EXPIRED_KEY,
+    self, Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, Dialect, FORGET_EXPIRED_KEY,
     LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY,
     REMEMBERED_KEY, bind_fence, bind_key, claim_from_rows, count_from_sql, count_to_sql,
     failed_too_often, fenced_shard, gave_up, group_to_sql, insert_shards, job_columns,
@@ -13,7 +13,7 @@ use super::rows::{
 };
 use super::sql::{AnyRow, Conn, Sql, Tx};
 use super::{
-    Awaited, Claim, EncodedGroups, Fence, JobQueue, JobRecord, Lease, LeaseTerms, Page, QueueEvent,
+    Awaited, Claim, EncodedGroups, Fence, JobRecord, Lease, LeaseTerms, Page, QueueEvent,
     ShardRecord, StoreError, StoreResult,
 };
 use crate::domain::rare::{RARE_ROUNDS, is_round};
@@ -21,15 +21,15 @@ use crate::domain::{
     IdempotencyKey, JobId, Once, Owner, QueueBound, QueuedJob, ROOM_RETRY_MS, RetryBudget,
     SHARD_OVERHEAD_OPERATIONS, ShardPlan, UnixMs, first_shards, retry_backoff_ms,
 };
-use async_trait::async_trait;
 use bouncewear_model::Pointer;
+use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::montecarlo::{Job, JobSpec};
 use tokio::sync::broadcast;
 
 /// How often a job's delete is tried when the database broke a deadlock by rolling it back.
 const DELETE_ATTEMPTS: u32 = 3;
 
-impl SqlStore {
+impl Store {
     /// Deletes a job that ended, and its schedule run, in one transaction.
     async fn delete_ended_job(&self, owner: &Owner, id: &JobId) -> StoreResult<()> {
         let mut tx = self.begin().await?;
@@ -54,7 +54,7 @@ impl SqlStore {
 
 // ---- idempotency keys ----------------------------------------------------------------------
 
-impl SqlStore {
+impl Store {
     /// In the caller's transaction, first (two retries of one request never both miss the key):
     /// forgets the key if it expired, then reads what it created (fingerprint, id).
     pub(crate) async fn remembered(
@@ -321,18 +321,28 @@ async fn exhausted(tx: &mut Tx, now: UnixMs, retries: u64) -> StoreResult<Vec<(J
         .collect()
 }
 
-#[async_trait]
-impl JobQueue for SqlStore {
-    async fn why_unreachable(&self) -> Option<String> {
+/// The durable job queue: submissions, leases with fencing, and the end of every job.
+impl Store {
+    /// Why no connection reached the database, in the database's own words where it gave them
+    /// (PostgreSQL refuses a connection with its reason, `remaining connection slots are
+    /// reserved ...`, which the pool's time-out drops): for a log line, asked at most once every
+    /// ten seconds; `None` otherwise, or for a database that gives none.
+    pub async fn why_unreachable(&self) -> Option<String> {
         self.why_no_connection().await
     }
 
-    async fn checkpoint(&self) -> StoreResult<()> {
+    /// Folds what the database keeps beside its main file into it, as the process ends: SQLite's
+    /// write-ahead log, checkpointed whole, so that a copy of the file alone (a stopped server's
+    /// backup) holds every write it acknowledged (it lacked the last ones, found from outside).
+    /// The log's file keeps its size: emptied, a file the next start may not write could not be
+    /// opened at all (SQLite needs a log to read one read-only). Nothing for PostgreSQL.
+    pub async fn checkpoint(&self) -> StoreResult<()> {
         self.fold_log().await
     }
 
+    /// Inserts a queued job unless the queue or its owner's share of it is full (then `None`).
     #[tracing::instrument(skip_all, fields(job = %job.id))]
-    async fn insert_job(
+    pub async fn insert_job(
         &self,
         job: QueuedJob,
         bound: QueueBound,
@@ -348,8 +358,11 @@ impl JobQueue for SqlStore {
         Ok(Some(record))
     }
 
+    /// As [`Store::insert_job`], once per key of the job's owner: a key used within 24 hours
+    /// (before `now`) gives the job it created, or [`Once::KeyReused`] for another body. The key
+    /// is remembered only with a job (a full queue leaves it unused).
     #[tracing::instrument(skip_all, fields(job = %job.id))]
-    async fn insert_job_once(
+    pub async fn insert_job_once(
         &self,
         job: QueuedJob,
         bound: QueueBound,
@@ -381,18 +394,24 @@ impl JobQueue for SqlStore {
     }
 
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn job(&self, owner: &Owner, id: &JobId) -> StoreResult<JobRecord> {
+    pub async fn job(&self, owner: &Owner, id: &JobId) -> StoreResult<JobRecord> {
         select_job(self.readers(), owner, id).await
     }
 
+    /// The job and the job as submitted, seed fixed, in one read.
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn job_with_spec(&self, owner: &Owner, id: &JobId) -> StoreResult<(JobRecord, JobSpec)> {
+    pub async fn job_with_spec(
+        &self,
+        owner: &Owner,
+        id: &JobId,
+    ) -> StoreResult<(JobRecord, JobSpec)> {
         let row = job_row(self.readers(), select_job!(", spec"), owner, id).await?;
         Ok((job_from_row(&row)?, spec_from_json(&row.text("spec")?)?))
     }
 
+    /// Newest first.
     #[tracing::instrument(skip_all)]
-    async fn jobs(&self, owner: &Owner, page: Page) -> StoreResult<Vec<JobRecord>> {
+    pub async fn jobs(&self, owner: &Owner, page: Page) -> StoreResult<Vec<JobRecord>> {
         let rows = Sql::new(concat!(
             "SELECT ",
             job_columns!(),
@@ -406,8 +425,11 @@ impl JobQueue for SqlStore {
         Ok(rows.iter().map(job_from_row).collect::<Result<_, _>>()?)
     }
 
+    /// Every owner's queued and running jobs, and the other jobs submitted after `after` (a
+    /// `seq`), oldest first, with the newest `seq` of all (read first, so a job submitted
+    /// meanwhile is newer than it): what the live view of jobs looks at.
     #[tracing::instrument(skip_all)]
-    async fn live_jobs(&self, after: i64) -> StoreResult<(Vec<JobRecord>, i64)> {
+    pub async fn live_jobs(&self, after: i64) -> StoreResult<(Vec<JobRecord>, i64)> {
         let mut connection = self.reader().await?;
         let newest = Sql::new("SELECT COALESCE(MAX(seq), 0) AS newest FROM jobs")
             .fetch_one(&mut connection)
@@ -430,8 +452,10 @@ impl JobQueue for SqlStore {
         Ok((jobs, newest))
     }
 
+    /// Cancels a queued or running job; [`StoreError::Conflict`] if it already ended.
+    /// The job's end is stamped `at`, or on the database's clock.
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn cancel(
+    pub async fn cancel(
         &self,
         owner: &Owner,
         id: &JobId,
@@ -466,8 +490,11 @@ impl JobQueue for SqlStore {
         )))
     }
 
+    /// Deletes a job that ended, with everything stored for it (its shards, result,
+    /// distributions, device lives, its place among a schedule's runs), in one transaction;
+    /// [`StoreError::Conflict`] while it is queued or running.
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn delete_job(&self, owner: &Owner, id: &JobId) -> StoreResult<()> {
+    pub async fn delete_job(&self, owner: &Owner, id: &JobId) -> StoreResult<()> {
         // The delete locks the job, then its shards; a worker's heartbeat locks its shard, then
         // the job (its progress): deleting a job just cancelled while a heartbeat of it is under
         // way can deadlock, and PostgreSQL then rolls one of the two back (a 503 for the delete,
@@ -484,8 +511,11 @@ impl JobQueue for SqlStore {
         }
     }
 
+    /// Deletes every owner's jobs that ended `age_ms` or more before `at` (or the database's
+    /// clock, on which their ends are stamped) as [`Store::delete_job`] does, in one
+    /// transaction; how many.
     #[tracing::instrument(skip_all)]
-    async fn prune_jobs(&self, age_ms: i64, at: Option<UnixMs>) -> StoreResult<u64> {
+    pub async fn prune_jobs(&self, age_ms: i64, at: Option<UnixMs>) -> StoreResult<u64> {
         let mut tx = self.begin().await?;
         let ended_before = UnixMs(now_or(self.dialect(), &mut tx, at).await?.0 - age_ms);
         Sql::new(PRUNE_RUNS)
@@ -500,8 +530,13 @@ impl JobQueue for SqlStore {
         Ok(deleted)
     }
 
+    /// Leases the next shard to run: a queued shard past its backoff or a running one whose lease
+    /// expired (bumping its attempt), a merge step only once its batch's groups are done. Fair
+    /// share: of the job with the least virtual start time (then the oldest job; in a job, shards
+    /// in order), which is charged the shard's cost (docs/contract.md "Fair share"). A shard whose
+    /// lease has expired `budget.lost_leases + 1` times fails its job instead, with the reason.
     #[tracing::instrument(skip_all, fields(worker))]
-    async fn claim(
+    pub async fn claim(
         &self,
         worker: &str,
         terms: LeaseTerms,
@@ -552,8 +587,12 @@ impl JobQueue for SqlStore {
         claim_from_rows(&claimed, &job, now).map(Some)
     }
 
+    /// Counts `operations`, run by a merge step that runs its job whole, as all its shard's, done,
+    /// if the claim still holds it and the job still runs; fair share charges the job what they
+    /// exceed of the `charged` operations its claim was charged (the step's first batch), so that
+    /// a job run a second at a time is charged its seconds (docs/contract.md "Fair share").
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    async fn count_run(&self, fence: &Fence, operations: u64, charged: u64) -> StoreResult<()> {
+    pub async fn count_run(&self, fence: &Fence, operations: u64, charged: u64) -> StoreResult<()> {
         let mut tx = self.begin_redoable().await?;
         let ran = count_to_sql(operations);
         let counted = fenced(
@@ -582,8 +621,12 @@ impl JobQueue for SqlStore {
         Ok(())
     }
 
+    /// Extends the shard's lease and records its progress (the job's is the sum over its
+    /// shards), if the claim still holds it and the job still runs: its operations done, and
+    /// `operations_total` where that is more than the shard's total (a job run whole learns its
+    /// next batch as it goes).
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    async fn heartbeat(
+    pub async fn heartbeat(
         &self,
         fence: &Fence,
         terms: LeaseTerms,
@@ -628,8 +671,10 @@ impl JobQueue for SqlStore {
         })
     }
 
+    /// Marks a group done with what it made, encoded: a group's accumulators
+    /// (`partial_to_sql`) or a rare event's task's outcome ([`rows::encode`]).
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    async fn complete_encoded(&self, fence: &Fence, partial: Vec<u8>) -> StoreResult<bool> {
+    pub async fn complete_encoded(&self, fence: &Fence, partial: Vec<u8>) -> StoreResult<bool> {
         let partial_bytes = partial.len() as u64;
         self.check_room(partial_bytes).await?;
         // Accumulators that a power cut undoes are computed again, to the same bits.
@@ -668,8 +713,16 @@ impl JobQueue for SqlStore {
         Ok(true)
     }
 
+    /// Marks a merge step done and queues the next step's shards, in one transaction, if the claim
+    /// still holds it: a precision target's next batch, or a rare event's round with `state`,
+    /// encoded ([`rows::encode`]), as its merge step's partial. `folded` (the groups of every batch so
+    /// far, folded) replaces the accumulators of batch `folded_through`'s groups, the last batch
+    /// run (inserted, for a job that ran whole;
+    /// [`crate::domain::shards::Merged::folded_through`]), and what the next step no longer
+    /// reads is dropped: the groups of earlier batches, or a round's outcomes and state (the
+    /// devices' groups are kept for the Result).
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    async fn add_batch(
+    pub async fn add_batch(
         &self,
         fence: &Fence,
         shards: &[ShardPlan],
@@ -742,8 +795,11 @@ impl JobQueue for SqlStore {
         Ok(true)
     }
 
+    /// Marks the job failed with `error` at once (a failure no retry can mend), if the claim still
+    /// holds its shard.
+    /// The job's end is stamped `at`, or on the database's clock.
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    async fn fail(&self, fence: &Fence, at: Option<UnixMs>, error: &str) -> StoreResult<bool> {
+    pub async fn fail(&self, fence: &Fence, at: Option<UnixMs>, error: &str) -> StoreResult<bool> {
         let Some(mut tx) = self.begin_finishing(fence).await? else {
             return Ok(false);
         };
@@ -754,8 +810,11 @@ impl JobQueue for SqlStore {
         Ok(true)
     }
 
+    /// Hands a shard whose run failed back to the queue, counting the failure, to be claimed again
+    /// after [`crate::domain::retry_backoff_ms`] on the database's clock (or from `at`, as [`LeaseTerms::at`]);
+    /// once it failed more than `retries` times, its job fails instead, with the reason.
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    async fn fail_attempt(
+    pub async fn fail_attempt(
         &self,
         fence: &Fence,
         at: Option<UnixMs>,
@@ -807,8 +866,13 @@ impl JobQueue for SqlStore {
         Ok(true)
     }
 
+    /// Hands a shard whose outcome could not be stored back to the queue, counting nothing
+    /// against it, to be claimed again after [`crate::domain::ROOM_RETRY_MS`] on the database's
+    /// clock (or from `at`): its job waits (an operator makes room or connections, or cancels
+    /// it) rather than fail. Its `error` is `waiting for room: REASON` (or `waiting for the
+    /// database: REASON`) meanwhile, and its history has one line of it however often it waits.
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    async fn wait_for(
+    pub async fn wait_for(
         &self,
         fence: &Fence,
         at: Option<UnixMs>,
@@ -839,8 +903,9 @@ impl JobQueue for SqlStore {
         Ok(updated == 1)
     }
 
+    /// Hands a running shard back to the queue (graceful shutdown), without counting a failure.
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    async fn release(&self, fence: &Fence) -> StoreResult<bool> {
+    pub async fn release(&self, fence: &Fence) -> StoreResult<bool> {
         let mut tx = self.begin().await?;
         let updated = fenced(
             concat!(
@@ -858,8 +923,10 @@ impl JobQueue for SqlStore {
         Ok(updated == 1)
     }
 
+    /// The job's shards, in order: at most `limit` of them, after the first `skip`. Shards are
+    /// only ever added after those already there, so pages read one after another miss none.
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn shards_from(
+    pub async fn shards_from(
         &self,
         id: &JobId,
         skip: u64,
@@ -887,8 +954,9 @@ impl JobQueue for SqlStore {
         Ok(shards.collect::<Result<_, _>>()?)
     }
 
+    /// `(queued, running)` job counts, for metrics.
     #[tracing::instrument(skip_all)]
-    async fn queue_depth(&self) -> StoreResult<(u64, u64)> {
+    pub async fn queue_depth(&self) -> StoreResult<(u64, u64)> {
         let row = Sql::new(
             "SELECT COUNT(*) FILTER (WHERE status = 'queued') AS queued, \
              COUNT(*) FILTER (WHERE status = 'running') AS running FROM jobs",
@@ -902,13 +970,17 @@ impl JobQueue for SqlStore {
     }
 
     #[tracing::instrument(skip_all)]
-    async fn ping(&self) -> StoreResult<()> {
+    pub async fn ping(&self) -> StoreResult<()> {
         Sql::new("SELECT 1").execute(self.readers()).await?;
         Ok(())
     }
 
+    /// Whether this instance can do its work (`/readyz`): the database takes a write (recorded at
+    /// `now`), every migration this build knows is applied, and, for SQLite, the file at the
+    /// database's path is still the one opened, with at least `min_free_disk_bytes` free beside
+    /// it. [`StoreError::NotReady`] says what is wrong.
     #[tracing::instrument(skip_all)]
-    async fn ready(&self, min_free_disk_bytes: u64, now: UnixMs) -> StoreResult<()> {
+    pub async fn ready(&self, min_free_disk_bytes: u64, now: UnixMs) -> StoreResult<()> {
         self.check_disk(min_free_disk_bytes).await?;
         Sql::new(READINESS_WRITE)
             .bind(now.0)
@@ -921,11 +993,31 @@ impl JobQueue for SqlStore {
         schema_current(self.dialect().migrator, applied)
     }
 
-    fn events(&self) -> Option<broadcast::Receiver<QueueEvent>> {
+    /// Announcements of changes to the queue, where the backend makes them (PostgreSQL's
+    /// LISTEN/NOTIFY); `None` means the caller polls.
+    pub fn events(&self) -> Option<broadcast::Receiver<QueueEvent>> {
         self.subscribe()
     }
 
-    fn ends(&self) -> broadcast::Receiver<QueueEvent> {
+    /// Jobs that ended, as soon as the store knows: [`QueueEvent::Changed`] with the job's id
+    /// (PostgreSQL announces the ends of every instance's jobs, SQLite those of jobs this process
+    /// wrote); a job's progress is not announced here. Not every end reaches it (another process
+    /// on the same SQLite file, an announcement missed while PostgreSQL's listener reconnected): a
+    /// waiter reads the job again now and then.
+    pub fn ends(&self) -> broadcast::Receiver<QueueEvent> {
         self.subscribe_ends()
+    }
+
+    /// Marks a group done with its accumulators, encoded here, in one transaction, if the claim
+    /// still holds it. A worker encodes them off the async threads and calls
+    /// [`Store::complete_encoded`].
+    pub async fn complete(&self, fence: &Fence, stats: &GroupStats) -> StoreResult<bool> {
+        self.complete_encoded(fence, rows::partial_to_sql(stats)?)
+            .await
+    }
+
+    /// The job's shards, in order, all of them.
+    pub async fn shards(&self, id: &JobId) -> StoreResult<Vec<ShardRecord>> {
+        self.shards_from(id, 0, u64::MAX).await
     }
 }

@@ -2,7 +2,7 @@
 //! its summary and its groups' accumulators, its Result without those summaries (each is stored
 //! once, and put back when the Result is read), and each listed device's life.
 
-use super::backend::SqlStore;
+use super::backend::Store;
 use super::queue::drop_partials;
 use super::rows::{
     self, EncodedResult, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, SELECT_PARTIALS,
@@ -11,13 +11,12 @@ use super::rows::{
     life_from_row, result_from_row,
 };
 use super::sql::Sql;
-use super::{DistributionRow, Fence, Operations, Results, StoreResult};
+use super::{DistributionRow, Fence, Operations, StoreResult};
 use crate::domain::query::LARGE_DISTRIBUTION_BINS;
 use crate::domain::rare::Rounds;
 use crate::domain::{Folding, JobId, UnixMs};
-use async_trait::async_trait;
-use bouncewear_model::montecarlo::DeviceLife;
 use bouncewear_model::montecarlo::rare::Outcome;
+use bouncewear_model::montecarlo::{DeviceLife, JobResult};
 use bouncewear_model::stats::Accumulator;
 
 /// Transactions that write a large Result's rows side by side where the database runs writers
@@ -31,7 +30,7 @@ const SIDE_BY_SIDE_WRITES: usize = 2;
 /// cost more than they save.
 const SIDE_BY_SIDE_BYTES: u64 = 256 << 10;
 
-impl SqlStore {
+impl Store {
     /// Writes a result's distribution rows and listed device lives in short transactions of
     /// bounded size ([`rows::DISTRIBUTIONS_PER_WRITE`], [`rows::LIVES_PER_WRITE`]), each only while
     /// the claim holds the merge step, so that no result holds the database for long; the rows
@@ -92,7 +91,7 @@ impl SqlStore {
 }
 
 /// Whether `result`'s rows go in the transaction that ends the job, rather than in transactions
-/// of their own before it ([`SqlStore::write_rows`]): when they fit in one write, and unless
+/// of their own before it ([`Store::write_rows`]): when they fit in one write, and unless
 /// `side_by_side` (the database runs writers side by side) and there are rows enough to share
 /// out, large enough to gain.
 fn with_the_end(result: &EncodedResult, side_by_side: bool) -> bool {
@@ -104,10 +103,17 @@ fn with_the_end(result: &EncodedResult, side_by_side: bool) -> bool {
         && !shared_out
 }
 
-#[async_trait]
-impl Results for SqlStore {
+/// What a succeeded job leaves: its Result, one row per (metric, bin), each device's life.
+impl Store {
+    /// Stores the result, marks the merge step done and the job succeeded, and drops the groups'
+    /// accumulators, if the claim still holds the merge step: the distributions (each with the
+    /// final groups' accumulators of its (metric, bin), for queries after the run) and device
+    /// lives first, in short transactions, then the rest in one. The job's stored bytes
+    /// ([`super::JobRecord::stored_bytes`]); `None` if the claim no longer holds (the job stays
+    /// unsucceeded; rows already written go when it ends, or its next merge writes them again).
+    /// The job's end is stamped `at`, or on the database's clock.
     #[tracing::instrument(skip_all, fields(job = %fence.job))]
-    async fn succeed(
+    pub async fn succeed(
         &self,
         fence: &Fence,
         at: Option<UnixMs>,
@@ -159,8 +165,10 @@ impl Results for SqlStore {
         Ok(Some(stored_bytes))
     }
 
+    /// The accumulators of the job's done groups, in batch and group order, read into `into`
+    /// one at a time; those of the groups `into` holds are not sent ([`Folding::holding`]).
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn partials(&self, id: &JobId, into: Folding) -> StoreResult<Folding> {
+    pub async fn partials(&self, id: &JobId, into: Folding) -> StoreResult<Folding> {
         collect_partials(
             Sql::new(SELECT_PARTIALS)
                 .bind(id.as_str())
@@ -172,8 +180,9 @@ impl Results for SqlStore {
         .await
     }
 
+    /// The state a rare event's round `batch` starts from, its merge step's partial.
     #[tracing::instrument(skip_all, fields(job = %id, batch))]
-    async fn round(&self, id: &JobId, batch: u64) -> StoreResult<Rounds> {
+    pub async fn round(&self, id: &JobId, batch: u64) -> StoreResult<Rounds> {
         let stored = Sql::new(
             "SELECT partial FROM shards WHERE job_id = $1 AND batch = $2 AND grp = -1 \
              AND partial IS NOT NULL",
@@ -188,8 +197,9 @@ impl Results for SqlStore {
         decoded("rare-event round", stored).await
     }
 
+    /// The outcomes of round `batch`'s done tasks, in task order.
     #[tracing::instrument(skip_all, fields(job = %id, batch))]
-    async fn round_outcomes(&self, id: &JobId, batch: u64) -> StoreResult<Vec<Outcome>> {
+    pub async fn round_outcomes(&self, id: &JobId, batch: u64) -> StoreResult<Vec<Outcome>> {
         let rows = Sql::new(
             "SELECT partial FROM shards WHERE job_id = $1 AND batch = $2 AND grp >= 0 \
              AND status = 'done' AND partial IS NOT NULL ORDER BY grp",
@@ -205,8 +215,9 @@ impl Results for SqlStore {
         Ok(outcomes)
     }
 
+    /// The Result JSON as stored, to be served as it is.
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>> {
+    pub async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>> {
         let row = Sql::new(SELECT_RESULT)
             .bind(id.as_str())
             .fetch_optional(self.readers())
@@ -217,8 +228,9 @@ impl Results for SqlStore {
         }
     }
 
+    /// The bins of `metric` that overlap `range`, in bin order.
     #[tracing::instrument(skip_all, fields(job = %id, metric))]
-    async fn distribution(
+    pub async fn distribution(
         &self,
         id: &JobId,
         metric: &str,
@@ -232,8 +244,10 @@ impl Results for SqlStore {
         rows::off_async_threads("distribution", large, parse).await
     }
 
+    /// The groups' accumulators of the bins [`Store::distribution`] gives, in the same order:
+    /// what a query after the run reads. `None` for a bin stored before they were kept.
     #[tracing::instrument(skip_all, fields(job = %id, metric))]
-    async fn distribution_groups(
+    pub async fn distribution_groups(
         &self,
         id: &JobId,
         metric: &str,
@@ -245,8 +259,10 @@ impl Results for SqlStore {
         rows.iter().map(groups_from_row).collect()
     }
 
+    /// The listed devices' lives after device `after` (from the first without), in device order,
+    /// at most `limit`: one page of a keyset walk, whatever the job's size.
     #[tracing::instrument(skip_all, fields(job = %id))]
-    async fn lives_page(
+    pub async fn lives_page(
         &self,
         id: &JobId,
         after: Option<u64>,
@@ -262,6 +278,32 @@ impl Results for SqlStore {
         .fetch_all(self.readers())
         .await?;
         Ok(rows.iter().map(life_from_row).collect::<Result<_, _>>()?)
+    }
+
+    /// The Result, parsed (off the async threads when it is large).
+    pub async fn result(&self, id: &JobId) -> StoreResult<Option<JobResult>> {
+        let Some(text) = self.result_json(id).await? else {
+            return Ok(None);
+        };
+        let large = text.len() >= rows::LARGE_RESULT_BYTES;
+        let parse = move || serde_json::from_str(&text).map_err(|e| rows::corrupt("result", e));
+        rows::off_async_threads("result", large, parse)
+            .await
+            .map(Some)
+    }
+
+    /// Every listed device's life, in device order (page by page; for tests and small jobs).
+    pub async fn lives(&self, id: &JobId) -> StoreResult<Vec<DeviceLife>> {
+        let mut lives: Vec<DeviceLife> = Vec::new();
+        loop {
+            let page = self
+                .lives_page(id, lives.last().map(|l| l.device), 10_000)
+                .await?;
+            if page.is_empty() {
+                return Ok(lives);
+            }
+            lives.extend(page);
+        }
     }
 }
 

@@ -310,7 +310,7 @@ macro_rules! fenced_shard {
 
 pub(crate) use fenced_shard;
 
-/// Leases the next shard (see [`super::JobQueue::claim`]): the target picks the shard's row with the
+/// Leases the next shard (see [`super::Store::claim`]): the target picks the shard's row with the
 /// lock the backend takes on it; `$jobs` names the jobs table, with the index that walks the open
 /// ones in fair-share order where the backend must be told. `s.status <> 'done'`, implied by the
 /// terms after it, is there for the partial index `shards_open_by_job`, which a planner uses only

@@ -1,16 +1,15 @@
 //! Schedules and their runs, written once for both databases.
 
-use super::backend::SqlStore;
+use super::backend::Store;
 use super::queue::{remember, select_job};
 use super::rows::{
     Created, bind_schedule, count_from_sql, run_from_row, schedule_columns, schedule_from_row,
 };
 use super::sql::{Sql, Tx};
-use super::{NewRun, RunRecord, RunSlot, ScheduleRecord, Schedules, StoreError, StoreResult};
+use super::{NewRun, RunRecord, RunSlot, ScheduleRecord, StoreError, StoreResult};
 use crate::domain::{
     IdempotencyKey, Once, Owner, QueueBound, QueuedJob, ScheduleBound, ScheduleId, UnixMs,
 };
-use async_trait::async_trait;
 
 const INSERT_SCHEDULE: &str = concat!(
     "INSERT INTO schedules (",
@@ -18,7 +17,7 @@ const INSERT_SCHEDULE: &str = concat!(
     ") VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)"
 );
 
-impl SqlStore {
+impl Store {
     /// Inserts a schedule in `tx` unless the bound refuses it: the count and the insert in one
     /// transaction, under the owner's lock (SQLite's one writer; an advisory lock on PostgreSQL,
     /// whose inserts at the same moment would each see the count below the bound).
@@ -47,10 +46,13 @@ impl SqlStore {
     }
 }
 
-#[async_trait]
-impl Schedules for SqlStore {
+/// Schedules and their runs.
+impl Store {
+    /// Inserts a schedule unless its owner holds the most the bound allows
+    /// ([`StoreError::TooManySchedules`]); below the bound's free disk, the database is not
+    /// ready (503).
     #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
-    async fn insert_schedule(
+    pub async fn insert_schedule(
         &self,
         schedule: &ScheduleRecord,
         bound: ScheduleBound,
@@ -61,8 +63,11 @@ impl Schedules for SqlStore {
         Ok(())
     }
 
+    /// As [`Store::insert_schedule`], once per key of the schedule's owner (see
+    /// [`Store::insert_job_once`]): a retry gets the schedule the first created, whatever
+    /// the bound.
     #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
-    async fn insert_schedule_once(
+    pub async fn insert_schedule_once(
         &self,
         schedule: &ScheduleRecord,
         bound: ScheduleBound,
@@ -90,7 +95,7 @@ impl Schedules for SqlStore {
     }
 
     #[tracing::instrument(skip_all, fields(schedule = %id))]
-    async fn schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<ScheduleRecord> {
+    pub async fn schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<ScheduleRecord> {
         let row = Sql::new(concat!(
             "SELECT ",
             schedule_columns!(),
@@ -104,8 +109,10 @@ impl Schedules for SqlStore {
         schedule_from_row(&row)
     }
 
+    /// An owner's schedules after the one at `seq` `after` (from the first without it), oldest
+    /// first, at most `limit`; each with its `seq`, the cursor of the next page.
     #[tracing::instrument(skip_all)]
-    async fn schedules(
+    pub async fn schedules(
         &self,
         owner: &Owner,
         after: Option<i64>,
@@ -126,8 +133,9 @@ impl Schedules for SqlStore {
             .collect()
     }
 
+    /// Replaces a schedule's definition and next run (its runs stay).
     #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
-    async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
+    pub async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
         let update = Sql::new(
             "UPDATE schedules SET name = $3, cron = $4, time_zone = $5, template = $6, statistics = $7, \
              enabled = $8, next_run_at = $9, created_at = $10, updated_at = $11 WHERE id = $1 AND owner = $2",
@@ -142,7 +150,7 @@ impl Schedules for SqlStore {
     }
 
     #[tracing::instrument(skip_all, fields(schedule = %id))]
-    async fn delete_schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<()> {
+    pub async fn delete_schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<()> {
         let deleted = Sql::new("DELETE FROM schedules WHERE id = $1 AND owner = $2")
             .bind(id.as_str())
             .bind(owner.as_str())
@@ -154,8 +162,9 @@ impl Schedules for SqlStore {
         Ok(())
     }
 
+    /// Enabled schedules of every owner whose next run is due at `now`.
     #[tracing::instrument(skip_all)]
-    async fn due_schedules(&self, now: UnixMs) -> StoreResult<Vec<ScheduleRecord>> {
+    pub async fn due_schedules(&self, now: UnixMs) -> StoreResult<Vec<ScheduleRecord>> {
         let rows = Sql::new(concat!(
             "SELECT ",
             schedule_columns!(),
@@ -167,8 +176,9 @@ impl Schedules for SqlStore {
         rows.iter().map(schedule_from_row).collect()
     }
 
+    /// Creates the job of one slot unless the slot has one, in one transaction.
     #[tracing::instrument(skip_all, fields(schedule = %slot.schedule, job = %job.id))]
-    async fn create_run(
+    pub async fn create_run(
         &self,
         slot: RunSlot<'_>,
         job: QueuedJob,
@@ -208,8 +218,9 @@ impl Schedules for SqlStore {
         Ok(NewRun::Created(record))
     }
 
+    /// Moves `next_run_at` from `from` to `to`, unless another loop already moved it.
     #[tracing::instrument(skip_all, fields(schedule = %id))]
-    async fn advance_schedule(
+    pub async fn advance_schedule(
         &self,
         id: &ScheduleId,
         from: Option<UnixMs>,
@@ -226,8 +237,9 @@ impl Schedules for SqlStore {
         Ok(updated == 1)
     }
 
+    /// The latest runs, newest first.
     #[tracing::instrument(skip_all, fields(schedule = %schedule))]
-    async fn runs(&self, schedule: &ScheduleId, limit: u32) -> StoreResult<Vec<RunRecord>> {
+    pub async fn runs(&self, schedule: &ScheduleId, limit: u32) -> StoreResult<Vec<RunRecord>> {
         let rows = Sql::new(
             "SELECT r.scheduled_for, r.job_id, r.manual, j.status FROM schedule_runs r JOIN jobs j ON j.id = r.job_id \
              WHERE r.schedule_id = $1 ORDER BY r.scheduled_for DESC LIMIT $2",

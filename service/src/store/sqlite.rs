@@ -1,6 +1,6 @@
 //! The SQLite backend: WAL, foreign keys, `synchronous = FULL` (a submitted job survives a crash or
 //! a power cut once its 202 is sent; only writes the queue can redo do not wait for the disk, see
-//! [`super::SqlStore::begin_redoable`]), one writer connection (writes never race for the lock
+//! [`super::Store::begin_redoable`]), one writer connection (writes never race for the lock
 //! inside the process, and every write transaction starts with a write, so instances sharing the
 //! file wait on `busy_timeout` instead of failing with "database is locked"), and a pool of
 //! readers. The SQL is the store's one body; what is SQLite's own is here.
@@ -29,7 +29,7 @@ pub(crate) struct SqliteBackend {
     pub(crate) readers: SqlitePool,
     /// The file opened; none for an in-memory database.
     file: Option<DatabaseFile>,
-    /// The ends of jobs this process wrote ([`super::SqlStore::ended`]): SQLite announces
+    /// The ends of jobs this process wrote ([`super::Store::ended`]): SQLite announces
     /// nothing itself.
     pub(crate) ends: tokio::sync::broadcast::Sender<super::QueueEvent>,
 }
@@ -200,7 +200,7 @@ impl std::fmt::Display for Room {
 /// file (the store checks the file before each write: [`SqliteBackend::writer`]).
 ///
 /// Released, the writer is back at `synchronous = FULL`, whatever its last transaction was
-/// ([`super::SqlStore::begin_redoable`] sets `NORMAL`), so every other commit reaches the disk
+/// ([`super::Store::begin_redoable`] sets `NORMAL`), so every other commit reaches the disk
 /// before it is acknowledged; a writer that cannot be set back is closed.
 ///
 /// A write waits [`LOCK_WAIT`] for a lock another process holds on the file: then it answers 503
@@ -361,18 +361,18 @@ pub(crate) async fn insert_queued(
 mod tests {
     use super::*;
     use crate::domain::{Owner, UnixMs};
-    use crate::store::{JobQueue, SqlStore};
+    use crate::store::Store;
     use bouncewear_model::montecarlo::Job;
 
     /// A store in a fresh directory of its own, and the directory (to remove at the test's end).
-    async fn open_named(name: &str) -> (SqlStore, String, std::path::PathBuf) {
+    async fn open_named(name: &str) -> (Store, String, std::path::PathBuf) {
         let dir =
             std::env::temp_dir().join(format!("bouncewear-store-{}-{name}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let url = format!("sqlite://{}", dir.join("store.db").display());
         (
-            SqlStore::open(&url, crate::store::DEFAULT_CONNECTIONS)
+            Store::open(&url, crate::store::DEFAULT_CONNECTIONS)
                 .await
                 .unwrap(),
             url,
@@ -494,7 +494,7 @@ mod tests {
             .await
             .unwrap();
         drop(store);
-        let store = SqlStore::open(&url, crate::store::DEFAULT_CONNECTIONS)
+        let store = Store::open(&url, crate::store::DEFAULT_CONNECTIONS)
             .await
             .unwrap();
         for (id, seed) in ids.iter().zip(seeds) {
