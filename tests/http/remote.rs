@@ -3,6 +3,7 @@
 
 use crate::support::app::{Service, TestApp};
 use crate::support::client::get;
+use crate::support::tls;
 use crate::support::{BIN, temp_db, temp_dir};
 use serde_json::{Value, json};
 use std::io::{BufRead, BufReader, Read, Write};
@@ -43,6 +44,16 @@ pub(crate) fn job_file(name: &str, job: &Value) -> String {
     path.display().to_string()
 }
 
+/// What `run` prints for the job in `file`.
+fn run_locally(file: &str) -> String {
+    stdout(
+        &Command::new(BIN)
+            .args(["run", "-q", file])
+            .output()
+            .unwrap(),
+    )
+}
+
 /// Every line of a printed Result but its timing, which differs between two runs.
 fn without_timing(text: &str) -> Vec<&str> {
     text.lines()
@@ -60,12 +71,7 @@ fn submit_wait_prints_what_run_prints_and_fetch_reads_the_parts() {
         "failure": {"e1": {"below": 0.36}}});
     let file = job_file("remote-job", &job);
     let remote_result = stdout(&remote(&server, Some("k1"), &["submit", &file, "--wait"]));
-    let local = stdout(
-        &Command::new(BIN)
-            .args(["run", "-q", &file])
-            .output()
-            .unwrap(),
-    );
+    let local = run_locally(&file);
     assert_eq!(without_timing(&remote_result), without_timing(&local));
 
     let queued: Value =
@@ -108,6 +114,57 @@ fn submit_wait_prints_what_run_prints_and_fetch_reads_the_parts() {
     let refused = remote(&server, None, &["status", id]);
     assert_eq!(refused.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&refused.stderr).contains("401"));
+}
+
+/// The remote commands speak https, as to a server behind a TLS terminator: trusting the CA that
+/// `--ca-cert` (or `BOUNCEWEAR_CA_CERT`) names, a submission waited for prints what `run` prints;
+/// without it the server's certificate is refused at once (exit 1, never sent again), the message
+/// pointing at `--ca-cert`; a file with no certificate in it is a bad command line (exit 2).
+#[test]
+fn remote_commands_speak_https_trusting_the_ca_they_are_told() {
+    let server = TestApp::start(&temp_db("remote-tls"), &["--api-key", "k1"]);
+    let url = tls::terminate(server.base());
+    let ca = tls::ca_file();
+    let file = job_file(
+        "remote-tls-job",
+        &json!({"devices": 6, "operations": 20, "seed": 3}),
+    );
+    let mut served = remote_at(
+        &url,
+        Some("k1"),
+        &["submit", &file, "--wait", "--ca-cert", &ca],
+    );
+    let served = stdout(&served.output().unwrap());
+    let local = run_locally(&file);
+    assert_eq!(without_timing(&served), without_timing(&local));
+
+    let queued = remote_at(&url, Some("k1"), &["submit", &file])
+        .env("BOUNCEWEAR_CA_CERT", &ca)
+        .output()
+        .unwrap();
+    let queued: Value = serde_json::from_str(&stdout(&queued)).unwrap();
+    let id = queued["id"].as_str().unwrap();
+
+    let untrusted = remote_at(&url, Some("k1"), &["status", id])
+        .output()
+        .unwrap();
+    assert_eq!(untrusted.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&untrusted.stderr);
+    assert!(
+        said.contains("UnknownIssuer") && said.contains("--ca-cert"),
+        "{said}"
+    );
+    assert!(
+        !said.contains("again in"),
+        "a refused certificate is not tried again: {said}"
+    );
+
+    let key = tls::key_file();
+    let no_certificate = remote_at(&url, Some("k1"), &["status", id, "--ca-cert", &key])
+        .output()
+        .unwrap();
+    assert_eq!(no_certificate.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&no_certificate.stderr).contains("no PEM certificate"));
 }
 
 /// A job the server refuses exits 2 naming the field; an unknown job, a cancelled one waited for

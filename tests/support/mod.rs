@@ -7,6 +7,7 @@ pub mod app;
 pub mod client;
 pub mod json_close;
 pub mod postgres;
+pub mod tls;
 
 use serde_json::{Value, json};
 use std::io::Write;

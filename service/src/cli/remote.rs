@@ -7,8 +7,9 @@
 use super::{CliError, read_input};
 use bouncewear_model::montecarlo::Metric;
 use bouncewear_model::{FieldError, InvalidInput};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+use ureq::tls::{PemItem, RootCerts, TlsConfig};
 
 /// The server a remote command talks to.
 #[derive(Debug, Clone, clap::Args)]
@@ -37,6 +38,10 @@ pub struct Server {
     /// sends it once. `submit` sends an `Idempotency-Key`, so a retry never queues the job twice.
     #[arg(long, default_value_t = 3, global = true, value_parser = clap::value_parser!(u32).range(..=100))]
     pub retries: u32,
+    /// For an `https` URL: a PEM file of the CA certificates to trust instead of the Mozilla
+    /// roots built in (a company's own CA, say).
+    #[arg(long, env = "BOUNCEWEAR_CA_CERT", global = true, value_name = "PEM")]
+    pub ca_cert: Option<PathBuf>,
 }
 
 /// The longest pause before a retry, whatever `Retry-After` asks.
@@ -78,13 +83,37 @@ pub fn seconds(text: &str) -> Result<f64, String> {
 }
 
 /// An HTTP client whose every request ends within `timeout_seconds`, and which hands any status
-/// back to the caller (a 4xx or 5xx is an answer, not an error of the client).
-pub fn agent(timeout_seconds: f64) -> ureq::Agent {
+/// back to the caller (a 4xx or 5xx is an answer, not an error of the client). It speaks `http`
+/// and `https`, trusting `roots` (else the Mozilla roots built in).
+pub fn agent(timeout_seconds: f64, roots: Option<RootCerts>) -> ureq::Agent {
+    let tls = TlsConfig::builder().root_certs(roots.unwrap_or(RootCerts::WebPki));
     ureq::Agent::config_builder()
         .http_status_as_error(false)
         .timeout_global(Some(Duration::from_secs_f64(timeout_seconds.max(0.001))))
+        .tls_config(tls.build())
         .build()
         .into()
+}
+
+/// The certificates of a PEM file, for `--ca-cert`: exit 2 for a file that cannot be read or
+/// holds none.
+pub fn trusted(path: &Path) -> Result<RootCerts, CliError> {
+    let text = read_input(path).map_err(|e| CliError::Usage(format!("--ca-cert {e}")))?;
+    let certificates = ureq::tls::parse_pem(text.as_bytes())
+        .filter_map(|item| match item {
+            Ok(PemItem::Certificate(certificate)) => Some(Ok(certificate)),
+            Ok(_) => None,
+            Err(error) => Some(Err(error)),
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| CliError::Usage(format!("--ca-cert {}: {e}", path.display())))?;
+    if certificates.is_empty() {
+        return Err(CliError::Usage(format!(
+            "--ca-cert {}: no PEM certificate (-----BEGIN CERTIFICATE-----) in it",
+            path.display()
+        )));
+    }
+    Ok(RootCerts::new_with_certs(&certificates))
 }
 
 impl Server {
@@ -179,7 +208,11 @@ impl Server {
         let left = deadline.map_or(f64::INFINITY, |end| {
             end.saturating_duration_since(Instant::now()).as_secs_f64()
         });
-        let agent = agent(self.request_timeout_seconds.min(left));
+        let roots = self.ca_cert.as_deref().map(trusted).transpose();
+        let agent = agent(
+            self.request_timeout_seconds.min(left),
+            roots.map_err(Failure::Final)?,
+        );
         let sent = match (method, body) {
             ("POST", Some(body)) => {
                 let request = self
@@ -285,6 +318,9 @@ impl Failure {
         let said = match error {
             ureq::Error::Timeout(_) => format!(
                 "{url}: no answer within --request-timeout-seconds (or what --timeout-seconds left)"
+            ),
+            _ if error.to_string().contains("invalid peer certificate") => format!(
+                "{url}: {error} (a server whose certificate a CA of your own signed: --ca-cert)"
             ),
             _ => format!("{url}: {error}"),
         };
