@@ -363,7 +363,7 @@ fn woodruff_intervals(
         .zip(&halves)
         .flat_map(|(&q, &half)| [(q - half).clamp(0.0, 1.0), (q + half).clamp(0.0, 1.0)])
         .collect();
-    let ends = all.sketch().interpolated(&bounds);
+    let ends = all.sketch().interpolated(&bounds, [all.min(), all.max()]);
     ends.chunks_exact(2)
         .zip(values.iter().zip(&halves).zip(variances))
         .map(|(end, ((&value, &half), variance))| {
