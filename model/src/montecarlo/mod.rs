@@ -236,6 +236,20 @@ impl LifeReport {
         }
         crate::life::Lives::from_counts(counts)
     }
+
+    /// The report with its candidate fits compared, where a Result stored by an older build has
+    /// none (`fits` came later, and such a Result reads as if no fit could be made): from the
+    /// lives it summarises ([`LifeReport::lives`], exact), as the job's own run compares them,
+    /// beside the stored Weibull. A report that has them, or has no failure to fit, is as it was.
+    pub fn with_fits(mut self, operations: u64) -> Self {
+        if self.analysis.fits.is_empty() && self.failures > 0 {
+            let lives = self.lives(operations);
+            let analysis = &mut self.analysis;
+            analysis.fits = crate::life::fits::fits(&lives, analysis.weibull.as_ref());
+            analysis.fit_warning = crate::life::fits::weibull_warning(&analysis.fits);
+        }
+        self
+    }
 }
 
 /// Why a run gave no Result.

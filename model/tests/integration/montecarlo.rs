@@ -496,6 +496,12 @@ fn scattered_devices_give_a_weibull_life_with_censoring() {
         "censored at the end of the test"
     );
     assert!(life.devices.windows(2).all(|w| w[0].device < w[1].device));
+    // A Result stored before the candidate fits were compared gets them as its run does.
+    assert!(life.analysis.fits.len() >= 2);
+    let mut older = life.clone();
+    (older.analysis.fits, older.analysis.fit_warning) = (Vec::new(), None);
+    assert_eq!(older.with_fits(1000).analysis, life.analysis);
+    assert_eq!(life.clone().with_fits(1000).analysis, life.analysis);
     let weibull = life.analysis.weibull.clone().expect("a fit");
     assert!(
         weibull.beta > 1.0 && weibull.eta > 500.0 && weibull.eta < 2000.0,

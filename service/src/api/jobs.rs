@@ -1280,13 +1280,17 @@ async fn result_asking(
     stored_result(state, id).await
 }
 
-/// The stored Result of a succeeded job, parsed.
+/// The stored Result of a succeeded job, parsed; one stored by an older build gets the life
+/// fits it lacks ([`bouncewear_model::montecarlo::LifeReport::with_fits`]).
 pub async fn stored_result(state: &AppState, id: &JobId) -> Result<JobResult, ApiError> {
-    state
+    let mut result = state
         .store
         .result(id)
         .await?
-        .ok_or_else(|| without_result(id))
+        .ok_or_else(|| without_result(id))?;
+    let operations = result.job.spec().operations;
+    result.life = result.life.map(|life| life.with_fits(operations));
+    Ok(result)
 }
 
 /// A succeeded job's result is stored with it and deleted with it: missing, the job was deleted
