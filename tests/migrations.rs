@@ -106,3 +106,41 @@ async fn landed_migrations_are_never_edited() {
         "a new migration: add its checksum to LANDED"
     );
 }
+
+/// A database that a newer build migrated (a rollback after an upgrade) is not opened, and the
+/// refusal says so and what to do, for a migration this build does not know and for one whose
+/// checksum differs from its own.
+#[tokio::test]
+async fn a_database_a_newer_build_migrated_is_refused_saying_so() {
+    use sqlx::Connection;
+    let cases = [
+        (
+            9999,
+            "INSERT INTO _sqlx_migrations \
+             (version, description, installed_on, success, checksum, execution_time) \
+             VALUES (9999, 'later', CURRENT_TIMESTAMP, 1, x'00', 1)",
+            "a newer build migrated it",
+        ),
+        (
+            1,
+            "UPDATE _sqlx_migrations SET checksum = x'00' WHERE version = 1",
+            "was edited",
+        ),
+    ];
+    for (version, change, said) in cases {
+        let path = crate::support::temp_dir(&format!("newer-{version}")).join("jobs.db");
+        let url = format!("sqlite://{}", path.display());
+        drop(bouncewear::store::open(&url).await.expect("a new database"));
+        let mut connection = sqlx::SqliteConnection::connect(&url).await.unwrap();
+        sqlx::query(change).execute(&mut connection).await.unwrap();
+        connection.close().await.unwrap();
+        let Err(refused) = bouncewear::store::open(&url).await else {
+            panic!("migration {version}: opened");
+        };
+        let message = refused.to_string();
+        assert!(
+            message.contains(&format!("migration {version}")) && message.contains(said),
+            "{message}"
+        );
+    }
+}

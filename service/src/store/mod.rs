@@ -33,6 +33,24 @@ use std::sync::Arc;
 
 pub type StoreResult<T> = Result<T, StoreError>;
 
+/// Why the database's migrations stop this build, in words that say what to do: a database
+/// that another build migrated further (a rollback after an upgrade), or one whose applied
+/// migration was edited since, is never migrated over.
+fn migration_failed(error: &sqlx::migrate::MigrateError) -> String {
+    use sqlx::migrate::MigrateError::{VersionMismatch, VersionMissing};
+    match error {
+        VersionMissing(version) => format!(
+            "the database has migration {version}, which this build does not know: a newer build \
+             migrated it; run that build (or this one on a copy taken before the upgrade)"
+        ),
+        VersionMismatch(version) => format!(
+            "the database's migration {version} is not this build's migration {version} (a landed \
+             migration was edited): run the build that migrated it"
+        ),
+        other => format!("migration: {other}"),
+    }
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
     /// No such thing for this owner (another owner's things do not exist for the caller).
@@ -43,7 +61,7 @@ pub enum StoreError {
     Conflict(String),
     #[error("database: {0}")]
     Database(#[from] sqlx::Error),
-    #[error("migration: {0}")]
+    #[error("{}", migration_failed(.0))]
     Migration(#[from] sqlx::migrate::MigrateError),
     /// The database URL names no backend this build has.
     #[error(
