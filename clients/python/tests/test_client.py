@@ -327,3 +327,67 @@ def test_the_other_job_of_a_comparison_reaches_no_other_resource(client, job):
     with pytest.raises(BouncewearError) as unknown:
         job.compare(Job(client, {"id": f"{job.id}?metric=e1", "status": "succeeded"}))
     assert unknown.value.status == 404
+
+
+TLS = os.path.join(os.path.dirname(__file__), "..", "..", "..", "tests", "data", "tls")
+
+
+def _terminating(backend):
+    """A TLS terminator in front of the server at `backend` (as a deployment puts one), with the
+    test CA's certificate for localhost (tests/data/tls): its https URL and listening socket."""
+    import socket
+    import ssl
+    host, port = backend.removeprefix("http://").rsplit(":", 1)
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    context.load_cert_chain(os.path.join(TLS, "localhost.pem"), os.path.join(TLS, "localhost.key"))
+    listening = socket.socket()
+    listening.bind(("127.0.0.1", 0))
+    listening.listen(16)
+
+    def pump(source, sink):
+        try:
+            while data := source.recv(65536):
+                sink.sendall(data)
+        except OSError:
+            pass
+        finally:
+            for end in (source, sink):
+                try:
+                    end.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+
+    def serve():
+        while True:
+            try:
+                raw, _ = listening.accept()
+            except OSError:
+                return
+            try:
+                client = context.wrap_socket(raw, server_side=True)
+            except (OSError, ssl.SSLError):
+                raw.close()  # a client that did not trust the certificate
+                continue
+            server = socket.create_connection((host, int(port)))
+            threading.Thread(target=pump, args=(client, server), daemon=True).start()
+            threading.Thread(target=pump, args=(server, client), daemon=True).start()
+
+    threading.Thread(target=serve, daemon=True).start()
+    return f"https://localhost:{listening.getsockname()[1]}", listening
+
+
+def test_https_trusts_the_ca_it_is_told_and_refuses_others_at_once(job, monkeypatch, caplog):
+    url, listening = _terminating(BASE)
+    try:
+        ca = os.path.join(TLS, "ca.pem")
+        assert Client(url, ca_cert=ca).job(job.id).status == "succeeded"
+        monkeypatch.setenv("BOUNCEWEAR_CA_CERT", ca)
+        assert Client(url).job(job.id).status == "succeeded"
+        monkeypatch.delenv("BOUNCEWEAR_CA_CERT")
+        with pytest.raises(requests.exceptions.SSLError):
+            Client(url).job(job.id)
+        assert _notes(caplog) == []
+        with pytest.raises(ValueError):
+            Client(url, ca_cert=os.path.join(TLS, "missing.pem"))
+    finally:
+        listening.close()

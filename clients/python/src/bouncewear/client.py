@@ -8,6 +8,7 @@ import datetime
 import email.utils
 import io
 import logging
+import os
 import sys
 import time
 import urllib.parse
@@ -131,16 +132,26 @@ class Client:
     `Retry-After` (at most a minute), and a repeatable one whose connection was refused, reset or
     cut short after 0.5, 1, 2, ... s, up to `retries` times, each noted on the `bouncewear`
     logger; then the last `BouncewearError` (or `requests.ConnectionError`) is raised. `submit`
-    always sends an Idempotency-Key, so a job is never queued twice."""
+    always sends an Idempotency-Key, so a job is never queued twice.
+
+    An `https` URL is checked against the CA certificates `requests` trusts, or instead those of
+    the PEM file `ca_cert` (default: the `BOUNCEWEAR_CA_CERT` environment variable, as for the
+    command line's `--ca-cert`), for a server whose certificate a company's own CA signed; a
+    certificate not trusted raises `requests.exceptions.SSLError` at once."""
 
     def __init__(self, base_url: str = "http://127.0.0.1:8080", api_key: Optional[str] = None,
-                 timeout: float = 60.0, retries: int = 3) -> None:
+                 timeout: float = 60.0, retries: int = 3, ca_cert: Optional[str] = None) -> None:
         if retries < 0:
             raise ValueError(f"retries must be 0 or more, got {retries}")
         self.base_url = base_url.rstrip("/")
         self.timeout = timeout
         self.retries = retries
         self._session = requests.Session()
+        ca_cert = ca_cert or os.environ.get("BOUNCEWEAR_CA_CERT") or None
+        if ca_cert is not None and not os.path.isfile(ca_cert):
+            raise ValueError(f"ca_cert {ca_cert!r} is not a file")
+        # Given with each request: `requests` lets REQUESTS_CA_BUNDLE override a session's own.
+        self._verify: Dict[str, Any] = {} if ca_cert is None else {"verify": ca_cert}
         if api_key is not None:
             self._session.headers["Authorization"] = f"Bearer {api_key}"
 
@@ -166,7 +177,8 @@ class Client:
                 timeout = min(timeout, left) if timeout else left
             try:
                 response = self._session.request(method, self.base_url + path, json=json,
-                                                 params=params, headers=headers, timeout=timeout)
+                                                 params=params, headers=headers, timeout=timeout,
+                                                 **self._verify)
             except requests.exceptions.SSLError:
                 raise  # a TLS fault, which another try would meet again
             except (requests.ConnectionError, requests.exceptions.ChunkedEncodingError,
