@@ -237,8 +237,9 @@ pub async fn get_schedule(
 
 /// Replace a schedule's definition (its runs stay).
 ///
-/// The body is a whole ScheduleSpec, as for creation; the next due time is worked out again. Its
-/// runs and their jobs stay.
+/// The body is a whole ScheduleSpec, as for creation; the next due time is worked out again,
+/// but a run already due and not yet made (waiting for room in the queue) stays due. Its runs and
+/// their jobs stay.
 #[utoipa::path(
     put, path = "/v1/schedules/{id}", tag = "schedules", params(("id" = String, Path, description = "Schedule id")),
     request_body(content = ScheduleSpec, content_type = "application/json"),
@@ -258,7 +259,12 @@ pub async fn replace_schedule(
 ) -> Result<Json<ScheduleResource>, ApiError> {
     let existing = state.store.schedule(&owner, &id).await?;
     let valid = ValidSchedule::parse(&body, state.config.schedule_limits(), Utc::now())?;
-    let record = record(valid, id, owner, existing.created_at, UnixMs::now());
+    let now = UnixMs::now();
+    let next_run_at = valid.next_run_replacing(existing.next_run_at, now);
+    let record = ScheduleRecord {
+        next_run_at,
+        ..record(valid, id, owner, existing.created_at, now)
+    };
     state.store.update_schedule(&record).await?;
     Ok(Json(resource(&state, &record).await?))
 }

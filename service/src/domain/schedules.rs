@@ -209,6 +209,15 @@ impl ValidSchedule {
             .map(UnixMs::from_datetime)
     }
 
+    /// The next run of this document replacing a schedule whose next run was `due`: a due time
+    /// already past stays (its run is not made yet: it waits for room in the queue, or for the
+    /// scheduler's next tick), else the first run after `now`; none while disabled. An edit, even
+    /// of the same body, dropped a night that waited for room.
+    pub fn next_run_replacing(&self, due: Option<UnixMs>, now: UnixMs) -> Option<UnixMs> {
+        let next = self.next_run_after(now)?;
+        Some(due.filter(|&due| due <= now).unwrap_or(next))
+    }
+
     pub fn into_definition(self) -> ScheduleDefinition {
         self.definition
     }
@@ -1209,5 +1218,29 @@ mod tests {
             Some(UnixMs::from_datetime(utc("2026-11-23T03:00:00Z")))
         );
         assert_eq!(next(false), None);
+    }
+
+    /// A schedule replaced while its run is due (waiting for room in the queue) keeps that due
+    /// time; one whose next run is ahead gets the new document's; a disabled one none.
+    #[test]
+    fn a_replaced_schedule_keeps_a_night_still_owed() {
+        let body = |enabled: bool| {
+            format!(
+                r#"{{"name": "n", "cron": "0 4 * * *", "template": {{}}, "enabled": {enabled}}}"#
+            )
+        };
+        let at = |text| UnixMs::from_datetime(utc(text));
+        let now = at("2026-11-22T03:00:10Z");
+        let replacing = |enabled, due| {
+            ValidSchedule::parse(&body(enabled), HOURLY, now.to_datetime())
+                .unwrap()
+                .next_run_replacing(due, now)
+        };
+        let owed = Some(at("2026-11-22T03:00:00Z"));
+        assert_eq!(replacing(true, owed), owed);
+        let ahead = Some(at("2026-11-23T03:00:00Z"));
+        assert_eq!(replacing(true, ahead), Some(at("2026-11-22T04:00:00Z")));
+        assert_eq!(replacing(true, None), Some(at("2026-11-22T04:00:00Z")));
+        assert_eq!(replacing(false, owed), None);
     }
 }
