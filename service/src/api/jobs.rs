@@ -1135,7 +1135,7 @@ pub async fn get_life(
         Format::Json => Ok(immutable(&state, &headers, JSON, to_json(&life)?)),
         Format::Csv => {
             let identity = format!("{id}/life.csv");
-            let body = Body::from_stream(life_csv(state.clone(), id));
+            let body = Body::from_stream(life_csv(state.clone(), owner, id));
             Ok(immutable_identified(
                 &state,
                 &headers,
@@ -1218,23 +1218,31 @@ const LIVES_PER_PAGE: u32 = 10_000;
 
 /// The life CSV of a job, its header and then one page of listed devices at a time: what a
 /// response holds in memory is one page, whatever the job's size. A store error ends the stream
-/// (the client sees a truncated body: the status line is sent before the rows).
+/// (the client sees a truncated body: the status line is sent before the rows), and so does the
+/// job's delete while it is read: the last page is served only if the job is still there once
+/// it was read, since a page read after the delete is empty (a header alone came back as a
+/// whole 200).
 fn life_csv(
     state: AppState,
+    owner: Owner,
     id: JobId,
 ) -> impl Stream<Item = Result<Bytes, crate::store::StoreError>> + Send {
     let header = Bytes::from_static(b"device,operations_to_failure,censored\n");
     let pages = futures_util::stream::try_unfold(Some(None), move |after| {
-        let (state, id) = (state.clone(), id.clone());
+        let (state, owner, id) = (state.clone(), owner.clone(), id.clone());
         async move {
             let Some(after) = after else {
                 return Ok(None);
             };
             let page = state.store.lives_page(&id, after, LIVES_PER_PAGE).await?;
+            let last_page = page.len() < LIVES_PER_PAGE as usize;
+            if last_page {
+                state.store.job(&owner, &id).await?;
+            }
             let Some(last) = page.last() else {
                 return Ok(None);
             };
-            let next = (page.len() == LIVES_PER_PAGE as usize).then_some(Some(last.device));
+            let next = (!last_page).then_some(Some(last.device));
             let mut csv = String::with_capacity(page.len() * 16);
             for device in &page {
                 // A censored device did not fail: it has no operations to failure.

@@ -176,6 +176,7 @@ pub(crate) static DIALECT: Dialect = Dialect {
         "jobs j",
         " FOR UPDATE OF s SKIP LOCKED"
     ),
+    lock_job: Some("SELECT 1 AS locked FROM jobs WHERE id = $1 FOR NO KEY UPDATE"),
     migrator: &migrations::POSTGRES,
 };
 

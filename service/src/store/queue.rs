@@ -169,8 +169,18 @@ macro_rules! progress_sums {
     };
 }
 
-/// Sets the job's progress to the sum over its shards.
-async fn sum_progress(tx: &mut Tx, job: &JobId) -> StoreResult<()> {
+/// Locks job `job`'s row where the database asks it ([`Dialect::lock_job`]), before a statement
+/// that writes [`progress_sums!`]: that statement then reads every shard committed before it.
+async fn lock_job(dialect: &Dialect, tx: &mut Tx, job: &str) -> StoreResult<()> {
+    if let Some(lock) = dialect.lock_job {
+        Sql::new(lock).bind(job).fetch_optional(&mut *tx).await?;
+    }
+    Ok(())
+}
+
+/// Sets the job's progress to the sum over its shards, its row locked first ([`lock_job`]).
+async fn sum_progress(dialect: &Dialect, tx: &mut Tx, job: &JobId) -> StoreResult<()> {
+    lock_job(dialect, tx, job.as_str()).await?;
     Sql::new(concat!(
         "UPDATE jobs SET ",
         progress_sums!(),
@@ -375,12 +385,20 @@ impl Store {
             .await?
         {
             let once = if fingerprint == key.fingerprint {
-                Once::Replayed(select_job(&mut tx, &job.owner, &JobId::from(id)).await?)
+                match select_job(&mut tx, &job.owner, &JobId::from(id)).await {
+                    Ok(replayed) => Some(Once::Replayed(replayed)),
+                    // Deleted since the key was read (PostgreSQL reads each statement afresh),
+                    // and the key with it: the retry creates the job, as one after the delete.
+                    Err(StoreError::NotFound { .. }) => None,
+                    Err(error) => return Err(error),
+                }
             } else {
-                Once::KeyReused
+                Some(Once::KeyReused)
             };
-            tx.commit().await?;
-            return Ok(Some(once));
+            if let Some(once) = once {
+                tx.commit().await?;
+                return Ok(Some(once));
+            }
         }
         if !self.insert_queued(&mut tx, &job, bound).await? {
             tx.rollback().await?;
@@ -572,6 +590,7 @@ impl Store {
         // The job runs from its first claim, is charged its shard's cost at each (fair share), and
         // counts the claimed shard's progress afresh; the statement returns what the worker needs
         // of the job (one round trip where three were).
+        lock_job(self.dialect(), &mut tx, &claimed.text("job_id")?).await?;
         let job = Sql::new(concat!(
             "UPDATE jobs SET status = CASE WHEN status = 'queued' THEN 'running' ELSE status END, \
              started_at = COALESCE(started_at, $2), vstart = vtime, vtime = vtime + $3, ",
@@ -616,7 +635,7 @@ impl Store {
             .bind(count_to_sql(operations.saturating_sub(charged)))
             .execute(&mut tx)
             .await?;
-        sum_progress(&mut tx, &fence.job).await?;
+        sum_progress(self.dialect(), &mut tx, &fence.job).await?;
         tx.commit().await?;
         Ok(())
     }
@@ -653,7 +672,7 @@ impl Store {
         .execute(&mut tx)
         .await?;
         if updated == 1 {
-            sum_progress(&mut tx, &fence.job).await?;
+            sum_progress(self.dialect(), &mut tx, &fence.job).await?;
             tx.commit().await?;
             return Ok(Lease::Held);
         }
@@ -696,6 +715,7 @@ impl Store {
         }
         // Only a job still running (as in `succeed`): a cancel committed since the fence was read
         // dropped the accumulators, and these would be counted in a job that ended.
+        lock_job(self.dialect(), &mut tx, fence.job.as_str()).await?;
         let counted = Sql::new(concat!(
             "UPDATE jobs SET stored_bytes = stored_bytes + $2, ",
             progress_sums!(),
@@ -790,7 +810,7 @@ impl Store {
             tx.rollback().await?;
             return Ok(false);
         }
-        sum_progress(&mut tx, &fence.job).await?;
+        sum_progress(self.dialect(), &mut tx, &fence.job).await?;
         tx.commit().await?;
         Ok(true)
     }
@@ -857,7 +877,7 @@ impl Store {
             .bind(now.0 + retry_backoff_ms(failures))
             .execute(&mut tx)
             .await?;
-            sum_progress(&mut tx, &fence.job).await?;
+            sum_progress(self.dialect(), &mut tx, &fence.job).await?;
         }
         tx.commit().await?;
         if ends {
@@ -898,7 +918,7 @@ impl Store {
         .bind(now.0 + ROOM_RETRY_MS)
         .execute(&mut tx)
         .await?;
-        sum_progress(&mut tx, &fence.job).await?;
+        sum_progress(self.dialect(), &mut tx, &fence.job).await?;
         tx.commit().await?;
         Ok(updated == 1)
     }
@@ -918,7 +938,7 @@ impl Store {
         )
         .execute(&mut tx)
         .await?;
-        sum_progress(&mut tx, &fence.job).await?;
+        sum_progress(self.dialect(), &mut tx, &fence.job).await?;
         tx.commit().await?;
         Ok(updated == 1)
     }

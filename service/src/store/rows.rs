@@ -190,6 +190,12 @@ pub(crate) struct Dialect {
     pub holds: &'static str,
     /// The claim of the next shard ([`claim_next`]).
     pub claim: &'static str,
+    /// Where one statement reads what others committed before it began (PostgreSQL): the lock
+    /// on job `$1`'s row that a write of its progress takes first, so that the sum it writes
+    /// reads every shard written before it (else a claim's or a heartbeat's sum, read before a
+    /// group's completion committed, waited for that job's row and overwrote the larger sum:
+    /// progress stepped back by a group).
+    pub lock_job: Option<&'static str>,
     pub migrator: &'static LazyLock<Migrator>,
 }
 

@@ -84,9 +84,13 @@ impl Store {
             if fingerprint != key.fingerprint {
                 return Ok(Once::KeyReused);
             }
-            return Ok(Once::Replayed(
-                self.schedule(owner, &ScheduleId::from(id)).await?,
-            ));
+            match self.schedule(owner, &ScheduleId::from(id)).await {
+                Ok(replayed) => return Ok(Once::Replayed(replayed)),
+                // Deleted since the key was read, and the key with it (a delete takes its keys
+                // in its transaction): created anew, as by a retry after the delete.
+                Err(StoreError::NotFound { .. }) => tx = self.begin_reading_first().await?,
+                Err(error) => return Err(error),
+            }
         }
         self.insert_bounded(&mut tx, schedule, bound).await?;
         remember(&mut tx, owner, Created::Schedule(&schedule.id), key, now).await?;

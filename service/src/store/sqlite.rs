@@ -331,6 +331,8 @@ pub(crate) static DIALECT: Dialect = Dialect {
         "jobs j INDEXED BY jobs_open_by_vtime",
         ""
     ),
+    // One writer at a time: a transaction's statements see every write committed before it.
+    lock_job: None,
     migrator: &migrations::SQLITE,
 };
 
