@@ -27,6 +27,7 @@ const LANDED: &[(&str, &str, &str)] = &[
         "0013_results_without_summaries.sql",
         "4edb9d9e1644443b",
     ),
+    ("sqlite", "0014_skipped_runs.sql", "3a77580360657193"),
     ("postgres", "0001_schema.sql", "e6be58dc128a013f"),
     ("postgres", "0002_lost_leases.sql", "3f9e97de535e85cf"),
     ("postgres", "0003_job_events.sql", "4f2154e380d53591"),
@@ -66,6 +67,7 @@ const LANDED: &[(&str, &str, &str)] = &[
         "0015_job_end_announcements.sql",
         "b7b1cf8cda75a8e8",
     ),
+    ("postgres", "0016_skipped_runs.sql", "956586cc8c8422ac"),
 ];
 
 /// sqlx refuses to start against a database whose applied migration has changed since: an edit

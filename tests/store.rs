@@ -14,7 +14,7 @@ use bouncewear::domain::{
 use bouncewear::scheduler::{RunLimits, Waiting, tick};
 use bouncewear::store::{
     self, Awaited, EncodedGroups, EncodedResult, JobRecord, Lease, LeaseTerms, NewRun, Operations,
-    RetryBudget, RunSlot, ScheduleRecord, Store, StoreError,
+    RetryBudget, RunSlot, ScheduleRecord, Skipped, Store, StoreError,
 };
 use bouncewear::worker::{HELD_GROUP_BYTES, HeldGroups, Workers};
 use bouncewear_model::Pointer;
@@ -1790,7 +1790,18 @@ fn nightly(id: &str, next_run_at: &str) -> ScheduleRecord {
         next_run_at: Some(UnixMs::from_datetime(utc(next_run_at))),
         created_at: UnixMs(0),
         updated_at: UnixMs(0),
+        skipped: Skipped::default(),
     }
+}
+
+/// The runs `schedule` skipped as stored: how many, the latest one's due time and its reason.
+async fn skipped(store: &Store, schedule: &ScheduleRecord) -> (u64, Option<(String, String)>) {
+    let stored = store.schedule(&schedule.owner, &schedule.id).await.unwrap();
+    let last = stored
+        .skipped
+        .last
+        .map(|(due, reason)| (due.to_rfc3339(), reason));
+    (stored.skipped.runs, last)
 }
 
 async fn two_scheduler_loops_never_duplicate_a_night(url: &str) {
@@ -1915,6 +1926,16 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
         stored.next_run_at,
         Some(UnixMs::from_datetime(utc("2026-11-23T03:00:00Z")))
     );
+    // The lost night shows on the schedule, with why: it was in the log only.
+    let (runs, last) = skipped(&store, &schedule).await;
+    assert_eq!(runs, 1);
+    let (due, reason) = last.expect("the skipped run");
+    assert_eq!(due, "2026-11-22T03:00:00.000Z");
+    assert!(
+        reason.starts_with("the template is refused by this server now: ")
+            && reason.contains("/devices"),
+        "{reason}"
+    );
     // A template larger than the server now allows (a limit lowered since it was written, or
     // another instance's) skips its run the same way: it ran, unbounded.
     let mut large = nightly("s2", "2026-11-22T03:00:00Z");
@@ -1934,11 +1955,39 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
     };
     let next_night = utc("2026-11-23T03:00:05Z");
     let created = tick(store.as_ref(), limits, next_night, &mut waiting);
+    let (runs, last) = skipped(&store, &large).await;
+    assert_eq!(runs, 1);
+    let reason = last.unwrap().1;
+    assert!(reason.contains("this server allows 9999"), "{reason}");
     assert_eq!(
         created.await.unwrap(),
         1,
         "within the limit, the next night runs"
     );
+    let (runs, last) = skipped(&store, &large).await;
+    assert_eq!(runs, 1, "a run made is no skip");
+    assert_eq!(last.unwrap().0, "2026-11-22T03:00:00.000Z");
+    // The first schedule's template is still refused: its next night is skipped too.
+    let (runs, last) = skipped(&store, &schedule).await;
+    assert_eq!(
+        (runs, last.unwrap().0.as_str()),
+        (2, "2026-11-23T03:00:00.000Z")
+    );
+    // A second loop (another instance) that read the schedule before the first skipped its run
+    // moves nothing and counts nothing.
+    assert!(
+        !store
+            .skip_run(
+                &schedule.id,
+                schedule.next_run_at,
+                None,
+                UnixMs::from_datetime(now),
+                "again"
+            )
+            .await
+            .unwrap()
+    );
+    assert_eq!(skipped(&store, &schedule).await.0, 2);
 }
 
 async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) {
@@ -1989,6 +2038,11 @@ async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) 
         let made = store.runs(&ScheduleId::from(schedule), 10).await.unwrap();
         assert_eq!(made.len(), runs, "{schedule}");
     }
+    let (runs, last) = skipped(&store, &nightly("s1", "2026-11-22T03:00:00Z")).await;
+    let (due, reason) = last.expect("the skipped run");
+    assert_eq!((runs, due.as_str()), (1, "2026-11-22T03:00:00.000Z"));
+    assert!(reason.contains("quota"), "{reason}");
+    assert_eq!(skipped(&store, &other).await, (0, None));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -4,7 +4,7 @@
 //! key makes the job unique across restarts and across instances sharing the database.
 
 use crate::domain::{QueueBound, ScheduleId, Timetable, UnixMs};
-use crate::store::{NewRun, RunSlot, Store, StoreError, StoreResult};
+use crate::store::{NewRun, RunSlot, ScheduleRecord, Store, StoreError, StoreResult};
 use chrono::{DateTime, Utc};
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -118,9 +118,8 @@ pub async fn tick(
             Err(invalid) => {
                 // Moved past this run, so that it is said once a run, not at every tick.
                 tracing::error!(schedule = %schedule.id, %invalid, "stored template no longer validates; this run is skipped");
-                store
-                    .advance_schedule(&schedule.id, schedule.next_run_at, next)
-                    .await?;
+                let reason = format!("the template is refused by this server now: {invalid}");
+                skip(store, &schedule, next, due, &reason).await?;
                 continue;
             }
         };
@@ -140,7 +139,12 @@ pub async fn tick(
             // schedule moves on as past a run that exists.
             Err(StoreError::OverQuota { used, quota }) => {
                 tracing::warn!(schedule = %schedule.id, used, quota, "the schedule's key stores its quota; this run is skipped");
-                NewRun::AlreadyExists
+                waiting.0.remove(&schedule.id);
+                let reason = format!(
+                    "its key's jobs store {used} bytes, its quota is {quota}: delete some jobs"
+                );
+                skip(store, &schedule, next, due, &reason).await?;
+                continue;
             }
             made => made?,
         };
@@ -161,4 +165,22 @@ pub async fn tick(
             .await?;
     }
     Ok(created)
+}
+
+/// Skips `schedule`'s run due at `due` for `reason`: counted on the schedule (shown with it) and on
+/// `/metrics`, and its next run moved to `next`.
+async fn skip(
+    store: &Store,
+    schedule: &ScheduleRecord,
+    next: Option<UnixMs>,
+    due: UnixMs,
+    reason: &str,
+) -> StoreResult<()> {
+    if store
+        .skip_run(&schedule.id, schedule.next_run_at, next, due, reason)
+        .await?
+    {
+        crate::telemetry::record_scheduled_run_skipped();
+    }
+    Ok(())
 }

@@ -144,6 +144,9 @@ pub const FITS_STOPPED: &str = "bouncewear_fits_stopped_total";
 /// Jobs accepted into the queue, schedules' runs included ([`record_jobs_submitted`]).
 const JOBS_SUBMITTED: &str = "bouncewear_jobs_submitted_total";
 
+/// Schedules' runs skipped at their due time ([`record_scheduled_run_skipped`]).
+const SCHEDULED_RUNS_SKIPPED: &str = "bouncewear_scheduled_runs_skipped_total";
+
 /// The HELP text of every metric the service records, wherever it records it.
 fn describe_metrics() {
     metrics::describe_counter!(
@@ -176,6 +179,10 @@ fn describe_metrics() {
     metrics::describe_counter!(
         JOBS_SUBMITTED,
         "Jobs accepted into the queue by this instance, schedules' runs included."
+    );
+    metrics::describe_counter!(
+        SCHEDULED_RUNS_SKIPPED,
+        "Schedules' runs this instance skipped at their due time: a template the server's limits refuse now, or a key over its quota."
     );
     metrics::describe_counter!(
         "bouncewear_jobs_finished_total",
@@ -237,6 +244,7 @@ fn counters_from_zero() {
         FITS_STOPPED,
         "bouncewear_store_retries_total",
         JOBS_SUBMITTED,
+        SCHEDULED_RUNS_SKIPPED,
         "bouncewear_operations_simulated_total",
         RESPONSES_REFUSED,
     ] {
@@ -296,6 +304,11 @@ pub fn render_metrics(handle: &PrometheusHandle) -> String {
 /// run now), whether or not they go on to succeed.
 pub fn record_jobs_submitted(jobs: u64) {
     metrics::counter!(JOBS_SUBMITTED).increment(jobs);
+}
+
+/// Counts a schedule's run skipped at its due time (shown on the schedule as well).
+pub fn record_scheduled_run_skipped() {
+    metrics::counter!(SCHEDULED_RUNS_SKIPPED).increment(1);
 }
 
 /// Records a succeeded job's wall time and speed. `operations` is what the job simulated.

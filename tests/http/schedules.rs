@@ -321,3 +321,50 @@ fn a_run_larger_than_this_server_allows_is_refused() {
             .is_empty()
     );
 }
+
+/// A night the scheduler skips, its template refused by this server's limits now, shows on the
+/// schedule (how many, the latest and why) and on `/metrics`, not only in the log.
+#[test]
+fn a_run_the_scheduler_skips_shows_on_the_schedule() {
+    let db = temp_db("schedule-skipped");
+    let every_second = ["--workers", "0", "--min-schedule-interval-seconds", "1"];
+    let roomy = TestApp::start(&db, &every_second);
+    let body = json!({"name": "n", "cron": "* * * * * *",
+                      "template": {"devices": 100, "operations": 100}});
+    let created = post(&roomy.url("/v1/schedules"), &body.to_string(), None);
+    assert_eq!(created.status, 201, "{}", created.body);
+    assert_eq!(created.json()["skipped_runs"], 0);
+    assert!(created.json()["last_skipped"].is_null());
+    let id = created.json()["id"].as_str().unwrap().to_owned();
+    drop(roomy);
+    let strict = Spawned::start(
+        &db,
+        &[&every_second[..], &["--max-job-operations", "1000"]].concat(),
+    );
+    let url = strict.url(&format!("/v1/schedules/{id}"));
+    let mut schedule = get(&url, None).json();
+    for _ in 0..100 {
+        if schedule["skipped_runs"].as_u64().unwrap() >= 2 {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+        schedule = get(&url, None).json();
+    }
+    assert!(
+        schedule["skipped_runs"].as_u64().unwrap() >= 2,
+        "{schedule}"
+    );
+    let reason = schedule["last_skipped"]["reason"].as_str().unwrap();
+    assert!(
+        reason.contains("/template/devices") && reason.contains("this server allows 1000"),
+        "{schedule}"
+    );
+    let due = schedule["last_skipped"]["scheduled_for"].as_str().unwrap();
+    assert!(due.ends_with(".000Z"), "a due time, whole seconds: {due}");
+    let metrics = get(&strict.url("/metrics"), None).body;
+    let skipped = metrics
+        .lines()
+        .find_map(|l| l.strip_prefix("bouncewear_scheduled_runs_skipped_total "))
+        .unwrap_or_else(|| panic!("no skipped count:\n{metrics}"));
+    assert!(skipped.parse::<f64>().unwrap() >= 2.0, "{skipped}");
+}

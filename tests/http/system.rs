@@ -294,6 +294,7 @@ fn every_metric_family_has_help_and_type_and_latency_is_a_histogram() {
         "bouncewear_event_watch_looks_total",
         "bouncewear_fits_stopped_total",
         "bouncewear_responses_refused_total",
+        "bouncewear_scheduled_runs_skipped_total",
         "bouncewear_responses_waiting",
         "bouncewear_response_bytes_held",
         "bouncewear_jobs_queued",

@@ -692,6 +692,12 @@
           el("span", {}, el("code", {}, schedule.cron || "–"), " in ", el("b", {}, schedule.time_zone || "UTC")),
           el("span", { class: "next-run" }, "next run ", el("b", {}, schedule.enabled ? fmtZoned(schedule.next_run_at, schedule.time_zone) : "–")),
           el("span", {}, "last run ", el("b", {}, fmtZoned(schedule.last_run_at, schedule.time_zone))),
+          schedule.skipped_runs ? el("span", {
+            class: "skipped",
+            title: schedule.last_skipped ? schedule.last_skipped.reason : "",
+          }, "skipped ", el("b", {}, String(schedule.skipped_runs)),
+            schedule.last_skipped ? [", last ", el("b", {}, fmtZoned(schedule.last_skipped.scheduled_for, schedule.time_zone)),
+              ": " + schedule.last_skipped.reason] : null) : null,
           statistics.length ? el("span", {}, "follows ", el("b", {}, statistics.join(", "))) : null),
         plot,
         note);

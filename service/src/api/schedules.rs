@@ -14,7 +14,7 @@ use crate::domain::trend::trend;
 use crate::domain::{
     JobStatus, Once, Owner, ScheduleId, ScheduleSpec, TrendValue, UnixMs, ValidSchedule,
 };
-use crate::store::{NewRun, RunRecord, RunSlot, ScheduleRecord};
+use crate::store::{NewRun, RunRecord, RunSlot, ScheduleRecord, Skipped};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Query, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
@@ -60,12 +60,27 @@ pub struct ScheduleResource {
     /// RFC 3339; the due time of its latest run, if any.
     #[schema(format = DateTime)]
     pub last_run_at: Option<String>,
+    /// How many of its runs were skipped at their due time (never run later): its template
+    /// refused by the server's limits then, or its key over its quota.
+    pub skipped_runs: u64,
+    /// The latest skipped run, if any.
+    pub last_skipped: Option<SkippedRun>,
     /// RFC 3339.
     #[schema(format = DateTime)]
     pub created_at: String,
     /// RFC 3339; when its definition last changed.
     #[schema(format = DateTime)]
     pub updated_at: String,
+}
+
+/// A run skipped at its due time.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct SkippedRun {
+    /// RFC 3339; its due time.
+    #[schema(format = DateTime)]
+    pub scheduled_for: String,
+    /// Why it was skipped.
+    pub reason: String,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -92,6 +107,7 @@ fn record(
         owner,
         created_at,
         updated_at: now,
+        skipped: Skipped::default(),
     }
 }
 
@@ -117,6 +133,15 @@ async fn resource(state: &AppState, record: &ScheduleRecord) -> Result<ScheduleR
             .collect(),
         next_run_at: record.next_run_at.map(UnixMs::to_rfc3339),
         last_run_at: last,
+        skipped_runs: record.skipped.runs,
+        last_skipped: record
+            .skipped
+            .last
+            .as_ref()
+            .map(|(due, reason)| SkippedRun {
+                scheduled_for: due.to_rfc3339(),
+                reason: reason.clone(),
+            }),
         created_at: record.created_at.to_rfc3339(),
         updated_at: record.updated_at.to_rfc3339(),
     })
@@ -263,6 +288,7 @@ pub async fn replace_schedule(
     let next_run_at = valid.next_run_replacing(existing.next_run_at, now);
     let record = ScheduleRecord {
         next_run_at,
+        skipped: existing.skipped,
         ..record(valid, id, owner, existing.created_at, now)
     };
     state.store.update_schedule(&record).await?;

@@ -33,6 +33,7 @@ const SQLITE_FILES: &[(&str, &str)] = embed!("sqlite":
     "0011_fair_share_and_retries.sql",
     "0012_claim_indexes.sql",
     "0013_results_without_summaries.sql",
+    "0014_skipped_runs.sql",
 );
 
 const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
@@ -51,6 +52,7 @@ const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
     "0013_results_compressed_with_lz4.sql",
     "0014_results_without_summaries.sql",
     "0015_job_end_announcements.sql",
+    "0016_skipped_runs.sql",
 );
 
 /// `migrations/sqlite/`.

@@ -314,6 +314,17 @@ pub struct ScheduleRecord {
     pub next_run_at: Option<UnixMs>,
     pub created_at: UnixMs,
     pub updated_at: UnixMs,
+    /// The runs it skipped; kept by a PUT, which replaces only the definition.
+    pub skipped: Skipped,
+}
+
+/// The runs a schedule skipped at their due time: its template refused by the server's limits
+/// then, or its key over its quota. A skipped night is not run later.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Skipped {
+    pub runs: u64,
+    /// The latest skipped run's due time and why it was skipped.
+    pub last: Option<(UnixMs, String)>,
 }
 
 /// One run of a schedule, with its job's status.

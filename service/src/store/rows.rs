@@ -4,7 +4,7 @@
 use super::sql::{AnyRow, Sql, Tx};
 use super::{
     Claim, DistributionRow, Fence, JobRecord, Operations, RunRecord, ScheduleRecord, ShardRecord,
-    StoreError, StoreResult,
+    Skipped, StoreError, StoreResult,
 };
 use crate::domain::{
     Attempt, Folding, IdempotencyKey, JobId, JobStatus, Owner, QueuedJob, ScheduleDefinition,
@@ -1123,6 +1123,19 @@ macro_rules! schedule_columns {
 
 pub(crate) use schedule_columns;
 
+/// A schedule's columns as read: [`schedule_columns`] and the runs it skipped, which only the
+/// scheduler writes.
+macro_rules! schedule_read_columns {
+    () => {
+        concat!(
+            $crate::store::rows::schedule_columns!(),
+            ", skipped_runs, last_skipped_for, last_skip_reason"
+        )
+    };
+}
+
+pub(crate) use schedule_read_columns;
+
 pub(crate) fn schedule_from_row(row: &AnyRow) -> StoreResult<ScheduleRecord> {
     Ok(ScheduleRecord {
         id: ScheduleId::from(row.text("id")?),
@@ -1139,6 +1152,13 @@ pub(crate) fn schedule_from_row(row: &AnyRow) -> StoreResult<ScheduleRecord> {
         next_run_at: optional_ms(row, "next_run_at")?,
         created_at: ms(row, "created_at")?,
         updated_at: ms(row, "updated_at")?,
+        skipped: Skipped {
+            runs: count_from_sql(row, "skipped_runs")?,
+            last: match optional_ms(row, "last_skipped_for")? {
+                Some(due) => Some((due, row.text("last_skip_reason")?)),
+                None => None,
+            },
+        },
     })
 }
 

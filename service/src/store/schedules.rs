@@ -4,6 +4,7 @@ use super::backend::Store;
 use super::queue::{remember, select_job};
 use super::rows::{
     Created, bind_schedule, count_from_sql, run_from_row, schedule_columns, schedule_from_row,
+    schedule_read_columns,
 };
 use super::sql::{Sql, Tx};
 use super::{NewRun, RunRecord, RunSlot, ScheduleRecord, StoreError, StoreResult};
@@ -102,7 +103,7 @@ impl Store {
     pub async fn schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<ScheduleRecord> {
         let row = Sql::new(concat!(
             "SELECT ",
-            schedule_columns!(),
+            schedule_read_columns!(),
             " FROM schedules WHERE id = $1 AND owner = $2"
         ))
         .bind(id.as_str())
@@ -124,7 +125,7 @@ impl Store {
     ) -> StoreResult<Vec<(i64, ScheduleRecord)>> {
         let rows = Sql::new(concat!(
             "SELECT seq, ",
-            schedule_columns!(),
+            schedule_read_columns!(),
             " FROM schedules WHERE owner = $1 AND seq > $2 ORDER BY seq LIMIT $3"
         ))
         .bind(owner.as_str())
@@ -171,7 +172,7 @@ impl Store {
     pub async fn due_schedules(&self, now: UnixMs) -> StoreResult<Vec<ScheduleRecord>> {
         let rows = Sql::new(concat!(
             "SELECT ",
-            schedule_columns!(),
+            schedule_read_columns!(),
             " FROM schedules WHERE enabled = TRUE AND next_run_at <= $1 ORDER BY next_run_at"
         ))
         .bind(now.0)
@@ -236,6 +237,32 @@ impl Store {
         .bind(id.as_str())
         .bind(from.map(|t| t.0))
         .bind(to.map(|t| t.0))
+        .execute(self.writer()?)
+        .await?;
+        Ok(updated == 1)
+    }
+
+    /// Skips the run due at `due` with `reason` and moves `next_run_at` from `from` to `to`,
+    /// unless another loop already moved it (then nothing is counted twice): false.
+    #[tracing::instrument(skip_all, fields(schedule = %id))]
+    pub async fn skip_run(
+        &self,
+        id: &ScheduleId,
+        from: Option<UnixMs>,
+        to: Option<UnixMs>,
+        due: UnixMs,
+        reason: &str,
+    ) -> StoreResult<bool> {
+        let updated = Sql::new(
+            "UPDATE schedules SET next_run_at = $3, skipped_runs = skipped_runs + 1, \
+             last_skipped_for = $4, last_skip_reason = $5 \
+             WHERE id = $1 AND next_run_at IS NOT DISTINCT FROM $2",
+        )
+        .bind(id.as_str())
+        .bind(from.map(|t| t.0))
+        .bind(to.map(|t| t.0))
+        .bind(due.0)
+        .bind(reason)
         .execute(self.writer()?)
         .await?;
         Ok(updated == 1)
