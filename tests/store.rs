@@ -11,7 +11,7 @@ use bouncewear::domain::{
     Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob, ROOM_RETRY_MS,
     ScheduleBound, ScheduleDefinition, ScheduleId, ShardId, UnixMs,
 };
-use bouncewear::scheduler::{RunLimits, Waiting, tick};
+use bouncewear::scheduler::{RunLimits, Waiting, rebase, tick};
 use bouncewear::store::{
     self, Awaited, EncodedGroups, EncodedResult, JobRecord, Lease, LeaseTerms, NewRun, Operations,
     RetryBudget, RunSlot, ScheduleRecord, Skipped, Store, StoreError,
@@ -110,6 +110,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(&database("full")).await;
     a_template_that_no_longer_validates_skips_its_night_and_moves_on(&database("stale-template"))
         .await;
+    a_clock_that_went_back_brings_the_next_runs_back(&database("clock-back")).await;
 }
 
 async fn a_store_that_takes_writes_and_is_migrated_is_ready(url: &str) {
@@ -1988,6 +1989,48 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
             .unwrap()
     );
     assert_eq!(skipped(&store, &schedule).await.0, 2);
+}
+
+/// A clock that went back (between ticks, or while the server was down) left each next run where
+/// the later clock put it: a day back, a night was missed, as a probe with libfaketime saw. The
+/// next runs later than the timetable gives from now come back to it; the others stay.
+async fn a_clock_that_went_back_brings_the_next_runs_back(url: &str) {
+    let store = store::open(url).await.unwrap();
+    // Worked out on a clock two days ahead, on time, and disabled.
+    let ahead = nightly("ahead", "2026-11-24T03:00:00Z");
+    let on_time = nightly("on-time", "2026-11-23T03:00:00Z");
+    let mut disabled = nightly("disabled", "2026-11-24T03:00:00Z");
+    disabled.definition.enabled = false;
+    disabled.next_run_at = None;
+    for schedule in [&ahead, &on_time, &disabled] {
+        store.insert_schedule(schedule, SCHEDULES).await.unwrap();
+    }
+    let now = utc("2026-11-22T12:00:00Z");
+    assert_eq!(rebase(store.as_ref(), now).await.unwrap(), 1);
+    for (schedule, next) in [
+        (&ahead, Some("2026-11-23T03:00:00.000Z")),
+        (&on_time, Some("2026-11-23T03:00:00.000Z")),
+        (&disabled, None),
+    ] {
+        let stored = store.schedule(&schedule.owner, &schedule.id).await.unwrap();
+        assert_eq!(
+            stored.next_run_at.map(UnixMs::to_rfc3339).as_deref(),
+            next,
+            "{}",
+            schedule.id
+        );
+    }
+    assert_eq!(rebase(store.as_ref(), now).await.unwrap(), 0, "once");
+    // The night comes: both run.
+    let mut waiting = Waiting::default();
+    let limits = queue(QueueBound::total(10));
+    let created = tick(
+        store.as_ref(),
+        limits,
+        utc("2026-11-23T03:00:01Z"),
+        &mut waiting,
+    );
+    assert_eq!(created.await.unwrap(), 2);
 }
 
 async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) {

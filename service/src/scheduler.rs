@@ -1,7 +1,8 @@
 //! The scheduler loop: every second, each enabled schedule whose next run is due gets one job for
 //! its latest due time at or before now (so a server that was down for three nights runs the missed
 //! night once, not three times), and its next run moves past now. The (schedule, due time) primary
-//! key makes the job unique across restarts and across instances sharing the database.
+//! key makes the job unique across restarts and across instances sharing the database. At
+//! start-up and when the clock steps back, next runs the later clock put too far are brought back.
 
 use crate::domain::{QueueBound, ScheduleId, Timetable, UnixMs};
 use crate::store::{NewRun, RunSlot, ScheduleRecord, Store, StoreError, StoreResult};
@@ -23,6 +24,7 @@ pub async fn run(
     // Ticks failed in a row: the first is logged as an error and the end of the run as news,
     // not every tick (a second) between, as when the disk stays below --min-free-disk-mb.
     let mut failing = 0_u64;
+    let mut last_tick: Option<DateTime<Utc>> = None;
     // Every second on the second from the start, not a second after each tick's work: a tick
     // period that drifted to 1.02-1.2 s skipped one due time of a cron every second in 13 (a
     // probe, with --min-schedule-interval-seconds 1).
@@ -39,7 +41,24 @@ pub async fn run(
                 continue;
             }
         }
-        let ticked = tick(store.as_ref(), limits, Utc::now(), &mut waiting).await;
+        let now = Utc::now();
+        // At start-up, and when the clock stepped back since the last tick.
+        if last_tick.is_none_or(|last| now + TICK < last) {
+            match rebase(store.as_ref(), now).await {
+                Ok(0) => {}
+                Ok(rebased) => {
+                    tracing::warn!(
+                        rebased,
+                        "schedules' next runs were later than their timetables give from now (the clock went back); moved to the next due time from now"
+                    );
+                }
+                Err(error) => {
+                    tracing::error!(%error, "the schedules' next runs could not be checked against the clock")
+                }
+            }
+        }
+        last_tick = Some(now);
+        let ticked = tick(store.as_ref(), limits, now, &mut waiting).await;
         if ticked.is_ok() && failing > 0 {
             tracing::info!(
                 failed_ticks = failing,
@@ -165,6 +184,31 @@ pub async fn tick(
             .await?;
     }
     Ok(created)
+}
+
+/// Moves each enabled schedule whose next run is later than its timetable's next due time after
+/// `now` back to that time; returns how many it moved. Only a clock that went back (between two
+/// ticks, or while the server was down) leaves one so: its next run was worked out on the later
+/// clock, and it would wait that long again, its nights between never run (a day back, a night
+/// missed; a year back, a year). A run made on the later clock keeps its slot: the new clock's
+/// nights are made unless one of them was made already.
+pub async fn rebase(store: &Store, now: DateTime<Utc>) -> StoreResult<usize> {
+    let mut rebased = 0;
+    for schedule in store.due_schedules(UnixMs(i64::MAX)).await? {
+        let definition = &schedule.definition;
+        let Ok(timetable) = Timetable::parse(&definition.cron, &definition.time_zone) else {
+            continue;
+        };
+        let next = timetable.next_after(now).map(UnixMs::from_datetime);
+        if next.is_some_and(|next| schedule.next_run_at.is_some_and(|at| at > next))
+            && store
+                .advance_schedule(&schedule.id, schedule.next_run_at, next)
+                .await?
+        {
+            rebased += 1;
+        }
+    }
+    Ok(rebased)
 }
 
 /// Skips `schedule`'s run due at `due` for `reason`: counted on the schedule (shown with it) and on
