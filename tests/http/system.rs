@@ -162,6 +162,35 @@ fn api_keys_are_required_and_isolate_jobs() {
     assert_problem(&put(None), 401);
     assert_problem(&put(Some("alpha")), 405);
     assert_problem(&get(&server.url("/no-such-page"), None), 404);
+    // Nor by the query parameters a route takes: 400 for an unknown one only with a key.
+    for listing in [jobs.clone(), server.url("/v1/schedules")] {
+        let asked = format!("{listing}?bogus=1");
+        assert_problem(&get(&asked, None), 401);
+        let problem = assert_problem(&get(&asked, Some("alpha")), 400);
+        assert!(
+            problem["detail"].as_str().unwrap().contains("`bogus`"),
+            "{problem}"
+        );
+    }
+    // Authorization twice is refused, whichever key comes first: taking the first let a
+    // client's header win over one a proxy added after it.
+    for (first, second) in [("alpha", "beta"), ("beta", "alpha"), ("alpha", "alpha")] {
+        let twice = reply(
+            agent()
+                .get(&jobs)
+                .header("authorization", &format!("Bearer {first}"))
+                .header("authorization", &format!("Bearer {second}"))
+                .call(),
+        );
+        let problem = assert_problem(&twice, 400);
+        assert!(
+            problem["detail"]
+                .as_str()
+                .unwrap()
+                .contains("more than once"),
+            "{problem}"
+        );
+    }
     let reply = post(
         &jobs,
         &json!({"devices": 1, "operations": 1, "seed": 9}).to_string(),

@@ -4,11 +4,12 @@
 //! OpenAPI document, the one place the parameters are declared.
 
 use super::error::ApiError;
+use crate::domain::Owner;
 use axum::extract::{MatchedPath, Query, Request, State};
 use axum::http::Method;
 use axum::middleware::Next;
 use axum::response::Response;
-use std::collections::{BTreeSet, HashMap};
+use std::collections::{BTreeSet, HashMap, HashSet};
 use std::sync::Arc;
 use utoipa::openapi::path::{Operation, ParameterIn};
 use utoipa::openapi::{OpenApi, RefOr};
@@ -92,17 +93,27 @@ fn query_names(operation: &Operation) -> Option<BTreeSet<String>> {
     Some(names)
 }
 
-/// Answers 400 naming every query parameter the matched operation does not take.
+/// Answers 400 naming every query parameter the matched operation does not take; under `/v1`,
+/// 401 first without a key the server knows, as the route itself answers (a request without one
+/// learns nothing of what a route takes).
 pub async fn refuse_unknown(
-    State(known): State<KnownQueries>,
+    State((known, key_owners)): State<(KnownQueries, Arc<HashSet<Owner>>)>,
     path: MatchedPath,
     request: Request,
     next: Next,
 ) -> Result<Response, ApiError> {
+    if let Err(refused) = check(&known, path.as_str(), &request) {
+        return Err(super::unmatched(&key_owners, &request, refused));
+    }
+    Ok(next.run(request).await)
+}
+
+/// 400 for a query that cannot be read or that names a parameter the operation does not take.
+fn check(known: &KnownQueries, path: &str, request: &Request) -> Result<(), ApiError> {
     if request.uri().query().is_some() {
         let Query(query) =
             Query::<Vec<(String, String)>>::try_from_uri(request.uri()).map_err(ApiError::from)?;
-        let unknown = known.unknown(request.method(), path.as_str(), &query);
+        let unknown = known.unknown(request.method(), path, &query);
         if !unknown.is_empty() {
             let quoted = |names: &[String]| {
                 names
@@ -111,21 +122,20 @@ pub async fn refuse_unknown(
                     .collect::<Vec<_>>()
                     .join(", ")
             };
-            let takes = known.takes(request.method(), path.as_str());
+            let takes = known.takes(request.method(), path);
             let takes = if takes.is_empty() {
                 "no query parameters".to_owned()
             } else {
                 format!("only {}", quoted(&takes))
             };
             return Err(ApiError::BadRequest(format!(
-                "unknown query parameter {}: {} {} takes {takes}",
+                "unknown query parameter {}: {} {path} takes {takes}",
                 quoted(&unknown),
                 request.method(),
-                path.as_str()
             )));
         }
     }
-    Ok(next.run(request).await)
+    Ok(())
 }
 
 #[cfg(test)]

@@ -210,7 +210,7 @@ fn api_routes(state: AppState) -> axum::Router {
         .route("/docs", get(system::docs))
         .route("/docs/rapidoc-min.js", get(system::docs_script))
         .route_layer(axum::middleware::from_fn_with_state(
-            known,
+            (known, Arc::clone(&state.key_owners)),
             known_query::refuse_unknown,
         ));
     router.with_state(state)
@@ -285,8 +285,16 @@ fn owner_of(
     if key_owners.is_empty() {
         return Ok(Owner::anonymous());
     }
-    let presented = headers
-        .get(header::AUTHORIZATION)
+    let mut given = headers.get_all(header::AUTHORIZATION).iter();
+    let first = given.next();
+    if given.next().is_some() {
+        // Not a list (RFC 9110, section 11.6.2): which one counts is not ours to guess, and taking
+        // the first let a client's header win over one a proxy added after it.
+        return Err(ApiError::BadRequest(
+            "Authorization is given more than once: send one".to_owned(),
+        ));
+    }
+    let presented = first
         .and_then(|value| value.to_str().ok())
         // The scheme is case-insensitive (RFC 9110, section 11.1): `bearer` and `BEARER` count.
         .and_then(|value| value.trim_start().split_once(' '))
