@@ -111,6 +111,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_template_that_no_longer_validates_skips_its_night_and_moves_on(&database("stale-template"))
         .await;
     a_clock_that_went_back_brings_the_next_runs_back(&database("clock-back")).await;
+    a_schedule_whose_key_is_gone_skips_its_runs(&database("key-gone")).await;
 }
 
 async fn a_store_that_takes_writes_and_is_migrated_is_ready(url: &str) {
@@ -1899,6 +1900,7 @@ fn queue(bound: QueueBound) -> RunLimits {
     RunLimits {
         queue: bound,
         max_job_operations: u64::MAX,
+        key_owners: Arc::default(),
     }
 }
 
@@ -1947,7 +1949,7 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
         max_job_operations: 9_999,
         ..queue(QueueBound::total(100))
     };
-    let created = tick(store.as_ref(), limits, now, &mut waiting);
+    let created = tick(store.as_ref(), limits.clone(), now, &mut waiting);
     assert_eq!(created.await.unwrap(), 0);
     assert!(store.runs(&large.id, 10).await.unwrap().is_empty());
     let limits = RunLimits {
@@ -2031,6 +2033,39 @@ async fn a_clock_that_went_back_brings_the_next_runs_back(url: &str) {
         &mut waiting,
     );
     assert_eq!(created.await.unwrap(), 2);
+}
+
+/// On a server with API keys, a schedule whose key was removed from them skips its runs: no
+/// caller could see, pause or delete it, and it ran on (a probe: a revoked key's `* * * * *`
+/// schedule made a job a minute). The keys' own schedules run.
+async fn a_schedule_whose_key_is_gone_skips_its_runs(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let mut kept = nightly("kept", "2026-11-22T03:00:00Z");
+    kept.owner = Owner::of_key("alpha");
+    let mut gone = nightly("gone", "2026-11-22T03:00:00Z");
+    gone.owner = Owner::of_key("beta");
+    for schedule in [&kept, &gone] {
+        store.insert_schedule(schedule, SCHEDULES).await.unwrap();
+    }
+    let limits = RunLimits {
+        key_owners: Arc::new([Owner::of_key("alpha")].into()),
+        ..queue(QueueBound::total(10))
+    };
+    let mut waiting = Waiting::default();
+    let created = tick(
+        store.as_ref(),
+        limits,
+        utc("2026-11-22T03:00:01Z"),
+        &mut waiting,
+    );
+    assert_eq!(created.await.unwrap(), 1);
+    assert_eq!(store.runs(&kept.id, 10).await.unwrap().len(), 1);
+    assert!(store.runs(&gone.id, 10).await.unwrap().is_empty());
+    let (runs, last) = skipped(&store, &gone).await;
+    let (due, reason) = last.expect("the skipped run");
+    assert_eq!((runs, due.as_str()), (1, "2026-11-22T03:00:00.000Z"));
+    assert!(reason.contains("API key"), "{reason}");
+    assert_eq!(skipped(&store, &kept).await, (0, None));
 }
 
 async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) {

@@ -149,6 +149,7 @@ impl Application {
             crate::scheduler::RunLimits {
                 queue: config.queue_bound(),
                 max_job_operations: config.max_job_operations,
+                key_owners: Arc::clone(&state.key_owners),
             },
             Arc::clone(&state.wake),
             stopping.clone(),

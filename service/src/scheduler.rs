@@ -4,7 +4,7 @@
 //! key makes the job unique across restarts and across instances sharing the database. At
 //! start-up and when the clock steps back, next runs the later clock put too far are brought back.
 
-use crate::domain::{QueueBound, ScheduleId, Timetable, UnixMs};
+use crate::domain::{Owner, QueueBound, ScheduleId, Timetable, UnixMs};
 use crate::store::{NewRun, RunSlot, ScheduleRecord, Store, StoreError, StoreResult};
 use chrono::{DateTime, Utc};
 use std::collections::HashSet;
@@ -58,7 +58,7 @@ pub async fn run(
             }
         }
         last_tick = Some(now);
-        let ticked = tick(store.as_ref(), limits, now, &mut waiting).await;
+        let ticked = tick(store.as_ref(), limits.clone(), now, &mut waiting).await;
         if ticked.is_ok() && failing > 0 {
             tracing::info!(
                 failed_ticks = failing,
@@ -97,12 +97,16 @@ impl Waiting {
     }
 }
 
-/// What the server allows the jobs its schedules make: room in the queue, and each one's size (a
-/// run larger than `max_job_operations` is skipped, as a job submitted now would be refused).
-#[derive(Debug, Clone, Copy)]
+/// What the server allows the jobs its schedules make: room in the queue, each one's size (a
+/// run larger than `max_job_operations` is skipped, as a job submitted now would be refused) and
+/// whose they may be (with API keys, a schedule whose key is not among them is skipped: no caller
+/// could see, pause or delete it).
+#[derive(Debug, Clone)]
 pub struct RunLimits {
     pub queue: QueueBound,
     pub max_job_operations: u64,
+    /// The owners of the server's API keys; empty without keys, when every schedule runs.
+    pub key_owners: Arc<HashSet<Owner>>,
 }
 
 /// One pass over the due schedules at `now`; returns how many jobs it created. `waiting` carries
@@ -127,6 +131,13 @@ pub async fn tick(
             continue;
         };
         let next = timetable.next_after(now).map(UnixMs::from_datetime);
+        if !limits.key_owners.is_empty() && !limits.key_owners.contains(&schedule.owner) {
+            tracing::warn!(schedule = %schedule.id, "the schedule's API key is no longer among this server's keys; this run is skipped");
+            let reason = "its API key is no longer among this server's keys: configure the key \
+                          again to run it, or to see and delete it";
+            skip(store, &schedule, next, due, reason).await?;
+            continue;
+        }
         let job = match definition.job_at(
             schedule.owner.clone(),
             due,

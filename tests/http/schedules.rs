@@ -368,3 +368,54 @@ fn a_run_the_scheduler_skips_shows_on_the_schedule() {
         .unwrap_or_else(|| panic!("no skipped count:\n{metrics}"));
     assert!(skipped.parse::<f64>().unwrap() >= 2.0, "{skipped}");
 }
+
+/// A schedule whose API key was taken off the server skips its runs (it ran on, and no key could
+/// see or stop it); with the key back, its owner sees each night skipped and why.
+#[test]
+fn a_schedule_whose_key_was_removed_skips_its_runs() {
+    let db = temp_db("schedule-key-gone");
+    let every_second = ["--workers", "0", "--min-schedule-interval-seconds", "1"];
+    let both = [&every_second[..], &["--api-key", "alpha,beta"]].concat();
+    let server = TestApp::start(&db, &both);
+    let body = json!({"name": "n", "cron": "* * * * * *",
+                      "template": {"devices": 2, "operations": 2}});
+    let created = post(
+        &server.url("/v1/schedules"),
+        &body.to_string(),
+        Some("beta"),
+    );
+    assert_eq!(created.status, 201, "{}", created.body);
+    let id = created.json()["id"].as_str().unwrap().to_owned();
+    drop(server);
+    let alpha_only = [&every_second[..], &["--api-key", "alpha"]].concat();
+    let server = TestApp::start(&db, &alpha_only);
+    std::thread::sleep(Duration::from_millis(2500));
+    drop(server);
+    let server = TestApp::start(
+        &db,
+        &[&["--workers", "0"][..], &["--api-key", "alpha,beta"]].concat(),
+    );
+    let schedule = get(&server.url(&format!("/v1/schedules/{id}")), Some("beta")).json();
+    assert!(
+        schedule["skipped_runs"].as_u64().unwrap() >= 2,
+        "{schedule}"
+    );
+    let reason = schedule["last_skipped"]["reason"].as_str().unwrap();
+    assert!(reason.contains("API key"), "{schedule}");
+    // Its runs are those made while its key was there: none after the first server stopped.
+    let runs = get(
+        &server.url(&format!("/v1/schedules/{id}/runs")),
+        Some("beta"),
+    )
+    .json();
+    let last_run = runs["runs"]
+        .as_array()
+        .unwrap()
+        .last()
+        .map(|run| run["scheduled_for"].clone());
+    let skipped_for = schedule["last_skipped"]["scheduled_for"].clone();
+    assert!(
+        last_run.is_none_or(|run| run.as_str() < skipped_for.as_str()),
+        "{runs}\n{schedule}"
+    );
+}
