@@ -4,7 +4,7 @@
 
 use super::remote::{job_file, remote, stdout};
 use crate::support::app::{Service, TestApp};
-use crate::support::client::{assert_problem, get};
+use crate::support::client::{assert_problem, get, post};
 use crate::support::temp_db;
 use serde_json::{Value, json};
 
@@ -154,4 +154,26 @@ fn a_job_against_itself_and_two_designs_over_api_and_cli() {
     assert_problem(&get(&format!("{base}/plots/histograms.svg"), None), 404);
     let missing = format!("{}/v1/jobs/{strong}/compare/no-such-job", server.base());
     assert_problem(&get(&missing, None), 404);
+}
+
+/// A job that does not exist is 404 whatever the other's status: the first job, still queued,
+/// answered 409 and hid that the second never will be there.
+#[test]
+fn a_comparison_with_no_such_job_is_404_before_the_other_ends() {
+    let server = TestApp::start(&temp_db("compare-missing"), &["--workers", "0"]);
+    let body = json!({"devices": 2, "operations": 2}).to_string();
+    let queued = post(&server.url("/v1/jobs"), &body, None).json()["id"]
+        .as_str()
+        .unwrap()
+        .to_owned();
+    let nobody = "00000000-0000-4000-8000-000000000000";
+    for (a, b, status) in [
+        (&*queued, nobody, 404),
+        (nobody, &*queued, 404),
+        (&*queued, &*queued, 409),
+    ] {
+        let url = server.url(&format!("/v1/jobs/{a}/compare/{b}"));
+        assert_problem(&get(&url, None), status);
+        assert_problem(&get(&format!("{url}/plots/bands.svg"), None), status);
+    }
 }

@@ -180,6 +180,9 @@ async fn results(
     a: &JobId,
     b: &JobId,
 ) -> Result<(JobResult, JobResult, OwnedSemaphorePermit), ApiError> {
+    // A job that does not exist is 404 whatever the other's status: a 409 for the first, not
+    // yet succeeded, hid that the second will never be there.
+    state.store.job(owner, b).await?;
     let place = super::limits::take_place(&state.parsing).await?;
     Ok((
         succeeded_result(state, owner, a).await?,
