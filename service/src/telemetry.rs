@@ -62,9 +62,38 @@ pub fn request_span<B>(request: &Request<B>) -> tracing::Span {
         "request",
         method = %request.method(),
         route = %route_label(request),
-        uri = %request.uri(),
+        uri = %LoggedUri(request.uri()),
         request_id,
     )
+}
+
+/// A request's URI as logged: a query parameter whose name says it holds a secret (`api_key=`,
+/// `token=`, ...) has its value replaced. The API takes none, but a client that sends its key
+/// in the query instead of `Authorization` (refused, 401) put it in the log as written.
+struct LoggedUri<'a>(&'a axum::http::Uri);
+
+impl std::fmt::Display for LoggedUri<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.0.path())?;
+        let Some(query) = self.0.query() else {
+            return Ok(());
+        };
+        for (index, pair) in query.split('&').enumerate() {
+            f.write_str(if index == 0 { "?" } else { "&" })?;
+            match pair.split_once('=') {
+                Some((name, _)) if secret_name(name) => write!(f, "{name}=REDACTED")?,
+                _ => f.write_str(pair)?,
+            }
+        }
+        Ok(())
+    }
+}
+
+fn secret_name(name: &str) -> bool {
+    let name = name.to_ascii_lowercase();
+    ["key", "token", "secret", "password", "auth", "bearer"]
+        .iter()
+        .any(|word| name.contains(word))
 }
 
 /// The one log line of a request, at info: its status and latency, in the request's span.
@@ -371,6 +400,18 @@ pub async fn record_request(request: axum::extract::Request, next: Next) -> Resp
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_secret_in_the_query_is_not_logged() {
+        let logged = |uri: &str| LoggedUri(&uri.parse().unwrap()).to_string();
+        assert_eq!(
+            logged("/v1/jobs?api_key=k1&limit=2&Access_Token=t&cursor=9"),
+            "/v1/jobs?api_key=REDACTED&limit=2&Access_Token=REDACTED&cursor=9"
+        );
+        assert_eq!(logged("/v1/jobs?wait_s=3&flag"), "/v1/jobs?wait_s=3&flag");
+        assert_eq!(logged("/v1/jobs"), "/v1/jobs");
+        assert_eq!(logged("/v1/jobs?"), "/v1/jobs?");
+    }
 
     #[test]
     fn text_logs_are_coloured_on_a_terminal_unless_no_color_is_set() {
