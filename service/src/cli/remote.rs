@@ -42,6 +42,9 @@ pub struct Server {
     /// roots built in (a company's own CA, say).
     #[arg(long, env = "BOUNCEWEAR_CA_CERT", global = true, value_name = "PEM")]
     pub ca_cert: Option<PathBuf>,
+    /// `--ca-cert`'s certificates, read at the first request (`wait` sends one every 10 s).
+    #[arg(skip)]
+    pub roots: std::sync::OnceLock<RootCerts>,
 }
 
 /// The longest pause before a retry, whatever `Retry-After` asks.
@@ -194,6 +197,18 @@ impl Server {
         }
     }
 
+    /// The roots `--ca-cert` names, read once; none without it (the Mozilla roots then).
+    fn trusted_roots(&self) -> Result<Option<RootCerts>, CliError> {
+        let Some(path) = self.ca_cert.as_deref() else {
+            return Ok(None);
+        };
+        if let Some(roots) = self.roots.get() {
+            return Ok(Some(roots.clone()));
+        }
+        let roots = trusted(path)?;
+        Ok(Some(self.roots.get_or_init(|| roots).clone()))
+    }
+
     /// Sends a request once, to be answered within `--request-timeout-seconds` and before
     /// `deadline`: the body of a 2xx, or why not.
     fn send_once(
@@ -208,10 +223,9 @@ impl Server {
         let left = deadline.map_or(f64::INFINITY, |end| {
             end.saturating_duration_since(Instant::now()).as_secs_f64()
         });
-        let roots = self.ca_cert.as_deref().map(trusted).transpose();
         let agent = agent(
             self.request_timeout_seconds.min(left),
-            roots.map_err(Failure::Final)?,
+            self.trusted_roots().map_err(Failure::Final)?,
         );
         let sent = match (method, body) {
             ("POST", Some(body)) => {
