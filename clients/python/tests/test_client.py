@@ -391,3 +391,33 @@ def test_https_trusts_the_ca_it_is_told_and_refuses_others_at_once(job, monkeypa
             Client(url, ca_cert=os.path.join(TLS, "missing.pem"))
     finally:
         listening.close()
+
+
+def test_a_schedule_runs_now_and_its_trend_is_a_frame(client):
+    spec = {"name": "py nightly", "cron": "0 3 * * *", "time_zone": "Europe/Berlin",
+            "template": {"devices": 20, "operations": 50, "seed": 3},
+            "statistics": ["operations.total_bounce_s.p95", "operations.total_bounce_s.mean"]}
+    schedule = client.create_schedule(spec)
+    assert schedule.enabled and schedule.skipped_runs == 0 and schedule.last_skipped is None
+    assert schedule.id in [s.id for s in client.schedules()]
+    assert client.schedule(schedule.id).resource["name"] == "py nightly"
+    runs = [schedule.run_now().wait(progress=False) for _ in range(2)]
+    trend = schedule.trend()
+    assert list(trend["job_id"]) == [run.id for run in runs for _ in spec["statistics"]]
+    assert list(trend["statistic"]) == spec["statistics"] * 2
+    assert str(trend["scheduled_for"].dt.tz) == "UTC" and trend["manual"].all()
+    # The template's seed gives each run the same numbers: no drift, each inside its interval.
+    p95 = trend[trend["statistic"] == "operations.total_bounce_s.p95"]
+    assert p95["value"].iloc[0] == p95["value"].iloc[1] > 0
+    assert ((trend["lo"] <= trend["value"]) & (trend["value"] <= trend["hi"])).all()
+    assert not trend["drift"].any()
+    # The trend's p95 is the Result's last bin's.
+    last = runs[0].distribution("total_bounce_s").iloc[-1]
+    assert p95["value"].iloc[0] == last["p95"]
+    assert len(schedule.trend(limit=1)) == len(spec["statistics"])
+    schedule.replace(dict(spec, enabled=False))
+    assert not schedule.enabled and schedule.resource["next_run_at"] is None
+    schedule.delete()
+    with pytest.raises(BouncewearError) as missing:
+        client.schedule(schedule.id)
+    assert missing.value.status == 404

@@ -8,7 +8,7 @@
     curve = job.distribution("total_bounce_s")   # a pandas.DataFrame, one row per bin
 """
 
-from .client import BouncewearError, Client, FieldError, Job, JobFailed
+from .client import BouncewearError, Client, FieldError, Job, JobFailed, Schedule
 
-__all__ = ["BouncewearError", "Client", "FieldError", "Job", "JobFailed"]
+__all__ = ["BouncewearError", "Client", "FieldError", "Job", "JobFailed", "Schedule"]
 __version__ = "0.1.0"

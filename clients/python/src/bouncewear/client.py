@@ -233,6 +233,27 @@ class Client:
                 break
         return found
 
+    def create_schedule(self, schedule: JSON, *, idempotency_key: Optional[str] = None) -> "Schedule":
+        """Creates a schedule (`{"name", "cron", "time_zone", "template": JOB, "statistics",
+        "enabled"}`: docs/manual.md "Nightly endurance runs"); a retry is safe as `submit`'s."""
+        headers = {"Idempotency-Key": idempotency_key or f"py-{uuid.uuid4().hex}"}
+        return Schedule(self, self.request("POST", "/v1/schedules", json=schedule, headers=headers).json())
+
+    def schedule(self, id: str) -> "Schedule":
+        """The schedule `id` as it stands now."""
+        return Schedule(self, self.request("GET", f"/v1/schedules/{_segment(id)}").json())
+
+    def schedules(self) -> List["Schedule"]:
+        """Your schedules, oldest first."""
+        found: List[Schedule] = []
+        params: Dict[str, Any] = {}
+        while True:
+            body = self.request("GET", "/v1/schedules", params=params).json()
+            found.extend(Schedule(self, resource) for resource in body["schedules"])
+            if not body.get("next_cursor"):
+                return found
+            params = {"cursor": body["next_cursor"]}
+
     def simulate(self, scenario: Optional[JSON] = None, fidelity: str = "exact") -> JSON:
         """One make operation of `scenario` (every field optional): its bounces and arc energy."""
         return self.request("POST", "/v1/simulate", json=scenario or {}, params={"fidelity": fidelity}).json()
@@ -429,6 +450,81 @@ class Job:
         ended is left as it is, never deleted (`POST /v1/jobs/{id}/cancel`)."""
         self.resource = self.client.request("POST", self._path("/cancel")).json()
         return self
+
+
+class Schedule:
+    """A schedule on a server: a job template run on a cron timetable. Its attributes are the
+    schedule resource as last read; `refresh` reads it again."""
+
+    def __init__(self, client: Client, resource: JSON) -> None:
+        self.client = client
+        self.resource = resource
+
+    def __repr__(self) -> str:
+        return f"Schedule({self.id!r}, {self.resource.get('cron')!r}, enabled={self.enabled!r})"
+
+    @property
+    def id(self) -> str:
+        return str(self.resource["id"])
+
+    @property
+    def enabled(self) -> bool:
+        return bool(self.resource["enabled"])
+
+    @property
+    def skipped_runs(self) -> int:
+        """How many runs were skipped at their due time (a template the server refuses now, a key
+        over its quota or no longer among the server's keys); `last_skipped` says when and why."""
+        return int(self.resource.get("skipped_runs", 0))
+
+    @property
+    def last_skipped(self) -> Optional[JSON]:
+        return self.resource.get("last_skipped")
+
+    def _path(self, tail: str = "") -> str:
+        return f"/v1/schedules/{_segment(self.id)}{tail}"
+
+    def refresh(self) -> "Schedule":
+        self.resource = self.client.request("GET", self._path()).json()
+        return self
+
+    def replace(self, schedule: JSON) -> "Schedule":
+        """Replaces its definition with `schedule` (a whole one, as for creation); its runs stay."""
+        self.resource = self.client.request("PUT", self._path(), json=schedule).json()
+        return self
+
+    def delete(self) -> None:
+        """Deletes it; the jobs it submitted stay."""
+        self.client.request("DELETE", self._path())
+
+    def run_now(self) -> Job:
+        """Runs its template now, outside its timetable; the job, queued."""
+        return Job(self.client, self.client.request("POST", self._path("/run")).json())
+
+    def trend(self, limit: Optional[int] = None) -> pd.DataFrame:
+        """Its latest runs (60, or `limit` up to 366), oldest first, one row per run and
+        statistic: `scheduled_for` (a UTC timestamp), `job_id`, `status`, `manual`, `statistic`,
+        `value`, `lo`, `hi` (its 95 % interval) and `drift` (it left the previous run's interval);
+        value, interval and drift missing until the run's job succeeded."""
+        params = {"limit": limit} if limit is not None else None
+        body = self.client.request("GET", self._path("/runs"), params=params).json()
+        rows = []
+        for run in body["runs"]:
+            for statistic in body["statistics"]:
+                value = run["values"].get(statistic) or {}
+                interval = value.get("ci95") or [None, None]
+                rows.append({"scheduled_for": run["scheduled_for"], "job_id": run["job_id"],
+                             "status": run["status"], "manual": run["manual"],
+                             "statistic": statistic, "value": value.get("value"),
+                             "lo": interval[0], "hi": interval[1], "drift": value.get("drift")})
+        columns = ["scheduled_for", "job_id", "status", "manual", "statistic", "value", "lo", "hi",
+                   "drift"]
+        frame = pd.DataFrame(rows, columns=columns)
+        frame["scheduled_for"] = pd.to_datetime(frame["scheduled_for"], utc=True)
+        for column in ("value", "lo", "hi"):
+            frame[column] = frame[column].astype(float)
+        frame["drift"] = frame["drift"].astype("boolean")
+        return frame
 
 
 def _csv(response: requests.Response) -> pd.DataFrame:
