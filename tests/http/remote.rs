@@ -491,3 +491,55 @@ fn a_remote_commands_stderr_is_json_lines_when_asked() {
         (Some("ERROR"), Some(1))
     );
 }
+
+/// `schedule`: a schedule created from a file, listed, shown, run now, its trend printed,
+/// replaced, deleted; the API's answers as printed JSON, a schedule gone exit 1.
+#[test]
+fn schedules_from_the_command_line() {
+    let server = TestApp::start(&temp_db("remote-schedules"), &["--api-key", "k1"]);
+    let spec = json!({"name": "nightly", "cron": "0 3 * * *", "time_zone": "Europe/Berlin",
+                      "template": {"devices": 4, "operations": 20, "seed": 5}});
+    let file = job_file("remote-schedule", &spec);
+    let schedule = |args: &[&str]| remote(&server, Some("k1"), &[&["schedule"][..], args].concat());
+    let created: Value = serde_json::from_str(&stdout(&schedule(&["create", &file]))).unwrap();
+    let id = created["id"].as_str().unwrap().to_owned();
+    assert_eq!(created["skipped_runs"], 0);
+    let listed: Value = serde_json::from_str(&stdout(&schedule(&["list"]))).unwrap();
+    assert_eq!(listed["schedules"][0]["id"], id.as_str(), "{listed}");
+    let shown: Value = serde_json::from_str(&stdout(&schedule(&["show", &id]))).unwrap();
+    assert_eq!(shown["next_run_at"], created["next_run_at"]);
+    let job: Value = serde_json::from_str(&stdout(&schedule(&["run", &id]))).unwrap();
+    let job_id = job["id"].as_str().unwrap();
+    stdout(&remote(&server, Some("k1"), &["wait", job_id]));
+    let runs: Value =
+        serde_json::from_str(&stdout(&schedule(&["runs", &id, "--limit", "5"]))).unwrap();
+    let run = &runs["runs"][0];
+    assert_eq!(
+        (run["job_id"].as_str(), run["manual"].as_bool()),
+        (Some(job_id), Some(true))
+    );
+    assert!(
+        run["values"]["operations.total_bounce_s.p95"]["value"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    let mut off = spec.clone();
+    off["enabled"] = json!(false);
+    let off = job_file("remote-schedule-off", &off);
+    let replaced: Value =
+        serde_json::from_str(&stdout(&schedule(&["replace", &id, &off]))).unwrap();
+    assert_eq!(
+        (
+            replaced["enabled"].as_bool(),
+            replaced["next_run_at"].is_null()
+        ),
+        (Some(false), true)
+    );
+    let deleted = schedule(&["delete", &id]);
+    assert!(stdout(&deleted).is_empty());
+    let gone = schedule(&["show", &id]);
+    let said = String::from_utf8_lossy(&gone.stderr);
+    assert_eq!(gone.status.code(), Some(1), "{said}");
+    assert!(said.contains("404"), "{said}");
+}

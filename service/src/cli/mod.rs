@@ -187,6 +187,14 @@ enum Command {
         #[command(flatten)]
         server: remote::Server,
     },
+    /// Nightly runs on a server: create, list, show, replace or delete a schedule, run it now,
+    /// and print its runs' trend.
+    Schedule {
+        #[command(subcommand)]
+        command: remote::ScheduleCommand,
+        #[command(flatten)]
+        server: remote::Server,
+    },
     /// Measure speed against error and write report.json, report.md and report.svg.
     Bench {
         /// A smaller run that finishes in well under two minutes.
@@ -480,6 +488,11 @@ fn run(cli: Cli) -> Result<(), CliError> {
             )?)
         }
         Command::Cancel { id, server } => print_text(remote::cancel(&server, &id)?),
+        Command::Schedule { command, server } => match remote::schedule(&server, &command)? {
+            // A delete answers 204 with nothing to print.
+            text if text.is_empty() => Ok(()),
+            text => print_text(text),
+        },
         Command::Bench {
             quick,
             out,

@@ -151,7 +151,7 @@ impl Server {
         body: Option<&str>,
         deadline: Option<Instant>,
     ) -> Result<String, CliError> {
-        let key = (method == "POST" && path == "/v1/jobs")
+        let key = (method == "POST" && ["/v1/jobs", "/v1/schedules"].contains(&path))
             .then(|| format!("cli-{}", uuid::Uuid::new_v4().simple()));
         let mut retried = 0;
         loop {
@@ -181,7 +181,7 @@ impl Server {
                     // The server may have queued it: the key gives that job back to a retry.
                     (Failure::Broken(error), Some(key)) => CliError::Failed(format!(
                         "{error} (the submission's Idempotency-Key was {key}: it may have been \
-                         queued; `GET /v1/jobs` lists it)"
+                         created; `GET {path}` lists it)"
                     )),
                     (failure, _) => failure.into_error(),
                 });
@@ -238,6 +238,11 @@ impl Server {
                 }
             }
             ("POST", None) => self.prepare(agent.post(&url)).send_empty(),
+            ("PUT", Some(body)) => self
+                .prepare(agent.put(&url))
+                .header("content-type", "application/json")
+                .send(body),
+            ("DELETE", _) => self.prepare(agent.delete(&url)).call(),
             _ => self.prepare(agent.get(&url)).call(),
         };
         let failed = |error: &ureq::Error| Failure::of(&url, error);
@@ -611,6 +616,97 @@ fn encode(text: &str) -> String {
 /// as it is, never deleted (`POST /v1/jobs/{id}/cancel`, not `DELETE`).
 pub fn cancel(server: &Server, id: &str) -> Result<String, CliError> {
     server.send("POST", &format!("/v1/jobs/{}/cancel", encode(id)), None)
+}
+
+/// `schedule`: nightly runs on a server.
+#[derive(Debug, Clone, clap::Subcommand)]
+pub enum ScheduleCommand {
+    /// Create a schedule from a JSON file (`{"name", "cron", "time_zone", "template": JOB,
+    /// "statistics", "enabled"}`; `-` or nothing reads standard input); print it.
+    Create {
+        /// The schedule JSON file; `-` or nothing reads standard input.
+        #[arg(default_value = "-")]
+        file: PathBuf,
+    },
+    /// Print your schedules, oldest first: `{"schedules": [...]}`, every page.
+    List,
+    /// Print a schedule: its timetable, next and last run, and the runs it skipped.
+    Show {
+        /// The schedule's id.
+        id: String,
+    },
+    /// Replace a schedule's definition with a JSON file's (its runs stay); print it.
+    Replace {
+        /// The schedule's id.
+        id: String,
+        /// The schedule JSON file; `-` or nothing reads standard input.
+        #[arg(default_value = "-")]
+        file: PathBuf,
+    },
+    /// Delete a schedule (the jobs it submitted stay).
+    Delete {
+        /// The schedule's id.
+        id: String,
+    },
+    /// Run a schedule's template now, outside its timetable; print the job. Sent once: a
+    /// request sent again after a lost answer would run it twice.
+    Run {
+        /// The schedule's id.
+        id: String,
+    },
+    /// Print a schedule's latest runs, oldest first, with each statistic's value, 95 % interval
+    /// and drift flag.
+    Runs {
+        /// The schedule's id.
+        id: String,
+        /// How many of the latest runs, 1 to 366 (the server's default 60).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=366))]
+        limit: Option<u32>,
+    },
+}
+
+/// Runs a `schedule` command; what it prints (nothing for a delete).
+pub fn schedule(server: &Server, command: &ScheduleCommand) -> Result<String, CliError> {
+    let path = |id: &str, tail: &str| format!("/v1/schedules/{}{tail}", encode(id));
+    match command {
+        ScheduleCommand::Create { file } => {
+            server.send("POST", "/v1/schedules", Some(&read_input(file)?))
+        }
+        ScheduleCommand::List => {
+            let mut schedules = Vec::new();
+            let mut cursor: Option<String> = None;
+            loop {
+                let page = match &cursor {
+                    Some(cursor) => format!("/v1/schedules?cursor={}", encode(cursor)),
+                    None => "/v1/schedules".to_owned(),
+                };
+                let mut body = parse(&server.send("GET", &page, None)?)?;
+                if let Some(serde_json::Value::Array(items)) = body.get_mut("schedules") {
+                    schedules.append(items);
+                }
+                cursor = body["next_cursor"].as_str().map(str::to_owned);
+                if cursor.is_none() {
+                    return Ok(serde_json::json!({ "schedules": schedules }).to_string());
+                }
+            }
+        }
+        ScheduleCommand::Show { id } => server.send("GET", &path(id, ""), None),
+        ScheduleCommand::Replace { id, file } => {
+            server.send("PUT", &path(id, ""), Some(&read_input(file)?))
+        }
+        ScheduleCommand::Delete { id } => server.send("DELETE", &path(id, ""), None),
+        ScheduleCommand::Run { id } => {
+            let once = Server {
+                retries: 0,
+                ..server.clone()
+            };
+            once.send("POST", &path(id, "/run"), None)
+        }
+        ScheduleCommand::Runs { id, limit } => {
+            let query = limit.map_or(String::new(), |limit| format!("?limit={limit}"));
+            server.send("GET", &path(id, &format!("/runs{query}")), None)
+        }
+    }
 }
 
 #[cfg(test)]
