@@ -1939,6 +1939,30 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
             && reason.contains("/devices"),
         "{reason}"
     );
+    // A timetable this build no longer reads (written by another): skipped, and stopped until a
+    // PUT, rather than due and logged again every second.
+    let mut unreadable = nightly("s3", "2026-11-22T03:00:00Z");
+    unreadable.definition.time_zone = "Europe/Atlantis".to_owned();
+    store.insert_schedule(&unreadable, SCHEDULES).await.unwrap();
+    let created = tick(
+        store.as_ref(),
+        queue(QueueBound::total(100)),
+        now,
+        &mut waiting,
+    );
+    assert_eq!(created.await.unwrap(), 0);
+    let (runs, last) = skipped(&store, &unreadable).await;
+    let (due, reason) = last.expect("the skipped run");
+    assert_eq!((runs, due.as_str()), (1, "2026-11-22T03:00:00.000Z"));
+    assert!(
+        reason.contains("Europe/Atlantis") && reason.contains("PUT"),
+        "{reason}"
+    );
+    let stored = store
+        .schedule(&unreadable.owner, &unreadable.id)
+        .await
+        .unwrap();
+    assert_eq!(stored.next_run_at, None);
     // A template larger than the server now allows (a limit lowered since it was written, or
     // another instance's) skips its run the same way: it ran, unbounded.
     let mut large = nightly("s2", "2026-11-22T03:00:00Z");

@@ -120,9 +120,25 @@ pub async fn tick(
     let mut created = 0;
     for schedule in store.due_schedules(UnixMs::from_datetime(now)).await? {
         let definition = &schedule.definition;
-        let Ok(timetable) = Timetable::parse(&definition.cron, &definition.time_zone) else {
-            tracing::error!(schedule = %schedule.id, "stored schedule no longer parses; skipped");
-            continue;
+        let timetable = match Timetable::parse(&definition.cron, &definition.time_zone) {
+            Ok(timetable) => timetable,
+            Err(faults) => {
+                // A build that reads cron or time zones otherwise than the one that wrote it: the
+                // run is skipped and the schedule stops (no next run: it was due and logged
+                // again every second) until a PUT writes it anew.
+                let faults: Vec<String> = faults
+                    .iter()
+                    .map(|(field, fault)| format!("{field}: {fault}"))
+                    .collect();
+                let reason = format!(
+                    "its timetable no longer parses ({}); it runs again once replaced (PUT)",
+                    faults.join("; ")
+                );
+                tracing::error!(schedule = %schedule.id, %reason, "this run is skipped");
+                let due = schedule.next_run_at.unwrap_or(UnixMs::from_datetime(now));
+                skip(store, &schedule, None, due, &reason).await?;
+                continue;
+            }
         };
         let Some(due) = timetable
             .latest_at_or_before(now)
