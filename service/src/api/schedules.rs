@@ -54,7 +54,8 @@ pub struct ScheduleResource {
     pub template: serde_json::Value,
     /// The statistics its trend follows.
     pub statistics: Vec<String>,
-    /// RFC 3339; null when disabled.
+    /// RFC 3339; null when disabled, or when its timetable no longer parses (`last_skipped`
+    /// says so) until a PUT.
     #[schema(format = DateTime)]
     pub next_run_at: Option<String>,
     /// RFC 3339; the due time of its latest run, if any.
