@@ -117,6 +117,71 @@ fn serve_and_worker_refuse_an_unsupported_database_scheme_as_a_bad_command_line(
     }
 }
 
+/// A SQLite URL that names no file (`sqlite://$DB` with DB unset) is a bad command line too: it
+/// served, SQLite gave each connection a private temporary database, and a job acknowledged with
+/// 202 was lost (a probe). Nothing is created.
+#[test]
+fn serve_and_worker_refuse_a_sqlite_url_without_a_file() {
+    let dir = temp_dir("no-file");
+    for url in ["sqlite://", "sqlite:", "sqlite://?mode=rwc"] {
+        for command in [&["serve", "--bind", "127.0.0.1:0"][..], &["worker"]] {
+            let output = Command::new(BIN)
+                .args(command)
+                .args(["--database", url])
+                .current_dir(&dir)
+                .output()
+                .unwrap();
+            let stderr = String::from_utf8_lossy(&output.stderr);
+            assert_eq!(output.status.code(), Some(2), "{command:?} {url}: {stderr}");
+            assert!(stderr.contains("names no file"), "{stderr}");
+        }
+    }
+    assert_eq!(
+        std::fs::read_dir(&dir).unwrap().count(),
+        0,
+        "nothing created"
+    );
+}
+
+/// A count or a time outside what the server can honour is a bad command line naming the flag,
+/// before anything is created: `--workers 100000` started and logged 108,731 warnings of its
+/// pool in 12 s, `--header-timeout-seconds 0` became 1 ms and cut off every keep-alive, and
+/// `--max-connections 0` became 1 (a probe).
+#[test]
+fn serve_refuses_counts_and_times_out_of_range_by_name() {
+    let dir = temp_dir("flag-ranges");
+    for (flag, value) in [
+        ("--workers", "100000"),
+        ("--compute-threads", "0"),
+        ("--max-queued", "0"),
+        ("--max-queued-per-key", "0"),
+        ("--max-job-operations", "0"),
+        ("--max-body-bytes", "0"),
+        ("--header-timeout-seconds", "0"),
+        ("--body-timeout-seconds", "0"),
+        ("--request-timeout-seconds", "NaN"),
+        ("--max-concurrent-requests", "0"),
+        ("--max-connections", "0"),
+        ("--max-streams-per-key", "0"),
+        ("--min-free-disk-mb", "18446744073709551615"),
+        ("--retain-days", "100000"),
+    ] {
+        let output = Command::new(BIN)
+            .args(["serve", "--bind", "127.0.0.1:0", flag, value])
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{flag} {value}: {stderr}");
+        assert!(stderr.contains(flag), "{flag} {value}: {stderr}");
+    }
+    assert_eq!(
+        std::fs::read_dir(&dir).unwrap().count(),
+        0,
+        "nothing created"
+    );
+}
+
 #[test]
 fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sigterm() {
     use std::io::{BufRead, BufReader};

@@ -51,7 +51,7 @@ impl StartupError {
             StartupError::PublicWithoutKeys(_)
                 | StartupError::NoWorkers
                 | StartupError::Compute(PoolError::NoThreads | PoolError::TooMany(_))
-                | StartupError::Database(StoreError::UnsupportedUrl(_))
+                | StartupError::Database(StoreError::UnsupportedUrl(_) | StoreError::NoFile(_))
         )
     }
 }
@@ -78,8 +78,7 @@ impl Application {
         if key_owners.is_empty() && !config.bind.ip().is_loopback() {
             return Err(StartupError::PublicWithoutKeys(config.bind));
         }
-        let workers = Arc::new(start_workers(&config.queue).await?);
-        let store = Arc::clone(&workers.store);
+        // The address first: a port in use is refused before the database file is created.
         let listener =
             TcpListener::bind(config.bind)
                 .await
@@ -87,6 +86,8 @@ impl Application {
                     address: config.bind,
                     source,
                 })?;
+        let workers = Arc::new(start_workers(&config.queue).await?);
+        let store = Arc::clone(&workers.store);
         let address = listener.local_addr().map_err(|source| StartupError::Bind {
             address: config.bind,
             source,
@@ -155,6 +156,9 @@ impl Application {
             stopping.clone(),
         ));
         let retention = config.retain_days.map(|days| {
+            if days == 0 {
+                tracing::warn!("--retain-days 0: every job is deleted, with its Result, as soon as it ends (at the next hourly check); leave the flag out to keep jobs until deleted");
+            }
             tokio::spawn(crate::retention::run(
                 Arc::clone(&state.store),
                 days,

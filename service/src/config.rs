@@ -42,11 +42,11 @@ pub struct WorkerConfig {
     pub database_connections: u32,
     /// Shards run at the same time, each on one compute thread (default: one per compute thread);
     /// with `serve`, 0 serves the API without running jobs.
-    #[arg(long, env = "BOUNCEWEAR_WORKERS")]
+    #[arg(long, env = "BOUNCEWEAR_WORKERS", value_parser = at_most(1024, 0))]
     pub workers: Option<usize>,
     /// Compute threads (default: one per core). Compute never runs on the async runtime. With one,
     /// a merge encodes half its Result's rows on a second thread, as stores encode beside it.
-    #[arg(long, env = "BOUNCEWEAR_COMPUTE_THREADS")]
+    #[arg(long, env = "BOUNCEWEAR_COMPUTE_THREADS", value_parser = at_most(1024, 1))]
     pub compute_threads: Option<usize>,
     /// How long a claimed job stays leased without a heartbeat before another worker may take it.
     #[arg(long, env = "BOUNCEWEAR_LEASE_SECONDS", default_value_t = 30.0)]
@@ -66,6 +66,30 @@ pub struct WorkerConfig {
     /// worker that runs a job's last merge applies it (with `serve --workers 0`, the workers').
     #[arg(long, env = "BOUNCEWEAR_MAX_LISTED_LIVES", default_value_t = 100_000)]
     pub max_listed_lives: u64,
+}
+
+/// The most seconds any flag's time may be: a year.
+const MAX_SECONDS: f64 = 365.0 * 24.0 * 3600.0;
+
+/// Parses a flag's seconds: a number more than 0 and at most a year (so that NaN, infinities and
+/// values no `Duration` holds are refused by name, exit 2, rather than panicking or never ending;
+/// a server's `--header-timeout-seconds 0` read as 1 ms cut off every keep-alive).
+pub fn seconds_flag(text: &str) -> Result<f64, String> {
+    let seconds: f64 = text.trim().parse().map_err(|e| format!("{e}"))?;
+    if seconds > 0.0 && seconds <= MAX_SECONDS {
+        Ok(seconds)
+    } else {
+        Err(format!(
+            "must be more than 0 and at most {MAX_SECONDS} seconds (a year)"
+        ))
+    }
+}
+
+/// A count flag's parser: from `least` to `most`, else a refusal naming the range (exit 2). A
+/// flag with no upper bound took `--workers 100000` and logged 108,731 warnings of its pool in
+/// 12 s; one with no lower bound read 0 as 1, or as no bound.
+fn at_most(most: u64, least: u64) -> clap::builder::RangedU64ValueParser<usize> {
+    clap::builder::RangedU64ValueParser::<usize>::new().range(least..=most)
 }
 
 impl WorkerConfig {
@@ -90,11 +114,13 @@ pub struct ServeConfig {
     #[arg(long = "api-key", env = "BOUNCEWEAR_API_KEYS", value_delimiter = ',')]
     pub api_keys: Vec<String>,
     /// Unfinished (queued or running) jobs at most; further submissions get 429 with Retry-After.
-    #[arg(long, env = "BOUNCEWEAR_MAX_QUEUED", default_value_t = 1000)]
+    #[arg(long, env = "BOUNCEWEAR_MAX_QUEUED", default_value_t = 1000,
+          value_parser = clap::value_parser!(u64).range(1..))]
     pub max_queued: u64,
     /// Unfinished jobs at most per API key (and per schedule's key), so that one key cannot fill the
     /// queue for all (default: half of --max-queued with two keys or more, else all of it).
-    #[arg(long, env = "BOUNCEWEAR_MAX_QUEUED_PER_KEY")]
+    #[arg(long, env = "BOUNCEWEAR_MAX_QUEUED_PER_KEY",
+          value_parser = clap::value_parser!(u64).range(1..))]
     pub max_queued_per_key: Option<u64>,
     /// Shortest interval between two runs of a schedule, in seconds: a cron expression that fires
     /// more often is refused (422).
@@ -108,45 +134,52 @@ pub struct ServeConfig {
     #[arg(
         long,
         env = "BOUNCEWEAR_MAX_JOB_OPERATIONS",
-        default_value_t = 2_000_000_000
+        default_value_t = 2_000_000_000,
+        value_parser = clap::value_parser!(u64).range(1..)
     )]
     pub max_job_operations: u64,
     /// Largest request body, in bytes.
-    #[arg(long, env = "BOUNCEWEAR_MAX_BODY_BYTES", default_value_t = 1 << 20)]
+    #[arg(long, env = "BOUNCEWEAR_MAX_BODY_BYTES", default_value_t = 1 << 20,
+          value_parser = at_most(1 << 30, 1))]
     pub max_body_bytes: usize,
     /// Seconds a connection may take to send a request's headers (and may stay idle between
     /// requests); a client that stalls is disconnected.
     #[arg(
         long,
         env = "BOUNCEWEAR_HEADER_TIMEOUT_SECONDS",
-        default_value_t = 10.0
+        default_value_t = 10.0,
+        value_parser = seconds_flag
     )]
     pub header_timeout_seconds: f64,
     /// Seconds a request may take to send its whole body; later, 408.
-    #[arg(long, env = "BOUNCEWEAR_BODY_TIMEOUT_SECONDS", default_value_t = 30.0)]
+    #[arg(long, env = "BOUNCEWEAR_BODY_TIMEOUT_SECONDS", default_value_t = 30.0,
+          value_parser = seconds_flag)]
     pub body_timeout_seconds: f64,
     /// Seconds a request may take until its response starts (waiting for a slot included);
     /// later, 503. An event stream, once started, runs as long as its job.
     #[arg(
         long,
         env = "BOUNCEWEAR_REQUEST_TIMEOUT_SECONDS",
-        default_value_t = 60.0
+        default_value_t = 60.0,
+        value_parser = seconds_flag
     )]
     pub request_timeout_seconds: f64,
     /// Requests handled at the same time; more wait for a slot (within the request timeout).
     #[arg(
         long,
         env = "BOUNCEWEAR_MAX_CONCURRENT_REQUESTS",
-        default_value_t = 256
+        default_value_t = 256,
+        value_parser = at_most(1 << 20, 1)
     )]
     pub max_concurrent_requests: usize,
     /// Open connections at most; more wait in the listen backlog. Never more than the process's
     /// open-file limit (RLIMIT_NOFILE) less what the database and the process need (default: that).
-    #[arg(long, env = "BOUNCEWEAR_MAX_CONNECTIONS")]
+    #[arg(long, env = "BOUNCEWEAR_MAX_CONNECTIONS", value_parser = at_most(1 << 20, 1))]
     pub max_connections: Option<usize>,
     /// Event streams (`/v1/events`, `/v1/jobs/{id}/events`) one API key may hold open at once
     /// (without API keys: all clients together); more get 429 with Retry-After.
-    #[arg(long, env = "BOUNCEWEAR_MAX_STREAMS_PER_KEY", default_value_t = 64)]
+    #[arg(long, env = "BOUNCEWEAR_MAX_STREAMS_PER_KEY", default_value_t = 64,
+          value_parser = at_most(1 << 20, 1))]
     pub max_streams_per_key: usize,
     /// Schedules one API key may hold (without API keys: all clients together); another gets 403
     /// until one is deleted.
@@ -169,7 +202,8 @@ pub struct ServeConfig {
     pub max_response_mb: u64,
     /// Free disk space, in MB, beside a SQLite database below which the server reports itself not
     /// ready (`/readyz` answers 503).
-    #[arg(long, env = "BOUNCEWEAR_MIN_FREE_DISK_MB", default_value_t = 100)]
+    #[arg(long, env = "BOUNCEWEAR_MIN_FREE_DISK_MB", default_value_t = 100,
+          value_parser = clap::value_parser!(u64).range(..=1_000_000_000))]
     pub min_free_disk_mb: u64,
     /// Bytes, in MB, that the jobs of one API key (and of its schedules) may store: a key whose
     /// jobs store this much or more gets 403 for a new job until it deletes some (a job's
@@ -182,7 +216,8 @@ pub struct ServeConfig {
     pub max_stored_mb_per_key: Option<u64>,
     /// Delete finished jobs, with everything stored for them, this many days after they ended
     /// (checked at start-up and every hour). Without it, they stay until deleted.
-    #[arg(long, env = "BOUNCEWEAR_RETAIN_DAYS")]
+    #[arg(long, env = "BOUNCEWEAR_RETAIN_DAYS",
+          value_parser = clap::value_parser!(u32).range(..=36_500))]
     pub retain_days: Option<u32>,
     #[command(flatten)]
     pub queue: WorkerConfig,

@@ -69,21 +69,7 @@ const WAIT_PER_REQUEST: f64 = 10.0;
 /// The least time between two of `wait`'s requests, should a server answer at once anyway.
 const POLL: Duration = Duration::from_millis(200);
 
-/// The most seconds a client waits for anything: a year.
-const MAX_SECONDS: f64 = 365.0 * 24.0 * 3600.0;
-
-/// Parses a flag's seconds: a number more than 0 and at most a year (so that NaN, infinities and
-/// values no `Duration` holds are refused by name, exit 2, rather than panicking or never ending).
-pub fn seconds(text: &str) -> Result<f64, String> {
-    let seconds: f64 = text.trim().parse().map_err(|e| format!("{e}"))?;
-    if seconds > 0.0 && seconds <= MAX_SECONDS {
-        Ok(seconds)
-    } else {
-        Err(format!(
-            "must be more than 0 and at most {MAX_SECONDS} seconds (a year)"
-        ))
-    }
-}
+pub use crate::config::seconds_flag as seconds;
 
 /// An HTTP client whose every request ends within `timeout_seconds`, and which hands any status
 /// back to the caller (a 4xx or 5xx is an answer, not an error of the client). It speaks `http`

@@ -68,6 +68,12 @@ pub enum StoreError {
         "unsupported database URL scheme `{0}`: use sqlite://FILE (embedded, the default) or postgres://USER@HOST/DATABASE"
     )]
     UnsupportedUrl(String),
+    /// A SQLite URL that names no file (`sqlite://`, an unset variable in `sqlite://$DB`):
+    /// SQLite would give each connection a private temporary database, and lose what they wrote.
+    #[error(
+        "the database URL `{0}` names no file: use sqlite://FILE (sqlite::memory: for a database that lives as long as the process)"
+    )]
+    NoFile(String),
     /// A stored document no longer reads as its type (written by another version, or damaged).
     #[error("stored {what} cannot be read: {detail}")]
     Corrupt { what: &'static str, detail: String },

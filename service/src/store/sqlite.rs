@@ -38,7 +38,11 @@ impl SqliteBackend {
     /// Opens (creating if missing) and migrates the database at `url`.
     #[tracing::instrument(skip_all)]
     pub(crate) async fn open(url: &str) -> StoreResult<Self> {
-        let options = SqliteConnectOptions::from_str(url)?
+        let options = SqliteConnectOptions::from_str(url)?;
+        if options.get_filename().as_os_str().is_empty() {
+            return Err(StoreError::NoFile(url.to_owned()));
+        }
+        let options = options
             .create_if_missing(true)
             .journal_mode(SqliteJournalMode::Wal)
             .synchronous(SqliteSynchronous::Full)
