@@ -41,6 +41,47 @@ fn a_job_killed_mid_run_finishes_after_restart_with_the_identical_result() {
     assert_eq!(result["devices"], local["devices"]);
 }
 
+/// A client that reads a large Result slowly no longer holds a SIGTERM for its body timeout:
+/// with 120 s of it, the server stopped only when it ran out (a probe saw 30 s with the default,
+/// past a container's grace period); it now cuts the response off after 10 s and exits.
+#[test]
+fn sigterm_cuts_off_a_response_its_client_reads_too_slowly() {
+    use std::io::{Read, Write};
+    let server = Spawned::start(&temp_db("slow-reader"), &["--body-timeout-seconds", "120"]);
+    // 1000 bins: a Result of about 18 MB, far beyond what the sockets' buffers hold.
+    let job = json!({"devices": 64, "operations": 1000, "seed": 3, "bin_operations": 1});
+    let id = server.submit(&job);
+    server.wait_for(&id, "succeeded", Duration::from_secs(60));
+    let address = server
+        .url("")
+        .trim_start_matches("http://")
+        .trim_end_matches('/')
+        .to_owned();
+    let mut reader = std::net::TcpStream::connect(&address).unwrap();
+    write!(
+        reader,
+        "GET /v1/jobs/{id}/result HTTP/1.1\r\nHost: x\r\n\r\n"
+    )
+    .unwrap();
+    let mut first = [0_u8; 4096];
+    reader.read_exact(&mut first).unwrap();
+    let mut server = server;
+    let signalled = Instant::now();
+    let pid = server.child.id().to_string();
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let exit = server.child.wait().unwrap();
+    let took = signalled.elapsed();
+    assert!(exit.success(), "{exit:?}");
+    assert!(took < Duration::from_secs(60), "stopped after {took:?}");
+    drop(reader);
+}
+
 #[test]
 fn sigterm_hands_a_running_job_back_to_the_queue() {
     let database = temp_db("sigterm");

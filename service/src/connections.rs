@@ -394,8 +394,31 @@ pub async fn serve(
         });
     }
     drop(listener);
-    while connections.join_next().await.is_some() {}
+    // Responses still being sent get DRAIN to end, then are cut off: a client reading a large
+    // Result at 300 kB/s held a SIGTERM for its whole body timeout (30 s, silently), past the
+    // 30 s a container manager grants before it kills the process, workers' hand-back and all.
+    let sending = connections.len();
+    if sending > 0 {
+        tracing::info!(
+            connections = sending,
+            "waiting at most {} s for the responses still being sent",
+            DRAIN.as_secs()
+        );
+    }
+    let drained = tokio::time::timeout(DRAIN, async {
+        while connections.join_next().await.is_some() {}
+    });
+    if drained.await.is_err() {
+        tracing::warn!(
+            connections = connections.len(),
+            "responses still being sent were cut off at shutdown"
+        );
+        connections.shutdown().await;
+    }
 }
+
+/// How long a stopping server lets the responses it is sending end.
+const DRAIN: Duration = Duration::from_secs(10);
 
 /// After a failed accept: a client that gave up is nothing; anything else (out of descriptors,
 /// most likely) gets a second's pause, as accept loops do, instead of a busy loop.
