@@ -499,6 +499,26 @@ fn each_request_is_one_json_log_line_with_its_route_status_latency_and_request_i
     );
 }
 
+/// A `RUST_LOG` that does not parse is said on stderr (it was dropped in silence, logging at
+/// info as if it were not set).
+#[test]
+fn a_rust_log_that_does_not_parse_is_said() {
+    use std::io::Write;
+    let mut simulate = Command::new(BIN)
+        .args(["simulate", "-"])
+        .env("RUST_LOG", "x=y=z")
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    simulate.stdin.take().unwrap().write_all(b"{}").unwrap();
+    let output = simulate.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(stderr.contains("RUST_LOG does not parse"), "{stderr}");
+}
+
 #[test]
 fn text_logs_on_a_pipe_have_no_colour_and_name_the_request() {
     let (server, lines) = Spawned::logging(&temp_db("text-log"), &[]);

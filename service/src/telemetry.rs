@@ -23,8 +23,17 @@ pub enum LogFormat {
 
 /// Logs to stderr, filtered by `RUST_LOG` (default: info, and warnings from sqlx).
 pub fn init_logging(format: LogFormat) {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,sqlx=warn"));
+    // A RUST_LOG that does not parse is said once logging runs, not dropped in silence.
+    let mut refused = None;
+    let filter = match tracing_subscriber::EnvFilter::try_from_default_env() {
+        Ok(filter) => filter,
+        Err(error) => {
+            if std::env::var_os("RUST_LOG").is_some_and(|value| !value.is_empty()) {
+                refused = Some(error.to_string());
+            }
+            tracing_subscriber::EnvFilter::new("info,sqlx=warn")
+        }
+    };
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr);
@@ -43,6 +52,9 @@ pub fn init_logging(format: LogFormat) {
             .with_span_list(false)
             .try_init(),
     };
+    if let Some(error) = refused {
+        tracing::warn!(%error, "RUST_LOG does not parse; logging at info (and sqlx at warn)");
+    }
 }
 
 /// Whether text logs are coloured: on a terminal, unless `NO_COLOR` is set to anything but the

@@ -121,6 +121,27 @@ fn every_number_of_a_scenario_has_its_one_rule_in_the_document() {
     }
 }
 
+/// A client's `X-Request-Id` is echoed (and logged) when it is an id; one of 9,000 characters,
+/// or with a space, is replaced by one of the server's (a UUID) rather than echoed whole.
+#[test]
+fn a_request_id_is_echoed_only_when_it_is_an_id() {
+    let server = TestApp::start(&temp_db("request-id"), &[]);
+    let echoed = |id: &str| {
+        let asked = agent()
+            .get(&server.url("/healthz"))
+            .header("x-request-id", id);
+        reply(asked.call())
+            .header("x-request-id")
+            .unwrap()
+            .to_owned()
+    };
+    assert_eq!(echoed("build-42.step-7"), "build-42.step-7");
+    for unusable in ["x".repeat(9000), "a b".to_owned(), "x".repeat(129)] {
+        let ours = echoed(&unusable);
+        assert!(ours.len() == 36 && ours.matches('-').count() == 4, "{ours}");
+    }
+}
+
 #[test]
 fn api_keys_are_required_and_isolate_jobs() {
     let server = TestApp::start(&temp_db("keys"), &["--api-key", "alpha,beta"]);

@@ -133,6 +133,24 @@ pub fn router(state: AppState) -> axum::Router {
         )
         .layer(PropagateRequestIdLayer::x_request_id())
         .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
+        .layer(axum::middleware::map_request(usable_request_id))
+}
+
+/// The request without a client's `X-Request-Id` that is no id (more than 128 characters, or
+/// any but visible ASCII, or given twice): one of ours replaces it. A 9,000-character one was
+/// echoed and logged whole with every request.
+async fn usable_request_id(mut request: Request) -> Request {
+    let mut given = request.headers().get_all("x-request-id").iter();
+    let usable = match (given.next(), given.next()) {
+        (Some(id), None) => {
+            id.len() <= 128 && id.as_bytes().iter().all(|b| (b'!'..=b'~').contains(b))
+        }
+        _ => false,
+    };
+    if !usable {
+        request.headers_mut().remove("x-request-id");
+    }
+    request
 }
 
 /// The request with the entries of `Accept-Encoding` that refuse the uncompressed form
