@@ -184,6 +184,30 @@ fn serve_and_worker_refuse_a_sqlite_url_without_a_file() {
     );
 }
 
+/// A SQLite file that cannot be opened is named, with what to check: the error was "database:
+/// database: error returned from database: (code: 14) unable to open database file".
+#[test]
+fn a_sqlite_file_that_cannot_be_opened_is_named() {
+    let dir = temp_dir("unopened");
+    let not_a_database = dir.join("notes.db");
+    std::fs::write(&not_a_database, "not a database, but notes\n".repeat(100)).unwrap();
+    let missing_dir = dir.join("no-such-dir").join("x.db");
+    for file in [&not_a_database, &missing_dir] {
+        let output = Command::new(BIN)
+            .args(["serve", "--bind", "127.0.0.1:0", "--database"])
+            .arg(format!("sqlite://{}", file.display()))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(1), "{stderr}");
+        let named = format!("cannot open {}", file.display());
+        assert!(
+            stderr.contains(&named) && !stderr.contains("database: database"),
+            "{stderr}"
+        );
+    }
+}
+
 /// A count or a time outside what the server can honour is a bad command line naming the flag,
 /// before anything is created: `--workers 100000` started and logged 108,731 warnings of its
 /// pool in 12 s, `--header-timeout-seconds 0` became 1 ms and cut off every keep-alive, and

@@ -74,6 +74,11 @@ pub enum StoreError {
         "the database URL `{0}` names no file: use sqlite://FILE (sqlite::memory: for a database that lives as long as the process)"
     )]
     NoFile(String),
+    /// The SQLite file could not be opened (or created), and why.
+    #[error(
+        "cannot open {file}: {source} (does its directory exist, may this user write there, and is it a SQLite database?)"
+    )]
+    Unopened { file: String, source: sqlx::Error },
     /// A stored document no longer reads as its type (written by another version, or damaged).
     #[error("stored {what} cannot be read: {detail}")]
     Corrupt { what: &'static str, detail: String },

@@ -51,8 +51,27 @@ impl SqliteBackend {
         let writer = SqlitePoolOptions::new()
             .max_connections(1)
             .connect_with(options.clone())
-            .await?;
-        migrations::SQLITE.run(&writer).await?;
+            .await
+            .map_err(|source| StoreError::Unopened {
+                file: options.get_filename().display().to_string(),
+                source,
+            })?;
+        migrations::SQLITE
+            .run(&writer)
+            .await
+            .map_err(|error| match error {
+                // The first statement reads the file: one that is no database (SQLITE_NOTADB) fails
+                // there.
+                sqlx::migrate::MigrateError::Execute(sqlx::Error::Database(source))
+                    if source.code().as_deref() == Some("26") =>
+                {
+                    StoreError::Unopened {
+                        file: options.get_filename().display().to_string(),
+                        source: sqlx::Error::Database(source),
+                    }
+                }
+                error => StoreError::Migration(error),
+            })?;
         backfill_seeds(&writer).await?;
         let file = DatabaseFile::opened(options.get_filename());
         let writer = match &file {
