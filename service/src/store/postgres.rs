@@ -86,7 +86,11 @@ impl PgBackend {
                 Ok(_) => break,
                 Err(sqlx::Error::PoolTimedOut) if started.elapsed() < STARTUP_WAIT => {
                     let why = why_no_connection(url).await;
-                    tracing::warn!(%why, "the database has not answered yet; trying again");
+                    let server =
+                        <sqlx::postgres::PgConnectOptions as std::str::FromStr>::from_str(url)
+                            .map(|o| format!("{}:{}", o.get_host(), o.get_port()))
+                            .unwrap_or_default();
+                    tracing::warn!(%why, %server, "the database has not answered yet; trying again");
                 }
                 Err(sqlx::Error::PoolTimedOut) => {
                     let why = why_no_connection(url).await;
@@ -98,7 +102,19 @@ impl PgBackend {
                 Err(error) => return Err(error.into()),
             }
         }
-        migrations::POSTGRES.run(&pool).await?;
+        migrations::POSTGRES
+            .run(&pool)
+            .await
+            .map_err(|error| match error {
+                // Its connection taken meanwhile (a server at max_connections): say why, as above.
+                sqlx::migrate::MigrateError::Execute(sqlx::Error::PoolTimedOut) => {
+                    StoreError::NotReady(format!(
+                        "no connection to the database for its migrations within {} s",
+                        super::DATABASE_WAIT.as_secs_f64()
+                    ))
+                }
+                error => StoreError::Migration(error),
+            })?;
         let mut listener = PgListener::connect_with(&pool).await?;
         listener.listen(JOB_CHANNEL).await?;
         let (events, ends) = (broadcast::channel(1024).0, broadcast::channel(1024).0);
