@@ -203,7 +203,7 @@ pub struct ServeConfig {
     /// Free disk space, in MB, beside a SQLite database below which the server reports itself not
     /// ready (`/readyz` answers 503).
     #[arg(long, env = "BOUNCEWEAR_MIN_FREE_DISK_MB", default_value_t = 100,
-          value_parser = clap::value_parser!(u64).range(..=1_000_000_000))]
+          value_parser = clap::value_parser!(u64).range(..=1_000_000_000_000))]
     pub min_free_disk_mb: u64,
     /// Bytes, in MB, that the jobs of one API key (and of its schedules) may store: a key whose
     /// jobs store this much or more gets 403 for a new job until it deletes some (a job's
