@@ -120,25 +120,8 @@ pub async fn tick(
     let mut created = 0;
     for schedule in store.due_schedules(UnixMs::from_datetime(now)).await? {
         let definition = &schedule.definition;
-        let timetable = match Timetable::parse(&definition.cron, &definition.time_zone) {
-            Ok(timetable) => timetable,
-            Err(faults) => {
-                // A build that reads cron or time zones otherwise than the one that wrote it: the
-                // run is skipped and the schedule stops (no next run: it was due and logged
-                // again every second) until a PUT writes it anew.
-                let faults: Vec<String> = faults
-                    .iter()
-                    .map(|(field, fault)| format!("{field}: {fault}"))
-                    .collect();
-                let reason = format!(
-                    "its timetable no longer parses ({}); it runs again once replaced (PUT)",
-                    faults.join("; ")
-                );
-                tracing::error!(schedule = %schedule.id, %reason, "this run is skipped");
-                let due = schedule.next_run_at.unwrap_or(UnixMs::from_datetime(now));
-                skip(store, &schedule, None, due, &reason).await?;
-                continue;
-            }
+        let Some(timetable) = timetable_or_stop(store, &schedule, now).await? else {
+            continue;
         };
         let Some(due) = timetable
             .latest_at_or_before(now)
@@ -236,6 +219,33 @@ pub async fn rebase(store: &Store, now: DateTime<Utc>) -> StoreResult<usize> {
         }
     }
     Ok(rebased)
+}
+
+/// The schedule's timetable; none when this build cannot read it (one that reads cron or time
+/// zones otherwise than the build that wrote it): then its run is skipped and the schedule stops
+/// (no next run: it stayed due and was logged again every second) until a PUT writes it anew.
+async fn timetable_or_stop(
+    store: &Store,
+    schedule: &ScheduleRecord,
+    now: DateTime<Utc>,
+) -> StoreResult<Option<Timetable>> {
+    let definition = &schedule.definition;
+    let faults = match Timetable::parse(&definition.cron, &definition.time_zone) {
+        Ok(timetable) => return Ok(Some(timetable)),
+        Err(faults) => faults,
+    };
+    let faults: Vec<String> = faults
+        .iter()
+        .map(|(field, fault)| format!("{field}: {fault}"))
+        .collect();
+    let reason = format!(
+        "its timetable no longer parses ({}); it runs again once replaced (PUT)",
+        faults.join("; ")
+    );
+    tracing::error!(schedule = %schedule.id, %reason, "this run is skipped");
+    let due = schedule.next_run_at.unwrap_or(UnixMs::from_datetime(now));
+    skip(store, schedule, None, due, &reason).await?;
+    Ok(None)
 }
 
 /// Skips `schedule`'s run due at `due` for `reason`: counted on the schedule (shown with it) and on
