@@ -9,7 +9,7 @@ use super::error::{
     ApiError, PROBLEM, Problem,
     responses::{BadQuery, NotSucceeded, Unauthorized},
 };
-use super::jobs::{JSON, succeeded_result, to_json};
+use super::jobs::{JSON, has_succeeded, stored_result, to_json};
 use crate::domain::query::{fraction, items};
 use crate::domain::{JobId, Owner};
 use crate::plots;
@@ -180,13 +180,19 @@ async fn results(
     a: &JobId,
     b: &JobId,
 ) -> Result<(JobResult, JobResult, OwnedSemaphorePermit), ApiError> {
-    // A job that does not exist is 404 whatever the other's status: a 409 for the first, not
-    // yet succeeded, hid that the second will never be there.
-    state.store.job(owner, b).await?;
+    // Both jobs read before either's status is judged: a job that does not exist is 404
+    // whatever the other's status (a 409 for the first, not yet succeeded, hid that the second
+    // will never be there).
+    let (job_a, job_b) = (
+        state.store.job(owner, a).await?,
+        state.store.job(owner, b).await?,
+    );
+    has_succeeded(job_a)?;
+    has_succeeded(job_b)?;
     let place = super::limits::take_place(&state.parsing).await?;
     Ok((
-        succeeded_result(state, owner, a).await?,
-        succeeded_result(state, owner, b).await?,
+        stored_result(state, a).await?,
+        stored_result(state, b).await?,
         place,
     ))
 }

@@ -620,7 +620,7 @@ pub async fn succeeded(state: &AppState, owner: &Owner, id: &JobId) -> Result<Jo
 }
 
 /// The job's record, if it succeeded (409 before).
-fn has_succeeded(record: JobRecord) -> Result<JobRecord, ApiError> {
+pub fn has_succeeded(record: JobRecord) -> Result<JobRecord, ApiError> {
     if record.status != JobStatus::Succeeded {
         return Err(ApiError::Conflict(format!(
             "job {} is {}; results exist once it succeeds",
