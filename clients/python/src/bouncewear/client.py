@@ -14,7 +14,7 @@ import time
 import urllib.parse
 import uuid
 from dataclasses import dataclass, field
-from typing import Any, Dict, Iterable, List, Optional
+from typing import Any, Dict, Iterable, List, Optional, TypeVar
 
 import pandas as pd
 import requests
@@ -263,20 +263,39 @@ class Client:
         return self.request("POST", "/v1/calibrations", json=request).json()
 
 
-class Job:
-    """A job on a server. Its attributes are the job resource as last read; `refresh` reads it
-    again, `wait` until it ends."""
+class _Resource:
+    """A resource of a server under `_collection` (`/v1/jobs`, `/v1/schedules`), as last read."""
+
+    _collection = ""
 
     def __init__(self, client: Client, resource: JSON) -> None:
         self.client = client
         self.resource = resource
 
-    def __repr__(self) -> str:
-        return f"Job({self.id!r}, status={self.status!r})"
-
     @property
     def id(self) -> str:
         return str(self.resource["id"])
+
+    def _path(self, part: str = "") -> str:
+        return f"{self._collection}/{_segment(self.id)}{part}"
+
+    def refresh(self: "_R") -> "_R":
+        """Reads it again."""
+        self.resource = self.client.request("GET", self._path()).json()
+        return self
+
+
+_R = TypeVar("_R", bound=_Resource)
+
+
+class Job(_Resource):
+    """A job on a server. Its attributes are the job resource as last read; `refresh` reads it
+    again, `wait` until it ends."""
+
+    _collection = "/v1/jobs"
+
+    def __repr__(self) -> str:
+        return f"Job({self.id!r}, status={self.status!r})"
 
     @property
     def status(self) -> str:
@@ -292,14 +311,6 @@ class Job:
     def error(self) -> Optional[str]:
         """Why it failed."""
         return self.resource.get("error")
-
-    def _path(self, part: str = "") -> str:
-        return f"/v1/jobs/{_segment(self.id)}{part}"
-
-    def refresh(self) -> "Job":
-        """Reads the job again."""
-        self.resource = self.client.request("GET", self._path()).json()
-        return self
 
     def wait(self, progress: bool = True, timeout: Optional[float] = None, poll: float = 1.0) -> "Job":
         """Waits until the job ends; itself. With `progress`, a line on stderr shows how far it is.
@@ -452,20 +463,14 @@ class Job:
         return self
 
 
-class Schedule:
+class Schedule(_Resource):
     """A schedule on a server: a job template run on a cron timetable. Its attributes are the
     schedule resource as last read; `refresh` reads it again."""
 
-    def __init__(self, client: Client, resource: JSON) -> None:
-        self.client = client
-        self.resource = resource
+    _collection = "/v1/schedules"
 
     def __repr__(self) -> str:
         return f"Schedule({self.id!r}, {self.resource.get('cron')!r}, enabled={self.enabled!r})"
-
-    @property
-    def id(self) -> str:
-        return str(self.resource["id"])
 
     @property
     def enabled(self) -> bool:
@@ -480,13 +485,6 @@ class Schedule:
     @property
     def last_skipped(self) -> Optional[JSON]:
         return self.resource.get("last_skipped")
-
-    def _path(self, tail: str = "") -> str:
-        return f"/v1/schedules/{_segment(self.id)}{tail}"
-
-    def refresh(self) -> "Schedule":
-        self.resource = self.client.request("GET", self._path()).json()
-        return self
 
     def replace(self, schedule: JSON) -> "Schedule":
         """Replaces its definition with `schedule` (a whole one, as for creation); its runs stay."""
