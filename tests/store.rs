@@ -1862,16 +1862,7 @@ async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: 
         .unwrap();
     // The server was down for three nights; it starts at 08:00.
     let now = utc("2026-11-22T08:00:00Z");
-    let tick_at = async |now| {
-        let mut waiting = Waiting::default();
-        let created = tick(
-            store.as_ref(),
-            queue(QueueBound::total(100)),
-            now,
-            &mut waiting,
-        );
-        created.await.unwrap()
-    };
+    let tick_at = async |now| tick_now(&store, 100, now, &mut Waiting::default()).await;
     assert_eq!(tick_at(now).await, 1);
     assert_eq!(
         tick_at(now).await,
@@ -1895,6 +1886,13 @@ async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: 
     assert_eq!(store.runs(&id, 10).await.unwrap().len(), 2);
 }
 
+/// One scheduler tick at `now` with room for `room` jobs in the queue; the jobs it created.
+async fn tick_now(store: &Store, room: u64, now: DateTime<Utc>, waiting: &mut Waiting) -> usize {
+    tick(store, queue(QueueBound::total(room)), now, waiting)
+        .await
+        .unwrap()
+}
+
 /// The scheduler's limits with room for every run and no bound on a job's size.
 fn queue(bound: QueueBound) -> RunLimits {
     RunLimits {
@@ -1913,13 +1911,7 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
     store.insert_schedule(&schedule, SCHEDULES).await.unwrap();
     let now = utc("2026-11-22T03:00:05Z");
     let mut waiting = Waiting::default();
-    let created = tick(
-        store.as_ref(),
-        queue(QueueBound::total(100)),
-        now,
-        &mut waiting,
-    );
-    assert_eq!(created.await.unwrap(), 0);
+    assert_eq!(tick_now(&store, 100, now, &mut waiting).await, 0);
     assert!(store.runs(&schedule.id, 10).await.unwrap().is_empty());
     let stored = store
         .schedule(&Owner::anonymous(), &schedule.id)
@@ -1944,13 +1936,7 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
     let mut unreadable = nightly("s3", "2026-11-22T03:00:00Z");
     unreadable.definition.time_zone = "Europe/Atlantis".to_owned();
     store.insert_schedule(&unreadable, SCHEDULES).await.unwrap();
-    let created = tick(
-        store.as_ref(),
-        queue(QueueBound::total(100)),
-        now,
-        &mut waiting,
-    );
-    assert_eq!(created.await.unwrap(), 0);
+    assert_eq!(tick_now(&store, 100, now, &mut waiting).await, 0);
     let (runs, last) = skipped(&store, &unreadable).await;
     let (due, reason) = last.expect("the skipped run");
     assert_eq!((runs, due.as_str()), (1, "2026-11-22T03:00:00.000Z"));
@@ -2049,14 +2035,8 @@ async fn a_clock_that_went_back_brings_the_next_runs_back(url: &str) {
     assert_eq!(rebase(store.as_ref(), now).await.unwrap(), 0, "once");
     // The night comes: both run.
     let mut waiting = Waiting::default();
-    let limits = queue(QueueBound::total(10));
-    let created = tick(
-        store.as_ref(),
-        limits,
-        utc("2026-11-23T03:00:01Z"),
-        &mut waiting,
-    );
-    assert_eq!(created.await.unwrap(), 2);
+    let night = utc("2026-11-23T03:00:01Z");
+    assert_eq!(tick_now(&store, 10, night, &mut waiting).await, 2);
 }
 
 /// On a server with API keys, a schedule whose key was removed from them skips its runs: no
@@ -2101,13 +2081,7 @@ async fn a_full_queue_waits_and_a_key_over_its_quota_skips_the_night(url: &str) 
     let now = utc("2026-11-22T03:00:05Z");
     let mut waiting = Waiting::default();
     for _ in 0..2 {
-        let created = tick(
-            store.as_ref(),
-            queue(QueueBound::total(0)),
-            now,
-            &mut waiting,
-        );
-        assert_eq!(created.await.unwrap(), 0);
+        assert_eq!(tick_now(&store, 0, now, &mut waiting).await, 0);
         assert!(waiting.contains(&ScheduleId::from("s1")), "warned of once");
     }
     let due = store
