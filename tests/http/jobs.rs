@@ -263,6 +263,57 @@ fn jobs_are_listed_newest_first_with_cursor_paging() {
     assert_eq!(last["jobs"].as_array().unwrap().len(), 1);
 }
 
+/// A key's listing cursor names its place and nothing else: not the row's number, whose gaps
+/// would count other keys' jobs. It is sealed with the database's secret, so it opens on every
+/// instance of that database and on no other.
+#[test]
+fn listing_cursors_are_sealed_with_the_databases_secret() {
+    let database = temp_db("sealed-cursors");
+    let keys = ["--api-key", "alpha,beta", "--workers", "0"];
+    let (one, two) = (
+        TestApp::start(&database, &keys),
+        TestApp::start(&database, &keys),
+    );
+    let submit = |server: &TestApp, key: &str, seed: u64| {
+        let job = json!({"devices": 1, "operations": 1, "seed": seed});
+        let reply = post(&server.url("/v1/jobs"), &job.to_string(), Some(key));
+        assert_eq!(reply.status, 202, "{}", reply.body);
+        reply.json()["id"].as_str().unwrap().to_owned()
+    };
+    let older = submit(&one, "alpha", 1);
+    for seed in 0..7 {
+        submit(&two, "beta", seed);
+    }
+    let newer = submit(&two, "alpha", 2);
+    let first = get(&one.url("/v1/jobs?limit=1"), Some("alpha")).json();
+    assert_eq!(first["jobs"][0]["id"], newer.as_str());
+    let cursor = first["next_cursor"].as_str().unwrap();
+    assert!(
+        cursor.len() == 24 && cursor.bytes().all(|b| b.is_ascii_hexdigit()),
+        "{cursor}"
+    );
+    let next = get(
+        &two.url(&format!("/v1/jobs?limit=1&cursor={cursor}")),
+        Some("alpha"),
+    )
+    .json();
+    assert_eq!(next["jobs"][0]["id"], older.as_str(), "{next}");
+    assert!(next.get("next_cursor").is_none(), "{next}");
+    // The row numbers the cursors stood for before are no cursors now.
+    assert_problem(&get(&one.url("/v1/jobs?cursor=9"), Some("alpha")), 400);
+
+    let elsewhere = TestApp::start(&temp_db("sealed-cursors-elsewhere"), &keys);
+    let refused = get(
+        &elsewhere.url(&format!("/v1/jobs?cursor={cursor}")),
+        Some("alpha"),
+    );
+    let problem = assert_problem(&refused, 400);
+    assert_eq!(
+        problem["detail"],
+        format!("cursor `{cursor}` is not one this server gave")
+    );
+}
+
 #[test]
 fn cancelling_stops_a_running_job_a_retried_cancel_keeps_it_and_a_purge_deletes_it() {
     let server = TestApp::start(&temp_db("cancel"), &[]);

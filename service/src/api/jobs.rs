@@ -13,7 +13,9 @@ use super::error::{
 use super::watch::MAX_WAIT_S;
 use super::{AppState, JsonText, idempotency_key, replayed};
 use crate::domain::query::LARGE_DISTRIBUTION_BINS;
-use crate::domain::{AfterRunQuery, JobId, JobStatus, Once, Owner, QueuedJob, UnixMs, draw_seed};
+use crate::domain::{
+    AfterRunQuery, CursorKey, JobId, JobStatus, Once, Owner, QueuedJob, UnixMs, draw_seed,
+};
 use crate::store::{JobRecord, Operations, Page, ShardRecord, StoreError};
 use axum::body::{Body, Bytes};
 use axum::extract::rejection::QueryRejection;
@@ -243,44 +245,61 @@ pub struct ListQuery {
     /// Page size, 1 to 100 (default 20 jobs, 100 schedules).
     #[param(minimum = 1, maximum = 100, example = 20)]
     pub limit: Option<u32>,
-    /// `next_cursor` of the previous page.
-    #[param(pattern = "^[1-9][0-9]{0,18}$", example = "42")]
+    /// `next_cursor` of the previous page: opaque, as this database's instances give it.
+    #[param(pattern = "^[0-9a-f]{24}$", example = "5d1e0c7a9b3f4e2a81c6d0b9")]
     pub cursor: Option<String>,
 }
 
 impl ListQuery {
-    /// The page asked for: its size (`default` without `limit`) and the cursor's `seq`.
-    pub fn page(&self, default: u32) -> Result<(u32, Option<i64>), ApiError> {
+    /// The page asked for: its size (`default` without `limit`) and the `seq` the cursor, opened
+    /// with `key`, stands after.
+    pub fn page(&self, default: u32, key: &CursorKey) -> Result<(u32, Option<i64>), ApiError> {
         let limit = self.limit.unwrap_or(default);
         if !(1..=100).contains(&limit) {
             return Err(ApiError::BadRequest(format!(
                 "limit must be from 1 to 100, got {limit}"
             )));
         }
-        let seq = self.cursor.as_deref().map(cursor_seq).transpose()?;
-        Ok((limit, seq))
+        let seq = self
+            .cursor
+            .as_deref()
+            .map(|cursor| key.open(cursor).ok_or_else(|| not_given(cursor)));
+        Ok((limit, seq.transpose()?))
     }
 
     /// `records`, read one more than the page (`limit + 1`), cut to the page; the cursor of the
-    /// next page (the last record's `seq`), only where another page has records.
-    pub fn cut<T>(records: &mut Vec<T>, limit: u32, seq: impl Fn(&T) -> i64) -> Option<String> {
-        let more = records.len() > limit as usize;
-        records.truncate(limit as usize);
-        more.then(|| records.last().map(|r| seq(r).to_string()))
-            .flatten()
+    /// next page (the last record's `seq`, sealed with `key`), only where another page has
+    /// records.
+    pub fn cut<T>(
+        records: &mut Vec<T>,
+        limit: u32,
+        key: &CursorKey,
+        seq: impl Fn(&T) -> i64,
+    ) -> Option<String> {
+        last_of_page(records, limit).map(|last| key.seal(seq(last)))
     }
 }
 
-/// The number a cursor this server gave stands for: as the documented pattern, digits, the first
-/// not 0 (`01` is no cursor this server gave).
-fn cursor_seq(cursor: &str) -> Result<i64, ApiError> {
+/// `records`, read one more than the page (`limit + 1`), cut to the page; its last record where
+/// another page has records.
+fn last_of_page<T>(records: &mut Vec<T>, limit: u32) -> Option<&T> {
+    let more = records.len() > limit as usize;
+    records.truncate(limit as usize);
+    more.then(|| records.last()).flatten()
+}
+
+fn not_given(cursor: &str) -> ApiError {
+    ApiError::BadRequest(format!("cursor `{cursor}` is not one this server gave"))
+}
+
+/// The place a shards cursor this server gave stands for: as the documented pattern, digits,
+/// the first not 0 (`01` is no cursor this server gave).
+fn shards_cursor(cursor: &str) -> Result<u64, ApiError> {
     (!cursor.starts_with('0') && cursor.bytes().all(|b| b.is_ascii_digit()))
-        .then(|| cursor.parse::<i64>().ok())
+        .then(|| cursor.parse::<u64>().ok())
         .flatten()
-        .filter(|seq| *seq > 0)
-        .ok_or_else(|| {
-            ApiError::BadRequest(format!("cursor `{cursor}` is not one this server gave"))
-        })
+        .filter(|place| *place > 0 && *place <= i64::MAX as u64)
+        .ok_or_else(|| not_given(cursor))
 }
 
 /// List your jobs, newest first, with cursor paging.
@@ -302,7 +321,8 @@ pub async fn list_jobs(
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<JobList>, ApiError> {
     let Query(query) = query?;
-    let (limit, before) = query.page(20)?;
+    let key = state.store.cursor_key();
+    let (limit, before) = query.page(20, key)?;
     // One more than the page: a cursor only where another page has jobs.
     let mut records = state
         .store
@@ -314,7 +334,7 @@ pub async fn list_jobs(
             },
         )
         .await?;
-    let next_cursor = ListQuery::cut(&mut records, limit, |r| r.seq);
+    let next_cursor = ListQuery::cut(&mut records, limit, key, |r| r.seq);
     Ok(Json(JobList {
         jobs: records.iter().map(JobResource::from_record).collect(),
         next_cursor,
@@ -511,10 +531,9 @@ pub async fn get_shards(
     let skip = query
         .cursor
         .as_deref()
-        .map(cursor_seq)
+        .map(shards_cursor)
         .transpose()?
         .unwrap_or(0);
-    let skip = skip.unsigned_abs();
     state.store.job(&owner, &id).await?;
     // One more than the page: a cursor only where another page has shards.
     let mut shards = state
@@ -522,8 +541,8 @@ pub async fn get_shards(
         .shards_from(&id, skip, u64::from(limit) + 1)
         .await?;
     // The next page starts where this one ends, whatever its last shard.
-    let next = i64::try_from(skip + u64::from(limit)).unwrap_or(i64::MAX);
-    let next_cursor = ListQuery::cut(&mut shards, limit, |_| next);
+    let next = skip + u64::from(limit);
+    let next_cursor = last_of_page(&mut shards, limit).map(|_| next.to_string());
     Ok(Json(ShardList {
         shards: shards.into_iter().map(ShardResource::from_record).collect(),
         next_cursor,

@@ -226,10 +226,11 @@ pub async fn list_schedules(
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<ScheduleList>, ApiError> {
     let Query(query) = query?;
-    let (limit, after) = query.page(100)?;
+    let key = state.store.cursor_key();
+    let (limit, after) = query.page(100, key)?;
     // One more than the page: a cursor only where another page has schedules.
     let mut records = state.store.schedules(&owner, after, limit + 1).await?;
-    let next_cursor = ListQuery::cut(&mut records, limit, |(seq, _)| *seq);
+    let next_cursor = ListQuery::cut(&mut records, limit, key, |(seq, _)| *seq);
     let mut schedules = Vec::with_capacity(records.len());
     for (_, record) in &records {
         schedules.push(resource(&state, record).await?);

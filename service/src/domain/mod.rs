@@ -3,6 +3,7 @@
 //! trend and drift are read. The HTTP handlers, the workers and the scheduler all come here, so each
 //! rule is written once.
 
+pub mod cursor;
 pub mod idempotency;
 mod ids;
 pub mod jobs;
@@ -12,6 +13,7 @@ pub mod schedules;
 pub mod shards;
 pub mod trend;
 
+pub use cursor::CursorKey;
 pub use idempotency::{IdempotencyKey, Once};
 pub use ids::{Attempt, JobId, Owner, ScheduleId, UnixMs};
 pub use jobs::{JobStatus, QueueBound, QueuedJob, draw_seed};

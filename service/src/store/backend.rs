@@ -8,18 +8,29 @@ use super::rows::{Dialect, count_from_sql};
 use super::sql::{Conn, Pooled, Sql, Tx};
 use super::sqlite::SqliteBackend;
 use super::{QueueEvent, StoreError, StoreResult};
-use crate::domain::{JobId, QueueBound, QueuedJob};
+use crate::domain::{CursorKey, JobId, QueueBound, QueuedJob};
 use tokio::sync::broadcast;
 
 /// The store over either database.
 pub struct Store {
     pub(crate) backend: Backend,
+    /// Seals listing cursors: from the secret the database's migration drew.
+    cursor_key: CursorKey,
 }
 
 /// SQLite (embedded, one writer connection) or PostgreSQL (a pool shared by many instances).
 pub(crate) enum Backend {
     Sqlite(SqliteBackend),
     Postgres(PgBackend),
+}
+
+impl Backend {
+    fn readers(&self) -> Conn<'_> {
+        match self {
+            Backend::Sqlite(sqlite) => Conn::SqlitePool(&sqlite.readers),
+            Backend::Postgres(postgres) => Conn::PostgresPool(&postgres.pool),
+        }
+    }
 }
 
 impl Store {
@@ -37,9 +48,21 @@ impl Store {
                 return Err(StoreError::UnsupportedUrl(scheme));
             }
         };
-        let store = Store { backend };
+        let secret = Sql::new("SELECT value FROM secrets WHERE name = 'cursor'")
+            .fetch_one(backend.readers())
+            .await?
+            .text("value")?;
+        let store = Store {
+            backend,
+            cursor_key: CursorKey::from_secret(&secret),
+        };
         store.backfill_shards().await?;
         Ok(store)
+    }
+
+    /// The key that seals this database's listing cursors, the same on every instance.
+    pub fn cursor_key(&self) -> &CursorKey {
+        &self.cursor_key
     }
 
     pub(crate) fn dialect(&self) -> &'static Dialect {
@@ -87,10 +110,7 @@ impl Store {
 
     /// Where reads go: SQLite's read-only connections, which never wait for the writer.
     pub(crate) fn readers(&self) -> Conn<'_> {
-        match &self.backend {
-            Backend::Sqlite(sqlite) => Conn::SqlitePool(&sqlite.readers),
-            Backend::Postgres(postgres) => Conn::PostgresPool(&postgres.pool),
-        }
+        self.backend.readers()
     }
 
     /// One reading connection, for statements that must see the same database.

@@ -34,6 +34,7 @@ const SQLITE_FILES: &[(&str, &str)] = embed!("sqlite":
     "0012_claim_indexes.sql",
     "0013_results_without_summaries.sql",
     "0014_skipped_runs.sql",
+    "0015_cursor_secret.sql",
 );
 
 const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
@@ -53,6 +54,7 @@ const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
     "0014_results_without_summaries.sql",
     "0015_job_end_announcements.sql",
     "0016_skipped_runs.sql",
+    "0017_cursor_secret.sql",
 );
 
 /// `migrations/sqlite/`.
