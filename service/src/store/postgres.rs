@@ -81,9 +81,9 @@ impl PgBackend {
         // The first connection may take longer than a request may wait (a database still
         // starting, a busy machine): opening tries for up to STARTUP_WAIT.
         let started = std::time::Instant::now();
-        loop {
+        let mut connection = loop {
             match pool.acquire().await {
-                Ok(_) => break,
+                Ok(connection) => break connection,
                 Err(sqlx::Error::PoolTimedOut) if started.elapsed() < STARTUP_WAIT => {
                     let why = why_no_connection(url).await;
                     let server =
@@ -101,20 +101,10 @@ impl PgBackend {
                 }
                 Err(error) => return Err(error.into()),
             }
-        }
-        migrations::POSTGRES
-            .run(&pool)
-            .await
-            .map_err(|error| match error {
-                // Its connection taken meanwhile (a server at max_connections): say why, as above.
-                sqlx::migrate::MigrateError::Execute(sqlx::Error::PoolTimedOut) => {
-                    StoreError::NotReady(format!(
-                        "no connection to the database for its migrations within {} s",
-                        super::DATABASE_WAIT.as_secs_f64()
-                    ))
-                }
-                error => StoreError::Migration(error),
-            })?;
+        };
+        // On the connection just had: on a server at max_connections another might not come.
+        migrations::POSTGRES.run(&mut *connection).await?;
+        drop(connection);
         let mut listener = PgListener::connect_with(&pool).await?;
         listener.listen(JOB_CHANNEL).await?;
         let (events, ends) = (broadcast::channel(1024).0, broadcast::channel(1024).0);
