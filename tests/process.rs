@@ -563,6 +563,25 @@ fn text_logs_on_a_pipe_have_no_colour_and_name_the_request() {
     }
 }
 
+/// Flags that the server honours otherwise than they read are warned of at start-up.
+#[test]
+fn flags_honoured_otherwise_than_they_read_are_warned_of() {
+    let flags = [
+        "--max-queued",
+        "5",
+        "--max-queued-per-key",
+        "8",
+        "--retain-days",
+        "0",
+    ];
+    let (_server, lines) = Spawned::logging(&temp_db("flag-warnings"), &flags);
+    let logged = log_until(&lines, "--retain-days 0").join("\n");
+    assert!(
+        logged.contains("--max-queued-per-key 8 is above --max-queued 5: a key holds at most 5"),
+        "{logged}"
+    );
+}
+
 /// The command of the Dockerfile's `HEALTHCHECK ... CMD [...]`, without the binary's name.
 fn dockerfile_health_check() -> Vec<String> {
     let dockerfile = include_str!("../Dockerfile");

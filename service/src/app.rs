@@ -155,6 +155,12 @@ impl Application {
             Arc::clone(&state.wake),
             stopping.clone(),
         ));
+        if let Some(per_key) = config.max_queued_per_key.filter(|n| *n > config.max_queued) {
+            let total = config.max_queued;
+            tracing::warn!(
+                "--max-queued-per-key {per_key} is above --max-queued {total}: a key holds at most {total} unfinished jobs, as the queue does"
+            );
+        }
         let retention = config.retain_days.map(|days| {
             if days == 0 {
                 tracing::warn!("--retain-days 0: every job is deleted, with its Result, as soon as it ends (at the next hourly check); leave the flag out to keep jobs until deleted");
