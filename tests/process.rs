@@ -82,6 +82,47 @@ fn sigterm_cuts_off_a_response_its_client_reads_too_slowly() {
     drop(reader);
 }
 
+/// A second SIGTERM ends the process at once, where the first waits for a request in flight
+/// (here a body that never comes, for up to the 10 s drain).
+#[test]
+fn a_second_sigterm_ends_a_graceful_stop_at_once() {
+    use std::io::Write;
+    let server = Spawned::start(&temp_db("second-sigterm"), &["--workers", "0"]);
+    let address = server.url("");
+    let address = address.trim_start_matches("http://").trim_end_matches('/');
+    let mut writer = std::net::TcpStream::connect(address).unwrap();
+    write!(
+        writer,
+        "POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n\
+         Content-Length: 100\r\n\r\n{{"
+    )
+    .unwrap();
+    writer.flush().unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    let mut server = server;
+    let pid = server.child.id().to_string();
+    let terminate = || {
+        let sent = Command::new("kill").args(["-TERM", &pid]).status().unwrap();
+        assert!(sent.success());
+    };
+    terminate();
+    std::thread::sleep(Duration::from_secs(1));
+    assert!(
+        server.child.try_wait().unwrap().is_none(),
+        "the first SIGTERM waits for the request in flight"
+    );
+    let signalled = Instant::now();
+    terminate();
+    let exit = server.child.wait().unwrap();
+    let took = signalled.elapsed();
+    assert_eq!(exit.code(), Some(1), "{exit:?}");
+    assert!(
+        took < Duration::from_secs(3),
+        "ended {took:?} after the second"
+    );
+    drop(writer);
+}
+
 #[test]
 fn sigterm_hands_a_running_job_back_to_the_queue() {
     let database = temp_db("sigterm");

@@ -352,7 +352,21 @@ async fn report_queue_depth(store: Arc<Store>, metrics: PrometheusHandle) {
     }
 }
 
+/// The first SIGINT or SIGTERM, which starts a graceful stop; a second one then ends the process
+/// at once, as an operator who sends it asks: the queue loses nothing by it (what was
+/// acknowledged is in the database; running shards go back to the queue as their leases expire).
 async fn wait_for_signal() {
+    one_signal().await;
+    tokio::spawn(async {
+        one_signal().await;
+        tracing::warn!(
+            "a second signal: exiting now; running shards go back to the queue as their leases expire"
+        );
+        std::process::exit(1);
+    });
+}
+
+async fn one_signal() {
     let interrupt = async {
         let _ = tokio::signal::ctrl_c().await;
     };
