@@ -112,6 +112,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
         .await;
     a_clock_that_went_back_brings_the_next_runs_back(&database("clock-back")).await;
     a_schedule_whose_key_is_gone_skips_its_runs(&database("key-gone")).await;
+    a_run_comes_only_of_the_schedule_as_the_scheduler_read_it(&database("replaced")).await;
 }
 
 async fn a_store_that_takes_writes_and_is_migrated_is_ready(url: &str) {
@@ -333,6 +334,7 @@ async fn ended_jobs_are_deleted_with_everything_stored_for_them(url: &str) {
         schedule: &schedule.id,
         scheduled_for: UnixMs(5),
         manual: true,
+        moves: None,
     };
     let NewRun::Created(run) = store
         .create_run(slot, queued(1), QueueBound::total(10))
@@ -370,6 +372,7 @@ async fn ended_jobs_are_deleted_with_everything_stored_for_them(url: &str) {
         schedule: &schedule.id,
         scheduled_for: UnixMs(6),
         manual: true,
+        moves: None,
     };
     let created = store
         .create_run(slot, queued(4), QueueBound::total(10))
@@ -1793,6 +1796,7 @@ fn nightly(id: &str, next_run_at: &str) -> ScheduleRecord {
         created_at: UnixMs(0),
         updated_at: UnixMs(0),
         skipped: Skipped::default(),
+        revision: 0,
     }
 }
 
@@ -1992,8 +1996,7 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
         !store
             .skip_run(
                 &schedule.id,
-                schedule.next_run_at,
-                None,
+                schedule.moving_to(None),
                 UnixMs::from_datetime(now),
                 "again"
             )
@@ -2001,6 +2004,92 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
             .unwrap()
     );
     assert_eq!(skipped(&store, &schedule).await.0, 2);
+}
+
+/// A PUT that lands between the scheduler's read of a due schedule and its run stops that run: a
+/// probe with three nodes saw runs of a disabled schedule's old definition committed up to 1.5 s
+/// after the PUT's 200, and a cron replaced under a kept due time run at a past time of the new
+/// one. The run, and the move of the next run, are made only of the schedule as read.
+async fn a_run_comes_only_of_the_schedule_as_the_scheduler_read_it(url: &str) {
+    let store = store::open(url).await.unwrap();
+    let schedule = nightly("s1", "2026-11-22T03:00:00Z");
+    store.insert_schedule(&schedule, SCHEDULES).await.unwrap();
+    let now = utc("2026-11-22T03:00:01Z");
+    let read = store
+        .due_schedules(UnixMs::from_datetime(now))
+        .await
+        .unwrap();
+    let read = read.into_iter().next().unwrap();
+    let tomorrow = Some(UnixMs::from_datetime(utc("2026-11-23T03:00:00Z")));
+    // Replaced meanwhile: the same due time kept, another template.
+    let mut replaced = read.clone();
+    replaced.definition.template =
+        serde_json::from_str(r#"{"devices": 3, "operations": 2, "seed": 2}"#).unwrap();
+    store.update_schedule(&replaced).await.unwrap();
+    let slot = RunSlot {
+        schedule: &read.id,
+        scheduled_for: read.next_run_at.unwrap(),
+        manual: false,
+        moves: Some(read.moving_to(tomorrow)),
+    };
+    let made = store.create_run(slot, queued(1), QueueBound::total(10));
+    assert!(matches!(made.await.unwrap(), NewRun::Moved));
+    assert!(store.runs(&read.id, 10).await.unwrap().is_empty());
+    assert!(
+        !store
+            .skip_run(
+                &read.id,
+                read.moving_to(tomorrow),
+                slot.scheduled_for,
+                "stale"
+            )
+            .await
+            .unwrap()
+    );
+    // The next tick reads the schedule as replaced and runs its template.
+    assert_eq!(tick_now(&store, 10, now, &mut Waiting::default()).await, 1);
+    let runs = store.runs(&read.id, 10).await.unwrap();
+    let job = store.job(&read.owner, &runs[0].job_id).await.unwrap();
+    assert_eq!(job.operations_total, 6, "3 devices of 2 operations");
+    let stored = store.schedule(&read.owner, &read.id).await.unwrap();
+    assert_eq!(stored.next_run_at, tomorrow);
+    assert_eq!(stored.revision, 1);
+
+    // Disabled after the read: no run, and it stays disabled.
+    let disabled = nightly("s2", "2026-11-22T03:00:00Z");
+    store.insert_schedule(&disabled, SCHEDULES).await.unwrap();
+    let read = store.schedule(&disabled.owner, &disabled.id).await.unwrap();
+    let off = ScheduleRecord {
+        next_run_at: None,
+        definition: ScheduleDefinition {
+            enabled: false,
+            ..read.definition.clone()
+        },
+        ..read.clone()
+    };
+    store.update_schedule(&off).await.unwrap();
+    let slot = RunSlot {
+        schedule: &read.id,
+        ..slot
+    };
+    let made = store.create_run(slot, queued(2), QueueBound::total(10));
+    assert!(matches!(made.await.unwrap(), NewRun::Moved));
+    assert!(store.runs(&read.id, 10).await.unwrap().is_empty());
+    let stored = store.schedule(&read.owner, &read.id).await.unwrap();
+    assert_eq!(stored.next_run_at, None);
+
+    // A due time its timetable does not give (stored before a replaced cron moved it): the latest
+    // time the timetable gives is before it, so nothing is owed; the schedule moves on.
+    let moved = nightly("s3", "2026-11-22T05:00:00Z");
+    store.insert_schedule(&moved, SCHEDULES).await.unwrap();
+    let later = utc("2026-11-22T05:30:00Z");
+    assert_eq!(
+        tick_now(&store, 10, later, &mut Waiting::default()).await,
+        0
+    );
+    assert!(store.runs(&moved.id, 10).await.unwrap().is_empty());
+    let stored = store.schedule(&moved.owner, &moved.id).await.unwrap();
+    assert_eq!(stored.next_run_at, tomorrow);
 }
 
 /// A clock that went back (between ticks, or while the server was down) left each next run where

@@ -123,13 +123,19 @@ pub async fn tick(
         let Some(timetable) = timetable_or_stop(store, &schedule, now).await? else {
             continue;
         };
-        let Some(due) = timetable
+        let next = timetable.next_after(now).map(UnixMs::from_datetime);
+        let latest = timetable
             .latest_at_or_before(now)
-            .map(UnixMs::from_datetime)
+            .map(UnixMs::from_datetime);
+        // A due time before the run planned is not owed: a timetable replaced under a kept due
+        // time (before the revision that stops it) made runs at past times of the new one.
+        let Some(due) = latest.filter(|due| schedule.next_run_at.is_none_or(|at| *due >= at))
         else {
+            store
+                .advance_schedule(&schedule.id, schedule.moving_to(next))
+                .await?;
             continue;
         };
-        let next = timetable.next_after(now).map(UnixMs::from_datetime);
         if !limits.key_owners.is_empty() && !limits.key_owners.contains(&schedule.owner) {
             tracing::warn!(schedule = %schedule.id, "the schedule's API key is no longer among this server's keys; this run is skipped");
             let reason = "its API key is no longer among this server's keys: configure the key \
@@ -156,6 +162,7 @@ pub async fn tick(
             schedule: &schedule.id,
             scheduled_for: due,
             manual: false,
+            moves: Some(schedule.moving_to(next)),
         };
         let made = match store.create_run(slot, job, limits.queue).await {
             // Deleted since it was read: the other schedules still run this tick.
@@ -177,21 +184,25 @@ pub async fn tick(
             }
             made => made?,
         };
-        if let NewRun::QueueFull = made {
-            if waiting.0.insert(schedule.id.clone()) {
-                tracing::warn!(schedule = %schedule.id, "queue full; the scheduled run waits for room");
+        match made {
+            NewRun::QueueFull => {
+                if waiting.0.insert(schedule.id.clone()) {
+                    tracing::warn!(schedule = %schedule.id, "queue full; the scheduled run waits for room");
+                }
+                continue;
             }
-            continue;
+            // Replaced, disabled, deleted or run by another loop since it was read: the next
+            // tick reads it as it is now.
+            NewRun::Moved => {
+                waiting.0.remove(&schedule.id);
+                continue;
+            }
+            NewRun::Created(_) => created += 1,
+            NewRun::AlreadyExists => {}
         }
         if waiting.0.remove(&schedule.id) {
             tracing::info!(schedule = %schedule.id, "the scheduled run no longer waits for room");
         }
-        if let NewRun::Created(_) = made {
-            created += 1;
-        }
-        store
-            .advance_schedule(&schedule.id, schedule.next_run_at, next)
-            .await?;
     }
     Ok(created)
 }
@@ -212,7 +223,7 @@ pub async fn rebase(store: &Store, now: DateTime<Utc>) -> StoreResult<usize> {
         let next = timetable.next_after(now).map(UnixMs::from_datetime);
         if next.is_some_and(|next| schedule.next_run_at.is_some_and(|at| at > next))
             && store
-                .advance_schedule(&schedule.id, schedule.next_run_at, next)
+                .advance_schedule(&schedule.id, schedule.moving_to(next))
                 .await?
         {
             rebased += 1;
@@ -258,7 +269,7 @@ async fn skip(
     reason: &str,
 ) -> StoreResult<()> {
     if store
-        .skip_run(&schedule.id, schedule.next_run_at, next, due, reason)
+        .skip_run(&schedule.id, schedule.moving_to(next), due, reason)
         .await?
     {
         crate::telemetry::record_scheduled_run_skipped();

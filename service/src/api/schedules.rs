@@ -109,6 +109,7 @@ fn record(
         created_at,
         updated_at: now,
         skipped: Skipped::default(),
+        revision: 0,
     }
 }
 
@@ -287,10 +288,11 @@ pub async fn replace_schedule(
     let existing = state.store.schedule(&owner, &id).await?;
     let valid = ValidSchedule::parse(&body, state.config.schedule_limits(), Utc::now())?;
     let now = UnixMs::now();
-    let next_run_at = valid.next_run_replacing(existing.next_run_at, now);
+    let next_run_at = valid.next_run_replacing(&existing.definition, existing.next_run_at, now);
     let record = ScheduleRecord {
         next_run_at,
         skipped: existing.skipped,
+        revision: existing.revision + 1,
         ..record(valid, id, owner, existing.created_at, now)
     };
     state.store.update_schedule(&record).await?;
@@ -367,6 +369,7 @@ pub async fn run_schedule_now(
             schedule: &schedule.id,
             scheduled_for: at,
             manual: true,
+            moves: None,
         };
         match state
             .store
@@ -378,7 +381,8 @@ pub async fn run_schedule_now(
                 crate::telemetry::record_jobs_submitted(1);
                 return accepted(&record);
             }
-            NewRun::AlreadyExists => continue,
+            // (`Moved` comes only of a due run's move, which a run asked for has not.)
+            NewRun::AlreadyExists | NewRun::Moved => continue,
             NewRun::QueueFull => return Err(ApiError::QueueFull(state.config.queue_bound())),
         }
     }

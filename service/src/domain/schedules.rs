@@ -209,13 +209,26 @@ impl ValidSchedule {
             .map(UnixMs::from_datetime)
     }
 
-    /// The next run of this document replacing a schedule whose next run was `due`: a due time
-    /// already past stays (its run is not made yet: it waits for room in the queue, or for the
-    /// scheduler's next tick), else the first run after `now`; none while disabled. An edit, even
-    /// of the same body, dropped a night that waited for room.
-    pub fn next_run_replacing(&self, due: Option<UnixMs>, now: UnixMs) -> Option<UnixMs> {
+    /// The next run of this document replacing `replaced`, whose next run was `due`: a due time
+    /// already past stays while the timetable does (its run is not made yet: it waits for room
+    /// in the queue, or for the scheduler's next tick), else the first run after `now`; none
+    /// while disabled. An edit, even of the same body, dropped a night that waited for room; a
+    /// new timetable that kept it ran at the new one's latest time, before the edit (a probe:
+    /// every second, then `0 0 3 * * *` at 05:50, made a run for 03:00).
+    pub fn next_run_replacing(
+        &self,
+        replaced: &ScheduleDefinition,
+        due: Option<UnixMs>,
+        now: UnixMs,
+    ) -> Option<UnixMs> {
         let next = self.next_run_after(now)?;
-        Some(due.filter(|&due| due <= now).unwrap_or(next))
+        let same_timetable = (self.definition.cron.split_whitespace())
+            .eq(replaced.cron.split_whitespace())
+            && self.definition.time_zone == replaced.time_zone;
+        Some(
+            due.filter(|&due| due <= now && same_timetable)
+                .unwrap_or(next),
+        )
     }
 
     pub fn into_definition(self) -> ScheduleDefinition {
@@ -1221,26 +1234,39 @@ mod tests {
     }
 
     /// A schedule replaced while its run is due (waiting for room in the queue) keeps that due
-    /// time; one whose next run is ahead gets the new document's; a disabled one none.
+    /// time while its timetable stays; one whose next run is ahead, or whose timetable changes,
+    /// gets the new document's; a disabled one none.
     #[test]
-    fn a_replaced_schedule_keeps_a_night_still_owed() {
-        let body = |enabled: bool| {
+    fn a_replaced_schedule_keeps_a_night_still_owed_by_its_timetable() {
+        let body = |cron: &str, zone: &str, enabled: bool| {
             format!(
-                r#"{{"name": "n", "cron": "0 4 * * *", "template": {{}}, "enabled": {enabled}}}"#
+                r#"{{"name": "n", "cron": "{cron}", "time_zone": "{zone}", "template": {{}}, "enabled": {enabled}}}"#
             )
         };
         let at = |text| UnixMs::from_datetime(utc(text));
         let now = at("2026-11-22T03:00:10Z");
-        let replacing = |enabled, due| {
-            ValidSchedule::parse(&body(enabled), HOURLY, now.to_datetime())
-                .unwrap()
-                .next_run_replacing(due, now)
+        let parse = |cron, zone, enabled| {
+            ValidSchedule::parse(&body(cron, zone, enabled), HOURLY, now.to_datetime()).unwrap()
+        };
+        let nightly = parse("0 3 * * *", "UTC", true).into_definition();
+        let replacing = |cron, zone, enabled, due| {
+            parse(cron, zone, enabled).next_run_replacing(&nightly, due, now)
         };
         let owed = Some(at("2026-11-22T03:00:00Z"));
-        assert_eq!(replacing(true, owed), owed);
-        let ahead = Some(at("2026-11-23T03:00:00Z"));
-        assert_eq!(replacing(true, ahead), Some(at("2026-11-22T04:00:00Z")));
-        assert_eq!(replacing(true, None), Some(at("2026-11-22T04:00:00Z")));
-        assert_eq!(replacing(false, owed), None);
+        let tomorrow = Some(at("2026-11-23T03:00:00Z"));
+        assert_eq!(replacing("0 3 * * *", "UTC", true, owed), owed);
+        assert_eq!(replacing("0  3 * *  *", "UTC", true, owed), owed);
+        assert_eq!(replacing("0 3 * * *", "UTC", true, tomorrow), tomorrow);
+        assert_eq!(replacing("0 3 * * *", "UTC", true, None), tomorrow);
+        assert_eq!(replacing("0 3 * * *", "UTC", false, owed), None);
+        // A new timetable owes nothing of the old one: its first time after the edit.
+        assert_eq!(
+            replacing("0 4 * * *", "UTC", true, owed),
+            Some(at("2026-11-22T04:00:00Z"))
+        );
+        assert_eq!(
+            replacing("0 3 * * *", "Europe/Berlin", true, owed),
+            Some(at("2026-11-23T02:00:00Z"))
+        );
     }
 }

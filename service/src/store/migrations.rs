@@ -35,6 +35,7 @@ const SQLITE_FILES: &[(&str, &str)] = embed!("sqlite":
     "0013_results_without_summaries.sql",
     "0014_skipped_runs.sql",
     "0015_cursor_secret.sql",
+    "0016_schedule_revision.sql",
 );
 
 const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
@@ -55,6 +56,7 @@ const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
     "0015_job_end_announcements.sql",
     "0016_skipped_runs.sql",
     "0017_cursor_secret.sql",
+    "0018_schedule_revision.sql",
 );
 
 /// `migrations/sqlite/`.

@@ -327,6 +327,19 @@ pub struct ScheduleRecord {
     pub updated_at: UnixMs,
     /// The runs it skipped; kept by a PUT, which replaces only the definition.
     pub skipped: Skipped,
+    /// How often it was replaced: each [`Store::update_schedule`] adds one.
+    pub revision: u64,
+}
+
+impl ScheduleRecord {
+    /// The move of its next run to `to` from where it was read ([`NextRun`]).
+    pub fn moving_to(&self, to: Option<UnixMs>) -> NextRun {
+        NextRun {
+            from: self.next_run_at,
+            to,
+            revision: self.revision,
+        }
+    }
 }
 
 /// The runs a schedule skipped at their due time: its template refused by the server's limits
@@ -354,6 +367,19 @@ pub struct RunSlot<'a> {
     pub schedule: &'a ScheduleId,
     pub scheduled_for: UnixMs,
     pub manual: bool,
+    /// A due run's move of the schedule's next run, made in the run's transaction; none for a
+    /// run asked for.
+    pub moves: Option<NextRun>,
+}
+
+/// Where a due run moves its schedule's next run: from `from` to `to`, only if the schedule is
+/// still at `from` and at `revision` (not replaced, disabled or run by another loop since the
+/// scheduler read it).
+#[derive(Debug, Clone, Copy)]
+pub struct NextRun {
+    pub from: Option<UnixMs>,
+    pub to: Option<UnixMs>,
+    pub revision: u64,
 }
 
 /// What creating a scheduled run did.
@@ -363,6 +389,8 @@ pub enum NewRun {
     /// That slot already has its job: another loop or instance made it.
     AlreadyExists,
     QueueFull,
+    /// The schedule is no longer as read ([`NextRun`]): nothing was made or moved.
+    Moved,
 }
 
 /// A change to the queue, as the database announces it to every instance.

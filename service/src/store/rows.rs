@@ -1123,13 +1123,13 @@ macro_rules! schedule_columns {
 
 pub(crate) use schedule_columns;
 
-/// A schedule's columns as read: [`schedule_columns`] and the runs it skipped, which only the
-/// scheduler writes.
+/// A schedule's columns as read: [`schedule_columns`], the runs it skipped, which only the
+/// scheduler writes, and its revision, which the store counts.
 macro_rules! schedule_read_columns {
     () => {
         concat!(
             $crate::store::rows::schedule_columns!(),
-            ", skipped_runs, last_skipped_for, last_skip_reason"
+            ", skipped_runs, last_skipped_for, last_skip_reason, revision"
         )
     };
 }
@@ -1159,6 +1159,7 @@ pub(crate) fn schedule_from_row(row: &AnyRow) -> StoreResult<ScheduleRecord> {
                 None => None,
             },
         },
+        revision: count_from_sql(row, "revision")?,
     })
 }
 

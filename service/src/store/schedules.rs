@@ -3,14 +3,28 @@
 use super::backend::Store;
 use super::queue::{remember, select_job};
 use super::rows::{
-    Created, bind_schedule, count_from_sql, run_from_row, schedule_columns, schedule_from_row,
-    schedule_read_columns,
+    Created, bind_schedule, count_from_sql, count_to_sql, run_from_row, schedule_columns,
+    schedule_from_row, schedule_read_columns,
 };
 use super::sql::{Sql, Tx};
-use super::{NewRun, RunRecord, RunSlot, ScheduleRecord, StoreError, StoreResult};
+use super::{NewRun, NextRun, RunRecord, RunSlot, ScheduleRecord, StoreError, StoreResult};
 use crate::domain::{
     IdempotencyKey, Once, Owner, QueueBound, QueuedJob, ScheduleBound, ScheduleId, UnixMs,
 };
+
+/// Moves a schedule's next run from `$2` to `$3` if it is still at `$2` and at revision `$4`
+/// ([`bind_move`]).
+const MOVE_NEXT_RUN: &str = "UPDATE schedules SET next_run_at = $3 \
+     WHERE id = $1 AND next_run_at IS NOT DISTINCT FROM $2 AND revision = $4";
+
+/// Binds parameters 1 to 4 of [`MOVE_NEXT_RUN`] (and of a statement that moves as it does).
+fn bind_move(query: Sql, id: &ScheduleId, moves: NextRun) -> Sql {
+    query
+        .bind(id.as_str())
+        .bind(moves.from.map(|t| t.0))
+        .bind(moves.to.map(|t| t.0))
+        .bind(count_to_sql(moves.revision))
+}
 
 const INSERT_SCHEDULE: &str = concat!(
     "INSERT INTO schedules (",
@@ -143,7 +157,8 @@ impl Store {
     pub async fn update_schedule(&self, schedule: &ScheduleRecord) -> StoreResult<()> {
         let update = Sql::new(
             "UPDATE schedules SET name = $3, cron = $4, time_zone = $5, template = $6, statistics = $7, \
-             enabled = $8, next_run_at = $9, created_at = $10, updated_at = $11 WHERE id = $1 AND owner = $2",
+             enabled = $8, next_run_at = $9, created_at = $10, updated_at = $11, \
+             revision = revision + 1 WHERE id = $1 AND owner = $2",
         );
         let updated = bind_schedule(update, schedule)?
             .execute(self.writer()?)
@@ -181,7 +196,8 @@ impl Store {
         rows.iter().map(schedule_from_row).collect()
     }
 
-    /// Creates the job of one slot unless the slot has one, in one transaction.
+    /// Creates the job of one slot unless the slot has one, and moves a due run's schedule on
+    /// ([`RunSlot::moves`]), in one transaction.
     #[tracing::instrument(skip_all, fields(schedule = %slot.schedule, job = %job.id))]
     pub async fn create_run(
         &self,
@@ -190,7 +206,17 @@ impl Store {
         bound: QueueBound,
     ) -> StoreResult<NewRun> {
         let mut tx = self.begin().await?;
-        // Claim the slot first: the primary key decides who runs this night.
+        // A due run first moves its schedule on, if the schedule is still as read.
+        if let Some(moves) = slot.moves {
+            let moved = bind_move(Sql::new(MOVE_NEXT_RUN), slot.schedule, moves)
+                .execute(&mut tx)
+                .await?;
+            if moved == 0 {
+                tx.rollback().await?;
+                return Ok(NewRun::Moved);
+            }
+        }
+        // Claim the slot: the primary key decides who runs this night.
         let claimed = Sql::new(
             "INSERT INTO schedule_runs (schedule_id, scheduled_for, job_id, manual) VALUES ($1, $2, $3, $4) \
              ON CONFLICT DO NOTHING",
@@ -211,7 +237,8 @@ impl Store {
             error => error,
         })?;
         if claimed == 0 {
-            tx.rollback().await?;
+            // Its move stays: the schedule is past a night that has its job.
+            tx.commit().await?;
             return Ok(NewRun::AlreadyExists);
         }
         if !self.insert_queued(&mut tx, &job, bound).await? {
@@ -223,48 +250,36 @@ impl Store {
         Ok(NewRun::Created(record))
     }
 
-    /// Moves `next_run_at` from `from` to `to`, unless another loop already moved it.
+    /// Moves the schedule's next run ([`NextRun`]), unless another loop moved it or a PUT
+    /// replaced the schedule since it was read: false.
     #[tracing::instrument(skip_all, fields(schedule = %id))]
-    pub async fn advance_schedule(
-        &self,
-        id: &ScheduleId,
-        from: Option<UnixMs>,
-        to: Option<UnixMs>,
-    ) -> StoreResult<bool> {
-        let updated = Sql::new(
-            "UPDATE schedules SET next_run_at = $3 WHERE id = $1 AND next_run_at IS NOT DISTINCT FROM $2",
-        )
-        .bind(id.as_str())
-        .bind(from.map(|t| t.0))
-        .bind(to.map(|t| t.0))
-        .execute(self.writer()?)
-        .await?;
+    pub async fn advance_schedule(&self, id: &ScheduleId, moves: NextRun) -> StoreResult<bool> {
+        let updated = bind_move(Sql::new(MOVE_NEXT_RUN), id, moves)
+            .execute(self.writer()?)
+            .await?;
         Ok(updated == 1)
     }
 
-    /// Skips the run due at `due` with `reason` and moves `next_run_at` from `from` to `to`,
-    /// unless another loop already moved it (then nothing is counted twice): false.
+    /// Skips the run due at `due` with `reason` and moves the schedule's next run, as
+    /// [`Store::advance_schedule`] would (else nothing is counted: false).
     #[tracing::instrument(skip_all, fields(schedule = %id))]
     pub async fn skip_run(
         &self,
         id: &ScheduleId,
-        from: Option<UnixMs>,
-        to: Option<UnixMs>,
+        moves: NextRun,
         due: UnixMs,
         reason: &str,
     ) -> StoreResult<bool> {
         let updated = Sql::new(
             "UPDATE schedules SET next_run_at = $3, skipped_runs = skipped_runs + 1, \
-             last_skipped_for = $4, last_skip_reason = $5 \
-             WHERE id = $1 AND next_run_at IS NOT DISTINCT FROM $2",
-        )
-        .bind(id.as_str())
-        .bind(from.map(|t| t.0))
-        .bind(to.map(|t| t.0))
-        .bind(due.0)
-        .bind(reason)
-        .execute(self.writer()?)
-        .await?;
+             last_skipped_for = $5, last_skip_reason = $6 \
+             WHERE id = $1 AND next_run_at IS NOT DISTINCT FROM $2 AND revision = $4",
+        );
+        let updated = bind_move(updated, id, moves)
+            .bind(due.0)
+            .bind(reason)
+            .execute(self.writer()?)
+            .await?;
         Ok(updated == 1)
     }
 
