@@ -94,6 +94,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
         .await;
     a_result_the_database_keeps_refusing_fails_its_job_at_the_retry_limit(&database("refusing"))
         .await;
+    a_result_the_databases_full_disk_refuses_waits_for_room(&database("disk-full")).await;
     lives_beyond_the_listing_cap_are_counted_not_listed(&database("listed")).await;
     a_result_is_stored_once_and_one_stored_whole_before_reads_as_it_was(&database("whole")).await;
     a_large_result_reads_back_whole(&database("large")).await;
@@ -1277,10 +1278,14 @@ async fn a_poison_job_fails_after_the_retry_limit_with_the_reason(url: &str) {
 /// A trigger that refuses every Result as a full disk would: a real failure of the database, on
 /// the write that stores a job's outcome.
 const REFUSE_RESULTS: (&str, &str) = (
-    "CREATE TRIGGER refuse_results BEFORE INSERT ON results BEGIN SELECT RAISE(ABORT, 'injected: database or disk is full'); END",
+    "CREATE TRIGGER refuse_results BEFORE INSERT ON results BEGIN SELECT RAISE(ABORT, 'injected: refused'); END",
     "CREATE FUNCTION refuse_results() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN \
-     RAISE EXCEPTION 'injected: could not extend file' USING ERRCODE = 'disk_full'; END $$",
+     RAISE EXCEPTION 'injected: refused'; END $$",
 );
+/// PostgreSQL's own full disk, as it reports it.
+const DISK_FULL: &str = "CREATE FUNCTION refuse_results() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN \
+     RAISE EXCEPTION 'injected: could not extend file: No space left on device' \
+     USING ERRCODE = 'disk_full'; END $$";
 const REFUSE_RESULTS_ON_INSERT: &str = "CREATE TRIGGER refuse_results BEFORE INSERT ON results FOR EACH ROW EXECUTE FUNCTION refuse_results()";
 const ACCEPT_RESULTS: (&str, &str) = (
     "DROP TRIGGER refuse_results",
@@ -1415,7 +1420,7 @@ async fn run_until_ended(
     ended
 }
 
-/// A Result the database refuses (full disk) is written again after a backoff, with the lease
+/// A Result the database refuses (for a moment) is written again after a backoff, with the lease
 /// kept: once the database takes writes again, the job succeeds without its merge running twice.
 async fn a_result_the_database_refuses_for_a_while_is_stored_without_running_again(url: &str) {
     let store = store::open(url).await.unwrap();
@@ -1466,6 +1471,72 @@ async fn a_result_the_database_keeps_refusing_fails_its_job_at_the_retry_limit(u
     assert_eq!((merge.attempt, merge.failures), (Attempt(2), 2));
     assert!(store.result(&id).await.unwrap().is_none());
     assert_eq!(ended.stored_bytes, spec_only, "only the spec stays");
+}
+
+/// A Result that PostgreSQL's own full disk refuses (beyond the store's tries) waits for room,
+/// as one that the store's free-space check refuses: it failed its job at the retry limit (a
+/// probe: three jobs acknowledged, then `failed`, "could not extend file"). SQLite's full file
+/// reads the same ([`a_full_sqlite_file_is_out_of_space`]); the wait itself is
+/// [`a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later`].
+async fn a_result_the_databases_full_disk_refuses_waits_for_room(url: &str) {
+    if url.starts_with("sqlite:") {
+        return;
+    }
+    let store = store::open(url).await.unwrap();
+    let id = insert(&store, single(8)).await;
+    execute(url, "SELECT 1", DISK_FULL).await;
+    execute(url, "SELECT 1", REFUSE_RESULTS_ON_INSERT).await;
+    let (stop, stopping) = watch::channel(false);
+    let handles = workers(&store, 0, u64::MAX).spawn(1, stopping);
+    let started = Instant::now();
+    let merge = loop {
+        let merge = store.shards(&id).await.unwrap().pop().unwrap();
+        if merge.error.is_some() {
+            break merge;
+        }
+        assert!(started.elapsed() < Duration::from_secs(30), "{merge:?}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    stop.send(true).unwrap();
+    for handle in handles {
+        handle.await.unwrap();
+    }
+    let error = merge.error.unwrap();
+    assert!(
+        error.starts_with("waiting for room: storing the result: ")
+            && error.contains("No space left on device"),
+        "{error}"
+    );
+    assert_eq!((merge.status.as_str(), merge.failures), ("queued", 0));
+    let job = store.job(&Owner::anonymous(), &id).await.unwrap();
+    assert_eq!(job.status, JobStatus::Running);
+    execute(url, ACCEPT_RESULTS.0, ACCEPT_RESULTS.1).await;
+}
+
+/// SQLite's full file (here its page limit) is the disk's state, as PostgreSQL's `disk_full`.
+#[tokio::test]
+async fn a_full_sqlite_file_is_out_of_space() {
+    use sqlx::Connection;
+    let path = temp_dir("full-file").join("full.db");
+    let url = format!("sqlite://{}?mode=rwc", path.display());
+    let mut connection = sqlx::SqliteConnection::connect(&url).await.unwrap();
+    for statement in ["CREATE TABLE t (b BLOB)", "PRAGMA max_page_count = 4"] {
+        sqlx::query(statement)
+            .execute(&mut connection)
+            .await
+            .unwrap();
+    }
+    let full = sqlx::query("INSERT INTO t VALUES (zeroblob(100000))")
+        .execute(&mut connection)
+        .await
+        .unwrap_err();
+    let full = StoreError::from(full);
+    assert!(full.is_out_of_space(), "{full}");
+    let refused = sqlx::query("INSERT INTO nowhere VALUES (1)")
+        .execute(&mut connection)
+        .await
+        .unwrap_err();
+    assert!(!StoreError::from(refused).is_out_of_space());
 }
 
 /// Each device's life is listed up to the workers' cap, across groups, and read back page by page;

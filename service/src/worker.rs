@@ -1093,11 +1093,13 @@ impl Workers {
     /// connection counted as a failed run, found from outside); any other error counts as a
     /// failed run.
     async fn database_failed(&self, fence: &Fence, what: &str, error: StoreError) {
-        // No room on the disk, or no connection to the database in all the write's tries (none
-        // free, unreachable): nothing is wrong with the job, which waits rather than fail. An
-        // error the database reports itself counts against the shard.
+        // No room on the disk (this store's check, or the database's own full disk), or no
+        // connection to the database in all the write's tries (none free, unreachable): nothing
+        // is wrong with the job, which waits rather than fail. Any other error the database
+        // reports counts against the shard.
         let (awaited, reason) = match error {
             StoreError::NoRoom(room) => (Awaited::Room, format!("{what}: {room}")),
+            error if error.is_out_of_space() => (Awaited::Room, format!("{what}: {error}")),
             error if error.is_unreachable() => (Awaited::Database, format!("{what}: {error}")),
             error => {
                 return self

@@ -154,6 +154,12 @@ impl From<StoreError> for ApiError {
             StoreError::OverQuota { .. } | StoreError::TooManySchedules { .. } => {
                 ApiError::OverQuota(error.to_string())
             }
+            other if other.is_out_of_space() => {
+                tracing::warn!(error = %other, "the database's disk is full");
+                ApiError::NotReady(
+                    "the database has no room on its disk; retry once space is freed".to_owned(),
+                )
+            }
             other if other.is_unavailable() => ApiError::Unavailable(Internal(other.to_string())),
             other => ApiError::Internal(Internal(other.to_string())),
         }

@@ -142,6 +142,22 @@ impl StoreError {
         }
     }
 
+    /// Whether the database reported that its disk is full: SQLite's `SQLITE_FULL` (code 13),
+    /// PostgreSQL's `disk_full` (SQLSTATE 53100, "could not extend file"). Like a write this
+    /// store refuses for want of room ([`StoreError::NoRoom`]), it is the disk's state, not the
+    /// job's: what waits for room is written once there is some.
+    pub fn is_out_of_space(&self) -> bool {
+        let StoreError::Database(sqlx::Error::Database(error)) = self else {
+            return false;
+        };
+        match error.try_downcast_ref::<sqlx::sqlite::SqliteError>() {
+            Some(sqlite) => sqlx::error::DatabaseError::code(sqlite)
+                .and_then(|code| code.parse::<i32>().ok())
+                .is_some_and(|code| code & 0xff == 13),
+            None => error.code().as_deref() == Some("53100"),
+        }
+    }
+
     /// Whether no connection reached the database (none free in the pool in time, refused,
     /// reset), or SQLite's file stayed locked by another process for all of `busy_timeout`:
     /// unlike an error the database itself reports (a full disk, a refused statement), nothing
