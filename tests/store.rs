@@ -1955,6 +1955,14 @@ async fn missed_nights_run_once_on_start_up_and_the_next_night_is_tomorrow(url: 
         schedule.next_run_at,
         Some(UnixMs::from_datetime(utc("2026-11-23T03:00:00Z")))
     );
+    // The nights before the one run are skipped, and the schedule says so.
+    let (runs, last) = skipped(&store, &schedule).await;
+    let (at, reason) = last.unwrap();
+    assert_eq!((runs, at.as_str()), (3, "2026-11-21T03:00:00.000Z"));
+    assert!(
+        reason.starts_with("no scheduler ran at its due time"),
+        "{reason}"
+    );
     // The next night runs at its time, once.
     let next_night = utc("2026-11-23T03:00:01Z");
     assert_eq!(tick_at(next_night).await, 1);

@@ -4,8 +4,8 @@
 //! key makes the job unique across restarts and across instances sharing the database. At
 //! start-up and when the clock steps back, next runs the later clock put too far are brought back.
 
-use crate::domain::{Owner, QueueBound, ScheduleId, Timetable, UnixMs};
-use crate::store::{NewRun, RunSlot, ScheduleRecord, Store, StoreError, StoreResult};
+use crate::domain::{MISSED_RUNS_COUNTED, Owner, QueueBound, ScheduleId, Timetable, UnixMs};
+use crate::store::{NewRun, NextRun, RunSlot, ScheduleRecord, Store, StoreError, StoreResult};
 use chrono::{DateTime, Utc};
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -124,23 +124,27 @@ pub async fn tick(
             continue;
         };
         let next = timetable.next_after(now).map(UnixMs::from_datetime);
-        let latest = timetable
-            .latest_at_or_before(now)
-            .map(UnixMs::from_datetime);
-        // A due time before the run planned is not owed: a timetable replaced under a kept due
-        // time (before the revision that stops it) made runs at past times of the new one.
-        let Some(due) = latest.filter(|due| schedule.next_run_at.is_none_or(|at| *due >= at))
-        else {
+        // No time of the timetable from the run planned to now owes nothing: a timetable
+        // replaced under a kept due time (before the revision that stops it) made runs at past
+        // times of the new one.
+        let planned = schedule.next_run_at.map_or(now, UnixMs::to_datetime);
+        let Some(catch_up) = timetable.catch_up(planned, now, MISSED_RUNS_COUNTED) else {
             store
                 .advance_schedule(&schedule.id, schedule.moving_to(next))
                 .await?;
             continue;
         };
+        let due = UnixMs::from_datetime(catch_up.due);
+        let moves = NextRun {
+            missed: catch_up.missed,
+            last_missed: catch_up.last_missed.map(UnixMs::from_datetime),
+            ..schedule.moving_to(next)
+        };
         if !limits.key_owners.is_empty() && !limits.key_owners.contains(&schedule.owner) {
             tracing::warn!(schedule = %schedule.id, "the schedule's API key is no longer among this server's keys; this run is skipped");
             let reason = "its API key is no longer among this server's keys: configure the key \
                           again to run it, or to see and delete it";
-            skip(store, &schedule, next, due, reason).await?;
+            skip(store, &schedule, moves, due, reason).await?;
             continue;
         }
         let job = match definition.job_at(
@@ -154,7 +158,7 @@ pub async fn tick(
                 // Moved past this run, so that it is said once a run, not at every tick.
                 tracing::error!(schedule = %schedule.id, %invalid, "stored template no longer validates; this run is skipped");
                 let reason = format!("the template is refused by this server now: {invalid}");
-                skip(store, &schedule, next, due, &reason).await?;
+                skip(store, &schedule, moves, due, &reason).await?;
                 continue;
             }
         };
@@ -162,7 +166,7 @@ pub async fn tick(
             schedule: &schedule.id,
             scheduled_for: due,
             manual: false,
-            moves: Some(schedule.moving_to(next)),
+            moves: Some(moves),
         };
         let made = match store.create_run(slot, job, limits.queue).await {
             // Deleted since it was read: the other schedules still run this tick.
@@ -179,7 +183,7 @@ pub async fn tick(
                 let reason = format!(
                     "its key's jobs store {used} bytes, its quota is {quota}: delete some jobs"
                 );
-                skip(store, &schedule, next, due, &reason).await?;
+                skip(store, &schedule, moves, due, &reason).await?;
                 continue;
             }
             made => made?,
@@ -255,7 +259,7 @@ async fn timetable_or_stop(
     );
     tracing::error!(schedule = %schedule.id, %reason, "this run is skipped");
     let due = schedule.next_run_at.unwrap_or(UnixMs::from_datetime(now));
-    skip(store, schedule, None, due, &reason).await?;
+    skip(store, schedule, schedule.moving_to(None), due, &reason).await?;
     Ok(None)
 }
 
@@ -264,14 +268,11 @@ async fn timetable_or_stop(
 async fn skip(
     store: &Store,
     schedule: &ScheduleRecord,
-    next: Option<UnixMs>,
+    moves: NextRun,
     due: UnixMs,
     reason: &str,
 ) -> StoreResult<()> {
-    if store
-        .skip_run(&schedule.id, schedule.moving_to(next), due, reason)
-        .await?
-    {
+    if store.skip_run(&schedule.id, moves, due, reason).await? {
         crate::telemetry::record_scheduled_run_skipped();
     }
     Ok(())

@@ -62,7 +62,8 @@ pub struct ScheduleResource {
     #[schema(format = DateTime)]
     pub last_run_at: Option<String>,
     /// How many of its runs were skipped at their due time (never run later): its template
-    /// refused by the server's limits then, or its key over its quota.
+    /// refused by the server's limits then, its key over its quota, or no scheduler running then
+    /// (a catch-up runs only the latest due time; counted up to 100,000 at a time).
     pub skipped_runs: u64,
     /// The latest skipped run, if any.
     pub last_skipped: Option<SkippedRun>,

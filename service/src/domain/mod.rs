@@ -19,8 +19,8 @@ pub use ids::{Attempt, JobId, Owner, ScheduleId, UnixMs};
 pub use jobs::{JobStatus, QueueBound, QueuedJob, draw_seed};
 pub use query::AfterRunQuery;
 pub use schedules::{
-    ScheduleBound, ScheduleDefinition, ScheduleLimits, ScheduleSpec, Statistic, Timetable,
-    ValidSchedule,
+    CatchUp, MISSED_RUNS, MISSED_RUNS_COUNTED, ScheduleBound, ScheduleDefinition, ScheduleLimits,
+    ScheduleSpec, Statistic, Timetable, ValidSchedule,
 };
 pub use shards::{
     Folding, ROOM_RETRY_MS, RetryBudget, SHARD_OVERHEAD_OPERATIONS, ShardId, ShardPlan,

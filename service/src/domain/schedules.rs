@@ -19,6 +19,22 @@ use utoipa::ToSchema;
 /// What a schedule follows when the document names no statistic.
 const DEFAULT_STATISTIC: &str = "operations.total_bounce_s.p95";
 
+/// Why a schedule's due times before the one it runs are skipped ([`Timetable::missed`]).
+pub const MISSED_RUNS: &str = "no scheduler ran at its due time (the server was down, or its \
+    ticks late): only the latest due time runs";
+
+/// Most runs missed that one tick counts: a schedule every second, a day down, is 86,400.
+pub const MISSED_RUNS_COUNTED: u64 = 100_000;
+
+/// The run a due schedule makes: its latest due time at or before now, and the due times before
+/// it since its next run that it misses (counted up to a cap), with the latest of them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CatchUp {
+    pub due: DateTime<Utc>,
+    pub missed: u64,
+    pub last_missed: Option<DateTime<Utc>>,
+}
+
 /// A schedule as a client writes it.
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -390,6 +406,35 @@ impl Timetable {
         }
         let end = change + length;
         Some(self.time_zone.from_utc_datetime(&end.naive_utc()))
+    }
+
+    /// What a schedule due since `from` runs at `now` ([`CatchUp`]): found going forward from
+    /// `from`, a step or two for a scheduler on time (a search from a day before `now` took
+    /// 86,400 steps a tick for a schedule every second). None if the timetable gives no time from
+    /// `from` to `now`: nothing is owed.
+    pub fn catch_up(&self, from: DateTime<Utc>, now: DateTime<Utc>, cap: u64) -> Option<CatchUp> {
+        let (mut seen, mut latest, mut before) = (0, None, None);
+        let mut next = self.next_after(whole_seconds(from) - TimeDelta::seconds(1));
+        while let Some(due) = next.filter(|&due| due <= now) {
+            if seen > cap {
+                // Too many to step through: the latest found from `now` back.
+                let due = self.latest_at_or_before(now)?;
+                let before = self.latest_at_or_before(due - TimeDelta::seconds(1));
+                return Some(CatchUp {
+                    due,
+                    missed: cap,
+                    last_missed: before,
+                });
+            }
+            seen += 1;
+            (before, latest) = (latest, Some(due));
+            next = self.next_after(due);
+        }
+        Some(CatchUp {
+            due: latest?,
+            missed: seen - 1,
+            last_missed: before,
+        })
     }
 
     /// The last due time at or before `now`: the one night a catch-up runs, however many were
@@ -1231,6 +1276,48 @@ mod tests {
             Some(UnixMs::from_datetime(utc("2026-11-23T03:00:00Z")))
         );
         assert_eq!(next(false), None);
+    }
+
+    /// A schedule due since `from` runs its latest time at or before now and misses the ones
+    /// before, found stepping forward; past the cap, from now back; nothing from a time the
+    /// timetable does not give to a now before its next.
+    #[test]
+    fn a_catch_up_runs_the_latest_time_and_counts_the_ones_before() {
+        let at = |text| utc(text);
+        let timetable = |cron| Timetable::parse(cron, "UTC").unwrap();
+        let nightly = timetable("0 3 * * *");
+        let caught = nightly.catch_up(at("2026-11-19T03:00:00Z"), at("2026-11-22T08:00:00Z"), 10);
+        assert_eq!(
+            caught,
+            Some(CatchUp {
+                due: at("2026-11-22T03:00:00Z"),
+                missed: 3,
+                last_missed: Some(at("2026-11-21T03:00:00Z")),
+            })
+        );
+        let on_time = nightly.catch_up(at("2026-11-22T03:00:00Z"), at("2026-11-22T03:00:00Z"), 10);
+        assert_eq!(on_time.map(|c| (c.missed, c.last_missed)), Some((0, None)));
+        assert_eq!(
+            nightly.catch_up(at("2026-11-22T05:00:00Z"), at("2026-11-22T05:30:00Z"), 10),
+            None
+        );
+        // Every second, a day down: the cap counts, the latest two come from now back.
+        let secondly = timetable("* * * * * *");
+        let day = secondly.catch_up(at("2026-11-21T08:00:00Z"), at("2026-11-22T08:00:00Z"), 1000);
+        assert_eq!(
+            day,
+            Some(CatchUp {
+                due: at("2026-11-22T08:00:00Z"),
+                missed: 1000,
+                last_missed: Some(at("2026-11-22T07:59:59Z")),
+            })
+        );
+        let late = secondly.catch_up(
+            at("2026-11-22T08:00:00Z"),
+            at("2026-11-22T08:00:04.5Z"),
+            1000,
+        );
+        assert_eq!(late.map(|c| c.missed), Some(4));
     }
 
     /// A schedule replaced while its run is due (waiting for room in the queue) keeps that due

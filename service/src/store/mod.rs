@@ -354,6 +354,8 @@ impl ScheduleRecord {
             from: self.next_run_at,
             to,
             revision: self.revision,
+            missed: 0,
+            last_missed: None,
         }
     }
 }
@@ -390,12 +392,15 @@ pub struct RunSlot<'a> {
 
 /// Where a due run moves its schedule's next run: from `from` to `to`, only if the schedule is
 /// still at `from` and at `revision` (not replaced, disabled or run by another loop since the
-/// scheduler read it).
+/// scheduler read it); with the runs it missed since `from`, counted as skipped.
 #[derive(Debug, Clone, Copy)]
 pub struct NextRun {
     pub from: Option<UnixMs>,
     pub to: Option<UnixMs>,
     pub revision: u64,
+    /// Due times before the one run that no run was made for ([`crate::domain::CatchUp`]).
+    pub missed: u64,
+    pub last_missed: Option<UnixMs>,
 }
 
 /// What creating a scheduled run did.

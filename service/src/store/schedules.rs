@@ -9,21 +9,32 @@ use super::rows::{
 use super::sql::{Sql, Tx};
 use super::{NewRun, NextRun, RunRecord, RunSlot, ScheduleRecord, StoreError, StoreResult};
 use crate::domain::{
-    IdempotencyKey, Once, Owner, QueueBound, QueuedJob, ScheduleBound, ScheduleId, UnixMs,
+    IdempotencyKey, MISSED_RUNS, Once, Owner, QueueBound, QueuedJob, ScheduleBound, ScheduleId,
+    UnixMs,
 };
 
-/// Moves a schedule's next run from `$2` to `$3` if it is still at `$2` and at revision `$4`
-/// ([`bind_move`]).
-const MOVE_NEXT_RUN: &str = "UPDATE schedules SET next_run_at = $3 \
+/// Moves a schedule's next run from `$2` to `$3` if it is still at `$2` and at revision `$4`,
+/// counting `$5` runs skipped, the latest due at `$6` for the reason `$7` ([`bind_move`]).
+const MOVE_NEXT_RUN: &str = "UPDATE schedules SET next_run_at = $3, \
+     skipped_runs = skipped_runs + $5, last_skipped_for = COALESCE($6, last_skipped_for), \
+     last_skip_reason = COALESCE($7, last_skip_reason) \
      WHERE id = $1 AND next_run_at IS NOT DISTINCT FROM $2 AND revision = $4";
 
-/// Binds parameters 1 to 4 of [`MOVE_NEXT_RUN`] (and of a statement that moves as it does).
-fn bind_move(query: Sql, id: &ScheduleId, moves: NextRun) -> Sql {
-    query
+/// [`MOVE_NEXT_RUN`] with its parameters: the runs `moves` missed, and the run due at `skipped`'s
+/// time skipped for its reason (the latest skip then).
+fn move_next_run(id: &ScheduleId, moves: NextRun, skipped: Option<(UnixMs, &str)>) -> Sql {
+    let (count, last) = match skipped {
+        Some(skipped) => (moves.missed + 1, Some(skipped)),
+        None => (moves.missed, moves.last_missed.map(|at| (at, MISSED_RUNS))),
+    };
+    Sql::new(MOVE_NEXT_RUN)
         .bind(id.as_str())
         .bind(moves.from.map(|t| t.0))
         .bind(moves.to.map(|t| t.0))
         .bind(count_to_sql(moves.revision))
+        .bind(count_to_sql(count))
+        .bind(last.map(|(at, _)| at.0))
+        .bind(last.map(|(_, reason)| reason.to_owned()))
 }
 
 const INSERT_SCHEDULE: &str = concat!(
@@ -208,7 +219,7 @@ impl Store {
         let mut tx = self.begin().await?;
         // A due run first moves its schedule on, if the schedule is still as read.
         if let Some(moves) = slot.moves {
-            let moved = bind_move(Sql::new(MOVE_NEXT_RUN), slot.schedule, moves)
+            let moved = move_next_run(slot.schedule, moves, None)
                 .execute(&mut tx)
                 .await?;
             if moved == 0 {
@@ -254,14 +265,15 @@ impl Store {
     /// replaced the schedule since it was read: false.
     #[tracing::instrument(skip_all, fields(schedule = %id))]
     pub async fn advance_schedule(&self, id: &ScheduleId, moves: NextRun) -> StoreResult<bool> {
-        let updated = bind_move(Sql::new(MOVE_NEXT_RUN), id, moves)
+        let updated = move_next_run(id, moves, None)
             .execute(self.writer()?)
             .await?;
         Ok(updated == 1)
     }
 
-    /// Skips the run due at `due` with `reason` and moves the schedule's next run, as
-    /// [`Store::advance_schedule`] would (else nothing is counted: false).
+    /// Skips the run due at `due` with `reason` (and counts those `moves` missed before it) and
+    /// moves the schedule's next run, as [`Store::advance_schedule`] would (else nothing is
+    /// counted: false).
     #[tracing::instrument(skip_all, fields(schedule = %id))]
     pub async fn skip_run(
         &self,
@@ -270,14 +282,7 @@ impl Store {
         due: UnixMs,
         reason: &str,
     ) -> StoreResult<bool> {
-        let updated = Sql::new(
-            "UPDATE schedules SET next_run_at = $3, skipped_runs = skipped_runs + 1, \
-             last_skipped_for = $5, last_skip_reason = $6 \
-             WHERE id = $1 AND next_run_at IS NOT DISTINCT FROM $2 AND revision = $4",
-        );
-        let updated = bind_move(updated, id, moves)
-            .bind(due.0)
-            .bind(reason)
+        let updated = move_next_run(id, moves, Some((due, reason)))
             .execute(self.writer()?)
             .await?;
         Ok(updated == 1)
