@@ -1208,9 +1208,12 @@ async fn a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later(url:
         ["attempt 1 (w): waiting for room: no room: 2 MB"]
     );
     let owner = Owner::anonymous();
+    let job = store.job(&owner, &id).await.unwrap();
+    assert_eq!(job.status, JobStatus::Running);
     assert_eq!(
-        store.job(&owner, &id).await.unwrap().status,
-        JobStatus::Running
+        job.waiting.as_deref(),
+        Some("waiting for room: no room: 2 MB"),
+        "the job says why it waits"
     );
     let early = store.claim("w", terms(100 + ROOM_RETRY_MS - 1), budget(0));
     assert!(early.await.unwrap().is_none(), "claimed before the wait");
@@ -1237,6 +1240,7 @@ async fn a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later(url:
     let shard = store.shards(&id).await.unwrap().remove(0);
     assert_eq!((shard.status.as_str(), shard.error), ("done", None));
     assert_eq!(shard.history.len(), 1, "{:?}", shard.history);
+    assert_eq!(store.job(&owner, &id).await.unwrap().waiting, None);
 }
 
 /// A job whose stored accumulators are damaged makes every merge fail: real workers retry it the
@@ -1510,6 +1514,7 @@ async fn a_result_the_databases_full_disk_refuses_waits_for_room(url: &str) {
     assert_eq!((merge.status.as_str(), merge.failures), ("queued", 0));
     let job = store.job(&Owner::anonymous(), &id).await.unwrap();
     assert_eq!(job.status, JobStatus::Running);
+    assert_eq!(job.waiting, Some(error));
     execute(url, ACCEPT_RESULTS.0, ACCEPT_RESULTS.1).await;
 }
 

@@ -64,6 +64,9 @@ fn a_job_goes_from_submission_to_result_with_live_progress() {
     for field in ["created_at", "started_at", "finished_at"] {
         assert!(status[field].is_string(), "{field}");
     }
+    for field in ["error", "waiting"] {
+        assert!(status.get(field).is_some_and(Value::is_null), "{field}");
+    }
     // The job as it runs (as submitted, defaults filled in), and the URLs of what it has.
     let spec = &status["spec"];
     for field in ["name", "devices", "operations", "seed", "scatter", "limits"] {

@@ -70,6 +70,10 @@ pub struct JobResource {
     pub finished_at: Option<String>,
     /// Why it failed.
     pub error: Option<String>,
+    /// While it runs, why its work waits, if it does (null otherwise): `waiting for room: ...`
+    /// (no room on the disk for what it computed, kept until there is) or `waiting for the
+    /// database: ...`; its shards (`links.shards`) say which.
+    pub waiting: Option<String>,
     /// The seed the job runs with (drawn at submission when the job did not give one).
     pub seed: u64,
     /// Bytes stored for the job: its spec, its groups' accumulators while it runs, and once it
@@ -144,6 +148,7 @@ impl JobResource {
             started_at: record.started_at.map(UnixMs::to_rfc3339),
             finished_at: record.finished_at.map(UnixMs::to_rfc3339),
             error: record.error.clone(),
+            waiting: record.waiting.clone(),
             seed: record.seed,
             stored_bytes: record.stored_bytes,
             links: Links {

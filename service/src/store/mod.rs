@@ -211,6 +211,9 @@ pub struct JobRecord {
     /// device lives (not the database's own
     /// overhead: indexes, free pages).
     pub stored_bytes: u64,
+    /// While it runs, why its work waits, if it does: `waiting for room: ...` (the disk) or
+    /// `waiting for the database: ...`, as its shard says.
+    pub waiting: Option<String>,
 }
 
 /// One page of a newest-first listing: the rows below the cursor `before` (a `seq`).
@@ -406,7 +409,7 @@ pub struct NextRun {
 /// What creating a scheduled run did.
 #[derive(Debug, Clone)]
 pub enum NewRun {
-    Created(JobRecord),
+    Created(Box<JobRecord>),
     /// That slot already has its job: another loop or instance made it.
     AlreadyExists,
     QueueFull,

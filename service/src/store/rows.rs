@@ -201,10 +201,15 @@ pub(crate) struct Dialect {
 
 // ---- jobs ----------------------------------------------------------------------------------
 
+/// A job's columns as read, with why its work waits while it does: a queued shard's reason for
+/// waiting ([`super::Store::wait_for`]), for room on the disk or for the database.
 macro_rules! job_columns {
     () => {
         "seq, id, owner, name, seed, status, operations_done, operations_total, error, \
-         created_at, started_at, finished_at, stored_bytes"
+         created_at, started_at, finished_at, stored_bytes, \
+         CASE WHEN status = 'running' THEN (SELECT s.error FROM shards s \
+         WHERE s.job_id = jobs.id AND s.status = 'queued' AND s.error LIKE 'waiting for %' \
+         LIMIT 1) END AS waiting"
     };
 }
 
@@ -225,6 +230,7 @@ pub(crate) fn job_from_row(row: &AnyRow) -> Result<JobRecord, sqlx::Error> {
         started_at: optional_ms(row, "started_at")?,
         finished_at: optional_ms(row, "finished_at")?,
         stored_bytes: count_from_sql(row, "stored_bytes")?,
+        waiting: row.maybe_text("waiting")?,
     })
 }
 

@@ -258,7 +258,7 @@ impl Store {
         }
         let record = select_job(&mut tx, &job.owner, &job.id).await?;
         tx.commit().await?;
-        Ok(NewRun::Created(record))
+        Ok(NewRun::Created(Box::new(record)))
     }
 
     /// Moves the schedule's next run ([`NextRun`]), unless another loop moved it or a PUT

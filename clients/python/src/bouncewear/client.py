@@ -312,6 +312,12 @@ class Job(_Resource):
         """Why it failed."""
         return self.resource.get("error")
 
+    @property
+    def waiting(self) -> Optional[str]:
+        """While it runs, why its work waits, if it does (no room on the server's disk, no
+        database), as last read."""
+        return self.resource.get("waiting")
+
     def wait(self, progress: bool = True, timeout: Optional[float] = None, poll: float = 1.0) -> "Job":
         """Waits until the job ends; itself. With `progress`, a line on stderr shows how far it is.
 
@@ -341,7 +347,8 @@ class Job(_Resource):
                 break
             if progress:
                 done, total = self.progress["operations_done"], self.progress["operations_total"]
-                print(f"\r{self.id}: {self.status} {done:,}/{total:,} operations", end="", file=sys.stderr)
+                waits = f" ({self.waiting})" if self.waiting else ""
+                print(f"\r{self.id}: {self.status} {done:,}/{total:,} operations{waits}", end="", file=sys.stderr)
             if timeout is not None and time.monotonic() - started >= timeout:
                 if progress:
                     print(file=sys.stderr)
