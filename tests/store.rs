@@ -1508,8 +1508,8 @@ async fn a_result_the_databases_full_disk_refuses_waits_for_room(url: &str) {
     let error = merge.error.unwrap();
     assert!(
         error.starts_with("waiting for room: storing the result: ")
-            && error.contains("No space left on device"),
-        "{error}"
+            && error.ends_with("No space left on device (code 53100)"),
+        "in PostgreSQL's words and code, not its source's line: {error}"
     );
     assert_eq!((merge.status.as_str(), merge.failures), ("queued", 0));
     let job = store.job(&Owner::anonymous(), &id).await.unwrap();

@@ -51,6 +51,18 @@ fn migration_failed(error: &sqlx::migrate::MigrateError) -> String {
     }
 }
 
+/// What the database said, in its own words and code: PostgreSQL's errors read without the line
+/// of PostgreSQL's own source that sqlx adds ("... No space left on device at line 3891").
+fn said(error: &sqlx::Error) -> String {
+    match error {
+        sqlx::Error::Database(error) => match error.code() {
+            Some(code) => format!("{} (code {code})", error.message()),
+            None => error.message().to_owned(),
+        },
+        other => other.to_string(),
+    }
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
     /// No such thing for this owner (another owner's things do not exist for the caller).
@@ -59,7 +71,7 @@ pub enum StoreError {
     /// The request contradicts the stored state, e.g. cancelling a job that already ended.
     #[error("{0}")]
     Conflict(String),
-    #[error("database: {0}")]
+    #[error("database: {}", said(.0))]
     Database(#[from] sqlx::Error),
     #[error("{}", migration_failed(.0))]
     Migration(#[from] sqlx::migrate::MigrateError),
