@@ -202,10 +202,15 @@ fn job_fields() -> Vec<(&'static str, &'static str, Value)> {
         .chain(QUANTILES.iter().map(|(name, _)| *name))
         .collect();
     vec![
+        // 0, or from the least magnitude to 1, as `Scenario::new` checks it: 1e-169 was
+        // schema-valid and refused (schemathesis, another seed).
         (
             "MaterialSpec",
             "anode_erosion_fraction",
-            json!({"minimum": 0, "maximum": 1}),
+            json!({
+                "minimum": 0, "maximum": 1,
+                "not": {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": MIN_MAGNITUDE}
+            }),
         ),
         (
             "LossesSpec",
