@@ -19,7 +19,7 @@ use utoipa::ToSchema;
 /// What a schedule follows when the document names no statistic.
 const DEFAULT_STATISTIC: &str = "operations.total_bounce_s.p95";
 
-/// Why a schedule's due times before the one it runs are skipped ([`Timetable::missed`]).
+/// Why a schedule's due times before the one it runs are skipped ([`Timetable::catch_up`]).
 pub const MISSED_RUNS: &str = "no scheduler ran at its due time (the server was down, or its \
     ticks late): only the latest due time runs";
 

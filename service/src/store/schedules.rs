@@ -14,7 +14,7 @@ use crate::domain::{
 };
 
 /// Moves a schedule's next run from `$2` to `$3` if it is still at `$2` and at revision `$4`,
-/// counting `$5` runs skipped, the latest due at `$6` for the reason `$7` ([`bind_move`]).
+/// counting `$5` runs skipped, the latest due at `$6` for the reason `$7` ([`move_next_run`]).
 const MOVE_NEXT_RUN: &str = "UPDATE schedules SET next_run_at = $3, \
      skipped_runs = skipped_runs + $5, last_skipped_for = COALESCE($6, last_skipped_for), \
      last_skip_reason = COALESCE($7, last_skip_reason) \
