@@ -92,6 +92,30 @@ pub async fn run(
 pub struct Waiting(HashSet<ScheduleId>);
 
 impl Waiting {
+    /// Notes what creating `schedule`'s run did, saying once when its run starts and stops
+    /// waiting for room in the queue; whether it made a job.
+    fn note(&mut self, schedule: &ScheduleId, made: &NewRun) -> bool {
+        match made {
+            NewRun::QueueFull => {
+                if self.0.insert(schedule.clone()) {
+                    tracing::warn!(%schedule, "queue full; the scheduled run waits for room");
+                }
+                return false;
+            }
+            // Replaced, disabled, deleted or run by another loop since it was read: the next
+            // tick reads it as it is now.
+            NewRun::Moved => {
+                self.0.remove(schedule);
+                return false;
+            }
+            NewRun::Created(_) | NewRun::AlreadyExists => {}
+        }
+        if self.0.remove(schedule) {
+            tracing::info!(%schedule, "the scheduled run no longer waits for room");
+        }
+        matches!(made, NewRun::Created(_))
+    }
+
     pub fn contains(&self, schedule: &ScheduleId) -> bool {
         self.0.contains(schedule)
     }
@@ -188,25 +212,7 @@ pub async fn tick(
             }
             made => made?,
         };
-        match made {
-            NewRun::QueueFull => {
-                if waiting.0.insert(schedule.id.clone()) {
-                    tracing::warn!(schedule = %schedule.id, "queue full; the scheduled run waits for room");
-                }
-                continue;
-            }
-            // Replaced, disabled, deleted or run by another loop since it was read: the next
-            // tick reads it as it is now.
-            NewRun::Moved => {
-                waiting.0.remove(&schedule.id);
-                continue;
-            }
-            NewRun::Created(_) => created += 1,
-            NewRun::AlreadyExists => {}
-        }
-        if waiting.0.remove(&schedule.id) {
-            tracing::info!(schedule = %schedule.id, "the scheduled run no longer waits for room");
-        }
+        created += usize::from(waiting.note(&schedule.id, &made));
     }
     Ok(created)
 }
