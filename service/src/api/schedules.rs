@@ -62,7 +62,7 @@ pub struct ScheduleResource {
     #[schema(format = DateTime)]
     pub last_run_at: Option<String>,
     /// How many of its runs were skipped at their due time (never run later): its template
-    /// refused by the server's limits then, its key over its quota, or no scheduler running then
+    /// refused by the server's limits then, its key over its quota, or a later due time come first
     /// (a catch-up runs only the latest due time; counted up to 100,000 at a time).
     pub skipped_runs: u64,
     /// The latest skipped run, if any.
@@ -286,19 +286,33 @@ pub async fn replace_schedule(
     Path(id): Path<ScheduleId>,
     JsonText(body): JsonText,
 ) -> Result<Json<ScheduleResource>, ApiError> {
-    let existing = state.store.schedule(&owner, &id).await?;
-    let valid = ValidSchedule::parse(&body, state.config.schedule_limits(), Utc::now())?;
-    let now = UnixMs::now();
-    let next_run_at = valid.next_run_replacing(&existing.definition, existing.next_run_at, now);
-    let record = ScheduleRecord {
-        next_run_at,
-        skipped: existing.skipped,
-        revision: existing.revision + 1,
-        ..record(valid, id, owner, existing.created_at, now)
-    };
-    state.store.update_schedule(&record).await?;
-    Ok(Json(resource(&state, &record).await?))
+    let mut existing = state.store.schedule(&owner, &id).await?;
+    // Worked out again from the schedule as it is if a run (or another PUT) moved it meanwhile:
+    // a scheduler moves it once a due time.
+    for _ in 0..REPLACE_TRIES {
+        let valid = ValidSchedule::parse(&body, state.config.schedule_limits(), Utc::now())?;
+        let now = UnixMs::now();
+        let next_run_at = valid.next_run_replacing(&existing.definition, existing.next_run_at, now);
+        let record = ScheduleRecord {
+            next_run_at,
+            skipped: existing.skipped.clone(),
+            revision: existing.revision + 1,
+            ..record(valid, id.clone(), owner.clone(), existing.created_at, now)
+        };
+        if state.store.update_schedule(&record, &existing).await? {
+            return Ok(Json(resource(&state, &record).await?));
+        }
+        existing = state.store.schedule(&owner, &id).await?;
+    }
+    Err(ApiError::Conflict(
+        "the schedule kept changing while it was replaced (its runs, or other PUTs): send the \
+         PUT again"
+            .to_owned(),
+    ))
 }
+
+/// Tries a PUT makes to replace a schedule that moves on meanwhile.
+const REPLACE_TRIES: usize = 5;
 
 /// Delete a schedule (its jobs stay).
 ///

@@ -201,14 +201,15 @@ pub(crate) struct Dialect {
 
 // ---- jobs ----------------------------------------------------------------------------------
 
-/// A job's columns as read, with why its work waits while it does: a queued shard's reason for
-/// waiting ([`super::Store::wait_for`]), for room on the disk or for the database.
+/// A job's columns as read, with why its work waits while it does: the reason of a shard not done
+/// that last waited ([`super::Store::wait_for`]), for room on the disk or for the database (kept
+/// while it is claimed again and tries its write, until it is done).
 macro_rules! job_columns {
     () => {
         "seq, id, owner, name, seed, status, operations_done, operations_total, error, \
          created_at, started_at, finished_at, stored_bytes, \
          CASE WHEN status = 'running' THEN (SELECT s.error FROM shards s \
-         WHERE s.job_id = jobs.id AND s.status = 'queued' AND s.error LIKE 'waiting for %' \
+         WHERE s.job_id = jobs.id AND s.status <> 'done' AND s.error LIKE 'waiting for %' \
          LIMIT 1) END AS waiting"
     };
 }
