@@ -326,7 +326,7 @@ pub async fn list_jobs(
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<JobList>, ApiError> {
     let Query(query) = query?;
-    let key = state.store.cursor_key();
+    let key = &state.store.cursor_key().of_list("jobs");
     let (limit, before) = query.page(20, key)?;
     // One more than the page: a cursor only where another page has jobs.
     let mut records = state

@@ -228,7 +228,7 @@ pub async fn list_schedules(
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<ScheduleList>, ApiError> {
     let Query(query) = query?;
-    let key = state.store.cursor_key();
+    let key = &state.store.cursor_key().of_list("schedules");
     let (limit, after) = query.page(100, key)?;
     // One more than the page: a cursor only where another page has schedules.
     let mut records = state.store.schedules(&owner, after, limit + 1).await?;

@@ -32,6 +32,18 @@ impl CursorKey {
         Self(Sha256::digest(secret.as_bytes()).into())
     }
 
+    /// The key of one list's cursors (`jobs`, `schedules`), so that a cursor of one list opens in
+    /// no other.
+    pub fn of_list(&self, list: &str) -> Self {
+        Self(
+            Sha256::new()
+                .chain_update(self.0)
+                .chain_update(list.as_bytes())
+                .finalize()
+                .into(),
+        )
+    }
+
     /// The cursor of the place after row `seq`: 24 lowercase hex digits.
     pub fn seal(&self, seq: i64) -> String {
         // The block: the number's 63 bits, then 32 zero bits that opening checks.
@@ -106,6 +118,13 @@ mod tests {
         fn another_databases_cursor_opens_to_nothing(seq in 1..=i64::MAX) {
             let other = CursorKey::from_secret("another database's secret");
             prop_assert_eq!(other.open(&key().seal(seq)), None);
+        }
+
+        #[test]
+        fn another_lists_cursor_opens_to_nothing(seq in 1..=i64::MAX) {
+            let (jobs, schedules) = (key().of_list("jobs"), key().of_list("schedules"));
+            prop_assert_eq!(schedules.open(&jobs.seal(seq)), None);
+            prop_assert_eq!(jobs.open(&jobs.seal(seq)), Some(seq));
         }
     }
 
