@@ -2111,7 +2111,7 @@ async fn a_run_comes_only_of_the_schedule_as_the_scheduler_read_it(url: &str) {
     let mut replaced = read.clone();
     replaced.definition.template =
         serde_json::from_str(r#"{"devices": 3, "operations": 2, "seed": 2}"#).unwrap();
-    assert!(store.update_schedule(&replaced, &read).await.unwrap());
+    assert_eq!(store.update_schedule(&replaced, &read).await.unwrap(), None);
     let slot = RunSlot {
         schedule: &read.id,
         scheduled_for: read.next_run_at.unwrap(),
@@ -2142,7 +2142,12 @@ async fn a_run_comes_only_of_the_schedule_as_the_scheduler_read_it(url: &str) {
     assert_eq!(stored.revision, 1);
     // A PUT worked out from a read the run has moved on from writes nothing: it would put the
     // schedule back on the night just run.
-    assert!(!store.update_schedule(&replaced, &replaced).await.unwrap());
+    let moved = store.update_schedule(&replaced, &replaced).await.unwrap();
+    assert_eq!(
+        moved,
+        Some(stored.clone()),
+        "nothing written: the schedule as it is"
+    );
     assert_eq!(store.schedule(&read.owner, &read.id).await.unwrap(), stored);
 
     // Disabled after the read: no run, and it stays disabled.
@@ -2157,7 +2162,7 @@ async fn a_run_comes_only_of_the_schedule_as_the_scheduler_read_it(url: &str) {
         },
         ..read.clone()
     };
-    assert!(store.update_schedule(&off, &read).await.unwrap());
+    assert_eq!(store.update_schedule(&off, &read).await.unwrap(), None);
     let slot = RunSlot {
         schedule: &read.id,
         ..slot

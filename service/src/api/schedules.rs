@@ -299,10 +299,10 @@ pub async fn replace_schedule(
             revision: existing.revision + 1,
             ..record(valid, id.clone(), owner.clone(), existing.created_at, now)
         };
-        if state.store.update_schedule(&record, &existing).await? {
-            return Ok(Json(resource(&state, &record).await?));
+        match state.store.update_schedule(&record, &existing).await? {
+            None => return Ok(Json(resource(&state, &record).await?)),
+            Some(moved) => existing = moved,
         }
-        existing = state.store.schedule(&owner, &id).await?;
     }
     Err(ApiError::Conflict(
         "the schedule kept changing while it was replaced (its runs, or other PUTs): send the \

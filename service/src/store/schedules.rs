@@ -164,8 +164,9 @@ impl Store {
     }
 
     /// Replaces a schedule's definition and next run (its runs stay), if it is still as `read`
-    /// (its revision and next run): false if a PUT or a run moved it since, then to be worked out
-    /// again from it as it is ([`StoreError::NotFound`] if it is gone). A PUT that wrote back a
+    /// (its revision and next run): `None` once written; the schedule as it is now if a PUT or a
+    /// run moved it since, to work the replacement out again from ([`StoreError::NotFound`] if
+    /// it is gone). A PUT that wrote back a
     /// next run read before a tick moved it put the schedule on a night already run, and the
     /// catch-up counted that night as skipped (a probe: 8 runs and 1 skipped of 8 due times).
     #[tracing::instrument(skip_all, fields(schedule = %schedule.id))]
@@ -173,7 +174,7 @@ impl Store {
         &self,
         schedule: &ScheduleRecord,
         read: &ScheduleRecord,
-    ) -> StoreResult<bool> {
+    ) -> StoreResult<Option<ScheduleRecord>> {
         let update = Sql::new(
             "UPDATE schedules SET name = $3, cron = $4, time_zone = $5, template = $6, statistics = $7, \
              enabled = $8, next_run_at = $9, created_at = $10, updated_at = $11, \
@@ -187,10 +188,9 @@ impl Store {
             .await?;
         if updated == 0 {
             // Gone, or moved on since it was read.
-            self.schedule(&schedule.owner, &schedule.id).await?;
-            return Ok(false);
+            return self.schedule(&schedule.owner, &schedule.id).await.map(Some);
         }
-        Ok(true)
+        Ok(None)
     }
 
     #[tracing::instrument(skip_all, fields(schedule = %id))]
