@@ -292,8 +292,16 @@ await step("compare with the second design through the form", async () => {
   await page.click("#compare-form button[type=submit]");
 });
 await step("both compared plots show an SVG", async () => {
-  await page.waitForSelector("#plot-compare-bands svg");
-  await page.waitForSelector("#plot-compare-weibull svg");
+  // Or the page says why not: a comparison that failed shows its error and never its plots.
+  const plots = Promise.all([
+    page.waitForSelector("#plot-compare-bands svg"),
+    page.waitForSelector("#plot-compare-weibull svg"),
+  ]).then(() => null);
+  const said = page.waitForSelector("#compare-error:not([hidden])")
+    .then((alert) => alert.textContent(), () => null)
+    .then((text) => text || new Promise(() => {}));
+  const error = await Promise.race([plots, said]);
+  if (error) throw new Error(`the page says: ${error}`);
 });
 const compareRows = await step("the comparison tables are filled", async () => {
   await page.waitForFunction(() => document.querySelectorAll("#compare-life-table tbody tr").length >= 3);
