@@ -919,22 +919,52 @@ async fn a_rare_events_rounds_run_as_shards_give_the_whole_result(url: &str) {
 async fn run_rounds(store: &Arc<Store>, id: &JobId) -> JobRecord {
     let mut workers = Arc::into_inner(workers(store, 3, u64::MAX)).unwrap();
     workers.sharded_round_operations = 1;
+    let ended = async || ended(store, id).await;
+    work_until(
+        Arc::new(workers),
+        2,
+        Duration::from_secs(120),
+        async || {},
+        ended,
+    )
+    .await
+}
+
+/// Job `id` once it ended, else as it is.
+async fn ended(store: &Store, id: &JobId) -> Result<JobRecord, JobRecord> {
+    let job = store.job(&Owner::anonymous(), id).await.unwrap();
+    if job.status.is_terminal() {
+        Ok(job)
+    } else {
+        Err(job)
+    }
+}
+
+/// Runs `workers`, `slots` shards at a time, and `meanwhile` beside them, until `done` gives a
+/// value (within `limit`, else the test fails with what it gave last); stops them; the value.
+async fn work_until<T, U: std::fmt::Debug>(
+    workers: Arc<Workers>,
+    slots: usize,
+    limit: Duration,
+    meanwhile: impl AsyncFnOnce(),
+    mut done: impl AsyncFnMut() -> Result<T, U>,
+) -> T {
     let (stop, stopping) = watch::channel(false);
-    let handles = Arc::new(workers).spawn(2, stopping);
+    let handles = workers.spawn(slots, stopping);
+    meanwhile().await;
     let started = Instant::now();
-    let ended = loop {
-        let job = store.job(&Owner::anonymous(), id).await.unwrap();
-        if job.status.is_terminal() {
-            break job;
+    let value = loop {
+        match done().await {
+            Ok(value) => break value,
+            Err(last) => assert!(started.elapsed() < limit, "{last:?}"),
         }
-        assert!(started.elapsed() < Duration::from_secs(120), "{job:?}");
         tokio::time::sleep(Duration::from_millis(20)).await;
     };
     stop.send(true).unwrap();
     for handle in handles {
         handle.await.unwrap();
     }
-    ended
+    value
 }
 
 /// A job run whole with a precision target hands itself on after each step of `whole_step`
@@ -1410,23 +1440,8 @@ async fn run_until_ended(
     id: &JobId,
     meanwhile: impl AsyncFnOnce(),
 ) -> JobRecord {
-    let (stop, stopping) = watch::channel(false);
-    let handles = workers.spawn(1, stopping);
-    meanwhile().await;
-    let started = Instant::now();
-    let ended = loop {
-        let job = store.job(&Owner::anonymous(), id).await.unwrap();
-        if job.status.is_terminal() {
-            break job;
-        }
-        assert!(started.elapsed() < Duration::from_secs(60), "{job:?}");
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    };
-    stop.send(true).unwrap();
-    for handle in handles {
-        handle.await.unwrap();
-    }
-    ended
+    let check = async || ended(store, id).await;
+    work_until(workers, 1, Duration::from_secs(60), meanwhile, check).await
 }
 
 /// A Result the database refuses (for a moment) is written again after a backoff, with the lease
@@ -1495,21 +1510,16 @@ async fn a_result_the_databases_full_disk_refuses_waits_for_room(url: &str) {
     let id = insert(&store, single(8)).await;
     execute(url, "SELECT 1", DISK_FULL).await;
     execute(url, "SELECT 1", REFUSE_RESULTS_ON_INSERT).await;
-    let (stop, stopping) = watch::channel(false);
-    let handles = workers(&store, 0, u64::MAX).spawn(1, stopping);
-    let started = Instant::now();
-    let merge = loop {
+    let waits = async || {
         let merge = store.shards(&id).await.unwrap().pop().unwrap();
         if merge.error.is_some() {
-            break merge;
+            Ok(merge)
+        } else {
+            Err(merge)
         }
-        assert!(started.elapsed() < Duration::from_secs(30), "{merge:?}");
-        tokio::time::sleep(Duration::from_millis(20)).await;
     };
-    stop.send(true).unwrap();
-    for handle in handles {
-        handle.await.unwrap();
-    }
+    let workers = workers(&store, 0, u64::MAX);
+    let merge = work_until(workers, 1, Duration::from_secs(30), async || {}, waits).await;
     let error = merge.error.unwrap();
     assert!(
         error.starts_with("waiting for room: storing the result: ")
