@@ -1,7 +1,9 @@
 //! `/v1/jobs`: submission to result, listing, cancelling, the queue bound, life, and every 4xx.
 
 use crate::support::app::{Service, TestApp};
-use crate::support::client::{Reply, agent, assert_problem, authorized, delete, get, post, reply};
+use crate::support::client::{
+    Reply, agent, assert_problem, assert_problem_saying, authorized, delete, get, post, reply,
+};
 use crate::support::{
     on_own_runtime, run_job, scattered_job, submit_concurrently, temp_db, wearing_template,
 };
@@ -1401,14 +1403,7 @@ fn a_retry_with_the_same_idempotency_key_gets_the_first_resource_and_another_bod
             .header("idempotency-key", "retry-2")
             .send(&job.to_string()),
     );
-    let problem = assert_problem(&twice, 400);
-    assert!(
-        problem["detail"]
-            .as_str()
-            .unwrap()
-            .contains("more than once"),
-        "{problem}"
-    );
+    assert_problem_saying(&twice, 400, "more than once");
 
     // Keys are per collection: the same key makes one schedule.
     let schedule = json!({"name": "n", "cron": "0 3 * * *", "time_zone": "UTC",

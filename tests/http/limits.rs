@@ -2,7 +2,7 @@
 //! answer, bounded connections and requests. Slow clients are raw sockets that stall mid-request.
 
 use crate::support::app::{Service, Spawned, TestApp};
-use crate::support::client::{agent, assert_problem, delete, get};
+use crate::support::client::{agent, assert_problem, assert_problem_saying, delete, get};
 use crate::support::{scattered_job, temp_db};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -428,14 +428,7 @@ fn large_responses_held_for_unread_clients_are_bounded() {
         std::thread::sleep(Duration::from_millis(100));
     }
     let refused = get(&result, None);
-    let problem = assert_problem(&refused, 503);
-    assert!(
-        problem["detail"]
-            .as_str()
-            .unwrap()
-            .contains("--max-response-mb"),
-        "{problem}"
-    );
+    assert_problem_saying(&refused, 503, "--max-response-mb");
     assert_eq!(refused.headers["retry-after"], "5");
     assert_eq!(
         get(&server.url(&format!("/v1/jobs/{id}")), None).status,

@@ -1,7 +1,9 @@
 //! The OpenAPI document, docs, health and metrics (every family described), and API keys.
 
 use crate::support::app::{Service, TestApp};
-use crate::support::client::{Reply, agent, assert_problem, delete, get, post, reply};
+use crate::support::client::{
+    Reply, agent, assert_problem, assert_problem_saying, delete, get, post, reply,
+};
 use crate::support::temp_db;
 use bouncewear_model::calibration::FITTED;
 use bouncewear_model::scenario::{MAX_MAGNITUDE, MIN_MAGNITUDE, NUMBER_RULES, Rule};
@@ -203,14 +205,7 @@ fn api_keys_are_required_and_isolate_jobs() {
                 .header("authorization", &format!("Bearer {second}"))
                 .call(),
         );
-        let problem = assert_problem(&twice, 400);
-        assert!(
-            problem["detail"]
-                .as_str()
-                .unwrap()
-                .contains("more than once"),
-            "{problem}"
-        );
+        assert_problem_saying(&twice, 400, "more than once");
     }
     let reply = post(
         &jobs,

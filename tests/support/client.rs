@@ -84,6 +84,17 @@ pub fn delete(url: &str) -> Reply {
     reply(agent().delete(url).call())
 }
 
+/// Checks that `reply` is an RFC 9457 problem with `status` whose detail says `words`, and
+/// returns it.
+pub fn assert_problem_saying(reply: &Reply, status: u16, words: &str) -> Value {
+    let problem = assert_problem(reply, status);
+    assert!(
+        problem["detail"].as_str().unwrap().contains(words),
+        "{words} in {problem}"
+    );
+    problem
+}
+
 /// Checks that `reply` is an RFC 9457 problem with `status`, and returns it.
 pub fn assert_problem(reply: &Reply, status: u16) -> Value {
     assert_eq!(reply.status, status, "{}", reply.body);
