@@ -1501,7 +1501,9 @@ async fn a_result_the_database_keeps_refusing_fails_its_job_at_the_retry_limit(u
 /// as one that the store's free-space check refuses: it failed its job at the retry limit (a
 /// probe: three jobs acknowledged, then `failed`, "could not extend file"). SQLite's full file
 /// reads the same ([`a_full_sqlite_file_is_out_of_space`]); the wait itself is
-/// [`a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later`].
+/// [`a_shard_waiting_for_room_counts_nothing_and_is_claimed_again_later`]. The hand-back that
+/// says so, refused once by the same full disk, is tried again: it left the shard running until
+/// its lease expired, counted as lost (a probe at 0 bytes free).
 async fn a_result_the_databases_full_disk_refuses_waits_for_room(url: &str) {
     if url.starts_with("sqlite:") {
         return;
@@ -1510,6 +1512,9 @@ async fn a_result_the_databases_full_disk_refuses_waits_for_room(url: &str) {
     let id = insert(&store, single(8)).await;
     execute(url, "SELECT 1", DISK_FULL).await;
     execute(url, "SELECT 1", REFUSE_RESULTS_ON_INSERT).await;
+    execute(url, "SELECT 1", REFUSE_ONE_HAND_BACK.0).await;
+    execute(url, "SELECT 1", REFUSE_ONE_HAND_BACK.1).await;
+    execute(url, "SELECT 1", REFUSE_ONE_HAND_BACK.2).await;
     let waits = async || {
         let merge = store.shards(&id).await.unwrap().pop().unwrap();
         if merge.error.is_some() {
@@ -1518,20 +1523,41 @@ async fn a_result_the_databases_full_disk_refuses_waits_for_room(url: &str) {
             Err(merge)
         }
     };
-    let workers = workers(&store, 0, u64::MAX);
-    let merge = work_until(workers, 1, Duration::from_secs(30), async || {}, waits).await;
+    // One try again for a write the disk refuses: the Result's twice, the hand-back's once.
+    let workers = workers(&store, 1, u64::MAX);
+    let merge = work_until(workers, 1, Duration::from_secs(20), async || {}, waits).await;
     let error = merge.error.unwrap();
     assert!(
         error.starts_with("waiting for room: storing the result: ")
             && error.ends_with("No space left on device (code 53100)"),
         "in PostgreSQL's words and code, not its source's line: {error}"
     );
-    assert_eq!((merge.status.as_str(), merge.failures), ("queued", 0));
+    let counted = (merge.failures, merge.lost_leases);
+    assert_eq!((merge.status.as_str(), counted), ("queued", (0, 0)));
+    let refused: (i64,) = sqlx::query_as("SELECT last_value FROM hand_backs_refused")
+        .fetch_one(&sqlx::PgPool::connect(url).await.unwrap())
+        .await
+        .unwrap();
+    assert!(
+        refused.0 >= 2,
+        "the first hand-back was refused and another made"
+    );
     let job = store.job(&Owner::anonymous(), &id).await.unwrap();
     assert_eq!(job.status, JobStatus::Running);
     assert_eq!(job.waiting, Some(error));
     execute(url, ACCEPT_RESULTS.0, ACCEPT_RESULTS.1).await;
 }
+
+/// A trigger that refuses the first hand-back of a shard waiting for room as a full disk would.
+const REFUSE_ONE_HAND_BACK: (&str, &str, &str) = (
+    "CREATE SEQUENCE hand_backs_refused",
+    "CREATE FUNCTION refuse_a_hand_back() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN \
+     IF nextval('hand_backs_refused') = 1 THEN RAISE EXCEPTION \
+     'injected: could not extend file: No space left on device' USING ERRCODE = 'disk_full'; \
+     END IF; RETURN NEW; END $$",
+    "CREATE TRIGGER refuse_a_hand_back BEFORE UPDATE ON shards FOR EACH ROW \
+     WHEN (NEW.error LIKE 'waiting for %') EXECUTE FUNCTION refuse_a_hand_back()",
+);
 
 /// SQLite's full file (here its page limit) is the disk's state, as PostgreSQL's `disk_full`.
 #[tokio::test]

@@ -608,7 +608,10 @@ impl Workers {
     async fn merge(&self, fence: &Fence, job: Job, started_at: UnixMs, lease: &KeptLease) {
         let mut clock = MergeClock::start();
         let last = fence.shard.batch;
-        let read = clock.time(Part::Read, self.read_groups(fence, job, last, Holding::Use));
+        let read = clock.time(
+            Part::Read,
+            self.read_groups(fence, job, last, Holding::Use, lease),
+        );
         let Some((_alone, partials)) = read.await else {
             return;
         };
@@ -782,7 +785,7 @@ impl Workers {
                 written
             }
             Err(error) => {
-                self.database_failed(fence, &format!("storing {what}"), error)
+                self.database_failed(fence, lease, &format!("storing {what}"), error)
                     .await;
                 false
             }
@@ -795,7 +798,7 @@ impl Workers {
             Ok(rounds) => rounds,
             Err(error) => {
                 let what = "reading the rare event's round";
-                return self.database_failed(fence, what, error).await;
+                return self.database_failed(fence, lease, what, error).await;
             }
         };
         let Some(task) = rounds.task(group) else {
@@ -856,7 +859,7 @@ impl Workers {
             Ok(read) => read,
             Err(error) => {
                 let what = "reading the rare event's round";
-                return self.database_failed(fence, what, error).await;
+                return self.database_failed(fence, lease, what, error).await;
             }
         };
         let devices_last = rounds.devices_last;
@@ -902,7 +905,7 @@ impl Workers {
         // The estimate is made: the Result from the devices' groups.
         let read = clock.time(
             Part::Read,
-            self.read_groups(fence, job, devices_last, Holding::Stale),
+            self.read_groups(fence, job, devices_last, Holding::Stale, lease),
         );
         let Some((_alone, devices)) = read.await else {
             return;
@@ -927,6 +930,7 @@ impl Workers {
         job: Job,
         last: u64,
         holding: Holding,
+        lease: &KeptLease,
     ) -> Option<(Option<SemaphorePermit<'_>>, Folding)> {
         let alone = if merge_accumulators(&job) > LARGE_MERGE_ACCUMULATORS {
             match self.large_merges.acquire().await {
@@ -952,7 +956,7 @@ impl Workers {
             Ok(partials) => Some((alone, partials)),
             Err(error) => {
                 let what = "reading the groups' accumulators";
-                self.database_failed(fence, what, error).await;
+                self.database_failed(fence, lease, what, error).await;
                 None
             }
         }
@@ -1092,7 +1096,13 @@ impl Workers {
     /// against it: the job is not at fault; a merge step's read that found no free PostgreSQL
     /// connection counted as a failed run, found from outside); any other error counts as a
     /// failed run.
-    async fn database_failed(&self, fence: &Fence, what: &str, error: StoreError) {
+    async fn database_failed(
+        &self,
+        fence: &Fence,
+        lease: &KeptLease,
+        what: &str,
+        error: StoreError,
+    ) {
         // No room on the disk (this store's check, or the database's own full disk), or no
         // connection to the database in all the write's tries (none free, unreachable): nothing
         // is wrong with the job, which waits rather than fail. Any other error the database
@@ -1114,7 +1124,11 @@ impl Workers {
             },
             Awaited::Room => tracing::warn!(reason, ?awaited, "shard waits"),
         }
-        if let Err(error) = self.store.wait_for(fence, None, awaited, &reason).await {
+        // The hand-back is a write too, which the same full disk or outage can refuse: tried
+        // again while the lease is kept, or the lease expired and counted as lost against the
+        // shard (a probe: PostgreSQL at 0 bytes free).
+        let hand_back = || self.store.wait_for(fence, None, awaited, &reason);
+        if let Err(error) = self.store_with_backoff(lease, hand_back).await {
             tracing::error!(%error, "could not hand the shard back; its lease will expire");
         }
     }
@@ -1146,7 +1160,7 @@ impl Workers {
                 false
             }
             Err(error) => {
-                self.database_failed(fence, "storing the result", error)
+                self.database_failed(fence, lease, "storing the result", error)
                     .await;
                 false
             }
