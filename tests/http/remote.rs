@@ -274,7 +274,8 @@ fn refusals_and_failures_exit_as_the_local_commands_do() {
 }
 
 /// A full queue's 429 is asked again after its `Retry-After`: a submission made while the queue
-/// is full is queued once there is room, not lost; with `--retries 0` it fails at once.
+/// is full is queued once there is room, not lost; with `--retries 0` it fails at once. A wait
+/// of the queued job that times out says it is still queued.
 #[test]
 fn a_submission_to_a_full_queue_is_sent_again_once_there_is_room() {
     let server = TestApp::start(
@@ -284,6 +285,19 @@ fn a_submission_to_a_full_queue_is_sent_again_once_there_is_room() {
     let file = job_file("remote-full-job", &json!({"devices": 2, "operations": 2}));
     let first: Value =
         serde_json::from_str(&stdout(&remote(&server, None, &["submit", &file]))).unwrap();
+    // A wait that times out says so: its last request's answer comes before the timeout (asked
+    // to wait all the time left, the server answered past the request's deadline, and 1 wait in
+    // 10 said "no answer within --request-timeout-seconds").
+    let id = first["id"].as_str().unwrap();
+    for timeout in ["0.5", "1", "1", "2"] {
+        let waited = remote(&server, None, &["wait", id, "--timeout-seconds", timeout]);
+        assert_eq!(waited.status.code(), Some(1));
+        let said = String::from_utf8_lossy(&waited.stderr);
+        assert!(
+            said.contains(&format!("job {id} is still queued after")),
+            "{said}"
+        );
+    }
     let refused = remote(&server, None, &["submit", &file, "--retries", "0"]);
     assert_eq!(refused.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&refused.stderr).contains("429"));
@@ -312,11 +326,7 @@ fn a_submission_to_a_full_queue_is_sent_again_once_there_is_room() {
         said.contains("429 from the server; again in 5.0 s (1 of 3)"),
         "{said}"
     );
-    stdout(&remote(
-        &server,
-        None,
-        &["cancel", first["id"].as_str().unwrap()],
-    ));
+    stdout(&remote(&server, None, &["cancel", id]));
     let second: Value =
         serde_json::from_str(&stdout(&waiting.wait_with_output().unwrap())).unwrap();
     assert_eq!(second["status"], "queued");

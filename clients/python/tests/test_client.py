@@ -1,6 +1,7 @@
 """The client against a live `bouncewear serve` at BOUNCEWEAR_URL (CI starts one), and the
 binary at BOUNCEWEAR_BIN for the local Result to compare with."""
 
+import contextlib
 import datetime
 import email.utils
 import json
@@ -181,17 +182,37 @@ def _notes(caplog):
             if record.name == "bouncewear"]
 
 
-def test_a_submission_to_a_full_queue_is_sent_again_once_there_is_room(tmp_path, caplog):
-    """A server of its own whose queue holds one job and runs none: the second submission's 429 is
-    waited out (its Retry-After, 5 s) and the job queued once the first is cancelled."""
+@contextlib.contextmanager
+def _idle_server(tmp_path, *flags):
+    """A server of its own that runs no job, with `flags`; its URL."""
     server = subprocess.Popen(
-        [BIN, "serve", "--bind", "127.0.0.1:0", "--workers", "0", "--max-queued", "1",
+        [BIN, "serve", "--bind", "127.0.0.1:0", "--workers", "0", *flags,
          "--database", f"sqlite://{tmp_path}/queue.db"],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         ready, _, _ = select.select([server.stdout], [], [], 60)
         assert ready, "the server did not start within a minute"
-        url = server.stdout.readline().split()[-1]  # "bouncewear listening on URL"
+        yield server.stdout.readline().split()[-1]  # "bouncewear listening on URL"
+    finally:
+        server.terminate()
+        server.wait()
+
+
+def test_a_wait_that_times_out_says_the_job_is_still_queued(tmp_path):
+    """The last read's answer comes before the timeout: asked to wait all the time left, the server
+    answered after the read's deadline, and each wait of 1-3 s said "no answer from the server"."""
+    with _idle_server(tmp_path) as url:
+        job = Client(url).submit({"devices": 2, "operations": 2})
+        for timeout in [0.5, 1.0, 1.0, 2.0]:
+            with pytest.raises(TimeoutError) as waited:
+                job.wait(progress=False, timeout=timeout)
+            assert str(waited.value) == f"job {job.id} is still queued after {timeout} s"
+
+
+def test_a_submission_to_a_full_queue_is_sent_again_once_there_is_room(tmp_path, caplog):
+    """A server of its own whose queue holds one job and runs none: the second submission's 429 is
+    waited out (its Retry-After, 5 s) and the job queued once the first is cancelled."""
+    with _idle_server(tmp_path, "--max-queued", "1") as url:
         small = {"devices": 2, "operations": 2}
         first = Client(url).submit(small)
         with pytest.raises(BouncewearError) as full:
@@ -213,9 +234,6 @@ def test_a_submission_to_a_full_queue_is_sent_again_once_there_is_room(tmp_path,
         assert _notes(caplog) == ["again in 5.0 s (1 of 3)"]
         assert second.status == "queued" and second.id != first.id
         assert sorted(job.status for job in Client(url).jobs()) == ["cancelled", "queued"]
-    finally:
-        server.terminate()
-        server.wait()
 
 
 def test_a_server_that_cannot_be_reached_is_tried_again_then_raises(caplog):

@@ -68,6 +68,10 @@ pub enum Part {
 const WAIT_PER_REQUEST: f64 = 10.0;
 /// The least time between two of `wait`'s requests, should a server answer at once anyway.
 const POLL: Duration = Duration::from_millis(200);
+/// What `wait`'s last request leaves its answer before the timeout: a server asked to wait all
+/// the time left answers just after it, past the request's own deadline, and the timeout read
+/// as "no answer within --request-timeout-seconds" (1 of 10 waits of 2 s, found from outside).
+const ANSWER_MARGIN: Duration = Duration::from_millis(250);
 
 pub use crate::config::seconds_flag as seconds;
 
@@ -440,7 +444,8 @@ fn wait_until(server: &Server, id: &str, deadline: Option<Instant>) -> Result<St
     let started = Instant::now();
     loop {
         let left = deadline.map_or(WAIT_PER_REQUEST, |end| {
-            end.saturating_duration_since(Instant::now()).as_secs_f64()
+            let left = end.saturating_duration_since(Instant::now());
+            left.saturating_sub(ANSWER_MARGIN).as_secs_f64()
         });
         let wait_s = left
             .min(WAIT_PER_REQUEST)
@@ -459,7 +464,9 @@ fn wait_until(server: &Server, id: &str, deadline: Option<Instant>) -> Result<St
             }
             _ => {}
         }
-        if deadline.is_some_and(|end| Instant::now() >= end) {
+        if let Some(end) = deadline.filter(|&end| Instant::now() + ANSWER_MARGIN >= end) {
+            // Too little time left for another request's answer: the job as last read.
+            std::thread::sleep(end.saturating_duration_since(Instant::now()));
             return Err(CliError::Failed(format!(
                 "job {id} is still {} after {:.0} s",
                 job["status"].as_str().unwrap_or("?"),

@@ -21,10 +21,12 @@ import requests
 
 JSON = Dict[str, Any]
 
-#: The statuses a job ends in.
 # The longest `wait_s` the server takes (docs/contract.md, "HTTP API").
 MAX_WAIT_S = 30.0
+# What `Job.wait`'s last read leaves its answer before the timeout, as the CLI's `wait` does.
+ANSWER_MARGIN_S = 0.25
 
+#: The statuses a job ends in.
 ENDED = ("succeeded", "failed", "cancelled")
 
 #: The longest pause before a request is sent again, whatever `Retry-After` asks.
@@ -332,7 +334,9 @@ class Job(_Resource):
             if self.client.timeout:
                 wait_s = min(wait_s, self.client.timeout / 2)
             if timeout is not None:
-                wait_s = min(wait_s, timeout - (time.monotonic() - started))
+                # The answer comes a little before the timeout: a server asked to wait all the
+                # time left answered just after the read's own deadline ("no answer").
+                wait_s = min(wait_s, timeout - (time.monotonic() - started) - ANSWER_MARGIN_S)
             asked = time.monotonic()
             deadline = None if timeout is None else started + timeout
             try:
@@ -349,7 +353,9 @@ class Job(_Resource):
                 done, total = self.progress["operations_done"], self.progress["operations_total"]
                 waits = f" ({self.waiting})" if self.waiting else ""
                 print(f"\r{self.id}: {self.status} {done:,}/{total:,} operations{waits}", end="", file=sys.stderr)
-            if timeout is not None and time.monotonic() - started >= timeout:
+            if timeout is not None and time.monotonic() - started >= timeout - ANSWER_MARGIN_S:
+                # Too little time left for another read's answer: the job as last read.
+                time.sleep(max(0.0, started + timeout - time.monotonic()))
                 if progress:
                     print(file=sys.stderr)
                 raise TimeoutError(f"job {self.id} is still {self.status} after {timeout} s")
