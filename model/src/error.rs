@@ -598,16 +598,29 @@ fn invalid_from_serde(pointer: Pointer, error: &serde_json::Error) -> InvalidInp
 /// serde's message with the Rust types it names (`expected f64`, `expected u64`, `expected
 /// struct CircuitSpec`) put as a JSON document's reader knows them.
 fn in_plain_words(message: &str) -> String {
-    // A whole number's range is its field's rule, said by the rule where it is checked.
+    // A whole number's range here is its type's, the most it can be read as (a seed's whole
+    // rule); a field's own rule, where narrower, is said where it is checked.
     const TYPES: [(&str, &str); 16] = [
         ("expected f64", "expected a number"),
         ("expected f32", "expected a number"),
-        ("expected u64", "expected a whole number"),
-        ("expected usize", "expected a whole number"),
-        ("expected u32", "expected a whole number"),
-        ("expected u16", "expected a whole number"),
-        ("expected u8", "expected a whole number"),
-        ("expected i64", "expected a whole number"),
+        (
+            "expected u64",
+            "expected a whole number from 0 to 18446744073709551615",
+        ),
+        (
+            "expected usize",
+            "expected a whole number from 0 to 18446744073709551615",
+        ),
+        (
+            "expected u32",
+            "expected a whole number from 0 to 4294967295",
+        ),
+        ("expected u16", "expected a whole number from 0 to 65535"),
+        ("expected u8", "expected a whole number from 0 to 255"),
+        (
+            "expected i64",
+            "expected a whole number from -9223372036854775808 to 9223372036854775807",
+        ),
         ("expected a sequence", "expected a list"),
         ("expected a map", "expected an object"),
         ("expected map", "expected an object"),
@@ -634,6 +647,12 @@ fn in_plain_words(message: &str) -> String {
             .find(|c: char| !(c.is_alphanumeric() || c == ' ' || c == '_'))
             .map_or(plain.len(), |n| at + n);
         plain.replace_range(at..end, "expected an object");
+    }
+    // A number read as one with a point or an exponent (`2.5`, `1e+20`, or a whole number beyond
+    // the type, which JSON's reader takes as such): the number quoted may not be the one
+    // written (`9007199254740993.0` is quoted `9007199254740992.0`).
+    if plain.starts_with("invalid type: number") && plain.contains("expected a whole number") {
+        plain.push_str(", written in digits alone");
     }
     plain
 }
@@ -692,19 +711,19 @@ mod tests {
         for (text, expected) in [
             (
                 r#"{"count": "x"}"#,
-                r#"/count: invalid type: string "x", expected a whole number"#,
+                r#"/count: invalid type: string "x", expected a whole number from 0 to 18446744073709551615"#,
             ),
             (
                 r#"{"count": -1}"#,
-                "/count: invalid value: integer `-1`, expected a whole number",
+                "/count: invalid value: integer `-1`, expected a whole number from 0 to 18446744073709551615",
             ),
             (
                 r#"{"small": 1.5}"#,
-                "/small: invalid type: number `1.5`, expected a whole number",
+                "/small: invalid type: number `1.5`, expected a whole number from 0 to 4294967295, written in digits alone",
             ),
             (
                 r#"{"count": 100000000000000000000}"#,
-                "/count: invalid type: number `1e+20`, expected a whole number",
+                "/count: invalid type: number `1e+20`, expected a whole number from 0 to 18446744073709551615, written in digits alone",
             ),
             (
                 r#"{"map": 5}"#,

@@ -121,6 +121,20 @@ fn every_number_of_a_scenario_has_its_one_rule_in_the_document() {
             );
         }
     }
+    // No whole number's range goes beyond the format it is said to have: a seed is any u64,
+    // which `int64` would not hold.
+    for (name, schema) in schemas.as_object().unwrap() {
+        let properties = schema["properties"].as_object().into_iter().flatten();
+        for (field, property) in properties {
+            let beyond_int64 = property["maximum"].as_f64() > Some(i64::MAX as f64);
+            assert!(
+                !(beyond_int64 && property["format"] == "int64"),
+                "{name}.{field}: {property}"
+            );
+        }
+    }
+    let seed = &schemas["JobSpec"]["properties"]["seed"];
+    assert_eq!(seed["maximum"].as_u64(), Some(u64::MAX), "{seed}");
 }
 
 /// A client's `X-Request-Id` is echoed (and logged) when it is an id; one of 9,000 characters,

@@ -50,7 +50,7 @@ pub struct JobSpec {
     #[serde(default = "default_count")]
     #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 100_000_000))]
     pub operations: u64,
-    /// Operations per bin of the operation metrics, 1 to `operations`, giving at most 1000 bins (default `operations / 10`).
+    /// Operations per bin of the operation metrics, 1 to `operations`, giving at most 1000 bins (default `max(1, operations / 10)`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bin_operations: Option<u64>,
     /// Seed of the random streams; the same seed gives the same Result bit for bit (drawn at submission when omitted).
