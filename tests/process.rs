@@ -614,11 +614,20 @@ fn flags_honoured_otherwise_than_they_read_are_warned_of() {
         "8",
         "--retain-days",
         "0",
+        "--max-connections",
+        "20",
+        "--max-streams-per-key",
+        "20",
     ];
     let (_server, lines) = Spawned::logging(&temp_db("flag-warnings"), &flags);
-    let logged = log_until(&lines, "--retain-days 0").join("\n");
+    let logged = log_until(&lines, "--max-streams-per-key").join("\n");
     assert!(
         logged.contains("--max-queued-per-key 8 is above --max-queued 5: a key holds at most 5"),
+        "{logged}"
+    );
+    assert!(logged.contains("--retain-days 0"), "{logged}");
+    assert!(
+        logged.contains("--max-streams-per-key 20 for every client (no API keys) can hold 20"),
         "{logged}"
     );
 }

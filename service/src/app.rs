@@ -192,6 +192,20 @@ impl Application {
             header_timeout_s = limits.header_timeout.as_secs_f64(),
             "accepting connections"
         );
+        // A stream holds its connection for as long as it is open (found from outside: 20
+        // streams under `--max-connections 20`, and `/healthz` waited in the backlog).
+        let streams = config.max_streams_per_key * config.api_keys.len().max(1);
+        if streams >= limits.max_connections {
+            tracing::warn!(
+                "--max-streams-per-key {} for {} can hold {streams} event streams, every one of the {} connections (--max-connections): other requests, /healthz's too, would wait",
+                config.max_streams_per_key,
+                match config.api_keys.len() {
+                    0 => "every client (no API keys)".to_owned(),
+                    keys => format!("each of {keys} API keys"),
+                },
+                limits.max_connections
+            );
+        }
         connections::serve(listener, router, limits, stopping).await;
         reporter.abort();
         let _ = scheduler.await;

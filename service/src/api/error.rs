@@ -73,7 +73,7 @@ pub enum ApiError {
     #[error("{0}")]
     OverQuota(String),
     #[error(
-        "this API key holds {0} event streams already, the most it may; close one, or retry later"
+        "this API key (every client, where the server has no keys) holds {0} event streams already, the most it may; close one, or retry later"
     )]
     TooManyStreams(usize),
     /// Every slot of a schedule's manual runs within one instant is taken.
