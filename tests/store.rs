@@ -95,6 +95,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_result_the_database_keeps_refusing_fails_its_job_at_the_retry_limit(&database("refusing"))
         .await;
     a_result_the_databases_full_disk_refuses_waits_for_room(&database("disk-full")).await;
+    retries_racing_a_schedules_delete_make_it_once(&database("schedule-race")).await;
     lives_beyond_the_listing_cap_are_counted_not_listed(&database("listed")).await;
     a_result_is_stored_once_and_one_stored_whole_before_reads_as_it_was(&database("whole")).await;
     a_large_result_reads_back_whole(&database("large")).await;
@@ -289,6 +290,41 @@ async fn a_key_creates_once_and_refuses_another_body_for_24_hours(url: &str) {
     assert_eq!(ids(&next), ["s5", "s6"]);
     let last = store.schedules(&anyone, Some(next[1].0), 2).await.unwrap();
     assert!(last.is_empty());
+}
+
+/// Retries of a keyed schedule racing its delete make it at most once more, and never fail: a
+/// retry that found the schedule deleted after reading its key created it outside the key's
+/// lock, and racing retries met on the key's row (500s on PostgreSQL, found from outside).
+async fn retries_racing_a_schedules_delete_make_it_once(url: &str) {
+    let store = store::open(url).await.unwrap();
+    for round in 0..20 {
+        let key = IdempotencyKey::new(&format!("racing-{round}"), "body").unwrap();
+        let first = nightly(&format!("r{round}"), "2026-11-22T03:00:00Z");
+        let created = store.insert_schedule_once(&first, SCHEDULES, &key, UnixMs(1));
+        assert!(matches!(created.await.unwrap(), Once::Created(_)));
+        let retries: Vec<_> = (0..8)
+            .map(|n| {
+                let (store, key) = (Arc::clone(&store), key.clone());
+                let retry = nightly(&format!("r{round}-{n}"), "2026-11-22T03:00:00Z");
+                tokio::spawn(async move {
+                    store
+                        .insert_schedule_once(&retry, SCHEDULES, &key, UnixMs(2))
+                        .await
+                })
+            })
+            .collect();
+        let anyone = Owner::anonymous();
+        store.delete_schedule(&anyone, &first.id).await.unwrap();
+        let mut made = 0;
+        for retry in retries {
+            match retry.await.unwrap() {
+                Ok(Once::Created(_)) => made += 1,
+                Ok(Once::Replayed(_)) => {}
+                other => panic!("round {round}: {other:?}"),
+            }
+        }
+        assert!(made <= 1, "round {round}: made {made} times");
+    }
 }
 
 /// Room for every schedule a test makes.

@@ -6,7 +6,7 @@ use super::rows::{
     Created, bind_schedule, count_from_sql, count_to_sql, run_from_row, schedule_columns,
     schedule_from_row, schedule_read_columns,
 };
-use super::sql::{Sql, Tx};
+use super::sql::{Conn, Sql, Tx};
 use super::{NewRun, NextRun, RunRecord, RunSlot, ScheduleRecord, StoreError, StoreResult};
 use crate::domain::{
     IdempotencyKey, MISSED_RUNS, Once, Owner, QueueBound, QueuedJob, ScheduleBound, ScheduleId,
@@ -106,16 +106,23 @@ impl Store {
             .remembered(&mut tx, owner, "schedules", key, now)
             .await?
         {
-            tx.commit().await?;
-            if fingerprint != key.fingerprint {
-                return Ok(Once::KeyReused);
-            }
-            match self.schedule(owner, &ScheduleId::from(id)).await {
-                Ok(replayed) => return Ok(Once::Replayed(replayed)),
-                // Deleted since the key was read, and the key with it (a delete takes its keys
-                // in its transaction): created anew, as by a retry after the delete.
-                Err(StoreError::NotFound { .. }) => tx = self.begin_reading_first().await?,
-                Err(error) => return Err(error),
+            let once = if fingerprint == key.fingerprint {
+                // Read in the transaction that holds the key's lock: a read after it, which
+                // found the schedule deleted, created it anew without the lock, and racing
+                // retries met on the key's row (500s, found from outside).
+                match select_schedule(&mut tx, owner, &ScheduleId::from(id)).await {
+                    Ok(replayed) => Some(Once::Replayed(replayed)),
+                    // Deleted since the key was read, and the key with it (a delete takes its
+                    // keys in its transaction): created anew, as by a retry after the delete.
+                    Err(StoreError::NotFound { .. }) => None,
+                    Err(error) => return Err(error),
+                }
+            } else {
+                Some(Once::KeyReused)
+            };
+            if let Some(once) = once {
+                tx.commit().await?;
+                return Ok(once);
             }
         }
         self.insert_bounded(&mut tx, schedule, bound).await?;
@@ -126,17 +133,7 @@ impl Store {
 
     #[tracing::instrument(skip_all, fields(schedule = %id))]
     pub async fn schedule(&self, owner: &Owner, id: &ScheduleId) -> StoreResult<ScheduleRecord> {
-        let row = Sql::new(concat!(
-            "SELECT ",
-            schedule_read_columns!(),
-            " FROM schedules WHERE id = $1 AND owner = $2"
-        ))
-        .bind(id.as_str())
-        .bind(owner.as_str())
-        .fetch_optional(self.writer()?)
-        .await?
-        .ok_or_else(|| StoreError::schedule_not_found(id))?;
-        schedule_from_row(&row)
+        select_schedule(self.writer()?, owner, id).await
     }
 
     /// An owner's schedules after the one at `seq` `after` (from the first without it), oldest
@@ -314,4 +311,23 @@ impl Store {
         .await?;
         Ok(rows.iter().map(run_from_row).collect::<Result<_, _>>()?)
     }
+}
+
+/// Schedule `id` of `owner`, read on `on`.
+async fn select_schedule(
+    on: impl Into<Conn<'_>>,
+    owner: &Owner,
+    id: &ScheduleId,
+) -> StoreResult<ScheduleRecord> {
+    let row = Sql::new(concat!(
+        "SELECT ",
+        schedule_read_columns!(),
+        " FROM schedules WHERE id = $1 AND owner = $2"
+    ))
+    .bind(id.as_str())
+    .bind(owner.as_str())
+    .fetch_optional(on)
+    .await?
+    .ok_or_else(|| StoreError::schedule_not_found(id))?;
+    schedule_from_row(&row)
 }
