@@ -96,6 +96,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
         .await;
     a_result_the_databases_full_disk_refuses_waits_for_room(&database("disk-full")).await;
     retries_racing_a_schedules_delete_make_it_once(&database("schedule-race")).await;
+    a_connection_postgresql_ended_is_unreachable(&database("ended")).await;
     lives_beyond_the_listing_cap_are_counted_not_listed(&database("listed")).await;
     a_result_is_stored_once_and_one_stored_whole_before_reads_as_it_was(&database("whole")).await;
     a_large_result_reads_back_whole(&database("large")).await;
@@ -1594,6 +1595,52 @@ const REFUSE_ONE_HAND_BACK: (&str, &str, &str) = (
     "CREATE TRIGGER refuse_a_hand_back BEFORE UPDATE ON shards FOR EACH ROW \
      WHEN (NEW.error LIKE 'waiting for %') EXECUTE FUNCTION refuse_a_hand_back()",
 );
+
+/// A connection PostgreSQL ended (a restart's `terminating connection due to administrator
+/// command`, SQLSTATE 57P01) is the database out of reach, not a fault of the statement, also
+/// where a migration met it: a process started as PostgreSQL restarted exited at once (found
+/// from outside), where it waits for a database that does not answer yet.
+async fn a_connection_postgresql_ended_is_unreachable(url: &str) {
+    use sqlx::Connection;
+    if url.starts_with("sqlite:") {
+        return;
+    }
+    let mut ended = sqlx::PgConnection::connect(url).await.unwrap();
+    let (pid,): (i32,) = sqlx::query_as("SELECT pg_backend_pid()")
+        .fetch_one(&mut ended)
+        .await
+        .unwrap();
+    let mut admin = sqlx::PgConnection::connect(url).await.unwrap();
+    sqlx::query("SELECT pg_terminate_backend($1)")
+        .bind(pid)
+        .execute(&mut admin)
+        .await
+        .unwrap();
+    let error = sqlx::query("SELECT 1")
+        .execute(&mut ended)
+        .await
+        .unwrap_err();
+    let code = error
+        .as_database_error()
+        .and_then(|e| e.code())
+        .map(|code| code.into_owned());
+    let unreachable = StoreError::from(error);
+    assert!(unreachable.is_unreachable(), "{unreachable}");
+    if let Some(code) = code {
+        assert_eq!(code, "57P01", "{unreachable}");
+    }
+    let migrating = StoreError::Migration(sqlx::migrate::MigrateError::Execute(
+        sqlx::query("SELECT 1")
+            .execute(&mut ended)
+            .await
+            .unwrap_err(),
+    ));
+    assert!(migrating.is_unreachable(), "{migrating}");
+    let refused = sqlx::query("SELECT * FROM nowhere")
+        .execute(&mut admin)
+        .await;
+    assert!(!StoreError::from(refused.unwrap_err()).is_unreachable());
+}
 
 /// SQLite's full file (here its page limit) is the disk's state, as PostgreSQL's `disk_full`.
 #[tokio::test]

@@ -171,23 +171,37 @@ impl StoreError {
     }
 
     /// Whether no connection reached the database (none free in the pool in time, refused,
-    /// reset), or SQLite's file stayed locked by another process for all of `busy_timeout`:
+    /// reset, cut short), PostgreSQL ended it or does not take one yet (SQLSTATE classes 08,
+    /// connection exceptions, and 57: an administrator's shutdown, a server starting: a
+    /// restart), or SQLite's file stayed locked by another process for all of `busy_timeout`:
     /// unlike an error the database itself reports (a full disk, a refused statement), nothing
-    /// says the write would fail once one does.
+    /// says the write would fail once one does. Also met migrating the database at start-up.
     pub fn is_unreachable(&self) -> bool {
-        match self {
-            StoreError::Database(
-                sqlx::Error::PoolTimedOut | sqlx::Error::PoolClosed | sqlx::Error::Io(_),
-            ) => true,
-            StoreError::Database(sqlx::Error::Database(error)) => error
-                .try_downcast_ref::<sqlx::sqlite::SqliteError>()
-                .and_then(|sqlite| {
-                    sqlx::error::DatabaseError::code(sqlite)?
-                        .parse::<i32>()
-                        .ok()
-                })
-                // SQLITE_BUSY and its extended codes.
-                .is_some_and(|code| code & 0xff == 5),
+        let error = match self {
+            StoreError::Database(error)
+            | StoreError::Migration(
+                sqlx::migrate::MigrateError::Execute(error)
+                | sqlx::migrate::MigrateError::ExecuteMigration(error, _),
+            ) => error,
+            _ => return false,
+        };
+        match error {
+            sqlx::Error::PoolTimedOut
+            | sqlx::Error::PoolClosed
+            | sqlx::Error::Io(_)
+            | sqlx::Error::Protocol(_)
+            | sqlx::Error::WorkerCrashed => true,
+            sqlx::Error::Database(error) => {
+                match error.try_downcast_ref::<sqlx::sqlite::SqliteError>() {
+                    Some(sqlite) => sqlx::error::DatabaseError::code(sqlite)
+                        .and_then(|code| code.parse::<i32>().ok())
+                        // SQLITE_BUSY and its extended codes.
+                        .is_some_and(|code| code & 0xff == 5),
+                    None => error
+                        .code()
+                        .is_some_and(|code| code.starts_with("08") || code.starts_with("57")),
+                }
+            }
             _ => false,
         }
     }

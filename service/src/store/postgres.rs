@@ -67,9 +67,27 @@ async fn why_no_connection(url: &str) -> String {
     }
 }
 
+/// The pause between two tries to open the store while the database does not answer.
+const STARTUP_RETRY: Duration = Duration::from_millis(500);
+
+/// The pool's first connection, the database migrated on it, and a listener to the queue's
+/// announcements: what opening the store needs of the database.
+async fn migrated_listener(pool: &PgPool) -> StoreResult<PgListener> {
+    let mut connection = pool.acquire().await?;
+    // On the connection just had: on a server at max_connections another might not come.
+    migrations::POSTGRES.run(&mut *connection).await?;
+    drop(connection);
+    let mut listener = PgListener::connect_with(pool).await?;
+    listener.listen(JOB_CHANNEL).await?;
+    Ok(listener)
+}
+
 impl PgBackend {
     /// Connects to the database at `url` and migrates it (concurrent instances wait for each
-    /// other: sqlx takes an advisory lock around migrations).
+    /// other: sqlx takes an advisory lock around migrations). A database that does not answer
+    /// yet, or goes away meanwhile (restarted: its connections reset or ended by its
+    /// administrator), is tried again for up to [`STARTUP_WAIT`]: a process started as
+    /// PostgreSQL restarted exited within 2 s (7 of 7 tries, found from outside).
     #[tracing::instrument(skip_all)]
     pub(crate) async fn open(url: &str, connections: u32) -> StoreResult<Self> {
         let pool = PgPoolOptions::new()
@@ -78,35 +96,32 @@ impl PgBackend {
             // During an outage a request gets its 503 within this, not after the pool's 30 s.
             .acquire_timeout(super::DATABASE_WAIT)
             .connect_lazy(url)?;
-        // The first connection may take longer than a request may wait (a database still
-        // starting, a busy machine): opening tries for up to STARTUP_WAIT.
         let started = std::time::Instant::now();
-        let mut connection = loop {
-            match pool.acquire().await {
-                Ok(connection) => break connection,
-                Err(sqlx::Error::PoolTimedOut) if started.elapsed() < STARTUP_WAIT => {
-                    let why = why_no_connection(url).await;
-                    let server =
-                        <sqlx::postgres::PgConnectOptions as std::str::FromStr>::from_str(url)
-                            .map(|o| format!("{}:{}", o.get_host(), o.get_port()))
-                            .unwrap_or_default();
-                    tracing::warn!(%why, %server, "the database has not answered yet; trying again");
-                }
-                Err(sqlx::Error::PoolTimedOut) => {
-                    let why = why_no_connection(url).await;
-                    return Err(StoreError::NotReady(format!(
-                        "no connection to the database within {} s: {why}",
-                        STARTUP_WAIT.as_secs()
-                    )));
-                }
-                Err(error) => return Err(error.into()),
+        let listener = loop {
+            let error = match migrated_listener(&pool).await {
+                Ok(listener) => break listener,
+                Err(error) => error,
+            };
+            if !error.is_unreachable() {
+                return Err(error);
             }
+            let why = match error {
+                StoreError::Database(sqlx::Error::PoolTimedOut) => why_no_connection(url).await,
+                other => other.to_string(),
+            };
+            if started.elapsed() >= STARTUP_WAIT {
+                return Err(StoreError::NotReady(format!(
+                    "no connection to the database within {} s: {why}",
+                    STARTUP_WAIT.as_secs()
+                )));
+            }
+            let server = <sqlx::postgres::PgConnectOptions as std::str::FromStr>::from_str(url)
+                .map(|o| format!("{}:{}", o.get_host(), o.get_port()))
+                .unwrap_or_default();
+            tracing::warn!(%why, %server, "the database has not answered yet; trying again");
+            // A refused connection comes back at once: not a busy loop meanwhile.
+            tokio::time::sleep(STARTUP_RETRY).await;
         };
-        // On the connection just had: on a server at max_connections another might not come.
-        migrations::POSTGRES.run(&mut *connection).await?;
-        drop(connection);
-        let mut listener = PgListener::connect_with(&pool).await?;
-        listener.listen(JOB_CHANNEL).await?;
         let (events, ends) = (broadcast::channel(1024).0, broadcast::channel(1024).0);
         let announcements = tokio::spawn(forward_announcements(
             listener,
