@@ -30,6 +30,7 @@ const LANDED: &[(&str, &str, &str)] = &[
     ("sqlite", "0014_skipped_runs.sql", "3a77580360657193"),
     ("sqlite", "0015_cursor_secret.sql", "f694e94deb4368b1"),
     ("sqlite", "0016_schedule_revision.sql", "aa864b7ef66d47c9"),
+    ("sqlite", "0017_groups_in_shards.sql", "cc57777068e4fb44"),
     ("postgres", "0001_schema.sql", "e6be58dc128a013f"),
     ("postgres", "0002_lost_leases.sql", "3f9e97de535e85cf"),
     ("postgres", "0003_job_events.sql", "4f2154e380d53591"),
@@ -72,6 +73,7 @@ const LANDED: &[(&str, &str, &str)] = &[
     ("postgres", "0016_skipped_runs.sql", "956586cc8c8422ac"),
     ("postgres", "0017_cursor_secret.sql", "3bec3424dfb7ef62"),
     ("postgres", "0018_schedule_revision.sql", "a59bfa342a94d88a"),
+    ("postgres", "0019_groups_in_shards.sql", "3952a135a9e60f1a"),
 ];
 
 /// sqlx refuses to start against a database whose applied migration has changed since: an edit

@@ -6,7 +6,9 @@ use crate::support::{temp_dir, without_timing};
 use bouncewear::compute::thread_pool;
 use bouncewear::domain::idempotency::KEY_LIFETIME_MS;
 use bouncewear::domain::rare::{RARE_ROUNDS, SHARDED_ROUND_OPERATIONS, is_round};
-use bouncewear::domain::shards::{Folding, Merged, WHOLE_STEP, grouped_shards, merge};
+use bouncewear::domain::shards::{
+    Folding, Merged, WHOLE_STEP, grouped_shards, groups_stay_in_shards, merge,
+};
 use bouncewear::domain::{
     Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob, ROOM_RETRY_MS,
     ScheduleBound, ScheduleDefinition, ScheduleId, ShardId, UnixMs,
@@ -683,6 +685,15 @@ async fn stored_groups(store: &Store, id: &JobId, job: &Job) -> Vec<ShardId> {
 /// is left; returns the shards each claim ran. A merge holds the odd groups of its batch, as a
 /// worker holds those it ran, and reads the others back.
 async fn run_every_shard(store: &Store) -> Vec<ShardId> {
+    run_every_shard_keeping(store, groups_stay_in_shards).await
+}
+
+/// [`run_every_shard`], a Result leaving its groups in the shards where `in_shards` says, as the
+/// workers do by [`groups_stay_in_shards`].
+async fn run_every_shard_keeping(
+    store: &Store,
+    in_shards: fn(&Job, u64, bool) -> bool,
+) -> Vec<ShardId> {
     let mut ran = Vec::new();
     let mut odd_groups = Vec::new();
     while let Some(claim) = store.claim("w", terms(0), budget(3)).await.unwrap() {
@@ -710,9 +721,13 @@ async fn run_every_shard(store: &Store) -> Vec<ShardId> {
                 assert_eq!(partials.held().count(), 0, "held groups come without bytes");
                 let merged = merge(partials, SHARDED_ROUND_OPERATIONS, 1.0, &Silent).unwrap();
                 let through = merged.folded_through();
+                let encoding = match in_shards(&job, fence.shard.batch, false) {
+                    true => EncodedResult::with_groups_in_shards,
+                    false => EncodedResult::new,
+                };
                 match merged {
                     Merged::Result { mut result, groups } => {
-                        let encoded = EncodedResult::new(&mut result, groups).unwrap();
+                        let encoded = encoding(&mut result, groups).unwrap();
                         assert!(
                             store
                                 .succeed(fence, Some(UnixMs(5)), &encoded)
@@ -779,11 +794,22 @@ async fn a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(url: &st
     );
     assert_eq!(store.lives(&id).await.unwrap(), whole.life.unwrap().devices);
     let job = Job::from_json(text, || 0).unwrap();
+    assert_eq!(
+        stored_groups(store.as_ref(), &id, &job).await.len(),
+        3,
+        "a job of one batch leaves its groups in its shards, for queries after the run"
+    );
+    // The same job with its groups in its distribution rows, as a larger job keeps them: its
+    // shards keep none, and the two give each bin the same groups, to the bit.
+    let in_rows = insert(&store, queued_job(text, 4)).await;
+    run_every_shard_keeping(store.as_ref(), |_, _, _| false).await;
     assert!(
-        stored_groups(store.as_ref(), &id, &job).await.is_empty(),
+        stored_groups(store.as_ref(), &in_rows, &job)
+            .await
+            .is_empty(),
         "the running accumulators go with the Result"
     );
-    // Each distribution keeps the final groups it summarises, for queries after the run.
+    // Each distribution has the final groups it summarises, for queries after the run.
     for metric in ["e1", "eroded_mass_kg"] {
         let bins = store
             .distribution(&id, metric, every_operation())
@@ -793,6 +819,8 @@ async fn a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(url: &st
             .distribution_groups(&id, metric, every_operation())
             .await
             .unwrap();
+        let of_rows = store.distribution_groups(&in_rows, metric, every_operation());
+        assert_eq!(of_rows.await.unwrap(), groups, "{metric}");
         assert_eq!(groups.len(), bins.len());
         for (bin, groups) in bins.iter().zip(groups) {
             let per_device = Metric::parse(metric)

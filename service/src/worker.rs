@@ -22,7 +22,8 @@
 use crate::domain::rare::{Rounds, is_round};
 use crate::domain::shards::{
     Folding, LARGE_MERGE_ACCUMULATORS, MergeError, Merged, RoundMerged, ShardPlan, claims_ahead,
-    estimated, merge, merge_accumulators, merge_plan, merge_round, run_whole,
+    estimated, groups_stay_in_shards, merge, merge_accumulators, merge_plan, merge_round,
+    run_whole,
 };
 use crate::domain::{JobId, UnixMs};
 use crate::store::{
@@ -267,14 +268,22 @@ enum Outcome {
 }
 
 /// What a merge step made, encoded on the compute pool so that the writes bind bytes (each group
-/// goes once encoded); `Err` for a cancelled computation.
-fn encoded(merged: Result<Merged, MergeError>) -> Result<Result<Outcome, MergeError>, Cancelled> {
+/// goes once encoded; a Result's not at all where they stay in the job's shards,
+/// `groups_in_shards`); `Err` for a cancelled computation.
+fn encoded(
+    merged: Result<Merged, MergeError>,
+    groups_in_shards: bool,
+) -> Result<Result<Outcome, MergeError>, Cancelled> {
     let folded_through = merged.as_ref().ok().and_then(Merged::folded_through);
     let outcome = match merged {
         Err(MergeError::Cancelled(cancelled)) => return Err(cancelled),
         Err(other) => return Ok(Err(other)),
         Ok(Merged::Result { mut result, groups }) => {
-            match EncodedResult::new(&mut result, groups) {
+            let encoding = match groups_in_shards {
+                true => EncodedResult::with_groups_in_shards,
+                false => EncodedResult::new,
+            };
+            match encoding(&mut result, groups) {
                 Ok(encoded) => Outcome::Result { result, encoded },
                 Err(error) => Outcome::Unencodable(format!("encoding the result failed: {error}")),
             }
@@ -632,6 +641,7 @@ impl Workers {
             }
         };
         let merge_planned = merge_plan(partials.job(), last);
+        let in_shards = groups_stay_in_shards(partials.job(), last, whole);
         let (sharded_from, step) = (self.sharded_round_operations, self.whole_step);
         // A job run whole learns its total as its precision target adds batches.
         let work = if whole { Work::Growing } else { Work::Planned };
@@ -646,7 +656,7 @@ impl Workers {
             } else {
                 merge(partials, sharded_from, wall_s, observer)
             };
-            encoded(merged)
+            encoded(merged, in_shards)
         });
         let ran = clock.time(Part::Compute, compute).await;
         // A job run whole ran its operations here: its batches from this one on.
@@ -912,7 +922,7 @@ impl Workers {
         };
         let wall_s = lease.wall_s_since(started_at);
         let compute = self.compute(lease, Work::Planned, move |_| {
-            encoded(estimated(devices, report, wall_s))
+            encoded(estimated(devices, report, wall_s), false)
         });
         let ran = clock.time(Part::Compute, compute).await;
         clock

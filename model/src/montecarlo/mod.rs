@@ -548,10 +548,16 @@ pub struct RunGroups {
 
 impl RunGroups {
     pub fn new(job: &Job, tally: Tally) -> Self {
+        Self::from_groups(job, tally.groups)
+    }
+
+    /// The groups of `job`, in group order, as a run's tally holds them (or a store gives them
+    /// back).
+    pub fn from_groups(job: &Job, groups: Vec<engine::GroupStats>) -> Self {
         Self {
             operation_metrics: job.operation_metrics().to_vec(),
             device_metrics: job.device_metrics().to_vec(),
-            groups: tally.groups,
+            groups,
         }
     }
 

@@ -24,6 +24,6 @@ pub use schedules::{
 };
 pub use shards::{
     Folding, ROOM_RETRY_MS, RetryBudget, SHARD_OVERHEAD_OPERATIONS, ShardId, ShardPlan,
-    batch_shards, first_shards, grouped_shards, retry_backoff_ms,
+    batch_shards, first_shards, grouped_shards, groups_stay_in_shards, retry_backoff_ms,
 };
 pub use trend::TrendValue;

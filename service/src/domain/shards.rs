@@ -653,6 +653,22 @@ pub fn merge_accumulators(job: &Job) -> u64 {
     groups.saturating_mul(per_group)
 }
 
+/// At most this many [`merge_accumulators`], a job's Result merged from its first batch's
+/// groups as their shards stored them leaves them there for queries after the run
+/// ([`groups_stay_in_shards`]). A query then decodes every group of the job, about 900 bytes an
+/// accumulator: at most about 7 MB, where a bin's own groups are one bin's.
+pub const GROUPS_IN_SHARDS_ACCUMULATORS: u64 = 8_192;
+
+/// Whether the Result that the merge step of batch `last` of `job` makes from its groups as their
+/// shards stored them (not a step that ran the job `whole`) leaves them in the shards rather than
+/// writing them again, each bin's in its distribution row: its final groups are those of its
+/// first batch, and their accumulators few enough ([`GROUPS_IN_SHARDS_ACCUMULATORS`]). The
+/// scale-out job's merge wrote 2.5 MB of groups its shards had written already, about half of
+/// the merge's time on PostgreSQL (docs/performance.md).
+pub fn groups_stay_in_shards(job: &Job, last: u64, whole: bool) -> bool {
+    !whole && last == 0 && merge_accumulators(job) <= GROUPS_IN_SHARDS_ACCUMULATORS
+}
+
 /// Beyond this many [`merge_accumulators`], a merge step runs alone on its instance (other large
 /// merges wait for it), so that an instance's memory holds one large merge at a time however many
 /// workers it runs: 32 groups of 180 bins x 18 metrics, about 90 MB with the README's scatter.

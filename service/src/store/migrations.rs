@@ -36,6 +36,7 @@ const SQLITE_FILES: &[(&str, &str)] = embed!("sqlite":
     "0014_skipped_runs.sql",
     "0015_cursor_secret.sql",
     "0016_schedule_revision.sql",
+    "0017_groups_in_shards.sql",
 );
 
 const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
@@ -57,6 +58,7 @@ const POSTGRES_FILES: &[(&str, &str)] = embed!("postgres":
     "0016_skipped_runs.sql",
     "0017_cursor_secret.sql",
     "0018_schedule_revision.sql",
+    "0019_groups_in_shards.sql",
 );
 
 /// `migrations/sqlite/`.

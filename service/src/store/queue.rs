@@ -8,8 +8,8 @@ use super::rows::{
     LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY,
     REMEMBERED_KEY, bind_fence, bind_key, claim_from_rows, count_from_sql, count_to_sql,
     failed_too_often, fenced_shard, gave_up, group_to_sql, insert_shards, job_columns,
-    job_from_row, not_ended, remembered_from_row, schema_current, shard_columns, shard_from_row,
-    shard_id_from_row, spec_from_json,
+    job_from_row, not_ended, partial_bytes, remembered_from_row, schema_current, shard_columns,
+    shard_from_row, shard_id_from_row, spec_from_json,
 };
 use super::sql::{AnyRow, Conn, Sql, Tx};
 use super::{
@@ -797,11 +797,11 @@ impl Store {
             .execute(&mut tx)
             .await?;
         }
-        let counted = Sql::new(
-            "UPDATE jobs SET stored_bytes = octet_length(spec) + \
-             (SELECT COALESCE(SUM(octet_length(partial)), 0) FROM shards WHERE job_id = $1) \
-             WHERE id = $1 AND status = 'running'",
-        )
+        let counted = Sql::new(concat!(
+            "UPDATE jobs SET stored_bytes = octet_length(spec) + ",
+            partial_bytes!(),
+            " WHERE id = $1 AND status = 'running'"
+        ))
         .bind(fence.job.as_str())
         .execute(&mut tx)
         .await?;

@@ -5,18 +5,20 @@
 use super::backend::Store;
 use super::queue::drop_partials;
 use super::rows::{
-    self, EncodedResult, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, SELECT_PARTIALS,
-    SELECT_RESULT, bind_bins, collect_partials, count_from_sql, count_to_sql,
+    self, EncodedResult, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, SELECT_GROUPS_IN_SHARDS,
+    SELECT_PARTIALS, SELECT_RESULT, bind_bins, collect_partials, count_from_sql, count_to_sql,
     distribution_from_row, groups_from_row, held_mask, insert_distributions, insert_lives,
-    life_from_row, result_from_row,
+    life_from_row, result_from_row, spec_from_json,
 };
 use super::sql::Sql;
 use super::{DistributionRow, Fence, Operations, StoreResult};
 use crate::domain::query::LARGE_DISTRIBUTION_BINS;
 use crate::domain::rare::Rounds;
 use crate::domain::{Folding, JobId, UnixMs};
+use bouncewear_model::Pointer;
+use bouncewear_model::montecarlo::engine::GroupStats;
 use bouncewear_model::montecarlo::rare::Outcome;
-use bouncewear_model::montecarlo::{DeviceLife, JobResult};
+use bouncewear_model::montecarlo::{DeviceLife, Job, JobResult, RunGroups};
 use bouncewear_model::stats::Accumulator;
 
 /// Transactions that write a large Result's rows side by side where the database runs writers
@@ -90,6 +92,22 @@ impl Store {
     }
 }
 
+/// Where a bin's groups' accumulators are: its own, decoded (none if stored before they were
+/// kept), or its job's shards', for bin `.0`.
+enum Kept {
+    Own(Option<Vec<Accumulator>>),
+    InShards(u64),
+}
+
+impl Kept {
+    fn own(self) -> Option<Vec<Accumulator>> {
+        match self {
+            Kept::Own(groups) => groups,
+            Kept::InShards(_) => None,
+        }
+    }
+}
+
 /// Whether `result`'s rows go in the transaction that ends the job, rather than in transactions
 /// of their own before it ([`Store::write_rows`]): when they fit in one write, and unless
 /// `side_by_side` (the database runs writers side by side) and there are rows enough to share
@@ -130,15 +148,21 @@ impl Store {
             return Ok(None);
         };
         let finished_at = super::queue::now_or(self.dialect(), &mut tx, at).await?;
+        // The groups' accumulators go, unless the rows leave them in the shards; those left
+        // count towards the job's stored bytes.
+        if !result.groups_in_shards {
+            drop_partials(&mut tx, &fence.job).await?;
+        }
         // Only a job still running: a cancel that committed after the shard's fence was read
         // has ended it (and dropped the rows written before), and stands.
-        let Some(stored) = Sql::new(
+        let Some(stored) = Sql::new(concat!(
             "UPDATE jobs SET status = 'succeeded', finished_at = $2, \
              operations_total = CASE WHEN $4 > operations_total THEN $4 ELSE operations_total END, \
              operations_done = CASE WHEN $4 > operations_total THEN $4 ELSE operations_total END, \
-             stored_bytes = octet_length(spec) + $3 WHERE id = $1 AND status = 'running' \
-             RETURNING stored_bytes",
-        )
+             stored_bytes = octet_length(spec) + $3 + ",
+            rows::partial_bytes!(),
+            " WHERE id = $1 AND status = 'running' RETURNING stored_bytes"
+        ))
         .bind(fence.job.as_str())
         .bind(finished_at.0)
         .bind(count_to_sql(result.bytes()))
@@ -154,7 +178,6 @@ impl Store {
             insert_distributions(&mut tx, &fence.job, &result.rows).await?;
             insert_lives(&mut tx, &fence.job, &result.lives).await?;
         }
-        drop_partials(&mut tx, &fence.job).await?;
         Sql::new("INSERT INTO results (job_id, result) VALUES ($1, $2)")
             .bind(fence.job.as_str())
             .bind(result.text.clone())
@@ -245,7 +268,9 @@ impl Store {
     }
 
     /// The groups' accumulators of the bins [`Store::distribution`] gives, in the same order:
-    /// what a query after the run reads. `None` for a bin stored before they were kept.
+    /// what a query after the run reads. `None` for a bin stored before they were kept. Where
+    /// the bins leave them in the job's shards, every group is read from there, decoded off the
+    /// async threads, and each bin's taken out.
     #[tracing::instrument(skip_all, fields(job = %id, metric))]
     pub async fn distribution_groups(
         &self,
@@ -256,7 +281,46 @@ impl Store {
         let rows = bind_bins(Sql::new(SELECT_DISTRIBUTION_GROUPS), id, metric, range)
             .fetch_all(self.readers())
             .await?;
-        rows.iter().map(groups_from_row).collect()
+        let mut bins = Vec::with_capacity(rows.len());
+        for row in &rows {
+            bins.push(match row.flag("groups_in_shards")? {
+                true => Kept::InShards(count_from_sql(row, "bin")?),
+                false => Kept::Own(groups_from_row(row)?),
+            });
+        }
+        drop(rows);
+        if !bins.iter().any(|bin| matches!(bin, Kept::InShards(_))) {
+            return Ok(bins.into_iter().map(Kept::own).collect());
+        }
+        let spec = Sql::new("SELECT spec FROM jobs WHERE id = $1")
+            .bind(id.as_str())
+            .fetch_one(self.readers())
+            .await?
+            .text("spec")?;
+        let stored = Sql::new(SELECT_GROUPS_IN_SHARDS)
+            .bind(id.as_str())
+            .fetch_all(self.readers())
+            .await?;
+        let metric = metric.to_owned();
+        rows::off_async_threads("groups in shards", true, move || {
+            let what = "group accumulators";
+            // The job as it ran: which metrics its groups hold, in what order.
+            let job = Job::new(spec_from_json(&spec)?, || 0, &Pointer::root())
+                .map_err(|e| rows::corrupt("job", e))?;
+            let groups: Vec<GroupStats> = stored
+                .iter()
+                .map(|row| rows::decode(what, &row.bytes("partial")?))
+                .collect::<StoreResult<_>>()?;
+            let run = RunGroups::from_groups(&job, groups);
+            let of_bin = |bin| match bin {
+                Kept::Own(groups) => Ok(groups),
+                Kept::InShards(bin) => run.of(&metric, bin).map(Some).ok_or_else(|| {
+                    rows::corrupt(what, format!("the job's shards have no {metric} bin {bin}"))
+                }),
+            };
+            bins.into_iter().map(of_bin).collect()
+        })
+        .await
     }
 
     /// The listed devices' lives after device `after` (from the first without), in device order,
@@ -332,6 +396,7 @@ mod tests {
                 .map(|i| rows::EncodedRow::of_bytes(bytes / rows + usize::from(i < bytes % rows)))
                 .collect(),
             lives: vec![life; lives],
+            groups_in_shards: false,
             operations: 0,
         }
     }

@@ -457,6 +457,14 @@ pub(crate) const SELECT_PARTIALS: &str = "SELECT batch, grp, \
      WHERE job_id = $1 AND batch <= $2 AND grp >= 0 AND status = 'done' AND partial IS NOT NULL \
      ORDER BY batch, grp";
 
+/// The bytes of job `$1`'s groups' accumulators in its shards, for its stored bytes.
+macro_rules! partial_bytes {
+    () => {
+        "(SELECT COALESCE(SUM(octet_length(partial)), 0) FROM shards WHERE job_id = $1)"
+    };
+}
+pub(crate) use partial_bytes;
+
 /// The groups `into` holds as [`SELECT_PARTIALS`] takes them: `1` at each held group's place
 /// (its index from 0) up to the last held, `0` elsewhere. A batch has at most
 /// [`engine::GROUPS`] groups.
@@ -623,6 +631,9 @@ pub struct EncodedResult {
     pub(crate) text: String,
     pub(crate) rows: Vec<EncodedRow>,
     pub(crate) lives: Vec<DeviceLife>,
+    /// Whether the rows leave the groups' accumulators where the job's groups' shards stored
+    /// them ([`EncodedResult::with_groups_in_shards`]): its shards' keep them.
+    pub(crate) groups_in_shards: bool,
     /// The operations the devices ran ([`JobResult::counts`]), at least the job's progress at
     /// its end: a job run whole with a precision target counts its batches only as it runs them.
     pub(crate) operations: u64,
@@ -656,7 +667,8 @@ pub(crate) struct EncodedRow {
     columns: [f64; 7],
     exceedance: Option<f64>,
     summary: String,
-    groups: Vec<u8>,
+    /// Its groups' accumulators, [`encode`]d; none where they stay in the job's shards.
+    groups: Option<Vec<u8>>,
 }
 
 impl EncodedRow {
@@ -673,13 +685,18 @@ impl EncodedRow {
             columns: [0.0; 7],
             exceedance: None,
             summary: String::new(),
-            groups: vec![0; groups],
+            groups: Some(vec![0; groups]),
         }
     }
 
     /// The row of `metric`'s bin `bin` of `result` (bin 0 of a device metric), with its groups
-    /// [`encode`]d.
-    fn new(result: &JobResult, metric: Metric, bin: u64, groups: Vec<u8>) -> StoreResult<Self> {
+    /// [`encode`]d, or none where they stay in the job's shards.
+    fn new(
+        result: &JobResult,
+        metric: Metric,
+        bin: u64,
+        groups: Option<Vec<u8>>,
+    ) -> StoreResult<Self> {
         let name = metric.name();
         let missing = || corrupt(GROUPS, format!("the Result has no {name} bin {bin}"));
         let (kind, op_start, op_end, summary) = match metric {
@@ -730,9 +747,26 @@ impl EncodedResult {
     /// as a group's store encodes beside the compute thread: the scale-out job's 115 rows took
     /// 6.6-6.9 ms on one thread, 3.5-3.8 on two. `result` is as it was after.
     pub fn new(result: &mut JobResult, groups: RunGroups) -> StoreResult<Self> {
+        Self::encode(result, groups, false)
+    }
+
+    /// As [`EncodedResult::new`], with rows that leave the groups' accumulators where the job's
+    /// groups' shards stored them, for a query after the run to read there: the merge of a job
+    /// of one batch, whose final groups are those ([`crate::domain::groups_stay_in_shards`]),
+    /// neither encodes nor writes them a second time.
+    pub fn with_groups_in_shards(result: &mut JobResult, groups: RunGroups) -> StoreResult<Self> {
+        Self::encode(result, groups, true)
+    }
+
+    fn encode(result: &mut JobResult, groups: RunGroups, in_shards: bool) -> StoreResult<Self> {
         let shared = &*result;
         let mut bins = groups.into_bins().peekable();
         let mut rows = Vec::new();
+        if in_shards {
+            for (metric, bin, _) in bins.by_ref() {
+                rows.push(EncodedRow::new(shared, metric, bin, None)?);
+            }
+        }
         while bins.peek().is_some() {
             let mut chunk: Vec<_> = bins.by_ref().take(ROWS_PER_ENCODING).collect();
             let alone = rayon::current_num_threads() == 1 && chunk.len() > 1;
@@ -759,7 +793,7 @@ impl EncodedResult {
                 )
             })??;
             for (metric, bin, groups) in beside {
-                rows.push(EncodedRow::new(shared, metric, bin, groups)?);
+                rows.push(EncodedRow::new(shared, metric, bin, Some(groups))?);
             }
         }
         let operations = std::mem::take(&mut result.operations);
@@ -782,6 +816,7 @@ impl EncodedResult {
             text,
             rows,
             lives,
+            groups_in_shards: in_shards,
             operations,
         })
     }
@@ -792,7 +827,7 @@ impl EncodedResult {
         let rows: usize = self
             .rows
             .iter()
-            .map(|r| r.summary.len() + r.groups.len())
+            .map(|r| r.summary.len() + r.groups.as_ref().map_or(0, Vec::len))
             .sum();
         (self.text.len() + rows) as u64 + self.lives.len() as u64 * LIFE_ROW_BYTES
     }
@@ -807,7 +842,7 @@ fn encode_rows(
     bins.into_par_iter()
         .map(|(metric, bin, groups)| {
             let groups = encode(GROUPS, &groups)?;
-            EncodedRow::new(result, metric, bin, groups)
+            EncodedRow::new(result, metric, bin, Some(groups))
         })
         .collect()
 }
@@ -840,12 +875,12 @@ pub(crate) async fn insert_distributions(
     rows: &[EncodedRow],
 ) -> StoreResult<()> {
     let into = "distributions (job_id, metric, kind, bin, op_start, op_end, n, mean, sd, min, max, \
-                p05, p50, p95, exceedance, summary, groups)";
+                p05, p50, p95, exceedance, summary, groups, groups_in_shards)";
     insert_rows(
         tx,
         job,
         into,
-        (16, DISTRIBUTIONS_PER_STATEMENT),
+        (17, DISTRIBUTIONS_PER_STATEMENT),
         rows,
         |insert, row| {
             let [mean, sd, min, max, p05, p50, p95] = row.columns;
@@ -866,6 +901,7 @@ pub(crate) async fn insert_distributions(
                 .bind(row.exceedance)
                 .bind(row.summary.as_str())
                 .bind(row.groups.clone())
+                .bind(row.groups.is_none())
         },
     )
     .await
@@ -927,9 +963,16 @@ const GROUPS: &str = "groups of a distribution";
 pub(crate) const SELECT_DISTRIBUTION: &str = "SELECT kind, bin, op_start, op_end, summary \
      FROM distributions WHERE job_id = $1 AND metric = $2 AND op_end > $3 AND op_start < $4 ORDER BY bin";
 
-/// The same bins' groups' accumulators.
-pub(crate) const SELECT_DISTRIBUTION_GROUPS: &str = "SELECT groups FROM distributions \
+/// The same bins' groups' accumulators, or whether they are in the job's shards.
+pub(crate) const SELECT_DISTRIBUTION_GROUPS: &str = "SELECT bin, groups, groups_in_shards \
+     FROM distributions \
      WHERE job_id = $1 AND metric = $2 AND op_end > $3 AND op_start < $4 ORDER BY bin";
+
+/// The groups' accumulators of job `$1` as its first batch's groups' shards stored them, in
+/// group order: where a Result of one batch leaves them ([`EncodedResult::with_groups_in_shards`]).
+pub(crate) const SELECT_GROUPS_IN_SHARDS: &str = "SELECT partial FROM shards \
+     WHERE job_id = $1 AND batch = 0 AND grp >= 0 AND status = 'done' AND partial IS NOT NULL \
+     ORDER BY grp";
 
 /// Binds [`SELECT_DISTRIBUTION`]'s (or [`SELECT_DISTRIBUTION_GROUPS`]') parameters.
 pub(crate) fn bind_bins(query: Sql, job: &JobId, metric: &str, range: Operations) -> Sql {

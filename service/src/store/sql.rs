@@ -45,7 +45,7 @@ pub(crate) enum Arg {
     Int(Option<i64>),
     Real(Option<f64>),
     Text(Option<String>),
-    Bytes(Vec<u8>),
+    Bytes(Option<Vec<u8>>),
     Flag(bool),
 }
 
@@ -67,7 +67,8 @@ arg_from! {
     String => Text(Some),
     &str => Text(|s: &str| Some(s.to_owned())),
     Option<String> => Text(std::convert::identity),
-    Vec<u8> => Bytes(std::convert::identity),
+    Vec<u8> => Bytes(Some),
+    Option<Vec<u8>> => Bytes(std::convert::identity),
     bool => Flag(std::convert::identity),
 }
 
@@ -78,7 +79,7 @@ impl Arg {
         let value = match self {
             Arg::Int(_) | Arg::Real(_) => 8,
             Arg::Text(text) => text.as_ref().map_or(0, String::len),
-            Arg::Bytes(bytes) => bytes.len(),
+            Arg::Bytes(bytes) => bytes.as_ref().map_or(0, Vec::len),
             Arg::Flag(_) => 1,
         };
         4 + value
@@ -200,7 +201,7 @@ impl Sql {
         for<'t> Option<i64>: Encode<'t, DB> + Type<DB>,
         for<'t> Option<f64>: Encode<'t, DB> + Type<DB>,
         for<'t> Option<String>: Encode<'t, DB> + Type<DB>,
-        for<'t> Vec<u8>: Encode<'t, DB> + Type<DB>,
+        for<'t> Option<Vec<u8>>: Encode<'t, DB> + Type<DB>,
         for<'t> bool: Encode<'t, DB> + Type<DB>,
     {
         use sqlx::Arguments;
