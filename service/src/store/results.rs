@@ -11,7 +11,7 @@ use super::rows::{
     life_from_row, result_from_row, spec_from_json,
 };
 use super::sql::Sql;
-use super::{DistributionRow, Fence, Operations, StoreResult};
+use super::{DistributionRow, Fence, Operations, StoreError, StoreResult};
 use crate::domain::query::LARGE_DISTRIBUTION_BINS;
 use crate::domain::rare::Rounds;
 use crate::domain::{Folding, JobId, UnixMs};
@@ -292,15 +292,21 @@ impl Store {
         if !bins.iter().any(|bin| matches!(bin, Kept::InShards(_))) {
             return Ok(bins.into_iter().map(Kept::own).collect());
         }
+        // A job deleted since its rows were read has neither (a DELETE takes them together): it
+        // is not found, as a read after the delete finds it (a query racing the delete was a 500).
         let spec = Sql::new("SELECT spec FROM jobs WHERE id = $1")
             .bind(id.as_str())
-            .fetch_one(self.readers())
+            .fetch_optional(self.readers())
             .await?
+            .ok_or_else(|| StoreError::job_not_found(id))?
             .text("spec")?;
         let stored = Sql::new(SELECT_GROUPS_IN_SHARDS)
             .bind(id.as_str())
             .fetch_all(self.readers())
             .await?;
+        if stored.is_empty() {
+            return Err(StoreError::job_not_found(id));
+        }
         let metric = metric.to_owned();
         rows::off_async_threads("groups in shards", true, move || {
             let what = "group accumulators";
