@@ -38,16 +38,24 @@ impl Store {
     pub async fn open(url: &str, connections: u32) -> StoreResult<Self> {
         // Only the scheme is ever repeated back: the rest of a URL may hold a password.
         let scheme = url.split_once(':').map_or(url, |(scheme, _)| scheme);
-        let backend = match scheme {
-            "sqlite" => Backend::Sqlite(SqliteBackend::open(url).await?),
+        match scheme {
+            "sqlite" => Self::on(Backend::Sqlite(SqliteBackend::open(url).await?)).await,
             "postgres" | "postgresql" => {
-                Backend::Postgres(PgBackend::open(url, connections).await?)
+                super::postgres::while_starting(url, || async {
+                    Self::on(Backend::Postgres(PgBackend::open(url, connections).await?)).await
+                })
+                .await
             }
             _ => {
                 let scheme = scheme.chars().take(32).collect();
-                return Err(StoreError::UnsupportedUrl(scheme));
+                Err(StoreError::UnsupportedUrl(scheme))
             }
-        };
+        }
+    }
+
+    /// The store on `backend`, opened and migrated: its cursors' key read, shards filled in for
+    /// jobs queued before there were any.
+    async fn on(backend: Backend) -> StoreResult<Self> {
         let secret = Sql::new("SELECT value FROM secrets WHERE name = 'cursor'")
             .fetch_one(backend.readers())
             .await?

@@ -70,6 +70,45 @@ async fn why_no_connection(url: &str) -> String {
 /// The pause between two tries to open the store while the database does not answer.
 const STARTUP_RETRY: Duration = Duration::from_millis(500);
 
+/// Opens the store on the database at `url` by `attempt`, tried again for up to
+/// [`STARTUP_WAIT`] while the database does not answer yet or goes away meanwhile (restarted:
+/// its connections reset or ended by its administrator, [`StoreError::is_unreachable`]): a
+/// process started as PostgreSQL restarted exited within 2 s (found from outside), at its
+/// migrations or at its first reads after them. Any other error ends it at once (a wrong
+/// password, a database that does not exist).
+pub(crate) async fn while_starting<T, F>(
+    url: &str,
+    mut attempt: impl FnMut() -> F,
+) -> StoreResult<T>
+where
+    F: Future<Output = StoreResult<T>>,
+{
+    let started = std::time::Instant::now();
+    loop {
+        let error = match attempt().await {
+            Ok(opened) => return Ok(opened),
+            Err(error) if error.is_unreachable() => error,
+            Err(error) => return Err(error),
+        };
+        let why = match error {
+            StoreError::Database(sqlx::Error::PoolTimedOut) => why_no_connection(url).await,
+            other => other.to_string(),
+        };
+        if started.elapsed() >= STARTUP_WAIT {
+            return Err(StoreError::NotReady(format!(
+                "no connection to the database within {} s: {why}",
+                STARTUP_WAIT.as_secs()
+            )));
+        }
+        let server = <sqlx::postgres::PgConnectOptions as std::str::FromStr>::from_str(url)
+            .map(|o| format!("{}:{}", o.get_host(), o.get_port()))
+            .unwrap_or_default();
+        tracing::warn!(%why, %server, "the database has not answered yet; trying again");
+        // A refused connection comes back at once: not a busy loop meanwhile.
+        tokio::time::sleep(STARTUP_RETRY).await;
+    }
+}
+
 /// The pool's first connection, the database migrated on it, and a listener to the queue's
 /// announcements: what opening the store needs of the database.
 async fn migrated_listener(pool: &PgPool) -> StoreResult<PgListener> {
@@ -84,10 +123,8 @@ async fn migrated_listener(pool: &PgPool) -> StoreResult<PgListener> {
 
 impl PgBackend {
     /// Connects to the database at `url` and migrates it (concurrent instances wait for each
-    /// other: sqlx takes an advisory lock around migrations). A database that does not answer
-    /// yet, or goes away meanwhile (restarted: its connections reset or ended by its
-    /// administrator), is tried again for up to [`STARTUP_WAIT`]: a process started as
-    /// PostgreSQL restarted exited within 2 s (7 of 7 tries, found from outside).
+    /// other: sqlx takes an advisory lock around migrations), once: [`while_starting`] tries
+    /// again while the database is out of reach.
     #[tracing::instrument(skip_all)]
     pub(crate) async fn open(url: &str, connections: u32) -> StoreResult<Self> {
         let pool = PgPoolOptions::new()
@@ -96,32 +133,7 @@ impl PgBackend {
             // During an outage a request gets its 503 within this, not after the pool's 30 s.
             .acquire_timeout(super::DATABASE_WAIT)
             .connect_lazy(url)?;
-        let started = std::time::Instant::now();
-        let listener = loop {
-            let error = match migrated_listener(&pool).await {
-                Ok(listener) => break listener,
-                Err(error) => error,
-            };
-            if !error.is_unreachable() {
-                return Err(error);
-            }
-            let why = match error {
-                StoreError::Database(sqlx::Error::PoolTimedOut) => why_no_connection(url).await,
-                other => other.to_string(),
-            };
-            if started.elapsed() >= STARTUP_WAIT {
-                return Err(StoreError::NotReady(format!(
-                    "no connection to the database within {} s: {why}",
-                    STARTUP_WAIT.as_secs()
-                )));
-            }
-            let server = <sqlx::postgres::PgConnectOptions as std::str::FromStr>::from_str(url)
-                .map(|o| format!("{}:{}", o.get_host(), o.get_port()))
-                .unwrap_or_default();
-            tracing::warn!(%why, %server, "the database has not answered yet; trying again");
-            // A refused connection comes back at once: not a busy loop meanwhile.
-            tokio::time::sleep(STARTUP_RETRY).await;
-        };
+        let listener = migrated_listener(&pool).await?;
         let (events, ends) = (broadcast::channel(1024).0, broadcast::channel(1024).0);
         let announcements = tokio::spawn(forward_announcements(
             listener,
@@ -229,4 +241,37 @@ pub(crate) async fn insert_queued(
     .fetch_one(&mut *tx)
     .await?;
     Ok(within.flag("within")?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicU32, Ordering};
+
+    /// Opening goes on through the database being out of reach (its connections reset while it
+    /// restarts) and stops at once at any other error, which waiting would not mend.
+    #[tokio::test]
+    async fn opening_tries_again_only_while_the_database_is_out_of_reach() {
+        let tries = AtomicU32::new(0);
+        let url = "postgres://127.0.0.1:1/none";
+        let opened = while_starting(url, || async {
+            match tries.fetch_add(1, Ordering::Relaxed) {
+                0 | 1 => Err(StoreError::Database(sqlx::Error::Io(
+                    std::io::ErrorKind::ConnectionReset.into(),
+                ))),
+                _ => Ok("open"),
+            }
+        });
+        assert_eq!(opened.await.unwrap(), "open");
+        assert_eq!(tries.load(Ordering::Relaxed), 3);
+        let refused = while_starting(url, || async {
+            tries.fetch_add(1, Ordering::Relaxed);
+            Err::<(), _>(StoreError::Database(sqlx::Error::RowNotFound))
+        });
+        assert!(matches!(
+            refused.await,
+            Err(StoreError::Database(sqlx::Error::RowNotFound))
+        ));
+        assert_eq!(tries.load(Ordering::Relaxed), 4, "tried once");
+    }
 }
