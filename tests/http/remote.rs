@@ -333,6 +333,19 @@ fn a_submission_to_a_full_queue_is_sent_again_once_there_is_room() {
     assert_ne!(second["id"], first["id"]);
     let listed: Value = serde_json::from_str(&get(&server.url("/v1/jobs"), None).body).unwrap();
     assert_eq!(listed["jobs"].as_array().unwrap().len(), 2, "{listed}");
+    // A job that ends just before the timeout is told as it ended: with its last request asked
+    // to answer a quarter second early, one that ended then was told as still running.
+    let second = second["id"].as_str().unwrap();
+    let waited = std::thread::scope(|scope| {
+        scope.spawn(|| {
+            std::thread::sleep(std::time::Duration::from_millis(850));
+            stdout(&remote(&server, None, &["cancel", second]));
+        });
+        remote(&server, None, &["wait", second, "--timeout-seconds", "1"])
+    });
+    assert_eq!(waited.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&waited.stderr);
+    assert!(said.contains(&format!("job {second} cancelled")), "{said}");
 }
 
 /// A submission whose answer was lost (the connection closed after the server queued the job) is

@@ -199,14 +199,23 @@ def _idle_server(tmp_path, *flags):
 
 
 def test_a_wait_that_times_out_says_the_job_is_still_queued(tmp_path):
-    """The last read's answer comes before the timeout: asked to wait all the time left, the server
-    answered after the read's deadline, and each wait of 1-3 s said "no answer from the server"."""
+    """The last read's answer is awaited a little past the timeout: asked to wait all the time left,
+    the server answered after the read's deadline, and each wait of 1-3 s said "no answer from the
+    server"."""
     with _idle_server(tmp_path) as url:
         job = Client(url).submit({"devices": 2, "operations": 2})
         for timeout in [0.5, 1.0, 1.0, 2.0]:
             with pytest.raises(TimeoutError) as waited:
                 job.wait(progress=False, timeout=timeout)
             assert str(waited.value) == f"job {job.id} is still queued after {timeout} s"
+        # A job that ends just before the timeout is told as it ended: with the last read asked
+        # to answer a quarter second early, one that ended then was told as still queued.
+        cancel = threading.Timer(0.85, lambda: Client(url).job(job.id).cancel())
+        cancel.start()
+        with pytest.raises(JobFailed):
+            job.wait(progress=False, timeout=1.0)
+        cancel.join()
+        assert job.status == "cancelled"
 
 
 def test_a_submission_to_a_full_queue_is_sent_again_once_there_is_room(tmp_path, caplog):

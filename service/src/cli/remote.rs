@@ -68,10 +68,12 @@ pub enum Part {
 const WAIT_PER_REQUEST: f64 = 10.0;
 /// The least time between two of `wait`'s requests, should a server answer at once anyway.
 const POLL: Duration = Duration::from_millis(200);
-/// What `wait`'s last request leaves its answer before the timeout: a server asked to wait all
-/// the time left answers just after it, past the request's own deadline, and the timeout read
-/// as "no answer within --request-timeout-seconds" (1 of 10 waits of 2 s, found from outside).
-const ANSWER_MARGIN: Duration = Duration::from_millis(250);
+/// How long past a deadline (`wait`'s timeout) the answer to a request is awaited: a server
+/// asked to wait all the time left answers just after it. With the deadline as the request's
+/// own, 1 wait in 10 read as "no answer within --request-timeout-seconds"; with the last
+/// request asked to answer a quarter second early, a job that ended in that quarter second was
+/// told as still running (both found from outside).
+const ANSWER_GRACE: Duration = Duration::from_secs(1);
 
 pub use crate::config::seconds_flag as seconds;
 
@@ -199,8 +201,8 @@ impl Server {
         Ok(Some(self.roots.get_or_init(|| roots).clone()))
     }
 
-    /// Sends a request once, to be answered within `--request-timeout-seconds` and before
-    /// `deadline`: the body of a 2xx, or why not.
+    /// Sends a request once, to be answered within `--request-timeout-seconds` and
+    /// [`ANSWER_GRACE`] after `deadline`: the body of a 2xx, or why not.
     fn send_once(
         &self,
         method: &str,
@@ -211,7 +213,9 @@ impl Server {
     ) -> Result<String, Failure> {
         let url = self.url(path);
         let left = deadline.map_or(f64::INFINITY, |end| {
-            end.saturating_duration_since(Instant::now()).as_secs_f64()
+            (end + ANSWER_GRACE)
+                .saturating_duration_since(Instant::now())
+                .as_secs_f64()
         });
         let agent = agent(
             self.request_timeout_seconds.min(left),
@@ -444,8 +448,7 @@ fn wait_until(server: &Server, id: &str, deadline: Option<Instant>) -> Result<St
     let started = Instant::now();
     loop {
         let left = deadline.map_or(WAIT_PER_REQUEST, |end| {
-            let left = end.saturating_duration_since(Instant::now());
-            left.saturating_sub(ANSWER_MARGIN).as_secs_f64()
+            end.saturating_duration_since(Instant::now()).as_secs_f64()
         });
         let wait_s = left
             .min(WAIT_PER_REQUEST)
@@ -464,17 +467,18 @@ fn wait_until(server: &Server, id: &str, deadline: Option<Instant>) -> Result<St
             }
             _ => {}
         }
-        if let Some(end) = deadline.filter(|&end| Instant::now() + ANSWER_MARGIN >= end) {
-            // Too little time left for another request's answer: the job as last read.
-            std::thread::sleep(end.saturating_duration_since(Instant::now()));
+        // The job as read at the timeout or after: the last request waits until then.
+        if deadline.is_some_and(|end| Instant::now() >= end) {
             return Err(CliError::Failed(format!(
-                "job {id} is still {} after {:.0} s",
+                "job {id} is still {} after {:.1} s",
                 job["status"].as_str().unwrap_or("?"),
                 started.elapsed().as_secs_f64()
             )));
         }
-        // A server that did not wait (all its places taken) is asked again after a pause.
-        std::thread::sleep(POLL.saturating_sub(asked.elapsed()));
+        // A server that did not wait (all its places taken) is asked again after a pause, never
+        // past the timeout.
+        let left = deadline.map_or(POLL, |end| end.saturating_duration_since(Instant::now()));
+        std::thread::sleep(POLL.saturating_sub(asked.elapsed()).min(left));
     }
 }
 

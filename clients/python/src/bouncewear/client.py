@@ -23,8 +23,9 @@ JSON = Dict[str, Any]
 
 # The longest `wait_s` the server takes (docs/contract.md, "HTTP API").
 MAX_WAIT_S = 30.0
-# What `Job.wait`'s last read leaves its answer before the timeout, as the CLI's `wait` does.
-ANSWER_MARGIN_S = 0.25
+# How long past a deadline (`Job.wait`'s timeout) a request's answer is awaited, as the CLI's
+# `wait` does: a server asked to wait all the time left answers just after it.
+ANSWER_GRACE_S = 1.0
 
 #: The statuses a job ends in.
 ENDED = ("succeeded", "failed", "cancelled")
@@ -174,8 +175,9 @@ class Client:
             failure: Exception
             timeout = self.timeout
             if deadline is not None:
-                # No request outlasts the deadline, whatever the client's own timeout.
-                left = max(deadline - time.monotonic(), 0.001)
+                # No request outlasts the deadline by more than the answer's grace, whatever the
+                # client's own timeout.
+                left = max(deadline - time.monotonic(), 0.0) + ANSWER_GRACE_S
                 timeout = min(timeout, left) if timeout else left
             try:
                 response = self._session.request(method, self.base_url + path, json=json,
@@ -334,9 +336,7 @@ class Job(_Resource):
             if self.client.timeout:
                 wait_s = min(wait_s, self.client.timeout / 2)
             if timeout is not None:
-                # The answer comes a little before the timeout: a server asked to wait all the
-                # time left answered just after the read's own deadline ("no answer").
-                wait_s = min(wait_s, timeout - (time.monotonic() - started) - ANSWER_MARGIN_S)
+                wait_s = min(wait_s, timeout - (time.monotonic() - started))
             asked = time.monotonic()
             deadline = None if timeout is None else started + timeout
             try:
@@ -353,14 +353,17 @@ class Job(_Resource):
                 done, total = self.progress["operations_done"], self.progress["operations_total"]
                 waits = f" ({self.waiting})" if self.waiting else ""
                 print(f"\r{self.id}: {self.status} {done:,}/{total:,} operations{waits}", end="", file=sys.stderr)
-            if timeout is not None and time.monotonic() - started >= timeout - ANSWER_MARGIN_S:
-                # Too little time left for another read's answer: the job as last read.
-                time.sleep(max(0.0, started + timeout - time.monotonic()))
+            # The job as read at the timeout or after: the last read waits until then.
+            if timeout is not None and time.monotonic() - started >= timeout:
                 if progress:
                     print(file=sys.stderr)
                 raise TimeoutError(f"job {self.id} is still {self.status} after {timeout} s")
-            # A server that did not wait (all its places taken) is asked again after a pause.
-            time.sleep(max(0.0, 0.2 - (time.monotonic() - asked)))
+            # A server that did not wait (all its places taken) is asked again after a pause,
+            # never past the timeout.
+            pause = 0.2 - (time.monotonic() - asked)
+            if timeout is not None:
+                pause = min(pause, started + timeout - time.monotonic())
+            time.sleep(max(0.0, pause))
         if progress:
             print(f"\r{self.id}: {self.status} in {time.monotonic() - started:.1f} s" + " " * 20, file=sys.stderr)
         if self.status != "succeeded":
