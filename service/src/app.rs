@@ -28,7 +28,7 @@ pub enum StartupError {
         "--bind {0} is not a loopback address: configure --api-key (or BOUNCEWEAR_API_KEYS) first"
     )]
     PublicWithoutKeys(SocketAddr),
-    #[error("database: {0}")]
+    #[error("{}", prefixed("database", .0))]
     Database(#[from] StoreError),
     #[error("compute threads: {0}")]
     Compute(#[from] PoolError),
@@ -39,6 +39,19 @@ pub enum StartupError {
     },
     #[error("--workers must be at least 1 for a worker process")]
     NoWorkers,
+}
+
+/// `error` after `what: `, unless it says so already (a database's own error begins
+/// `database: `; "database: database: ... password authentication failed", found from outside).
+fn prefixed(what: &str, error: &impl std::fmt::Display) -> String {
+    let said = error.to_string();
+    match said
+        .strip_prefix(what)
+        .is_some_and(|rest| rest.starts_with(": "))
+    {
+        true => said,
+        false => format!("{what}: {said}"),
+    }
 }
 
 impl StartupError {
@@ -403,7 +416,17 @@ async fn one_signal() {
 
 #[cfg(test)]
 mod tests {
-    use super::describe;
+    use super::{StartupError, StoreError, describe};
+
+    /// A store's error is told after `database: ` once, whether or not it says so itself.
+    #[test]
+    fn a_database_error_at_start_up_says_database_once() {
+        let said = |error: StoreError| StartupError::Database(error).to_string();
+        let refused = said(StoreError::Database(sqlx::Error::RowNotFound));
+        assert!(refused.starts_with("database: no rows"), "{refused}");
+        let waited = said(StoreError::NotReady("no connection".to_owned()));
+        assert_eq!(waited, "database: not ready: no connection");
+    }
 
     #[test]
     fn a_database_url_is_logged_without_its_credentials() {
