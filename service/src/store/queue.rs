@@ -56,15 +56,20 @@ impl Store {
 
 impl Store {
     /// In the caller's transaction, first (two retries of one request never both miss the key):
-    /// forgets the key if it expired, then reads what it created (fingerprint, id).
-    pub(crate) async fn remembered(
+    /// forgets the key if it expired, then gives what its first use created, read by `read` from
+    /// its id in the same transaction, under the key's lock; [`Once::KeyReused`] for another
+    /// body; `None` for the caller to create: the key unused, or its resource deleted since
+    /// (a delete takes its keys in its transaction), as a retry after the delete. A schedule
+    /// read after the lock, found deleted, was created anew without it, and racing retries met
+    /// on the key's row (500s, found from outside).
+    pub(crate) async fn replayed<T>(
         &self,
         tx: &mut Tx,
-        owner: &Owner,
-        collection: &str,
+        (owner, collection): (&Owner, &str),
         key: &IdempotencyKey,
         now: UnixMs,
-    ) -> StoreResult<Option<(String, String)>> {
+        read: impl AsyncFnOnce(&mut Tx, String) -> StoreResult<T>,
+    ) -> StoreResult<Option<Once<T>>> {
         self.lock(tx, format!("{}/{collection}/{}", owner.as_str(), key.key))
             .await?;
         Sql::new(FORGET_EXPIRED_KEY)
@@ -80,7 +85,17 @@ impl Store {
             .bind(key.key.as_str())
             .fetch_optional(&mut *tx)
             .await?;
-        Ok(row.as_ref().map(remembered_from_row).transpose()?)
+        let Some((fingerprint, id)) = row.as_ref().map(remembered_from_row).transpose()? else {
+            return Ok(None);
+        };
+        if fingerprint != key.fingerprint {
+            return Ok(Some(Once::KeyReused));
+        }
+        match read(tx, id).await {
+            Ok(replayed) => Ok(Some(Once::Replayed(replayed))),
+            Err(StoreError::NotFound { .. }) => Ok(None),
+            Err(error) => Err(error),
+        }
     }
 
     /// A write transaction in which the claim's shard is marked done; `None` (rolled back) once
@@ -380,25 +395,12 @@ impl Store {
         now: UnixMs,
     ) -> StoreResult<Option<Once<JobRecord>>> {
         let mut tx = self.begin().await?;
-        if let Some((fingerprint, id)) = self
-            .remembered(&mut tx, &job.owner, "jobs", key, now)
-            .await?
-        {
-            let once = if fingerprint == key.fingerprint {
-                match select_job(&mut tx, &job.owner, &JobId::from(id)).await {
-                    Ok(replayed) => Some(Once::Replayed(replayed)),
-                    // Deleted since the key was read (PostgreSQL reads each statement afresh),
-                    // and the key with it: the retry creates the job, as one after the delete.
-                    Err(StoreError::NotFound { .. }) => None,
-                    Err(error) => return Err(error),
-                }
-            } else {
-                Some(Once::KeyReused)
-            };
-            if let Some(once) = once {
-                tx.commit().await?;
-                return Ok(Some(once));
-            }
+        let owner = &job.owner;
+        let read = async |tx: &mut Tx, id| select_job(tx, owner, &JobId::from(id)).await;
+        let replayed = self.replayed(&mut tx, (owner, "jobs"), key, now, read);
+        if let Some(once) = replayed.await? {
+            tx.commit().await?;
+            return Ok(Some(once));
         }
         if !self.insert_queued(&mut tx, &job, bound).await? {
             tx.rollback().await?;

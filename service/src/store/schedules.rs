@@ -102,28 +102,11 @@ impl Store {
     ) -> StoreResult<Once<ScheduleRecord>> {
         let owner = &schedule.owner;
         let mut tx = self.begin_reading_first().await?;
-        if let Some((fingerprint, id)) = self
-            .remembered(&mut tx, owner, "schedules", key, now)
-            .await?
-        {
-            let once = if fingerprint == key.fingerprint {
-                // Read in the transaction that holds the key's lock: a read after it, which
-                // found the schedule deleted, created it anew without the lock, and racing
-                // retries met on the key's row (500s, found from outside).
-                match select_schedule(&mut tx, owner, &ScheduleId::from(id)).await {
-                    Ok(replayed) => Some(Once::Replayed(replayed)),
-                    // Deleted since the key was read, and the key with it (a delete takes its
-                    // keys in its transaction): created anew, as by a retry after the delete.
-                    Err(StoreError::NotFound { .. }) => None,
-                    Err(error) => return Err(error),
-                }
-            } else {
-                Some(Once::KeyReused)
-            };
-            if let Some(once) = once {
-                tx.commit().await?;
-                return Ok(once);
-            }
+        let read = async |tx: &mut Tx, id| select_schedule(tx, owner, &ScheduleId::from(id)).await;
+        let replayed = self.replayed(&mut tx, (owner, "schedules"), key, now, read);
+        if let Some(once) = replayed.await? {
+            tx.commit().await?;
+            return Ok(once);
         }
         self.insert_bounded(&mut tx, schedule, bound).await?;
         remember(&mut tx, owner, Created::Schedule(&schedule.id), key, now).await?;
