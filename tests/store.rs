@@ -99,6 +99,7 @@ async fn every_promise(database: impl Fn(&str) -> String) {
     a_result_the_databases_full_disk_refuses_waits_for_room(&database("disk-full")).await;
     retries_racing_a_schedules_delete_make_it_once(&database("schedule-race")).await;
     a_connection_postgresql_ended_is_unreachable(&database("ended")).await;
+    a_finishing_merge_locks_its_job_before_its_groups(&database("lock-order")).await;
     lives_beyond_the_listing_cap_are_counted_not_listed(&database("listed")).await;
     a_result_is_stored_once_and_one_stored_whole_before_reads_as_it_was(&database("whole")).await;
     a_large_result_reads_back_whole(&database("large")).await;
@@ -1850,6 +1851,62 @@ async fn an_owner_whose_jobs_store_its_quota_gets_no_new_job(url: &str) {
         .unwrap();
     store.delete_job(&greedy, &first.id).await.unwrap();
     assert!(admitted(of(&greedy, 4)).await);
+}
+
+/// A merge that ends its job locks the job's row before its groups' rows, as a cancel and a
+/// claim that fails a job do: it dropped the groups' accumulators first, and a cancel racing it
+/// on PostgreSQL deadlocked (the cancel, rolled back, a 503; found from a review). Here another
+/// transaction holds the job's row: the ending waits for it with the groups' rows still free.
+async fn a_finishing_merge_locks_its_job_before_its_groups(url: &str) {
+    if url.starts_with("sqlite:") {
+        return; // One writer at a time: no two transactions hold rows at once.
+    }
+    let store = store::open(url).await.unwrap();
+    let id = insert(&store, queued(5)).await;
+    let mut merge_claim = None;
+    while let Some(claim) = store.claim("w", terms(0), budget(2)).await.unwrap() {
+        let job = Job::new(claim.spec.clone(), || 0, &Pointer::root()).unwrap();
+        match claim.fence.shard.group {
+            Some(group) => {
+                let stats = run_group(&job, Batch::of(&job, 0).unwrap(), group, &Silent).unwrap();
+                assert!(store.complete(&claim.fence, &stats).await.unwrap());
+            }
+            None => merge_claim = Some((job, claim.fence)),
+        }
+    }
+    let (job, fence) = merge_claim.expect("the merge step, once its groups are done");
+    let partials = store.partials(&id, Folding::new(job, 0)).await.unwrap();
+    let merged = merge(partials, SHARDED_ROUND_OPERATIONS, 1.0, &Silent).unwrap();
+    let Merged::Result { mut result, groups } = merged else {
+        panic!("one batch: {merged:?}");
+    };
+    let encoded = EncodedResult::new(&mut result, groups).unwrap();
+    let holder = sqlx::PgPool::connect(url).await.unwrap();
+    let mut holding = holder.begin().await.unwrap();
+    sqlx::query("SELECT 1 FROM jobs WHERE id = $1 FOR UPDATE")
+        .bind(id.as_str())
+        .execute(&mut *holding)
+        .await
+        .unwrap();
+    let ending = tokio::spawn({
+        let store = Arc::clone(&store);
+        async move { store.succeed(&fence, Some(UnixMs(5)), &encoded).await }
+    });
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert!(!ending.is_finished(), "the ending waits for the job's row");
+    let mut probe = holder.begin().await.unwrap();
+    let groups =
+        sqlx::query("SELECT grp FROM shards WHERE job_id = $1 AND grp >= 0 FOR UPDATE NOWAIT")
+            .bind(id.as_str())
+            .fetch_all(&mut *probe)
+            .await;
+    assert_eq!(
+        groups.map(|rows| rows.len()).map_err(|e| e.to_string()),
+        Ok(2)
+    );
+    probe.rollback().await.unwrap();
+    holding.commit().await.unwrap();
+    assert!(ending.await.unwrap().unwrap().is_some(), "the job succeeds");
 }
 
 async fn a_cancelled_job_keeps_no_accumulators(url: &str) {

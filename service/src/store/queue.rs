@@ -186,7 +186,7 @@ macro_rules! progress_sums {
 
 /// Locks job `job`'s row where the database asks it ([`Dialect::lock_job`]), before a statement
 /// that writes [`progress_sums!`]: that statement then reads every shard committed before it.
-async fn lock_job(dialect: &Dialect, tx: &mut Tx, job: &str) -> StoreResult<()> {
+pub(super) async fn lock_job(dialect: &Dialect, tx: &mut Tx, job: &str) -> StoreResult<()> {
     if let Some(lock) = dialect.lock_job {
         Sql::new(lock).bind(job).fetch_optional(&mut *tx).await?;
     }

@@ -148,6 +148,9 @@ impl Store {
             return Ok(None);
         };
         let finished_at = super::queue::now_or(self.dialect(), &mut tx, at).await?;
+        // The job's row before its groups' rows, in the order a cancel and a claim that fails
+        // the job take them: dropping the groups first deadlocked with a cancel (a review).
+        super::queue::lock_job(self.dialect(), &mut tx, fence.job.as_str()).await?;
         // The groups' accumulators go, unless the rows leave them in the shards; those left
         // count towards the job's stored bytes.
         if !result.groups_in_shards {
