@@ -1688,6 +1688,22 @@ async fn a_connection_postgresql_ended_is_unreachable(url: &str) {
         .execute(&mut admin)
         .await;
     assert!(!StoreError::from(refused.unwrap_err()).is_unreachable());
+    // A statement timeout (57014, class 57 as a shutdown is) fails the same way next time: a
+    // shard whose Result's write always met one waited for the database for ever (found from
+    // a review), where it counts as a failed run and fails its job at the retry limit.
+    sqlx::query("SET statement_timeout = 1")
+        .execute(&mut admin)
+        .await
+        .unwrap();
+    let timed_out = sqlx::query("SELECT pg_sleep(1)")
+        .execute(&mut admin)
+        .await
+        .unwrap_err();
+    let code = timed_out.as_database_error().and_then(|e| e.code());
+    assert_eq!(code.as_deref(), Some("57014"), "{timed_out}");
+    assert!(!StoreError::from(timed_out).is_unreachable());
+    let unsendable = sqlx::Error::Protocol("too many arguments for query: 65536".into());
+    assert!(!StoreError::from(unsendable).is_unreachable());
 }
 
 /// SQLite's full file (here its page limit) is the disk's state, as PostgreSQL's `disk_full`.

@@ -171,11 +171,14 @@ impl StoreError {
     }
 
     /// Whether no connection reached the database (none free in the pool in time, refused,
-    /// reset, cut short), PostgreSQL ended it or does not take one yet (SQLSTATE classes 08,
-    /// connection exceptions, and 57: an administrator's shutdown, a server starting: a
-    /// restart), or SQLite's file stayed locked by another process for all of `busy_timeout`:
-    /// unlike an error the database itself reports (a full disk, a refused statement), nothing
+    /// reset, cut short, its name not found yet), PostgreSQL ended it or does not take one yet
+    /// (SQLSTATE class 08, connection exceptions, but for a protocol violation; 57P01-57P03 and
+    /// 57P05: a shutdown, a crash, a server starting, an idle session ended), or SQLite's file
+    /// stayed locked by another process for all of `busy_timeout`: unlike an error the database
+    /// itself reports (a full disk, a refused statement, a statement timeout, 57014), nothing
     /// says the write would fail once one does. Also met migrating the database at start-up.
+    /// Not sqlx's protocol errors: a message it cannot read, or a query it cannot send (too
+    /// many arguments), fails the same way every time, and waiting for it would never end.
     pub fn is_unreachable(&self) -> bool {
         let error = match self {
             StoreError::Database(error)
@@ -189,7 +192,6 @@ impl StoreError {
             sqlx::Error::PoolTimedOut
             | sqlx::Error::PoolClosed
             | sqlx::Error::Io(_)
-            | sqlx::Error::Protocol(_)
             | sqlx::Error::WorkerCrashed => true,
             sqlx::Error::Database(error) => {
                 match error.try_downcast_ref::<sqlx::sqlite::SqliteError>() {
@@ -197,9 +199,10 @@ impl StoreError {
                         .and_then(|code| code.parse::<i32>().ok())
                         // SQLITE_BUSY and its extended codes.
                         .is_some_and(|code| code & 0xff == 5),
-                    None => error
-                        .code()
-                        .is_some_and(|code| code.starts_with("08") || code.starts_with("57")),
+                    None => error.code().is_some_and(|code| {
+                        (code.starts_with("08") && code != "08P01")
+                            || ["57P01", "57P02", "57P03", "57P05"].contains(&code.as_ref())
+                    }),
                 }
             }
             _ => false,
