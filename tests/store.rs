@@ -207,26 +207,31 @@ async fn a_key_creates_once_and_refuses_another_body_for_24_hours(url: &str) {
     let store = store::open(url).await.unwrap();
     let key = IdempotencyKey::new("retry-1", "body A").unwrap();
     let Some(Once::Created(job)) = store
-        .insert_job_once(queued(1), QueueBound::total(10), &key, UnixMs(1000))
+        .insert_job_once(queued(1), QueueBound::total(10), &key, Some(UnixMs(1000)))
         .await
         .unwrap()
     else {
         panic!("the first use of a key creates");
     };
     let again = store
-        .insert_job_once(queued(2), QueueBound::total(10), &key, UnixMs(2000))
+        .insert_job_once(queued(2), QueueBound::total(10), &key, Some(UnixMs(2000)))
         .await;
     assert_eq!(again.unwrap(), Some(Once::Replayed(job)));
     assert_eq!(store.queue_depth().await.unwrap(), (1, 0));
     let other_body = IdempotencyKey::new("retry-1", "body B").unwrap();
     let reused = store
-        .insert_job_once(queued(3), QueueBound::total(10), &other_body, UnixMs(3000))
+        .insert_job_once(
+            queued(3),
+            QueueBound::total(10),
+            &other_body,
+            Some(UnixMs(3000)),
+        )
         .await;
     assert_eq!(reused.unwrap(), Some(Once::KeyReused));
     let theirs = Job::from_json(r#"{"devices": 2, "operations": 3}"#, || 4).unwrap();
     let theirs = QueuedJob::new(&theirs, Owner::of_key("another key"), None, UnixMs(1));
     let created = store
-        .insert_job_once(theirs, QueueBound::total(10), &key, UnixMs(3000))
+        .insert_job_once(theirs, QueueBound::total(10), &key, Some(UnixMs(3000)))
         .await;
     assert!(
         matches!(created.unwrap(), Some(Once::Created(_))),
@@ -234,7 +239,12 @@ async fn a_key_creates_once_and_refuses_another_body_for_24_hours(url: &str) {
     );
     let a_day_later = UnixMs(1000 + KEY_LIFETIME_MS + 1);
     let fresh = store
-        .insert_job_once(queued(4), QueueBound::total(10), &other_body, a_day_later)
+        .insert_job_once(
+            queued(4),
+            QueueBound::total(10),
+            &other_body,
+            Some(a_day_later),
+        )
         .await;
     assert!(
         matches!(fresh.unwrap(), Some(Once::Created(_))),
@@ -243,7 +253,7 @@ async fn a_key_creates_once_and_refuses_another_body_for_24_hours(url: &str) {
 
     let schedule = nightly("s1", "2026-11-22T03:00:00Z");
     let created = store
-        .insert_schedule_once(&schedule, SCHEDULES, &key, UnixMs(1))
+        .insert_schedule_once(&schedule, SCHEDULES, &key, Some(UnixMs(1)))
         .await;
     assert!(
         matches!(created.unwrap(), Once::Created(_)),
@@ -257,13 +267,13 @@ async fn a_key_creates_once_and_refuses_another_body_for_24_hours(url: &str) {
     };
     let retry = nightly("s2", "2026-11-22T03:00:00Z");
     let replayed = store
-        .insert_schedule_once(&retry, one, &key, UnixMs(2))
+        .insert_schedule_once(&retry, one, &key, Some(UnixMs(2)))
         .await
         .unwrap();
     assert!(matches!(replayed, Once::Replayed(s) if s.id == schedule.id));
     let new_key = IdempotencyKey::new("retry-2", "body C").unwrap();
     let refused = store
-        .insert_schedule_once(&retry, one, &new_key, UnixMs(3))
+        .insert_schedule_once(&retry, one, &new_key, Some(UnixMs(3)))
         .await;
     assert!(matches!(
         refused,
@@ -304,7 +314,7 @@ async fn retries_racing_a_schedules_delete_make_it_once(url: &str) {
     for round in 0..20 {
         let key = IdempotencyKey::new(&format!("racing-{round}"), "body").unwrap();
         let first = nightly(&format!("r{round}"), "2026-11-22T03:00:00Z");
-        let created = store.insert_schedule_once(&first, SCHEDULES, &key, UnixMs(1));
+        let created = store.insert_schedule_once(&first, SCHEDULES, &key, Some(UnixMs(1)));
         assert!(matches!(created.await.unwrap(), Once::Created(_)));
         let retries: Vec<_> = (0..8)
             .map(|n| {
@@ -312,7 +322,7 @@ async fn retries_racing_a_schedules_delete_make_it_once(url: &str) {
                 let retry = nightly(&format!("r{round}-{n}"), "2026-11-22T03:00:00Z");
                 tokio::spawn(async move {
                     store
-                        .insert_schedule_once(&retry, SCHEDULES, &key, UnixMs(2))
+                        .insert_schedule_once(&retry, SCHEDULES, &key, Some(UnixMs(2)))
                         .await
                 })
             })
@@ -2560,6 +2570,75 @@ async fn postgres_keeps_every_promise() {
     a_dropped_store_closes_every_connection(&cluster.database("dropped")).await;
     compressed_accumulators_are_stored_without_pglz(&cluster.database("storage")).await;
     postgres_says_why_it_gives_no_connection(&cluster.database("why")).await;
+}
+
+/// A database whose clock runs an hour ahead of this machine's judges an idempotency key's age
+/// and the schedules' due times by its own clock, which every instance shares. Each instance's
+/// own clock did: a key stored by a node 10 minutes slow was forgotten by one 23 h 55 min ahead
+/// (its retry made a second job), and a node 10 minutes fast ran each due time 10 minutes early
+/// (a probe with libfaketime).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn postgres_judges_keys_and_due_times_on_its_own_clock() {
+    let Some(cluster) = Postgres::start_with_clock(&temp_dir("store-clock"), "+1h") else {
+        return;
+    };
+    let store = store::open(&cluster.database("clock")).await.unwrap();
+    let machine = UnixMs::now();
+    let database = store.now().await.unwrap();
+    let ahead = database.0 - machine.0;
+    assert!((3_500_000..3_700_000).contains(&ahead), "{ahead} ms");
+
+    // Stamped on the database's clock: 23 h 30 min old by a clock 24 h 30 min past this machine's.
+    let key = IdempotencyKey::new("clock", r#"{"devices": 2}"#).unwrap();
+    let bound = QueueBound::total(10);
+    let first = store.insert_job_once(queued(1), bound, &key, None).await;
+    let Some(Once::Created(first)) = first.unwrap() else {
+        panic!("the key's first job");
+    };
+    let retried_at = machine.plus_ms(KEY_LIFETIME_MS + 30 * 60 * 1000);
+    let retry = store
+        .insert_job_once(queued(2), bound, &key, Some(retried_at))
+        .await;
+    match retry.unwrap() {
+        Some(Once::Replayed(job)) => assert_eq!(job.id, first.id),
+        other => panic!("the first job, replayed: {other:?}"),
+    }
+
+    // Due this minute by the database's clock, an hour from now by this machine's: the
+    // scheduler runs it at once, for the database's due time (with 10 s to spare in the minute).
+    let mut database = store.now().await.unwrap();
+    if database.0 % 60_000 > 50_000 {
+        let rest = 60_000 - database.0 % 60_000 + 500;
+        tokio::time::sleep(Duration::from_millis(rest as u64)).await;
+        database = store.now().await.unwrap();
+    }
+    let minute = UnixMs(database.0 / 60_000 * 60_000);
+    let mut every_minute = nightly("every-minute", &minute.to_rfc3339());
+    every_minute.definition.cron = "* * * * *".to_owned();
+    store
+        .insert_schedule(&every_minute, SCHEDULES)
+        .await
+        .unwrap();
+    let (stop, stopped) = watch::channel(false);
+    let scheduler = tokio::spawn(bouncewear::scheduler::run(
+        Arc::clone(&store),
+        queue(QueueBound::total(10)),
+        Arc::new(Notify::new()),
+        stopped,
+    ));
+    let started = std::time::Instant::now();
+    let runs = loop {
+        let runs = store.runs(&every_minute.id, 10).await.unwrap();
+        if !runs.is_empty() || started.elapsed() > Duration::from_secs(10) {
+            break runs;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    stop.send(true).unwrap();
+    scheduler.await.unwrap();
+    assert_eq!(runs.len(), 1, "one run, within 10 s: {runs:?}");
+    assert_eq!(runs[0].scheduled_for, minute, "the database's due time");
+    assert_eq!(skipped(&store, &every_minute).await.0, 0, "nothing skipped");
 }
 
 /// A pool that gets no connection says only that it timed out: the store asks PostgreSQL itself

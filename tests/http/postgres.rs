@@ -224,7 +224,10 @@ fn a_jobs_times_are_the_databases_whatever_the_workers_clock() {
     let Some(cluster) = Postgres::start_with_clock(&temp_dir("http-postgres-clock"), "+1h") else {
         return;
     };
-    let server = TestApp::on(&cluster.database("clock"), &[]);
+    let server = TestApp::on(
+        &cluster.database("clock"),
+        &["--min-schedule-interval-seconds", "60"],
+    );
     // 3e6 operations: sharded, the Result stored by a merge step.
     let id = server.submit(&scattered_job(3000, 1000, 3));
     let job = server.wait_for(&id, "succeeded", Duration::from_secs(120));
@@ -260,4 +263,36 @@ fn a_jobs_times_are_the_databases_whatever_the_workers_clock() {
         (3_500_000..3_700_000).contains(&ahead),
         "{ahead} ms: {cancelled}"
     );
+    // A schedule's next run and a manual run's time are the database's too, as the scheduler
+    // reads due times (a node 10 minutes fast ran each one 10 minutes early, a probe).
+    let schedule = post(
+        &server.url("/v1/schedules"),
+        &json!({"name": "each minute", "cron": "* * * * *", "template": {"devices": 2, "operations": 2, "seed": 3}})
+            .to_string(),
+        None,
+    );
+    assert_eq!(schedule.status, 201, "{}", schedule.body);
+    let schedule = schedule.json();
+    let next = rfc3339_ms(&schedule["next_run_at"]);
+    let ahead = next - chrono::Utc::now().timestamp_millis();
+    assert!(
+        (3_500_000..3_700_000).contains(&ahead),
+        "{ahead} ms: {schedule}"
+    );
+    let id = schedule["id"].as_str().unwrap();
+    let run = post(&server.url(&format!("/v1/schedules/{id}/run")), "", None);
+    assert_eq!(run.status, 202, "{}", run.body);
+    let runs = get(&server.url(&format!("/v1/schedules/{id}/runs")), None).json();
+    let manual = rfc3339_ms(&runs["runs"][0]["scheduled_for"]);
+    let ahead = manual - chrono::Utc::now().timestamp_millis();
+    assert!(
+        (3_500_000..3_700_000).contains(&ahead),
+        "{ahead} ms: {runs}"
+    );
+}
+
+fn rfc3339_ms(time: &serde_json::Value) -> i64 {
+    chrono::DateTime::parse_from_rfc3339(time.as_str().unwrap())
+        .unwrap()
+        .timestamp_millis()
 }

@@ -208,7 +208,7 @@ pub async fn submit_job(
     let new = QueuedJob::new(&job, owner, job.spec().name.clone(), now);
     let bound = state.config.queue_bound();
     let once = match key {
-        Some(key) => state.store.insert_job_once(new, bound, &key, now).await?,
+        Some(key) => state.store.insert_job_once(new, bound, &key, None).await?,
         None => state.store.insert_job(new, bound).await?.map(Once::Created),
     };
     match once.ok_or(ApiError::QueueFull(bound))? {

@@ -175,14 +175,15 @@ pub async fn create_schedule(
 ) -> Result<Response, ApiError> {
     let key = idempotency_key(&headers, &body)?;
     let valid = ValidSchedule::parse(&body, state.config.schedule_limits(), Utc::now())?;
-    let now = UnixMs::now();
+    // Due times are the database's, as the scheduler reads them (`Store::now`).
+    let now = state.store.now().await?;
     let record = record(valid, ScheduleId::generate(), owner, now, now);
     let bound = state.config.schedule_bound();
     let once = match key {
         Some(key) => {
             state
                 .store
-                .insert_schedule_once(&record, bound, &key, now)
+                .insert_schedule_once(&record, bound, &key, None)
                 .await?
         }
         None => {
@@ -291,7 +292,7 @@ pub async fn replace_schedule(
     // a scheduler moves it once a due time.
     for _ in 0..REPLACE_TRIES {
         let valid = ValidSchedule::parse(&body, state.config.schedule_limits(), Utc::now())?;
-        let now = UnixMs::now();
+        let now = state.store.now().await?;
         let next_run_at = valid.next_run_replacing(&existing.definition, existing.next_run_at, now);
         let record = ScheduleRecord {
             next_run_at,
@@ -363,7 +364,7 @@ pub async fn run_schedule_now(
     Path(id): Path<ScheduleId>,
 ) -> Result<Response, ApiError> {
     let schedule = state.store.schedule(&owner, &id).await?;
-    let now = UnixMs::now();
+    let now = state.store.now().await?;
     // A manual run is keyed by its own time; two in the same millisecond take the next one, and
     // none takes a due time, its scheduled run's.
     for offset in 0..MANUAL_RUN_SLOTS {

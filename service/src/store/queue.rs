@@ -384,17 +384,21 @@ impl Store {
     }
 
     /// As [`Store::insert_job`], once per key of the job's owner: a key used within 24 hours
-    /// (before `now`) gives the job it created, or [`Once::KeyReused`] for another body. The key
-    /// is remembered only with a job (a full queue leaves it unused).
+    /// (before `at`, or the database's clock) gives the job it created, or [`Once::KeyReused`]
+    /// for another body. The key is remembered only with a job (a full queue leaves it unused).
+    /// Its age is the database's to judge: stored and read on each instance's own clock, a key
+    /// stored by a node 10 minutes slow was forgotten by one 23 h 55 min ahead, and its retry
+    /// made a second job (a probe).
     #[tracing::instrument(skip_all, fields(job = %job.id))]
     pub async fn insert_job_once(
         &self,
         job: QueuedJob,
         bound: QueueBound,
         key: &IdempotencyKey,
-        now: UnixMs,
+        at: Option<UnixMs>,
     ) -> StoreResult<Option<Once<JobRecord>>> {
         let mut tx = self.begin().await?;
+        let now = now_or(self.dialect(), &mut tx, at).await?;
         let owner = &job.owner;
         let read = async |tx: &mut Tx, id| select_job(tx, owner, &JobId::from(id)).await;
         let replayed = self.replayed(&mut tx, (owner, "jobs"), key, now, read);
@@ -989,6 +993,15 @@ impl Store {
             count_from_sql(&row, "queued")?,
             count_from_sql(&row, "running")?,
         ))
+    }
+
+    /// The database's clock, which leases, a job's start and end, idempotency keys and the
+    /// schedules' due times are judged by: instances whose clocks disagree agree on them.
+    pub async fn now(&self) -> StoreResult<UnixMs> {
+        let row = Sql::new(self.dialect().now)
+            .fetch_one(self.readers())
+            .await?;
+        Ok(UnixMs(row.int("now")?))
     }
 
     #[tracing::instrument(skip_all)]

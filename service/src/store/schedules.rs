@@ -98,10 +98,11 @@ impl Store {
         schedule: &ScheduleRecord,
         bound: ScheduleBound,
         key: &IdempotencyKey,
-        now: UnixMs,
+        at: Option<UnixMs>,
     ) -> StoreResult<Once<ScheduleRecord>> {
         let owner = &schedule.owner;
         let mut tx = self.begin_reading_first().await?;
+        let now = super::queue::now_or(self.dialect(), &mut tx, at).await?;
         let read = async |tx: &mut Tx, id| select_schedule(tx, owner, &ScheduleId::from(id)).await;
         let replayed = self.replayed(&mut tx, (owner, "schedules"), key, now, read);
         if let Some(once) = replayed.await? {
