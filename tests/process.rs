@@ -180,6 +180,28 @@ fn serve_refuses_a_public_bind_without_keys() {
     assert!(String::from_utf8_lossy(&output.stderr).contains("--api-key"));
 }
 
+/// A server whose open-file limit leaves no room for connections beside the descriptors it keeps
+/// refuses to start, saying which limit and how much: under `ulimit -n 16` it said it listened
+/// and accepted no connection at all, and under 12 it blamed the database's file (found from
+/// outside).
+#[test]
+fn serve_refuses_an_open_file_limit_without_room_for_connections() {
+    for limit in [12, 64] {
+        let output = Command::new("sh")
+            .arg("-c")
+            .arg(format!(
+                "ulimit -n {limit} && exec {BIN} serve --bind 127.0.0.1:0 --database sqlite::memory:"
+            ))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(1), "{stderr}");
+        let said = format!("open-file limit (RLIMIT_NOFILE, `ulimit -n`) is {limit}");
+        assert!(stderr.contains(&said), "{stderr}");
+        assert!(stderr.contains("raise it to at least 136"), "{stderr}");
+    }
+}
+
 /// A database URL of a scheme no backend takes is a bad command line (exit 2, the contract's
 /// "Exit codes"), as a public bind without keys is; it exited 1.
 #[test]

@@ -39,6 +39,8 @@ pub enum StartupError {
     },
     #[error("--workers must be at least 1 for a worker process")]
     NoWorkers,
+    #[error("{0}")]
+    OpenFiles(String),
 }
 
 /// `error` after `what: `, unless it says so already (a database's own error begins
@@ -91,6 +93,7 @@ impl Application {
         if key_owners.is_empty() && !config.bind.ip().is_loopback() {
             return Err(StartupError::PublicWithoutKeys(config.bind));
         }
+        connections::check_open_file_limit().map_err(StartupError::OpenFiles)?;
         // The address first: a port in use is refused before the database file is created.
         let listener =
             TcpListener::bind(config.bind)

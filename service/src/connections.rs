@@ -26,6 +26,27 @@ use tokio::task::JoinSet;
 /// shared memory, the log, `/proc` reads for the process metrics.
 const RESERVED_FDS: u64 = 128;
 
+/// The fewest connections a server starts with: one event stream must not leave `/healthz` and
+/// every other request waiting in the backlog.
+const MIN_CONNECTIONS: u64 = 8;
+
+/// Refuses an open-file limit that leaves no room for connections beside [`RESERVED_FDS`]: under
+/// `ulimit -n 16` the server said it listened and accepted no connection at all, its 17
+/// descriptors at rest already over the limit, and under 12 it blamed the database's file (found
+/// from outside). The soft limit stays as it is: the default `--max-connections` follows it.
+pub fn check_open_file_limit() -> Result<(), String> {
+    match open_file_limit() {
+        Some(limit) if limit < RESERVED_FDS + MIN_CONNECTIONS => Err(format!(
+            "the open-file limit (RLIMIT_NOFILE, `ulimit -n`) is {limit}: the server keeps \
+             {RESERVED_FDS} descriptors for the database, the log and the process metrics and \
+             needs room for {MIN_CONNECTIONS} connections or more beside them; raise it to at \
+             least {}",
+            RESERVED_FDS + MIN_CONNECTIONS
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// What each connection may take.
 #[derive(Debug, Clone, Copy)]
 pub struct ConnectionLimits {
