@@ -123,15 +123,23 @@ fn a_second_sigterm_ends_a_graceful_stop_at_once() {
     drop(writer);
 }
 
+/// SIGTERM, and SIGHUP as it (a hang-up ended the process at once, its default action; found
+/// from outside).
 #[test]
 fn sigterm_hands_a_running_job_back_to_the_queue() {
-    let database = temp_db("sigterm");
+    for signal in ["-TERM", "-HUP"] {
+        stopping_hands_a_running_job_back_to_the_queue(signal);
+    }
+}
+
+fn stopping_hands_a_running_job_back_to_the_queue(signal: &str) {
+    let database = temp_db(&format!("stopped-by{signal}"));
     let server = Spawned::start(&database, &[]);
     let id = server.submit(&scattered_job(200_000, 1000, 3));
     server.wait_for(&id, "running", Duration::from_secs(10));
     let pid = server.child.id();
     let status = Command::new("kill")
-        .args(["-TERM", &pid.to_string()])
+        .args([signal, &pid.to_string()])
         .status()
         .unwrap();
     assert!(status.success());

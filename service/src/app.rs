@@ -382,7 +382,8 @@ async fn report_queue_depth(store: Arc<Store>, metrics: PrometheusHandle) {
     }
 }
 
-/// The first SIGINT or SIGTERM, which starts a graceful stop; a second one then ends the process
+/// The first SIGINT, SIGTERM or SIGHUP, which starts a graceful stop (a hang-up, the terminal
+/// that started it closed, ended the process at once: the default action); a second one then ends the process
 /// at once, as an operator who sends it asks: the queue loses nothing by it (what was
 /// acknowledged is in the database; running shards go back to the queue as their leases expire).
 async fn wait_for_signal() {
@@ -401,19 +402,23 @@ async fn one_signal() {
         let _ = tokio::signal::ctrl_c().await;
     };
     #[cfg(unix)]
-    let terminate = async {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut signal) => {
-                signal.recv().await;
-            }
-            Err(_) => std::future::pending::<()>().await,
+    let received = async |kind| match tokio::signal::unix::signal(kind) {
+        Ok(mut signal) => {
+            signal.recv().await;
         }
+        Err(_) => std::future::pending::<()>().await,
     };
+    #[cfg(unix)]
+    let (terminate, hang_up) = (
+        received(tokio::signal::unix::SignalKind::terminate()),
+        received(tokio::signal::unix::SignalKind::hangup()),
+    );
     #[cfg(not(unix))]
-    let terminate = std::future::pending::<()>();
+    let (terminate, hang_up) = (std::future::pending::<()>(), std::future::pending::<()>());
     tokio::select! {
         () = interrupt => {}
         () = terminate => {}
+        () = hang_up => {}
     }
 }
 
