@@ -264,6 +264,10 @@ await step("the candidate fits are listed with Anderson-Darling", () =>
   page.waitForFunction(() => [4, 5].includes(document.querySelectorAll("#fits-table tbody tr").length)
     && document.querySelector("#fits-table thead").textContent.includes("Anderson-Darling")),
 );
+await step("B1 and B10 read off the Kaplan-Meier curve are listed", () =>
+  page.waitForFunction(() => [...document.querySelectorAll("#life-table tbody tr")]
+    .filter((row) => row.textContent.includes("Kaplan-Meier, no model")).length === 2),
+);
 await page.waitForTimeout(300);
 await step("save dashboard-life.png", () =>
   page.locator("#life-section").screenshot({ path: join(outDir, "dashboard-life.png") }),
@@ -307,7 +311,8 @@ const compareRows = await step("the comparison tables are filled", async () => {
   await page.waitForFunction(() => document.querySelectorAll("#compare-life-table tbody tr").length >= 3);
   return page.$$eval("#compare-table tbody tr, #compare-life-table tbody tr", (rows) => rows.map((r) => r.textContent));
 });
-if (!compareRows.some((r) => r.includes("outlasts")) || !compareRows.some((r) => r.startsWith("B10"))) {
+if (!compareRows.some((r) => r.includes("outlasts")) || !compareRows.some((r) => r.startsWith("B10"))
+  || !compareRows.some((r) => r.startsWith("B10, operations (Kaplan-Meier)"))) {
   await fail(`the comparison lists ${compareRows.join(" | ")}`);
 }
 if (!page.url().includes(`#`) || !page.url().includes(`compare=${otherDesign.id}`)) {

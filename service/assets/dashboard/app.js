@@ -971,6 +971,12 @@
         if (b) rows.push([label + " (Fisher bounds)", fmt(b.value), fmtInterval(b.ci95)]);
         if (b && b.lr_ci95) rows.push([label + " (likelihood-ratio bounds)", fmt(b.value), fmtInterval(b.lr_ci95)]);
       }
+      // Read off the Kaplan-Meier curve, no distribution assumed; a bound past the test is open.
+      for (const [label, b] of [["B1, operations", analysis.b1_observed], ["B10, operations", analysis.b10_observed]]) {
+        if (!b) continue;
+        const end = (x) => (x === null || x === undefined ? "past the test" : fmt(x));
+        rows.push([label + " (Kaplan-Meier, no model)", end(b.value), "[" + end(b.ci95[0]) + ", " + end(b.ci95[1]) + "]"]);
+      }
       const table = $("#life-table");
       if (!w) {
         table.replaceChildren(el("tbody", {}, el("tr", {}, el("td", { class: "error-text" },
@@ -1160,7 +1166,11 @@
       if (life) {
         injectSvg($("#plot-compare-weibull"), path + "/plots/weibull.svg");
         const lifeRows = (life.b_lives || []).map((b) => el("tr", {},
-          el("td", {}, "B" + fmt(100 * b.p) + ", operations"), ...both(b).map((v) => el("td", { class: "num" }, v))));
+          el("td", {}, "B" + fmt(100 * b.p) + ", operations (Weibull)"), ...both(b).map((v) => el("td", { class: "num" }, v))));
+        for (const b of life.b_lives_observed || []) {
+          lifeRows.push(el("tr", {}, el("td", {}, "B" + fmt(100 * b.p) + ", operations (Kaplan-Meier)"),
+            ...both(b).map((v) => el("td", { class: "num" }, v))));
+        }
         const o = life.outlasts || {};
         const modelled = o.weibull === null || o.weibull === undefined ? "–"
           : fmt(o.weibull, 4) + " " + fmtInterval(o.weibull_ci95);
