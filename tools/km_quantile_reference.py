@@ -6,7 +6,8 @@ bounds on `F = 1 - R` are Clopper and Pearson's (scipy's beta quantiles) at Gree
 sample size `n* = F (1 - F) / var(F)` with `F n*` events (Korn & Graubard 1998; Wilson's score
 interval where both counts are 100 or more, as the engine's `proportion_interval`), and the
 B-life's bounds are the first failure times at which the upper and the lower bound reach `p`
-(Brookmeyer & Crowley 1982), the lower one 0 where the bound before any failure reaches it. Prints the values that `model/src/life.rs`'s tests hold, for the
+(Brookmeyer & Crowley 1982), the lower one 0 where the bound before any failure reaches it.
+Where all at risk fail (R = 0), the bounds are those of n of n at the effective size before. Prints the values that `model/src/life.rs`'s tests hold, for the
 6-MP arm of Freireich et al. (1963) as Klein & Moeschberger give it.
 
     python3 tools/km_quantile_reference.py
@@ -35,7 +36,8 @@ def curve(lives):
     times = sorted({t for t, failed in lives if failed})
     # Before the first failure: none of the devices then at risk has failed.
     first_at_risk = sum(1 for s, _ in lives if s >= times[0])
-    points, reliability, greenwood = [(0.0, 0.0, proportion_bounds(0.0, first_at_risk)[1], 0.0)], 1.0, 0.0
+    effective = first_at_risk
+    points, reliability, greenwood = [(0.0, 0.0, proportion_bounds(0.0, effective)[1], 0.0)], 1.0, 0.0
     for t in times:
         at_risk = sum(1 for s, _ in lives if s >= t)
         deaths = sum(1 for s, failed in lives if s == t and failed)
@@ -44,9 +46,9 @@ def curve(lives):
         f = 1 - reliability
         variance = reliability ** 2 * greenwood
         if 0 < variance < math.inf:
-            lower, upper = proportion_bounds(f, f * reliability / variance)
-        else:
-            lower = upper = f
+            effective = f * reliability / variance
+        # All at risk failed (R = 0): n of n of the effective devices before.
+        lower, upper = proportion_bounds(f, effective)
         points.append((t, f, upper, lower))
     return points
 

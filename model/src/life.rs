@@ -673,18 +673,21 @@ pub fn observed_b_life(kaplan_meier: &[KaplanMeierPoint], p: f64) -> Option<Obse
     // Before the first failure none of its devices at risk has failed, which bounds `1 - R`
     // there too: where that bound reaches `p` already, the lower bound on `B_p` is 0 (with 300
     // devices and p = 0.01 a sample has no failure below B1 in 4.9 % of draws).
-    let [_, none_yet] = proportion_interval(0.0, first.at_risk as f64, Z_975);
+    let mut effective = first.at_risk as f64;
+    let [_, none_yet] = proportion_interval(0.0, effective, Z_975);
     let mut greenwood = 0.0;
     let bounds: Vec<_> = std::iter::once((0.0, [0.0, none_yet, 0.0]))
         .chain(kaplan_meier.iter().map(|point| {
             let failed = 1.0 - point.reliability;
             greenwood += greenwood_term(point.at_risk as u64, point.failures as u64);
             let variance = point.reliability * point.reliability * greenwood;
-            let [lower, upper] = if variance > 0.0 && variance.is_finite() {
-                proportion_interval(failed, failed * point.reliability / variance, Z_975)
-            } else {
-                [failed; 2] // All at risk failed: R = 0 is known.
-            };
+            if variance > 0.0 && variance.is_finite() {
+                effective = failed * point.reliability / variance;
+            }
+            // Where all at risk failed (R = 0, Greenwood's variance undefined), every one of the
+            // effective devices before has: n of n, whose lower bound is 0.025^(1/n), not 1 (a
+            // single device's B10 was bounded by its own life, found from outside).
+            let [lower, upper] = proportion_interval(failed, effective, Z_975);
             (point.time, [failed, upper, lower])
         }))
         .collect();
@@ -1329,10 +1332,16 @@ mod tests {
             assert_eq!(observed.value, Some(value), "p = {p}");
             assert_eq!(observed.ci95, ci95.map(Some), "p = {p}");
         }
-        // Every device failed: the last step's R = 0 is its own bound.
+        // Every device failed: two of two bound 1 - R from below at 0.025^(1/2) = 0.16 only, so
+        // B90's upper bound lies past the test; one device bounds no B10 from above.
         let all = kaplan_meier(&[(1.0, true), (2.0, true)]).unwrap();
         let b = observed_b_life(&all, 0.9).unwrap();
-        assert_eq!((b.value, b.ci95[1]), (Some(2.0), Some(2.0)));
+        assert_eq!((b.value, b.ci95), (Some(2.0), [Some(1.0), None]));
+        let b = observed_b_life(&all, 0.15).unwrap();
+        assert_eq!((b.value, b.ci95), (Some(1.0), [Some(0.0), Some(2.0)]));
+        let one = kaplan_meier(&[(100.0, true)]).unwrap();
+        let b = observed_b_life(&one, 0.1).unwrap();
+        assert_eq!((b.value, b.ci95), (Some(100.0), [Some(0.0), None]));
     }
 
     /// The observed B-lives' bounds hold the population's own B-life, whatever its distribution,

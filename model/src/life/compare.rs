@@ -124,9 +124,12 @@ pub fn compare_lives(
                 difference: difference(ea, eb),
             }),
             None => notes.push(format!(
-                "the B-life at p = {p} read off the Kaplan-Meier curves: design {}'s does not \
-                 reach it within its test",
-                if ea.is_none() { "a" } else { "b" }
+                "the B-life at p = {p} read off the Kaplan-Meier curves: {} within the test",
+                match (ea, eb) {
+                    (None, None) => "neither design's reaches it",
+                    (None, _) => "design a's does not reach it",
+                    _ => "design b's does not reach it",
+                }
             )),
         }
     }
@@ -645,7 +648,7 @@ mod tests {
         );
         assert!(c.b_lives_observed.is_empty());
         assert!(
-            c.notes[1].contains("p = 0.1 read off the Kaplan-Meier curves: design a's"),
+            c.notes[1].contains("p = 0.1 read off the Kaplan-Meier curves: design a's does not"),
             "{:?}",
             c.notes
         );

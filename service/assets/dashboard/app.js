@@ -971,21 +971,21 @@
         if (b) rows.push([label + " (Fisher bounds)", fmt(b.value), fmtInterval(b.ci95)]);
         if (b && b.lr_ci95) rows.push([label + " (likelihood-ratio bounds)", fmt(b.value), fmtInterval(b.lr_ci95)]);
       }
-      // Read off the Kaplan-Meier curve, no distribution assumed; a bound past the test is open.
+      // Read off the Kaplan-Meier curve, no distribution assumed (with or without a fit); a
+      // bound past the test is open.
       for (const [label, b] of [["B1, operations", analysis.b1_observed], ["B10, operations", analysis.b10_observed]]) {
         if (!b) continue;
         const end = (x) => (x === null || x === undefined ? "past the test" : fmt(x));
         rows.push([label + " (Kaplan-Meier, no model)", end(b.value), "[" + end(b.ci95[0]) + ", " + end(b.ci95[1]) + "]"]);
       }
-      const table = $("#life-table");
+      const body = rows.map(([k, v, ci]) => el("tr", {}, el("td", {}, k), el("td", { class: "num" }, v), el("td", { class: "num" }, ci)));
       if (!w) {
-        table.replaceChildren(el("tbody", {}, el("tr", {}, el("td", { class: "error-text" },
-          "No Weibull fit: " + (analysis.weibull_error || "not available")))));
-        return;
+        body.unshift(el("tr", {}, el("td", { class: "error-text", colspan: "3" },
+          "No Weibull fit: " + (analysis.weibull_error || "not available"))));
       }
-      table.replaceChildren(
-        el("thead", {}, el("tr", {}, el("th", {}, "Weibull fit"), el("th", { class: "num" }, "estimate"), el("th", { class: "num" }, "95 % interval"))),
-        el("tbody", {}, rows.map(([k, v, ci]) => el("tr", {}, el("td", {}, k), el("td", { class: "num" }, v), el("td", { class: "num" }, ci)))));
+      $("#life-table").replaceChildren(
+        el("thead", {}, el("tr", {}, el("th", {}, "Weibull fit and B-lives"), el("th", { class: "num" }, "estimate"), el("th", { class: "num" }, "95 % interval"))),
+        el("tbody", {}, body));
     }
 
     // The candidate distributions, best first by AICc, with BIC and Anderson-Darling.
@@ -1182,7 +1182,8 @@
       } else {
         $("#compare-life-table").replaceChildren();
       }
-      $("#compare-notes").replaceChildren(...(comparison.notes || []).map((n) => el("li", {}, n)));
+      const notes = [...(comparison.notes || []), ...((comparison.life || {}).notes || [])];
+      $("#compare-notes").replaceChildren(...notes.map((n) => el("li", {}, n)));
     }
 
     function renderRun(result) {
