@@ -24,6 +24,25 @@ struct Cluster {
     env: Vec<(&'static str, String)>,
 }
 
+/// libfaketime names the semaphore and shared memory its processes share after the process that
+/// made them, and one killed leaves them in /dev/shm: a process of another user given that pid
+/// later cannot make its own, and exits. Those of processes no longer running go.
+fn remove_stale_faketime_files() {
+    let Ok(entries) = std::fs::read_dir("/dev/shm") else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        let pid = name
+            .strip_prefix("sem.faketime_sem_")
+            .or_else(|| name.strip_prefix("faketime_shm_"));
+        if pid.is_some_and(|pid| !Path::new("/proc").join(pid).exists()) {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
 /// Debian's libfaketime (package `faketime`), which sets a process's clock apart: in the
 /// directory of this machine's multiarch triplet (`/usr/lib/x86_64-linux-gnu/faketime`, ...).
 fn faketime() -> Option<PathBuf> {
@@ -80,6 +99,7 @@ impl Postgres {
             eprintln!("\n*** SKIPPED: no libfaketime (Debian: apt install faketime). ***\n");
             return None;
         };
+        remove_stale_faketime_files();
         let env = vec![
             ("LD_PRELOAD", library.display().to_string()),
             ("FAKETIME", offset.to_owned()),
@@ -228,18 +248,29 @@ impl Cluster {
         );
     }
 
+    /// The environment (libfaketime's) goes to the program alone, set by `env` once `runuser` has
+    /// become `postgres`: given to `runuser`, root's libfaketime made the semaphore its children
+    /// share, which `postgres` may not open ("sem_open failed ... Permission denied", a CI run).
     fn output(&self, program: &str, args: &[&str]) -> std::process::Output {
         let program = self.bin.join(program);
+        let assignments = self
+            .env
+            .iter()
+            .map(|(name, value)| format!("{name}={value}"));
         let mut command = if running_as_root() {
             let mut command = Command::new("runuser");
-            command.args(["-u", "postgres", "--"]).arg(&program);
+            command
+                .args(["-u", "postgres", "--", "env"])
+                .args(assignments);
+            command.arg(&program);
             command
         } else {
-            Command::new(&program)
+            let mut command = Command::new("env");
+            command.args(assignments).arg(&program);
+            command
         };
         command
             .args(args)
-            .envs(self.env.iter().map(|(name, value)| (name, value)))
             .stdin(Stdio::null())
             .output()
             .unwrap_or_else(|e| panic!("{}: {e}", program.display()))
