@@ -231,11 +231,7 @@ fn a_jobs_times_are_the_databases_whatever_the_workers_clock() {
     // 3e6 operations: sharded, the Result stored by a merge step.
     let id = server.submit(&scattered_job(3000, 1000, 3));
     let job = server.wait_for(&id, "succeeded", Duration::from_secs(120));
-    let time = |field: &str| {
-        chrono::DateTime::parse_from_rfc3339(job[field].as_str().unwrap())
-            .unwrap()
-            .timestamp_millis()
-    };
+    let time = |field: &str| rfc3339_ms(&job[field]);
     let (created, started, finished) =
         (time("created_at"), time("started_at"), time("finished_at"));
     assert!(created <= started && started <= finished, "{job}");
@@ -255,10 +251,7 @@ fn a_jobs_times_are_the_databases_whatever_the_workers_clock() {
     // A cancel's end too (the API node stamped it with its own clock).
     let long = server.submit(&scattered_job(200_000, 1000, 4));
     let cancelled = delete(&server.url(&format!("/v1/jobs/{long}"))).json();
-    let finished = chrono::DateTime::parse_from_rfc3339(cancelled["finished_at"].as_str().unwrap())
-        .unwrap()
-        .timestamp_millis();
-    let ahead = finished - chrono::Utc::now().timestamp_millis();
+    let ahead = rfc3339_ms(&cancelled["finished_at"]) - chrono::Utc::now().timestamp_millis();
     assert!(
         (3_500_000..3_700_000).contains(&ahead),
         "{ahead} ms: {cancelled}"
@@ -291,6 +284,7 @@ fn a_jobs_times_are_the_databases_whatever_the_workers_clock() {
     );
 }
 
+/// A time of the API's, in milliseconds since the epoch.
 fn rfc3339_ms(time: &serde_json::Value) -> i64 {
     chrono::DateTime::parse_from_rfc3339(time.as_str().unwrap())
         .unwrap()
