@@ -30,7 +30,7 @@ const RESERVED_FDS: u64 = 128;
 /// every other request waiting in the backlog.
 const MIN_CONNECTIONS: u64 = 8;
 
-/// Refuses an open-file limit that leaves no room for connections beside [`RESERVED_FDS`]: under
+/// Refuses an open-file limit that leaves no room for connections beside `RESERVED_FDS`: under
 /// `ulimit -n 16` the server said it listened and accepted no connection at all, its 17
 /// descriptors at rest already over the limit, and under 12 it blamed the database's file (found
 /// from outside). The soft limit stays as it is: the default `--max-connections` follows it.
