@@ -1273,10 +1273,7 @@ mod tests {
             assert!((f - want).abs() < 1e-15, "{f} against {want}");
         }
 
-        let failed = [6, 6, 6, 7, 10, 13, 16, 22, 23].map(|t| (f64::from(t), true));
-        let censored =
-            [6, 9, 10, 11, 17, 19, 20, 25, 32, 32, 34, 35].map(|t| (f64::from(t), false));
-        let data: Vec<_> = censored.into_iter().chain(failed).collect();
+        let data = six_mp();
         let ranks = median_ranks(&kaplan_meier(&data).unwrap(), data.len());
         // One position per failure time: that of its last failure (three at t = 6).
         let expected = [
@@ -1302,15 +1299,21 @@ mod tests {
         assert!((ranks[9] - 9.7 / 10.4).abs() < 1e-15);
     }
 
-    /// B-lives read off the 6-MP arm's curve (Klein & Moeschberger's data, as the test above),
+    /// The 6-MP arm of Freireich et al. (1963), weeks of remission, as Klein & Moeschberger give
+    /// it: the censored times, then the failures.
+    fn six_mp() -> Vec<(f64, bool)> {
+        let failed = [6, 6, 6, 7, 10, 13, 16, 22, 23].map(|t| (f64::from(t), true));
+        let censored =
+            [6, 9, 10, 11, 17, 19, 20, 25, 32, 32, 34, 35].map(|t| (f64::from(t), false));
+        censored.into_iter().chain(failed).collect()
+    }
+
+    /// B-lives read off the 6-MP arm's curve ([`six_mp`]),
     /// against `tools/km_quantile_reference.py`'s own curve and inversion: the median 23 weeks
     /// with bounds 13 and beyond the study, as R's `survfit(conf.type = "log-log")` gives it.
     #[test]
     fn observed_b_lives_match_the_reference() {
-        let failed = [6, 6, 6, 7, 10, 13, 16, 22, 23].map(|t| (f64::from(t), true));
-        let censored =
-            [6, 9, 10, 11, 17, 19, 20, 25, 32, 32, 34, 35].map(|t| (f64::from(t), false));
-        let data: Vec<_> = censored.into_iter().chain(failed).collect();
+        let data = six_mp();
         let curve = kaplan_meier(&data).unwrap();
         let expected = [
             (0.1, Some(6.0), [Some(0.0), Some(13.0)]),
@@ -1403,10 +1406,7 @@ mod tests {
 
     #[test]
     fn kaplan_meier_matches_the_textbook_six_mp_example() {
-        let failed = [6, 6, 6, 7, 10, 13, 16, 22, 23].map(|t| (f64::from(t), true));
-        let censored =
-            [6, 9, 10, 11, 17, 19, 20, 25, 32, 32, 34, 35].map(|t| (f64::from(t), false));
-        let data: Vec<_> = censored.into_iter().chain(failed).collect();
+        let data = six_mp();
         let points = kaplan_meier(&data).unwrap();
         // (t, n, d, R exact, Greenwood standard error of R, log-log bounds)
         let expected = [
