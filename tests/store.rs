@@ -872,7 +872,8 @@ async fn a_job_runs_group_by_group_and_its_merge_gives_the_whole_result(url: &st
 }
 
 /// A Result of over a megabyte (a thousand bins' summaries), which the store puts back together
-/// and parses off the async threads, reads back as the job run whole gives it.
+/// and parses off the async threads, reads back as the job run whole gives it; its ends (what a
+/// schedule's trend reads) are the whole Result with each operation metric's last bin alone.
 async fn a_large_result_reads_back_whole(url: &str) {
     let store = store::open(url).await.unwrap();
     let text = r#"{"devices": 2, "operations": 100, "seed": 6, "bin_operations": 1}"#;
@@ -882,11 +883,24 @@ async fn a_large_result_reads_back_whole(url: &str) {
     assert!(stored.len() > 1 << 20, "{} bytes", stored.len());
     let parsed = store.result(&id).await.unwrap().unwrap();
     assert_eq!(serde_json::to_string(&parsed).unwrap(), stored);
-    let whole = run_job(&Job::from_json(text, || 0).unwrap(), &Silent).unwrap();
+    let mut whole = run_job(&Job::from_json(text, || 0).unwrap(), &Silent).unwrap();
     assert_eq!(
         without_timing(&stored),
         without_timing(&serde_json::to_string(&whole).unwrap())
     );
+    let ends = store.result_ends(&id).await.unwrap().unwrap();
+    for bins in whole.operations.values_mut() {
+        assert_eq!(bins.len(), 100);
+        bins.drain(..99);
+    }
+    let ends = serde_json::to_string(&ends).unwrap();
+    assert!(ends.len() < 1 << 17, "{} bytes", ends.len());
+    assert_eq!(
+        without_timing(&ends),
+        without_timing(&serde_json::to_string(&whole).unwrap())
+    );
+    let gone = JobId::generate();
+    assert!(store.result_ends(&gone).await.unwrap().is_none());
 }
 
 async fn a_precision_target_queues_its_next_batch_from_the_merge(url: &str) {

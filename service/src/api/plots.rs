@@ -112,16 +112,20 @@ pub async fn schedule_trend_plot(
 ) -> Result<Response, ApiError> {
     let Query(query) = query?;
     let schedule = state.store.schedule(&owner, &id).await?;
-    let trend = schedule_trend(&state, &schedule, 60).await?;
+    let followed = &schedule.definition.statistics;
     let statistic = match query.statistic {
-        Some(statistic) if trend.statistics.contains(&statistic) => statistic,
+        Some(statistic) if followed.iter().any(|s| s.to_string() == statistic) => statistic,
         Some(statistic) => {
             return Err(ApiError::NotFound(format!(
                 "the schedule does not follow `{statistic}`"
             )));
         }
-        None => trend.statistics.first().cloned().unwrap_or_default(),
+        None => followed
+            .first()
+            .map(ToString::to_string)
+            .unwrap_or_default(),
     };
+    let trend = schedule_trend(&state, &schedule, 60).await?;
     let points: Vec<TrendPoint> = trend
         .runs
         .iter()

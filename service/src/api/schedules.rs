@@ -8,9 +8,9 @@ use super::error::{
         TooManySchedules, Unauthorized,
     },
 };
-use super::jobs::{JobResource, ListQuery, accepted, header_text, stored_result};
+use super::jobs::{JobResource, ListQuery, accepted, header_text};
 use super::{AppState, JsonText, idempotency_key, replayed};
-use crate::domain::trend::trend;
+use crate::domain::trend::{run_values, trend};
 use crate::domain::{
     JobStatus, Once, Owner, ScheduleId, ScheduleSpec, TrendValue, UnixMs, ValidSchedule,
 };
@@ -480,12 +480,15 @@ pub const DRIFT_LOOKBACK: u32 = 30;
 
 /// The trend of a schedule's `limit` latest runs, oldest first. Each value's drift flag compares
 /// it with the run before that has a value of the same statistic, within the window or before it
-/// (up to [`DRIFT_LOOKBACK`] runs older): a run's flag does not depend on the window asked.
+/// (up to [`DRIFT_LOOKBACK`] runs older): a run's flag does not depend on the window asked. It
+/// reads each run's end alone ([`Store::result_ends`](crate::store::Store::result_ends)), one at
+/// a time, in a place of its own among the requests that parse stored Results.
 pub async fn schedule_trend(
     state: &AppState,
     schedule: &ScheduleRecord,
     limit: u32,
 ) -> Result<Trend, ApiError> {
+    let _place = super::limits::take_place(&state.parsing).await?;
     let mut runs = state
         .store
         .runs(&schedule.id, limit + DRIFT_LOOKBACK)
@@ -495,32 +498,36 @@ pub async fn schedule_trend(
     let statistics = &schedule.definition.statistics;
     let mut window = Vec::with_capacity(runs.len());
     for run in &runs {
-        window.push(run_result(state, run).await?);
+        window.push(run_values(
+            statistics,
+            run_result(state, run).await?.as_ref(),
+        ));
     }
     // The runs before the window, newest first, until every statistic the window has a value of
     // has one among them too (a life statistic may have none in a run of too few failures): put
     // before the window, they give its oldest values the runs they are compared with. A
     // statistic without a value in the window needs none, and costs no reading.
-    let mut unmet: Vec<_> = statistics
-        .iter()
-        .filter(|statistic| window.iter().flatten().any(|r| statistic.read(r).is_some()))
+    let mut unmet: Vec<usize> = (0..statistics.len())
+        .filter(|&column| window.iter().any(|values| values[column].is_some()))
         .collect();
-    let mut results = Vec::new();
+    let mut looked_back = Vec::new();
     for run in &older {
         if unmet.is_empty() {
             break;
         }
         if let Some(result) = run_result(state, run).await? {
-            unmet.retain(|statistic| statistic.read(&result).is_none());
-            results.push(Some(result));
+            let values = run_values(statistics, Some(&result));
+            unmet.retain(|&column| values[column].is_none());
+            looked_back.push(values);
         }
     }
-    results.reverse();
-    let looked_back = results.len();
-    results.extend(window);
+    looked_back.reverse();
+    let skipped = looked_back.len();
+    looked_back.extend(window);
+    let results = looked_back;
     let runs = runs
         .iter()
-        .zip(trend(statistics, &results).into_iter().skip(looked_back))
+        .zip(trend(statistics, &results).into_iter().skip(skipped))
         .map(|(run, values)| Run {
             scheduled_for: run.scheduled_for.to_rfc3339(),
             job_id: run.job_id.to_string(),
@@ -536,15 +543,11 @@ pub async fn schedule_trend(
     })
 }
 
-/// A run's Result, once its job succeeded; none before, for a failed run, or for one whose job was
-/// deleted meanwhile.
+/// A run's Result with its last bins alone ([`run_values`] reads no other), once its job
+/// succeeded; none before, for a failed run, or for one whose job was deleted meanwhile.
 async fn run_result(state: &AppState, run: &RunRecord) -> Result<Option<JobResult>, ApiError> {
     if run.status != JobStatus::Succeeded {
         return Ok(None);
     }
-    match stored_result(state, &run.job_id).await {
-        Ok(result) => Ok(Some(result)),
-        Err(ApiError::NotFound(_)) => Ok(None),
-        Err(error) => Err(error),
-    }
+    Ok(state.store.result_ends(&run.job_id).await?)
 }

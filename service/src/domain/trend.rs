@@ -32,23 +32,27 @@ pub fn flag_drift(values: &[Option<(f64, [f64; 2])>]) -> Vec<Option<TrendValue>>
         .collect()
 }
 
-/// Each run's value of each statistic, oldest run first, keyed by the statistic's name: `results`
-/// holds each run's result (`None` until its job succeeded).
+/// A run's value and 95 % interval of each statistic of a schedule, in its order.
+pub type RunValues = Vec<Option<(f64, [f64; 2])>>;
+
+/// What `result` gives of each statistic: none of any for a run whose job has no Result.
+pub fn run_values(statistics: &[Statistic], result: Option<&JobResult>) -> RunValues {
+    statistics
+        .iter()
+        .map(|statistic| result.and_then(|r| statistic.read(r)))
+        .collect()
+}
+
+/// Each run's value of each statistic, oldest run first, keyed by the statistic's name: `runs`
+/// holds each run's [`run_values`].
 pub fn trend(
     statistics: &[Statistic],
-    results: &[Option<JobResult>],
+    runs: &[RunValues],
 ) -> Vec<BTreeMap<String, Option<TrendValue>>> {
-    let columns: Vec<Vec<Option<TrendValue>>> = statistics
-        .iter()
-        .map(|statistic| {
-            let values: Vec<_> = results
-                .iter()
-                .map(|result| result.as_ref().and_then(|r| statistic.read(r)))
-                .collect();
-            flag_drift(&values)
-        })
+    let columns: Vec<Vec<Option<TrendValue>>> = (0..statistics.len())
+        .map(|column| flag_drift(&runs.iter().map(|run| run[column]).collect::<Vec<_>>()))
         .collect();
-    (0..results.len())
+    (0..runs.len())
         .map(|run| {
             statistics
                 .iter()
@@ -82,7 +86,8 @@ mod tests {
     #[test]
     fn a_run_without_a_result_has_no_values() {
         let statistics = ["life.b10".parse::<Statistic>().unwrap()];
-        let runs = trend(&statistics, &[None, None]);
+        let none = run_values(&statistics, None);
+        let runs = trend(&statistics, &[none.clone(), none]);
         assert_eq!(runs.len(), 2);
         assert_eq!(runs[0]["life.b10"], None);
     }

@@ -6,9 +6,9 @@ use super::backend::Store;
 use super::queue::drop_partials;
 use super::rows::{
     self, EncodedResult, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, SELECT_GROUPS_IN_SHARDS,
-    SELECT_PARTIALS, SELECT_RESULT, bind_bins, collect_partials, count_from_sql, count_to_sql,
-    distribution_from_row, groups_from_row, held_mask, insert_distributions, insert_lives,
-    life_from_row, result_from_row, spec_from_json,
+    SELECT_PARTIALS, SELECT_RESULT, SELECT_RESULT_ENDS, bind_bins, collect_partials,
+    count_from_sql, count_to_sql, distribution_from_row, groups_from_row, held_mask,
+    insert_distributions, insert_lives, life_from_row, result_from_row, spec_from_json,
 };
 use super::sql::Sql;
 use super::{DistributionRow, Fence, Operations, StoreError, StoreResult};
@@ -244,7 +244,16 @@ impl Store {
     /// The Result JSON as stored, to be served as it is.
     #[tracing::instrument(skip_all, fields(job = %id))]
     pub async fn result_json(&self, id: &JobId) -> StoreResult<Option<String>> {
-        let row = Sql::new(SELECT_RESULT)
+        self.result_text(id, SELECT_RESULT).await
+    }
+
+    /// The Result JSON that `statement` ([`SELECT_RESULT`] or [`SELECT_RESULT_ENDS`]) reads.
+    async fn result_text(
+        &self,
+        id: &JobId,
+        statement: &'static str,
+    ) -> StoreResult<Option<String>> {
+        let row = Sql::new(statement)
             .bind(id.as_str())
             .fetch_optional(self.readers())
             .await?;
@@ -355,7 +364,22 @@ impl Store {
 
     /// The Result, parsed (off the async threads when it is large).
     pub async fn result(&self, id: &JobId) -> StoreResult<Option<JobResult>> {
-        let Some(text) = self.result_json(id).await? else {
+        self.parsed_result(id, SELECT_RESULT).await
+    }
+
+    /// The Result with each operation metric's last bin alone (its other bins left out), for
+    /// what reads only the job's end: a schedule's trend. A few kilobytes where the whole Result
+    /// of a 1000-bin job is tens of megabytes.
+    pub async fn result_ends(&self, id: &JobId) -> StoreResult<Option<JobResult>> {
+        self.parsed_result(id, SELECT_RESULT_ENDS).await
+    }
+
+    async fn parsed_result(
+        &self,
+        id: &JobId,
+        statement: &'static str,
+    ) -> StoreResult<Option<JobResult>> {
+        let Some(text) = self.result_text(id, statement).await? else {
             return Ok(None);
         };
         let large = text.len() >= rows::LARGE_RESULT_BYTES;

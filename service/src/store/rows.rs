@@ -994,13 +994,31 @@ pub(crate) const STORED_APART: [(&str, &str); 2] =
 /// One summary row as [`member_json`] reads it: metric, bin, first and end operation, summary.
 pub(crate) type SummaryRow<'a> = (&'a str, i64, u64, u64, &'a str);
 
-/// Job `$1`'s stored Result and every summary row of it, the row's columns joined by tabs and
-/// the rows by newlines (neither is ever raw in compact JSON nor in a metric's name), in no
-/// particular order: one statement, so one snapshot of the database (a job deleted meanwhile is
-/// wholly there or wholly gone), and one value to read however many rows.
-pub(crate) const SELECT_RESULT: &str = "SELECT result, (SELECT string_agg(kind || '\t' || \
-     metric || '\t' || bin || '\t' || op_start || '\t' || op_end || '\t' || summary, '\n') \
-     FROM distributions d WHERE d.job_id = r.job_id) AS summaries FROM results r WHERE r.job_id = $1";
+/// Job `$1`'s stored Result and the summary rows of it that `$rows` admits, the row's columns
+/// joined by tabs and the rows by newlines (neither is ever raw in compact JSON nor in a metric's
+/// name), in no particular order: one statement, so one snapshot of the database (a job deleted
+/// meanwhile is wholly there or wholly gone), and one value to read however many rows.
+macro_rules! select_result {
+    ($rows:literal) => {
+        concat!(
+            "SELECT result, (SELECT string_agg(kind || '\t' || metric || '\t' || bin || '\t' \
+             || op_start || '\t' || op_end || '\t' || summary, '\n') FROM distributions d \
+             WHERE d.job_id = r.job_id",
+            $rows,
+            ") AS summaries FROM results r WHERE r.job_id = $1"
+        )
+    };
+}
+
+/// [`select_result!`] with every summary row: the whole Result.
+pub(crate) const SELECT_RESULT: &str = select_result!("");
+
+/// [`select_result!`] with the device metrics' rows and each operation metric's last bin alone:
+/// what a schedule's trend reads of a run, a few rows where the whole Result can have 18,000.
+pub(crate) const SELECT_RESULT_ENDS: &str = select_result!(
+    " AND (d.kind = 'device' OR d.bin = (SELECT MAX(e.bin) FROM distributions e \
+     WHERE e.job_id = d.job_id AND e.metric = d.metric))"
+);
 
 /// Bytes of a stored Result from which it is put back together or parsed off the async threads
 /// ([`off_async_threads`]): a 1000-bin job's 15.7 MB took several milliseconds of a thread that
