@@ -196,7 +196,9 @@ pub async fn submit_job(
     let job = Job::from_json(&body, draw_seed)?;
     job.check_size(state.config.max_job_operations, &Pointer::root())?;
     if job.rare_event().is_some() {
-        // One device run to the operation read: off the async threads.
+        // One device run to the operation read: off the async threads, in a place among the
+        // requests that compute, so that many submissions at once take no more cores than those.
+        let _place = super::limits::take_place(&state.parsing).await?;
         let checked = job.clone();
         tokio::task::spawn_blocking(move || {
             check_threshold(&checked, &Pointer::root().child("rare_event"))

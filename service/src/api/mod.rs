@@ -56,9 +56,10 @@ pub struct AppState {
     pub watch: Arc<watch::JobWatch>,
     /// Places for calibration fits ([`calibrations::places_for_fits`]).
     pub fits: Arc<tokio::sync::Semaphore>,
-    /// Places for requests that parse whole Results (life, rare event, plots, comparisons), one
-    /// per core: a Result of 1000 bins parses to hundreds of MB, and 256 comparisons at once took
-    /// 6.5 GB; more wait their turn within the request timeout.
+    /// Places for requests that parse whole Results (life, rare event, plots, comparisons,
+    /// trends) or run a device (a rare event's check at submission), one per core: a Result of
+    /// 1000 bins parses to hundreds of MB, and 256 comparisons at once took 6.5 GB; more wait
+    /// their turn within the request timeout.
     pub parsing: Arc<tokio::sync::Semaphore>,
 }
 
