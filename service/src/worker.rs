@@ -696,8 +696,10 @@ impl Workers {
         // (`first_shards`, `run_whole`), as its shard counts it (a step of one batch, any small
         // job without a precision target, is counted already, with no round trip to the
         // database for it); a batch's merge the rare event's budget on the last possible batch
-        // ([`merge_plan`]), which stays its total: a target met sooner counts the estimate as it
-        // ran (it counted nothing but what a heartbeat caught, a probe).
+        // ([`merge_plan`]). Beyond its charge, a step counts what it ran here (a target met
+        // sooner counted nothing but what a heartbeat caught, a probe); its write then counts
+        // what it ran, less than its plan too (a budget the estimate did not spend, or that
+        // rounds of their own count as they run).
         let charged = if whole { first_batch } else { merge_planned };
         if simulated > charged
             && matches!(
@@ -740,7 +742,10 @@ impl Workers {
                 return self.fail_attempt(fence, &reason).await;
             }
             Ran::Done(Ok(Outcome::Result { result, encoded })) => {
-                if self.succeed(fence, &result, &encoded, lease).await {
+                if self
+                    .succeed(fence, simulated, &result, &encoded, lease)
+                    .await
+                {
                     count();
                 }
                 return;
@@ -765,8 +770,14 @@ impl Workers {
         };
         let (shards, folded, folded_through, state) = next;
         let queue = || {
-            self.store
-                .add_batch(fence, &shards, &folded, folded_through, state.as_deref())
+            self.store.add_batch(
+                fence,
+                simulated,
+                &shards,
+                &folded,
+                folded_through,
+                state.as_deref(),
+            )
         };
         if self.stored(fence, lease, "the next step", queue).await {
             count();
@@ -1147,12 +1158,13 @@ impl Workers {
     async fn succeed(
         &self,
         fence: &Fence,
+        ran: u64,
         result: &JobResult,
         encoded: &EncodedResult,
         lease: &KeptLease,
     ) -> bool {
         let stored = self
-            .store_with_backoff(lease, || self.store.succeed(fence, None, encoded))
+            .store_with_backoff(lease, || self.store.succeed(fence, None, ran, encoded))
             .await;
         match stored {
             Ok(Some(stored_bytes)) => {

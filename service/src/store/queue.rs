@@ -98,11 +98,15 @@ impl Store {
         }
     }
 
-    /// A write transaction in which the claim's shard is marked done; `None` (rolled back) once
-    /// the claim no longer holds it.
-    pub(crate) async fn begin_finishing(&self, fence: &Fence) -> StoreResult<Option<Tx>> {
+    /// A write transaction in which the claim's shard is marked done, its operations `ran` or,
+    /// if `None`, all it planned; `None` (rolled back) once the claim no longer holds it.
+    pub(crate) async fn begin_finishing(
+        &self,
+        fence: &Fence,
+        ran: Option<u64>,
+    ) -> StoreResult<Option<Tx>> {
         let mut tx = self.begin().await?;
-        if finish_shard(&mut tx, fence).await? {
+        if finish_shard(&mut tx, fence, ran).await? {
             return Ok(Some(tx));
         }
         tx.rollback().await?;
@@ -241,18 +245,21 @@ fn fenced(sql: &'static str, fence: &Fence) -> Sql {
     bind_fence(Sql::new(sql), fence)
 }
 
-/// Marks the claim's shard done, all its operations with it, if the claim still holds it. Its
-/// `error` goes: its last run did not fail (a shard that waited for the database kept "waiting
-/// for the database" once done, found from outside); the history keeps every attempt's.
-async fn finish_shard(tx: &mut Tx, fence: &Fence) -> StoreResult<bool> {
+/// Marks the claim's shard done, if the claim still holds it, with the operations it `ran` as
+/// its total, or all it planned (`None`). Its `error` goes: its last run did not fail (a shard
+/// that waited for the database kept "waiting for the database" once done, found from outside);
+/// the history keeps every attempt's.
+async fn finish_shard(tx: &mut Tx, fence: &Fence, ran: Option<u64>) -> StoreResult<bool> {
     let updated = fenced(
         concat!(
             "UPDATE shards SET status = 'done', lease_until = NULL, error = NULL, \
-             operations_done = operations_total WHERE ",
+             operations_total = COALESCE($5, operations_total), \
+             operations_done = COALESCE($5, operations_total) WHERE ",
             fenced_shard!()
         ),
         fence,
     )
+    .bind(ran.map(count_to_sql))
     .execute(&mut *tx)
     .await?;
     Ok(updated == 1)
@@ -746,11 +753,13 @@ impl Store {
     /// run (inserted, for a job that ran whole;
     /// [`crate::domain::shards::Merged::folded_through`]), and what the next step no longer
     /// reads is dropped: the groups of earlier batches, or a round's outcomes and state (the
-    /// devices' groups are kept for the Result).
+    /// devices' groups are kept for the Result). The step counts the operations it `ran` itself:
+    /// what it planned beyond them (a rare event's budget) is the queued shards' to count.
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     pub async fn add_batch(
         &self,
         fence: &Fence,
+        ran: u64,
         shards: &[ShardPlan],
         folded: &EncodedGroups,
         last_run: u64,
@@ -758,7 +767,7 @@ impl Store {
     ) -> StoreResult<bool> {
         self.check_room(folded.0.iter().map(|partial| partial.len() as u64).sum())
             .await?;
-        let Some(mut tx) = self.begin_finishing(fence).await? else {
+        let Some(mut tx) = self.begin_finishing(fence, Some(ran)).await? else {
             return Ok(false);
         };
         let batch = count_to_sql(last_run);
@@ -826,7 +835,7 @@ impl Store {
     /// The job's end is stamped `at`, or on the database's clock.
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     pub async fn fail(&self, fence: &Fence, at: Option<UnixMs>, error: &str) -> StoreResult<bool> {
-        let Some(mut tx) = self.begin_finishing(fence).await? else {
+        let Some(mut tx) = self.begin_finishing(fence, None).await? else {
             return Ok(false);
         };
         let now = now_or(self.dialect(), &mut tx, at).await?;

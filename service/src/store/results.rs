@@ -129,12 +129,15 @@ impl Store {
     /// lives first, in short transactions, then the rest in one. The job's stored bytes
     /// ([`super::JobRecord::stored_bytes`]); `None` if the claim no longer holds (the job stays
     /// unsucceeded; rows already written go when it ends, or its next merge writes them again).
-    /// The job's end is stamped `at`, or on the database's clock.
+    /// The job's end is stamped `at`, or on the database's clock. The merge step counts the
+    /// operations it `ran` itself (a job's devices run whole, a rare event estimated there), and
+    /// the job's progress ends as the sum over its shards, each operation run counted once.
     #[tracing::instrument(skip_all, fields(job = %fence.job))]
     pub async fn succeed(
         &self,
         fence: &Fence,
         at: Option<UnixMs>,
+        ran: u64,
         result: &EncodedResult,
     ) -> StoreResult<Option<u64>> {
         // A Result that fits in one write goes in the transaction that ends the job, one commit,
@@ -144,7 +147,7 @@ impl Store {
         if !with_the_end && self.write_rows(fence, result).await?.is_none() {
             return Ok(None);
         }
-        let Some(mut tx) = self.begin_finishing(fence).await? else {
+        let Some(mut tx) = self.begin_finishing(fence, Some(ran)).await? else {
             return Ok(None);
         };
         let finished_at = super::queue::now_or(self.dialect(), &mut tx, at).await?;
@@ -160,8 +163,8 @@ impl Store {
         // has ended it (and dropped the rows written before), and stands.
         let Some(stored) = Sql::new(concat!(
             "UPDATE jobs SET status = 'succeeded', finished_at = $2, \
-             operations_total = CASE WHEN $4 > operations_total THEN $4 ELSE operations_total END, \
-             operations_done = CASE WHEN $4 > operations_total THEN $4 ELSE operations_total END, \
+             operations_total = (SELECT COALESCE(SUM(operations_done), 0) FROM shards WHERE job_id = $1), \
+             operations_done = (SELECT COALESCE(SUM(operations_done), 0) FROM shards WHERE job_id = $1), \
              stored_bytes = octet_length(spec) + $3 + ",
             rows::partial_bytes!(),
             " WHERE id = $1 AND status = 'running' RETURNING stored_bytes"
@@ -169,7 +172,6 @@ impl Store {
         .bind(fence.job.as_str())
         .bind(finished_at.0)
         .bind(count_to_sql(result.bytes()))
-        .bind(count_to_sql(result.operations))
         .fetch_optional(&mut tx)
         .await?
         else {
@@ -430,7 +432,6 @@ mod tests {
                 .collect(),
             lives: vec![life; lives],
             groups_in_shards: false,
-            operations: 0,
         }
     }
 

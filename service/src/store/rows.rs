@@ -634,9 +634,6 @@ pub struct EncodedResult {
     /// Whether the rows leave the groups' accumulators where the job's groups' shards stored
     /// them ([`EncodedResult::with_groups_in_shards`]): its shards' keep them.
     pub(crate) groups_in_shards: bool,
-    /// The operations the devices ran ([`JobResult::counts`]), at least the job's progress at
-    /// its end: a job run whole with a precision target counts its batches only as it runs them.
-    pub(crate) operations: u64,
 }
 
 /// Rows [`EncodedResult::new`] encodes at a time, in parallel: the most bins' groups out of the
@@ -811,13 +808,11 @@ impl EncodedResult {
             .life
             .as_ref()
             .map_or_else(Vec::new, |life| life.devices.clone());
-        let operations = result.counts.operations;
         Ok(Self {
             text,
             rows,
             lives,
             groups_in_shards: in_shards,
-            operations,
         })
     }
 
