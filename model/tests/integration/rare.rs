@@ -181,6 +181,30 @@ fn crude_monte_carlo_is_the_same_question_asked_plainly() {
         "{found:?}"
     );
     assert!(found.cov.unwrap() <= 0.05);
+    // Its tail: 10 % and 1 % of its first batch beyond the values that many reach (no ties).
+    let shares: Vec<f64> = found.tail.iter().map(|p| p.probability).collect();
+    assert_eq!(shares[..2], [0.1, 0.01], "{found:?}");
+}
+
+/// The crude tail reads the share of its first batch beyond each point: a count metric's values
+/// tie, and where every sample gives 7 bounces the tail has no point at 7 (it read P(> 7) as 0.1
+/// and then 0.01 at the same 7, the levels' nominal shares, a probe), only the threshold's 0.
+#[test]
+fn the_crude_tail_is_the_share_beyond_each_point_where_values_tie() {
+    let ties = job(json!({
+        "devices": 16, "operations": 1, "seed": 1,
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                     "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.01, "min": 0}}],
+        "rare_event": {"metric": "bounce_count", "above": 7.5, "method": "crude",
+                       "max_evaluations": 2000}
+    }));
+    let found = report(&ties);
+    let tail: Vec<(f64, f64)> = found
+        .tail
+        .iter()
+        .map(|p| (p.threshold, p.probability))
+        .collect();
+    assert_eq!(tail, [(7.5, 0.0)], "{found:?}");
 }
 
 /// Coverage over 200 seeds at P = 1e-4, each method, the operation metric: how often the 95 %
@@ -526,15 +550,31 @@ fn bad_rare_events_name_their_field() {
         assert_eq!(pointers(value), [pointer], "{life}");
     }
     // The median device already beyond the threshold: not a rare event.
-    let job = rare_job(
+    let median = rare_job(
         "total_bounce_s",
         1,
         "operation",
         json!({"metric": "total_bounce_s", "above": 0.001}),
         1,
     );
-    let refused = check_threshold(&job, &Pointer::root().child("rare_event")).unwrap_err();
+    let refused = check_threshold(&median, &Pointer::root().child("rare_event")).unwrap_err();
     assert_eq!(refused.errors()[0].pointer, "/rare_event/above");
+    assert!(refused.errors()[0].detail.contains("median inputs already"));
+    // A median on the threshold is not beyond it: no circuit, no device arcs, and "above 0" is
+    // an event no input reaches, said so (it was refused as "near one half", a probe).
+    let never = job(json!({
+        "devices": 1, "operations": 1,
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                     "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.03, "min": 0}}],
+        "rare_event": {"metric": "pre_arc_s", "above": 0}
+    }));
+    let refused = check_threshold(&never, &Pointer::root().child("rare_event")).unwrap_err();
+    assert_eq!(refused.errors()[0].pointer, "/rare_event/above");
+    let message = &refused.errors()[0].detail;
+    assert!(
+        message.contains("pre_arc_s never reaches above 0"),
+        "{message}"
+    );
     // A rare event counts against the job's size by the operations it may run.
     let sized = rare_job(
         "total_bounce_s",

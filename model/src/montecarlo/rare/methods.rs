@@ -1021,8 +1021,12 @@ impl Estimator {
             let mut p = LEVEL_PROBABILITY;
             while p * n as f64 >= 10.0 {
                 let b = sorted[(p * n as f64) as usize];
-                if b < self.threshold {
-                    c.tail.push((b, p));
+                // The share of the batch beyond `b`: `p`, less where values tie with `b` (a
+                // count metric's: every device's 7 bounces read P(> 7) as 0.1, then 0.01).
+                let beyond = sorted.partition_point(|&y| y > b);
+                let new = c.tail.last().is_none_or(|&(last, _)| last != b);
+                if b < self.threshold && beyond > 0 && new {
+                    c.tail.push((b, beyond as f64 / n as f64));
                 }
                 p *= LEVEL_PROBABILITY;
             }

@@ -383,7 +383,9 @@ pub fn check_threshold(job: &Job, at: &Pointer) -> Result<(), crate::error::Inva
     let side = if rare.above { "above" } else { "below" };
     let refuse = |detail| Err(crate::error::InvalidInput::single(&at.child(side), detail));
     let median = state.function.value(&vec![0.0; state.dimension()]);
-    if sign * median >= threshold {
+    // Beyond, strictly, as the event is: a median on the threshold (a metric that is 0 for
+    // every device, `pre_arc_s` without a circuit) is the search's to judge, not "near one half".
+    if sign * median > threshold {
         return refuse(match rare.reading {
             Reading::Metric(metric) => format!(
                 "the device with median inputs already gives {median} for {}: the event has \
