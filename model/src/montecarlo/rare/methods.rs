@@ -485,7 +485,13 @@ struct Counting {
     hits: u64,
     samples: u64,
     batch: u64,
+    /// The tail's points short of the threshold, placed by the first batch, with its share beyond.
     tail: Vec<(f64, f64)>,
+    /// The samples of every batch so far beyond each of `tail`'s points, whose shares of all the
+    /// samples the tail ends with (empty in a state stored before they were counted: the first
+    /// batch's shares stand).
+    #[serde(default)]
+    beyond: Vec<u64>,
     design_point: Option<Vec<f64>>,
 }
 
@@ -1012,7 +1018,7 @@ impl Estimator {
         }
     }
 
-    /// A crude batch counted; the first also gives the tail curve's points before the last.
+    /// A crude batch counted; the first also places the tail curve's points before the last.
     fn count(&mut self, mut c: Counting, batch: &Level) -> Option<Estimate> {
         let n = batch.ys.len();
         if c.batch == 0 {
@@ -1031,6 +1037,15 @@ impl Estimator {
                 p *= LEVEL_PROBABILITY;
             }
             c.tail.sort_by(|a, b| a.0.total_cmp(&b.0));
+            c.beyond = vec![0; c.tail.len()];
+        }
+        // Every batch counts towards each point, so that the tail and the estimate are shares of
+        // the same samples and fall together (the first batch's alone read 0.01 at a point short
+        // of a threshold whose estimate was 0.0103).
+        if c.beyond.len() == c.tail.len() {
+            for (count, &(point, _)) in c.beyond.iter_mut().zip(&c.tail) {
+                *count += batch.ys.iter().filter(|&&y| y > point).count() as u64;
+            }
         }
         c.hits += batch.ys.iter().filter(|&&y| y > self.threshold).count() as u64;
         c.samples += n as u64;
@@ -1050,7 +1065,13 @@ impl Estimator {
             return None;
         }
         self.stage = Stage::Done;
-        let probability = c.hits as f64 / c.samples.max(1) as f64;
+        let share = |count: u64| count as f64 / c.samples.max(1) as f64;
+        if c.beyond.len() == c.tail.len() {
+            for (point, &count) in c.tail.iter_mut().zip(&c.beyond) {
+                point.1 = share(count);
+            }
+        }
+        let probability = share(c.hits);
         c.tail.push((self.threshold, probability));
         Some(Estimate {
             probability,
