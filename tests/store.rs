@@ -984,7 +984,7 @@ async fn a_rare_events_rounds_run_as_shards_give_the_whole_result(url: &str) {
         (ran_whole, vec![]),
     ] {
         let id = insert(&store, queued).await;
-        let ended = run_rounds(&store, &id).await;
+        let ended = run_rounds(&store, &id, 1).await;
         assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
         let shards = store.shards(&id).await.unwrap();
         let rounds: Vec<ShardId> = shards
@@ -1031,12 +1031,33 @@ async fn a_rare_events_rounds_run_as_shards_give_the_whole_result(url: &str) {
         );
         assert!(stored_groups(store.as_ref(), &id, &job).await.is_empty());
     }
+    // The first level's 1000 evaluations (2000 operations) queued, the chains' 900 run by the
+    // merge step that reaches them: each counted once, by its task or by the step (the step's
+    // end counted 0, and progress fell by its rounds: a probe).
+    let id = insert(&store, queued_job(text, 9)).await;
+    let ended = run_rounds(&store, &id, 1900).await;
+    assert_eq!(ended.status, JobStatus::Succeeded, "{ended:?}");
+    let shards = store.shards(&id).await.unwrap();
+    let step_ran = |s: &&store::ShardRecord| is_round(s.shard.batch) && s.shard.group.is_none();
+    assert!(
+        shards
+            .iter()
+            .filter(step_ran)
+            .any(|s| s.operations_done > 0),
+        "a round's step ran rounds itself: {shards:?}"
+    );
+    let evaluations = whole.rare_event.as_ref().unwrap().evaluations;
+    let ran = 3 * 2 + evaluations * rare::operations_per_evaluation(&job);
+    let counted: u64 = shards.iter().map(|s| s.operations_done).sum();
+    assert_eq!(counted, ran, "{shards:?}");
+    assert_eq!((ended.operations_done, ended.operations_total), (ran, ran));
 }
 
-/// Runs the queue with two real workers that shard every rare event's round until job `id` ends.
-async fn run_rounds(store: &Arc<Store>, id: &JobId) -> JobRecord {
+/// Runs the queue with two real workers that shard every rare event's round of at least
+/// `sharded_from` operations until job `id` ends.
+async fn run_rounds(store: &Arc<Store>, id: &JobId, sharded_from: u64) -> JobRecord {
     let mut workers = Arc::into_inner(workers(store, 3, u64::MAX)).unwrap();
-    workers.sharded_round_operations = 1;
+    workers.sharded_round_operations = sharded_from;
     let ended = async || ended(store, id).await;
     work_until(
         Arc::new(workers),

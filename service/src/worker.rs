@@ -897,13 +897,15 @@ impl Workers {
             }
         });
         // The rounds the step estimated itself count as it ran them, before what it made is
-        // written (their progress reached the store at its heartbeats alone).
-        let report = match clock.time(Part::Compute, compute).await {
+        // written (their progress reached the store at its heartbeats alone), and its write
+        // counts them again as the step's own (it counted 0 there, and the probe's progress fell
+        // by the rounds at each step's end).
+        let (report, rounds_ran) = match clock.time(Part::Compute, compute).await {
             Ran::Done(Ok(Ok((next, ran)))) => {
                 if ran > 0 {
                     self.counted(fence, ran, 0).await;
                 }
-                let write = self.write(fence, Ran::Done(Ok(next)), 0, lease);
+                let write = self.write(fence, Ran::Done(Ok(next)), ran, lease);
                 clock.time(Part::Write, write).await;
                 return clock.record();
             }
@@ -911,7 +913,7 @@ impl Workers {
                 if ran > 0 {
                     self.counted(fence, ran, 0).await;
                 }
-                report
+                (report, ran)
             }
             Ran::Done(Err(error)) => {
                 return self.write(fence, Ran::Done(Err(error)), 0, lease).await;
@@ -937,7 +939,7 @@ impl Workers {
         });
         let ran = clock.time(Part::Compute, compute).await;
         clock
-            .time(Part::Write, self.write(fence, ran, 0, lease))
+            .time(Part::Write, self.write(fence, ran, rounds_ran, lease))
             .await;
         clock.record();
     }
