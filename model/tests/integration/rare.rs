@@ -216,6 +216,61 @@ fn the_crude_tail_is_the_share_beyond_each_point_where_values_tie() {
     assert_eq!(tail, [(7.5, 0.0)], "{found:?}");
 }
 
+/// A count's plateau: every input the chains of a level reach can give the same bounce count,
+/// which failed the job ("never reaches the threshold", 5 % of jobs at 2.8e-3 and 73 % at 2.7e-4
+/// in a probe). Such a level is run again on the same threshold until its chains pass it. The
+/// truth: the count steps up at a velocity found by bisection, beyond which its normal tail lies.
+#[test]
+fn a_counts_plateau_is_passed_and_its_interval_holds_the_truth() {
+    // No circuit (at 15 A every velocity bounces twice); the velocity N(0.224, 0.05) above 0.05.
+    let mechanical = |scatter: Value, extra: Value| {
+        let mut value = json!({"devices": 1, "operations": 1, "bin_operations": 1,
+                               "scatter": [scatter], "metrics": ["bounce_count"]});
+        value
+            .as_object_mut()
+            .unwrap()
+            .extend(extra.as_object().unwrap().clone());
+        job(value)
+    };
+    let count = |v: f64| {
+        let fixed = json!({"parameter": "impact_velocity_m_s", "per": "device",
+                           "distribution": {"kind": "fixed", "value": v}});
+        run_on(1, &mechanical(fixed, json!({"seed": 1}))).operations["bounce_count"][0]
+            .summary
+            .mean
+    };
+    let (mean, sd, min) = (0.224, 0.05, 0.05);
+    // The count 3 sd out, and the velocity where it steps up to it, by bisection.
+    let top = count(mean + 3.0 * sd);
+    let (mut lo, mut hi) = (mean, mean + 3.0 * sd);
+    assert!(count(lo) < top);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if count(mid) < top {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let z = |v: f64| (v - mean) / sd;
+    let truth = standard_normal_cdf(-z(hi)) / standard_normal_cdf(-z(min));
+    assert!((1e-3..1e-2).contains(&truth), "{truth}");
+    let mut covered = 0;
+    for seed in 0..20 {
+        let velocity = json!({"parameter": "impact_velocity_m_s", "per": "operation",
+                              "distribution": {"kind": "normal", "mean": mean, "sd": sd,
+                                               "min": min}});
+        let rare = json!({"seed": seed, "rare_event": {"metric": "bounce_count",
+                          "above": top - 1.0, "method": "subset", "target_cov": 0.1,
+                          "max_evaluations": 200_000}});
+        let found = report(&mechanical(velocity, rare));
+        covered += usize::from(found.ci95[0] <= truth && truth <= found.ci95[1]);
+        let thresholds: Vec<f64> = found.tail.iter().map(|p| p.threshold).collect();
+        assert!(thresholds.windows(2).all(|w| w[0] != w[1]), "{found:?}");
+    }
+    assert!(covered >= 17, "{covered} of 20 intervals hold {truth}");
+}
+
 /// Coverage over 200 seeds at P = 1e-4, each method, the operation metric: how often the 95 %
 /// interval holds the exact probability.
 #[test]

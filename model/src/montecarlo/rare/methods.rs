@@ -78,6 +78,9 @@ const STRANDS_PER_LEVEL: usize = 10;
 /// Below this, subset simulation stops looking: the threshold is never reached or rarer than
 /// any reliability question.
 pub const SMALLEST_PROBABILITY: f64 = 1e-30;
+/// Subset simulation's most levels in a row on one threshold, each run where every sample of the
+/// level before tied (a count's plateau, [`plateau`]), before a run gives up.
+const MAX_PLATEAU_LEVELS: usize = 10;
 /// Subset simulation's most runs, and most levels per run.
 const MAX_RUNS: usize = 1 << 12;
 const MAX_LEVEL: u64 = 255;
@@ -374,6 +377,18 @@ fn next_threshold(level: &Level) -> Option<(f64, Vec<usize>)> {
     Some((b, seeds))
 }
 
+/// The next level where every sample of `level` ties (a count metric's plateau: every input the
+/// chains reach gives 7 bounces): the same threshold again, its region and so its conditional
+/// probability (1) unchanged, its chains seeded by every tenth sample, so that they explore the
+/// plateau further for a way past it. `None` for a first level (no threshold yet) or after
+/// [`MAX_PLATEAU_LEVELS`] such levels in a row.
+fn plateau(levels: &[(f64, f64)], level: &Level) -> Option<(f64, Vec<usize>)> {
+    let &(b, _) = levels.last()?;
+    let repeated = levels.iter().rev().take_while(|&&(t, _)| t == b).count();
+    let step = (1.0 / LEVEL_PROBABILITY).round() as usize;
+    (repeated < MAX_PLATEAU_LEVELS).then(|| (b, (0..level.ys.len()).step_by(step).collect()))
+}
+
 /// The tail curve: the first run's thresholds, one point per level, each at the mean over `runs`
 /// of their probabilities there (a run that ended at 0 before it counts 0), then the estimate at
 /// the threshold; an earlier point below the estimate (a run's noise) is raised to it, so the
@@ -383,6 +398,10 @@ fn tail(first: &SubsetRun, runs: &[SubsetRun], probability: f64) -> Vec<(f64, f6
     levels
         .iter()
         .enumerate()
+        // A plateau's levels repeat a threshold ([`plateau`]): one point for it; and a count's
+        // last level can sit on the threshold itself (the top tenth all beyond it), whose point
+        // is the estimate's (it read the pilot's 9.5e-4 beside the estimate's 2.7e-4 at 7).
+        .filter(|&(i, &(b, _))| (i == 0 || levels[i - 1].0 != b) && b < last.0)
         .map(|(i, &(b, _))| {
             let at = |run: &SubsetRun| run.levels.get(i).map_or(0.0, |&(_, p)| p);
             let mean = runs.iter().map(at).sum::<f64>() / runs.len() as f64;
@@ -751,20 +770,23 @@ impl Estimator {
                 let b = self.runs[0].levels[run.index as usize - 1].0;
                 Some((b, (0..n).filter(|&i| level.ys[i] > b).collect()))
             }
-            None => next_threshold(&level),
+            None => next_threshold(&level).or_else(|| plateau(&run.levels, &level)),
         };
         let Some((b, seeds)) = next else {
             return Err(Stop::Failed(format!(
-                "the metric is {} on every input explored at probability {:.3e} and never \
-                 reaches the threshold",
-                level.ys[0], run.probability
+                "every input sampled at probability {:.3e} gives the metric the same value, \
+                 short of the threshold, level after level: subset simulation cannot pass a \
+                 value so many inputs share (a count's plateau); ask for `crude`, or a \
+                 continuous metric",
+                run.probability
             )));
         };
         if seeds.is_empty() {
             // Only with fixed thresholds: no sample passed this one, the run's estimate is 0.
             return Ok(self.finish(run, &level, b));
         }
-        let share = seeds.len() as f64 / n as f64;
+        // The share beyond the threshold: its seeds', but all of a plateau's level.
+        let share = level.ys.iter().filter(|&&y| y > b).count() as f64 / n as f64;
         run.spread.add(&level, b);
         run.probability *= share;
         run.levels.push((b, run.probability));
