@@ -247,7 +247,8 @@ const GOLDEN_STEPS: usize = 10;
 /// rays' differences give (each input's whole effect, across the steps of a counting metric);
 /// then [`SEARCH_STEPS`] steps of projected gradient ascent, `v <- g / |g|` (its fixed point is
 /// where the gradient is normal to the sphere, the largest response on it), the gradient by
-/// forward differences of one standard deviation taken one step inside the sphere. Each ray is
+/// forward differences of one standard deviation taken one step inside the sphere, each step
+/// also along the way half-way between `v` and `g / |g|`. Each ray is
 /// evaluated at [`RAY_POINTS`] points out to the radius and refined around its best by a
 /// golden-section search: a response that peaks before the sphere, as the total bounce time
 /// does at eleven standard deviations of velocity, is found near its peak. It is a search, not a
@@ -259,7 +260,7 @@ fn highest_within(state: &dyn LimitState, radius: f64, threshold: f64, budget: u
     const STEP: f64 = 1.0;
     let d = state.dimension();
     let per_ray = (RAY_POINTS + 2 + GOLDEN_STEPS) as u64;
-    let evaluations = 2 * d as u64 * per_ray + SEARCH_STEPS as u64 * (per_ray + 1 + d as u64);
+    let evaluations = 2 * d as u64 * per_ray + SEARCH_STEPS as u64 * (2 * per_ray + 1 + d as u64);
     if evaluations > budget {
         return None;
     }
@@ -306,6 +307,22 @@ fn highest_within(state: &dyn LimitState, radius: f64, threshold: f64, budget: u
                 };
                 step[i] = inside[i];
                 *g = there - here;
+            }
+            // Half-way between this ray and the gradient: where the response needs both (an
+            // arc's pre-arc time: a current high enough to arc, and a fast closing, which the
+            // gradient alone, flat in the current once it arcs, turned away from: a probe).
+            let norm = direction.iter().map(|g| g * g).sum::<f64>().sqrt();
+            if norm.is_finite() && norm > 0.0 {
+                let turned: Vec<f64> = unit
+                    .iter()
+                    .zip(&direction)
+                    .map(|(v, g)| v + g / norm)
+                    .collect();
+                let length = turned.iter().map(|t| t * t).sum::<f64>().sqrt();
+                let turned: Vec<f64> = turned.iter().map(|t| t / length).collect();
+                if length > 0.0 && search.ray(&turned, radius).is_none() {
+                    break 'search;
+                }
             }
         }
     }
@@ -488,6 +505,25 @@ mod tests {
         approx::assert_relative_eq!(highest, 10.0, max_relative = 1e-12);
         let highest = highest_within(&Together, 2.0, f64::INFINITY, 1000).unwrap();
         approx::assert_relative_eq!(highest, 2.0_f64.sqrt(), max_relative = 1e-12);
+    }
+
+    /// A response that one input switches on and the other then raises, flat in the first once
+    /// on: `1 + u_2` where `u_1 > 1` (an arc, and its pre-arc time with the closing velocity),
+    /// else 0. The gradient on the first axis points along the second alone, where nothing is
+    /// on; half-way between them the response reaches `1 + 4 / sqrt 2` on a sphere of 4.
+    #[test]
+    fn the_search_finds_what_needs_one_input_on_and_another_high() {
+        struct Switched;
+        impl LimitState for Switched {
+            fn dimension(&self) -> usize {
+                2
+            }
+            fn response(&self, u: &[f64]) -> f64 {
+                if u[0] > 1.0 { 1.0 + u[1] } else { 0.0 }
+            }
+        }
+        let highest = highest_within(&Switched, 4.0, f64::INFINITY, 1000).unwrap();
+        approx::assert_relative_eq!(highest, 1.0 + 8.0_f64.sqrt(), max_relative = 1e-12);
     }
 
     #[test]
