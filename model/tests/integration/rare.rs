@@ -625,20 +625,21 @@ fn bad_rare_events_name_their_field() {
     assert_eq!(refused.errors()[0].pointer, "/rare_event/above");
     assert!(refused.errors()[0].detail.contains("median inputs already"));
     // A median on the threshold is not beyond it: no circuit, no device arcs, and "above 0" is
-    // an event no input reaches, said so (it was refused as "near one half", a probe).
-    let never = job(json!({
-        "devices": 1, "operations": 1,
-        "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
-                     "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.03, "min": 0}}],
-        "rare_event": {"metric": "pre_arc_s", "above": 0}
-    }));
-    let refused = check_threshold(&never, &Pointer::root().child("rare_event")).unwrap_err();
-    assert_eq!(refused.errors()[0].pointer, "/rare_event/above");
-    let message = &refused.errors()[0].detail;
-    assert!(
-        message.contains("pre_arc_s never reaches above 0"),
-        "{message}"
-    );
+    // an event no input reaches, said so (it was refused as "near one half", a probe); and a
+    // number reads as one (1e-300, not 300 zeros after the point).
+    for (above, said) in [(0.0, "above 0 in"), (1e-300, "above 1e-300 in")] {
+        let never = job(json!({
+            "devices": 1, "operations": 1,
+            "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                         "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.03, "min": 0}}],
+            "rare_event": {"metric": "pre_arc_s", "above": above}
+        }));
+        let refused = check_threshold(&never, &Pointer::root().child("rare_event")).unwrap_err();
+        assert_eq!(refused.errors()[0].pointer, "/rare_event/above");
+        let message = &refused.errors()[0].detail;
+        let never_reaches = format!("pre_arc_s never reaches {said}");
+        assert!(message.contains(&never_reaches), "{message}");
+    }
     // A rare event counts against the job's size by the operations it may run.
     let sized = rare_job(
         "total_bounce_s",

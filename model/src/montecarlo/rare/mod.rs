@@ -389,6 +389,7 @@ impl Search<'_> {
 /// (`highest_within`, when it costs at most [`SEARCH_OPERATIONS`] operations). Each refusal
 /// names the threshold's field.
 pub fn check_threshold(job: &Job, at: &Pointer) -> Result<(), crate::error::InvalidInput> {
+    use crate::error::shown;
     let Some(rare) = job.rare_event() else {
         return Ok(());
     };
@@ -405,8 +406,9 @@ pub fn check_threshold(job: &Job, at: &Pointer) -> Result<(), crate::error::Inva
     if sign * median > threshold {
         return refuse(match rare.reading {
             Reading::Metric(metric) => format!(
-                "the device with median inputs already gives {median} for {}: the event has \
+                "the device with median inputs already gives {} for {}: the event has \
                  probability near one half or more, not a rare event (ask for it with `limits`)",
+                shown(median),
                 metric.name()
             ),
             Reading::FailureMargin => format!(
@@ -428,8 +430,8 @@ pub fn check_threshold(job: &Job, at: &Pointer) -> Result<(), crate::error::Inva
                      value found is {}",
                     metric.name(),
                     side,
-                    rare.threshold,
-                    sign * highest
+                    shown(rare.threshold),
+                    shown(sign * highest)
                 ),
                 Reading::FailureMargin => format!(
                     "no device fails before operation {} in a search of the inputs within \
