@@ -389,6 +389,15 @@ fn plateau(levels: &[(f64, f64)], level: &Level) -> Option<(f64, Vec<usize>)> {
     (repeated < MAX_PLATEAU_LEVELS).then(|| (b, (0..level.ys.len()).step_by(step).collect()))
 }
 
+/// Why a run stops where every sample of its levels, `probability` deep, keeps tying.
+fn on_a_plateau(probability: f64) -> Stop {
+    Stop::Failed(format!(
+        "every input sampled at probability {probability:.3e} gives the metric the same value, \
+         short of the threshold, level after level: subset simulation cannot pass a value so \
+         many inputs share (a count's plateau); ask for `crude`, or a continuous metric"
+    ))
+}
+
 /// The tail curve: the first run's thresholds, one point per level, each at the mean over `runs`
 /// of their probabilities there (a run that ended at 0 before it counts 0), then the estimate at
 /// the threshold; an earlier point below the estimate (a run's noise) is raised to it, so the
@@ -773,13 +782,7 @@ impl Estimator {
             None => next_threshold(&level).or_else(|| plateau(&run.levels, &level)),
         };
         let Some((b, seeds)) = next else {
-            return Err(Stop::Failed(format!(
-                "every input sampled at probability {:.3e} gives the metric the same value, \
-                 short of the threshold, level after level: subset simulation cannot pass a \
-                 value so many inputs share (a count's plateau); ask for `crude`, or a \
-                 continuous metric",
-                run.probability
-            )));
+            return Err(on_a_plateau(run.probability));
         };
         if seeds.is_empty() {
             // Only with fixed thresholds: no sample passed this one, the run's estimate is 0.
