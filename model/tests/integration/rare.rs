@@ -269,6 +269,21 @@ fn a_counts_plateau_is_passed_and_its_interval_holds_the_truth() {
         assert!(thresholds.windows(2).all(|w| w[0] != w[1]), "{found:?}");
     }
     assert!(covered >= 17, "{covered} of 20 intervals hold {truth}");
+    // A first level that ties (a count's failure criterion, the life's margin 0 for every
+    // sample) has no level to climb from: said so, not "level after level" (a probe).
+    let tied = job(json!({
+        "devices": 4, "operations": 10, "seed": 0,
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+                     "distribution": {"kind": "normal", "mean": mean, "sd": 0.0283, "min": min}}],
+        "failure": {"bounce_count": {"above": 7}},
+        "rare_event": {"metric": "operations_to_failure", "below": 11, "method": "subset"}
+    }));
+    let failed = estimate(&tied, &Silent).unwrap_err().to_string();
+    assert!(
+        failed.contains("sampled at its first level gives"),
+        "{failed}"
+    );
+    assert!(!failed.contains("level after level"), "{failed}");
 }
 
 /// Coverage over 200 seeds at P = 1e-4, each method, the operation metric: how often the 95 %

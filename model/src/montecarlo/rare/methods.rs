@@ -389,12 +389,20 @@ fn plateau(levels: &[(f64, f64)], level: &Level) -> Option<(f64, Vec<usize>)> {
     (repeated < MAX_PLATEAU_LEVELS).then(|| (b, (0..level.ys.len()).step_by(step).collect()))
 }
 
-/// Why a run stops where every sample of its levels, `probability` deep, keeps tying.
-fn on_a_plateau(probability: f64) -> Stop {
+/// Why a run stops where every sample of its `levels` so far, the last `probability` deep, ties:
+/// its first level (none before), or levels again and again on a plateau ([`plateau`]).
+fn on_a_plateau(levels: &[(f64, f64)], probability: f64) -> Stop {
+    let (at, tries) = match levels {
+        [] => ("its first level".to_owned(), ""),
+        _ => (
+            format!("probability {probability:.3e}"),
+            ", level after level",
+        ),
+    };
     Stop::Failed(format!(
-        "every input sampled at probability {probability:.3e} gives the metric the same value, \
-         short of the threshold, level after level: subset simulation cannot pass a value so \
-         many inputs share (a count's plateau); ask for `crude`, or a continuous metric"
+        "every input sampled at {at} gives the metric the same value, short of the threshold{tries}: \
+         subset simulation cannot pass a value so many inputs share (a count's plateau); ask for \
+         `crude`, or a continuous metric"
     ))
 }
 
@@ -782,7 +790,7 @@ impl Estimator {
             None => next_threshold(&level).or_else(|| plateau(&run.levels, &level)),
         };
         let Some((b, seeds)) = next else {
-            return Err(on_a_plateau(run.probability));
+            return Err(on_a_plateau(&run.levels, run.probability));
         };
         if seeds.is_empty() {
             // Only with fixed thresholds: no sample passed this one, the run's estimate is 0.
