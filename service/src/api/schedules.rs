@@ -524,10 +524,9 @@ pub async fn schedule_trend(
     looked_back.reverse();
     let skipped = looked_back.len();
     looked_back.extend(window);
-    let results = looked_back;
     let runs = runs
         .iter()
-        .zip(trend(statistics, &results).into_iter().skip(skipped))
+        .zip(trend(statistics, &looked_back).into_iter().skip(skipped))
         .map(|(run, values)| Run {
             scheduled_for: run.scheduled_for.to_rfc3339(),
             job_id: run.job_id.to_string(),

@@ -178,13 +178,25 @@ pub(crate) async fn remember(
 
 // ---- jobs ----------------------------------------------------------------------------------
 
+/// The operations done over job `$1`'s shards.
+macro_rules! done_over_shards {
+    () => {
+        "(SELECT COALESCE(SUM(operations_done), 0) FROM shards WHERE job_id = $1)"
+    };
+}
+pub(super) use done_over_shards;
+
 /// The assignments of an `UPDATE jobs ... WHERE id = $1` that set the job's progress to the sum
 /// over its shards.
 macro_rules! progress_sums {
     () => {
-        "operations_done = (SELECT COALESCE(SUM(operations_done), 0) FROM shards WHERE job_id = $1), \
-         operations_total = (SELECT CASE WHEN COALESCE(SUM(operations_total), 0) > jobs.operations_total \
-             THEN SUM(operations_total) ELSE jobs.operations_total END FROM shards WHERE job_id = $1)"
+        concat!(
+            "operations_done = ",
+            done_over_shards!(),
+            ", operations_total = (SELECT CASE WHEN COALESCE(SUM(operations_total), 0) > \
+             jobs.operations_total THEN SUM(operations_total) ELSE jobs.operations_total END \
+             FROM shards WHERE job_id = $1)"
+        )
     };
 }
 

@@ -3,7 +3,7 @@
 //! once, and put back when the Result is read), and each listed device's life.
 
 use super::backend::Store;
-use super::queue::drop_partials;
+use super::queue::{done_over_shards, drop_partials};
 use super::rows::{
     self, EncodedResult, SELECT_DISTRIBUTION, SELECT_DISTRIBUTION_GROUPS, SELECT_GROUPS_IN_SHARDS,
     SELECT_PARTIALS, SELECT_RESULT, SELECT_RESULT_ENDS, bind_bins, collect_partials,
@@ -162,10 +162,11 @@ impl Store {
         // Only a job still running: a cancel that committed after the shard's fence was read
         // has ended it (and dropped the rows written before), and stands.
         let Some(stored) = Sql::new(concat!(
-            "UPDATE jobs SET status = 'succeeded', finished_at = $2, \
-             operations_total = (SELECT COALESCE(SUM(operations_done), 0) FROM shards WHERE job_id = $1), \
-             operations_done = (SELECT COALESCE(SUM(operations_done), 0) FROM shards WHERE job_id = $1), \
-             stored_bytes = octet_length(spec) + $3 + ",
+            "UPDATE jobs SET status = 'succeeded', finished_at = $2, operations_total = ",
+            done_over_shards!(),
+            ", operations_done = ",
+            done_over_shards!(),
+            ", stored_bytes = octet_length(spec) + $3 + ",
             rows::partial_bytes!(),
             " WHERE id = $1 AND status = 'running' RETURNING stored_bytes"
         ))
