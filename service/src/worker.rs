@@ -371,6 +371,52 @@ fn round_outcome(rounds: &Rounds, shards: Vec<ShardPlan>, folded: Vec<GroupStats
     }
 }
 
+/// The operations a merge step of `job`'s batch `last` ran itself, by what it made: a job run
+/// `whole` its batches from this one on; a rare event estimated in the step its whole estimate,
+/// or the rounds before the one it queues.
+fn simulated_in_step(
+    job: &Job,
+    last: u64,
+    whole: bool,
+    ran: &Ran<Result<Outcome, MergeError>>,
+) -> u64 {
+    let operations = job.spec().operations;
+    let batch_operations = job.spec().devices * operations;
+    // The operations of the devices' batches up to `through`, the last run.
+    let run_through =
+        |through: u64| Batch::of(job, through).map_or(0, |b| (b.first + b.size) * operations);
+    let before = last * batch_operations;
+    let rare_here = rare::operations_per_evaluation(job)
+        * match ran {
+            Ran::Done(Ok(Outcome::Result { result, .. })) => {
+                result.rare_event.as_ref().map_or(0, |r| r.evaluations)
+            }
+            Ran::Done(Ok(Outcome::Next {
+                rare_evaluations, ..
+            })) => *rare_evaluations,
+            _ => 0,
+        };
+    match ran {
+        _ if !whole => rare_here,
+        Ran::Done(Ok(Outcome::Result { result, .. })) => {
+            (result.counts.operations + rare_here).saturating_sub(before)
+        }
+        // A rare event's round follows the devices, every batch of them run, up to the last
+        // (cut short by `max_devices`, perhaps); another batch follows those before it.
+        Ran::Done(Ok(Outcome::Next {
+            shards,
+            folded_through,
+            ..
+        })) => match shards[0].shard.batch {
+            batch if is_round(batch) => {
+                (run_through(*folded_through) + rare_here).saturating_sub(before)
+            }
+            batch => batch * batch_operations - before,
+        },
+        _ => batch_operations,
+    }
+}
+
 /// How a computation under a lease ended.
 enum Ran<T> {
     Done(T),
@@ -628,20 +674,11 @@ impl Workers {
         // A batch without groups stored is a job that entered the queue whole, at its first
         // batch or handed on after a step.
         let whole = !partials.read().iter().any(|shard| shard.batch == last);
-        let spec = partials.job().spec();
-        let batch_operations = spec.devices * spec.operations;
-        let first_batch = Batch::of(partials.job(), last).map_or(0, |b| b.size * spec.operations);
-        // A rare event's evaluations, in operations.
-        let per_evaluation = rare::operations_per_evaluation(partials.job());
-        // The operations of the devices' batches up to `through`, the last run.
-        let run_through = {
-            let job = partials.job().clone();
-            move |through: u64| {
-                Batch::of(&job, through).map_or(0, |b| (b.first + b.size) * job.spec().operations)
-            }
-        };
-        let merge_planned = merge_plan(partials.job(), last);
-        let in_shards = groups_stay_in_shards(partials.job(), last, whole);
+        let job_here = partials.job().clone();
+        let first_batch =
+            Batch::of(&job_here, last).map_or(0, |b| b.size * job_here.spec().operations);
+        let merge_planned = merge_plan(&job_here, last);
+        let in_shards = groups_stay_in_shards(&job_here, last, whole);
         let (sharded_from, step) = (self.sharded_round_operations, self.whole_step);
         // A job run whole learns its total as its precision target adds batches.
         let work = if whole { Work::Growing } else { Work::Planned };
@@ -659,39 +696,7 @@ impl Workers {
             encoded(merged, in_shards)
         });
         let ran = clock.time(Part::Compute, compute).await;
-        // A job run whole ran its operations here: its batches from this one on.
-        let before = last * batch_operations;
-        // A rare event estimated in the step counts as it ran: its whole estimate, or the rounds
-        // before the one it queues.
-        let rare_here = per_evaluation
-            * match &ran {
-                Ran::Done(Ok(Outcome::Result { result, .. })) => {
-                    result.rare_event.as_ref().map_or(0, |r| r.evaluations)
-                }
-                Ran::Done(Ok(Outcome::Next {
-                    rare_evaluations, ..
-                })) => *rare_evaluations,
-                _ => 0,
-            };
-        let simulated = match &ran {
-            _ if !whole => rare_here,
-            Ran::Done(Ok(Outcome::Result { result, .. })) => {
-                (result.counts.operations + rare_here).saturating_sub(before)
-            }
-            // A rare event's round follows the devices, every batch of them run, up to the last
-            // (cut short by `max_devices`, perhaps); another batch follows those before it.
-            Ran::Done(Ok(Outcome::Next {
-                shards,
-                folded_through,
-                ..
-            })) => match shards[0].shard.batch {
-                batch if is_round(batch) => {
-                    (run_through(*folded_through) + rare_here).saturating_sub(before)
-                }
-                batch => batch * batch_operations - before,
-            },
-            _ => batch_operations,
-        };
+        let simulated = simulated_in_step(&job_here, last, whole, &ran);
         // Its claim was charged what its shard planned: a whole step its first batch
         // (`first_shards`, `run_whole`), as its shard counts it (a step of one batch, any small
         // job without a precision target, is counted already, with no round trip to the
