@@ -8,9 +8,9 @@ use crate::operation::Operation;
 use crate::scenario::ArcRestitutionLawKind;
 use serde::{Deserialize, Serialize};
 
-/// How far, as a factor either way, from its calibration current the paper's eq. 16 may be used
+/// How far, as a factor either way, from its calibration current a post-arc law may be used
 /// before a Result warns (docs/model.md section 5).
-pub const PAPER_LAW_CURRENT_FACTOR: f64 = 2.0;
+pub const CALIBRATION_CURRENT_FACTOR: f64 = 2.0;
 
 /// The quantiles of a scattered current that are checked against the calibration current.
 const SCATTERED_CURRENT_QUANTILES: [f64; 2] = [0.01, 0.99];
@@ -145,7 +145,7 @@ pub fn diagnose(job: &Job, counts: &Counts) -> Vec<Diagnostic> {
             });
         }
     }
-    found.extend(paper_law_far_from_calibration(job));
+    found.extend(current_far_from_calibration(job));
     found.extend(truncated_draws(counts));
     found.extend(few_devices_for_sobol(job, counts));
     found
@@ -210,15 +210,14 @@ fn scattered_range(job: &Job, parameter: Parameter) -> Option<(Pointer, [f64; 2]
     Some((pointer, quantiles))
 }
 
-/// Under the paper's post-arc law, an arcing current (the nominal one, or the 1st and 99th
-/// percentiles of a scattered one) more than [`PAPER_LAW_CURRENT_FACTOR`] away from the calibration
-/// current.
-fn paper_law_far_from_calibration(job: &Job) -> Option<Diagnostic> {
+/// An arcing current (the nominal one, or the 1st and 99th percentiles of a scattered one) more
+/// than [`CALIBRATION_CURRENT_FACTOR`] away from the post-arc law's calibration current (the 15 A
+/// of the paper's tests by default), under either law: the paper measured restitution after arcs
+/// at that current alone, so elsewhere eq. 16 (the paper's law) or its fade and hold (the
+/// continuous law) stand in for a measurement.
+fn current_far_from_calibration(job: &Job) -> Option<Diagnostic> {
     let spec = job.scenario().spec();
     let (mat, circuit) = (&spec.material, &spec.circuit);
-    if mat.arc_restitution.law != ArcRestitutionLawKind::Paper {
-        return None;
-    }
     let (pointer, currents) = match scattered_range(job, Parameter::Current) {
         Some(scattered) => scattered,
         None => (
@@ -240,17 +239,31 @@ fn paper_law_far_from_calibration(job: &Job) -> Option<Diagnostic> {
             mat.softening_energy_j,
         )
         .is_some();
-        arcs && !(calibration_a / PAPER_LAW_CURRENT_FACTOR
-            ..=calibration_a * PAPER_LAW_CURRENT_FACTOR)
+        arcs && !(calibration_a / CALIBRATION_CURRENT_FACTOR
+            ..=calibration_a * CALIBRATION_CURRENT_FACTOR)
             .contains(&current_a)
     });
-    far.map(|current_a| Diagnostic {
+    let current_a = far?;
+    let law = match mat.arc_restitution.law {
+        ArcRestitutionLawKind::Paper if current_a < calibration_a => {
+            "the paper's law (eq. 16) is an extrapolation there; \"material.arc_restitution.law\": \
+             \"continuous\" fades the arc's effect out towards the minimum arc current"
+        }
+        ArcRestitutionLawKind::Paper => "the paper's law (eq. 16) is an extrapolation there",
+        ArcRestitutionLawKind::Continuous if current_a < calibration_a => {
+            "the continuous law's restitution there is its linear fade between no arc and eq. 16, \
+             not a measurement"
+        }
+        ArcRestitutionLawKind::Continuous => {
+            "the continuous law holds eq. 16 there, where the paper measured nothing"
+        }
+    };
+    Some(Diagnostic {
         pointer: pointer.to_string(),
         detail: format!(
-            "arcs burn at {} A, more than a factor {PAPER_LAW_CURRENT_FACTOR} from the \
-             {calibration_a} A at which the paper fitted its post-arc law (eq. 16): its restitution \
-             is an extrapolation here. \"material.arc_restitution.law\": \"continuous\" fades the \
-             arc's effect out towards the minimum arc current (docs/model.md section 5)",
+            "arcs burn at {} A, more than a factor {CALIBRATION_CURRENT_FACTOR} from the \
+             {calibration_a} A the post-arc law is calibrated at (`calibration_current_a`; the \
+             paper's tests ran at 15 A): {law} (docs/model.md section 5)",
             crate::error::shown(current_a)
         ),
     })
@@ -306,21 +319,51 @@ mod tests {
         );
     }
 
+    /// Either law warns at an arcing current more than a factor 2 from its calibration current,
+    /// saying what stands in for a measurement there; no law warns where no arc burns.
     #[test]
-    fn the_paper_law_far_from_15_a_warns_and_the_continuous_law_does_not() {
+    fn an_arcing_current_far_from_15_a_warns_under_either_law() {
+        let detail = |current_a: f64, law: &str| {
+            let found = diagnose_json(&format!(
+                r#"{{"scenario": {{"circuit": {{"supply_voltage_v": 48, "current_a": {current_a}}},
+                    "material": {{"arc_restitution": {{"law": "{law}"}}}}}}}}"#
+            ));
+            assert!(found.len() <= 1, "{found:?}");
+            found.first().map(|found| {
+                assert_eq!(found.pointer, "/scenario/circuit/current_a");
+                found.detail.clone()
+            })
+        };
+        for law in ["paper", "continuous"] {
+            for quiet in [7.5, 10.0, 15.0, 30.0, 0.3] {
+                assert_eq!(detail(quiet, law), None, "{quiet} A, {law}");
+            }
+        }
+        // What stands in for a measurement: eq. 16 (and, below, the continuous law named), or
+        // the continuous law's fade below and hold above.
+        for (current_a, law, says) in [
+            (0.6, "paper", "\"continuous\" fades"),
+            (40.0, "paper", "is an extrapolation there (docs"),
+            (0.6, "continuous", "linear fade"),
+            (7.49, "continuous", "linear fade"),
+            (30.1, "continuous", "holds eq. 16"),
+        ] {
+            let found = detail(current_a, law).unwrap();
+            let named = format!("arcs burn at {current_a} A");
+            assert!(found.contains(&named) && found.contains(says), "{found}");
+        }
+        // A scattered current is judged by its 1st and 99th percentiles, named by its entry.
         let found = diagnose_json(
-            r#"{"scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 0.6},
-                "material": {"arc_restitution": {"law": "paper"}}}}"#,
+            r#"{"scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+                "scatter": [{"parameter": "current_a", "per": "device",
+                    "distribution": {"kind": "normal", "mean": 15, "sd": 4, "min": 0}}]}"#,
         );
-        assert_eq!(found.len(), 1);
-        assert_eq!(found[0].pointer, "/scenario/circuit/current_a");
-        assert!(found[0].detail.contains("0.6 A"), "{}", found[0].detail);
-        // The continuous law is the default.
+        assert_eq!(found.len(), 1, "{found:?}");
+        assert_eq!(found[0].pointer, "/scatter/0/distribution");
         assert!(
-            diagnose_json(
-                r#"{"scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 0.6}}}"#
-            )
-            .is_empty()
+            found[0].detail.contains("arcs burn at 5.70"),
+            "{}",
+            found[0].detail
         );
     }
 
