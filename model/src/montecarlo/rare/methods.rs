@@ -379,14 +379,16 @@ fn next_threshold(level: &Level) -> Option<(f64, Vec<usize>)> {
 
 /// The next level where every sample of `level` ties (a count metric's plateau: every input the
 /// chains reach gives 7 bounces): the same threshold again, its region and so its conditional
-/// probability (1) unchanged, its chains seeded by every tenth sample, so that they explore the
-/// plateau further for a way past it. `None` for a first level (no threshold yet) or after
-/// [`MAX_PLATEAU_LEVELS`] such levels in a row.
+/// probability (1) unchanged, its chains seeded by the last of every ten samples, where the
+/// level's chains of ten ended (their first samples are the seeds they started from), so that
+/// they walk on across the plateau for a way past it. `None` for a first level (no threshold yet)
+/// or once [`MAX_PLATEAU_LEVELS`] levels in a row held the threshold.
 fn plateau(levels: &[(f64, f64)], level: &Level) -> Option<(f64, Vec<usize>)> {
     let &(b, _) = levels.last()?;
     let repeated = levels.iter().rev().take_while(|&&(t, _)| t == b).count();
     let step = (1.0 / LEVEL_PROBABILITY).round() as usize;
-    (repeated < MAX_PLATEAU_LEVELS).then(|| (b, (0..level.ys.len()).step_by(step).collect()))
+    let ends = (step - 1..level.ys.len()).step_by(step).collect();
+    (repeated < MAX_PLATEAU_LEVELS).then_some((b, ends))
 }
 
 /// Why a run stops where every sample of its `levels` so far, the last `probability` deep, ties:
@@ -1664,5 +1666,33 @@ mod tests {
             panic!("1e-9 needs nine levels");
         };
         assert!(reason.contains("max_evaluations"), "{reason}");
+    }
+
+    /// A plateau's level walks on from where the level before it stopped: the last sample of
+    /// each chain of ten, never the chain's first, which is the seed it started from (a review
+    /// found every repeat restarting from the same hundred points); and at most
+    /// [`MAX_PLATEAU_LEVELS`] levels in a row hold one threshold.
+    #[test]
+    fn a_plateau_seeds_its_level_where_the_chains_ended() {
+        let level = Level {
+            us: (0..SAMPLES_PER_LEVEL).map(|i| i as f64).collect(),
+            ys: vec![7.0; SAMPLES_PER_LEVEL],
+            roots: vec![0; SAMPLES_PER_LEVEL],
+        };
+        assert_eq!(plateau(&[], &level), None);
+        let mut levels = vec![(5.0, 0.1), (6.0, 0.01)];
+        let Some((b, seeds)) = plateau(&levels, &level) else {
+            panic!("a plateau after a level is run again");
+        };
+        assert_eq!(b, 6.0);
+        let ends: Vec<usize> = (1..=100).map(|chain| 10 * chain - 1).collect();
+        assert_eq!(seeds, ends);
+        // The level on 6 and the plateau's levels after it: ten in a row, then no more.
+        let mut holding = 1;
+        while plateau(&levels, &level).is_some() {
+            levels.push((6.0, 0.01));
+            holding += 1;
+        }
+        assert_eq!(holding, MAX_PLATEAU_LEVELS);
     }
 }
