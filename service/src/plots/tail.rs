@@ -27,9 +27,16 @@ pub fn tail_svg(metric: &str, beyond: &str, report: &RareEventReport) -> String 
             "No sample reached the threshold: the tail has no point.",
         );
     }
+    // The estimate at the threshold asked, the tail's last point: 0 where nothing was beyond it.
+    let (t, p) = report
+        .tail
+        .last()
+        .map(|last| (last.threshold, report.probability))
+        .filter(|(t, p)| t.is_finite() && p.is_finite())
+        .unwrap_or(*points.last().expect("not empty"));
     let (width, height) = (760.0, 380.0);
     let frame = Frame::inset(0.0, 0.0, width, height, [78.0, 62.0, 24.0, 58.0]);
-    let (lo, hi) = pad_x(extent(points.iter().map(|p| p.0)));
+    let (lo, hi) = pad_x(extent(points.iter().map(|p| p.0).chain([t])));
     let x_axis = LinearAxis::new(lo, hi, 6, false);
     let xs = Scale::new(x_axis.lo, x_axis.hi, frame.left, frame.right());
     let [ci_lo, ci_hi] = report.ci95;
@@ -53,16 +60,22 @@ pub fn tail_svg(metric: &str, beyond: &str, report: &RareEventReport) -> String 
     for &(x, y) in &line {
         svg.circle(x, y, 3.5, BLUE, "#ffffff", 1.0);
     }
-    // The estimate at the threshold asked, with its interval.
-    let &(t, p) = points.last().expect("not empty");
+    // The estimate with its interval; an estimate of 0 sits on the axis's floor, its interval
+    // reaching up from there to its upper bound.
     let x = xs.map(t);
-    if ci_lo > 0.0 && ci_hi.is_finite() {
-        let (ya, yb) = (ys.map(ci_lo.log10()), ys.map(ci_hi.log10()));
+    let y_of = |p: f64| match p > 0.0 {
+        true => ys.map(p.log10()),
+        false => frame.bottom(),
+    };
+    if ci_hi > 0.0 && ci_hi.is_finite() {
+        let (ya, yb) = (y_of(ci_lo), y_of(ci_hi));
         svg.line(x, ya, x, yb, RED, 1.4, None);
-        svg.line(x - 5.0, ya, x + 5.0, ya, RED, 1.4, None);
+        if ci_lo > 0.0 {
+            svg.line(x - 5.0, ya, x + 5.0, ya, RED, 1.4, None);
+        }
         svg.line(x - 5.0, yb, x + 5.0, yb, RED, 1.4, None);
     }
-    svg.circle(x, ys.map(p.log10()), 4.5, RED, "#ffffff", 1.0);
+    svg.circle(x, y_of(p), 4.5, RED, "#ffffff", 1.0);
     draw_frame_axes(&mut svg, &frame);
     svg.text(
         frame.left + frame.width / 2.0,
@@ -131,6 +144,37 @@ mod tests {
         check(&svg);
         assert!(svg.contains("P(total_bounce_s above t)"));
         assert!(svg.contains("5400 evaluations"));
+    }
+
+    /// An estimate of 0 (a crude run with nothing beyond the threshold) sits at the threshold
+    /// asked, beyond the last level, on the axis's floor under its upper bound; it sat on the
+    /// last level with a positive share, and the axis stopped short of the threshold (a probe).
+    #[test]
+    fn an_estimate_of_zero_sits_at_the_threshold_asked() {
+        let tail = [(0.0121, 0.1), (0.0131, 0.01), (0.0137, 1e-3), (0.0218, 0.0)];
+        let svg = tail_svg("total_bounce_s", "above", &report(&tail, [0.0, 3.688e-4]));
+        check(&svg);
+        let circles: Vec<(f64, f64, f64)> = svg
+            .lines()
+            .filter(|line| line.starts_with("<circle"))
+            .map(|line| {
+                let attribute = |name: &str| -> f64 {
+                    let start = line.find(&format!("{name}=\"")).unwrap() + name.len() + 2;
+                    line[start..].split('"').next().unwrap().parse().unwrap()
+                };
+                (attribute("cx"), attribute("cy"), attribute("r"))
+            })
+            .collect();
+        // The levels' points (r 3.5), the estimate (r 4.5), below the legend's row (y 46).
+        let drawn = |r: f64| -> Vec<&(f64, f64, f64)> {
+            circles.iter().filter(|c| c.2 == r && c.1 > 50.0).collect()
+        };
+        let (levels, estimate) = (drawn(3.5), drawn(4.5));
+        assert_eq!((levels.len(), estimate.len()), (3, 1), "{svg}");
+        let last_level = levels.iter().map(|c| c.0).fold(f64::MIN, f64::max);
+        let lowest_level = levels.iter().map(|c| c.1).fold(f64::MIN, f64::max);
+        assert!(estimate[0].0 > last_level + 100.0, "{circles:?}");
+        assert!(estimate[0].1 > lowest_level, "{circles:?}");
     }
 
     #[test]
