@@ -332,6 +332,27 @@ await step("the linked comparison opens with its plots and tables", async () => 
 if (!page.url().includes(`compare=${otherDesign.id}`) || !page.url().includes("metric=")) {
   await fail(`the reopened page's address ${page.url()} lost the comparison or the metric`);
 }
+// An address changed in place shows what it names (the page read it only when it loaded).
+const linkedHash = new URL(linked).hash.slice(1);
+await step("a metric changed in the address shows it and compares for it", async () => {
+  const hash = new URLSearchParams(linkedHash);
+  hash.set("metric", "e1");
+  await page.evaluate((h) => { location.hash = h; }, hash.toString());
+  await page.waitForFunction(() => document.querySelector("#metric").value === "e1"
+    && document.querySelector("#compare-table thead th")?.textContent === "e1");
+});
+await step("the comparison taken out of the address is hidden", async () => {
+  await page.evaluate(() => { location.hash = "metric=e1"; });
+  await page.waitForFunction(() => document.querySelector("#compare-result").hidden
+    && document.querySelector("#compare-with").value === "");
+});
+await step("the linked address again shows its comparison", async () => {
+  await page.evaluate((h) => { location.hash = h; }, linkedHash);
+  await page.waitForFunction((other) => !document.querySelector("#compare-result").hidden
+    && document.querySelector("#compare-with").value === other
+    && document.querySelector("#compare-table thead th")?.textContent === "total_bounce_s",
+    otherDesign.id);
+});
 await page.waitForTimeout(300);
 await step("save dashboard-compare.png", () =>
   page.locator("#compare-section").screenshot({ path: join(outDir, "dashboard-compare.png") }),
@@ -386,7 +407,10 @@ log(`submitting ${ACTIVE_JOBS} long jobs`);
 const active = [];
 for (let k = 0; k < ACTIVE_JOBS; k++) {
   const job = await step(`submit long job ${k + 1}`, () =>
-    call("POST", "/v1/jobs", { name: `Long job ${k + 1}`, devices: 100000, operations: 10000, seed: k + 1 }),
+    // The first named by one unbroken word of 200 letters, which must wrap in the list.
+    call("POST", "/v1/jobs", {
+      name: k ? `Long job ${k + 1}` : "L".repeat(200), devices: 100000, operations: 10000, seed: k + 1,
+    }),
   );
   active.push(job.id);
 }
@@ -422,6 +446,11 @@ const activeRows = await step(`the ${ACTIVE_JOBS} long jobs are listed as active
   );
   return active.length;
 });
+const widths = await page.evaluate(() => [document.querySelector("#jobs-table").scrollWidth,
+  document.querySelector("#jobs-section").clientWidth]);
+if (widths[0] > widths[1]) {
+  await fail(`a job's long name widens the list to ${widths[0]} px in a card of ${widths[1]} px`);
+}
 const nextRun = (await page.textContent(`[data-schedule-id="${schedule.id}"] .next-run`)) || "";
 if (!/\d{4}-\d\d-\d\d \d\d:\d\d Europe\/Berlin \(\d{4}-\d\d-\d\d \d\d:\d\d UTC\)/.test(nextRun)) {
   await fail(`the schedule's next run does not name its zone: "${nextRun.trim()}"`);

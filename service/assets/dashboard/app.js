@@ -1129,6 +1129,21 @@
         input.value = wanted;
         compareWith(wanted);
       }
+      // An address changed in place (a link followed, a hash typed) shows what it names: its
+      // metric (which compares again) and its comparison, or none.
+      window.onhashchange = () => {
+        const hash = new URLSearchParams(location.hash.slice(1));
+        const select = $("#metric");
+        const [metric, other] = [hash.get("metric"), hash.get("compare")];
+        input.value = other || "";
+        if (!other) show($("#compare-result"), false);
+        if (metric && metric !== select.value && [...select.options].some((o) => o.value === metric)) {
+          select.value = metric;
+          select.onchange(); // shows the metric, and compares again for it
+        } else if (other) {
+          compareWith(other);
+        }
+      };
     }
 
     async function compareWith(other) {
