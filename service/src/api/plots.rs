@@ -16,7 +16,6 @@ use axum::extract::rejection::QueryRejection;
 use axum::extract::{Query, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
-use chrono::DateTime;
 use serde::Deserialize;
 use utoipa::IntoParams;
 use utoipa_axum::router::OpenApiRouter;
@@ -126,21 +125,24 @@ pub async fn schedule_trend_plot(
             .unwrap_or_default(),
     };
     let trend = schedule_trend(&state, &schedule, 60).await?;
-    let points: Vec<TrendPoint> = trend
+    let shown: Vec<_> = trend
         .runs
         .iter()
         .filter_map(|run| {
-            let value = run.values.get(&statistic)?.as_ref()?;
-            let label = DateTime::parse_from_rfc3339(&run.scheduled_for).map_or_else(
-                |_| run.scheduled_for.clone(),
-                |at| schedule.definition.wall_clock(at.to_utc()),
-            );
-            Some(TrendPoint {
-                label,
-                value: value.value,
-                ci95: Some(value.ci95),
-                flagged: value.drift,
-            })
+            Some((
+                run.scheduled_for.as_str(),
+                run.values.get(&statistic)?.as_ref()?,
+            ))
+        })
+        .collect();
+    let times: Vec<&str> = shown.iter().map(|(time, _)| *time).collect();
+    let points: Vec<TrendPoint> = (schedule.definition.wall_clock(&times).into_iter())
+        .zip(&shown)
+        .map(|(label, (_, value))| TrendPoint {
+            label,
+            value: value.value,
+            ci95: Some(value.ci95),
+            flagged: value.drift,
         })
         .collect();
     let svg = plots::trend_svg(

@@ -99,11 +99,27 @@ impl ScheduleDefinition {
             .is_some_and(|due| UnixMs::from_datetime(due) == at)
     }
 
-    /// `at` on the schedule's wall clock, to the minute, as its trend labels runs:
-    /// `2026-11-22 03:00`. (A stored zone always parses; UTC stands in should one not.)
-    pub fn wall_clock(&self, at: DateTime<Utc>) -> String {
+    /// Runs' times (RFC 3339, as stored) on the schedule's wall clock, as its trend labels them:
+    /// to the minute (`2026-11-22 03:00`), or to the second where two runs share a minute (runs
+    /// asked for by hand); a time that does not parse as it is. (A stored zone always parses; UTC
+    /// stands in should one not.)
+    pub fn wall_clock(&self, times: &[&str]) -> Vec<String> {
         let zone = Tz::from_str(&self.time_zone).unwrap_or(Tz::UTC);
-        at.with_timezone(&zone).format("%Y-%m-%d %H:%M").to_string()
+        let shown = |pattern: &str| -> Vec<String> {
+            times
+                .iter()
+                .map(|&text| match DateTime::parse_from_rfc3339(text) {
+                    Ok(at) => at.with_timezone(&zone).format(pattern).to_string(),
+                    Err(_) => text.to_owned(),
+                })
+                .collect()
+        };
+        let minutes = shown("%Y-%m-%d %H:%M");
+        let distinct: std::collections::HashSet<&String> = minutes.iter().collect();
+        match distinct.len() == minutes.len() {
+            true => minutes,
+            false => shown("%Y-%m-%d %H:%M:%S"),
+        }
     }
 }
 
@@ -767,7 +783,7 @@ mod tests {
     }
 
     #[test]
-    fn the_wall_clock_is_the_schedules_zone_to_the_minute() {
+    fn the_wall_clock_is_the_schedules_zone_to_the_minute_or_second() {
         let definition = ScheduleDefinition {
             name: "nightly".into(),
             cron: "0 1 * * *".into(),
@@ -776,10 +792,15 @@ mod tests {
             statistics: Vec::new(),
             enabled: true,
         };
-        // 00:00:00.123 UTC is 01:00 in Berlin in winter.
+        // 00:00:00.123 UTC is 01:00 in Berlin in winter; two runs in one minute (run by hand)
+        // are told apart by their seconds (their labels were the same, found from outside).
         assert_eq!(
-            definition.wall_clock(utc("2026-11-22T00:00:00.123Z")),
-            "2026-11-22 01:00"
+            definition.wall_clock(&["2026-11-22T00:00:00.123Z", "2026-11-23T00:00:00Z", "x"]),
+            ["2026-11-22 01:00", "2026-11-23 01:00", "x"]
+        );
+        assert_eq!(
+            definition.wall_clock(&["2026-11-22T00:00:00.123Z", "2026-11-22T00:00:41Z"]),
+            ["2026-11-22 01:00:00", "2026-11-22 01:00:41"]
         );
         // The due time itself, to the millisecond, is the scheduled run's slot; a manual run
         // takes the next millisecond.
