@@ -1083,7 +1083,9 @@ fn a_sensitivity_job_has_a_sensitivity_plot_and_a_job_without_one_gets_404() {
     assert_eq!(svg.content_type, "image/svg+xml");
     assert!(svg.body.starts_with("<svg") && svg.body.ends_with("</svg>\n"));
     assert!(svg.body.contains("total_bounce_s") && svg.body.contains("contact_radius_m"));
-    assert!(svg.body.contains("operations 0-49") && svg.body.contains("operations 50-99"));
+    assert!(
+        svg.body.contains("operations 0\u{2013}49") && svg.body.contains("operations 50\u{2013}99")
+    );
     assert!(!svg.body.contains("NaN"));
     // A device metric has its indices over the devices; a metric the analysis lacks is 404.
     let device = plot(&id, "?metric=final_radius_m");

@@ -144,6 +144,11 @@
     return Array.isArray(ci) && ci.length === 2 ? "[" + fmt(ci[0]) + ", " + fmt(ci[1]) + "]" : "–";
   }
 
+  // A bin's operations, both ends included (its op_end is exclusive), as the plots head them.
+  function opRange(bin) {
+    return bin.op_start + "–" + Math.max(bin.op_start, bin.op_end - 1);
+  }
+
   function fmtCount(value) {
     return typeof value === "number" && Number.isFinite(value) ? value.toLocaleString("en-US") : "–";
   }
@@ -934,7 +939,7 @@
         limited ? el("th", { class: "num" }, "P(above limit)") : null);
       const q = (b, k) => (b.quantiles && b.quantiles[k] ? b.quantiles[k].value : undefined);
       const rowsHtml = bins.map((b) => el("tr", {},
-        el("td", {}, b.op_start + "–" + b.op_end),
+        el("td", {}, opRange(b)),
         el("td", { class: "num" }, fmtCount(b.n)),
         el("td", { class: "num" }, fmt(b.mean)),
         el("td", { class: "num" }, fmt(q(b, "p05"))),
@@ -1060,7 +1065,7 @@
       }
       const sobol = entries.some(([, p]) => p.first || p.total);
       const where = typeof last.op_start === "number" && typeof last.op_end === "number"
-        ? "Last bin, operations " + last.op_start + "–" + (last.op_end - 1)
+        ? "Last bin, operations " + opRange(last)
         : "Over the devices at the end of the test";
       $("#sensitivity-bin").textContent = where +
         (typeof last.r_squared === "number" ? "; the regression explains R² = " + fmt(last.r_squared, 3) + " of the variance." : ".");
@@ -1171,7 +1176,7 @@
       const rows = [];
       for (const bin of comparison.bins || []) {
         for (const [name, d] of Object.entries(bin.statistics || {})) {
-          rows.push(el("tr", {}, el("td", {}, "ops " + bin.op_start + "–" + bin.op_end + ": " + name),
+          rows.push(el("tr", {}, el("td", {}, "ops " + opRange(bin) + ": " + name),
             ...both(d).map((v) => el("td", { class: "num" }, v))));
         }
       }

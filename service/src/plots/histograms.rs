@@ -98,8 +98,9 @@ fn shared_axes(metric: &str, chosen: &[&Bin]) -> [LinearAxis; 2] {
 /// A panel's heading and its count, shortened until both fit on one line of `room` pixels with a
 /// gap between them: `operations a-b` then `ops a-b`, `n = 12345` then `n = 12.3k`.
 fn panel_labels(bin: &Bin, room: f64) -> (String, String) {
-    let range = format!("{}\u{2013}{}", bin.op_start, bin.op_end);
-    let headings = [format!("operations {range}"), format!("ops {range}")];
+    let heading = super::operation_range(bin.op_start, bin.op_end);
+    let short = heading.replacen("operations", "ops", 1);
+    let headings = [heading, short];
     let counts = [
         format!("n = {}", bin.summary.n),
         format!("n = {}", fmt_count(bin.summary.n)),
@@ -233,8 +234,8 @@ mod tests {
         let svg = histograms_svg("total_bounce_s", &bins);
         check(&svg);
         assert!(svg.contains("total_bounce_s: distribution per bin of operations"));
-        assert!(svg.contains("operations 0\u{2013}100"));
-        assert!(svg.contains("operations 900\u{2013}1000"));
+        assert!(svg.contains("operations 0\u{2013}99"));
+        assert!(svg.contains("operations 900\u{2013}999"));
         assert_eq!(svg.matches("class=\"panel\"").count(), 10);
         assert!(svg.contains("limit"));
         assert!(svg.contains(">count<"));
@@ -247,8 +248,8 @@ mod tests {
         check(&svg);
         assert_eq!(svg.matches("class=\"panel\"").count(), 12);
         assert!(svg.contains("12 of 40 bins, evenly spaced"));
-        assert!(svg.contains("operations 0\u{2013}25"));
-        assert!(svg.contains("operations 975\u{2013}1000"));
+        assert!(svg.contains("operations 0\u{2013}24"));
+        assert!(svg.contains("operations 975\u{2013}999"));
         assert_eq!(pick_evenly(40, 12).len(), 12);
         let v = pick_evenly(13, 12);
         assert_eq!((v.len(), v[0], v[11]), (12, 0, 12));
@@ -350,7 +351,7 @@ mod tests {
         let room = PANEL.0 - 12.0 - 8.0;
         assert_eq!(
             panel_labels(&bin(0, 20, 2000), room),
-            ("operations 0\u{2013}20".to_owned(), "n = 2000".to_owned())
+            ("operations 0\u{2013}19".to_owned(), "n = 2000".to_owned())
         );
         let (heading, count) = panel_labels(&bin(100_000, 200_000, 2_000_000), room);
         assert!(heading.starts_with("ops "), "{heading}");

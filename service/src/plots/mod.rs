@@ -131,6 +131,15 @@ pub fn compared_plot(
 }
 
 /// Whether `metric` takes whole values only (`bounce_count`): its axes get whole ticks.
+/// A bin's operations as every plot heads it, both ends included: `operations 90–99` for the
+/// bin whose `op_start` is 90 and `op_end` (exclusive) 100, as the dashboard writes it too.
+fn operation_range(start: u64, end: u64) -> String {
+    format!(
+        "operations {start}\u{2013}{}",
+        end.saturating_sub(1).max(start)
+    )
+}
+
 fn whole_valued(metric: &str) -> bool {
     matches!(Metric::parse(metric), Some(Metric::Operation(m)) if m.is_integer())
 }

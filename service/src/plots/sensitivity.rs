@@ -290,13 +290,11 @@ fn index_axis(lo: f64, hi: f64) -> LinearAxis {
     axis
 }
 
-/// "operations 0-99" for a bin of operations 0 to 99 (its end is exclusive); a device metric's
+/// "operations 0–99" for a bin of operations 0 to 99 (its end is exclusive); a device metric's
 /// single entry is over the devices at the end of the test.
 fn operations(bin: &SensitivityBin) -> String {
     match (bin.op_start, bin.op_end) {
-        (Some(start), Some(end)) => {
-            format!("operations {start}-{}", end.saturating_sub(1).max(start))
-        }
+        (Some(start), Some(end)) => super::operation_range(start, end),
         (Some(start), None) => format!("operations from {start}"),
         _ => "devices at the end of the test".to_owned(),
     }
@@ -476,9 +474,9 @@ mod tests {
         ];
         let svg = sensitivity_svg("total_bounce_s", &bins);
         strict(&svg);
-        assert!(svg.contains("operations 0-99 (first bin)"), "{svg}");
-        assert!(svg.contains("operations 900-999 (last bin)"));
-        assert!(!svg.contains("operations 100-199"));
+        assert!(svg.contains("operations 0\u{2013}99 (first bin)"), "{svg}");
+        assert!(svg.contains("operations 900\u{2013}999 (last bin)"));
+        assert!(!svg.contains("operations 100\u{2013}199"));
         assert!(svg.contains("first-order index") && svg.contains("total index"));
         // Two panels, two parameters, two bars each.
         assert_eq!(svg.matches(&format!("fill=\"{TOTAL}\"")).count(), 4 + 1);
@@ -550,7 +548,7 @@ mod tests {
         );
         assert!(svg.contains("R\u{b2} = 0.810"));
         assert!(svg.contains("no coefficient"));
-        assert!(svg.contains("operations 10-19 (last bin)"));
+        assert!(svg.contains("operations 10\u{2013}19 (last bin)"));
     }
 
     #[test]
@@ -577,7 +575,7 @@ mod tests {
         let svg = sensitivity_svg("<m>", &[bin.clone(), bin]);
         strict(&svg);
         assert!(svg.contains("&lt;b&gt;&amp;&quot;x&quot;"));
-        assert!(svg.contains("operations 5-5"));
+        assert!(svg.contains("operations 5\u{2013}5"));
     }
 
     #[test]
