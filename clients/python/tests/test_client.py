@@ -107,7 +107,10 @@ def test_a_refused_job_names_its_fields(client):
         client.submit({"devices": 0, "operations": 0})
     assert refused.value.status == 422
     assert refused.value.pointers == ["/devices", "/operations"]
-    assert "/devices" in str(refused.value)
+    # Each field's rule once: the server's detail names them (they were listed twice).
+    told = str(refused.value)
+    assert "/devices" in told
+    assert all(told.count(f"{e.pointer}: {e.detail}") == 1 for e in refused.value.errors), told
 
 
 def test_unknown_jobs_and_results_before_success_are_errors(client):
@@ -174,6 +177,43 @@ def test_an_id_with_a_slash_reaches_no_other_resource(client, job):
     with pytest.raises(BouncewearError) as unknown:
         client.job(f"{job.id}/life")
     assert unknown.value.status == 404
+    # A metric's or a plot's name is one segment too: it read e1's bins, and added queries.
+    for metric in ("total_bounce_s/../e1", "../result", "total_bounce_s?op_start=0"):
+        with pytest.raises(BouncewearError) as unknown:
+            job.distribution(metric)
+        assert unknown.value.status == 404, metric
+    with pytest.raises(BouncewearError) as unknown:
+        job.plot("../result")
+    assert unknown.value.status == 404
+
+
+def test_comparisons_keep_their_columns_and_types_with_no_bin_or_interval(client, job):
+    """Found from outside: no shared bin gave a frame without columns, and no interval anywhere
+    columns of None."""
+    apart = client.submit({"devices": 4, "operations": 10, "seed": 3}).wait(progress=False)
+    empty = job.compare_statistics(apart)
+    assert len(empty) == 0
+    assert list(empty.columns) == ["op_start", "op_end", "statistic", "a", "b", "difference",
+                                   "difference_lo", "difference_hi", "ratio", "ratio_lo",
+                                   "ratio_hi"]
+    # Four values a bin bound neither end's quantile: no interval, nor a ratio's.
+    same = apart.compare_statistics(apart, statistics=["p01", "p99"])
+    assert len(same) == 20
+    assert all(same[c].dtype == float for c in same.columns[3:])
+    assert (same["difference_hi"] - same["difference_lo"]).isna().all()
+
+
+def test_a_job_run_whole_has_its_shards_group_column(client):
+    small = client.submit({"devices": 4, "operations": 10, "seed": 4}).wait(progress=False)
+    shards = small.shards()
+    assert len(shards) == 1 and "group" in shards
+    assert shards["group"].isna().all() and str(shards["group"].dtype) == "Int64"
+
+
+def test_an_idempotency_key_the_server_would_refuse_is_refused_here(client):
+    for key in ("", "\u20ac", "a b", "x" * 256):
+        with pytest.raises(ValueError, match="idempotency_key"):
+            client.submit({"devices": 1, "operations": 1}, idempotency_key=key)
 
 
 def _notes(caplog):

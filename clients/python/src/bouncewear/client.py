@@ -61,7 +61,9 @@ class BouncewearError(Exception):
     retry_after: Optional[float] = None
 
     def __str__(self) -> str:
-        fields = "".join(f"\n  {e.pointer or '(document)'}: {e.detail}" for e in self.errors)
+        # The server's detail names each field already; a field it leaves out is listed below it.
+        fields = "".join(f"\n  {e.pointer or '(document)'}: {e.detail}" for e in self.errors
+                         if f"{e.pointer}: {e.detail}" not in self.detail)
         return f"{self.status} {self.title}: {self.detail}{fields}"
 
     @property
@@ -93,8 +95,19 @@ class BouncewearError(Exception):
 
 
 def _segment(id: str) -> str:
-    """A job's id as one segment of a path: a slash or `?` in it reaches no other resource."""
+    """An id, metric or plot's name as one segment of a path: a slash or `?` in it reaches no
+    other resource and adds no query."""
     return urllib.parse.quote(str(id), safe="")
+
+
+def _idempotency_key(key: Optional[str]) -> str:
+    """`key` checked as the server takes it (1 to 255 visible ASCII characters: docs/contract.md
+    "Idempotency-Key"), or a new one when None."""
+    if key is None:
+        return f"py-{uuid.uuid4().hex}"
+    if not 1 <= len(key) <= 255 or not all("!" <= c <= "~" for c in key):
+        raise ValueError(f"idempotency_key must be 1 to 255 visible ASCII characters, got {key!r}")
+    return key
 
 
 def _seconds_to_wait(retry_after: Optional[str]) -> Optional[float]:
@@ -134,7 +147,8 @@ class Client:
     HEAD or PUT, or a POST the server honours an Idempotency-Key on) is sent again after its
     `Retry-After` (at most a minute), and a repeatable one whose connection was refused, reset or
     cut short after 0.5, 1, 2, ... s, up to `retries` times, each noted on the `bouncewear`
-    logger; then the last `BouncewearError` (or `requests.ConnectionError`) is raised. `submit`
+    logger; then the last `BouncewearError` (or `requests.ConnectionError`, or
+    `requests.Timeout` for an answer that took longer than `timeout` seconds) is raised. `submit`
     always sends an Idempotency-Key, so a job is never queued twice.
 
     An `https` URL is checked against the CA certificates `requests` trusts, or instead those of
@@ -214,7 +228,7 @@ class Client:
         With `idempotency_key`, a retry of the same submission within 24 hours gives the same job;
         without, a key of its own makes this call's own retries safe.
         """
-        headers = {"Idempotency-Key": idempotency_key or f"py-{uuid.uuid4().hex}"}
+        headers = {"Idempotency-Key": _idempotency_key(idempotency_key)}
         return Job(self, self.request("POST", "/v1/jobs", json=job, headers=headers).json())
 
     def job(self, id: str) -> "Job":
@@ -240,7 +254,7 @@ class Client:
     def create_schedule(self, schedule: JSON, *, idempotency_key: Optional[str] = None) -> "Schedule":
         """Creates a schedule (`{"name", "cron", "time_zone", "template": JOB, "statistics",
         "enabled"}`: docs/manual.md "Nightly endurance runs"); a retry is safe as `submit`'s."""
-        headers = {"Idempotency-Key": idempotency_key or f"py-{uuid.uuid4().hex}"}
+        headers = {"Idempotency-Key": _idempotency_key(idempotency_key)}
         return Schedule(self, self.request("POST", "/v1/schedules", json=schedule, headers=headers).json())
 
     def schedule(self, id: str) -> "Schedule":
@@ -393,7 +407,8 @@ class Job(_Resource):
             params["quantiles"] = ",".join(repr(float(q)) for q in quantiles)
         if exceedance is not None:
             params["exceedance"] = ",".join(exceedance)
-        frame = _csv(self.client.request("GET", self._path(f"/distributions/{metric}"), params=params))
+        path = self._path(f"/distributions/{_segment(metric)}")
+        frame = _csv(self.client.request("GET", path, params=params))
         # Every statistic a float, whatever its values (a column of zeros reads as integers).
         counts = {"op_start", "op_end", "n"}
         for column in frame.columns:
@@ -422,9 +437,10 @@ class Job(_Resource):
             shards.extend(body["shards"])
             if not body.get("next_cursor"):
                 frame = pd.DataFrame(shards)
-                # A merge step has no group: integers with gaps, not floats.
-                if "group" in frame:
-                    frame["group"] = frame["group"].astype("Int64")
+                # A merge step has no group: integers with gaps, not floats; a job run whole is
+                # its merge step alone, and the column is there all the same.
+                frame["group"] = (frame["group"] if "group" in frame else pd.NA)
+                frame["group"] = frame["group"].astype("Int64")
                 return frame
             params = {"cursor": body["next_cursor"]}
 
@@ -432,7 +448,7 @@ class Job(_Resource):
         """A plot as SVG text (`bands.svg`, `histograms.svg`, `weibull.svg`, `sensitivity.svg`,
         `tail.svg`); in Jupyter, `IPython.display.SVG(job.plot())` shows it."""
         params = {"metric": metric} if metric else None
-        return self.client.request("GET", self._path(f"/plots/{kind}"), params=params).text
+        return self.client.request("GET", self._path(f"/plots/{_segment(kind)}"), params=params).text
 
     def compare(self, other: "Job", metric: Optional[str] = None,
                 statistics: Optional[Iterable[str]] = None,
@@ -465,7 +481,12 @@ class Job(_Resource):
                              "a": d["a"], "b": d["b"], "difference": d["difference"],
                              "difference_lo": difference[0], "difference_hi": difference[1],
                              "ratio": d.get("ratio"), "ratio_lo": ratio[0], "ratio_hi": ratio[1]})
-        return pd.DataFrame(rows)
+        # The same columns and types with no bin shared (the answer's `notes` say why) and with
+        # no interval anywhere: numbers are floats, a missing one NaN.
+        frame = pd.DataFrame(rows, columns=_COMPARED)
+        for column in _COMPARED[3:]:
+            frame[column] = pd.to_numeric(frame[column], errors="coerce").astype(float)
+        return frame.astype({"op_start": "int64", "op_end": "int64", "statistic": object})
 
     def compare_plot(self, other: "Job", kind: str = "bands.svg", metric: Optional[str] = None) -> str:
         """Both jobs' `bands.svg` (wear curves) or `weibull.svg` overlaid, as SVG text."""
@@ -539,6 +560,11 @@ class Schedule(_Resource):
             frame[column] = frame[column].astype(float)
         frame["drift"] = frame["drift"].astype("boolean")
         return frame
+
+
+# The columns of `Job.compare_statistics`.
+_COMPARED = ["op_start", "op_end", "statistic", "a", "b", "difference", "difference_lo",
+             "difference_hi", "ratio", "ratio_lo", "ratio_hi"]
 
 
 def _csv(response: requests.Response) -> pd.DataFrame:
