@@ -265,8 +265,9 @@ pub enum RunError {
 
 /// A summary the run cannot state: a metric's values, or their spread, beyond f64's range. The
 /// magnitudes a scenario admits keep every input within 1e-30 to 1e30, but their products can
-/// still combine past 1.8e308 (1e30 N pressing contacts of 1e-30 m at 1e-30 Pa: a first impact's
-/// plastic work of 1e314 J), and such a job ends with this instead of a Result of `null`s.
+/// still combine past 1.8e308 (forces of 1e30 N, lengths and pressures of 1e-30, an arc of 1e30 V and
+/// 1e30 A: a first impact's plastic work beyond f64), and such a job ends with this
+/// instead of a Result of `null`s.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
     "{metric} leaves the range of f64 (beyond 1.8e308) {at}{what}: the scenario's magnitudes \
@@ -281,7 +282,7 @@ pub struct OutOfRange {
 }
 
 /// Every operation bin's and device metric's summary stated in finite numbers (its mean, interval,
-/// spread and extremes), or the first that is not.
+/// spread and extremes), and every sensitivity index, or the first that is not.
 pub fn check_in_range(result: &JobResult) -> Result<(), OutOfRange> {
     let finite = |s: &Summary| {
         [s.mean, s.mean_ci95[0], s.mean_ci95[1], s.sd, s.min, s.max]
@@ -308,14 +309,27 @@ pub fn check_in_range(result: &JobResult) -> Result<(), OutOfRange> {
             });
         }
     }
-    match result.devices.iter().find(|(_, summary)| !finite(summary)) {
-        Some((metric, summary)) => Err(OutOfRange {
+    if let Some((metric, summary)) = result.devices.iter().find(|(_, summary)| !finite(summary)) {
+        return Err(OutOfRange {
             metric: metric.clone(),
             what: what(summary),
             at: "over the devices at the end of the test".to_owned(),
-        }),
-        None => Ok(()),
+        });
     }
+    // The indices' sums of products can pass f64 where no summary's does (they printed null).
+    for (metric, bins) in result.sensitivity.iter().flatten() {
+        if let Some(bin) = bins.iter().find(|bin| !bin.is_finite()) {
+            return Err(OutOfRange {
+                metric: metric.clone(),
+                what: " in its sensitivity indices (their sums of products of values)".to_owned(),
+                at: match bin.op_start {
+                    Some(start) => format!("in the bin from operation {start}"),
+                    None => "over the devices at the end of the test".to_owned(),
+                },
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Runs a job on the current rayon pool on [`Kernel::active`] and summarises it.

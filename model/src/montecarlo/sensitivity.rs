@@ -300,6 +300,22 @@ pub struct ParameterSensitivity {
     pub per: Per,
 }
 
+impl SensitivityBin {
+    /// Whether every index, interval and coefficient of the bin is a finite number.
+    pub fn is_finite(&self) -> bool {
+        let estimate = |e: &IndexEstimate| {
+            [e.value, e.ci95[0], e.ci95[1]]
+                .iter()
+                .all(|v| v.is_finite())
+        };
+        self.r_squared.is_none_or(f64::is_finite)
+            && self.indices.values().all(|p| {
+                [p.first, p.total].iter().flatten().all(estimate)
+                    && p.src.is_none_or(f64::is_finite)
+            })
+    }
+}
+
 /// The Result's `sensitivity`: per metric, its bins (a device metric: one entry), from the
 /// groups' sums merged in group order.
 pub fn summarize_sensitivity(
@@ -391,4 +407,37 @@ pub fn summarize_sensitivity(
         }
     }
     result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A bin whose index, interval or coefficient is not a number is not finite (such a Result
+    /// printed `null` indices, found from outside); one without a regression's numbers is.
+    #[test]
+    fn a_bin_is_finite_when_every_number_it_states_is() {
+        let estimate = |value: f64| IndexEstimate {
+            value,
+            ci95: [0.0, 1.0],
+        };
+        let bin = |first: f64, src: Option<f64>| SensitivityBin {
+            op_start: Some(0),
+            op_end: Some(10),
+            indices: BTreeMap::from([(
+                "contact_radius_m".to_owned(),
+                ParameterSensitivity {
+                    first: Some(estimate(first)),
+                    total: Some(estimate(0.5)),
+                    src,
+                    per: Per::Device,
+                },
+            )]),
+            r_squared: src.map(|_| 0.9),
+        };
+        assert!(bin(0.4, Some(0.7)).is_finite());
+        assert!(bin(0.4, None).is_finite());
+        assert!(!bin(f64::NAN, Some(0.7)).is_finite());
+        assert!(!bin(0.4, Some(f64::INFINITY)).is_finite());
+    }
 }

@@ -331,13 +331,20 @@ impl Accumulator {
     }
 
     /// Sample variance `(Q - S^2/n) / (n - 1)`, never negative; 0 for fewer than two values.
+    /// Where the squares pass f64 (`inf - inf`), NaN, never 0: a run's range check names the
+    /// metric (`check_in_range`); values of 1e153 and more summed 4000 times read a spread of 0.
     pub fn variance(&self) -> f64 {
         let n = self.count();
         if n < 2 {
             return 0.0;
         }
         let n = n as f64;
-        ((self.sum_sq - self.sum * self.sum / n) / (n - 1.0)).max(0.0)
+        let variance = (self.sum_sq - self.sum * self.sum / n) / (n - 1.0);
+        if variance.is_nan() {
+            variance
+        } else {
+            variance.max(0.0)
+        }
     }
 
     /// Sample standard deviation (`n - 1` in the denominator); 0 for fewer than two values.

@@ -925,9 +925,9 @@ fn listed_lives_are_the_first_devices_and_every_device_is_counted() {
     assert_eq!((none.failures, none.censored), (all.failures, all.censored));
 }
 
-/// Inputs each within the magnitudes a scenario admits can still combine past f64 (1e30 N on
-/// contacts of 1e-30 m at 1e-30 Pa: a first impact's plastic work of about 1e314 J). The run says
-/// which metric and where, instead of a Result whose summaries are `null`.
+/// Inputs each within the magnitudes a scenario admits can still combine past f64 (forces of
+/// 1e30 N, lengths and pressures of 1e-30, an arc of 1e30 V and 1e30 A: a first impact's plastic
+/// work beyond f64). The run says which metric and where, instead of a Result whose summaries are `null`.
 #[test]
 fn a_metric_beyond_f64_ends_the_run_with_its_name() {
     let text = include_str!("../../../tests/data/beyond_f64_job.json");
@@ -958,5 +958,43 @@ fn a_metric_beyond_f64_ends_the_run_with_its_name() {
              0 in its spread (values reach 2."
         ) && told.contains("e156, whose squares pass 1.8e308)"),
         "{told}"
+    );
+}
+
+/// Values of 1e153 to 1e154 whose sum's square passes f64 (`inf - inf` in the variance) read a
+/// spread of 0 and succeeded, and their Sobol' indices printed `null` (found from outside): the
+/// run ends naming the metric, as where the squares alone pass it.
+#[test]
+fn a_spread_whose_squares_pass_f64_is_no_spread_of_zero() {
+    let extreme = json!({
+        "mechanism": {"spring_stiffness_n_per_m": 0, "static_force_n": 1e-30,
+                      "inertia_kg_m2": 1e30, "contact_arm_m": 1e-30, "impact_velocity_m_s": 1e30},
+        "material": {"kappa": 1e30},
+        "losses": {"impact_energy_loss_j": 0, "min_separation_m": 0, "max_bounces": 10000}});
+    let velocity = |per: &str, min: f64, max: f64| {
+        json!([{"parameter": "impact_velocity_m_s",
+        "per": per, "distribution": {"kind": "uniform", "min": min, "max": max}}])
+    };
+    let told = |text: serde_json::Value| {
+        let error = bouncewear_model::montecarlo::run_job(&job(text), &Silent).unwrap_err();
+        error.to_string()
+    };
+    let eight = told(
+        json!({"scenario": extreme, "devices": 4, "operations": 2, "seed": 1,
+        "metrics": ["total_bounce_s"], "scatter": velocity("operation", 1e29, 1e30)}),
+    );
+    assert!(
+        eight.starts_with("total_bounce_s leaves the range of f64"),
+        "{eight}"
+    );
+    assert!(eight.contains("in its spread (values reach 1."), "{eight}");
+    let sobol = told(
+        json!({"scenario": extreme, "devices": 8, "operations": 1, "seed": 1,
+        "metrics": ["total_bounce_s"], "scatter": velocity("device", 1e29, 1e30),
+        "sensitivity": {"method": "sobol"}}),
+    );
+    assert!(
+        sobol.starts_with("total_bounce_s leaves the range of f64"),
+        "{sobol}"
     );
 }
