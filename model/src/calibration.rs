@@ -292,6 +292,20 @@ fn fit(problem: Problem) -> Result<Calibration, InvalidInput> {
         .map(|(_, path)| problem.start_value(path).ln())
         .collect();
     let start = problem.within_bounds(start);
+    // A start no scenario takes (eq. 8's kappa of contacts of 1e-30 m is 1.5e-35) is the
+    // parameter's fault, not the scenario's (it read "/scenario: cannot simulate").
+    let magnitudes = MIN_MAGNITUDE.ln()..=MAX_MAGNITUDE.ln();
+    if let Some(k) = start.iter().position(|theta| !magnitudes.contains(theta)) {
+        return Err(InvalidInput::single(
+            &Pointer::root().child("fit").child(k),
+            format!(
+                "{} starts at {} (its value in the scenario, or eq. 8's for kappa), outside the \
+                 1e-30 to 1e30 a scenario's numbers keep: give it a start or `bounds` within them",
+                problem.parameters[k].0,
+                crate::error::shown(start[k].exp())
+            ),
+        ));
+    }
     let (theta, iterations, settled) = problem.levenberg_marquardt(start)?;
     problem.report(&theta, iterations, settled)
 }
@@ -2404,6 +2418,29 @@ mod tests {
         .unwrap_err();
         assert_eq!(invalid.pointers(), ["/fit/1"], "{invalid}");
         assert!(invalid.to_string().contains("a whole number"), "{invalid}");
+    }
+
+    /// A start no scenario takes (eq. 8's kappa of contacts of 1e-30 m, 1.5e-35) is refused at
+    /// its place in `fit`, not blamed on the scenario (found from outside); inside the
+    /// magnitudes it starts.
+    #[test]
+    fn a_start_beyond_a_scenarios_magnitudes_names_its_parameter() {
+        let text = |bounds: &str| {
+            format!(
+                r#"{{"scenario": {{"material": {{"contact_radius_m": 1e-30, "worn_radius_m": 1e-30,
+                    "dynamic_yield_pressure_pa": 1e-30}}}}, "fit": ["material.kappa"]{bounds},
+                    "observations": [{{"e1": 0.3}}, {{"e1": 0.2}}]}}"#
+            )
+        };
+        let invalid = calibrate(&CalibrationSpec::from_json(&text("")).unwrap()).unwrap_err();
+        assert_eq!(invalid.pointers(), ["/fit/0"], "{invalid}");
+        assert!(
+            invalid.to_string().contains("material.kappa starts at 1.4"),
+            "{invalid}"
+        );
+        let bounded = text(r#", "bounds": {"material.kappa": [1e-20, 1]}"#);
+        let refused = calibrate(&CalibrationSpec::from_json(&bounded).unwrap()).unwrap_err();
+        assert!(!refused.to_string().contains("starts at"), "{refused}");
     }
 
     /// A measured value beyond a scenario's magnitudes is refused at its field (a sweep of the
