@@ -331,8 +331,9 @@ impl Accumulator {
     }
 
     /// Sample variance `(Q - S^2/n) / (n - 1)`, never negative; 0 for fewer than two values.
-    /// Where the squares pass f64 (`inf - inf`), NaN, never 0: a run's range check names the
-    /// metric (`check_in_range`); values of 1e153 and more summed 4000 times read a spread of 0.
+    /// Where the squares or the sum's square pass f64 (`inf - inf`, `Q - inf`), infinite, never
+    /// 0: a run's range check names the metric (`check_in_range`); values of 1e153 and more read
+    /// a spread of 0 (found from outside).
     pub fn variance(&self) -> f64 {
         let n = self.count();
         if n < 2 {
@@ -340,10 +341,10 @@ impl Accumulator {
         }
         let n = n as f64;
         let variance = (self.sum_sq - self.sum * self.sum / n) / (n - 1.0);
-        if variance.is_nan() {
-            variance
-        } else {
+        if variance.is_finite() {
             variance.max(0.0)
+        } else {
+            f64::INFINITY
         }
     }
 
