@@ -45,6 +45,9 @@ pub fn tail_svg(metric: &str, beyond: &str, report: &RareEventReport) -> String 
         .map(|p| p.1)
         .chain([ci_lo, ci_hi].into_iter().filter(|p| *p > 0.0));
     let (p_lo, p_hi) = extent(probabilities);
+    // An estimate of 0 sits on the floor a decade below everything drawn, so that its interval
+    // reaches up from it to its upper bound (its floor was that bound, the bar of no length).
+    let p_lo = if p > 0.0 { p_lo } else { p_lo / 10.0 };
     let y_axis = LogAxis::whole(p_lo, p_hi.max(p_lo * 10.0));
     let ys = y_axis.scale(frame.bottom(), frame.top);
 
@@ -175,6 +178,20 @@ mod tests {
         let lowest_level = levels.iter().map(|c| c.1).fold(f64::MIN, f64::max);
         assert!(estimate[0].0 > last_level + 100.0, "{circles:?}");
         assert!(estimate[0].1 > lowest_level, "{circles:?}");
+        // Its interval a red line up from it, of some length (it was none: a re-probe).
+        let bar = svg
+            .lines()
+            .filter(|line| line.starts_with("<line") && line.contains(RED))
+            .map(|line| {
+                let attribute = |name: &str| -> f64 {
+                    let start = line.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
+                    line[start..].split('"').next().unwrap().parse().unwrap()
+                };
+                (attribute("x1"), attribute("y1"), attribute("y2"))
+            })
+            .find(|&(x, ..)| (x - estimate[0].0).abs() < 1e-9)
+            .expect("the interval's line");
+        assert!(bar.1 - bar.2 > 20.0, "{bar:?}");
     }
 
     #[test]
