@@ -1338,7 +1338,8 @@ fn check_observations(
     terms
 }
 
-/// Each bound names a fitted parameter and is `[lower, upper]` with `0 < lower < upper`.
+/// Each bound names a fitted parameter and is `[lower, upper]` with `0 < lower < upper`,
+/// reaching into the magnitudes a scenario keeps.
 fn check_bounds(
     spec: &CalibrationSpec,
     parameters: &[(String, Vec<String>)],
@@ -1360,6 +1361,16 @@ fn check_bounds(
                 pointer,
                 detail: format!(
                     "must be [lower, upper] with 0 < lower < upper, got [{lower}, {upper}]"
+                ),
+            });
+        } else if upper < MIN_MAGNITUDE || lower > MAX_MAGNITUDE {
+            // No scenario takes a value there: the fit could not start (it read as the start's
+            // fault, found from outside).
+            errors.push(FieldError {
+                pointer,
+                detail: format!(
+                    "[{lower:e}, {upper:e}] lies outside the 1e-30 to 1e30 a scenario's numbers \
+                     keep"
                 ),
             });
         }
@@ -2438,6 +2449,12 @@ mod tests {
             invalid.to_string().contains("material.kappa starts at 1.4"),
             "{invalid}"
         );
+        // Bounds wholly outside the magnitudes are the bounds' fault, not the start's.
+        for outside in ["[1e31, 1e35]", "[1e-40, 1e-35]"] {
+            let bounds = format!(r#", "bounds": {{"material.kappa": {outside}}}"#);
+            let invalid = CalibrationSpec::from_json(&text(&bounds)).unwrap_err();
+            assert_eq!(invalid.pointers(), ["/bounds/material.kappa"], "{invalid}");
+        }
         let bounded = text(r#", "bounds": {"material.kappa": [1e-20, 1]}"#);
         let refused = calibrate(&CalibrationSpec::from_json(&bounded).unwrap()).unwrap_err();
         assert!(!refused.to_string().contains("starts at"), "{refused}");
