@@ -360,12 +360,23 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
     server.wait_for(&id, "succeeded", Duration::from_secs(60));
     let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
     assert_eq!(result["operations"], run_job(&job, &[])["operations"]);
+    // A rare event whose round (10,000 evaluations of 100 operations) runs as shards: its tasks
+    // count their operations as groups do (the counter missed them, found from outside).
+    let rare = json!({"devices": 4, "operations": 100, "seed": 9, "metrics": ["total_bounce_s"],
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+            "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.05}}],
+        "rare_event": {"metric": "total_bounce_s", "above": 0.0305, "operation": 100,
+            "method": "crude", "target_cov": 0.3, "max_evaluations": 10000}});
+    let id = server.submit(&rare);
+    server.wait_for(&id, "succeeded", Duration::from_secs(120));
+    let ended = get(&server.url(&format!("/v1/jobs/{id}")), None).json();
+    assert_eq!(ended["progress"]["operations_done"], 1_000_400, "{ended}");
     // The job's metrics are the worker's, which ran it: an API-only node has none of them.
     let scraped = get(&metrics, None);
     assert_eq!(scraped.status, 200);
     for line in [
-        "bouncewear_jobs_finished_total{status=\"succeeded\"} 1",
-        "bouncewear_operations_simulated_total 2000",
+        "bouncewear_jobs_finished_total{status=\"succeeded\"} 2",
+        "bouncewear_operations_simulated_total 1002400",
     ] {
         assert!(
             scraped.body.lines().any(|l| l == line),

@@ -831,6 +831,7 @@ impl Workers {
             let reason = format!("{} is not part of the job", fence.shard);
             return self.fail(fence, &reason).await;
         };
+        let operations = rounds.operations_of(&job, task);
         let running = Instant::now();
         let ran = self
             .compute(lease, Work::Planned, move |observer| {
@@ -859,11 +860,15 @@ impl Workers {
             }
         };
         record_shard_step("run", running);
+        let storing = Instant::now();
         let complete = || self.store.complete_encoded(fence, outcome.clone());
         if self
             .stored(fence, lease, "the task's outcome", complete)
             .await
         {
+            // As a group's store is (the counter and the step missed every round run as shards).
+            record_shard_step("store", storing);
+            metrics::counter!("bouncewear_operations_simulated_total").increment(operations);
             tracing::debug!("rare-event task done");
         }
     }

@@ -55,15 +55,17 @@ impl Rounds {
 
     /// The operations of each of the round's tasks, in order.
     pub fn task_operations(&self, job: &Job) -> Vec<u64> {
-        let per_evaluation = rare::operations_per_evaluation(job);
         let tasks = self.estimator.tasks(self.tasks as usize);
         tasks
             .into_iter()
-            .map(|task| {
-                let evaluations = self.estimator.task_evaluations(task);
-                evaluations.saturating_mul(per_evaluation)
-            })
+            .map(|task| self.operations_of(job, task))
             .collect()
+    }
+
+    /// The operations of `task`: its evaluations, each of the job's operations per evaluation.
+    pub fn operations_of(&self, job: &Job, task: Task) -> u64 {
+        let evaluations = self.estimator.task_evaluations(task);
+        evaluations.saturating_mul(rare::operations_per_evaluation(job))
     }
 }
 
