@@ -353,6 +353,38 @@ await step("the linked address again shows its comparison", async () => {
     && document.querySelector("#compare-table thead th")?.textContent === "total_bounce_s",
     otherDesign.id);
 });
+await step("a comparison left before its answer came stays away", async () => {
+  // Its answer held back a second: the address moves on before it comes (it showed, late).
+  await page.route("**/compare/**", async (route) => {
+    await new Promise((done) => setTimeout(done, 1000));
+    await route.continue();
+  });
+  await page.evaluate(() => { location.hash = "metric=total_bounce_s"; });
+  await page.evaluate((h) => { location.hash = h; }, linkedHash);
+  await page.evaluate(() => { location.hash = "metric=total_bounce_s"; });
+  await page.waitForTimeout(1800);
+  await page.unroute("**/compare/**");
+  const [hidden, address] = await page.evaluate(() =>
+    [document.querySelector("#compare-result").hidden, location.hash]);
+  if (!hidden || address.includes("compare=")) {
+    throw new Error(`the comparison came back: hidden ${hidden}, address ${address}`);
+  }
+});
+await step("a failed comparison's error goes with it from the address", async () => {
+  await page.evaluate(() => { location.hash = "metric=total_bounce_s&compare=no-such-job"; });
+  await page.waitForSelector("#compare-error:not([hidden])");
+  await page.evaluate(() => { location.hash = "metric=total_bounce_s"; });
+  await page.waitForSelector("#compare-error", { state: "hidden" });
+});
+await step("a metric the job lacks in the address is written as the one shown", async () => {
+  await page.evaluate(() => { location.hash = "metric=no_such_metric"; });
+  await page.waitForFunction(() => location.hash === "#metric=" + document.querySelector("#metric").value);
+});
+await step("the linked comparison once more, for its screenshot", async () => {
+  await page.evaluate((h) => { location.hash = h; }, linkedHash);
+  await page.waitForFunction(() => !document.querySelector("#compare-result").hidden
+    && document.querySelectorAll("#compare-life-table tbody tr").length >= 3);
+});
 await page.waitForTimeout(300);
 await step("save dashboard-compare.png", () =>
   page.locator("#compare-section").screenshot({ path: join(outDir, "dashboard-compare.png") }),

@@ -1115,6 +1115,9 @@
     // Comparing this job (design a) with another succeeded one (design b), linkable as
     // #compare=ID; a change of metric compares again once the form is set up.
     let compareReady = false;
+    // The comparisons asked for, counted: only the latest's answer is shown (an earlier one that
+    // came late showed, and wrote its job back into an address the user had left).
+    let compareAsked = 0;
     function setupCompare() {
       compareReady = true;
       const form = $("#compare-form");
@@ -1141,17 +1144,29 @@
         const select = $("#metric");
         const [metric, other] = [hash.get("metric"), hash.get("compare")];
         input.value = other || "";
-        if (!other) show($("#compare-result"), false);
-        if (metric && metric !== select.value && [...select.options].some((o) => o.value === metric)) {
+        if (!other) {
+          // Nothing compared: an answer still on its way is dropped, an old error cleared.
+          compareAsked += 1;
+          show($("#compare-result"), false);
+          setAlert($("#compare-error"), null);
+        }
+        const known = [...select.options].some((o) => o.value === metric);
+        if (metric && metric !== select.value && known) {
           select.value = metric;
           select.onchange(); // shows the metric, and compares again for it
-        } else if (other) {
-          compareWith(other);
+          return;
         }
+        if (metric && !known) {
+          // A metric the job lacks: the address says what is shown, as on load.
+          hash.set("metric", select.value);
+          history.replaceState(null, "", "#" + hash.toString());
+        }
+        if (other) compareWith(other);
       };
     }
 
     async function compareWith(other) {
+      const asked = ++compareAsked;
       const metric = $("#metric").value || "total_bounce_s";
       const path = base + "/compare/" + encodeURIComponent(other);
       const query = "?metric=" + encodeURIComponent(metric);
@@ -1159,10 +1174,12 @@
       try {
         comparison = await getJson(path + query + "&statistics=mean,p50,p95");
       } catch (error) {
+        if (asked !== compareAsked) return;
         show($("#compare-result"), false);
         setAlert($("#compare-error"), "Could not compare: " + error.message);
         return;
       }
+      if (asked !== compareAsked) return;
       setAlert($("#compare-error"), null);
       show($("#compare-result"), true);
       const hash = new URLSearchParams(location.hash.slice(1));
