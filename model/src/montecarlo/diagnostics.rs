@@ -210,11 +210,11 @@ fn scattered_range(job: &Job, parameter: Parameter) -> Option<(Pointer, [f64; 2]
     Some((pointer, quantiles))
 }
 
-/// An arcing current (the nominal one, or the 1st and 99th percentiles of a scattered one) more
-/// than [`CALIBRATION_CURRENT_FACTOR`] away from the post-arc law's calibration current (the 15 A
-/// of the paper's tests by default), under either law: the paper measured restitution after arcs
-/// at that current alone, so elsewhere eq. 16 (the paper's law) or its fade and hold (the
-/// continuous law) stand in for a measurement.
+/// An arcing current (the nominal one, or one from the 1st to the 99th percentile of a scattered
+/// one, at the highest supply drawn) more than [`CALIBRATION_CURRENT_FACTOR`] away from the
+/// post-arc law's calibration current (the 15 A of the paper's tests by default), under either
+/// law: the paper measured restitution after arcs at that current alone, so elsewhere eq. 16 (the
+/// paper's law) or its fade and hold (the continuous law) stand in for a measurement.
 fn current_far_from_calibration(job: &Job) -> Option<Diagnostic> {
     let spec = job.scenario().spec();
     let (mat, circuit) = (&spec.material, &spec.circuit);
@@ -229,20 +229,33 @@ fn current_far_from_calibration(job: &Job) -> Option<Diagnostic> {
         ),
     };
     let calibration_a = mat.arc_restitution.calibration_current_a;
-    let far = currents.into_iter().find(|&current_a| {
-        let arcs = Arc::strike(
-            circuit.supply_voltage_v,
+    // Arcs burn most readily at the highest supply a job draws (a scattered one's 99th percentile).
+    let supply_v = scattered_range(job, Parameter::SupplyVoltage)
+        .map_or(circuit.supply_voltage_v, |(_, [_, high])| high);
+    let arcs = |current_a: f64| {
+        Arc::strike(
+            supply_v,
             current_a,
             mat.min_arc_voltage_v,
             mat.min_arc_current_a,
             mat.breakdown_field_v_per_m,
             mat.softening_energy_j,
         )
-        .is_some();
-        arcs && !(calibration_a / CALIBRATION_CURRENT_FACTOR
-            ..=calibration_a * CALIBRATION_CURRENT_FACTOR)
-            .contains(&current_a)
-    });
+        .is_some()
+    };
+    let [low, high] = currents;
+    let (below, above) = (
+        calibration_a / CALIBRATION_CURRENT_FACTOR,
+        calibration_a * CALIBRATION_CURRENT_FACTOR,
+    );
+    // The lowest arcing current of the range under the window (a range from a current that
+    // does not arc to one within the window arcs in between: it said nothing), else the highest
+    // above it.
+    let under = (low < below).then(|| high.min(below * (1.0 - f64::EPSILON)));
+    let far = match under {
+        Some(top) if arcs(top) => Some(lowest_arcing(low, top, arcs)),
+        _ => (high > above && arcs(high)).then_some(high),
+    };
     let current_a = far?;
     let law = match mat.arc_restitution.law {
         ArcRestitutionLawKind::Paper if current_a < calibration_a => {
@@ -267,6 +280,27 @@ fn current_far_from_calibration(job: &Job) -> Option<Diagnostic> {
             crate::error::shown(current_a)
         ),
     })
+}
+
+/// The lowest current from `low` to `top` at which an arc burns, `top` being one: `low` where it
+/// burns already, else by bisection (an arc burns from a current on as it rises).
+fn lowest_arcing(low: f64, top: f64, arcs: impl Fn(f64) -> bool) -> f64 {
+    if arcs(low) {
+        return low;
+    }
+    let (mut quiet, mut burning) = (low, top);
+    for _ in 0..64 {
+        let middle = 0.5 * (quiet + burning);
+        if middle <= quiet || middle >= burning {
+            break;
+        }
+        if arcs(middle) {
+            burning = middle;
+        } else {
+            quiet = middle;
+        }
+    }
+    burning
 }
 
 #[cfg(test)]
@@ -352,19 +386,40 @@ mod tests {
             let named = format!("arcs burn at {current_a} A");
             assert!(found.contains(&named) && found.contains(says), "{found}");
         }
-        // A scattered current is judged by its 1st and 99th percentiles, named by its entry.
-        let found = diagnose_json(
-            r#"{"scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
-                "scatter": [{"parameter": "current_a", "per": "device",
-                    "distribution": {"kind": "normal", "mean": 15, "sd": 4, "min": 0}}]}"#,
-        );
-        assert_eq!(found.len(), 1, "{found:?}");
-        assert_eq!(found[0].pointer, "/scatter/0/distribution");
-        assert!(
-            found[0].detail.contains("arcs burn at 5.70"),
-            "{}",
-            found[0].detail
-        );
+        // A scattered current is judged from its 1st to its 99th percentile, named by its
+        // entry; a range from a current that does not arc to one within the window arcs in
+        // between, from about 0.53 A at 48 V (it said nothing: a re-probe); so does a current
+        // whose arc burns only at the higher supplies a scattered supply draws.
+        for (circuit, scatter, pointer, says) in [
+            (
+                r#"{"supply_voltage_v": 48, "current_a": 15}"#,
+                r#"{"parameter": "current_a", "per": "device", "distribution":
+                    {"kind": "normal", "mean": 15, "sd": 4, "min": 0}}"#,
+                "/scatter/0/distribution",
+                "arcs burn at 5.70",
+            ),
+            (
+                r#"{"supply_voltage_v": 48, "current_a": 15}"#,
+                r#"{"parameter": "current_a", "per": "device", "distribution":
+                    {"kind": "uniform", "min": 0.1, "max": 20}}"#,
+                "/scatter/0/distribution",
+                "arcs burn at 0.53",
+            ),
+            (
+                r#"{"supply_voltage_v": 0, "current_a": 1}"#,
+                r#"{"parameter": "supply_voltage_v", "per": "device", "distribution":
+                    {"kind": "uniform", "min": 20, "max": 48}}"#,
+                "/scenario/circuit/current_a",
+                "arcs burn at 1 A",
+            ),
+        ] {
+            let found = diagnose_json(&format!(
+                r#"{{"scenario": {{"circuit": {circuit}}}, "scatter": [{scatter}]}}"#
+            ));
+            assert_eq!(found.len(), 1, "{found:?}");
+            assert_eq!(found[0].pointer, pointer);
+            assert!(found[0].detail.contains(says), "{}", found[0].detail);
+        }
     }
 
     #[test]
