@@ -101,7 +101,8 @@ impl ScheduleDefinition {
 
     /// Runs' times (RFC 3339, as stored) on the schedule's wall clock, as its trend labels them:
     /// to the minute (`2026-11-22 03:00`), or to the second where two runs share a minute (runs
-    /// asked for by hand); a time that does not parse as it is. (A stored zone always parses; UTC
+    /// asked for by hand), or to the millisecond where two share a second (runs asked for by a
+    /// script); a time that does not parse as it is. (A stored zone always parses; UTC
     /// stands in should one not.)
     pub fn wall_clock(&self, times: &[&str]) -> Vec<String> {
         let zone = Tz::from_str(&self.time_zone).unwrap_or(Tz::UTC);
@@ -114,12 +115,18 @@ impl ScheduleDefinition {
                 })
                 .collect()
         };
-        let minutes = shown("%Y-%m-%d %H:%M");
-        let distinct: std::collections::HashSet<&String> = minutes.iter().collect();
-        match distinct.len() == minutes.len() {
-            true => minutes,
-            false => shown("%Y-%m-%d %H:%M:%S"),
-        }
+        let distinct = |labels: &Vec<String>| {
+            labels
+                .iter()
+                .collect::<std::collections::HashSet<_>>()
+                .len()
+                == labels.len()
+        };
+        ["%Y-%m-%d %H:%M", "%Y-%m-%d %H:%M:%S"]
+            .into_iter()
+            .map(shown)
+            .find(distinct)
+            .unwrap_or_else(|| shown("%Y-%m-%d %H:%M:%S%.3f"))
     }
 }
 
@@ -801,6 +808,10 @@ mod tests {
         assert_eq!(
             definition.wall_clock(&["2026-11-22T00:00:00.123Z", "2026-11-22T00:00:41Z"]),
             ["2026-11-22 01:00:00", "2026-11-22 01:00:41"]
+        );
+        assert_eq!(
+            definition.wall_clock(&["2026-11-22T00:00:00.123Z", "2026-11-22T00:00:00.130Z"]),
+            ["2026-11-22 01:00:00.123", "2026-11-22 01:00:00.130"]
         );
         // The due time itself, to the millisecond, is the scheduled run's slot; a manual run
         // takes the next millisecond.
