@@ -331,16 +331,23 @@ impl Accumulator {
     }
 
     /// Sample variance `(Q - S^2/n) / (n - 1)`, never negative; 0 for fewer than two values.
-    /// Where the squares or the sum's square pass f64 (`inf - inf`, `Q - inf`), infinite, never
-    /// 0: a run's range check names the metric (`check_in_range`); values of 1e153 and more read
-    /// a spread of 0 (found from outside).
+    /// `S^2` past f64 where `S^2/n` is not is taken as `S (S/n)` (10,000 values of 2e151: their
+    /// squares within f64, their sum's square not). Where the squares themselves pass f64,
+    /// infinite, never 0: a run's range check names the metric (`check_in_range`); values of
+    /// 1e153 and more read a spread of 0 (found from outside).
     pub fn variance(&self) -> f64 {
         let n = self.count();
         if n < 2 {
             return 0.0;
         }
         let n = n as f64;
-        let variance = (self.sum_sq - self.sum * self.sum / n) / (n - 1.0);
+        let square = self.sum * self.sum;
+        let mean_square = if square.is_finite() {
+            square / n
+        } else {
+            self.sum * (self.sum / n)
+        };
+        let variance = (self.sum_sq - mean_square) / (n - 1.0);
         if variance.is_finite() {
             variance.max(0.0)
         } else {

@@ -989,14 +989,51 @@ fn a_spread_whose_squares_pass_f64_is_no_spread_of_zero() {
     );
     assert!(eight.contains("in its spread (values reach 1."), "{eight}");
     // Four to sixteen devices of one operation: their shifted squares finite, the sum's square
-    // not (Q - inf), read a spread of 0 as well (found from outside, after the first mend).
+    // not (Q - inf), read a spread of 0 as well (found from outside, after the first mend). Now
+    // the spread is read where it fits in f64, and the run refuses it where it does not; never
+    // 0. A sample's sd lies between (max - min) / sqrt(2 (n - 1)) (its extremes alone) and
+    // (max - min) sqrt(n / (4 (n - 1))).
     for devices in [4, 8, 16] {
-        let one = told(
-            json!({"scenario": extreme, "devices": devices, "operations": 1,
-            "seed": 1, "metrics": ["total_bounce_s"], "scatter": velocity("device", 1e29, 1e30)}),
-        );
-        assert!(one.contains("in its spread"), "{devices}: {one}");
+        let text = json!({"scenario": extreme, "devices": devices, "operations": 1, "seed": 1,
+            "metrics": ["total_bounce_s"], "scatter": velocity("device", 1e29, 1e30)});
+        match bouncewear_model::montecarlo::run_job(&job(text), &Silent) {
+            Ok(result) => {
+                let s = &result.operations["total_bounce_s"][0].summary;
+                let (range, n) = (s.max - s.min, devices as f64);
+                let bounds = [
+                    range / (2.0 * (n - 1.0)).sqrt(),
+                    range * (n / (4.0 * (n - 1.0))).sqrt(),
+                ];
+                assert!(
+                    bounds[0] <= s.sd && s.sd <= bounds[1],
+                    "{devices}: {} {bounds:?}",
+                    s.sd
+                );
+            }
+            Err(error) => assert!(
+                error.to_string().contains("in its spread"),
+                "{devices}: {error}"
+            ),
+        }
     }
+    // Ten thousand values of 2e150 to 2e151 (ten bounces): their squares within f64, their
+    // sum's square not (S^2 alone passes it). Their spread is read, not refused (a re-probe).
+    let mut ten = extreme.clone();
+    ten["losses"]["max_bounces"] = json!(10);
+    let result = run_on(
+        1,
+        &job(json!({"scenario": ten, "devices": 10_000, "operations": 1,
+        "seed": 1, "metrics": ["total_bounce_s"], "scatter": velocity("device", 1e29, 1e30)})),
+    );
+    let summary = &result.operations["total_bounce_s"][0].summary;
+    // Uniform velocities and bounce times in proportion: the spread of a uniform, within 5 %.
+    let uniform = (summary.max - summary.min) / 12f64.sqrt();
+    assert!(summary.min > 1e150 && summary.max < 1e152, "{summary:?}");
+    assert!(
+        (summary.sd / uniform - 1.0).abs() < 0.05,
+        "{} {uniform}",
+        summary.sd
+    );
     let sobol = told(
         json!({"scenario": extreme, "devices": 8, "operations": 1, "seed": 1,
         "metrics": ["total_bounce_s"], "scatter": velocity("device", 1e29, 1e30),
