@@ -149,6 +149,12 @@ mod tests {
         assert!(svg.contains("5400 evaluations"));
     }
 
+    /// The number an SVG element's line gives its attribute `name`.
+    fn number(line: &str, name: &str) -> f64 {
+        let start = line.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
+        line[start..].split('"').next().unwrap().parse().unwrap()
+    }
+
     /// An estimate of 0 (a crude run with nothing beyond the threshold) sits at the threshold
     /// asked, beyond the last level, on the axis's floor under its upper bound; it sat on the
     /// last level with a positive share, and the axis stopped short of the threshold (a probe).
@@ -160,13 +166,7 @@ mod tests {
         let circles: Vec<(f64, f64, f64)> = svg
             .lines()
             .filter(|line| line.starts_with("<circle"))
-            .map(|line| {
-                let attribute = |name: &str| -> f64 {
-                    let start = line.find(&format!("{name}=\"")).unwrap() + name.len() + 2;
-                    line[start..].split('"').next().unwrap().parse().unwrap()
-                };
-                (attribute("cx"), attribute("cy"), attribute("r"))
-            })
+            .map(|line| (number(line, "cx"), number(line, "cy"), number(line, "r")))
             .collect();
         // The levels' points (r 3.5), the estimate (r 4.5), below the legend's row (y 46).
         let drawn = |r: f64| -> Vec<&(f64, f64, f64)> {
@@ -182,13 +182,7 @@ mod tests {
         let bar = svg
             .lines()
             .filter(|line| line.starts_with("<line") && line.contains(RED))
-            .map(|line| {
-                let attribute = |name: &str| -> f64 {
-                    let start = line.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
-                    line[start..].split('"').next().unwrap().parse().unwrap()
-                };
-                (attribute("x1"), attribute("y1"), attribute("y2"))
-            })
+            .map(|line| (number(line, "x1"), number(line, "y1"), number(line, "y2")))
             .find(|&(x, ..)| (x - estimate[0].0).abs() < 1e-9)
             .expect("the interval's line");
         assert!(bar.1 - bar.2 > 20.0, "{bar:?}");
