@@ -56,6 +56,21 @@ pub trait LimitState: Sync {
     fn response(&self, u: &[f64]) -> f64;
 }
 
+/// A limit state of `.0` inputs whose response is the function `.1`: the tests' small shapes,
+/// written as their formula.
+#[cfg(test)]
+pub(crate) struct Response<F>(pub usize, pub F);
+
+#[cfg(test)]
+impl<F: Fn(&[f64]) -> f64 + Sync> LimitState for Response<F> {
+    fn dimension(&self) -> usize {
+        self.0
+    }
+    fn response(&self, u: &[f64]) -> f64 {
+        (self.1)(u)
+    }
+}
+
 /// Samples per level of subset simulation, and per batch of importance sampling.
 pub const SAMPLES_PER_LEVEL: usize = 1000;
 /// The conditional probability each intermediate level of subset simulation aims at.
@@ -1634,20 +1649,12 @@ mod tests {
 
     #[test]
     fn a_threshold_never_reached_is_an_error_not_a_hang() {
-        struct Bounded;
-        impl LimitState for Bounded {
-            fn dimension(&self) -> usize {
-                2
-            }
-            fn response(&self, u: &[f64]) -> f64 {
-                u[0].tanh()
-            }
-        }
+        let bounded = Response(2, |u: &[f64]| u[0].tanh());
         let budget = Budget {
             max_evaluations: 1_000_000,
             target_cov: 0.1,
         };
-        let Err(Stop::Failed(reason)) = Method::Subset.estimate(&Bounded, 1.5, budget, 1, &Silent)
+        let Err(Stop::Failed(reason)) = Method::Subset.estimate(&bounded, 1.5, budget, 1, &Silent)
         else {
             panic!("tanh never exceeds 1");
         };

@@ -446,6 +446,7 @@ pub fn check_threshold(job: &Job, at: &Pointer) -> Result<(), crate::error::Inva
 
 #[cfg(test)]
 mod tests {
+    use super::methods::Response;
     use super::*;
 
     /// `y = a . u`: largest on the sphere at `radius a / |a|`, where it is `radius |a|`.
@@ -462,16 +463,7 @@ mod tests {
 
     /// A response that only the combination of inputs lifts: `min(u_1, u_2)`, largest on the
     /// sphere at `u_1 = u_2 = radius / sqrt 2`, which no input alone approaches.
-    struct Together;
-
-    impl LimitState for Together {
-        fn dimension(&self) -> usize {
-            2
-        }
-        fn response(&self, u: &[f64]) -> f64 {
-            u[0].min(u[1])
-        }
-    }
+    const TOGETHER: Response<fn(&[f64]) -> f64> = Response(2, |u| u[0].min(u[1]));
 
     #[test]
     fn the_search_radius_is_the_index_of_the_smallest_probability() {
@@ -483,20 +475,12 @@ mod tests {
     /// `y = r exp(1 - r)` along `u_1` (`r = u_1`), largest at `r = 1` where it is 1, inside a
     /// sphere of radius 4 where it is 0.2; and a slight rise with `u_2`, so that the largest
     /// response in the ball is 1.039 (`u_2 = 3.87`).
-    struct Peak;
-
-    impl LimitState for Peak {
-        fn dimension(&self) -> usize {
-            2
-        }
-        fn response(&self, u: &[f64]) -> f64 {
-            u[0] * (1.0 - u[0]).exp() + 0.01 * u[1]
-        }
-    }
+    const PEAK: Response<fn(&[f64]) -> f64> =
+        Response(2, |u| u[0] * (1.0 - u[0]).exp() + 0.01 * u[1]);
 
     #[test]
     fn the_search_finds_a_peak_inside_the_sphere() {
-        let highest = highest_within(&Peak, 4.0, f64::INFINITY, 1000).unwrap();
+        let highest = highest_within(&PEAK, 4.0, f64::INFINITY, 1000).unwrap();
         assert!(highest > 0.9999 && highest <= 1.039, "{highest}");
     }
 
@@ -505,7 +489,7 @@ mod tests {
         let a = Linear(vec![3.0, -4.0, 0.0]);
         let highest = highest_within(&a, 2.0, f64::INFINITY, 1000).unwrap();
         approx::assert_relative_eq!(highest, 10.0, max_relative = 1e-12);
-        let highest = highest_within(&Together, 2.0, f64::INFINITY, 1000).unwrap();
+        let highest = highest_within(&TOGETHER, 2.0, f64::INFINITY, 1000).unwrap();
         approx::assert_relative_eq!(highest, 2.0_f64.sqrt(), max_relative = 1e-12);
     }
 
@@ -515,16 +499,8 @@ mod tests {
     /// on; half-way between them the response reaches `1 + 4 / sqrt 2` on a sphere of 4.
     #[test]
     fn the_search_finds_what_needs_one_input_on_and_another_high() {
-        struct Switched;
-        impl LimitState for Switched {
-            fn dimension(&self) -> usize {
-                2
-            }
-            fn response(&self, u: &[f64]) -> f64 {
-                if u[0] > 1.0 { 1.0 + u[1] } else { 0.0 }
-            }
-        }
-        let highest = highest_within(&Switched, 4.0, f64::INFINITY, 1000).unwrap();
+        let switched = Response(2, |u: &[f64]| if u[0] > 1.0 { 1.0 + u[1] } else { 0.0 });
+        let highest = highest_within(&switched, 4.0, f64::INFINITY, 1000).unwrap();
         approx::assert_relative_eq!(highest, 1.0 + 8.0_f64.sqrt(), max_relative = 1e-12);
     }
 
@@ -539,15 +515,7 @@ mod tests {
     /// A NaN response says nothing about the threshold: the search gives no verdict.
     #[test]
     fn a_response_without_a_value_leaves_the_search_without_a_verdict() {
-        struct Broken;
-        impl LimitState for Broken {
-            fn dimension(&self) -> usize {
-                2
-            }
-            fn response(&self, u: &[f64]) -> f64 {
-                if u[1] > 1.0 { f64::NAN } else { u[0] }
-            }
-        }
-        assert_eq!(highest_within(&Broken, 2.0, 10.0, 1000), None);
+        let broken = Response(2, |u: &[f64]| if u[1] > 1.0 { f64::NAN } else { u[0] });
+        assert_eq!(highest_within(&broken, 2.0, 10.0, 1000), None);
     }
 }
