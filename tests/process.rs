@@ -324,22 +324,25 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
     use std::process::Stdio;
     let database = temp_db("worker");
     let server = Spawned::start(&database, &["--workers", "0"]);
-    let mut worker = Command::new(BIN)
-        .args([
-            "worker",
-            "--workers",
-            "2",
-            "--metrics-bind",
-            "127.0.0.1:0",
-            "--database",
-        ])
-        .arg(format!("sqlite://{}", database.display()))
-        .env("RUST_LOG", "warn")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut stdout = BufReader::new(worker.stdout.take().unwrap());
+    // Killed when dropped, should an assertion fail before its SIGTERM.
+    let mut worker = WorkerProcess {
+        child: Command::new(BIN)
+            .args([
+                "worker",
+                "--workers",
+                "2",
+                "--metrics-bind",
+                "127.0.0.1:0",
+                "--database",
+            ])
+            .arg(format!("sqlite://{}", database.display()))
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    };
+    let mut stdout = BufReader::new(worker.child.stdout.take().unwrap());
     let (mut metrics, mut line) = (String::new(), String::new());
     stdout.read_line(&mut metrics).unwrap();
     stdout.read_line(&mut line).unwrap();
@@ -352,7 +355,7 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
         line.starts_with("bouncewear worker running 2 shard(s) at a time"),
         "{line}"
     );
-    for pid in [server.child.id(), worker.id()] {
+    for pid in [server.child.id(), worker.child.id()] {
         assert_ne!(huge_pages(pid), Some(true), "process {pid}");
     }
     let job = json!({"devices": 50, "operations": 40, "seed": 8});
@@ -371,12 +374,39 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
     server.wait_for(&id, "succeeded", Duration::from_secs(120));
     let ended = get(&server.url(&format!("/v1/jobs/{id}")), None).json();
     assert_eq!(ended["progress"]["operations_done"], 1_000_400, "{ended}");
+    // A subset simulation out of its budget: its first level (1000 evaluations of 500
+    // operations) runs as a round's shards, and the round's merge, which runs the second level
+    // (900) and finds no budget for a third, fails the job. The job keeps what it ran (it read
+    // the devices' 2,000 and the first level's alone), the counter counts it too, and that merge
+    // is timed as every other merge step is (it was not, found from outside).
+    let failing = json!({"devices": 4, "operations": 500, "seed": 9, "metrics": ["total_bounce_s"],
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+            "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.05}}],
+        "rare_event": {"metric": "total_bounce_s", "above": 0.04, "operation": 500,
+            "method": "subset", "max_evaluations": 2000}});
+    let failed = server.submit(&failing);
+    server.wait_for(&failed, "failed", Duration::from_secs(120));
+    let ended = get(&server.url(&format!("/v1/jobs/{failed}")), None).json();
+    let ran = 2_000 + 1_900 * 500;
+    assert_eq!(ended["progress"]["operations_done"], ran, "{ended}");
     // The job's metrics are the worker's, which ran it: an API-only node has none of them.
     let scraped = get(&metrics, None);
     assert_eq!(scraped.status, 200);
+    let merge_steps: usize = [&id, &failed]
+        .iter()
+        .map(|job| {
+            let shards = get(&server.url(&format!("/v1/jobs/{job}/shards")), None).json();
+            let shards = shards["shards"].as_array().unwrap().clone();
+            shards.iter().filter(|s| s.get("group").is_none()).count()
+        })
+        .sum::<usize>()
+        + 1;
+    let merges = format!("bouncewear_shard_step_seconds_count{{step=\"merge\"}} {merge_steps}");
     for line in [
         "bouncewear_jobs_finished_total{status=\"succeeded\"} 2",
-        "bouncewear_operations_simulated_total 1002400",
+        "bouncewear_jobs_finished_total{status=\"failed\"} 1",
+        "bouncewear_operations_simulated_total 1954400",
+        &merges,
     ] {
         assert!(
             scraped.body.lines().any(|l| l == line),
@@ -385,11 +415,11 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
         );
     }
     let status = Command::new("kill")
-        .args(["-TERM", &worker.id().to_string()])
+        .args(["-TERM", &worker.child.id().to_string()])
         .status()
         .unwrap();
     assert!(status.success());
-    assert!(worker.wait().unwrap().success());
+    assert!(worker.child.wait().unwrap().success());
 }
 
 /// Whether the kernel may back process `pid`'s memory with transparent huge pages (its

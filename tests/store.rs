@@ -492,7 +492,7 @@ async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor(url: &str) {
     );
     assert!(
         !store
-            .fail(&first.fence, Some(UnixMs(2100)), "late")
+            .fail(&first.fence, Some(UnixMs(2100)), 0, "late")
             .await
             .unwrap()
     );
@@ -2091,6 +2091,45 @@ async fn an_ended_jobs_running_shards_stop_with_it(url: &str) {
     assert_eq!(
         store.heartbeat(&a.fence, terms(600), 1, 1).await.unwrap(),
         Lease::Cancelled
+    );
+
+    // Failed at once by a run that no retry mends, after 3 operations of it (no heartbeat told
+    // them) and 2 of the other group's: the run reads as failed, and the job keeps all 5.
+    let (id, a, b) = claim_both(8, 2).await;
+    let renewed = store.heartbeat(&a.fence, terms(400), 2, 2).await.unwrap();
+    assert_eq!(renewed, Lease::Held);
+    assert!(
+        store
+            .fail(&b.fence, Some(UnixMs(500)), 3, "no answer")
+            .await
+            .unwrap()
+    );
+    let job = store.job(&owner, &id).await.unwrap();
+    assert_eq!(
+        (job.status, job.operations_done, job.error.as_deref()),
+        (JobStatus::Failed, 5, Some("no answer"))
+    );
+    let shards = store.shards(&id).await.unwrap();
+    assert_eq!(
+        shard_lines(&shards),
+        [
+            (
+                "queued".into(),
+                0,
+                line("attempt 1 (a): stopped: job failed")
+            ),
+            ("queued".into(), 0, line("attempt 1 (b): failed: no answer")),
+            ("queued".into(), 0, vec![]),
+        ]
+    );
+    let failed = &shards[1];
+    assert_eq!(
+        (
+            failed.failures,
+            failed.operations_done,
+            failed.error.as_deref()
+        ),
+        (1, 3, Some("no answer"))
     );
 }
 

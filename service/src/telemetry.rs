@@ -231,7 +231,7 @@ fn describe_metrics() {
     );
     metrics::describe_counter!(
         "bouncewear_operations_simulated_total",
-        "Make operations simulated by this instance's workers, counted as each group of devices, rare-event task or merge step is stored (a job's progress counts them the same way)."
+        "Make operations simulated by this instance's workers, counted as each group of devices, rare-event task or merge step is stored or fails its job (a job's progress counts them the same way)."
     );
     metrics::describe_counter!(
         CONNECTIONS_SHED,

@@ -573,7 +573,7 @@ impl Workers {
             Ok(job) => job.with_listed_lives(self.listed_lives),
             Err(invalid) => {
                 let reason = format!("the stored job no longer validates: {invalid}");
-                return self.fail(fence, &reason).await;
+                return self.fail(fence, &lease, &reason).await;
             }
         };
         // The lease is kept from the claim to the last write: reading, computing and storing.
@@ -598,7 +598,7 @@ impl Workers {
     ) {
         let Some(batch) = Batch::of(&job, fence.shard.batch).filter(|b| group < b.groups()) else {
             let reason = format!("{} is not part of the job", fence.shard);
-            return self.fail(fence, &reason).await;
+            return self.fail(fence, &lease, &reason).await;
         };
         let devices = batch.group_devices(group);
         let operations = (devices.end - devices.start) * job.spec().operations;
@@ -763,7 +763,7 @@ impl Workers {
                 ..
             })) => (shards, folded, folded_through, state),
             Ran::Done(Err(failed @ (MergeError::RareEvent(_) | MergeError::OutOfRange(_)))) => {
-                return self.fail(fence, &failed.to_string()).await;
+                return self.fail(fence, lease, &failed.to_string()).await;
             }
             Ran::Done(Err(other)) => return self.fail_attempt(fence, &other.to_string()).await,
             Ran::Stopped { shutdown } => return self.stopped(fence, shutdown).await,
@@ -829,7 +829,7 @@ impl Workers {
         };
         let Some(task) = rounds.task(group) else {
             let reason = format!("{} is not part of the job", fence.shard);
-            return self.fail(fence, &reason).await;
+            return self.fail(fence, lease, &reason).await;
         };
         let operations = rounds.operations_of(&job, task);
         let running = Instant::now();
@@ -851,7 +851,7 @@ impl Workers {
                 let reason = format!("encoding the task's outcome failed: {unencodable}");
                 return self.fail_attempt(fence, &reason).await;
             }
-            Ran::Done(Err(failed)) => return self.fail(fence, &failed.to_string()).await,
+            Ran::Done(Err(failed)) => return self.fail(fence, lease, &failed.to_string()).await,
             Ran::Stopped { shutdown } => return self.stopped(fence, shutdown).await,
             Ran::Panicked => {
                 return self
@@ -926,7 +926,9 @@ impl Workers {
                 (report, ran)
             }
             Ran::Done(Err(error)) => {
-                return self.write(fence, Ran::Done(Err(error)), 0, lease).await;
+                let write = self.write(fence, Ran::Done(Err(error)), 0, lease);
+                clock.time(Part::Write, write).await;
+                return clock.record();
             }
             Ran::Stopped { shutdown } => return self.stopped(fence, shutdown).await,
             Ran::Panicked => {
@@ -1098,13 +1100,18 @@ impl Workers {
         }
     }
 
-    /// Ends the job as failed, with the reason (no retry can mend it); a failure to write it leaves
-    /// the lease to expire, and the shard to be rerun.
-    async fn fail(&self, fence: &Fence, reason: &str) {
+    /// Ends the job as failed, with the reason (no retry can mend it), counting what the shard ran
+    /// as its lease last heard; a failure to write it leaves the lease to expire, and the shard
+    /// to be rerun.
+    async fn fail(&self, fence: &Fence, lease: &KeptLease, reason: &str) {
         tracing::error!(reason, "job failed");
-        match self.store.fail(fence, None, reason).await {
-            Ok(true) => metrics::counter!("bouncewear_jobs_finished_total", "status" => "failed")
-                .increment(1),
+        let ran = lease.done.load(Ordering::Relaxed);
+        match self.store.fail(fence, None, ran, reason).await {
+            Ok(true) => {
+                metrics::counter!("bouncewear_jobs_finished_total", "status" => "failed")
+                    .increment(1);
+                metrics::counter!("bouncewear_operations_simulated_total").increment(ran);
+            }
             Ok(false) => {}
             Err(error) => {
                 tracing::error!(%error, "could not mark the job failed; its lease will expire")

@@ -98,13 +98,9 @@ impl Store {
         }
     }
 
-    /// A write transaction in which the claim's shard is marked done, its operations `ran` or,
-    /// if `None`, all it planned; `None` (rolled back) once the claim no longer holds it.
-    pub(crate) async fn begin_finishing(
-        &self,
-        fence: &Fence,
-        ran: Option<u64>,
-    ) -> StoreResult<Option<Tx>> {
+    /// A write transaction in which the claim's shard is marked done, its operations `ran`;
+    /// `None` (rolled back) once the claim no longer holds it.
+    pub(crate) async fn begin_finishing(&self, fence: &Fence, ran: u64) -> StoreResult<Option<Tx>> {
         let mut tx = self.begin().await?;
         if finish_shard(&mut tx, fence, ran).await? {
             return Ok(Some(tx));
@@ -258,23 +254,45 @@ fn fenced(sql: &'static str, fence: &Fence) -> Sql {
 }
 
 /// Marks the claim's shard done, if the claim still holds it, with the operations it `ran` as
-/// its total, or all it planned (`None`). Its `error` goes: its last run did not fail (a shard
+/// its total. Its `error` goes: its last run did not fail (a shard
 /// that waited for the database kept "waiting for the database" once done, found from outside);
 /// the history keeps every attempt's.
-async fn finish_shard(tx: &mut Tx, fence: &Fence, ran: Option<u64>) -> StoreResult<bool> {
+async fn finish_shard(tx: &mut Tx, fence: &Fence, ran: u64) -> StoreResult<bool> {
     let updated = fenced(
         concat!(
             "UPDATE shards SET status = 'done', lease_until = NULL, error = NULL, \
-             operations_total = COALESCE($5, operations_total), \
-             operations_done = COALESCE($5, operations_total) WHERE ",
+             operations_total = $5, operations_done = $5 WHERE ",
             fenced_shard!()
         ),
         fence,
     )
-    .bind(ran.map(count_to_sql))
+    .bind(count_to_sql(ran))
     .execute(&mut *tx)
     .await?;
     Ok(updated == 1)
+}
+
+/// Records the claim's run as failed with `error`, if the claim still holds its shard: queued
+/// (claimed again only while its job runs), its failures counted, the `error` and a history line,
+/// with the operations it `ran` done (0 for a run to be made again); its failures so far.
+async fn failed_run(tx: &mut Tx, fence: &Fence, error: &str, ran: u64) -> StoreResult<Option<u64>> {
+    let failures = fenced(
+        concat!(
+            "UPDATE shards SET status = 'queued', failures = failures + 1, error = $5, operations_done = $6, \
+             history = history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): failed: ' || $5 || '\n', \
+             lease_until = NULL WHERE ",
+            fenced_shard!(),
+            " RETURNING failures"
+        ),
+        fence,
+    )
+    .bind(error)
+    .bind(count_to_sql(ran))
+    .fetch_optional(&mut *tx)
+    .await?
+    .map(|row| row.int("failures"))
+    .transpose()?;
+    Ok(failures.map(|failures| failures.max(0) as u64))
 }
 
 /// Ends a job that has not ended yet as failed, with the reason, dropping its groups' accumulators.
@@ -779,7 +797,7 @@ impl Store {
     ) -> StoreResult<bool> {
         self.check_room(folded.0.iter().map(|partial| partial.len() as u64).sum())
             .await?;
-        let Some(mut tx) = self.begin_finishing(fence, Some(ran)).await? else {
+        let Some(mut tx) = self.begin_finishing(fence, ran).await? else {
             return Ok(false);
         };
         let batch = count_to_sql(last_run);
@@ -843,14 +861,25 @@ impl Store {
     }
 
     /// Marks the job failed with `error` at once (a failure no retry can mend), if the claim still
-    /// holds its shard.
+    /// holds its shard: the shard reads as its failed run left it ([`failed_run`]), the
+    /// operations it `ran` counted in the job's progress (a step that failed read 0 of what it
+    /// had run where no heartbeat had told it, found from outside).
     /// The job's end is stamped `at`, or on the database's clock.
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
-    pub async fn fail(&self, fence: &Fence, at: Option<UnixMs>, error: &str) -> StoreResult<bool> {
-        let Some(mut tx) = self.begin_finishing(fence, None).await? else {
-            return Ok(false);
-        };
+    pub async fn fail(
+        &self,
+        fence: &Fence,
+        at: Option<UnixMs>,
+        ran: u64,
+        error: &str,
+    ) -> StoreResult<bool> {
+        let mut tx = self.begin().await?;
         let now = now_or(self.dialect(), &mut tx, at).await?;
+        if failed_run(&mut tx, fence, error, ran).await?.is_none() {
+            tx.rollback().await?;
+            return Ok(false);
+        }
+        sum_progress(self.dialect(), &mut tx, &fence.job).await?;
         end_job(&mut tx, &fence.job, now, error).await?;
         tx.commit().await?;
         self.ended(&fence.job);
@@ -870,26 +899,10 @@ impl Store {
     ) -> StoreResult<bool> {
         let mut tx = self.begin().await?;
         let now = now_or(self.dialect(), &mut tx, at).await?;
-        let failures: Option<i64> = fenced(
-            concat!(
-                "UPDATE shards SET status = 'queued', failures = failures + 1, error = $5, operations_done = 0, \
-                 history = history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): failed: ' || $5 || '\n', \
-                 lease_until = NULL WHERE ",
-                fenced_shard!(),
-                " RETURNING failures"
-            ),
-            fence,
-        )
-        .bind(error)
-        .fetch_optional(&mut tx)
-        .await?
-        .map(|row| row.int("failures"))
-        .transpose()?;
-        let Some(failures) = failures else {
+        let Some(failures) = failed_run(&mut tx, fence, error, 0).await? else {
             tx.rollback().await?;
             return Ok(false);
         };
-        let failures = failures.max(0) as u64;
         let ends = failures > retries;
         if ends {
             let reason = failed_too_often(retries, fence.shard, failures, error);

@@ -147,7 +147,7 @@ impl Store {
         if !with_the_end && self.write_rows(fence, result).await?.is_none() {
             return Ok(None);
         }
-        let Some(mut tx) = self.begin_finishing(fence, Some(ran)).await? else {
+        let Some(mut tx) = self.begin_finishing(fence, ran).await? else {
             return Ok(None);
         };
         let finished_at = super::queue::now_or(self.dialect(), &mut tx, at).await?;
