@@ -286,12 +286,12 @@ struct Minimum {
 const MAX_ITERATIONS: u32 = 100;
 
 fn fit(problem: Problem) -> Result<Calibration, InvalidInput> {
-    let start: Vec<f64> = problem
+    let given: Vec<f64> = problem
         .parameters
         .iter()
         .map(|(_, path)| problem.start_value(path).ln())
         .collect();
-    let start = problem.within_bounds(start);
+    let start = problem.within_bounds(given.clone());
     // A start no scenario takes (eq. 8's kappa of contacts of 1e-30 m is 1.5e-35) is the
     // parameter's fault, not the scenario's (it read "/scenario: cannot simulate").
     let magnitudes = MIN_MAGNITUDE.ln()..=MAX_MAGNITUDE.ln();
@@ -303,6 +303,27 @@ fn fit(problem: Problem) -> Result<Calibration, InvalidInput> {
                  1e-30 to 1e30 a scenario's numbers keep: give it a start or `bounds` within them",
                 problem.parameters[k].0,
                 crate::error::shown(start[k].exp())
+            ),
+        ));
+    }
+    // A start its bounds moved to where the scenario cannot run is the bounds' fault (a radius
+    // bounded below the worn radius read "/scenario: cannot simulate", found from outside).
+    let moved = (0..start.len()).find(|&k| start[k] != given[k]);
+    if let Some(k) = moved
+        && problem.residuals(&start).is_none()
+    {
+        let at = Pointer::root().child("scenario");
+        let why = match problem.spec(&start).map(|spec| Scenario::new(spec, &at)) {
+            Some(Err(invalid)) => format!("breaks a rule: {invalid}"),
+            _ => "cannot simulate every observation".to_owned(),
+        };
+        let name = &problem.parameters[k].0;
+        return Err(InvalidInput::single(
+            &Pointer::root().child("bounds").child(name.as_str()),
+            format!(
+                "{name} starts at {} (its value in the scenario, or eq. 8's for kappa), outside \
+                 these bounds; at their nearer end the scenario {why}",
+                crate::error::shown(problem.start_value(&problem.parameters[k].1))
             ),
         ));
     }
@@ -2458,6 +2479,28 @@ mod tests {
         let bounded = text(r#", "bounds": {"material.kappa": [1e-20, 1]}"#);
         let refused = calibrate(&CalibrationSpec::from_json(&bounded).unwrap()).unwrap_err();
         assert!(!refused.to_string().contains("starts at"), "{refused}");
+    }
+
+    /// Bounds that move the start to where the scenario breaks a rule name themselves and the
+    /// rule (a probe's radius bounded below the worn radius read "/scenario: cannot simulate").
+    #[test]
+    fn bounds_that_move_the_start_out_of_the_scenario_name_themselves() {
+        let text = r#"{"fit": ["material.contact_radius_m"],
+            "bounds": {"material.contact_radius_m": [1e-30, 1e-29]},
+            "observations": [{"e1": 0.3}, {"e1": 0.31}]}"#;
+        let refused = calibrate(&CalibrationSpec::from_json(text).unwrap()).unwrap_err();
+        assert_eq!(
+            refused.pointers(),
+            ["/bounds/material.contact_radius_m"],
+            "{refused}"
+        );
+        let message = refused.to_string();
+        for part in ["starts at 0.0077 (", "breaks a rule: /scenario/material/"] {
+            assert!(message.contains(part), "{part}: {message}");
+        }
+        // Bounds the start simulates within are taken as before.
+        let within = text.replace("[1e-30, 1e-29]", "[5e-3, 2e-2]");
+        calibrate(&CalibrationSpec::from_json(&within).unwrap()).unwrap();
     }
 
     /// A measured value beyond a scenario's magnitudes is refused at its field (a sweep of the

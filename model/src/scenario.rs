@@ -443,7 +443,8 @@ fn check_spec(spec: &ScenarioSpec, root: &Pointer, errors: &mut Vec<FieldError>)
             pointer: at.child("worn_radius_m").to_string(),
             detail: format!(
                 "must not exceed contact_radius_m ({} m), got {} m",
-                mat.contact_radius_m, mat.worn_radius_m
+                shown(mat.contact_radius_m),
+                shown(mat.worn_radius_m)
             ),
         });
     }
@@ -455,7 +456,8 @@ fn check_spec(spec: &ScenarioSpec, root: &Pointer, errors: &mut Vec<FieldError>)
             pointer: at_wear.child("worn_pressure_pa").to_string(),
             detail: format!(
                 "must not exceed dynamic_yield_pressure_pa ({} Pa) under roughening_and_softening, got {} Pa",
-                mat.dynamic_yield_pressure_pa, wear.worn_pressure_pa
+                shown(mat.dynamic_yield_pressure_pa),
+                shown(wear.worn_pressure_pa)
             ),
         });
     }
