@@ -23,9 +23,10 @@ pub struct Weibayes {
     pub devices: u64,
     /// The scale's estimate; none without failures.
     pub eta: Option<f64>,
-    /// The scale's lower bound at `confidence`.
+    /// The scale's lower bound at `confidence` (a bound beyond f64 reads as its largest value, a
+    /// lower bound still, where JSON has no infinity).
     pub eta_lower: f64,
-    /// B1's and B10's lower bounds at `confidence`.
+    /// B1's and B10's lower bounds at `confidence`, as `eta_lower` beyond f64.
     pub b1_lower: f64,
     pub b10_lower: f64,
 }
@@ -61,14 +62,18 @@ pub fn weibayes(lives: &Lives, beta: f64, confidence: f64) -> Result<Weibayes, W
     // (beta 0.01 at 95 %: eta_lower about 1e331, B1's about 1e131).
     let ln_scale_of = |divisor: f64| t_max.ln() + (scaled / divisor).ln() / beta;
     let ln_eta_lower = ln_scale_of(0.5 * chi_square_quantile(confidence, failures + 1));
-    let b_lower = |p: f64| (ln_eta_lower + (-(-p).ln_1p()).ln() / beta).exp();
+    let b_lower = |p: f64| {
+        (ln_eta_lower + (-(-p).ln_1p()).ln() / beta)
+            .exp()
+            .min(f64::MAX)
+    };
     Ok(Weibayes {
         beta,
         confidence,
         failures,
         devices: lives.failures() + lives.censored(),
         eta: (failures > 0).then(|| ln_scale_of(failures as f64).exp()),
-        eta_lower: ln_eta_lower.exp(),
+        eta_lower: ln_eta_lower.exp().min(f64::MAX),
         b1_lower: b_lower(0.01),
         b10_lower: b_lower(0.10),
     })
@@ -178,12 +183,13 @@ mod tests {
 
     /// A shape of 0.01 and 5 % confidence, no failures among 100 devices through 200 operations:
     /// the scale's bound, `200 (100 / -ln 0.95)^100`, is about 1e331, beyond f64; the B-lives' are
-    /// not, `200 (100 (-ln(1 - p)) / -ln 0.95)^100` (B1 about 3e131), and are kept.
+    /// not, `200 (100 (-ln(1 - p)) / -ln 0.95)^100` (B1 about 3e131), and are kept. The scale's
+    /// reads as f64's largest, still a lower bound (infinity was `null` in JSON).
     #[test]
     fn a_b_life_within_f64_is_kept_where_the_scale_is_beyond() {
         let lives = Lives::from_pairs(&[(200.0, false); 100]).unwrap();
         let w = weibayes(&lives, 0.01, 0.05).unwrap();
-        assert_eq!(w.eta_lower, f64::INFINITY);
+        assert_eq!(w.eta_lower, f64::MAX);
         let zero_failure = -(0.95f64).ln();
         for (p, bound) in [(0.01, w.b1_lower), (0.10, w.b10_lower)] {
             let expected = 200.0 * (100.0 * -(1.0f64 - p).ln() / zero_failure).powf(100.0);
