@@ -390,6 +390,10 @@ fn inputs_are_bounded_and_outputs_checked_before_the_work() {
         line.starts_with("bouncewear: --plots ") && line.contains("cannot be made a directory"),
         "{line}"
     );
+    // A directory that is there but takes no file is refused before the run too (it failed
+    // after it, the Result printed).
+    let line = rejected(&["run", "-q", "--plots", "/proc/self", "-"], job);
+    assert!(line.contains("--plots /proc/self: cannot"), "{line}");
     let huge = " ".repeat((64 << 20) + 1);
     let line = rejected(&["simulate", "-"], &huge);
     assert!(line.contains("more than 64 MB"), "{line}");
@@ -436,6 +440,97 @@ fn a_reader_that_stops_early_is_not_an_error() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success(), "{:?}: {stderr}", output.status);
     assert!(!stderr.contains("Broken pipe"), "{stderr}");
+}
+
+/// A `--url` the remote commands cannot use, and an API key no header can carry, are a bad
+/// command line (2) naming the flag, before any request: they were exit 1 with the HTTP
+/// library's words, a query string sent every request to the dashboard, and port 99999 went to
+/// another port (found from outside). The key is not repeated.
+#[test]
+fn a_remote_command_line_that_cannot_be_sent_is_refused_naming_the_flag() {
+    for (url, rule) in [
+        ("garbage", "no scheme"),
+        ("ftp://127.0.0.1:8080", "http or https"),
+        ("", "not a URL"),
+        ("http://127.0.0.1:99999", "port must be from 1 to 65535"),
+        ("http://127.0.0.1:0", "port must be from 1 to 65535"),
+        ("http://127.0.0.1:8080?x=1", "no query or fragment"),
+        ("http://127.0.0.1:8080#top", "no query or fragment"),
+    ] {
+        let line = rejected(&["status", "some-id", "--url", url], "");
+        assert!(
+            line.contains("'--url <URL>'") && line.contains(rule),
+            "{url}: {line}"
+        );
+    }
+    let args = [
+        "status",
+        "some-id",
+        "--url",
+        "http://127.0.0.1:9",
+        "--retries",
+        "0",
+    ];
+    let line = rejected(&[&args[..], &["--api-key", "k1\nX-Evil: 1"]].concat(), "");
+    assert!(
+        line.contains("--api-key") && !line.contains("X-Evil"),
+        "{line}"
+    );
+}
+
+/// A stdout or stderr that cannot take a line never panics (exit 101): a message that cannot
+/// be written leaves the exit status as it was, and a server whose stdout is a full disk says
+/// where it listens in its log and serves (it panicked at start-up, found from outside).
+#[test]
+fn an_unwritable_stdout_or_stderr_never_panics() {
+    use std::io::{BufRead, BufReader};
+    use std::process::{Command, Stdio};
+    let full = || {
+        let file = std::fs::OpenOptions::new().write(true).open("/dev/full");
+        Stdio::from(file.unwrap())
+    };
+    let mut refused = Command::new(crate::support::BIN)
+        .args(["simulate", "-"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(full())
+        .spawn()
+        .unwrap();
+    drop(refused.stdin.take());
+    assert_eq!(refused.wait().unwrap().code(), Some(2));
+    let dir = temp_dir("unwritable");
+    let database = format!("sqlite://{}", dir.join("a.db").display());
+    let mut server = Command::new(crate::support::BIN)
+        .args(["serve", "--bind", "127.0.0.1:0", "--workers", "0"])
+        .args(["--database", &database])
+        .env("RUST_LOG", "warn")
+        .stdout(full())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut log = BufReader::new(server.stderr.take().unwrap());
+    let mut line = String::new();
+    let address = loop {
+        line.clear();
+        assert_ne!(log.read_line(&mut line).unwrap(), 0, "the server ended");
+        if let Some(rest) = line.split("bouncewear listening on ").nth(1) {
+            break rest.split_whitespace().next().unwrap().to_owned();
+        }
+    };
+    let health = format!("{address}/healthz");
+    let answered = bouncewear(&["health", "--url", &health], "");
+    let to_full = Command::new(crate::support::BIN)
+        .args(["health", "--url", &health])
+        .stdout(full())
+        .output()
+        .unwrap();
+    server.kill().unwrap();
+    server.wait().unwrap();
+    assert!(answered.status.success(), "{answered:?}");
+    assert!(String::from_utf8_lossy(&answered.stdout).contains("\"ok\""));
+    let stderr = String::from_utf8_lossy(&to_full.stderr);
+    assert_eq!(to_full.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("<stdout>: No space left"), "{stderr}");
 }
 
 /// Runs the binary with `args` on a terminal (util-linux `script` gives it one), its stdout
@@ -693,6 +788,16 @@ fn calibrate_fits_kappa_to_simulated_measurements() {
     );
     assert!(
         line.contains("column `first_bounce_s`: `abc` is not a finite number"),
+        "{line}"
+    );
+    // Observations in the file and in the CSV: one list too many (the file's were dropped).
+    std::fs::write(&path, "e1\n0.4\n0.5\n").unwrap();
+    let line = rejected(
+        &["calibrate", "--observations", path.to_str().unwrap()],
+        &request.to_string(),
+    );
+    assert!(
+        line.contains("--observations") && line.contains("give them in one place"),
         "{line}"
     );
 

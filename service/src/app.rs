@@ -285,17 +285,19 @@ pub async fn work(process: WorkerProcess) -> Result<(), StartupError> {
     if let Some(address) = process.metrics_bind {
         // Printed before the line below, for which tests and scripts wait.
         let bound = serve_metrics(address).await?;
-        println!("bouncewear worker metrics on http://{bound}/metrics");
+        announce(format_args!(
+            "bouncewear worker metrics on http://{bound}/metrics"
+        ));
     }
     let workers = Arc::new(start_workers(&config).await?);
     let slots = workers.slots(config.workers);
     let (stop, stopping) = watch::channel(false);
     let handles = Arc::clone(&workers).spawn(slots, stopping);
     // Tests and scripts wait for this line.
-    println!(
+    announce(format_args!(
         "bouncewear worker running {slots} shard(s) at a time from {}",
         describe(&config.database)
-    );
+    ));
     wait_for_signal().await;
     tracing::info!("shutting down: running shards go back to the queue");
     let _ = stop.send(true);
@@ -343,12 +345,26 @@ fn describe(url: &str) -> String {
     }
 }
 
+/// A line for the scripts that start a server or worker, on stdout; one that cannot be written
+/// (stdout a full disk or a closed pipe) is logged, and the process runs on: `println!` panicked
+/// there, and the server never served (found from outside).
+fn announce(line: std::fmt::Arguments) {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    if let Err(error) = writeln!(stdout, "{line}").and_then(|()| stdout.flush()) {
+        tracing::warn!(%error, "{line} (stdout could not take this line)");
+    }
+}
+
 /// `bouncewear serve`: the application until SIGINT or SIGTERM.
 pub async fn serve(config: ServeConfig) -> Result<(), StartupError> {
     no_transparent_huge_pages();
     let application = Application::build(config).await?;
     // Tests and scripts read the port from this line.
-    println!("bouncewear listening on http://{}", application.address());
+    announce(format_args!(
+        "bouncewear listening on http://{}",
+        application.address()
+    ));
     application.run_until_stopped(wait_for_signal()).await
 }
 

@@ -84,8 +84,9 @@ enum Command {
         #[arg(long)]
         threads: Option<usize>,
         /// Also write the plots as SVG files into this directory: for every operation metric its
-        /// wear curve (`bands-METRIC.svg`) and histograms (`histograms-METRIC.svg`), `weibull.svg`,
-        /// and with a sensitivity analysis, for every metric of it, `sensitivity-METRIC.svg`.
+        /// wear curve (`bands-METRIC.svg`) and histograms (`histograms-METRIC.svg`); with failure
+        /// criteria `weibull.svg`, with a rare event `tail.svg`, and with a sensitivity analysis,
+        /// for every metric of it, `sensitivity-METRIC.svg`.
         #[arg(long)]
         plots: Option<PathBuf>,
         /// No progress bar (it is drawn only when stderr is a terminal anyway).
@@ -329,13 +330,19 @@ impl From<BenchError> for CliError {
 /// a path that cannot be one is a bad command line (exit 2) at once, not after a run of hours
 /// whose Result it would throw away (found from outside: `run --plots FILE` ran the job, then
 /// exited with "File exists" and printed nothing).
+/// A directory that exists but takes no file (`/proc/self`, one without write permission) is
+/// found by writing a file there and removing it: it failed after the run before.
 fn output_directory(flag: &str, dir: &Path) -> Result<(), CliError> {
-    std::fs::create_dir_all(dir).map_err(|source| {
+    let usage = |source: std::io::Error| {
         CliError::Usage(format!(
             "{flag} {}: cannot be made a directory for the outputs ({source})",
             dir.display()
         ))
-    })
+    };
+    std::fs::create_dir_all(dir).map_err(usage)?;
+    let probe = dir.join(format!(".bouncewear-{}", std::process::id()));
+    std::fs::write(&probe, b"").map_err(usage)?;
+    std::fs::remove_file(&probe).map_err(usage)
 }
 
 /// `text` on one line and inert on a terminal: its control characters escaped (`\n`,
@@ -354,6 +361,13 @@ fn one_line(text: &str) -> String {
     line
 }
 
+/// One line on stderr, `bouncewear: ` first. A stderr that cannot take it (a full disk, a closed
+/// pipe) changes nothing of the exit status: `eprintln!` panicked there, and exit 2 or 1 became
+/// 101 (found from outside).
+fn complain(line: std::fmt::Arguments) {
+    let _ = writeln!(std::io::stderr().lock(), "bouncewear: {line}");
+}
+
 /// A command line clap does not run: the help or version asked for, to stdout (exit 0, or 1 when
 /// it cannot be written), or why the line is wrong, one line on stderr with exit 2 as for any bad
 /// input (clap's own message spans five lines: the fault, a tip, the usage and a pointer to
@@ -364,16 +378,18 @@ fn not_run(error: &clap::Error) -> ExitCode {
         ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
             let mut stdout = std::io::stdout().lock();
             let written = write!(stdout, "{error}").and_then(|()| stdout.flush());
-            match written {
-                Err(error) if error.kind() != std::io::ErrorKind::BrokenPipe => {
-                    eprintln!("bouncewear: writing to <stdout>: {error}");
-                    ExitCode::FAILURE
+            match stdout_written(written) {
+                Err(error) => {
+                    complain(format_args!("{error}"));
+                    error.exit_code()
                 }
-                _ => ExitCode::SUCCESS,
+                Ok(()) => ExitCode::SUCCESS,
             }
         }
         ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
-            eprintln!("bouncewear: no command given: `bouncewear --help` lists them");
+            complain(format_args!(
+                "no command given: `bouncewear --help` lists them"
+            ));
             ExitCode::from(2)
         }
         _ => {
@@ -389,7 +405,7 @@ fn not_run(error: &clap::Error) -> ExitCode {
                 }
                 line.push_str(part.strip_prefix("error: ").unwrap_or(part));
             }
-            eprintln!("bouncewear: {} (--help for more)", one_line(&line));
+            complain(format_args!("{} (--help for more)", one_line(&line)));
             ExitCode::from(2)
         }
     }
@@ -409,7 +425,7 @@ pub fn main() -> ExitCode {
                 let _ = print_text(job.clone());
             }
             match log_format {
-                LogFormat::Text => eprintln!("bouncewear: {}", one_line(&error.to_string())),
+                LogFormat::Text => complain(format_args!("{}", one_line(&error.to_string()))),
                 // Every line on stderr one JSON object, the last one too.
                 LogFormat::Json => tracing::error!(exit_code = error.code(), "{error}"),
             }
@@ -445,8 +461,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
             url,
             timeout_seconds,
         } => {
-            println!("{}", check_health(&url, timeout_seconds)?);
-            Ok(())
+            let body = check_health(&url, timeout_seconds)?;
+            print_line(&body)
         }
         Command::Submit {
             file,
@@ -475,6 +491,9 @@ fn run(cli: Cli) -> Result<(), CliError> {
             plots,
             server,
         } => {
+            if let Some(dir) = &plots {
+                output_directory("--plots", dir)?;
+            }
             let asked = remote::Compared {
                 metric,
                 statistics,
@@ -500,14 +519,17 @@ fn run(cli: Cli) -> Result<(), CliError> {
             threads,
             quiet,
         } => {
+            let pool = thread_pool(threads)?;
             output_directory("--out", &out)?;
             let progress = Progress::steps(quiet, bench::measurements(quick));
-            let report = thread_pool(threads)?
-                .install(|| bench::bench(&out, quick, coverage_seeds, &progress));
+            let report = pool.install(|| bench::bench(&out, quick, coverage_seeds, &progress));
             progress.finish();
             let report = report?;
             if !quiet {
-                eprintln!("bouncewear: wrote {}/report.{{json,md,svg}}", out.display());
+                complain(format_args!(
+                    "wrote {}/report.{{json,md,svg}}",
+                    out.display()
+                ));
             }
             print_json(&report)
         }
@@ -695,6 +717,13 @@ fn with_observations(text: &str, csv: &str, path: &str) -> Result<String, CliErr
             "a calibration request is a JSON object",
         ))
     })?;
+    // Two lists of observations are one too many: the file's were dropped without a word
+    // (found from outside).
+    if object.contains_key("observations") {
+        return Err(CliError::Usage(format!(
+            "--observations {path}: the request has `observations` too; give them in one place"
+        )));
+    }
     object.insert(
         "observations".to_owned(),
         measurements::observations_from_csv(csv, path)?,
@@ -711,14 +740,13 @@ fn print_text(text: String) -> Result<(), CliError> {
     if let Ok(value) = serde_json::from_str::<serde_json::Value>(&text) {
         return print_json(&value);
     }
+    print_line(&text)
+}
+
+/// `text` and a newline on stdout, as [`print_json`] writes (a reader gone is not an error).
+fn print_line(text: &str) -> Result<(), CliError> {
     let mut out = std::io::stdout().lock();
-    match writeln!(out, "{text}").and_then(|()| out.flush()) {
-        Err(error) if error.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
-        written => written.map_err(|source| CliError::Write {
-            path: "<stdout>".into(),
-            source,
-        }),
-    }
+    stdout_written(writeln!(out, "{text}").and_then(|()| out.flush()))
 }
 
 /// Prints a document to stdout, buffered (a Result is thousands of lines). A reader that stops
@@ -729,6 +757,12 @@ fn print_json(value: &impl serde::Serialize) -> Result<(), CliError> {
         .map_err(std::io::Error::from)
         .and_then(|()| writeln!(out))
         .and_then(|()| out.flush());
+    stdout_written(written)
+}
+
+/// What writing to stdout came to: a reader that stopped early (`| head`) is not an error, the
+/// output simply ends there; any other failure (a full disk) is.
+fn stdout_written(written: std::io::Result<()>) -> Result<(), CliError> {
     match written {
         Err(error) if error.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
         written => written.map_err(|source| CliError::Write {

@@ -19,7 +19,8 @@ pub struct Server {
         long,
         env = "BOUNCEWEAR_URL",
         default_value = "http://127.0.0.1:8080",
-        global = true
+        global = true,
+        value_parser = base_url
     )]
     pub url: String,
     /// The API key, when the server has keys.
@@ -45,6 +46,39 @@ pub struct Server {
     /// `--ca-cert`'s certificates, read at the first request (`wait` sends one every 10 s).
     #[arg(skip)]
     pub roots: std::sync::OnceLock<RootCerts>,
+}
+
+/// A server's base URL as `--url` takes it, the API's paths added to it: `http` or `https`, a
+/// host, a port from 1 to 65535, and no query or fragment. A bad one is a bad command line
+/// (exit 2) naming the flag; it was exit 1 with "http: invalid format", or a query string that
+/// sent every request to the dashboard (found from outside).
+fn base_url(text: &str) -> Result<String, String> {
+    let uri: ureq::http::Uri = text
+        .parse()
+        .map_err(|error| format!("not a URL such as http://127.0.0.1:8080 ({error})"))?;
+    match uri.scheme_str() {
+        Some("http" | "https") => {}
+        Some(other) => return Err(format!("the scheme must be http or https, got {other}")),
+        None => return Err("no scheme: write http://HOST:PORT (or https://)".to_owned()),
+    }
+    if uri.host().is_none_or(str::is_empty) {
+        return Err("no host: write http://HOST:PORT (or https://)".to_owned());
+    }
+    // The port as written: `Uri` takes 99999 and the request went to another port.
+    let authority = uri.authority().map_or("", |a| a.as_str());
+    let port = authority
+        .rsplit_once(':')
+        .filter(|(host, _)| !host.starts_with('[') || host.ends_with(']'))
+        .map(|(_, port)| port);
+    if port.is_some_and(|port| port.parse::<u16>().is_err() || port == "0") {
+        return Err("the port must be from 1 to 65535".to_owned());
+    }
+    if uri.query().is_some() || text.contains('#') {
+        return Err(
+            "a base URL has no query or fragment: the API's paths are added to it".to_owned(),
+        );
+    }
+    Ok(text.to_owned())
 }
 
 /// The longest pause before a retry, whatever `Retry-After` asks.
@@ -211,6 +245,17 @@ impl Server {
         idempotency_key: Option<&str>,
         deadline: Option<Instant>,
     ) -> Result<String, Failure> {
+        // A key that no header can carry (a newline) is the command line's fault; the key is
+        // not repeated (it failed each request with "failed to parse header value").
+        if let Some(key) = &self.api_key
+            && ureq::http::HeaderValue::from_str(&format!("Bearer {key}")).is_err()
+        {
+            return Err(Failure::Final(CliError::Usage(
+                "--api-key (BOUNCEWEAR_API_KEY): a key has no control characters, and the one \
+                 given has"
+                    .to_owned(),
+            )));
+        }
         let url = self.url(path);
         let left = deadline.map_or(f64::INFINITY, |end| {
             (end + ANSWER_GRACE)
@@ -571,9 +616,8 @@ pub fn compare(
     };
     let this = format!("/v1/jobs/{}/compare/{}", encode(a), encode(b));
     let text = server.send("GET", &format!("{this}{query}"), None)?;
+    // The directory is made and tried before the request (`--plots`, exit 2).
     if let Some(dir) = plots {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| CliError::Failed(format!("{}: {e}", dir.display())))?;
         let comparison = parse(&text)?;
         let metric = asked.metric.as_deref().map(encode).unwrap_or_default();
         // A device metric is one value a device: no wear curve to draw.
@@ -589,8 +633,10 @@ pub fn compare(
             let query = if query == "?metric=" { "" } else { &query };
             let svg = server.send("GET", &format!("{this}/plots/{kind}{query}"), None)?;
             let path = dir.join(kind);
-            std::fs::write(&path, svg)
-                .map_err(|e| CliError::Failed(format!("{}: {e}", path.display())))?;
+            std::fs::write(&path, svg).map_err(|source| CliError::Write {
+                path: path.display().to_string(),
+                source,
+            })?;
         }
     }
     Ok(text.trim_end().to_owned())
