@@ -199,6 +199,7 @@ pub async fn tick(
                 continue;
             }
         };
+        let missed = moves.missed;
         let slot = RunSlot {
             schedule: &schedule.id,
             scheduled_for: due,
@@ -225,6 +226,9 @@ pub async fn tick(
             }
             made => made?,
         };
+        if matches!(made, NewRun::Created(_)) {
+            passed_over(&schedule.id, missed);
+        }
         created += usize::from(waiting.note(&schedule.id, &made));
     }
     Ok(created)
@@ -291,8 +295,20 @@ async fn skip(
     due: UnixMs,
     reason: &str,
 ) -> StoreResult<()> {
+    let missed = moves.missed;
     if store.skip_run(&schedule.id, moves, due, reason).await? {
-        crate::telemetry::record_scheduled_run_skipped();
+        crate::telemetry::record_scheduled_runs_skipped(1);
+        passed_over(&schedule.id, missed);
     }
     Ok(())
+}
+
+/// Says in the log and on `/metrics` the `missed` due times a catch-up passed over (the server
+/// down or late) once the schedule has recorded them: they showed on the schedule alone (found
+/// from outside).
+fn passed_over(schedule: &ScheduleId, missed: u64) {
+    if missed > 0 {
+        tracing::warn!(%schedule, missed, "due times passed while the server was down or late are skipped; only the latest is made");
+        crate::telemetry::record_scheduled_runs_skipped(missed);
+    }
 }

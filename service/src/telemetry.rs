@@ -185,7 +185,7 @@ pub const FITS_STOPPED: &str = "bouncewear_fits_stopped_total";
 /// Jobs accepted into the queue, schedules' runs included ([`record_jobs_submitted`]).
 const JOBS_SUBMITTED: &str = "bouncewear_jobs_submitted_total";
 
-/// Schedules' runs skipped at their due time ([`record_scheduled_run_skipped`]).
+/// Schedules' runs skipped at their due time ([`record_scheduled_runs_skipped`]).
 const SCHEDULED_RUNS_SKIPPED: &str = "bouncewear_scheduled_runs_skipped_total";
 
 /// The HELP text of every metric the service records, wherever it records it.
@@ -223,7 +223,7 @@ fn describe_metrics() {
     );
     metrics::describe_counter!(
         SCHEDULED_RUNS_SKIPPED,
-        "Schedules' runs this instance skipped at their due time: a template the server's limits refuse now, or a key over its quota."
+        "Schedules' runs this instance skipped at their due time: a template the server's limits refuse now, a key over its quota, or due times passed while the server was down or late (only the latest is made)."
     );
     metrics::describe_counter!(
         "bouncewear_jobs_finished_total",
@@ -348,8 +348,8 @@ pub fn record_jobs_submitted(jobs: u64) {
 }
 
 /// Counts a schedule's run skipped at its due time (shown on the schedule as well).
-pub fn record_scheduled_run_skipped() {
-    metrics::counter!(SCHEDULED_RUNS_SKIPPED).increment(1);
+pub fn record_scheduled_runs_skipped(runs: u64) {
+    metrics::counter!(SCHEDULED_RUNS_SKIPPED).increment(runs);
 }
 
 /// Records a succeeded job's wall time and speed. `operations` is what the job simulated.
