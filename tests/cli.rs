@@ -456,6 +456,10 @@ fn a_remote_command_line_that_cannot_be_sent_is_refused_naming_the_flag() {
         ("http://127.0.0.1:0", "port must be from 1 to 65535"),
         ("http://127.0.0.1:8080?x=1", "no query or fragment"),
         ("http://127.0.0.1:8080#top", "no query or fragment"),
+        (
+            "http://user:pw@127.0.0.1:99999",
+            "port must be from 1 to 65535",
+        ),
     ] {
         let line = rejected(&["status", "some-id", "--url", url], "");
         assert!(
@@ -463,19 +467,27 @@ fn a_remote_command_line_that_cannot_be_sent_is_refused_naming_the_flag() {
             "{url}: {line}"
         );
     }
+    // URLs that are good, their server absent: no answer (1), never a bad command line.
+    for url in [
+        "http://user:pw@127.0.0.1",
+        "HTTP://[::1]:9/prefix/",
+        "https://127.0.0.1:9",
+    ] {
+        let output = bouncewear(&["status", "some-id", "--retries", "0", "--url", url], "");
+        assert_eq!(output.status.code(), Some(1), "{url}: {output:?}");
+    }
     let args = [
         "status",
         "some-id",
-        "--url",
-        "http://127.0.0.1:9",
         "--retries",
         "0",
+        "--url",
+        "http://127.0.0.1:9",
     ];
-    let line = rejected(&[&args[..], &["--api-key", "k1\nX-Evil: 1"]].concat(), "");
-    assert!(
-        line.contains("--api-key") && !line.contains("X-Evil"),
-        "{line}"
-    );
+    for key in ["k1\nX-Evil: 1", "caf\u{e9}"] {
+        let line = rejected(&[&args[..], &["--api-key", key]].concat(), "");
+        assert!(line.contains("--api-key") && !line.contains(key), "{line}");
+    }
 }
 
 /// A stdout or stderr that cannot take a line never panics (exit 101): a message that cannot

@@ -66,7 +66,10 @@ fn base_url(text: &str) -> Result<String, String> {
     }
     // The port as written: `Uri` takes 99999 and the request went to another port.
     let authority = uri.authority().map_or("", |a| a.as_str());
-    let port = authority
+    let host_and_port = authority
+        .rsplit_once('@')
+        .map_or(authority, |(_, rest)| rest);
+    let port = host_and_port
         .rsplit_once(':')
         .filter(|(host, _)| !host.starts_with('[') || host.ends_with(']'))
         .map(|(_, port)| port);
@@ -245,15 +248,18 @@ impl Server {
         idempotency_key: Option<&str>,
         deadline: Option<Instant>,
     ) -> Result<String, Failure> {
-        // A key that no header can carry (a newline) is the command line's fault; the key is
-        // not repeated (it failed each request with "failed to parse header value").
+        // A key that no header can carry (a newline, a letter beyond ASCII) is the command
+        // line's fault; the key is not repeated (it failed each request with the HTTP
+        // library's "failed to parse header value").
         if let Some(key) = &self.api_key
-            && ureq::http::HeaderValue::from_str(&format!("Bearer {key}")).is_err()
+            && key
+                .chars()
+                .any(|c| !(c == ' ' || c == '\t' || c.is_ascii_graphic()))
         {
             return Err(Failure::Final(CliError::Usage(
-                "--api-key (BOUNCEWEAR_API_KEY): a key has no control characters, and the one \
-                 given has"
-                    .to_owned(),
+                "--api-key (BOUNCEWEAR_API_KEY): a key is printable ASCII, and the one given is \
+                 not"
+                .to_owned(),
             )));
         }
         let url = self.url(path);
