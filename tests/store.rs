@@ -492,7 +492,7 @@ async fn a_claim_whose_lease_expired_is_fenced_out_by_its_successor(url: &str) {
     );
     assert!(
         !store
-            .fail(&first.fence, Some(UnixMs(2100)), 0, "late")
+            .fail(&first.fence, Some(UnixMs(2100)), [0, 0], "late")
             .await
             .unwrap()
     );
@@ -2093,14 +2093,15 @@ async fn an_ended_jobs_running_shards_stop_with_it(url: &str) {
         Lease::Cancelled
     );
 
-    // Failed at once by a run that no retry mends, after 3 operations of it (no heartbeat told
-    // them) and 2 of the other group's: the run reads as failed, and the job keeps all 5.
+    // Failed at once by a run that no retry mends, after 3 operations of it of the 7 it had
+    // learnt of (no heartbeat told them) and 2 of the other group's: the run reads as failed, and
+    // the job keeps all 5.
     let (id, a, b) = claim_both(8, 2).await;
     let renewed = store.heartbeat(&a.fence, terms(400), 2, 2).await.unwrap();
     assert_eq!(renewed, Lease::Held);
     assert!(
         store
-            .fail(&b.fence, Some(UnixMs(500)), 3, "no answer")
+            .fail(&b.fence, Some(UnixMs(500)), [3, 7], "no answer")
             .await
             .unwrap()
     );
@@ -2127,9 +2128,10 @@ async fn an_ended_jobs_running_shards_stop_with_it(url: &str) {
         (
             failed.failures,
             failed.operations_done,
+            failed.operations_total,
             failed.error.as_deref()
         ),
-        (1, 3, Some("no answer"))
+        (1, 3, 7, Some("no answer"))
     );
 }
 

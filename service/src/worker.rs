@@ -1101,12 +1101,13 @@ impl Workers {
     }
 
     /// Ends the job as failed, with the reason (no retry can mend it), counting what the shard ran
-    /// as its lease last heard; a failure to write it leaves the lease to expire, and the shard
-    /// to be rerun.
+    /// of its total as its lease last heard; a failure to write it leaves the lease to expire, and
+    /// the shard to be rerun.
     async fn fail(&self, fence: &Fence, lease: &KeptLease, reason: &str) {
         tracing::error!(reason, "job failed");
         let ran = lease.done.load(Ordering::Relaxed);
-        match self.store.fail(fence, None, ran, reason).await {
+        let total = lease.total.load(Ordering::Relaxed);
+        match self.store.fail(fence, None, [ran, total], reason).await {
             Ok(true) => {
                 metrics::counter!("bouncewear_jobs_finished_total", "status" => "failed")
                     .increment(1);

@@ -274,11 +274,19 @@ async fn finish_shard(tx: &mut Tx, fence: &Fence, ran: u64) -> StoreResult<bool>
 
 /// Records the claim's run as failed with `error`, if the claim still holds its shard: queued
 /// (claimed again only while its job runs), its failures counted, the `error` and a history line,
-/// with the operations it `ran` done (0 for a run to be made again); its failures so far.
-async fn failed_run(tx: &mut Tx, fence: &Fence, error: &str, ran: u64) -> StoreResult<Option<u64>> {
+/// with the operations it `ran` done (0 for a run to be made again) of a total of at least
+/// `ran` and the `total` its run had learnt (as a heartbeat tells it); its failures so far.
+async fn failed_run(
+    tx: &mut Tx,
+    fence: &Fence,
+    error: &str,
+    [ran, total]: [u64; 2],
+) -> StoreResult<Option<u64>> {
+    let total = total.max(ran);
     let failures = fenced(
         concat!(
             "UPDATE shards SET status = 'queued', failures = failures + 1, error = $5, operations_done = $6, \
+             operations_total = CASE WHEN $7 > operations_total THEN $7 ELSE operations_total END, \
              history = history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): failed: ' || $5 || '\n', \
              lease_until = NULL WHERE ",
             fenced_shard!(),
@@ -288,6 +296,7 @@ async fn failed_run(tx: &mut Tx, fence: &Fence, error: &str, ran: u64) -> StoreR
     )
     .bind(error)
     .bind(count_to_sql(ran))
+    .bind(count_to_sql(total))
     .fetch_optional(&mut *tx)
     .await?
     .map(|row| row.int("failures"))
@@ -862,15 +871,15 @@ impl Store {
 
     /// Marks the job failed with `error` at once (a failure no retry can mend), if the claim still
     /// holds its shard: the shard reads as its failed run left it ([`failed_run`]), the
-    /// operations it `ran` counted in the job's progress (a step that failed read 0 of what it
-    /// had run where no heartbeat had told it, found from outside).
+    /// operations it `ran`, of the total it learnt, counted in the job's progress (a step that
+    /// failed read 0 of what it had run where no heartbeat had told it, found from outside).
     /// The job's end is stamped `at`, or on the database's clock.
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     pub async fn fail(
         &self,
         fence: &Fence,
         at: Option<UnixMs>,
-        ran: u64,
+        ran: [u64; 2],
         error: &str,
     ) -> StoreResult<bool> {
         let mut tx = self.begin().await?;
@@ -899,7 +908,7 @@ impl Store {
     ) -> StoreResult<bool> {
         let mut tx = self.begin().await?;
         let now = now_or(self.dialect(), &mut tx, at).await?;
-        let Some(failures) = failed_run(&mut tx, fence, error, 0).await? else {
+        let Some(failures) = failed_run(&mut tx, fence, error, [0, 0]).await? else {
             tx.rollback().await?;
             return Ok(false);
         };
