@@ -221,6 +221,9 @@ struct Problem<'c> {
     terms: Vec<(usize, &'static str)>,
     /// `[ln lower, ln upper]` of each parameter (unbounded: the whole line).
     bounds_ln: Vec<[f64; 2]>,
+    /// The values each parameter takes exactly, not through its logarithm: its start (the
+    /// scenario's value, or eq. 8's for kappa), then its bounds, if any ([`Problem::value`]).
+    exact: Vec<Vec<f64>>,
     /// Set once nobody waits for the fit any more ([`calibrate_until`]).
     cancel: Option<&'c AtomicBool>,
 }
@@ -286,11 +289,7 @@ struct Minimum {
 const MAX_ITERATIONS: u32 = 100;
 
 fn fit(problem: Problem) -> Result<Calibration, InvalidInput> {
-    let given: Vec<f64> = problem
-        .parameters
-        .iter()
-        .map(|(_, path)| problem.start_value(path).ln())
-        .collect();
+    let given = problem.start();
     let start = problem.within_bounds(given.clone());
     // A start no scenario takes (eq. 8's kappa of contacts of 1e-30 m is 1.5e-35) is the
     // parameter's fault, not the scenario's (it read "/scenario: cannot simulate").
@@ -302,33 +301,65 @@ fn fit(problem: Problem) -> Result<Calibration, InvalidInput> {
                 "{} starts at {} (its value in the scenario, or eq. 8's for kappa), outside the \
                  1e-30 to 1e30 a scenario's numbers keep: give it a start or `bounds` within them",
                 problem.parameters[k].0,
-                crate::error::shown(start[k].exp())
+                crate::error::shown(problem.value(k, start[k]))
             ),
         ));
     }
-    // A start its bounds moved to where the scenario cannot run is the bounds' fault (a radius
-    // bounded below the worn radius read "/scenario: cannot simulate", found from outside).
-    let moved = (0..start.len()).find(|&k| start[k] != given[k]);
-    if let Some(k) = moved
-        && problem.residuals(&start).is_none()
-    {
-        let at = Pointer::root().child("scenario");
-        let why = match problem.spec(&start).map(|spec| Scenario::new(spec, &at)) {
+    moved_out_of_the_scenario(&problem, &given, &start)?;
+    let (theta, iterations, settled) = problem.levenberg_marquardt(start)?;
+    problem.report(&theta, iterations, settled)
+}
+
+/// Refuses a `start` its bounds moved from the `given` one to where the scenario cannot run: the
+/// bounds' fault (a radius bounded below the worn radius read "/scenario: cannot simulate", found
+/// from outside). Each bound that breaks the scenario alone, the other parameters at their
+/// starts, is named with the rule; where none does alone, each that moved (two that break a
+/// rule between them). Two moved parameters named the first of them, whichever broke it.
+fn moved_out_of_the_scenario(
+    problem: &Problem,
+    given: &[f64],
+    start: &[f64],
+) -> Result<(), InvalidInput> {
+    let moved: Vec<usize> = (0..start.len()).filter(|&k| start[k] != given[k]).collect();
+    if moved.is_empty() || problem.residuals(start).is_some() {
+        return Ok(());
+    }
+    let alone = |k: usize| {
+        let mut theta = given.to_vec();
+        theta[k] = start[k];
+        theta
+    };
+    let breaking: Vec<usize> = moved
+        .iter()
+        .copied()
+        .filter(|&k| problem.residuals(&alone(k)).is_none())
+        .collect();
+    let (at_fault, together) = match breaking.is_empty() {
+        true => (moved, true),
+        false => (breaking, false),
+    };
+    let at = Pointer::root().child("scenario");
+    let errors = at_fault.into_iter().map(|k| {
+        let theta = if together { start.to_vec() } else { alone(k) };
+        let why = match problem.spec(&theta).map(|spec| Scenario::new(spec, &at)) {
             Some(Err(invalid)) => format!("breaks a rule: {invalid}"),
             _ => "cannot simulate every observation".to_owned(),
         };
         let name = &problem.parameters[k].0;
-        return Err(InvalidInput::single(
-            &Pointer::root().child("bounds").child(name.as_str()),
-            format!(
+        FieldError {
+            pointer: Pointer::root()
+                .child("bounds")
+                .child(name.as_str())
+                .to_string(),
+            detail: format!(
                 "{name} starts at {} (its value in the scenario, or eq. 8's for kappa), outside \
-                 these bounds; at their nearer end the scenario {why}",
-                crate::error::shown(problem.start_value(&problem.parameters[k].1))
+                 these bounds; at their nearer end{} the scenario {why}",
+                crate::error::shown(problem.exact[k][0]),
+                if together { ", with the others'," } else { "" }
             ),
-        ));
-    }
-    let (theta, iterations, settled) = problem.levenberg_marquardt(start)?;
-    problem.report(&theta, iterations, settled)
+        }
+    });
+    Err(InvalidInput::new(errors.collect()))
 }
 
 /// A relative difference this near its end (2) is a simulated value over 2000 times its
@@ -371,7 +402,7 @@ impl Problem<'_> {
         if !errors.is_empty() {
             return Err(InvalidInput::new(errors));
         }
-        Ok(Self {
+        let mut problem = Self {
             bounds_ln: parameters
                 .iter()
                 .map(|(name, _)| {
@@ -380,12 +411,38 @@ impl Problem<'_> {
                         .map_or([f64::NEG_INFINITY, f64::INFINITY], |b| b.map(f64::ln))
                 })
                 .collect(),
+            exact: Vec::new(),
             base,
             parameters,
             observations: spec.observations.clone(),
             terms,
             cancel: None,
-        })
+        };
+        problem.exact = problem
+            .parameters
+            .iter()
+            .map(|(name, path)| {
+                let bounds = spec.bounds.get(name).into_iter().flatten();
+                std::iter::once(problem.start_value(path))
+                    .chain(bounds.copied())
+                    .collect()
+            })
+            .collect();
+        Ok(problem)
+    }
+
+    /// Parameter `k`'s value at `ln`, its logarithm: exactly its start or a bound where `ln` is
+    /// one's logarithm, else `exp(ln)`. The round trip through `ln` and `exp` can move a value by
+    /// an ulp, and a start or bound on a rule's edge then broke the rule (a radius at the worn
+    /// radius, found from outside) or read a hair inside its bound (0.005999999999999998).
+    fn value(&self, k: usize, ln: f64) -> f64 {
+        let exact = self.exact[k].iter().copied().find(|v| v.ln() == ln);
+        exact.unwrap_or_else(|| ln.exp())
+    }
+
+    /// The logarithms of the parameters' starts.
+    fn start(&self) -> Vec<f64> {
+        self.exact.iter().map(|values| values[0].ln()).collect()
     }
 
     fn cancelled(&self) -> bool {
@@ -424,11 +481,11 @@ impl Problem<'_> {
     /// The scenario with the parameters at `exp(theta)`; `None` if that breaks a scenario rule.
     fn spec(&self, theta: &[f64]) -> Option<ScenarioSpec> {
         let mut value = self.base.clone();
-        for ((_, path), ln) in self.parameters.iter().zip(theta) {
+        for (k, ((_, path), &ln)) in self.parameters.iter().zip(theta).enumerate() {
             let place = path
                 .iter()
                 .fold(&mut value, |at, key| &mut at[key.as_str()]);
-            *place = serde_json::json!(ln.exp());
+            *place = serde_json::json!(self.value(k, ln));
         }
         serde_json::from_value(value).ok()
     }
@@ -709,8 +766,7 @@ impl Problem<'_> {
             .iter()
             .position(|&n| n.is_nan() || n <= 1e-9 * largest.max(1e-300))
         {
-            let start = self.start_value(&self.parameters[k].1);
-            let at_start = theta[k] == start.ln();
+            let at_start = theta[k] == self.exact[k][0].ln();
             // Every simulated value thousands of times its measurement (or a thousandth of it):
             // the relative differences sit at their ends (+-2), where no small move shows.
             let far = self
@@ -733,8 +789,7 @@ impl Problem<'_> {
                 format!(
                     "`{}` changes none of the measured quantities at {}{why}",
                     self.parameters[k].0,
-                    // At its start, the value as written (not its logarithm's round trip).
-                    crate::error::shown(if at_start { start } else { theta[k].exp() }),
+                    crate::error::shown(self.value(k, theta[k])),
                 ),
             ));
         }
@@ -890,10 +945,10 @@ impl Problem<'_> {
             }
         }
         let estimate = Estimate {
-            value: theta[i].exp(),
+            value: self.value(i, theta[i]),
             ci95: [
-                (theta[i] - ends[0].reach()).max(lower).exp(),
-                (theta[i] + ends[1].reach()).min(upper).exp(),
+                self.value(i, (theta[i] - ends[0].reach()).max(lower)),
+                self.value(i, (theta[i] + ends[1].reach()).min(upper)),
             ],
             se_ln,
             at_bound: theta[i] == lower || theta[i] == upper || on_edge.contains(&true),
@@ -2501,6 +2556,53 @@ mod tests {
         // Bounds the start simulates within are taken as before.
         let within = text.replace("[1e-30, 1e-29]", "[5e-3, 2e-2]");
         calibrate(&CalibrationSpec::from_json(&within).unwrap()).unwrap();
+        // Two moved: the one that breaks the rule is named, whichever is listed first.
+        let two = r#"{"fit": ["material.kappa", "material.contact_radius_m"],
+            "bounds": {"material.kappa": [0.5, 0.6], "material.contact_radius_m": [1e-30, 1e-29]},
+            "observations": [{"e1": 0.3, "first_bounce_s": 0.01},
+                             {"e1": 0.31, "first_bounce_s": 0.011}]}"#;
+        let refused = calibrate(&CalibrationSpec::from_json(two).unwrap()).unwrap_err();
+        assert_eq!(
+            refused.pointers(),
+            ["/bounds/material.contact_radius_m"],
+            "{refused}"
+        );
+    }
+
+    /// A start or bound on a rule's edge is taken exactly, not through its logarithm's round
+    /// trip: a radius bounded at the worn radius, or starting there, broke the rule by an ulp
+    /// (found from outside), and an estimate held by its bound read a hair inside it.
+    #[test]
+    fn a_start_or_bound_on_a_rules_edge_is_taken_exactly() {
+        let request = |scenario: &str, bounds: &str| {
+            let text = format!(
+                r#"{{"scenario": {{"material": {scenario}}}, "fit": ["material.contact_radius_m"]
+                    {bounds}, "observations": [{{"e1": 0.3}}, {{"e1": 0.31}}]}}"#
+            );
+            calibrate(&CalibrationSpec::from_json(&text).unwrap())
+        };
+        let at_edge = r#"{"worn_radius_m": 0.000703, "contact_radius_m": 0.000703}"#;
+        let fit = request(at_edge, "").unwrap();
+        assert!(fit.estimates["material.contact_radius_m"].value >= 0.000703);
+        let worn = r#"{"worn_radius_m": 0.000703}"#;
+        request(
+            worn,
+            r#", "bounds": {"material.contact_radius_m": [1e-4, 0.000703]}"#,
+        )
+        .unwrap();
+        // Held by its lower bound (the data's radius is 1.9e-3), the estimate is the bound, as
+        // written.
+        let held = request(
+            "{}",
+            r#", "bounds": {"material.contact_radius_m": [3e-3, 6e-3]}"#,
+        );
+        let estimate = &held.unwrap().estimates["material.contact_radius_m"];
+        assert!(estimate.at_bound, "{estimate:?}");
+        assert_eq!(
+            (estimate.value, estimate.ci95[0]),
+            (3e-3, 3e-3),
+            "{estimate:?}"
+        );
     }
 
     /// A measured value beyond a scenario's magnitudes is refused at its field (a sweep of the
