@@ -21,7 +21,8 @@ pub struct Weibayes {
     pub confidence: f64,
     pub failures: u64,
     pub devices: u64,
-    /// The scale's estimate; none without failures.
+    /// The scale's estimate; none without failures, or where it passes f64 (a shape near 0.01
+    /// with few failures: an estimate is not lowered as a lower bound may be).
     pub eta: Option<f64>,
     /// The scale's lower bound at `confidence` (a bound beyond f64 reads as its largest value, a
     /// lower bound still, where JSON has no infinity).
@@ -72,7 +73,9 @@ pub fn weibayes(lives: &Lives, beta: f64, confidence: f64) -> Result<Weibayes, W
         confidence,
         failures,
         devices: lives.failures() + lives.censored(),
-        eta: (failures > 0).then(|| ln_scale_of(failures as f64).exp()),
+        eta: (failures > 0)
+            .then(|| ln_scale_of(failures as f64).exp())
+            .filter(|eta| eta.is_finite()),
         eta_lower: ln_eta_lower.exp().min(f64::MAX),
         b1_lower: b_lower(0.01),
         b10_lower: b_lower(0.10),
@@ -190,6 +193,12 @@ mod tests {
         let lives = Lives::from_pairs(&[(200.0, false); 100]).unwrap();
         let w = weibayes(&lives, 0.01, 0.05).unwrap();
         assert_eq!(w.eta_lower, f64::MAX);
+        // With a failure, the estimate beyond f64 too (4000^100 x 5, about 1e360): none (an
+        // infinity before, which JSON wrote as null all the same).
+        let mut one = vec![(5.0, false); 3999];
+        one.push((5.0, true));
+        let w1 = weibayes(&Lives::from_pairs(&one).unwrap(), 0.01, 0.05).unwrap();
+        assert_eq!((w1.failures, w1.eta, w1.eta_lower), (1, None, f64::MAX));
         let zero_failure = -(0.95f64).ln();
         for (p, bound) in [(0.01, w.b1_lower), (0.10, w.b10_lower)] {
             let expected = 200.0 * (100.0 * -(1.0f64 - p).ln() / zero_failure).powf(100.0);
