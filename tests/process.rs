@@ -426,6 +426,44 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
     assert!(worker.child.wait().unwrap().success());
 }
 
+/// A server and a worker started together on a new SQLite database both run: SQLite's migrator
+/// takes no lock, and the later of two processes failed on a migration the other had made
+/// ("table jobs already exists", 4 starts in 5, found from outside).
+#[test]
+fn a_server_and_a_worker_started_together_on_a_new_database_both_run() {
+    use std::io::{BufRead, BufReader, Read};
+    use std::process::Stdio;
+    for round in 0..4 {
+        let database = temp_db(&format!("together-{round}"));
+        let url = format!("sqlite://{}", database.display());
+        // Killed when dropped, as the server is.
+        let mut worker = WorkerProcess {
+            child: Command::new(BIN)
+                .args(["worker", "--compute-threads", "1", "--database", &url])
+                .env("RUST_LOG", "warn")
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+        };
+        let server = Spawned::start(&database, &["--workers", "0"]);
+        let mut line = String::new();
+        BufReader::new(worker.child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let mut stderr = String::new();
+        if line.is_empty() {
+            let mut log = worker.child.stderr.take().unwrap();
+            log.read_to_string(&mut stderr).unwrap();
+        }
+        assert!(
+            line.starts_with("bouncewear worker running"),
+            "round {round}: {line}{stderr}"
+        );
+        assert_eq!(get(&server.url("/healthz"), None).status, 200);
+    }
+}
+
 /// Whether the kernel may back process `pid`'s memory with transparent huge pages (its
 /// `THP_enabled` line); `None` where /proc does not tell. `serve` and `worker` turn them off.
 fn huge_pages(pid: u32) -> Option<bool> {

@@ -34,6 +34,34 @@ pub(crate) struct SqliteBackend {
     pub(crate) ends: tokio::sync::broadcast::Sender<super::QueueEvent>,
 }
 
+/// Runs the migrations the database lacks. SQLite's migrator takes no lock: two processes
+/// opening a new database together (`serve` and `worker` started at once) both ran a migration,
+/// and the later one failed on what the earlier had made ("table jobs already exists", found from
+/// outside). Its transaction rolled back; while another process has recorded a migration since
+/// the run began, the run is tried again, and finds that migration made. A migration that fails
+/// while nobody else migrates fails at once.
+async fn migrate(writer: &SqlitePool) -> Result<(), sqlx::migrate::MigrateError> {
+    let applied = async || -> i64 {
+        let count = sqlx::query_scalar("SELECT COUNT(*) FROM _sqlx_migrations");
+        count.fetch_one(writer).await.unwrap_or(0)
+    };
+    loop {
+        let before = applied().await;
+        match migrations::SQLITE.run(writer).await {
+            // A migration's statements, or its row in `_sqlx_migrations` (a statement that
+            // changed nothing, then "UNIQUE constraint failed").
+            Err(
+                error @ (sqlx::migrate::MigrateError::ExecuteMigration(..)
+                | sqlx::migrate::MigrateError::Execute(_)),
+            ) if applied().await > before => {
+                tracing::info!(%error, "another process migrated the database meanwhile: trying again");
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+            done => return done,
+        }
+    }
+}
+
 impl SqliteBackend {
     /// Opens (creating if missing) and migrates the database at `url`.
     #[tracing::instrument(skip_all)]
@@ -56,22 +84,19 @@ impl SqliteBackend {
                 file: options.get_filename().display().to_string(),
                 source,
             })?;
-        migrations::SQLITE
-            .run(&writer)
-            .await
-            .map_err(|error| match error {
-                // The first statement reads the file: one that is no database (SQLITE_NOTADB) fails
-                // there.
-                sqlx::migrate::MigrateError::Execute(sqlx::Error::Database(source))
-                    if source.code().as_deref() == Some("26") =>
-                {
-                    StoreError::Unopened {
-                        file: options.get_filename().display().to_string(),
-                        source: sqlx::Error::Database(source),
-                    }
+        migrate(&writer).await.map_err(|error| match error {
+            // The first statement reads the file: one that is no database (SQLITE_NOTADB) fails
+            // there.
+            sqlx::migrate::MigrateError::Execute(sqlx::Error::Database(source))
+                if source.code().as_deref() == Some("26") =>
+            {
+                StoreError::Unopened {
+                    file: options.get_filename().display().to_string(),
+                    source: sqlx::Error::Database(source),
                 }
-                error => StoreError::Migration(error),
-            })?;
+            }
+            error => StoreError::Migration(error),
+        })?;
         backfill_seeds(&writer).await?;
         let file = DatabaseFile::opened(options.get_filename());
         let writer = match &file {
