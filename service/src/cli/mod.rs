@@ -364,7 +364,7 @@ fn one_line(text: &str) -> String {
 /// One line on stderr, `bouncewear: ` first. A stderr that cannot take it (a full disk, a closed
 /// pipe) changes nothing of the exit status: `eprintln!` panicked there, and exit 2 or 1 became
 /// 101 (found from outside).
-fn complain(line: std::fmt::Arguments) {
+fn stderr_line(line: std::fmt::Arguments) {
     let _ = writeln!(std::io::stderr().lock(), "bouncewear: {line}");
 }
 
@@ -380,14 +380,14 @@ fn not_run(error: &clap::Error) -> ExitCode {
             let written = write!(stdout, "{error}").and_then(|()| stdout.flush());
             match stdout_written(written) {
                 Err(error) => {
-                    complain(format_args!("{error}"));
+                    stderr_line(format_args!("{error}"));
                     error.exit_code()
                 }
                 Ok(()) => ExitCode::SUCCESS,
             }
         }
         ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
-            complain(format_args!(
+            stderr_line(format_args!(
                 "no command given: `bouncewear --help` lists them"
             ));
             ExitCode::from(2)
@@ -405,7 +405,7 @@ fn not_run(error: &clap::Error) -> ExitCode {
                 }
                 line.push_str(part.strip_prefix("error: ").unwrap_or(part));
             }
-            complain(format_args!("{} (--help for more)", one_line(&line)));
+            stderr_line(format_args!("{} (--help for more)", one_line(&line)));
             ExitCode::from(2)
         }
     }
@@ -425,7 +425,7 @@ pub fn main() -> ExitCode {
                 let _ = print_text(job.clone());
             }
             match log_format {
-                LogFormat::Text => complain(format_args!("{}", one_line(&error.to_string()))),
+                LogFormat::Text => stderr_line(format_args!("{}", one_line(&error.to_string()))),
                 // Every line on stderr one JSON object, the last one too.
                 LogFormat::Json => tracing::error!(exit_code = error.code(), "{error}"),
             }
@@ -518,22 +518,31 @@ fn run(cli: Cli) -> Result<(), CliError> {
             coverage_seeds,
             threads,
             quiet,
-        } => {
-            let pool = thread_pool(threads)?;
-            output_directory("--out", &out)?;
-            let progress = Progress::steps(quiet, bench::measurements(quick));
-            let report = pool.install(|| bench::bench(&out, quick, coverage_seeds, &progress));
-            progress.finish();
-            let report = report?;
-            if !quiet {
-                complain(format_args!(
-                    "wrote {}/report.{{json,md,svg}}",
-                    out.display()
-                ));
-            }
-            print_json(&report)
-        }
+        } => bench_command(&out, quick, coverage_seeds, threads, quiet),
     }
+}
+
+/// `bouncewear bench`: the report written into `out` and printed as JSON.
+fn bench_command(
+    out: &Path,
+    quick: bool,
+    coverage_seeds: Option<u32>,
+    threads: Option<usize>,
+    quiet: bool,
+) -> Result<(), CliError> {
+    let pool = thread_pool(threads)?;
+    output_directory("--out", out)?;
+    let progress = Progress::steps(quiet, bench::measurements(quick));
+    let report = pool.install(|| bench::bench(out, quick, coverage_seeds, &progress));
+    progress.finish();
+    let report = report?;
+    if !quiet {
+        stderr_line(format_args!(
+            "wrote {}/report.{{json,md,svg}}",
+            out.display()
+        ));
+    }
+    print_json(&report)
 }
 
 /// `bouncewear calibrate`: the fit of `file` (with the measurements of the CSV `observations`,
