@@ -716,6 +716,28 @@ fn several_correlated_inputs_agree_with_the_jobs_crude_twin() {
     assert_eq!(found.design_point.len(), 22);
 }
 
+/// A budget spent before the first run ends says where the levels reached as the metric reads
+/// (e1 of the mechanical rig is 0.507 at the mean velocity): a `below` event's level read as its
+/// negation ("P(metric beyond -0.4579900885686343)", found
+/// from outside).
+#[test]
+fn a_below_event_out_of_budget_says_its_level_below_the_metric() {
+    let job = job(json!({
+        "devices": 1, "operations": 1, "seed": 3,
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                     "distribution": {"kind": "normal", "mean": 0.224, "sd": 0.02, "min": 0.05}}],
+        "metrics": ["e1"],
+        "rare_event": {"metric": "e1", "below": 0.43, "method": "subset", "max_evaluations": 2000}
+    }));
+    let failed = estimate(&job, &Silent).unwrap_err().to_string();
+    assert!(
+        failed.contains("ran out")
+            && failed.contains("P(metric below 0.4")
+            && !failed.contains("-0."),
+        "{failed}"
+    );
+}
+
 /// A subset run that runs out of `max_evaluations` part-way leaves the runs before it standing:
 /// the answer is their mean, not a failed job (a probe: at 2e-12 this failed 10 jobs of 200,
 /// after some 17 runs each).

@@ -477,6 +477,15 @@ pub struct Estimator {
     /// Subset simulation's finished runs; importance sampling's pilot.
     runs: Vec<SubsetRun>,
     stage: Stage,
+    /// -1 where the event is the metric below its threshold (the responses are its negation),
+    /// else 1: how a message writes a response as the metric's value ([`Estimator::reading`]).
+    #[serde(default = "above")]
+    sign: f64,
+}
+
+/// An estimator stored before it knew its sign read an event above its threshold.
+fn above() -> f64 {
+    1.0
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -584,7 +593,21 @@ impl Estimator {
             done: 0,
             runs: Vec::new(),
             stage,
+            sign: 1.0,
         }
+    }
+
+    /// The estimator of an event that is the metric times `sign` above its threshold: its
+    /// messages write a level as the metric's value (a `below` event's read "beyond
+    /// -0.4579900885686343", found from outside).
+    pub fn reading(self, sign: f64) -> Self {
+        Self { sign, ..self }
+    }
+
+    /// Where response `b` lies, in the metric's words: `above B` or `below B`.
+    fn level(&self, b: f64) -> String {
+        let side = if self.sign < 0.0 { "below" } else { "above" };
+        format!("{side} {}", self.sign * b)
     }
 
     /// The method it runs.
@@ -829,7 +852,8 @@ impl Estimator {
         if fixed.is_none() && (probability < SMALLEST_PROBABILITY || run.index >= MAX_LEVEL) {
             return Err(Stop::Failed(format!(
                 "the threshold is not reached with probability above {SMALLEST_PROBABILITY:e}: \
-                 the metric reached {b} at probability {probability:.3e}"
+                 the metric reached {} at probability {probability:.3e}",
+                self.sign * b
             )));
         }
         let cost = match fixed {
@@ -844,8 +868,10 @@ impl Estimator {
             }
             return Err(Stop::Failed(format!(
                 "max_evaluations ran out after {} evaluations at level {}, where P(metric \
-                 beyond {b}) is about {probability:.3e}; each further level costs about {cost}",
-                self.done, run.index
+                 {}) is about {probability:.3e}; each further level costs about {cost}",
+                self.done,
+                run.index,
+                self.level(b)
             )));
         }
         let d = self.dimension;

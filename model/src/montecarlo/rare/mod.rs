@@ -116,7 +116,7 @@ pub fn estimate(job: &Job, observer: &dyn Observer) -> Result<Option<RareEventRe
 /// 1.05e-6], covering in 35 of 100 seeds; subset simulation 48 of 50).
 pub fn start(job: &Job) -> Option<Estimator> {
     let rare = job.rare_event()?;
-    let (_, threshold) = rare.limit();
+    let (sign, threshold) = rare.limit();
     let function = limit_state(job, rare).function;
     let dimension = function.dimension();
     let one_region = !function.scatters_several_operations();
@@ -128,13 +128,8 @@ pub fn start(job: &Job) -> Option<Estimator> {
         RareMethod::Importance => Method::Importance,
         RareMethod::Crude => Method::Crude,
     };
-    Some(Estimator::new(
-        method,
-        dimension,
-        threshold,
-        rare.budget,
-        job.seed(),
-    ))
+    let estimator = Estimator::new(method, dimension, threshold, rare.budget, job.seed());
+    Some(estimator.reading(sign))
 }
 
 /// The operations one evaluation of the job's rare event runs (the device's operations up to
