@@ -426,40 +426,45 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
     assert!(worker.child.wait().unwrap().success());
 }
 
-/// A server and a worker started together on a new SQLite database both run: SQLite's migrator
-/// takes no lock, and the later of two processes failed on a migration the other had made
-/// ("table jobs already exists", 4 starts in 5, found from outside).
+/// A server and two workers started together on a new SQLite database all run: SQLite's
+/// migrator takes no lock, and the later of two processes failed on a migration the other had
+/// made ("table jobs already exists", 4 starts in 5); and two processes turning a new file to
+/// WAL together saw "database is locked" at once (3 pairs of workers in 40; found from outside).
 #[test]
-fn a_server_and_a_worker_started_together_on_a_new_database_both_run() {
+fn a_server_and_workers_started_together_on_a_new_database_all_run() {
     use std::io::{BufRead, BufReader, Read};
     use std::process::Stdio;
     for round in 0..4 {
         let database = temp_db(&format!("together-{round}"));
         let url = format!("sqlite://{}", database.display());
         // Killed when dropped, as the server is.
-        let mut worker = WorkerProcess {
-            child: Command::new(BIN)
-                .args(["worker", "--compute-threads", "1", "--database", &url])
-                .env("RUST_LOG", "warn")
-                .stdout(Stdio::piped())
-                .stderr(Stdio::piped())
-                .spawn()
-                .unwrap(),
-        };
+        let mut workers: Vec<WorkerProcess> = (0..2)
+            .map(|_| WorkerProcess {
+                child: Command::new(BIN)
+                    .args(["worker", "--compute-threads", "1", "--database", &url])
+                    .env("RUST_LOG", "warn")
+                    .stdout(Stdio::piped())
+                    .stderr(Stdio::piped())
+                    .spawn()
+                    .unwrap(),
+            })
+            .collect();
         let server = Spawned::start(&database, &["--workers", "0"]);
-        let mut line = String::new();
-        BufReader::new(worker.child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let mut stderr = String::new();
-        if line.is_empty() {
-            let mut log = worker.child.stderr.take().unwrap();
-            log.read_to_string(&mut stderr).unwrap();
+        for worker in &mut workers {
+            let mut line = String::new();
+            BufReader::new(worker.child.stdout.take().unwrap())
+                .read_line(&mut line)
+                .unwrap();
+            let mut stderr = String::new();
+            if line.is_empty() {
+                let mut log = worker.child.stderr.take().unwrap();
+                log.read_to_string(&mut stderr).unwrap();
+            }
+            assert!(
+                line.starts_with("bouncewear worker running"),
+                "round {round}: {line}{stderr}"
+            );
         }
-        assert!(
-            line.starts_with("bouncewear worker running"),
-            "round {round}: {line}{stderr}"
-        );
         assert_eq!(get(&server.url("/healthz"), None).status, 200);
     }
 }

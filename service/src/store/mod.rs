@@ -118,6 +118,21 @@ pub enum StoreError {
     TooManySchedules { most: u64 },
 }
 
+/// SQLite's primary result codes this store tells apart: a lock held past `busy_timeout` (or
+/// refused at once), and a full disk.
+pub(crate) const SQLITE_BUSY: i32 = 5;
+const SQLITE_FULL: i32 = 13;
+
+/// The primary result code of a SQLite `error` (its extended code's low byte: SQLITE_BUSY for
+/// SQLITE_BUSY_SNAPSHOT too); none for another database's.
+pub(crate) fn sqlite_code(error: &dyn sqlx::error::DatabaseError) -> Option<i32> {
+    let sqlite = error.try_downcast_ref::<sqlx::sqlite::SqliteError>()?;
+    let code = sqlx::error::DatabaseError::code(sqlite)?
+        .parse::<i32>()
+        .ok()?;
+    Some(code & 0xff)
+}
+
 impl StoreError {
     pub(crate) fn job_not_found(id: &JobId) -> Self {
         Self::NotFound {
@@ -162,10 +177,8 @@ impl StoreError {
         let StoreError::Database(sqlx::Error::Database(error)) = self else {
             return false;
         };
-        match error.try_downcast_ref::<sqlx::sqlite::SqliteError>() {
-            Some(sqlite) => sqlx::error::DatabaseError::code(sqlite)
-                .and_then(|code| code.parse::<i32>().ok())
-                .is_some_and(|code| code & 0xff == 13),
+        match sqlite_code(error.as_ref()) {
+            Some(code) => code == SQLITE_FULL,
             None => error.code().as_deref() == Some("53100"),
         }
     }
@@ -193,18 +206,13 @@ impl StoreError {
             | sqlx::Error::PoolClosed
             | sqlx::Error::Io(_)
             | sqlx::Error::WorkerCrashed => true,
-            sqlx::Error::Database(error) => {
-                match error.try_downcast_ref::<sqlx::sqlite::SqliteError>() {
-                    Some(sqlite) => sqlx::error::DatabaseError::code(sqlite)
-                        .and_then(|code| code.parse::<i32>().ok())
-                        // SQLITE_BUSY and its extended codes.
-                        .is_some_and(|code| code & 0xff == 5),
-                    None => error.code().is_some_and(|code| {
-                        (code.starts_with("08") && code != "08P01")
-                            || ["57P01", "57P02", "57P03", "57P05"].contains(&code.as_ref())
-                    }),
-                }
-            }
+            sqlx::Error::Database(error) => match sqlite_code(error.as_ref()) {
+                Some(code) => code == SQLITE_BUSY,
+                None => error.code().is_some_and(|code| {
+                    (code.starts_with("08") && code != "08P01")
+                        || ["57P01", "57P02", "57P03", "57P05"].contains(&code.as_ref())
+                }),
+            },
             _ => false,
         }
     }
