@@ -600,7 +600,8 @@ fn run_command(
 /// The body of a 200 from `url`; anything else is a failure naming what went wrong.
 fn check_health(url: &str, timeout_seconds: f64) -> Result<String, CliError> {
     let agent = remote::agent(timeout_seconds, None);
-    let unhealthy = |what: String| CliError::Failed(format!("{url}: {what}"));
+    let shown = remote::without_password(url);
+    let unhealthy = |what: String| CliError::Failed(format!("{shown}: {what}"));
     let mut response = agent
         .get(url)
         .call()

@@ -73,7 +73,8 @@ fn base_url(text: &str) -> Result<String, String> {
         .rsplit_once(':')
         .filter(|(host, _)| !host.starts_with('[') || host.ends_with(']'))
         .map(|(_, port)| port);
-    if port.is_some_and(|port| port.parse::<u16>().is_err() || port == "0") {
+    let digits = |port: &str| port.bytes().all(|b| b.is_ascii_digit());
+    if port.is_some_and(|port| !digits(port) || port.parse::<u16>().is_err() || port == "0") {
         return Err("the port must be from 1 to 65535".to_owned());
     }
     if uri.query().is_some() || text.contains('#') {
@@ -82,6 +83,23 @@ fn base_url(text: &str) -> Result<String, String> {
         );
     }
     Ok(text.to_owned())
+}
+
+/// `url` with the password of its user part, if it has one, written `***`: a message or log
+/// line shows the URL (a log collector keeps it), never the password (it did, found from
+/// outside).
+pub(super) fn without_password(url: &str) -> String {
+    let Some((scheme, rest)) = url.split_once("://") else {
+        return url.to_owned();
+    };
+    let (authority, path) = rest.split_at(rest.find('/').unwrap_or(rest.len()));
+    match authority.rsplit_once('@') {
+        Some((user, host)) if user.contains(':') => {
+            let name = user.split_once(':').map_or(user, |(name, _)| name);
+            format!("{scheme}://{name}:***@{host}{path}")
+        }
+        _ => url.to_owned(),
+    }
 }
 
 /// The longest pause before a retry, whatever `Retry-After` asks.
@@ -252,17 +270,16 @@ impl Server {
         // line's fault; the key is not repeated (it failed each request with the HTTP
         // library's "failed to parse header value").
         if let Some(key) = &self.api_key
-            && key
-                .chars()
-                .any(|c| !(c == ' ' || c == '\t' || c.is_ascii_graphic()))
+            && (key.is_empty() || key.chars().any(|c| !(c == ' ' || c.is_ascii_graphic())))
         {
             return Err(Failure::Final(CliError::Usage(
-                "--api-key (BOUNCEWEAR_API_KEY): a key is printable ASCII, and the one given is \
-                 not"
-                .to_owned(),
+                "--api-key (BOUNCEWEAR_API_KEY): a key is printable ASCII, at least one \
+                 character, and the one given is not"
+                    .to_owned(),
             )));
         }
         let url = self.url(path);
+        let shown = without_password(&url);
         let left = deadline.map_or(f64::INFINITY, |end| {
             (end + ANSWER_GRACE)
                 .saturating_duration_since(Instant::now())
@@ -290,7 +307,7 @@ impl Server {
             ("DELETE", _) => self.prepare(agent.delete(&url)).call(),
             _ => self.prepare(agent.get(&url)).call(),
         };
-        let failed = |error: &ureq::Error| Failure::of(&url, error);
+        let failed = |error: &ureq::Error| Failure::of(&shown, error);
         let mut response = sent.map_err(|e| failed(&e))?;
         let status = response.status().as_u16();
         let header = |name: &str| {
@@ -305,7 +322,7 @@ impl Server {
             .limit(u64::MAX)
             .read_to_vec()
             .map_err(|e| failed(&e))?;
-        let unreadable = |e: String| Failure::Final(CliError::Failed(format!("{url}: {e}")));
+        let unreadable = |e: String| Failure::Final(CliError::Failed(format!("{shown}: {e}")));
         let text = if gzipped {
             let mut text = String::new();
             std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(&bytes[..]), &mut text)
@@ -318,10 +335,10 @@ impl Server {
             200..=299 => Ok(text),
             429 | 503 => Err(Failure::Busy {
                 retry_after,
-                refused: refused(status, &url, &text),
+                refused: refused(status, &shown, &text),
                 status,
             }),
-            _ => Err(Failure::Final(refused(status, &url, &text))),
+            _ => Err(Failure::Final(refused(status, &shown, &text))),
         }
     }
 
