@@ -478,12 +478,14 @@ pub struct Estimator {
     runs: Vec<SubsetRun>,
     stage: Stage,
     /// -1 where the event is the metric below its threshold (the responses are its negation),
-    /// else 1: how a message writes a response as the metric's value ([`Estimator::reading`]).
-    #[serde(default = "above")]
+    /// else 1: how a message writes a response as the metric's value. Not stored: the stored
+    /// estimator keeps the bytes every build reads (postcard reads fields by position), and the
+    /// job gives it back to each step ([`Estimator::read_as`]).
+    #[serde(skip, default = "above")]
     sign: f64,
 }
 
-/// An estimator stored before it knew its sign read an event above its threshold.
+/// The sign of an event above its threshold, until the job says otherwise.
 fn above() -> f64 {
     1.0
 }
@@ -597,11 +599,11 @@ impl Estimator {
         }
     }
 
-    /// The estimator of an event that is the metric times `sign` above its threshold: its
-    /// messages write a level as the metric's value (a `below` event's read "beyond
-    /// -0.4579900885686343", found from outside).
-    pub fn reading(self, sign: f64) -> Self {
-        Self { sign, ..self }
+    /// Reads the event as the metric times `sign` above its threshold: its messages write a
+    /// level as the metric's value (a `below` event's read "beyond -0.4579900885686343", found
+    /// from outside).
+    pub fn read_as(&mut self, sign: f64) {
+        self.sign = sign;
     }
 
     /// Where response `b` lies, in the metric's words: `above B` or `below B`.

@@ -128,8 +128,9 @@ pub fn start(job: &Job) -> Option<Estimator> {
         RareMethod::Importance => Method::Importance,
         RareMethod::Crude => Method::Crude,
     };
-    let estimator = Estimator::new(method, dimension, threshold, rare.budget, job.seed());
-    Some(estimator.reading(sign))
+    let mut estimator = Estimator::new(method, dimension, threshold, rare.budget, job.seed());
+    estimator.read_as(sign);
+    Some(estimator)
 }
 
 /// The operations one evaluation of the job's rare event runs (the device's operations up to
@@ -178,6 +179,8 @@ pub fn advance(
         inner: observer,
         per_evaluation: rare.operations,
     };
+    // As [`start`] made it: a stored estimator does not keep it.
+    estimator.read_as(rare.limit().0);
     let Some(estimate) = estimator.advance(outcomes, &observer).map_err(stopped)? else {
         return Ok(None);
     };
