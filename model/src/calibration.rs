@@ -221,9 +221,11 @@ struct Problem<'c> {
     terms: Vec<(usize, &'static str)>,
     /// `[ln lower, ln upper]` of each parameter (unbounded: the whole line).
     bounds_ln: Vec<[f64; 2]>,
-    /// The values each parameter takes exactly, not through its logarithm: its start (the
-    /// scenario's value, or eq. 8's for kappa), then its bounds, if any ([`Problem::value`]).
-    exact: Vec<Vec<f64>>,
+    /// Each parameter's start: the scenario's value, or eq. 8's for kappa.
+    starts: Vec<f64>,
+    /// `(ln value, value)` of the values each parameter takes exactly, not through its
+    /// logarithm: its bounds, if any, then its start ([`Problem::value`]).
+    exact: Vec<Vec<(f64, f64)>>,
     /// Set once nobody waits for the fit any more ([`calibrate_until`]).
     cancel: Option<&'c AtomicBool>,
 }
@@ -305,8 +307,8 @@ fn fit(problem: Problem) -> Result<Calibration, InvalidInput> {
             ),
         ));
     }
-    moved_out_of_the_scenario(&problem, &given, &start)?;
-    let (theta, iterations, settled) = problem.levenberg_marquardt(start)?;
+    let at_start = moved_out_of_the_scenario(&problem, &given, &start)?;
+    let (theta, iterations, settled) = problem.levenberg_marquardt(start, at_start)?;
     problem.report(&theta, iterations, settled)
 }
 
@@ -314,15 +316,23 @@ fn fit(problem: Problem) -> Result<Calibration, InvalidInput> {
 /// bounds' fault (a radius bounded below the worn radius read "/scenario: cannot simulate", found
 /// from outside). Each bound that breaks the scenario alone, the other parameters at their
 /// starts, is named with the rule; where none does alone, each that moved (two that break a
-/// rule between them). Two moved parameters named the first of them, whichever broke it.
+/// rule between them). Two moved parameters named the first of them, whichever broke it. A
+/// start that cannot run unmoved is the scenario's fault, said where the fit starts. The
+/// residuals at `start`, where this found them.
 fn moved_out_of_the_scenario(
     problem: &Problem,
     given: &[f64],
     start: &[f64],
-) -> Result<(), InvalidInput> {
+) -> Result<Option<Vec<f64>>, InvalidInput> {
     let moved: Vec<usize> = (0..start.len()).filter(|&k| start[k] != given[k]).collect();
-    if moved.is_empty() || problem.residuals(start).is_some() {
-        return Ok(());
+    if moved.is_empty() {
+        return Ok(None);
+    }
+    if let Some(residuals) = problem.residuals(start) {
+        return Ok(Some(residuals));
+    }
+    if problem.residuals(given).is_none() {
+        return Ok(None);
     }
     let alone = |k: usize| {
         let mut theta = given.to_vec();
@@ -354,7 +364,7 @@ fn moved_out_of_the_scenario(
             detail: format!(
                 "{name} starts at {} (its value in the scenario, or eq. 8's for kappa), outside \
                  these bounds; at their nearer end{} the scenario {why}",
-                crate::error::shown(problem.exact[k][0]),
+                crate::error::shown(problem.starts[k]),
                 if together { ", with the others'," } else { "" }
             ),
         }
@@ -411,6 +421,7 @@ impl Problem<'_> {
                         .map_or([f64::NEG_INFINITY, f64::INFINITY], |b| b.map(f64::ln))
                 })
                 .collect(),
+            starts: Vec::new(),
             exact: Vec::new(),
             base,
             parameters,
@@ -418,31 +429,37 @@ impl Problem<'_> {
             terms,
             cancel: None,
         };
+        problem.starts = problem
+            .parameters
+            .iter()
+            .map(|(_, path)| problem.start_value(path))
+            .collect();
         problem.exact = problem
             .parameters
             .iter()
-            .map(|(name, path)| {
-                let bounds = spec.bounds.get(name).into_iter().flatten();
-                std::iter::once(problem.start_value(path))
-                    .chain(bounds.copied())
-                    .collect()
+            .zip(&problem.starts)
+            .map(|((name, _), &start)| {
+                let bounds = spec.bounds.get(name).into_iter().flatten().copied();
+                let values = bounds.chain(std::iter::once(start));
+                values.map(|value| (value.ln(), value)).collect()
             })
             .collect();
         Ok(problem)
     }
 
-    /// Parameter `k`'s value at `ln`, its logarithm: exactly its start or a bound where `ln` is
-    /// one's logarithm, else `exp(ln)`. The round trip through `ln` and `exp` can move a value by
-    /// an ulp, and a start or bound on a rule's edge then broke the rule (a radius at the worn
-    /// radius, found from outside) or read a hair inside its bound (0.005999999999999998).
+    /// Parameter `k`'s value at `ln`, its logarithm: exactly a bound or its start where `ln` is
+    /// one's logarithm (a bound first: a start an ulp beyond it shares its logarithm), else
+    /// `exp(ln)`. The round trip through `ln` and `exp` can move a value by an ulp, and a start
+    /// or bound on a rule's edge then broke the rule (a radius at the worn radius, found from
+    /// outside) or read a hair inside its bound (0.005999999999999998).
     fn value(&self, k: usize, ln: f64) -> f64 {
-        let exact = self.exact[k].iter().copied().find(|v| v.ln() == ln);
-        exact.unwrap_or_else(|| ln.exp())
+        let exact = self.exact[k].iter().find(|&&(at, _)| at == ln);
+        exact.map_or_else(|| ln.exp(), |&(_, value)| value)
     }
 
     /// The logarithms of the parameters' starts.
     fn start(&self) -> Vec<f64> {
-        self.exact.iter().map(|values| values[0].ln()).collect()
+        self.starts.iter().map(|start| start.ln()).collect()
     }
 
     fn cancelled(&self) -> bool {
@@ -640,9 +657,13 @@ impl Problem<'_> {
         Some(columns)
     }
 
-    /// Minimises the sum of squared residuals from `start`; the optimum, the iterations taken and
-    /// whether it settled (not stopped by the cap).
-    fn levenberg_marquardt(&self, start: Vec<f64>) -> Result<(Vec<f64>, u32, bool), InvalidInput> {
+    /// Minimises the sum of squared residuals from `start` (its residuals `at_start`, if known);
+    /// the optimum, the iterations taken and whether it settled (not stopped by the cap).
+    fn levenberg_marquardt(
+        &self,
+        start: Vec<f64>,
+        at_start: Option<Vec<f64>>,
+    ) -> Result<(Vec<f64>, u32, bool), InvalidInput> {
         let invalid_start = || {
             InvalidInput::single(
                 &Pointer::root().child("scenario"),
@@ -650,7 +671,10 @@ impl Problem<'_> {
             )
         };
         let all: Vec<usize> = (0..start.len()).collect();
-        let residuals = self.residuals(&start).ok_or_else(invalid_start)?;
+        let residuals = match at_start {
+            Some(residuals) => residuals,
+            None => self.residuals(&start).ok_or_else(invalid_start)?,
+        };
         let minimum = self
             .minimise(start, residuals, &all, 1e-14, |theta, jacobian| {
                 self.identifiable(theta, jacobian)
@@ -766,7 +790,7 @@ impl Problem<'_> {
             .iter()
             .position(|&n| n.is_nan() || n <= 1e-9 * largest.max(1e-300))
         {
-            let at_start = theta[k] == self.exact[k][0].ln();
+            let at_start = theta[k] == self.starts[k].ln();
             // Every simulated value thousands of times its measurement (or a thousandth of it):
             // the relative differences sit at their ends (+-2), where no small move shows.
             let far = self
