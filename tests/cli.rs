@@ -461,12 +461,14 @@ fn a_remote_command_line_that_cannot_be_sent_is_refused_naming_the_flag() {
             "port must be from 1 to 65535",
         ),
         ("http://127.0.0.1:+8080", "port must be from 1 to 65535"),
+        ("http://127.0.0.1:00", "port must be from 1 to 65535"),
     ] {
         let line = rejected(&["status", "some-id", "--url", url], "");
         assert!(
-            line.contains("'--url <URL>'") && line.contains(rule),
+            line.contains("--url (BOUNCEWEAR_URL)") && line.contains(rule),
             "{url}: {line}"
         );
+        assert!(!line.contains(":pw@"), "the password is not shown: {line}");
     }
     // URLs that are good, their server absent: no answer (1), never a bad command line; a
     // password is never shown (it was, in every message and log line, found from outside).

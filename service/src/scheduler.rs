@@ -226,7 +226,9 @@ pub async fn tick(
             }
             made => made?,
         };
-        if matches!(made, NewRun::Created(_)) {
+        // The schedule moved past the due times missed with either (a night that had its job
+        // keeps the move): the count is this instance's.
+        if matches!(made, NewRun::Created(_) | NewRun::AlreadyExists) {
             passed_over(&schedule.id, missed);
         }
         created += usize::from(waiting.note(&schedule.id, &made));

@@ -104,7 +104,8 @@ enum Command {
         #[arg(
             long,
             env = "BOUNCEWEAR_HEALTH_URL",
-            default_value = "http://127.0.0.1:8080/healthz"
+            default_value = "http://127.0.0.1:8080/healthz",
+            hide_env_values = true
         )]
         url: String,
         /// Seconds to wait for the answer.

@@ -20,7 +20,7 @@ pub struct Server {
         env = "BOUNCEWEAR_URL",
         default_value = "http://127.0.0.1:8080",
         global = true,
-        value_parser = base_url
+        hide_env_values = true
     )]
     pub url: String,
     /// The API key, when the server has keys.
@@ -50,9 +50,10 @@ pub struct Server {
 
 /// A server's base URL as `--url` takes it, the API's paths added to it: `http` or `https`, a
 /// host, a port from 1 to 65535, and no query or fragment. A bad one is a bad command line
-/// (exit 2) naming the flag; it was exit 1 with "http: invalid format", or a query string that
-/// sent every request to the dashboard (found from outside).
-fn base_url(text: &str) -> Result<String, String> {
+/// (exit 2) naming the flag, checked before the first request rather than by clap, whose
+/// message repeats the value, password and all; it was exit 1 with "http: invalid format", or
+/// a query string that sent every request to the dashboard (found from outside).
+fn check_base_url(text: &str) -> Result<(), String> {
     let uri: ureq::http::Uri = text
         .parse()
         .map_err(|error| format!("not a URL such as http://127.0.0.1:8080 ({error})"))?;
@@ -73,8 +74,10 @@ fn base_url(text: &str) -> Result<String, String> {
         .rsplit_once(':')
         .filter(|(host, _)| !host.starts_with('[') || host.ends_with(']'))
         .map(|(_, port)| port);
-    let digits = |port: &str| port.bytes().all(|b| b.is_ascii_digit());
-    if port.is_some_and(|port| !digits(port) || port.parse::<u16>().is_err() || port == "0") {
+    let in_range = |port: &str| {
+        port.bytes().all(|b| b.is_ascii_digit()) && port.parse::<u16>().is_ok_and(|p| p > 0)
+    };
+    if port.is_some_and(|port| !in_range(port)) {
         return Err("the port must be from 1 to 65535".to_owned());
     }
     if uri.query().is_some() || text.contains('#') {
@@ -82,7 +85,7 @@ fn base_url(text: &str) -> Result<String, String> {
             "a base URL has no query or fragment: the API's paths are added to it".to_owned(),
         );
     }
-    Ok(text.to_owned())
+    Ok(())
 }
 
 /// `url` with the password of its user part, if it has one, written `***`: a message or log
@@ -278,6 +281,12 @@ impl Server {
                     .to_owned(),
             )));
         }
+        check_base_url(&self.url).map_err(|rule| {
+            let url = without_password(&self.url);
+            Failure::Final(CliError::Usage(format!(
+                "--url (BOUNCEWEAR_URL) {url}: {rule}"
+            )))
+        })?;
         let url = self.url(path);
         let shown = without_password(&url);
         let left = deadline.map_or(f64::INFINITY, |end| {

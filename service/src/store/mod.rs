@@ -119,9 +119,10 @@ pub enum StoreError {
 }
 
 /// SQLite's primary result codes this store tells apart: a lock held past `busy_timeout` (or
-/// refused at once), and a full disk.
+/// refused at once), a full disk, and a file that is no database.
 pub(crate) const SQLITE_BUSY: i32 = 5;
 const SQLITE_FULL: i32 = 13;
+pub(crate) const SQLITE_NOTADB: i32 = 26;
 
 /// The primary result code of a SQLite `error` (its extended code's low byte: SQLITE_BUSY for
 /// SQLITE_BUSY_SNAPSHOT too); none for another database's.

@@ -10,7 +10,7 @@ use super::rows::{
     seed_to_sql, spec_from_json,
 };
 use super::sql::{Sql, Tx};
-use super::{SQLITE_BUSY, StoreError, StoreResult, migrations, sqlite_code};
+use super::{SQLITE_BUSY, SQLITE_NOTADB, StoreError, StoreResult, migrations, sqlite_code};
 use crate::domain::{QueueBound, QueuedJob};
 use sqlx::sqlite::{
     SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
@@ -112,7 +112,7 @@ impl SqliteBackend {
             // The first statement reads the file: one that is no database (SQLITE_NOTADB) fails
             // there.
             sqlx::migrate::MigrateError::Execute(sqlx::Error::Database(source))
-                if source.code().as_deref() == Some("26") =>
+                if sqlite_code(source.as_ref()) == Some(SQLITE_NOTADB) =>
             {
                 StoreError::Unopened {
                     file: options.get_filename().display().to_string(),
