@@ -870,9 +870,9 @@ impl Store {
     }
 
     /// Marks the job failed with `error` at once (a failure no retry can mend), if the claim still
-    /// holds its shard: the shard reads as its failed run left it ([`failed_run`]), the
-    /// operations it `ran`, of the total it learnt, counted in the job's progress (a step that
-    /// failed read 0 of what it had run where no heartbeat had told it, found from outside).
+    /// holds its shard: the shard reads as a failed run (as [`Store::fail_attempt`] leaves one),
+    /// the operations it `ran`, of the total it learnt, counted in the job's progress (a step
+    /// that failed read 0 of what it had run where no heartbeat had told it, found from outside).
     /// The job's end is stamped `at`, or on the database's clock.
     #[tracing::instrument(skip_all, fields(job = %fence.job, shard = %fence.shard))]
     pub async fn fail(
