@@ -224,7 +224,8 @@ struct Problem<'c> {
     /// Each parameter's start: the scenario's value, or eq. 8's for kappa.
     starts: Vec<f64>,
     /// `(ln value, value)` of the values each parameter takes exactly, not through its
-    /// logarithm: its bounds, if any, then its start ([`Problem::value`]).
+    /// logarithm ([`Problem::value`]): its start, then its bounds, if any; the bounds first where
+    /// the start lies outside them.
     exact: Vec<Vec<(f64, f64)>>,
     /// Set once nobody waits for the fit any more ([`calibrate_until`]).
     cancel: Option<&'c AtomicBool>,
@@ -439,17 +440,23 @@ impl Problem<'_> {
             .iter()
             .zip(&problem.starts)
             .map(|((name, _), &start)| {
-                let bounds = spec.bounds.get(name).into_iter().flatten().copied();
-                let values = bounds.chain(std::iter::once(start));
-                values.map(|value| (value.ln(), value)).collect()
+                let bounds = spec.bounds.get(name).copied();
+                let outside =
+                    bounds.is_some_and(|[lower, upper]| !(lower..=upper).contains(&start));
+                let mut values: Vec<f64> = bounds.into_iter().flatten().collect();
+                values.insert(if outside { values.len() } else { 0 }, start);
+                values
+                    .into_iter()
+                    .map(|value| (value.ln(), value))
+                    .collect()
             })
             .collect();
         Ok(problem)
     }
 
-    /// Parameter `k`'s value at `ln`, its logarithm: exactly a bound or its start where `ln` is
-    /// one's logarithm (a bound first: a start an ulp beyond it shares its logarithm), else
-    /// `exp(ln)`. The round trip through `ln` and `exp` can move a value by an ulp, and a start
+    /// Parameter `k`'s value at `ln`, its logarithm: exactly its start or a bound where `ln` is
+    /// one's logarithm (a start an ulp from a bound shares its logarithm: the start where it lies
+    /// within its bounds, else the bound it was moved to), else `exp(ln)`. The round trip through `ln` and `exp` can move a value by an ulp, and a start
     /// or bound on a rule's edge then broke the rule (a radius at the worn radius, found from
     /// outside) or read a hair inside its bound (0.005999999999999998).
     fn value(&self, k: usize, ln: f64) -> f64 {
@@ -2614,6 +2621,12 @@ mod tests {
             r#", "bounds": {"material.contact_radius_m": [1e-4, 0.000703]}"#,
         )
         .unwrap();
+        // A start on the edge, its bound an ulp beyond the edge with the same logarithm: the
+        // start as written (the bound was taken for it, and the scenario refused).
+        let below = f64::from_bits(0.000703f64.to_bits() - 1);
+        assert_eq!(below.ln(), 0.000703f64.ln());
+        let bounds = format!(r#", "bounds": {{"material.contact_radius_m": [{below:e}, 2e-2]}}"#);
+        request(at_edge, &bounds).unwrap();
         // Held by its lower bound (the data's radius is 1.9e-3), the estimate is the bound, as
         // written.
         let held = request(
