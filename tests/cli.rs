@@ -155,6 +155,21 @@ fn every_subcommand_has_help_and_a_version() {
             format!("{expected} {}\n", env!("CARGO_PKG_VERSION")),
         );
     }
+    // Help never shows a secret the environment holds (it showed the database's password and
+    // every API key of the server, found from outside).
+    for command in ["serve", "worker", "status", "health"] {
+        let output = std::process::Command::new(crate::support::BIN)
+            .args([command, "--help"])
+            .env("BOUNCEWEAR_DATABASE", "postgres://u:s3cret-db@h/x")
+            .env("BOUNCEWEAR_API_KEYS", "s3cret-key1,s3cret-key2")
+            .env("BOUNCEWEAR_API_KEY", "s3cret-key1")
+            .env("BOUNCEWEAR_URL", "http://u:s3cret-url@h:1")
+            .env("BOUNCEWEAR_HEALTH_URL", "http://u:s3cret-url@h:1/healthz")
+            .output()
+            .unwrap();
+        let help = String::from_utf8(output.stdout).unwrap();
+        assert!(help.contains("Usage") && !help.contains("s3cret"), "{help}");
+    }
     // Help that cannot be written is a failure, as any output is.
     let output = to_dev_full(&["--help"]);
     let stderr = String::from_utf8_lossy(&output.stderr);
@@ -488,9 +503,20 @@ fn a_remote_command_line_that_cannot_be_sent_is_refused_naming_the_flag() {
     );
     let stderr = String::from_utf8_lossy(&health.stderr);
     assert!(
-        stderr.contains("user:***@") && !stderr.contains("s3cret"),
+        stderr.contains("//***@") && !stderr.contains("s3cret"),
         "{stderr}"
     );
+    // A URL too broken to parse, its password too: no scheme, a `/` in the password; health's
+    // URL is held to the same rules.
+    for url in ["u:s3cret@h:80", "http://u:s3/cret@h", "//u:s3cret@h"] {
+        for command in [&["status", "some-id"][..], &["health"]] {
+            let line = rejected(&[command, &["--url", url]].concat(), "");
+            assert!(
+                line.contains("--url") && !line.contains("s3"),
+                "{url}: {line}"
+            );
+        }
+    }
     let args = [
         "status",
         "some-id",
@@ -499,7 +525,7 @@ fn a_remote_command_line_that_cannot_be_sent_is_refused_naming_the_flag() {
         "--url",
         "http://127.0.0.1:9",
     ];
-    for key in ["k1\nX-Evil: 1", "caf\u{e9}", "a\tb", ""] {
+    for key in ["k1\nX-Evil: 1", "caf\u{e9}", "a\tb", "", "   ", " k1"] {
         let line = rejected(&[&args[..], &["--api-key", key]].concat(), "");
         let repeated = !key.is_empty() && line.contains(key);
         assert!(line.contains("--api-key") && !repeated, "{line}");

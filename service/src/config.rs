@@ -28,7 +28,8 @@ pub struct WorkerConfig {
     #[arg(
         long,
         env = "BOUNCEWEAR_DATABASE",
-        default_value = "sqlite://bouncewear.db"
+        default_value = "sqlite://bouncewear.db",
+        hide_env_values = true
     )]
     pub database: String,
     /// Connections this process keeps to a PostgreSQL database at most, besides one that listens
@@ -111,7 +112,12 @@ pub struct ServeConfig {
     #[arg(long, env = "BOUNCEWEAR_BIND", default_value = "127.0.0.1:8080")]
     pub bind: SocketAddr,
     /// API keys, comma-separated; with keys, every /v1 call needs `Authorization: Bearer KEY`.
-    #[arg(long = "api-key", env = "BOUNCEWEAR_API_KEYS", value_delimiter = ',')]
+    #[arg(
+        long = "api-key",
+        env = "BOUNCEWEAR_API_KEYS",
+        value_delimiter = ',',
+        hide_env_values = true
+    )]
     pub api_keys: Vec<String>,
     /// Unfinished (queued or running) jobs at most; further submissions get 429 with Retry-After.
     #[arg(long, env = "BOUNCEWEAR_MAX_QUEUED", default_value_t = 1000,

@@ -602,6 +602,9 @@ fn run_command(
 fn check_health(url: &str, timeout_seconds: f64) -> Result<String, CliError> {
     let agent = remote::agent(timeout_seconds, None);
     let shown = remote::without_password(url);
+    remote::check_base_url(url).map_err(|rule| {
+        CliError::Usage(format!("--url (BOUNCEWEAR_HEALTH_URL) {shown}: {rule}"))
+    })?;
     let unhealthy = |what: String| CliError::Failed(format!("{shown}: {what}"));
     let mut response = agent
         .get(url)

@@ -53,7 +53,7 @@ pub struct Server {
 /// (exit 2) naming the flag, checked before the first request rather than by clap, whose
 /// message repeats the value, password and all; it was exit 1 with "http: invalid format", or
 /// a query string that sent every request to the dashboard (found from outside).
-fn check_base_url(text: &str) -> Result<(), String> {
+pub(super) fn check_base_url(text: &str) -> Result<(), String> {
     let uri: ureq::http::Uri = text
         .parse()
         .map_err(|error| format!("not a URL such as http://127.0.0.1:8080 ({error})"))?;
@@ -88,21 +88,16 @@ fn check_base_url(text: &str) -> Result<(), String> {
     Ok(())
 }
 
-/// `url` with the password of its user part, if it has one, written `***`: a message or log
-/// line shows the URL (a log collector keeps it), never the password (it did, found from
-/// outside).
+/// `url` with its user part, if it has one, written `***`: a message or log line shows the URL
+/// (a log collector keeps it), never a password (it did, found from outside). Whatever comes
+/// before the last `@` and after the scheme's `//` goes, so that a URL too broken to parse (no
+/// scheme, a `/` in the password) loses it too.
 pub(super) fn without_password(url: &str) -> String {
-    let Some((scheme, rest)) = url.split_once("://") else {
+    let Some(at) = url.rfind('@') else {
         return url.to_owned();
     };
-    let (authority, path) = rest.split_at(rest.find('/').unwrap_or(rest.len()));
-    match authority.rsplit_once('@') {
-        Some((user, host)) if user.contains(':') => {
-            let name = user.split_once(':').map_or(user, |(name, _)| name);
-            format!("{scheme}://{name}:***@{host}{path}")
-        }
-        _ => url.to_owned(),
-    }
+    let start = url.find("//").map_or(0, |slashes| slashes + 2).min(at);
+    format!("{}***{}", &url[..start], &url[at..])
 }
 
 /// The longest pause before a retry, whatever `Retry-After` asks.
@@ -273,11 +268,13 @@ impl Server {
         // line's fault; the key is not repeated (it failed each request with the HTTP
         // library's "failed to parse header value").
         if let Some(key) = &self.api_key
-            && (key.is_empty() || key.chars().any(|c| !(c == ' ' || c.is_ascii_graphic())))
+            && (key.trim() != key
+                || key.is_empty()
+                || key.chars().any(|c| !(c == ' ' || c.is_ascii_graphic())))
         {
             return Err(Failure::Final(CliError::Usage(
-                "--api-key (BOUNCEWEAR_API_KEY): a key is printable ASCII, at least one \
-                 character, and the one given is not"
+                "--api-key (BOUNCEWEAR_API_KEY): a key is printable ASCII, not empty and with \
+                 no space at either end, and the one given is not"
                     .to_owned(),
             )));
         }
