@@ -159,7 +159,7 @@ impl Application {
         let queue = &config.queue;
         let slots = workers.slots(queue.workers);
         let kernel = bouncewear_model::montecarlo::Kernel::active().name();
-        tracing::info!(%address, database = %describe(&queue.database), workers = slots, kernel, "serving");
+        tracing::info!(%address, database = %crate::config::shown_url(&queue.database), workers = slots, kernel, "serving");
         let stopping = state.shutdown.clone();
         let scheduler = tokio::spawn(crate::scheduler::run(
             Arc::clone(&state.store),
@@ -296,7 +296,7 @@ pub async fn work(process: WorkerProcess) -> Result<(), StartupError> {
     // Tests and scripts wait for this line.
     announce(format_args!(
         "bouncewear worker running {slots} shard(s) at a time from {}",
-        describe(&config.database)
+        crate::config::shown_url(&config.database)
     ));
     wait_for_signal().await;
     tracing::info!("shutting down: running shards go back to the queue");
@@ -332,17 +332,6 @@ async fn serve_metrics(address: SocketAddr) -> Result<SocketAddr, StartupError> 
         }
     });
     Ok(bound)
-}
-
-/// A database URL fit for logs: its scheme and where it points, never its credentials.
-fn describe(url: &str) -> String {
-    match url.split_once("://") {
-        Some((scheme, rest)) => {
-            let place = rest.rsplit_once('@').map_or(rest, |(_, place)| place);
-            format!("{scheme}://{place}")
-        }
-        None => url.to_owned(),
-    }
 }
 
 /// A line for the scripts that start a server or worker, on stdout; one that cannot be written
@@ -440,7 +429,7 @@ async fn one_signal() {
 
 #[cfg(test)]
 mod tests {
-    use super::{StartupError, StoreError, describe};
+    use super::{StartupError, StoreError};
 
     /// A store's error is told after `database: ` once, whether or not it says so itself.
     #[test]
@@ -454,10 +443,16 @@ mod tests {
 
     #[test]
     fn a_database_url_is_logged_without_its_credentials() {
+        use crate::config::shown_url;
         assert_eq!(
-            describe("postgres://bouncewear:secret@db:5432/bouncewear"),
-            "postgres://db:5432/bouncewear"
+            shown_url("postgres://bouncewear:secret@db:5432/bouncewear"),
+            "postgres://***@db:5432/bouncewear"
         );
-        assert_eq!(describe("sqlite://bouncewear.db"), "sqlite://bouncewear.db");
+        assert_eq!(
+            shown_url("sqlite://bouncewear.db"),
+            "sqlite://bouncewear.db"
+        );
+        // Too broken to parse, the password goes all the same.
+        assert_eq!(shown_url("u:s3/cret@h:80"), "***@h:80");
     }
 }

@@ -72,6 +72,18 @@ pub struct WorkerConfig {
 /// The most seconds any flag's time may be: a year.
 const MAX_SECONDS: f64 = 365.0 * 24.0 * 3600.0;
 
+/// `url` with its user part, if it has one, written `***`: a message or log line shows a server's
+/// or a database's URL (a log collector keeps it), never a password (the remote commands showed
+/// it, found from outside). Whatever comes before the last `@` and after the scheme's `//` goes,
+/// so that a URL too broken to parse (no scheme, a `/` in the password) loses it too.
+pub fn shown_url(url: &str) -> String {
+    let Some(at) = url.rfind('@') else {
+        return url.to_owned();
+    };
+    let start = url.find("//").map_or(0, |slashes| slashes + 2).min(at);
+    format!("{}***{}", &url[..start], &url[at..])
+}
+
 /// Parses a flag's seconds: a number more than 0 and at most a year (so that NaN, infinities and
 /// values no `Duration` holds are refused by name, exit 2, rather than panicking or never ending;
 /// a server's `--header-timeout-seconds 0` read as 1 ms cut off every keep-alive).

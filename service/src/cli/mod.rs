@@ -601,7 +601,7 @@ fn run_command(
 /// The body of a 200 from `url`; anything else is a failure naming what went wrong.
 fn check_health(url: &str, timeout_seconds: f64) -> Result<String, CliError> {
     let agent = remote::agent(timeout_seconds, None);
-    let shown = remote::without_password(url);
+    let shown = crate::config::shown_url(url);
     remote::check_base_url(url).map_err(|rule| {
         CliError::Usage(format!("--url (BOUNCEWEAR_HEALTH_URL) {shown}: {rule}"))
     })?;

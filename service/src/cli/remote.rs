@@ -88,18 +88,6 @@ pub(super) fn check_base_url(text: &str) -> Result<(), String> {
     Ok(())
 }
 
-/// `url` with its user part, if it has one, written `***`: a message or log line shows the URL
-/// (a log collector keeps it), never a password (it did, found from outside). Whatever comes
-/// before the last `@` and after the scheme's `//` goes, so that a URL too broken to parse (no
-/// scheme, a `/` in the password) loses it too.
-pub(super) fn without_password(url: &str) -> String {
-    let Some(at) = url.rfind('@') else {
-        return url.to_owned();
-    };
-    let start = url.find("//").map_or(0, |slashes| slashes + 2).min(at);
-    format!("{}***{}", &url[..start], &url[at..])
-}
-
 /// The longest pause before a retry, whatever `Retry-After` asks.
 const MAX_RETRY_PAUSE: Duration = Duration::from_secs(60);
 
@@ -279,13 +267,13 @@ impl Server {
             )));
         }
         check_base_url(&self.url).map_err(|rule| {
-            let url = without_password(&self.url);
+            let url = crate::config::shown_url(&self.url);
             Failure::Final(CliError::Usage(format!(
                 "--url (BOUNCEWEAR_URL) {url}: {rule}"
             )))
         })?;
         let url = self.url(path);
-        let shown = without_password(&url);
+        let shown = crate::config::shown_url(&url);
         let left = deadline.map_or(f64::INFINITY, |end| {
             (end + ANSWER_GRACE)
                 .saturating_duration_since(Instant::now())
