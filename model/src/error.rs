@@ -522,6 +522,10 @@ pub fn shown(x: f64) -> String {
 /// metric's name, and the name of any member. Longer text is never a mistake worth storing.
 pub const MAX_TEXT_CHARS: usize = 200;
 
+/// Why text may not hold U+0000 (NUL), in a document or a URL's path: PostgreSQL stores no such
+/// character (a job named with one got 503 there, and was stored on SQLite), and no name has one.
+pub const NO_NUL: &str = "must not hold the character U+0000 (NUL)";
+
 /// Whether `pointer` is the list field `field`, in which a `*` token stands for any index or
 /// member name (`/correlation/matrix/*`: each row of a matrix; `/limits/*`: any metric's list).
 fn matches_field(field: &str, pointer: &str) -> bool {
@@ -536,18 +540,22 @@ fn matches_field(field: &str, pointer: &str) -> bool {
 }
 
 /// The rules every document's shape obeys before its types are read: arrays only where the
-/// document has lists (`array_fields`), and no text longer than [`MAX_TEXT_CHARS`].
+/// document has lists (`array_fields`), and no text longer than [`MAX_TEXT_CHARS`] or holding
+/// U+0000 ([`NO_NUL`]).
 fn check_shape(
     value: &serde_json::Value,
     at: &Pointer,
     array_fields: &[&str],
 ) -> Result<(), InvalidInput> {
-    let too_long = |text: &str| text.chars().count() > MAX_TEXT_CHARS;
-    let length_error = |at: &Pointer, what: &str| {
-        InvalidInput::single(
-            at,
-            format!("{what} must be at most {MAX_TEXT_CHARS} characters"),
-        )
+    let text_error = |at: &Pointer, what: &str, text: &str| {
+        if text.chars().count() > MAX_TEXT_CHARS {
+            let rule = format!("{what} must be at most {MAX_TEXT_CHARS} characters");
+            Err(InvalidInput::single(at, rule))
+        } else if text.contains('\0') {
+            Err(InvalidInput::single(at, format!("{what} {NO_NUL}")))
+        } else {
+            Ok(())
+        }
     };
     match value {
         serde_json::Value::Array(items) => {
@@ -567,12 +575,10 @@ fn check_shape(
         }
         serde_json::Value::Object(members) => members.iter().try_for_each(|(name, member)| {
             let at = at.child(name);
-            if too_long(name) {
-                return Err(length_error(&at, "a member's name"));
-            }
+            text_error(&at, "a member's name", name)?;
             check_shape(member, &at, array_fields)
         }),
-        serde_json::Value::String(text) if too_long(text) => Err(length_error(at, "text")),
+        serde_json::Value::String(text) => text_error(at, "text", text),
         _ => Ok(()),
     }
 }
@@ -855,6 +861,23 @@ mod tests {
         );
         let longest = "é".repeat(MAX_TEXT_CHARS);
         assert!(from_json::<serde_json::Value>(&format!(r#"{{"a": "{longest}"}}"#), &[]).is_ok());
+    }
+
+    #[test]
+    fn text_holding_nul_is_named_as_a_value_or_a_member() {
+        let refused = |text: &str| {
+            from_json::<serde_json::Value>(text, &[])
+                .unwrap_err()
+                .errors
+        };
+        let value = refused(r#"{"name": "a\u0000b"}"#);
+        assert_eq!(value[0].pointer, "/name");
+        assert_eq!(value[0].detail, format!("text {NO_NUL}"));
+        let member = refused(r#"{"a": {"\u0000": 1}}"#);
+        assert_eq!(member[0].pointer, "/a/\u{0}");
+        assert_eq!(member[0].detail, format!("a member's name {NO_NUL}"));
+        // Other control characters are text like any other.
+        assert!(from_json::<serde_json::Value>(r#"{"name": "a\u0001\n"}"#, &[]).is_ok());
     }
 
     #[test]

@@ -93,6 +93,23 @@ fn jobs_results_and_schedules_work_the_same_on_postgres() {
         runs.iter()
             .all(|run| run["values"]["operations.total_bounce_s.p95"]["drift"] == false)
     );
+
+    // U+0000, which PostgreSQL cannot hold, in a path or a name: refused as the client's (503
+    // with Retry-After before: the database's "invalid byte sequence").
+    for path in [
+        "/v1/jobs/%00".to_owned(),
+        format!("/v1/jobs/{id}/compare/a%00b"),
+        "/v1/schedules/%00".to_owned(),
+    ] {
+        assert_problem(&get(&server.url(&path), None), 400);
+    }
+    assert_problem(&delete(&server.url("/v1/jobs/%00")), 400);
+    let named = |name: &str| json!({"name": name, "devices": 2, "operations": 2}).to_string();
+    let refused = assert_problem(&post(&server.url("/v1/jobs"), &named("a\0b"), None), 422);
+    assert_eq!(refused["errors"][0]["pointer"], "/name", "{refused}");
+    let schedule = json!({"name": "a\0b", "cron": "0 3 * * *", "template": {}}).to_string();
+    let refused = assert_problem(&post(&server.url("/v1/schedules"), &schedule, None), 422);
+    assert_eq!(refused["errors"][0]["pointer"], "/name", "{refused}");
 }
 
 #[test]

@@ -364,8 +364,9 @@ pub fn replayed(mut response: Response) -> Response {
 }
 
 /// Path parameters as axum's `Path` reads them, refused as a problem document (400) rather than
-/// axum's plain text: a segment that is not UTF-8 once percent-decoded (`/v1/jobs/%FF`). Named as
-/// axum's, so that a handler reads `Path(id): Path<JobId>` either way.
+/// axum's plain text: a segment that is not UTF-8 once percent-decoded (`/v1/jobs/%FF`), or one
+/// that holds U+0000 (`/v1/jobs/%00`: PostgreSQL refused to compare it, a 503). Named as axum's,
+/// so that a handler reads `Path(id): Path<JobId>` either way.
 pub struct Path<T>(pub T);
 
 impl<S: Send + Sync, T: serde::de::DeserializeOwned + Send> FromRequestParts<S> for Path<T> {
@@ -375,6 +376,13 @@ impl<S: Send + Sync, T: serde::de::DeserializeOwned + Send> FromRequestParts<S> 
         parts: &mut axum::http::request::Parts,
         state: &S,
     ) -> Result<Self, ApiError> {
+        let raw = axum::extract::RawPathParams::from_request_parts(parts, state)
+            .await
+            .map_err(|rejection| ApiError::BadRequest(rejection.body_text()))?;
+        if let Some((name, _)) = raw.iter().find(|(_, value)| value.contains('\0')) {
+            let rule = bouncewear_model::error::NO_NUL;
+            return Err(ApiError::BadRequest(format!("the path's `{name}` {rule}")));
+        }
         axum::extract::Path::<T>::from_request_parts(parts, state)
             .await
             .map(|axum::extract::Path(value)| Path(value))
