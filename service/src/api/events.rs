@@ -58,6 +58,15 @@ pub(super) fn status_event(record: &JobRecord) -> Event {
         .id(event_id(record))
 }
 
+/// The `deleted` event of a job the stream followed and the store no longer has, its end untold:
+/// deleted (by another server on the same database) before this one saw it end.
+fn deleted_event(id: &JobId) -> Event {
+    Event::default()
+        .event("deleted")
+        .data(serde_json::json!({ "id": id }).to_string())
+        .id(format!("{id}:deleted"))
+}
+
 /// An event's `id`: the job's state it tells, `JOB:STATUS:OPERATIONS_DONE`. A client that
 /// reconnects sends the last one as `Last-Event-ID`, and a job's stream then does not tell that
 /// state again.
@@ -127,6 +136,7 @@ impl Follower {
                 Ok(record) => self.tell(&record),
                 Err(StoreError::NotFound { .. }) => {
                     self.active.remove(&id);
+                    self.ready.push_back(deleted_event(&id));
                 }
                 Err(_) => {}
             }
@@ -152,7 +162,8 @@ impl Follower {
 ///
 /// Open it once for a page that shows many jobs: browsers hold at most six connections per host.
 /// Each `progress` event's data is `{id, status, operations_done, operations_total}`; a `status`
-/// event's data is the JobResource. The stream stays open until the client closes it or the server
+/// event's data is the JobResource; a job that another server deleted before this one saw it end
+/// gets a `deleted` event (data: `{id}`). The stream stays open until the client closes it or the server
 /// shuts down; with API keys it shows only your jobs.
 #[utoipa::path(
     get, path = "/v1/events", tag = "jobs",
@@ -195,7 +206,8 @@ pub async fn events(
 ///
 /// `progress` events (data: `{status, operations_done, operations_total}`) while the job is queued
 /// or runs, then one `status` event (data: the JobResource) when it ends, and the stream closes. A
-/// job that already ended gets its `status` event at once.
+/// job that already ended gets its `status` event at once; one that another server deleted before
+/// this one saw it end gets a `deleted` event (data: `{id}`).
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
@@ -249,10 +261,14 @@ pub async fn job_events(
                     match snapshot.get(&f.id) {
                         Some(record) => record.clone(),
                         // Neither live nor ended lately: ask the store (a stream not read for
-                        // long, or the job deleted: then the stream ends).
+                        // long, or the job deleted: then the stream says so and ends).
                         None => match f.state.store.job(&f.owner, &f.id).await {
                             Ok(record) => record,
-                            Err(StoreError::NotFound { .. }) => return None,
+                            Err(StoreError::NotFound { .. }) => {
+                                f.ended = true;
+                                let event = first(deleted_event(&f.id), &mut f.sent);
+                                return Some((Ok(event), f));
+                            }
                             Err(_) => continue,
                         },
                     }

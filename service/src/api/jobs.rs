@@ -595,6 +595,8 @@ pub async fn cancel_job(
     if !had_ended || (record.status == JobStatus::Cancelled && !purge) {
         return Ok(Json(JobResource::from_record(&record)).into_response());
     }
+    // Told before it goes: a stream that has not read its end yet would find nothing.
+    state.watch.deleting(record);
     state.store.delete_job(&owner, &id).await?;
     Ok(StatusCode::NO_CONTENT.into_response())
 }

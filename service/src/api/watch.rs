@@ -70,6 +70,9 @@ pub struct JobWatch {
     waits: Semaphore,
     /// Told of each new stream, so that an idle watcher looks at once.
     listening: Notify,
+    /// Jobs that ended and that this process deletes, as they ended, since the watcher last
+    /// looked: their end is told as any other's, though the store may no longer have them.
+    deleted: Mutex<Vec<Arc<JobRecord>>>,
 }
 
 /// The longest a request may wait for a job's end (`wait_s`): within the request timeout's
@@ -96,6 +99,7 @@ impl JobWatch {
             per_key,
             waits: Semaphore::new(waits),
             listening: Notify::new(),
+            deleted: Mutex::new(Vec::new()),
         });
         tokio::spawn(Arc::clone(&watch).run(store, shutdown));
         watch
@@ -118,6 +122,16 @@ impl JobWatch {
             owner: owner.clone(),
             watch: Arc::clone(self),
         })
+    }
+
+    /// Tells the streams of this process the end of `ended`, a job about to be deleted: each that
+    /// has not told its end yet tells it (deleted before the watcher looked, it was gone from
+    /// the store, its end untold). Kept only while some stream listens.
+    pub fn deleting(&self, ended: JobRecord) {
+        if self.snapshots.receiver_count() > 0 {
+            let mut deleted = self.deleted.lock().unwrap_or_else(|e| e.into_inner());
+            deleted.push(Arc::new(ended));
+        }
     }
 
     /// `owner`'s job `id` once it ended, or as it is when `wait` passed: a request that waits
@@ -187,7 +201,9 @@ impl JobWatch {
                 continue;
             }
             metrics::counter!(EVENT_WATCH_LOOKS).increment(1);
-            let wait = match tracked.look(store.as_ref()).await {
+            let deleted =
+                std::mem::take(&mut *self.deleted.lock().unwrap_or_else(|e| e.into_inner()));
+            let wait = match tracked.look(store.as_ref(), deleted).await {
                 Ok(()) => {
                     if failures > 0 {
                         tracing::info!("the event watcher reads the database again");
@@ -281,8 +297,13 @@ struct Tracked {
 }
 
 impl Tracked {
-    /// One look at the store; on an error nothing changes.
-    async fn look(&mut self, store: &Store) -> StoreResult<()> {
+    /// One look at the store, after remembering the `deleted` jobs as ended; on an error nothing
+    /// else changes.
+    async fn look(&mut self, store: &Store, deleted: Vec<Arc<JobRecord>>) -> StoreResult<()> {
+        let at = Instant::now();
+        for record in deleted {
+            self.ended.insert(record.id.clone(), (at, record));
+        }
         let (rows, newest) = store.live_jobs(self.newest.unwrap_or(i64::MAX)).await?;
         let mut live = HashMap::new();
         let mut ended = Vec::new();
@@ -296,7 +317,8 @@ impl Tracked {
         }
         // Live at the last look, not now: ended since, or deleted.
         for (id, before) in &self.live {
-            if live.contains_key(id) || ended.iter().any(|r| r.id == *id) {
+            let told = ended.iter().any(|r| r.id == *id) || self.ended.contains_key(id);
+            if live.contains_key(id) || told {
                 continue;
             }
             match store.job(&before.owner, id).await {
