@@ -225,57 +225,102 @@ fn events_have_ids_and_a_resumed_stream_does_not_repeat_the_last() {
 #[test]
 fn a_job_deleted_right_after_its_end_has_its_end_told() {
     let server = TestApp::start(&temp_db("events-deleted"), &["--workers", "1"]);
-    // Each stream's (event, data) pairs, as they come, on a thread of its own.
-    let follow = |path: &str| {
-        let mut stream = agent().get(&server.url(path)).call().unwrap();
-        let (sender, events) = std::sync::mpsc::channel::<(String, Value)>();
-        std::thread::spawn(move || {
-            let mut name = String::new();
-            for line in BufReader::new(stream.body_mut().as_reader()).lines() {
-                let Ok(line) = line else { return };
-                if let Some(event) = line.strip_prefix("event: ") {
-                    name = event.to_owned();
-                } else if let Some(data) = line.strip_prefix("data: ") {
-                    let data = serde_json::from_str(data).unwrap();
-                    if sender.send((name.clone(), data)).is_err() {
-                        return;
-                    }
-                }
-            }
-        });
-        events
-    };
-    let all = follow("/v1/events");
+    let all = follow(&server, "/v1/events");
     let mut told = BTreeMap::new();
     for seed in 0..10 {
         let id = server.submit(&scattered_job(20, 20, seed));
-        let url = server.url(&format!("/v1/jobs/{id}"));
-        let ended = get(&format!("{url}?wait_s=10"), None).json();
-        assert_eq!(ended["status"], "succeeded", "{ended}");
-        assert_eq!(delete(&url).status, 204);
+        delete_once_ended(&server, &server, &id);
         told.insert(id, "succeeded");
     }
     let long = server.submit(&scattered_job(200_000, 1000, 1));
-    let one = follow(&format!("/v1/jobs/{long}/events"));
+    let one = follow(&server, &format!("/v1/jobs/{long}/events"));
     let url = server.url(&format!("/v1/jobs/{long}"));
     assert_eq!(delete(&url).status, 200);
     assert_eq!(delete(&format!("{url}?purge=true")).status, 204);
     told.insert(long.clone(), "cancelled");
 
-    let wait = std::time::Duration::from_secs(20);
-    let last = std::iter::from_fn(|| one.recv_timeout(wait).ok()).last();
+    let last = std::iter::from_fn(|| one.recv_timeout(TOLD_WITHIN).ok()).last();
     let last = last.expect("the job's stream tells something, then closes");
     assert_eq!(last.0, "status", "{last:?}");
     assert_eq!(last.1["status"], "cancelled", "{last:?}");
+    assert_eq!(ends_told_once(&all, told.len()), told);
+}
+
+/// A job another process on the same database ran, that this server deletes before its watcher
+/// saw it (the newest job: gone, it no longer counted among the jobs the stream had seen), has
+/// its end told once (the re-probe: told at every read of the watcher, every 2 s on PostgreSQL).
+#[test]
+fn a_job_this_server_never_saw_and_deleted_has_its_end_told_once() {
+    let database = temp_db("events-deleted-elsewhere");
+    let runner = TestApp::start(&database, &["--workers", "1"]);
+    let server = TestApp::start(&database, &["--workers", "0"]);
+    let all = follow(&server, "/v1/events");
+    let mut told = BTreeMap::new();
+    for seed in 0..5 {
+        let id = runner.submit(&scattered_job(20, 20, seed));
+        delete_once_ended(&runner, &server, &id);
+        told.insert(id, "succeeded");
+    }
+    assert_eq!(ends_told_once(&all, told.len()), told);
+}
+
+/// How soon a stream tells an end.
+const TOLD_WITHIN: std::time::Duration = std::time::Duration::from_secs(20);
+
+/// A stream's (event, data) pairs, as they come, read on a thread of its own.
+fn follow(server: &TestApp, path: &str) -> std::sync::mpsc::Receiver<(String, Value)> {
+    let mut stream = agent().get(&server.url(path)).call().unwrap();
+    let (sender, events) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut name = String::new();
+        for line in BufReader::new(stream.body_mut().as_reader()).lines() {
+            let Ok(line) = line else { return };
+            if let Some(event) = line.strip_prefix("event: ") {
+                name = event.to_owned();
+            } else if let Some(data) = line.strip_prefix("data: ") {
+                let data: Value = serde_json::from_str(data).unwrap();
+                if sender.send((name.clone(), data)).is_err() {
+                    return;
+                }
+            }
+        }
+    });
+    events
+}
+
+/// Waits through `waiter` until job `id` succeeded, then deletes it at once through `deleter`.
+fn delete_once_ended(waiter: &TestApp, deleter: &TestApp, id: &str) {
+    let ended = get(&waiter.url(&format!("/v1/jobs/{id}?wait_s=10")), None).json();
+    assert_eq!(ended["status"], "succeeded", "{ended}");
+    assert_eq!(delete(&deleter.url(&format!("/v1/jobs/{id}"))).status, 204);
+}
+
+/// The status each of `count` jobs ended with, as `/v1/events` told it, once each: the stream is
+/// read on for 1.5 s after the last, over several of the watcher's reads.
+fn ends_told_once(
+    all: &std::sync::mpsc::Receiver<(String, Value)>,
+    count: usize,
+) -> BTreeMap<String, &'static str> {
     let mut ended = BTreeMap::new();
-    while ended.len() < told.len() {
-        let (name, data) = all.recv_timeout(wait).expect("every end told in time");
+    let later = std::time::Duration::from_millis(1500);
+    let wait = |ended: &BTreeMap<_, _>| {
+        if ended.len() < count {
+            TOLD_WITHIN
+        } else {
+            later
+        }
+    };
+    while let Ok((name, data)) = all.recv_timeout(wait(&ended)) {
         if name == "status" {
             let id = data["id"].as_str().unwrap().to_owned();
-            ended.insert(id, data["status"].as_str().unwrap().to_owned());
+            let status = match data["status"].as_str().unwrap() {
+                "succeeded" => "succeeded",
+                "cancelled" => "cancelled",
+                other => panic!("{other} told for {id}"),
+            };
+            assert_eq!(ended.insert(id, status), None, "an end told twice: {data}");
         }
     }
-    let ended: BTreeMap<String, &str> =
-        ended.iter().map(|(k, v)| (k.clone(), v.as_str())).collect();
-    assert_eq!(ended, told.into_iter().collect());
+    assert_eq!(ended.len(), count, "every end told in time: {ended:?}");
+    ended
 }

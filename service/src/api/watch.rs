@@ -40,8 +40,8 @@ pub struct Snapshot {
     jobs: Vec<Arc<JobRecord>>,
     /// Positions in `jobs`.
     by_id: HashMap<JobId, usize>,
-    /// The newest `seq` of all jobs at this look: every job at most as new that ended since the
-    /// previous look is in `jobs`.
+    /// The newest `seq` of all jobs at this look, those this process deleted since included:
+    /// every job at most as new that ended since the previous look is in `jobs`.
     pub newest: i64,
 }
 
@@ -337,7 +337,11 @@ impl Tracked {
             self.ended.insert(record.id.clone(), (now, record));
         }
         self.live = live;
-        self.newest = Some(newest);
+        // The store's newest, or a deleted job's that is newer: a stream told of every job up to
+        // it tells such a job once, where the store's alone (its newest gone) told it at every
+        // look.
+        let remembered = self.ended.values().map(|(_, record)| record.seq);
+        self.newest = Some(remembered.fold(newest, i64::max));
         self.generation += 1;
         Ok(())
     }
