@@ -104,9 +104,9 @@ struct Follower {
     subscription: Subscription,
     /// Queued and running jobs, with the status and count last sent.
     active: HashMap<JobId, (JobStatus, u64)>,
-    /// The newest job (by `seq`) of the last snapshot: later ones are new to the stream. `None`
-    /// before the first snapshot.
-    newest: Option<i64>,
+    /// The newest job (by `seq`) the stream has seen: later ones are new to it. At first the
+    /// subscription's, so that a job submitted once it opened is told, however soon it ended.
+    newest: i64,
     ready: VecDeque<Event>,
     /// Whether an event went out yet.
     sent: bool,
@@ -117,7 +117,7 @@ impl Follower {
     /// `progress` for a queued or running job whose status or count moved, `status` for a job
     /// that ended (one followed before, or one submitted since the stream began).
     async fn look(&mut self, snapshot: &Snapshot) {
-        let newest = *self.newest.get_or_insert(snapshot.newest);
+        let newest = self.newest;
         let mut gone: HashSet<JobId> = self.active.keys().cloned().collect();
         let owner = self.owner.clone();
         for record in snapshot.of(&owner) {
@@ -127,7 +127,7 @@ impl Follower {
                 self.tell(record);
             }
         }
-        self.newest = Some(newest.max(snapshot.newest));
+        self.newest = newest.max(snapshot.newest);
         // Followed jobs gone from the snapshot: ended so long ago that the watcher forgot them
         // (this stream was not read meanwhile), or deleted. The store says which; on an error the
         // job stays followed and is asked about again.
@@ -182,9 +182,9 @@ pub async fn events(
     let follower = Follower {
         state,
         owner,
+        newest: subscription.newest,
         subscription,
         active: HashMap::new(),
-        newest: None,
         ready: VecDeque::new(),
         sent: false,
     };

@@ -115,9 +115,11 @@ impl JobWatch {
         }
         *held += 1;
         let receiver = self.snapshots.subscribe();
+        let newest = receiver.borrow().newest;
         // After the receiver counts: the watcher that wakes sees a listener.
         self.listening.notify_one();
         Ok(Subscription {
+            newest,
             receiver,
             owner: owner.clone(),
             watch: Arc::clone(self),
@@ -370,6 +372,10 @@ impl Tracked {
 
 /// One stream's place at the watcher; gives it back when dropped.
 pub struct Subscription {
+    /// The newest job (by `seq`) of the watcher's last look before the stream opened (0 before
+    /// its first): the jobs after it are new to the stream, even those its first snapshot holds
+    /// as ended (or deleted) already.
+    pub newest: i64,
     receiver: watch::Receiver<Arc<Snapshot>>,
     owner: Owner,
     watch: Arc<JobWatch>,
