@@ -7,6 +7,7 @@ use crate::support::{scattered_job, temp_db, temp_dir};
 use serde_json::Value;
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader};
+use std::sync::mpsc::RecvTimeoutError;
 
 const KEYS_AND_ONE_WORKER: [&str; 4] = ["--api-key", "alpha,beta", "--workers", "1"];
 
@@ -234,8 +235,19 @@ fn a_job_deleted_right_after_its_end_has_its_end_told() {
     assert_eq!(delete(&format!("{url}?purge=true")).status, 204);
     told.insert(long.clone(), "cancelled");
 
-    let last = std::iter::from_fn(|| one.recv_timeout(TOLD_WITHIN).ok()).last();
-    let last = last.expect("the job's stream tells something, then closes");
+    let mut last = None;
+    let closed = loop {
+        match one.recv_timeout(TOLD_WITHIN) {
+            Ok(event) => last = Some(event),
+            Err(closed) => break closed,
+        }
+    };
+    assert_eq!(
+        closed,
+        RecvTimeoutError::Disconnected,
+        "the job's stream closes"
+    );
+    let last = last.expect("the job's stream tells something");
     assert_eq!(last.0, "status", "{last:?}");
     assert_eq!(last.1["status"], "cancelled", "{last:?}");
     assert_eq!(ends_told_once(&all, told.len()), told);

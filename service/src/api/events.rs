@@ -59,7 +59,8 @@ pub(super) fn status_event(record: &JobRecord) -> Event {
 }
 
 /// The `deleted` event of a job the stream followed and the store no longer has, its end untold:
-/// deleted (by another server on the same database) before this one saw it end.
+/// deleted by another server on the same database before this one saw it end (or deleted while
+/// the stream was not read for over a minute).
 fn deleted_event(id: &JobId) -> Event {
     Event::default()
         .event("deleted")
@@ -168,7 +169,7 @@ impl Follower {
 #[utoipa::path(
     get, path = "/v1/events", tag = "jobs",
     responses(
-        (status = 200, description = "An event stream that stays open: `progress` events (data: id, status, operations_done, operations_total) for each queued or running job at the start and whenever it moves, and one `status` event (data: the JobResource) when a job ends", content_type = "text/event-stream", body = ServerSentEvent),
+        (status = 200, description = "An event stream that stays open: `progress` events (data: id, status, operations_done, operations_total) for each queued or running job at the start and whenever it moves, and one `status` event (data: the JobResource) when a job ends (`deleted`, data: id, for a followed job another server deleted before this one saw its end)", content_type = "text/event-stream", body = ServerSentEvent),
         Unauthorized,
         TooManyStreams,
     ),
@@ -211,7 +212,7 @@ pub async fn events(
 #[utoipa::path(
     get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path, description = "Job id")),
     responses(
-        (status = 200, description = "An event stream: `progress` events (data: status, operations_done, operations_total) while the job runs, then one `status` event (data: the JobResource) when it ends", content_type = "text/event-stream", body = ServerSentEvent),
+        (status = 200, description = "An event stream: `progress` events (data: status, operations_done, operations_total) while the job runs, then one `status` event (data: the JobResource) when it ends (`deleted`, data: id, if another server deleted it before this one saw its end)", content_type = "text/event-stream", body = ServerSentEvent),
         Unauthorized,
         TooManyStreams,
         NoSuchJob,
@@ -226,7 +227,8 @@ pub async fn job_events(
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
     let current = state.store.job(&owner, &id).await?;
     let last = last_seen(&request, &id);
-    // Subscribed after the first read; its first snapshot is taken after this point.
+    // Subscribed after the first read (a job is looked up before its stream takes a place); its
+    // first snapshot is taken after this point.
     let subscription = state.watch.subscribe(&owner)?;
     struct Follower {
         state: AppState,

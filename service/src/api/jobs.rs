@@ -1069,12 +1069,12 @@ fn threshold_name(threshold: Threshold) -> String {
 /// One Server-Sent Event as a client parses it; `data` is a JSON document.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ServerSentEvent {
-    /// `progress` or `status`.
+    /// `progress`, `status`, or `deleted` (a job whose end the stream can no longer read).
     pub event: Option<String>,
     /// The event's JSON document.
     pub data: String,
-    /// The job's state the event tells, `JOB:STATUS:OPERATIONS_DONE`: sent back as
-    /// `Last-Event-ID` on reconnecting, a job's stream does not tell that state again.
+    /// The job's state the event tells, `JOB:STATUS:OPERATIONS_DONE` (`JOB:deleted`): sent back
+    /// as `Last-Event-ID` on reconnecting, a job's stream does not tell that state again.
     pub id: Option<String>,
     /// On the stream's first event: milliseconds to wait before reconnecting (2000).
     pub retry: Option<u64>,

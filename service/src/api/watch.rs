@@ -29,6 +29,9 @@ const MAX_BACKOFF: Duration = Duration::from_secs(5);
 /// How long a job that ended stays in the snapshots: a stream that was not read for longer (a
 /// stalled client) asks the store for the jobs it still follows.
 const REMEMBER_ENDED: Duration = Duration::from_secs(60);
+/// The most jobs being deleted the watcher remembers between two looks: beyond them, a stream
+/// that followed one tells it `deleted`.
+const MAX_DELETING: usize = 10_000;
 
 /// What the watcher saw at one look.
 #[derive(Debug, Default)]
@@ -128,10 +131,22 @@ impl JobWatch {
 
     /// Tells the streams of this process the end of `ended`, a job about to be deleted: each that
     /// has not told its end yet tells it (deleted before the watcher looked, it was gone from
-    /// the store, its end untold). Kept only while some stream listens.
+    /// the store, its end untold). Kept only while some stream listens, and only for a job whose
+    /// end no snapshot holds yet: live at the last look, or newer than it (a job that ended long
+    /// ago costs nothing, however many are deleted); at most [`MAX_DELETING`] between two looks.
     pub fn deleting(&self, ended: JobRecord) {
-        if self.snapshots.receiver_count() > 0 {
-            let mut deleted = self.deleted.lock().unwrap_or_else(|e| e.into_inner());
+        if self.snapshots.receiver_count() == 0 {
+            return;
+        }
+        let untold = {
+            let last = self.snapshots.borrow();
+            ended.seq > last.newest
+                || last
+                    .get(&ended.id)
+                    .is_some_and(|job| !job.status.is_terminal())
+        };
+        let mut deleted = self.deleted.lock().unwrap_or_else(|e| e.into_inner());
+        if untold && deleted.len() < MAX_DELETING {
             deleted.push(Arc::new(ended));
         }
     }
@@ -193,6 +208,10 @@ impl JobWatch {
             if self.snapshots.receiver_count() == 0 {
                 // Nobody listens: read nothing, and start afresh as soon as somebody does.
                 tracked = Tracked::default();
+                self.deleted
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .clear();
                 failures = 0;
                 tokio::select! {
                     () = self.listening.notified() => {}
@@ -203,9 +222,7 @@ impl JobWatch {
                 continue;
             }
             metrics::counter!(EVENT_WATCH_LOOKS).increment(1);
-            let deleted =
-                std::mem::take(&mut *self.deleted.lock().unwrap_or_else(|e| e.into_inner()));
-            let wait = match tracked.look(store.as_ref(), deleted).await {
+            let wait = match tracked.look(store.as_ref(), &self.deleted).await {
                 Ok(()) => {
                     if failures > 0 {
                         tracing::info!("the event watcher reads the database again");
@@ -299,14 +316,22 @@ struct Tracked {
 }
 
 impl Tracked {
-    /// One look at the store, after remembering the `deleted` jobs as ended; on an error nothing
-    /// else changes.
-    async fn look(&mut self, store: &Store, deleted: Vec<Arc<JobRecord>>) -> StoreResult<()> {
-        let at = Instant::now();
-        for record in deleted {
-            self.ended.insert(record.id.clone(), (at, record));
-        }
+    /// One look at the store; the jobs being `deleted` meanwhile are remembered as ended once it
+    /// read (each is handed over before its delete: one the read missed is there). On an error
+    /// nothing else changes.
+    async fn look(
+        &mut self,
+        store: &Store,
+        deleted: &Mutex<Vec<Arc<JobRecord>>>,
+    ) -> StoreResult<()> {
         let (rows, newest) = store.live_jobs(self.newest.unwrap_or(i64::MAX)).await?;
+        let now = Instant::now();
+        self.ended
+            .retain(|_, (at, _)| now.duration_since(*at) < REMEMBER_ENDED);
+        let deleted = std::mem::take(&mut *deleted.lock().unwrap_or_else(|e| e.into_inner()));
+        for record in deleted {
+            self.ended.insert(record.id.clone(), (now, record));
+        }
         let mut live = HashMap::new();
         let mut ended = Vec::new();
         for record in rows {
@@ -332,9 +357,6 @@ impl Tracked {
                 Err(error) => return Err(error),
             }
         }
-        let now = Instant::now();
-        self.ended
-            .retain(|_, (at, _)| now.duration_since(*at) < REMEMBER_ENDED);
         for record in ended {
             self.ended.insert(record.id.clone(), (now, record));
         }
