@@ -105,9 +105,14 @@ struct Follower {
     subscription: Subscription,
     /// Queued and running jobs, with the status and count last sent.
     active: HashMap<JobId, (JobStatus, u64)>,
-    /// The newest job (by `seq`) the stream has seen: later ones are new to it. At first the
-    /// subscription's, so that a job submitted once it opened is told, however soon it ended.
-    newest: i64,
+    /// The newest job (by `seq`) when the stream opened (the subscription's, or the first
+    /// snapshot's store's): later ones were submitted since, and an end of one is told however
+    /// soon it came.
+    since: Option<i64>,
+    /// The owner's jobs in the last snapshot: a job later than `since` and not among them is new
+    /// to the stream. By number alone, a job whose submission committed after a newer one's
+    /// was read (PostgreSQL numbers at insert) was passed over.
+    seen: HashSet<JobId>,
     ready: VecDeque<Event>,
     /// Whether an event went out yet.
     sent: bool,
@@ -118,17 +123,20 @@ impl Follower {
     /// `progress` for a queued or running job whose status or count moved, `status` for a job
     /// that ended (one followed before, or one submitted since the stream began).
     async fn look(&mut self, snapshot: &Snapshot) {
-        let newest = self.newest;
+        let since = *self.since.get_or_insert(snapshot.stored_newest);
         let mut gone: HashSet<JobId> = self.active.keys().cloned().collect();
+        let mut seen = HashSet::new();
         let owner = self.owner.clone();
         for record in snapshot.of(&owner) {
             gone.remove(&record.id);
             let followed = self.active.contains_key(&record.id);
-            if !record.status.is_terminal() || followed || record.seq > newest {
+            let new = record.seq > since && !self.seen.contains(&record.id);
+            seen.insert(record.id.clone());
+            if !record.status.is_terminal() || followed || new {
                 self.tell(record);
             }
         }
-        self.newest = newest.max(snapshot.newest);
+        self.seen = seen;
         // Followed jobs gone from the snapshot: ended so long ago that the watcher forgot them
         // (this stream was not read meanwhile), or deleted. The store says which; on an error the
         // job stays followed and is asked about again.
@@ -183,7 +191,8 @@ pub async fn events(
     let follower = Follower {
         state,
         owner,
-        newest: subscription.newest,
+        since: subscription.newest,
+        seen: HashSet::new(),
         subscription,
         active: HashMap::new(),
         ready: VecDeque::new(),
