@@ -386,9 +386,22 @@ fn constrain_structure(schemas: &mut Value) {
     }
 }
 
-/// `maxLength` on every string a request body may hold, and on the names of its maps' members:
-/// the rule `bouncewear_model::error::from_json` enforces on every document.
+/// `maxLength` and no U+0000 on every string a request body may hold, and on the names of its
+/// maps' members: the rules `bouncewear_model::error::from_json` enforces on every document; no
+/// U+0000 in a path's parameters, as `api::Path` refuses it.
 fn limit_request_text(document: &mut Value) {
+    for (_, operation) in operations_mut(document) {
+        let parameters = operation
+            .get_mut("parameters")
+            .and_then(Value::as_array_mut);
+        for parameter in parameters.into_iter().flatten() {
+            let in_path = parameter["in"] == "path";
+            let schema = &mut parameter["schema"];
+            if in_path && schema["type"] == "string" && schema.get("pattern").is_none() {
+                schema["pattern"] = json!(NO_NUL_PATTERN);
+            }
+        }
+    }
     let mut names = BTreeSet::new();
     let bodies: Vec<Value> = operations_mut(document)
         .filter_map(|(_, operation)| {
@@ -431,6 +444,9 @@ fn collect_refs(schema: &Value, schemas: &Value, names: &mut BTreeSet<String>) {
     }
 }
 
+/// Text holding no U+0000 ([`bouncewear_model::error::NO_NUL`]), as a JSON Schema pattern.
+const NO_NUL_PATTERN: &str = "^[^\\u0000]*$";
+
 fn limit_text(schema: &mut Value) {
     let Value::Object(members) = schema else {
         return;
@@ -443,11 +459,15 @@ fn limit_text(schema: &mut Value) {
     if is_string && !members.contains_key("enum") && !members.contains_key("maxLength") {
         members.insert("maxLength".to_owned(), json!(MAX_TEXT_CHARS));
     }
+    if is_string && !members.contains_key("enum") && !members.contains_key("pattern") {
+        members.insert("pattern".to_owned(), json!(NO_NUL_PATTERN));
+    }
     if members.contains_key("additionalProperties") {
         let names = members
             .entry("propertyNames")
             .or_insert_with(|| json!({"type": "string"}));
         names["maxLength"] = json!(MAX_TEXT_CHARS);
+        names["pattern"] = json!(NO_NUL_PATTERN);
     }
     for (name, member) in members.iter_mut() {
         match name.as_str() {
@@ -738,6 +758,11 @@ mod tests {
         limit_text(&mut schema);
         let properties = &schema["properties"];
         assert_eq!(properties["name"]["maxLength"], MAX_TEXT_CHARS);
+        assert_eq!(properties["name"]["pattern"], NO_NUL_PATTERN);
+        assert_eq!(
+            properties["limits"]["propertyNames"]["pattern"],
+            NO_NUL_PATTERN
+        );
         assert!(properties["law"].get("maxLength").is_none());
         assert_eq!(
             properties["limits"]["propertyNames"]["maxLength"],
