@@ -54,7 +54,7 @@ pub struct Snapshot {
     pub newest: i64,
     /// The store's newest `seq` at this look: the starting point of a stream that opened while
     /// the watcher was idle, where its last look, long before, would take the ends read back
-    /// ([`LOOK_BACK`]) as new.
+    /// (`LOOK_BACK`) as new.
     pub stored_newest: i64,
 }
 
@@ -146,8 +146,8 @@ impl JobWatch {
     /// has not told its end yet tells it (deleted before the watcher looked, it was gone from
     /// the store, its end untold). Kept only while some stream listens, and only for a job whose
     /// end a snapshot may not hold yet: live at the last look, or newer than its newest less
-    /// [`LOOK_BACK`] (one numbered below it may have committed since); a job that ended long ago
-    /// costs nothing, however many are deleted; at most [`MAX_DELETING`] between two looks.
+    /// `LOOK_BACK` (one numbered below it may have committed since); a job that ended long ago
+    /// costs nothing, however many are deleted; at most `MAX_DELETING` between two looks.
     pub fn deleting(&self, ended: JobRecord) {
         if self.snapshots.receiver_count() == 0 {
             return;
