@@ -109,10 +109,10 @@ struct Follower {
     /// snapshot's store's): later ones were submitted since, and an end of one is told however
     /// soon it came.
     since: Option<i64>,
-    /// The owner's jobs in the last snapshot: a job later than `since` and not among them is new
-    /// to the stream. By number alone, a job whose submission committed after a newer one's
-    /// was read (PostgreSQL numbers at insert) was passed over.
-    seen: HashSet<JobId>,
+    /// The owner's jobs (by `seq`) in the last snapshot: a job later than `since` and not among
+    /// them is new to the stream. By number alone, a job whose submission committed after a
+    /// newer one's was read (PostgreSQL numbers at insert) was passed over.
+    seen: HashSet<i64>,
     ready: VecDeque<Event>,
     /// Whether an event went out yet.
     sent: bool,
@@ -130,8 +130,8 @@ impl Follower {
         for record in snapshot.of(&owner) {
             gone.remove(&record.id);
             let followed = self.active.contains_key(&record.id);
-            let new = record.seq > since && !self.seen.contains(&record.id);
-            seen.insert(record.id.clone());
+            let new = record.seq > since && !self.seen.contains(&record.seq);
+            seen.insert(record.seq);
             if !record.status.is_terminal() || followed || new {
                 self.tell(record);
             }
@@ -172,8 +172,8 @@ impl Follower {
 /// Open it once for a page that shows many jobs: browsers hold at most six connections per host.
 /// Each `progress` event's data is `{id, status, operations_done, operations_total}`; a `status`
 /// event's data is the JobResource; a job that another server deleted before this one saw it end
-/// gets a `deleted` event (data: `{id}`). The stream stays open until the client closes it or the server
-/// shuts down; with API keys it shows only your jobs.
+/// gets a `deleted` event (data: `{id}`). The stream stays open until the client closes it or the
+/// server shuts down; with API keys it shows only your jobs.
 #[utoipa::path(
     get, path = "/v1/events", tag = "jobs",
     responses(
