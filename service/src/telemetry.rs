@@ -11,6 +11,8 @@ use metrics_exporter_prometheus::{Matcher, PrometheusBuilder, PrometheusHandle};
 use std::io::IsTerminal;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
+use tracing_subscriber::layer::SubscriberExt;
+use tracing_subscriber::util::SubscriberInitExt;
 
 /// How log lines are written (`--log-format`, `BOUNCEWEAR_LOG_FORMAT`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -43,6 +45,8 @@ pub fn init_logging(format: LogFormat) {
                 std::io::stderr().is_terminal(),
                 std::env::var_os("NO_COLOR"),
             ))
+            .finish()
+            .with(no_request_bytes())
             .try_init(),
         // The request's fields (method, route, request id) sit beside the event's own.
         LogFormat::Json => builder
@@ -50,11 +54,22 @@ pub fn init_logging(format: LogFormat) {
             .flatten_event(true)
             .with_current_span(true)
             .with_span_list(false)
+            .finish()
+            .with(no_request_bytes())
             .try_init(),
     };
     if let Some(error) = refused {
         tracing::warn!(%error, "RUST_LOG does not parse; logging at info (and sqlx at warn)");
     }
+}
+
+/// ureq's protocol layer dumps every request's bytes at trace, the remote commands'
+/// `Authorization: Bearer KEY` among them (at debug it names headers, not their values): no
+/// `RUST_LOG` lets those lines through.
+fn no_request_bytes<S: tracing::Subscriber>() -> impl tracing_subscriber::Layer<S> {
+    tracing_subscriber::filter::filter_fn(|event| {
+        !(*event.level() == tracing::Level::TRACE && event.target().starts_with("ureq_proto"))
+    })
 }
 
 /// Whether text logs are coloured: on a terminal, unless `NO_COLOR` is set to anything but the

@@ -116,6 +116,27 @@ fn submit_wait_prints_what_run_prints_and_fetch_reads_the_parts() {
     assert!(String::from_utf8_lossy(&refused.stderr).contains("401"));
 }
 
+/// No log level shows the API key: with `RUST_LOG=trace` the HTTP client's protocol layer dumped
+/// each request's bytes, `Authorization: Bearer KEY` among them, sixteen characters a line.
+#[test]
+fn remote_commands_never_log_the_api_key() {
+    const KEY: &str = "k0123456789abcdefghijklmnopqrstuvwxyz";
+    let server = TestApp::start(&temp_db("remote-trace"), &["--api-key", KEY]);
+    for filter in ["trace", "ureq_proto::util=trace,ureq=trace"] {
+        let listed = remote_at(server.base(), Some(KEY), &["schedule", "list"])
+            .env("RUST_LOG", filter)
+            .output()
+            .expect("bouncewear runs");
+        let logged = String::from_utf8_lossy(&listed.stderr);
+        assert!(
+            listed.status.success() && logged.contains("ureq"),
+            "{logged}"
+        );
+        let shown = (0..=KEY.len() - 8).find(|&at| logged.contains(&KEY[at..at + 8]));
+        assert_eq!(shown, None, "RUST_LOG={filter}: {logged}");
+    }
+}
+
 /// The remote commands speak https, as to a server behind a TLS terminator: trusting the CA that
 /// `--ca-cert` (or `BOUNCEWEAR_CA_CERT`) names, a submission waited for prints what `run` prints;
 /// without it the server's certificate is refused at once (exit 1, never sent again), the message
