@@ -389,9 +389,14 @@ impl Timetable {
         let after = whole_seconds(after);
         let mut from = self.time_zone.from_utc_datetime(&after.naive_utc());
         let mut inclusive = false;
-        // A search from an overlap's end finds a time past the overlap; the bound is a guard.
-        for _ in 0..4 {
+        // A search from an overlap's end, or on from a gap's end that croner made up, finds a
+        // time past it; the bound is a guard.
+        for _ in 0..6 {
             let next = self.cron.find_next_occurrence(&from, inclusive).ok()?;
+            if !self.runs_at(&next) {
+                (from, inclusive) = (next, false);
+                continue;
+            }
             let due = whole_seconds(next.with_timezone(&Utc));
             if due > after {
                 return Some(due);
@@ -404,6 +409,26 @@ impl Timetable {
             };
         }
         None
+    }
+
+    /// Whether the cron runs at `at`: at its own wall-clock time, or right after a spring-forward
+    /// gap that holds one. Croner 3 answers the gap's end for any search of a fixed-time cron
+    /// that steps into the gap on a day the cron runs, whatever the time stepped into: at 01:40
+    /// in Berlin on 2027-03-28, `30 1 * * *` was next due at 03:00 CEST, the gap's end (a probe).
+    fn runs_at(&self, at: &DateTime<Tz>) -> bool {
+        if self.cron.is_time_matching(at).unwrap_or(false) {
+            return true;
+        }
+        let skipped = utc_offset(at) - utc_offset(&(*at - TimeDelta::seconds(1)));
+        if skipped <= TimeDelta::zero() {
+            return false;
+        }
+        // The wall-clock times the gap skipped, searched without a zone (as UTC: no gaps).
+        let gap_end = at.naive_local();
+        let before_gap = Utc.from_utc_datetime(&(gap_end - skipped - TimeDelta::seconds(1)));
+        self.cron
+            .find_next_occurrence(&before_gap, false)
+            .is_ok_and(|skipped_time| skipped_time.naive_utc() < gap_end)
     }
 
     /// The end of the fall-back overlap whose second pass holds `at`, its first pass at the UTC
@@ -864,6 +889,38 @@ mod tests {
             Some(utc("2026-10-26T01:30:00Z")),
             "not again at 01:30Z"
         );
+    }
+
+    /// In the hour before a spring-forward gap, a fixed time of that hour already past is next due
+    /// the day after, not at the gap's end, where croner put it (a probe); one in the gap still
+    /// runs at its end, and a time after the gap at that time. Truths from zoneinfo.
+    #[test]
+    fn a_time_before_the_spring_gap_is_not_moved_to_its_end() {
+        // From 01:40 CET, and from 01:59 CET, just after a run at that time.
+        let (at_01_40, at_01_59) = ("2027-03-28T00:40:00Z", "2027-03-28T00:59:00Z");
+        for (cron, from, due) in [
+            ("30 1 * * *", at_01_40, "2027-03-28T23:30:00Z"),
+            ("15 1 * * *", at_01_40, "2027-03-28T23:15:00Z"),
+            ("0 1 * * *", at_01_40, "2027-03-28T23:00:00Z"),
+            ("45 1 * * *", at_01_40, "2027-03-28T00:45:00Z"),
+            ("30 2 * * *", at_01_40, "2027-03-28T01:00:00Z"),
+            ("0 3 * * *", at_01_40, "2027-03-28T01:00:00Z"),
+            ("0 12 * * *", at_01_40, "2027-03-28T10:00:00Z"),
+            ("59 1 * * *", at_01_59, "2027-03-28T23:59:00Z"),
+            ("59 1 * * 0", at_01_59, "2027-04-03T23:59:00Z"),
+            ("59 1 28 3 *", at_01_59, "2028-03-27T23:59:00Z"),
+        ] {
+            let timetable = Timetable::parse(cron, "Europe/Berlin").unwrap();
+            assert_eq!(timetable.next_after(utc(from)), Some(utc(due)), "{cron}");
+            // Nothing is made at the gap's end but for a time in the gap or at 03:00 itself.
+            let gap_end = utc("2027-03-28T01:00:00Z");
+            let made = timetable.latest_at_or_before(gap_end + TimeDelta::seconds(30));
+            assert_eq!(
+                made == Some(gap_end),
+                utc(due) == gap_end,
+                "{cron}: {made:?}"
+            );
+        }
     }
 
     /// Antarctica/Troll falls back two hours (03:00 +02 to 01:00 +00): from an instant in the
