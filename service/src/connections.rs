@@ -93,6 +93,11 @@ fn open_file_limit() -> Option<u64> {
     (read == 0 && limit.rlim_cur != libc::RLIM_INFINITY).then_some(limit.rlim_cur)
 }
 
+/// The most a connection buffers of what its client sends: a request's line and headers must fit
+/// (more is 431). Hyper's default, about 400 KB, let 6,000 clients that stall in one long header
+/// each keep that much in memory until their header timeout: 1.4 GB (a probe).
+pub const MAX_REQUEST_HEAD_BYTES: usize = 16 * 1024;
+
 /// How often a new client waiting for a slot looks again for a connection to close, while none can
 /// be: every open one is busy, or new.
 const SHED_RETRY: Duration = Duration::from_millis(5);
@@ -107,6 +112,8 @@ const FIRST_BYTES_WITHIN: Duration = Duration::from_millis(100);
 /// read), and the signal that closes it.
 struct Connection {
     in_progress: AtomicUsize,
+    /// Of those, how many wait their turn to send a body ([`Waiting`]).
+    waiting_turn: AtomicUsize,
     waiting: AtomicBool,
     /// Whether its client has sent any bytes.
     heard: AtomicBool,
@@ -138,6 +145,7 @@ impl Open {
         let id = self.next.fetch_add(1, Ordering::Relaxed);
         let connection = Arc::new(Connection {
             in_progress: AtomicUsize::new(0),
+            waiting_turn: AtomicUsize::new(0),
             waiting: AtomicBool::new(false),
             heard: AtomicBool::new(false),
             writing: AtomicBool::new(false),
@@ -154,26 +162,58 @@ impl Open {
     }
 
     /// Closes the oldest connection that waits on its client, with no request in progress and
-    /// nothing left to write, and has heard from it or is older than [`FIRST_BYTES_WITHIN`];
-    /// whether there was one.
+    /// nothing left to write, and has heard from it or is older than [`FIRST_BYTES_WITHIN`]; or
+    /// else the oldest whose request waits its turn to send a body ([`Waiting`]): nothing of it
+    /// was read or done. Whether there was one.
     fn shed_oldest_idle(&self) -> bool {
         let open = self.lock();
-        let idle = open.values().find(|c| {
+        let free = |c: &&Arc<Connection>| {
+            !c.writing.load(Ordering::Acquire) && !c.shedding.load(Ordering::Acquire)
+        };
+        let idle = open.values().filter(free).find(|c| {
             c.in_progress.load(Ordering::Acquire) == 0
-                && !c.writing.load(Ordering::Acquire)
                 && c.waiting.load(Ordering::Acquire)
                 && (c.heard.load(Ordering::Acquire) || c.started.elapsed() >= FIRST_BYTES_WITHIN)
-                && !c.shedding.load(Ordering::Acquire)
         });
-        if let Some(connection) = idle {
+        let chosen = idle.or_else(|| {
+            open.values().filter(free).find(|c| {
+                let waiting_turn = c.waiting_turn.load(Ordering::Acquire);
+                waiting_turn > 0 && waiting_turn == c.in_progress.load(Ordering::Acquire)
+            })
+        });
+        if let Some(connection) = chosen {
             connection.shedding.store(true, Ordering::Release);
             connection.shed.notify_one();
         }
-        idle.is_some()
+        chosen.is_some()
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, BTreeMap<u64, Arc<Connection>>> {
         self.connections.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// A request's connection, in the request's extensions: while the request waits its turn to send
+/// its body, the connection may be closed for a new client as an idle one is. Uploads that stall
+/// hold their connections until their body timeout, and those waiting behind them until their
+/// turn: 20,000 of them kept every other client in the backlog (a probe).
+#[derive(Clone)]
+pub struct RequestConnection(Arc<Connection>);
+
+impl RequestConnection {
+    /// The request waits its turn until the guard is dropped.
+    pub fn waiting_turn(&self) -> Waiting {
+        self.0.waiting_turn.fetch_add(1, Ordering::AcqRel);
+        Waiting(Arc::clone(&self.0))
+    }
+}
+
+/// A request waiting its turn to send its body ([`RequestConnection::waiting_turn`]).
+pub struct Waiting(Arc<Connection>);
+
+impl Drop for Waiting {
+    fn drop(&mut self) {
+        self.0.waiting_turn.fetch_sub(1, Ordering::AcqRel);
     }
 }
 
@@ -350,7 +390,8 @@ pub async fn serve(
     let open = Arc::new(Open::default());
     let mut http = http1::Builder::new();
     http.timer(TokioTimer::new())
-        .header_read_timeout(limits.header_timeout);
+        .header_read_timeout(limits.header_timeout)
+        .max_buf_size(MAX_REQUEST_HEAD_BYTES);
     let mut connections = JoinSet::new();
     loop {
         while connections.try_join_next().is_some() {}
@@ -378,8 +419,10 @@ pub async fn serve(
         let (id, state) = open.add();
         let inner = TowerToHyperService::new(router.clone());
         let counting = Arc::clone(&state);
-        let service = service_fn(move |request| {
+        let service = service_fn(move |mut request: hyper::Request<hyper::body::Incoming>| {
             let in_progress = InProgress::enter(&counting);
+            let on = RequestConnection(Arc::clone(&counting));
+            request.extensions_mut().insert(on);
             let response = inner.call(request);
             async move {
                 let response = response.await?;

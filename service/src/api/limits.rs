@@ -10,6 +10,7 @@
 //! timeout never cuts a stream; its body runs as long as its job.
 
 use super::error::ApiError;
+use crate::connections::RequestConnection;
 use crate::domain::Owner;
 use axum::body::Body;
 use axum::extract::{Request, State};
@@ -66,7 +67,10 @@ impl Admission {
         if !has_body || refused_unread {
             return Ok((request, None));
         }
+        let waiting =
+            (request.extensions().get::<RequestConnection>()).map(RequestConnection::waiting_turn);
         let place = take_place(&self.arriving).await?;
+        drop(waiting);
         let (parts, body) = request.into_parts();
         let deadline = arrival_deadline(declared, self.body_timeout);
         let bytes = tokio::time::timeout(deadline, axum::body::to_bytes(body, self.max_body))
