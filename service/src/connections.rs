@@ -161,26 +161,16 @@ impl Open {
         self.lock().remove(&id);
     }
 
-    /// Closes the oldest connection that waits on its client, with no request in progress and
-    /// nothing left to write, and has heard from it or is older than [`FIRST_BYTES_WITHIN`]; or
-    /// else the oldest whose request waits its turn to send a body ([`Waiting`]): nothing of it
-    /// was read or done. Whether there was one.
+    /// Closes the oldest connection that is idle ([`Connection::idle`]), or else the oldest whose
+    /// request waits its turn to send a body; whether one was chosen. None is while another
+    /// chosen is still closing (or finds it may not: then the next look chooses again).
     fn shed_oldest_idle(&self) -> bool {
         let open = self.lock();
-        let free = |c: &&Arc<Connection>| {
-            !c.writing.load(Ordering::Acquire) && !c.shedding.load(Ordering::Acquire)
-        };
-        let idle = open.values().filter(free).find(|c| {
-            c.in_progress.load(Ordering::Acquire) == 0
-                && c.waiting.load(Ordering::Acquire)
-                && (c.heard.load(Ordering::Acquire) || c.started.elapsed() >= FIRST_BYTES_WITHIN)
-        });
-        let chosen = idle.or_else(|| {
-            open.values().filter(free).find(|c| {
-                let waiting_turn = c.waiting_turn.load(Ordering::Acquire);
-                waiting_turn > 0 && waiting_turn == c.in_progress.load(Ordering::Acquire)
-            })
-        });
+        if open.values().any(|c| c.shedding.load(Ordering::Acquire)) {
+            return false;
+        }
+        let chosen = (open.values().find(|c| c.idle()))
+            .or_else(|| open.values().find(|c| c.waiting_turn_only()));
         if let Some(connection) = chosen {
             connection.shedding.store(true, Ordering::Release);
             connection.shed.notify_one();
@@ -190,6 +180,25 @@ impl Open {
 
     fn lock(&self) -> std::sync::MutexGuard<'_, BTreeMap<u64, Arc<Connection>>> {
         self.connections.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl Connection {
+    /// Waiting on its client, with no request in progress and nothing left to write, and it has
+    /// heard from it or is older than [`FIRST_BYTES_WITHIN`].
+    fn idle(&self) -> bool {
+        self.in_progress.load(Ordering::Acquire) == 0
+            && !self.writing.load(Ordering::Acquire)
+            && self.waiting.load(Ordering::Acquire)
+            && (self.heard.load(Ordering::Acquire) || self.started.elapsed() >= FIRST_BYTES_WITHIN)
+    }
+
+    /// Its request waits its turn to send a body ([`Waiting`]): nothing of it was read or done.
+    fn waiting_turn_only(&self) -> bool {
+        let waiting_turn = self.waiting_turn.load(Ordering::Acquire);
+        waiting_turn > 0
+            && waiting_turn == self.in_progress.load(Ordering::Acquire)
+            && !self.writing.load(Ordering::Acquire)
     }
 }
 
@@ -363,17 +372,15 @@ async fn make_room(
     slots: &Arc<Semaphore>,
     stopping: &mut watch::Receiver<bool>,
 ) -> Option<OwnedSemaphorePermit> {
-    let mut shed = false;
     loop {
-        if !shed && open.shed_oldest_idle() {
+        if open.shed_oldest_idle() {
             metrics::counter!(crate::telemetry::CONNECTIONS_SHED).increment(1);
-            shed = true;
         }
         tokio::select! {
             slot = Arc::clone(slots).acquire_owned() => {
                 return Some(slot.expect("the semaphore is never closed"));
             }
-            () = tokio::time::sleep(SHED_RETRY), if !shed => {}
+            () = tokio::time::sleep(SHED_RETRY) => {}
             _ = stopping.wait_for(|stop| *stop) => return None,
         }
     }
@@ -442,18 +449,30 @@ pub async fn serve(
         let mut stop = stopping.clone();
         let open = Arc::clone(&open);
         connections.spawn(async move {
-            let _slot = slot;
-            tokio::pin!(connection);
-            let drain = tokio::select! {
-                _ = connection.as_mut() => false,
-                // Dropping the connection closes its socket.
-                () = state.shed.notified() => false,
-                _ = stop.wait_for(|stop| *stop) => true,
-            };
-            if drain {
-                connection.as_mut().graceful_shutdown();
-                let _ = connection.await;
+            {
+                tokio::pin!(connection);
+                let drain = loop {
+                    tokio::select! {
+                        _ = connection.as_mut() => break false,
+                        // Dropping the connection closes its socket; not once a request came, or
+                        // an upload's turn, after it was chosen (they move on only in this task).
+                        () = state.shed.notified() => {
+                            if state.idle() || state.waiting_turn_only() {
+                                break false;
+                            }
+                            state.shedding.store(false, Ordering::Release);
+                        }
+                        _ = stop.wait_for(|stop| *stop) => break true,
+                    }
+                };
+                if drain {
+                    connection.as_mut().graceful_shutdown();
+                    let _ = connection.await;
+                }
             }
+            // The socket is closed; its slot goes before its listing, so that no other connection
+            // is chosen for the newcomer while this one still counts as closing.
+            drop(slot);
             open.remove(id);
         });
     }
@@ -501,39 +520,53 @@ async fn pause_after(error: &std::io::Error) {
 mod tests {
     use super::*;
 
-    /// At the limit the oldest connection that waits on its client goes, once: not one the server
-    /// has not read from yet, nor one with a request in progress or a response not yet flushed,
-    /// nor a new one whose client has sent nothing yet.
+    /// At the limit the oldest connection that waits on its client goes, once, and one at a time:
+    /// not one the server has not read from yet, nor one with a request in progress or a response
+    /// not yet flushed, nor a new one whose client has sent nothing yet; after them, the oldest
+    /// whose upload waits its turn, not once its turn came.
     #[test]
     fn the_oldest_connection_waiting_on_its_client_is_shed_once() {
         let open = Arc::new(Open::default());
         let (_, unread) = open.add();
         let (_, busy) = open.add();
+        let (_, queued) = open.add();
         let (_, flushing) = open.add();
-        let (_, silent) = open.add();
-        let (_, stalled) = open.add();
-        let (_, newer) = open.add();
-        for c in [&busy, &flushing, &silent, &stalled, &newer] {
+        let (silent_id, silent) = open.add();
+        let (stalled_id, stalled) = open.add();
+        let (newer_id, newer) = open.add();
+        for c in [&busy, &queued, &flushing, &silent, &stalled, &newer] {
             c.waiting.store(true, Ordering::Release);
         }
-        for c in [&busy, &flushing, &stalled, &newer] {
+        for c in [&busy, &queued, &flushing, &stalled, &newer] {
             c.heard.store(true, Ordering::Release);
         }
         let _request = InProgress::enter(&busy);
+        let _upload = InProgress::enter(&queued);
+        let turn = RequestConnection(Arc::clone(&queued)).waiting_turn();
         flushing.writing.store(true, Ordering::Release);
         assert!(open.shed_oldest_idle());
         assert!(stalled.shedding.load(Ordering::Acquire));
+        assert!(!open.shed_oldest_idle(), "one at a time");
+        open.remove(stalled_id);
         assert!(open.shed_oldest_idle(), "the next client gets the next one");
         assert!(newer.shedding.load(Ordering::Acquire));
+        open.remove(newer_id);
+        assert!(open.shed_oldest_idle(), "the upload waiting its turn");
+        assert!(queued.shedding.load(Ordering::Acquire));
         assert!(
-            !open.shed_oldest_idle(),
+            !silent.shedding.load(Ordering::Acquire),
             "a new client has a moment to send"
         );
+        queued.shedding.store(false, Ordering::Release);
+        drop(turn);
+        assert!(!queued.waiting_turn_only(), "its turn came: it stays");
+        assert!(!open.shed_oldest_idle());
         std::thread::sleep(FIRST_BYTES_WITHIN + Duration::from_millis(10));
         assert!(open.shed_oldest_idle());
         assert!(silent.shedding.load(Ordering::Acquire));
+        open.remove(silent_id);
         assert!(!open.shed_oldest_idle());
-        for c in [&unread, &busy, &flushing] {
+        for c in [&unread, &busy, &queued, &flushing] {
             assert!(!c.shedding.load(Ordering::Acquire));
         }
     }
