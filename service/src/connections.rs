@@ -64,10 +64,7 @@ impl ConnectionLimits {
     /// `wanted` connections (or as many as there are descriptors for), never more than the
     /// open-file limit allows.
     pub fn new(wanted: Option<usize>, header_timeout: Duration, write_stall: Duration) -> Self {
-        let available = open_file_limit().map_or(usize::MAX, |limit| {
-            usize::try_from(limit.saturating_sub(RESERVED_FDS).max(1)).unwrap_or(usize::MAX)
-        });
-        let max_connections = wanted.map_or(available, |wanted| wanted.clamp(1, available));
+        let max_connections = max_connections(wanted);
         if wanted.is_some_and(|wanted| wanted > max_connections) {
             tracing::warn!(
                 max_connections,
@@ -75,11 +72,21 @@ impl ConnectionLimits {
             );
         }
         Self {
-            max_connections: max_connections.min(Semaphore::MAX_PERMITS),
+            max_connections,
             header_timeout,
             write_stall,
         }
     }
+}
+
+/// The connections a server keeps open at most for `wanted` (`--max-connections`): as many as
+/// asked, or as the open-file limit leaves room for, whichever is fewer.
+pub fn max_connections(wanted: Option<usize>) -> usize {
+    let available = open_file_limit().map_or(usize::MAX, |limit| {
+        usize::try_from(limit.saturating_sub(RESERVED_FDS).max(1)).unwrap_or(usize::MAX)
+    });
+    let max_connections = wanted.map_or(available, |wanted| wanted.clamp(1, available));
+    max_connections.min(Semaphore::MAX_PERMITS)
 }
 
 /// The soft limit on open files (RLIMIT_NOFILE); `None` where there is none or it cannot be read.

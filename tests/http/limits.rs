@@ -309,13 +309,21 @@ fn clients_stalling_in_their_bodies_hold_up_no_request_without_one() {
 /// is closed for a newcomer as an idle one is; the uploads whose turn came keep theirs.
 #[test]
 fn uploads_waiting_their_turn_keep_no_one_out() {
+    // Two bodies arriving; and as many as half the connections when there are more slots than
+    // connections (as many as there were slots, all 24, held every connection: a probe).
+    for requests in ["2", "256"] {
+        uploads_waiting_their_turn_keep_no_one_out_with(requests);
+    }
+}
+
+fn uploads_waiting_their_turn_keep_no_one_out_with(concurrent_requests: &str) {
     let server = TestApp::start(
         &temp_db("queued-uploads"),
         &[
             "--max-connections",
             "24",
             "--max-concurrent-requests",
-            "2",
+            concurrent_requests,
             "--body-timeout-seconds",
             "30",
         ],
@@ -345,7 +353,7 @@ fn uploads_waiting_their_turn_keep_no_one_out() {
         stalled.extend((0..8).map(|_| stalled_upload()));
         std::thread::sleep(Duration::from_millis(100));
     }
-    // The first two had their turn: they are still open, sent nothing back, until their 408.
+    // The first ones had their turn: they are still open, sent nothing back, until their 408.
     for stream in &mut stalled[..2] {
         stream.set_nonblocking(true).unwrap();
         let mut byte = [0];

@@ -1,7 +1,8 @@
 //! What one request may take of the server: a slot among `--max-concurrent-requests`, and
 //! `--request-timeout-seconds` until its response starts (the wait for a slot included), else 503.
 //! The body of an API request whose key is valid arrives before the request takes a slot, under a
-//! bound of its own (as many bodies arriving, or read and waiting for a slot, as there are slots),
+//! bound of its own (as many bodies arriving, or read and waiting for a slot, as there are slots,
+//! and never more than half the connections),
 //! each within `--body-timeout-seconds` from when its turn to arrive came (sooner for a short body
 //! of declared length, at 4 KB/s after 2 s) (408): clients that stall
 //! mid-body hold up other uploads for at most that long, and never a request without a body (a
@@ -10,7 +11,7 @@
 //! timeout never cuts a stream; its body runs as long as its job.
 
 use super::error::ApiError;
-use crate::connections::RequestConnection;
+use crate::connections::{self, RequestConnection};
 use crate::domain::Owner;
 use axum::body::Body;
 use axum::extract::{Request, State};
@@ -40,9 +41,13 @@ impl Admission {
         let slots = config
             .max_concurrent_requests
             .clamp(1, Semaphore::MAX_PERMITS);
+        // Uploads arriving hold their connections: half of them at most, so that uploads that
+        // stall leave room for others. With as many places as slots, 200 connections and 256
+        // slots, stalled uploads took every connection until their body timeout (a probe).
+        let connections = connections::max_connections(config.max_connections);
         Self {
             slots: Arc::new(Semaphore::new(slots)),
-            arriving: Arc::new(Semaphore::new(slots)),
+            arriving: Arc::new(Semaphore::new(slots.min(connections / 2).max(1))),
             timeout: config.request_timeout(),
             max_body: config.max_body_bytes,
             body_timeout: config.body_timeout(),
