@@ -21,7 +21,39 @@ fn cell(text: &str) -> &str {
         .map_or(text, str::trim)
 }
 
-pub fn observations_from_csv(text: &str, path: &str) -> Result<Value, CliError> {
+/// Where each data row of a measurements file was: its line in the file (blank lines are skipped).
+#[derive(Debug)]
+pub struct RowLines {
+    path: String,
+    lines: Vec<usize>,
+}
+
+impl RowLines {
+    /// `error` with each fault of an observation told at its line in the file too: the
+    /// calibration's own rules name `/observations/ROW`, counted past blank lines.
+    pub fn locate(&self, error: InvalidInput) -> InvalidInput {
+        if error.is_syntax() {
+            return error;
+        }
+        let errors = error.errors().iter().map(|fault| {
+            let row = (fault.pointer.strip_prefix("/observations/"))
+                .and_then(|rest| rest.split('/').next()?.parse::<usize>().ok());
+            match row.and_then(|row| Some((row, self.lines.get(row)?))) {
+                Some((row, line)) if !fault.detail.starts_with(&self.path) => FieldError {
+                    pointer: fault.pointer.clone(),
+                    detail: format!(
+                        "{}: line {line} (data row {row}): {}",
+                        self.path, fault.detail
+                    ),
+                },
+                _ => fault.clone(),
+            }
+        });
+        InvalidInput::new(errors.collect())
+    }
+}
+
+pub fn observations_from_csv(text: &str, path: &str) -> Result<(Value, RowLines), CliError> {
     // Each line with its number in the file, as a spreadsheet numbers its rows.
     let mut lines = text
         .lines()
@@ -39,7 +71,7 @@ pub fn observations_from_csv(text: &str, path: &str) -> Result<Value, CliError> 
         .split(',')
         .map(cell)
         .collect();
-    let (mut rows, mut errors) = (Vec::new(), Vec::new());
+    let (mut rows, mut errors, mut row_lines) = (Vec::new(), Vec::new(), Vec::new());
     let mut fault = |pointer: Pointer, detail: String| {
         errors.push(FieldError {
             pointer: pointer.to_string(),
@@ -54,6 +86,7 @@ pub fn observations_from_csv(text: &str, path: &str) -> Result<Value, CliError> 
         }
     }
     for (row, (line_number, line)) in lines.enumerate() {
+        row_lines.push(line_number);
         let at = observations.child(row);
         let cells: Vec<&str> = line.split(',').map(cell).collect();
         if cells.len() != header.len() {
@@ -91,7 +124,11 @@ pub fn observations_from_csv(text: &str, path: &str) -> Result<Value, CliError> 
     if !errors.is_empty() {
         return Err(CliError::Invalid(InvalidInput::new(errors)));
     }
-    Ok(Value::Array(rows))
+    let lines = RowLines {
+        path: path.to_owned(),
+        lines: row_lines,
+    };
+    Ok((Value::Array(rows), lines))
 }
 
 #[cfg(test)]
@@ -104,13 +141,24 @@ mod tests {
         let csv = "operation,impact_velocity_m_s,first_bounce_s,total_bounce_s\r\n\
                    0,0.2,0.0086,0.0108\n\n\
                    500, 0.3 ,,0.0121\n";
+        let (rows, lines) = observations_from_csv(csv, "m.csv").unwrap();
         assert_eq!(
-            observations_from_csv(csv, "m.csv").unwrap(),
+            rows,
             json!([
                 {"operation": 0, "impact_velocity_m_s": 0.2, "first_bounce_s": 0.0086, "total_bounce_s": 0.0108},
                 {"operation": 500, "impact_velocity_m_s": 0.3, "total_bounce_s": 0.0121}
             ])
         );
+        // A rule of the calibration's own is told at the row's line too, past the blank line
+        // (it named `/observations/1` alone: a probe).
+        let row = Pointer::root().child("observations").child(1);
+        let fault = InvalidInput::single(&row.child("e1"), "measures nothing");
+        assert_eq!(
+            lines.locate(fault).errors()[0].detail,
+            "m.csv: line 4 (data row 1): measures nothing"
+        );
+        let elsewhere = InvalidInput::single(&Pointer::root().child("fit"), "unknown");
+        assert_eq!(lines.locate(elsewhere).errors()[0].detail, "unknown");
     }
 
     #[test]
@@ -141,7 +189,7 @@ mod tests {
         let quoted =
             observations_from_csv("\"e1\",\"first_bounce_s\"\n\"0.4\",\" 0.0086\"\n", "q.csv");
         assert_eq!(
-            quoted.unwrap(),
+            quoted.unwrap().0,
             serde_json::json!([{"e1": 0.4, "first_bounce_s": 0.0086}])
         );
         assert!(observations_from_csv("", "m.csv").is_err());

@@ -554,11 +554,18 @@ fn calibrate_command(
     observations: Option<&Path>,
 ) -> Result<(), CliError> {
     let mut text = read_input(file)?;
+    let mut rows = None;
     if let Some(csv) = observations {
-        text = with_observations(&text, &read_input(csv)?, &csv.display().to_string())?;
+        let (request, lines) =
+            with_observations(&text, &read_input(csv)?, &csv.display().to_string())?;
+        (text, rows) = (request, Some(lines));
     }
-    let spec = CalibrationSpec::from_json(&text)?;
-    let fit = calibrate(&spec)?;
+    let located = |error| match &rows {
+        Some(rows) => rows.locate(error),
+        None => error,
+    };
+    let spec = CalibrationSpec::from_json(&text).map_err(located)?;
+    let fit = calibrate(&spec).map_err(located)?;
     // The fit first, as `run` prints its Result first: a plot that cannot be written loses it not.
     print_json(&fit)?;
     if let Some(path) = plot {
@@ -717,8 +724,13 @@ pub fn read_input(path: &Path) -> Result<String, CliError> {
 /// from outside), where the server takes 1 MB a request by default.
 pub const MAX_INPUT_BYTES: usize = 64 << 20;
 
-/// The calibration request `text` with its `observations` read from CSV `csv` (at `path`).
-fn with_observations(text: &str, csv: &str, path: &str) -> Result<String, CliError> {
+/// The calibration request `text` with its `observations` read from CSV `csv` (at `path`), and
+/// the line of each.
+fn with_observations(
+    text: &str,
+    csv: &str,
+    path: &str,
+) -> Result<(String, measurements::RowLines), CliError> {
     let mut request: serde_json::Value = serde_json::from_str(text).map_err(|error| {
         CliError::Invalid(InvalidInput::single(
             &Pointer::root(),
@@ -738,11 +750,9 @@ fn with_observations(text: &str, csv: &str, path: &str) -> Result<String, CliErr
             "--observations {path}: the request has `observations` too; give them in one place"
         )));
     }
-    object.insert(
-        "observations".to_owned(),
-        measurements::observations_from_csv(csv, path)?,
-    );
-    Ok(request.to_string())
+    let (rows, lines) = measurements::observations_from_csv(csv, path)?;
+    object.insert("observations".to_owned(), rows);
+    Ok((request.to_string(), lines))
 }
 
 /// A server's answer on stdout: JSON as `print_json` writes it (a Result field for field as `run`
