@@ -165,7 +165,8 @@ fn weibulls_svg(title: &str, designs: &[(&str, &LifeAnalysis)]) -> String {
     }
     draw_frame_axes(&mut svg, &plane.frame);
     if alone {
-        draw_notes(&mut svg, frame.left + 10.0, frame.top + 10.0, &notes);
+        let [bx, by] = empty_corner(&plane, &drawn, notes_size(&notes));
+        draw_notes(&mut svg, bx, by, &notes);
     } else {
         draw_notes(&mut svg, frame.left, 62.0, &notes);
     }
@@ -451,14 +452,43 @@ fn fit_notes(life: &LifeAnalysis, fit: Option<&Weibull>) -> Vec<String> {
     notes
 }
 
-/// The annotation box with its top left at `(bx, by)`, each line in its colour.
-fn draw_notes(svg: &mut Svg, bx: f64, by: f64, notes: &[(String, &'static str)]) {
+/// The annotation box's width and height.
+fn notes_size(notes: &[(String, &'static str)]) -> [f64; 2] {
     let box_w = notes
         .iter()
         .map(|(s, _)| text_width(s, 12.0))
         .fold(0.0, f64::max)
         + 20.0;
-    let box_h = notes.len() as f64 * 17.0 + 10.0;
+    [box_w, notes.len() as f64 * 17.0 + 10.0]
+}
+
+/// Where a box of `size` goes over the plot: its top left corner, where lives rise from the
+/// bottom left; its bottom right where that would hide more of the points (all failures at one
+/// time are one point in the middle of the top, which the note saying why there is no fit hid).
+fn empty_corner(plane: &Plane, drawn: &[Drawn], [box_w, box_h]: [f64; 2]) -> [f64; 2] {
+    let frame = &plane.frame;
+    let top_left = [frame.left + 10.0, frame.top + 10.0];
+    let bottom_right = [frame.right() - 10.0 - box_w, frame.bottom() - 10.0 - box_h];
+    let hidden = |[bx, by]: [f64; 2]| {
+        let points = drawn.iter().flat_map(|d| &d.points);
+        points
+            .filter(|&&(p, f)| {
+                let x = plane.x_of_t(p.time);
+                let y = (plane.ys).map(weibull_scale(f).clamp(plane.y_lo, plane.y_hi));
+                (bx..=bx + box_w).contains(&x) && (by..=by + box_h).contains(&y)
+            })
+            .count()
+    };
+    if hidden(bottom_right) < hidden(top_left) {
+        bottom_right
+    } else {
+        top_left
+    }
+}
+
+/// The annotation box with its top left at `(bx, by)`, each line in its colour.
+fn draw_notes(svg: &mut Svg, bx: f64, by: f64, notes: &[(String, &'static str)]) {
+    let [box_w, box_h] = notes_size(notes);
     let _ = write!(
         svg.out,
         r##"<rect x="{}" y="{}" width="{}" height="{}" rx="4" fill="#ffffff" fill-opacity="0.92" stroke="{GRID}"/>"##,
@@ -601,6 +631,28 @@ mod tests {
         assert!(svg.contains("<circle"));
 
         check(&weibull_svg(&life_of(&[])));
+
+        // Every device failing at one time is one point in the middle of the top: the note
+        // saying why there is no fit goes where it hides it not (it did: a probe).
+        let all_at_once = life_of(&[(1.0, true); 30]);
+        let svg = weibull_svg(&all_at_once);
+        check(&svg);
+        let attribute = |element: &str, name: &str| -> f64 {
+            let after = &element[element.find(&format!(" {name}=\"")).unwrap() + name.len() + 3..];
+            after[..after.find('"').unwrap()].parse().unwrap()
+        };
+        // The point, not the legend's dot.
+        let dot_fill = svg.find(r#"fill-opacity="0.85""#).unwrap();
+        let circle = &svg[svg[..dot_fill].rfind("<circle").unwrap()..];
+        let (cx, cy) = (attribute(circle, "cx"), attribute(circle, "cy"));
+        let box_fill = svg.find(r#"fill-opacity="0.92""#).unwrap();
+        let note = &svg[svg[..box_fill].rfind("<rect").unwrap()..];
+        let (x, y) = (attribute(note, "x"), attribute(note, "y"));
+        let (w, h) = (attribute(note, "width"), attribute(note, "height"));
+        assert!(
+            !((x..=x + w).contains(&cx) && (y..=y + h).contains(&cy)),
+            "the point ({cx}, {cy}) under the note {x} {y} {w} {h}"
+        );
     }
 
     #[test]
