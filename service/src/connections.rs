@@ -168,16 +168,20 @@ impl Open {
         self.lock().remove(&id);
     }
 
-    /// Closes the oldest connection that is idle ([`Connection::idle`]), or else the oldest whose
-    /// request waits its turn to send a body; whether one was chosen. None is while another
-    /// chosen is still closing (or finds it may not: then the next look chooses again).
-    fn shed_oldest_idle(&self) -> bool {
+    /// Closes the oldest connection that is idle ([`Connection::idle`]), or else the newest whose
+    /// request waits its turn to send a body (the older keep their places in the queue); whether
+    /// one was chosen. None is while a slot is free, or while another chosen is still closing (or
+    /// finds it may not: then the next look chooses again): one at a time, for one newcomer. A
+    /// closing connection frees its slot before it is unlisted, under this lock.
+    fn shed_oldest_idle(&self, slots: &Semaphore) -> bool {
         let open = self.lock();
-        if open.values().any(|c| c.shedding.load(Ordering::Acquire)) {
+        if slots.available_permits() > 0
+            || open.values().any(|c| c.shedding.load(Ordering::Acquire))
+        {
             return false;
         }
         let chosen = (open.values().find(|c| c.idle()))
-            .or_else(|| open.values().find(|c| c.waiting_turn_only()));
+            .or_else(|| open.values().rev().find(|c| c.waiting_turn_only()));
         if let Some(connection) = chosen {
             connection.shedding.store(true, Ordering::Release);
             connection.shed.notify_one();
@@ -230,6 +234,23 @@ pub struct Waiting(Arc<Connection>);
 impl Drop for Waiting {
     fn drop(&mut self) {
         self.0.waiting_turn.fetch_sub(1, Ordering::AcqRel);
+    }
+}
+
+/// A connection's slot and its listing in [`Open`], given back when its task ends, however it
+/// ends, after its socket is closed (the connection, pinned later in the task, is dropped
+/// first): the slot before the listing, so that while it still counts as closing no other
+/// connection is chosen for the newcomer, who takes the slot.
+struct Place {
+    open: Arc<Open>,
+    id: u64,
+    slot: Option<OwnedSemaphorePermit>,
+}
+
+impl Drop for Place {
+    fn drop(&mut self) {
+        drop(self.slot.take());
+        self.open.remove(self.id);
     }
 }
 
@@ -371,8 +392,8 @@ impl AsyncWrite for Watched {
     }
 }
 
-/// At the limit: closes the oldest connection that waits on its client ([`Open`]) and takes the
-/// slot that frees. While none can be closed (every open connection busy, or not read from yet),
+/// At the limit: closes a connection that waits on its client ([`Open`]) and takes the slot that
+/// frees. While none can be closed (every open connection busy, or not read from yet),
 /// the new client waits for a slot, looking again every [`SHED_RETRY`]. `None` once `stopping`.
 async fn make_room(
     open: &Open,
@@ -380,10 +401,15 @@ async fn make_room(
     stopping: &mut watch::Receiver<bool>,
 ) -> Option<OwnedSemaphorePermit> {
     loop {
-        if open.shed_oldest_idle() {
+        if let Ok(slot) = Arc::clone(slots).try_acquire_owned() {
+            return Some(slot);
+        }
+        if open.shed_oldest_idle(slots) {
             metrics::counter!(crate::telemetry::CONNECTIONS_SHED).increment(1);
         }
         tokio::select! {
+            // A slot handed over is taken, not dropped for the sleep's turn (and another closed).
+            biased;
             slot = Arc::clone(slots).acquire_owned() => {
                 return Some(slot.expect("the semaphore is never closed"));
             }
@@ -454,33 +480,35 @@ pub async fn serve(
         };
         let connection = http.serve_connection(TokioIo::new(watched), service);
         let mut stop = stopping.clone();
-        let open = Arc::clone(&open);
+        let place = Place {
+            open: Arc::clone(&open),
+            id,
+            slot: Some(slot),
+        };
         connections.spawn(async move {
-            {
-                tokio::pin!(connection);
-                let drain = loop {
-                    tokio::select! {
-                        _ = connection.as_mut() => break false,
-                        // Dropping the connection closes its socket; not once a request came, or
-                        // an upload's turn, after it was chosen (they move on only in this task).
-                        () = state.shed.notified() => {
-                            if state.idle() || state.waiting_turn_only() {
-                                break false;
-                            }
-                            state.shedding.store(false, Ordering::Release);
+            let _place = place;
+            tokio::pin!(connection);
+            let drain = loop {
+                tokio::select! {
+                    // The connection first: a request whose bytes or turn came is seen to move
+                    // on (they move on only in this task) before a choice to close is looked at.
+                    biased;
+                    _ = connection.as_mut() => break false,
+                    // Dropping the connection closes its socket; not once a request came, or an
+                    // upload's turn, after it was chosen.
+                    () = state.shed.notified() => {
+                        if state.idle() || state.waiting_turn_only() {
+                            break false;
                         }
-                        _ = stop.wait_for(|stop| *stop) => break true,
+                        state.shedding.store(false, Ordering::Release);
                     }
-                };
-                if drain {
-                    connection.as_mut().graceful_shutdown();
-                    let _ = connection.await;
+                    _ = stop.wait_for(|stop| *stop) => break true,
                 }
+            };
+            if drain {
+                connection.as_mut().graceful_shutdown();
+                let _ = connection.await;
             }
-            // The socket is closed; its slot goes before its listing, so that no other connection
-            // is chosen for the newcomer while this one still counts as closing.
-            drop(slot);
-            open.remove(id);
         });
     }
     drop(listener);
@@ -529,36 +557,59 @@ mod tests {
 
     /// At the limit the oldest connection that waits on its client goes, once, and one at a time:
     /// not one the server has not read from yet, nor one with a request in progress or a response
-    /// not yet flushed, nor a new one whose client has sent nothing yet; after them, the oldest
-    /// whose upload waits its turn, not once its turn came.
+    /// not yet flushed, nor a new one whose client has sent nothing yet; after them, the newest
+    /// whose upload waits its turn, not once its turn came; and none while a slot is free.
     #[test]
     fn the_oldest_connection_waiting_on_its_client_is_shed_once() {
         let open = Arc::new(Open::default());
+        let full = Semaphore::new(0);
         let (_, unread) = open.add();
         let (_, busy) = open.add();
         let (_, queued) = open.add();
+        let (_, queued_later) = open.add();
         let (_, flushing) = open.add();
         let (silent_id, silent) = open.add();
         let (stalled_id, stalled) = open.add();
         let (newer_id, newer) = open.add();
-        for c in [&busy, &queued, &flushing, &silent, &stalled, &newer] {
+        for c in [
+            &busy,
+            &queued,
+            &queued_later,
+            &flushing,
+            &silent,
+            &stalled,
+            &newer,
+        ] {
             c.waiting.store(true, Ordering::Release);
         }
-        for c in [&busy, &queued, &flushing, &stalled, &newer] {
+        for c in [&busy, &queued, &queued_later, &flushing, &stalled, &newer] {
             c.heard.store(true, Ordering::Release);
         }
         let _request = InProgress::enter(&busy);
         let _upload = InProgress::enter(&queued);
         let turn = RequestConnection(Arc::clone(&queued)).waiting_turn();
+        let _later = InProgress::enter(&queued_later);
+        let later_turn = RequestConnection(Arc::clone(&queued_later)).waiting_turn();
         flushing.writing.store(true, Ordering::Release);
-        assert!(open.shed_oldest_idle());
+        assert!(!open.shed_oldest_idle(&Semaphore::new(1)), "a slot is free");
+        assert!(open.shed_oldest_idle(&full));
         assert!(stalled.shedding.load(Ordering::Acquire));
-        assert!(!open.shed_oldest_idle(), "one at a time");
+        assert!(!open.shed_oldest_idle(&full), "one at a time");
         open.remove(stalled_id);
-        assert!(open.shed_oldest_idle(), "the next client gets the next one");
+        assert!(
+            open.shed_oldest_idle(&full),
+            "the next client gets the next one"
+        );
         assert!(newer.shedding.load(Ordering::Acquire));
         open.remove(newer_id);
-        assert!(open.shed_oldest_idle(), "the upload waiting its turn");
+        assert!(
+            open.shed_oldest_idle(&full),
+            "the last upload waiting its turn"
+        );
+        assert!(queued_later.shedding.load(Ordering::Acquire));
+        queued_later.shedding.store(false, Ordering::Release);
+        drop(later_turn);
+        assert!(open.shed_oldest_idle(&full), "then the one before it");
         assert!(queued.shedding.load(Ordering::Acquire));
         assert!(
             !silent.shedding.load(Ordering::Acquire),
@@ -567,13 +618,13 @@ mod tests {
         queued.shedding.store(false, Ordering::Release);
         drop(turn);
         assert!(!queued.waiting_turn_only(), "its turn came: it stays");
-        assert!(!open.shed_oldest_idle());
+        assert!(!open.shed_oldest_idle(&full));
         std::thread::sleep(FIRST_BYTES_WITHIN + Duration::from_millis(10));
-        assert!(open.shed_oldest_idle());
+        assert!(open.shed_oldest_idle(&full));
         assert!(silent.shedding.load(Ordering::Acquire));
         open.remove(silent_id);
-        assert!(!open.shed_oldest_idle());
-        for c in [&unread, &busy, &queued, &flushing] {
+        assert!(!open.shed_oldest_idle(&full));
+        for c in [&unread, &busy, &queued, &queued_later, &flushing] {
             assert!(!c.shedding.load(Ordering::Acquire));
         }
     }
