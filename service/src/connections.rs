@@ -512,9 +512,13 @@ pub async fn serve(
         });
     }
     drop(listener);
-    // Responses still being sent get DRAIN to end, then are cut off: a client reading a large
-    // Result at 300 kB/s held a SIGTERM for its whole body timeout (30 s, silently), past the
-    // 30 s a container manager grants before it kills the process, workers' hand-back and all.
+    drain(connections).await;
+}
+
+/// Responses still being sent get DRAIN to end, then are cut off: a client reading a large
+/// Result at 300 kB/s held a SIGTERM for its whole body timeout (30 s, silently), past the 30 s
+/// a container manager grants before it kills the process, workers' hand-back and all.
+async fn drain(mut connections: JoinSet<()>) {
     let sending = connections.len();
     if sending > 0 {
         tracing::info!(
