@@ -168,9 +168,10 @@ impl Open {
         self.lock().remove(&id);
     }
 
-    /// Closes the oldest connection that is idle ([`Connection::idle`]), or else the newest whose
-    /// request waits its turn to send a body (the older keep their places in the queue); whether
-    /// one was chosen. None is while a slot is free, or while another chosen is still closing (or
+    /// Closes the oldest connection that is idle ([`Connection::idle`]), or else the oldest whose
+    /// request waits its turn to send a body (the newest first kept none: each upload coming in
+    /// was the newest when the next client came, 0 of 40 submissions got through a flood of
+    /// reconnecting stalled uploads, a probe); whether one was chosen. None is while a slot is free, or while another chosen is still closing (or
     /// finds it may not: then the next look chooses again): one at a time, for one newcomer. A
     /// closing connection frees its slot before it is unlisted, under this lock.
     fn shed_oldest_idle(&self, slots: &Semaphore) -> bool {
@@ -181,7 +182,7 @@ impl Open {
             return false;
         }
         let chosen = (open.values().find(|c| c.idle()))
-            .or_else(|| open.values().rev().find(|c| c.waiting_turn_only()));
+            .or_else(|| open.values().find(|c| c.waiting_turn_only()));
         if let Some(connection) = chosen {
             connection.shedding.store(true, Ordering::Release);
             connection.shed.notify_one();
@@ -561,7 +562,7 @@ mod tests {
 
     /// At the limit the oldest connection that waits on its client goes, once, and one at a time:
     /// not one the server has not read from yet, nor one with a request in progress or a response
-    /// not yet flushed, nor a new one whose client has sent nothing yet; after them, the newest
+    /// not yet flushed, nor a new one whose client has sent nothing yet; after them, the oldest
     /// whose upload waits its turn, not once its turn came; and none while a slot is free.
     #[test]
     fn the_oldest_connection_waiting_on_its_client_is_shed_once() {
@@ -608,19 +609,19 @@ mod tests {
         open.remove(newer_id);
         assert!(
             open.shed_oldest_idle(&full),
-            "the last upload waiting its turn"
+            "the first upload waiting its turn"
         );
-        assert!(queued_later.shedding.load(Ordering::Acquire));
-        queued_later.shedding.store(false, Ordering::Release);
-        drop(later_turn);
-        assert!(open.shed_oldest_idle(&full), "then the one before it");
         assert!(queued.shedding.load(Ordering::Acquire));
+        queued.shedding.store(false, Ordering::Release);
+        drop(turn);
+        assert!(open.shed_oldest_idle(&full), "then the one after it");
+        assert!(queued_later.shedding.load(Ordering::Acquire));
         assert!(
             !silent.shedding.load(Ordering::Acquire),
             "a new client has a moment to send"
         );
-        queued.shedding.store(false, Ordering::Release);
-        drop(turn);
+        queued_later.shedding.store(false, Ordering::Release);
+        drop(later_turn);
         assert!(!queued.waiting_turn_only(), "its turn came: it stays");
         assert!(!open.shed_oldest_idle(&full));
         std::thread::sleep(FIRST_BYTES_WITHIN + Duration::from_millis(10));

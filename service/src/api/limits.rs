@@ -18,6 +18,7 @@ use axum::extract::{Request, State};
 use axum::http::header;
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
+use http_body_util::BodyExt;
 use std::collections::HashSet;
 use std::sync::Arc;
 use std::time::Duration;
@@ -77,12 +78,36 @@ impl Admission {
         let place = take_place(&self.arriving).await?;
         drop(waiting);
         let (parts, body) = request.into_parts();
-        let deadline = arrival_deadline(declared, self.body_timeout);
-        let bytes = tokio::time::timeout(deadline, axum::body::to_bytes(body, self.max_body))
-            .await
-            .map_err(|_| ApiError::BodyTimeout(deadline))?
-            .map_err(|error| self.body_error(&error))?;
+        let bytes = self.arrived(body, declared).await?;
         Ok((Request::from_parts(parts, Body::from(bytes)), Some(place)))
+    }
+
+    /// The body, read as it arrives: whole within [`arrival_deadline`], and at no moment after
+    /// [`ARRIVAL_GRACE`] behind [`MIN_ARRIVAL_BYTES_PER_S`] (else 408). A chunked body that
+    /// stalled after a byte held its place for the whole body timeout, so that reconnecting
+    /// clients kept others' uploads waiting their turn 30 s at a time (a probe).
+    async fn arrived(&self, body: Body, declared: Option<u64>) -> Result<Vec<u8>, ApiError> {
+        let started = tokio::time::Instant::now();
+        let end = started + arrival_deadline(declared, self.body_timeout);
+        let mut body = http_body_util::Limited::new(body, self.max_body);
+        let mut bytes = Vec::new();
+        loop {
+            let behind = ARRIVAL_GRACE
+                + Duration::from_secs_f64(bytes.len() as f64 / MIN_ARRIVAL_BYTES_PER_S);
+            let until = end.min(started + behind);
+            let frame = tokio::time::timeout_at(until, body.frame())
+                .await
+                .map_err(|_| ApiError::BodyTimeout(until - started))?;
+            match frame {
+                None => return Ok(bytes),
+                Some(Err(error)) => return Err(self.body_error(&*error)),
+                Some(Ok(frame)) => {
+                    if let Ok(data) = frame.into_data() {
+                        bytes.extend_from_slice(&data);
+                    }
+                }
+            }
+        }
     }
 
     /// Why a body could not be read: too large (413), or broken (400).
@@ -98,7 +123,7 @@ impl Admission {
     }
 }
 
-/// The slowest a body of declared length may arrive, after its first [`ARRIVAL_GRACE`].
+/// The slowest a body may arrive, after its first [`ARRIVAL_GRACE`].
 pub const MIN_ARRIVAL_BYTES_PER_S: f64 = 4096.0;
 pub const ARRIVAL_GRACE: Duration = Duration::from_secs(2);
 
