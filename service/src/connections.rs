@@ -171,9 +171,10 @@ impl Open {
     /// Closes the oldest connection that is idle ([`Connection::idle`]), or else the oldest whose
     /// request waits its turn to send a body (the newest first kept none: each upload coming in
     /// was the newest when the next client came, 0 of 40 submissions got through a flood of
-    /// reconnecting stalled uploads, a probe); whether one was chosen. None is while a slot is free, or while another chosen is still closing (or
-    /// finds it may not: then the next look chooses again): one at a time, for one newcomer. A
-    /// closing connection frees its slot before it is unlisted, under this lock.
+    /// reconnecting stalled uploads, a probe); whether one was chosen. None is while a slot is
+    /// free, or while another chosen is still closing (or finds it may not: then the next look
+    /// chooses again): one at a time, for one newcomer. A closing connection frees its slot
+    /// before it is unlisted, under this lock.
     fn shed_oldest_idle(&self, slots: &Semaphore) -> bool {
         let open = self.lock();
         if slots.available_permits() > 0

@@ -3,8 +3,8 @@
 //! The body of an API request whose key is valid arrives before the request takes a slot, under a
 //! bound of its own (as many bodies arriving, or read and waiting for a slot, as there are slots,
 //! and never more than half the connections),
-//! each within `--body-timeout-seconds` from when its turn to arrive came (sooner for a short body
-//! of declared length, at 4 KB/s after 2 s) (408): clients that stall
+//! each within `--body-timeout-seconds` from when its turn to arrive came, and never behind 4 KB/s
+//! after its first 2 s (408): clients that stall
 //! mid-body hold up other uploads for at most that long, and never a request without a body (a
 //! probe, a read). A body the server would refuse without reading (no valid key, no API route, a
 //! declared length over the limit) is not read. An event stream's response starts at once, so the
