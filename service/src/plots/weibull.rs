@@ -43,6 +43,12 @@ impl Plane {
         self.xs.map(t.log10())
     }
 
+    /// Where a failure time `t` at unreliability `f` is drawn, in pixels (`f` held in the range).
+    fn point_at(&self, t: f64, f: f64) -> (f64, f64) {
+        let y = weibull_scale(f).clamp(self.y_lo, self.y_hi);
+        (self.x_of_t(t), self.ys.map(y))
+    }
+
     /// A point of `ln t` and `y`, in pixels.
     fn at_ln(&self, ln_t: f64, y: f64) -> (f64, f64) {
         (self.xs.map(ln_t / std::f64::consts::LN_10), self.ys.map(y))
@@ -395,12 +401,12 @@ fn draw_points(svg: &mut Svg, plane: &Plane, points: &[Point], colour: &str) {
     let r = if points.len() > 200 { 2.2 } else { 3.2 };
     let mut dots = String::new();
     for &(p, f) in points {
-        let y = weibull_scale(f).clamp(y_lo, y_hi);
+        let (x, y) = plane.point_at(p.time, f);
         let _ = write!(
             dots,
             r#"<circle cx="{}" cy="{}" r="{r}" fill="{colour}" fill-opacity="0.85"/>"#,
-            num(plane.x_of_t(p.time)),
-            num(plane.ys.map(y))
+            num(x),
+            num(y)
         );
     }
     if !dots.is_empty() {
@@ -473,8 +479,7 @@ fn empty_corner(plane: &Plane, drawn: &[Drawn], [box_w, box_h]: [f64; 2]) -> [f6
         let points = drawn.iter().flat_map(|d| &d.points);
         points
             .filter(|&&(p, f)| {
-                let x = plane.x_of_t(p.time);
-                let y = (plane.ys).map(weibull_scale(f).clamp(plane.y_lo, plane.y_hi));
+                let (x, y) = plane.point_at(p.time, f);
                 (bx..=bx + box_w).contains(&x) && (by..=by + box_h).contains(&y)
             })
             .count()
