@@ -175,7 +175,7 @@ impl Open {
     /// free, or while another chosen is still closing (or finds it may not: then the next look
     /// chooses again): one at a time, for one newcomer. A closing connection frees its slot
     /// before it is unlisted, under this lock.
-    fn shed_oldest_idle(&self, slots: &Semaphore) -> bool {
+    fn shed_one(&self, slots: &Semaphore) -> bool {
         let open = self.lock();
         if slots.available_permits() > 0
             || open.values().any(|c| c.shedding.load(Ordering::Acquire))
@@ -406,7 +406,7 @@ async fn make_room(
         if let Ok(slot) = Arc::clone(slots).try_acquire_owned() {
             return Some(slot);
         }
-        if open.shed_oldest_idle(slots) {
+        if open.shed_one(slots) {
             metrics::counter!(crate::telemetry::CONNECTIONS_SHED).increment(1);
         }
         tokio::select! {
@@ -597,25 +597,19 @@ mod tests {
         let _later = InProgress::enter(&queued_later);
         let later_turn = RequestConnection(Arc::clone(&queued_later)).waiting_turn();
         flushing.writing.store(true, Ordering::Release);
-        assert!(!open.shed_oldest_idle(&Semaphore::new(1)), "a slot is free");
-        assert!(open.shed_oldest_idle(&full));
+        assert!(!open.shed_one(&Semaphore::new(1)), "a slot is free");
+        assert!(open.shed_one(&full));
         assert!(stalled.shedding.load(Ordering::Acquire));
-        assert!(!open.shed_oldest_idle(&full), "one at a time");
+        assert!(!open.shed_one(&full), "one at a time");
         open.remove(stalled_id);
-        assert!(
-            open.shed_oldest_idle(&full),
-            "the next client gets the next one"
-        );
+        assert!(open.shed_one(&full), "the next client gets the next one");
         assert!(newer.shedding.load(Ordering::Acquire));
         open.remove(newer_id);
-        assert!(
-            open.shed_oldest_idle(&full),
-            "the first upload waiting its turn"
-        );
+        assert!(open.shed_one(&full), "the first upload waiting its turn");
         assert!(queued.shedding.load(Ordering::Acquire));
         queued.shedding.store(false, Ordering::Release);
         drop(turn);
-        assert!(open.shed_oldest_idle(&full), "then the one after it");
+        assert!(open.shed_one(&full), "then the one after it");
         assert!(queued_later.shedding.load(Ordering::Acquire));
         assert!(
             !silent.shedding.load(Ordering::Acquire),
@@ -624,12 +618,12 @@ mod tests {
         queued_later.shedding.store(false, Ordering::Release);
         drop(later_turn);
         assert!(!queued.waiting_turn_only(), "its turn came: it stays");
-        assert!(!open.shed_oldest_idle(&full));
+        assert!(!open.shed_one(&full));
         std::thread::sleep(FIRST_BYTES_WITHIN + Duration::from_millis(10));
-        assert!(open.shed_oldest_idle(&full));
+        assert!(open.shed_one(&full));
         assert!(silent.shedding.load(Ordering::Acquire));
         open.remove(silent_id);
-        assert!(!open.shed_oldest_idle(&full));
+        assert!(!open.shed_one(&full));
         for c in [&unread, &busy, &queued, &queued_later, &flushing] {
             assert!(!c.shedding.load(Ordering::Acquire));
         }
