@@ -3,7 +3,9 @@
 // wear-curve and histogram plots are there, and save screenshots: the jobs page, a job's page, a
 // schedule's trend over a few runs, a job's Weibull plot, two designs compared (through the job
 // page's form: both overlaid plots and the tables) and a job's sensitivity analysis (its
-// section shown, its Sobol' plot and table, hidden on a job without one). Then under load: with 20 active
+// section shown, its Sobol' plot and table, hidden on a job without one); a job submitted through
+// the API joins the open list, a refused job names each field once, and a job deleted while its
+// page is open says so. Then under load: with 20 active
 // jobs and a schedule, every plot of both pages loads within 5 s and a submit through the form is
 // accepted while they run (Chromium opens at most 6 connections per host: the page must not hold
 // one stream per job).
@@ -242,6 +244,32 @@ await step("save dashboard-trend.png", () =>
   page.locator("#schedules-section").screenshot({ path: join(outDir, "dashboard-trend.png") }),
 );
 log(`saved ${join(outDir, "dashboard-trend.png")}`);
+
+// The list follows jobs made elsewhere (the API, another tab, a schedule) through its one stream.
+const outsideJob = await step("submit a job through the API while the jobs page is open", () =>
+  call("POST", "/v1/jobs", { name: "Submitted outside the page", devices: 10, operations: 10, seed: 7 }),
+);
+await step("the job submitted outside the page joins the list and ends there", () =>
+  page.waitForSelector(`#jobs-body tr[data-job-id="${outsideJob.id}"][data-status="succeeded"]`, {
+    timeout: JOB_TIMEOUT_MS,
+  }),
+);
+// A refused job: each field named once, the whole document as "(document)".
+for (const [text, wanted] of [
+  ['{"devices": -1, "operations": 0}', ["/devices", "/operations"]],
+  ["[1]", ["(document)"]],
+]) {
+  await step(`submit ${text} through the form`, async () => {
+    await page.fill("#job-json", text);
+    await page.click("#submit-button");
+    await page.waitForSelector("#submit-errors:not([hidden]) li");
+  });
+  const shown = await page.textContent("#submit-errors");
+  for (const field of wanted) {
+    const times = shown.split(field).length - 1;
+    if (times !== 1) await fail(`the refusal of ${text} names ${field} ${times} times: "${shown}"`);
+  }
+}
 const lifeJob = await step("submit a job with a failure criterion", () =>
   call("POST", "/v1/jobs", {
     name: "Life to 330 J of arc energy",
@@ -434,6 +462,19 @@ await step("save dashboard-sensitivity.png", () =>
   page.locator("#sensitivity-section").screenshot({ path: join(outDir, "dashboard-sensitivity.png") }),
 );
 log(`saved ${join(outDir, "dashboard-sensitivity.png")}`);
+
+// A job deleted while its page is open says so (the page looks every 15 s once the job ended).
+await step(`open ${base}/jobs/${outsideJob.id}`, () => page.goto(`${base}/jobs/${outsideJob.id}`, { waitUntil: "load" }));
+await step("its page says succeeded", () =>
+  page.waitForFunction(() => document.querySelector("#job-status").textContent === "succeeded"),
+);
+await step("delete it through the API", () => call("DELETE", `/v1/jobs/${outsideJob.id}`));
+await step("its page says deleted", () =>
+  page.waitForFunction(() => document.querySelector("#job-status").textContent === "deleted", null, {
+    timeout: 20_000,
+    polling: 250,
+  }),
+);
 
 log(`submitting ${ACTIVE_JOBS} long jobs`);
 const active = [];

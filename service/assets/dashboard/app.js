@@ -58,8 +58,11 @@
     let fallback = "HTTP " + response.status;
     if (response.status === 401) fallback = "This server needs an API key: enter it at the top right.";
     const error = new ApiError(response.status, problem, fallback);
-    if (response.status === 401 && !apiKey()) {
-      error.message = "This server needs an API key: enter it at the top right.";
+    if (response.status === 401) {
+      error.message = apiKey()
+        ? "The server did not accept this API key: check it at the top right."
+        : "This server needs an API key: enter it at the top right.";
+      keyRefused(Boolean(apiKey()));
     }
     return error;
   }
@@ -275,6 +278,12 @@
     };
   }
 
+  /** The key field's note: "not accepted" once the server refused the stored key. */
+  function keyRefused(refused) {
+    const state = $("#api-key-state");
+    if (state && refused) state.textContent = "not accepted";
+  }
+
   function setupKeyField(onChange) {
     const input = $("#api-key");
     const state = $("#api-key-state");
@@ -442,10 +451,16 @@
       liveStream = current;
       live = false;
       let opened = false;
+      let refused = false;
       streamEvents("/v1/events", (name, data) => {
         const entry = data && rows.get(data.id);
-        if (!entry) return false;
-        if (name === "status") {
+        if (!entry) {
+          if (data && typeof data.id === "string" && name !== "deleted") adopt(data.id, name === "status" ? data : null);
+          return false;
+        }
+        if (name === "deleted") {
+          removeRow(data.id);
+        } else if (name === "status") {
           updateRow(data);
         } else if (name === "progress") {
           const progress = { operations_done: data.operations_done, operations_total: data.operations_total };
@@ -458,15 +473,24 @@
         onOpen: () => {
           opened = true;
           live = true;
-          loadJobs(false);
+          // As many rows as were shown: pages loaded with "Load more" stay.
+          loadJobs(false, rows.size);
         },
       })
-        .catch(() => {})
+        .catch((error) => {
+          if (liveStream !== current) return;
+          refused = error.status === 401;
+          if (!refused && !(error.status < 500)) {
+            setAlert($("#jobs-error"), "Live updates stopped (" + error.message + "): trying again every 5 s.");
+          }
+        })
         .finally(() => {
           if (liveStream !== current) return;
           live = false;
           if (!opened && !retry) loadJobs(false);
           schedulePoll();
+          // A refused key is tried again when the key changes, not every 5 s.
+          if (refused) return;
           setTimeout(() => {
             if (liveStream === current) followAll(true);
           }, 5000);
@@ -483,6 +507,36 @@
         el("td", {}, bar),
         el("td", { class: "small nowrap" }, fmtTime(job.created_at)));
       return { row, bar, statusCell, job };
+    }
+
+    // A job the stream tells of that the list lacks: one submitted elsewhere (another tab, the
+    // command line, a schedule) joins the top; one older than the newest row belongs to a later
+    // page. The newest `status` told while it is fetched is the one shown.
+    const adopting = new Map(); // job id -> its latest `status` resource, or null
+    async function adopt(id, resource) {
+      if (adopting.has(id)) {
+        if (resource) adopting.set(id, resource);
+        return;
+      }
+      adopting.set(id, resource);
+      try {
+        const job = resource || (await getJson("/v1/jobs/" + encodeURIComponent(id)));
+        const newest = body.firstElementChild && rows.get(body.firstElementChild.dataset.jobId);
+        if (rows.has(id) || (newest && Date.parse(job.created_at) < Date.parse(newest.job.created_at))) return;
+        addRows([adopting.get(id) || job], true);
+      } catch (_) {
+        // Deleted already, or the server is away: the next load lists what there is.
+      } finally {
+        adopting.delete(id);
+      }
+    }
+
+    function removeRow(id) {
+      const entry = rows.get(id);
+      if (!entry) return;
+      entry.row.remove();
+      rows.delete(id);
+      show($("#jobs-empty"), rows.size === 0);
     }
 
     function updateRow(job) {
@@ -513,16 +567,22 @@
       schedulePoll();
     }
 
-    async function loadJobs(more) {
+    /** The first page (or, `more`, the next one), and further pages until `atLeast` rows show. */
+    async function loadJobs(more, atLeast) {
+      const page = (after) => getJson("/v1/jobs?limit=50" + (after ? "&cursor=" + encodeURIComponent(after) : ""));
       try {
-        const path = "/v1/jobs?limit=50" + (more && cursor ? "&cursor=" + encodeURIComponent(cursor) : "");
-        const list = await getJson(path);
+        let list = await page(more ? cursor : null);
         if (!more) {
           rows.clear();
           body.replaceChildren();
         }
         addRows(list.jobs || [], false);
         cursor = list.next_cursor || null;
+        while (cursor && rows.size < (atLeast || 0)) {
+          list = await page(cursor);
+          addRows(list.jobs || [], false);
+          cursor = list.next_cursor || null;
+        }
         show($("#jobs-more"), Boolean(cursor));
         setAlert($("#jobs-error"), null);
       } catch (error) {
@@ -602,6 +662,7 @@
     $("#jobs-more").addEventListener("click", () => loadJobs(true));
     $("#schedules-refresh").addEventListener("click", () => loadSchedules());
     setupKeyField(() => {
+      setAlert($("#submit-errors"), null);
       followAll();
       loadSchedules();
     });
@@ -715,14 +776,15 @@
   }
 
   /** The problem's detail and each `errors[].pointer: detail`. */
+  /** A refusal: its fields listed once each (a 422's `detail` joins the same list), or its detail. */
   function problemView(error) {
-    const box = el("div", {}, el("strong", {}, error.message || "Request failed"));
     const problem = error.problem;
-    if (problem && Array.isArray(problem.errors) && problem.errors.length) {
-      box.append(el("ul", {}, problem.errors.map((e) =>
-        el("li", {}, el("code", {}, e.pointer || "/"), ": ", e.detail || e.message || ""))));
-    }
-    return box;
+    const errors = problem && Array.isArray(problem.errors) ? problem.errors : [];
+    if (!errors.length) return el("div", {}, el("strong", {}, error.message || "Request failed"));
+    return el("div", {},
+      el("strong", {}, "The server refused the job (" + (problem.title || "HTTP " + error.status) + "):"),
+      el("ul", {}, errors.map((e) =>
+        el("li", {}, el("code", {}, e.pointer || "(document)"), ": ", e.detail || e.message || ""))));
   }
 
   // ---------------------------------------------------------------------------------------------
@@ -804,37 +866,46 @@
       );
     }
 
+    /** One look at the job; false once there is nothing more to look for (gone, or a refused key). */
+    async function look() {
+      try {
+        render(await getJson(base));
+      } catch (error) {
+        if (error.status === 404 || error.status === 401) {
+          showLoadError(error);
+          return false;
+        }
+        // Until the next answer (render clears it): the page is not silently stale.
+        setAlert($("#job-error"), "The server does not answer (" + error.message + "): trying again.");
+      }
+      return true;
+    }
+
     function poll(generation) {
       clearTimeout(pollTimer);
       pollTimer = setTimeout(async () => {
         if (generation !== following) return;
-        try {
-          render(await getJson(base));
-        } catch (error) {
-          if (error.status === 404 || error.status === 401) {
-            showLoadError(error);
-            return;
-          }
-        }
-        if (!finished) poll(generation);
+        if ((await look()) && !finished) poll(generation);
       }, 1000);
     }
 
+    // While the job runs, a look every 5 s beside the stream; once it ended, every 15 s, so that a
+    // job deleted meanwhile does not stay on the page as if it were there.
     function watch(generation) {
       setTimeout(async () => {
-        if (generation !== following || finished) return;
-        try {
-          render(await getJson(base));
-        } catch (_) {
-          // The stream or the next look brings it.
-        }
-        watch(generation);
-      }, 5000);
+        if (generation !== following) return;
+        if (await look()) watch(generation);
+      }, finished ? 15000 : 5000);
     }
 
     function showLoadError(error) {
-      setStatus(error.status === 404 ? "not found" : "unavailable");
-      setAlert($("#job-error"), error.status === 404 ? "No such job (for this API key)." : error.message);
+      const gone = error.status === 404;
+      // A job this page showed and the server no longer has was deleted.
+      setStatus(gone ? (job ? "deleted" : "not found") : "unavailable");
+      if (!gone) setAlert($("#job-error"), error.message);
+      else if (job) setAlert($("#job-error"), "This job was deleted; what the page shows was loaded before.");
+      else setAlert($("#job-error"), "No such job (for this API key).");
+      if (gone) following += 1;
     }
 
     async function start() {
@@ -848,9 +919,10 @@
         showLoadError(error);
         return;
       }
-      if (finished) return;
-      // A slow poll beside the stream, in case a proxy buffers it.
+      // A slow poll beside the stream, in case a proxy buffers it (and, once the job ended, to see
+      // it deleted).
       watch(generation);
+      if (finished) return;
       try {
         const ended = await followEvents(generation);
         if (ended || generation !== following) return;
@@ -1019,7 +1091,8 @@
       show($("#rare-section"), Boolean(rare));
       if (!rare) return;
       const asked = (result.job && result.job.rare_event) || {};
-      const side = asked.below !== undefined ? "below " + fmt(asked.below) : "above " + fmt(asked.above);
+      // The threshold as asked, every digit: rounded it would misstate the question.
+      const side = asked.below !== undefined ? "below " + String(asked.below) : "above " + String(asked.above);
       $("#rare-question").textContent = "P(" + asked.metric + " " + side + ") per device: " + fmt(rare.probability) +
         ", 95 % interval " + fmtInterval(rare.ci95) + (typeof rare.cov === "number" ? ", c.o.v. " + fmt(rare.cov, 2) : "") +
         "; " + rare.method + ", " + fmtCount(rare.evaluations) + " evaluations" +
