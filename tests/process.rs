@@ -281,8 +281,9 @@ fn a_sqlite_file_that_cannot_be_opened_is_named() {
 
 /// A count or a time outside what the server can honour is a bad command line naming the flag,
 /// before anything is created: `--workers 100000` started and logged 108,731 warnings of its
-/// pool in 12 s, `--header-timeout-seconds 0` became 1 ms and cut off every keep-alive, and
-/// `--max-connections 0` became 1 (a probe).
+/// pool in 12 s, `--header-timeout-seconds 0` became 1 ms and cut off every keep-alive,
+/// `--max-connections 0` became 1, and `--lease-seconds 1e20` panicked where 0, -1 and NaN became
+/// half a second (probes).
 #[test]
 fn serve_refuses_counts_and_times_out_of_range_by_name() {
     let dir = temp_dir("flag-ranges");
@@ -296,6 +297,12 @@ fn serve_refuses_counts_and_times_out_of_range_by_name() {
         ("--header-timeout-seconds", "0"),
         ("--body-timeout-seconds", "0"),
         ("--request-timeout-seconds", "NaN"),
+        ("--header-timeout-seconds", "1e-9"),
+        ("--lease-seconds", "99999999999999999999"),
+        ("--lease-seconds", "inf"),
+        ("--lease-seconds", "0"),
+        ("--lease-seconds", "0.25"),
+        ("--lease-seconds", "NaN"),
         ("--max-concurrent-requests", "0"),
         ("--max-connections", "0"),
         ("--max-streams-per-key", "0"),
@@ -481,6 +488,10 @@ fn huge_pages(pid: u32) -> Option<bool> {
 fn a_worker_needs_at_least_one_slot_and_a_known_database_scheme() {
     for (args, message) in [
         (&["worker", "--workers", "0"][..], "--workers"),
+        (
+            &["worker", "--lease-seconds", "1e30"][..],
+            "--lease-seconds",
+        ),
         (
             &["worker", "--database", "mysql://u:secret@h/db"][..],
             "postgres://",

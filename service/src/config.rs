@@ -49,8 +49,10 @@ pub struct WorkerConfig {
     /// a merge encodes half its Result's rows on a second thread, as stores encode beside it.
     #[arg(long, env = "BOUNCEWEAR_COMPUTE_THREADS", value_parser = at_most(1024, 1))]
     pub compute_threads: Option<usize>,
-    /// How long a claimed job stays leased without a heartbeat before another worker may take it.
-    #[arg(long, env = "BOUNCEWEAR_LEASE_SECONDS", default_value_t = 30.0)]
+    /// How long a claimed job stays leased without a heartbeat before another worker may take it
+    /// (from half a second to a year).
+    #[arg(long, env = "BOUNCEWEAR_LEASE_SECONDS", default_value_t = 30.0,
+          value_parser = lease_seconds_flag)]
     pub lease_seconds: f64,
     /// Times a shard may be run again after its run failed (an error of the job itself), each
     /// after a backoff (1 s, doubling, at most a minute); once more and its job fails with the reason.
@@ -72,6 +74,13 @@ pub struct WorkerConfig {
 /// The most seconds any flag's time may be: a year.
 const MAX_SECONDS: f64 = 365.0 * 24.0 * 3600.0;
 
+/// The fewest seconds a flag's time may be: a millisecond (a zero timeout would refuse everything).
+const MIN_SECONDS: f64 = 0.001;
+
+/// The shortest lease: a worker's heartbeat comes every third of one (at most every 500 ms), and
+/// each is a database round trip that must land before the lease runs out.
+const MIN_LEASE_SECONDS: f64 = 0.5;
+
 /// `url` with its user part, if it has one, written `***`: a message or log line shows a server's
 /// or a database's URL (a log collector keeps it), never a password (the remote commands showed
 /// it, found from outside). Whatever comes before the last `@` and after the scheme's `//` goes,
@@ -84,16 +93,27 @@ pub fn shown_url(url: &str) -> String {
     format!("{}***{}", &url[..start], &url[at..])
 }
 
-/// Parses a flag's seconds: a number more than 0 and at most a year (so that NaN, infinities and
+/// Parses a flag's seconds: a number from a millisecond to a year (so that NaN, infinities and
 /// values no `Duration` holds are refused by name, exit 2, rather than panicking or never ending;
-/// a server's `--header-timeout-seconds 0` read as 1 ms cut off every keep-alive).
+/// a server's `--header-timeout-seconds 0` read as 1 ms cut off every keep-alive, and 1e-9 was
+/// raised to 1 ms without a word).
 pub fn seconds_flag(text: &str) -> Result<f64, String> {
+    seconds_within(text, MIN_SECONDS)
+}
+
+/// Parses `--lease-seconds`: from [`MIN_LEASE_SECONDS`] to a year (a probe's 1e20 panicked, and
+/// 0, -1 and NaN became half a second without a word).
+fn lease_seconds_flag(text: &str) -> Result<f64, String> {
+    seconds_within(text, MIN_LEASE_SECONDS)
+}
+
+fn seconds_within(text: &str, least: f64) -> Result<f64, String> {
     let seconds: f64 = text.trim().parse().map_err(|e| format!("{e}"))?;
-    if seconds > 0.0 && seconds <= MAX_SECONDS {
+    if (least..=MAX_SECONDS).contains(&seconds) {
         Ok(seconds)
     } else {
         Err(format!(
-            "must be more than 0 and at most {MAX_SECONDS} seconds (a year)"
+            "must be from {least} to {MAX_SECONDS} seconds (a year)"
         ))
     }
 }
@@ -114,7 +134,7 @@ impl WorkerConfig {
     }
 
     pub fn lease(&self) -> Duration {
-        Duration::from_secs_f64(self.lease_seconds.max(0.5))
+        seconds(self.lease_seconds, MIN_LEASE_SECONDS)
     }
 }
 
@@ -241,24 +261,24 @@ pub struct ServeConfig {
     pub queue: WorkerConfig,
 }
 
-/// Seconds from a flag: at least a millisecond (a zero timeout would refuse everything), at most
-/// a year (later deadlines overflow the clock).
-fn seconds(value: f64) -> Duration {
+/// Seconds from a flag, at least `least` and at most a year (later deadlines overflow the clock):
+/// the parsers refuse what lies outside, and a configuration built in code is held to it too.
+fn seconds(value: f64, least: f64) -> Duration {
     const YEAR: Duration = Duration::from_secs(365 * 86_400);
-    Duration::try_from_secs_f64(value.max(0.001)).map_or(YEAR, |d| d.min(YEAR))
+    Duration::try_from_secs_f64(value.max(least)).map_or(YEAR, |d| d.min(YEAR))
 }
 
 impl ServeConfig {
     pub fn header_timeout(&self) -> Duration {
-        seconds(self.header_timeout_seconds)
+        seconds(self.header_timeout_seconds, MIN_SECONDS)
     }
 
     pub fn body_timeout(&self) -> Duration {
-        seconds(self.body_timeout_seconds)
+        seconds(self.body_timeout_seconds, MIN_SECONDS)
     }
 
     pub fn request_timeout(&self) -> Duration {
-        seconds(self.request_timeout_seconds)
+        seconds(self.request_timeout_seconds, MIN_SECONDS)
     }
 
     /// Requests that may wait for a job's end at once (`wait_s`): a quarter of the request slots,
