@@ -475,6 +475,67 @@ fn a_failure_any_of_several_operations_can_cause_is_estimated_whole() {
     );
 }
 
+/// No arc, `arc_energy_j` below 1e-9, where the supply and the current are scattered: an arc
+/// burns only where `V > V_min` and `I (V - V_min) / V >= I_min` (docs/model.md, "Does it
+/// arc?"), so the event is a low voltage or a low current, two regions meeting in a corner. The
+/// truth is that integral over the voltage's normal, exact to far below the estimates' spread.
+/// Importance sampling around the failing samples' mean alone (between the two regions) was 0.89
+/// and 0.81 of it at 4.6e-4 and 8.7e-6, and its intervals held it in 119 and 81 of 200 seeds
+/// (0 to 199, release build); `auto` takes importance sampling for two inputs.
+#[test]
+fn no_arc_where_either_the_voltage_or_the_current_is_low_holds_the_truth() {
+    for (sigma_v, sigma_i, truth) in [
+        (0.185, 0.78, 4.6e-4..4.65e-4),
+        (0.146, 0.617, 8.6e-6..8.8e-6),
+    ] {
+        no_arc_holds_the_truth(sigma_v, sigma_i, truth);
+    }
+}
+
+fn no_arc_holds_the_truth(sigma_v: f64, sigma_i: f64, expected: std::ops::Range<f64>) {
+    const V_MIN: f64 = 12.0;
+    const I_MIN: f64 = 0.4;
+    let (median_v, median_i) = (24.0, 15.0);
+    // P(V <= V_min) plus, above it, P(I < I_min V / (V - V_min)) over the voltage's normal z.
+    let below = (V_MIN / median_v).ln() / sigma_v;
+    let density = |z: f64| (-z * z / 2.0).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    let low_current = |z: f64| {
+        let v = median_v * (sigma_v * z).exp();
+        let current = I_MIN * v / (v - V_MIN);
+        standard_normal_cdf((current / median_i).ln() / sigma_i) * density(z)
+    };
+    // Simpson's rule from just above the corner (the integrand tends to phi there) to 12 sd.
+    let (a, b, n) = (below, 12.0, 200_000);
+    let h = (b - a) / f64::from(n);
+    let inner: f64 = (1..n)
+        .map(|k| f64::from(if k % 2 == 1 { 4 } else { 2 }) * low_current(a + h * f64::from(k)))
+        .sum();
+    let truth = standard_normal_cdf(below) + h / 3.0 * (density(a) + inner + low_current(b));
+    assert!(expected.contains(&truth), "{truth}");
+    let seeds = 100;
+    let (mut covered, mut ratio) = (0, 0.0);
+    for seed in 0..seeds {
+        let found = report(&job(json!({
+            "devices": 1, "operations": 1, "seed": seed,
+            "scenario": {"circuit": {"supply_voltage_v": median_v, "current_a": median_i}},
+            "scatter": [
+                {"parameter": "supply_voltage_v", "per": "operation",
+                 "distribution": {"kind": "lognormal", "median": median_v, "sigma": sigma_v}},
+                {"parameter": "current_a", "per": "operation",
+                 "distribution": {"kind": "lognormal", "median": median_i, "sigma": sigma_i}}],
+            "metrics": ["arc_energy_j"],
+            "rare_event": {"metric": "arc_energy_j", "below": 1e-9}
+        })));
+        assert_eq!(found.method, "importance");
+        covered += u32::from(found.ci95[0] <= truth && truth <= found.ci95[1]);
+        ratio += found.probability / truth / f64::from(seeds);
+    }
+    // 95 of 100 expected: 88 is 3 standard deviations short. The mean of 100 estimates of cov
+    // about 0.1 is within 3 % by 3 standard errors.
+    assert!(covered >= 88, "{truth}: {covered} of {seeds}");
+    assert!((ratio - 1.0).abs() < 0.03, "{truth}: {ratio}");
+}
+
 /// A threshold no input within 11.5 standard deviations of the median reaches (below
 /// probability 1e-30) is refused before the job runs, naming its field, above and below and for
 /// the life; thresholds far out in the tail but within reach, at 1e-9 and 1e-20, are accepted.

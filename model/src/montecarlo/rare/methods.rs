@@ -78,6 +78,23 @@ pub const LEVEL_PROBABILITY: f64 = 0.1;
 /// Samples per batch of crude Monte Carlo, between checks of its precision.
 pub const CRUDE_BATCH: usize = 10_000;
 
+/// The share of importance samples drawn around the pilot's failing mean; the others are drawn
+/// around one of its failing samples ([`MAX_KERNELS`] of them), chosen uniformly, with
+/// [`KERNEL_SCALE`] times the spread. Chosen on the no-arc domain of a scattered supply and
+/// current (the voltage low, or the current low for its voltage: one bent region with two arms),
+/// at 4.6e-4 and 8.7e-6, 200 seeds each against the exact integral: a fifth of the samples around
+/// the failing samples at the unit spread held the truth in 165 and 138 of 200; half of them at
+/// twice the spread in 191 and 186, within 1 % of it on average. A tail of one region then took
+/// 22 % more evaluations for its target in 20 inputs, 1.6 % in two.
+const AROUND_THE_MEAN: f64 = 0.5;
+
+/// The spread of the normals drawn around a failing sample: wide enough to reach from the
+/// samples the pilot's chains left to the parts of the region between and beyond them.
+const KERNEL_SCALE: f64 = 2.0;
+
+/// The most failing samples of the pilot's last level that importance samples are drawn around.
+const MAX_KERNELS: usize = 50;
+
 /// The fewest importance samples whose weighted mean stands as an estimate: one batch. A budget
 /// that leaves fewer after the pilot run gets the pilot's estimate.
 const MIN_IMPORTANCE_SAMPLES: u64 = SAMPLES_PER_LEVEL as u64;
@@ -111,6 +128,8 @@ enum Stream {
     Importance,
     Crude,
     Seeds,
+    /// Which centre an importance sample is drawn around.
+    Kernel,
 }
 
 fn stream(kind: Stream, replicate: u64, level: u64, index: u64) -> u64 {
@@ -173,10 +192,16 @@ pub enum Method {
     /// Importance sampling around the design point: a first subset simulation run reaches the
     /// failure domain (and gives the tail curve), and the mean of its failing samples is the
     /// centre `u*` (a mean, not one sample: the directions that do not matter average out, which
-    /// keeps the weights sane); then batches of `u* + xi`, `xi` standard normal, each weighed by
-    /// `phi(u) / phi(u - u*) = exp(-u*.xi - |u*|^2 / 2)`, until the estimate's coefficient of
+    /// keeps the weights sane); then batches of `c + xi`, `xi` standard normal, `c` the centre with
+    /// probability 1/2 and else one of up to 50 failing samples of the run's last level, chosen
+    /// uniformly (`xi` then of twice the spread), each weighed by `phi(u) / q(u)`, `q` that
+    /// mixture's density, until the estimate's coefficient of
     /// variation is at most the target or the budget is spent. The interval is the normal one of
-    /// the weighted mean.
+    /// the weighted mean. Around the mean alone, a failure domain of two regions (two inputs that
+    /// each cause the event, the mean between them) was missed in part: low, with intervals that
+    /// held the truth in 62 % of seeds. The failing samples lie in every region the run reached,
+    /// and drawing half the samples around them costs a single region at most twice the
+    /// variance (`q` is at least half the density around the mean).
     Importance,
     /// Crude Monte Carlo: batches of independent inputs until the count beyond the threshold
     /// gives a coefficient of variation at most the target, or the budget is spent; Wilson's
@@ -245,6 +270,9 @@ fn closest_failing(us: &[f64], ys: &[f64], d: usize, threshold: f64) -> Option<V
         .min_by(|a, b| norm2(a).total_cmp(&norm2(b)))
         .map(<[f64]>::to_vec)
 }
+
+/// No kernels: importance sampling around its centre alone.
+static NO_KERNELS: Kernels = Kernels(Vec::new());
 
 /// The mean of the rows of `level` beyond `threshold` (none where no row is).
 fn failing_mean(level: &Level, d: usize, threshold: f64) -> Vec<f64> {
@@ -496,12 +524,91 @@ enum Stage {
     FirstLevel { replicate: u64, started: u64 },
     /// A conditional level of a subset run.
     Level(Box<Descent>),
-    /// Importance sampling's batches around the pilot's failing mean.
+    /// Importance sampling's batches around the pilot's failing mean alone: a state stored by a
+    /// build before the mixture ([`Stage::Mixture`]), which goes on as it started.
     Importance(Box<Weighing>),
     /// Crude Monte Carlo's batches.
     Crude(Box<Counting>),
     /// The estimate was made: no round is left.
     Done,
+    /// Importance sampling's batches around the pilot's failing mean and its failing samples
+    /// (last, so that the states stored before it read as they were written).
+    Mixture(Box<Weighing>, Kernels),
+}
+
+/// The failing samples importance sampling also draws around, `d` values each, in the pilot's
+/// index order.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+struct Kernels(Vec<f64>);
+
+impl Kernels {
+    /// Up to [`MAX_KERNELS`] of `level`'s rows beyond `threshold`, evenly spaced in index order.
+    fn of(level: &Level, d: usize, threshold: f64) -> Self {
+        let failing: Vec<&[f64]> = level
+            .us
+            .chunks(d.max(1))
+            .zip(&level.ys)
+            .filter(|&(_, &y)| y > threshold)
+            .map(|(u, _)| u)
+            .collect();
+        let k = failing.len().min(MAX_KERNELS);
+        Self(
+            (0..k)
+                .flat_map(|i| failing[i * failing.len() / k])
+                .copied()
+                .collect(),
+        )
+    }
+
+    /// Moves sample `index`'s standard normals `u` to the centre it is drawn around: `centre`,
+    /// or one of the kernels, at [`KERNEL_SCALE`] times the spread.
+    fn place(&self, u: &mut [f64], centre: &[f64], seed: u64, index: u64) {
+        let d = centre.len();
+        let k = self.0.len().checked_div(d).unwrap_or(0);
+        let (centre, scale) = if k == 0 {
+            (centre, 1.0)
+        } else {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            rng.set_stream(stream(Stream::Kernel, 0, 0, index));
+            let r: f64 = rng.random();
+            if r < AROUND_THE_MEAN {
+                (centre, 1.0)
+            } else {
+                let j = ((r - AROUND_THE_MEAN) / (1.0 - AROUND_THE_MEAN) * k as f64) as usize;
+                let j = j.min(k - 1);
+                (&self.0[j * d..(j + 1) * d], KERNEL_SCALE)
+            }
+        };
+        for (x, c) in u.iter_mut().zip(centre) {
+            *x = *x * scale + c;
+        }
+    }
+
+    /// `phi(u) / q(u)`: the standard normal density over the mixture's, `q(u) = a phi(u - c) +
+    /// (1 - a) / k sum phi_s(u - c_j)` (`phi_s` the normal of spread `s` = [`KERNEL_SCALE`]),
+    /// each density's ratio to `phi(u)` summed in logarithms (the exponents reach hundreds in
+    /// deep tails): `u.c - |c|^2 / 2` around the mean, `|u|^2 / 2 - |u - c|^2 / (2 s^2) - d ln s`
+    /// around a kernel.
+    fn weight(&self, centre: &[f64], u: &[f64]) -> f64 {
+        let around_mean =
+            u.iter().zip(centre).map(|(x, c)| x * c).sum::<f64>() - norm2(centre) / 2.0;
+        let d = centre.len().max(1);
+        let k = self.0.len() / d;
+        if k == 0 {
+            return (-around_mean).exp();
+        }
+        let s = KERNEL_SCALE;
+        let kernel_share = ((1.0 - AROUND_THE_MEAN) / k as f64).ln() - d as f64 * s.ln();
+        let around_kernel = |c: &[f64]| {
+            let distance: f64 = u.iter().zip(c).map(|(x, c)| (x - c) * (x - c)).sum();
+            kernel_share + norm2(u) / 2.0 - distance / (2.0 * s * s)
+        };
+        let terms: Vec<f64> = std::iter::once(AROUND_THE_MEAN.ln() + around_mean)
+            .chain(self.0.chunks(d).map(around_kernel))
+            .collect();
+        let top = terms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        (-top).exp() / terms.iter().map(|t| (t - top).exp()).sum::<f64>()
+    }
 }
 
 /// A subset run between its levels.
@@ -560,13 +667,13 @@ struct Counting {
 }
 
 /// A round's fresh samples: indices `first..first + n` of the streams of `kind`, moved by
-/// `centre` if given.
+/// `centre` (or, importance sampling's, by one of `kernels`) if given.
 struct Draws<'a> {
     kind: Stream,
     replicate: u64,
     first: u64,
     n: u64,
-    centre: Option<&'a [f64]>,
+    centre: Option<(&'a [f64], &'a Kernels)>,
 }
 
 impl Estimator {
@@ -681,10 +788,20 @@ impl Estimator {
                 SAMPLES_PER_LEVEL as u64,
                 None,
             ),
-            Stage::Importance(w) => {
+            Stage::Importance(w) | Stage::Mixture(w, _) => {
                 let n = left.min(SAMPLES_PER_LEVEL as u64);
                 let first = w.batch * SAMPLES_PER_LEVEL as u64;
-                (Stream::Importance, 0, first, n, Some(w.centre.as_slice()))
+                let kernels = match &self.stage {
+                    Stage::Mixture(_, kernels) => kernels,
+                    _ => &NO_KERNELS,
+                };
+                (
+                    Stream::Importance,
+                    0,
+                    first,
+                    n,
+                    Some((w.centre.as_slice(), kernels)),
+                )
             }
             Stage::Crude(c) => {
                 let n = left.min(CRUDE_BATCH as u64);
@@ -715,8 +832,8 @@ impl Estimator {
                 us.par_chunks_mut(d.max(1)).enumerate().for_each(|(i, u)| {
                     let index = draws.first + start + i as u64;
                     normals(self.seed, stream(draws.kind, draws.replicate, 0, index), u);
-                    for (x, c) in u.iter_mut().zip(draws.centre.unwrap_or_default()) {
-                        *x += c;
+                    if let Some((centre, kernels)) = draws.centre {
+                        kernels.place(u, centre, self.seed, index);
                     }
                 });
                 let ys = responses(state, &us, d)?;
@@ -798,7 +915,8 @@ impl Estimator {
                 descent.index += 1;
                 self.descend(*descent, round)?
             }
-            Stage::Importance(weighing) => self.weigh(*weighing, &round),
+            Stage::Importance(weighing) => self.weigh(*weighing, Kernels::default(), &round),
+            Stage::Mixture(weighing, kernels) => self.weigh(*weighing, kernels, &round),
             Stage::Crude(counting) => self.count(*counting, &round),
             Stage::Done => return Err(Stop::Failed("the estimate is already made".to_owned())),
         };
@@ -941,12 +1059,14 @@ impl Estimator {
             failing_mean: failing_mean(level, d, self.threshold),
             proposals: run.proposals,
         };
-        self.run_finished(finished)
+        let kernels = Kernels::of(level, d, self.threshold);
+        self.run_finished(finished, kernels)
     }
 
     /// A subset run finished: subset simulation combines its runs and stops at its target or its
-    /// budget; importance sampling takes it as its pilot.
-    fn run_finished(&mut self, run: SubsetRun) -> Option<Estimate> {
+    /// budget; importance sampling takes it as its pilot, drawing around its failing mean and its
+    /// failing samples `kernels`.
+    fn run_finished(&mut self, run: SubsetRun, kernels: Kernels) -> Option<Estimate> {
         let left = self.budget.max_evaluations.saturating_sub(self.done);
         self.runs.push(run);
         // Another run only where the budget covers the costliest yet: a run that runs out
@@ -968,7 +1088,7 @@ impl Estimator {
             if left == 0 {
                 return Some(self.weighed(weighing));
             }
-            self.stage = Stage::Importance(Box::new(weighing));
+            self.stage = Stage::Mixture(Box::new(weighing), kernels);
             return None;
         }
         let (_, cov, _) = self.combination();
@@ -1033,16 +1153,14 @@ impl Estimator {
         }
     }
 
-    /// An importance-sampling batch weighed: `phi(u) / phi(u - u*) = exp(-u*.u + |u*|^2 / 2)`
-    /// for each failing sample `u = u* + xi`.
-    fn weigh(&mut self, mut w: Weighing, batch: &Level) -> Option<Estimate> {
+    /// An importance-sampling batch weighed: `phi(u) / q(u)` for each failing sample `u`
+    /// ([`Kernels::weight`]).
+    fn weigh(&mut self, mut w: Weighing, kernels: Kernels, batch: &Level) -> Option<Estimate> {
         let d = self.dimension;
-        let shift = norm2(&w.centre);
         let mut closest = norm2(&w.design_point);
         for (u, &y) in batch.us.chunks(d.max(1)).zip(&batch.ys) {
             if y > self.threshold {
-                let dot: f64 = u.iter().zip(&w.centre).map(|(x, c)| x * c).sum();
-                let weight = (shift / 2.0 - dot).exp();
+                let weight = kernels.weight(&w.centre, u);
                 w.sum += weight;
                 w.sum2 += weight * weight;
                 let norm = norm2(u);
@@ -1058,7 +1176,7 @@ impl Estimator {
         if (w.sum > 0.0 && se / mean <= self.budget.target_cov) || spent {
             return Some(self.weighed(w));
         }
-        self.stage = Stage::Importance(Box::new(w));
+        self.stage = Stage::Mixture(Box::new(w), kernels);
         None
     }
 
@@ -1459,6 +1577,36 @@ mod tests {
         let (covered, cov) = coverage(Method::Importance, 2, 4.753, budget, 100);
         assert!((0.88..=0.99).contains(&covered), "{covered}");
         assert!(cov <= 0.1 + 1e-12, "{cov}");
+    }
+
+    /// Two failure regions meeting in a corner, `max(u1, u2) > b` (`P = 1 - Phi(b)^2`): the shape
+    /// of "no arc" where the voltage or the current is low. Around the failing samples' mean
+    /// alone (in the corner, between the arms) the estimates were low, 0.90 of the truth, and
+    /// their intervals held it in 65 % of 140 seeds of such a job (a probe); drawn around the
+    /// failing samples too, the weights see both arms.
+    #[test]
+    fn importance_sampling_covers_two_regions_meeting_in_a_corner() {
+        let budget = Budget {
+            max_evaluations: 20_000,
+            target_cov: 0.1,
+        };
+        let corner = Response(2, |u: &[f64]| u[0].max(u[1]));
+        for beta in [3.5, 4.5] {
+            let truth = 2.0 * standard_normal_cdf(-beta) - standard_normal_cdf(-beta).powi(2);
+            let seeds = 100;
+            let (mut covered, mut ratio) = (0, 0.0);
+            for seed in 0..seeds {
+                let e = Method::Importance
+                    .estimate(&corner, beta, budget, seed, &Silent)
+                    .unwrap();
+                covered += u64::from(e.ci95[0] <= truth && truth <= e.ci95[1]);
+                ratio += e.probability / truth / seeds as f64;
+            }
+            let covered = covered as f64 / seeds as f64;
+            assert!((0.88..=1.0).contains(&covered), "{beta}: {covered}");
+            // The mean of 100 estimates of cov 0.1: within 3 % of the truth by 3 standard errors.
+            assert!((ratio - 1.0).abs() < 0.03, "{beta}: {ratio}");
+        }
     }
 
     #[test]
