@@ -446,6 +446,39 @@ fn readiness_turns_503_when_the_database_file_is_replaced_or_deleted() {
     );
 }
 
+/// A database that takes no writes (here SQLite's `?mode=ro`, as a file without write permission
+/// or a read-only mount would be, or a PostgreSQL standby) is said to be read-only by `/readyz`
+/// and by a submission's 503: both said "the database is unavailable", naming no cause (a probe).
+/// Reads go on.
+#[test]
+fn a_read_only_database_is_said_to_be_read_only() {
+    let database = temp_db("read-only");
+    let id = TestApp::ran(
+        &database,
+        &json!({"devices": 2, "operations": 3, "seed": 1}),
+    );
+    let server = TestApp::on(&format!("sqlite://{}?mode=ro", database.display()), &[]);
+    let ready = get(&server.url("/readyz"), None);
+    let problem = assert_problem(&ready, 503);
+    assert!(ready.header("retry-after").is_some());
+    assert!(
+        problem["detail"].as_str().unwrap().contains("read-only"),
+        "{problem}"
+    );
+    let submitted = post(
+        &server.url("/v1/jobs"),
+        r#"{"devices": 2, "operations": 3, "seed": 2}"#,
+        None,
+    );
+    let problem = assert_problem(&submitted, 503);
+    assert!(
+        problem["detail"].as_str().unwrap().contains("read-only"),
+        "{problem}"
+    );
+    let job = get(&server.url(&format!("/v1/jobs/{id}")), None);
+    assert_eq!(job.json()["status"], json!("succeeded"));
+}
+
 /// A lock another process holds on the SQLite file (a backup, a tool) makes a submission answer
 /// 503 with Retry-After within the database's wait, not wait for the lock (it waited 49 s for a
 /// lock held 50 s, found from outside); reads go on, and once the lock is gone the submission is

@@ -160,6 +160,14 @@ impl From<StoreError> for ApiError {
                     "the database has no room on its disk; retry once space is freed".to_owned(),
                 )
             }
+            other if other.is_read_only() => {
+                tracing::warn!(error = %other, "the database takes no writes");
+                ApiError::NotReady(
+                    "the database takes no writes: it is read-only (the file's or its directory's \
+                     permissions, a read-only mount, or a PostgreSQL standby); retry once it does"
+                        .to_owned(),
+                )
+            }
             other if other.is_unavailable() => ApiError::Unavailable(Internal(other.to_string())),
             other => ApiError::Internal(Internal(other.to_string())),
         }

@@ -121,6 +121,7 @@ pub enum StoreError {
 /// SQLite's primary result codes this store tells apart: a lock held past `busy_timeout` (or
 /// refused at once), a full disk, and a file that is no database.
 pub(crate) const SQLITE_BUSY: i32 = 5;
+const SQLITE_READONLY: i32 = 8;
 const SQLITE_FULL: i32 = 13;
 pub(crate) const SQLITE_NOTADB: i32 = 26;
 
@@ -181,6 +182,20 @@ impl StoreError {
         match sqlite_code(error.as_ref()) {
             Some(code) => code == SQLITE_FULL,
             None => error.code().as_deref() == Some("53100"),
+        }
+    }
+
+    /// Whether the database takes no writes at all: SQLite's `SQLITE_READONLY` (code 8: a file or
+    /// directory without write permission, a read-only mount or `?mode=ro`), PostgreSQL's
+    /// `read_only_sql_transaction` (SQLSTATE 25006: a standby, or `default_transaction_read_only`).
+    /// The server's state, which an operator mends: said as it is, not as "unavailable".
+    pub fn is_read_only(&self) -> bool {
+        let StoreError::Database(sqlx::Error::Database(error)) = self else {
+            return false;
+        };
+        match sqlite_code(error.as_ref()) {
+            Some(code) => code == SQLITE_READONLY,
+            None => error.code().as_deref() == Some("25006"),
         }
     }
 
