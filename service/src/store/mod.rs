@@ -176,13 +176,7 @@ impl StoreError {
     /// store refuses for want of room ([`StoreError::NoRoom`]), it is the disk's state, not the
     /// job's: what waits for room is written once there is some.
     pub fn is_out_of_space(&self) -> bool {
-        let StoreError::Database(sqlx::Error::Database(error)) = self else {
-            return false;
-        };
-        match sqlite_code(error.as_ref()) {
-            Some(code) => code == SQLITE_FULL,
-            None => error.code().as_deref() == Some("53100"),
-        }
+        self.is_database_error(SQLITE_FULL, "53100")
     }
 
     /// Whether the database takes no writes at all: SQLite's `SQLITE_READONLY` (code 8: a file or
@@ -190,12 +184,18 @@ impl StoreError {
     /// `read_only_sql_transaction` (SQLSTATE 25006: a standby, or `default_transaction_read_only`).
     /// The server's state, which an operator mends: said as it is, not as "unavailable".
     pub fn is_read_only(&self) -> bool {
+        self.is_database_error(SQLITE_READONLY, "25006")
+    }
+
+    /// Whether the database itself reported SQLite's primary result code `sqlite`, or
+    /// PostgreSQL's SQLSTATE `postgres`.
+    fn is_database_error(&self, sqlite: i32, postgres: &str) -> bool {
         let StoreError::Database(sqlx::Error::Database(error)) = self else {
             return false;
         };
         match sqlite_code(error.as_ref()) {
-            Some(code) => code == SQLITE_READONLY,
-            None => error.code().as_deref() == Some("25006"),
+            Some(code) => code == sqlite,
+            None => error.code().as_deref() == Some(postgres),
         }
     }
 
