@@ -807,4 +807,16 @@ fn the_images_health_check_passes_against_a_healthy_server_and_fails_without_one
         .output()
         .unwrap();
     assert_eq!(not_health.status.code(), Some(1), "only a 200 is healthy");
+
+    // A server's address without a path, as the remote commands take it, asks its /healthz (it
+    // answered the dashboard's page, which passed, printing its HTML).
+    for base in [server.url(""), server.url("/")] {
+        let answered = Command::new(BIN)
+            .args(["health", "--url", &base])
+            .output()
+            .unwrap();
+        assert!(answered.status.success(), "{base}: {answered:?}");
+        let health: Value = serde_json::from_slice(&answered.stdout).unwrap();
+        assert_eq!(health["status"], "ok", "{base}");
+    }
 }

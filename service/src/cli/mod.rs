@@ -100,7 +100,7 @@ enum Command {
     /// Ask a running server whether it is healthy: exit 0 when its `/healthz` answers 200, 1 when
     /// not (the Docker image's health check).
     Health {
-        /// The health endpoint.
+        /// The health endpoint; a server's address without a path asks its `/healthz`.
         #[arg(
             long,
             env = "BOUNCEWEAR_HEALTH_URL",
@@ -608,6 +608,7 @@ fn run_command(
 /// The body of a 200 from `url`; anything else is a failure naming what went wrong.
 fn check_health(url: &str, timeout_seconds: f64) -> Result<String, CliError> {
     let agent = remote::agent(timeout_seconds, None);
+    let url = &health_url(url);
     let shown = crate::config::shown_url(url);
     remote::check_base_url(url).map_err(|rule| {
         CliError::Usage(format!("--url (BOUNCEWEAR_HEALTH_URL) {shown}: {rule}"))
@@ -624,6 +625,17 @@ fn check_health(url: &str, timeout_seconds: f64) -> Result<String, CliError> {
     match response.status().as_u16() {
         200 => Ok(body),
         status => Err(unhealthy(format!("{status} {body}"))),
+    }
+}
+
+/// The URL `health` asks: `url`, or a server's address without a path (`http://host:8080`, as
+/// `--url` is given to the remote commands) with `/healthz` added. Asked as it was, such an
+/// address answered the dashboard's page, 200, and the check passed printing its HTML.
+fn health_url(url: &str) -> String {
+    let after_scheme = url.find("://").map_or(0, |at| at + 3);
+    match url[after_scheme..].find('/') {
+        Some(slash) if url[after_scheme + slash..] != *"/" => url.to_owned(),
+        _ => format!("{}/healthz", url.trim_end_matches('/')),
     }
 }
 
