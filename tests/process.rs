@@ -279,6 +279,47 @@ fn a_sqlite_file_that_cannot_be_opened_is_named() {
     }
 }
 
+/// A SQLite file of another application (tables, and no record of bouncewear's migrations) is
+/// refused, naming its tables, and left as it was: the server added its own tables to it.
+#[test]
+fn another_applications_sqlite_file_is_refused_and_left_alone() {
+    use sqlx::{Connection, Executor};
+    let file = temp_dir("foreign").join("app.db");
+    let url = format!("sqlite://{}?mode=rwc", file.display());
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    runtime.block_on(async {
+        let mut connection = sqlx::SqliteConnection::connect(&url).await.unwrap();
+        connection
+            .execute("CREATE TABLE customers (id INTEGER PRIMARY KEY, name TEXT)")
+            .await
+            .unwrap();
+        connection.close().await.unwrap();
+    });
+    let before = std::fs::read(&file).unwrap();
+    for command in [&["serve", "--bind", "127.0.0.1:0"][..], &["worker"]] {
+        let output = Command::new(BIN)
+            .args(command)
+            .arg("--database")
+            .arg(format!("sqlite://{}", file.display()))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(1), "{command:?}: {stderr}");
+        assert!(
+            stderr.contains("(customers)") && stderr.contains("a file of its own"),
+            "{stderr}"
+        );
+    }
+    assert_eq!(
+        std::fs::read(&file).unwrap(),
+        before,
+        "the file is left as it was"
+    );
+}
+
 /// A count or a time outside what the server can honour is a bad command line naming the flag,
 /// before anything is created: `--workers 100000` started and logged 108,731 warnings of its
 /// pool in 12 s, `--header-timeout-seconds 0` became 1 ms and cut off every keep-alive,

@@ -91,6 +91,13 @@ pub enum StoreError {
         "cannot open {file}: {source} (does its directory exist, may this user write there, and is it a SQLite database?)"
     )]
     Unopened { file: String, source: sqlx::Error },
+    /// A SQLite file with tables and no record of bouncewear's migrations: another
+    /// application's, which migrating would fill with bouncewear's tables.
+    #[error(
+        "{file} holds tables that are not bouncewear's ({tables}) and no record of its \
+         migrations: point --database at a file of its own"
+    )]
+    Foreign { file: String, tables: String },
     /// A stored document no longer reads as its type (written by another version, or damaged).
     #[error("stored {what} cannot be read: {detail}")]
     Corrupt { what: &'static str, detail: String },

@@ -84,6 +84,35 @@ async fn migrate(writer: &SqlitePool) -> Result<(), sqlx::migrate::MigrateError>
     }
 }
 
+/// Refuses a file with tables and no record of bouncewear's migrations: an operator's slip
+/// (`--database sqlite://app.db`) added bouncewear's tables to another application's file
+/// without a word (a probe). Read on a connection of its own, read-only, that leaves the file
+/// as it was. Processes opening a new file together see `_sqlx_migrations` before any table the
+/// migrations make: sqlx creates it first. A file that is no database is left to the writer to
+/// name.
+async fn others_tables(options: SqliteConnectOptions, file: &str) -> StoreResult<()> {
+    use sqlx::Connection;
+    let Ok(mut connection) = sqlx::SqliteConnection::connect_with(&options).await else {
+        return Ok(());
+    };
+    let tables: Result<Vec<String>, _> = sqlx::query_scalar(
+        "SELECT name FROM sqlite_master WHERE type = 'table' \
+         AND name NOT LIKE 'sqlite!_%' ESCAPE '!' ORDER BY name",
+    )
+    .fetch_all(&mut connection)
+    .await;
+    let _ = connection.close().await;
+    match tables {
+        Ok(tables) if !tables.is_empty() && !tables.iter().any(|t| t == "_sqlx_migrations") => {
+            Err(StoreError::Foreign {
+                file: file.to_owned(),
+                tables: tables.join(", "),
+            })
+        }
+        _ => Ok(()),
+    }
+}
+
 impl SqliteBackend {
     /// Opens (creating if missing) and migrates the database at `url`.
     #[tracing::instrument(skip_all)]
@@ -91,6 +120,11 @@ impl SqliteBackend {
         let options = SqliteConnectOptions::from_str(url)?;
         if options.get_filename().as_os_str().is_empty() {
             return Err(StoreError::NoFile(url.to_owned()));
+        }
+        let name = options.get_filename().display().to_string();
+        // Read before the writer opens it: WAL mode rewrites the file's header.
+        if options.get_filename().exists() {
+            others_tables(options.clone().read_only(true), &name).await?;
         }
         let options = options
             .create_if_missing(true)
@@ -105,17 +139,15 @@ impl SqliteBackend {
         })
         .await
         .map_err(|source| StoreError::Unopened {
-            file: options.get_filename().display().to_string(),
+            file: name.clone(),
             source,
         })?;
         migrate(&writer).await.map_err(|error| match error {
-            // The first statement reads the file: one that is no database (SQLITE_NOTADB) fails
-            // there.
             sqlx::migrate::MigrateError::Execute(sqlx::Error::Database(source))
                 if sqlite_code(source.as_ref()) == Some(SQLITE_NOTADB) =>
             {
                 StoreError::Unopened {
-                    file: options.get_filename().display().to_string(),
+                    file: name.clone(),
                     source: sqlx::Error::Database(source),
                 }
             }
