@@ -284,21 +284,37 @@ fn a_sqlite_file_that_cannot_be_opened_is_named() {
 #[test]
 fn another_applications_sqlite_file_is_refused_and_left_alone() {
     use sqlx::{Connection, Executor};
-    let file = temp_dir("foreign").join("app.db");
-    let url = format!("sqlite://{}?mode=rwc", file.display());
+    let dir = temp_dir("foreign");
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .unwrap();
-    runtime.block_on(async {
-        let mut connection = sqlx::SqliteConnection::connect(&url).await.unwrap();
-        connection
-            .execute("CREATE TABLE customers (id INTEGER PRIMARY KEY, name TEXT)")
-            .await
-            .unwrap();
-        connection.close().await.unwrap();
-    });
-    let before = std::fs::read(&file).unwrap();
+    // A plain application's file, and one whose own sqlx migrations are recorded.
+    for (name, sql) in [
+        ("app.db", ""),
+        (
+            "sqlx-app.db",
+            "CREATE TABLE _sqlx_migrations (version BIGINT PRIMARY KEY, description TEXT); \
+             INSERT INTO _sqlx_migrations VALUES (20240101, 'init');",
+        ),
+    ] {
+        let file = dir.join(name);
+        let url = format!("sqlite://{}?mode=rwc", file.display());
+        runtime.block_on(async {
+            let mut connection = sqlx::SqliteConnection::connect(&url).await.unwrap();
+            let made = "CREATE TABLE customers (id INTEGER PRIMARY KEY, name TEXT)";
+            connection.execute(made).await.unwrap();
+            if !sql.is_empty() {
+                connection.execute(sql).await.unwrap();
+            }
+            connection.close().await.unwrap();
+        });
+        refused_and_left_alone(&file);
+    }
+}
+
+fn refused_and_left_alone(file: &std::path::Path) {
+    let before = std::fs::read(file).unwrap();
     for command in [&["serve", "--bind", "127.0.0.1:0"][..], &["worker"]] {
         let output = Command::new(BIN)
             .args(command)
@@ -309,12 +325,12 @@ fn another_applications_sqlite_file_is_refused_and_left_alone() {
         let stderr = String::from_utf8_lossy(&output.stderr);
         assert_eq!(output.status.code(), Some(1), "{command:?}: {stderr}");
         assert!(
-            stderr.contains("(customers)") && stderr.contains("a file of its own"),
+            stderr.contains("customers") && stderr.contains("a file of its own"),
             "{stderr}"
         );
     }
     assert_eq!(
-        std::fs::read(&file).unwrap(),
+        std::fs::read(file).unwrap(),
         before,
         "the file is left as it was"
     );
@@ -844,20 +860,23 @@ fn the_images_health_check_passes_against_a_healthy_server_and_fails_without_one
 
     let not_health = Command::new(BIN)
         .args(&check)
-        .env("BOUNCEWEAR_HEALTH_URL", server.url("/no-such-page"))
+        .env("BOUNCEWEAR_HEALTH_URL", server.url("/no-such/healthz"))
         .output()
         .unwrap();
     assert_eq!(not_health.status.code(), Some(1), "only a 200 is healthy");
 
-    // A server's address without a path, as the remote commands take it, asks its /healthz (it
-    // answered the dashboard's page, which passed, printing its HTML).
-    for base in [server.url(""), server.url("/")] {
+    // A server's address, as the remote commands take it, asks its /healthz (it answered the
+    // dashboard's page, which passed, printing its HTML); /readyz is asked as given.
+    for base in [server.url(""), server.url("/"), server.url("/readyz")] {
         let answered = Command::new(BIN)
             .args(["health", "--url", &base])
             .output()
             .unwrap();
         assert!(answered.status.success(), "{base}: {answered:?}");
         let health: Value = serde_json::from_slice(&answered.stdout).unwrap();
-        assert_eq!(health["status"], "ok", "{base}");
+        assert!(
+            ["ok", "ready"].contains(&health["status"].as_str().unwrap()),
+            "{base}"
+        );
     }
 }

@@ -77,8 +77,8 @@ const MAX_SECONDS: f64 = 365.0 * 24.0 * 3600.0;
 /// The fewest seconds a flag's time may be: a millisecond (a zero timeout would refuse everything).
 const MIN_SECONDS: f64 = 0.001;
 
-/// The shortest lease: a worker's heartbeat comes every third of one (at most every 500 ms), and
-/// each is a database round trip that must land before the lease runs out.
+/// The shortest lease: a worker's heartbeat comes every third of one (or every 500 ms, if that
+/// is sooner), and each is a database round trip that must land before the lease runs out.
 const MIN_LEASE_SECONDS: f64 = 0.5;
 
 /// `url` with its user part, if it has one, written `***`: a message or log line shows a server's

@@ -440,6 +440,9 @@
     let pollTimer = null;
     let live = false; // the event stream is open: it brings every change to the rows
     let liveStream = null; // {generation, controller} of the current stream
+    let keyRefused = false; // the server refused the key: nothing is polled until it changes
+    let listed = false; // the first page came since the stream opened: a job not on it is judged
+    const offPage = new Set(); // jobs the stream told of that belong to later pages
 
     // Live rows: one stream for all of the caller's jobs, however many run (a stream per job would
     // take the browser's six connections per host and stall the plots and the form). The rows are
@@ -450,12 +453,16 @@
       const current = { controller: new AbortController() };
       liveStream = current;
       live = false;
+      listed = false;
+      keyRefused = false;
       let opened = false;
       let refused = false;
       streamEvents("/v1/events", (name, data) => {
         const entry = data && rows.get(data.id);
         if (!entry) {
-          if (data && typeof data.id === "string" && name !== "deleted") adopt(data.id, name === "status" ? data : null);
+          // Until the first page has come, it may well hold the job.
+          const told = data && typeof data.id === "string" && name !== "deleted";
+          if (told && listed && !offPage.has(data.id)) adopt(data.id, name === "status" ? data : null);
           return false;
         }
         if (name === "deleted") {
@@ -480,6 +487,7 @@
         .catch((error) => {
           if (liveStream !== current) return;
           refused = error.status === 401;
+          keyRefused = refused;
           if (!refused && !(error.status < 500)) {
             setAlert($("#jobs-error"), "Live updates stopped (" + error.message + "): trying again every 5 s.");
           }
@@ -522,7 +530,11 @@
       try {
         const job = resource || (await getJson("/v1/jobs/" + encodeURIComponent(id)));
         const newest = body.firstElementChild && rows.get(body.firstElementChild.dataset.jobId);
-        if (rows.has(id) || (newest && Date.parse(job.created_at) < Date.parse(newest.job.created_at))) return;
+        if (rows.has(id)) return;
+        if (newest && Date.parse(job.created_at) < Date.parse(newest.job.created_at)) {
+          offPage.add(id); // asked once: its later events are not fetched again
+          return;
+        }
         addRows([adopting.get(id) || job], true);
       } catch (_) {
         // Deleted already, or the server is away: the next load lists what there is.
@@ -574,7 +586,9 @@
         let list = await page(more ? cursor : null);
         if (!more) {
           rows.clear();
+          offPage.clear();
           body.replaceChildren();
+          listed = true;
         }
         addRows(list.jobs || [], false);
         cursor = list.next_cursor || null;
@@ -597,7 +611,7 @@
 
     // Fallback while the event stream is down (a proxy, an error): active jobs are fetched every second.
     function schedulePoll() {
-      if (pollTimer) return;
+      if (pollTimer || keyRefused) return;
       const polled = (e) => ACTIVE.has(e.job.status) && !live;
       if (![...rows.values()].some(polled)) return;
       pollTimer = setTimeout(async () => {
@@ -775,7 +789,6 @@
     loadSchedules();
   }
 
-  /** The problem's detail and each `errors[].pointer: detail`. */
   /** A refusal: its fields listed once each (a 422's `detail` joins the same list), or its detail. */
   function problemView(error) {
     const problem = error.problem;
@@ -912,6 +925,8 @@
       following += 1;
       const generation = following;
       finished = false;
+      // Nothing shown yet under this key: a 404 now is "not found", not "deleted".
+      job = null;
       clearTimeout(pollTimer);
       try {
         render(await getJson(base));

@@ -100,7 +100,8 @@ enum Command {
     /// Ask a running server whether it is healthy: exit 0 when its `/healthz` answers 200, 1 when
     /// not (the Docker image's health check).
     Health {
-        /// The health endpoint; a server's address without a path asks its `/healthz`.
+        /// The health endpoint; a URL whose path ends in neither `/healthz` nor `/readyz` is a
+        /// server's address, and its `/healthz` is asked.
         #[arg(
             long,
             env = "BOUNCEWEAR_HEALTH_URL",
@@ -628,14 +629,16 @@ fn check_health(url: &str, timeout_seconds: f64) -> Result<String, CliError> {
     }
 }
 
-/// The URL `health` asks: `url`, or a server's address without a path (`http://host:8080`, as
-/// `--url` is given to the remote commands) with `/healthz` added. Asked as it was, such an
-/// address answered the dashboard's page, 200, and the check passed printing its HTML.
+/// The URL `health` asks: `url` where its path ends in `/healthz` or `/readyz`, else a server's
+/// address (`http://host:8080`, `http://proxy/bouncewear`, as `--url` is given to the remote
+/// commands) with `/healthz` added. Asked as it was, such an address answered the dashboard's
+/// page, 200, and the check passed printing its HTML.
 fn health_url(url: &str) -> String {
-    let after_scheme = url.find("://").map_or(0, |at| at + 3);
-    match url[after_scheme..].find('/') {
-        Some(slash) if url[after_scheme + slash..] != *"/" => url.to_owned(),
-        _ => format!("{}/healthz", url.trim_end_matches('/')),
+    let path = url.split(['?', '#']).next().unwrap_or_default();
+    if path.ends_with("/healthz") || path.ends_with("/readyz") {
+        url.to_owned()
+    } else {
+        format!("{}/healthz", url.trim_end_matches('/'))
     }
 }
 

@@ -84,7 +84,8 @@ async fn migrate(writer: &SqlitePool) -> Result<(), sqlx::migrate::MigrateError>
     }
 }
 
-/// Refuses a file with tables and no record of bouncewear's migrations: an operator's slip
+/// Refuses a file with tables and no record of bouncewear's migrations (no `_sqlx_migrations`, or
+/// one that records other migrations than bouncewear's first): an operator's slip
 /// (`--database sqlite://app.db`) added bouncewear's tables to another application's file
 /// without a word (a probe). Read on a connection of its own, read-only, that leaves the file
 /// as it was. Processes opening a new file together see `_sqlx_migrations` before any table the
@@ -101,14 +102,21 @@ async fn others_tables(options: SqliteConnectOptions, file: &str) -> StoreResult
     )
     .fetch_all(&mut connection)
     .await;
+    // Another application's sqlx migrations record other versions: ours start with `1 jobs`
+    // (none recorded yet: a process migrating the new file right now).
+    let ours = sqlx::query_scalar(
+        "SELECT COUNT(*) = 0 OR SUM(version = 1 AND description = 'jobs') > 0 \
+         FROM _sqlx_migrations",
+    )
+    .fetch_one(&mut connection)
+    .await
+    .unwrap_or(false);
     let _ = connection.close().await;
     match tables {
-        Ok(tables) if !tables.is_empty() && !tables.iter().any(|t| t == "_sqlx_migrations") => {
-            Err(StoreError::Foreign {
-                file: file.to_owned(),
-                tables: tables.join(", "),
-            })
-        }
+        Ok(tables) if !tables.is_empty() && !ours => Err(StoreError::Foreign {
+            file: file.to_owned(),
+            tables: tables.join(", "),
+        }),
         _ => Ok(()),
     }
 }

@@ -81,11 +81,12 @@ pub const CRUDE_BATCH: usize = 10_000;
 /// The share of importance samples drawn around the pilot's failing mean; the others are drawn
 /// around one of its failing samples ([`MAX_KERNELS`] of them), chosen uniformly, with
 /// [`KERNEL_SCALE`] times the spread. Chosen on the no-arc domain of a scattered supply and
-/// current (the voltage low, or the current low for its voltage: one bent region with two arms),
-/// at 4.6e-4 and 8.7e-6, 200 seeds each against the exact integral: a fifth of the samples around
-/// the failing samples at the unit spread held the truth in 165 and 138 of 200; half of them at
-/// twice the spread in 191 and 186, within 1 % of it on average. A tail of one region then took
-/// 22 % more evaluations for its target in 20 inputs, 1.6 % in two.
+/// current (the voltage low, or the current low for its voltage: one bent region with two arms)
+/// written as a response of two normals, at 4.6e-4 and 8.7e-6, 200 seeds each against the exact
+/// integral: a fifth of the samples around the failing samples at the unit spread held the truth
+/// in 165 and 138 of 200; half of them at twice the spread in 191 and 186, within 1 % of it on
+/// average (the jobs themselves: 180 and 185, docs/manual.md "Rare failures"). A tail of one
+/// region then took 22 % more evaluations for its target in 20 inputs, 1.6 % in two.
 const AROUND_THE_MEAN: f64 = 0.5;
 
 /// The spread of the normals drawn around a failing sample: wide enough to reach from the
@@ -199,9 +200,9 @@ pub enum Method {
     /// variation is at most the target or the budget is spent. The interval is the normal one of
     /// the weighted mean. Around the mean alone, a failure domain of two regions (two inputs that
     /// each cause the event, the mean between them) was missed in part: low, with intervals that
-    /// held the truth in 62 % of seeds. The failing samples lie in every region the run reached,
-    /// and drawing half the samples around them costs a single region at most twice the
-    /// variance (`q` is at least half the density around the mean).
+    /// held the truth in 62 of 100 seeds (`max(u1, u2) > 3.5`). The failing samples lie in every
+    /// region the run reached, and drawing half the samples around them costs a single region at
+    /// most twice the weights' second moment (`q` is at least half the density around the mean).
     Importance,
     /// Crude Monte Carlo: batches of independent inputs until the count beyond the threshold
     /// gives a coefficient of variation at most the target, or the budget is spent; Wilson's
@@ -599,9 +600,10 @@ impl Kernels {
         }
         let s = KERNEL_SCALE;
         let kernel_share = ((1.0 - AROUND_THE_MEAN) / k as f64).ln() - d as f64 * s.ln();
+        let half_norm = norm2(u) / 2.0;
         let around_kernel = |c: &[f64]| {
             let distance: f64 = u.iter().zip(c).map(|(x, c)| (x - c) * (x - c)).sum();
-            kernel_share + norm2(u) / 2.0 - distance / (2.0 * s * s)
+            kernel_share + half_norm - distance / (2.0 * s * s)
         };
         let terms: Vec<f64> = std::iter::once(AROUND_THE_MEAN.ln() + around_mean)
             .chain(self.0.chunks(d).map(around_kernel))
