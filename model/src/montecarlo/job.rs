@@ -939,6 +939,17 @@ fn check_scatter(
             });
             continue;
         }
+        // Drawn per operation it would change nothing: a probe's 20,000 devices all eroded the
+        // same mass, and a rare event on the mass was refused as never reached.
+        if spec.parameter == Parameter::ErosionRate && spec.per == Per::Operation {
+            errors.push(FieldError {
+                pointer: at.child("per").to_string(),
+                detail: "must be \"device\" for erosion_kg_per_j: it enters only the device's \
+                         eroded mass, its own value times its whole arc energy"
+                    .to_owned(),
+            });
+            continue;
+        }
         match Distribution::new(
             &spec.distribution,
             domain(spec.parameter),
@@ -1161,6 +1172,23 @@ mod tests {
             ],
             "{invalid}"
         );
+    }
+
+    /// The erosion rate drawn per operation changed nothing (the eroded mass is the device's own
+    /// rate times its whole arc energy): every device eroded the same mass (a probe). It is
+    /// refused at its `per`; drawn per device it stands.
+    #[test]
+    fn an_erosion_rate_drawn_per_operation_is_refused_at_its_per() {
+        let scatter = |per: &str| {
+            format!(
+                r#"{{"devices": 4, "scatter": [{{"parameter": "erosion_kg_per_j", "per": "{per}",
+                    "distribution": {{"kind": "lognormal", "median": 2e-9, "sigma": 0.3}}}}]}}"#
+            )
+        };
+        let invalid = Job::from_json(&scatter("operation"), || 1).unwrap_err();
+        assert_eq!(invalid.pointers(), ["/scatter/0/per"], "{invalid}");
+        assert!(invalid.to_string().contains("eroded mass"), "{invalid}");
+        assert!(Job::from_json(&scatter("device"), || 1).is_ok());
     }
 
     /// A threshold listed twice, in any spelling, is refused where the job is written: its CSV
