@@ -63,7 +63,8 @@ pub fn level_key(level: f64) -> String {
 /// [`summarize`](super::summarize) on the same groups:
 /// for a level of [`QUANTILES`](super::QUANTILES) the value and interval are those of the summary,
 /// to the bit. A level the data cannot bound (fewer than
-/// [`MIN_TAIL_UNITS`](super::summary::MIN_TAIL_UNITS) independent values beyond it, or one group)
+/// [`MIN_TAIL_UNITS`](super::summary::MIN_TAIL_UNITS) independent units beyond it, devices or
+/// groups, or one group)
 /// has no value, only the reason: its interval would end at the sample's extreme.
 ///
 /// A threshold's probability is exact, `c / n` with its proportion interval

@@ -773,7 +773,7 @@ impl Sketch {
         let negatives = self.negative.sum_keys(0..KEY_END);
         let positives = self.positive.sum_keys(0..KEY_END);
         let k = key(t);
-        let [lo, hi] = [k, k + 1].map(|k| f64::from_bits(u64::from(k) << KEY_SHIFT));
+        let bucket = Self::bucket_of(t);
         if t > 0.0 {
             let below = self.positive.sum_keys(0..k);
             let within = self.positive.sum_keys(k..k + 1);
@@ -781,25 +781,39 @@ impl Sketch {
                 below: negatives + self.zeros + below,
                 within,
                 above: positives - below - within,
-                bucket: [lo, hi.min(f64::MAX)],
+                bucket,
             }
         } else if t < 0.0 {
-            // The negative bucket `k` holds `x` with `|x|` in `[lo, hi)`.
             let above = self.negative.sum_keys(0..k);
             let within = self.negative.sum_keys(k..k + 1);
             Around {
                 below: negatives - above - within,
                 within,
                 above: above + self.zeros + positives,
-                bucket: [-hi.min(f64::MAX), -lo],
+                bucket,
             }
         } else {
             Around {
                 below: negatives,
                 within: 0,
                 above: positives,
-                bucket: [0.0, 0.0],
+                bucket,
             }
+        }
+    }
+
+    /// The value range `[lo, hi]` of the bucket that holds `t` (`[0, 0]` for `t = 0`), as
+    /// [`Self::around`] gives it, without counting: every sketch has the same buckets.
+    pub fn bucket_of(t: f64) -> [f64; 2] {
+        let k = key(t);
+        let [lo, hi] = [k, k + 1].map(|k| f64::from_bits(u64::from(k) << KEY_SHIFT));
+        if t > 0.0 {
+            [lo, hi.min(f64::MAX)]
+        } else if t < 0.0 {
+            // The negative bucket `k` holds `x` with `|x|` in `[lo, hi)`.
+            [-hi.min(f64::MAX), -lo]
+        } else {
+            [0.0, 0.0]
         }
     }
 
