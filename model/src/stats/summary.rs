@@ -887,6 +887,21 @@ mod tests {
             .collect()
     }
 
+    /// `count` groups (no limit), each filled by `fill` from `rng` in turn.
+    fn filled_groups(
+        count: usize,
+        rng: &mut SplitMix,
+        mut fill: impl FnMut(&mut SplitMix, &mut Accumulator),
+    ) -> Vec<Accumulator> {
+        (0..count)
+            .map(|_| {
+                let mut group = Accumulator::new(None);
+                fill(rng, &mut group);
+                group
+            })
+            .collect()
+    }
+
     #[test]
     fn a_level_answered_is_covered_where_a_devices_values_are_alike() {
         // 400 jobs of 64 devices in 32 groups, 20 values a device: 10 plus the device's own
@@ -904,17 +919,12 @@ mod tests {
         let mut answered = [0_u32; 2];
         let mut covered = [0_u32; 2];
         for seed in 0..400 {
-            let mut rng = SplitMix(1000 + seed);
-            let groups: Vec<Accumulator> = (0..32)
-                .map(|_| {
-                    let mut group = Accumulator::new(None);
-                    for _ in 0..2 {
-                        let device = 10.0 + rng.normal();
-                        (0..20).for_each(|_| group.push(device + 0.05 * rng.normal()));
-                    }
-                    group
-                })
-                .collect();
+            let groups = filled_groups(32, &mut SplitMix(1000 + seed), |rng, group| {
+                for _ in 0..2 {
+                    let device = 10.0 + rng.normal();
+                    (0..20).for_each(|_| group.push(device + 0.05 * rng.normal()));
+                }
+            });
             let summary = summarize(&groups, 20);
             for (i, (key, z)) in levels.iter().enumerate() {
                 let quantile = &summary.quantiles[*key];
@@ -941,22 +951,12 @@ mod tests {
         // one), but [min, max] of two values holds a median half the time. Four devices of 2000
         // independent values: every level from p01 to p99 has thousands of values beyond it.
         let mut rng = SplitMix(41);
-        let two: Vec<Accumulator> = (0..2)
-            .map(|_| {
-                let mut group = Accumulator::new(None);
-                group.push(10.0 + rng.normal());
-                group
-            })
-            .collect();
+        let two = filled_groups(2, &mut rng, |rng, group| group.push(10.0 + rng.normal()));
         let reason = summarize(&two, 1).quantiles["p50"].reason.clone().unwrap();
         assert!(reason.contains("in 2 of 2 groups") && reason.contains("with fewer groups"));
-        let four: Vec<Accumulator> = (0..4)
-            .map(|_| {
-                let mut group = Accumulator::new(None);
-                (0..2000).for_each(|_| group.push(10.0 + rng.normal()));
-                group
-            })
-            .collect();
+        let four = filled_groups(4, &mut rng, |rng, group| {
+            (0..2000).for_each(|_| group.push(10.0 + rng.normal()));
+        });
         let summary = summarize(&four, 2000);
         for (key, quantile) in &summary.quantiles {
             assert!(quantile.reason.is_none(), "{key}: {:?}", quantile.reason);
@@ -974,24 +974,17 @@ mod tests {
         let mut answered = 0_u32;
         let mut covered = 0_u32;
         for seed in 0..400 {
-            let mut rng = SplitMix(7000 + seed);
-            let groups: Vec<Accumulator> = (0..32)
-                .map(|_| {
-                    let mut group = Accumulator::new(None);
-                    for _ in 0..40 {
-                        let u = rng.uniform();
-                        let count = match u {
-                            u if u < 0.5 => 7.0,
-                            u if u < 0.8 => 8.0,
-                            u if u < 0.955 => 9.0,
-                            u if u < 0.995 => 10.0,
-                            _ => 11.0,
-                        };
-                        group.push(count);
-                    }
-                    group
-                })
-                .collect();
+            let groups = filled_groups(32, &mut SplitMix(7000 + seed), |rng, group| {
+                for _ in 0..40 {
+                    group.push(match rng.uniform() {
+                        u if u < 0.5 => 7.0,
+                        u if u < 0.8 => 8.0,
+                        u if u < 0.955 => 9.0,
+                        u if u < 0.995 => 10.0,
+                        _ => 11.0,
+                    });
+                }
+            });
             let p95 = &summarize(&groups, 20).quantiles["p95"];
             if p95.reason.is_none() {
                 answered += 1;
