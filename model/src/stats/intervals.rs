@@ -1,4 +1,5 @@
-//! The interval ingredients: Student's t 0.975 quantile (batch-means intervals from few groups),
+//! The interval ingredients: Student's t 0.975 quantile (batch-means intervals from few groups)
+//! and Satterthwaite's degrees of freedom for it,
 //! the Wilson score interval and, for few events, Clopper and Pearson's (proportions).
 
 use super::beta;
@@ -66,6 +67,22 @@ pub fn student_t_975(df: u64) -> f64 {
             z + v * (g1 + v * (g2 + v * (g3 + v * g4)))
         }
     }
+}
+
+/// Satterthwaite's degrees of freedom of a clustered variance `V = c sum_g r_g^2` from `groups`
+/// residuals `r_g`, given `squares = sum_g r_g^2` and `fourths = sum_g r_g^4`: `2 E[V]^2 / Var(V)`
+/// with each group's `Var(r_g^2) = E r_g^4 - (E r_g^2)^2` estimated by `r_g^4 - (squares / G)^2`,
+/// that is `df = 2 / (1/k - 1/G)` with `k = squares^2 / fourths` (Kish's count of the groups that
+/// carry the variance). Groups alike give `G - 1` (the cap: `V` has no more); one group carrying
+/// it all gives 2, where `t` is 4.3 rather than 2.0, because such a `V` is an estimate from one
+/// group however many there are. Rounded down, at least 1; `G - 1` where no residual differs
+/// from 0.
+pub fn satterthwaite_df(squares: f64, fourths: f64, groups: usize) -> u64 {
+    let most = groups.saturating_sub(1).max(1) as f64;
+    // `1/k - 1/G`: 0 where the residuals are alike, NaN where all are 0.
+    let spread = fourths / (squares * squares) - 1.0 / groups as f64;
+    let df = if spread > 0.0 { 2.0 / spread } else { most };
+    df.clamp(1.0, most) as u64
 }
 
 /// Wilson score interval for a proportion `p` observed over an (effective) sample size `n_eff`,
@@ -144,6 +161,65 @@ fn clopper_pearson(events: f64, n: f64) -> [f64; 2] {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    #[test]
+    fn satterthwaite_df_is_the_groups_less_one_when_they_are_alike() {
+        // Equal residuals (k = G): the cap.
+        assert_eq!(satterthwaite_df(32.0, 32.0, 32), 31);
+        // Nothing differs: the cap too, not a division by zero.
+        assert_eq!(satterthwaite_df(0.0, 0.0, 32), 31);
+        assert_eq!(satterthwaite_df(0.0, 0.0, 1), 1);
+    }
+
+    #[test]
+    fn satterthwaite_df_falls_to_two_when_one_group_carries_the_variance() {
+        // One residual of 1, the rest 0: k = 1, df = 2 / (1 - 1/G), just over 2.
+        assert_eq!(satterthwaite_df(1.0, 1.0, 32), 2);
+        // Two groups alike among zeros: k = 2, df = 2 / (1/2 - 1/32) = 4.27.
+        assert_eq!(satterthwaite_df(2.0, 2.0, 32), 4);
+        // Independent normal residuals: E[sum r^4 / (sum r^2)^2] = 3 / (G + 2), so df is about
+        // G (G + 2) / (G - 1), over the cap.
+        let (g, squares) = (32.0, 32.0);
+        let fourths = 3.0 * squares * squares / (g + 2.0);
+        assert_eq!(satterthwaite_df(squares, fourths, 32), 31);
+    }
+
+    #[test]
+    fn satterthwaite_df_never_rises_as_one_group_grows() {
+        let mut last = u64::MAX;
+        for big in [1.0, 1.5, 2.0, 3.0, 5.0, 10.0, 100.0] {
+            let residuals: Vec<f64> = std::iter::once(big).chain([1.0; 15]).collect();
+            let squares: f64 = residuals.iter().map(|r| r * r).sum();
+            let fourths: f64 = residuals.iter().map(|r| r.powi(4)).sum();
+            let df = satterthwaite_df(squares, fourths, residuals.len());
+            assert!(
+                (1..=15).contains(&df) && df <= last,
+                "{big}: {df} after {last}"
+            );
+            last = df;
+        }
+        assert_eq!(last, 2);
+    }
+
+    proptest::proptest! {
+        /// However the residuals fall, the degrees of freedom lie in `1 ..= G - 1`, and groups
+        /// alike (every residual of one size, whatever its sign) give `G - 1`.
+        #[test]
+        fn satterthwaite_df_stays_within_the_groups(
+            residuals in proptest::collection::vec(-1e6_f64..1e6, 2..64),
+            scale in 1e-9_f64..1e9,
+        ) {
+            let g = residuals.len();
+            let squares: f64 = residuals.iter().map(|r| r * r).sum();
+            let fourths: f64 = residuals.iter().map(|r| r.powi(4)).sum();
+            let df = satterthwaite_df(squares, fourths, g);
+            proptest::prop_assert!((1..g as u64).contains(&df), "{df} of {g}");
+            let alike: Vec<f64> = (0..g).map(|i| if i % 2 == 0 { scale } else { -scale }).collect();
+            let squares: f64 = alike.iter().map(|r| r * r).sum();
+            let fourths: f64 = alike.iter().map(|r| r.powi(4)).sum();
+            proptest::prop_assert_eq!(satterthwaite_df(squares, fourths, g), g as u64 - 1);
+        }
+    }
 
     #[test]
     fn t_quantiles_match_known_values() {

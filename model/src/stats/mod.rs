@@ -45,7 +45,7 @@ pub mod threshold;
 
 pub use accumulator::{Accumulator, LaneSums};
 pub use difference::{Difference, Estimate, difference};
-pub use intervals::{Z_975, proportion_interval, student_t_975, wilson_interval};
+pub use intervals::{Z_975, proportion_interval, satterthwaite_df, student_t_975, wilson_interval};
 pub use query::{QueryAnswer, QueryQuantile, level_key, query};
 pub use sketch::{Interpolated, Sketch};
 pub use summary::{Exceedance, HISTOGRAM_BINS, Histogram, QuantileSummary, Summary, summarize};

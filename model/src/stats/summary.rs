@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::QUANTILES;
 use super::accumulator::Accumulator;
-use super::intervals::{proportion_interval, student_t_975};
+use super::intervals::{proportion_interval, satterthwaite_df, student_t_975};
 use super::sketch::Sketch;
 use super::threshold::ThresholdExceedance;
 
@@ -160,9 +160,11 @@ pub struct Summary {
 ///   mean of the group means is the overall mean).
 /// - each quantile's `ci95`: Woodruff's interval for clustered samples. The share of values at or
 ///   below the estimate, `F(value)`, is a mean of indicators, so its clustered variance comes from
-///   the groups' shares as a ratio estimator, `V = G'/(G'-1) sum_g (c_g - F n_g)^2 / n^2` (where the
-///   estimate's bucket alone holds more of the values than `t sqrt(V)`, ties, the greater of that
-///   and the same just below the bucket); the
+///   the groups' shares as a ratio estimator, `V = G'/(G'-1) sum_g r_g^2 / n^2`, `r_g = c_g - F n_g`;
+///   its factor is `t` with Satterthwaite's degrees of freedom from the residuals
+///   ([`satterthwaite_df`]: `G' - 1` where the groups are alike, down to 2 where one group
+///   carries `V`, as in a tail a few devices hold). Where the estimate's bucket alone holds more of
+///   the values than `t sqrt(V)` (ties), the wider of that and the same just below the bucket. The
 ///   interval `q +- t sqrt(V)` in probability is mapped back through the overall quantile function,
 ///   interpolated within buckets and moved outwards by what the density's slope across each end's
 ///   bucket allows ([`super::Sketch::interpolated`]: with 1e8 values a bucket holds hundreds of
@@ -395,34 +397,40 @@ fn woodruff_intervals(
         })
         .collect();
     let n = all.count() as f64;
-    let t = student_t_975(g as u64 - 1);
-    let variance = |probe: usize| {
+    // The share's variance at a probe, and its half-width: `t` with Satterthwaite's degrees of
+    // freedom from the groups' residuals, so that a variance carried by a few groups (a tail a few
+    // devices hold) is taken for the rough estimate it is.
+    let spread = |probe: usize| {
         let share = overall[probe] as f64 / n;
-        let squares: f64 = per_group
+        let (squares, fourths) = per_group
             .iter()
-            .map(|(size, counts)| {
+            .fold((0.0, 0.0), |(s2, s4), (size, counts)| {
                 let residual = counts[probe] as f64 - share * size;
-                residual * residual
-            })
-            .sum();
-        g as f64 / (g as f64 - 1.0) * squares / (n * n)
+                let square = residual * residual;
+                (s2 + square, s4 + square * square)
+            });
+        let variance = g as f64 / (g as f64 - 1.0) * squares / (n * n);
+        let t = student_t_975(satterthwaite_df(squares, fourths, g));
+        (variance, t * variance.sqrt())
     };
-    // The share's variance at the estimate, or where its bucket alone is wider than the interval
+    // The share's spread at the estimate, or where its bucket alone is wider than the interval
     // (ties: a count such as `bounce_count`, whose p95 of 10 has 99.8 % of the values at or
-    // below it and 92.8 % below it), the greater of that and the variance just below the
-    // bucket: there the share at the estimate hardly varies, while the one below it decides
-    // whether the level lies lower.
-    let variances: Vec<f64> = (0..l)
+    // below it and 92.8 % below it), the wider of that and the spread just below the bucket:
+    // there the share at the estimate hardly varies, while the one below it decides whether the
+    // level lies lower.
+    let spreads: Vec<(f64, f64)> = (0..l)
         .map(|i| {
-            let at = variance(i);
+            let at = spread(i);
             let within = (overall[i] - overall[l + i]) as f64 / n;
-            match within > t * at.sqrt() {
-                true => at.max(variance(l + i)),
+            match within > at.1 {
+                true => {
+                    let below = spread(l + i);
+                    if below.1 > at.1 { below } else { at }
+                }
                 false => at,
             }
         })
         .collect();
-    let halves: Vec<f64> = variances.iter().map(|v| t * v.sqrt()).collect();
     // The groups holding values at the bucket or beyond it: above its lower edge for an upper
     // level, at or below its upper edge for a lower one.
     let beyond = levels.iter().enumerate().map(|(i, &q)| {
@@ -436,13 +444,13 @@ fn woodruff_intervals(
     });
     let bounds: Vec<f64> = levels
         .iter()
-        .zip(&halves)
-        .flat_map(|(&q, &half)| [(q - half).clamp(0.0, 1.0), (q + half).clamp(0.0, 1.0)])
+        .zip(&spreads)
+        .flat_map(|(&q, &(_, half))| [(q - half).clamp(0.0, 1.0), (q + half).clamp(0.0, 1.0)])
         .collect();
     let ends = all.sketch().interpolated(&bounds, [all.min(), all.max()]);
     ends.chunks_exact(2)
-        .zip(values.iter().zip(&halves).zip(beyond.zip(variances)))
-        .map(|(end, ((&value, &half), (beyond, variance)))| {
+        .zip(values.iter().zip(spreads).zip(beyond))
+        .map(|(end, ((&value, (variance, half)), beyond))| {
             // No group differs at this level (every value at or below it, say, when the top
             // values share one bucket): the data place the quantile within its bucket, no closer.
             let ci95 = if half == 0.0 {

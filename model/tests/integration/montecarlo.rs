@@ -420,12 +420,7 @@ fn confidence_intervals_cover_the_truth_over_200_seeds() {
     let truth_mean = summarize_job(&reference, &tally, 1.0).operations["total_bounce_s"][0]
         .summary
         .mean;
-    let mut all = Accumulator::new(None);
-    RunGroups::new(&reference, tally)
-        .of("total_bounce_s", 0)
-        .unwrap()
-        .iter()
-        .for_each(|group| all.merge(group));
+    let all = merged(&reference, tally, "total_bounce_s");
     let [truth_p50, truth_p95] = [0.5, 0.95].map(|q| all.sketch().interpolated_quantile(q));
     let seeds: u32 = 200;
     let mut covered = [0u32; 3];
@@ -449,6 +444,63 @@ fn confidence_intervals_cover_the_truth_over_200_seeds() {
         coverage.iter().all(|c| (0.90..=0.99).contains(c)),
         "{coverage:?}"
     );
+}
+
+/// Every value of `metric`'s first bin of a run of `job`, merged.
+fn merged(job: &Job, tally: engine::Tally, metric: &str) -> Accumulator {
+    let mut all = Accumulator::new(None);
+    RunGroups::new(job, tally)
+        .of(metric, 0)
+        .unwrap()
+        .iter()
+        .for_each(|group| all.merge(group));
+    all
+}
+
+/// A mechanical job of 64 devices (hardness scattered 10 % per device, velocity 20 % per
+/// operation), where a few devices' groups carry an extreme quantile's spread: Student's t with
+/// Satterthwaite's degrees of freedom covers it. Over these 400 seeds (the truth from 64,000
+/// devices) the p95 covered 92.8 % and the p99, where answered, 88.9 % of 262 with t for one less
+/// than the groups; now 95.3 % and 93.1 %.
+#[test]
+fn extreme_quantiles_carried_by_few_groups_are_covered() {
+    let mechanical = |devices: u64, seed: u64| {
+        job(json!({
+            "devices": devices, "operations": 50, "bin_operations": 50, "seed": seed,
+            "scenario": {}, "metrics": ["total_bounce_s"],
+            "scatter": [
+                {"parameter": "impact_velocity_m_s", "per": "operation",
+                 "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.06, "min": 0.1}},
+                {"parameter": "dynamic_yield_pressure_pa", "per": "device",
+                 "distribution": {"kind": "normal", "mean": 2e8, "sd": 2e7, "min": 1e8}}
+            ]
+        }))
+    };
+    let reference = mechanical(64_000, 1_000_000);
+    let tally = engine::run(&reference, &Silent, |_| false).unwrap();
+    let all = merged(&reference, tally, "total_bounce_s");
+    let levels = ["p95", "p99"];
+    let truth = [0.95, 0.99].map(|q| all.sketch().interpolated_quantile(q));
+    let (mut answered, mut covered) = ([0_u32; 2], [0_u32; 2]);
+    for seed in 0..400 {
+        let bin = run(&mechanical(64, seed)).operations["total_bounce_s"][0]
+            .summary
+            .clone();
+        for (i, level) in levels.iter().enumerate() {
+            let quantile = &bin.quantiles[*level];
+            if quantile.reason.is_none() {
+                answered[i] += 1;
+                let [lo, hi] = quantile.ci95;
+                covered[i] += u32::from(lo <= truth[i] && truth[i] <= hi);
+            }
+        }
+    }
+    println!("answered {answered:?}, covered {covered:?}");
+    assert!(answered[0] == 400 && answered[1] >= 200, "{answered:?}");
+    for i in 0..2 {
+        let coverage = f64::from(covered[i]) / f64::from(answered[i]);
+        assert!(coverage >= 0.92, "{}: {coverage:.3}", levels[i]);
+    }
 }
 
 #[test]
