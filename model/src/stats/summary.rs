@@ -154,7 +154,7 @@ pub struct Summary {
 ///
 /// Intervals treat each non-empty group as one independent observation (the operations of one
 /// device are correlated, the groups are not); `G'` is the number of non-empty groups and
-/// `t = t_{0.975, G'-1}` ([`student_t_975`]):
+/// `t = t_{0.975, G'-1}` ([`student_t_975`]) but for the quantiles (below):
 /// - `mean_ci95`: batch means, `mean +- t * sd(group means) / sqrt(G')`. Groups hold equal numbers
 ///   of values by construction, so the unweighted spread of their means is the right one (and the
 ///   mean of the group means is the overall mean).
@@ -164,7 +164,8 @@ pub struct Summary {
 ///   its factor is `t` with Satterthwaite's degrees of freedom from the residuals
 ///   ([`satterthwaite_df`]: `G' - 1` where the groups are alike, down to 2 where one group
 ///   carries `V`, as in a tail a few devices hold). Where the estimate's bucket alone holds more of
-///   the values than `t sqrt(V)` (ties), the wider of that and the same just below the bucket. The
+///   the values than `t_{0.975, G'-1} sqrt(V)` (ties), the greater `V` and the wider interval of
+///   that and the same just below the bucket. The
 ///   interval `q +- t sqrt(V)` in probability is mapped back through the overall quantile function,
 ///   interpolated within buckets and moved outwards by what the density's slope across each end's
 ///   bucket allows ([`super::Sketch::interpolated`]: with 1e8 values a bucket holds hundreds of
@@ -415,17 +416,20 @@ fn woodruff_intervals(
     };
     // The share's spread at the estimate, or where its bucket alone is wider than the interval
     // (ties: a count such as `bounce_count`, whose p95 of 10 has 99.8 % of the values at or
-    // below it and 92.8 % below it), the wider of that and the spread just below the bucket:
-    // there the share at the estimate hardly varies, while the one below it decides whether the
-    // level lies lower.
+    // below it and 92.8 % below it), the greater variance and the wider half-width of that and
+    // the spread just below the bucket: there the share at the estimate hardly varies, while the
+    // one below it decides whether the level lies lower.
+    // Whether the bucket is wider than the interval is judged with `t` for `G' - 1`, so that a
+    // level the rule held for ties is held still (its interval only widens).
+    let t = student_t_975(g as u64 - 1);
     let spreads: Vec<(f64, f64)> = (0..l)
         .map(|i| {
             let at = spread(i);
             let within = (overall[i] - overall[l + i]) as f64 / n;
-            match within > at.1 {
+            match within > t * at.0.sqrt() {
                 true => {
                     let below = spread(l + i);
-                    if below.1 > at.1 { below } else { at }
+                    (at.0.max(below.0), at.1.max(below.1))
                 }
                 false => at,
             }

@@ -497,9 +497,10 @@ fn extreme_quantiles_carried_by_few_groups_are_covered() {
     }
     println!("answered {answered:?}, covered {covered:?}");
     assert!(answered[0] == 400 && answered[1] >= 200, "{answered:?}");
-    for i in 0..2 {
+    // The seeds are fixed: with the old t the p95 falls 5 jobs short, the p99 9.
+    for (i, least) in [0.94, 0.92].into_iter().enumerate() {
         let coverage = f64::from(covered[i]) / f64::from(answered[i]);
-        assert!(coverage >= 0.92, "{}: {coverage:.3}", levels[i]);
+        assert!(coverage >= least, "{}: {coverage:.3}", levels[i]);
     }
 }
 
