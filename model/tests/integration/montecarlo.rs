@@ -448,42 +448,42 @@ fn confidence_intervals_cover_the_truth_over_200_seeds() {
 
 /// Every value of `metric`'s first bin of a run of `job`, merged.
 fn merged(job: &Job, tally: engine::Tally, metric: &str) -> Accumulator {
-    let mut all = Accumulator::new(None);
-    RunGroups::new(job, tally)
-        .of(metric, 0)
-        .unwrap()
-        .iter()
-        .for_each(|group| all.merge(group));
+    let groups = RunGroups::new(job, tally);
+    let groups = groups.of(metric, 0).unwrap();
+    let mut all = groups[0].empty_like();
+    groups.iter().for_each(|group| all.merge(group));
     all
 }
 
-/// A mechanical job of 64 devices (hardness scattered 10 % per device, velocity 20 % per
-/// operation), where a few devices' groups carry an extreme quantile's spread: Student's t with
-/// Satterthwaite's degrees of freedom covers it. Over these 400 seeds (the truth from 64,000
-/// devices) the p95 covered 92.8 % and the p99, where answered, 88.9 % of 262 with t for one less
-/// than the groups; now 95.3 % and 93.1 %.
+/// A mechanical job (hardness scattered 10 % per device, velocity 20 % per operation, 50
+/// operations) of `devices`, its `total_bounce_s` alone, with `limits` if any.
+fn mechanical(devices: u64, seed: u64, limits: Value) -> Job {
+    job(json!({
+        "devices": devices, "operations": 50, "bin_operations": 50, "seed": seed,
+        "scenario": {}, "metrics": ["total_bounce_s"], "limits": limits,
+        "scatter": [
+            {"parameter": "impact_velocity_m_s", "per": "operation",
+             "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.06, "min": 0.1}},
+            {"parameter": "dynamic_yield_pressure_pa", "per": "device",
+             "distribution": {"kind": "normal", "mean": 2e8, "sd": 2e7, "min": 1e8}}
+        ]
+    }))
+}
+
+/// The [`mechanical`] job of 64 devices, where a few devices' groups carry an extreme quantile's
+/// spread: Student's t with Satterthwaite's degrees of freedom covers it. Over these 400 seeds
+/// (the truth from 64,000 devices) the p95 covered 92.8 % and the p99, where answered, 88.9 % of
+/// 262 with t for one less than the groups; now 95.3 % and 93.1 %.
 #[test]
 fn extreme_quantiles_carried_by_few_groups_are_covered() {
-    let mechanical = |devices: u64, seed: u64| {
-        job(json!({
-            "devices": devices, "operations": 50, "bin_operations": 50, "seed": seed,
-            "scenario": {}, "metrics": ["total_bounce_s"],
-            "scatter": [
-                {"parameter": "impact_velocity_m_s", "per": "operation",
-                 "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.06, "min": 0.1}},
-                {"parameter": "dynamic_yield_pressure_pa", "per": "device",
-                 "distribution": {"kind": "normal", "mean": 2e8, "sd": 2e7, "min": 1e8}}
-            ]
-        }))
-    };
-    let reference = mechanical(64_000, 1_000_000);
+    let reference = mechanical(64_000, 1_000_000, json!({}));
     let tally = engine::run(&reference, &Silent, |_| false).unwrap();
     let all = merged(&reference, tally, "total_bounce_s");
     let levels = ["p95", "p99"];
     let truth = [0.95, 0.99].map(|q| all.sketch().interpolated_quantile(q));
     let (mut answered, mut covered) = ([0_u32; 2], [0_u32; 2]);
     for seed in 0..400 {
-        let bin = run(&mechanical(64, seed)).operations["total_bounce_s"][0]
+        let bin = run(&mechanical(64, seed, json!({}))).operations["total_bounce_s"][0]
             .summary
             .clone();
         for (i, level) in levels.iter().enumerate() {
@@ -502,6 +502,39 @@ fn extreme_quantiles_carried_by_few_groups_are_covered() {
         let coverage = f64::from(covered[i]) / f64::from(answered[i]);
         assert!(coverage >= least, "{}: {coverage:.3}", levels[i]);
     }
+}
+
+/// The [`mechanical`] job of 64 devices, the probability above the population's p99 counted as it
+/// ran: the events lie in the few devices hard enough, so the groups' spread of their share rests
+/// on a few groups. Over these 400 seeds (the truth counted in 64,000 devices) the interval held
+/// it in 85.0 % with t for one less than the groups; with Satterthwaite's degrees of freedom,
+/// 92.2 %.
+#[test]
+fn an_exceedance_held_by_few_devices_is_covered() {
+    let reference = mechanical(64_000, 1_000_000, json!({}));
+    let tally = engine::run(&reference, &Silent, |_| false).unwrap();
+    let limit = merged(&reference, tally, "total_bounce_s")
+        .sketch()
+        .interpolated_quantile(0.99);
+    let counting = mechanical(64_000, 1_000_001, json!({"total_bounce_s": limit}));
+    let tally = engine::run(&counting, &Silent, |_| false).unwrap();
+    let all = merged(&counting, tally, "total_bounce_s");
+    let truth = all.count_above() as f64 / all.count() as f64;
+    let covered: u32 = (0..400)
+        .map(|seed| {
+            let result = run(&mechanical(64, seed, json!({"total_bounce_s": limit})));
+            let exceedance = result.operations["total_bounce_s"][0]
+                .summary
+                .exceedance
+                .clone()
+                .unwrap();
+            let [lo, hi] = exceedance.ci95;
+            u32::from(lo <= truth && truth <= hi)
+        })
+        .sum();
+    println!("P = {truth:.5}: covered {covered} of 400");
+    // The seeds are fixed: with the old t 340 of them.
+    assert!(covered >= 360, "covered {covered} of 400");
 }
 
 #[test]
