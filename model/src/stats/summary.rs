@@ -154,7 +154,7 @@ pub struct Summary {
 ///
 /// Intervals treat each non-empty group as one independent observation (the operations of one
 /// device are correlated, the groups are not); `G'` is the number of non-empty groups and
-/// `t = t_{0.975, G'-1}` ([`student_t_975`]) but for the quantiles (below):
+/// `t = t_{0.975, G'-1}` ([`student_t_975`]) but for the quantiles and the exceedance (below):
 /// - `mean_ci95`: batch means, `mean +- t * sd(group means) / sqrt(G')`. Groups hold equal numbers
 ///   of values by construction, so the unweighted spread of their means is the right one (and the
 ///   mean of the group means is the overall mean).
