@@ -69,6 +69,17 @@ pub fn student_t_975(df: u64) -> f64 {
     }
 }
 
+/// `(sum r^2, sum r^4)` of the `residuals`, summed in order: what a clustered variance and its
+/// [`satterthwaite_df`] take.
+pub fn squares_and_fourths(residuals: impl IntoIterator<Item = f64>) -> (f64, f64) {
+    residuals
+        .into_iter()
+        .fold((0.0, 0.0), |(squares, fourths), r| {
+            let square = r * r;
+            (squares + square, fourths + square * square)
+        })
+}
+
 /// Satterthwaite's degrees of freedom of a clustered variance `V = c sum_g r_g^2` from `groups`
 /// residuals `r_g`, given `squares = sum_g r_g^2` and `fourths = sum_g r_g^4`: `2 E[V]^2 / Var(V)`
 /// with each group's `Var(r_g^2) = E r_g^4 - (E r_g^2)^2` estimated by `r_g^4 - (squares / G)^2`,
@@ -188,10 +199,8 @@ mod tests {
     fn satterthwaite_df_never_rises_as_one_group_grows() {
         let mut last = u64::MAX;
         for big in [1.0, 1.5, 2.0, 3.0, 5.0, 10.0, 100.0] {
-            let residuals: Vec<f64> = std::iter::once(big).chain([1.0; 15]).collect();
-            let squares: f64 = residuals.iter().map(|r| r * r).sum();
-            let fourths: f64 = residuals.iter().map(|r| r.powi(4)).sum();
-            let df = satterthwaite_df(squares, fourths, residuals.len());
+            let (squares, fourths) = squares_and_fourths(std::iter::once(big).chain([1.0; 15]));
+            let df = satterthwaite_df(squares, fourths, 16);
             assert!(
                 (1..=15).contains(&df) && df <= last,
                 "{big}: {df} after {last}"
@@ -210,13 +219,11 @@ mod tests {
             scale in 1e-9_f64..1e9,
         ) {
             let g = residuals.len();
-            let squares: f64 = residuals.iter().map(|r| r * r).sum();
-            let fourths: f64 = residuals.iter().map(|r| r.powi(4)).sum();
+            let (squares, fourths) = squares_and_fourths(residuals.iter().copied());
             let df = satterthwaite_df(squares, fourths, g);
             proptest::prop_assert!((1..g as u64).contains(&df), "{df} of {g}");
-            let alike: Vec<f64> = (0..g).map(|i| if i % 2 == 0 { scale } else { -scale }).collect();
-            let squares: f64 = alike.iter().map(|r| r * r).sum();
-            let fourths: f64 = alike.iter().map(|r| r.powi(4)).sum();
+            let alike = (0..g).map(|i| if i % 2 == 0 { scale } else { -scale });
+            let (squares, fourths) = squares_and_fourths(alike);
             proptest::prop_assert_eq!(satterthwaite_df(squares, fourths, g), g as u64 - 1);
         }
     }

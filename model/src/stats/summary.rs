@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::QUANTILES;
 use super::accumulator::Accumulator;
-use super::intervals::{proportion_interval, satterthwaite_df, student_t_975};
+use super::intervals::{proportion_interval, satterthwaite_df, squares_and_fourths, student_t_975};
 use super::sketch::Sketch;
 use super::threshold::ThresholdExceedance;
 
@@ -340,10 +340,7 @@ fn design_effect_interval(probability: f64, devices: f64, shares: &[f64]) -> [f6
         return [probability, probability];
     }
     let mean = shares.iter().sum::<f64>() / g as f64;
-    let (squares, fourths) = shares.iter().fold((0.0, 0.0), |(s2, s4), share| {
-        let square = (share - mean) * (share - mean);
-        (s2 + square, s4 + square * square)
-    });
+    let (squares, fourths) = squares_and_fourths(shares.iter().map(|share| share - mean));
     let var = squares / (g as f64 - 1.0) / g as f64;
     let n_eff = if probability == 0.0 || probability == 1.0 || var == 0.0 {
         devices
@@ -414,13 +411,9 @@ fn woodruff_intervals(
     // devices hold) is taken for the rough estimate it is.
     let spread = |probe: usize| {
         let share = overall[probe] as f64 / n;
-        let (squares, fourths) = per_group
-            .iter()
-            .fold((0.0, 0.0), |(s2, s4), (size, counts)| {
-                let residual = counts[probe] as f64 - share * size;
-                let square = residual * residual;
-                (s2 + square, s4 + square * square)
-            });
+        let (squares, fourths) = squares_and_fourths(
+            (per_group.iter()).map(|(size, counts)| counts[probe] as f64 - share * size),
+        );
         let variance = g as f64 / (g as f64 - 1.0) * squares / (n * n);
         let t = student_t_975(satterthwaite_df(squares, fourths, g));
         (variance, t * variance.sqrt())
