@@ -1156,15 +1156,11 @@ impl Estimator {
                 return Some(self.weighed(weighing));
             }
             // The rays only where the budget leaves a batch after them.
-            self.stage = Stage::Rays(Box::new(weighing), kernels);
-            if left < self.ray_points() + MIN_IMPORTANCE_SAMPLES {
-                let Stage::Rays(weighing, kernels) =
-                    std::mem::replace(&mut self.stage, Stage::Done)
-                else {
-                    unreachable!()
-                };
-                self.stage = Stage::Mixture(weighing, kernels);
-            }
+            let weighing = Box::new(weighing);
+            self.stage = match left < self.ray_points() + MIN_IMPORTANCE_SAMPLES {
+                true => Stage::Mixture(weighing, kernels),
+                false => Stage::Rays(weighing, kernels),
+            };
             return None;
         }
         let (_, cov, _) = self.combination();
@@ -1682,11 +1678,6 @@ mod tests {
         assert!(cov <= 0.1 + 1e-12, "{cov}");
     }
 
-    /// Two failure regions meeting in a corner, `max(u1, u2) > b` (`P = 1 - Phi(b)^2`): the shape
-    /// of "no arc" where the voltage or the current is low. Around the failing samples' mean
-    /// alone (in the corner, between the arms) the estimates were low, 0.90 of the truth, and
-    /// their intervals held it in 65 % of 140 seeds of such a job (a probe); drawn around the
-    /// failing samples too, the weights see both arms.
     /// Importance sampling of `P(Y > beta) = truth` over seeds 0-99 (budget 20,000, cov 0.1): at
     /// least 88 of 100 intervals hold the truth (95 expected, 88 is 3 standard deviations short),
     /// and the estimates' mean is within 3 % of it (3 standard errors).
@@ -1708,6 +1699,11 @@ mod tests {
         assert!((ratio - 1.0).abs() < 0.03, "{beta}: {ratio}");
     }
 
+    /// Two failure regions meeting in a corner, `max(u1, u2) > b` (`P = 1 - Phi(b)^2`): the shape
+    /// of "no arc" where the voltage or the current is low. Around the failing samples' mean
+    /// alone (in the corner, between the arms) the estimates were low, 0.90 of the truth, and
+    /// their intervals held it in 65 % of 140 seeds of such a job (a probe); drawn around the
+    /// failing samples too, the weights see both arms.
     #[test]
     fn importance_sampling_covers_two_regions_meeting_in_a_corner() {
         let corner = Response(2, |u: &[f64]| u[0].max(u[1]));
