@@ -133,8 +133,12 @@ fn every_number_of_a_scenario_has_its_one_rule_in_the_document() {
             );
         }
     }
-    let seed = &schemas["JobSpec"]["properties"]["seed"];
-    assert_eq!(seed["maximum"].as_u64(), Some(u64::MAX), "{seed}");
+    // A seed is any u64 wherever it is told: in a job asked for and in the job's resource.
+    for schema in ["JobSpec", "JobResource"] {
+        let seed = &schemas[schema]["properties"]["seed"];
+        assert_eq!(seed["maximum"].as_u64(), Some(u64::MAX), "{schema}: {seed}");
+        assert!(seed["format"].is_null(), "{schema}: {seed}");
+    }
 }
 
 /// A client's `X-Request-Id` is echoed (and logged) when it is an id; one of 9,000 characters,

@@ -200,6 +200,8 @@ fn metric_names() -> (Vec<&'static str>, Vec<&'static str>) {
 fn job_fields() -> Vec<(&'static str, &'static str, Value)> {
     let (operation_metrics, metrics) = metric_names();
     let names = json!({"type": "string", "enum": metrics});
+    // Not `int64`, which the generated schema says of every whole number: a seed goes beyond it.
+    let seed = json!({"minimum": 0, "maximum": u64::MAX, "format": null});
     let statistics: Vec<&str> = std::iter::once("mean")
         .chain(QUANTILES.iter().map(|(name, _)| *name))
         .collect();
@@ -224,13 +226,9 @@ fn job_fields() -> Vec<(&'static str, &'static str, Value)> {
             "bin_operations",
             json!({"minimum": 1, "maximum": MAX_OPERATIONS}),
         ),
-        (
-            "JobSpec",
-            "seed",
-            // Not `int64`, which the generated schema says of every whole number: a seed goes
-            // beyond it.
-            json!({"minimum": 0, "maximum": u64::MAX, "format": null}),
-        ),
+        ("JobSpec", "seed", seed.clone()),
+        // The seed a job runs with, as its resource tells it.
+        ("JobResource", "seed", seed),
         (
             "JobSpec",
             "metrics",
