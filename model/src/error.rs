@@ -2,6 +2,7 @@
 
 use serde::Serialize;
 use serde::de::DeserializeOwned;
+use serde_path_to_error::Segment;
 use std::fmt;
 
 /// A JSON pointer into a submitted document, built one reference token at a time.
@@ -154,7 +155,7 @@ impl fmt::Display for InvalidInput {
 /// serde's derived structs also accept a JSON array of their fields in order; a user who writes
 /// `"circuit": [48, 15]` made a mistake, so arrays are rejected everywhere except at the pointers in
 /// `array_fields` (the document's real lists).
-pub fn from_json<T: DeserializeOwned>(
+pub fn from_json<T: DeserializeOwned + Serialize>(
     text: &str,
     array_fields: &[&str],
 ) -> Result<T, InvalidInput> {
@@ -178,7 +179,8 @@ pub const READ_PAST_BYTES: usize = 4 << 20;
 /// ([`with_faults`]). A fault it cannot leave out (a missing field, an item of a list, the whole
 /// document), or one in an object it left a member out of, ends the reading: the faults so far
 /// are the error. So does one more after the last reading, with a last entry at `""` saying so.
-pub fn read_past_faults<T: DeserializeOwned>(
+/// A name written as an object (`{"exact": null}`) is a fault at the name.
+pub fn read_past_faults<T: DeserializeOwned + Serialize>(
     text: &str,
     array_fields: &[&str],
 ) -> Result<(T, Vec<FieldError>), InvalidInput> {
@@ -192,12 +194,24 @@ pub fn read_past_faults<T: DeserializeOwned>(
     let mut left_out: Vec<(String, String)> = Vec::new();
     loop {
         let error = match serde_path_to_error::deserialize(&value) {
-            Ok(read) => return Ok((read, faults)),
+            Ok(read) => {
+                if let Ok(back) = serde_json::to_value(&read) {
+                    named_as_objects(&value, &back, &Pointer::root(), &mut faults);
+                }
+                return Ok((read, faults));
+            }
             Err(error) => error,
         };
-        let pointer = path_to_pointer(error.path());
-        let at = pointer.to_string();
+        let mut segments: Vec<&Segment> = error.path().iter().collect();
         let detail = error.inner().to_string();
+        let name_as_object = detail.ends_with("expected unit")
+            && matches!(segments.last(), Some(Segment::Enum { .. }));
+        if name_as_object {
+            // `{"closed_form": {}}` where a name is asked: named where the name belongs.
+            segments.pop();
+        }
+        let pointer = path_to_pointer(&segments);
+        let at = pointer.to_string();
         let consequence = match detail
             .strip_prefix("missing field `")
             .and_then(|rest| rest.split_once('`'))
@@ -207,7 +221,12 @@ pub fn read_past_faults<T: DeserializeOwned>(
                 .any(|(object, member)| *object == at && member == field),
             None => left_out.iter().any(|(object, _)| *object == at),
         };
-        if !consequence {
+        if name_as_object {
+            faults.push(FieldError {
+                pointer: at.clone(),
+                detail: NAME_AS_OBJECT.to_owned(),
+            });
+        } else if !consequence {
             faults.extend(invalid_from_serde(pointer, error.inner()).errors);
         }
         let removable = !consequence && !detail.starts_with("missing field");
@@ -223,7 +242,7 @@ pub fn read_past_faults<T: DeserializeOwned>(
             });
             return Err(InvalidInput::new(faults));
         }
-        if !(removable && leave_out(&mut value, error.path())) {
+        if !(removable && leave_out(&mut value, &segments)) {
             return Err(InvalidInput::new(faults));
         }
         let (parent, member) = at.rsplit_once('/').unwrap_or(("", ""));
@@ -236,11 +255,44 @@ fn unescape(token: &str) -> String {
     token.replace("~1", "/").replace("~0", "~")
 }
 
-/// Removes the object member `path` names from `value`; whether there was one to remove (an
+/// A name written as an object: serde reads `{"exact": null}` as `"exact"` (an enum's
+/// one-member form, which no document states) and refuses `{"closed_form": {}}` as `expected
+/// unit`, below a member the document does not have.
+const NAME_AS_OBJECT: &str = "invalid type: object, expected text (one of its names)";
+
+/// Every place where `written` has an object and `read` (the value read from it, written back)
+/// has text: a name given in serde's one-member form, for [`NAME_AS_OBJECT`].
+fn named_as_objects(
+    written: &serde_json::Value,
+    read: &serde_json::Value,
+    at: &Pointer,
+    faults: &mut Vec<FieldError>,
+) {
+    use serde_json::Value;
+    match (written, read) {
+        (Value::Object(_), Value::String(_)) => faults.push(FieldError {
+            pointer: at.to_string(),
+            detail: NAME_AS_OBJECT.to_owned(),
+        }),
+        (Value::Object(written), Value::Object(read)) => {
+            for (name, member) in written {
+                if let Some(back) = read.get(name) {
+                    named_as_objects(member, back, &at.child(name), faults);
+                }
+            }
+        }
+        (Value::Array(written), Value::Array(read)) if written.len() == read.len() => {
+            for (i, (item, back)) in written.iter().zip(read).enumerate() {
+                named_as_objects(item, back, &at.child(i), faults);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// Removes the object member `segments` name from `value`; whether there was one to remove (an
 /// item of a list is kept: removing it would renumber the items after it).
-fn leave_out(value: &mut serde_json::Value, path: &serde_path_to_error::Path) -> bool {
-    use serde_path_to_error::Segment;
-    let segments: Vec<&Segment> = path.iter().collect();
+fn leave_out(value: &mut serde_json::Value, segments: &[&Segment]) -> bool {
     let Some((Segment::Map { key }, parents)) = segments.split_last() else {
         return false;
     };
@@ -324,7 +376,8 @@ pub fn not_utf8(bytes: &[u8], error: &std::str::Utf8Error) -> InvalidInput {
 fn read_strict(text: &str) -> Result<serde_json::Value, InvalidInput> {
     let mut reader = serde_json::Deserializer::from_str(text);
     let Strict(value) = serde_path_to_error::deserialize(&mut reader).map_err(|error| {
-        let (pointer, inner) = (path_to_pointer(error.path()), error.inner());
+        let segments: Vec<&Segment> = error.path().iter().collect();
+        let (pointer, inner) = (path_to_pointer(&segments), error.inner());
         // serde_json calls an overflowing number a syntax error, but the text is JSON: only the
         // value cannot be represented, so it breaks a rule at its field.
         if inner.to_string().starts_with("number out of range") {
@@ -606,7 +659,7 @@ fn invalid_from_serde(pointer: Pointer, error: &serde_json::Error) -> InvalidInp
 fn in_plain_words(message: &str) -> String {
     // A whole number's range here is its type's, the most it can be read as (a seed's whole
     // rule); a field's own rule, where narrower, is said where it is checked.
-    const TYPES: [(&str, &str); 16] = [
+    const TYPES: [(&str, &str); 17] = [
         ("expected f64", "expected a number"),
         ("expected f32", "expected a number"),
         (
@@ -638,6 +691,8 @@ fn in_plain_words(message: &str) -> String {
             "expected one of its names (text)",
         ),
         ("unknown variant", "unknown value"),
+        // A name (an enum's unit variant): text, not serde's one-member object.
+        ("expected string or map", "expected text (one of its names)"),
     ];
     let mut plain = message.to_owned();
     for (rust, json) in TYPES {
@@ -663,9 +718,9 @@ fn in_plain_words(message: &str) -> String {
     plain
 }
 
-fn path_to_pointer(path: &serde_path_to_error::Path) -> Pointer {
-    use serde_path_to_error::Segment;
-    path.iter()
+fn path_to_pointer(segments: &[&Segment]) -> Pointer {
+    segments
+        .iter()
         .fold(Pointer::root(), |pointer, segment| match segment {
             Segment::Seq { index } => pointer.child(index),
             Segment::Map { key } | Segment::Enum { variant: key } => pointer.child(key),
@@ -682,7 +737,7 @@ mod tests {
     /// out for its wrong type is not said missing again.
     #[test]
     fn a_missing_field_beside_an_unknown_member_is_named_too() {
-        #[derive(Debug, serde::Deserialize)]
+        #[derive(Debug, serde::Deserialize, serde::Serialize)]
         #[serde(deny_unknown_fields)]
         #[allow(dead_code, reason = "only read")]
         struct Doc {
@@ -700,12 +755,12 @@ mod tests {
     /// told a user of a type they never wrote.
     #[test]
     fn a_wrong_type_is_told_in_jsons_words() {
-        #[derive(Debug, serde::Deserialize)]
+        #[derive(Debug, serde::Deserialize, serde::Serialize)]
         #[allow(dead_code, reason = "only read")]
         struct Inner {
             x: f64,
         }
-        #[derive(Debug, serde::Deserialize)]
+        #[derive(Debug, serde::Deserialize, serde::Serialize)]
         #[allow(dead_code, reason = "only read")]
         struct Doc {
             count: Option<u64>,
@@ -753,11 +808,75 @@ mod tests {
         }
     }
 
+    /// A name is text: serde also reads an enum's name in its one-member object form
+    /// (`{"exact": null}` was taken as `"exact"`, `{"closed_form": {}}` refused below a member the
+    /// document does not have, and a wrong type was told `expected string or map`). Each is
+    /// named where the name belongs, and read past; a name in its place and an object of
+    /// fields beside it are as before.
+    #[test]
+    fn a_name_is_text_not_an_object() {
+        #[derive(Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+        #[serde(rename_all = "snake_case")]
+        enum Kind {
+            Exact,
+            ClosedForm,
+        }
+        #[derive(Debug, serde::Deserialize, serde::Serialize)]
+        #[serde(deny_unknown_fields)]
+        struct Item {
+            kind: Kind,
+            #[serde(default)]
+            size: u32,
+        }
+        #[derive(Debug, serde::Deserialize, serde::Serialize)]
+        #[serde(deny_unknown_fields)]
+        struct Doc {
+            fidelity: Option<Kind>,
+            #[serde(default)]
+            items: Vec<Item>,
+            count: Option<u64>,
+        }
+        let named = |text: &str| -> Vec<String> {
+            match from_json::<Doc>(text, &["/items"]) {
+                Ok(_) => Vec::new(),
+                Err(invalid) => invalid.errors().iter().map(|e| e.to_string()).collect(),
+            }
+        };
+        let object = "invalid type: object, expected text (one of its names)";
+        assert_eq!(
+            named(r#"{"fidelity": {"exact": null}}"#),
+            [format!("/fidelity: {object}")]
+        );
+        assert_eq!(
+            named(r#"{"fidelity": {"closed_form": {}}, "count": "x"}"#),
+            [
+                r#"/count: invalid type: string "x", expected a whole number from 0 to 18446744073709551615"#
+                    .to_owned(),
+                format!("/fidelity: {object}")
+            ]
+        );
+        assert_eq!(
+            named(r#"{"items": [{"kind": "exact"}, {"kind": {"closed_form": null}, "size": 2}]}"#),
+            [format!("/items/1/kind: {object}")]
+        );
+        assert_eq!(
+            named(r#"{"fidelity": null, "items": [{"kind": 5}]}"#),
+            ["/items/0/kind: invalid type: integer `5`, expected text (one of its names)"]
+        );
+        let read: Doc = from_json(
+            r#"{"fidelity": "closed_form", "items": [{"kind": "exact", "size": 3}]}"#,
+            &["/items"],
+        )
+        .unwrap();
+        assert_eq!(read.fidelity, Some(Kind::ClosedForm));
+        assert_eq!((&read.items[0].kind, read.items[0].size), (&Kind::Exact, 3));
+    }
+
     /// Up to [`MAX_FAULTS`] members are read past in a small document, fewer in a large one, so
     /// that a hostile body costs a few readings at most ([`READ_PAST_BYTES`]).
     #[test]
     fn a_large_document_is_read_past_fewer_faults() {
-        #[derive(Debug, serde::Deserialize)]
+        #[derive(Debug, serde::Deserialize, serde::Serialize)]
         #[serde(deny_unknown_fields)]
         #[allow(dead_code, reason = "only read")]
         struct Doc {

@@ -81,6 +81,48 @@ fn every_field_at_fault_is_named_past_a_wrong_type() {
     }
 }
 
+/// A name is text: serde's one-member object form of an enum's name (`{"exact": null}`) was
+/// taken for the name, in a job, a scenario and a calibration, at every kind of name (a plain
+/// name, a distribution's `kind` and a law's tag).
+#[test]
+fn a_name_written_as_an_object_is_named() {
+    let server = TestApp::start(&temp_db("strict-names"), &[]);
+    let cases = [
+        (
+            "/v1/jobs",
+            r#"{"devices": 2, "operations": 2, "fidelity": {"exact": null}, "seed": "x"}"#,
+            vec!["/seed", "/fidelity"],
+        ),
+        (
+            "/v1/jobs",
+            r#"{"devices": 2, "operations": 2, "sampler": {"lhs": {}},
+                "scatter": [{"parameter": "kappa", "per": {"device": null},
+                             "distribution": {"kind": {"fixed": null}, "value": 0.3}}]}"#,
+            vec!["/sampler", "/scatter/0/distribution/kind", "/scatter/0/per"],
+        ),
+        (
+            "/v1/simulate",
+            r#"{"material": {"wear_law": {"law": {"constant": null}}}}"#,
+            vec!["/material/wear_law/law"],
+        ),
+        (
+            "/v1/jobs",
+            r#"{"devices": 20, "operations": 2, "sensitivity": {"method": {"sobol": null}}}"#,
+            vec!["/sensitivity/method"],
+        ),
+    ];
+    for (path, body, pointers) in cases {
+        assert_eq!(rejected_pointers(&server, path, body), pointers, "{body}");
+    }
+    // The names themselves, as text, are taken.
+    let taken = post(
+        &server.url("/v1/jobs"),
+        r#"{"devices": 2, "operations": 2, "fidelity": "exact", "sampler": "lhs"}"#,
+        None,
+    );
+    assert_eq!(taken.status, 202, "{}", taken.body);
+}
+
 #[test]
 fn a_member_given_twice_is_rejected_naming_it() {
     let server = TestApp::start(&temp_db("strict-duplicate"), &[]);

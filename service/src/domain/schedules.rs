@@ -36,7 +36,7 @@ pub struct CatchUp {
 }
 
 /// A schedule as a client writes it.
-#[derive(Debug, Deserialize, ToSchema)]
+#[derive(Debug, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ScheduleSpec {
     /// A label for the schedule and its jobs (1 to 200 characters, not only white space).
