@@ -432,7 +432,7 @@ impl Distribution {
         {
             faults.within_magnitude(distribution, spec, domain);
             if domain.lower >= 0.0 {
-                faults.above_least_magnitude(distribution, spec);
+                faults.above_least_magnitude(distribution, spec, domain);
             }
             if faults.errors.is_empty() && domain.lower >= 0.0 {
                 faults.reaches_least_magnitude(distribution, spec);
@@ -775,7 +775,12 @@ impl Faults<'_> {
     /// from there, and, without a `min`, a lognormal's value at `-MAX_SCORE` and a Weibull's scale.
     /// The lower tail of one from 0 that reaches above (a uniform's first draws above 0, a
     /// Weibull's tail) is left to its draws (docs/model.md section 9).
-    fn above_least_magnitude(&mut self, distribution: &Distribution, spec: &DistributionSpec) {
+    fn above_least_magnitude(
+        &mut self,
+        distribution: &Distribution,
+        spec: &DistributionSpec,
+        domain: Domain,
+    ) {
         let tiny = |value: f64| value > 0.0 && value < MIN_MAGNITUDE;
         let (min, _) = spec.bounds();
         let (field, lowest, reached) = match (spec, min) {
@@ -798,7 +803,11 @@ impl Faults<'_> {
                 -MAX_SCORE
             )
         } else {
-            format!("must be 0 or at least {MIN_MAGNITUDE:e} (the supported range), got {lowest:e}")
+            // 0 only where the parameter takes it: a positive one's 0 is refused as such.
+            let zero = if domain.inclusive { "0 or " } else { "" };
+            format!(
+                "must be {zero}at least {MIN_MAGNITUDE:e} (the supported range), got {lowest:e}"
+            )
         };
         self.fail(field, detail);
     }
@@ -1320,6 +1329,22 @@ mod tests {
                 .starts_with("a normal(mean 1e-300, sd 1e-301) reaches below 0"),
             "{told:?}"
         );
+        // The rule told is the parameter's own: 0 only where it takes 0 (an HTTP probe found a
+        // positive parameter's 1e-31 told "must be 0 or at least 1e-30", and its 0 refused).
+        for (domain, rule) in [
+            (
+                positive,
+                "must be at least 1e-30 (the supported range), got 1e-31",
+            ),
+            (
+                non_negative,
+                "must be 0 or at least 1e-30 (the supported range), got 1e-31",
+            ),
+        ] {
+            let fixed = parse(r#"{"kind":"fixed","value":1e-31}"#);
+            let told = Distribution::new(&fixed, domain, &Pointer::root()).unwrap_err();
+            assert_eq!(told[0].detail, rule);
+        }
         for (json, domain) in [
             (r#"{"kind":"fixed","value":0}"#, non_negative),
             (r#"{"kind":"fixed","value":1e-30}"#, positive),
