@@ -162,10 +162,12 @@ fn reconnecting_stalled_clients_beyond_the_connection_limit_delay_no_one() {
         reconnects > 300,
         "the stalled clients were cut off and came back"
     );
-    // Without shedding, a health check waits for stalled clients' header timeouts (30 s); the
-    // bound leaves room for two busy cores shared with other tests (alone: under 0.1 s).
+    // Without shedding, a health check waits for stalled clients' header timeouts (30 s, several
+    // rounds of them behind 300 clients); the bound leaves room for two busy cores shared with
+    // other tests (alone: under 0.1 s; beside the whole suite once over 10 s, the check's
+    // connection queued in the backlog behind the reconnecting clients, accepted one per close).
     assert!(
-        slowest < Duration::from_secs(10),
+        slowest < Duration::from_secs(25),
         "a health check waited {slowest:?} behind stalled clients"
     );
 }
