@@ -210,8 +210,11 @@ pub enum Method {
     /// weights' second moment (`q` is at least half the density around the mean).
     Importance,
     /// Crude Monte Carlo: batches of independent inputs until the count beyond the threshold
-    /// gives a coefficient of variation at most the target, or the budget is spent; Wilson's
-    /// interval (Clopper and Pearson's below 100 hits: [`crate::stats::proportion_interval`]). The tail curve's points before the last are read from the first batch.
+    /// reaches `1 / target_cov^2` (a coefficient of variation at most the target), or the budget
+    /// is spent; the estimate corrected for stopping on a lucky batch (`stopped_share`), Wilson's
+    /// interval from the count (Clopper and Pearson's below 100 hits:
+    /// [`crate::stats::proportion_interval`]). The tail curve's points before the last are placed
+    /// by the first batch.
     Crude,
 }
 
@@ -249,6 +252,50 @@ fn weighted_mean(sum: f64, sum2: f64, n: u64) -> (f64, f64) {
 /// Crude Monte Carlo's coefficient of variation at `p` over `n` samples.
 fn binomial_cov(p: f64, n: u64) -> f64 {
     ((1.0 - p) / (n as f64 * p)).sqrt()
+}
+
+/// The hits crude Monte Carlo counts before it stops at `target_cov`: `1 / target_cov^2`, at
+/// which the binomial's coefficient of variation, `sqrt((1 - p) / hits)`, is at most the target.
+fn hits_needed(target_cov: f64) -> u64 {
+    (1.0 / (target_cov * target_cov)).ceil() as u64
+}
+
+/// Crude Monte Carlo's estimate where it stopped after the first batch whose hits reached
+/// `needed` (or at its budget): `hits` of `samples`, `last` of them in the last batch.
+///
+/// The share `hits / samples` reads high, since a run stops early on a lucky batch (measured from
+/// outside with the old rule, stopping at the estimated cov: 1.024 of the truth at P = 1e-2 and a
+/// cov of 0.1, 1.054 at 1.5e-3 and 0.25, 400 seeds each). This is the share of hits among the
+/// samples before the last batch, expected given the hits and that those samples had not reached
+/// `needed`: the Rao-Blackwell estimate from the first sample's indicator, unbiased whatever the
+/// stopping. Given the hits, the ones before the last batch, `s`, are hypergeometric, held below
+/// `needed`; where that bound does not bite (the budget stopped the run, or it stopped after its
+/// first batch) this is `hits / samples` itself.
+fn stopped_share(hits: u64, samples: u64, last: u64, needed: u64) -> f64 {
+    let before = samples - last;
+    let share = hits as f64 / samples as f64;
+    let (lo, hi) = (
+        hits.saturating_sub(last),
+        hits.min(before).min(needed.max(1) - 1),
+    );
+    if before == 0 || hits < needed || lo > hi {
+        return share;
+    }
+    // ln C(n, k) = -ln(n + 1) - ln B(k + 1, n - k + 1), exact for huge `n`.
+    let ln_choose = |n: u64, k: u64| {
+        -((n + 1) as f64).ln() - crate::stats::beta::ln_beta((k + 1) as f64, (n - k + 1) as f64)
+    };
+    let ln_weights: Vec<f64> = (lo..=hi)
+        .map(|s| ln_choose(before, s) + ln_choose(last, hits - s))
+        .collect();
+    let top = ln_weights.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (mut total, mut held) = (0.0, 0.0);
+    for (s, ln_weight) in (lo..=hi).zip(&ln_weights) {
+        let weight = (ln_weight - top).exp();
+        total += weight;
+        held += weight * s as f64;
+    }
+    held / total / before as f64
 }
 
 /// The responses at the rows of `us` (`d` values each), in row order, on the rayon pool.
@@ -1353,9 +1400,8 @@ impl Estimator {
         {
             c.design_point = Some(closest);
         }
-        let met = c.hits > 0
-            && binomial_cov(c.hits as f64 / c.samples as f64, c.samples) <= self.budget.target_cov;
-        if !met && self.done < self.budget.max_evaluations {
+        let needed = hits_needed(self.budget.target_cov);
+        if c.hits < needed && self.done < self.budget.max_evaluations {
             self.stage = Stage::Crude(Box::new(c));
             return None;
         }
@@ -1366,11 +1412,13 @@ impl Estimator {
                 point.1 = share(count);
             }
         }
-        let probability = share(c.hits);
+        let probability = stopped_share(c.hits, c.samples, n as u64, needed);
+        // The interval from the count, as ever; it holds the estimate, a little below the share.
+        let [lo, hi] = proportion_interval(share(c.hits), c.samples as f64, Z_975);
         c.tail.push((self.threshold, probability));
         Some(Estimate {
             probability,
-            ci95: proportion_interval(probability, c.samples as f64, Z_975),
+            ci95: [lo.min(probability), hi.max(probability)],
             cov: (c.hits > 0).then(|| binomial_cov(probability, c.samples)),
             evaluations: self.done,
             design_point: c.design_point,
@@ -1566,6 +1614,7 @@ mod tests {
     use super::*;
     use crate::montecarlo::Silent;
     use crate::montecarlo::distribution::standard_normal_cdf;
+    use approx::assert_relative_eq;
 
     /// `Y = a.u / |a|`: `P(Y > b) = Phi(-b)` in any dimension.
     struct Linear {
@@ -1794,6 +1843,75 @@ mod tests {
         assert_eq!(estimate.evaluations, CRUDE_BATCH as u64);
         let truth = standard_normal_cdf(-1.2816);
         assert!(estimate.ci95[0] <= truth && truth <= estimate.ci95[1]);
+    }
+
+    /// A crude run's estimate is unbiased whatever its stopping: its expectation over every way
+    /// a run can go (batches of `m` samples, stopping once the hits reach `needed` or after
+    /// `batches`), summed exactly, is `p` to 1e-12, where the plain share's reads high.
+    #[test]
+    fn a_stopped_crude_estimate_is_unbiased_exactly() {
+        let choose = |n: u64, k: u64| (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64);
+        let binomial = |n: u64, k: u64, p: f64| {
+            choose(n, k) * p.powi(k as i32) * (1.0 - p).powi((n - k) as i32)
+        };
+        for (m, needed, batches, p) in [
+            (5, 3, 6, 0.1),
+            (10, 4, 5, 0.3),
+            (7, 1, 4, 0.05),
+            (20, 12, 4, 0.2),
+        ] {
+            // The chance that the run goes on with `s` hits after the batches so far.
+            let mut going = vec![1.0];
+            let (mut stopped, mut mean, mut plain) = (0.0, 0.0, 0.0);
+            for b in 1..=batches {
+                let mut next = vec![0.0; needed as usize];
+                for (s, &chance) in going.iter().enumerate() {
+                    for t in 0..=m {
+                        let q = chance * binomial(m, t, p);
+                        let hits = s as u64 + t;
+                        if hits >= needed || b == batches {
+                            stopped += q;
+                            mean += q * stopped_share(hits, b * m, m, needed);
+                            plain += q * hits as f64 / (b * m) as f64;
+                        } else {
+                            next[hits as usize] += q;
+                        }
+                    }
+                }
+                going = next;
+            }
+            assert_relative_eq!(stopped, 1.0, max_relative = 1e-12);
+            assert_relative_eq!(mean, p, max_relative = 1e-12);
+            assert!(plain > 1.01 * p, "{m} {needed} {batches} {p}: {plain}");
+        }
+    }
+
+    /// Through the method itself, over 1000 seeds at P = 1e-2 and a cov of 0.1 (runs of 10,000
+    /// to 20,000 samples): the estimates average the truth within four standard errors (the old
+    /// rule, stopping at the estimated cov, read 1.024 of it from outside, 6 standard errors off).
+    #[test]
+    fn crude_estimates_average_the_truth() {
+        let state = Linear::new(3);
+        let budget = Budget {
+            max_evaluations: 1_000_000,
+            target_cov: 0.1,
+        };
+        let beta = 2.326_347_874_040_841;
+        let truth = standard_normal_cdf(-beta);
+        let ratios: Vec<f64> = (0..1000)
+            .map(|seed| {
+                let estimate = Method::Crude
+                    .estimate(&state, beta, budget, seed, &Silent)
+                    .unwrap();
+                assert!(estimate.cov.unwrap() <= budget.target_cov);
+                estimate.probability / truth
+            })
+            .collect();
+        let n = ratios.len() as f64;
+        let mean = ratios.iter().sum::<f64>() / n;
+        let sd = (ratios.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        let se = sd / n.sqrt();
+        assert!((mean - 1.0).abs() < 4.0 * se, "mean {mean}, se {se}");
     }
 
     #[test]
