@@ -11,8 +11,19 @@ use super::intervals::{proportion_interval, satterthwaite_df, squares_and_fourth
 use super::sketch::Sketch;
 use super::threshold::ThresholdExceedance;
 
-/// Number of equal-width histogram bins between the exact min and max.
+/// Number of equal-width histogram bins between the exact min and max, where the sketch's
+/// buckets resolve them ([`BUCKETS_PER_BIN`]).
 pub const HISTOGRAM_BINS: usize = 20;
+
+/// The fewest sketch buckets (the widest, at the range's larger magnitude) a histogram's bin
+/// spans: fewer bins where `[min, max]` is narrower than 20 of them. A bucket that straddles an
+/// edge puts its whole count on one side, so bins as narrow as a bucket misplaced 60-90 % of their
+/// values (an outside check: a job without scatter, whose wear moved each metric by less than a
+/// bucket, drew `[640, 0, ..., 0]` where the values stood 64 in every other bin). A bin at least
+/// a bucket wide keeps the 20 bins wherever the range spans 8 % of its larger end or more (every
+/// reference job's bin, the README's); a bin's count can still be a bucket's worth off at either
+/// edge, most where it is only a few buckets wide.
+pub const BUCKETS_PER_BIN: f64 = 1.0;
 
 /// One quantile: its value and a 95 % confidence interval.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -93,10 +104,11 @@ fn unsupported(q: f64, tail: Tail, merged: &Merged) -> Option<String> {
     })
 }
 
-/// [`HISTOGRAM_BINS`] equal-width bins over the exact `[min, max]`: bin `i` is
+/// [`HISTOGRAM_BINS`] equal-width bins over the exact `[min, max]` (fewer, at least one, where
+/// the range spans fewer than [`BUCKETS_PER_BIN`] sketch buckets a bin): bin `i` is
 /// `[edges[i], edges[i + 1])`, the last one closed, and `edges.len() == counts.len() + 1`.
-/// `edges[0] = min` and `edges[20] = max` exactly, `edges[i] = min + (max - min) i / 20` rounded
-/// once. If `min == max` there is one bin `[min, min]` holding every value (with `n = 0`:
+/// `edges[0] = min` and `edges[bins] = max` exactly, `edges[i] = min + (max - min) i / bins`
+/// rounded once. If `min == max` there is one bin `[min, min]` holding every value (with `n = 0`:
 /// `edges [0, 0], counts [0]`).
 ///
 /// Counts come from the sketch, not the values: each bucket's whole count goes to the bin holding
@@ -493,17 +505,24 @@ fn histogram(all: &Accumulator) -> Histogram {
         };
     }
     let range = max - min;
-    let bins = HISTOGRAM_BINS as f64;
-    let mut edges: Vec<f64> = (0..HISTOGRAM_BINS)
+    let [lo, hi] = Sketch::bucket_of(if max.abs() >= min.abs() { max } else { min });
+    let resolved = (range / (BUCKETS_PER_BIN * (hi - lo))).floor();
+    let count = if resolved >= HISTOGRAM_BINS as f64 {
+        HISTOGRAM_BINS
+    } else {
+        (resolved as usize).max(1)
+    };
+    let bins = count as f64;
+    let mut edges: Vec<f64> = (0..count)
         .map(|i| min + range * (i as f64 / bins))
         .collect();
     edges.push(max);
-    let mut counts = vec![0; HISTOGRAM_BINS];
-    for (value, count) in all.sketch().buckets() {
+    let mut counts = vec![0; count];
+    for (value, n) in all.sketch().buckets() {
         let position = (value.clamp(min, max) - min) / range * bins;
         // Non-negative since value >= min; min() keeps the maximum in the last, closed bin.
-        let bin = (position as usize).min(HISTOGRAM_BINS - 1);
-        counts[bin] += count;
+        let bin = (position as usize).min(count - 1);
+        counts[bin] += n;
     }
     Histogram { edges, counts }
 }
@@ -733,6 +752,38 @@ mod tests {
         let zero_bin = h.edges.iter().rposition(|&e| e <= 0.0).unwrap();
         let zeros = values.iter().filter(|&&x| x == 0.0).count() as u64;
         assert!(h.counts[zero_bin] >= zeros);
+    }
+
+    /// Bins no narrower than [`BUCKETS_PER_BIN`] buckets: ten values 64 times each, spread
+    /// over less than a bucket (a metric that wear moved a little), are one bin holding all 640
+    /// (20 bins drew `[640, 0, ...]` where every other bin held 64); over 5.5 buckets, 5 bins of
+    /// one; over 10,000, the 20. Each bin holds its values up to a bucket's worth at its edges.
+    #[test]
+    fn histogram_bins_are_no_narrower_than_the_buckets_resolve() {
+        let [lo, hi] = Sketch::bucket_of(0.1);
+        let width = hi - lo;
+        for (span, bins) in [(0.9, 1), (5.5, 5), (10_000.0, HISTOGRAM_BINS)] {
+            // Spans counted in buckets at the larger end, so starting from the bucket's low end.
+            let step = span * width / 9.0;
+            let values: Vec<f64> = (0..640).map(|i| lo + step * (i % 10) as f64).collect();
+            let s = summarize(&[accumulate(values.iter().copied(), None)], 1);
+            let h = &s.histogram;
+            let widest = {
+                let [a, b] = Sketch::bucket_of(s.max);
+                b - a
+            };
+            assert_eq!(h.counts.len(), bins, "span {span}: {h:?}");
+            assert_eq!(h.counts.iter().sum::<u64>(), 640);
+            assert_eq!((h.edges[0], h.edges[bins]), (s.min, s.max));
+            if bins > 1 {
+                assert!((s.max - s.min) / bins as f64 >= BUCKETS_PER_BIN * widest);
+            }
+            for (i, &count) in h.counts.iter().enumerate() {
+                let (a, b) = (h.edges[i] - widest, h.edges[i + 1] + widest);
+                let near = values.iter().filter(|&&x| a <= x && x <= b).count() as u64;
+                assert!(count <= near, "span {span}, bin {i}: {count} of {near}");
+            }
+        }
     }
 
     #[test]
