@@ -269,6 +269,9 @@ fn named_as_objects(
     faults: &mut Vec<FieldError>,
 ) {
     use serde_json::Value;
+    if past_listing(faults) {
+        return;
+    }
     match (written, read) {
         (Value::Object(_), Value::String(_)) => faults.push(FieldError {
             pointer: at.to_string(),
@@ -329,10 +332,12 @@ pub fn with_faults<T>(
         (false, Err(invalid)) => {
             // A rule broken at a member's ancestor (an observation with nothing measured, once
             // its one measured value of the wrong type was left out) follows from the fault
-            // there: said once, at the member.
+            // there: said once, at the member. A name written as an object was read as the name,
+            // so the rules above it stand on their own.
             let follows = |rule: &FieldError| {
                 faults.iter().any(|fault| {
-                    fault.pointer.starts_with(&rule.pointer)
+                    fault.detail != NAME_AS_OBJECT
+                        && fault.pointer.starts_with(&rule.pointer)
                         && fault.pointer[rule.pointer.len()..].starts_with('/')
                 })
             };
@@ -659,7 +664,13 @@ fn invalid_from_serde(pointer: Pointer, error: &serde_json::Error) -> InvalidInp
 fn in_plain_words(message: &str) -> String {
     // A whole number's range here is its type's, the most it can be read as (a seed's whole
     // rule); a field's own rule, where narrower, is said where it is checked.
-    const TYPES: [(&str, &str); 17] = [
+    const TYPES: [(&str, &str); 18] = [
+        // An object of no or several members where a name is asked (serde's one-member form of
+        // an enum's name aside): before `expected map` below takes its words.
+        (
+            "invalid value: map, expected map with a single key",
+            "invalid type: object, expected text (one of its names)",
+        ),
         ("expected f64", "expected a number"),
         ("expected f32", "expected a number"),
         (
@@ -859,6 +870,12 @@ mod tests {
             named(r#"{"items": [{"kind": "exact"}, {"kind": {"closed_form": null}, "size": 2}]}"#),
             [format!("/items/1/kind: {object}")]
         );
+        for empty_or_two in [r#"{}"#, r#"{"exact": null, "closed_form": null}"#] {
+            assert_eq!(
+                named(&format!(r#"{{"fidelity": {empty_or_two}}}"#)),
+                [format!("/fidelity: {object}")]
+            );
+        }
         assert_eq!(
             named(r#"{"fidelity": null, "items": [{"kind": 5}]}"#),
             ["/items/0/kind: invalid type: integer `5`, expected text (one of its names)"]

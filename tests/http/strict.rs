@@ -105,10 +105,11 @@ fn a_name_written_as_an_object_is_named() {
             r#"{"material": {"wear_law": {"law": {"constant": null}}}}"#,
             vec!["/material/wear_law/law"],
         ),
+        // Read as the name, so a rule above it still stands (no parameter scattered).
         (
             "/v1/jobs",
             r#"{"devices": 20, "operations": 2, "sensitivity": {"method": {"sobol": null}}}"#,
-            vec!["/sensitivity/method"],
+            vec!["/sensitivity/method", "/sensitivity"],
         ),
     ];
     for (path, body, pointers) in cases {

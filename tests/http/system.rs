@@ -133,6 +133,12 @@ fn every_number_of_a_scenario_has_its_one_rule_in_the_document() {
             );
         }
     }
+    // A schedule's name is not only white space and holds no U+0000, in one pattern (its own
+    // rule had taken the place of the one every text gets, and schemathesis sent a NUL).
+    let name = schemas["ScheduleSpec"]["properties"]["name"]["pattern"]
+        .as_str()
+        .unwrap();
+    assert_eq!(name, r"^[^\u0000]*[^\s\u0000][^\u0000]*$");
     // A seed is any u64 wherever it is told: in a job asked for and in the job's resource.
     for schema in ["JobSpec", "JobResource"] {
         let seed = &schemas[schema]["properties"]["seed"];

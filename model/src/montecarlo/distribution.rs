@@ -803,8 +803,12 @@ impl Faults<'_> {
                 -MAX_SCORE
             )
         } else {
-            // 0 only where the parameter takes it: a positive one's 0 is refused as such.
-            let zero = if domain.inclusive { "0 or " } else { "" };
+            // 0 only where the parameter and the field take it (a Weibull's scale never does).
+            let zero = if domain.inclusive && field != "scale" {
+                "0 or "
+            } else {
+                ""
+            };
             format!(
                 "must be {zero}at least {MIN_MAGNITUDE:e} (the supported range), got {lowest:e}"
             )

@@ -17,8 +17,8 @@ pub const HISTOGRAM_BINS: usize = 20;
 
 /// The fewest sketch buckets (the widest, at the range's larger magnitude) a histogram's bin
 /// spans: fewer bins where `[min, max]` is narrower than 20 of them. A bucket that straddles an
-/// edge puts its whole count on one side, so bins as narrow as a bucket misplaced 60-90 % of their
-/// values (an outside check: a job without scatter, whose wear moved each metric by less than a
+/// edge puts its whole count on one side, so 20 bins within a bucket or two misplaced 60-90 % of
+/// their values (an outside check: a job without scatter, whose wear moved each metric by less than a
 /// bucket, drew `[640, 0, ..., 0]` where the values stood 64 in every other bin). A bin at least
 /// a bucket wide keeps the 20 bins wherever the range spans 8 % of its larger end or more (every
 /// reference job's bin, the README's); a bin's count can still be a bucket's worth off at either
@@ -170,7 +170,7 @@ pub struct Summary {
 /// - `mean_ci95`: batch means, `mean +- t * sd(group means) / sqrt(G')`. Groups hold equal numbers
 ///   of values where the devices are fewer than the groups or a multiple of them, and then the
 ///   unweighted spread of their means is the right one. Otherwise groups differ by one device,
-///   and the unweighted spread errs wide, never narrow: 48 devices (groups of one and two) gave a
+///   and the unweighted spread errs wide on average: 48 devices (groups of one and two) gave a
 ///   half-width 6 % over the ratio estimator's (an outside check, seed 4).
 /// - each quantile's `ci95`: Woodruff's interval for clustered samples. The share of values at or
 ///   below the estimate, `F(value)`, is a mean of indicators, so its clustered variance comes from

@@ -335,7 +335,13 @@ fn schedule_fields() -> Vec<(&'static str, &'static str, Value)> {
         .collect();
     time_zones.push(Value::Null);
     vec![
-        ("ScheduleSpec", "name", json!({"pattern": "\\S"})),
+        // Not only white space, and (one pattern for both) no U+0000: `\S` alone left the name
+        // of NUL and a letter schema-valid, and refused (schemathesis, stateful).
+        (
+            "ScheduleSpec",
+            "name",
+            json!({"pattern": "^[^\\u0000]*[^\\s\\u0000][^\\u0000]*$"}),
+        ),
         ("ScheduleSpec", "time_zone", json!({"enum": time_zones})),
         (
             "ScheduleSpec",
@@ -592,7 +598,8 @@ const OUTPUT_DESCRIPTIONS: &[(&str, &[(&str, &str)])] = &[
             ("max", "Largest value (exact)"),
             (
                 "histogram",
-                "20 equal-width bins over [min, max], counts summing to n",
+                "Up to 20 equal-width bins over [min, max], none narrower than a sketch bucket, \
+                 counts summing to n",
             ),
             (
                 "exceedance",

@@ -255,10 +255,16 @@ fn binomial_cov(p: f64, n: u64) -> f64 {
 }
 
 /// The hits crude Monte Carlo counts before it stops at `target_cov`: `1 / target_cov^2`, at
-/// which the binomial's coefficient of variation, `sqrt((1 - p) / hits)`, is at most the target.
+/// which the binomial's coefficient of variation, `sqrt((1 - p) / hits)`, is at most the target,
+/// and at least [`MIN_CRUDE_HITS`].
 fn hits_needed(target_cov: f64) -> u64 {
-    (1.0 / (target_cov * target_cov)).ceil() as u64
+    ((1.0 / (target_cov * target_cov)).ceil() as u64).max(MIN_CRUDE_HITS)
 }
+
+/// The fewest hits crude Monte Carlo stops at, whatever its target: the estimate's share of the
+/// samples before the last batch is held below the number, so with one hit needed a run that
+/// missed in its first batch answered 0 (unbiased, and useless), with two at most one hit's worth.
+const MIN_CRUDE_HITS: u64 = 10;
 
 /// Crude Monte Carlo's estimate where it stopped after the first batch whose hits reached
 /// `needed` (or at its budget): `hits` of `samples`, `last` of them in the last batch.
@@ -1381,9 +1387,9 @@ impl Estimator {
             c.tail.sort_by(|a, b| a.0.total_cmp(&b.0));
             c.beyond = vec![0; c.tail.len()];
         }
-        // Every batch counts towards each point, so that the tail and the estimate are shares of
-        // the same samples and fall together (the first batch's alone read 0.01 at a point short
-        // of a threshold whose estimate was 0.0103).
+        // Every batch counts towards each point, so that the tail's points and the count are
+        // shares of the same samples and fall together, the estimate at most the count's share
+        // (the first batch's alone read 0.01 at a point short of a threshold at 0.0103).
         if c.beyond.len() == c.tail.len() {
             for (count, &(point, _)) in c.beyond.iter_mut().zip(&c.tail) {
                 *count += batch.ys.iter().filter(|&&y| y > point).count() as u64;
@@ -1419,7 +1425,8 @@ impl Estimator {
         Some(Estimate {
             probability,
             ci95: [lo.min(probability), hi.max(probability)],
-            cov: (c.hits > 0).then(|| binomial_cov(probability, c.samples)),
+            // From the count the run stopped at, as its target was judged.
+            cov: (c.hits > 0).then(|| binomial_cov(share(c.hits), c.samples)),
             evaluations: self.done,
             design_point: c.design_point,
             tail: c.tail,
@@ -1854,25 +1861,29 @@ mod tests {
         let binomial = |n: u64, k: u64, p: f64| {
             choose(n, k) * p.powi(k as i32) * (1.0 - p).powi((n - k) as i32)
         };
-        for (m, needed, batches, p) in [
-            (5, 3, 6, 0.1),
-            (10, 4, 5, 0.3),
-            (7, 1, 4, 0.05),
-            (20, 12, 4, 0.2),
+        // The last batch as large as the others, or cut short by the budget.
+        for (m, needed, batches, last, p) in [
+            (5, 3, 6, 5, 0.1),
+            (10, 4, 5, 3, 0.3),
+            (7, 1, 4, 7, 0.05),
+            (20, 12, 4, 20, 0.2),
+            (20, 10, 3, 9, 0.15),
         ] {
             // The chance that the run goes on with `s` hits after the batches so far.
             let mut going = vec![1.0];
             let (mut stopped, mut mean, mut plain) = (0.0, 0.0, 0.0);
             for b in 1..=batches {
+                let size = if b == batches { last } else { m };
+                let samples = (b - 1) * m + size;
                 let mut next = vec![0.0; needed as usize];
                 for (s, &chance) in going.iter().enumerate() {
-                    for t in 0..=m {
-                        let q = chance * binomial(m, t, p);
+                    for t in 0..=size {
+                        let q = chance * binomial(size, t, p);
                         let hits = s as u64 + t;
                         if hits >= needed || b == batches {
                             stopped += q;
-                            mean += q * stopped_share(hits, b * m, m, needed);
-                            plain += q * hits as f64 / (b * m) as f64;
+                            mean += q * stopped_share(hits, samples, size, needed);
+                            plain += q * hits as f64 / samples as f64;
                         } else {
                             next[hits as usize] += q;
                         }
@@ -1883,6 +1894,11 @@ mod tests {
             assert_relative_eq!(stopped, 1.0, max_relative = 1e-12);
             assert_relative_eq!(mean, p, max_relative = 1e-12);
             assert!(plain > 1.01 * p, "{m} {needed} {batches} {p}: {plain}");
+        }
+        // The number a run stops at: a cov of at most the target, and never fewer than ten hits
+        // (with one, a run that missed its first batch answered 0).
+        for (target_cov, needed) in [(0.1, 100), (0.25, 16), (0.5, 10), (1.0, 10)] {
+            assert_eq!(hits_needed(target_cov), needed, "{target_cov}");
         }
     }
 
