@@ -669,7 +669,7 @@ fn in_plain_words(message: &str) -> String {
         // an enum's name aside): before `expected map` below takes its words.
         (
             "invalid value: map, expected map with a single key",
-            "invalid type: object, expected text (one of its names)",
+            NAME_AS_OBJECT,
         ),
         ("expected f64", "expected a number"),
         ("expected f32", "expected a number"),
