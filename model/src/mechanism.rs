@@ -108,6 +108,10 @@ impl Flight {
         }
         let x = v / self.omega;
         let d = self.static_deflection_m;
+        if x == 0.0 {
+            // No static deflection and a speed that rounds to 0 over `w`: no gap, not 0/0.
+            return 0.0;
+        }
         x * (x / (d.hypot(x) + d))
     }
 

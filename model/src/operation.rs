@@ -240,6 +240,9 @@ pub struct Operation {
     loss_speed_sq: f64,
     /// The separation speed whose flight just reaches `min_separation_m`; slower flights end the sequence.
     min_bounce_speed: f64,
+    /// Neither an impact's energy loss nor a least gap can end a sequence, only the cap: a speed
+    /// too small for f64 flies on at the least positive one (docs/model.md section 3).
+    never_rests: bool,
     max_bounces: u32,
 }
 
@@ -323,6 +326,12 @@ impl Setup {
         } else {
             self.stiffness_n_per_m
         };
+        let min_bounce_speed = impact_velocity(
+            self.mass_kg,
+            gap_stiffness,
+            static_force_n,
+            self.min_separation_m,
+        );
         let arc = Arc::strike(
             self.supply_voltage_v,
             conditions.current_a,
@@ -363,12 +372,8 @@ impl Setup {
             arc_restitution: self.arc_restitution,
             arc_weight,
             loss_speed_sq: self.loss_speed_sq,
-            min_bounce_speed: impact_velocity(
-                self.mass_kg,
-                gap_stiffness,
-                static_force_n,
-                self.min_separation_m,
-            ),
+            min_bounce_speed,
+            never_rests: self.loss_speed_sq == 0.0 && min_bounce_speed == 0.0,
             max_bounces: self.max_bounces,
         }
     }
@@ -608,12 +613,21 @@ impl Operation {
                 );
             }
         }
-        let rebound_sq = if self.arc.is_some() {
-            self.arc_restitution_squared(v, f.kappa_sq) * (v * v)
+        // Whether the impact gives any rebound at all: eq. 16's `a + b v` may reach 0, eq. 7's and
+        // eq. 18's `e` never do.
+        let (rebound_sq, rebounds) = if self.arc.is_some() {
+            let e_sq = self.arc_restitution_squared(v, f.kappa_sq);
+            (e_sq * (v * v), c(0.0).lt(e_sq))
         } else {
-            self.rebound_squared(v, f.kappa_sq)
+            (self.rebound_squared(v, f.kappa_sq), active)
         };
         f.v = self.separation_speed(rebound_sq);
+        if self.never_rests {
+            // The exact sequence never ends: a rebound speed that f64 rounds to 0 (below about
+            // 1e-162 m/s) is the least positive one, and the sequence runs on to the cap.
+            let underflowed = active & rebounds & f.v.eq(c(0.0));
+            f.v = L::select(underflowed, c(f64::from_bits(1)), f.v);
+        }
         f.active = active & self.bouncing(f.v);
     }
 
