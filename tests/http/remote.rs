@@ -205,6 +205,19 @@ fn refusals_and_failures_exit_as_the_local_commands_do() {
         String::from_utf8_lossy(&bad.stderr)
     );
 
+    // A body over the server's limit (1 MiB) is refused before it is sent, each time: writing
+    // it all ended in a broken pipe (exit 1) at random once the server had answered and closed.
+    let huge = job_file("remote-huge", &json!({"name": "x".repeat(3 << 20)}));
+    for _ in 0..3 {
+        let refused = remote(&server, None, &["submit", &huge]);
+        let said = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{said}");
+        assert!(
+            said.contains("413: the request body is larger than"),
+            "{said}"
+        );
+    }
+
     let file = job_file("remote-queued", &json!({"devices": 2, "operations": 2}));
     let queued: Value =
         serde_json::from_str(&stdout(&remote(&server, None, &["submit", &file]))).unwrap();

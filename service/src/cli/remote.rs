@@ -283,21 +283,24 @@ impl Server {
             self.request_timeout_seconds.min(left),
             self.trusted_roots().map_err(Failure::Final)?,
         );
+        // A body waits for the server's 100 Continue: a body over its limit is refused (413)
+        // before any of it is sent, where writing it all gave a broken pipe instead of the answer
+        // (once the server had answered and closed), at random, past about a megabyte.
+        let json = |request: ureq::RequestBuilder<ureq::typestate::WithBody>| {
+            self.prepare(request)
+                .header("content-type", "application/json")
+                .header("expect", "100-continue")
+        };
         let sent = match (method, body) {
             ("POST", Some(body)) => {
-                let request = self
-                    .prepare(agent.post(&url))
-                    .header("content-type", "application/json");
+                let request = json(agent.post(&url));
                 match idempotency_key {
                     Some(key) => request.header("idempotency-key", key).send(body),
                     None => request.send(body),
                 }
             }
             ("POST", None) => self.prepare(agent.post(&url)).send_empty(),
-            ("PUT", Some(body)) => self
-                .prepare(agent.put(&url))
-                .header("content-type", "application/json")
-                .send(body),
+            ("PUT", Some(body)) => json(agent.put(&url)).send(body),
             ("DELETE", _) => self.prepare(agent.delete(&url)).call(),
             _ => self.prepare(agent.get(&url)).call(),
         };
