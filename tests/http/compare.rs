@@ -116,10 +116,17 @@ fn a_job_against_itself_and_two_designs_over_api_and_cli() {
     let args = [
         "compare", &strong, &weak, "--metric", metric, "--plots", plots,
     ];
-    let compared: Value = serde_json::from_str(&stdout(&remote(&server, None, &args))).unwrap();
+    let output = remote(&server, None, &args);
+    let compared: Value = serde_json::from_str(&stdout(&output)).unwrap();
     assert_eq!(compared["metric"], metric);
     assert!(dir.join("weibull.svg").is_file());
     assert!(!dir.join("bands.svg").exists());
+    // Said, not left out in silence.
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        said.contains("no bands.svg: eroded_mass_kg is a device metric"),
+        "{said}"
+    );
     // A flag the server refuses is said as the flag's fault, not a document's (exit 2).
     let refused = remote(
         &server,

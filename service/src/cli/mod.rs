@@ -176,8 +176,8 @@ enum Command {
         /// Comma-separated fractions of the B-lives compared (default `0.01,0.1`).
         #[arg(long)]
         b_lives: Option<String>,
-        /// Also write the overlaid plots, `bands.svg` and (with failure criteria) `weibull.svg`,
-        /// into this directory.
+        /// Also write the overlaid plots, `bands.svg` (the wear curves of an operation metric; a
+        /// device metric has none) and (with failure criteria) `weibull.svg`, into this directory.
         #[arg(long)]
         plots: Option<PathBuf>,
         #[command(flatten)]

@@ -643,7 +643,13 @@ pub fn compare(
         // A device metric is one value a device: no wear curve to draw.
         let device = asked.metric.as_deref().and_then(Metric::parse);
         let mut kinds = Vec::new();
-        if !matches!(device, Some(Metric::Device(_))) {
+        if matches!(device, Some(Metric::Device(_))) {
+            tracing::warn!(
+                "--plots: no bands.svg: {} is a device metric, one value a device, with no wear \
+                 curve",
+                asked.metric.as_deref().unwrap_or_default()
+            );
+        } else {
             kinds.push(("bands.svg", format!("?metric={metric}")));
         }
         if comparison.get("life").is_some_and(|life| !life.is_null()) {
