@@ -102,6 +102,22 @@ def test_cancelling_an_ended_job_leaves_it_as_it_is(client):
     assert ended.result()["job"]["seed"] == 3
 
 
+def test_a_base_url_the_paths_cannot_follow_is_refused_naming_the_rule():
+    # As the command line's --url: a query swallowed the paths (the dashboard's HTML came back as
+    # a JSONDecodeError), and no scheme left `requests` without an adapter.
+    for url, rule in [("http://127.0.0.1:8080/?x=1", "no query or fragment"),
+                      ("http://127.0.0.1:8080#top", "no query or fragment"),
+                      ("localhost:8080", "no scheme"), ("ftp://h/", "http or https"),
+                      ("http://", "no host"), ("http://h:0", "from 1 to 65535"),
+                      ("http://h:99999", "not a URL"),
+                      ("http://me:secret@h:1/?x", "no query")]:
+        with pytest.raises(ValueError, match=rule) as refused:
+            Client(url)
+        assert "secret" not in str(refused.value)
+    for url in ["http://127.0.0.1:8080", "https://example.com/prefix/", "http://[::1]:8080"]:
+        assert Client(url).base_url == url.rstrip("/")
+
+
 def test_a_refused_job_names_its_fields(client):
     with pytest.raises(BouncewearError) as refused:
         client.submit({"devices": 0, "operations": 0})

@@ -9,6 +9,7 @@ import email.utils
 import io
 import logging
 import os
+import re
 import sys
 import time
 import urllib.parse
@@ -140,6 +141,29 @@ class JobFailed(Exception):
         return (JobFailed, (self.job,))
 
 
+def _check_base_url(base_url: str) -> None:
+    """Refuses a base URL the API's paths cannot be added to, by the rules of the command line's
+    `--url`: `requests` would send `http://host/?x=1/v1/jobs` to the dashboard, or fail to find an
+    adapter for `localhost:8080`, with a message that names neither."""
+    def refused(rule: str) -> ValueError:
+        shown = re.sub(r"(//[^/@:]*:)[^/@]*@", r"\1***@", base_url)  # no password in a message
+        return ValueError(f"base_url {shown!r}: {rule}")
+    try:
+        parts = urllib.parse.urlsplit(base_url)
+        port = parts.port
+    except ValueError as error:
+        raise refused(f"not a URL such as http://127.0.0.1:8080 ({error})") from None
+    if parts.scheme not in ("http", "https"):
+        raise refused(f"the scheme must be http or https, got {parts.scheme!r}" if parts.scheme
+                      and parts.netloc else "no scheme: write http://HOST:PORT (or https://)")
+    if not parts.hostname:
+        raise refused("no host: write http://HOST:PORT (or https://)")
+    if port == 0:
+        raise refused("the port must be from 1 to 65535")
+    if parts.query or parts.fragment or "?" in base_url or "#" in base_url:
+        raise refused("a base URL has no query or fragment: the API's paths are added to it")
+
+
 class Client:
     """A bouncewear server at `base_url`, with `api_key` when the server has keys.
 
@@ -154,12 +178,15 @@ class Client:
     An `https` URL is checked against the CA certificates `requests` trusts, or instead those of
     the PEM file `ca_cert` (default: the `BOUNCEWEAR_CA_CERT` environment variable, as for the
     command line's `--ca-cert`), for a server whose certificate a company's own CA signed; a
-    certificate not trusted raises `requests.exceptions.SSLError` at once."""
+    certificate not trusted raises `requests.exceptions.SSLError` at once. A `base_url` the API's
+    paths cannot follow (no scheme or host, a query or fragment, a port beyond 1 to 65535) raises
+    `ValueError` naming the rule, as the command line's `--url` is refused."""
 
     def __init__(self, base_url: str = "http://127.0.0.1:8080", api_key: Optional[str] = None,
                  timeout: float = 60.0, retries: int = 3, ca_cert: Optional[str] = None) -> None:
         if retries < 0:
             raise ValueError(f"retries must be 0 or more, got {retries}")
+        _check_base_url(base_url)
         self.base_url = base_url.rstrip("/")
         self.timeout = timeout
         self.retries = retries
