@@ -621,10 +621,13 @@ fn check_shape(
                 .iter()
                 .any(|field| matches_field(field, at.as_str()))
             {
-                return Err(InvalidInput::single(
-                    at,
-                    "expected one value here (an object, a number or text), found a list",
-                ));
+                // Every document is an object; within one, the type asked depends on the field.
+                let expected = if at.as_str().is_empty() {
+                    "expected an object, found a list"
+                } else {
+                    "expected one value here (an object, a number or text), found a list"
+                };
+                return Err(InvalidInput::single(at, expected));
             }
             items
                 .iter()
@@ -813,6 +816,7 @@ mod tests {
                 r#"{"value": [1]}"#,
                 "/value: expected one value here (an object, a number or text), found a list",
             ),
+            ("[1, 2]", "(document): expected an object, found a list"),
         ] {
             let invalid = from_json::<Doc>(text, &[]).unwrap_err();
             assert_eq!(invalid.to_string(), expected);
