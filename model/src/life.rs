@@ -98,6 +98,14 @@ pub struct BLife {
     pub lr_ci95: Option<[f64; 2]>,
 }
 
+impl BLife {
+    /// The 95 % bounds to judge by: the likelihood ratio's, the delta method's where the profile
+    /// cannot be crossed (as a comparison's, [`compare::b_life_estimate`]).
+    pub fn bounds(&self) -> [f64; 2] {
+        self.lr_ci95.unwrap_or(self.ci95)
+    }
+}
+
 /// `B_p` read off the Kaplan-Meier curve, with no distribution assumed ([`observed_b_life`]): what
 /// the devices did, where a fitted distribution's [`BLife`] extrapolates its shape.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
