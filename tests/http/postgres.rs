@@ -1,7 +1,7 @@
 //! The same API on PostgreSQL: a job's life from submission to result (bit-identical to `run`),
 //! listing, cancelling, life, and a schedule's trend, on a throwaway cluster.
 
-use crate::support::app::{Service, Spawned, TestApp};
+use crate::support::app::{Service, Spawned, TestApp, WorkerProcess};
 use crate::support::client::{agent, assert_problem, delete, get, post};
 use crate::support::postgres::Postgres;
 use crate::support::{run_job, scattered_job, submit_concurrently, temp_dir, wearing_template};
@@ -306,4 +306,70 @@ fn rfc3339_ms(time: &serde_json::Value) -> i64 {
     chrono::DateTime::parse_from_rfc3339(time.as_str().unwrap())
         .unwrap()
         .timestamp_millis()
+}
+
+/// A worker frozen inside one of its transactions (stopped, or cut off from the database) kept
+/// that transaction's row locks: every claim skipped its shard for as long as it stayed frozen,
+/// long past its lease, and the job never ended (an outside check). PostgreSQL now ends a session
+/// idle in a transaction after 5 s: another worker runs the shard once its lease expires, and the
+/// job succeeds with `run`'s Result while the first worker is still stopped.
+#[test]
+fn a_worker_frozen_inside_a_transaction_holds_its_shard_no_longer_than_5_s() {
+    let Some(cluster) = Postgres::start(&temp_dir("http-postgres-frozen")) else {
+        return;
+    };
+    let url = cluster.database("frozen");
+    let server = TestApp::on(&url, &["--workers", "0"]);
+    let lease = ["--workers", "1", "--lease-seconds", "1"];
+    let frozen = WorkerProcess::start(&url, &lease);
+    let signal = |which: &str| {
+        let sent = std::process::Command::new("kill")
+            .args([which, &frozen.child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(sent.success());
+    };
+    // Stopped until caught with a write transaction open (a group's store, a claim, a
+    // heartbeat), a few milliseconds in each shard's run: tried again job after job.
+    let idle_in_transaction = "SELECT a.pid FROM pg_stat_activity a JOIN pg_locks l ON l.pid = a.pid \
+         WHERE a.datname = current_database() AND a.pid <> pg_backend_pid() \
+         AND a.state LIKE 'idle in transaction%' AND l.locktype = 'transactionid' LIMIT 1";
+    let query = |sql: String| -> Option<i32> {
+        let url = url.clone();
+        crate::support::on_own_runtime(async move {
+            use sqlx::Connection;
+            let mut connection = sqlx::PgConnection::connect(&url).await.unwrap();
+            sqlx::query_scalar(sqlx::AssertSqlSafe(sql))
+                .fetch_optional(&mut connection)
+                .await
+                .unwrap()
+        })
+    };
+    let mut held = None;
+    for seed in 0..5 {
+        let job = scattered_job(20_000, 1000, seed);
+        let id = server.submit(&job);
+        let job_status =
+            || get(&server.url(&format!("/v1/jobs/{id}")), None).json()["status"].clone();
+        while held.is_none() && job_status() != "succeeded" {
+            signal("-STOP");
+            held = query(idle_in_transaction.to_owned());
+            if held.is_none() {
+                signal("-CONT");
+                std::thread::sleep(Duration::from_millis(3));
+            }
+        }
+        if let Some(backend) = held {
+            let other = WorkerProcess::start(&url, &lease);
+            server.wait_for(&id, "succeeded", Duration::from_secs(120));
+            let result = get(&server.url(&format!("/v1/jobs/{id}/result")), None).json();
+            assert_eq!(result["operations"], run_job(&job, &[])["operations"]);
+            let alive = format!("SELECT pid FROM pg_stat_activity WHERE pid = {backend}");
+            assert_eq!(query(alive), None, "the frozen session ended by PostgreSQL");
+            signal("-CONT");
+            drop(other);
+            return;
+        }
+    }
+    panic!("no worker caught inside a transaction in five jobs");
 }

@@ -13,7 +13,8 @@ use super::sql::{Sql, Tx};
 use super::{QueueEvent, StoreResult, migrations};
 use crate::domain::{JobId, QueueBound, QueuedJob};
 use sqlx::Connection;
-use sqlx::postgres::{PgConnection, PgListener, PgPool, PgPoolOptions};
+use sqlx::postgres::{PgConnectOptions, PgConnection, PgListener, PgPool, PgPoolOptions};
+use std::str::FromStr;
 use std::time::Duration;
 use tokio::sync::broadcast;
 use tokio::task::AbortHandle;
@@ -52,6 +53,15 @@ const STARTUP_WAIT: Duration = Duration::from_secs(30);
 /// A pooled connection idle this long is closed: a node that stopped working hands its slots
 /// back to PostgreSQL for the others.
 const IDLE_CONNECTION: Duration = Duration::from_secs(60);
+
+/// A session idle inside a transaction this long is ended by PostgreSQL, and its row locks with
+/// it. Between its statements every transaction of the store waits on nothing but the database
+/// (no computing, no other lock of the process), so such a session is a process frozen or cut off
+/// from the database. Its locks made every claim skip its shard for as long as it stayed so, long
+/// past its lease (an outside check: a worker stopped mid-store held its group 30 s and more past
+/// a 3 s lease, and one cut off until TCP gave up, two hours by default), and a cancel waited on
+/// them until its 503. Now its shard is claimed again once the lease expires, or after this.
+pub(crate) const IDLE_IN_TRANSACTION: &str = "5s";
 
 /// The advisory lock every insert into the queue takes, so that counting the queued jobs and
 /// inserting one cannot interleave with another submission.
@@ -100,7 +110,7 @@ where
                 STARTUP_WAIT.as_secs()
             )));
         }
-        let server = <sqlx::postgres::PgConnectOptions as std::str::FromStr>::from_str(url)
+        let server = PgConnectOptions::from_str(url)
             .map(|o| format!("{}:{}", o.get_host(), o.get_port()))
             .unwrap_or_default();
         tracing::warn!(%why, %server, "the database has not answered yet; trying again");
@@ -127,12 +137,14 @@ impl PgBackend {
     /// again while the database is out of reach.
     #[tracing::instrument(skip_all)]
     pub(crate) async fn open(url: &str, connections: u32) -> StoreResult<Self> {
+        let options = PgConnectOptions::from_str(url)?
+            .options([("idle_in_transaction_session_timeout", IDLE_IN_TRANSACTION)]);
         let pool = PgPoolOptions::new()
             .max_connections(connections)
             .idle_timeout(IDLE_CONNECTION)
             // During an outage a request gets its 503 within this, not after the pool's 30 s.
             .acquire_timeout(super::DATABASE_WAIT)
-            .connect_lazy(url)?;
+            .connect_lazy_with(options);
         let listener = migrated_listener(&pool).await?;
         let (events, ends) = (broadcast::channel(1024).0, broadcast::channel(1024).0);
         let announcements = tokio::spawn(forward_announcements(
