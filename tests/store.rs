@@ -549,16 +549,19 @@ async fn a_job_whose_lease_keeps_expiring_fails_with_the_reason(url: &str) {
         reason,
         "gave up after 2 retries: the lease of batch 0 group 0 expired 3 times (its worker stopped or stalled, or lost the database, each time)"
     );
-    // Its last attempt, whose lease ran out too, was stopped by the job's end.
+    // Its last attempt, whose lease ran out too, reads so, as the job's error tells: a lease
+    // lost, the reason its error (as a run that failed its job reads).
     let shards = store.shards(&id).await.unwrap();
-    assert_eq!((shards[0].failures, shards[0].lost_leases), (0, 2));
+    assert_eq!((shards[0].failures, shards[0].lost_leases), (0, 3));
     assert_eq!(shards[0].status, "queued");
+    assert_eq!(shards[0].error.as_deref(), Some(reason.as_str()));
+    assert_eq!(shards[0].operations_done, 0);
     assert_eq!(
         shards[0].history,
         [
             "attempt 1 (w): lease lost",
             "attempt 2 (w): lease lost",
-            "attempt 3 (w): stopped: job failed"
+            "attempt 3 (w): lease lost"
         ],
         "one line per attempt that did not finish"
     );

@@ -19,7 +19,7 @@ use super::{
 use crate::domain::rare::{RARE_ROUNDS, is_round};
 use crate::domain::{
     IdempotencyKey, JobId, Once, Owner, QueueBound, QueuedJob, ROOM_RETRY_MS, RetryBudget,
-    SHARD_OVERHEAD_OPERATIONS, ShardPlan, UnixMs, first_shards, retry_backoff_ms,
+    SHARD_OVERHEAD_OPERATIONS, ShardId, ShardPlan, UnixMs, first_shards, retry_backoff_ms,
 };
 use bouncewear_model::Pointer;
 use bouncewear_model::montecarlo::engine::GroupStats;
@@ -369,9 +369,13 @@ pub(super) async fn now_or(
     }
 }
 
-/// The jobs to fail, each with the reason: one of their running shards lost its lease once
-/// more than `retries` allow.
-async fn exhausted(tx: &mut Tx, now: UnixMs, retries: u64) -> StoreResult<Vec<(JobId, String)>> {
+/// The jobs to fail, each with the shard and the reason: one of their running shards lost its
+/// lease once more than `retries` allow.
+async fn exhausted(
+    tx: &mut Tx,
+    now: UnixMs,
+    retries: u64,
+) -> StoreResult<Vec<(JobId, ShardId, String)>> {
     let rows = Sql::new(
         // From the running shards (`shards_open`, whose condition `s.status <> 'done'` is stated
         // for the planner to use it), not from every open job's: 16 ms a claim with 1000 jobs
@@ -386,8 +390,8 @@ async fn exhausted(tx: &mut Tx, now: UnixMs, retries: u64) -> StoreResult<Vec<(J
     .await?;
     rows.iter()
         .map(|row| {
-            let job = JobId::from(row.text("job_id")?);
-            Ok((job, gave_up(retries, shard_id_from_row(row)?)))
+            let (job, shard) = (JobId::from(row.text("job_id")?), shard_id_from_row(row)?);
+            Ok((job, shard, gave_up(retries, shard)))
         })
         .collect()
 }
@@ -624,7 +628,22 @@ impl Store {
             now = now_or(self.dialect(), &mut tx, terms.at).await?;
             ending = exhausted(&mut tx, now, budget.lost_leases).await?;
         }
-        for (job, reason) in ending {
+        for (job, shard, reason) in ending {
+            // The lease that ran out is counted and said, as a run that failed its job is: the
+            // shard then reads as the job's error tells (it read one lease short, its last
+            // attempt "stopped: job failed").
+            Sql::new(
+                "UPDATE shards SET status = 'queued', lost_leases = lost_leases + 1, \
+                 operations_done = 0, error = $4, history = history || 'attempt ' || attempt \
+                 || ' (' || COALESCE(lease_owner, '?') || '): lease lost\n' \
+                 WHERE job_id = $1 AND batch = $2 AND grp = $3 AND status = 'running'",
+            )
+            .bind(job.as_str())
+            .bind(count_to_sql(shard.batch))
+            .bind(group_to_sql(shard))
+            .bind(reason.as_str())
+            .execute(&mut tx)
+            .await?;
             end_job(&mut tx, &job, now, &reason).await?;
         }
         // Fair share: the job with the least virtual start time (docs/contract.md "Fair share");
