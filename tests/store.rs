@@ -2659,6 +2659,62 @@ async fn postgres_keeps_every_promise() {
     a_dropped_store_closes_every_connection(&cluster.database("dropped")).await;
     compressed_accumulators_are_stored_without_pglz(&cluster.database("storage")).await;
     postgres_says_why_it_gives_no_connection(&cluster.database("why")).await;
+    a_heartbeat_that_outlives_its_jobs_end_leaves_its_progress(&cluster.database("late")).await;
+}
+
+/// A heartbeat begun while its job ran and finished after the job was cancelled (its worker
+/// frozen between its statements: an outside check) changed the ended job's progress. Here the
+/// test holds the job's row, so the heartbeat waits between its shard's update and the job's
+/// sum, and cancels the job meanwhile: the progress stays what the cancel left.
+async fn a_heartbeat_that_outlives_its_jobs_end_leaves_its_progress(url: &str) {
+    use sqlx::Connection;
+    let store = store::open(url).await.unwrap();
+    let id = insert(&store, queued(1)).await;
+    let claim = store
+        .claim("w", terms(0), budget(3))
+        .await
+        .unwrap()
+        .unwrap();
+    let mut holder = sqlx::PgConnection::connect(url).await.unwrap();
+    sqlx::query("BEGIN").execute(&mut holder).await.unwrap();
+    sqlx::query("SELECT id FROM jobs WHERE id = $1 FOR UPDATE")
+        .bind(id.as_str())
+        .execute(&mut holder)
+        .await
+        .unwrap();
+    let late = tokio::spawn({
+        let (store, fence) = (store.clone(), claim.fence.clone());
+        async move { store.heartbeat(&fence, terms(100), 7, 7).await }
+    });
+    // The heartbeat has updated its shard and waits for the job's row.
+    let waiting = "SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock' \
+                   AND datname = current_database()";
+    let started = std::time::Instant::now();
+    while sqlx::query_scalar::<_, i64>(waiting)
+        .fetch_one(&mut holder)
+        .await
+        .unwrap()
+        == 0
+    {
+        assert!(
+            started.elapsed().as_secs() < 10,
+            "the heartbeat never waited"
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+    }
+    sqlx::query("UPDATE jobs SET status = 'cancelled', finished_at = 9 WHERE id = $1")
+        .bind(id.as_str())
+        .execute(&mut holder)
+        .await
+        .unwrap();
+    sqlx::query("COMMIT").execute(&mut holder).await.unwrap();
+    late.await.unwrap().unwrap();
+    let job = store.job(&Owner::anonymous(), &id).await.unwrap();
+    assert_eq!(job.status, JobStatus::Cancelled);
+    assert_eq!(
+        job.operations_done, 0,
+        "the ended job's progress as its end left it"
+    );
 }
 
 /// A database whose clock runs an hour ahead of this machine's judges an idempotency key's age

@@ -208,10 +208,12 @@ pub(super) async fn lock_job(dialect: &Dialect, tx: &mut Tx, job: &str) -> Store
 /// Sets the job's progress to the sum over its shards, its row locked first ([`lock_job`]).
 async fn sum_progress(dialect: &Dialect, tx: &mut Tx, job: &JobId) -> StoreResult<()> {
     lock_job(dialect, tx, job.as_str()).await?;
+    // Only while the job runs: a transaction that waited for the row while the job ended (its
+    // shard's update made before) leaves the progress the end left.
     Sql::new(concat!(
         "UPDATE jobs SET ",
         progress_sums!(),
-        " WHERE id = $1"
+        " WHERE id = $1 AND status IN ('queued', 'running')"
     ))
     .bind(job.as_str())
     .execute(&mut *tx)
