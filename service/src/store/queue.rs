@@ -7,9 +7,9 @@ use super::rows::{
     self, Created, DELETE_ENDED_JOB, DELETE_RUN_OF_JOB, Dialect, FORGET_EXPIRED_KEY,
     LATEST_APPLIED_MIGRATION, PRUNE_JOBS, PRUNE_RUNS, READINESS_WRITE, REMEMBER_KEY,
     REMEMBERED_KEY, bind_fence, bind_key, claim_from_rows, count_from_sql, count_to_sql,
-    failed_too_often, fenced_shard, gave_up, group_to_sql, insert_shards, job_columns,
-    job_from_row, not_ended, partial_bytes, remembered_from_row, schema_current, shard_columns,
-    shard_from_row, shard_id_from_row, spec_from_json,
+    failed_too_often, fenced_shard, gave_up, group_to_sql, history_lease_lost, insert_shards,
+    job_columns, job_from_row, not_ended, partial_bytes, remembered_from_row, schema_current,
+    shard_columns, shard_from_row, shard_id_from_row, spec_from_json,
 };
 use super::sql::{AnyRow, Conn, Sql, Tx};
 use super::{
@@ -634,12 +634,12 @@ impl Store {
             // The lease that ran out is counted and said, as a run that failed its job is: the
             // shard then reads as the job's error tells (it read one lease short, its last
             // attempt "stopped: job failed").
-            Sql::new(
+            Sql::new(concat!(
                 "UPDATE shards SET status = 'queued', lost_leases = lost_leases + 1, \
-                 operations_done = 0, error = $4, history = history || 'attempt ' || attempt \
-                 || ' (' || COALESCE(lease_owner, '?') || '): lease lost\n' \
-                 WHERE job_id = $1 AND batch = $2 AND grp = $3 AND status = 'running'",
-            )
+                 operations_done = 0, error = $4, history = ",
+                history_lease_lost!(),
+                " WHERE job_id = $1 AND batch = $2 AND grp = $3 AND status = 'running'",
+            ))
             .bind(job.as_str())
             .bind(count_to_sql(shard.batch))
             .bind(group_to_sql(shard))

@@ -323,6 +323,15 @@ macro_rules! fenced_shard {
 
 pub(crate) use fenced_shard;
 
+/// A shard's history with the line of its attempt whose lease ran out appended.
+macro_rules! history_lease_lost {
+    () => {
+        "history || 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): lease lost\n'"
+    };
+}
+
+pub(crate) use history_lease_lost;
+
 /// Leases the next shard (see [`super::Store::claim`]): the target picks the shard's row with the
 /// lock the backend takes on it; `$jobs` names the jobs table, with the index that walks the open
 /// ones in fair-share order where the backend must be told. `s.status <> 'done'`, implied by the
@@ -334,9 +343,9 @@ macro_rules! claim_next {
             "UPDATE shards SET status = 'running', attempt = attempt + 1, lease_owner = $1, lease_until = $2 + $3, \
              operations_done = 0, retry_at = NULL, \
              lost_leases = lost_leases + CASE WHEN status = 'running' THEN 1 ELSE 0 END, \
-             history = history || CASE WHEN status = 'running' \
-                 THEN 'attempt ' || attempt || ' (' || COALESCE(lease_owner, '?') || '): lease lost\n' \
-                 ELSE '' END \
+             history = CASE WHEN status = 'running' THEN ",
+            $crate::store::rows::history_lease_lost!(),
+            " ELSE history END \
              WHERE ",
             $target,
             " FROM ",
