@@ -222,10 +222,7 @@ pub fn read_past_faults<T: DeserializeOwned + Serialize>(
             None => left_out.iter().any(|(object, _)| *object == at),
         };
         if name_as_object {
-            faults.push(FieldError {
-                pointer: at.clone(),
-                detail: NAME_AS_OBJECT.to_owned(),
-            });
+            faults.push(name_as_object_at(at.clone()));
         } else if !consequence {
             faults.extend(invalid_from_serde(pointer, error.inner()).errors);
         }
@@ -260,6 +257,14 @@ fn unescape(token: &str) -> String {
 /// unit`, below a member the document does not have.
 const NAME_AS_OBJECT: &str = "invalid type: object, expected text (one of its names)";
 
+/// The fault of a name written as an object at `pointer`.
+fn name_as_object_at(pointer: String) -> FieldError {
+    FieldError {
+        pointer,
+        detail: NAME_AS_OBJECT.to_owned(),
+    }
+}
+
 /// Every place where `written` has an object and `read` (the value read from it, written back)
 /// has text: a name given in serde's one-member form, for [`NAME_AS_OBJECT`].
 fn named_as_objects(
@@ -273,10 +278,7 @@ fn named_as_objects(
         return;
     }
     match (written, read) {
-        (Value::Object(_), Value::String(_)) => faults.push(FieldError {
-            pointer: at.to_string(),
-            detail: NAME_AS_OBJECT.to_owned(),
-        }),
+        (Value::Object(_), Value::String(_)) => faults.push(name_as_object_at(at.to_string())),
         (Value::Object(written), Value::Object(read)) => {
             for (name, member) in written {
                 if let Some(back) = read.get(name) {
