@@ -119,6 +119,12 @@ fn a_job_against_itself_and_two_designs_over_api_and_cli() {
     let output = remote(&server, None, &args);
     let compared: Value = serde_json::from_str(&stdout(&output)).unwrap();
     assert_eq!(compared["metric"], metric);
+    // Its comparison links to no wear curves.
+    assert_eq!(compared["links"]["bands"], Value::Null);
+    assert_eq!(
+        compared["links"]["weibull"],
+        format!("/v1/jobs/{strong}/compare/{weak}/plots/weibull.svg")
+    );
     assert!(dir.join("weibull.svg").is_file());
     assert!(!dir.join("bands.svg").exists());
     // Said, not left out in silence.
@@ -140,6 +146,15 @@ fn a_job_against_itself_and_two_designs_over_api_and_cli() {
         "{said}"
     );
 
+    // Without failure criteria on a side, no Weibull plot to link to.
+    let mut plain = design("plain", 15.0);
+    plain.as_object_mut().unwrap().remove("failure");
+    let plain = submit(&plain, "compare-c");
+    let url = format!("{}/v1/jobs/{strong}/compare/{plain}", server.base());
+    let compared = get(&url, None).json();
+    assert_eq!(compared["links"]["weibull"], Value::Null, "{compared}");
+    assert!(compared["links"]["bands"].is_string(), "{compared}");
+
     // Refusals name what is wrong.
     let base = format!("{}/v1/jobs/{strong}/compare/{weak}", server.base());
     let problem = assert_problem(&get(&format!("{base}?statistics=mean,median"), None), 400);
@@ -157,7 +172,12 @@ fn a_job_against_itself_and_two_designs_over_api_and_cli() {
         problem["detail"].as_str().unwrap().contains("metrc"),
         "{problem}"
     );
-    assert_problem(&get(&format!("{base}?metric=no_such_metric"), None), 404);
+    let problem = assert_problem(&get(&format!("{base}?metric=no_such_metric"), None), 404);
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(
+        detail.contains("no metric `no_such_metric`; known: "),
+        "{problem}"
+    );
     assert_problem(&get(&format!("{base}/plots/histograms.svg"), None), 404);
     let missing = format!("{}/v1/jobs/{strong}/compare/no-such-job", server.base());
     assert_problem(&get(&missing, None), 404);

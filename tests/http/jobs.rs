@@ -1559,4 +1559,60 @@ fn parts_a_job_never_has_are_404_before_it_ends() {
     let failing = failing.json()["id"].as_str().unwrap().to_owned();
     let life = get(&server.url(&format!("/v1/jobs/{failing}/life")), None);
     assert_problem(&life, 409);
+
+    // So are the plots and the metrics it never has (they were 409 before it ended, 404 after).
+    let one_metric = post(
+        &server.url("/v1/jobs"),
+        r#"{"devices": 2, "operations": 2, "metrics": ["e1"]}"#,
+        None,
+    );
+    let one_metric = one_metric.json()["id"].as_str().unwrap().to_owned();
+    for (job, part, status, why) in [
+        (&plain, "plots/nosuch.svg", 404, "no plot `nosuch.svg`"),
+        (&plain, "plots/weibull.svg", 404, "no failure criteria"),
+        (&plain, "plots/sensitivity.svg", 404, "no sensitivity"),
+        (&plain, "plots/tail.svg", 404, "asks no rare event"),
+        (
+            &plain,
+            "plots/bands.svg?metric=final_kappa",
+            404,
+            "no operation metric",
+        ),
+        (
+            &plain,
+            "plots/bands.svg?metric=kappa",
+            409,
+            "results exist once",
+        ),
+        (&failing, "plots/weibull.svg", 409, "results exist once"),
+        (&one_metric, "plots/histograms.svg", 404, "`total_bounce_s`"),
+        (
+            &plain,
+            "distributions/nosuch",
+            404,
+            "no metric `nosuch`; known",
+        ),
+        (
+            &one_metric,
+            "distributions/kappa",
+            404,
+            "not among its `metrics`",
+        ),
+        (&one_metric, "distributions/e1", 409, "results exist once"),
+    ] {
+        let reply = get(&server.url(&format!("/v1/jobs/{job}/{part}")), None);
+        let problem = assert_problem(&reply, status);
+        let detail = problem["detail"].as_str().unwrap();
+        assert!(detail.contains(why), "{part}: {problem}");
+    }
+    // A job that ended without results says so, not that they come once it succeeds.
+    let cancelled = post(&server.url(&format!("/v1/jobs/{plain}/cancel")), "", None);
+    assert_eq!(cancelled.status, 200, "{}", cancelled.body);
+    let reply = get(&server.url(&format!("/v1/jobs/{plain}/result")), None);
+    let problem = assert_problem(&reply, 409);
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(
+        detail.contains("is cancelled: it ended without results"),
+        "{problem}"
+    );
 }

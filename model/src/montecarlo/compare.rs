@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use super::{Bin, JobResult};
+use super::{Bin, JobResult, Metric};
 use crate::life::compare::{LifeComparison, compare_lives};
 use crate::stats::{Difference, Estimate, QUANTILES, Summary, difference};
 
@@ -106,7 +106,9 @@ pub struct Comparison {
 /// Why two jobs cannot be compared.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CompareError {
-    #[error("job {0} has no metric `{1}` (was it requested?)")]
+    #[error("no metric `{0}`; known: {known}", known = Metric::all_names())]
+    UnknownMetric(String),
+    #[error("job {0} does not compute `{1}`: it was not among its `metrics`")]
     NoMetric(&'static str, String),
 }
 
@@ -120,6 +122,9 @@ pub fn compare(
     statistics: &[Statistic],
     b_lives: &[f64],
 ) -> Result<Comparison, CompareError> {
+    if Metric::parse(metric).is_none() {
+        return Err(CompareError::UnknownMetric(metric.to_owned()));
+    }
     let (bins_a, bins_b) = (bins_of(a, metric), bins_of(b, metric));
     let bins_a = bins_a.ok_or_else(|| CompareError::NoMetric("a", metric.to_owned()))?;
     let bins_b = bins_b.ok_or_else(|| CompareError::NoMetric("b", metric.to_owned()))?;

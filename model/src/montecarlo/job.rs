@@ -138,6 +138,15 @@ impl Default for JobSpec {
     }
 }
 
+impl JobSpec {
+    /// Whether the job summarises `metric` (a name of [`Metric`]): the job's Result has it, once
+    /// the job succeeds. A stored spec lists its metrics; one that lists none asks for all.
+    pub fn computes(&self, metric: &str) -> bool {
+        Metric::parse(metric).is_some()
+            && (self.metrics.as_ref()).is_none_or(|names| names.iter().any(|name| name == metric))
+    }
+}
+
 /// How device-level scatter is drawn.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]

@@ -18,10 +18,10 @@ use axum::extract::rejection::QueryRejection;
 use axum::extract::{Query, State};
 use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
-use bouncewear_model::montecarlo::JobResult;
 use bouncewear_model::montecarlo::compare::{
     Comparison, DEFAULT_B_LIVES, DEFAULT_STATISTICS, Statistic, compare,
 };
+use bouncewear_model::montecarlo::{JobResult, Metric};
 use serde::{Deserialize, Serialize};
 use tokio::sync::OwnedSemaphorePermit;
 use utoipa::{IntoParams, ToSchema};
@@ -70,12 +70,14 @@ pub struct JobComparison {
     pub links: ComparisonLinks,
 }
 
+/// Each `null` where the comparison has no such plot.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ComparisonLinks {
-    /// The wear curves of the metric overlaid.
-    pub bands: String,
-    /// The Weibull plots overlaid (jobs with failure criteria).
-    pub weibull: String,
+    /// The wear curves of the metric overlaid; `null` for a device metric (one value a device,
+    /// no wear curve).
+    pub bands: Option<String>,
+    /// The Weibull plots overlaid; `null` unless both jobs have failure criteria.
+    pub weibull: Option<String>,
 }
 
 /// Job `id` (design a) compared with job `other` (design b): any statistic of a metric, B-lives,
@@ -120,11 +122,12 @@ pub async fn get_comparison(
     let body = JobComparison {
         a: id.to_string(),
         b: other.to_string(),
-        comparison,
         links: ComparisonLinks {
-            bands: format!("{this}/plots/bands.svg?metric={metric}"),
-            weibull: format!("{this}/plots/weibull.svg"),
+            bands: matches!(Metric::parse(&metric), Some(Metric::Operation(_)))
+                .then(|| format!("{this}/plots/bands.svg?metric={metric}")),
+            weibull: (comparison.life.is_some()).then(|| format!("{this}/plots/weibull.svg")),
         },
+        comparison,
     };
     Ok(immutable(&state, &headers, JSON, to_json(&body)?))
 }

@@ -649,12 +649,19 @@ pub async fn succeeded(state: &AppState, owner: &Owner, id: &JobId) -> Result<Jo
 
 /// The job's record, if it succeeded (409 before).
 pub fn has_succeeded(record: JobRecord) -> Result<JobRecord, ApiError> {
-    if record.status != JobStatus::Succeeded {
-        return Err(ApiError::Conflict(format!(
-            "job {} is {}; results exist once it succeeds",
-            record.id,
-            record.status.as_str()
-        )));
+    let (id, status) = (&record.id, record.status.as_str());
+    match record.status {
+        JobStatus::Succeeded => {}
+        JobStatus::Queued | JobStatus::Running => {
+            return Err(ApiError::Conflict(format!(
+                "job {id} is {status}; results exist once it succeeds"
+            )));
+        }
+        JobStatus::Failed | JobStatus::Cancelled => {
+            return Err(ApiError::Conflict(format!(
+                "job {id} is {status}: it ended without results (only a succeeded job has them)"
+            )));
+        }
     }
     Ok(record)
 }
@@ -854,13 +861,20 @@ pub async fn get_distribution(
         query.op_start.unwrap_or(0),
         query.op_end.unwrap_or(u64::MAX),
     );
-    let record = succeeded(&state, &owner, &id).await?;
+    // A metric the job does not compute is 404 whatever its status: it never will.
+    let (record, spec) = state.store.job_with_spec(&owner, &id).await?;
     let Some(parsed) = Metric::parse(&metric) else {
         return Err(ApiError::NotFound(format!(
             "no metric `{metric}`; known: {}",
             Metric::all_names()
         )));
     };
+    if !spec.computes(&metric) {
+        return Err(ApiError::NotFound(format!(
+            "job {id} does not compute `{metric}`: it was not among its `metrics`"
+        )));
+    }
+    let record = has_succeeded(record)?;
     if op_start >= op_end {
         // Half-open: `[10, 10)` holds no operation, so no bin overlaps it (the store's overlap
         // test alone would take the bin around 10).
@@ -876,7 +890,7 @@ pub async fn get_distribution(
     let kind = rows.first().map(|r| r.kind.clone());
     let Some(kind) = kind else {
         return Err(ApiError::NotFound(format!(
-            "job {id} has no bins of `{metric}` in that range (was the metric requested?)"
+            "job {id} has no bins of `{metric}` in that range"
         )));
     };
     let levels = after_run
@@ -1128,13 +1142,9 @@ pub async fn get_life(
             "job {id} has no failure criteria, so no life analysis"
         ))
     };
-    let result = result_asking(
-        &state,
-        &owner,
-        &id,
-        |spec| !spec.failure.is_empty(),
-        no_life,
-    )
+    let result = result_asking(&state, &owner, &id, |spec| {
+        (!spec.failure.is_empty()).then_some(()).ok_or_else(no_life)
+    })
     .await?;
     let Some(mut life) = result.life else {
         return Err(no_life());
@@ -1215,13 +1225,12 @@ pub async fn get_rare_event(
             "job {id} asks no rare event: submit it with `rare_event`"
         ))
     };
-    let result = result_asking(
-        &state,
-        &owner,
-        &id,
-        |spec| spec.rare_event.is_some(),
-        no_rare_event,
-    )
+    let result = result_asking(&state, &owner, &id, |spec| {
+        spec.rare_event
+            .is_some()
+            .then_some(())
+            .ok_or_else(no_rare_event)
+    })
     .await?;
     let Some(rare) = result.rare_event else {
         return Err(no_rare_event());
@@ -1289,29 +1298,16 @@ fn life_csv(
     futures_util::stream::once(async move { Ok(header) }).chain(pages)
 }
 
-/// The stored Result of the caller's job, parsed (409 until the job succeeded).
-pub async fn succeeded_result(
-    state: &AppState,
-    owner: &Owner,
-    id: &JobId,
-) -> Result<JobResult, ApiError> {
-    succeeded(state, owner, id).await?;
-    stored_result(state, id).await
-}
-
-/// The Result of a succeeded job whose spec `asks` for a part of it: `missing` (a 404) when it
+/// The Result of a succeeded job whose spec `asks` for a part of it: its error (a 404) when it
 /// does not, whatever the job's status, since it never will; 409 before the job succeeds.
-async fn result_asking(
+pub(super) async fn result_asking(
     state: &AppState,
     owner: &Owner,
     id: &JobId,
-    asks: impl FnOnce(&JobSpec) -> bool,
-    missing: impl FnOnce() -> ApiError,
+    asks: impl FnOnce(&JobSpec) -> Result<(), ApiError>,
 ) -> Result<JobResult, ApiError> {
     let (record, spec) = state.store.job_with_spec(owner, id).await?;
-    if !asks(&spec) {
-        return Err(missing());
-    }
+    asks(&spec)?;
     has_succeeded(record)?;
     stored_result(state, id).await
 }

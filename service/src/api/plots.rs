@@ -7,7 +7,7 @@ use super::error::{
     ApiError, PROBLEM, Problem,
     responses::{BadQuery, NotSucceeded, Unauthorized},
 };
-use super::jobs::succeeded_result;
+use super::jobs::result_asking;
 use super::schedules::schedule_trend;
 use crate::domain::{JobId, Owner, ScheduleId};
 use crate::plots::{self, TrendPoint};
@@ -71,12 +71,12 @@ pub async fn job_plot(
 ) -> Result<Response, ApiError> {
     let Query(query) = query?;
     let _place = super::limits::take_place(&state.parsing).await?;
-    let result = succeeded_result(&state, &owner, &id).await?;
-    let svg = plots::job_plot(
-        &result,
-        &kind,
-        query.metric.as_deref().unwrap_or("total_bounce_s"),
-    )?;
+    let metric = query.metric.as_deref().unwrap_or("total_bounce_s");
+    let result = result_asking(&state, &owner, &id, |spec| {
+        Ok(plots::job_has_plot(spec, &kind, metric)?)
+    })
+    .await?;
+    let svg = plots::job_plot(&result, &kind, metric)?;
     Ok(([(header::CONTENT_TYPE, SVG)], svg).into_response())
 }
 

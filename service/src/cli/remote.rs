@@ -5,7 +5,6 @@
 //! failed, 5xx).
 
 use super::{CliError, read_input};
-use bouncewear_model::montecarlo::Metric;
 use bouncewear_model::{FieldError, InvalidInput};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -638,27 +637,22 @@ pub fn compare(
     let text = server.send("GET", &format!("{this}{query}"), None)?;
     // The directory is made and tried before the request (`--plots`, exit 2).
     if let Some(dir) = plots {
+        // The plots the comparison links to: `null` where it has none.
         let comparison = parse(&text)?;
-        let metric = asked.metric.as_deref().map(encode).unwrap_or_default();
-        // A device metric is one value a device: no wear curve to draw.
-        let device = asked.metric.as_deref().and_then(Metric::parse);
-        let mut kinds = Vec::new();
-        if matches!(device, Some(Metric::Device(_))) {
+        let links = &comparison["links"];
+        if links["bands"].is_null() {
             tracing::warn!(
                 "--plots: no bands.svg: {} is a device metric, one value a device, with no wear \
                  curve",
                 asked.metric.as_deref().unwrap_or_default()
             );
-        } else {
-            kinds.push(("bands.svg", format!("?metric={metric}")));
         }
-        if comparison.get("life").is_some_and(|life| !life.is_null()) {
-            kinds.push(("weibull.svg", String::new()));
-        }
-        for (kind, query) in kinds {
-            let query = if query == "?metric=" { "" } else { &query };
-            let svg = server.send("GET", &format!("{this}/plots/{kind}{query}"), None)?;
-            let path = dir.join(kind);
+        for kind in ["bands", "weibull"] {
+            let Some(link) = links[kind].as_str() else {
+                continue;
+            };
+            let svg = server.send("GET", link, None)?;
+            let path = dir.join(format!("{kind}.svg"));
             std::fs::write(&path, svg).map_err(|source| CliError::Write {
                 path: path.display().to_string(),
                 source,

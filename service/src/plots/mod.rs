@@ -22,7 +22,7 @@ mod trend;
 mod weibull;
 mod work_precision;
 
-use bouncewear_model::montecarlo::{JobResult, Metric};
+use bouncewear_model::montecarlo::{JobResult, JobSpec, Metric};
 use bouncewear_model::stats::Summary;
 
 pub use bands::{Design, compared_bands_svg, quantile_bands_svg};
@@ -60,6 +60,7 @@ pub enum PlotError {
 /// use. `metric` is an operation metric for the first two, any metric of the sensitivity analysis
 /// for the fourth; the tail curve is of the job's rare event.
 pub fn job_plot(result: &JobResult, kind: &str, metric: &str) -> Result<String, PlotError> {
+    job_has_plot(result.job.spec(), kind, metric)?;
     let bins = || {
         result
             .operations
@@ -95,6 +96,30 @@ pub fn job_plot(result: &JobResult, kind: &str, metric: &str) -> Result<String, 
             };
             Ok(tail_svg(&asked.metric, beyond, report))
         }
+        other => Err(PlotError::NoSuchPlot(other.to_owned())),
+    }
+}
+
+/// Whether a job of `spec` (as stored: its metrics filled in) has the plot `kind` of `metric`
+/// once it succeeds: the rule [`job_plot`] applies, which the API applies whatever the job's
+/// status, since a plot the job does not ask for never comes.
+pub fn job_has_plot(spec: &JobSpec, kind: &str, metric: &str) -> Result<(), PlotError> {
+    match kind {
+        "bands.svg" | "histograms.svg" => {
+            if matches!(Metric::parse(metric), Some(Metric::Operation(_))) && spec.computes(metric)
+            {
+                Ok(())
+            } else {
+                Err(PlotError::NoMetric(metric.to_owned()))
+            }
+        }
+        "weibull.svg" if spec.failure.is_empty() => Err(PlotError::NoLifeAnalysis),
+        "sensitivity.svg" if spec.sensitivity.is_none() => Err(PlotError::NoSensitivity),
+        "sensitivity.svg" if !spec.computes(metric) => {
+            Err(PlotError::NoSensitivityMetric(metric.to_owned()))
+        }
+        "tail.svg" if spec.rare_event.is_none() => Err(PlotError::NoRareEvent),
+        "weibull.svg" | "sensitivity.svg" | "tail.svg" => Ok(()),
         other => Err(PlotError::NoSuchPlot(other.to_owned())),
     }
 }
