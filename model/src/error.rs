@@ -728,7 +728,14 @@ fn in_plain_words(message: &str) -> String {
     // A number read as one with a point or an exponent (`2.5`, `1e+20`, or a whole number beyond
     // the type, which JSON's reader takes as such): the number quoted may not be the one
     // written (`9007199254740993.0` is quoted `9007199254740992.0`).
-    if plain.starts_with("invalid type: number") && plain.contains("expected a whole number") {
+    // `2.5` is no whole number however written: the hint is for those that are.
+    let quoted = plain
+        .strip_prefix("invalid type: number `")
+        .and_then(|rest| rest.split_once('`'))
+        .and_then(|(number, _)| number.parse::<f64>().ok());
+    if quoted.is_some_and(|number| number.fract() == 0.0)
+        && plain.contains("expected a whole number")
+    {
         plain.push_str(", written in digits alone");
     }
     plain
@@ -796,7 +803,11 @@ mod tests {
             ),
             (
                 r#"{"small": 1.5}"#,
-                "/small: invalid type: number `1.5`, expected a whole number from 0 to 4294967295, written in digits alone",
+                "/small: invalid type: number `1.5`, expected a whole number from 0 to 4294967295",
+            ),
+            (
+                r#"{"count": 9007199254740993.0}"#,
+                "/count: invalid type: number `9007199254740992.0`, expected a whole number from 0 to 18446744073709551615, written in digits alone",
             ),
             (
                 r#"{"count": 100000000000000000000}"#,

@@ -961,6 +961,16 @@ fn life_analysis_is_served_as_json_and_per_device_csv() {
     let csv = get(&server.url(&format!("/v1/jobs/{id}/life?format=csv")), None);
     let rows: Vec<&str> = csv.body.lines().collect();
     assert_eq!(rows[0], "device,operations_to_failure,censored");
+    // A Weibayes demonstration is the JSON analysis': asked of the CSV, it is refused, not ignored.
+    let weibayes = format!("/v1/jobs/{id}/life?format=csv&weibayes_beta=2");
+    let problem = assert_problem(&get(&server.url(&weibayes), None), 400);
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("`weibayes_beta`"),
+        "{problem}"
+    );
     assert_eq!(rows.len(), 61);
     assert!(rows[1].starts_with("0,"));
     // A failed device gives the operation it failed at; a censored one none.

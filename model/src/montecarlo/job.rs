@@ -3,7 +3,7 @@
 
 use super::correlation::{Correlation, CorrelationSpec};
 use super::distribution::{Distribution, Domain};
-use super::metric::{DeviceMetric, Metric, OperationMetric};
+use super::metric::{DeviceMetric, Metric, OperationMetric, needs_polarity};
 use super::rare::question::{JobShape, RareEvent, RareEventSpec};
 pub use super::scatter::{Parameter, Per, ScatterSpec};
 use crate::error::{FieldError, InvalidInput, Pointer, past_listing};
@@ -718,10 +718,9 @@ fn parse_metric(
 ) -> Option<Metric> {
     let detail = match Metric::parse(name) {
         None => format!("unknown metric `{name}`; known: {}", Metric::all_names()),
-        Some(Metric::Device(metric)) if metric.needs_polarity() && !polarity => format!(
-            "`{name}` needs the anode's share of the eroded mass: set \
-             scenario/material/anode_erosion_fraction"
-        ),
+        Some(Metric::Device(metric)) if metric.needs_polarity() && !polarity => {
+            needs_polarity(name)
+        }
         Some(metric) => return Some(metric),
     };
     errors.push(FieldError {

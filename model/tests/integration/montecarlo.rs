@@ -635,6 +635,16 @@ fn the_anode_cathode_split_needs_the_anodes_share_and_names_where_it_is_asked_fo
     for (document, pointer) in cases {
         assert_eq!(pointers(document.clone()), [pointer], "{document}");
     }
+    // The field to set is named by its pointer, in a job's metrics and in its rare event alike.
+    for document in [
+        json!({"metrics": ["anode_eroded_mass_kg"]}),
+        json!({"rare_event": {"metric": "anode_eroded_mass_kg", "above": 1e-9}}),
+    ] {
+        let invalid = Job::from_json(&document.to_string(), || 7).unwrap_err();
+        let detail = &invalid.errors()[0].detail;
+        let set = "set the job's /scenario/material/anode_erosion_fraction";
+        assert!(detail.contains(set), "{detail}");
+    }
     let split = json!({"scenario": {"material": {"anode_erosion_fraction": 0.7}},
                        "metrics": ["anode_eroded_mass_kg", "cathode_eroded_mass_kg"]});
     assert_eq!(pointers(split), Vec::<String>::new());

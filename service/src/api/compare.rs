@@ -49,9 +49,10 @@ pub struct ComparisonQuery {
     )]
     pub statistics: Option<String>,
     /// Comma-separated fractions failed of the B-lives compared (default `0.01,0.1`), at most 20,
-    /// each at least 1e-9 and below 1.
+    /// each at least 1e-9 and below 1, written as a decimal (`0.001`) or with an exponent
+    /// (`1e-3`).
     #[param(
-        pattern = "^0?\\.[0-9]*[1-9][0-9]*(,0?\\.[0-9]*[1-9][0-9]*){0,19}$",
+        pattern = "^(0?\\.0{0,8}[1-9][0-9]*|[1-9](\\.[0-9]+)?[eE]-0*[1-9])(,(0?\\.0{0,8}[1-9][0-9]*|[1-9](\\.[0-9]+)?[eE]-0*[1-9])){0,19}$",
         example = "0.01,0.1"
     )]
     pub b_lives: Option<String>,

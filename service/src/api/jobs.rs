@@ -1101,7 +1101,8 @@ pub struct LifeQuery {
     #[param(inline, example = "json")]
     pub format: Option<Format>,
     /// A Weibull shape taken as known, 0.01 to 100: the JSON adds `weibayes`, the scale and the
-    /// B1 and B10 lives' one-sided lower bounds demonstrated with it (with no failures too).
+    /// B1 and B10 lives' one-sided lower bounds demonstrated with it (with no failures too); 400
+    /// with the CSV, which lists the devices' lives.
     #[param(minimum = 0.01, maximum = 100, example = 2.0)]
     pub weibayes_beta: Option<f64>,
     /// The one-sided confidence of `weibayes` (default 0.9), strictly between 0 and 1: given only
@@ -1136,6 +1137,15 @@ pub async fn get_life(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let Query(query) = query?;
+    let format = Format::negotiate(query.format, &headers);
+    if format == Format::Csv && (query.weibayes_beta, query.confidence) != (None, None) {
+        // Computed and left out of the devices' rows, it was ignored in silence.
+        return Err(ApiError::BadRequest(
+            "query parameters `weibayes_beta` and `confidence` ask the JSON analysis for a \
+             Weibayes demonstration; the CSV lists each device's life: leave them out"
+                .to_owned(),
+        ));
+    }
     let _place = super::limits::take_place(&state.parsing).await?;
     let no_life = || {
         ApiError::NotFound(format!(
@@ -1169,7 +1179,7 @@ pub async fn get_life(
         }
         (None, None) => {}
     }
-    match Format::negotiate(query.format, &headers) {
+    match format {
         Format::Json => Ok(immutable(&state, &headers, JSON, to_json(&life)?)),
         Format::Csv => {
             let identity = format!("{id}/life.csv");

@@ -4,7 +4,7 @@
 
 use super::methods::{Budget, SAMPLES_PER_LEVEL};
 use crate::error::{FieldError, Pointer};
-use crate::montecarlo::metric::Metric;
+use crate::montecarlo::metric::{Metric, needs_polarity};
 use serde::{Deserialize, Serialize};
 
 /// What an evaluation reads off the device.
@@ -168,13 +168,7 @@ fn check_reading(spec: &RareEventSpec, shape: &JobShape, faults: &mut Faults) ->
             None
         }
         Some(Metric::Device(metric)) if metric.needs_polarity() && !shape.polarity => {
-            faults.push(
-                "metric",
-                format!(
-                    "`{}` needs scenario/material/anode_erosion_fraction",
-                    spec.metric
-                ),
-            );
+            faults.push("metric", needs_polarity(&spec.metric));
             None
         }
         Some(metric) => Some(Reading::Metric(metric)),
