@@ -402,6 +402,7 @@ pub fn summarize_job(job: &Job, tally: &Tally, wall_s: f64) -> JobResult {
         }
     });
     diagnostics.extend(precision.as_ref().and_then(diagnostics::stopped_early));
+    diagnostics.extend(rare::forced_importance(job));
     JobResult {
         job: ResolvedJob::new(job, tally.devices),
         operations: summarize_operations(job, tally),

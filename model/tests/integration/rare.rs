@@ -865,3 +865,37 @@ fn a_budget_spent_in_a_later_run_keeps_the_runs_before_it() {
         "{found:?} against {truth}"
     );
 }
+
+/// Importance sampling forced on an event of several operations' scattered inputs is warned of
+/// in the Result's diagnostics (its interval covers less than it claims there, measured from
+/// outside); `auto`, which takes subset simulation there, and importance sampling on one
+/// operation's or the device's inputs are not.
+#[test]
+fn forced_importance_over_several_operations_is_warned_of() {
+    let rare_job = |per: &str, method: &str| {
+        job(json!({
+            "devices": 4, "operations": 20,
+            "scatter": [{"parameter": "impact_velocity_m_s", "per": per,
+                         "distribution": {"kind": "normal", "mean": MEAN, "sd": SD, "min": 0.05}}],
+            "metrics": ["cumulative_plastic_work_j"],
+            "rare_event": {"metric": "cumulative_plastic_work_j", "above": 0.0107,
+                           "method": method}
+        }))
+    };
+    let warned = |job: &Job| {
+        bouncewear_model::montecarlo::rare::forced_importance(job).map(|d| (d.pointer, d.detail))
+    };
+    let (pointer, detail) = warned(&rare_job("operation", "importance")).unwrap();
+    assert_eq!(pointer, "/rare_event/method");
+    assert!(
+        detail.contains("`auto` takes subset simulation here"),
+        "{detail}"
+    );
+    for (per, method) in [
+        ("operation", "auto"),
+        ("operation", "subset"),
+        ("device", "importance"),
+    ] {
+        assert_eq!(warned(&rare_job(per, method)), None, "{per} {method}");
+    }
+}

@@ -6,6 +6,7 @@
 pub mod methods;
 pub mod question;
 
+use super::diagnostics::Diagnostic;
 use super::engine::limit_state::DeviceFunction;
 use super::job::Job;
 use super::{Observer, RunError};
@@ -106,6 +107,28 @@ pub fn estimate(job: &Job, observer: &dyn Observer) -> Result<Option<RareEventRe
             return Ok(Some(report));
         }
     }
+}
+
+/// The warning where a job forces importance sampling on an event of several operations'
+/// scattered inputs, where `auto` takes subset simulation ([`start`]): drawn around one design
+/// point, its weights are heavy-tailed, their spread read too small. Measured from outside: the
+/// plastic work summed over 20 operations of scattered velocity (the truth from a sampler of the
+/// model's closed form, 4e7 samples), target cov 0.1: at 2.4e-6 the interval held the truth in 741
+/// of 800 jobs (92.6 %), at 5.8e-9 in 259 of 300 (86.3 %), missing from below, the estimate 1.3 and
+/// 3.4 % low; one batch (target cov 1), 87.7 % of 400; subset simulation 97-98 % on both.
+pub fn forced_importance(job: &Job) -> Option<Diagnostic> {
+    let rare = job.rare_event()?;
+    let several = limit_state(job, rare)
+        .function
+        .scatters_several_operations();
+    (rare.method == RareMethod::Importance && several).then(|| Diagnostic {
+        pointer: "/rare_event/method".to_owned(),
+        detail: "importance sampling draws around one design point, and this event has one per \
+                 operation whose inputs are scattered: its interval holds the truth less often \
+                 than 95 % (87-93 % where measured, missing from below) and the estimate runs a \
+                 few per cent low; `auto` takes subset simulation here"
+            .to_owned(),
+    })
 }
 
 /// The job's rare event ready for its first round, if it asks one (`auto` resolved: importance
