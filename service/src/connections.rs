@@ -304,32 +304,110 @@ impl<B: HttpBody + Unpin> HttpBody for Counted<B> {
 /// A connection's socket, recording for [`Open`] whether the server waits on its client (a read
 /// that found nothing to read sets it, one that read bytes or the end clears it), whether the
 /// client has sent anything, and whether written bytes wait for a flush; and failing a write
-/// that has waited `write_stall` for the client to read (hyper then drops the connection).
+/// once the client has read none of the response for `write_stall` (hyper then drops the
+/// connection): a write that has waited that long, or one of a trickle the kernel still takes
+/// (an event stream's, a few bytes a minute) while none of what it took before has reached the
+/// client ([`Delivery`]).
 struct Watched {
     stream: TcpStream,
     connection: Arc<Connection>,
     write_stall: Duration,
     /// Runs while a write waits for the client; none while writes go through.
     stalled: Option<Pin<Box<tokio::time::Sleep>>>,
+    delivery: Delivery,
+}
+
+/// What of the bytes written has reached the client: the kernel takes an event stream's few
+/// bytes a minute for as long as its buffers last (about 4 MB on Linux), so a stream whose client
+/// read nothing held its place for hours, writes never waiting (found from outside: 64 streams
+/// that never read shut every other client out of event streams). The bytes the client's end
+/// has taken are those written less those the socket still holds unacknowledged (`SIOCOUTQ`); a
+/// client whose buffer is full because it reads nothing takes no more.
+struct Delivery {
+    /// Bytes written to the socket.
+    written: u64,
+    /// Bytes the client's end had taken when last looked at.
+    taken: u64,
+    /// When those bytes last grew, or bytes began to wait (the socket held none when last asked).
+    since: tokio::time::Instant,
+    /// Whether the socket held bytes unacknowledged when last asked.
+    waiting: bool,
+    /// When the socket was last asked: at most once a second.
+    asked: tokio::time::Instant,
+}
+
+impl Delivery {
+    fn new() -> Self {
+        let now = tokio::time::Instant::now();
+        Self {
+            written: 0,
+            taken: 0,
+            since: now,
+            waiting: false,
+            asked: now,
+        }
+    }
+
+    /// Whether the client has taken none of the bytes written to `stream` for `stall`, with
+    /// some waiting for it (looked at once a second at most; `false` where the platform cannot
+    /// tell).
+    fn stalled(&mut self, stream: &TcpStream, stall: Duration) -> bool {
+        let now = tokio::time::Instant::now();
+        if now.duration_since(self.asked) < Duration::from_secs(1) {
+            return false;
+        }
+        self.asked = now;
+        let Some(held) = unacknowledged(stream) else {
+            return false;
+        };
+        let taken = self.written.saturating_sub(held);
+        let waited_before = std::mem::replace(&mut self.waiting, held > 0);
+        // A new wait (after an idle keep-alive, say) starts its own clock.
+        if held == 0 || taken > self.taken || !waited_before {
+            (self.taken, self.since) = (taken, now);
+            return false;
+        }
+        now.duration_since(self.since) >= stall
+    }
+}
+
+/// The bytes written to `stream` that its peer has not acknowledged yet (`SIOCOUTQ`).
+#[cfg(target_os = "linux")]
+fn unacknowledged(stream: &TcpStream) -> Option<u64> {
+    use std::os::fd::AsRawFd;
+    let mut held: libc::c_int = 0;
+    // SAFETY: `SIOCOUTQ` (`TIOCOUTQ`) writes one `int` through the pointer, which lives for
+    // the call; the descriptor is the stream's own, open while it is borrowed.
+    let done = unsafe { libc::ioctl(stream.as_raw_fd(), libc::TIOCOUTQ, &raw mut held) };
+    (done == 0).then(|| u64::try_from(held).unwrap_or(0))
+}
+
+#[cfg(not(target_os = "linux"))]
+fn unacknowledged(_stream: &TcpStream) -> Option<u64> {
+    None
 }
 
 impl Watched {
-    /// `written`, or the error that ends the connection once writes have waited too long.
+    /// `written`, or the error that ends the connection once the client has read none of the
+    /// response for `write_stall`.
     fn unless_stalled<T>(
         &mut self,
         cx: &mut Context<'_>,
         written: Poll<std::io::Result<T>>,
     ) -> Poll<std::io::Result<T>> {
+        let stall = self.write_stall;
         if written.is_ready() {
             self.stalled = None;
-            return written;
-        }
-        let stall = self.write_stall;
-        let stalled = self
-            .stalled
-            .get_or_insert_with(|| Box::pin(tokio::time::sleep(stall)));
-        if stalled.as_mut().poll(cx).is_pending() {
-            return Poll::Pending;
+            if !self.delivery.stalled(&self.stream, stall) {
+                return written;
+            }
+        } else {
+            let stalled = self
+                .stalled
+                .get_or_insert_with(|| Box::pin(tokio::time::sleep(stall)));
+            if stalled.as_mut().poll(cx).is_pending() {
+                return Poll::Pending;
+            }
         }
         metrics::counter!(crate::telemetry::CONNECTIONS_STALLED).increment(1);
         Poll::Ready(Err(std::io::Error::new(
@@ -364,6 +442,9 @@ impl AsyncWrite for Watched {
     ) -> Poll<std::io::Result<usize>> {
         self.connection.writing.store(true, Ordering::Release);
         let written = Pin::new(&mut self.stream).poll_write(cx, buf);
+        if let Poll::Ready(Ok(n)) = written {
+            self.delivery.written += n as u64;
+        }
         self.unless_stalled(cx, written)
     }
 
@@ -374,6 +455,9 @@ impl AsyncWrite for Watched {
     ) -> Poll<std::io::Result<usize>> {
         self.connection.writing.store(true, Ordering::Release);
         let written = Pin::new(&mut self.stream).poll_write_vectored(cx, bufs);
+        if let Poll::Ready(Ok(n)) = written {
+            self.delivery.written += n as u64;
+        }
         self.unless_stalled(cx, written)
     }
 
@@ -479,6 +563,7 @@ pub async fn serve(
             connection: Arc::clone(&state),
             write_stall: limits.write_stall,
             stalled: None,
+            delivery: Delivery::new(),
         };
         let connection = http.serve_connection(TokioIo::new(watched), service);
         let mut stop = stopping.clone();

@@ -586,3 +586,74 @@ fn large_responses_held_for_unread_clients_are_bounded() {
     assert_eq!(read.status, 200);
     assert!(read.body.len() > 20_000_000);
 }
+
+/// An event stream whose client reads none of it is dropped after the body timeout too, though the
+/// kernel keeps taking its few bytes a minute, so writes never wait (found from outside: 64 such
+/// streams held for minutes, every other client's stream refused with 429).
+#[test]
+fn an_event_stream_whose_client_reads_nothing_is_dropped() {
+    let server = TestApp::start(
+        &temp_db("unread-events"),
+        &["--body-timeout-seconds", "2", "--max-streams-per-key", "2"],
+    );
+    let address: std::net::SocketAddr =
+        server.base().trim_start_matches("http://").parse().unwrap();
+    // Sockets that take about 2 KB and read none of it.
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let unread: Vec<TcpStream> = (0..2)
+        .map(|_| {
+            let socket = tokio::net::TcpSocket::new_v4().unwrap();
+            socket.set_recv_buffer_size(1024).unwrap();
+            let stream = runtime.block_on(socket.connect(address)).unwrap();
+            let mut stream = stream.into_std().unwrap();
+            stream.set_nonblocking(false).unwrap();
+            let request =
+                "GET /v1/events HTTP/1.1\r\nhost: bouncewear\r\naccept: text/event-stream\r\n\r\n";
+            stream.write_all(request.as_bytes()).unwrap();
+            stream
+        })
+        .collect();
+    // The status alone: a stream that opens is dropped unread.
+    let events = || {
+        let reply = agent().get(&server.url("/v1/events")).call().unwrap();
+        reply.status().as_u16()
+    };
+    let stalled = || {
+        let metrics = get(&server.url("/metrics"), None).body;
+        metrics
+            .lines()
+            .find_map(|line| line.strip_prefix("bouncewear_connections_stalled_total "))
+            .and_then(|count| count.trim().parse::<u64>().ok())
+            .unwrap_or(0)
+    };
+    let started = Instant::now();
+    while events() != 429 {
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "the streams never opened"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Eight jobs give each stream about 8 KB of events: more than its socket takes, less than
+    // the kernel's send buffer (16 KB at first), so no write waits; then only the keep-alive
+    // comment every 15 s is written.
+    for _ in 0..8 {
+        server.submit(&serde_json::json!({"devices": 2, "operations": 2}));
+        std::thread::sleep(Duration::from_millis(300));
+    }
+    let since = Instant::now();
+    while stalled() < 2 {
+        assert!(
+            since.elapsed() < Duration::from_secs(40),
+            "the unread streams are still held: {} stalled",
+            stalled()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    // Their places are free again, while their clients still hold the sockets.
+    assert_eq!(events(), 200);
+    drop(unread);
+}
