@@ -133,6 +133,13 @@ fn a_job_against_itself_and_two_designs_over_api_and_cli() {
         said.contains("no bands.svg: eroded_mass_kg is a device metric"),
         "{said}"
     );
+    // A comparison that fails takes away the directory it made for its plots.
+    let dir = crate::support::temp_dir("compare-failed-plots").join("new");
+    let nobody = "00000000-0000-4000-8000-000000000000";
+    let args = ["compare", &strong, nobody, "--plots", dir.to_str().unwrap()];
+    let failed = remote(&server, None, &args);
+    assert_eq!(failed.status.code(), Some(1));
+    assert!(!dir.exists(), "{}", dir.display());
     // A flag the server refuses is said as the flag's fault, not a document's (exit 2).
     let refused = remote(
         &server,

@@ -334,17 +334,35 @@ impl From<BenchError> for CliError {
 /// exited with "File exists" and printed nothing).
 /// A directory that exists but takes no file (`/proc/self`, one without write permission) is
 /// found by writing a file there and removing it: it failed after the run before.
-fn output_directory(flag: &str, dir: &Path) -> Result<(), CliError> {
+/// Whether it made the directory ([`unless_failed`] takes it away again).
+fn output_directory(flag: &str, dir: &Path) -> Result<bool, CliError> {
     let usage = |source: std::io::Error| {
         CliError::Usage(format!(
             "{flag} {}: cannot be made a directory for the outputs ({source})",
             dir.display()
         ))
     };
+    let made = !dir.exists();
     std::fs::create_dir_all(dir).map_err(usage)?;
     let probe = dir.join(format!(".bouncewear-{}", std::process::id()));
     std::fs::write(&probe, b"").map_err(usage)?;
-    std::fs::remove_file(&probe).map_err(usage)
+    std::fs::remove_file(&probe).map_err(usage)?;
+    Ok(made)
+}
+
+/// `outcome`, with the output directory the command made taken away again if it failed and
+/// left it empty (a failed `compare --plots DIR` left `DIR`, empty, behind).
+fn unless_failed<T>(
+    outcome: Result<T, CliError>,
+    made: Option<(&Path, bool)>,
+) -> Result<T, CliError> {
+    if outcome.is_err()
+        && let Some((dir, true)) = made
+    {
+        // Only an empty directory goes.
+        let _ = std::fs::remove_dir(dir);
+    }
+    outcome
 }
 
 /// `text` on one line and inert on a terminal: its control characters escaped (`\n`,
@@ -493,20 +511,17 @@ fn run(cli: Cli) -> Result<(), CliError> {
             plots,
             server,
         } => {
-            if let Some(dir) = &plots {
-                output_directory("--plots", dir)?;
-            }
+            let made = match &plots {
+                Some(dir) => Some((dir.as_path(), output_directory("--plots", dir)?)),
+                None => None,
+            };
             let asked = remote::Compared {
                 metric,
                 statistics,
                 b_lives,
             };
-            print_text(remote::compare(
-                &server,
-                [&a, &b],
-                &asked,
-                plots.as_deref(),
-            )?)
+            let compared = remote::compare(&server, [&a, &b], &asked, plots.as_deref());
+            print_text(unless_failed(compared, made)?)
         }
         Command::Cancel { id, server } => print_text(remote::cancel(&server, &id)?),
         Command::Schedule { command, server } => match remote::schedule(&server, &command)? {
@@ -591,13 +606,15 @@ fn run_command(
     let job = Job::from_json(&read_input(file)?, draw_seed)?.with_listed_lives(0);
     check_threshold(&job, &Pointer::root().child("rare_event"))?;
     let pool = thread_pool(threads)?;
-    if let Some(dir) = plots {
-        output_directory("--plots", dir)?;
-    }
+    let made = match plots {
+        Some(dir) => Some((dir, output_directory("--plots", dir)?)),
+        None => None,
+    };
     let progress = Progress::operations(quiet);
     let result = pool.install(|| run_job(&job, &progress));
     progress.finish();
-    let result = result.map_err(|cancelled| CliError::Failed(cancelled.to_string()))?;
+    let result = result.map_err(|cancelled| CliError::Failed(cancelled.to_string()));
+    let result = unless_failed(result, made)?;
     // The Result first: plots that cannot be written then lose nothing of the run.
     print_json(&result)?;
     match plots {
