@@ -218,6 +218,11 @@ def before_call(context, case, kwargs):
     # `confidence` is the confidence of a Weibayes demonstration: it comes with its shape.
     if operation.path.endswith("/life") and case.query and "confidence" in case.query:
         case.query.setdefault("weibayes_beta", 2.0)
+    # A Weibayes demonstration is the JSON analysis's: the CSV of devices' lives takes neither
+    # (400 with them).
+    if operation.path.endswith("/life") and case.query and case.query.get("format") == "csv":
+        case.query.pop("weibayes_beta", None)
+        case.query.pop("confidence", None)
     body = case.body if isinstance(case.body, dict) else None
     if body is None:
         return
