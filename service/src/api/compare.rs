@@ -18,10 +18,10 @@ use axum::extract::rejection::QueryRejection;
 use axum::extract::{Query, State};
 use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
+use bouncewear_model::montecarlo::JobResult;
 use bouncewear_model::montecarlo::compare::{
     Comparison, DEFAULT_B_LIVES, DEFAULT_STATISTICS, Statistic, compare,
 };
-use bouncewear_model::montecarlo::{JobResult, Metric};
 use serde::{Deserialize, Serialize};
 use tokio::sync::OwnedSemaphorePermit;
 use utoipa::{IntoParams, ToSchema};
@@ -124,7 +124,7 @@ pub async fn get_comparison(
         a: id.to_string(),
         b: other.to_string(),
         links: ComparisonLinks {
-            bands: matches!(Metric::parse(&metric), Some(Metric::Operation(_)))
+            bands: plots::has_wear_curve(&metric)
                 .then(|| format!("{this}/plots/bands.svg?metric={metric}")),
             weibull: (comparison.life.is_some()).then(|| format!("{this}/plots/weibull.svg")),
         },

@@ -100,14 +100,19 @@ pub fn job_plot(result: &JobResult, kind: &str, metric: &str) -> Result<String, 
     }
 }
 
+/// Whether `metric` has wear curves (`bands.svg`, `histograms.svg`): an operation metric, with
+/// a value every operation; a device metric has one a device.
+pub fn has_wear_curve(metric: &str) -> bool {
+    matches!(Metric::parse(metric), Some(Metric::Operation(_)))
+}
+
 /// Whether a job of `spec` (as stored: its metrics filled in) has the plot `kind` of `metric`
 /// once it succeeds: the rule [`job_plot`] applies, which the API applies whatever the job's
 /// status, since a plot the job does not ask for never comes.
 pub fn job_has_plot(spec: &JobSpec, kind: &str, metric: &str) -> Result<(), PlotError> {
     match kind {
         "bands.svg" | "histograms.svg" => {
-            if matches!(Metric::parse(metric), Some(Metric::Operation(_))) && spec.computes(metric)
-            {
+            if has_wear_curve(metric) && spec.computes(metric) {
                 Ok(())
             } else {
                 Err(PlotError::NoMetric(metric.to_owned()))
