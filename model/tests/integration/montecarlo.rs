@@ -473,7 +473,8 @@ fn mechanical(devices: u64, seed: u64, limits: Value) -> Job {
 /// The [`mechanical`] job of 64 devices, where a few devices' groups carry an extreme quantile's
 /// spread: Student's t with Satterthwaite's degrees of freedom covers it. Over these 400 seeds
 /// (the truth from 64,000 devices) the p95 covered 92.8 % and the p99, where answered, 88.9 % of
-/// 262 with t for one less than the groups; now 95.3 % and 93.1 %.
+/// 262 with t for one less than the groups; now 95.3 % and 93.1 %. Since the p99 needs 1.5 of the
+/// values' effective number beyond it as well, it is answered in 186 of them, covering 93.5 %.
 #[test]
 fn extreme_quantiles_carried_by_few_groups_are_covered() {
     let reference = mechanical(64_000, 1_000_000, json!({}));
@@ -496,7 +497,7 @@ fn extreme_quantiles_carried_by_few_groups_are_covered() {
         }
     }
     println!("answered {answered:?}, covered {covered:?}");
-    assert!(answered[0] == 400 && answered[1] >= 200, "{answered:?}");
+    assert!(answered[0] == 400 && answered[1] >= 150, "{answered:?}");
     // The seeds are fixed: with the old t the p95 falls 5 jobs short, the p99 9.
     for (i, least) in [0.94, 0.92].into_iter().enumerate() {
         let coverage = f64::from(covered[i]) / f64::from(answered[i]);
