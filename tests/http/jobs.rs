@@ -1357,6 +1357,16 @@ fn with_api_keys_results_are_cached_privately_and_unfinished_jobs_not_at_all() {
         (first.status, first.header("cache-control")),
         (200, Some("private, max-age=31536000, immutable"))
     );
+    // A browser whose key changed must not answer from the last key's copy.
+    let varies: Vec<String> = (first.headers.get_all("vary").iter())
+        .flat_map(|v| {
+            v.to_str()
+                .unwrap()
+                .split(',')
+                .map(|n| n.trim().to_lowercase())
+        })
+        .collect();
+    assert!(varies.contains(&"authorization".to_owned()), "{varies:?}");
     let tag = first.header("etag").unwrap();
     assert_eq!(get_if_none_match(&result, tag, Some("alpha")).status, 304);
     assert_problem(&get_if_none_match(&result, tag, None), 401);

@@ -47,6 +47,56 @@ fn openapi_docs_health_and_metrics_are_served() {
 /// document says so: `b_lives` and `statistics` had no bound there, so a schema-valid request of
 /// 25 items was refused.
 #[test]
+fn the_dashboards_files_are_revalidated_and_every_answer_forbids_framing() {
+    let server = TestApp::start(&temp_db("pages"), &[]);
+    for (path, kind) in [
+        ("/", "text/html"),
+        ("/jobs/anything", "text/html"),
+        ("/dashboard/app.js", "application/javascript"),
+        ("/dashboard/style.css", "text/css"),
+    ] {
+        let first = get(&server.url(path), None);
+        assert!(
+            first.content_type.starts_with(kind),
+            "{path}: {}",
+            first.content_type
+        );
+        assert_eq!(first.header("cache-control"), Some("no-cache"), "{path}");
+        let tag = first.header("etag").expect("an ETag").to_owned();
+        // A reload of the same build moves no body.
+        let again = reply(
+            agent()
+                .get(&server.url(path))
+                .header("if-none-match", &tag)
+                .call(),
+        );
+        assert_eq!((again.status, again.body.as_str()), (304, ""), "{path}");
+        let stale = reply(
+            agent()
+                .get(&server.url(path))
+                .header("if-none-match", "W/\"0\"")
+                .call(),
+        );
+        assert_eq!((stale.status, &stale.body), (200, &first.body), "{path}");
+    }
+    // Pages, the API and its errors alike (a page framed by another site, a "Run now" clicked).
+    for path in ["/", "/v1/jobs", "/v1/jobs/nosuch", "/openapi.json"] {
+        let answer = get(&server.url(path), None);
+        assert_eq!(answer.header("x-frame-options"), Some("DENY"), "{path}");
+        assert_eq!(
+            answer.header("x-content-type-options"),
+            Some("nosniff"),
+            "{path}"
+        );
+        assert_eq!(
+            answer.header("referrer-policy"),
+            Some("no-referrer"),
+            "{path}"
+        );
+    }
+}
+
+#[test]
 fn every_list_parameters_pattern_bounds_its_items() {
     let server = TestApp::start(&temp_db("patterns"), &[]);
     let openapi = get(&server.url("/openapi.json"), None).json();

@@ -108,11 +108,16 @@ fn immutable_body(
 /// What a 200 and a 304 of an immutable representation carry: its tag and how long it may be
 /// kept, and by whom.
 fn validators(state: &AppState, tag: HeaderValue) -> [(header::HeaderName, HeaderValue); 3] {
-    // With API keys a result is its owner's alone: no shared cache may keep it for others.
-    let cache_control = if state.key_owners.is_empty() {
-        "public, max-age=31536000, immutable"
+    // With API keys a result is its owner's alone: no shared cache may keep it for others, and a
+    // browser whose key changed asks again rather than show the last key's copy (the dashboard's
+    // key field; found from outside: the other key got 200 from the browser's cache).
+    let (cache_control, vary) = if state.key_owners.is_empty() {
+        ("public, max-age=31536000, immutable", "accept")
     } else {
-        "private, max-age=31536000, immutable"
+        (
+            "private, max-age=31536000, immutable",
+            "accept, authorization",
+        )
     };
     [
         (header::ETAG, tag),
@@ -121,8 +126,33 @@ fn validators(state: &AppState, tag: HeaderValue) -> [(header::HeaderName, Heade
             HeaderValue::from_static(cache_control),
         ),
         // JSON or CSV, as `format` or else `Accept` asks (`jobs::Format::negotiate`).
-        (header::VARY, HeaderValue::from_static("accept")),
+        (header::VARY, HeaderValue::from_static(vary)),
     ]
+}
+
+/// One of the server's own files (a dashboard page, its script or style): asked again at every
+/// use (`no-cache`), answered 304 while the build that serves it is the one that served it before,
+/// so a reload moves a few hundred bytes rather than the whole script, and a new build is seen at
+/// once.
+pub fn revalidated(
+    request: &HeaderMap,
+    content_type: &'static str,
+    body: &'static str,
+) -> Response {
+    let tag = entity_tag(body.as_bytes());
+    let headers = [
+        (header::ETAG, tag.clone()),
+        (header::CACHE_CONTROL, HeaderValue::from_static("no-cache")),
+    ];
+    if matches_any(request, &tag) {
+        let mut response = (StatusCode::NOT_MODIFIED, headers).into_response();
+        response
+            .headers_mut()
+            .append(header::VARY, HeaderValue::from_static("accept-encoding"));
+        return response;
+    }
+    let content_type = [(header::CONTENT_TYPE, HeaderValue::from_static(content_type))];
+    (headers, content_type, body).into_response()
 }
 
 /// A weak tag from the SHA-256 of the bytes: weak because compression may send other bytes for

@@ -1,14 +1,14 @@
 //! Health, Prometheus metrics, the OpenAPI document and its docs UI (RapiDoc, vendored).
 
-use super::AppState;
 use super::error::{ApiError, Internal, Problem};
+use super::{AppState, cache};
 use crate::domain::UnixMs;
 use crate::store::{DATABASE_WAIT, StoreResult};
 use crate::telemetry;
 use axum::Json;
 use axum::extract::State;
-use axum::http::header;
-use axum::response::{Html, IntoResponse};
+use axum::http::{HeaderMap, header};
+use axum::response::{Html, IntoResponse, Response};
 use serde::Serialize;
 use std::future::Future;
 use std::sync::LazyLock;
@@ -156,31 +156,25 @@ static JOB_PAGE: LazyLock<String> = LazyLock::new(|| {
     )
 });
 
+const HTML: &str = "text/html; charset=utf-8";
+
 /// The dashboard: jobs with live progress, the submit form and schedules.
-pub async fn dashboard() -> Html<&'static str> {
-    Html(INDEX_PAGE.as_str())
+pub async fn dashboard(request: HeaderMap) -> Response {
+    cache::revalidated(&request, HTML, INDEX_PAGE.as_str())
 }
 
 /// A job's page: live progress, wear curves, histograms, the Weibull plot.
-pub async fn job_page() -> Html<&'static str> {
-    Html(JOB_PAGE.as_str())
+pub async fn job_page(request: HeaderMap) -> Response {
+    cache::revalidated(&request, HTML, JOB_PAGE.as_str())
 }
 
-pub async fn dashboard_script() -> impl IntoResponse {
-    (
-        [(
-            header::CONTENT_TYPE,
-            "application/javascript; charset=utf-8",
-        )],
-        DASHBOARD_SCRIPT,
-    )
+pub async fn dashboard_script(request: HeaderMap) -> Response {
+    let script = "application/javascript; charset=utf-8";
+    cache::revalidated(&request, script, DASHBOARD_SCRIPT)
 }
 
-pub async fn dashboard_style() -> impl IntoResponse {
-    (
-        [(header::CONTENT_TYPE, "text/css; charset=utf-8")],
-        DASHBOARD_STYLE,
-    )
+pub async fn dashboard_style(request: HeaderMap) -> Response {
+    cache::revalidated(&request, "text/css; charset=utf-8", DASHBOARD_STYLE)
 }
 
 #[cfg(test)]
