@@ -254,6 +254,19 @@ await step("the job submitted outside the page joins the list and ends there", (
     timeout: JOB_TIMEOUT_MS,
   }),
 );
+// A burst from elsewhere (schedules firing together, a script): every job joins the list, each
+// in its place by creation, whatever order their fetches answer in (5-7 of 20 were lost).
+const burst = await step("submit 12 jobs at once through the API", () =>
+  Promise.all(Array.from({ length: 12 }, (_, k) =>
+    call("POST", "/v1/jobs", { name: `Burst ${k}`, devices: 4, operations: 4, seed: 100 + k }))),
+);
+await step("every job of the burst joins the list", () =>
+  page.waitForFunction(
+    (ids) => ids.every((id) => document.querySelector(`#jobs-body tr[data-job-id="${id}"]`)),
+    burst.map((job) => job.id),
+    { timeout: JOB_TIMEOUT_MS },
+  ),
+);
 // A refused job: each field named once, the whole document as "(document)".
 for (const [text, wanted] of [
   ['{"devices": -1, "operations": 0}', ["/devices", "/operations"]],

@@ -518,8 +518,10 @@
     }
 
     // A job the stream tells of that the list lacks: one submitted elsewhere (another tab, the
-    // command line, a schedule) joins the top; one older than the newest row belongs to a later
-    // page. The newest `status` told while it is fetched is the one shown.
+    // command line, a schedule) takes its place by creation, at the top for the newest; one older
+    // than the oldest row, while later pages remain, belongs to one of them. The fetches of a
+    // burst answer in any order, so a job is judged against the listed rows, never against one
+    // adopted before it. The newest `status` told while it is fetched is the one shown.
     const adopting = new Map(); // job id -> its latest `status` resource, or null
     async function adopt(id, resource) {
       if (adopting.has(id)) {
@@ -529,13 +531,13 @@
       adopting.set(id, resource);
       try {
         const job = resource || (await getJson("/v1/jobs/" + encodeURIComponent(id)));
-        const newest = body.firstElementChild && rows.get(body.firstElementChild.dataset.jobId);
+        const oldest = body.lastElementChild && rows.get(body.lastElementChild.dataset.jobId);
         if (rows.has(id)) return;
-        if (newest && Date.parse(job.created_at) < Date.parse(newest.job.created_at)) {
+        if (cursor && oldest && Date.parse(job.created_at) < Date.parse(oldest.job.created_at)) {
           offPage.add(id); // asked once: its later events are not fetched again
           return;
         }
-        addRows([adopting.get(id) || job], true);
+        placeRow(adopting.get(id) || job);
       } catch (_) {
         // Deleted already, or the server is away: the next load lists what there is.
       } finally {
@@ -558,6 +560,25 @@
       entry.row.dataset.status = job.status;
       entry.statusCell.replaceChildren(badge(job.status));
       updateProgress(entry.bar, job, false);
+    }
+
+    /** A row for a job not listed yet, before the first row created before it. */
+    function placeRow(job) {
+      if (rows.has(job.id)) {
+        updateRow(job);
+        return;
+      }
+      const created = Date.parse(job.created_at);
+      const before = Array.from(body.children).find((row) => {
+        const other = rows.get(row.dataset.jobId);
+        return other && Date.parse(other.job.created_at) < created;
+      });
+      const entry = jobRow(job);
+      rows.set(job.id, entry);
+      entry.row.classList.add("fresh");
+      body.insertBefore(entry.row, before || null);
+      show($("#jobs-empty"), false);
+      schedulePoll();
     }
 
     function addRows(jobs, atTop) {
@@ -925,8 +946,18 @@
       following += 1;
       const generation = following;
       finished = false;
-      // Nothing shown yet under this key: a 404 now is "not found", not "deleted".
+      // Nothing shown yet under this key: a 404 now is "not found", not "deleted"; and nothing
+      // another key loaded stays on the page.
       job = null;
+      resultLoaded = false;
+      show($("#result"), false);
+      $("#job-name").textContent = "Job";
+      document.title = "bouncewear · job " + id;
+      $("#job-facts").replaceChildren();
+      $("#compare-jobs").replaceChildren();
+      compareAsked += 1; // a comparison on its way under the old key is dropped
+      show($("#compare-result"), false);
+      setAlert($("#compare-error"), null);
       clearTimeout(pollTimer);
       try {
         render(await getJson(base));
@@ -1333,10 +1364,7 @@
       keyedLink($("#result-json"), base + "/result", "job-" + id + "-result.json");
     }
 
-    setupKeyField(() => {
-      resultLoaded = false;
-      start();
-    });
+    setupKeyField(start);
     start();
   }
 
