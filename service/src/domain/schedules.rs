@@ -3,7 +3,7 @@
 
 use super::jobs::{QueuedJob, draw_seed};
 use super::{Owner, UnixMs};
-use bouncewear_model::error::past_listing;
+use bouncewear_model::error::{MAX_TEXT_CHARS, past_listing};
 use bouncewear_model::montecarlo::job::{LIST_FIELDS, check_written};
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
 use bouncewear_model::stats::{QUANTILES, Summary};
@@ -85,8 +85,17 @@ impl ScheduleDefinition {
         let template = Pointer::root().child("template");
         let job = Job::new(self.template.clone(), draw_seed, &template)?;
         job.check_size(max_job_operations, &template)?;
-        let name = format!("{} @ {}", self.name, due.to_rfc3339());
-        Ok(QueuedJob::new(&job, owner, Some(name), now))
+        Ok(QueuedJob::new(&job, owner, Some(self.run_name(due)), now))
+    }
+
+    /// A run's job name: the schedule's and the due time, within the
+    /// [`MAX_TEXT_CHARS`] a job's name may hold (a schedule named with 200 characters made jobs
+    /// named with 227, which `POST /v1/jobs` refuses; found from outside). The time stays whole.
+    fn run_name(&self, due: UnixMs) -> String {
+        let at = format!(" @ {}", due.to_rfc3339());
+        let room = MAX_TEXT_CHARS.saturating_sub(at.chars().count());
+        let name: String = self.name.chars().take(room).collect();
+        format!("{}{at}", name.trim_end())
     }
 
     /// Whether `at` is one of the schedule's due times: the slot its run on the timetable takes,
@@ -845,6 +854,20 @@ mod tests {
         assert!(!definition.is_due_time(at("2026-11-22T00:00:00.001Z")));
         assert!(!definition.is_due_time(at("2026-11-21T23:59:59.999Z")));
         assert!(!definition.is_due_time(at("2026-11-22T01:00:00.000Z")));
+        assert_eq!(
+            definition.run_name(at("2026-11-22T00:00:00.123Z")),
+            "nightly @ 2026-11-22T00:00:00.123Z"
+        );
+        let long = ScheduleDefinition {
+            name: "\u{e9}".repeat(MAX_TEXT_CHARS),
+            ..definition
+        };
+        let name = long.run_name(at("2026-11-22T00:00:00.123Z"));
+        assert_eq!(name.chars().count(), MAX_TEXT_CHARS);
+        assert!(
+            name.ends_with("\u{e9} @ 2026-11-22T00:00:00.123Z"),
+            "{name}"
+        );
     }
 
     fn utc(text: &str) -> DateTime<Utc> {

@@ -117,7 +117,9 @@ pub(super) fn esc(s: &str) -> String {
             '>' => out.push_str("&gt;"),
             '"' => out.push_str("&quot;"),
             '\'' => out.push_str("&#39;"),
-            c if c.is_control() => {}
+            // Nor the two non-characters XML forbids: a name holding U+FFFF made a plot no
+            // parser reads (found from outside).
+            c if c.is_control() || matches!(c, '\u{fffe}' | '\u{ffff}') => {}
             c => out.push(c),
         }
     }
@@ -338,5 +340,13 @@ mod tests {
         assert_eq!(fmt_sig(1234.5, 3), "1234");
         assert_eq!(fmt_sig(2.345, 3), "2.35");
         assert_eq!(num(-0.001), "0");
+    }
+
+    #[test]
+    fn text_is_escaped_to_what_xml_allows() {
+        assert_eq!(
+            esc("a\u{ffff}b\u{fffe}<&>\"'\u{7}\u{fffd}"),
+            "ab&lt;&amp;&gt;&quot;&#39;\u{fffd}"
+        );
     }
 }
