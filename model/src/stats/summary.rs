@@ -41,8 +41,8 @@ pub struct QuantileSummary {
 /// bound it (docs/contract.md, "Queries after the run").
 pub const MIN_TAIL_UNITS: f64 = 5.0;
 
-/// The fewest of the values' effective number ([`Merged::effective_values`]) a level needs on
-/// its rarer side besides [`MIN_TAIL_UNITS`] units: where the devices differ much more than one
+/// The fewest of the values' effective number (`n` over the groups' design effect on the level's
+/// side, see [`summarize`]) a level needs on its rarer side besides [`MIN_TAIL_UNITS`] units: where the devices differ much more than one
 /// device's values do, the values beyond a far level belong to a device or two, and how many
 /// groups hold a few of them tells nothing of the devices the sample lacks.
 pub const MIN_EFFECTIVE_BEYOND: f64 = 1.5;
