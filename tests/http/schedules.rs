@@ -97,6 +97,45 @@ fn schedules_run_now_and_report_a_trend_with_drift_flags() {
 }
 
 #[test]
+fn a_quantile_beyond_the_data_carries_its_reason_and_never_drifts() {
+    // Four devices scattered per device, seedless: each run draws its own seed, and every
+    // Result's p99 says the data cannot bound it. Its values move from run to run beyond each
+    // other's (meaningless) intervals; the trend says why and raises no alarm (an outside probe
+    // saw drift flagged on the fourth of five such runs).
+    let server = TestApp::start(&temp_db("schedules-reason"), &[]);
+    let template = json!({"devices": 4, "operations": 20, "scatter": [
+        {"parameter": "impact_velocity_m_s", "per": "device",
+         "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.1, "min": 0.05}}]});
+    let body = json!({"name": "four devices", "cron": "0 3 * * *", "time_zone": "UTC",
+                      "template": template, "statistics": ["operations.total_bounce_s.p99", "operations.total_bounce_s.mean"]});
+    let created = post(&server.url("/v1/schedules"), &body.to_string(), None);
+    assert_eq!(created.status, 201, "{}", created.body);
+    let id = created.json()["id"].as_str().unwrap().to_owned();
+    for _ in 0..4 {
+        let reply = post(&server.url(&format!("/v1/schedules/{id}/run")), "", None);
+        assert_eq!(reply.status, 202, "{}", reply.body);
+        let job = reply.json()["id"].as_str().unwrap().to_owned();
+        server.wait_for(&job, "succeeded", Duration::from_secs(60));
+    }
+    let trend = get(&server.url(&format!("/v1/schedules/{id}/runs")), None).json();
+    let runs = trend["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 4);
+    for run in runs {
+        let p99 = &run["values"]["operations.total_bounce_s.p99"];
+        assert!(
+            p99["reason"].as_str().unwrap().contains("beyond the data"),
+            "{p99}"
+        );
+        assert_eq!(p99["drift"], false, "{p99}");
+        assert!(
+            run["values"]["operations.total_bounce_s.mean"]
+                .get("reason")
+                .is_none()
+        );
+    }
+}
+
+#[test]
 fn bad_schedules_name_their_field() {
     let server = TestApp::start(&temp_db("bad-schedules"), &[]);
     let schedules = server.url("/v1/schedules");

@@ -2,6 +2,7 @@
 //! must pass, and the statistics a schedule follows from run to run.
 
 use super::jobs::{QueuedJob, draw_seed};
+use super::trend::Reading;
 use super::{Owner, UnixMs};
 use bouncewear_model::error::{MAX_TEXT_CHARS, past_listing};
 use bouncewear_model::montecarlo::job::{LIST_FIELDS, check_written};
@@ -710,11 +711,21 @@ impl Statistic {
         }
     }
 
-    /// The statistic's value and 95 % interval in a result, if the result has it.
-    pub fn read(&self, result: &JobResult) -> Option<(f64, [f64; 2])> {
+    /// The statistic's value and 95 % interval in a result, if the result has it, with the reason
+    /// a quantile the data cannot bound carries.
+    pub fn read(&self, result: &JobResult) -> Option<Reading> {
+        let bounded = |(value, ci95): (f64, [f64; 2])| Reading {
+            value,
+            ci95,
+            reason: None,
+        };
         let from_summary = |summary: &Summary, stat: SummaryStat| match stat {
-            SummaryStat::Mean => Some((summary.mean, summary.mean_ci95)),
-            SummaryStat::Quantile(name) => summary.quantiles.get(name).map(|q| (q.value, q.ci95)),
+            SummaryStat::Mean => Some(bounded((summary.mean, summary.mean_ci95))),
+            SummaryStat::Quantile(name) => summary.quantiles.get(name).map(|q| Reading {
+                value: q.value,
+                ci95: q.ci95,
+                reason: q.reason.clone(),
+            }),
         };
         match self.source {
             Source::Operations(metric, stat) => {
@@ -729,6 +740,7 @@ impl Statistic {
                     LifeStat::Beta => analysis.weibull.as_ref().map(|w| (w.beta, w.beta_ci95)),
                     LifeStat::Eta => analysis.weibull.as_ref().map(|w| (w.eta, w.eta_ci95)),
                 }
+                .map(bounded)
             }
         }
     }
@@ -1195,7 +1207,10 @@ mod tests {
                 .unwrap();
         let last_bin = &result.operations["total_bounce_s"].last().unwrap().summary;
         let p95 = &last_bin.quantiles["p95"];
-        let read = |name: &str| name.parse::<Statistic>().unwrap().read(&result);
+        let read = |name: &str| {
+            let reading = name.parse::<Statistic>().unwrap().read(&result)?;
+            Some((reading.value, reading.ci95))
+        };
         assert_eq!(
             read("operations.total_bounce_s.p95"),
             Some((p95.value, p95.ci95))

@@ -12,28 +12,60 @@ use utoipa::ToSchema;
 pub struct TrendValue {
     pub value: f64,
     pub ci95: [f64; 2],
-    /// The value left the previous night's 95 % interval.
+    /// The value left the 95 % interval of the last night before it whose value has no `reason`.
     pub drift: bool,
+    /// Present where the Result's quantile carries it (the data cannot bound the level): the
+    /// interval claims more than the data hold, so the value is never flagged, nor a later one
+    /// judged by its interval.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }
 
-/// Flags every value that leaves the interval of the value before it (nights without a value are
-/// skipped: the comparison is with the last night that has one).
-pub fn flag_drift(values: &[Option<(f64, [f64; 2])>]) -> Vec<Option<TrendValue>> {
+/// A run's value of one statistic and its 95 % interval, with the reason its Result gives where
+/// the data cannot bound it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reading {
+    pub value: f64,
+    pub ci95: [f64; 2],
+    pub reason: Option<String>,
+}
+
+/// Flags every value that leaves the interval of the value before it (nights without a value, or
+/// whose value carries a reason, are skipped: the comparison is with the last night whose value
+/// the data bound). A value with a reason is never flagged: a drift alarm is a decision, and
+/// such an interval is not one to rest a decision on (found from outside: a p99 of 4 devices,
+/// carrying its reason in every Result, raised one).
+pub fn flag_drift(values: &[Option<Reading>]) -> Vec<Option<TrendValue>> {
     let mut previous: Option<[f64; 2]> = None;
     values
         .iter()
         .map(|entry| {
-            entry.map(|(value, ci95)| {
-                let drift = previous.is_some_and(|[lo, hi]| value < lo || value > hi);
-                previous = Some(ci95);
-                TrendValue { value, ci95, drift }
-            })
+            entry.clone().map(
+                |Reading {
+                     value,
+                     ci95,
+                     reason,
+                 }| {
+                    let bounded = reason.is_none();
+                    let drift =
+                        bounded && previous.is_some_and(|[lo, hi]| value < lo || value > hi);
+                    if bounded {
+                        previous = Some(ci95);
+                    }
+                    TrendValue {
+                        value,
+                        ci95,
+                        drift,
+                        reason,
+                    }
+                },
+            )
         })
         .collect()
 }
 
-/// A run's value and 95 % interval of each statistic of a schedule, in its order.
-pub type RunValues = Vec<Option<(f64, [f64; 2])>>;
+/// A run's reading of each statistic of a schedule, in its order.
+pub type RunValues = Vec<Option<Reading>>;
 
 /// What `result` gives of each statistic: none of any for a run whose job has no Result.
 pub fn run_values(statistics: &[Statistic], result: Option<&JobResult>) -> RunValues {
@@ -50,7 +82,10 @@ pub fn trend(
     runs: &[RunValues],
 ) -> Vec<BTreeMap<String, Option<TrendValue>>> {
     let columns: Vec<Vec<Option<TrendValue>>> = (0..statistics.len())
-        .map(|column| flag_drift(&runs.iter().map(|run| run[column]).collect::<Vec<_>>()))
+        .map(|column| {
+            let column: Vec<Option<Reading>> = runs.iter().map(|run| run[column].clone()).collect();
+            flag_drift(&column)
+        })
         .collect();
     (0..runs.len())
         .map(|run| {
@@ -67,19 +102,44 @@ pub fn trend(
 mod tests {
     use super::*;
 
+    fn reading(value: f64, ci95: [f64; 2], reason: Option<&str>) -> Option<Reading> {
+        Some(Reading {
+            value,
+            ci95,
+            reason: reason.map(str::to_owned),
+        })
+    }
+
     #[test]
     fn drift_is_a_value_outside_the_previous_nights_interval() {
         let flags = flag_drift(&[
-            Some((1.0, [0.9, 1.1])),
-            Some((1.05, [0.95, 1.15])),
+            reading(1.0, [0.9, 1.1], None),
+            reading(1.05, [0.95, 1.15], None),
             None,
-            Some((1.3, [1.2, 1.4])),
-            Some((1.35, [1.25, 1.45])),
+            reading(1.3, [1.2, 1.4], None),
+            reading(1.35, [1.25, 1.45], None),
+            // Beyond the data: never flagged, and not the interval the next night is judged by.
+            reading(2.0, [1.99, 2.01], Some("beyond the data")),
+            reading(1.4, [1.3, 1.5], None),
+            reading(3.0, [2.9, 3.1], None),
         ]);
         let drift: Vec<Option<bool>> = flags.iter().map(|f| f.as_ref().map(|v| v.drift)).collect();
         assert_eq!(
             drift,
-            [Some(false), Some(false), None, Some(true), Some(false)]
+            [
+                Some(false),
+                Some(false),
+                None,
+                Some(true),
+                Some(false),
+                Some(false),
+                Some(false),
+                Some(true)
+            ]
+        );
+        assert_eq!(
+            flags[5].as_ref().unwrap().reason.as_deref(),
+            Some("beyond the data")
         );
     }
 
