@@ -60,7 +60,7 @@ fn sigterm_cuts_off_a_response_its_client_reads_too_slowly() {
     let mut reader = std::net::TcpStream::connect(&address).unwrap();
     write!(
         reader,
-        "GET /v1/jobs/{id}/result HTTP/1.1\r\nHost: x\r\n\r\n"
+        "GET /v1/jobs/{id}/result HTTP/1.1\r\nHost: localhost\r\n\r\n"
     )
     .unwrap();
     let mut first = [0_u8; 4096];
@@ -93,7 +93,7 @@ fn a_second_sigterm_ends_a_graceful_stop_at_once() {
     let mut writer = std::net::TcpStream::connect(address).unwrap();
     write!(
         writer,
-        "POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n\
+        "POST /v1/jobs HTTP/1.1\r\nHost: localhost\r\nContent-Type: application/json\r\n\
          Content-Length: 100\r\n\r\n{{"
     )
     .unwrap();

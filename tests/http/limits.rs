@@ -20,7 +20,7 @@ fn stalled_in_body(server: &TestApp) -> TcpStream {
     let mut stream = TcpStream::connect(server.base().trim_start_matches("http://")).unwrap();
     stream
         .write_all(
-            b"POST /v1/jobs HTTP/1.1\r\nhost: bouncewear\r\ncontent-type: application/json\r\n\
+            b"POST /v1/jobs HTTP/1.1\r\nhost: localhost\r\ncontent-type: application/json\r\n\
               content-length: 100\r\n\r\n{\"devices\": 1,",
         )
         .unwrap();
@@ -72,7 +72,7 @@ fn a_request_head_over_16_kib_is_refused_at_once() {
         let address = server.base().trim_start_matches("http://");
         let mut stream = TcpStream::connect(address).unwrap();
         let head = format!(
-            "GET /healthz HTTP/1.1\r\nhost: x\r\nconnection: close\r\nx-long: {}",
+            "GET /healthz HTTP/1.1\r\nhost: localhost\r\nconnection: close\r\nx-long: {}",
             "a".repeat(header_bytes)
         );
         // The server may answer and close before all of it is sent (then the writes fail, and
@@ -229,7 +229,7 @@ fn a_chunked_body_that_stalls_is_cut_at_its_arrival_rate() {
     let mut stream = TcpStream::connect(server.base().trim_start_matches("http://")).unwrap();
     stream
         .write_all(
-            b"POST /v1/jobs HTTP/1.1\r\nhost: bouncewear\r\ncontent-type: application/json\r\n\
+            b"POST /v1/jobs HTTP/1.1\r\nhost: localhost\r\ncontent-type: application/json\r\n\
               transfer-encoding: chunked\r\n\r\n1\r\n{\r\n",
         )
         .unwrap();
@@ -252,7 +252,7 @@ fn a_body_declared_too_large_gets_413_before_it_is_read() {
     for length in ["1000000000000", "2000000"] {
         let mut stream = TcpStream::connect(server.base().trim_start_matches("http://")).unwrap();
         let head = format!(
-            "POST /v1/simulate HTTP/1.1\r\nhost: bouncewear\r\ncontent-type: application/json\r\n\
+            "POST /v1/simulate HTTP/1.1\r\nhost: localhost\r\ncontent-type: application/json\r\n\
              content-length: {length}\r\nconnection: close\r\n\r\n{{}}"
         );
         stream.write_all(head.as_bytes()).unwrap();
@@ -359,7 +359,7 @@ fn uploads_waiting_their_turn_keep_no_one_out_with(concurrent_requests: &str, ar
     // 60,000 bytes of a body, then nothing: at 4 KB a second it may take 16.6 s before it is cut.
     let stalled_upload = || {
         let mut stream = TcpStream::connect(&address).unwrap();
-        let head = "POST /v1/jobs HTTP/1.1\r\nhost: bouncewear\r\ncontent-type: application/json\r\n\
+        let head = "POST /v1/jobs HTTP/1.1\r\nhost: localhost\r\ncontent-type: application/json\r\n\
                     transfer-encoding: chunked\r\n\r\nea60\r\n";
         let chunk = [head, &" ".repeat(60_000), "\r\n"].concat();
         stream.write_all(chunk.as_bytes()).unwrap();
@@ -433,7 +433,7 @@ fn a_client_that_reads_none_of_a_response_is_disconnected() {
     );
     server.wait_for(&id, "succeeded", Duration::from_secs(120));
     let mut stream = TcpStream::connect(server.base().trim_start_matches("http://")).unwrap();
-    let request = format!("GET /v1/jobs/{id}/result HTTP/1.1\r\nhost: bouncewear\r\n\r\n");
+    let request = format!("GET /v1/jobs/{id}/result HTTP/1.1\r\nhost: localhost\r\n\r\n");
     stream.write_all(request.as_bytes()).unwrap();
     std::thread::sleep(Duration::from_secs(4));
     stream
@@ -543,7 +543,7 @@ fn large_responses_held_for_unread_clients_are_bounded() {
     let held = || gauge("bouncewear_response_bytes_held ");
     let result = server.url(&format!("/v1/jobs/{id}/result"));
     let mut unread = TcpStream::connect(server.base().trim_start_matches("http://")).unwrap();
-    let request = format!("GET /v1/jobs/{id}/result HTTP/1.1\r\nhost: bouncewear\r\n\r\n");
+    let request = format!("GET /v1/jobs/{id}/result HTTP/1.1\r\nhost: localhost\r\n\r\n");
     unread.write_all(request.as_bytes()).unwrap();
     let started = Instant::now();
     while held() < 20e6 {
@@ -611,7 +611,7 @@ fn an_event_stream_whose_client_reads_nothing_is_dropped() {
             let mut stream = stream.into_std().unwrap();
             stream.set_nonblocking(false).unwrap();
             let request =
-                "GET /v1/events HTTP/1.1\r\nhost: bouncewear\r\naccept: text/event-stream\r\n\r\n";
+                "GET /v1/events HTTP/1.1\r\nhost: localhost\r\naccept: text/event-stream\r\n\r\n";
             stream.write_all(request.as_bytes()).unwrap();
             // Its head read, so that the stream holds its place before any other asks for one.
             let mut head = Vec::new();

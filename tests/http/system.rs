@@ -97,6 +97,63 @@ fn the_dashboards_files_are_revalidated_and_every_answer_forbids_framing() {
 }
 
 #[test]
+fn a_browser_on_another_site_is_refused_before_any_handler_runs() {
+    let server = TestApp::start(&temp_db("cross-site"), &[]);
+    let address = server.base().trim_start_matches("http://").to_owned();
+    let raw = |host: &str| {
+        let mut stream = TcpStream::connect(&address).unwrap();
+        let request = format!("GET /v1/jobs HTTP/1.1\r\nhost: {host}\r\nconnection: close\r\n\r\n");
+        stream.write_all(request.as_bytes()).unwrap();
+        let mut answer = String::new();
+        stream.read_to_string(&mut answer).unwrap();
+        answer
+    };
+    // Without keys a server answers to loopback names only: another name pointing at 127.0.0.1
+    // is how a web page would reach it (DNS rebinding).
+    let port = address.rsplit_once(':').unwrap().1;
+    for host in [
+        format!("localhost:{port}"),
+        address.clone(),
+        format!("[::1]:{port}"),
+        "a.localhost".into(),
+    ] {
+        assert!(raw(&host).starts_with("HTTP/1.1 200"), "{host}");
+    }
+    let rebound = raw(&format!("attacker.example:{port}"));
+    assert!(rebound.starts_with("HTTP/1.1 403"), "{rebound}");
+    assert!(rebound.contains("loopback names only"), "{rebound}");
+    // A change sent by a page of another site (a form, a fetch without preflight) is refused; the
+    // server's own pages, and clients that are no browser, send their own origin or none.
+    let jobs = server.url("/v1/jobs");
+    let job = json!({"devices": 2, "operations": 2}).to_string();
+    let send = |origin: &str| {
+        let request = agent()
+            .post(&jobs)
+            .header("content-type", "application/json");
+        let request = if origin.is_empty() {
+            request
+        } else {
+            request.header("origin", origin)
+        };
+        reply(request.send(job.as_str()))
+    };
+    let refused = send("https://evil.example");
+    assert_problem_saying(&refused, 403, "another site");
+    assert_eq!(send("null").status, 403);
+    assert_eq!(send(server.base()).status, 202);
+    assert_eq!(send("").status, 202);
+    // Reading is not changing: a GET with a foreign origin is answered (CORS keeps its body from
+    // the page).
+    let read = reply(
+        agent()
+            .get(&jobs)
+            .header("origin", "https://evil.example")
+            .call(),
+    );
+    assert_eq!(read.status, 200);
+}
+
+#[test]
 fn every_list_parameters_pattern_bounds_its_items() {
     let server = TestApp::start(&temp_db("patterns"), &[]);
     let openapi = get(&server.url("/openapi.json"), None).json();
@@ -383,7 +440,7 @@ fn every_metric_family_has_help_and_type_and_latency_is_a_histogram() {
     get(&server.url("/no/such/page/12345"), None);
     // A method no client library sends, so written by hand.
     let mut raw = TcpStream::connect(server.base().trim_start_matches("http://")).unwrap();
-    raw.write_all(b"BREW /healthz HTTP/1.1\r\nhost: bouncewear\r\nconnection: close\r\n\r\n")
+    raw.write_all(b"BREW /healthz HTTP/1.1\r\nhost: localhost\r\nconnection: close\r\n\r\n")
         .unwrap();
     let mut answer = String::new();
     raw.read_to_string(&mut answer).unwrap();

@@ -72,6 +72,9 @@ pub enum ApiError {
     /// The key's jobs store its quota or more ([`StoreError::OverQuota`]).
     #[error("{0}")]
     OverQuota(String),
+    /// A request a browser sends on another site's behalf ([`super::same_site`]).
+    #[error("{0}")]
+    CrossSite(String),
     #[error(
         "this API key (every client, where the server has no keys) holds {0} event streams already, the most it may; close one, or retry later"
     )]
@@ -196,7 +199,7 @@ impl ApiError {
             ApiError::MalformedJson(_) | ApiError::BadRequest(_) => StatusCode::BAD_REQUEST,
             ApiError::Invalid(_) | ApiError::KeyReused(_) => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::Unauthorized => StatusCode::UNAUTHORIZED,
-            ApiError::OverQuota(_) => StatusCode::FORBIDDEN,
+            ApiError::OverQuota(_) | ApiError::CrossSite(_) => StatusCode::FORBIDDEN,
             ApiError::NotFound(_) => StatusCode::NOT_FOUND,
             ApiError::Conflict(_) => StatusCode::CONFLICT,
             ApiError::TooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,

@@ -96,6 +96,7 @@ pub fn router(state: AppState) -> axum::Router {
     let admission = limits::Admission::new(&state);
     let held = held::Held::new(state.config.max_response_mb);
     let (keys, keys_too) = (Arc::clone(&state.key_owners), Arc::clone(&state.key_owners));
+    let keyless = state.key_owners.is_empty();
     api_routes(state)
         .route("/", get(system::dashboard))
         .route("/jobs/{id}", get(system::job_page))
@@ -112,6 +113,7 @@ pub fn router(state: AppState) -> axum::Router {
             unmatched(&keys_too, &request, ApiError::MethodNotAllowed)
         })
         .layer(axum::middleware::from_fn_with_state(held, held::hold))
+        .layer(axum::middleware::from_fn_with_state(keyless, same_site))
         .layer(DefaultBodyLimit::max(max_body))
         .layer(axum::middleware::from_fn_with_state(
             admission,
@@ -150,6 +152,54 @@ pub fn router(state: AppState) -> axum::Router {
             header::REFERRER_POLICY,
             header::HeaderValue::from_static("no-referrer"),
         ))
+}
+
+/// Refuses, before any handler runs, what a browser sends on another site's behalf (found from
+/// outside): on a server without keys, a name other than a loopback one (a web page that made its
+/// own name point at 127.0.0.1, DNS rebinding, reads and changes everything such a server holds);
+/// and on any server, a change (any method but GET, HEAD and OPTIONS) whose `Origin` is not this
+/// server's (a page's form posting to `/v1/jobs/{id}/cancel`). A client that is no browser sends
+/// no `Origin`, and names the server as it reached it.
+async fn same_site(State(keyless): State<bool>, request: Request, next: Next) -> Response {
+    match cross_site(&request, keyless) {
+        Some(refusal) => ApiError::CrossSite(refusal).into_response(),
+        None => next.run(request).await,
+    }
+}
+
+fn cross_site(request: &Request, keyless: bool) -> Option<String> {
+    let host = (request.headers().get(header::HOST))
+        .and_then(|host| host.to_str().ok())
+        .or_else(|| request.uri().authority().map(|a| a.as_str()));
+    if keyless && let Some(host) = host.filter(|host| !loopback_name(host)) {
+        return Some(format!(
+            "a server without API keys answers to loopback names only (localhost, 127.0.0.1, [::1]), not `{host}`: another name pointing here is how a web page would reach it; configure --api-key to serve other names"
+        ));
+    }
+    let changes = !matches!(
+        *request.method(),
+        axum::http::Method::GET | axum::http::Method::HEAD | axum::http::Method::OPTIONS
+    );
+    let origin = request.headers().get(header::ORIGIN)?;
+    let origin = origin.to_str().unwrap_or("");
+    let same = (origin.split_once("://"))
+        .is_some_and(|(_, authority)| host.is_some_and(|h| authority.eq_ignore_ascii_case(h)));
+    (changes && !same)
+        .then(|| format!("a page of another site (Origin `{origin}`) may not change anything here"))
+}
+
+/// Whether `host` (a `Host` field: a name or address, and a port) names this machine's loopback.
+fn loopback_name(host: &str) -> bool {
+    let name = match host.strip_prefix('[') {
+        Some(bracketed) => bracketed.split(']').next().unwrap_or(""),
+        None => host.rsplit_once(':').map_or(host, |(name, _)| name),
+    };
+    let name = name.trim_end_matches('.').to_ascii_lowercase();
+    name == "localhost"
+        || name.ends_with(".localhost")
+        || name
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
 }
 
 /// The request without a client's `X-Request-Id` that is no id (more than 128 characters, or
