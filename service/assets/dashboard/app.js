@@ -206,7 +206,10 @@
   }
 
   function progressBar(job, large) {
-    const bar = el("div", { class: "progress" + (large ? " large" : "") },
+    const bar = el("div", {
+      class: "progress" + (large ? " large" : ""),
+      role: "progressbar", "aria-valuemin": "0", "aria-valuemax": "100", "aria-label": "progress",
+    },
       el("div", { class: "track" }, el("div", { class: "fill" })),
       el("span", { class: "label" }));
     updateProgress(bar, job, large);
@@ -226,6 +229,8 @@
     } else {
       label.textContent = p.toFixed(0) + " %";
     }
+    bar.setAttribute("aria-valuenow", p.toFixed(0));
+    bar.setAttribute("aria-valuetext", (status ? status + ", " : "") + label.textContent);
   }
 
   /**
@@ -900,36 +905,55 @@
       );
     }
 
+    let answering = true; // the last look got an answer
+
     /** One look at the job; false once there is nothing more to look for (gone, or a refused key). */
     async function look() {
       try {
         render(await getJson(base));
+        answering = true;
       } catch (error) {
         if (error.status === 404 || error.status === 401) {
           showLoadError(error);
           return false;
         }
         // Until the next answer (render clears it): the page is not silently stale.
+        answering = false;
         setAlert($("#job-error"), "The server does not answer (" + error.message + "): trying again.");
       }
       return true;
+    }
+
+    /** The job's stream while it runs; a look a second while there is none, until it opens again. */
+    async function follow(generation) {
+      try {
+        const ended = await followEvents(generation);
+        if (ended || generation !== following) return;
+      } catch (_) {
+        // No stream (a proxy, an old server, a server restarting): poll until it is back.
+      }
+      if (generation === following && !finished) poll(generation);
     }
 
     function poll(generation) {
       clearTimeout(pollTimer);
       pollTimer = setTimeout(async () => {
         if (generation !== following) return;
-        if ((await look()) && !finished) poll(generation);
+        if (!(await look()) || finished) return;
+        // The server answers again: back to its stream (a restart left the page polling).
+        if (answering) follow(generation);
+        else poll(generation);
       }, 1000);
     }
 
     // While the job runs, a look every 5 s beside the stream; once it ended, every 15 s, so that a
-    // job deleted meanwhile does not stay on the page as if it were there.
+    // job deleted meanwhile does not stay on the page as if it were there; every 2 s while the
+    // server does not answer, so that its return is seen soon.
     function watch(generation) {
       setTimeout(async () => {
         if (generation !== following) return;
         if (await look()) watch(generation);
-      }, finished ? 15000 : 5000);
+      }, !answering ? 2000 : finished ? 15000 : 5000);
     }
 
     function showLoadError(error) {
@@ -968,14 +992,7 @@
       // A slow poll beside the stream, in case a proxy buffers it (and, once the job ended, to see
       // it deleted).
       watch(generation);
-      if (finished) return;
-      try {
-        const ended = await followEvents(generation);
-        if (ended || generation !== following) return;
-      } catch (_) {
-        // No stream (a proxy, an old server): poll instead.
-      }
-      if (generation === following && !finished) poll(generation);
+      if (!finished) follow(generation);
     }
 
     $("#job-cancel").addEventListener("click", async () => {
