@@ -81,7 +81,7 @@ pub fn not_modified(state: &AppState, request: &HeaderMap, identity: &[u8]) -> O
 /// A 304 with `validators`, and the `Vary` its 200 would carry (RFC 9110 section 15.4.5): the
 /// compression layer adds `accept-encoding` to a 200 only, and the route's `accept` is set by its
 /// own layer on both.
-fn unchanged(validators: [(header::HeaderName, HeaderValue); 3]) -> Response {
+fn unchanged<const N: usize>(validators: [(header::HeaderName, HeaderValue); N]) -> Response {
     let mut response = (StatusCode::NOT_MODIFIED, validators).into_response();
     response
         .headers_mut()
@@ -145,11 +145,7 @@ pub fn revalidated(
         (header::CACHE_CONTROL, HeaderValue::from_static("no-cache")),
     ];
     if matches_any(request, &tag) {
-        let mut response = (StatusCode::NOT_MODIFIED, headers).into_response();
-        response
-            .headers_mut()
-            .append(header::VARY, HeaderValue::from_static("accept-encoding"));
-        return response;
+        return unchanged(headers);
     }
     let content_type = [(header::CONTENT_TYPE, HeaderValue::from_static(content_type))];
     (headers, content_type, body).into_response()
