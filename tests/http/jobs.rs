@@ -1271,6 +1271,17 @@ fn a_result_comes_gzip_or_br_compressed_when_the_client_accepts_it() {
 }
 
 /// GET `url` with `If-None-Match: tag`.
+/// The names every `Vary` line of `reply` lists, lower case, sorted, once each.
+fn varies(reply: &Reply) -> Vec<String> {
+    let mut names: Vec<String> = (reply.headers.get_all("vary").iter())
+        .flat_map(|v| v.to_str().unwrap().split(','))
+        .map(|n| n.trim().to_lowercase())
+        .collect();
+    names.sort();
+    names.dedup();
+    names
+}
+
 fn get_if_none_match(url: &str, tag: &str, key: Option<&str>) -> Reply {
     reply(authorized(agent().get(url).header("if-none-match", tag), key).call())
 }
@@ -1302,22 +1313,6 @@ fn a_succeeded_jobs_results_are_immutable_with_an_etag_and_a_current_tag_gets_30
         assert_eq!((again.status, again.body.as_str()), (304, ""), "{path}");
         assert_eq!(again.header("etag"), Some(tag.as_str()), "{path}");
         // A 304 carries the Vary its 200 would (RFC 9110 15.4.5): it lacked accept-encoding.
-        let varies = |reply: &Reply| -> Vec<String> {
-            let mut names: Vec<String> = reply
-                .headers
-                .get_all("vary")
-                .iter()
-                .flat_map(|v| {
-                    v.to_str()
-                        .unwrap()
-                        .split(',')
-                        .map(|n| n.trim().to_lowercase())
-                })
-                .collect();
-            names.sort();
-            names.dedup();
-            names
-        };
         assert_eq!(varies(&again), varies(&first), "{path}");
         assert!(
             varies(&again).contains(&"accept-encoding".to_owned()),
@@ -1358,14 +1353,7 @@ fn with_api_keys_results_are_cached_privately_and_unfinished_jobs_not_at_all() {
         (200, Some("private, max-age=31536000, immutable"))
     );
     // A browser whose key changed must not answer from the last key's copy.
-    let varies: Vec<String> = (first.headers.get_all("vary").iter())
-        .flat_map(|v| {
-            v.to_str()
-                .unwrap()
-                .split(',')
-                .map(|n| n.trim().to_lowercase())
-        })
-        .collect();
+    let varies = varies(&first);
     assert!(varies.contains(&"authorization".to_owned()), "{varies:?}");
     let tag = first.header("etag").unwrap();
     assert_eq!(get_if_none_match(&result, tag, Some("alpha")).status, 304);
