@@ -299,6 +299,9 @@ pub(super) struct Merged<'a> {
     pub(super) filled: Vec<&'a Accumulator>,
     /// The values each device gives (see [`summarize`]).
     per_device: u64,
+    /// [`Self::effective_values`] below the median and above it, once each: the p01 and the p05
+    /// (the p95 and the p99) measure it at the same level.
+    effective: [std::cell::OnceCell<(f64, f64)>; 2],
 }
 
 impl<'a> Merged<'a> {
@@ -319,6 +322,7 @@ impl<'a> Merged<'a> {
             all,
             filled,
             per_device: per_device.max(1),
+            effective: Default::default(),
         }
     }
 
@@ -339,13 +343,18 @@ impl<'a> Merged<'a> {
     /// from a slow closing) is told from one the devices drive even where the devices carry most
     /// of the variance elsewhere.
     fn effective_values(&self, q: f64) -> (f64, f64) {
+        *self.effective[usize::from(q >= 0.5)].get_or_init(|| self.effective_on(q < 0.5))
+    }
+
+    /// [`Self::effective_values`] below the median (`low`) or above it, measured.
+    fn effective_on(&self, low: bool) -> (f64, f64) {
         let n = self.all.count() as f64;
         let devices = self.devices();
         if self.filled.len() < 2 || devices <= 0.0 {
             return (n, 1.0);
         }
         let near = (MIN_TAIL_UNITS / devices).min(0.5);
-        let level = if q < 0.5 { near } else { 1.0 - near };
+        let level = if low { near } else { 1.0 - near };
         let value = self.all.quantiles(&[level])[0];
         let variance = woodruff_intervals(&self.all, &self.filled, &[level], &[value])[0]
             .1
