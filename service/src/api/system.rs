@@ -190,7 +190,9 @@ mod tests {
             assert!(page.starts_with("<!doctype html>"));
             assert!(page.contains(&format!("<title>bouncewear · {title}</title>")));
             assert!(page.contains(&format!("<body data-page=\"{name}\">")));
-            assert!(page.contains("<main>\n    <section") && page.ends_with("</html>\n"));
+            // Each page has one `h1` (the jobs page's read by screen readers alone).
+            assert!(page.contains("<main>\n    <") && page.ends_with("</html>\n"));
+            assert_eq!(page.matches("<h1").count(), 1, "{name}");
             assert!(!page.contains("{{"), "every placeholder filled");
         }
     }
