@@ -116,12 +116,25 @@ fn a_browser_on_another_site_is_refused_before_any_handler_runs() {
         address.clone(),
         format!("[::1]:{port}"),
         "a.localhost".into(),
+        format!("LOCALHOST.:{port}"),
+        // As `inet_aton` reads them, and a client may send them as typed.
+        format!("127.1:{port}"),
+        format!("2130706433:{port}"),
+        format!("0x7f.0.0.1:{port}"),
     ] {
         assert!(raw(&host).starts_with("HTTP/1.1 200"), "{host}");
     }
-    let rebound = raw(&format!("attacker.example:{port}"));
-    assert!(rebound.starts_with("HTTP/1.1 403"), "{rebound}");
-    assert!(rebound.contains("loopback names only"), "{rebound}");
+    for host in [
+        format!("attacker.example:{port}"),
+        format!("localhost:{port}@attacker.example"),
+        "[::1]attacker.example".into(),
+        "localhost.attacker.example".into(),
+        "128.0.0.1".into(),
+    ] {
+        let rebound = raw(&host);
+        assert!(rebound.starts_with("HTTP/1.1 403"), "{host}: {rebound}");
+        assert!(rebound.contains("loopback names only"), "{rebound}");
+    }
     // A change sent by a page of another site (a form, a fetch without preflight) is refused; the
     // server's own pages, and clients that are no browser, send their own origin or none.
     let jobs = server.url("/v1/jobs");
@@ -141,6 +154,7 @@ fn a_browser_on_another_site_is_refused_before_any_handler_runs() {
     assert_problem_saying(&refused, 403, "another site");
     assert_eq!(send("null").status, 403);
     assert_eq!(send(server.base()).status, 202);
+    assert_eq!(send(&format!("http://localhost:{port}")).status, 202);
     assert_eq!(send("").status, 202);
     // Reading is not changing: a GET with a foreign origin is answered (CORS keeps its body from
     // the page).
@@ -151,6 +165,23 @@ fn a_browser_on_another_site_is_refused_before_any_handler_runs() {
             .call(),
     );
     assert_eq!(read.status, 200);
+
+    // With keys neither rule applies: a key is no credential a browser attaches for another
+    // site, and a proxy in front may name the server as it likes.
+    let keyed = TestApp::start(&temp_db("cross-site-keys"), &["--api-key", "alpha"]);
+    let keyed_post = |key: Option<&str>| {
+        let request = agent()
+            .post(&keyed.url("/v1/jobs"))
+            .header("content-type", "application/json")
+            .header("origin", "https://bouncewear.example");
+        let request = match key {
+            Some(key) => request.header("authorization", &format!("Bearer {key}")),
+            None => request,
+        };
+        reply(request.send(job.as_str()))
+    };
+    assert_eq!(keyed_post(Some("alpha")).status, 202);
+    assert_eq!(keyed_post(None).status, 401);
 }
 
 #[test]

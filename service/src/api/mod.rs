@@ -154,24 +154,28 @@ pub fn router(state: AppState) -> axum::Router {
         ))
 }
 
-/// Refuses, before any handler runs, what a browser sends on another site's behalf (found from
-/// outside): on a server without keys, a name other than a loopback one (a web page that made its
-/// own name point at 127.0.0.1, DNS rebinding, reads and changes everything such a server holds);
-/// and on any server, a change (any method but GET, HEAD and OPTIONS) whose `Origin` is not this
-/// server's (a page's form posting to `/v1/jobs/{id}/cancel`). A client that is no browser sends
-/// no `Origin`, and names the server as it reached it.
+/// Refuses, before any handler runs, what a browser sends on another site's behalf to a server
+/// without keys (found from outside): a name other than a loopback one (a web page that made its
+/// own name point at 127.0.0.1, DNS rebinding, reads and changes everything such a server holds),
+/// and a change (any method but GET, HEAD and OPTIONS) from a page whose `Origin` is not on this
+/// machine's loopback (a form posting to `/v1/jobs/{id}/cancel`). A server with keys needs
+/// neither: a key is no credential a browser attaches to another site's request, and a proxy in
+/// front of it may name it as it likes (a proxy that rewrote `Host` had every change of the
+/// dashboard refused, found from outside). A client that is no browser sends no `Origin`.
 async fn same_site(State(keyless): State<bool>, request: Request, next: Next) -> Response {
-    match cross_site(&request, keyless) {
+    match keyless.then(|| cross_site(&request)).flatten() {
         Some(refusal) => ApiError::CrossSite(refusal).into_response(),
         None => next.run(request).await,
     }
 }
 
-fn cross_site(request: &Request, keyless: bool) -> Option<String> {
-    let host = (request.headers().get(header::HOST))
-        .and_then(|host| host.to_str().ok())
-        .or_else(|| request.uri().authority().map(|a| a.as_str()));
-    if keyless && let Some(host) = host.filter(|host| !loopback_name(host)) {
+fn cross_site(request: &Request) -> Option<String> {
+    let host = match request.headers().get(header::HOST) {
+        // A field that is no text is no name of this machine.
+        Some(host) => Some(host.to_str().unwrap_or("?")),
+        None => request.uri().authority().map(|a| a.as_str()),
+    };
+    if let Some(host) = host.filter(|host| !loopback_name(host)) {
         return Some(format!(
             "a server without API keys answers to loopback names only (localhost, 127.0.0.1, [::1]), not `{host}`: another name pointing here is how a web page would reach it; configure --api-key to serve other names"
         ));
@@ -180,26 +184,73 @@ fn cross_site(request: &Request, keyless: bool) -> Option<String> {
         *request.method(),
         axum::http::Method::GET | axum::http::Method::HEAD | axum::http::Method::OPTIONS
     );
-    let origin = request.headers().get(header::ORIGIN)?;
-    let origin = origin.to_str().unwrap_or("");
-    let same = (origin.split_once("://"))
-        .is_some_and(|(_, authority)| host.is_some_and(|h| authority.eq_ignore_ascii_case(h)));
-    (changes && !same)
-        .then(|| format!("a page of another site (Origin `{origin}`) may not change anything here"))
+    let origin = request
+        .headers()
+        .get(header::ORIGIN)?
+        .to_str()
+        .unwrap_or("?");
+    let local = (origin.split_once("://")).is_some_and(|(_, authority)| loopback_name(authority));
+    (changes && !local).then(|| {
+        format!(
+            "a page of another site (Origin `{origin}`) may not change anything on a server without API keys; configure --api-key to serve pages of other names"
+        )
+    })
 }
 
-/// Whether `host` (a `Host` field: a name or address, and a port) names this machine's loopback.
+/// Whether `host` (a `Host` field: a name or address, and a port of digits) names this machine's
+/// loopback: `localhost` and its subdomains, `127.0.0.0/8` (in the shorthand `inet_aton` reads
+/// too, `127.1`, which a client may send as typed), `[::1]`.
 fn loopback_name(host: &str) -> bool {
-    let name = match host.strip_prefix('[') {
-        Some(bracketed) => bracketed.split(']').next().unwrap_or(""),
-        None => host.rsplit_once(':').map_or(host, |(name, _)| name),
+    let (name, port) = match host.strip_prefix('[') {
+        Some(bracketed) => match bracketed.split_once(']') {
+            Some((name, rest)) => (
+                name,
+                rest.strip_prefix(':')
+                    .or(Some(rest).filter(|r| r.is_empty())),
+            ),
+            None => return false,
+        },
+        None => match host.rsplit_once(':') {
+            Some((name, port)) => (name, Some(port)),
+            None => (host, Some("")),
+        },
     };
-    let name = name.trim_end_matches('.').to_ascii_lowercase();
+    if !port.is_some_and(|port| port.bytes().all(|b| b.is_ascii_digit())) {
+        return false;
+    }
+    let name = name.strip_suffix('.').unwrap_or(name).to_ascii_lowercase();
     name == "localhost"
         || name.ends_with(".localhost")
         || name
-            .parse::<std::net::IpAddr>()
+            .parse::<std::net::Ipv6Addr>()
             .is_ok_and(|ip| ip.is_loopback())
+        || ipv4_shorthand(&name).is_some_and(|ip| ip >> 24 == 127)
+}
+
+/// An IPv4 address as `inet_aton` reads it: one to four parts, each decimal, octal (`0` first)
+/// or hexadecimal (`0x`), the last filling the bytes the others leave.
+fn ipv4_shorthand(name: &str) -> Option<u32> {
+    let parts: Vec<u64> = (name.split('.'))
+        .map(
+            |part| match part.strip_prefix("0x").or_else(|| part.strip_prefix("0X")) {
+                Some(hex) => u64::from_str_radix(hex, 16).ok(),
+                None if part.len() > 1 && part.starts_with('0') => {
+                    u64::from_str_radix(part, 8).ok()
+                }
+                None => part.parse().ok(),
+            },
+        )
+        .collect::<Option<_>>()?;
+    let (last, leading) = parts.split_last()?;
+    if leading.len() > 3 || leading.iter().any(|&byte| byte > 255) {
+        return None;
+    }
+    let rest_bits = 8 * (4 - leading.len() as u32);
+    if rest_bits < 64 && *last >= 1 << rest_bits {
+        return None;
+    }
+    let high = (leading.iter()).fold(0_u64, |address, &byte| address << 8 | byte);
+    u32::try_from(high << rest_bits | last).ok()
 }
 
 /// The request without a client's `X-Request-Id` that is no id (more than 128 characters, or
