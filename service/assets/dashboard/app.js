@@ -844,6 +844,7 @@
     let pollTimer = null;
     let resultLoaded = false;
     let following = 0; // generation of the current follow, so a key change restarts cleanly
+    let cancelRefused = null; // why the last cancel was refused, while the job runs on
 
     document.title = "bouncewear · job " + id;
     $("#job-id").textContent = id;
@@ -876,7 +877,9 @@
       } else if (job.status === "cancelled") {
         setAlert($("#job-error"), "The job was cancelled" + (job.error ? ": " + job.error : "."));
       } else {
-        setAlert($("#job-error"), null);
+        // A refused cancel stays said while the job runs on (the next progress cleared it within
+        // 100 ms, found from outside).
+        setAlert($("#job-error"), ACTIVE.has(job.status) ? cancelRefused : null);
       }
       if (!ACTIVE.has(job.status)) {
         finished = true;
@@ -976,6 +979,7 @@
       // Nothing shown yet under this key: a 404 now is "not found", not "deleted"; and nothing
       // another key loaded stays on the page.
       job = null;
+      cancelRefused = null;
       resultLoaded = false;
       show($("#result"), false);
       $("#job-name").textContent = "Job";
@@ -1000,6 +1004,7 @@
 
     $("#job-cancel").addEventListener("click", async () => {
       if (!confirm("Cancel this job?")) return;
+      cancelRefused = null;
       try {
         const response = await api(base, { method: "DELETE" });
         if (!response.ok) throw await failed(response);
@@ -1012,7 +1017,8 @@
           }
         }
       } catch (error) {
-        setAlert($("#job-error"), "Could not cancel: " + error.message);
+        cancelRefused = "Could not cancel: " + error.message;
+        setAlert($("#job-error"), cancelRefused);
       }
     });
 
