@@ -72,7 +72,8 @@ pub enum ApiError {
     /// The key's jobs store its quota or more ([`StoreError::OverQuota`]).
     #[error("{0}")]
     OverQuota(String),
-    /// A request a browser sends on another site's behalf ([`super::same_site`]).
+    /// A request a browser sends on another site's behalf to a server without keys (see
+    /// docs/contract.md, "API keys").
     #[error("{0}")]
     CrossSite(String),
     #[error(
