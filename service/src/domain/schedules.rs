@@ -2,7 +2,6 @@
 //! must pass, and the statistics a schedule follows from run to run.
 
 use super::jobs::{QueuedJob, draw_seed};
-use super::trend::Reading;
 use super::{Owner, UnixMs};
 use bouncewear_model::error::{MAX_TEXT_CHARS, past_listing};
 use bouncewear_model::montecarlo::job::{LIST_FIELDS, check_written};
@@ -744,6 +743,15 @@ impl Statistic {
             }
         }
     }
+}
+
+/// A run's value of one statistic and its 95 % interval, with the reason its Result gives where
+/// the data cannot bound it ([`Statistic::read`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reading {
+    pub value: f64,
+    pub ci95: [f64; 2],
+    pub reason: Option<String>,
 }
 
 impl fmt::Display for Statistic {

@@ -1,7 +1,7 @@
 //! The run-by-run trend of a schedule's statistics, and the drift flag that says a run left the
 //! interval of the run before it.
 
-use super::schedules::Statistic;
+use super::schedules::{Reading, Statistic};
 use bouncewear_model::montecarlo::JobResult;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -18,15 +18,6 @@ pub struct TrendValue {
     /// interval claims more than the data hold, so the value is never flagged, nor a later one
     /// judged by its interval.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub reason: Option<String>,
-}
-
-/// A run's value of one statistic and its 95 % interval, with the reason its Result gives where
-/// the data cannot bound it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Reading {
-    pub value: f64,
-    pub ci95: [f64; 2],
     pub reason: Option<String>,
 }
 
