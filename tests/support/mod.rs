@@ -130,8 +130,11 @@ pub fn wearing_template(supply_voltage_v: f64) -> Value {
 }
 
 /// Submits `count` small jobs at once, spread over the `urls` (each a `/v1/jobs`), checks that
-/// each was accepted (202) or refused with `Retry-After` (429), and returns the accepted ids.
-pub fn submit_concurrently(urls: &[String], count: u64) -> Vec<String> {
+/// each was accepted (202) or refused with `Retry-After`: the queue full (429), or the database
+/// not answering in time (503, as the contract allows; seen once with the two cores starved by
+/// other work), and returns the accepted ids and how many got 503. The callers check that
+/// exactly those ids were stored.
+pub fn submit_concurrently(urls: &[String], count: u64) -> (Vec<String>, usize) {
     let threads: Vec<_> = (0..count)
         .map(|seed| {
             let url = urls[seed as usize % urls.len()].clone();
@@ -148,12 +151,16 @@ pub fn submit_concurrently(urls: &[String], count: u64) -> Vec<String> {
         threads.into_iter().map(|t| t.join().unwrap()).collect();
     let statuses: Vec<u16> = replies.iter().map(|r| r.0).collect();
     assert!(
-        statuses.iter().all(|s| *s == 202 || *s == 429),
+        statuses.iter().all(|s| matches!(s, 202 | 429 | 503)),
         "{statuses:?}"
     );
     assert!(
-        replies.iter().filter(|r| r.0 == 429).all(|r| r.1),
-        "429 carries Retry-After"
+        replies.iter().filter(|r| r.0 != 202).all(|r| r.1),
+        "a refusal carries Retry-After"
     );
-    replies.into_iter().filter_map(|r| r.2).collect()
+    let unavailable = statuses.iter().filter(|&&s| s == 503).count();
+    (
+        replies.into_iter().filter_map(|r| r.2).collect(),
+        unavailable,
+    )
 }
