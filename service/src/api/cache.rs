@@ -130,25 +130,41 @@ fn validators(state: &AppState, tag: HeaderValue) -> [(header::HeaderName, Heade
     ]
 }
 
-/// One of the server's own files (a dashboard page, its script or style): asked again at every
-/// use (`no-cache`), answered 304 while the build that serves it is the one that served it before,
-/// so a reload moves a few hundred bytes rather than the whole script, and a new build is seen at
-/// once.
-pub fn revalidated(
-    request: &HeaderMap,
+/// One of the server's own files (a dashboard page, its script or style), with its tag made
+/// once: asked again at every use (`no-cache`), answered 304 while the build that serves it is
+/// the one that served it before, so a reload moves a few hundred bytes rather than the whole
+/// script, and a new build is seen at once.
+pub struct OwnFile {
     content_type: &'static str,
     body: &'static str,
-) -> Response {
-    let tag = entity_tag(body.as_bytes());
-    let headers = [
-        (header::ETAG, tag.clone()),
-        (header::CACHE_CONTROL, HeaderValue::from_static("no-cache")),
-    ];
-    if matches_any(request, &tag) {
-        return unchanged(headers);
+    tag: HeaderValue,
+}
+
+impl OwnFile {
+    pub fn new(content_type: &'static str, body: &'static str) -> Self {
+        let tag = entity_tag(body.as_bytes());
+        Self {
+            content_type,
+            body,
+            tag,
+        }
     }
-    let content_type = [(header::CONTENT_TYPE, HeaderValue::from_static(content_type))];
-    (headers, content_type, body).into_response()
+
+    /// The file, or 304 where `If-None-Match` names its tag.
+    pub fn respond(&self, request: &HeaderMap) -> Response {
+        let headers = [
+            (header::ETAG, self.tag.clone()),
+            (header::CACHE_CONTROL, HeaderValue::from_static("no-cache")),
+        ];
+        if matches_any(request, &self.tag) {
+            return unchanged(headers);
+        }
+        let content_type = [(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static(self.content_type),
+        )];
+        (headers, content_type, self.body).into_response()
+    }
 }
 
 /// A weak tag from the SHA-256 of the bytes: weak because compression may send other bytes for

@@ -1,7 +1,8 @@
 //! Health, Prometheus metrics, the OpenAPI document and its docs UI (RapiDoc, vendored).
 
+use super::AppState;
+use super::cache::OwnFile;
 use super::error::{ApiError, Internal, Problem};
-use super::{AppState, cache};
 use crate::domain::UnixMs;
 use crate::store::{DATABASE_WAIT, StoreResult};
 use crate::telemetry;
@@ -157,24 +158,29 @@ static JOB_PAGE: LazyLock<String> = LazyLock::new(|| {
 });
 
 const HTML: &str = "text/html; charset=utf-8";
+static INDEX_FILE: LazyLock<OwnFile> = LazyLock::new(|| OwnFile::new(HTML, INDEX_PAGE.as_str()));
+static JOB_FILE: LazyLock<OwnFile> = LazyLock::new(|| OwnFile::new(HTML, JOB_PAGE.as_str()));
+static SCRIPT_FILE: LazyLock<OwnFile> =
+    LazyLock::new(|| OwnFile::new("application/javascript; charset=utf-8", DASHBOARD_SCRIPT));
+static STYLE_FILE: LazyLock<OwnFile> =
+    LazyLock::new(|| OwnFile::new("text/css; charset=utf-8", DASHBOARD_STYLE));
 
 /// The dashboard: jobs with live progress, the submit form and schedules.
 pub async fn dashboard(request: HeaderMap) -> Response {
-    cache::revalidated(&request, HTML, INDEX_PAGE.as_str())
+    INDEX_FILE.respond(&request)
 }
 
 /// A job's page: live progress, wear curves, histograms, the Weibull plot.
 pub async fn job_page(request: HeaderMap) -> Response {
-    cache::revalidated(&request, HTML, JOB_PAGE.as_str())
+    JOB_FILE.respond(&request)
 }
 
 pub async fn dashboard_script(request: HeaderMap) -> Response {
-    let script = "application/javascript; charset=utf-8";
-    cache::revalidated(&request, script, DASHBOARD_SCRIPT)
+    SCRIPT_FILE.respond(&request)
 }
 
 pub async fn dashboard_style(request: HeaderMap) -> Response {
-    cache::revalidated(&request, "text/css; charset=utf-8", DASHBOARD_STYLE)
+    STYLE_FILE.respond(&request)
 }
 
 #[cfg(test)]

@@ -26,12 +26,12 @@ pub struct TrendValue {
 /// the data bound). A value with a reason is never flagged: a drift alarm is a decision, and
 /// such an interval is not one to rest a decision on (found from outside: a p99 of 4 devices,
 /// carrying its reason in every Result, raised one).
-pub fn flag_drift(values: &[Option<Reading>]) -> Vec<Option<TrendValue>> {
+pub fn flag_drift(values: impl IntoIterator<Item = Option<Reading>>) -> Vec<Option<TrendValue>> {
     let mut previous: Option<[f64; 2]> = None;
     values
-        .iter()
+        .into_iter()
         .map(|entry| {
-            entry.clone().map(
+            entry.map(
                 |Reading {
                      value,
                      ci95,
@@ -73,10 +73,7 @@ pub fn trend(
     runs: &[RunValues],
 ) -> Vec<BTreeMap<String, Option<TrendValue>>> {
     let columns: Vec<Vec<Option<TrendValue>>> = (0..statistics.len())
-        .map(|column| {
-            let column: Vec<Option<Reading>> = runs.iter().map(|run| run[column].clone()).collect();
-            flag_drift(&column)
-        })
+        .map(|column| flag_drift(runs.iter().map(|run| run[column].clone())))
         .collect();
     (0..runs.len())
         .map(|run| {
@@ -103,7 +100,7 @@ mod tests {
 
     #[test]
     fn drift_is_a_value_outside_the_previous_nights_interval() {
-        let flags = flag_drift(&[
+        let flags = flag_drift([
             reading(1.0, [0.9, 1.1], None),
             reading(1.05, [0.95, 1.15], None),
             None,
