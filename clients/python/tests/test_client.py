@@ -232,6 +232,33 @@ def test_an_idempotency_key_the_server_would_refuse_is_refused_here(client):
             client.submit({"devices": 1, "operations": 1}, idempotency_key=key)
 
 
+def test_a_frame_holds_every_number_as_the_json_gives_it(client):
+    """A tiny metric (eroded mass, about 1e-11 kg) is written in the CSV without an exponent; read
+    at pandas' default precision it kept 5 digits of its sd."""
+    tiny = client.submit({"devices": 30, "operations": 1, "seed": 5,
+                          "scenario": {"circuit": {"supply_voltage_v": 24, "current_a": 1}},
+                          "scatter": [{"parameter": "impact_velocity_m_s", "per": "device",
+                                       "distribution": {"kind": "uniform", "min": 0.2, "max": 0.6}}],
+                          "metrics": ["eroded_mass_kg"]}).wait(progress=False)
+    served = tiny.result()["devices"]["eroded_mass_kg"]
+    frame = tiny.distribution("eroded_mass_kg")
+    for column in ("mean", "sd", "min", "max"):
+        assert frame[column].iloc[0] == served[column], column
+    assert 0 < served["sd"] < 1e-9
+
+
+def test_a_key_no_header_can_carry_is_refused_without_repeating_it():
+    for key in ("", " k1", "k1 ", "k1\n", "k\u20ac"):
+        with pytest.raises(ValueError, match="api_key") as refused:
+            Client(api_key=key)
+        assert key.strip() == "" or key.strip() not in str(refused.value)
+    for timeout in (0, -1.0):
+        with pytest.raises(ValueError, match="timeout"):
+            Client(timeout=timeout)
+    with pytest.raises(ValueError, match="limit"):
+        Client("http://127.0.0.1:1").jobs(limit=-1)
+
+
 def _notes(caplog):
     """The retry notes the client logged, each's end: "again in S s (N of M)"."""
     return [record.getMessage().split("; ")[-1] for record in caplog.records

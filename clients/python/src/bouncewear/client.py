@@ -171,8 +171,9 @@ class Client:
     HEAD or PUT, or a POST the server honours an Idempotency-Key on) is sent again after its
     `Retry-After` (at most a minute), and a repeatable one whose connection was refused, reset or
     cut short after 0.5, 1, 2, ... s, up to `retries` times, each noted on the `bouncewear`
-    logger; then the last `BouncewearError` (or `requests.ConnectionError`, or
-    `requests.Timeout` for an answer that took longer than `timeout` seconds) is raised. `submit`
+    logger; then the last `BouncewearError` (or `requests.ConnectionError`,
+    `requests.exceptions.ChunkedEncodingError` for an answer cut short, or `requests.Timeout` for
+    an answer that took longer than `timeout` seconds) is raised. `submit`
     always sends an Idempotency-Key, so a job is never queued twice.
 
     An `https` URL is checked against the CA certificates `requests` trusts, or instead those of
@@ -183,9 +184,16 @@ class Client:
     `ValueError` naming the rule, as the command line's `--url` is refused."""
 
     def __init__(self, base_url: str = "http://127.0.0.1:8080", api_key: Optional[str] = None,
-                 timeout: float = 60.0, retries: int = 3, ca_cert: Optional[str] = None) -> None:
+                 timeout: Optional[float] = 60.0, retries: int = 3, ca_cert: Optional[str] = None) -> None:
         if retries < 0:
             raise ValueError(f"retries must be 0 or more, got {retries}")
+        if timeout is not None and not timeout > 0:
+            raise ValueError(f"timeout must be a number of seconds above 0 (or None), got {timeout!r}")
+        if api_key is not None and (api_key.strip() != api_key or not api_key or not all(
+                c == " " or "!" <= c <= "~" for c in api_key)):
+            # As the command line's --api-key; the key itself is not repeated.
+            raise ValueError("api_key: a key is printable ASCII, not empty and with no space at "
+                             "either end, and the one given is not")
         _check_base_url(base_url)
         self.base_url = base_url.rstrip("/")
         self.timeout = timeout
@@ -264,6 +272,8 @@ class Client:
 
     def jobs(self, limit: Optional[int] = None) -> List["Job"]:
         """Your jobs, newest first: every one, or the newest `limit`."""
+        if limit is not None and limit < 0:
+            raise ValueError(f"limit must be 0 or more, got {limit}")
         found: List[Job] = []
         cursor = None
         while limit is None or len(found) < limit:
@@ -383,7 +393,8 @@ class Job(_Resource):
             try:
                 self.resource = self.client.request("GET", self._path(), params={"wait_s": max(wait_s, 0.0)},
                                                     deadline=deadline).json()
-            except (requests.ConnectionError, requests.exceptions.Timeout) as error:
+            except (requests.ConnectionError, requests.exceptions.ChunkedEncodingError,
+                    requests.exceptions.Timeout) as error:
                 if deadline is None or time.monotonic() < deadline:
                     raise
                 raise TimeoutError(f"job {self.id}: no answer from the server within {timeout} s "
@@ -594,7 +605,13 @@ _COMPARED = ["op_start", "op_end", "statistic", "a", "b", "difference", "differe
              "difference_hi", "ratio", "ratio_lo", "ratio_hi"]
 
 
+# Every number as the server wrote it: before pandas 3, the default reader keeps about 17 decimals
+# of a number written without an exponent (2.9865e-11 for 2.986509987185039e-11; 0 below 1e-17).
+_EXACT_FLOATS: Dict[str, str] = (
+    {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"})
+
+
 def _csv(response: requests.Response) -> pd.DataFrame:
-    return pd.read_csv(io.StringIO(response.text))
+    return pd.read_csv(io.StringIO(response.text), **_EXACT_FLOATS)
 
 
