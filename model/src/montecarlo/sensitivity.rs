@@ -23,7 +23,7 @@
 
 use super::job::{Job, Per, SensitivityMethod};
 use crate::stats::regression::RegressionAccumulator;
-use crate::stats::sobol::{IndexEstimate, SobolAccumulator};
+use crate::stats::sobol::{IndexEstimate, SobolAccumulator, SobolEstimate};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -279,6 +279,11 @@ pub struct SensitivityBin {
     /// when the regression is degenerate: an output that does not vary, say).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub r_squared: Option<f64>,
+    /// Why the Sobol' intervals are wider than the spread between devices alone: the values lie
+    /// so far from the value their sums are taken about that the sums' rounding widens an
+    /// interval by more than 0.001 either side (or leaves no digit of the variance).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }
 
 /// How much one parameter drives one metric in one bin.
@@ -316,6 +321,29 @@ impl SensitivityBin {
     }
 }
 
+/// How much the sums' rounding may widen an interval (either side, in the indices' units)
+/// before a bin says so.
+const WIDENING_SAID: f64 = 1e-3;
+
+/// Why a bin's Sobol' intervals include their rounding ([`SobolEstimate`]).
+fn rounding_reason(estimate: &SobolEstimate, shift: f64) -> String {
+    let about = format!(
+        "sums taken about {shift:e} (a new device's value with every scattered parameter at its \
+         median)"
+    );
+    if estimate.offset_sds == 0.0 {
+        return format!(
+            "the values' variance is lost in the rounding of {about}: every index is unknown, \
+             given as 0 in [0, 1]"
+        );
+    }
+    format!(
+        "the values lie {:.2e} of their standard deviations from the {about}: the intervals \
+         include the sums' rounding, which widens them by up to {:.2e} either side",
+        estimate.offset_sds, estimate.widening
+    )
+}
+
 /// The Result's `sensitivity`: per metric, its bins (a device metric: one entry), from the
 /// groups' sums merged in group order.
 pub fn summarize_sensitivity(
@@ -341,6 +369,7 @@ pub fn summarize_sensitivity(
     // One cell: Sobol' indices by level, regression over `regressors` (scatter indices).
     let cell = |cell: usize, regressors: &[usize], with_operation: bool| {
         let mut indices: BTreeMap<String, ParameterSensitivity> = BTreeMap::new();
+        let mut reason = None;
         let regression = merged.regression[cell].standardised();
         let src = |input: usize| {
             let position = regressors.iter().position(|&r| r == input)?;
@@ -358,9 +387,14 @@ pub fn summarize_sensitivity(
             if per == Per::Operation && !with_operation {
                 continue;
             }
-            let sobol = sobol.map(SobolAccumulator::indices);
+            let estimate = sobol.map(|sums| (sums.estimate(), sums.shift()));
+            if let Some((estimate, shift)) = &estimate
+                && estimate.widening > WIDENING_SAID
+            {
+                reason.get_or_insert_with(|| rounding_reason(estimate, *shift));
+            }
             for (position, &input) in level_inputs.iter().enumerate() {
-                let estimate = sobol.as_ref().map(|s| s[position]);
+                let estimate = estimate.as_ref().map(|(e, _)| e.indices[position]);
                 indices.insert(
                     name(input),
                     ParameterSensitivity {
@@ -372,7 +406,7 @@ pub fn summarize_sensitivity(
                 );
             }
         }
-        (indices, regression.map(|r| r.r_squared))
+        (indices, regression.map(|r| r.r_squared), reason)
     };
     let all: Vec<usize> = (0..scatter.len()).collect();
     let mut result = BTreeMap::new();
@@ -381,12 +415,13 @@ pub fn summarize_sensitivity(
         let entries = (0..bins)
             .map(|b| {
                 let operations = job.bin_range(b as u64);
-                let (indices, r_squared) = cell(b * metrics + m, &all, true);
+                let (indices, r_squared, reason) = cell(b * metrics + m, &all, true);
                 SensitivityBin {
                     op_start: Some(operations.start),
                     op_end: Some(operations.end),
                     indices,
                     r_squared,
+                    reason,
                 }
             })
             .collect();
@@ -394,7 +429,7 @@ pub fn summarize_sensitivity(
     }
     if !device_inputs.is_empty() {
         for (j, metric) in job.device_metrics().iter().enumerate() {
-            let (indices, r_squared) = cell(bins * metrics + j, &device_inputs, false);
+            let (indices, r_squared, reason) = cell(bins * metrics + j, &device_inputs, false);
             result.insert(
                 metric.name().to_owned(),
                 vec![SensitivityBin {
@@ -402,6 +437,7 @@ pub fn summarize_sensitivity(
                     op_end: None,
                     indices,
                     r_squared,
+                    reason,
                 }],
             );
         }
@@ -434,6 +470,7 @@ mod tests {
                 },
             )]),
             r_squared: src.map(|_| 0.9),
+            reason: None,
         };
         assert!(bin(0.4, Some(0.7)).is_finite());
         assert!(bin(0.4, None).is_finite());

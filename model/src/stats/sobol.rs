@@ -31,6 +31,16 @@
 //! clusters and `N` samples). A sample pushed alone is a cluster of one, where this is the
 //! independent-sample covariance above.
 //!
+//! **Rounding.** The sums hold `(a - c)^2` and its products, so the variance comes out with a
+//! relative error of about `eps r` and the intervals' spread of about `eps r^2`, where
+//! `r = (mean - c)^2 / V` counts how many variances the shift lies from the mean: a shift 10^3.5
+//! standard deviations away (`r = 10^7`) already puts a tenth of an interval's variance in
+//! rounding, and zero-width intervals follow. Each interval's variance therefore adds a bound on
+//! its own rounding, `eps sum |g_r| |g_s| C_rs`, with `C` the covariance's terms taken by
+//! magnitude, and [`SobolAccumulator::estimate`] says by how much that widened the intervals. An
+//! output whose variance comes out below `64 eps` of its mean square about the shift (0 or below
+//! included) has no digit of it left: its indices are unknown, 0 in `[0, 1]`.
+//!
 //! **Merging.** The accumulator keeps sums (of `z`, of the cluster sums' products `Z Z^T` and of
 //! `n_d Z_d`), so groups merge by addition; the caller fixes the order of pushes and merges and
 //! gets the same indices to the bit.
@@ -76,6 +86,19 @@ pub struct IndexEstimate {
     pub ci95: [f64; 2],
 }
 
+/// The indices of every input, and how much of them is the sums' rounding.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SobolEstimate {
+    /// In input order.
+    pub indices: Vec<SobolIndices>,
+    /// The most the rounding bound widened an interval's half-width, in the indices' units (1
+    /// when the variance itself is lost in rounding).
+    pub widening: f64,
+    /// How far the outputs' mean lies from the shift, in their standard deviations (0 without
+    /// a variance).
+    pub offset_sds: f64,
+}
+
 /// The first-order and total index of one input.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -116,6 +139,11 @@ impl SobolAccumulator {
 
     pub fn inputs(&self) -> usize {
         self.sums.len()
+    }
+
+    /// The value the sums are taken about.
+    pub fn shift(&self) -> f64 {
+        self.shift
     }
 
     /// Base samples pushed.
@@ -249,45 +277,79 @@ impl SobolAccumulator {
         (sums[4] + sums[5]) / (2.0 * n) - mean * mean
     }
 
-    /// The indices of every input, in input order. With fewer than two clusters, or an output
-    /// that does not vary (`V = 0`), every index is 0 with the interval `[0, 0]`, as SALib reports
-    /// a constant output.
+    /// The indices of every input, in input order ([`SobolAccumulator::estimate`]).
     pub fn indices(&self) -> Vec<SobolIndices> {
+        self.estimate().indices
+    }
+
+    /// The indices of every input with their rounding. With fewer than two clusters, or an
+    /// output that does not vary from the shift, every index is 0 with the interval `[0, 0]`, as
+    /// SALib reports a constant output; one whose variance the sums' rounding leaves within
+    /// `64 eps` of its mean square about the shift (0 or below included) has every index 0 with
+    /// the interval `[0, 1]` (nothing known).
+    pub fn estimate(&self) -> SobolEstimate {
         let n = self.n as f64;
         let clusters = self.clusters as f64;
         let variance = self.variance();
-        let zero = IndexEstimate {
-            value: 0.0,
-            ci95: [0.0, 0.0],
+        let every = |value: f64, ci95: [f64; 2], widening: f64| {
+            let index = IndexEstimate { value, ci95 };
+            SobolEstimate {
+                indices: vec![
+                    SobolIndices {
+                        first: index,
+                        total: index,
+                    };
+                    self.inputs()
+                ],
+                widening,
+                offset_sds: 0.0,
+            }
         };
-        if self.clusters < 2 || variance.is_nan() || variance <= 0.0 {
-            return vec![
-                SobolIndices {
-                    first: zero,
-                    total: zero,
-                };
-                self.inputs()
-            ];
+        let Some(sums) = self.sums.first() else {
+            return every(0.0, [0.0, 0.0], 0.0);
+        };
+        // The mean square about the shift, of which the variance is what rounding leaves.
+        let square = (sums[4] + sums[5]) / (2.0 * n);
+        if self.clusters < 2 || square == 0.0 {
+            return every(0.0, [0.0, 0.0], 0.0);
+        }
+        if !(variance.is_finite() && square.is_finite()) {
+            // Values whose squares pass f64: no index to state (the run says so).
+            return every(f64::NAN, [f64::NAN; 2], 0.0);
+        }
+        if variance <= 64.0 * f64::EPSILON * square {
+            // Negative or a few roundings of the mean square: no digit of it is left.
+            return every(0.0, [0.0, 1.0], 1.0);
         }
         // The centre m of every evaluation, less the shift.
         let evaluations = n * (self.inputs() + 2) as f64;
         let centre =
             (self.sums[0][2] + self.sums[0][3] + self.sums.iter().map(|s| s[6]).sum::<f64>())
                 / evaluations;
-        self.sums
+        let mut widening: f64 = 0.0;
+        let indices = self
+            .sums
             .iter()
             .zip(&self.products)
             .zip(&self.weighted)
             .map(|((sums, products), weighted)| {
                 let m: [f64; Z] = sums.map(|s| s / n);
                 // Covariance of the mean of z, from the spread between clusters.
-                let covariance = |r: usize, s: usize| {
+                // Its terms, and the same by magnitude: what rounding scales with.
+                let terms = |r: usize, s: usize| {
                     let (r, s) = (r.min(s), r.max(s));
-                    (products[packed(r, s)] - m[r] * weighted[s] - weighted[r] * m[s]
-                        + m[r] * m[s] * self.squared_sizes)
-                        * clusters
-                        / ((clusters - 1.0) * n * n)
+                    let scale = clusters / ((clusters - 1.0) * n * n);
+                    [
+                        products[packed(r, s)],
+                        -m[r] * weighted[s],
+                        -weighted[r] * m[s],
+                        m[r] * m[s] * self.squared_sizes,
+                    ]
+                    .map(|term| term * scale)
                 };
+                let covariance = |r: usize, s: usize| terms(r, s).iter().sum::<f64>();
+                let magnitude =
+                    |r: usize, s: usize| terms(r, s).iter().map(|t| t.abs()).sum::<f64>();
                 // dV/dm: V = (m4 + m5)/2 - ((m2 + m3)/2)^2.
                 let half_mean = (m[2] + m[3]) / 2.0;
                 let dv = [0.0, 0.0, -half_mean, -half_mean, 0.5, 0.5, 0.0];
@@ -298,17 +360,21 @@ impl SobolAccumulator {
                     [1.0, 0.0, centre, 0.0, 0.0, 0.0, -centre],
                 );
                 let total = (m[1], [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
-                let estimate = |(numerator, d_numerator): (f64, [f64; Z])| {
+                let mut estimate = |(numerator, d_numerator): (f64, [f64; Z])| {
                     let value = numerator / variance;
                     // g = d(numerator / V)/dm.
                     let gradient: [f64; Z] =
                         std::array::from_fn(|r| (d_numerator[r] - value * dv[r]) / variance);
-                    let spread = (0..Z)
-                        .flat_map(|r| (0..Z).map(move |s| (r, s)))
-                        .map(|(r, s)| gradient[r] * covariance(r, s) * gradient[s])
-                        .sum::<f64>()
-                        .max(0.0);
-                    let half = Z_975 * spread.sqrt();
+                    let quadratic = |c: &dyn Fn(usize, usize) -> f64, g: [f64; Z]| {
+                        (0..Z)
+                            .flat_map(|r| (0..Z).map(move |s| (r, s)))
+                            .map(|(r, s)| g[r] * c(r, s) * g[s])
+                            .sum::<f64>()
+                    };
+                    let spread = quadratic(&covariance, gradient).max(0.0);
+                    let rounding = f64::EPSILON * quadratic(&magnitude, gradient.map(f64::abs));
+                    let half = Z_975 * (spread + rounding).sqrt();
+                    widening = widening.max(half - Z_975 * spread.sqrt());
                     IndexEstimate {
                         value,
                         ci95: [value - half, value + half],
@@ -319,7 +385,13 @@ impl SobolAccumulator {
                     total: estimate(total),
                 }
             })
-            .collect()
+            .collect();
+        let mean = (sums[2] + sums[3]) / (2.0 * n);
+        SobolEstimate {
+            indices,
+            widening,
+            offset_sds: mean.abs() / variance.sqrt(),
+        }
     }
 }
 
@@ -502,18 +574,79 @@ mod tests {
         assert_eq!(alone, clustered);
     }
 
-    #[test]
-    fn a_constant_output_has_zero_indices() {
-        let mut sobol = SobolAccumulator::new(2, 0.0);
-        for _ in 0..10 {
-            sobol.push(1.0, 1.0, &[1.0, 1.0]);
+    /// Ishigami's outputs moved by `offset`, the sums taken about 0.
+    fn far_from_the_shift(seed: u64, n: usize, offset: f64) -> SobolAccumulator {
+        let mut rng = SplitMix(seed);
+        let mut sobol = SobolAccumulator::new(3, 0.0);
+        for _ in 0..n {
+            let (a, b, ab) = evaluations(&mut rng);
+            sobol.push(a + offset, b + offset, &ab.map(|v| v + offset));
         }
+        sobol
+    }
+
+    /// With the outputs 10^4 from the shift (2.7e3 standard deviations, `r = 7e6`) the
+    /// intervals' spread alone was 0.9-1.15 times the one about the mean, at 10^5 30-50 times, at
+    /// 10^6 0 (a zero-width interval about a wrong index, as found from outside at a tight
+    /// scatter): with their rounding, they are never narrower than about the mean, cover the
+    /// analytic indices, and the estimate says so; about the mean, rounding is nothing.
+    #[test]
+    fn a_shift_far_from_the_outputs_widens_the_intervals_by_their_rounding() {
+        let near = pick_freeze(5, 1024, 3.5).estimate();
+        assert!(near.widening < 1e-9, "{}", near.widening);
+        assert!(near.offset_sds < 0.05, "{}", near.offset_sds);
+        let width = |e: IndexEstimate| e.ci95[1] - e.ci95[0];
+        for (offset, least) in [(1e4, 0.005), (1e5, 0.5), (1e6, 100.0)] {
+            let far = far_from_the_shift(5, 1024, offset).estimate();
+            assert!(far.widening >= least, "{offset}: {}", far.widening);
+            assert!(
+                (far.offset_sds * 3.7 / offset - 1.0).abs() < 0.05,
+                "{}",
+                far.offset_sds
+            );
+            for ((got, about_mean), (first, total)) in
+                far.indices.iter().zip(&near.indices).zip(analytic())
+            {
+                for (e, m, truth) in [
+                    (got.first, about_mean.first, first),
+                    (got.total, about_mean.total, total),
+                ] {
+                    assert!(width(e) >= 0.98 * width(m), "{offset}: {e:?} against {m:?}");
+                    assert!(
+                        e.ci95[0] <= truth && truth <= e.ci95[1],
+                        "{offset}: {e:?} {truth}"
+                    );
+                }
+            }
+        }
+        // 10^8 from the shift, the variance itself is lost: nothing known.
+        let lost = far_from_the_shift(5, 1024, 1e8).estimate();
+        assert_eq!(lost.widening, 1.0);
         assert!(
-            sobol
-                .indices()
+            lost.indices
                 .iter()
-                .all(|i| i.first.value == 0.0 && i.total.ci95 == [0.0, 0.0])
+                .all(|i| i.first.ci95 == [0.0, 1.0] && i.total.value == 0.0)
         );
+    }
+
+    #[test]
+    /// A constant output at the shift has every index 0 in `[0, 0]`; off it, its variance of 0
+    /// cannot be told from one the rounding of `(a - c)^2` hid: 0 in `[0, 1]`.
+    fn a_constant_output_has_zero_indices() {
+        let constant = |shift: f64| {
+            let mut sobol = SobolAccumulator::new(2, shift);
+            for _ in 0..10 {
+                sobol.push(1.0, 1.0, &[1.0, 1.0]);
+            }
+            sobol.indices()
+        };
+        let all = |indices: Vec<SobolIndices>, ci95: [f64; 2]| {
+            indices
+                .iter()
+                .all(|i| i.first.value == 0.0 && i.total.ci95 == ci95)
+        };
+        assert!(all(constant(1.0), [0.0, 0.0]));
+        assert!(all(constant(0.0), [0.0, 1.0]));
         assert_eq!(SobolAccumulator::new(2, 0.0).indices().len(), 2);
     }
 }

@@ -317,3 +317,53 @@ fn the_rules_name_the_field() {
     unknown["sensitivity"] = json!({"method": "morris"});
     assert!(refused(unknown).contains("/sensitivity/method"));
 }
+
+/// A tight scatter far from the scenario's own values (48 V / 15 A; the closing velocity 3 m/s and
+/// the static force 0.5 N, each 0.01 %, per device): the sums about the nominal scenario's values
+/// kept no digit of the operation metrics' variances (an outside probe found zero-width intervals
+/// about indices of 1 and 0.0007, and [-1.9, 3.9]). Taken about the scatter's medians, every
+/// operation metric's index above 0 has an interval of some width and no bin a reason; the device
+/// metrics, which accumulate from a new device's value, lie about 1e4 of their standard
+/// deviations from it: their intervals include the sums' rounding, and say so. At 1e-13, their
+/// variance is lost: every index unknown, 0 in [0, 1].
+#[test]
+fn a_tight_scatter_far_from_the_scenario_keeps_honest_intervals() {
+    for (sigma, lost) in [(1e-4, false), (1e-13, true)] {
+        let job = job(json!({
+            "devices": 300, "operations": 6, "bin_operations": 3, "seed": 1,
+            "scenario": {"circuit": {"supply_voltage_v": 48, "current_a": 15}},
+            "metrics": ["e1", "total_bounce_s", "arc_energy_j", "cumulative_arc_energy_j",
+                        "final_radius_m"],
+            "scatter": [
+                {"parameter": "impact_velocity_m_s", "per": "device",
+                 "distribution": {"kind": "lognormal", "median": 3.0, "sigma": sigma}},
+                {"parameter": "static_force_n", "per": "device",
+                 "distribution": {"kind": "lognormal", "median": 0.5, "sigma": sigma}}],
+            "sensitivity": {"method": "sobol"}}));
+        let result = run_on(2, &job);
+        for (metric, bins) in result.sensitivity.as_ref().unwrap() {
+            let device = bins[0].op_start.is_none();
+            for bin in bins {
+                let said = bin.reason.as_deref().unwrap_or_default();
+                let estimates = bin
+                    .indices
+                    .values()
+                    .flat_map(|p| [p.first, p.total])
+                    .flatten();
+                for e in estimates {
+                    let (width, at) = (e.ci95[1] - e.ci95[0], (sigma, metric, bin.op_start));
+                    if device && lost {
+                        assert_eq!((e.value, e.ci95), (0.0, [0.0, 1.0]), "{at:?}");
+                        assert!(said.contains("lost in the rounding"), "{at:?} {said}");
+                    } else if device {
+                        assert!(width > 0.1, "{at:?} {e:?}");
+                        assert!(said.contains("standard deviations from"), "{at:?} {said}");
+                    } else {
+                        assert!(e.value == 0.0 || width > 0.0, "{at:?} {e:?}");
+                        assert!(bin.reason.is_none(), "{at:?} {said}");
+                    }
+                }
+            }
+        }
+    }
+}

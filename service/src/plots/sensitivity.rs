@@ -421,6 +421,7 @@ mod tests {
                 })
                 .collect(),
             r_squared: Some(0.9),
+            reason: None,
         }
     }
 
@@ -443,6 +444,7 @@ mod tests {
                 })
                 .collect(),
             r_squared: Some(0.81),
+            reason: None,
         }
     }
 
@@ -563,6 +565,7 @@ mod tests {
                 op_end: Some(0),
                 indices: BTreeMap::new(),
                 r_squared: None,
+                reason: None,
             }],
         );
         strict(&svg);

@@ -92,15 +92,23 @@ impl<'a> Plan<'a> {
             keep_tails: true,
         };
         plan.sensitivity = job.sensitivity().map(|method| {
-            // Sums are taken about the nominal scenario's values: a new device's operation.
-            let fidelity = job.spec().fidelity;
-            let nominal = &plan.nominal;
-            let operation = plan.model.setup.operation(&nominal.conditions, fidelity);
+            // Sums are taken about a new device's values with every scattered parameter at its
+            // median: near the outputs' mean, where the nominal scenario's may lie many of their
+            // spreads away (a tight scatter about another value), and a variance taken as a small
+            // difference of large squares would keep none of its digits.
+            let mut centre = plan.nominal.clone();
+            for scatter in job.scatter() {
+                centre.set(scatter.parameter, scatter.distribution.quantile(0.5));
+            }
+            let model = plan.model(&centre);
+            let operation = model
+                .setup
+                .operation(&centre.conditions, job.spec().fidelity);
             let outcome = operation
                 .run_lanes(
                     operation.impact_velocity_m_s(),
-                    nominal.radius_m,
-                    nominal.pressure_pa,
+                    centre.radius_m,
+                    centre.pressure_pa,
                     plan.needs,
                     |_, _, _, _| {},
                 )
@@ -113,7 +121,7 @@ impl<'a> Plan<'a> {
             let device_shifts = job
                 .device_metrics()
                 .iter()
-                .map(|m| plan.device_metric(&plan.model, *m, nominal, &DeviceWear::default()))
+                .map(|m| plan.device_metric(&model, *m, &centre, &DeviceWear::default()))
                 .collect();
             SensitivityPlan::new(job, method, operation_shifts, device_shifts)
         });
