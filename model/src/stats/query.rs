@@ -106,7 +106,8 @@ fn exceedance(merged: &Merged, threshold: Threshold) -> ThresholdExceedance {
         .map(|group| group.beyond(threshold))
         .collect();
     let sure: Vec<u64> = counts.iter().map(|(beyond, _)| beyond.sure).collect();
-    let (probability, ci95) = merged.share(&sure);
+    let above = matches!(threshold, Threshold::Above(_));
+    let (probability, ci95) = merged.share(&sure, above);
     let Some(bucket) = counts.iter().find_map(|&(_, bucket)| bucket) else {
         return ThresholdExceedance {
             threshold,
@@ -120,7 +121,7 @@ fn exceedance(merged: &Merged, threshold: Threshold) -> ThresholdExceedance {
         .iter()
         .map(|(beyond, _)| beyond.sure + beyond.unsure)
         .collect();
-    let (highest, [_, upper]) = merged.share(&most);
+    let (highest, [_, upper]) = merged.share(&most, above);
     let spread: f64 = counts.iter().map(|(beyond, _)| beyond.spread).sum();
     let n = merged.all.count() as f64;
     ThresholdExceedance {
