@@ -251,7 +251,7 @@ pub struct Summary {
 ///   after-run query's tests over 1200 seeds). Where fewer than 5 devices' share lies on the
 ///   event's rarer side and the values there count as fewer than 1.5 effective ones beyond (as a
 ///   quantile's level is refused, below), `n_eff` is at most that side's effective number of
-///   values ([`Merged::share`]).
+///   values (`Merged::share`).
 ///
 /// `per_device` is the number of values each device gives the (metric, bin): its operations, or 1
 /// for a device metric ([`crate::montecarlo::Metric::values_per_device`]); `n / per_device` is the
