@@ -269,6 +269,18 @@ fn every_kernel_gives_the_same_result_through_the_binary() {
     );
     let result = without_timing(std::str::from_utf8(&output.stdout).unwrap());
     assert!(result == scalar[0]);
+    // Set empty, it is no choice (it was refused as a kernel named ``).
+    let output = std::process::Command::new(crate::support::BIN)
+        .args(["run", "--quiet", path.to_str().unwrap()])
+        .env("BOUNCEWEAR_KERNEL", "")
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(without_timing(std::str::from_utf8(&output.stdout).unwrap()) == scalar[0]);
 }
 
 /// `--plots DIR` writes the dashboard's plots: per operation metric its bands and histograms, and
@@ -484,6 +496,18 @@ fn a_remote_command_line_that_cannot_be_sent_is_refused_naming_the_flag() {
             "{url}: {line}"
         );
         assert!(!line.contains(":pw@"), "the password is not shown: {line}");
+    }
+    // An empty id is a bad command line before any request (`wait ""` asked for `/v1/jobs/`
+    // and exited 1 with a 404, found from outside).
+    for args in [
+        &["wait", ""][..],
+        &["compare", "a", ""],
+        &["schedule", "show", ""],
+    ] {
+        let output = bouncewear(args, "");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains("a value is required"), "{args:?}: {stderr}");
     }
     // URLs that are good, their server absent: no answer (1), never a bad command line; a
     // password is never shown (it was, in every message and log line, found from outside).

@@ -132,6 +132,7 @@ enum Command {
     /// Print a job of a server: its status, progress and links.
     Status {
         /// The job's id.
+        #[arg(value_parser = clap::builder::NonEmptyStringValueParser::new())]
         id: String,
         #[command(flatten)]
         server: remote::Server,
@@ -139,6 +140,7 @@ enum Command {
     /// Wait until a job of a server ends; print it (exit 0 if it succeeded, 1 otherwise).
     Wait {
         /// The job's id.
+        #[arg(value_parser = clap::builder::NonEmptyStringValueParser::new())]
         id: String,
         /// Give up (exit 1) after this many seconds.
         #[arg(long, value_parser = remote::seconds)]
@@ -149,6 +151,7 @@ enum Command {
     /// Print a part of a succeeded job of a server, as the API serves it.
     Fetch {
         /// The job's id.
+        #[arg(value_parser = clap::builder::NonEmptyStringValueParser::new())]
         id: String,
         /// Which part.
         #[arg(value_enum, default_value_t = remote::Part::Result)]
@@ -163,8 +166,10 @@ enum Command {
     /// (statistics per shared bin, B-lives, who outlasts whom, with intervals) as the API serves it.
     Compare {
         /// The first job's id (design a).
+        #[arg(value_parser = clap::builder::NonEmptyStringValueParser::new())]
         a: String,
         /// The second job's id (design b).
+        #[arg(value_parser = clap::builder::NonEmptyStringValueParser::new())]
         b: String,
         /// The metric compared (default `total_bounce_s`).
         #[arg(long)]
@@ -186,6 +191,7 @@ enum Command {
     /// Cancel a queued or running job of a server; print it (a job that had ended, as it is: never deleted).
     Cancel {
         /// The job's id.
+        #[arg(value_parser = clap::builder::NonEmptyStringValueParser::new())]
         id: String,
         #[command(flatten)]
         server: remote::Server,
@@ -456,7 +462,8 @@ pub fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<(), CliError> {
     telemetry::init_logging(cli.log_format);
-    if let Some(name) = &cli.kernel {
+    // An empty `BOUNCEWEAR_KERNEL=` is no choice, as an unset one.
+    if let Some(name) = cli.kernel.as_deref().filter(|name| !name.is_empty()) {
         choose_kernel(name)?;
     }
     match cli.command {

@@ -696,11 +696,13 @@ pub enum ScheduleCommand {
     /// Print a schedule: its timetable, next and last run, and the runs it skipped.
     Show {
         /// The schedule's id.
+        #[arg(value_parser = clap::builder::NonEmptyStringValueParser::new())]
         id: String,
     },
     /// Replace a schedule's definition with a JSON file's (its runs stay); print it.
     Replace {
         /// The schedule's id.
+        #[arg(value_parser = clap::builder::NonEmptyStringValueParser::new())]
         id: String,
         /// The schedule JSON file; `-` or nothing reads standard input.
         #[arg(default_value = "-")]
@@ -709,18 +711,21 @@ pub enum ScheduleCommand {
     /// Delete a schedule (the jobs it submitted stay).
     Delete {
         /// The schedule's id.
+        #[arg(value_parser = clap::builder::NonEmptyStringValueParser::new())]
         id: String,
     },
     /// Run a schedule's template now, outside its timetable; print the job. Sent once: a
     /// request sent again after a lost answer would run it twice.
     Run {
         /// The schedule's id.
+        #[arg(value_parser = clap::builder::NonEmptyStringValueParser::new())]
         id: String,
     },
     /// Print a schedule's latest runs, oldest first, with each statistic's value, 95 % interval
     /// and drift flag.
     Runs {
         /// The schedule's id.
+        #[arg(value_parser = clap::builder::NonEmptyStringValueParser::new())]
         id: String,
         /// How many of the latest runs, 1 to 366 (the server's default 60).
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..=366))]
