@@ -46,9 +46,13 @@ pub enum LifeError {
     /// bound as `beta` grows, or `beta` is fixed by where the censoring falls rather than by the
     /// spread of the failures: a 2-parameter fit needs two distinct failure times.
     #[error(
-        "all {failures} failures at the same time {time}: with no spread of failure times the \
+        "{}: with no spread of failure times the \
          Weibull's shape is set by where the censoring falls alone (or grows without bound), so \
-         this fit needs two distinct failure times"
+         this fit needs two distinct failure times",
+        match .failures {
+            1 => format!("one failure, at time {}", .time),
+            n => format!("all {n} failures at the same time {}", .time),
+        }
     )]
     SingleFailureTime { failures: usize, time: f64 },
     /// A guard against overflow in a pathological data set; not expected for operation counts.

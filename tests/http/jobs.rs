@@ -630,7 +630,7 @@ fn a_second_key_gets_in_when_the_first_has_filled_its_share_of_the_queue() {
         problem["detail"]
             .as_str()
             .unwrap()
-            .contains("this API key's share of it, is full: at most 6 unfinished jobs in all and 3 per API key"),
+            .contains("this API key's share of it, is full: at most 6 unfinished jobs in all and 3 unfinished jobs per API key"),
         "{problem}"
     );
     for _ in 0..3 {

@@ -63,10 +63,10 @@ pub enum ApiError {
     #[error("a request body is read as it is sent: send it without `Content-Encoding: {0}`")]
     UnsupportedEncoding(String),
     #[error(
-        "the queue, or this API key's share of it, is full: at most {} unfinished jobs in all and {} \
-         per API key; retry later",
-        .0.total,
-        .0.per_owner
+        "the queue, or this API key's share of it, is full: at most {} in all and {} per API \
+         key; retry later",
+        unfinished_jobs(.0.total),
+        unfinished_jobs(.0.per_owner)
     )]
     QueueFull(QueueBound),
     /// The key's jobs store its quota or more ([`StoreError::OverQuota`]).
@@ -435,6 +435,14 @@ pub mod responses {
         headers(("Retry-After" = u32, description = "Seconds to wait before retrying"))
     )]
     pub struct TooManyStreams(pub Problem);
+}
+
+/// `n` unfinished job(s), in words.
+fn unfinished_jobs(n: u64) -> String {
+    match n {
+        1 => "1 unfinished job".to_owned(),
+        n => format!("{n} unfinished jobs"),
+    }
 }
 
 #[cfg(test)]
