@@ -253,34 +253,25 @@ fn every_kernel_gives_the_same_result_through_the_binary() {
             );
         }
     }
-    // The environment variable is the same switch.
+    // The environment variable is the same switch; set empty, it is no choice (it was refused
+    // as a kernel named ``).
     let dir = temp_dir("kernel-env");
     let path = dir.join("job.json");
     std::fs::write(&path, jobs[0].to_string()).unwrap();
-    let output = std::process::Command::new(crate::support::BIN)
-        .args(["run", "--quiet", path.to_str().unwrap()])
-        .env("BOUNCEWEAR_KERNEL", names.last().unwrap())
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let result = without_timing(std::str::from_utf8(&output.stdout).unwrap());
-    assert!(result == scalar[0]);
-    // Set empty, it is no choice (it was refused as a kernel named ``).
-    let output = std::process::Command::new(crate::support::BIN)
-        .args(["run", "--quiet", path.to_str().unwrap()])
-        .env("BOUNCEWEAR_KERNEL", "")
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    assert!(without_timing(std::str::from_utf8(&output.stdout).unwrap()) == scalar[0]);
+    for kernel in [names.last().unwrap().as_str(), ""] {
+        let output = std::process::Command::new(crate::support::BIN)
+            .args(["run", "--quiet", path.to_str().unwrap()])
+            .env("BOUNCEWEAR_KERNEL", kernel)
+            .output()
+            .unwrap();
+        assert!(
+            output.status.success(),
+            "{kernel}: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let result = without_timing(std::str::from_utf8(&output.stdout).unwrap());
+        assert!(result == scalar[0], "{kernel}");
+    }
 }
 
 /// `--plots DIR` writes the dashboard's plots: per operation metric its bands and histograms, and
