@@ -328,10 +328,10 @@ const WIDENING_SAID: f64 = 1e-3;
 /// Why a bin's Sobol' intervals include their rounding ([`SobolEstimate`]).
 fn rounding_reason(estimate: &SobolEstimate, shift: f64) -> String {
     let about = format!(
-        "sums taken about {shift:e} (a new device's value with every scattered parameter at its \
+        "sums taken about {shift:.4e} (a new device's value with every scattered parameter at its \
          median)"
     );
-    if estimate.offset_sds == 0.0 {
+    if estimate.offset_sds.is_infinite() {
         return format!(
             "the values' variance is lost in the rounding of {about}: every index is unknown, \
              given as 0 in [0, 1]"

@@ -94,8 +94,8 @@ pub struct SobolEstimate {
     /// The most the rounding bound widened an interval's half-width, in the indices' units (1
     /// when the variance itself is lost in rounding).
     pub widening: f64,
-    /// How far the outputs' mean lies from the shift, in their standard deviations (0 without
-    /// a variance).
+    /// How far the outputs' mean lies from the shift, in their standard deviations: 0 for a
+    /// constant output at the shift, infinite where the variance is lost in rounding.
     pub offset_sds: f64,
 }
 
@@ -291,7 +291,7 @@ impl SobolAccumulator {
         let n = self.n as f64;
         let clusters = self.clusters as f64;
         let variance = self.variance();
-        let every = |value: f64, ci95: [f64; 2], widening: f64| {
+        let every = |value: f64, ci95: [f64; 2], widening: f64, offset_sds: f64| {
             let index = IndexEstimate { value, ci95 };
             SobolEstimate {
                 indices: vec![
@@ -302,24 +302,24 @@ impl SobolAccumulator {
                     self.inputs()
                 ],
                 widening,
-                offset_sds: 0.0,
+                offset_sds,
             }
         };
         let Some(sums) = self.sums.first() else {
-            return every(0.0, [0.0, 0.0], 0.0);
+            return every(0.0, [0.0, 0.0], 0.0, 0.0);
         };
         // The mean square about the shift, of which the variance is what rounding leaves.
         let square = (sums[4] + sums[5]) / (2.0 * n);
         if self.clusters < 2 || square == 0.0 {
-            return every(0.0, [0.0, 0.0], 0.0);
+            return every(0.0, [0.0, 0.0], 0.0, 0.0);
         }
         if !(variance.is_finite() && square.is_finite()) {
             // Values whose squares pass f64: no index to state (the run says so).
-            return every(f64::NAN, [f64::NAN; 2], 0.0);
+            return every(f64::NAN, [f64::NAN; 2], 0.0, f64::NAN);
         }
         if variance <= 64.0 * f64::EPSILON * square {
             // Negative or a few roundings of the mean square: no digit of it is left.
-            return every(0.0, [0.0, 1.0], 1.0);
+            return every(0.0, [0.0, 1.0], 1.0, f64::INFINITY);
         }
         // The centre m of every evaluation, less the shift.
         let evaluations = n * (self.inputs() + 2) as f64;
@@ -622,6 +622,7 @@ mod tests {
         // 10^8 from the shift, the variance itself is lost: nothing known.
         let lost = far_from_the_shift(5, 1024, 1e8).estimate();
         assert_eq!(lost.widening, 1.0);
+        assert!(lost.offset_sds.is_infinite());
         assert!(
             lost.indices
                 .iter()
