@@ -31,6 +31,18 @@ impl Backend {
             Backend::Postgres(postgres) => Conn::PostgresPool(&postgres.pool),
         }
     }
+
+    /// Every pool, to ask whether the database answers at all: SQLite's readers and its writer
+    /// (as opened, whatever its file now), PostgreSQL's one pool.
+    fn pools(&self) -> Vec<Conn<'_>> {
+        match self {
+            Backend::Sqlite(sqlite) => vec![
+                Conn::SqlitePool(&sqlite.readers),
+                Conn::SqlitePool(sqlite.writer_as_opened()),
+            ],
+            Backend::Postgres(postgres) => vec![Conn::PostgresPool(&postgres.pool)],
+        }
+    }
 }
 
 impl Store {
@@ -119,6 +131,10 @@ impl Store {
     /// Where reads go: SQLite's read-only connections, which never wait for the writer.
     pub(crate) fn readers(&self) -> Conn<'_> {
         self.backend.readers()
+    }
+
+    pub(crate) fn pools(&self) -> Vec<Conn<'_>> {
+        self.backend.pools()
     }
 
     /// One reading connection, for statements that must see the same database.
