@@ -79,6 +79,18 @@ def test_lives_are_a_frame_with_censored_devices_missing_a_failure(job):
     assert analysis["analysis"]["weibull"]["beta"] > 0
 
 
+def test_lives_cut_at_the_servers_listing_say_so(tmp_path):
+    """A server listing 5 lives gave 5 rows of a 12-device job without a word (found from
+    outside): the frame keeps the job's devices and a warning says how many are listed."""
+    with _idle_server(tmp_path, "--max-listed-lives", "5", workers="1") as url:
+        cut = Client(url).submit(dict(WEARING, devices=12, operations=20)).wait(progress=False)
+        with pytest.warns(UserWarning, match="5 of its 12 devices listed"):
+            lives = Client(url).job(cut.id).life()
+        assert len(lives) == 5 and lives.attrs["devices"] == 12
+        analysis = cut.life_analysis()
+        assert analysis["failures"] + analysis["censored"] == 12
+
+
 def test_a_long_poll_asks_no_more_than_the_server_waits(job):
     """`wait_s` is at most 30 s whatever the client's timeout and `poll` (it asked 45 and got 400)."""
     patient = Client(BASE, timeout=120)
@@ -266,10 +278,10 @@ def _notes(caplog):
 
 
 @contextlib.contextmanager
-def _idle_server(tmp_path, *flags):
-    """A server of its own that runs no job, with `flags`; its URL."""
+def _idle_server(tmp_path, *flags, workers="0"):
+    """A server of its own that runs no job (or `workers` at once), with `flags`; its URL."""
     server = subprocess.Popen(
-        [BIN, "serve", "--bind", "127.0.0.1:0", "--workers", "0", *flags,
+        [BIN, "serve", "--bind", "127.0.0.1:0", "--workers", workers, *flags,
          "--database", f"sqlite://{tmp_path}/queue.db"],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:

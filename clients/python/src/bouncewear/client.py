@@ -14,6 +14,7 @@ import sys
 import time
 import urllib.parse
 import uuid
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Dict, Iterable, List, Optional, TypeVar
 
@@ -456,10 +457,20 @@ class Job(_Resource):
 
     def life(self) -> pd.DataFrame:
         """Each listed device's life: `device`, `operations_to_failure` (missing for a censored
-        device) and `censored`; 404 for a job without failure criteria."""
+        device) and `censored`; 404 for a job without failure criteria. The server lists the
+        first `--max-listed-lives` devices (docs/contract.md "Sizes"): with fewer rows than the
+        job's devices (`frame.attrs["devices"]`), a `UserWarning` says so; `life_analysis`
+        counts every device."""
         frame = _csv(self.client.request("GET", self._path("/life"), params={"format": "csv"}))
         frame["operations_to_failure"] = frame["operations_to_failure"].astype("Int64")
         frame["censored"] = frame["censored"].astype(bool)
+        spec = self.resource.get("spec") or self.refresh().resource.get("spec") or {}
+        devices = spec.get("devices")
+        frame.attrs["devices"] = devices
+        if devices is not None and len(frame) < devices:
+            warnings.warn(f"job {self.id}: {len(frame):,} of its {devices:,} devices listed (the "
+                          "server lists at most --max-listed-lives); life_analysis() counts every "
+                          "device", stacklevel=2)
         return frame
 
     def life_analysis(self) -> JSON:
