@@ -805,6 +805,17 @@ fn bad_requests_get_the_right_4xx_problem() {
         415,
     );
     assert_problem(&reply(agent().post(&jobs).send("{}")), 415);
+    // Two Content-Types: the first won, whatever the second said.
+    assert_problem(
+        &reply(
+            agent()
+                .post(&jobs)
+                .header("content-type", "application/json")
+                .header("content-type", "text/plain")
+                .send("{}"),
+        ),
+        415,
+    );
     // A compressed body is not decoded: 415 naming its encoding, not "not UTF-8".
     let gzipped = assert_problem(
         &reply(

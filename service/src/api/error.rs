@@ -58,7 +58,10 @@ pub enum ApiError {
     Conflict(String),
     #[error("the request body is larger than {0} bytes")]
     TooLarge(usize),
-    #[error("the request body must be application/json in UTF-8 (no charset, or charset=utf-8)")]
+    #[error(
+        "the request body must be application/json in UTF-8 (no charset, or charset=utf-8), in one \
+         Content-Type header"
+    )]
     UnsupportedMediaType,
     #[error("a request body is read as it is sent: send it without `Content-Encoding: {0}`")]
     UnsupportedEncoding(String),

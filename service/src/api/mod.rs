@@ -530,12 +530,13 @@ impl FromRequest<AppState> for JsonText {
     type Rejection = ApiError;
 
     async fn from_request(request: Request, state: &AppState) -> Result<Self, ApiError> {
-        let content_type = request
-            .headers()
-            .get(header::CONTENT_TYPE)
+        // One Content-Type: of two, the first won, whatever the second said (found from outside).
+        let mut content_types = request.headers().get_all(header::CONTENT_TYPE).iter();
+        let content_type = content_types
+            .next()
             .and_then(|v| v.to_str().ok())
             .unwrap_or("");
-        if !is_utf8_json(content_type) {
+        if !is_utf8_json(content_type) || content_types.next().is_some() {
             return Err(ApiError::UnsupportedMediaType);
         }
         // A compressed body would be read as its compressed bytes (RFC 7694: 415).
