@@ -733,10 +733,16 @@ fn in_plain_words(message: &str) -> String {
         .strip_prefix("invalid type: number `")
         .and_then(|rest| rest.split_once('`'))
         .and_then(|(number, _)| number.parse::<f64>().ok());
-    if quoted.is_some_and(|number| number.fract() == 0.0)
+    if let Some(number) = quoted.filter(|number| number.fract() == 0.0)
         && plain.contains("expected a whole number")
     {
-        plain.push_str(", written in digits alone");
+        // Beyond every integer type (2^64 and up, below -2^63), however it is written: written
+        // in digits, it was told to write it in digits (found from outside).
+        plain.push_str(if (-(2f64.powi(63))..2f64.powi(64)).contains(&number) {
+            ", written in digits alone"
+        } else {
+            ", and the one written lies beyond that range"
+        });
     }
     plain
 }
@@ -810,8 +816,12 @@ mod tests {
                 "/count: invalid type: number `9007199254740992.0`, expected a whole number from 0 to 18446744073709551615, written in digits alone",
             ),
             (
+                r#"{"count": 18446744073709551616}"#,
+                "/count: invalid type: number `1.8446744073709552e+19`, expected a whole number from 0 to 18446744073709551615, and the one written lies beyond that range",
+            ),
+            (
                 r#"{"count": 100000000000000000000}"#,
-                "/count: invalid type: number `1e+20`, expected a whole number from 0 to 18446744073709551615, written in digits alone",
+                "/count: invalid type: number `1e+20`, expected a whole number from 0 to 18446744073709551615, and the one written lies beyond that range",
             ),
             (
                 r#"{"map": 5}"#,
