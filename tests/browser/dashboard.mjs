@@ -470,11 +470,41 @@ await step("the sensitivity plot follows the selection", () =>
     return title && title.textContent.includes("final_radius_m");
   }),
 );
+if ((await page.textContent("#sensitivity-bin")).includes("wider than the devices' spread")) {
+  await fail("#sensitivity-bin gives a reason the Result does not");
+}
 await page.waitForTimeout(300);
 await step("save dashboard-sensitivity.png", () =>
   page.locator("#sensitivity-section").screenshot({ path: join(outDir, "dashboard-sensitivity.png") }),
 );
 log(`saved ${join(outDir, "dashboard-sensitivity.png")}`);
+// A bin whose intervals include the sums' rounding says why, as the Result does: a scatter of
+// 0.01 % puts the accumulated arc energy 1e4 standard deviations from a new device's 0.
+const tightJob = await step("submit a sensitivity job of a tight scatter", () =>
+  call("POST", "/v1/jobs", {
+    scenario: { circuit: { supply_voltage_v: 48, current_a: 15 } },
+    devices: 64,
+    operations: 2,
+    seed: 7,
+    metrics: ["total_bounce_s", "cumulative_arc_energy_j"],
+    scatter: [
+      { parameter: "impact_velocity_m_s", per: "device", distribution: { kind: "lognormal", median: 3, sigma: 1e-4 } },
+      { parameter: "static_force_n", per: "device", distribution: { kind: "lognormal", median: 0.5, sigma: 1e-4 } },
+    ],
+    sensitivity: { method: "sobol" },
+  }),
+);
+await step(`the tight job ${tightJob.id} succeeds`, () => succeeds(tightJob.id));
+const tightReason = (await call("GET", `/v1/jobs/${tightJob.id}/result`)).sensitivity.cumulative_arc_energy_j[0].reason;
+if (!tightReason) await fail("the tight job's accumulated arc energy gives no reason");
+await step(`open ${base}/jobs/${tightJob.id}`, () => page.goto(`${base}/jobs/${tightJob.id}`, { waitUntil: "load" }));
+await step("select cumulative_arc_energy_j for the sensitivity", async () => {
+  await page.waitForSelector("#sensitivity-section:not([hidden])");
+  await page.selectOption("#sensitivity-metric", "cumulative_arc_energy_j");
+});
+await step("#sensitivity-bin gives the Result's reason", () =>
+  page.waitForFunction((reason) => document.querySelector("#sensitivity-bin").textContent.includes(reason), tightReason),
+);
 
 // A job deleted while its page is open says so (the page looks every 15 s once the job ended).
 await step(`open ${base}/jobs/${outsideJob.id}`, () => page.goto(`${base}/jobs/${outsideJob.id}`, { waitUntil: "load" }));

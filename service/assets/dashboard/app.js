@@ -1213,7 +1213,8 @@
         ? "Last bin, operations " + opRange(last)
         : "Over the devices at the end of the test";
       $("#sensitivity-bin").textContent = where +
-        (typeof last.r_squared === "number" ? "; the regression explains R² = " + fmt(last.r_squared, 3) + " of the variance." : ".");
+        (typeof last.r_squared === "number" ? "; the regression explains R² = " + fmt(last.r_squared, 3) + " of the variance." : ".") +
+        (typeof last.reason === "string" ? " The Sobol' intervals are wider than the devices' spread alone: " + last.reason + "." : "");
       const weight = (p) => {
         const v = sobol ? (p.total || {}).value : Math.abs(p.src);
         return typeof v === "number" && Number.isFinite(v) ? v : -Infinity;
