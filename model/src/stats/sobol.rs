@@ -347,9 +347,15 @@ impl SobolAccumulator {
                     ]
                     .map(|term| term * scale)
                 };
-                let covariance = |r: usize, s: usize| terms(r, s).iter().sum::<f64>();
-                let magnitude =
-                    |r: usize, s: usize| terms(r, s).iter().map(|t| t.abs()).sum::<f64>();
+                // Each entry's sum and sum of magnitudes, once for both indices.
+                let table: [[(f64, f64); Z]; Z] = std::array::from_fn(|r| {
+                    std::array::from_fn(|s| {
+                        let terms = terms(r, s);
+                        (terms.iter().sum(), terms.iter().map(|t| t.abs()).sum())
+                    })
+                });
+                let covariance = |r: usize, s: usize| table[r][s].0;
+                let magnitude = |r: usize, s: usize| table[r][s].1;
                 // dV/dm: V = (m4 + m5)/2 - ((m2 + m3)/2)^2.
                 let half_mean = (m[2] + m[3]) / 2.0;
                 let dv = [0.0, 0.0, -half_mean, -half_mean, 0.5, 0.5, 0.0];

@@ -427,8 +427,10 @@ impl<'a> Merged<'a> {
     /// order), over all groups, and its Wilson interval with the design effect of the groups'
     /// shares; the values counted lie `above` a threshold or below it.
     ///
-    /// Where fewer than [`MIN_TAIL_UNITS`] devices' share lies on the event's rarer side, the
-    /// effective number is at most the values' on that side ([`Self::effective_values`]): the
+    /// Where fewer than [`MIN_TAIL_UNITS`] devices' share lies on the event's rarer side and the
+    /// values there count as fewer than [`MIN_EFFECTIVE_BEYOND`] effective ones (as a quantile
+    /// there is refused), the effective number is at most the values' on that side
+    /// ([`Self::effective_values`]; with no event, or all, it is the devices already): the
     /// groups' counts may come from the operations of ordinary devices, spread over many groups,
     /// in just the samples that lack the devices that carry the tail (an outside probe, 512
     /// devices of 2000 operations, kappa per device: P = 1e-4 read 1.4e-5 in [5.3e-6, 2.9e-5],
@@ -441,14 +443,14 @@ impl<'a> Merged<'a> {
             .map(|(g, &count)| proportion(count, g.count()))
             .collect();
         let devices = self.devices();
+        let rarer = probability.min(1.0 - probability);
         let mut most = f64::INFINITY;
-        if probability.min(1.0 - probability) * devices < MIN_TAIL_UNITS {
+        if rarer > 0.0 && rarer * devices < MIN_TAIL_UNITS {
             // The rarer side: above the median where the values above are fewer.
             let high = above == (probability < 0.5);
             let (effective, _) = self.effective_values(if high { 1.0 } else { 0.0 });
-            // As a quantile there is refused ([`MIN_EFFECTIVE_BEYOND`]); elsewhere the groups'
-            // spread is the measure, uncapped ([`summarize`]).
-            if probability.min(1.0 - probability) * effective < MIN_EFFECTIVE_BEYOND {
+            // Elsewhere the groups' spread is the measure, uncapped ([`summarize`]).
+            if rarer * effective < MIN_EFFECTIVE_BEYOND {
                 most = effective;
             }
         }
