@@ -158,9 +158,18 @@ pub fn diagnose(job: &Job, counts: &Counts) -> Vec<Diagnostic> {
 /// 1 mm, gave 29 J of arc with nothing said.
 fn breakdown_gap_beyond_the_opening(job: &Job) -> Option<Diagnostic> {
     let spec = job.scenario().spec();
-    let (circuit, height) = (&spec.circuit, spec.mechanism.drop_height_m);
-    let gap = circuit.supply_voltage_v / spec.material.breakdown_field_v_per_m;
-    (circuit.current_a > 0.0 && gap > height).then(|| Diagnostic {
+    let (circuit, mat, height) = (&spec.circuit, &spec.material, spec.mechanism.drop_height_m);
+    // Only an arc that burns strikes; its gap is the model's own.
+    let gap = Arc::strike(
+        circuit.supply_voltage_v,
+        circuit.current_a,
+        mat.min_arc_voltage_v,
+        mat.min_arc_current_a,
+        mat.breakdown_field_v_per_m,
+        mat.softening_energy_j,
+    )?
+    .breakdown_gap_m;
+    (gap > height).then(|| Diagnostic {
         pointer: "/scenario/material/breakdown_field_v_per_m".to_owned(),
         detail: format!(
             "the pre-impact arc strikes at d_b = V_s / E_b = {gap:e} m, wider than the contacts \

@@ -35,8 +35,8 @@ pub(crate) struct SensitivityPlan {
     pub device_inputs: Vec<usize>,
     /// The scatter entries drawn per operation.
     pub operation_inputs: Vec<usize>,
-    /// Per operation metric and device metric: the nominal scenario's value, near the mean, from
-    /// which sums are taken.
+    /// Per operation metric and device metric: a new device's value with every scattered
+    /// parameter at its median, near the mean, from which sums are taken.
     pub operation_shifts: Vec<f64>,
     pub device_shifts: Vec<f64>,
     /// Per scatter entry: its distribution's median.
@@ -49,6 +49,7 @@ impl SensitivityPlan {
         method: SensitivityMethod,
         operation_shifts: Vec<f64>,
         device_shifts: Vec<f64>,
+        input_shifts: Vec<f64>,
     ) -> Self {
         let inputs = |per| {
             job.scatter()
@@ -64,11 +65,7 @@ impl SensitivityPlan {
             operation_inputs: inputs(Per::Operation),
             operation_shifts,
             device_shifts,
-            input_shifts: job
-                .scatter()
-                .iter()
-                .map(|s| s.distribution.quantile(0.5))
-                .collect(),
+            input_shifts,
         }
     }
 

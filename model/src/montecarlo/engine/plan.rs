@@ -96,9 +96,12 @@ impl<'a> Plan<'a> {
             // median: near the outputs' mean, where the nominal scenario's may lie many of their
             // spreads away (a tight scatter about another value), and a variance taken as a small
             // difference of large squares would keep none of its digits.
+            let medians: Vec<f64> = (job.scatter().iter())
+                .map(|scatter| scatter.distribution.quantile(0.5))
+                .collect();
             let mut centre = plan.nominal.clone();
-            for scatter in job.scatter() {
-                centre.set(scatter.parameter, scatter.distribution.quantile(0.5));
+            for (scatter, &median) in job.scatter().iter().zip(&medians) {
+                centre.set(scatter.parameter, median);
             }
             let model = plan.model(&centre);
             let operation = model
@@ -123,7 +126,7 @@ impl<'a> Plan<'a> {
                 .iter()
                 .map(|m| plan.device_metric(&model, *m, &centre, &DeviceWear::default()))
                 .collect();
-            SensitivityPlan::new(job, method, operation_shifts, device_shifts)
+            SensitivityPlan::new(job, method, operation_shifts, device_shifts, medians)
         });
         plan
     }
