@@ -185,13 +185,35 @@ pub fn read_past_faults<T: DeserializeOwned + Serialize>(
     array_fields: &[&str],
 ) -> Result<(T, Vec<FieldError>), InvalidInput> {
     let mut value = read_strict(text)?;
-    check_shape(&value, &Pointer::root(), array_fields)?;
     let readings = (READ_PAST_BYTES / text.len().max(1)).clamp(1, MAX_FAULTS);
     let mut faults: Vec<FieldError> = Vec::new();
     // The members left out, by the object they were left out of: a later fault there is the
     // leaving out's own (an object left empty, the field left out now missing), not another; a
     // field missing that was never there (beside an unknown member) is a fault of its own.
     let mut left_out: Vec<(String, String)> = Vec::new();
+    let mut shape = Vec::new();
+    let unreadable = check_shape(&value, &Pointer::root(), array_fields, &mut shape).err();
+    // A list in a member's place is left out as a member of the wrong type is (below).
+    for at in shape {
+        if faults.len() >= readings {
+            faults.push(stopped_reading(readings));
+            return Err(InvalidInput::new(faults));
+        }
+        let (parent, member) = at.as_str().rsplit_once('/').unwrap_or(("", ""));
+        let member = unescape(member);
+        if let Some(members) = value.pointer_mut(parent).and_then(|v| v.as_object_mut()) {
+            members.remove(&member);
+        }
+        faults.push(FieldError {
+            pointer: at.to_string(),
+            detail: LIST_IN_A_MEMBERS_PLACE.to_owned(),
+        });
+        left_out.push((parent.to_owned(), member));
+    }
+    if let Some(unreadable) = unreadable {
+        faults.extend(unreadable.errors);
+        return Err(InvalidInput::new(faults));
+    }
     loop {
         let error = match serde_path_to_error::deserialize(&value) {
             Ok(read) => {
@@ -230,13 +252,7 @@ pub fn read_past_faults<T: DeserializeOwned + Serialize>(
         if removable && faults.len() >= readings {
             // Read past as often as it may be: the rest of the document is unread, and the list
             // says so rather than look whole.
-            faults.push(FieldError {
-                pointer: String::new(),
-                detail: format!(
-                    "read past {readings} faults and stopped: the rest of the document is not \
-                     checked yet; mend these and send it again"
-                ),
-            });
+            faults.push(stopped_reading(readings));
             return Err(InvalidInput::new(faults));
         }
         if !(removable && leave_out(&mut value, &segments)) {
@@ -244,6 +260,17 @@ pub fn read_past_faults<T: DeserializeOwned + Serialize>(
         }
         let (parent, member) = at.rsplit_once('/').unwrap_or(("", ""));
         left_out.push((parent.to_owned(), unescape(member)));
+    }
+}
+
+/// The last entry of a list of faults read past as often as they may be.
+fn stopped_reading(readings: usize) -> FieldError {
+    FieldError {
+        pointer: String::new(),
+        detail: format!(
+            "read past {readings} faults and stopped: the rest of the document is not checked \
+             yet; mend these and send it again"
+        ),
     }
 }
 
@@ -599,13 +626,20 @@ fn matches_field(field: &str, pointer: &str) -> bool {
     }
 }
 
+/// Why a list where the document has none, as an object's member, is left out.
+const LIST_IN_A_MEMBERS_PLACE: &str =
+    "expected one value here (an object, a number or text), found a list";
+
 /// The rules every document's shape obeys before its types are read: arrays only where the
 /// document has lists (`array_fields`), and no text longer than [`MAX_TEXT_CHARS`] or holding
-/// U+0000 ([`NO_NUL`]).
+/// U+0000 ([`NO_NUL`]). A list as an object's member where the document has none goes to
+/// `lists` (members in the order of their names), to be read past; any other fault ends the
+/// check.
 fn check_shape(
     value: &serde_json::Value,
     at: &Pointer,
     array_fields: &[&str],
+    lists: &mut Vec<Pointer>,
 ) -> Result<(), InvalidInput> {
     let text_error = |at: &Pointer, what: &str, text: &str| {
         if text.chars().count() > MAX_TEXT_CHARS {
@@ -627,19 +661,28 @@ fn check_shape(
                 let expected = if at.as_str().is_empty() {
                     "expected an object, found a list"
                 } else {
-                    "expected one value here (an object, a number or text), found a list"
+                    LIST_IN_A_MEMBERS_PLACE
                 };
                 return Err(InvalidInput::single(at, expected));
             }
             items
                 .iter()
                 .enumerate()
-                .try_for_each(|(i, item)| check_shape(item, &at.child(i), array_fields))
+                .try_for_each(|(i, item)| check_shape(item, &at.child(i), array_fields, lists))
         }
         serde_json::Value::Object(members) => members.iter().try_for_each(|(name, member)| {
             let at = at.child(name);
             text_error(&at, "a member's name", name)?;
-            check_shape(member, &at, array_fields)
+            let misplaced = member.is_array()
+                && !array_fields
+                    .iter()
+                    .any(|field| matches_field(field, at.as_str()));
+            if misplaced {
+                lists.push(at);
+                Ok(())
+            } else {
+                check_shape(member, &at, array_fields, lists)
+            }
         }),
         serde_json::Value::String(text) => text_error(at, "text", text),
         _ => Ok(()),
@@ -914,6 +957,52 @@ mod tests {
         .unwrap();
         assert_eq!(read.fidelity, Some(Kind::ClosedForm));
         assert_eq!((&read.items[0].kind, read.items[0].size), (&Kind::Exact, 3));
+    }
+
+    /// A list where the document has one value is read past as a member of the wrong type is
+    /// (an outside check found `{"devices": [], "operations": 0}` told of `/devices` alone), but
+    /// not as an item of a list, whose removal would renumber the items after it.
+    #[test]
+    fn a_list_in_a_members_place_is_read_past() {
+        #[derive(Debug, serde::Deserialize, serde::Serialize)]
+        #[serde(deny_unknown_fields)]
+        #[allow(dead_code, reason = "only read")]
+        struct Item {
+            size: u32,
+        }
+        #[derive(Debug, serde::Deserialize, serde::Serialize)]
+        #[serde(deny_unknown_fields)]
+        #[allow(dead_code, reason = "only read")]
+        struct Doc {
+            name: Option<String>,
+            count: Option<u64>,
+            #[serde(default)]
+            items: Vec<Item>,
+        }
+        let named = |text: &str| -> Vec<String> {
+            match from_json::<Doc>(text, &["/items"]) {
+                Ok(_) => Vec::new(),
+                Err(invalid) => invalid.errors().iter().map(|e| e.to_string()).collect(),
+            }
+        };
+        let list = LIST_IN_A_MEMBERS_PLACE;
+        assert_eq!(
+            named(r#"{"name": [], "count": "x", "items": [{"size": [1]}]}"#),
+            [
+                format!("/items/0/size: {list}"),
+                format!("/name: {list}"),
+                r#"/count: invalid type: string "x", expected a whole number from 0 to 18446744073709551615"#
+                    .to_owned(),
+            ]
+        );
+        // An item of a list: listed, and the end of the list (`/name` is not read).
+        assert_eq!(
+            named(r#"{"count": [], "items": [[1]], "name": 5}"#),
+            [format!("/count: {list}"), format!("/items/0: {list}")]
+        );
+        // A document of lists only where they belong reads as before.
+        let read: Doc = from_json(r#"{"items": [{"size": 2}]}"#, &["/items"]).unwrap();
+        assert_eq!(read.items.len(), 1);
     }
 
     /// Up to [`MAX_FAULTS`] members are read past in a small document, fewer in a large one, so

@@ -331,6 +331,13 @@ fn a_submission_to_a_full_queue_is_sent_again_once_there_is_room() {
             said.contains(&format!("job {id} is still queued after")),
             "{said}"
         );
+        // The job as it was goes to stdout, as a job that ended does: a script that submitted
+        // it with `--wait` learns its id there (printed nothing before).
+        let job: Value = serde_json::from_slice(&waited.stdout).unwrap();
+        assert_eq!(
+            (&job["id"], &job["status"]),
+            (&first["id"], &json!("queued"))
+        );
     }
     let refused = remote(&server, None, &["submit", &file, "--retries", "0"]);
     assert_eq!(refused.status.code(), Some(1));

@@ -123,7 +123,8 @@ pub struct JobResult {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 pub struct ResolvedJob {
     /// The JobSpec with every default filled in: its seed, `bin_operations`, the whole scenario and
-    /// the list of metrics. A plain object in the schema: JobSpec's admits no other members.
+    /// the list of metrics. A plain object here: JobSpec's schema admits no other members, and
+    /// the served document declares them (`api::openapi`).
     #[serde(flatten)]
     #[cfg_attr(feature = "openapi", schema(value_type = Object))]
     spec: JobSpec,

@@ -25,6 +25,7 @@ pub fn document(openapi: &utoipa::openapi::OpenApi) -> Value {
     constrain_request_fields(&mut document);
     limit_request_text(&mut document);
     add_links(&mut document);
+    declare_resolved_job(&mut document["components"]["schemas"]);
     describe_output_types(&mut document);
     hoist_optional_descriptions(&mut document);
     document
@@ -685,6 +686,49 @@ const OUTPUT_DESCRIPTIONS: &[(&str, &[(&str, &str)])] = &[
         ],
     ),
 ];
+
+/// The members every job as it ran has (docs/contract.md "Result": the contract's, and the
+/// `metrics` the implementation records).
+const RESOLVED_JOB_MEMBERS: [&str; 8] = [
+    "seed",
+    "devices",
+    "operations",
+    "bin_operations",
+    "fidelity",
+    "sampler",
+    "scenario",
+    "metrics",
+];
+
+/// A Result's `job` and a job's `spec` are a JobSpec with every default filled in: declared once,
+/// as `JobSpecAsRun`, with JobSpec's members and their rules, requiring those every job as it ran
+/// has. It cannot be JobSpec, which admits no other members (the Result's `job` has its own).
+fn declare_resolved_job(schemas: &mut Value) {
+    let Some(mut spec) = schemas.get("JobSpec").cloned() else {
+        return;
+    };
+    let Some(members) = spec.as_object_mut() else {
+        return;
+    };
+    members.remove("additionalProperties");
+    members.insert("required".to_owned(), json!(RESOLVED_JOB_MEMBERS));
+    members.insert(
+        "description".to_owned(),
+        json!(
+            "The JobSpec with every default filled in: its seed, `bin_operations`, the whole \
+             scenario and the list of metrics."
+        ),
+    );
+    schemas["JobSpecAsRun"] = spec;
+    let as_run = json!({"$ref": "#/components/schemas/JobSpecAsRun"});
+    if let Some(part) = schemas.pointer_mut("/ResolvedJob/allOf/0") {
+        *part = as_run.clone();
+    }
+    if let Some(Value::Object(spec)) = schemas.pointer_mut("/JobResource/properties/spec") {
+        spec.remove("type");
+        spec.insert("oneOf".to_owned(), json!([as_run, {"type": "null"}]));
+    }
+}
 
 fn describe_output_types(document: &mut Value) {
     let schemas = &mut document["components"]["schemas"];

@@ -281,8 +281,8 @@ pub enum CliError {
     /// `serve` could not start: exit 2 when its configuration is at fault, 1 otherwise.
     #[error(transparent)]
     Startup(#[from] StartupError),
-    /// A job waited for ended without succeeding: the job resource is printed, then its reason,
-    /// exit 1.
+    /// A job waited for ended without succeeding, or had not ended at the timeout: the job
+    /// resource is printed (a script learns the id of a job it submitted), then the reason, exit 1.
     #[error("{reason}")]
     Ended { job: String, reason: String },
     /// Anything else: exit 1.

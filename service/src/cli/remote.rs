@@ -501,8 +501,8 @@ pub fn status(server: &Server, id: &str) -> Result<String, CliError> {
 }
 
 /// `wait`: asks until the job ended; the final job resource when it succeeded; when it failed or
-/// was cancelled, the job resource too, and exit 1 with its error; exit 1 when `timeout` seconds
-/// passed first.
+/// was cancelled, the job resource too, and exit 1 with its error; when `timeout` seconds passed
+/// first, the job resource as it was then, and exit 1.
 pub fn wait_for(server: &Server, id: &str, timeout: Option<f64>) -> Result<String, CliError> {
     wait_until(server, id, deadline_after(timeout))
 }
@@ -533,11 +533,14 @@ fn wait_until(server: &Server, id: &str, deadline: Option<Instant>) -> Result<St
         }
         // The job as read at the timeout or after: the last request waits until then.
         if deadline.is_some_and(|end| Instant::now() >= end) {
-            return Err(CliError::Failed(format!(
-                "job {id} is still {} after {:.1} s",
-                job["status"].as_str().unwrap_or("?"),
-                started.elapsed().as_secs_f64()
-            )));
+            return Err(CliError::Ended {
+                reason: format!(
+                    "job {id} is still {} after {:.1} s",
+                    job["status"].as_str().unwrap_or("?"),
+                    started.elapsed().as_secs_f64()
+                ),
+                job: job.to_string(),
+            });
         }
         // A server that did not wait (all its places taken) is asked again after a pause, never
         // past the timeout.
