@@ -223,7 +223,8 @@ pub struct Summary {
 ///   that and the same just below the bucket. The
 ///   interval `q +- t sqrt(V)` in probability is mapped back through the overall quantile function,
 ///   interpolated within buckets and moved outwards by what the density's slope across each end's
-///   bucket allows ([`super::Sketch::interpolated`]: with 1e8 values a bucket holds hundreds of
+///   bucket allows, or to the bucket's edge where the density bends within it
+///   ([`super::Sketch::interpolated`]: with 1e8 values a bucket holds hundreds of
 ///   standard errors, and the even spread alone missed a p95 by up to 2.6 of them), and widened
 ///   to hold the value if need be. Where no group differs (`V = 0`, e.g. the top values all in
 ///   one bucket) the interval is the value's bucket: the data place the quantile there, no
@@ -1411,6 +1412,48 @@ mod tests {
         for (hits, (key, _)) in hits.iter().zip(levels) {
             let coverage = f64::from(*hits) / reps as f64;
             assert!(coverage >= 0.88, "{key} covered {coverage}");
+        }
+    }
+
+    #[test]
+    fn quantile_intervals_of_a_distribution_a_few_buckets_wide_hold_the_truth() {
+        // Normal(0.3, sd), sd 0.2 and 0.5 of the bucket's width there (2^-10): the whole
+        // distribution spans two to six buckets, and the density bends within each as much as it
+        // slopes. An outside check (1e6 values a job) found the median's and the p10's intervals
+        // off the truth in every one of 100 jobs, pinned by the first-order reading; now each
+        // end whose bucket's neighbours differ from it by more than a factor 2 is its bucket's
+        // edge. The truths are 0.3 + sd z_q, z_q from scipy.stats.norm.ppf.
+        let z = [
+            -2.326_347_874_040_840_8,
+            -1.644_853_626_951_472_2,
+            -1.281_551_565_544_600_4,
+            -0.674_489_750_196_081_7,
+            0.0,
+            0.674_489_750_196_081_7,
+            1.281_551_565_544_600_4,
+            1.644_853_626_951_472_2,
+            2.326_347_874_040_840_8,
+        ];
+        let width = 2f64.powi(-10);
+        for sd in [0.2 * width, 0.5 * width] {
+            let reps = 20;
+            let mut hits = [0_u32; 9];
+            for seed in 0..reps {
+                let mut rng = SplitMix(9100 + seed);
+                let groups: Vec<Accumulator> = (0..32)
+                    .map(|_| accumulate((0..31_250).map(|_| sd.mul_add(rng.normal(), 0.3)), None))
+                    .collect();
+                let summary = summarize(&groups, 1);
+                for (hit, ((key, _), z)) in hits.iter_mut().zip(QUANTILES.iter().zip(z)) {
+                    let [lo, hi] = summary.quantiles[*key].ci95;
+                    // Two buckets at most: the data place a quantile no closer, no wider.
+                    assert!(hi - lo <= 2.0 * width, "{key} at sd {sd}: [{lo}, {hi}]");
+                    *hit += u32::from((lo..=hi).contains(&sd.mul_add(z, 0.3)));
+                }
+            }
+            for (hits, (key, _)) in hits.iter().zip(QUANTILES) {
+                assert!(*hits >= 18, "{key} at sd {sd}: {hits} of {reps}");
+            }
         }
     }
 }
