@@ -1165,11 +1165,16 @@ impl Workers {
             },
             Awaited::Room => tracing::warn!(reason, ?awaited, "shard waits"),
         }
-        // The hand-back is a write too, which the same full disk or outage can refuse: tried
-        // again while the lease is kept, or the lease expired and counted as lost against the
-        // shard (a probe: PostgreSQL at 0 bytes free).
+        // The hand-back is a write too, which the same full disk or outage can refuse (a probe:
+        // PostgreSQL at 0 bytes free). It is tried again for as long as the database cannot
+        // answer and nothing stopped the shard, not `--max-lost-leases` times: given up while
+        // PostgreSQL was down, the shard sat "running" with nothing running it, `waiting` null,
+        // until its lease expired (a whole lease after the outage, found from outside), and the
+        // expiry counted against it. Once the database answers, the shard waits with its reason,
+        // or the lease was lost meanwhile and the fence refuses the write.
         let hand_back = || self.store.wait_for(fence, None, awaited, &reason);
-        if let Err(error) = self.store_with_backoff(lease, hand_back).await {
+        let delay = STORE_RETRY_FIRST_DELAY;
+        if let Err(error) = retry_unavailable(None, &lease.cancel, delay, hand_back).await {
             tracing::error!(%error, "could not hand the shard back; its lease will expire");
         }
     }
@@ -1216,30 +1221,45 @@ impl Workers {
     async fn store_with_backoff<T, F>(
         &self,
         lease: &KeptLease,
-        mut write: impl FnMut() -> F,
+        write: impl FnMut() -> F,
     ) -> StoreResult<T>
     where
         F: Future<Output = StoreResult<T>>,
     {
-        let mut delay = STORE_RETRY_FIRST_DELAY;
-        let mut tries = 0;
-        loop {
-            match write().await {
-                // No room on the disk is not tried again here: the shard waits for room.
-                Err(error)
-                    if error.is_unavailable()
-                        && !matches!(error, StoreError::NoRoom(_))
-                        && tries < self.budget.lost_leases
-                        && !lease.cancel.load(Ordering::Relaxed) =>
-                {
-                    tries += 1;
-                    metrics::counter!("bouncewear_store_retries_total").increment(1);
-                    tracing::warn!(%error, tries, ?delay, "the database did not take the write; trying again");
-                    tokio::time::sleep(delay).await;
-                    delay = (delay * 2).min(STORE_RETRY_MAX_DELAY);
-                }
-                outcome => return outcome,
+        let tries = Some(self.budget.lost_leases);
+        retry_unavailable(tries, &lease.cancel, STORE_RETRY_FIRST_DELAY, write).await
+    }
+}
+
+/// Runs `write`, trying again while the database cannot take it (unreachable, busy; not a full
+/// disk, which the shard waits out) and nothing stopped the shard (`cancel`): after `delay`,
+/// doubling up to [`STORE_RETRY_MAX_DELAY`], at most `tries` times, or for as long as that
+/// holds with `None`.
+async fn retry_unavailable<T, F>(
+    tries: Option<u64>,
+    cancel: &AtomicBool,
+    mut delay: Duration,
+    mut write: impl FnMut() -> F,
+) -> StoreResult<T>
+where
+    F: Future<Output = StoreResult<T>>,
+{
+    let mut tried = 0;
+    loop {
+        match write().await {
+            Err(error)
+                if error.is_unavailable()
+                    && !matches!(error, StoreError::NoRoom(_))
+                    && tries.is_none_or(|tries| tried < tries)
+                    && !cancel.load(Ordering::Relaxed) =>
+            {
+                tried += 1;
+                metrics::counter!("bouncewear_store_retries_total").increment(1);
+                tracing::warn!(%error, tries = tried, ?delay, "the database did not take the write; trying again");
+                tokio::time::sleep(delay).await;
+                delay = (delay * 2).min(STORE_RETRY_MAX_DELAY);
             }
+            outcome => return outcome,
         }
     }
 }
@@ -1278,6 +1298,58 @@ async fn wake_on_announcements(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A write the database cannot take is tried again: `tries` times, or with `None` until it
+    /// answers or the shard is stopped; any other error, and a full disk, at once.
+    #[tokio::test]
+    async fn a_write_is_tried_again_while_the_database_cannot_answer() {
+        let calls = std::cell::Cell::new(0_u64);
+        let cancel = AtomicBool::new(false);
+        let delay = Duration::from_millis(1);
+        // Unavailable `failing` times, then the write is taken; `stop_at` sets `cancel`.
+        let write = |failing: u64, stop_at: Option<u64>| {
+            let (calls, cancel) = (&calls, &cancel);
+            move || {
+                calls.set(calls.get() + 1);
+                if stop_at == Some(calls.get()) {
+                    cancel.store(true, Ordering::Relaxed);
+                }
+                let outcome = match calls.get() <= failing {
+                    true => Err(StoreError::Database(sqlx::Error::PoolTimedOut)),
+                    false => Ok(calls.get()),
+                };
+                std::future::ready(outcome)
+            }
+        };
+        // Past any count of tries, until it answers.
+        assert_eq!(
+            retry_unavailable(None, &cancel, delay, write(9, None))
+                .await
+                .ok(),
+            Some(10)
+        );
+        calls.set(0);
+        let limited = retry_unavailable(Some(3), &cancel, delay, write(9, None)).await;
+        assert!(limited.is_err_and(|error| error.is_unavailable()));
+        assert_eq!(calls.get(), 4);
+        calls.set(0);
+        let stopped = retry_unavailable(None, &cancel, delay, write(u64::MAX, Some(5))).await;
+        assert!(stopped.is_err() && calls.get() == 5);
+        cancel.store(false, Ordering::Relaxed);
+        for error in [
+            StoreError::Conflict("no".into()),
+            StoreError::NoRoom("full".into()),
+        ] {
+            calls.set(0);
+            let error = std::cell::RefCell::new(Some(error));
+            let once = || {
+                calls.set(calls.get() + 1);
+                std::future::ready(Err::<(), _>(error.borrow_mut().take().unwrap()))
+            };
+            assert!(retry_unavailable(None, &cancel, delay, once).await.is_err());
+            assert_eq!(calls.get(), 1);
+        }
+    }
     use crate::telemetry::prometheus_builder;
     use bouncewear_model::montecarlo::Silent;
 
