@@ -11,7 +11,7 @@ use bouncewear::domain::shards::{
 };
 use bouncewear::domain::{
     Attempt, IdempotencyKey, JobId, JobStatus, Once, Owner, QueueBound, QueuedJob, ROOM_RETRY_MS,
-    ScheduleBound, ScheduleDefinition, ScheduleId, ShardId, UnixMs,
+    ScheduleBound, ScheduleDefinition, ScheduleId, ScheduleLimits, ShardId, UnixMs,
 };
 use bouncewear::scheduler::{RunLimits, Waiting, rebase, tick};
 use bouncewear::store::{
@@ -2325,7 +2325,10 @@ async fn tick_now(store: &Store, room: u64, now: DateTime<Utc>, waiting: &mut Wa
 fn queue(bound: QueueBound) -> RunLimits {
     RunLimits {
         queue: bound,
-        max_job_operations: u64::MAX,
+        schedule: ScheduleLimits {
+            max_job_operations: u64::MAX,
+            min_interval: chrono::TimeDelta::zero(),
+        },
         key_owners: Arc::default(),
     }
 }
@@ -2383,19 +2386,26 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
     large.definition.template =
         serde_json::from_str(r#"{"devices": 100, "operations": 100}"#).unwrap();
     store.insert_schedule(&large, SCHEDULES).await.unwrap();
+    let limits = queue(QueueBound::total(100));
     let limits = RunLimits {
-        max_job_operations: 9_999,
-        ..queue(QueueBound::total(100))
+        schedule: ScheduleLimits {
+            max_job_operations: 9_999,
+            ..limits.schedule
+        },
+        ..limits
     };
     let created = tick(store.as_ref(), limits.clone(), now, &mut waiting);
     assert_eq!(created.await.unwrap(), 0);
     assert!(store.runs(&large.id, 10).await.unwrap().is_empty());
     let limits = RunLimits {
-        max_job_operations: 10_000,
+        schedule: ScheduleLimits {
+            max_job_operations: 10_000,
+            ..limits.schedule
+        },
         ..limits
     };
     let next_night = utc("2026-11-23T03:00:05Z");
-    let created = tick(store.as_ref(), limits, next_night, &mut waiting);
+    let created = tick(store.as_ref(), limits.clone(), next_night, &mut waiting);
     let (runs, last) = skipped(&store, &large).await;
     assert_eq!(runs, 1);
     let reason = last.unwrap().1;
@@ -2414,6 +2424,33 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
         (runs, last.unwrap().0.as_str()),
         (2, "2026-11-23T03:00:00.000Z")
     );
+    // A timetable that runs more often than the server now allows (a limit raised since it was
+    // written, or another instance's) skips its runs the same way: they ran every hour under a
+    // limit of a day. Within the limit, the next one runs.
+    let mut hourly = nightly("s4", "2026-11-23T04:00:00Z");
+    hourly.definition.cron = "0 * * * *".to_owned();
+    store.insert_schedule(&hourly, SCHEDULES).await.unwrap();
+    let daily = |limits: &RunLimits, hours: i64| RunLimits {
+        schedule: ScheduleLimits {
+            min_interval: chrono::TimeDelta::hours(hours),
+            ..limits.schedule
+        },
+        ..limits.clone()
+    };
+    let at_four = utc("2026-11-23T04:00:05Z");
+    let created = tick(store.as_ref(), daily(&limits, 24), at_four, &mut waiting);
+    assert_eq!(created.await.unwrap(), 0);
+    let (runs, last) = skipped(&store, &hourly).await;
+    let (due, reason) = last.expect("the skipped run");
+    assert_eq!((runs, due.as_str()), (1, "2026-11-23T04:00:00.000Z"));
+    assert!(
+        reason.contains("runs 1 h apart") && reason.contains("--min-schedule-interval-seconds"),
+        "{reason}"
+    );
+    let at_five = utc("2026-11-23T05:00:05Z");
+    let created = tick(store.as_ref(), daily(&limits, 1), at_five, &mut waiting);
+    assert_eq!(created.await.unwrap(), 1);
+    assert_eq!(store.runs(&hourly.id, 10).await.unwrap().len(), 1);
     // A second loop (another instance) that read the schedule before the first skipped its run
     // moves nothing and counts nothing.
     assert!(

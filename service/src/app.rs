@@ -165,7 +165,7 @@ impl Application {
             Arc::clone(&state.store),
             crate::scheduler::RunLimits {
                 queue: config.queue_bound(),
-                max_job_operations: config.max_job_operations,
+                schedule: config.schedule_limits(),
                 key_owners: Arc::clone(&state.key_owners),
             },
             Arc::clone(&state.wake),

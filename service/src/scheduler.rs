@@ -5,7 +5,10 @@
 //! the database's clock, which those instances share. At start-up and when that clock steps back,
 //! next runs the later clock put too far are brought back.
 
-use crate::domain::{MISSED_RUNS_COUNTED, Owner, QueueBound, ScheduleId, Timetable, UnixMs};
+use crate::domain::{
+    MISSED_RUNS_COUNTED, Owner, QueueBound, ScheduleId, ScheduleLimits, Timetable, UnixMs,
+    too_often,
+};
 use crate::store::{NewRun, NextRun, RunSlot, ScheduleRecord, Store, StoreError, StoreResult};
 use chrono::{DateTime, Utc};
 use std::collections::HashSet;
@@ -134,14 +137,15 @@ impl Waiting {
     }
 }
 
-/// What the server allows the jobs its schedules make: room in the queue, each one's size (a
-/// run larger than `max_job_operations` is skipped, as a job submitted now would be refused) and
-/// whose they may be (with API keys, a schedule whose key is not among them is skipped: no caller
-/// could see, pause or delete it).
+/// What the server allows the jobs its schedules make: room in the queue, each one's size and
+/// how often they run (a run larger than the schedule limits' `max_job_operations`, or of a
+/// timetable that runs more often than their `min_interval`, is skipped, as the schedule
+/// written now would be refused) and whose they may be (with API keys, a schedule whose key is
+/// not among them is skipped: no caller could see, pause or delete it).
 #[derive(Debug, Clone)]
 pub struct RunLimits {
     pub queue: QueueBound,
-    pub max_job_operations: u64,
+    pub schedule: ScheduleLimits,
     /// The owners of the server's API keys; empty without keys, when every schedule runs.
     pub key_owners: Arc<HashSet<Owner>>,
 }
@@ -184,11 +188,20 @@ pub async fn tick(
             skip(store, &schedule, moves, due, reason).await?;
             continue;
         }
+        // A limit raised since the schedule was written (or another instance's) holds for its
+        // runs too: they ran every minute under an hour's limit, unthrottled (found from outside).
+        let min_interval = limits.schedule.min_interval;
+        if let Some(why) = too_often(&timetable, &definition.time_zone, min_interval, now) {
+            tracing::warn!(schedule = %schedule.id, why, "the schedule runs more often than this server allows; this run is skipped");
+            let reason = format!("its cron {why}: replace it (PUT) with one that runs less often");
+            skip(store, &schedule, moves, due, &reason).await?;
+            continue;
+        }
         let job = match definition.job_at(
             schedule.owner.clone(),
             due,
             UnixMs::from_datetime(now),
-            limits.max_job_operations,
+            limits.schedule.max_job_operations,
         ) {
             Ok(job) => job,
             Err(invalid) => {

@@ -20,7 +20,7 @@ pub use jobs::{JobStatus, QueueBound, QueuedJob, draw_seed};
 pub use query::AfterRunQuery;
 pub use schedules::{
     CatchUp, MISSED_RUNS, MISSED_RUNS_COUNTED, ScheduleBound, ScheduleDefinition, ScheduleLimits,
-    ScheduleSpec, Statistic, Timetable, ValidSchedule,
+    ScheduleSpec, Statistic, Timetable, ValidSchedule, too_often,
 };
 pub use shards::{
     Folding, ROOM_RETRY_MS, RetryBudget, SHARD_OVERHEAD_OPERATIONS, ShardId, ShardPlan,

@@ -155,6 +155,25 @@ pub struct ScheduleLimits {
     pub min_interval: TimeDelta,
 }
 
+/// Why `timetable` (in `time_zone`) runs more often than `min_interval` allows, over the year
+/// after `now`; `None` where it does not. A schedule written so is refused, and one written
+/// before the server's limit was raised has its runs skipped by the scheduler.
+pub fn too_often(
+    timetable: &Timetable,
+    time_zone: &str,
+    min_interval: TimeDelta,
+    now: DateTime<Utc>,
+) -> Option<String> {
+    let gap = timetable.on_the_wall_clock().gap_below(min_interval, now)?;
+    Some(format!(
+        "runs {} apart at {} ({time_zone} wall clock): runs must be at least {} apart (the server's --min-schedule-interval-seconds)",
+        describe_interval(gap.1 - gap.0),
+        // The wall clock's time, which `on_the_wall_clock` holds as if it were UTC.
+        gap.1.naive_utc().format("%Y-%m-%d %H:%M:%S"),
+        describe_interval(min_interval)
+    ))
+}
+
 /// A schedule document that passed every rule; only [`ValidSchedule::parse`] makes one.
 #[derive(Debug, Clone)]
 pub struct ValidSchedule {
@@ -203,19 +222,13 @@ impl ValidSchedule {
                 pointer: "/cron".into(),
                 detail: "never runs: no date matches it (e.g. February 30)".into(),
             });
-        } else if let Some(gap) = timetable
+        } else if let Some(detail) = timetable
             .as_ref()
-            .and_then(|t| t.on_the_wall_clock().gap_below(limits.min_interval, now))
+            .and_then(|t| too_often(t, &time_zone, limits.min_interval, now))
         {
             errors.push(FieldError {
                 pointer: "/cron".into(),
-                detail: format!(
-                    "runs {} apart at {} ({time_zone} wall clock): runs must be at least {} apart (the server's --min-schedule-interval-seconds)",
-                    describe_interval(gap.1 - gap.0),
-                    // The wall clock's time, which `on_the_wall_clock` holds as if it were UTC.
-                    gap.1.naive_utc().format("%Y-%m-%d %H:%M:%S"),
-                    describe_interval(limits.min_interval)
-                ),
+                detail,
             });
         }
         let template = root.child("template");
