@@ -2219,6 +2219,14 @@ fn nightly(id: &str, next_run_at: &str) -> ScheduleRecord {
     }
 }
 
+/// The reason of `schedule`'s one skipped run, which was due at `due`.
+async fn one_skip_at(store: &Store, schedule: &ScheduleRecord, due: &str) -> String {
+    let (runs, last) = skipped(store, schedule).await;
+    let (skipped_due, reason) = last.expect("the skipped run");
+    assert_eq!((runs, skipped_due.as_str()), (1, due));
+    reason
+}
+
 /// The runs `schedule` skipped as stored: how many, the latest one's due time and its reason.
 async fn skipped(store: &Store, schedule: &ScheduleRecord) -> (u64, Option<(String, String)>) {
     let stored = store.schedule(&schedule.owner, &schedule.id).await.unwrap();
@@ -2333,6 +2341,17 @@ fn queue(bound: QueueBound) -> RunLimits {
     }
 }
 
+/// The scheduler's limits with room for 100 jobs, bounding each run's size and how often it runs.
+fn allowing(max_job_operations: u64, min_interval: chrono::TimeDelta) -> RunLimits {
+    RunLimits {
+        schedule: ScheduleLimits {
+            max_job_operations,
+            min_interval,
+        },
+        ..queue(QueueBound::total(100))
+    }
+}
+
 /// A schedule whose stored template no longer validates (a rule made since) skips its run and
 /// moves on to the next night: it stayed due, skipped and logged again at every tick (a second).
 async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &str) {
@@ -2368,9 +2387,7 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
     unreadable.definition.time_zone = "Europe/Atlantis".to_owned();
     store.insert_schedule(&unreadable, SCHEDULES).await.unwrap();
     assert_eq!(tick_now(&store, 100, now, &mut waiting).await, 0);
-    let (runs, last) = skipped(&store, &unreadable).await;
-    let (due, reason) = last.expect("the skipped run");
-    assert_eq!((runs, due.as_str()), (1, "2026-11-22T03:00:00.000Z"));
+    let reason = one_skip_at(&store, &unreadable, "2026-11-22T03:00:00.000Z").await;
     assert!(
         reason.contains("Europe/Atlantis") && reason.contains("PUT"),
         "{reason}"
@@ -2386,26 +2403,18 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
     large.definition.template =
         serde_json::from_str(r#"{"devices": 100, "operations": 100}"#).unwrap();
     store.insert_schedule(&large, SCHEDULES).await.unwrap();
-    let limits = queue(QueueBound::total(100));
-    let limits = RunLimits {
-        schedule: ScheduleLimits {
-            max_job_operations: 9_999,
-            ..limits.schedule
-        },
-        ..limits
-    };
-    let created = tick(store.as_ref(), limits.clone(), now, &mut waiting);
+    let any_interval = chrono::TimeDelta::zero();
+    let created = tick(
+        store.as_ref(),
+        allowing(9_999, any_interval),
+        now,
+        &mut waiting,
+    );
     assert_eq!(created.await.unwrap(), 0);
     assert!(store.runs(&large.id, 10).await.unwrap().is_empty());
-    let limits = RunLimits {
-        schedule: ScheduleLimits {
-            max_job_operations: 10_000,
-            ..limits.schedule
-        },
-        ..limits
-    };
     let next_night = utc("2026-11-23T03:00:05Z");
-    let created = tick(store.as_ref(), limits.clone(), next_night, &mut waiting);
+    let limits = allowing(10_000, any_interval);
+    let created = tick(store.as_ref(), limits, next_night, &mut waiting);
     let (runs, last) = skipped(&store, &large).await;
     assert_eq!(runs, 1);
     let reason = last.unwrap().1;
@@ -2430,25 +2439,17 @@ async fn a_template_that_no_longer_validates_skips_its_night_and_moves_on(url: &
     let mut hourly = nightly("s4", "2026-11-23T04:00:00Z");
     hourly.definition.cron = "0 * * * *".to_owned();
     store.insert_schedule(&hourly, SCHEDULES).await.unwrap();
-    let daily = |limits: &RunLimits, hours: i64| RunLimits {
-        schedule: ScheduleLimits {
-            min_interval: chrono::TimeDelta::hours(hours),
-            ..limits.schedule
-        },
-        ..limits.clone()
-    };
+    let every = |hours| allowing(10_000, chrono::TimeDelta::hours(hours));
     let at_four = utc("2026-11-23T04:00:05Z");
-    let created = tick(store.as_ref(), daily(&limits, 24), at_four, &mut waiting);
+    let created = tick(store.as_ref(), every(24), at_four, &mut waiting);
     assert_eq!(created.await.unwrap(), 0);
-    let (runs, last) = skipped(&store, &hourly).await;
-    let (due, reason) = last.expect("the skipped run");
-    assert_eq!((runs, due.as_str()), (1, "2026-11-23T04:00:00.000Z"));
+    let reason = one_skip_at(&store, &hourly, "2026-11-23T04:00:00.000Z").await;
     assert!(
         reason.contains("runs 1 h apart") && reason.contains("--min-schedule-interval-seconds"),
         "{reason}"
     );
     let at_five = utc("2026-11-23T05:00:05Z");
-    let created = tick(store.as_ref(), daily(&limits, 1), at_five, &mut waiting);
+    let created = tick(store.as_ref(), every(1), at_five, &mut waiting);
     assert_eq!(created.await.unwrap(), 1);
     assert_eq!(store.runs(&hourly.id, 10).await.unwrap().len(), 1);
     // A second loop (another instance) that read the schedule before the first skipped its run
