@@ -289,7 +289,6 @@ impl SobolAccumulator {
     /// the interval `[0, 1]` (nothing known).
     pub fn estimate(&self) -> SobolEstimate {
         let n = self.n as f64;
-        let clusters = self.clusters as f64;
         let variance = self.variance();
         let every = |value: f64, ci95: [f64; 2], widening: f64, offset_sds: f64| {
             let index = IndexEstimate { value, ci95 };
@@ -327,69 +326,11 @@ impl SobolAccumulator {
             (self.sums[0][2] + self.sums[0][3] + self.sums.iter().map(|s| s[6]).sum::<f64>())
                 / evaluations;
         let mut widening: f64 = 0.0;
-        let indices = self
-            .sums
-            .iter()
-            .zip(&self.products)
-            .zip(&self.weighted)
-            .map(|((sums, products), weighted)| {
-                let m: [f64; Z] = sums.map(|s| s / n);
-                // Covariance of the mean of z, from the spread between clusters.
-                // Its terms, and the same by magnitude: what rounding scales with.
-                let terms = |r: usize, s: usize| {
-                    let (r, s) = (r.min(s), r.max(s));
-                    let scale = clusters / ((clusters - 1.0) * n * n);
-                    [
-                        products[packed(r, s)],
-                        -m[r] * weighted[s],
-                        -weighted[r] * m[s],
-                        m[r] * m[s] * self.squared_sizes,
-                    ]
-                    .map(|term| term * scale)
-                };
-                // Each entry's sum and sum of magnitudes, once for both indices.
-                let table: [[(f64, f64); Z]; Z] = std::array::from_fn(|r| {
-                    std::array::from_fn(|s| {
-                        let terms = terms(r, s);
-                        (terms.iter().sum(), terms.iter().map(|t| t.abs()).sum())
-                    })
-                });
-                let covariance = |r: usize, s: usize| table[r][s].0;
-                let magnitude = |r: usize, s: usize| table[r][s].1;
-                // dV/dm: V = (m4 + m5)/2 - ((m2 + m3)/2)^2.
-                let half_mean = (m[2] + m[3]) / 2.0;
-                let dv = [0.0, 0.0, -half_mean, -half_mean, 0.5, 0.5, 0.0];
-                // Numerators and their gradients: the first order's, centred,
-                // m0 - centre (m6 - m2); the total's, m1.
-                let first = (
-                    m[0] - centre * (m[6] - m[2]),
-                    [1.0, 0.0, centre, 0.0, 0.0, 0.0, -centre],
-                );
-                let total = (m[1], [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
-                let mut estimate = |(numerator, d_numerator): (f64, [f64; Z])| {
-                    let value = numerator / variance;
-                    // g = d(numerator / V)/dm.
-                    let gradient: [f64; Z] =
-                        std::array::from_fn(|r| (d_numerator[r] - value * dv[r]) / variance);
-                    let quadratic = |c: &dyn Fn(usize, usize) -> f64, g: [f64; Z]| {
-                        (0..Z)
-                            .flat_map(|r| (0..Z).map(move |s| (r, s)))
-                            .map(|(r, s)| g[r] * c(r, s) * g[s])
-                            .sum::<f64>()
-                    };
-                    let spread = quadratic(&covariance, gradient).max(0.0);
-                    let rounding = f64::EPSILON * quadratic(&magnitude, gradient.map(f64::abs));
-                    let half = Z_975 * (spread + rounding).sqrt();
-                    widening = widening.max(half - Z_975 * spread.sqrt());
-                    IndexEstimate {
-                        value,
-                        ci95: [value - half, value + half],
-                    }
-                };
-                SobolIndices {
-                    first: estimate(first),
-                    total: estimate(total),
-                }
+        let indices = (0..self.inputs())
+            .map(|input| {
+                let (indices, widened) = self.input_indices(input, variance, centre);
+                widening = widening.max(widened);
+                indices
             })
             .collect();
         let mean = (sums[2] + sums[3]) / (2.0 * n);
@@ -399,6 +340,82 @@ impl SobolAccumulator {
             offset_sds: mean.abs() / variance.sqrt(),
         }
     }
+
+    /// One input's first-order and total indices from its cluster sums, each with its delta-method
+    /// interval, and by how much the rounding widened the wider of them.
+    fn input_indices(&self, input: usize, variance: f64, centre: f64) -> (SobolIndices, f64) {
+        let (n, clusters) = (self.n as f64, self.clusters as f64);
+        let (sums, products, weighted) = (
+            &self.sums[input],
+            &self.products[input],
+            &self.weighted[input],
+        );
+        let m: [f64; Z] = sums.map(|s| s / n);
+        // Covariance of the mean of z, from the spread between clusters.
+        // Its terms, and the same by magnitude: what rounding scales with.
+        let terms = |r: usize, s: usize| {
+            let (r, s) = (r.min(s), r.max(s));
+            let scale = clusters / ((clusters - 1.0) * n * n);
+            [
+                products[packed(r, s)],
+                -m[r] * weighted[s],
+                -weighted[r] * m[s],
+                m[r] * m[s] * self.squared_sizes,
+            ]
+            .map(|term| term * scale)
+        };
+        // Each entry's sum and sum of magnitudes, once for both indices.
+        let table: [[(f64, f64); Z]; Z] = std::array::from_fn(|r| {
+            std::array::from_fn(|s| {
+                let terms = terms(r, s);
+                (terms.iter().sum(), terms.iter().map(|t| t.abs()).sum())
+            })
+        });
+        // dV/dm: V = (m4 + m5)/2 - ((m2 + m3)/2)^2.
+        let half_mean = (m[2] + m[3]) / 2.0;
+        let dv = [0.0, 0.0, -half_mean, -half_mean, 0.5, 0.5, 0.0];
+        // Numerators and their gradients: the first order's, centred,
+        // m0 - centre (m6 - m2); the total's, m1.
+        let first = (
+            m[0] - centre * (m[6] - m[2]),
+            [1.0, 0.0, centre, 0.0, 0.0, 0.0, -centre],
+        );
+        let total = (m[1], [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        let (first, first_widening) = delta_interval(first, variance, dv, &table);
+        let (total, total_widening) = delta_interval(total, variance, dv, &table);
+        (
+            SobolIndices { first, total },
+            first_widening.max(total_widening),
+        )
+    }
+}
+
+/// The index `numerator / V` and its interval by the delta method: the gradient `g` of the ratio
+/// in the means `m`, `g' C g` with the covariance `table` (each entry's sum, then its sum of
+/// magnitudes for what rounding adds), and by how much the rounding widened the half-width.
+fn delta_interval(
+    (numerator, d_numerator): (f64, [f64; Z]),
+    variance: f64,
+    dv: [f64; Z],
+    table: &[[(f64, f64); Z]; Z],
+) -> (IndexEstimate, f64) {
+    let value = numerator / variance;
+    // g = d(numerator / V)/dm.
+    let gradient: [f64; Z] = std::array::from_fn(|r| (d_numerator[r] - value * dv[r]) / variance);
+    let quadratic = |c: &dyn Fn(usize, usize) -> f64, g: [f64; Z]| {
+        (0..Z)
+            .flat_map(|r| (0..Z).map(move |s| (r, s)))
+            .map(|(r, s)| g[r] * c(r, s) * g[s])
+            .sum::<f64>()
+    };
+    let spread = quadratic(&|r, s| table[r][s].0, gradient).max(0.0);
+    let rounding = f64::EPSILON * quadratic(&|r, s| table[r][s].1, gradient.map(f64::abs));
+    let half = Z_975 * (spread + rounding).sqrt();
+    let estimate = IndexEstimate {
+        value,
+        ci95: [value - half, value + half],
+    };
+    (estimate, half - Z_975 * spread.sqrt())
 }
 
 #[cfg(test)]

@@ -573,21 +573,7 @@ fn woodruff_intervals(
             }
         })
         .collect();
-    // The groups holding values at the bucket or beyond it: above its lower edge for an upper
-    // level, at or below its upper edge for a lower one.
-    let beyond = levels.iter().enumerate().map(|(i, &q)| {
-        per_group
-            .iter()
-            .filter(|(size, counts)| match q >= 0.5 {
-                true => (counts[l + i] as f64) < *size,
-                false => counts[2 * l + i] > 0,
-            })
-            .count()
-    });
-    let shares = levels.iter().enumerate().map(|(i, &q)| match q >= 0.5 {
-        true => 1.0 - overall[l + i] as f64 / n,
-        false => overall[2 * l + i] as f64 / n,
-    });
+    let beyond = beyond_levels(levels, &overall, n, &per_group);
     let bounds: Vec<f64> = levels
         .iter()
         .zip(&spreads)
@@ -595,7 +581,7 @@ fn woodruff_intervals(
         .collect();
     let ends = all.sketch().interpolated(&bounds, [all.min(), all.max()]);
     ends.chunks_exact(2)
-        .zip(values.iter().zip(spreads).zip(beyond.zip(shares)))
+        .zip(values.iter().zip(spreads).zip(beyond))
         .map(|(end, ((&value, (variance, half)), (beyond, share)))| {
             // No group differs at this level (every value at or below it, say, when the top
             // values share one bucket): the data place the quantile within its bucket, no closer.
@@ -612,6 +598,37 @@ fn woodruff_intervals(
                     share,
                 },
             )
+        })
+        .collect()
+}
+
+/// For each level, the groups holding values at its bucket or beyond it (above the bucket's lower
+/// edge for an upper level, at or below its upper edge for a lower one) and the share of all values
+/// there (of `n`), from the counts at or below each probe of [`woodruff_intervals`]: the values, then their
+/// buckets' lower edges, then their upper edges.
+fn beyond_levels(
+    levels: &[f64],
+    overall: &[u64],
+    n: f64,
+    per_group: &[(f64, Vec<u64>)],
+) -> Vec<(usize, f64)> {
+    let l = levels.len();
+    levels
+        .iter()
+        .enumerate()
+        .map(|(i, &q)| {
+            let groups = per_group
+                .iter()
+                .filter(|(size, counts)| match q >= 0.5 {
+                    true => (counts[l + i] as f64) < *size,
+                    false => counts[2 * l + i] > 0,
+                })
+                .count();
+            let share = match q >= 0.5 {
+                true => 1.0 - overall[l + i] as f64 / n,
+                false => overall[2 * l + i] as f64 / n,
+            };
+            (groups, share)
         })
         .collect()
 }
