@@ -272,9 +272,9 @@ pub fn summarize<A: Borrow<Accumulator>>(groups: &[A], per_device: u64) -> Summa
     let mean = all.mean();
     let group_means: Vec<f64> = merged.filled.iter().map(|g| g.mean()).collect();
     // Not clipped to `[min, max]`: the population's mean may lie beyond the sample's extremes,
-    // and with two to four groups the batch-means interval often reaches past them (clipped, it
+    // and with two to four groups the interval often reaches past them (clipped, it
     // covered 50 % of 200 jobs of two devices, 75 % of three).
-    let [lo, hi] = batch_interval(mean, &group_means);
+    let [lo, hi] = mean_interval(mean, &group_means);
     // Every metric of the model is a quantity that is never negative (times, energies, counts,
     // radii, masses): where no value is negative, neither is the mean, and the interval stops at
     // 0 rather than claim room where the mean cannot be.
@@ -633,15 +633,45 @@ fn beyond_levels(
         .collect()
 }
 
-/// Batch-means interval from one statistic per independent group (`G` of them):
-/// `centre +- t_{0.975, G-1} * sd(per_group) / sqrt(G)`, or `[centre, centre]` for `G < 2`.
-fn batch_interval(centre: f64, per_group: &[f64]) -> [f64; 2] {
-    let g = per_group.len();
-    if g < 2 {
+/// Batch-means interval for the mean from each independent group's mean (`G` of them):
+/// Student's t for `G - 1` degrees of freedom on `T = (mean - mu) / se`, `se = sd(per_group) /
+/// sqrt(G)`, through Hall's transformation for the groups' skewness `g` (Hall, *J. R. Statist.
+/// Soc. B* 54, 1992): `T + a T^2 + a^2 T^3 / 3 + a / 2` with `a = g / (3 sqrt G)` lies within
+/// `+- t_{0.975, G-1}`. Where the values skew to the right the few largest, which carry the mean,
+/// are missing from most samples and `T` leans to the right; the transformation moves the
+/// interval up to meet it. Without skew it is `centre +- t se`; `[centre, centre]` for `G < 2` or
+/// groups alike. It always holds `centre`.
+///
+/// `tools/skewed_mean_reference.py` measures it: of a lognormal with sigma 1.5, 64 groups of one
+/// value, it covers 90.6 % where Student's t alone covers 82.6 %, and as t does of a normal.
+fn mean_interval(centre: f64, per_group: &[f64]) -> [f64; 2] {
+    let g = per_group.len() as f64;
+    let variance = sample_variance(per_group);
+    if per_group.len() < 2 || variance == 0.0 {
         return [centre, centre];
     }
-    let half = student_t_975(g as u64 - 1) * (sample_variance(per_group) / g as f64).sqrt();
-    [centre - half, centre + half]
+    let sd = variance.sqrt();
+    let se = sd / g.sqrt();
+    let t = student_t_975(per_group.len() as u64 - 1);
+    let mean = per_group.iter().sum::<f64>() / g;
+    let third = per_group.iter().map(|x| (x - mean).powi(3)).sum::<f64>() / g;
+    let skew = third / (sd * sd * sd);
+    let a = if skew.is_finite() {
+        skew / (3.0 * g.sqrt())
+    } else {
+        0.0
+    };
+    // The root of `T + a T^2 + a^2 T^3 / 3 + a / 2 = y`, `((1 + 3 a (y - a / 2))^(1/3) - 1) / a`,
+    // written without the cancellation of small `a` (`T = y` at `a = 0`).
+    let root = |y: f64| {
+        let z = y - a / 2.0;
+        let c = (1.0 + 3.0 * a * z).cbrt();
+        3.0 * z / (c * c + c + 1.0)
+    };
+    [
+        (centre - root(t) * se).min(centre),
+        (centre - root(-t) * se).max(centre),
+    ]
 }
 
 /// The [`Histogram`] of all values, from the sketch's buckets.
@@ -762,6 +792,69 @@ mod tests {
                 assert!((end - expected).abs() < 1e-9, "{shift}: {:?}", s.mean_ci95);
             }
         }
+    }
+
+    /// The mean's interval against `tools/skewed_mean_reference.py`, which solves Hall's cubic
+    /// with `numpy.roots`: group means skewed right, skewed left by one low group, and two alike
+    /// in all but their order (the interval of a set of values is that of any order of them).
+    #[test]
+    fn the_means_interval_is_halls_transformation_of_students_t() {
+        let cases: [(&[f64], [f64; 2]); 3] = [
+            (
+                &[1.0, 2.0, 3.0, 10.0],
+                [-0.945_400_852_354_307_4, 30.172_268_220_929_322],
+            ),
+            (
+                &[0.5, 0.7, 0.6, 0.4, 3.0, 0.55, 0.45, 0.65],
+                [0.354_318_343_635_413_9, 3.509_813_379_946_918],
+            ),
+            (
+                &[-4.0, 1.0, 2.0, 1.5, 2.5],
+                [-12.631_285_936_559_998, 3.012_193_089_048_446_3],
+            ),
+        ];
+        for (values, expected) in cases {
+            let mean = values.iter().sum::<f64>() / values.len() as f64;
+            let mut reversed = values.to_vec();
+            reversed.reverse();
+            for values in [values, &reversed[..]] {
+                let [lo, hi] = mean_interval(mean, values);
+                for (end, reference) in [lo, hi].into_iter().zip(expected) {
+                    approx::assert_relative_eq!(end, reference, max_relative = 1e-10);
+                }
+            }
+        }
+    }
+
+    /// Of a lognormal with sigma 1.5, 64 groups of one value, Student's t alone covers the mean in
+    /// 82.6 % of samples and the transformation in 90.6 % (the reference's 20,000); of a normal
+    /// both 95 %. Here 20,000 samples of each: the interval always holds its centre, and is
+    /// finite where the values' cubes pass `f64` (Student's t alone, then).
+    #[test]
+    fn the_means_interval_covers_a_skewed_mean_where_students_t_falls_short() {
+        let mut rng = SplitMix(31);
+        let reps = 20_000;
+        let mut hits = [0usize; 2];
+        for _ in 0..reps {
+            let lognormal: Vec<f64> = (0..64).map(|_| (1.5 * rng.normal()).exp()).collect();
+            let normal: Vec<f64> = (0..64).map(|_| rng.normal()).collect();
+            for (i, (values, truth)) in [(lognormal, 1.125_f64.exp()), (normal, 0.0)]
+                .into_iter()
+                .enumerate()
+            {
+                let mean = values.iter().sum::<f64>() / 64.0;
+                let [lo, hi] = mean_interval(mean, &values);
+                assert!(lo <= mean && mean <= hi, "{lo} {mean} {hi}");
+                hits[i] += usize::from(lo <= truth && truth <= hi);
+            }
+        }
+        let [lognormal, normal] = hits.map(|h| h as f64 / reps as f64);
+        assert!((0.89..0.925).contains(&lognormal), "{lognormal}");
+        assert!((0.94..0.96).contains(&normal), "{normal}");
+        let huge = [1e150, 1.0, -1e150, 2.0, 3e150];
+        let mean = huge.iter().sum::<f64>() / 5.0;
+        let [lo, hi] = mean_interval(mean, &huge);
+        assert!(lo.is_finite() && hi.is_finite() && lo <= mean && mean <= hi);
     }
 
     #[test]
