@@ -276,9 +276,10 @@ pub struct SensitivityBin {
     /// when the regression is degenerate: an output that does not vary, say).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub r_squared: Option<f64>,
-    /// Why the Sobol' intervals are wider than the spread between devices alone: the values lie
-    /// so far from the value their sums are taken about that the sums' rounding widens an
-    /// interval by more than 0.001 either side (or leaves no digit of the variance).
+    /// Why the Sobol' intervals say other than the spread between devices: the values of one
+    /// device, whose intervals are their points; or values so far from the value their sums are
+    /// taken about that the sums' rounding widens an interval by more than 0.001 either side (or
+    /// leaves no digit of the variance).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
 }
@@ -321,6 +322,10 @@ impl SensitivityBin {
 /// How much the sums' rounding may widen an interval (either side, in the indices' units)
 /// before a bin says so.
 const WIDENING_SAID: f64 = 1e-3;
+
+/// Why a bin's Sobol' intervals are their points: the values of one device.
+const ONE_DEVICE: &str = "one device: the intervals come from the spread between devices, which \
+     one device cannot show, so each is its point; run two devices or more for intervals";
 
 /// Why a bin's Sobol' intervals include their rounding ([`SobolEstimate`]).
 fn rounding_reason(estimate: &SobolEstimate, shift: f64) -> String {
@@ -383,6 +388,9 @@ pub fn summarize_sensitivity(
         for (per, level_inputs, sobol) in levels {
             if per == Per::Operation && !with_operation {
                 continue;
+            }
+            if sobol.is_some_and(|sums| sums.clusters() == 1) {
+                reason.get_or_insert_with(|| ONE_DEVICE.to_owned());
             }
             let estimate = sobol.map(|sums| (sums.estimate(), sums.shift()));
             if let Some((estimate, shift)) = &estimate

@@ -282,11 +282,12 @@ impl SobolAccumulator {
         self.estimate().indices
     }
 
-    /// The indices of every input with their rounding. With fewer than two clusters, or an
-    /// output that does not vary from the shift, every index is 0 with the interval `[0, 0]`, as
-    /// SALib reports a constant output; one whose variance the sums' rounding leaves within
-    /// `64 eps` of its mean square about the shift (0 or below included) has every index 0 with
-    /// the interval `[0, 1]` (nothing known).
+    /// The indices of every input with their rounding. An output that does not vary from the
+    /// shift has every index 0 with the interval `[0, 0]`, as SALib reports a constant output;
+    /// one whose variance the sums' rounding leaves within `64 eps` of its mean square about the
+    /// shift (0 or below included) has every index 0 with the interval `[0, 1]` (nothing known),
+    /// or `[0, 0]` from one cluster. From one cluster (one device's operations) the indices are
+    /// estimated and each interval is its point: there is no spread between clusters to measure.
     pub fn estimate(&self) -> SobolEstimate {
         let n = self.n as f64;
         let variance = self.variance();
@@ -309,7 +310,7 @@ impl SobolAccumulator {
         };
         // The mean square about the shift, of which the variance is what rounding leaves.
         let square = (sums[4] + sums[5]) / (2.0 * n);
-        if self.clusters < 2 || square == 0.0 {
+        if square == 0.0 {
             return every(0.0, [0.0, 0.0], 0.0, 0.0);
         }
         if !(variance.is_finite() && square.is_finite()) {
@@ -317,8 +318,12 @@ impl SobolAccumulator {
             return every(f64::NAN, [f64::NAN; 2], 0.0, f64::NAN);
         }
         if variance <= 64.0 * f64::EPSILON * square {
-            // Negative or a few roundings of the mean square: no digit of it is left.
-            return every(0.0, [0.0, 1.0], 1.0, f64::INFINITY);
+            // One cluster's values alike (one device metric's value, say), or negative or a few
+            // roundings of the mean square: no digit of it is left.
+            return match self.clusters < 2 {
+                true => every(0.0, [0.0, 0.0], 0.0, 0.0),
+                false => every(0.0, [0.0, 1.0], 1.0, f64::INFINITY),
+            };
         }
         // The centre m of every evaluation, less the shift.
         let evaluations = n * (self.inputs() + 2) as f64;
@@ -351,6 +356,27 @@ impl SobolAccumulator {
             &self.weighted[input],
         );
         let m: [f64; Z] = sums.map(|s| s / n);
+        // dV/dm: V = (m4 + m5)/2 - ((m2 + m3)/2)^2.
+        let half_mean = (m[2] + m[3]) / 2.0;
+        let dv = [0.0, 0.0, -half_mean, -half_mean, 0.5, 0.5, 0.0];
+        // Numerators and their gradients: the first order's, centred,
+        // m0 - centre (m6 - m2); the total's, m1.
+        let first = (
+            m[0] - centre * (m[6] - m[2]),
+            [1.0, 0.0, centre, 0.0, 0.0, 0.0, -centre],
+        );
+        let total = (m[1], [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        if self.clusters < 2 {
+            let point = |(numerator, _): (f64, [f64; Z])| {
+                let value = numerator / variance;
+                IndexEstimate {
+                    value,
+                    ci95: [value, value],
+                }
+            };
+            let (first, total) = (point(first), point(total));
+            return (SobolIndices { first, total }, 0.0);
+        }
         // Covariance of the mean of z, from the spread between clusters.
         // Its terms, and the same by magnitude: what rounding scales with.
         let terms = |r: usize, s: usize| {
@@ -371,16 +397,6 @@ impl SobolAccumulator {
                 (terms.iter().sum(), terms.iter().map(|t| t.abs()).sum())
             })
         });
-        // dV/dm: V = (m4 + m5)/2 - ((m2 + m3)/2)^2.
-        let half_mean = (m[2] + m[3]) / 2.0;
-        let dv = [0.0, 0.0, -half_mean, -half_mean, 0.5, 0.5, 0.0];
-        // Numerators and their gradients: the first order's, centred,
-        // m0 - centre (m6 - m2); the total's, m1.
-        let first = (
-            m[0] - centre * (m[6] - m[2]),
-            [1.0, 0.0, centre, 0.0, 0.0, 0.0, -centre],
-        );
-        let total = (m[1], [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
         let (first, first_widening) = delta_interval(first, variance, dv, &table);
         let (total, total_widening) = delta_interval(total, variance, dv, &table);
         (

@@ -110,6 +110,36 @@ fn a_metric_one_parameter_fixes_has_index_one_for_it_and_zero_for_the_rest() {
     }
 }
 
+/// One device's operations: the indices are estimated from its values, each interval is its point
+/// (there is no spread between devices to measure) and the bin says so. They were 0 in `[0, 0]`,
+/// as of an output that does not vary (an outside probe: the velocity's own index 0, its
+/// regression coefficient 1). A device-level input does not vary within one device: index 0.
+#[test]
+fn one_devices_indices_are_estimated_and_their_intervals_are_points() {
+    let job = job(json!({
+        "devices": 1, "operations": 2000, "seed": 5,
+        "metrics": ["impact_velocity_m_s"],
+        "scatter": [
+            {"parameter": "impact_velocity_m_s", "per": "operation",
+             "distribution": {"kind": "uniform", "min": 0.1, "max": 0.4}},
+            {"parameter": "contact_radius_m", "per": "device",
+             "distribution": {"kind": "uniform", "min": 0.004, "max": 0.008}}
+        ],
+        "sensitivity": {"method": "sobol"}
+    }));
+    let result = run(Kernel::best(), 2, &job);
+    let bin = &result.sensitivity.as_ref().unwrap()["impact_velocity_m_s"][0];
+    let reason = bin.reason.as_deref().unwrap();
+    assert!(reason.starts_with("one device"), "{reason}");
+    let velocity = &bin.indices["impact_velocity_m_s"];
+    for index in [velocity.first.unwrap(), velocity.total.unwrap()] {
+        assert!((index.value - 1.0).abs() < 0.1, "{index:?}");
+        assert_eq!(index.ci95, [index.value; 2]);
+    }
+    let radius = &bin.indices["contact_radius_m"];
+    assert_eq!(radius.total.unwrap().ci95, [0.0; 2]);
+}
+
 /// The job's scenario with the parameter values `row` (one per scatter entry) in it.
 fn scenario_with(job: &Job, row: &[f64]) -> Value {
     let mut spec = job.scenario().spec().clone();
