@@ -445,6 +445,24 @@ def test_a_failed_job_crosses_a_process_boundary():
     assert str(again) == str(failed) and again.job.id == "j-1"
 
 
+def test_a_refusal_crosses_a_process_boundary(client):
+    import pickle
+    from concurrent.futures import ProcessPoolExecutor
+    with pytest.raises(BouncewearError) as refused:
+        client.submit({"devices": 0})
+    again = pickle.loads(pickle.dumps(refused.value))
+    assert (again.status, again.pointers, str(again)) == (422, ["/devices"], str(refused.value))
+    # Raised in a worker process, it reaches the caller whole (it broke the pool before).
+    with ProcessPoolExecutor(1) as pool:
+        with pytest.raises(BouncewearError) as remote:
+            pool.submit(_submit_nothing, BASE).result()
+    assert (remote.value.status, remote.value.pointers) == (422, ["/devices"])
+
+
+def _submit_nothing(base):
+    Client(base).submit({"devices": 0})
+
+
 def test_the_other_job_of_a_comparison_reaches_no_other_resource(client, job):
     with pytest.raises(BouncewearError) as unknown:
         job.compare(Job(client, {"id": f"{job.id}?metric=e1", "status": "succeeded"}))

@@ -73,6 +73,12 @@ class BouncewearError(Exception):
         """The JSON pointers of the fields at fault, in order."""
         return [e.pointer for e in self.errors]
 
+    def __reduce__(self) -> Any:
+        # Rebuilt from its fields, so that it crosses a process boundary (a process pool): an
+        # exception's own pickling passes its `args`, which a dataclass leaves empty.
+        fields = (self.status, self.title, self.detail, self.errors, self.retry_after)
+        return (BouncewearError, fields)
+
     @classmethod
     def from_response(cls, response: requests.Response) -> "BouncewearError":
         try:
