@@ -307,6 +307,56 @@ fn refusals_and_failures_exit_as_the_local_commands_do() {
     assert_eq!(said.matches("again in").count(), 1, "{said}");
 }
 
+/// Ctrl-C on `submit --wait` prints the job it queued (its id was lost: the interrupt ended the
+/// command with nothing printed, an outside probe) and how to follow it, and exits 130; the job
+/// goes on.
+#[test]
+fn an_interrupted_submit_wait_prints_the_job_it_queued() {
+    let server = TestApp::start(&temp_db("remote-interrupt"), &["--workers", "0"]);
+    let file = job_file(
+        "remote-interrupt-job",
+        &json!({"devices": 2, "operations": 2}),
+    );
+    let waiting = remote_at(server.base(), None, &["submit", &file, "--wait"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    let queued = loop {
+        let jobs = get(&server.url("/v1/jobs"), None).json();
+        if let Some(job) = jobs["jobs"].as_array().and_then(|jobs| jobs.first()) {
+            break job["id"].as_str().unwrap().to_owned();
+        }
+        assert!(started.elapsed().as_secs() < 30, "no job queued");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    // The submission's answer reaches the command a moment after the job is listed.
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let pid = waiting.id().to_string();
+    assert!(
+        Command::new("kill")
+            .args(["-INT", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let ended = waiting.wait_with_output().unwrap();
+    assert_eq!(ended.status.code(), Some(130));
+    let job: Value = serde_json::from_slice(&ended.stdout).unwrap();
+    assert_eq!(
+        (job["id"].as_str(), &job["status"]),
+        (Some(&queued[..]), &json!("queued"))
+    );
+    let said = String::from_utf8_lossy(&ended.stderr);
+    assert!(
+        said.contains(&format!("interrupted: job {queued} goes on")),
+        "{said}"
+    );
+    let still = get(&server.url(&format!("/v1/jobs/{queued}")), None).json();
+    assert_eq!(still["status"], "queued");
+}
+
 /// A full queue's 429 is asked again after its `Retry-After`: a submission made while the queue
 /// is full is queued once there is room, not lost; with `--retries 0` it fails at once. A wait
 /// of the queued job that times out says it is still queued.

@@ -484,9 +484,47 @@ pub fn submit(
         return Ok(job.to_string());
     }
     let id = id_of(&job)?;
+    on_interrupt_tell(&job, &id);
     wait_until(server, &id, deadline)?;
     let text = server.send_by("GET", &part_path(&id, Part::Result, ""), None, deadline)?;
     Ok(text.trim_end().to_owned())
+}
+
+/// From here until the process ends, an interrupt (Ctrl-C) prints `job`, the job resource
+/// `submit --wait` queued, says that the job goes on and how to follow it, and exits 130 as an
+/// interrupted command does. Without, the interrupt ended the command with nothing printed, and a
+/// script lost the id of the job it had queued (an outside probe).
+fn on_interrupt_tell(job: &serde_json::Value, id: &str) {
+    let Ok(runtime) = tokio::runtime::Builder::new_current_thread()
+        .enable_io()
+        .build()
+    else {
+        return;
+    };
+    // Listening before this returns, so that an interrupt from here on is ours; waited for on a
+    // thread of its own while this one waits on the server.
+    #[cfg(unix)]
+    let Ok(mut interrupts) = ({
+        let _entered = runtime.enter();
+        tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())
+    }) else {
+        return;
+    };
+    let (job, id) = (job.to_string(), id.to_owned());
+    std::thread::spawn(move || {
+        #[cfg(unix)]
+        runtime.block_on(interrupts.recv());
+        #[cfg(not(unix))]
+        if runtime.block_on(tokio::signal::ctrl_c()).is_err() {
+            return;
+        }
+        let _ = super::print_text(job);
+        super::stderr_line(format_args!(
+            "interrupted: job {id} goes on; `bouncewear wait {id}` waits for it, `bouncewear \
+             cancel {id}` cancels it"
+        ));
+        std::process::exit(130);
+    });
 }
 
 /// The moment `timeout` seconds from now, if given.
