@@ -642,11 +642,10 @@ fn summarize_devices(job: &Job, tally: &Tally) -> BTreeMap<String, Summary> {
         .collect()
 }
 
-/// The relative 95 % CI half-width of the precision statistic in the last bin (infinite when the
-/// statistic is 0 and the interval is not), and whether the data bound the statistic at all (a
-/// quantile level with a `reason` does not meet any target).
-/// The relative half-width of the target's statistic in the last bin, and why the data cannot
-/// bound it (a quantile's `reason`), if they cannot.
+/// The relative 95 % CI half-width of the precision statistic in the last bin (half the
+/// interval's width, which need not be symmetric; infinite when the statistic is 0 and the
+/// interval is not), and why the data cannot bound it (a quantile's `reason`: a level with one
+/// meets no target), if they cannot.
 fn precision_half_width(
     job: &Job,
     tally: &Tally,
