@@ -180,6 +180,8 @@ pub struct Exceedance {
 pub struct Summary {
     pub n: u64,
     pub mean: f64,
+    /// Batch means over the groups, Student's t through Hall's transformation for their
+    /// skewness: reaching further up than down where the values skew right.
     pub mean_ci95: [f64; 2],
     /// Sample standard deviation (`n - 1`); 0 for `n < 2`.
     pub sd: f64,
@@ -208,7 +210,8 @@ pub struct Summary {
 /// Intervals treat each non-empty group as one independent observation (the operations of one
 /// device are correlated, the groups are not); `G'` is the number of non-empty groups and
 /// `t = t_{0.975, G'-1}` ([`student_t_975`]) but for the quantiles and the exceedance (below):
-/// - `mean_ci95`: batch means, `mean +- t * sd(group means) / sqrt(G')`. Groups hold equal numbers
+/// - `mean_ci95`: batch means, `mean +- t * sd(group means) / sqrt(G')` through Hall's
+///   transformation for the group means' skewness (Hall, 1992). Groups hold equal numbers
 ///   of values where the devices are fewer than the groups or a multiple of them, and then the
 ///   unweighted spread of their means is the right one. Otherwise groups differ by one device,
 ///   and the unweighted spread errs wide on average: 48 devices (groups of one and two) gave a
