@@ -452,8 +452,10 @@ def test_a_refusal_crosses_a_process_boundary(client):
         client.submit({"devices": 0})
     again = pickle.loads(pickle.dumps(refused.value))
     assert (again.status, again.pointers, str(again)) == (422, ["/devices"], str(refused.value))
-    # Raised in a worker process, it reaches the caller whole (it broke the pool before).
-    with ProcessPoolExecutor(1) as pool:
+    # Raised in a worker process, it reaches the caller whole (it broke the pool before). Forked,
+    # so that the worker finds this module's function whatever the Python's default start method.
+    import multiprocessing
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
         with pytest.raises(BouncewearError) as remote:
             pool.submit(_submit_nothing, BASE).result()
     assert (remote.value.status, remote.value.pointers) == (422, ["/devices"])
