@@ -327,6 +327,15 @@ const WIDENING_SAID: f64 = 1e-3;
 const ONE_DEVICE: &str = "one device: the intervals come from the spread between devices, which \
      one device cannot show, so each is its point; run two devices or more for intervals";
 
+/// Why a level's Sobol' intervals say other than the spread between devices, if they do: the
+/// values of one device, or the sums' rounding widening them by more than [`WIDENING_SAID`].
+fn not_the_spread(sums: &SobolAccumulator, estimate: &SobolEstimate, shift: f64) -> Option<String> {
+    if sums.clusters() == 1 {
+        return Some(ONE_DEVICE.to_owned());
+    }
+    (estimate.widening > WIDENING_SAID).then(|| rounding_reason(estimate, shift))
+}
+
 /// Why a bin's Sobol' intervals include their rounding ([`SobolEstimate`]).
 fn rounding_reason(estimate: &SobolEstimate, shift: f64) -> String {
     let about = format!(
@@ -389,14 +398,9 @@ pub fn summarize_sensitivity(
             if per == Per::Operation && !with_operation {
                 continue;
             }
-            if sobol.is_some_and(|sums| sums.clusters() == 1) {
-                reason.get_or_insert_with(|| ONE_DEVICE.to_owned());
-            }
             let estimate = sobol.map(|sums| (sums.estimate(), sums.shift()));
-            if let Some((estimate, shift)) = &estimate
-                && estimate.widening > WIDENING_SAID
-            {
-                reason.get_or_insert_with(|| rounding_reason(estimate, *shift));
+            if let (Some(sums), Some((estimate, shift))) = (sobol, &estimate) {
+                reason = reason.or_else(|| not_the_spread(sums, estimate, *shift));
             }
             for (position, &input) in level_inputs.iter().enumerate() {
                 let estimate = estimate.as_ref().map(|(e, _)| e.indices[position]);
