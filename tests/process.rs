@@ -4,7 +4,7 @@
 use crate::support::app::{Service, Spawned, WorkerProcess};
 use crate::support::client::{agent, delete, get, reply};
 use crate::support::postgres::Postgres;
-use crate::support::{BIN, run_job, scattered_job, temp_db, temp_dir};
+use crate::support::{BIN, run_job, scattered_job, send_signal, temp_db, temp_dir};
 use serde_json::{Value, json};
 use std::process::Command;
 use std::sync::mpsc::Receiver;
@@ -67,14 +67,7 @@ fn sigterm_cuts_off_a_response_its_client_reads_too_slowly() {
     reader.read_exact(&mut first).unwrap();
     let mut server = server;
     let signalled = Instant::now();
-    let pid = server.child.id().to_string();
-    assert!(
-        Command::new("kill")
-            .args(["-TERM", &pid])
-            .status()
-            .unwrap()
-            .success()
-    );
+    send_signal(server.child.id(), "-TERM");
     let exit = server.child.wait().unwrap();
     let took = signalled.elapsed();
     assert!(exit.success(), "{exit:?}");
@@ -100,11 +93,8 @@ fn a_second_sigterm_ends_a_graceful_stop_at_once() {
     writer.flush().unwrap();
     std::thread::sleep(Duration::from_millis(300));
     let mut server = server;
-    let pid = server.child.id().to_string();
-    let terminate = || {
-        let sent = Command::new("kill").args(["-TERM", &pid]).status().unwrap();
-        assert!(sent.success());
-    };
+    let pid = server.child.id();
+    let terminate = || send_signal(pid, "-TERM");
     terminate();
     std::thread::sleep(Duration::from_secs(1));
     assert!(
@@ -137,12 +127,7 @@ fn stopping_hands_a_running_job_back_to_the_queue(signal: &str) {
     let server = Spawned::start(&database, &[]);
     let id = server.submit(&scattered_job(200_000, 1000, 3));
     server.wait_for(&id, "running", Duration::from_secs(10));
-    let pid = server.child.id();
-    let status = Command::new("kill")
-        .args([signal, &pid.to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    send_signal(server.child.id(), signal);
     let mut server = server;
     let exit = server.child.wait().unwrap();
     assert!(exit.success(), "{exit:?}");
@@ -482,11 +467,7 @@ fn a_worker_process_runs_what_an_api_only_server_queued_and_stops_cleanly_on_sig
             scraped.body
         );
     }
-    let status = Command::new("kill")
-        .args(["-TERM", &worker.child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    send_signal(worker.child.id(), "-TERM");
     assert!(worker.child.wait().unwrap().success());
 }
 

@@ -4,7 +4,9 @@
 use crate::support::app::{Service, Spawned, TestApp, WorkerProcess};
 use crate::support::client::{agent, assert_problem, delete, get, post};
 use crate::support::postgres::Postgres;
-use crate::support::{run_job, scattered_job, submit_concurrently, temp_dir, wearing_template};
+use crate::support::{
+    run_job, scattered_job, send_signal, submit_concurrently, temp_dir, wearing_template,
+};
 use serde_json::json;
 use std::io::{BufRead, BufReader};
 use std::time::{Duration, Instant};
@@ -326,13 +328,7 @@ fn a_worker_frozen_inside_a_transaction_holds_its_shard_no_longer_than_5_s() {
     let server = TestApp::on(&url, &["--workers", "0"]);
     let lease = ["--workers", "1", "--lease-seconds", "1"];
     let frozen = WorkerProcess::start(&url, &lease);
-    let signal = |which: &str| {
-        let sent = std::process::Command::new("kill")
-            .args([which, &frozen.child.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(sent.success());
-    };
+    let signal = |which: &str| send_signal(frozen.child.id(), which);
     // Stopped until caught with a write transaction open (a group's store, a claim, a
     // heartbeat), a few milliseconds in each shard's run: tried again job after job.
     let idle_in_transaction = "SELECT a.pid FROM pg_stat_activity a JOIN pg_locks l ON l.pid = a.pid \

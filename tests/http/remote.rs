@@ -4,7 +4,7 @@
 use crate::support::app::{Service, TestApp};
 use crate::support::client::get;
 use crate::support::tls;
-use crate::support::{BIN, temp_db, temp_dir};
+use crate::support::{BIN, send_signal, temp_db, temp_dir};
 use serde_json::{Value, json};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -333,14 +333,7 @@ fn an_interrupted_submit_wait_prints_the_job_it_queued() {
     };
     // The submission's answer reaches the command a moment after the job is listed.
     std::thread::sleep(std::time::Duration::from_millis(500));
-    let pid = waiting.id().to_string();
-    assert!(
-        Command::new("kill")
-            .args(["-INT", &pid])
-            .status()
-            .unwrap()
-            .success()
-    );
+    send_signal(waiting.id(), "-INT");
     let ended = waiting.wait_with_output().unwrap();
     assert_eq!(ended.status.code(), Some(130));
     let job: Value = serde_json::from_slice(&ended.stdout).unwrap();

@@ -62,6 +62,15 @@ fn binary_dir() -> &'static Path {
     })
 }
 
+/// Sends `signal` (`-TERM`, `-INT`, `-STOP`, ...) to the process `pid`, as `kill` does.
+pub fn send_signal(pid: u32, signal: &str) {
+    let sent = Command::new("kill")
+        .args([signal, &pid.to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success(), "kill {signal} {pid}");
+}
+
 /// A database file of its own for one test.
 pub fn temp_db(name: &str) -> PathBuf {
     temp_dir(name).join("bouncewear.db")
