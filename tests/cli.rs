@@ -4,6 +4,7 @@
 use crate::support::{bouncewear, run_job, temp_dir, without_timing};
 use bouncewear_model::{Fidelity, Scenario, simulate};
 use serde_json::Value;
+use std::path::Path;
 
 /// Runs the binary with `args`, its standard output a disk that is always full.
 fn to_dev_full(args: &[&str]) -> std::process::Output {
@@ -783,6 +784,76 @@ fn bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal(
         std::fs::read_to_string(out.join("report.md"))
             .unwrap()
             .contains("| paper eq. 9/10, e = 0.4 (")
+    );
+    measure_the_intervals_again(&out, &report);
+}
+
+/// `bench --only intervals` over the report [`bench_quick_writes_the_report_in_all_three_forms_with_progress_on_a_terminal`]
+/// wrote: the coverage table over the seeds asked now, the seeded tail and calibration tables
+/// the same to the bit, every timed figure as it was; a directory with no report, or one
+/// measured with `--quick` asked again without it, is refused (exit 2) before any work.
+fn measure_the_intervals_again(out: &Path, before: &Value) {
+    let out_arg = out.to_str().unwrap();
+    let again = bouncewear(
+        &[
+            "bench",
+            "--quick",
+            "--coverage-seeds",
+            "5",
+            "--only",
+            "intervals",
+            "--out",
+            out_arg,
+        ],
+        "",
+    );
+    assert!(again.status.success(), "{again:?}");
+    let after: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    for kept in [
+        "tiers",
+        "paper_forms",
+        "sampling",
+        "throughput",
+        "skips",
+        "engine",
+        "rare_events",
+        "tail_coverage",
+        "calibration_coverage",
+    ] {
+        assert_eq!(after[kept], before[kept], "{kept}");
+    }
+    let coverage = after["coverage"].as_array().unwrap();
+    assert_eq!(coverage.len(), before["coverage"].as_array().unwrap().len());
+    assert!(coverage.iter().all(|row| row["seeds"] == 5), "{coverage:?}");
+    assert_eq!(after["machine"]["coverage_seeds"], 5);
+    let markdown = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(
+        markdown.contains("measured again over it with `bouncewear bench --quick --coverage-seeds 5 --only intervals`"),
+        "{markdown}"
+    );
+    let empty = temp_dir("bench-none");
+    let refused = bouncewear(
+        &[
+            "bench",
+            "--quick",
+            "--only",
+            "intervals",
+            "--out",
+            empty.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(refused.status.code(), Some(2), "{refused:?}");
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("report.json"),
+        "{refused:?}"
+    );
+    let refused = bouncewear(&["bench", "--only", "intervals", "--out", out_arg], "");
+    assert_eq!(refused.status.code(), Some(2), "{refused:?}");
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("measured with --quick"),
+        "{refused:?}"
     );
 }
 

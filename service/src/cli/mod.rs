@@ -216,6 +216,11 @@ enum Command {
         /// seeds, a smaller standard error of the coverage (1.1 points at 400, 0.55 at 1600).
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
         coverage_seeds: Option<u32>,
+        /// Measure only this part again, over the report `--out` holds (from a run with the
+        /// same `--quick`), and keep its other figures as they are: the interval tables change
+        /// with the code of an interval, not with the machine, while the speed does.
+        #[arg(long, value_enum)]
+        only: Option<bench::Only>,
         /// Worker threads (default: one per core).
         #[arg(long)]
         threads: Option<usize>,
@@ -325,11 +330,14 @@ impl From<PoolError> for CliError {
 }
 
 /// The report's directory was made before the bench ran ([`output_directory`]): a file of it
-/// that cannot be written then is a failure, exit 1.
+/// that cannot be written then is a failure, exit 1. The report `--only` measures again is the
+/// user's path: missing or not a report, exit 2.
 impl From<BenchError> for CliError {
     fn from(error: BenchError) -> Self {
         match error {
             BenchError::Write { path, source } => CliError::Write { path, source },
+            BenchError::Read { path, source } => CliError::Io { path, source },
+            error @ BenchError::NotTheReport { .. } => CliError::Usage(error.to_string()),
         }
     }
 }
@@ -540,9 +548,10 @@ fn run(cli: Cli) -> Result<(), CliError> {
             quick,
             out,
             coverage_seeds,
+            only,
             threads,
             quiet,
-        } => bench_command(&out, quick, coverage_seeds, threads, quiet),
+        } => bench_command(&out, quick, coverage_seeds, only, threads, quiet),
     }
 }
 
@@ -551,13 +560,20 @@ fn bench_command(
     out: &Path,
     quick: bool,
     coverage_seeds: Option<u32>,
+    only: Option<bench::Only>,
     threads: Option<usize>,
     quiet: bool,
 ) -> Result<(), CliError> {
     let pool = thread_pool(threads)?;
+    let earlier = only
+        .map(|only| bench::read_report(out, quick).map(|report| (only, report)))
+        .transpose()?;
     output_directory("--out", out)?;
-    let progress = Progress::steps(quiet, bench::measurements(quick));
-    let report = pool.install(|| bench::bench(out, quick, coverage_seeds, &progress));
+    let progress = Progress::steps(quiet, bench::measurements(quick, only));
+    let report = pool.install(|| match earlier {
+        None => bench::bench(out, quick, coverage_seeds, &progress),
+        Some((only, report)) => bench::measure_again(report, only, out, coverage_seeds, &progress),
+    });
     progress.finish();
     let report = report?;
     if !quiet {

@@ -6,18 +6,18 @@ use super::speed::run;
 use crate::progress::Progress;
 use bouncewear_model::montecarlo::{Job, Metric, OperationMetric, Silent};
 use bouncewear_model::stats::Accumulator;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 use std::time::Instant;
 
 /// How often the nominal 95 % intervals of a small job cover the truth, and how wide they are: one
 /// design of scatter, one statistic.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct Coverage {
-    pub design: &'static str,
+    pub design: String,
     /// Devices per job.
     pub devices: u64,
-    pub statistic: &'static str,
+    pub statistic: String,
     /// Jobs (seeds) run.
     pub seeds: u32,
     /// Of those, the jobs whose data could bound the statistic (a quantile level too extreme for
@@ -26,6 +26,11 @@ pub struct Coverage {
     pub coverage: f64,
     /// The mean of the intervals' half-widths relative to the truth.
     pub mean_relative_half_width: f64,
+}
+
+/// The seeds (jobs) of each coverage figure when `--coverage-seeds` is not given.
+pub(super) fn default_coverage_seeds(quick: bool) -> u32 {
+    if quick { 20 } else { 400 }
 }
 
 /// The designs: which of the parameters scatter, and how (radius and hardness per
@@ -171,8 +176,8 @@ fn coverage_run(job: &Job, exceedance_above: f64) -> (Vec<Estimate>, Accumulator
 /// (quick: 2.5) times the largest: its own error then widens the spread an interval must cover by
 /// under 0.4 %.
 pub(super) fn coverage(quick: bool, seeds: Option<u32>, progress: &Progress) -> Vec<Coverage> {
-    let (default_seeds, truth_devices) = if quick { (20_u32, 1280) } else { (400, 64_000) };
-    let seeds = seeds.unwrap_or(default_seeds);
+    let truth_devices = if quick { 1280 } else { 64_000 };
+    let seeds = seeds.unwrap_or(default_coverage_seeds(quick));
     let mut rows = Vec::new();
     for (design, levels) in COVERAGE_DESIGNS {
         // The exceedance threshold is the truth's p90, so the true probability is about 0.1; the
@@ -204,9 +209,9 @@ pub(super) fn coverage(quick: bool, seeds: Option<u32>, progress: &Progress) -> 
                     for ((statistic, _, _), (hit, given, width)) in truth.iter().zip(hits) {
                         let given_f = f64::from(given.max(1));
                         rows.push(Coverage {
-                            design,
+                            design: design.into(),
                             devices,
-                            statistic,
+                            statistic: statistic.to_string(),
                             seeds,
                             answered: given,
                             coverage: f64::from(hit) / given_f,
@@ -221,9 +226,9 @@ pub(super) fn coverage(quick: bool, seeds: Option<u32>, progress: &Progress) -> 
 }
 
 /// How often the exceedance intervals of one kind cover an exact tail probability.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TailCoverage {
-    pub statistic: &'static str,
+    pub statistic: String,
     /// Values per job.
     pub values: u64,
     /// The exact probability beyond the threshold.
@@ -294,7 +299,7 @@ pub(super) fn tail_coverage(quick: bool, progress: &Progress) -> Vec<TailCoverag
             .zip(hits)
             .zip([counted, asked])
             .map(|((statistic, (hit, exact, width)), x)| TailCoverage {
-                statistic,
+                statistic: statistic.into(),
                 values: devices * 1000,
                 probability: truth(x),
                 seeds,
@@ -306,10 +311,10 @@ pub(super) fn tail_coverage(quick: bool, progress: &Progress) -> Vec<TailCoverag
     })
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CalibrationCoverage {
-    pub case: &'static str,
-    pub parameter: &'static str,
+    pub case: String,
+    pub parameter: String,
     pub truth: f64,
     /// The first of the noise draws' seeds, each fitted once.
     pub first_seed: u64,
@@ -338,8 +343,8 @@ pub(super) fn calibration_coverage(quick: bool, progress: &Progress) -> Vec<Cali
                 let shares = coverage.profile.into_iter().zip(coverage.linear_reference);
                 rows.extend(case.truths.iter().zip(shares).map(
                     |(&(parameter, truth), (coverage, linear_reference))| CalibrationCoverage {
-                        case: case.name,
-                        parameter,
+                        case: case.name.into(),
+                        parameter: parameter.into(),
                         truth,
                         first_seed: seeds.start,
                         draws: seeds.end - seeds.start,
@@ -358,9 +363,9 @@ pub(super) const RARE_EVENT_STUDIES: usize = 7;
 
 /// How one rare-event method fares at one probability: its intervals against the exact tail, its
 /// precision and its cost.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct RareEventCoverage {
-    pub method: &'static str,
+    pub method: String,
     /// The exact probability beyond the threshold.
     pub probability: f64,
     pub target_cov: f64,
@@ -438,7 +443,7 @@ pub(super) fn rare_event_coverage(quick: bool, progress: &Progress) -> Vec<RareE
                 }
                 let n = f64::from(seeds);
                 rows.push(RareEventCoverage {
-                    method,
+                    method: method.into(),
                     probability: truth,
                     target_cov,
                     seeds,

@@ -18,10 +18,10 @@ use bouncewear_model::Fidelity;
 use bouncewear_model::calibration;
 use intervals::{
     COVERAGE_DESIGNS, COVERAGE_DEVICES, RARE_EVENT_STUDIES, calibration_coverage, coverage,
-    rare_event_coverage, tail_coverage,
+    default_coverage_seeds, rare_event_coverage, tail_coverage,
 };
 pub use intervals::{CalibrationCoverage, Coverage, RareEventCoverage, TailCoverage};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 pub use speed::{EngineRow, PaperForm, Sampling, Skip, Throughput, Tier};
 use speed::{
     PAPER_FORMS, SAMPLERS, THROUGHPUT_JOBS, THROUGHPUT_METRICS, engine_row, paper_form,
@@ -29,7 +29,7 @@ use speed::{
 };
 use std::path::Path;
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct Report {
     pub machine: Machine,
     pub tiers: Vec<Tier>,
@@ -47,11 +47,29 @@ pub struct Report {
     pub rare_events: Vec<RareEventCoverage>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct Machine {
     pub threads: usize,
     pub quick: bool,
-    pub version: &'static str,
+    /// The seeds (jobs) each figure of the coverage table is over (`--coverage-seeds`).
+    #[serde(default)]
+    pub coverage_seeds: Option<u32>,
+    pub version: String,
+    /// Whether `bench --only intervals` measured the interval tables again over a report of
+    /// another run: their jobs are seeded and untimed, so the same figures come on every machine,
+    /// while the speed beside them stays as the first run measured it.
+    #[serde(default)]
+    pub intervals_measured_again: bool,
+}
+
+/// A part of the report `bench --only` measures again, keeping the rest as the report in
+/// `--out` has it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Only {
+    /// The coverage of the intervals, of small exceedance probabilities and of calibration
+    /// fits: figures of seeded jobs that no clock enters, the same on every machine (rare
+    /// events are timed, so they are measured with the speed).
+    Intervals,
 }
 
 /// Why `bench` could not finish. Every measurement runs fixed, valid jobs, so only the report's
@@ -63,20 +81,35 @@ pub enum BenchError {
         path: String,
         source: std::io::Error,
     },
+    /// `--only` found no report in `--out` to measure again.
+    #[error("{path}: {source}")]
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
+    /// `--only` found a file that is not a report `bench` wrote, or one measured with(out)
+    /// `--quick` when this run is not.
+    #[error("{path}: {reason}")]
+    NotTheReport { path: String, reason: String },
 }
 
-/// How many measurements [`bench`] makes, for its progress bar.
-pub fn measurements(quick: bool) -> u64 {
-    let count = Fidelity::ALL.len()
-        + PAPER_FORMS.len()
-        + SAMPLERS.len() * sampled_devices(quick).len()
-        + THROUGHPUT_JOBS.len() * THROUGHPUT_METRICS.len()
-        + 1
-        + THROUGHPUT_JOBS.len()
-        + COVERAGE_DESIGNS.len() * COVERAGE_DEVICES.len()
-        + 1
-        + calibration::study::CASES.len()
-        + RARE_EVENT_STUDIES;
+/// How many measurements [`bench`] makes (with `only`, [`measure_again`]), for its progress bar.
+pub fn measurements(quick: bool, only: Option<Only>) -> u64 {
+    let intervals =
+        COVERAGE_DESIGNS.len() * COVERAGE_DEVICES.len() + 1 + calibration::study::CASES.len();
+    let count = match only {
+        Some(Only::Intervals) => intervals,
+        None => {
+            Fidelity::ALL.len()
+                + PAPER_FORMS.len()
+                + SAMPLERS.len() * sampled_devices(quick).len()
+                + THROUGHPUT_JOBS.len() * THROUGHPUT_METRICS.len()
+                + 1
+                + THROUGHPUT_JOBS.len()
+                + intervals
+                + RARE_EVENT_STUDIES
+        }
+    };
     count as u64
 }
 
@@ -92,7 +125,9 @@ pub fn bench(
         machine: Machine {
             threads: rayon::current_num_threads(),
             quick,
-            version: env!("CARGO_PKG_VERSION"),
+            coverage_seeds: Some(coverage_seeds.unwrap_or(default_coverage_seeds(quick))),
+            version: env!("CARGO_PKG_VERSION").into(),
+            intervals_measured_again: false,
         },
         tiers: Fidelity::ALL
             .iter()
@@ -122,6 +157,64 @@ pub fn bench(
         calibration_coverage: calibration_coverage(quick, progress),
         rare_events: rare_event_coverage(quick, progress),
     };
+    write_report(out, &report)?;
+    Ok(report)
+}
+
+/// The report `bench` wrote into `out` before, read for [`measure_again`]: refused when it is
+/// not one, or was measured with(out) `--quick` when this run is not, since its tables would
+/// then mix two sizes of study.
+pub fn read_report(out: &Path, quick: bool) -> Result<Report, BenchError> {
+    let path = out.join("report.json");
+    let text = std::fs::read_to_string(&path).map_err(|source| BenchError::Read {
+        path: path.display().to_string(),
+        source,
+    })?;
+    let not_the_report = |reason: String| BenchError::NotTheReport {
+        path: path.display().to_string(),
+        reason,
+    };
+    let report: Report = serde_json::from_str(&text)
+        .map_err(|error| not_the_report(format!("not a report of `bench`: {error}")))?;
+    if report.machine.quick != quick {
+        let (was, is) = if quick {
+            ("without", "with")
+        } else {
+            ("with", "without")
+        };
+        return Err(not_the_report(format!(
+            "measured {was} --quick, so measure it again {was} it (this run is {is})"
+        )));
+    }
+    Ok(report)
+}
+
+/// Measures the `only` part of `report` again on the current rayon pool and rewrites
+/// `report.{json,md,svg}` in `out`, every other figure kept as it was.
+pub fn measure_again(
+    mut report: Report,
+    only: Only,
+    out: &Path,
+    coverage_seeds: Option<u32>,
+    progress: &Progress,
+) -> Result<Report, BenchError> {
+    let quick = report.machine.quick;
+    match only {
+        Only::Intervals => {
+            report.coverage = coverage(quick, coverage_seeds, progress);
+            report.tail_coverage = tail_coverage(quick, progress);
+            report.calibration_coverage = calibration_coverage(quick, progress);
+            report.machine.coverage_seeds =
+                Some(coverage_seeds.unwrap_or(default_coverage_seeds(quick)));
+            report.machine.intervals_measured_again = true;
+        }
+    }
+    write_report(out, &report)?;
+    Ok(report)
+}
+
+/// `report.{json,md,svg}` written into `out`.
+fn write_report(out: &Path, report: &Report) -> Result<(), BenchError> {
     std::fs::create_dir_all(out).map_err(|source| io_error(out, source))?;
     let write = |name: &str, text: String| {
         let path = out.join(name);
@@ -129,11 +222,10 @@ pub fn bench(
     };
     write(
         "report.json",
-        serde_json::to_string_pretty(&report).expect("a report serialises") + "\n",
+        serde_json::to_string_pretty(report).expect("a report serialises") + "\n",
     )?;
-    write("report.md", report::markdown(&report))?;
-    write("report.svg", report::svg(&report))?;
-    Ok(report)
+    write("report.md", report::markdown(report))?;
+    write("report.svg", report::svg(report))
 }
 
 fn io_error(path: &Path, source: std::io::Error) -> BenchError {

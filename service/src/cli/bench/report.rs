@@ -8,12 +8,25 @@ use std::fmt::Write as _;
 /// `report.md`: a heading, then one section per measurement, each a short text and a table.
 pub(super) fn markdown(report: &Report) -> String {
     let machine = &report.machine;
+    let seeds = machine
+        .coverage_seeds
+        .map(|seeds| format!(" --coverage-seeds {seeds}"))
+        .unwrap_or_default();
+    let quick = if machine.quick { " --quick" } else { "" };
+    let again = if machine.intervals_measured_again {
+        format!(
+            " The interval tables (coverage, tail, calibration) were measured again over it with \
+             `bouncewear bench{quick}{seeds} --only intervals`: their jobs are seeded and untimed, \
+             so they give the same figures on every machine."
+        )
+    } else {
+        String::new()
+    };
     let mut md = format!(
-        "# bouncewear speed against error\n\n`bouncewear bench{}` on {} threads, version {}. \
-         Regenerate with the same command.\n\n![work-precision plot](report.svg)\n\n",
-        if machine.quick { " --quick" } else { "" },
-        machine.threads,
-        machine.version
+        "# bouncewear speed against error\n\n`bouncewear bench{quick}{seeds}` on {} threads, \
+         version {}. Regenerate with the same command.{again}\n\n\
+         ![work-precision plot](report.svg)\n\n",
+        machine.threads, machine.version
     );
     let sections = [
         tiers(report),
@@ -189,7 +202,7 @@ fn engine(report: &Report) -> Section {
                     format!("{:.3}", row.run_process_s),
                     optional(row.numpy_peer_process_s, 3),
                     optional(row.numba_peer_process_s, 3),
-                    row.peer.unwrap_or("-").to_owned(),
+                    row.peer.as_deref().unwrap_or("-").to_owned(),
                     optional(row.ratio, 1),
                 ]
             })
@@ -435,12 +448,17 @@ mod tests {
     /// A report with one row of each kind, as `bench` would make it, with the peers' times.
     fn report(numpy: Option<f64>, numba: Option<f64>) -> Report {
         let faster = speed::faster_peer(&[("numpy", numpy), ("numba", numba)]);
-        let errors = BTreeMap::from([("total_bounce_s", 1.5e-9), ("e1", 2.5e-12)]);
+        let errors = BTreeMap::from([
+            ("total_bounce_s".to_owned(), 1.5e-9),
+            ("e1".to_owned(), 2.5e-12),
+        ]);
         Report {
             machine: Machine {
                 threads: 2,
                 quick: true,
-                version: "0.1.0",
+                coverage_seeds: Some(20),
+                version: "0.1.0".into(),
+                intervals_measured_again: false,
             },
             tiers: vec![Tier {
                 fidelity: Fidelity::Exact,
@@ -449,32 +467,32 @@ mod tests {
                 median_rel_error: errors.clone(),
             }],
             paper_forms: vec![PaperForm {
-                form: "eq. 10",
+                form: "eq. 10".into(),
                 scenarios: 53,
                 ns_per_op: 4.25,
                 max_rel_error: errors.clone(),
                 median_rel_error: errors,
             }],
             sampling: vec![Sampling {
-                sampler: "lhs",
+                sampler: "lhs".into(),
                 devices: 1000,
                 wall_s: 0.0123,
                 ci_half_width_rel: 0.00456,
             }],
             throughput: vec![Throughput {
-                job: "48 V / 15 A",
+                job: "48 V / 15 A".into(),
                 devices: 8000,
                 operations: 1000,
-                metrics: "all",
+                metrics: "all".into(),
                 operations_per_s: 2.345e7,
             }],
             skips: vec![Skip {
-                skip: "no wear",
+                skip: "no wear".into(),
                 ns_per_op_doing_it: 52.0,
                 ns_per_op_skipping: 31.0,
             }],
             engine: vec![EngineRow {
-                job: "mechanical",
+                job: "mechanical".into(),
                 devices: 2000,
                 operations: 500,
                 kernel: "avx512".to_owned(),
@@ -486,21 +504,21 @@ mod tests {
                 run_process_s: 0.5,
                 numpy_peer_process_s: numpy,
                 numba_peer_process_s: numba,
-                peer: faster.map(|(name, _)| name),
+                peer: faster.map(|(name, _)| name.into()),
                 peer_process_s: faster.map(|(_, seconds)| seconds),
                 ratio: faster.map(|(_, seconds)| seconds / 0.5),
             }],
             coverage: vec![Coverage {
-                design: "radius, hardness",
+                design: "radius, hardness".into(),
                 devices: 512,
-                statistic: "p95",
+                statistic: "p95".into(),
                 seeds: 400,
                 answered: 399,
                 coverage: 0.9475,
                 mean_relative_half_width: 0.0123,
             }],
             tail_coverage: vec![TailCoverage {
-                statistic: "exceedance, after the run",
+                statistic: "exceedance, after the run".into(),
                 values: 10_000_000,
                 probability: 1.04e-4,
                 seeds: 200,
@@ -509,8 +527,8 @@ mod tests {
                 mean_relative_half_width: 0.063,
             }],
             calibration_coverage: vec![CalibrationCoverage {
-                case: "wear curve",
-                parameter: "roughening_energy_j",
+                case: "wear curve".into(),
+                parameter: "roughening_energy_j".into(),
                 truth: 0.5,
                 first_seed: 1000,
                 draws: 1000,
@@ -518,7 +536,7 @@ mod tests {
                 linear_reference: 0.945,
             }],
             rare_events: vec![RareEventCoverage {
-                method: "subset",
+                method: "subset".into(),
                 probability: 1e-6,
                 target_cov: 0.1,
                 seeds: 20,
@@ -573,7 +591,36 @@ mod tests {
         }
         // Two tiers' metrics plus the paper form's.
         assert_eq!(tables[0].1.len(), 4);
-        assert!(md.starts_with("# bouncewear speed against error\n\n`bouncewear bench --quick` on 2 threads, version 0.1.0."));
+        assert!(md.starts_with(
+            "# bouncewear speed against error\n\n`bouncewear bench --quick --coverage-seeds 20` \
+             on 2 threads, version 0.1.0. Regenerate with the same command.\n\n"
+        ));
+    }
+
+    #[test]
+    fn a_report_reads_back_as_written_and_says_when_its_intervals_were_measured_again() {
+        let mut written = report(Some(12.25), Some(14.0));
+        let json = serde_json::to_string_pretty(&written).unwrap();
+        let read: Report = serde_json::from_str(&json).unwrap();
+        assert_eq!(serde_json::to_string_pretty(&read).unwrap(), json);
+        assert_eq!(markdown(&read), markdown(&written));
+        written.machine.intervals_measured_again = true;
+        let md = markdown(&written);
+        assert!(
+            md.contains(
+                "Regenerate with the same command. The interval tables (coverage, tail, \
+                 calibration) were measured again over it with `bouncewear bench --quick \
+                 --coverage-seeds 20 --only intervals`"
+            ),
+            "{md}"
+        );
+        // A report from before the seeds were recorded reads, and names none.
+        let mut old: serde_json::Value = serde_json::from_str(&json).unwrap();
+        let machine = old["machine"].as_object_mut().unwrap();
+        machine.remove("coverage_seeds");
+        machine.remove("intervals_measured_again");
+        let old: Report = serde_json::from_value(old).unwrap();
+        assert!(markdown(&old).contains("`bouncewear bench --quick` on 2 threads"));
     }
 
     #[test]

@@ -12,7 +12,7 @@ use bouncewear_model::montecarlo::{
 use bouncewear_model::paper_forms::{BounceTimes, constant_restitution, simplified_electrical};
 use bouncewear_model::wear::WearLaw;
 use bouncewear_model::{Fidelity, Needs, Operation, Outcome, Pointer, Scenario};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
 use std::hint::black_box;
@@ -22,49 +22,49 @@ use std::time::Instant;
 const REFERENCE: &str = include_str!("../../../../tests/data/reference_spread.json");
 const REFERENCE_JOBS: &str = include_str!("../../../../tests/data/reference_jobs.json");
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct Tier {
     pub fidelity: Fidelity,
     pub ns_per_op: f64,
-    pub max_rel_error: BTreeMap<&'static str, f64>,
-    pub median_rel_error: BTreeMap<&'static str, f64>,
+    pub max_rel_error: BTreeMap<String, f64>,
+    pub median_rel_error: BTreeMap<String, f64>,
 }
 
 /// One of the paper's closed forms of the bounce times (docs/model.md section 7), over the
 /// reference scenarios it applies to: its cost and its error against the exact model.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct PaperForm {
-    pub form: &'static str,
+    pub form: String,
     /// How many of the reference scenarios it applies to (`F_s > 0`; arcing for eq. 17/19) and
     /// in which the exact model bounces.
     pub scenarios: usize,
     pub ns_per_op: f64,
-    pub max_rel_error: BTreeMap<&'static str, f64>,
-    pub median_rel_error: BTreeMap<&'static str, f64>,
+    pub max_rel_error: BTreeMap<String, f64>,
+    pub median_rel_error: BTreeMap<String, f64>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct Sampling {
-    pub sampler: &'static str,
+    pub sampler: String,
     pub devices: u64,
     pub wall_s: f64,
     pub ci_half_width_rel: f64,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct Throughput {
-    pub job: &'static str,
+    pub job: String,
     pub devices: u64,
     pub operations: u64,
-    pub metrics: &'static str,
+    pub metrics: String,
     pub operations_per_s: f64,
 }
 
 /// One reference job: the engine per operation and thread, one device at a time and in lockstep,
 /// next to the floor; then the whole `bouncewear run` process against the faster of the peers.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct EngineRow {
-    pub job: &'static str,
+    pub job: String,
     pub devices: u64,
     pub operations: u64,
     pub kernel: String,
@@ -84,15 +84,15 @@ pub struct EngineRow {
     /// first of the three runs compiles and caches the machine code, so the best loads it.
     pub numba_peer_process_s: Option<f64>,
     /// The faster peer, `numpy` or `numba`, and its wall time.
-    pub peer: Option<&'static str>,
+    pub peer: Option<String>,
     pub peer_process_s: Option<f64>,
     /// The faster peer's wall time over ours.
     pub ratio: Option<f64>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct Skip {
-    pub skip: &'static str,
+    pub skip: String,
     pub ns_per_op_doing_it: f64,
     pub ns_per_op_skipping: f64,
 }
@@ -166,7 +166,7 @@ pub(super) fn tier(fidelity: Fidelity, quick: bool) -> Tier {
 }
 
 /// Relative errors by metric name.
-type Errors = BTreeMap<&'static str, f64>;
+type Errors = BTreeMap<String, f64>;
 
 /// The median and largest relative error of each metric over `(got, want)` pairs.
 fn relative_errors(
@@ -188,10 +188,13 @@ fn relative_errors(
             .collect();
         errors.sort_by(f64::total_cmp);
         median.insert(
-            metric.name(),
+            metric.name().to_owned(),
             errors.get(errors.len() / 2).copied().unwrap_or(0.0),
         );
-        max.insert(metric.name(), errors.last().copied().unwrap_or(0.0));
+        max.insert(
+            metric.name().to_owned(),
+            errors.last().copied().unwrap_or(0.0),
+        );
     }
     (median, max)
 }
@@ -241,7 +244,7 @@ pub(super) fn paper_form(name: &'static str, form: ClosedForm, quick: bool) -> P
             .collect()
     });
     PaperForm {
-        form: name,
+        form: name.into(),
         scenarios: operations.len(),
         ns_per_op,
         max_rel_error,
@@ -310,7 +313,7 @@ pub(super) fn sampling(quick: bool, progress: &Progress) -> Vec<Sampling> {
                 });
             let p95 = &result.operations["total_bounce_s"][0].summary.quantiles["p95"];
             rows.push(Sampling {
-                sampler: if sampler == "lhs" { "lhs" } else { "random" },
+                sampler: if sampler == "lhs" { "lhs" } else { "random" }.into(),
                 devices,
                 wall_s: result.timing.wall_s,
                 ci_half_width_rel: 0.5 * (p95.ci95[1] - p95.ci95[0]) / p95.value,
@@ -335,10 +338,10 @@ pub(super) fn throughput(quick: bool, progress: &Progress) -> Vec<Throughput> {
             let job = reference_job(devices, operations, arcing, "random", list);
             let result = progress.measure(format!("throughput: {name}, {metrics}"), || run(&job));
             rows.push(Throughput {
-                job: name,
+                job: name.into(),
                 devices,
                 operations,
-                metrics,
+                metrics: metrics.into(),
                 operations_per_s: result.timing.operations_per_s,
             });
         }
@@ -430,7 +433,7 @@ pub(super) fn engine_row(
     let faster = faster_peer(&peers);
     let (floor_scalar, floor_lanes) = floor_ns_per_op(arcing, kernel);
     Ok(EngineRow {
-        job: name,
+        job: name.into(),
         devices,
         operations,
         kernel: format!("{} x{}", kernel.name(), kernel.lanes()),
@@ -442,7 +445,7 @@ pub(super) fn engine_row(
         run_process_s,
         numpy_peer_process_s,
         numba_peer_process_s,
-        peer: faster.map(|(name, _)| name),
+        peer: faster.map(|(name, _)| name.into()),
         peer_process_s: faster.map(|(_, seconds)| seconds),
         ratio: faster.map(|(_, seconds)| seconds / run_process_s),
     })
@@ -553,17 +556,17 @@ pub(super) fn skips(quick: bool) -> Vec<Skip> {
     let every_metric = reference_job(devices, operations, true, "random", None);
     vec![
         Skip {
-            skip: "first-impact phase when neither peak_force_n nor impact_duration_s is asked for (one operation)",
+            skip: "first-impact phase when neither peak_force_n nor impact_duration_s is asked for (one operation)".into(),
             ns_per_op_doing_it: op_ns(&mechanical, Needs::ALL),
             ns_per_op_skipping: op_ns(&mechanical, Needs { impact: false }),
         },
         Skip {
-            skip: "wear radius and kappa rescaling when nothing can arc or only one operation runs (one operation at 48 V / 15 A)",
+            skip: "wear radius and kappa rescaling when nothing can arc or only one operation runs (one operation at 48 V / 15 A)".into(),
             ns_per_op_doing_it: worn_ns,
             ns_per_op_skipping: op_ns(&arcing, Needs::ALL),
         },
         Skip {
-            skip: "summaries (and impact phase) of the 13 metrics not asked for (job, 48 V / 15 A, all metrics vs total_bounce_s)",
+            skip: "summaries (and impact phase) of the 13 metrics not asked for (job, 48 V / 15 A, all metrics vs total_bounce_s)".into(),
             ns_per_op_doing_it: per_op(run(&every_metric)),
             ns_per_op_skipping: per_op(run(&reference_job(
                 devices,
@@ -574,7 +577,7 @@ pub(super) fn skips(quick: bool) -> Vec<Skip> {
             ))),
         },
         Skip {
-            skip: "extremes kept for thresholds asked after the run, when the run returns its Result alone (job, 48 V / 15 A, every metric)",
+            skip: "extremes kept for thresholds asked after the run, when the run returns its Result alone (job, 48 V / 15 A, every metric)".into(),
             ns_per_op_doing_it: per_op(run_keeping_tails(&every_metric)),
             ns_per_op_skipping: per_op(run(&every_metric)),
         },
