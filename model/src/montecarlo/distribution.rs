@@ -1320,6 +1320,13 @@ mod tests {
         for (json, domain, pointer) in cases {
             assert_eq!(pointers(json, domain), [pointer], "{json}");
         }
+    }
+
+    /// What [`a_distribution_that_reaches_below_the_least_magnitude_is_rejected`] tells: a tiny
+    /// number written as one, the parameter's own rule; and what it lets through.
+    #[test]
+    fn the_least_magnitude_is_told_as_the_parameters_rule_and_zero_stays_where_it_may() {
+        let (positive, non_negative) = (Domain::POSITIVE, Domain::NON_NEGATIVE);
         // A tiny number is written as one, not in 300 decimals.
         let told = Distribution::new(
             &parse(r#"{"kind":"normal","mean":1e-300,"sd":1e-301}"#),

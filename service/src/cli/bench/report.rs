@@ -445,9 +445,30 @@ mod tests {
     use super::*;
     use std::collections::BTreeMap;
 
+    /// The engine's row of [`report`]: the faster of the peers given against a 0.5 s run.
+    fn engine_row(numpy: Option<f64>, numba: Option<f64>) -> EngineRow {
+        let faster = speed::faster_peer(&[("numpy", numpy), ("numba", numba)]);
+        EngineRow {
+            job: "mechanical".into(),
+            devices: 2000,
+            operations: 500,
+            kernel: "avx512".to_owned(),
+            ns_per_op_one_device_at_a_time: 71.2,
+            ns_per_op_lockstep: 40.9,
+            floor_ns_per_op_scalar: 21.0,
+            floor_ns_per_op_lockstep: 2.6,
+            cpu: "AMD EPYC 9B45".to_owned(),
+            run_process_s: 0.5,
+            numpy_peer_process_s: numpy,
+            numba_peer_process_s: numba,
+            peer: faster.map(|(name, _)| name.into()),
+            peer_process_s: faster.map(|(_, seconds)| seconds),
+            ratio: faster.map(|(_, seconds)| seconds / 0.5),
+        }
+    }
+
     /// A report with one row of each kind, as `bench` would make it, with the peers' times.
     fn report(numpy: Option<f64>, numba: Option<f64>) -> Report {
-        let faster = speed::faster_peer(&[("numpy", numpy), ("numba", numba)]);
         let errors = BTreeMap::from([
             ("total_bounce_s".to_owned(), 1.5e-9),
             ("e1".to_owned(), 2.5e-12),
@@ -491,23 +512,7 @@ mod tests {
                 ns_per_op_doing_it: 52.0,
                 ns_per_op_skipping: 31.0,
             }],
-            engine: vec![EngineRow {
-                job: "mechanical".into(),
-                devices: 2000,
-                operations: 500,
-                kernel: "avx512".to_owned(),
-                ns_per_op_one_device_at_a_time: 71.2,
-                ns_per_op_lockstep: 40.9,
-                floor_ns_per_op_scalar: 21.0,
-                floor_ns_per_op_lockstep: 2.6,
-                cpu: "AMD EPYC 9B45".to_owned(),
-                run_process_s: 0.5,
-                numpy_peer_process_s: numpy,
-                numba_peer_process_s: numba,
-                peer: faster.map(|(name, _)| name.into()),
-                peer_process_s: faster.map(|(_, seconds)| seconds),
-                ratio: faster.map(|(_, seconds)| seconds / 0.5),
-            }],
+            engine: vec![engine_row(numpy, numba)],
             coverage: vec![Coverage {
                 design: "radius, hardness".into(),
                 devices: 512,
