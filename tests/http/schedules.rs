@@ -135,6 +135,56 @@ fn a_quantile_beyond_the_data_carries_its_reason_and_never_drifts() {
     }
 }
 
+/// A run's drift flag is the run's whatever `?limit=` shows: a window whose run before carries a
+/// reason looks back past it to the last run whose value the data bound (an outside probe: a p99
+/// flagged in the whole list read false under `?limit=7`, the look-back stopping at a value with a
+/// reason, which no later run is judged by).
+#[test]
+fn a_runs_drift_flag_looks_back_past_values_that_carry_a_reason() {
+    let server = TestApp::start(&temp_db("schedules-look-back"), &[]);
+    let body = |devices: u64, velocity: f64| {
+        let template = json!({"devices": devices, "operations": 2, "seed": 11, "scatter": [
+            {"parameter": "impact_velocity_m_s", "per": "device",
+             "distribution": {"kind": "normal", "mean": velocity, "sd": 0.05, "min": 0.05}}]});
+        json!({"name": "look back", "cron": "0 3 * * *", "time_zone": "UTC", "template": template,
+               "statistics": ["operations.total_bounce_s.p99"]})
+        .to_string()
+    };
+    let created = post(&server.url("/v1/schedules"), &body(1024, 0.3), None);
+    assert_eq!(created.status, 201, "{}", created.body);
+    let id = created.json()["id"].as_str().unwrap().to_owned();
+    let schedule = server.url(&format!("/v1/schedules/{id}"));
+    // Bound, then four devices (a p99 beyond the data), then bound again at a faster closing.
+    for (step, replacement) in [None, Some(body(4, 0.3)), Some(body(1024, 0.5))]
+        .into_iter()
+        .enumerate()
+    {
+        if let Some(replacement) = replacement {
+            assert_eq!(put(&schedule, &replacement).status, 200, "step {step}");
+        }
+        let reply = post(&format!("{schedule}/run"), "", None);
+        assert_eq!(reply.status, 202, "{}", reply.body);
+        let job = reply.json()["id"].as_str().unwrap().to_owned();
+        server.wait_for(&job, "succeeded", Duration::from_secs(60));
+    }
+    let p99 = |trend: &serde_json::Value, run: usize| {
+        trend["runs"][run]["values"]["operations.total_bounce_s.p99"].clone()
+    };
+    let whole = get(&format!("{schedule}/runs"), None).json();
+    assert_eq!(whole["runs"].as_array().unwrap().len(), 3, "{whole}");
+    assert!(p99(&whole, 0).get("reason").is_none(), "{whole}");
+    assert!(p99(&whole, 1)["reason"].is_string(), "{whole}");
+    assert_eq!(p99(&whole, 2)["drift"], true, "{whole}");
+    for limit in [1, 2] {
+        let window = get(&format!("{schedule}/runs?limit={limit}"), None).json();
+        assert_eq!(
+            window["runs"].as_array().unwrap().last(),
+            whole["runs"].as_array().unwrap().last(),
+            "?limit={limit}: {window}"
+        );
+    }
+}
+
 #[test]
 fn bad_schedules_name_their_field() {
     let server = TestApp::start(&temp_db("bad-schedules"), &[]);

@@ -10,7 +10,7 @@ use super::error::{
 };
 use super::jobs::{JobResource, ListQuery, accepted, header_text};
 use super::{AppState, JsonText, idempotency_key, replayed};
-use crate::domain::trend::{run_values, trend};
+use crate::domain::trend::{RunValues, judges_later_runs, run_values, trend};
 use crate::domain::{
     JobStatus, Once, Owner, ScheduleId, ScheduleSpec, TrendValue, UnixMs, ValidSchedule,
 };
@@ -503,12 +503,14 @@ pub async fn schedule_trend(
             run_result(state, run).await?.as_ref(),
         ));
     }
-    // The runs before the window, newest first, until every statistic the window has a value of
-    // has one among them too (a life statistic may have none in a run of too few failures): put
-    // before the window, they give its oldest values the runs they are compared with. A
-    // statistic without a value in the window needs none, and costs no reading.
+    // The runs before the window, newest first, until every statistic the window has a value
+    // judged by the run before of has one such value among them too ([`judges_later_runs`]: a
+    // life statistic may have none in a run of too few failures, a quantile may carry a reason):
+    // put before the window, they give its oldest values the runs they are compared with. A
+    // statistic without such a value in the window needs none, and costs no reading.
+    let judges = |values: &RunValues, column: usize| judges_later_runs(values[column].as_ref());
     let mut unmet: Vec<usize> = (0..statistics.len())
-        .filter(|&column| window.iter().any(|values| values[column].is_some()))
+        .filter(|&column| window.iter().any(|values| judges(values, column)))
         .collect();
     let mut looked_back = Vec::new();
     for run in &older {
@@ -517,7 +519,7 @@ pub async fn schedule_trend(
         }
         if let Some(result) = run_result(state, run).await? {
             let values = run_values(statistics, Some(&result));
-            unmet.retain(|&column| values[column].is_none());
+            unmet.retain(|&column| !judges(&values, column));
             looked_back.push(values);
         }
     }

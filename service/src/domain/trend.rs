@@ -31,13 +31,13 @@ pub fn flag_drift(values: impl IntoIterator<Item = Option<Reading>>) -> Vec<Opti
     values
         .into_iter()
         .map(|entry| {
+            let bounded = judges_later_runs(entry.as_ref());
             entry.map(
                 |Reading {
                      value,
                      ci95,
                      reason,
                  }| {
-                    let bounded = reason.is_none();
                     let drift =
                         bounded && previous.is_some_and(|[lo, hi]| value < lo || value > hi);
                     if bounded {
@@ -53,6 +53,13 @@ pub fn flag_drift(values: impl IntoIterator<Item = Option<Reading>>) -> Vec<Opti
             )
         })
         .collect()
+}
+
+/// Whether a run's reading is one a later run's drift is judged by: a value whose interval the
+/// data bound (no `reason`). A trend that shows only its latest runs looks back past the others
+/// to it, so that a run's flag is the same whatever the window.
+pub fn judges_later_runs(reading: Option<&Reading>) -> bool {
+    reading.is_some_and(|reading| reading.reason.is_none())
 }
 
 /// A run's reading of each statistic of a schedule, in its order.
