@@ -373,6 +373,15 @@ pub mod responses {
     )]
     pub struct StaleTemplate(pub Problem);
 
+    /// A schedule's runs, or other PUTs, moved it on at every try of a PUT.
+    #[derive(IntoResponses)]
+    #[response(
+        status = 409,
+        description = "The schedule kept changing while it was replaced (its runs, or other PUTs); send the PUT again",
+        content_type = "application/problem+json"
+    )]
+    pub struct ReplacedMeanwhile(pub Problem);
+
     /// Results exist once a job succeeded.
     #[derive(IntoResponses)]
     #[response(

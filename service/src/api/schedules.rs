@@ -4,8 +4,8 @@ use super::Path;
 use super::error::{
     ApiError,
     responses::{
-        BadQuery, BodyRejected, NoSuchSchedule, OverQuota, QueueFull, StaleTemplate,
-        TooManySchedules, Unauthorized,
+        BadQuery, BodyRejected, NoSuchSchedule, OverQuota, QueueFull, ReplacedMeanwhile,
+        StaleTemplate, TooManySchedules, Unauthorized,
     },
 };
 use super::jobs::{JobResource, ListQuery, accepted, header_text};
@@ -278,6 +278,7 @@ pub async fn get_schedule(
         BodyRejected,
         Unauthorized,
         NoSuchSchedule,
+        ReplacedMeanwhile,
     ),
     security((), ("api_key" = []))
 )]
@@ -293,7 +294,7 @@ pub async fn replace_schedule(
     for _ in 0..REPLACE_TRIES {
         let valid = ValidSchedule::parse(&body, state.config.schedule_limits(), Utc::now())?;
         let now = state.store.now().await?;
-        let next_run_at = valid.next_run_replacing(&existing.definition, existing.next_run_at, now);
+        let next_run_at = valid.next_run_replacing(existing.next_run_at, now);
         let record = ScheduleRecord {
             next_run_at,
             skipped: existing.skipped.clone(),

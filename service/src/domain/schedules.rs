@@ -102,10 +102,7 @@ impl ScheduleDefinition {
     /// which a manual run leaves to it (a run now at that very millisecond took it, and the
     /// night's scheduled run was never made).
     pub fn is_due_time(&self, at: UnixMs) -> bool {
-        Timetable::parse(&self.cron, &self.time_zone)
-            .ok()
-            .and_then(|timetable| timetable.next_after(at.plus_ms(-1).to_datetime()))
-            .is_some_and(|due| UnixMs::from_datetime(due) == at)
+        Timetable::parse(&self.cron, &self.time_zone).is_ok_and(|timetable| timetable.runs_then(at))
     }
 
     /// Runs' times (RFC 3339, as stored) on the schedule's wall clock, as its trend labels them:
@@ -270,24 +267,19 @@ impl ValidSchedule {
             .map(UnixMs::from_datetime)
     }
 
-    /// The next run of this document replacing `replaced`, whose next run was `due`: a due time
-    /// already past stays while the timetable does (its run is not made yet: it waits for room
-    /// in the queue, or for the scheduler's next tick), else the first run after `now`; none
-    /// while disabled. An edit, even of the same body, dropped a night that waited for room; a
-    /// new timetable that kept it ran at the new one's latest time, before the edit (a probe:
-    /// every second, then `0 0 3 * * *` at 05:50, made a run for 03:00).
-    pub fn next_run_replacing(
-        &self,
-        replaced: &ScheduleDefinition,
-        due: Option<UnixMs>,
-        now: UnixMs,
-    ) -> Option<UnixMs> {
+    /// The next run of this document replacing a schedule whose next run was `due`: a due time
+    /// already past stays while the new timetable runs then too (its run is not made yet: it
+    /// waits for room in the queue, or for the scheduler's next tick), else the first run after
+    /// `now`; none while disabled. An edit, even of the same body, dropped a night that waited for
+    /// room; a new timetable that kept it ran at the new one's latest time, before the edit (a
+    /// probe: every second, then `0 0 3 * * *` at 05:50, made a run for 03:00). Judged by the
+    /// times, not the cron's text: `0 3 * * *` made `0 3 * * 1-5` at 03:00:00.3 on a Monday,
+    /// before the tick, dropped that night unsaid (a probe: `* * * * * *` and `*/1 * * * * *`
+    /// in turn lost 8 of 8 due seconds).
+    pub fn next_run_replacing(&self, due: Option<UnixMs>, now: UnixMs) -> Option<UnixMs> {
         let next = self.next_run_after(now)?;
-        let same_timetable = (self.definition.cron.split_whitespace())
-            .eq(replaced.cron.split_whitespace())
-            && self.definition.time_zone == replaced.time_zone;
         Some(
-            due.filter(|&due| due <= now && same_timetable)
+            due.filter(|&due| due <= now && self.timetable.runs_then(due))
                 .unwrap_or(next),
         )
     }
@@ -431,6 +423,12 @@ impl Timetable {
             };
         }
         None
+    }
+
+    /// Whether `at` is one of the timetable's due times, as [`Timetable::next_after`] finds them.
+    pub fn runs_then(&self, at: UnixMs) -> bool {
+        self.next_after(at.plus_ms(-1).to_datetime())
+            .is_some_and(|due| UnixMs::from_datetime(due) == at)
     }
 
     /// Whether the cron runs at `at`: at its own wall-clock time, or right after a spring-forward
@@ -1473,8 +1471,9 @@ mod tests {
     }
 
     /// A schedule replaced while its run is due (waiting for room in the queue) keeps that due
-    /// time while its timetable stays; one whose next run is ahead, or whose timetable changes,
-    /// gets the new document's; a disabled one none.
+    /// time while the new timetable runs then too, however it is written; one whose next run is
+    /// ahead, or whose new timetable does not run at the due time, gets the new document's; a
+    /// disabled one none.
     #[test]
     fn a_replaced_schedule_keeps_a_night_still_owed_by_its_timetable() {
         let body = |cron: &str, zone: &str, enabled: bool| {
@@ -1487,14 +1486,20 @@ mod tests {
         let parse = |cron, zone, enabled| {
             ValidSchedule::parse(&body(cron, zone, enabled), HOURLY, now.to_datetime()).unwrap()
         };
-        let nightly = parse("0 3 * * *", "UTC", true).into_definition();
-        let replacing = |cron, zone, enabled, due| {
-            parse(cron, zone, enabled).next_run_replacing(&nightly, due, now)
-        };
+        let replacing =
+            |cron, zone, enabled, due| parse(cron, zone, enabled).next_run_replacing(due, now);
         let owed = Some(at("2026-11-22T03:00:00Z"));
         let tomorrow = Some(at("2026-11-23T03:00:00Z"));
         assert_eq!(replacing("0 3 * * *", "UTC", true, owed), owed);
         assert_eq!(replacing("0  3 * *  *", "UTC", true, owed), owed);
+        // Other words for a timetable that runs then too (22 November 2026 is a Sunday).
+        for cron in ["0 0 3 * * *", "0 3 * * 0", "0 3 22 * *", "0 */3 * * *"] {
+            assert_eq!(replacing(cron, "UTC", true, owed), owed, "{cron}");
+        }
+        assert_eq!(
+            replacing("0 3 * * 1-5", "UTC", true, owed),
+            Some(at("2026-11-23T03:00:00Z"))
+        );
         assert_eq!(replacing("0 3 * * *", "UTC", true, tomorrow), tomorrow);
         assert_eq!(replacing("0 3 * * *", "UTC", true, None), tomorrow);
         assert_eq!(replacing("0 3 * * *", "UTC", false, owed), None);
