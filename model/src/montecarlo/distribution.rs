@@ -863,7 +863,18 @@ impl Faults<'_> {
         domain: Domain,
         cdf: impl Fn(f64) -> f64,
     ) -> Window {
-        let lo = min.unwrap_or(support.lowest);
+        // A positive parameter never takes 0, not even a draw that rounds to it: from a support
+        // that starts at 0, the window starts at the least positive f64 and such a draw is made
+        // again (a Weibull of shape 0.01 rounds 6.6e-4 of its draws to 0; an inertia of 0 ran to
+        // a force of NaN, and a kappa of 0 to e1 = 0, found from outside). A window that then
+        // keeps too little of the mass is refused as any other.
+        let positive = domain.lower == 0.0 && !domain.inclusive;
+        let floor = if positive && support.lowest == 0.0 {
+            f64::from_bits(1)
+        } else {
+            support.lowest
+        };
+        let lo = min.unwrap_or(floor);
         let hi = max.unwrap_or(f64::INFINITY);
         match min {
             Some(lo) => self.lowest_in("min", lo, domain),
@@ -894,10 +905,14 @@ impl Faults<'_> {
         if self.errors.is_empty()
             && (cdf_max - cdf_min < MIN_ACCEPTANCE || cdf_max.is_nan() || cdf_min.is_nan())
         {
+            let lower = match min {
+                Some(_) => "min",
+                None => "the least positive f64 (this parameter takes no 0)",
+            };
             self.fail(
                 "min",
                 format!(
-                    "the window [min, max] keeps only {:.3e} of the distribution's mass; at least {MIN_ACCEPTANCE} is needed",
+                    "the window [{lower}, max] keeps only {:.3e} of the distribution's mass; at least {MIN_ACCEPTANCE} is needed",
                     cdf_max - cdf_min
                 ),
             );
@@ -1371,6 +1386,46 @@ mod tests {
         ] {
             assert!(pointers(json, domain).is_empty(), "{json}");
         }
+    }
+
+    /// A positive parameter draws no 0, even where a Weibull's draws round to it: they are drawn
+    /// again, and its quantiles keep above 0 too; a parameter that takes
+    /// 0 keeps its window from 0. A window the least positive value leaves too little of is
+    /// refused, saying so (a shape of 1e-30 draws 0 or infinity alone; kappa of 0 ran to e1 = 0).
+    #[test]
+    fn a_positive_parameter_never_draws_zero() {
+        let spec = parse(r#"{"kind":"weibull","scale":1.593e-5,"shape":0.01,"max":1e30}"#);
+        let positive = Distribution::new(&spec, Domain::POSITIVE, &Pointer::root()).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let draws = 200_000;
+        for _ in 0..draws {
+            let x = positive.sample(&mut rng);
+            assert!(x > 0.0, "{x}");
+        }
+        assert!(positive.quantile(1e-6) > 0.0);
+        let non_negative =
+            Distribution::new(&spec, Domain::NON_NEGATIVE, &Pointer::root()).unwrap();
+        assert_eq!(non_negative.quantile(1e-6), 0.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let zeros = (0..draws)
+            .filter(|_| non_negative.sample(&mut rng) == 0.0)
+            .count();
+        // P(a draw rounds to 0) = 1 - exp(-(5e-324 / 1.593e-5)^0.01) = 6.5e-4, of the 0.89
+        // within the max: 146 expected.
+        assert!((80..=220).contains(&zeros), "{zeros}");
+        let told = Distribution::new(
+            &parse(r#"{"kind":"weibull","scale":1.593e-5,"shape":1e-30,"max":1e30}"#),
+            Domain::POSITIVE,
+            &Pointer::root(),
+        )
+        .unwrap_err();
+        assert_eq!(told[0].pointer, "/min", "{told:?}");
+        assert!(
+            told[0].detail.starts_with(
+                "the window [the least positive f64 (this parameter takes no 0), max] keeps only 0"
+            ),
+            "{told:?}"
+        );
     }
 
     /// Wide but sane distributions, and the same ones truncated at the largest magnitude, stay

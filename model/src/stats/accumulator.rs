@@ -321,12 +321,17 @@ impl Accumulator {
         if self.count() == 0 { 0.0 } else { self.max }
     }
 
-    /// `s + S/n`, clamped to `[min, max]` against rounding; 0 when empty.
+    /// `s + S/n`, clamped to `[min, max]` against rounding; 0 when empty. Values that are all
+    /// NaN (0 times infinity in a run whose inputs passed f64's range) leave no range to clamp
+    /// to: their NaN mean stands, for the run's range check to name (`check_in_range`).
     pub fn mean(&self) -> f64 {
         if self.count() == 0 {
             return 0.0;
         }
         let mean = self.shift + self.sum / self.count() as f64;
+        if self.min > self.max {
+            return mean;
+        }
         mean.clamp(self.min, self.max)
     }
 
@@ -414,6 +419,8 @@ impl Accumulator {
             *value = match rank(q, n) {
                 1 => min,
                 k if k == n => max,
+                // Every value NaN: no range (as in `mean`).
+                _ if min > max => f64::NAN,
                 _ => value.clamp(min, max),
             };
         }

@@ -683,7 +683,9 @@ fn mean_interval(centre: f64, per_group: &[f64]) -> [f64; 2] {
 fn histogram(all: &Accumulator) -> Histogram {
     let n = all.count();
     let (min, max) = (all.min(), all.max());
-    if n == 0 || min == max {
+    // One value, or none that is a number (every one NaN: `min > max`; the run's range check
+    // names the metric).
+    if n == 0 || min >= max {
         return Histogram {
             edges: vec![min, max],
             counts: vec![n],

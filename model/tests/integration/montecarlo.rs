@@ -1058,6 +1058,26 @@ fn a_metric_beyond_f64_ends_the_run_with_its_name() {
     );
 }
 
+/// An input drawn far below 1e-30 (a Weibull's lower tail, left to its draws: shape 0.002) with
+/// an arm of 1e6 m leaves a mass of 0, and every peak force is NaN: the run panicked summarizing
+/// them (found from outside). It ends naming the metric and saying what its values are.
+#[test]
+fn values_that_are_not_numbers_end_the_run_with_its_name() {
+    let job = json!({"devices": 1, "operations": 1, "seed": 15,
+        "scenario": {"mechanism": {"contact_arm_m": 1e6}},
+        "metrics": ["peak_force_n", "total_bounce_s"],
+        "scatter": [{"parameter": "inertia_kg_m2", "per": "device",
+            "distribution": {"kind": "weibull", "scale": 1.593e-5, "shape": 0.002, "max": 1e30}}]});
+    let job = Job::from_json(&job.to_string(), || 1).unwrap();
+    let error = bouncewear_model::montecarlo::run_job(&job, &Silent).unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        "peak_force_n leaves the range of f64 (beyond 1.8e308) in the bin from operation 0 (its \
+         values are NaN: an intermediate passed f64's range, 0 times infinity): the scenario's \
+         magnitudes combine past what the model can represent (docs/model.md section 9)"
+    );
+}
+
 /// Values of 1e153 to 1e154 whose sum's square passes f64 (`inf - inf` in the variance) read a
 /// spread of 0 and succeeded, and their Sobol' indices printed `null` (found from outside): the
 /// run ends naming the metric, as where the squares alone pass it.
