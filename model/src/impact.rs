@@ -24,27 +24,46 @@ pub struct Impact<L = f64> {
 }
 
 impl<L: Real> Impact<L> {
+    /// `sqrt(k_c m) = w_c m`. Where `k_c m` falls below f64's normal range it is formed 2^600
+    /// larger and its root taken 2^300 smaller: exact powers of two, so every other product
+    /// keeps its bits (a softened pressure of 1e-210 on a radius of 1e-30 and a mass of 1e-90
+    /// rounded `k_c m` to 0, and the loading time `m / 0` printed null where it is 8.9e74 s,
+    /// found from outside).
+    #[inline(always)]
+    fn root_km(&self) -> L {
+        let (k, m) = (self.contact_stiffness_n_per_m, self.mass_kg);
+        let km = k * m;
+        let tiny = km.lt(L::splat(f64::MIN_POSITIVE));
+        let scaled = L::select(tiny, k * L::splat(2f64.powi(600)) * m, km);
+        scaled.sqrt() * L::select(tiny, L::splat(2f64.powi(-300)), L::splat(1.0))
+    }
+
     /// `u sqrt(k_c m) = u w_c m`, the momentum-like term shared by the force and the loading time.
     #[inline(always)]
     fn scaled_momentum(&self) -> L {
-        self.impact_speed_m_s * (self.contact_stiffness_n_per_m * self.mass_kg).sqrt()
+        self.impact_speed_m_s * self.root_km()
     }
 
     /// Peak force (Fig. 15, linear in `u`): `F_max = F_s + sqrt(F_s^2 + k_c m u^2)`, the force at
     /// maximum approach, where `1/2 m u^2 + F_s d = 1/2 k_c d^2`. Within the magnitudes a valid
-    /// scenario allows (docs/model.md section 9) the squares stay far inside f64's range.
+    /// scenario allows (docs/model.md section 9) the squares stay below f64's largest; where
+    /// both forces are below 2^-500 (3e-151) their squares could round to 0 (`F_s = 0` and
+    /// `u sqrt(k_c m)` of 1e-195 gave a peak force of 0 and an unloading time of `m e u / 0`),
+    /// so they are squared 2^500 larger: exact powers of two, the same bits elsewhere.
     #[inline(always)]
     pub fn peak_force_n(&self) -> L {
-        let fs = self.static_force_n;
         let x = self.scaled_momentum();
-        fs + (fs * fs + x * x).sqrt()
+        let tiny = self.static_force_n.max(x).lt(L::splat(2f64.powi(-500)));
+        let up = L::select(tiny, L::splat(2f64.powi(500)), L::splat(1.0));
+        let (fs, x) = (self.static_force_n * up, x * up);
+        (fs + (fs * fs + x * x).sqrt()) * L::select(tiny, L::splat(2f64.powi(-500)), L::splat(1.0))
     }
 
     /// Loading time to maximum approach (eq. 12): `t_load = (pi - atan2(u w_c m, F_s)) / w_c`, which
     /// is `pi / (2 w_c)` when `F_s = 0`. For `u > 0` this is `(pi/2 + atan(F_s / (u w_c m))) / w_c`.
     #[inline(always)]
     pub fn loading_time_s(&self) -> L {
-        let root_km = (self.contact_stiffness_n_per_m * self.mass_kg).sqrt();
+        let root_km = self.root_km();
         let u = self.impact_speed_m_s;
         let angle = L::select(
             L::splat(0.0).lt(u),
@@ -103,6 +122,60 @@ mod tests {
             static_force_n,
             impact_speed_m_s: u,
         }
+    }
+
+    /// `k_c m` below f64's normal range (3e-330: it rounded to 0, and the loading time to m / 0)
+    /// gives `sqrt(k_c m)` through exact powers of two: the loading time `pi/2 sqrt(m / k_c)`
+    /// without `F_s` and the peak force `u sqrt(k_c) sqrt(m)`, each as the separate roots give
+    /// them; in the normal range the root is `sqrt(k_c m)` to the bit.
+    #[test]
+    fn a_product_below_the_normal_range_keeps_its_root() {
+        let tiny = Impact {
+            mass_kg: 1e-90,
+            contact_stiffness_n_per_m: 3e-240,
+            static_force_n: 0.0,
+            impact_speed_m_s: 1e-30,
+        };
+        assert_relative_eq!(
+            tiny.loading_time_s(),
+            FRAC_PI_2 * (1e-90_f64 / 3e-240).sqrt(),
+            max_relative = 4e-16
+        );
+        assert_relative_eq!(
+            tiny.peak_force_n(),
+            1e-30 * 3e-240_f64.sqrt() * 1e-90_f64.sqrt(),
+            max_relative = 4e-16
+        );
+        let with_force = Impact {
+            static_force_n: 0.344,
+            ..tiny
+        };
+        let (peak, duration) = with_force.peak_force_and_duration(0.5);
+        assert!(peak.is_finite() && duration.is_finite() && duration > 0.0);
+        // Without the static force, the unloading time `1.8395 m e u / F_max` with `F_max =
+        // u sqrt(k_c m)`, 1e-195 N, whose square alone is below f64's range.
+        let quiet = Impact {
+            contact_stiffness_n_per_m: 3e-180,
+            ..tiny
+        };
+        let peak = quiet.peak_force_n();
+        assert_relative_eq!(
+            peak,
+            1e-30 * (3e-180_f64 * 1e-90).sqrt(),
+            max_relative = 4e-16
+        );
+        assert_relative_eq!(
+            quiet.unloading_time_s(0.5, peak),
+            1.8395 * 0.5 * (1e-90_f64 / 3e-180).sqrt(),
+            max_relative = 1e-15
+        );
+        let rig = rig(0.344, 0.224);
+        assert_eq!(
+            rig.root_km().to_bits(),
+            (rig.contact_stiffness_n_per_m * rig.mass_kg)
+                .sqrt()
+                .to_bits()
+        );
     }
 
     #[test]
