@@ -181,7 +181,7 @@ pub struct ValidSchedule {
 impl ValidSchedule {
     /// Parses and validates a schedule document, naming every field at fault. Each run of the
     /// template must fit the server's job size limit, and its runs, over the year after `now`,
-    /// must be at least the minimum interval apart.
+    /// must be at least the minimum interval apart, unless it is disabled.
     pub fn parse(
         body: &str,
         limits: ScheduleLimits,
@@ -219,10 +219,14 @@ impl ValidSchedule {
                 pointer: "/cron".into(),
                 detail: "never runs: no date matches it (e.g. February 30)".into(),
             });
-        } else if let Some(detail) = timetable
-            .as_ref()
-            .and_then(|t| too_often(t, &time_zone, limits.min_interval, now))
+        } else if spec.enabled != Some(false)
+            && let Some(detail) = timetable
+                .as_ref()
+                .and_then(|t| too_often(t, &time_zone, limits.min_interval, now))
         {
+            // A disabled schedule makes no runs, so how often it would is no rule of its: one the
+            // server's raised --min-schedule-interval-seconds left too frequent can be disabled
+            // as it is (it was refused at `/cron`, its skips counting on meanwhile; a probe).
             errors.push(FieldError {
                 pointer: "/cron".into(),
                 detail,
@@ -1364,6 +1368,15 @@ mod tests {
             assert!(detail.contains(at), "{detail}");
         }
         assert!(check("0 * * * *", "UTC").is_ok(), "hourly is allowed");
+        // Disabled, it makes no runs: held to the interval only once enabled again.
+        let disabled = |enabled: bool| {
+            let body = format!(
+                r#"{{"name": "n", "cron": "* * * * *", "template": {{}}, "enabled": {enabled}}}"#
+            );
+            ValidSchedule::parse(&body, HOURLY, now).map(|_| ())
+        };
+        assert!(disabled(false).is_ok());
+        assert_eq!(disabled(true).unwrap_err().pointers(), ["/cron"]);
         assert!(check("0 3 * * *", "Europe/Berlin").is_ok());
         assert!(check("0 0 29 2 *", "UTC").is_ok(), "a leap day alone");
         let day = ScheduleLimits {
