@@ -175,9 +175,8 @@ fn coverage_run(job: &Job, exceedance_above: f64) -> (Vec<Estimate>, Accumulator
 /// jobs (400; quick: 20), the truth from one job of 64 000 devices (quick: 1280), at least 125
 /// (quick: 2.5) times the largest: its own error then widens the spread an interval must cover by
 /// under 0.4 %.
-pub(super) fn coverage(quick: bool, seeds: Option<u32>, progress: &Progress) -> Vec<Coverage> {
+pub(super) fn coverage(quick: bool, seeds: u32, progress: &Progress) -> Vec<Coverage> {
     let truth_devices = if quick { 1280 } else { 64_000 };
-    let seeds = seeds.unwrap_or(default_coverage_seeds(quick));
     let mut rows = Vec::new();
     for (design, levels) in COVERAGE_DESIGNS {
         // The exceedance threshold is the truth's p90, so the true probability is about 0.1; the

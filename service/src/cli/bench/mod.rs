@@ -121,11 +121,11 @@ pub fn bench(
     coverage_seeds: Option<u32>,
     progress: &Progress,
 ) -> Result<Report, BenchError> {
-    let report = Report {
+    let mut report = Report {
         machine: Machine {
             threads: rayon::current_num_threads(),
             quick,
-            coverage_seeds: Some(coverage_seeds.unwrap_or(default_coverage_seeds(quick))),
+            coverage_seeds: None,
             version: env!("CARGO_PKG_VERSION").into(),
             intervals_measured_again: false,
         },
@@ -152,11 +152,13 @@ pub fn bench(
                 })
             })
             .collect::<Result<_, _>>()?,
-        coverage: coverage(quick, coverage_seeds, progress),
-        tail_coverage: tail_coverage(quick, progress),
-        calibration_coverage: calibration_coverage(quick, progress),
-        rare_events: rare_event_coverage(quick, progress),
+        coverage: Vec::new(),
+        tail_coverage: Vec::new(),
+        calibration_coverage: Vec::new(),
+        rare_events: Vec::new(),
     };
+    measure_intervals(&mut report, coverage_seeds, progress);
+    report.rare_events = rare_event_coverage(quick, progress);
     write_report(out, &report)?;
     Ok(report)
 }
@@ -198,19 +200,25 @@ pub fn measure_again(
     coverage_seeds: Option<u32>,
     progress: &Progress,
 ) -> Result<Report, BenchError> {
-    let quick = report.machine.quick;
     match only {
         Only::Intervals => {
-            report.coverage = coverage(quick, coverage_seeds, progress);
-            report.tail_coverage = tail_coverage(quick, progress);
-            report.calibration_coverage = calibration_coverage(quick, progress);
-            report.machine.coverage_seeds =
-                Some(coverage_seeds.unwrap_or(default_coverage_seeds(quick)));
+            measure_intervals(&mut report, coverage_seeds, progress);
             report.machine.intervals_measured_again = true;
         }
     }
     write_report(out, &report)?;
     Ok(report)
+}
+
+/// The interval tables of `report` (what `--only intervals` names), each coverage figure over
+/// `coverage_seeds` jobs (default 400, quick 20), at the report's size of study.
+fn measure_intervals(report: &mut Report, coverage_seeds: Option<u32>, progress: &Progress) {
+    let quick = report.machine.quick;
+    let seeds = coverage_seeds.unwrap_or(default_coverage_seeds(quick));
+    report.coverage = coverage(quick, seeds, progress);
+    report.tail_coverage = tail_coverage(quick, progress);
+    report.calibration_coverage = calibration_coverage(quick, progress);
+    report.machine.coverage_seeds = Some(seeds);
 }
 
 /// `report.{json,md,svg}` written into `out`.
