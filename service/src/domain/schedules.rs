@@ -20,8 +20,9 @@ use utoipa::ToSchema;
 const DEFAULT_STATISTIC: &str = "operations.total_bounce_s.p95";
 
 /// Why a schedule's due times before the one it runs are skipped ([`Timetable::catch_up`]).
-pub const MISSED_RUNS: &str = "not run at its due time (the server down, its ticks late, or the \
-    run before waiting for room) before a later one came: only the latest due time runs";
+pub const MISSED_RUNS: &str = "not run at its due time (the server down, its ticks late, the run \
+    before waiting for room, or the schedule replaced by a PUT as its run was made) before a later \
+    one came: only the latest due time runs";
 
 /// Most runs missed that one tick counts: a schedule every second, a day down, is 86,400.
 pub const MISSED_RUNS_COUNTED: u64 = 100_000;
