@@ -83,34 +83,42 @@ pub fn weibayes(lives: &Lives, beta: f64, confidence: f64) -> Result<Weibayes, W
 }
 
 /// The `p` quantile of chi-square with `2 m` degrees of freedom: twice the `p` quantile of the
-/// gamma distribution of shape `m`, found by bisection on its CDF, the regularised lower incomplete
-/// gamma function `P(m, y)`.
+/// gamma distribution of shape `m`, found by bisection in `ln y` on whichever tail of the gamma
+/// CDF keeps its digits there, in logarithms: `ln P(m, y)` against `ln p` at or below the median,
+/// `ln Q(m, y)` against `ln(1 - p)` above it. Near `p = 1` a CDF formed as `1 - Q` has lost the
+/// digits that set the quantile (`1 - 1e-16`: 1 % off), and a bisection from 0 in `y` stops short
+/// of a quantile near 1e-150 (`p = 1e-300`).
 fn chi_square_quantile(p: f64, m: u64) -> f64 {
     let m = m as f64;
     if m == 1.0 {
         return -2.0 * (-p).ln_1p();
     }
-    let (mut lo, mut hi) = (0.0, m + 10.0 * m.sqrt() + 50.0);
-    while regularized_lower_gamma(m, hi) < p {
-        hi *= 2.0;
+    let below = |ln_y: f64| {
+        let (ln_lower, ln_upper) = gamma_tails_ln(m, ln_y.exp());
+        if p <= 0.5 {
+            ln_lower < p.ln()
+        } else {
+            ln_upper > (-p).ln_1p()
+        }
+    };
+    // `P(m, y) <= y^m / m!`, so the quantile is at least `(p m!)^(1/m)`.
+    let mut lo = (p.ln() + libm::lgamma(m + 1.0)) / m - 1.0;
+    let mut hi = (m + 10.0 * m.sqrt() + 50.0).ln();
+    while below(hi) {
+        hi += std::f64::consts::LN_2;
     }
-    for _ in 0..200 {
+    while hi - lo > 1e-16 * hi.abs().max(1.0) {
         let mid = 0.5 * (lo + hi);
-        if regularized_lower_gamma(m, mid) < p {
+        if mid <= lo || mid >= hi {
+            break;
+        }
+        if below(mid) {
             lo = mid;
         } else {
             hi = mid;
         }
-        if hi - lo <= 1e-15 * hi {
-            break;
-        }
     }
-    lo + hi
-}
-
-/// `P(a, x)`, the regularised lower incomplete gamma function.
-fn regularized_lower_gamma(a: f64, x: f64) -> f64 {
-    regularized_gamma(a, x).0
+    2.0 * (0.5 * (lo + hi)).exp()
 }
 
 /// `(P(a, x), ln Q(a, x))`, the regularised lower incomplete gamma function and the log of its
@@ -123,44 +131,67 @@ pub(crate) fn regularized_gamma(a: f64, x: f64) -> (f64, f64) {
     }
     let ln_front = a * x.ln() - x - libm::lgamma(a);
     if x < a + 1.0 {
-        let (mut term, mut sum, mut n) = (1.0 / a, 1.0 / a, a);
-        for _ in 0..100_000 {
-            n += 1.0;
-            term *= x / n;
-            sum += term;
-            if term.abs() < sum.abs() * 1e-17 {
-                break;
-            }
-        }
-        let p = sum * ln_front.exp();
+        let p = lower_series(a, x) * ln_front.exp();
         (p, (-p).ln_1p())
     } else {
-        let tiny = 1e-300;
-        let mut b = x + 1.0 - a;
-        let mut c = 1.0 / tiny;
-        let mut d = 1.0 / b;
-        let mut h = d;
-        for i in 1..100_000 {
-            let an = -(i as f64) * (i as f64 - a);
-            b += 2.0;
-            d = an * d + b;
-            if d.abs() < tiny {
-                d = tiny;
-            }
-            c = b + an / c;
-            if c.abs() < tiny {
-                c = tiny;
-            }
-            d = 1.0 / d;
-            let delta = d * c;
-            h *= delta;
-            if (delta - 1.0).abs() < 1e-16 {
-                break;
-            }
-        }
-        let ln_q = h.ln() + ln_front;
+        let ln_q = upper_fraction(a, x).ln() + ln_front;
         (-ln_q.exp_m1(), ln_q)
     }
+}
+
+/// `(ln P(a, x), ln Q(a, x))` for `x > 0`: each tail in logarithms, the one computed directly
+/// keeping its digits where it is far below 1 (`P` near 0 and `Q` near 1 below `x = a + 1`).
+fn gamma_tails_ln(a: f64, x: f64) -> (f64, f64) {
+    let ln_front = a * x.ln() - x - libm::lgamma(a);
+    if x < a + 1.0 {
+        let ln_p = lower_series(a, x).ln() + ln_front;
+        (ln_p, (-ln_p.exp()).ln_1p())
+    } else {
+        let ln_q = upper_fraction(a, x).ln() + ln_front;
+        ((-ln_q.exp()).ln_1p(), ln_q)
+    }
+}
+
+/// `P(a, x) x^-a e^x Gamma(a)`: the series `sum x^n / (a (a + 1) ... (a + n))`.
+fn lower_series(a: f64, x: f64) -> f64 {
+    let (mut term, mut sum, mut n) = (1.0 / a, 1.0 / a, a);
+    for _ in 0..100_000 {
+        n += 1.0;
+        term *= x / n;
+        sum += term;
+        if term.abs() < sum.abs() * 1e-17 {
+            break;
+        }
+    }
+    sum
+}
+
+/// `Q(a, x) x^-a e^x Gamma(a)`: the continued fraction, by Lentz's method.
+fn upper_fraction(a: f64, x: f64) -> f64 {
+    let tiny = 1e-300;
+    let mut b = x + 1.0 - a;
+    let mut c = 1.0 / tiny;
+    let mut d = 1.0 / b;
+    let mut h = d;
+    for i in 1..100_000 {
+        let an = -(i as f64) * (i as f64 - a);
+        b += 2.0;
+        d = an * d + b;
+        if d.abs() < tiny {
+            d = tiny;
+        }
+        c = b + an / c;
+        if c.abs() < tiny {
+            c = tiny;
+        }
+        d = 1.0 / d;
+        let delta = d * c;
+        h *= delta;
+        if (delta - 1.0).abs() < 1e-16 {
+            break;
+        }
+    }
+    h
 }
 
 #[cfg(test)]
@@ -219,6 +250,29 @@ mod tests {
             (0.9, 501, 1059.781202550823),
         ] {
             assert_relative_eq!(chi_square_quantile(p, m), scipy, max_relative = 1e-12);
+        }
+    }
+
+    /// Far in either tail, against a 60-digit reference (`tools/chi_square_reference.py`, mpmath's
+    /// regularised incomplete gamma of the tail that keeps its digits): near `p = 1` the quantile
+    /// was 1 % low, a scale's lower bound 1 % high (the CDF as `1 - Q` loses the digits there), and
+    /// at `p = 1e-300` 1e91 times too large.
+    #[test]
+    fn chi_square_quantiles_hold_far_in_both_tails() {
+        for (p, m, reference) in [
+            (0.9999999999999999, 2, 80.92313496617493),
+            (0.999999999999, 2, 62.19979205810759),
+            (0.99999999, 4, 53.16947819326714),
+            (0.9999999999999999, 301, 932.6016458260909),
+            (1e-300, 2, 2.8284271247461904e-150),
+            (1e-300, 4, 4.426727678801287e-75),
+            (1e-100, 4, 4.426727678801286e-25),
+            (5e-324, 2, 6.286911138810515e-162),
+            (0.5, 3, 5.348120627447121),
+            (0.75, 1000, 2042.2873758143949),
+        ] {
+            let got = chi_square_quantile(p, m);
+            assert_relative_eq!(got, reference, max_relative = 1e-13);
         }
     }
 
