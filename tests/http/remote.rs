@@ -317,24 +317,8 @@ fn an_interrupted_submit_wait_prints_the_job_it_queued() {
         "remote-interrupt-job",
         &json!({"devices": 2, "operations": 2}),
     );
-    let waiting = remote_at(server.base(), None, &["submit", &file, "--wait"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let started = std::time::Instant::now();
-    let queued = loop {
-        let jobs = get(&server.url("/v1/jobs"), None).json();
-        if let Some(job) = jobs["jobs"].as_array().and_then(|jobs| jobs.first()) {
-            break job["id"].as_str().unwrap().to_owned();
-        }
-        assert!(started.elapsed().as_secs() < 30, "no job queued");
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    };
     // The submission's answer reaches the command a moment after the job is listed.
-    std::thread::sleep(std::time::Duration::from_millis(500));
-    send_signal(waiting.id(), "-INT");
-    let ended = waiting.wait_with_output().unwrap();
+    let (queued, ended) = interrupted_once_queued(&server, server.base(), &file, 500);
     assert_eq!(ended.status.code(), Some(130));
     let job: Value = serde_json::from_slice(&ended.stdout).unwrap();
     assert_eq!(
@@ -348,6 +332,70 @@ fn an_interrupted_submit_wait_prints_the_job_it_queued() {
     );
     let still = get(&server.url(&format!("/v1/jobs/{queued}")), None).json();
     assert_eq!(still["status"], "queued");
+}
+
+/// Ctrl-C while the submission's answer is still on its way (the job queued, its answer held
+/// back) says the job may have been queued and the key that finds it, and exits 130: it ended the
+/// command with nothing printed (an outside probe). The key named gives that job back.
+#[test]
+fn a_submit_interrupted_before_its_answer_names_its_key() {
+    let server = TestApp::start(&temp_db("remote-interrupt-early"), &["--workers", "0"]);
+    let proxy = losing_first_answer(server.base(), true);
+    let body = json!({"devices": 2, "operations": 2});
+    let file = job_file("remote-interrupt-early-job", &body);
+    let (queued, ended) = interrupted_once_queued(&server, &proxy, &file, 300);
+    assert_eq!(ended.status.code(), Some(130));
+    assert!(ended.stdout.is_empty());
+    let said = String::from_utf8_lossy(&ended.stderr).into_owned();
+    assert!(
+        said.contains("interrupted before the server answered: the job may have been queued"),
+        "{said}"
+    );
+    let key = said
+        .split("Idempotency-Key was ")
+        .nth(1)
+        .and_then(|rest| rest.split(';').next())
+        .unwrap_or_else(|| panic!("no key in {said}"));
+    let again = crate::support::client::agent()
+        .post(&server.url("/v1/jobs"))
+        .header("content-type", "application/json")
+        .header("idempotency-key", key)
+        .send(&body.to_string());
+    let again = crate::support::client::reply(again);
+    assert_eq!(
+        again.header("idempotent-replayed"),
+        Some("true"),
+        "{}",
+        again.body
+    );
+    assert_eq!(again.json()["id"], queued.as_str());
+}
+
+/// `submit FILE --wait` at `url` (the server or a proxy to it), interrupted `after_ms` after the
+/// server lists the job it queued: the job's id and what the command did.
+fn interrupted_once_queued(
+    server: &TestApp,
+    url: &str,
+    file: &str,
+    after_ms: u64,
+) -> (String, Output) {
+    let waiting = remote_at(url, None, &["submit", file, "--wait"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    let queued = loop {
+        let jobs = get(&server.url("/v1/jobs"), None).json();
+        if let Some(job) = jobs["jobs"].as_array().and_then(|jobs| jobs.first()) {
+            break job["id"].as_str().unwrap().to_owned();
+        }
+        assert!(started.elapsed().as_secs() < 30, "no job queued");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    std::thread::sleep(std::time::Duration::from_millis(after_ms));
+    send_signal(waiting.id(), "-INT");
+    (queued, waiting.wait_with_output().unwrap())
 }
 
 /// A full queue's 429 is asked again after its `Retry-After`: a submission made while the queue
@@ -511,6 +559,35 @@ fn wait_ends_at_its_timeout_against_a_server_that_never_answers() {
     assert!(took < std::time::Duration::from_secs(60), "{took:?}");
 }
 
+/// A sign-in page answered with 200 where JSON was expected is an error that shows what came
+/// (it said only "expected value at line 1 column 1", an outside probe), exit 1.
+#[test]
+fn a_page_that_is_not_json_is_shown_not_parsed() {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}", listener.local_addr().unwrap());
+    std::thread::spawn(move || {
+        for mut client in listener.incoming().map_while(Result::ok) {
+            let mut head = [0; 4096];
+            let _ = client.read(&mut head);
+            let page = "<html>please sign in</html>";
+            let _ = write!(
+                client,
+                "HTTP/1.1 200 OK\r\ncontent-type: text/html\r\ncontent-length: {}\r\n\
+                 connection: close\r\n\r\n{page}",
+                page.len()
+            );
+        }
+    });
+    let status = remote_at(&url, None, &["status", "j-1"]).output().unwrap();
+    assert_eq!(status.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&status.stderr);
+    assert!(
+        said.contains("the server's answer is not the JSON expected")
+            && said.contains("please sign in"),
+        "{said}"
+    );
+}
+
 /// A proxy to `base` that hands the first request on, lets the server handle it, and closes the
 /// client's connection without its answer (or, with `hold`, keeps it open and silent); later
 /// connections it relays both ways. Its base URL.
@@ -541,13 +618,15 @@ fn losing_first_answer(base: &str, hold: bool) -> String {
                 reader.read_exact(&mut body).unwrap();
                 request.extend_from_slice(&body);
                 (&server).write_all(&request).unwrap();
-                // The server's answer, read and dropped with the client's connection.
+                // The server's answer, read and dropped with the client's connection; held, the
+                // server's connection is kept too, so that closing it does not end the handler
+                // before the job is queued (its first byte may be a `100 Continue`).
                 let mut answer = [0; 1];
                 (&server).read_exact(&mut answer).unwrap();
                 if hold {
                     std::thread::spawn(move || {
                         std::thread::sleep(std::time::Duration::from_secs(120));
-                        drop(client);
+                        drop((client, server));
                     });
                 }
                 continue;

@@ -184,7 +184,19 @@ impl Server {
         deadline: Option<Instant>,
     ) -> Result<String, CliError> {
         let key = (method == "POST" && ["/v1/jobs", "/v1/schedules"].contains(&path))
-            .then(|| format!("cli-{}", uuid::Uuid::new_v4().simple()));
+            .then(submission_key);
+        self.send_keyed(method, path, body, deadline, key)
+    }
+
+    /// [`Server::send_by`] with the submission's `Idempotency-Key`, if it is one.
+    fn send_keyed(
+        &self,
+        method: &str,
+        path: &str,
+        body: Option<&str>,
+        deadline: Option<Instant>,
+        key: Option<String>,
+    ) -> Result<String, CliError> {
         let mut retried = 0;
         loop {
             let failure = match self.send_once(method, path, body, key.as_deref(), deadline) {
@@ -458,7 +470,14 @@ fn refused(status: u16, url: &str, body: &str) -> CliError {
 }
 
 fn parse(text: &str) -> Result<serde_json::Value, CliError> {
-    serde_json::from_str(text).map_err(|e| CliError::Failed(format!("the server's answer: {e}")))
+    serde_json::from_str(text).map_err(|e| {
+        // What came instead, a proxy's or a sign-in page perhaps (it said only "expected value
+        // at line 1 column 1", an outside probe).
+        let start: String = text.chars().take(120).collect();
+        CliError::Failed(format!(
+            "the server's answer is not the JSON expected ({e}): {start:?}"
+        ))
+    })
 }
 
 fn id_of(job: &serde_json::Value) -> Result<String, CliError> {
@@ -479,52 +498,82 @@ pub fn submit(
 ) -> Result<String, CliError> {
     let deadline = deadline_after(timeout);
     let body = read_input(file)?;
-    let job = parse(&server.send_by("POST", "/v1/jobs", Some(&body), deadline)?)?;
+    let key = submission_key();
+    let interrupt = OnInterrupt::listen(format!(
+        "interrupted before the server answered: the job may have been queued (the submission's \
+         Idempotency-Key was {key}; `GET /v1/jobs` lists your jobs)"
+    ));
+    let sent = server.send_keyed("POST", "/v1/jobs", Some(&body), deadline, Some(key))?;
+    let job = parse(&sent)?;
     if !wait {
         return Ok(job.to_string());
     }
     let id = id_of(&job)?;
-    on_interrupt_tell(&job, &id);
+    if let Some(interrupt) = &interrupt {
+        interrupt.tell(
+            job.to_string(),
+            format!(
+                "interrupted: job {id} goes on; `bouncewear wait {id}` waits for it, \
+                 `bouncewear cancel {id}` cancels it"
+            ),
+        );
+    }
     wait_until(server, &id, deadline)?;
     let text = server.send_by("GET", &part_path(&id, Part::Result, ""), None, deadline)?;
     Ok(text.trim_end().to_owned())
 }
 
-/// From here until the process ends, an interrupt (Ctrl-C) prints `job`, the job resource
-/// `submit --wait` queued, says that the job goes on and how to follow it, and exits 130 as an
-/// interrupted command does. Without, the interrupt ended the command with nothing printed, and a
-/// script lost the id of the job it had queued (an outside probe).
-fn on_interrupt_tell(job: &serde_json::Value, id: &str) {
-    let Ok(runtime) = tokio::runtime::Builder::new_current_thread()
-        .enable_io()
-        .build()
-    else {
-        return;
-    };
-    // Listening before this returns, so that an interrupt from here on is ours; waited for on a
-    // thread of its own while this one waits on the server.
-    #[cfg(unix)]
-    let Ok(mut interrupts) = ({
-        let _entered = runtime.enter();
-        tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())
-    }) else {
-        return;
-    };
-    let (job, id) = (job.to_string(), id.to_owned());
-    std::thread::spawn(move || {
+/// A fresh `Idempotency-Key` for one submission, the same on every try of it.
+fn submission_key() -> String {
+    format!("cli-{}", uuid::Uuid::new_v4().simple())
+}
+
+/// What an interrupt (Ctrl-C) says from [`OnInterrupt::listen`] until the process ends: the job
+/// resource `submit` queued on stdout once it is known, and on stderr what became of the job and
+/// how to follow it; then exit 130, as an interrupted command does. Without, the interrupt ended
+/// the command with nothing printed, and a script lost the id of the job it had queued (an
+/// outside probe), or, before the server answered, the key that finds it.
+struct OnInterrupt(std::sync::Arc<std::sync::Mutex<(Option<String>, String)>>);
+
+impl OnInterrupt {
+    /// Listening before this returns, so that an interrupt from here on is ours (telling
+    /// `stderr`); waited for on a thread of its own while this one waits on the server.
+    fn listen(stderr: String) -> Option<Self> {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_io()
+            .build()
+            .ok()?;
         #[cfg(unix)]
-        runtime.block_on(interrupts.recv());
-        #[cfg(not(unix))]
-        if runtime.block_on(tokio::signal::ctrl_c()).is_err() {
-            return;
-        }
-        let _ = super::print_text(job);
-        super::stderr_line(format_args!(
-            "interrupted: job {id} goes on; `bouncewear wait {id}` waits for it, `bouncewear \
-             cancel {id}` cancels it"
-        ));
-        std::process::exit(130);
-    });
+        let mut interrupts = {
+            let _entered = runtime.enter();
+            tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt()).ok()?
+        };
+        let told = std::sync::Arc::new(std::sync::Mutex::new((None::<String>, stderr)));
+        let tell = std::sync::Arc::clone(&told);
+        std::thread::spawn(move || {
+            #[cfg(unix)]
+            runtime.block_on(interrupts.recv());
+            #[cfg(not(unix))]
+            if runtime.block_on(tokio::signal::ctrl_c()).is_err() {
+                return;
+            }
+            let (stdout, stderr) = &*tell.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+            if let Some(stdout) = stdout {
+                let _ = super::print_text(stdout.clone());
+            }
+            super::stderr_line(format_args!("{stderr}"));
+            std::process::exit(130);
+        });
+        Some(Self(told))
+    }
+
+    /// From now on, an interrupt prints `stdout` and tells `stderr`.
+    fn tell(&self, stdout: String, stderr: String) {
+        *self
+            .0
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner()) = (Some(stdout), stderr);
+    }
 }
 
 /// The moment `timeout` seconds from now, if given.
