@@ -563,3 +563,75 @@ def test_a_schedule_runs_now_and_its_trend_is_a_frame(client):
     with pytest.raises(BouncewearError) as missing:
         client.schedule(schedule.id)
     assert missing.value.status == 404
+
+
+def test_a_page_that_is_not_json_is_an_error_naming_the_request():
+    """A sign-in page answered with 200 raised a bare `JSONDecodeError` (found from outside)."""
+    import http.server
+
+    class SignIn(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):
+            body = b"<html>please sign in</html>"
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):
+            pass
+
+    portal = http.server.ThreadingHTTPServer(("127.0.0.1", 0), SignIn)
+    threading.Thread(target=portal.serve_forever, daemon=True).start()
+    try:
+        url = f"http://127.0.0.1:{portal.server_address[1]}"
+        with pytest.raises(BouncewearError) as page:
+            Client(url).job("abc")
+        assert page.value.status == 200 and page.value.title == "Not JSON"
+        assert page.value.detail.startswith(f"GET {url}/v1/jobs/abc answered 200 with text/html")
+        assert "please sign in" in page.value.detail
+    finally:
+        portal.shutdown()
+
+
+def test_a_number_json_cannot_carry_is_refused_naming_its_field(client):
+    """NaN raised `requests`' "Out of range float values are not JSON compliant", naming no field."""
+    spec = {"devices": 2, "scenario": {"circuit": {"current_a": float("nan")}},
+            "scatter": [{"distribution": {"max": float("inf")}}]}
+    with pytest.raises(ValueError, match=r"^/scenario/circuit/current_a: NaN and infinities"):
+        client.submit(spec)
+    del spec["scenario"]
+    with pytest.raises(ValueError, match=r"^/scatter/0/distribution/max: "):
+        client.submit(spec)
+
+
+def test_lives_of_a_job_grown_by_its_precision_target_count_every_device(tmp_path):
+    """The warning and `attrs["devices"]` read the devices asked for, 16, where 32 ran (found
+    from outside)."""
+    grown = dict(WEARING, devices=16, operations=20,
+                 precision={"metric": "total_bounce_s", "statistic": "mean",
+                            "relative_half_width": 1e-9, "max_devices": 32})
+    with _idle_server(tmp_path, "--max-listed-lives", "20", workers="1") as url:
+        job = Client(url).submit(grown).wait(progress=False)
+        with pytest.warns(UserWarning, match="20 of its 32 devices listed"):
+            lives = job.life()
+        assert len(lives) == 20 and lives.attrs["devices"] == 32
+
+
+def test_a_trend_keeps_the_reason_a_value_carries(client):
+    """A p99 of 8 devices is beyond what they bound: the HTTP runs said why, the frame dropped it
+    (found from outside)."""
+    template = dict(WEARING, devices=8, operations=20, seed=5)
+    del template["failure"]
+    schedule = client.create_schedule({
+        "name": "py reason", "cron": "0 3 * * *", "template": template,
+        "statistics": ["operations.total_bounce_s.p99", "operations.total_bounce_s.mean"]})
+    try:
+        schedule.run_now().wait(progress=False)
+        trend = schedule.trend()
+        assert list(trend.columns)[-1] == "reason"
+        reasons = dict(zip(trend["statistic"], trend["reason"]))
+        assert reasons["operations.total_bounce_s.p99"].startswith("beyond the data")
+        assert pd.isna(reasons["operations.total_bounce_s.mean"])
+    finally:
+        schedule.delete()

@@ -8,6 +8,7 @@ import datetime
 import email.utils
 import io
 import logging
+import math
 import os
 import re
 import sys
@@ -100,6 +101,34 @@ class BouncewearError(Exception):
             ],
             retry_after=_seconds_to_wait(response.headers.get("Retry-After")),
         )
+
+
+def _json(response: requests.Response) -> Any:
+    """The answer's JSON, or `BouncewearError` naming the request and what came instead (a proxy's
+    or a sign-in page's HTML answered with 200, say)."""
+    try:
+        return response.json()
+    except ValueError:
+        request = response.request
+        kind = response.headers.get("Content-Type") or "no Content-Type"
+        raise BouncewearError(
+            status=response.status_code, title="Not JSON",
+            detail=f"{request.method} {response.url} answered {response.status_code} with {kind}, "
+                   f"not JSON: {response.text[:200]!r}") from None
+
+
+def _non_finite(value: Any, pointer: str = "") -> Optional[str]:
+    """The JSON pointer of the first number in `value` that JSON cannot carry (NaN, infinity)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return pointer or "/"
+    items = (value.items() if isinstance(value, dict)
+             else enumerate(value) if isinstance(value, (list, tuple)) else ())
+    for key, item in items:
+        escaped = str(key).replace("~", "~0").replace("/", "~1")
+        found = _non_finite(item, f"{pointer}/{escaped}")
+        if found is not None:
+            return found
+    return None
 
 
 def _segment(id: str) -> str:
@@ -222,7 +251,13 @@ class Client:
                 deadline: Optional[float] = None) -> requests.Response:
         """One request, sent again while the server is busy or cannot be reached (see `Client`),
         but never pausing past `deadline` (a `time.monotonic()` value); the response of a success,
-        else `BouncewearError`."""
+        else `BouncewearError`. A `json` body holding NaN or an infinity, which JSON cannot carry,
+        is a `ValueError` naming its field's pointer, as the server names a field it refuses."""
+        if json is not None:
+            pointer = _non_finite(json)
+            if pointer is not None:
+                raise ValueError(f"{pointer}: NaN and infinities are not JSON numbers; give a "
+                                 "finite number")
         keyed = method.upper() == "POST" and path in _KEYED and any(
             name.lower() == "idempotency-key" and value for name, value in (headers or {}).items())
         repeatable = method.upper() in _REPEATABLE or keyed
@@ -271,11 +306,11 @@ class Client:
         without, a key of its own makes this call's own retries safe.
         """
         headers = {"Idempotency-Key": _idempotency_key(idempotency_key)}
-        return Job(self, self.request("POST", "/v1/jobs", json=job, headers=headers).json())
+        return Job(self, _json(self.request("POST", "/v1/jobs", json=job, headers=headers)))
 
     def job(self, id: str) -> "Job":
         """The job `id` as it stands now."""
-        return Job(self, self.request("GET", f"/v1/jobs/{_segment(id)}").json())
+        return Job(self, _json(self.request("GET", f"/v1/jobs/{_segment(id)}")))
 
     def jobs(self, limit: Optional[int] = None) -> List["Job"]:
         """Your jobs, newest first: every one, or the newest `limit`."""
@@ -288,7 +323,7 @@ class Client:
             params: Dict[str, Any] = {"limit": page}
             if cursor:
                 params["cursor"] = cursor
-            body = self.request("GET", "/v1/jobs", params=params).json()
+            body = _json(self.request("GET", "/v1/jobs", params=params))
             found.extend(Job(self, resource) for resource in body["jobs"])
             cursor = body.get("next_cursor")
             if not cursor:
@@ -299,18 +334,18 @@ class Client:
         """Creates a schedule (`{"name", "cron", "time_zone", "template": JOB, "statistics",
         "enabled"}`: docs/manual.md "Nightly endurance runs"); a retry is safe as `submit`'s."""
         headers = {"Idempotency-Key": _idempotency_key(idempotency_key)}
-        return Schedule(self, self.request("POST", "/v1/schedules", json=schedule, headers=headers).json())
+        return Schedule(self, _json(self.request("POST", "/v1/schedules", json=schedule, headers=headers)))
 
     def schedule(self, id: str) -> "Schedule":
         """The schedule `id` as it stands now."""
-        return Schedule(self, self.request("GET", f"/v1/schedules/{_segment(id)}").json())
+        return Schedule(self, _json(self.request("GET", f"/v1/schedules/{_segment(id)}")))
 
     def schedules(self) -> List["Schedule"]:
         """Your schedules, oldest first."""
         found: List[Schedule] = []
         params: Dict[str, Any] = {}
         while True:
-            body = self.request("GET", "/v1/schedules", params=params).json()
+            body = _json(self.request("GET", "/v1/schedules", params=params))
             found.extend(Schedule(self, resource) for resource in body["schedules"])
             if not body.get("next_cursor"):
                 return found
@@ -318,11 +353,11 @@ class Client:
 
     def simulate(self, scenario: Optional[JSON] = None, fidelity: str = "exact") -> JSON:
         """One make operation of `scenario` (every field optional): its bounces and arc energy."""
-        return self.request("POST", "/v1/simulate", json=scenario or {}, params={"fidelity": fidelity}).json()
+        return _json(self.request("POST", "/v1/simulate", json=scenario or {}, params={"fidelity": fidelity}))
 
     def calibrate(self, request: JSON) -> JSON:
         """Scenario parameters fitted to measured operations (docs/contract.md "Calibration")."""
-        return self.request("POST", "/v1/calibrations", json=request).json()
+        return _json(self.request("POST", "/v1/calibrations", json=request))
 
 
 class _Resource:
@@ -343,7 +378,7 @@ class _Resource:
 
     def refresh(self: "_R") -> "_R":
         """Reads it again."""
-        self.resource = self.client.request("GET", self._path()).json()
+        self.resource = _json(self.client.request("GET", self._path()))
         return self
 
 
@@ -398,8 +433,8 @@ class Job(_Resource):
             asked = time.monotonic()
             deadline = None if timeout is None else started + timeout
             try:
-                self.resource = self.client.request("GET", self._path(), params={"wait_s": max(wait_s, 0.0)},
-                                                    deadline=deadline).json()
+                self.resource = _json(self.client.request(
+                    "GET", self._path(), params={"wait_s": max(wait_s, 0.0)}, deadline=deadline))
             except (requests.ConnectionError, requests.exceptions.ChunkedEncodingError,
                     requests.exceptions.Timeout) as error:
                 if deadline is None or time.monotonic() < deadline:
@@ -431,7 +466,7 @@ class Job(_Resource):
 
     def result(self) -> JSON:
         """The Result (docs/contract.md "Result"); 409 until the job succeeded."""
-        return self.client.request("GET", self._path("/result")).json()
+        return _json(self.client.request("GET", self._path("/result")))
 
     def distribution(self, metric: str = "total_bounce_s", *, op_start: Optional[int] = None,
                      op_end: Optional[int] = None, quantiles: Optional[Iterable[float]] = None,
@@ -465,13 +500,17 @@ class Job(_Resource):
         """Each listed device's life: `device`, `operations_to_failure` (missing for a censored
         device) and `censored`; 404 for a job without failure criteria. The server lists the
         first `--max-listed-lives` devices (docs/contract.md "Sizes"): with fewer rows than the
-        job's devices (`frame.attrs["devices"]`), a `UserWarning` says so; `life_analysis`
-        counts every device."""
+        job's devices (`frame.attrs["devices"]`, all that ran: a precision target's batches too), a
+        `UserWarning` says so; `life_analysis` counts every device."""
         frame = _csv(self.client.request("GET", self._path("/life"), params={"format": "csv"}))
         frame["operations_to_failure"] = frame["operations_to_failure"].astype("Int64")
         frame["censored"] = frame["censored"].astype(bool)
         spec = self.resource.get("spec") or self.refresh().resource.get("spec") or {}
         devices = spec.get("devices")
+        if spec.get("precision") is not None:
+            # A precision target adds batches of devices: the analysis counts every one that ran.
+            analysis = self.life_analysis()
+            devices = analysis["failures"] + analysis["censored"]
         frame.attrs["devices"] = devices
         if devices is not None and len(frame) < devices:
             warnings.warn(f"job {self.id}: {len(frame):,} of its {devices:,} devices listed (the "
@@ -481,14 +520,14 @@ class Job(_Resource):
 
     def life_analysis(self) -> JSON:
         """The life analysis: failures, censored devices, the Weibull fit with its bounds, B-lives."""
-        return self.client.request("GET", self._path("/life")).json()
+        return _json(self.client.request("GET", self._path("/life")))
 
     def shards(self) -> pd.DataFrame:
         """The shards the job runs as, one row each (read page by page: at most 1000 a page)."""
         shards: List[JSON] = []
         params: Dict[str, Any] = {}
         while True:
-            body = self.client.request("GET", self._path("/shards"), params=params).json()
+            body = _json(self.client.request("GET", self._path("/shards"), params=params))
             shards.extend(body["shards"])
             if not body.get("next_cursor"):
                 frame = pd.DataFrame(shards)
@@ -519,7 +558,7 @@ class Job(_Resource):
             params["statistics"] = ",".join(statistics)
         if b_lives is not None:
             params["b_lives"] = ",".join(repr(float(p)) for p in b_lives)
-        return self.client.request("GET", self._path(f"/compare/{_segment(other.id)}"), params=params).json()
+        return _json(self.client.request("GET", self._path(f"/compare/{_segment(other.id)}"), params=params))
 
     def compare_statistics(self, other: "Job", metric: Optional[str] = None,
                            statistics: Optional[Iterable[str]] = None) -> pd.DataFrame:
@@ -551,7 +590,7 @@ class Job(_Resource):
     def cancel(self) -> "Job":
         """Cancels the job if it is queued or running; itself, as it stands then. A job that had
         ended is left as it is, never deleted (`POST /v1/jobs/{id}/cancel`)."""
-        self.resource = self.client.request("POST", self._path("/cancel")).json()
+        self.resource = _json(self.client.request("POST", self._path("/cancel")))
         return self
 
 
@@ -580,7 +619,7 @@ class Schedule(_Resource):
 
     def replace(self, schedule: JSON) -> "Schedule":
         """Replaces its definition with `schedule` (a whole one, as for creation); its runs stay."""
-        self.resource = self.client.request("PUT", self._path(), json=schedule).json()
+        self.resource = _json(self.client.request("PUT", self._path(), json=schedule))
         return self
 
     def delete(self) -> None:
@@ -589,15 +628,17 @@ class Schedule(_Resource):
 
     def run_now(self) -> Job:
         """Runs its template now, outside its timetable; the job, queued."""
-        return Job(self.client, self.client.request("POST", self._path("/run")).json())
+        return Job(self.client, _json(self.client.request("POST", self._path("/run"))))
 
     def trend(self, limit: Optional[int] = None) -> pd.DataFrame:
         """Its latest runs (60, or `limit` up to 366), oldest first, one row per run and
         statistic: `scheduled_for` (a UTC timestamp), `job_id`, `status`, `manual`, `statistic`,
-        `value`, `lo`, `hi` (its 95 % interval) and `drift` (it left the previous run's interval);
-        value, interval and drift missing until the run's job succeeded."""
+        `value`, `lo`, `hi` (its 95 % interval), `drift` (it left the previous run's interval) and
+        `reason` (why a decision should not rest on the value: a quantile beyond what the run's
+        data bound, as its Result says); value, interval and drift missing until the run's job
+        succeeded."""
         params = {"limit": limit} if limit is not None else None
-        body = self.client.request("GET", self._path("/runs"), params=params).json()
+        body = _json(self.client.request("GET", self._path("/runs"), params=params))
         rows = []
         for run in body["runs"]:
             for statistic in body["statistics"]:
@@ -606,9 +647,10 @@ class Schedule(_Resource):
                 rows.append({"scheduled_for": run["scheduled_for"], "job_id": run["job_id"],
                              "status": run["status"], "manual": run["manual"],
                              "statistic": statistic, "value": value.get("value"),
-                             "lo": interval[0], "hi": interval[1], "drift": value.get("drift")})
+                             "lo": interval[0], "hi": interval[1], "drift": value.get("drift"),
+                             "reason": value.get("reason")})
         columns = ["scheduled_for", "job_id", "status", "manual", "statistic", "value", "lo", "hi",
-                   "drift"]
+                   "drift", "reason"]
         frame = pd.DataFrame(rows, columns=columns)
         frame["scheduled_for"] = pd.to_datetime(frame["scheduled_for"], utc=True)
         for column in ("value", "lo", "hi"):
