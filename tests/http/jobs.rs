@@ -1073,6 +1073,10 @@ fn a_job_without_failures_demonstrates_life_by_weibayes() {
             problem["detail"].as_str().unwrap().contains(named),
             "{query}: {problem}"
         );
+        // The query's fault whatever the job's state: a running job's was a 409 (an outside
+        // probe), an unknown job's a 404.
+        let unknown = format!("/v1/jobs/00000000-0000-0000-0000-000000000000/life{query}");
+        assert_problem(&get(&server.url(&unknown), None), 400);
     }
 
     let wearing = server.submit(&wearing_template(48.0));

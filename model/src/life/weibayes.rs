@@ -43,14 +43,21 @@ pub enum WeibayesError {
     NoLives,
 }
 
-/// The Weibayes demonstration of `lives` with shape `beta` at one-sided `confidence`.
-pub fn weibayes(lives: &Lives, beta: f64, confidence: f64) -> Result<Weibayes, WeibayesError> {
+/// Whether a demonstration can take shape `beta` at `confidence`, whatever the lives: what
+/// [`weibayes`] checks first, for a caller to refuse bad arguments before it has the lives.
+pub fn check_arguments(beta: f64, confidence: f64) -> Result<(), WeibayesError> {
     if !(beta.is_finite() && (0.01..=100.0).contains(&beta)) {
         return Err(WeibayesError::Shape(beta));
     }
     if !(confidence > 0.0 && confidence < 1.0) {
         return Err(WeibayesError::Confidence(confidence));
     }
+    Ok(())
+}
+
+/// The Weibayes demonstration of `lives` with shape `beta` at one-sided `confidence`.
+pub fn weibayes(lives: &Lives, beta: f64, confidence: f64) -> Result<Weibayes, WeibayesError> {
+    check_arguments(beta, confidence)?;
     let at = lives.at();
     let t_max = at.last().ok_or(WeibayesError::NoLives)?.time;
     // sum t^beta = t_max^beta sum (t / t_max)^beta: every term at most 1, nothing overflows.

@@ -24,7 +24,7 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
 use bouncewear_model::Pointer;
-use bouncewear_model::life::weibayes::{WeibayesError, weibayes};
+use bouncewear_model::life::weibayes::{WeibayesError, check_arguments, weibayes};
 use bouncewear_model::montecarlo::rare::check_threshold;
 use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric, query_metric};
 use bouncewear_model::stats::{Accumulator, QUANTILES, QueryAnswer, Summary, Threshold, level_key};
@@ -1146,6 +1146,29 @@ pub async fn get_life(
                 .to_owned(),
         ));
     }
+    // The query's own faults first, whatever the job's state (a running job's bad shape was a
+    // 409, an outside probe).
+    let refused = |error: WeibayesError| {
+        let parameter = match error {
+            WeibayesError::Confidence(_) => "confidence",
+            _ => "weibayes_beta",
+        };
+        ApiError::BadRequest(format!("query parameter `{parameter}`: {error}"))
+    };
+    let demonstration = match (query.weibayes_beta, query.confidence) {
+        (Some(beta), confidence) => {
+            let confidence = confidence.unwrap_or(0.9);
+            check_arguments(beta, confidence).map_err(refused)?;
+            Some((beta, confidence))
+        }
+        (None, Some(_)) => {
+            return Err(ApiError::BadRequest(
+                "query parameter `confidence` is the confidence of `weibayes_beta`: give both"
+                    .to_owned(),
+            ));
+        }
+        (None, None) => None,
+    };
     let _place = super::limits::take_place(&state.parsing).await?;
     let no_life = || {
         ApiError::NotFound(format!(
@@ -1159,25 +1182,9 @@ pub async fn get_life(
     let Some(mut life) = result.life else {
         return Err(no_life());
     };
-    match (query.weibayes_beta, query.confidence) {
-        (Some(beta), confidence) => {
-            let lives = life.lives(result.job.spec().operations);
-            let demonstrated = weibayes(&lives, beta, confidence.unwrap_or(0.9));
-            life.weibayes = Some(demonstrated.map_err(|error| {
-                let parameter = match error {
-                    WeibayesError::Confidence(_) => "confidence",
-                    _ => "weibayes_beta",
-                };
-                ApiError::BadRequest(format!("query parameter `{parameter}`: {error}"))
-            })?);
-        }
-        (None, Some(_)) => {
-            return Err(ApiError::BadRequest(
-                "query parameter `confidence` is the confidence of `weibayes_beta`: give both"
-                    .to_owned(),
-            ));
-        }
-        (None, None) => {}
+    if let Some((beta, confidence)) = demonstration {
+        let lives = life.lives(result.job.spec().operations);
+        life.weibayes = Some(weibayes(&lives, beta, confidence).map_err(refused)?);
     }
     match format {
         Format::Json => Ok(immutable(&state, &headers, JSON, to_json(&life)?)),
