@@ -305,7 +305,8 @@ impl<B: HttpBody + Unpin> HttpBody for Counted<B> {
 /// that found nothing to read sets it, one that read bytes or the end clears it), whether the
 /// client has sent anything, and whether written bytes wait for a flush; and failing a write
 /// once the client has read none of the response for `write_stall` (hyper then drops the
-/// connection): a write that has waited that long, or one of a trickle the kernel still takes
+/// connection): a write that has waited that long while the client took none of the bytes
+/// before it ([`Delivery::took_more`]), or one of a trickle the kernel still takes
 /// (an event stream's, a few bytes a minute) while none of what it took before has reached the
 /// client ([`Delivery`]).
 struct Watched {
@@ -369,6 +370,23 @@ impl Delivery {
         }
         now.duration_since(self.since) >= stall
     }
+
+    /// Whether the client's end has taken bytes since they were last looked at: a client reading
+    /// slowly and steadily. A write that waits for room wakes only once a third of the kernel's
+    /// buffer is free (about a megabyte), so at 1 KB/s a write waited far past the body timeout
+    /// while the client read all along, and a 17 MB Result was cut after 3-4 MB (an outside
+    /// probe). `false` where the platform cannot tell.
+    fn took_more(&mut self, stream: &TcpStream) -> bool {
+        let Some(held) = unacknowledged(stream) else {
+            return false;
+        };
+        let taken = self.written.saturating_sub(held);
+        if taken <= self.taken {
+            return false;
+        }
+        (self.taken, self.since) = (taken, tokio::time::Instant::now());
+        true
+    }
 }
 
 /// The bytes written to `stream` that its peer has not acknowledged yet (`SIOCOUTQ`).
@@ -402,11 +420,18 @@ impl Watched {
                 return written;
             }
         } else {
-            let stalled = self
-                .stalled
-                .get_or_insert_with(|| Box::pin(tokio::time::sleep(stall)));
-            if stalled.as_mut().poll(cx).is_pending() {
-                return Poll::Pending;
+            loop {
+                let stalled = self
+                    .stalled
+                    .get_or_insert_with(|| Box::pin(tokio::time::sleep(stall)));
+                if stalled.as_mut().poll(cx).is_pending() {
+                    return Poll::Pending;
+                }
+                // The wait outlasted the body timeout: a client still reading gets another.
+                if !self.delivery.took_more(&self.stream) {
+                    break;
+                }
+                self.stalled = None;
             }
         }
         metrics::counter!(crate::telemetry::CONNECTIONS_STALLED).increment(1);

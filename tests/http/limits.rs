@@ -421,17 +421,48 @@ fn uploads_without_a_valid_key_are_refused_unread() {
     assert!(started.elapsed() < Duration::from_secs(3));
 }
 
+/// A server with a body timeout of 1 s and the id of a job of one device whose Result, an
+/// operation a bin, is large (about 23 KB an operation).
+fn large_result(name: &str, operations: u64) -> (TestApp, String) {
+    let server = TestApp::start(&temp_db(name), &["--body-timeout-seconds", "1"]);
+    let id = server.submit(&serde_json::json!(
+        {"devices": 1, "operations": operations, "bin_operations": 1, "seed": 1}
+    ));
+    server.wait_for(&id, "succeeded", Duration::from_secs(120));
+    (server, id)
+}
+
+/// A blocking connection to `server` whose receive buffer is about `bytes` (the kernel doubles
+/// it), so that its client's end takes little of what it is not reading.
+fn small_buffered(server: &TestApp, bytes: u32) -> TcpStream {
+    let address: std::net::SocketAddr =
+        server.base().trim_start_matches("http://").parse().unwrap();
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket.set_recv_buffer_size(bytes).unwrap();
+    let stream = runtime.block_on(socket.connect(address)).unwrap();
+    let stream = stream.into_std().unwrap();
+    stream.set_nonblocking(false).unwrap();
+    stream
+}
+
+/// The `content-length` of a response head written in lower case.
+fn content_length(head: &str) -> Option<usize> {
+    head.lines()
+        .find_map(|line| line.strip_prefix("content-length: "))
+        .and_then(|length| length.trim().parse().ok())
+}
+
 /// A client that stops reading a large response is disconnected after the body timeout, and the
 /// response it pinned in memory goes (an audit: 40 such readers of a 23 MB Result held 1 GB,
 /// their connections open 5.5 minutes later).
 #[test]
 fn a_client_that_reads_none_of_a_response_is_disconnected() {
-    let server = TestApp::start(&temp_db("slow-reader"), &["--body-timeout-seconds", "1"]);
-    // One device, an operation a bin: a Result of about 23 MB.
-    let id = server.submit(
-        &serde_json::json!({"devices": 1, "operations": 1000, "bin_operations": 1, "seed": 1}),
-    );
-    server.wait_for(&id, "succeeded", Duration::from_secs(120));
+    // A Result of about 23 MB.
+    let (server, id) = large_result("slow-reader", 1000);
     let mut stream = TcpStream::connect(server.base().trim_start_matches("http://")).unwrap();
     let request = format!("GET /v1/jobs/{id}/result HTTP/1.1\r\nhost: localhost\r\n\r\n");
     stream.write_all(request.as_bytes()).unwrap();
@@ -444,11 +475,7 @@ fn a_client_that_reads_none_of_a_response_is_disconnected() {
     let _ = stream.read_to_end(&mut received);
     let head = String::from_utf8_lossy(&received[..received.len().min(400)]).to_lowercase();
     assert!(head.starts_with("http/1.1 200"), "{head}");
-    let length: usize = head
-        .lines()
-        .find_map(|line| line.strip_prefix("content-length: "))
-        .and_then(|length| length.trim().parse().ok())
-        .unwrap_or(usize::MAX);
+    let length = content_length(&head).unwrap_or(usize::MAX);
     assert!(
         received.len() < length.min(20_000_000),
         "{} of {length} bytes: the connection was closed before the end",
@@ -459,6 +486,41 @@ fn a_client_that_reads_none_of_a_response_is_disconnected() {
         metrics.contains("bouncewear_connections_stalled_total 1"),
         "{metrics}"
     );
+}
+
+/// A client that reads a large response slowly but steadily gets all of it: a write that waits
+/// for room wakes only once a third of the kernel's buffer is free, which at 200 KB/s takes
+/// longer than this server's body timeout, so such a client was cut short (an outside probe: a
+/// 17 MB Result read at 1-50 KB/s ended after 3-4 MB of it).
+#[test]
+fn a_client_reading_slowly_but_steadily_gets_the_whole_response() {
+    // A Result of about 4.6 MB.
+    let (server, id) = large_result("slow-steady", 200);
+    let mut stream = small_buffered(&server, 4096);
+    stream
+        .set_read_timeout(Some(Duration::from_secs(20)))
+        .unwrap();
+    let request = format!("GET /v1/jobs/{id}/result HTTP/1.1\r\nhost: localhost\r\n\r\n");
+    stream.write_all(request.as_bytes()).unwrap();
+    // 4 KB every 20 ms for 6 s, then the rest as fast as it comes.
+    let (started, mut received, mut chunk) = (Instant::now(), Vec::new(), [0u8; 4096]);
+    while started.elapsed() < Duration::from_secs(6) {
+        match stream.read(&mut chunk) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => received.extend_from_slice(&chunk[..n]),
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = stream.read_to_end(&mut received);
+    let head_end = received
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .expect("a head")
+        + 4;
+    let head = String::from_utf8_lossy(&received[..head_end]).to_lowercase();
+    let length = content_length(&head).expect("a length");
+    assert!(length > 4_000_000, "{head}");
+    assert_eq!(received.len() - head_end, length, "the whole body");
 }
 
 /// `Accept-Encoding` that refuses the uncompressed form got 406 from the compression layer after
@@ -596,20 +658,10 @@ fn an_event_stream_whose_client_reads_nothing_is_dropped() {
         &temp_db("unread-events"),
         &["--body-timeout-seconds", "2", "--max-streams-per-key", "2"],
     );
-    let address: std::net::SocketAddr =
-        server.base().trim_start_matches("http://").parse().unwrap();
     // Sockets that take about 2 KB and read none of it.
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
     let unread: Vec<TcpStream> = (0..2)
         .map(|_| {
-            let socket = tokio::net::TcpSocket::new_v4().unwrap();
-            socket.set_recv_buffer_size(1024).unwrap();
-            let stream = runtime.block_on(socket.connect(address)).unwrap();
-            let mut stream = stream.into_std().unwrap();
-            stream.set_nonblocking(false).unwrap();
+            let mut stream = small_buffered(&server, 1024);
             let request =
                 "GET /v1/events HTTP/1.1\r\nhost: localhost\r\naccept: text/event-stream\r\n\r\n";
             stream.write_all(request.as_bytes()).unwrap();
