@@ -100,14 +100,17 @@ fn the_dashboards_files_are_revalidated_and_every_answer_forbids_framing() {
 fn a_browser_on_another_site_is_refused_before_any_handler_runs() {
     let server = TestApp::start(&temp_db("cross-site"), &[]);
     let address = server.base().trim_start_matches("http://").to_owned();
-    let raw = |host: &str| {
+    // A GET of the jobs to `target` with a `Host` field for each of `hosts`.
+    let raw_to = |target: &str, hosts: &[&str]| {
         let mut stream = TcpStream::connect(&address).unwrap();
-        let request = format!("GET /v1/jobs HTTP/1.1\r\nhost: {host}\r\nconnection: close\r\n\r\n");
+        let fields: String = hosts.iter().map(|h| format!("host: {h}\r\n")).collect();
+        let request = format!("GET {target} HTTP/1.1\r\n{fields}connection: close\r\n\r\n");
         stream.write_all(request.as_bytes()).unwrap();
         let mut answer = String::new();
         stream.read_to_string(&mut answer).unwrap();
         answer
     };
+    let raw = |host: &str| raw_to("/v1/jobs", &[host]);
     // Without keys a server answers to loopback names only: another name pointing at 127.0.0.1
     // is how a web page would reach it (DNS rebinding).
     let port = address.rsplit_once(':').unwrap().1;
@@ -135,6 +138,24 @@ fn a_browser_on_another_site_is_refused_before_any_handler_runs() {
         assert!(rebound.starts_with("HTTP/1.1 403"), "{host}: {rebound}");
         assert!(rebound.contains("loopback names only"), "{rebound}");
     }
+    // Every name counts: a second `Host` field, and a target in absolute form (both were
+    // answered as the first `Host` said, found from outside).
+    let local = format!("localhost:{port}");
+    for (target, hosts) in [
+        ("/v1/jobs".to_owned(), vec![&local[..], "attacker.example"]),
+        (
+            "http://attacker.example/v1/jobs".to_owned(),
+            vec![&local[..]],
+        ),
+    ] {
+        let rebound = raw_to(&target, &hosts);
+        assert!(
+            rebound.starts_with("HTTP/1.1 403"),
+            "{target} {hosts:?}: {rebound}"
+        );
+    }
+    let absolute = format!("http://localhost:{port}/v1/jobs");
+    assert!(raw_to(&absolute, &[&local]).starts_with("HTTP/1.1 200"));
     // A change sent by a page of another site (a form, a fetch without preflight) is refused; the
     // server's own pages, and clients that are no browser, send their own origin or none.
     let jobs = server.url("/v1/jobs");

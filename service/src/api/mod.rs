@@ -170,12 +170,14 @@ async fn same_site(State(keyless): State<bool>, request: Request, next: Next) ->
 }
 
 fn cross_site(request: &Request) -> Option<String> {
-    let host = match request.headers().get(header::HOST) {
-        // A field that is no text is no name of this machine.
-        Some(host) => Some(host.to_str().unwrap_or("?")),
-        None => request.uri().authority().map(|a| a.as_str()),
-    };
-    if let Some(host) = host.filter(|host| !loopback_name(host)) {
+    // Every name the request gives: each `Host` field (a second one named another host after
+    // `localhost`, and the first was read) and the target's own, in absolute form (`GET
+    // http://attacker.example/...` with `Host: localhost` was answered; found from outside). A
+    // field that is no text is no name of this machine.
+    let mut names = (request.headers().get_all(header::HOST).iter())
+        .map(|host| host.to_str().unwrap_or("?"))
+        .chain(request.uri().authority().map(|a| a.as_str()));
+    if let Some(host) = names.find(|host| !loopback_name(host)) {
         return Some(format!(
             "a server without API keys answers to loopback names only (localhost, 127.0.0.1, [::1]), not `{host}`: another name pointing here is how a web page would reach it; configure --api-key to serve other names"
         ));
