@@ -1084,10 +1084,7 @@ fn check_precision(
     };
     let statistic = if spec.statistic == "mean" {
         Some(Statistic::Mean)
-    } else if let Some((name, _)) = crate::stats::QUANTILES
-        .iter()
-        .find(|(name, _)| *name == spec.statistic)
-    {
+    } else if let Some((name, _)) = crate::stats::quantile_keyed(&spec.statistic) {
         Some(Statistic::Quantile(name))
     } else {
         errors.push(FieldError {

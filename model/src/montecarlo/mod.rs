@@ -24,7 +24,9 @@ pub use metric::{DeviceMetric, Metric, OperationMetric};
 pub use rare::{RareEventReport, RareEventSpec};
 
 use crate::stats::summary::MIN_TAIL_UNITS;
-use crate::stats::{Accumulator, QUANTILES, QueryAnswer, Summary, Threshold, query, summarize};
+use crate::stats::{
+    Accumulator, QueryAnswer, Summary, Threshold, quantile_keyed, query, summarize,
+};
 use job::Statistic;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -656,7 +658,7 @@ fn summarize_devices(job: &Job, tally: &Tally) -> BTreeMap<String, Summary> {
 /// was met at 304 devices of one operation, 3 values beyond it, and such stopped intervals held
 /// the truth in 89 % of jobs (an outside probe, 7 December 2026).
 fn too_few_devices(name: &str, devices: u64) -> Option<String> {
-    let (_, q) = QUANTILES.iter().find(|(level, _)| *level == name)?;
+    let (_, q) = quantile_keyed(name)?;
     let rarer = q.min(1.0 - q);
     let needed = (MIN_TAIL_UNITS / rarer).round();
     (devices < needed as u64).then(|| {

@@ -66,6 +66,11 @@ pub const QUANTILES: [(&str, f64); 9] = [
     ("p99", 0.99),
 ];
 
+/// The reported quantile keyed `key` (`"p95"`): the key as [`QUANTILES`] holds it, and its level.
+pub fn quantile_keyed(key: &str) -> Option<(&'static str, f64)> {
+    QUANTILES.iter().find(|(known, _)| *known == key).copied()
+}
+
 /// splitmix64: a tiny deterministic generator, enough for test data and the synthetic
 /// measurements of [`crate::calibration::study`].
 pub(crate) struct SplitMix(pub u64);
