@@ -136,7 +136,7 @@ pub(crate) fn regularized_gamma(a: f64, x: f64) -> (f64, f64) {
     if x <= 0.0 {
         return (0.0, 0.0);
     }
-    let ln_front = a * x.ln() - x - libm::lgamma(a);
+    let ln_front = ln_prefactor(a, x);
     if x < a + 1.0 {
         let p = lower_series(a, x) * ln_front.exp();
         (p, (-p).ln_1p())
@@ -149,7 +149,7 @@ pub(crate) fn regularized_gamma(a: f64, x: f64) -> (f64, f64) {
 /// `(ln P(a, x), ln Q(a, x))` for `x > 0`: each tail in logarithms, the one computed directly
 /// keeping its digits where it is far below 1 (`P` near 0 and `Q` near 1 below `x = a + 1`).
 fn gamma_tails_ln(a: f64, x: f64) -> (f64, f64) {
-    let ln_front = a * x.ln() - x - libm::lgamma(a);
+    let ln_front = ln_prefactor(a, x);
     if x < a + 1.0 {
         let ln_p = lower_series(a, x).ln() + ln_front;
         (ln_p, (-ln_p.exp()).ln_1p())
@@ -157,6 +157,11 @@ fn gamma_tails_ln(a: f64, x: f64) -> (f64, f64) {
         let ln_q = upper_fraction(a, x).ln() + ln_front;
         ((-ln_q.exp()).ln_1p(), ln_q)
     }
+}
+
+/// `ln(x^a e^-x / Gamma(a))`, the factor both tails' expansions share.
+fn ln_prefactor(a: f64, x: f64) -> f64 {
+    a * x.ln() - x - libm::lgamma(a)
 }
 
 /// `P(a, x) x^-a e^x Gamma(a)`: the series `sum x^n / (a (a + 1) ... (a + n))`.
