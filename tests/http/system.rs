@@ -6,6 +6,7 @@ use crate::support::client::{
 };
 use crate::support::temp_db;
 use bouncewear_model::calibration::FITTED;
+use bouncewear_model::montecarlo::distribution::POSITIVE_MEMBERS;
 use bouncewear_model::scenario::{MAX_MAGNITUDE, MIN_MAGNITUDE, NUMBER_RULES, Rule};
 use serde_json::json;
 use std::collections::{BTreeMap, BTreeSet};
@@ -304,6 +305,74 @@ fn every_number_of_a_scenario_has_its_one_rule_in_the_document() {
         assert_eq!(seed["maximum"].as_u64(), Some(u64::MAX), "{schema}: {seed}");
         assert!(seed["format"].is_null(), "{schema}: {seed}");
     }
+}
+
+/// What the document says a request may send and get matches what the server does: a
+/// distribution's kind takes its own members only, those the model holds positive are so, a
+/// truncation bound may be `null` (a client that writes absent members as `null` was refused),
+/// every operation may get the keyless server's 403, and one that answers 304 reads
+/// `If-None-Match` (a probe against the contract found each missing).
+#[test]
+fn the_document_declares_what_every_request_may_send_and_get() {
+    let server = TestApp::start(&temp_db("declared"), &[]);
+    let openapi = get(&server.url("/openapi.json"), None).json();
+    let kinds = openapi["components"]["schemas"]["DistributionSpec"]["oneOf"]
+        .as_array()
+        .unwrap();
+    let mut positive = BTreeSet::new();
+    for kind in kinds {
+        assert_eq!(kind["additionalProperties"], json!(false), "{kind}");
+        for (member, rules) in kind["properties"].as_object().unwrap() {
+            if rules["exclusiveMinimum"] == json!(0) {
+                positive.insert(member.as_str());
+            }
+        }
+    }
+    assert_eq!(positive, BTreeSet::from(POSITIVE_MEMBERS));
+    let (mut operations, mut conditional) = (0, 0);
+    for (path, item) in openapi["paths"].as_object().unwrap() {
+        for (method, operation) in item.as_object().unwrap() {
+            let responses = &operation["responses"];
+            assert!(responses.get("403").is_some(), "{method} {path}");
+            let headers: Vec<&str> = operation["parameters"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter(|p| p["in"] == "header")
+                .map(|p| p["name"].as_str().unwrap())
+                .collect();
+            let not_modified = responses.get("304").is_some();
+            assert_eq!(
+                not_modified,
+                headers.contains(&"If-None-Match"),
+                "{method} {path}"
+            );
+            operations += 1;
+            conditional += usize::from(not_modified);
+        }
+    }
+    assert!(
+        operations > 20 && conditional >= 5,
+        "{operations} {conditional}"
+    );
+    let quota = &openapi["paths"]["/v1/jobs"]["post"]["responses"]["403"]["description"];
+    assert!(
+        quota.as_str().unwrap().contains("quota") && quota.as_str().unwrap().contains("Origin"),
+        "{quota}"
+    );
+    let job = r#"{"devices": 2, "operations": 2, "scatter": [{"parameter": "kappa",
+        "per": "device", "distribution": {"kind": "normal", "mean": 0.3, "sd": 0.01,
+        "min": 0.1, "max": null}}]}"#;
+    let accepted = post(&server.url("/v1/jobs"), job, None);
+    assert_eq!(accepted.status, 202, "{}", accepted.body);
+    let unbounded = job.replace(r#""min": 0.1"#, r#""min": null"#);
+    let refused = assert_problem(&post(&server.url("/v1/jobs"), &unbounded, None), 422);
+    let errors = refused["errors"].as_array().unwrap();
+    assert_eq!(errors.len(), 1, "{refused}");
+    assert_eq!(
+        errors[0]["pointer"], "/scatter/0/distribution/min",
+        "{refused}"
+    );
 }
 
 /// A client's `X-Request-Id` is echoed (and logged) when it is an id; one of 9,000 characters,

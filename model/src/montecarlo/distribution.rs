@@ -23,7 +23,7 @@ pub const MAX_SCORE: f64 = 37.0;
 
 /// A distribution as the user writes it.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
-/// Read by [`DistributionSpec`]'s own `Deserialize` (below), so that a fault names its member.
+// Read by its own `Deserialize` (below), so that a fault names its member.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum DistributionSpec {
@@ -134,6 +134,12 @@ impl Kind {
         needed.contains(&name) || optional.contains(&name)
     }
 
+    /// Whether this kind may go without the member `name` (a truncation bound), which `null`
+    /// then leaves out, as the OpenAPI document's `["number", "null"]` says.
+    fn may_omit(self, name: &str) -> bool {
+        self.members().1.contains(&name)
+    }
+
     /// Its members, `kind` first, as an unknown member's error lists them.
     fn listed(self) -> &'static [&'static str] {
         match self {
@@ -146,6 +152,10 @@ impl Kind {
         }
     }
 }
+
+/// The members positive whatever parameter the distribution feeds (`Faults::positive`); the
+/// OpenAPI document states each as its member's range.
+pub const POSITIVE_MEMBERS: [&str; 5] = ["sd", "median", "sigma", "scale", "shape"];
 
 /// Every number member of any kind of distribution.
 const NUMBER_MEMBERS: [&str; 10] = [
@@ -178,7 +188,8 @@ impl<'de> serde::de::Visitor<'de> for SpecVisitor {
     fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
         use serde::de::Error;
         let mut kind: Option<Kind> = None;
-        let mut numbers = [None::<f64>; NUMBER_MEMBERS.len()];
+        // Each member as given: absent, `null` (read before `kind`), or a number.
+        let mut numbers = [None::<Option<f64>>; NUMBER_MEMBERS.len()];
         while let Some(name) = map.next_key::<String>()? {
             if name == "kind" {
                 kind = Some(map.next_value()?);
@@ -187,8 +198,11 @@ impl<'de> serde::de::Visitor<'de> for SpecVisitor {
             let slot = NUMBER_MEMBERS.iter().position(|member| *member == name);
             match (slot, kind) {
                 (Some(slot), None) => numbers[slot] = Some(map.next_value()?),
-                (Some(slot), Some(kind)) if kind.has(&name) => {
+                (Some(slot), Some(kind)) if kind.may_omit(&name) => {
                     numbers[slot] = Some(map.next_value()?);
+                }
+                (Some(slot), Some(kind)) if kind.has(&name) => {
+                    numbers[slot] = Some(Some(map.next_value()?));
                 }
                 // Named at the member itself, once the kind is known.
                 (_, Some(kind)) => {
@@ -198,19 +212,26 @@ impl<'de> serde::de::Visitor<'de> for SpecVisitor {
             }
         }
         let kind = kind.ok_or_else(|| A::Error::missing_field("kind"))?;
-        let given = |name: &str| {
+        let written = |name: &str| {
             let slot = NUMBER_MEMBERS.iter().position(|member| *member == name);
             slot.and_then(|slot| numbers[slot])
         };
+        let given = |name: &str| written(name).flatten();
         // A member read before `kind` that this kind does not have (members come in their
         // names' order from a document read whole, so only `extra`-like names precede `kind`).
         if let Some(name) = NUMBER_MEMBERS
             .iter()
-            .find(|name| given(name).is_some() && !kind.has(name))
+            .find(|name| written(name).is_some() && !kind.has(name))
         {
             return Err(A::Error::unknown_field(name, kind.listed()));
         }
-        let needed = |name: &'static str| given(name).ok_or_else(|| A::Error::missing_field(name));
+        let needed = |name: &'static str| match written(name) {
+            Some(Some(value)) => Ok(value),
+            Some(None) => Err(A::Error::custom(format_args!(
+                "`{name}`: invalid type: null, expected a number"
+            ))),
+            None => Err(A::Error::missing_field(name)),
+        };
         Ok(match kind {
             Kind::Fixed => DistributionSpec::Fixed {
                 value: needed("value")?,
@@ -704,6 +725,7 @@ impl Faults<'_> {
     }
 
     fn positive(&mut self, field: &str, value: f64) {
+        debug_assert!(POSITIVE_MEMBERS.contains(&field), "{field}");
         if !(value.is_finite() && value > 0.0) {
             self.fail(field, format!("must be positive, got {}", shown(value)));
         }
@@ -1460,6 +1482,66 @@ mod tests {
             serde_json::from_str::<DistributionSpec>(r#"{"kind":"fixed","value":1,"sd":2}"#)
                 .is_err()
         );
+    }
+
+    /// Each of [`POSITIVE_MEMBERS`] refuses 0 in every kind that has it, whatever the parameter;
+    /// the other members take 0 where the parameter may be 0 or below.
+    #[test]
+    fn the_positive_members_are_those_listed() {
+        let kinds = [
+            r#"{"kind":"fixed","value":1}"#,
+            r#"{"kind":"normal","mean":1,"sd":1}"#,
+            r#"{"kind":"lognormal","median":1,"sigma":1}"#,
+            r#"{"kind":"uniform","min":-1,"max":1}"#,
+            r#"{"kind":"triangular","min":-1,"mode":0,"max":1}"#,
+            r#"{"kind":"weibull","scale":1,"shape":1}"#,
+        ];
+        let mut listed = 0;
+        for kind in kinds {
+            let spec: serde_json::Value = serde_json::from_str(kind).unwrap();
+            for member in spec.as_object().unwrap().keys().filter(|m| *m != "kind") {
+                let mut zero = spec.clone();
+                zero[member] = serde_json::json!(0);
+                let refused =
+                    pointers(&zero.to_string(), Domain::FINITE) == [format!("/d/{member}")];
+                let positive = POSITIVE_MEMBERS.contains(&member.as_str());
+                assert_eq!(refused, positive, "{zero}");
+                listed += usize::from(positive);
+            }
+        }
+        assert_eq!(listed, POSITIVE_MEMBERS.len());
+    }
+
+    /// A truncation bound given as `null` is left out, as the OpenAPI document's
+    /// `["number", "null"]` says (a client that writes absent members as `null` was refused); a
+    /// member a kind needs is still a number.
+    #[test]
+    fn a_null_truncation_bound_is_no_bound_and_a_needed_member_is_a_number() {
+        for (written, meant) in [
+            (
+                r#"{"kind":"normal","mean":1,"sd":0.1,"min":0.5,"max":null}"#,
+                r#"{"kind":"normal","mean":1,"sd":0.1,"min":0.5}"#,
+            ),
+            (
+                r#"{"kind":"lognormal","median":1,"sigma":0.1,"min":null,"max":null}"#,
+                r#"{"kind":"lognormal","median":1,"sigma":0.1}"#,
+            ),
+            (
+                r#"{"max":null,"kind":"weibull","scale":1,"shape":2}"#,
+                r#"{"kind":"weibull","scale":1,"shape":2}"#,
+            ),
+        ] {
+            assert_eq!(parse(written), parse(meant), "{written}");
+        }
+        for needed in [
+            r#"{"kind":"uniform","min":null,"max":1}"#,
+            r#"{"kind":"normal","mean":1,"sd":null}"#,
+            r#"{"sd":null,"kind":"normal","mean":1}"#,
+            r#"{"kind":"fixed","value":null}"#,
+        ] {
+            let error = serde_json::from_str::<DistributionSpec>(needed).unwrap_err();
+            assert!(error.to_string().contains("null"), "{needed}: {error}");
+        }
     }
 
     #[test]

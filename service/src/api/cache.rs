@@ -15,6 +15,29 @@ use sha2::{Digest, Sha256};
 )]
 pub struct NotModified;
 
+/// Declares the `If-None-Match` an operation that may answer [`NotModified`] reads.
+pub fn declare_if_none_match(operation: &mut utoipa::openapi::path::Operation) {
+    use utoipa::openapi::path::{ParameterBuilder, ParameterIn};
+    use utoipa::openapi::{ObjectBuilder, Required, Type};
+    let parameter = ParameterBuilder::new()
+        .name("If-None-Match")
+        .parameter_in(ParameterIn::Header)
+        .required(Required::False)
+        .description(Some(
+            "ETags of a copy the client holds (or `*`): 304 and no body when one is the \
+             current tag (weak comparison)",
+        ))
+        .schema(Some(ObjectBuilder::new().schema_type(Type::String)))
+        .example(Some(serde_json::json!(
+            "W/\"3f2a9c0d5e7b14f68a2c9e0b7d4f1a36\""
+        )))
+        .build();
+    operation
+        .parameters
+        .get_or_insert_with(Vec::new)
+        .push(utoipa::openapi::RefOr::T(parameter));
+}
+
 /// A succeeded job's result, distribution or life, as `content_type`, with its validator.
 pub fn immutable(
     state: &AppState,

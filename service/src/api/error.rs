@@ -438,6 +438,16 @@ pub mod responses {
     )]
     pub struct TooManySchedules(pub Problem);
 
+    /// Every request to a server without API keys that names a host other than loopback, and
+    /// every change whose `Origin` is another site (`limits`: DNS rebinding, cross-site forms).
+    #[derive(IntoResponses)]
+    #[response(
+        status = 403,
+        description = "Without API keys: a `Host` field or an absolute target that names no loopback host, or a change (not GET, HEAD or OPTIONS) whose `Origin` is not on one",
+        content_type = "application/problem+json"
+    )]
+    pub struct ForeignName(pub Problem);
+
     /// Event streams: each API key holds at most `--max-streams-per-key` at once.
     #[derive(IntoResponses)]
     #[response(

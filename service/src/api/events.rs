@@ -228,7 +228,7 @@ pub async fn events(
 /// job that already ended gets its `status` event at once; one that another server deleted before
 /// this one saw it end gets a `deleted` event (data: `{id}`).
 #[utoipa::path(
-    get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path, description = "Job id")),
+    get, path = "/v1/jobs/{id}/events", tag = "jobs", params(("id" = String, Path, description = "Job id"), ("Last-Event-ID" = Option<String>, Header, description = "The last event's `id` a client that reconnects saw (`JOB:STATUS:OPERATIONS_DONE`): that state is not told again", example = "6f0d4e8a-2b1c-4d7e-9a3f-5c8b1e2d4f60:running:40000")),
     responses(
         (status = 200, description = "An event stream: `progress` events (data: status, operations_done, operations_total) while the job runs, then one `status` event (data: the JobResource) when it ends (`deleted`, data: id, if another server deleted it before this one saw its end)", content_type = "text/event-stream", body = ServerSentEvent),
         Unauthorized,

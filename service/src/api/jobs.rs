@@ -54,6 +54,7 @@ pub struct JobResource {
     #[schema(format = "uuid")]
     pub id: String,
     /// The job's `name`, if it had one.
+    #[schema(required = true)]
     pub name: Option<String>,
     /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
     pub status: JobStatus,
@@ -63,16 +64,18 @@ pub struct JobResource {
     #[schema(format = DateTime)]
     pub created_at: String,
     /// RFC 3339; when a worker first started it.
-    #[schema(format = DateTime)]
+    #[schema(format = DateTime, required = true)]
     pub started_at: Option<String>,
     /// RFC 3339; when it ended.
-    #[schema(format = DateTime)]
+    #[schema(format = DateTime, required = true)]
     pub finished_at: Option<String>,
     /// Why it failed.
+    #[schema(required = true)]
     pub error: Option<String>,
     /// While it runs, why its work waits, if it does (null otherwise): `waiting for room: ...`
     /// (no room on the disk for what it computed, kept until there is) or `waiting for the
     /// database: ...`; its shards (`links.shards`) say which.
+    #[schema(required = true)]
     pub waiting: Option<String>,
     /// The seed the job runs with (drawn at submission when the job did not give one).
     pub seed: u64,

@@ -359,11 +359,13 @@ struct EveryRequest;
 
 impl Modify for EveryRequest {
     fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
-        use error::responses::{BadQuery, BodyTimeout, Unavailable};
+        use error::responses::{BadQuery, BodyTimeout, ForeignName, Unavailable};
         use utoipa::IntoResponses;
+        use utoipa::openapi::RefOr;
         let (unavailable, body_timeout) = (Unavailable::responses(), BodyTimeout::responses());
         // Every route refuses a query parameter it does not take (`known_query`).
         let bad_query = BadQuery::responses();
+        let foreign_name = ForeignName::responses();
         for item in openapi.paths.paths.values_mut() {
             let operations = [
                 &mut item.get,
@@ -378,12 +380,34 @@ impl Modify for EveryRequest {
                     .iter()
                     .chain(&bad_query)
                     .chain(body_timeout.iter().filter(|_| with_body));
+                let responses = &mut operation.responses.responses;
                 for (status, response) in common {
                     // An operation's own description of the status stays.
-                    let responses = &mut operation.responses.responses;
                     responses
                         .entry(status.clone())
                         .or_insert_with(|| response.clone());
+                }
+                // A 403 of the operation's own (a quota) gets the foreign name's reason too.
+                for (status, response) in &foreign_name {
+                    match responses.get_mut(status) {
+                        Some(RefOr::T(own)) => {
+                            if let RefOr::T(foreign) = response {
+                                own.description = format!(
+                                    "{}; or {}{}",
+                                    own.description,
+                                    foreign.description[..1].to_lowercase(),
+                                    &foreign.description[1..]
+                                );
+                            }
+                        }
+                        Some(RefOr::Ref(_)) => {}
+                        None => {
+                            responses.insert(status.clone(), response.clone());
+                        }
+                    }
+                }
+                if responses.contains_key("304") {
+                    cache::declare_if_none_match(operation);
                 }
             }
         }

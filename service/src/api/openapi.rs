@@ -7,6 +7,7 @@
 
 use bouncewear_model::calibration::{FITTED, MAX_OBSERVATIONS, MAX_OPERATION, MAX_PARAMETERS};
 use bouncewear_model::error::MAX_TEXT_CHARS;
+use bouncewear_model::montecarlo::distribution::POSITIVE_MEMBERS;
 use bouncewear_model::montecarlo::job::{MAX_DEVICES, MAX_OPERATIONS, MAX_THRESHOLDS};
 use bouncewear_model::montecarlo::rare::LIFE;
 use bouncewear_model::montecarlo::{DeviceMetric, OperationMetric};
@@ -353,7 +354,7 @@ fn schedule_fields() -> Vec<(&'static str, &'static str, Value)> {
 }
 
 /// The rules of a schema's shape rather than one field's: a mechanism that can return the arm, a
-/// list of limits and its thresholds' sides.
+/// distribution's members, a list of limits and its thresholds' sides.
 fn constrain_structure(schemas: &mut Value) {
     // Without a spring, a static force of 0 would never return the arm.
     if let Some(Value::Object(mechanism)) = schemas.get_mut("MechanismSpec") {
@@ -380,6 +381,21 @@ fn constrain_structure(schemas: &mut Value) {
             // None listed twice (`job::check_written`): JSON Schema's equality is the rule's.
             ("uniqueItems".to_owned(), json!(true)),
         ]);
+    }
+    // A distribution's kind has only its own members, and those the model holds positive
+    // whatever the parameter are so here too.
+    for kind in schemas
+        .pointer_mut("/DistributionSpec/oneOf")
+        .and_then(Value::as_array_mut)
+        .into_iter()
+        .flatten()
+    {
+        kind["additionalProperties"] = json!(false);
+        for member in POSITIVE_MEMBERS {
+            if let Some(Value::Object(rules)) = kind.pointer_mut(&format!("/properties/{member}")) {
+                rules.insert("exclusiveMinimum".to_owned(), json!(0));
+            }
+        }
     }
     for side in schemas
         .pointer_mut("/Threshold/oneOf")
