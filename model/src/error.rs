@@ -427,15 +427,18 @@ fn read_strict(text: &str) -> Result<serde_json::Value, InvalidInput> {
         .end()
         .map_err(|error| invalid_from_serde(Pointer::root(), &error))?;
     if let Some((pointer, token)) = underflowing_number(text) {
-        return Err(InvalidInput::single(
-            &pointer,
-            format!(
-                "`{token}` is not 0, but nearer 0 than any number (the least is 4.9e-324) and \
-                 would read as 0: write 0, or a number within range"
-            ),
-        ));
+        return Err(InvalidInput::single(&pointer, underflow(&token)));
     }
     Ok(value)
+}
+
+/// Why `token`, a number written as not 0 that reads as 0 (`1e-400`), is refused, in a body or a
+/// query.
+pub fn underflow(token: &str) -> String {
+    format!(
+        "`{token}` is not 0, but nearer 0 than any number (the least is 4.9e-324) and would read \
+         as 0: write 0, or a number within range"
+    )
 }
 
 /// The first number of valid JSON `text` written as not zero that reads as 0 (`1e-400`, which

@@ -2,6 +2,7 @@
 //! which thresholds to answer from a metric's stored groups, read from the query string's
 //! `quantiles=0.5,0.999` and `exceedance=above:0.005,below:0.002`.
 
+use bouncewear_model::error::underflow;
 use bouncewear_model::stats::Threshold;
 use std::fmt;
 
@@ -77,23 +78,21 @@ pub fn items<T>(
 
 /// A level: a number strictly between 0 and 1.
 fn level(item: &str) -> Result<f64, String> {
-    number(item)
-        .filter(|q| *q > 0.0 && *q < 1.0)
-        .ok_or_else(|| "a quantile level must be a number strictly between 0 and 1".to_owned())
+    let rule = || "a quantile level must be a number strictly between 0 and 1".to_owned();
+    number(item, rule).and_then(|q| (q > 0.0 && q < 1.0).then_some(q).ok_or_else(rule))
 }
 
 /// A fraction: a number strictly between 0 and 1, spaces around it allowed.
 pub fn fraction(item: &str) -> Result<f64, String> {
-    number(item.trim())
-        .filter(|p| *p > 0.0 && *p < 1.0)
-        .ok_or_else(|| "a fraction must be a number strictly between 0 and 1".to_owned())
+    let rule = || "a fraction must be a number strictly between 0 and 1".to_owned();
+    number(item.trim(), rule).and_then(|p| (p > 0.0 && p < 1.0).then_some(p).ok_or_else(rule))
 }
 
 /// A threshold: `above:X` or `below:X` with X a finite number.
 fn threshold(item: &str) -> Result<Threshold, String> {
     let rule = || "must be `above:X` or `below:X` with X a finite number".to_owned();
     let (side, value) = item.split_once(':').ok_or_else(rule)?;
-    let value = number(value).ok_or_else(rule)?;
+    let value = number(value, rule)?;
     match side {
         "above" => Ok(Threshold::Above(value)),
         "below" => Ok(Threshold::Below(value)),
@@ -101,17 +100,20 @@ fn threshold(item: &str) -> Result<Threshold, String> {
     }
 }
 
-/// A finite decimal number (not `inf`, `NaN` or beyond f64), and not one nearer 0 than any
-/// (`1e-400`, which reads as 0 and was taken as a threshold of 0; a job's body refuses it too).
-fn number(text: &str) -> Option<f64> {
+/// A finite decimal number (not `inf`, `NaN` or beyond f64; `rule` otherwise), and not one
+/// nearer 0 than any (`1e-400`, which reads as 0 and was taken as a threshold of 0; refused as a
+/// job's body refuses it).
+fn number(text: &str, rule: impl FnOnce() -> String) -> Result<f64, String> {
     let plain = text
         .bytes()
         .all(|b| b.is_ascii_digit() || b"+-.eE".contains(&b));
     let mantissa = text.split(['e', 'E']).next().unwrap_or_default();
     let written_zero = !mantissa.bytes().any(|b| (b'1'..=b'9').contains(&b));
-    text.parse::<f64>()
-        .ok()
-        .filter(|x| plain && x.is_finite() && (*x != 0.0 || written_zero))
+    match text.parse::<f64>() {
+        Ok(x) if plain && x == 0.0 && !written_zero => Err(underflow(text)),
+        Ok(x) if plain && x.is_finite() => Ok(x),
+        _ => Err(rule()),
+    }
 }
 
 /// An item as repeated in an error: at most 40 characters of it.
@@ -177,6 +179,13 @@ mod tests {
         assert_eq!(
             parse(Some("0.5,2"), None).unwrap_err(),
             "query parameter `quantiles`: `2`: a quantile level must be a number strictly between 0 and 1"
+        );
+        // A number nearer 0 than any is told so, as in a body ("finite number" said of 1e-400).
+        assert_eq!(
+            parse(None, Some("above:1e-400")).unwrap_err(),
+            "query parameter `exceedance`: `above:1e-400`: `1e-400` is not 0, but nearer 0 than \
+             any number (the least is 4.9e-324) and would read as 0: write 0, or a number within \
+             range"
         );
     }
 }
