@@ -646,18 +646,32 @@ fn mean_interval(centre: f64, per_group: &[f64]) -> [f64; 2] {
     }
     let g = per_group.len() as f64;
     let mean = per_group.iter().sum::<f64>() / g;
-    // The residuals' squares, cubes and fourth powers in one pass.
-    let (squares, cubes, fourths) =
+    // The residuals' squares, cubes and fourth powers in one pass, of the residuals over `scale`.
+    let moments = |scale: f64| {
         (per_group.iter()).fold((0.0, 0.0, 0.0), |(squares, cubes, fourths), x| {
-            let r = x - mean;
+            let r = (x - mean) / scale;
             (squares + r * r, cubes + r * r * r, fourths + r * r * r * r)
-        });
+        })
+    };
+    let (mut scale, mut sums) = (1.0, moments(1.0));
+    // Residuals from about 1e77 on, whose fourth powers pass f64: over the largest, so that the
+    // spread stays finite (the mean of seven equal values of 5e209 is one rounding off them, and
+    // the square of that residual passed f64: a job's interval was refused; found from outside)
+    // and the degrees of freedom right (an infinite sum of fourth powers made them 1).
+    if !sums.2.is_finite() {
+        scale = per_group
+            .iter()
+            .fold(0.0, |most, x| (x - mean).abs().max(most));
+        sums = moments(scale);
+    }
+    let (squares, cubes, fourths) = sums;
     let variance = squares / (g - 1.0);
     if variance == 0.0 {
         return [centre, centre];
     }
+    // Of the scaled residuals: the same bits as unscaled where `scale` is 1.
     let sd = variance.sqrt();
-    let se = sd / g.sqrt();
+    let se = sd * scale / g.sqrt();
     // A variance that a few groups carry is the rough estimate it is (the quantiles' rule).
     let t = student_t_975(satterthwaite_df(squares, fourths, per_group.len()));
     let skew = cubes / g / (sd * sd * sd);
@@ -873,6 +887,33 @@ mod tests {
         let mean = huge.iter().sum::<f64>() / 5.0;
         let [lo, hi] = mean_interval(mean, &huge);
         assert!(lo.is_finite() && hi.is_finite() && lo <= mean && mean <= hi);
+    }
+
+    /// Group means whose residuals pass 1e77 (fourth powers beyond f64): the interval is the
+    /// one of the same values at a small scale, scaled, and equal values far up stay a point
+    /// within rounding (seven of 5e209 averaged one rounding off them, and the residual's square
+    /// made a job's interval infinite: found from outside).
+    #[test]
+    fn the_means_interval_keeps_its_scale_far_up() {
+        let equal = [5e209; 7];
+        let mean = equal.iter().sum::<f64>() / 7.0;
+        assert_ne!(mean, 5e209, "the rounding this test is about");
+        let [lo, hi] = mean_interval(5e209, &equal);
+        assert!((hi - lo) / 5e209 < 1e-15, "{lo} {hi}");
+        let mut rng = SplitMix(77);
+        let small: Vec<f64> = (0..16).map(|_| (rng.normal()).exp()).collect();
+        for factor in [1e80, 1e150, 1e250] {
+            let large: Vec<f64> = small.iter().map(|x| x * factor).collect();
+            let centre = |values: &[f64]| values.iter().sum::<f64>() / 16.0;
+            let [lo, hi] = mean_interval(centre(&small), &small);
+            let [big_lo, big_hi] = mean_interval(centre(&large), &large);
+            for (end, expected) in [(big_lo, lo * factor), (big_hi, hi * factor)] {
+                assert!(
+                    (end / expected - 1.0).abs() < 1e-12,
+                    "{factor}: {end} {expected}"
+                );
+            }
+        }
     }
 
     #[test]
