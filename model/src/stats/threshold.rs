@@ -32,6 +32,18 @@ impl Threshold {
         }
     }
 
+    /// For whole-number values, the threshold half-way between two whole numbers that the same
+    /// values lie beyond (`above:7` is `above:7.5`, `below:7` is `below:6.5`): below 256, where
+    /// a sketch bucket holds one whole number, no value shares its bucket, so that it is answered
+    /// exactly after the run (`above:7` of bounce counts read 1.0 where 13.9 % were 8: every 7
+    /// in the bucket from 7 counted as spread above it; found from outside).
+    pub fn between_whole_values(self) -> Threshold {
+        match self {
+            Threshold::Above(x) => Threshold::Above(x.floor() + 0.5),
+            Threshold::Below(x) => Threshold::Below(x.ceil() - 0.5),
+        }
+    }
+
     /// The same side and value, to the bit (`-0.0` is not `0.0`).
     pub fn same(self, other: Threshold) -> bool {
         match (self, other) {

@@ -1192,3 +1192,75 @@ fn a_spread_whose_squares_pass_f64_is_no_spread_of_zero() {
         "{sobol}"
     );
 }
+
+/// A whole-number metric's quantiles and thresholds, against the job's own exact counts (its
+/// listed thresholds half-way between whole numbers): a level whose whole number the shares
+/// settle has the interval of that number alone (p01 to p75 of counts 86 % at 7 read `[7, 8]`),
+/// and a threshold asked after the run on a whole number is answered exactly (`above:7` read 1.0
+/// for 0.139, counted as if the 7s spread over their bucket; found from outside).
+#[test]
+fn whole_number_quantiles_and_thresholds_are_those_of_the_counts() {
+    use bouncewear_model::montecarlo::{Metric, RunGroups, Silent, engine, query_metric};
+    use bouncewear_model::stats::{QUANTILES, Resolution, Threshold};
+    let halves = [5.5, 6.5, 7.5, 8.5];
+    let listed: Vec<Value> = halves.iter().map(|h| json!({"above": h})).collect();
+    let job = job(
+        json!({"devices": 300, "operations": 300, "bin_operations": 300, "seed": 1,
+        "metrics": ["bounce_count"], "limits": {"bounce_count": listed},
+        "scatter": [{"parameter": "impact_velocity_m_s", "per": "operation",
+                     "distribution": {"kind": "normal", "mean": 0.33, "sd": 0.03, "min": 0.05}}]}),
+    );
+    let tally = engine::run(&job, &Silent, |_| false).unwrap();
+    let result = summarize_job(&job, &tally, 1.0);
+    let summary = &result.operations["bounce_count"][0].summary;
+    // The share at or below each whole number from 5 to 8, exact.
+    let above: Vec<f64> = summary.exceedances.iter().map(|e| e.probability).collect();
+    let at_or_below = |k: f64| match halves.iter().position(|h| *h == k + 0.5) {
+        Some(i) => 1.0 - above[i],
+        None if k < 5.0 => 0.0,
+        None => 1.0,
+    };
+    assert!(
+        at_or_below(7.0) > 0.8 && at_or_below(6.0) < 0.01,
+        "{above:?}"
+    );
+    let mut settled = 0;
+    for (key, level) in QUANTILES {
+        let q = &summary.quantiles[key];
+        let k = q.value;
+        // The exact sample quantile: the least whole number whose share reaches the level.
+        assert!(
+            at_or_below(k) >= level && at_or_below(k - 1.0) < level,
+            "{key}: {q:?}"
+        );
+        assert!(q.ci95[0] <= k && k <= q.ci95[1], "{key}: {q:?}");
+        if at_or_below(k) > level + 0.02 && at_or_below(k - 1.0) < level - 0.02 {
+            assert_eq!(q.ci95, [k, k], "{key}: a level the counts settle");
+            settled += 1;
+        }
+    }
+    assert!(settled >= 5, "{settled}");
+    let asked = [
+        Threshold::Above(7.0),
+        Threshold::Below(7.0),
+        Threshold::Above(7.2),
+        Threshold::Below(8.0),
+        Threshold::Above(6.0),
+    ];
+    let groups = RunGroups::new(&job, tally).of("bounce_count", 0).unwrap();
+    let metric = Metric::parse("bounce_count").unwrap();
+    let answer = query_metric(metric, job.bin_range(0), &groups, &[], &asked);
+    let exact = [
+        1.0 - at_or_below(7.0),
+        at_or_below(6.0),
+        1.0 - at_or_below(7.0),
+        at_or_below(7.0),
+        1.0 - at_or_below(6.0),
+    ];
+    for ((e, asked), p) in answer.exceedance.iter().zip(asked).zip(exact) {
+        assert!(e.threshold.same(asked), "{e:?}: told as asked");
+        assert_eq!(e.resolution, Resolution::Exact, "{e:?}");
+        assert!((e.probability - p).abs() <= 1e-12, "{e:?} against {p}");
+        assert!(e.ci95[0] <= p && p <= e.ci95[1], "{e:?}");
+    }
+}
