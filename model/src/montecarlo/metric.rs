@@ -218,7 +218,7 @@ impl Metric {
 
 /// Why the anode/cathode metric `name` cannot be had without the scenario's polarity: its fault
 /// wherever a job names it.
-pub(crate) fn needs_polarity(name: &str) -> String {
+pub fn needs_polarity(name: &str) -> String {
     format!(
         "`{name}` needs the anode's share of the eroded mass: set the job's \
          /scenario/material/anode_erosion_fraction"

@@ -20,7 +20,7 @@ pub use engine::{Cancelled, Observer, Silent, Tally, Watch};
 pub use job::{Job, JobSpec, LimitSpec};
 pub use kernel::{FLOOR_CHAINS, Isa, Kernel};
 pub use lives::{DeviceLife, GroupLives};
-pub use metric::{DeviceMetric, Metric, OperationMetric};
+pub use metric::{DeviceMetric, Metric, OperationMetric, needs_polarity};
 pub use rare::{RareEventReport, RareEventSpec};
 
 use crate::stats::summary::MIN_TAIL_UNITS;

@@ -5,7 +5,7 @@ use super::jobs::{QueuedJob, draw_seed};
 use super::{Owner, UnixMs};
 use bouncewear_model::error::{MAX_TEXT_CHARS, past_listing};
 use bouncewear_model::montecarlo::job::{LIST_FIELDS, check_written};
-use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric};
+use bouncewear_model::montecarlo::{Job, JobResult, JobSpec, Metric, needs_polarity};
 use bouncewear_model::stats::{QUANTILES, Summary};
 use bouncewear_model::{FieldError, InvalidInput, Pointer};
 use chrono::{DateTime, TimeDelta, TimeZone, Timelike, Utc};
@@ -712,6 +712,18 @@ impl Statistic {
                 "`{0}` is an operation metric, summarised per bin: write operations.{0}.STAT",
                 m.name()
             )),
+            // Not the template's `metrics` at fault: no job has them without the polarity.
+            Source::Devices(Metric::Device(m), _)
+                if m.needs_polarity()
+                    && job
+                        .spec()
+                        .scenario
+                        .material
+                        .anode_erosion_fraction
+                        .is_none() =>
+            {
+                Err(needs_polarity(m.name()))
+            }
             Source::Operations(metric, _) | Source::Devices(metric, _) if !computed(metric) => {
                 Err(format!(
                     "the template's `metrics` leaves out `{}`: its runs have no value of it",
@@ -1303,6 +1315,13 @@ mod tests {
         ]) {
             assert!(detail.contains(says), "{detail}: {says}");
         }
+        // Anode and cathode masses exist only with the polarity, whatever the `metrics` (the
+        // template's `metrics` was blamed where it had none).
+        let unpolar = parse(r#"{}"#, r#""devices.anode_eroded_mass_kg.mean""#).unwrap_err();
+        let detail = &unpolar.errors()[0].detail;
+        assert!(detail.contains("anode_erosion_fraction"), "{detail}");
+        let polar = r#"{"scenario": {"material": {"anode_erosion_fraction": 0.6}}}"#;
+        assert!(parse(polar, r#""devices.anode_eroded_mass_kg.mean""#).is_ok());
         let defaulted = parse(r#"{"metrics": ["e1"]}"#, "").unwrap_err();
         assert_eq!(defaulted.pointers(), ["/statistics"]);
         assert!(defaulted.errors()[0].detail.contains("default"));
