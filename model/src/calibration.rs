@@ -113,6 +113,16 @@ pub const FITTED: [&str; 7] = [
     "eroded_mass_kg",
 ];
 
+/// The values a measured quantity of [`FITTED`] may take: a scenario's positive magnitudes, and
+/// for `e1`, a coefficient of restitution, at most 1 (an `e1` of 1.5 was fitted as if the model
+/// could reach it; found from outside).
+pub fn measured_range(quantity: &str) -> [f64; 2] {
+    match quantity {
+        "e1" => [MIN_MAGNITUDE, 1.0],
+        _ => [MIN_MAGNITUDE, MAX_MAGNITUDE],
+    }
+}
+
 impl Observation {
     /// The measured value of a quantity (a field name: `first_bounce_s`, `bounce_count`, ...), if
     /// measured.
@@ -1459,14 +1469,15 @@ fn check_observations(
         for quantity in FITTED {
             if let Some(value) = observation.measured(quantity) {
                 measured = true;
-                // A scenario's range of magnitudes: a simulated value can be compared with it.
-                if (MIN_MAGNITUDE..=MAX_MAGNITUDE).contains(&value) {
+                // Within what a simulated value can be compared with.
+                let [least, most] = measured_range(quantity);
+                if (least..=most).contains(&value) {
                     terms.push((i, quantity));
                 } else {
                     errors.push(FieldError {
                         pointer: at.child(quantity).to_string(),
                         detail: format!(
-                            "must be a positive number from {MIN_MAGNITUDE:e} to {MAX_MAGNITUDE:e}, got {}",
+                            "must be a positive number from {least:e} to {most:e}, got {}",
                             crate::error::shown(value)
                         ),
                     });
@@ -2762,6 +2773,12 @@ mod tests {
                     impact_velocity_m_s: Some(-0.2),
                     ..Observation::default()
                 },
+                // A coefficient of restitution is at most 1.
+                Observation {
+                    e1: Some(1.5),
+                    total_bounce_s: Some(0.02),
+                    ..Observation::default()
+                },
             ],
         };
         let invalid = calibrate(&spec).unwrap_err();
@@ -2773,6 +2790,7 @@ mod tests {
                 "/observations/0",
                 "/observations/1/impact_velocity_m_s",
                 "/observations/1/first_bounce_s",
+                "/observations/2/e1",
                 "/bounds/losses.impact_energy_loss_j",
                 "/bounds/material.kappa"
             ]

@@ -5,7 +5,9 @@
 //! schemathesis' stateful phase, can follow them), the length limit on all text a client sends,
 //! and descriptions of the simulation's output types, whose Rust docs are written for the physics.
 
-use bouncewear_model::calibration::{FITTED, MAX_OBSERVATIONS, MAX_OPERATION, MAX_PARAMETERS};
+use bouncewear_model::calibration::{
+    FITTED, MAX_OBSERVATIONS, MAX_OPERATION, MAX_PARAMETERS, measured_range,
+};
 use bouncewear_model::error::MAX_TEXT_CHARS;
 use bouncewear_model::montecarlo::distribution::POSITIVE_MEMBERS;
 use bouncewear_model::montecarlo::job::{MAX_DEVICES, MAX_OPERATIONS, MAX_THRESHOLDS};
@@ -315,8 +317,15 @@ fn calibration_fields() -> Vec<(&'static str, &'static str, Value)> {
             json!({"minimum": 0, "maximum": MAX_OPERATION}),
         ),
     ];
-    // A measured quantity is a positive number within a scenario's magnitudes.
-    fields.extend(FITTED.map(|field| ("Observation", field, range(Rule::Positive))));
+    // A measured quantity is a positive number within a scenario's magnitudes (`e1` at most 1).
+    fields.extend(FITTED.map(|field| {
+        let [least, most] = measured_range(field);
+        (
+            "Observation",
+            field,
+            json!({"minimum": least, "maximum": most}),
+        )
+    }));
     fields
 }
 
