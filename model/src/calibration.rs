@@ -113,6 +113,9 @@ pub const FITTED: [&str; 7] = [
     "eroded_mass_kg",
 ];
 
+/// The measured quantities of a bounce, each 0 where the contact closes at no speed.
+const BOUNCES: [&str; 4] = ["first_bounce_s", "second_bounce_s", "total_bounce_s", "e1"];
+
 /// The values a measured quantity of [`FITTED`] may take: a scenario's positive magnitudes, and
 /// for `e1`, a coefficient of restitution, at most 1 (an `e1` of 1.5 was fitted as if the model
 /// could reach it; found from outside).
@@ -1471,7 +1474,16 @@ fn check_observations(
                 measured = true;
                 // Within what a simulated value can be compared with.
                 let [least, most] = measured_range(quantity);
-                if (least..=most).contains(&value) {
+                if observation.impact_velocity_m_s == Some(0.0) && BOUNCES.contains(&quantity) {
+                    // The fit had nothing to move and was told to start nearer (a probe).
+                    errors.push(FieldError {
+                        pointer: at.child(quantity).to_string(),
+                        detail: "is 0 at an impact velocity of 0, whatever the parameters (the \
+                                 contact does not bounce): a measured value cannot be fitted; \
+                                 give the velocity it was measured at"
+                            .to_owned(),
+                    });
+                } else if (least..=most).contains(&value) {
                     terms.push((i, quantity));
                 } else {
                     errors.push(FieldError {
@@ -2481,15 +2493,16 @@ mod tests {
         );
     }
 
-    /// Data the model cannot reach (e1 of 1.5) draw kappa to where e1 saturates: refused at
-    /// `/fit/0`, the message saying where the fit had taken it and why, not only that kappa
-    /// "changes none of the measured quantities".
+    /// Data the model cannot reach (e1 of 1, which e(u, kappa) only nears; above 1 is refused at
+    /// the field) draw kappa to where e1 saturates: refused at `/fit/0`, the message saying where
+    /// the fit had taken it and why, not only that kappa "changes none of the measured
+    /// quantities".
     #[test]
     fn data_beyond_the_models_reach_are_refused_saying_so() {
         let invalid = CalibrationSpec::from_json(
             r#"{"fit": ["material.kappa"], "observations": [
-                {"impact_velocity_m_s": 0.2, "e1": 1.5}, {"impact_velocity_m_s": 0.3, "e1": 1.5},
-                {"impact_velocity_m_s": 0.4, "e1": 1.5}]}"#,
+                {"impact_velocity_m_s": 0.2, "e1": 1}, {"impact_velocity_m_s": 0.3, "e1": 1},
+                {"impact_velocity_m_s": 0.4, "e1": 1}]}"#,
         )
         .and_then(|spec| calibrate(&spec))
         .unwrap_err();
@@ -2779,6 +2792,13 @@ mod tests {
                     total_bounce_s: Some(0.02),
                     ..Observation::default()
                 },
+                // Nothing bounces at no speed.
+                Observation {
+                    impact_velocity_m_s: Some(0.0),
+                    first_bounce_s: Some(0.01),
+                    peak_force_n: Some(0.3),
+                    ..Observation::default()
+                },
             ],
         };
         let invalid = calibrate(&spec).unwrap_err();
@@ -2791,6 +2811,7 @@ mod tests {
                 "/observations/1/impact_velocity_m_s",
                 "/observations/1/first_bounce_s",
                 "/observations/2/e1",
+                "/observations/3/first_bounce_s",
                 "/bounds/losses.impact_energy_loss_j",
                 "/bounds/material.kappa"
             ]
