@@ -393,12 +393,7 @@ fn constrain_structure(schemas: &mut Value) {
     }
     // A distribution's kind has only its own members, and those the model holds positive
     // whatever the parameter are so here too.
-    for kind in schemas
-        .pointer_mut("/DistributionSpec/oneOf")
-        .and_then(Value::as_array_mut)
-        .into_iter()
-        .flatten()
-    {
+    for kind in variants(schemas, "DistributionSpec") {
         kind["additionalProperties"] = json!(false);
         for member in POSITIVE_MEMBERS {
             if let Some(Value::Object(rules)) = kind.pointer_mut(&format!("/properties/{member}")) {
@@ -406,14 +401,18 @@ fn constrain_structure(schemas: &mut Value) {
             }
         }
     }
-    for side in schemas
-        .pointer_mut("/Threshold/oneOf")
+    for side in variants(schemas, "Threshold") {
+        side["additionalProperties"] = json!(false);
+    }
+}
+
+/// The schemas of the variants (`oneOf`) of the schema `name`.
+fn variants<'a>(schemas: &'a mut Value, name: &str) -> impl Iterator<Item = &'a mut Value> {
+    (schemas.get_mut(name))
+        .and_then(|schema| schema.get_mut("oneOf"))
         .and_then(Value::as_array_mut)
         .into_iter()
         .flatten()
-    {
-        side["additionalProperties"] = json!(false);
-    }
 }
 
 /// `maxLength` and no U+0000 on every string a request body may hold, and on the names of its
@@ -765,12 +764,7 @@ fn describe_output_types(document: &mut Value) {
         }
     }
     // A distribution's tag, in each of its kinds.
-    for kind in schemas
-        .pointer_mut("/DistributionSpec/oneOf")
-        .and_then(Value::as_array_mut)
-        .into_iter()
-        .flatten()
-    {
+    for kind in variants(schemas, "DistributionSpec") {
         describe(kind, "kind", "Which distribution; its parameters follow");
     }
 }
