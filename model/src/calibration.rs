@@ -1988,7 +1988,7 @@ mod tests {
                     .map(|o| Observation {
                         first_bounce_s: o.first_bounce_s.map(|x| x * (1.0 + first * rng.normal())),
                         total_bounce_s: o.total_bounce_s.map(|x| x * (1.0 + total * rng.normal())),
-                        ..o.clone()
+                        ..*o
                     })
                     .collect();
                 let fit = calibrate(&CalibrationSpec {
