@@ -296,14 +296,18 @@ impl Store {
         let rows = bind_bins(Sql::new(SELECT_DISTRIBUTION_GROUPS), id, metric, range)
             .fetch_all(self.readers())
             .await?;
-        let mut bins = Vec::with_capacity(rows.len());
-        for row in &rows {
-            bins.push(match row.flag("groups_in_shards")? {
-                true => Kept::InShards(count_from_sql(row, "bin")?),
-                false => Kept::Own(groups_from_row(row)?),
-            });
-        }
-        drop(rows);
+        // Decoded on the blocking pool: a wide job's bins are megabytes each, and decoded here
+        // eight such queries held the threads that answer requests (`/healthz` took up to 7 s;
+        // found from outside).
+        let bins = rows::off_async_threads(rows::GROUPS, true, move || {
+            (rows.iter())
+                .map(|row| match row.flag("groups_in_shards")? {
+                    true => Ok(Kept::InShards(count_from_sql(row, "bin")?)),
+                    false => Ok(Kept::Own(groups_from_row(row)?)),
+                })
+                .collect::<StoreResult<Vec<Kept>>>()
+        })
+        .await?;
         if !bins.iter().any(|bin| matches!(bin, Kept::InShards(_))) {
             return Ok(bins.into_iter().map(Kept::own).collect());
         }

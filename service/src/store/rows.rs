@@ -961,7 +961,7 @@ async fn insert_rows<T>(
     Ok(())
 }
 
-const GROUPS: &str = "groups of a distribution";
+pub(crate) const GROUPS: &str = "groups of a distribution";
 
 /// The bins of metric `$2` of job `$1` overlapping `[$3, $4)`, in bin order: their summaries.
 pub(crate) const SELECT_DISTRIBUTION: &str = "SELECT kind, bin, op_start, op_end, summary \
