@@ -17,9 +17,14 @@
 //! sketch's count allows (`u16` below 65,536 values, then `u32`, then `u64`, so no job overflows
 //! them): 2 bytes x 256 buckets per binade spanned, e.g. 10 kB (x 1.25) for values spanning 6
 //! decades (20 binades) while a sketch holds fewer than 65,536 values, whatever the values, and at
-//! most 4 MiB per store for the whole f64 range. Serialised, every count is a `u64`.
+//! most 4 MiB per store for the whole f64 range. Where that range is wider than 16 binades and
+//! than 16 keys per value of the sketch (a few values over many decades), the store keeps its
+//! non-empty buckets only, in a B-tree: about 16 to 24 bytes a bucket, so memory follows the
+//! values. Serialised, every count is a `u64`, from the first non-empty bucket to the last,
+//! whatever the form in memory.
 
 use crate::lanes::{MAX_LANES, Real, fill_lanes, within_lanes};
+use std::collections::BTreeMap;
 use std::ops::Range;
 
 /// Mantissa bits in the bucket key: 256 buckets per binade, relative bucket width `2^-8`.
@@ -141,17 +146,42 @@ fn widened<T: Count, U: Count>(counts: &[T]) -> Vec<U> {
     counts.iter().map(|&c| U::of(c.wide())).collect()
 }
 
-/// Dense counts for the keys `offset .. offset + len`. Every mutating call is given `total`, an
-/// upper bound on any count after it (the sketch's count), and widens the counts first when they
-/// could not hold it.
-#[derive(Debug, Clone, Default)]
-struct Store {
-    offset: u32,
-    counts: Counts,
+/// A dense store spans up to this many keys whatever it holds: 8 KiB of two-byte counts, 16
+/// binades (4.8 decades).
+const DENSE_UP_TO: u32 = 4096;
+
+/// Beyond [`DENSE_UP_TO`], a store whose dense range would span more than this many keys per value
+/// of its sketch keeps only its non-empty buckets ([`Store::Sparse`]), and it spans a dense range
+/// again once that range holds at most half as many keys per non-empty bucket: a sparse bucket
+/// takes about 16 to 24 bytes (a B-tree's key, count and share of its node), a dense one 2 to 8.
+const KEYS_PER_VALUE: u64 = 16;
+
+/// Whether a dense range of `len` keys is too wide for `values` values.
+fn too_wide(len: u32, values: u64) -> bool {
+    len > DENSE_UP_TO && u64::from(len) > KEYS_PER_VALUE.saturating_mul(values)
 }
 
-/// Equal counts in every bucket, however each store grew: the range a store holds depends on the
-/// order its values came in.
+/// The counts of the keys of a sketch's values of one sign. Dense: an array over the keys between
+/// the least and the greatest, an increment a value (the engine's hottest loop). Sparse: the
+/// non-empty buckets only, for values few and spread over many decades, so that memory follows the
+/// values rather than their range (velocities drawn over 32 decades, one operation a bin: 2.5 GB
+/// of dense counts for 512 devices). Every mutating call is given `total`, an upper bound on any
+/// count after it (the sketch's count). Which form a store takes changes no count, no answer and
+/// no serialised byte.
+#[derive(Debug, Clone)]
+enum Store {
+    Dense(Dense),
+    Sparse(BTreeMap<u32, u64>),
+}
+
+impl Default for Store {
+    fn default() -> Self {
+        Store::Dense(Dense::default())
+    }
+}
+
+/// Equal counts in every bucket, however each store grew: the range a store holds, and its form,
+/// depend on the order its values came in.
 impl PartialEq for Store {
     fn eq(&self, other: &Store) -> bool {
         self.buckets().eq(other.buckets())
@@ -159,27 +189,31 @@ impl PartialEq for Store {
 }
 
 /// As `{offset, counts}` from the first non-empty bucket to the last, every count a u64: the same
-/// bytes for the same counts, however the store grew and whatever the width in memory (a group's
-/// state is stored and sent between machines).
+/// bytes for the same counts, however the store grew, whatever its form and the width in memory (a
+/// group's state is stored and sent between machines).
 impl serde::Serialize for Store {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        use serde::ser::SerializeStruct;
-        struct Wide<'a>(&'a Store, std::ops::Range<usize>);
+        use serde::ser::{SerializeSeq, SerializeStruct};
+        struct Wide<'a>(&'a Store, u32, u32);
         impl serde::Serialize for Wide<'_> {
             fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-                serializer.collect_seq(self.1.clone().map(|i| self.0.get(i)))
+                let Wide(store, lo, end) = *self;
+                let mut seq = serializer.serialize_seq(Some((end - lo) as usize))?;
+                let mut next = lo;
+                for (key, count) in store.buckets() {
+                    for _ in next..key {
+                        seq.serialize_element(&0u64)?;
+                    }
+                    seq.serialize_element(&count)?;
+                    next = key + 1;
+                }
+                seq.end()
             }
         }
-        let (offset, slots) = match self.occupied() {
-            Some((lo, hi)) => (
-                lo,
-                (lo - self.offset) as usize..(hi - self.offset) as usize + 1,
-            ),
-            None => (0, 0..0),
-        };
+        let (lo, end) = self.occupied().map_or((0, 0), |(lo, hi)| (lo, hi + 1));
         let mut state = serializer.serialize_struct("Store", 2)?;
-        state.serialize_field("offset", &offset)?;
-        state.serialize_field("counts", &Wide(self, slots))?;
+        state.serialize_field("offset", &lo)?;
+        state.serialize_field("counts", &Wide(self, lo, end))?;
         state.end()
     }
 }
@@ -199,16 +233,224 @@ impl<'de> serde::Deserialize<'de> for Store {
                 "a store's keys end at {end}, beyond {KEY_END}"
             )));
         }
-        let mut store = Store {
+        let mut store = Store::Dense(Dense {
             offset,
             counts: Counts::U64(counts),
-        };
-        store.narrow();
+        });
+        let values = store
+            .buckets()
+            .fold(0u64, |sum, (_, count)| sum.saturating_add(count));
+        store.settle(values);
+        if let Store::Dense(dense) = &mut store {
+            dense.narrow();
+        }
         Ok(store)
     }
 }
 
 impl Store {
+    #[cfg(test)]
+    fn len(&self) -> usize {
+        match self {
+            Store::Dense(dense) => dense.len(),
+            Store::Sparse(buckets) => buckets.len(),
+        }
+    }
+
+    #[cfg(test)]
+    fn is_sparse(&self) -> bool {
+        matches!(self, Store::Sparse(_))
+    }
+
+    /// Counts one value of key `key`.
+    #[inline]
+    fn add(&mut self, key: u32, total: u64) {
+        if let Store::Dense(dense) = self {
+            dense.fit(total);
+            if dense.add_within(key) {
+                return;
+            }
+        }
+        self.add_outside(key, total);
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn add_outside(&mut self, key: u32, total: u64) {
+        // SAFETY: the one key lies in `key ..= key`.
+        unsafe { self.add_beyond(key, key, &[key], total) }
+    }
+
+    /// Counts values of the keys `keys`: one addition when they share one key.
+    ///
+    /// # Safety
+    ///
+    /// Every key lies in `lo ..= hi`: a dense store's increments are not bounds-checked (the check
+    /// was two of the loop's eight instructions, and the loop a tenth of the kernel's samples).
+    #[inline(always)]
+    unsafe fn add_all(&mut self, lo: u32, hi: u32, keys: &[u32], total: u64) {
+        if let Store::Dense(dense) = self {
+            dense.fit(total);
+            if dense.covers(lo, hi + 1) {
+                // SAFETY: the caller's promise, and the dense range holds `lo ..= hi`.
+                unsafe { dense.add_all(lo, hi, keys) };
+                return;
+            }
+        }
+        // SAFETY: the caller's promise.
+        unsafe { self.add_beyond(lo, hi, keys, total) }
+    }
+
+    /// [`Store::add_all`] where a dense store's range does not hold the keys, or the store is
+    /// sparse: the range grows, or the store turns sparse (or dense again).
+    ///
+    /// # Safety
+    ///
+    /// As [`Store::add_all`].
+    #[cold]
+    #[inline(never)]
+    unsafe fn add_beyond(&mut self, lo: u32, hi: u32, keys: &[u32], total: u64) {
+        self.make_room(lo, hi + 1, total);
+        match self {
+            Store::Dense(dense) => {
+                dense.fit(total);
+                // SAFETY: the caller's promise, and the dense range now holds `lo ..= hi`.
+                unsafe { dense.add_all(lo, hi, keys) }
+            }
+            Store::Sparse(buckets) => {
+                for &key in keys {
+                    *buckets.entry(key).or_default() += 1;
+                }
+                self.settle(total);
+            }
+        }
+    }
+
+    /// Makes a dense store's range include the keys `lo .. hi`, or turns it sparse where that
+    /// range would be too wide for the `total` values of its sketch.
+    fn make_room(&mut self, lo: u32, hi: u32, total: u64) {
+        if let Store::Dense(dense) = self
+            && !dense.covers(lo, hi)
+        {
+            let (new_lo, new_hi) = dense.grown(lo, hi);
+            if too_wide(new_hi - new_lo, total) {
+                *self = Store::Sparse(dense.buckets().collect());
+            } else {
+                dense.regrow(new_lo, new_hi);
+            }
+        }
+    }
+
+    /// A sparse store whose range is no longer wide for its non-empty buckets spans a dense range
+    /// again (counts narrow enough for `total`); a dense one too wide for `total` turns sparse.
+    fn settle(&mut self, total: u64) {
+        let Some((lo, hi)) = self.occupied() else {
+            return;
+        };
+        let span = hi - lo + 1;
+        match self {
+            Store::Sparse(buckets) if !too_wide(span, buckets.len() as u64 / 2) => {
+                let mut dense = Dense::default();
+                dense.fit(total);
+                dense.regrow(lo, hi + 1);
+                buckets
+                    .iter()
+                    .for_each(|(&key, &count)| dense.add_n(key, count));
+                *self = Store::Dense(dense);
+            }
+            Store::Dense(dense) if too_wide(span, total) => {
+                *self = Store::Sparse(dense.buckets().collect());
+            }
+            _ => {}
+        }
+    }
+
+    fn merge(&mut self, other: &Store, total: u64) {
+        let Some((lo, hi)) = other.occupied() else {
+            return;
+        };
+        self.make_room(lo, hi + 1, total);
+        match (&mut *self, other) {
+            (Store::Dense(mine), Store::Dense(theirs)) => {
+                mine.fit(total);
+                mine.merge_covered(theirs, lo, hi);
+            }
+            (Store::Dense(mine), Store::Sparse(theirs)) => {
+                mine.fit(total);
+                theirs
+                    .iter()
+                    .for_each(|(&key, &count)| mine.add_n(key, count));
+            }
+            (Store::Sparse(mine), _) => {
+                for (key, count) in other.buckets() {
+                    *mine.entry(key).or_default() += count;
+                }
+                self.settle(total);
+            }
+        }
+    }
+
+    /// The keys of the first and the last non-empty bucket; `None` when every count is zero.
+    fn occupied(&self) -> Option<(u32, u32)> {
+        match self {
+            Store::Dense(dense) => dense.occupied(),
+            Store::Sparse(buckets) => {
+                Some((*buckets.first_key_value()?.0, *buckets.last_key_value()?.0))
+            }
+        }
+    }
+
+    /// The sum of the counts of the keys `keys`.
+    fn sum_keys(&self, keys: std::ops::Range<u32>) -> u64 {
+        match self {
+            Store::Dense(dense) => dense.sum_keys(keys),
+            Store::Sparse(_) if keys.is_empty() => 0,
+            Store::Sparse(buckets) => buckets.range(keys).map(|(_, &count)| count).sum(),
+        }
+    }
+
+    /// The running totals of the counts, for sums of many ranges.
+    fn cumulative(&self) -> Cumulative {
+        match self {
+            Store::Dense(dense) => dense.cumulative(),
+            Store::Sparse(buckets) => {
+                let mut total = 0;
+                let below = std::iter::once(0)
+                    .chain(buckets.values().map(|&count| {
+                        total += count;
+                        total
+                    }))
+                    .collect();
+                Cumulative::Sparse {
+                    keys: buckets.keys().copied().collect(),
+                    below,
+                }
+            }
+        }
+    }
+
+    /// Non-empty buckets as `(key, count)`, by increasing key.
+    fn buckets(&self) -> impl DoubleEndedIterator<Item = (u32, u64)> + '_ {
+        let (dense, sparse) = match self {
+            Store::Dense(dense) => (Some(dense.buckets()), None),
+            Store::Sparse(buckets) => (None, Some(buckets.iter().map(|(&k, &c)| (k, c)))),
+        };
+        dense
+            .into_iter()
+            .flatten()
+            .chain(sparse.into_iter().flatten())
+    }
+}
+
+/// Dense counts for the keys `offset .. offset + len`, in the narrowest integer that holds the
+/// total each mutating caller states ([`Dense::fit`]).
+#[derive(Debug, Clone, Default)]
+struct Dense {
+    offset: u32,
+    counts: Counts,
+}
+
+impl Dense {
     fn len(&self) -> usize {
         with_counts!(&self.counts, c => c.len())
     }
@@ -263,42 +505,33 @@ impl Store {
         };
     }
 
-    /// Counts one value of key `key`.
+    /// Counts one value of key `key` if the range holds it (the counts wide enough already).
     #[inline]
-    fn add(&mut self, key: u32, total: u64) {
-        self.fit(total);
+    fn add_within(&mut self, key: u32) -> bool {
         // Keys below `offset` wrap to huge indices, so one bounds check covers both sides.
         let i = key.wrapping_sub(self.offset) as usize;
-        let counted = with_counts!(&mut self.counts, c => match c.get_mut(i) {
+        with_counts!(&mut self.counts, c => match c.get_mut(i) {
             Some(count) => {
                 *count += 1;
                 true
             }
             None => false,
-        });
-        if !counted {
-            self.add_outside(key);
-        }
+        })
     }
 
-    #[cold]
-    #[inline(never)]
-    fn add_outside(&mut self, key: u32) {
-        self.cover(key, key + 1);
+    /// Adds `n` to the count of `key`, which the range holds (the counts wide enough already).
+    fn add_n(&mut self, key: u32, n: u64) {
         let i = (key - self.offset) as usize;
-        with_counts!(&mut self.counts, c => c[i] += 1);
+        with_counts!(&mut self.counts, c => add(&mut c[i], n));
     }
 
     /// Counts values of the keys `keys`: one addition when they share one key.
     ///
     /// # Safety
     ///
-    /// Every key lies in `lo ..= hi`: the increments are not bounds-checked (the check was two of
-    /// the loop's eight instructions, and the loop a tenth of the kernel's samples).
+    /// Every key lies in `lo ..= hi`, which the range holds (the counts wide enough already).
     #[inline(always)]
-    unsafe fn add_all(&mut self, lo: u32, hi: u32, keys: &[u32], total: u64) {
-        self.fit(total);
-        self.cover(lo, hi + 1);
+    unsafe fn add_all(&mut self, lo: u32, hi: u32, keys: &[u32]) {
         let offset = self.offset;
         with_counts!(&mut self.counts, c => {
             if lo == hi {
@@ -317,58 +550,49 @@ impl Store {
         });
     }
 
-    /// Makes the dense range include the keys `lo .. hi` (nothing to do when it does already).
+    /// Whether the range holds the keys `lo .. hi`.
     #[inline(always)]
-    fn cover(&mut self, lo: u32, hi: u32) {
+    fn covers(&self, lo: u32, hi: u32) -> bool {
         let len = self.len();
-        if len == 0 || lo < self.offset || hi > self.offset + len as u32 {
-            self.grow(lo, hi);
-        }
+        len != 0 && lo >= self.offset && hi <= self.offset + len as u32
     }
 
-    /// Grows the dense range to include the keys `lo .. hi`. The range is widened by at least a
-    /// quarter of its length on the growing side, so a long run of new extremes reallocates only
-    /// `O(log(range))` times.
-    #[cold]
-    #[inline(never)]
-    fn grow(&mut self, lo: u32, hi: u32) {
+    /// The range that holds the keys `lo .. hi` besides those it holds: widened by at least a
+    /// quarter of its length on the growing side, so that a long run of new extremes reallocates
+    /// only `O(log(range))` times.
+    fn grown(&self, lo: u32, hi: u32) -> (u32, u32) {
         let len = self.len() as u32;
-        let old_lo = self.offset;
-        let old_hi = self.offset + len;
-        let (new_lo, new_hi) = if len == 0 {
-            (
+        if len == 0 {
+            return (
                 lo.saturating_sub(MIN_SLACK / 2),
                 (hi + MIN_SLACK / 2).min(KEY_END),
-            )
-        } else {
-            if lo >= old_lo && hi <= old_hi {
-                return;
-            }
-            let slack = (len / 4).max(MIN_SLACK);
-            (
-                if lo < old_lo {
-                    lo.saturating_sub(slack)
-                } else {
-                    old_lo
-                },
-                if hi > old_hi {
-                    (hi + slack).min(KEY_END)
-                } else {
-                    old_hi
-                },
-            )
-        };
-        let offset = if len == 0 { new_lo } else { old_lo };
+            );
+        }
+        let (old_lo, old_hi) = (self.offset, self.offset + len);
+        let slack = (len / 4).max(MIN_SLACK);
+        (
+            if lo < old_lo {
+                lo.saturating_sub(slack)
+            } else {
+                old_lo
+            },
+            if hi > old_hi {
+                (hi + slack).min(KEY_END)
+            } else {
+                old_hi
+            },
+        )
+    }
+
+    /// Moves the counts into the range `new_lo .. new_hi`, which holds the present one.
+    fn regrow(&mut self, new_lo: u32, new_hi: u32) {
+        let offset = if self.len() == 0 { new_lo } else { self.offset };
         with_counts!(&mut self.counts, c => *c = regrown(c, offset, new_lo, new_hi));
         self.offset = new_lo;
     }
 
-    fn merge(&mut self, other: &Store, total: u64) {
-        let Some((lo, hi)) = other.occupied() else {
-            return;
-        };
-        self.fit(total);
-        self.cover(lo, hi + 1);
+    /// Adds the counts of `other`'s keys `lo ..= hi`, which both ranges hold.
+    fn merge_covered(&mut self, other: &Dense, lo: u32, hi: u32) {
         let span = (hi - lo) as usize;
         let (start, first) = ((lo - self.offset) as usize, (lo - other.offset) as usize);
         with_counts!(&other.counts, theirs => with_counts!(&mut self.counts, mine => {
@@ -388,7 +612,7 @@ impl Store {
         })
     }
 
-    /// The sum of the counts of the keys `keys` (those the store holds).
+    /// The sum of the counts of the keys `keys` (those the range holds).
     fn sum_keys(&self, keys: std::ops::Range<u32>) -> u64 {
         let slots = slots(self.offset, self.len(), keys);
         with_counts!(&self.counts, c => c[slots].iter().map(|&x| x.wide()).sum())
@@ -403,7 +627,7 @@ impl Store {
             total += x.wide();
             total
         })));
-        Cumulative {
+        Cumulative::Dense {
             offset: self.offset,
             below,
         }
@@ -490,17 +714,25 @@ fn slots(offset: u32, len: usize, keys: std::ops::Range<u32>) -> std::ops::Range
 
 /// A store's running totals ([`Store::cumulative`]): the sum of the counts of any keys in two
 /// reads, where [`Store::sum_keys`] adds up each slot.
-struct Cumulative {
-    offset: u32,
-    /// The sum of the counts of the slots before each slot, and of all of them last.
-    below: Vec<u64>,
+enum Cumulative {
+    /// Over a dense range from key `offset`: the sum of the counts of the slots before each slot,
+    /// and of all of them last.
+    Dense { offset: u32, below: Vec<u64> },
+    /// Over the non-empty buckets `keys`: the sum of the counts before each, and of all last.
+    Sparse { keys: Vec<u32>, below: Vec<u64> },
 }
 
 impl Cumulative {
     /// The sum of the counts of the keys `keys`, as [`Store::sum_keys`] gives it.
     fn sum_keys(&self, keys: std::ops::Range<u32>) -> u64 {
-        let slots = slots(self.offset, self.below.len() - 1, keys);
-        self.below[slots.end] - self.below[slots.start]
+        let (slots, below) = match self {
+            Cumulative::Dense { offset, below } => (slots(*offset, below.len() - 1, keys), below),
+            Cumulative::Sparse { keys: held, below } => {
+                let at = |key: u32| held.partition_point(|&k| k < key);
+                (at(keys.start)..at(keys.end).max(at(keys.start)), below)
+            }
+        };
+        below[slots.end] - below[slots.start]
     }
 }
 
@@ -1163,6 +1395,109 @@ mod tests {
             !bytes(&forward).contains("[0"),
             "trimmed to the non-empty buckets"
         );
+    }
+
+    /// Values log-uniform over `decades` decades from 1e-30, from a fixed stream.
+    fn spread(n: usize, decades: f64, seed: u64) -> Vec<f64> {
+        let mut rng = SplitMix(seed);
+        (0..n)
+            .map(|_| 1e-30 * 10f64.powf(decades * rng.uniform()))
+            .collect()
+    }
+
+    #[test]
+    fn few_values_over_many_decades_keep_only_their_buckets() {
+        // 16 values over 32 decades: a dense range of about 27,000 keys (54 kB), 16 buckets kept.
+        let values = spread(16, 32.0, 5);
+        let sketch = sketch_of(&values);
+        assert!(sketch.positive.is_sparse());
+        assert!(sketch.allocated_buckets() <= 16);
+        assert_close_to_exact(&values);
+        // Lanes take the same path: one batch spanning the decades turns the store sparse at once.
+        let mut by_lanes = Sketch::new();
+        for batch in values.chunks(8) {
+            by_lanes.push_lanes(&Lanes::<8>::from_fn(|k| batch[k]), 0..8);
+        }
+        assert!(by_lanes.positive.is_sparse());
+        assert_eq!(by_lanes, sketch);
+        // The same bytes as a dense store of the same counts, and read back in the sparse form.
+        let dense = Sketch {
+            count: 16,
+            zeros: 0,
+            positive: Store::Dense(match &sketch.positive {
+                Store::Sparse(buckets) => {
+                    let mut dense = Dense::default();
+                    let (lo, hi) = sketch.positive.occupied().expect("values");
+                    dense.regrow(lo, hi + 1);
+                    buckets.iter().for_each(|(&k, &c)| dense.add_n(k, c));
+                    dense
+                }
+                Store::Dense(_) => unreachable!("sparse above"),
+            }),
+            negative: Store::default(),
+        };
+        let bytes = |s: &Sketch| postcard::to_stdvec(s).expect("serialises");
+        assert_eq!(bytes(&dense), bytes(&sketch));
+        assert_eq!(
+            serde_json::to_string(&dense).expect("serialises"),
+            serde_json::to_string(&sketch).expect("serialises")
+        );
+        let read: Sketch = postcard::from_bytes(&bytes(&dense)).expect("reads back");
+        assert!(read.positive.is_sparse());
+        assert_eq!(read, sketch);
+        assert_eq!(read.quantiles(&levels()), sketch.quantiles(&levels()));
+    }
+
+    #[test]
+    fn a_sparse_store_that_fills_its_range_turns_dense_again() {
+        // 32 groups of 16 values over 32 decades, merged: sparse while the buckets are few, dense
+        // again once the values fill the range; the counts those of pushing every value.
+        let values = spread(200_000, 32.0, 9);
+        let mut merged = Sketch::new();
+        for (i, group) in values.chunks(16).enumerate() {
+            let part = sketch_of(group);
+            assert!(part.positive.is_sparse());
+            merged.merge(&part);
+            if i == 0 {
+                assert!(merged.positive.is_sparse());
+            }
+        }
+        assert!(!merged.positive.is_sparse());
+        assert_eq!(merged, sketch_of(&values));
+        assert_close_to_exact(&values);
+        let read: Sketch = postcard::from_bytes(&postcard::to_stdvec(&merged).expect("serialises"))
+            .expect("reads");
+        assert!(!read.positive.is_sparse());
+        assert_eq!(read, merged);
+    }
+
+    #[test]
+    fn counts_at_or_below_and_around_read_a_sparse_store_as_a_dense_one() {
+        let mut values = spread(40, 60.0, 13);
+        values.extend(spread(40, 60.0, 14).iter().map(|x| -x));
+        values.extend([0.0, 0.0]);
+        let sketch = sketch_of(&values);
+        assert!(sketch.positive.is_sparse() && sketch.negative.is_sparse());
+        let mut probes: Vec<f64> = values
+            .iter()
+            .flat_map(|&x| [x, x * 1.001, x * 0.999])
+            .collect();
+        probes.extend([0.0, 1e-40, -1e-40, 1e40, -1e40]);
+        let counted = sketch.counts_at_or_below(&probes);
+        for (&t, &count) in probes.iter().zip(&counted) {
+            let by_buckets: u64 = sketch
+                .buckets()
+                .filter(|&(mid, _)| mid <= t)
+                .map(|(_, c)| c)
+                .sum();
+            assert_eq!(count, by_buckets, "at or below {t}");
+            let around = sketch.around(t);
+            let at_zero = if t == 0.0 { 2 } else { 0 };
+            assert_eq!(
+                around.below + around.within + around.above + at_zero,
+                sketch.count()
+            );
+        }
     }
 
     #[test]
