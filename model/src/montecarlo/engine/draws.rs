@@ -110,14 +110,14 @@ impl<'a> Entries<'a> {
     }
 
     /// Draws every entry from `rng`, in the job's order, and hands each value to `set` with the
-    /// entry's index in the job's scatter: entry `k` in stratum `permutations[k][local]` under
+    /// entry's index in the job's scatter: entry `k` in the stratum `strata` gives device `local` under
     /// LHS (`strata`), otherwise at random, counting the rejections of truncated draws by entry.
     /// Correlated entries draw a standard normal each (from their stratum under LHS), correlated
     /// together and then mapped through `Phi` and the marginal's inverse CDF.
     pub(super) fn draw(
         &self,
         job: &Job,
-        strata: Option<(&[Vec<u32>], usize)>,
+        strata: Option<(&Strata, usize)>,
         rng: &mut ChaCha8Rng,
         rejections: &mut [u64],
         mut set: impl FnMut(usize, f64),
@@ -127,10 +127,7 @@ impl<'a> Entries<'a> {
             None => Vec::new(),
         };
         for (k, &(index, scatter)) in self.scatter.iter().enumerate() {
-            let stratum = strata.map(|(permutations, local)| {
-                let strata = u32::try_from(permutations[k].len()).expect("batch fits u32");
-                (permutations[k][local], strata)
-            });
+            let stratum = strata.map(|(strata, local)| strata.of(k, local));
             if let Some(row) = self.correlation.as_ref().and_then(|(_, rows)| rows[k]) {
                 normals[row] = match stratum {
                     Some((stratum, strata)) => {
@@ -156,5 +153,21 @@ impl<'a> Entries<'a> {
                 set(index, job.scatter()[index].distribution.quantile(u));
             }
         }
+    }
+}
+
+/// The Latin hypercube strata of some of a batch's devices ([`super::plan::Plan::lhs_strata`]): of
+/// each device-level scatter entry, the stratum of every device from `first` on (counted from the
+/// batch's first device), among the batch's `size`.
+pub(super) struct Strata {
+    pub(super) size: u32,
+    pub(super) first: usize,
+    pub(super) permutations: Vec<Vec<u32>>,
+}
+
+impl Strata {
+    /// The stratum of entry `k` for device `local` of the batch, and the number of strata.
+    pub(super) fn of(&self, k: usize, local: usize) -> (u32, u32) {
+        (self.permutations[k][local - self.first], self.size)
     }
 }

@@ -145,7 +145,7 @@ impl<'a> Plan<'a> {
                 first_local + of_group.start as u64,
                 of_group.len(),
                 |device| device,
-                chunk.permutations,
+                chunk.strata,
                 &mut stats.truncation_rejections,
             );
             draws.extend(d);
@@ -619,7 +619,7 @@ impl<'p, L: Real> Variant<'p, L> {
 pub(super) struct Chunk<'a> {
     pub(super) first: u64,
     pub(super) size: u64,
-    pub(super) permutations: Option<&'a [Vec<u32>]>,
+    pub(super) strata: Option<&'a Strata>,
 }
 
 /// The devices of a chunk from `first_local` on, as many as the kernel has lanes.

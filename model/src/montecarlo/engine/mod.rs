@@ -246,13 +246,17 @@ pub fn run_group(
         "group {group} of {batch:?} is not part of the job"
     );
     let plan = Plan::new(job, Kernel::active());
-    let permutations = plan.batch_permutations(batch.index, batch.size);
+    let devices = batch.group_devices(group);
+    let strata = plan.batch_strata(
+        batch.index,
+        batch.size,
+        devices.start - batch.first..devices.end - batch.first,
+    );
     let chunk = Chunk {
         first: batch.first,
         size: batch.size,
-        permutations: permutations.as_deref(),
+        strata: strata.as_ref(),
     };
-    let devices = batch.group_devices(group);
     let total = (devices.end - devices.start) * job.spec().operations;
     plan.run_chunk(&chunk, group, observer, &AtomicU64::new(0), total)
 }
@@ -262,8 +266,8 @@ pub fn run_group(
 /// what an analysis of the inputs, or a test of the sampler, reads.
 pub fn batch_draws(job: &Job, batch: Batch) -> Vec<Vec<f64>> {
     let plan = Plan::new(job, Kernel::SCALAR);
-    let permutations = plan.batch_permutations(batch.index, batch.size);
-    draws_of(&plan, batch, |device| device, permutations.as_deref())
+    let strata = plan.batch_strata(batch.index, batch.size, 0..batch.size);
+    draws_of(&plan, batch, |device| device, strata.as_ref())
 }
 
 /// The device-level values of the devices' `B` samples in a Sobol' analysis, as
@@ -283,12 +287,12 @@ fn draws_of(
     plan: &Plan<'_>,
     batch: Batch,
     stream_of: impl Fn(u64) -> u64,
-    strata: Option<&[Vec<u32>]>,
+    strata: Option<&Strata>,
 ) -> Vec<Vec<f64>> {
     let chunk = Chunk {
         first: batch.first,
         size: batch.size,
-        permutations: strata,
+        strata,
     };
     let lanes = usize::try_from(batch.size).expect("batch fits in memory");
     let mut rejections = vec![0; plan.job.scatter().len()];
@@ -410,7 +414,7 @@ mod tests {
         let chunk = Chunk {
             first: batch.first,
             size: batch.size,
-            permutations: None,
+            strata: None,
         };
         plan.run_chunk(&chunk, 0, &Silent, &AtomicU64::new(0), 0)
             .expect("not cancelled")
@@ -433,6 +437,46 @@ mod tests {
                 .unwrap()
                 .iter()
                 .any(|&done| done >= self.cancel_at)
+        }
+    }
+
+    /// A group's LHS strata are its devices' share of the batch's permutations, each entry's
+    /// drawn whole from the same stream: what a group run alone keeps of them.
+    #[test]
+    fn a_groups_strata_are_its_share_of_the_batchs_permutations() {
+        let job = Job::from_json(
+            r#"{"devices": 100, "operations": 2, "seed": 9, "sampler": "lhs",
+                "scatter": [
+                  {"parameter": "contact_radius_m", "per": "device",
+                   "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 1e-3, "min": 1e-3}},
+                  {"parameter": "impact_velocity_m_s", "per": "operation",
+                   "distribution": {"kind": "uniform", "min": 0.2, "max": 0.3}},
+                  {"parameter": "dynamic_yield_pressure_pa", "per": "device",
+                   "distribution": {"kind": "lognormal", "median": 3e8, "sigma": 0.1}}]}"#,
+            || 0,
+        )
+        .unwrap();
+        let plan = Plan::new(&job, Kernel::SCALAR);
+        let batch = Batch::of(&job, 0).expect("a first batch");
+        let whole = plan.lhs_strata(batch.index, batch.size, 0..batch.size);
+        assert_eq!(whole.permutations.len(), 2, "the device-level entries");
+        for group in 0..batch.groups() {
+            let devices = batch.group_devices(group);
+            let local = devices.start - batch.first..devices.end - batch.first;
+            let kept = plan.lhs_strata(batch.index, batch.size, local.clone());
+            let range = local.start as usize..local.end as usize;
+            for (k, (mine, all)) in kept
+                .permutations
+                .iter()
+                .zip(&whole.permutations)
+                .enumerate()
+            {
+                assert_eq!(mine.as_slice(), &all[range.clone()], "group {group}");
+                for device in range.clone() {
+                    assert_eq!(kept.of(k, device), whole.of(k, device));
+                    assert_eq!(kept.of(k, device).1, 100);
+                }
+            }
         }
     }
 
@@ -602,7 +646,7 @@ mod tests {
         let chunk = Chunk {
             first: 0,
             size: 50,
-            permutations: None,
+            strata: None,
         };
         for (group, stats) in (0..).zip(&shared) {
             let alone = plan
