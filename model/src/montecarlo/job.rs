@@ -76,7 +76,11 @@ pub struct JobSpec {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub precision: Option<PrecisionSpec>,
     /// Failure criteria: a device fails at the first operation where any is met (life analysis).
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    #[serde(
+        default,
+        skip_serializing_if = "BTreeMap::is_empty",
+        deserialize_with = "some_criteria"
+    )]
     pub failure: BTreeMap<String, CriterionSpec>,
     /// Which scattered parameters drive each metric: the Result's `sensitivity` (none by default).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -179,6 +183,21 @@ pub struct PrecisionSpec {
 
 fn default_statistic() -> String {
     "p95".to_owned()
+}
+
+/// `failure` as given: at least one criterion, since `{}` would ask for no life analysis while
+/// looking as though it asked for one (its `/life` then 404).
+fn some_criteria<'de, D: serde::Deserializer<'de>>(
+    deserializer: D,
+) -> Result<BTreeMap<String, CriterionSpec>, D::Error> {
+    let criteria = BTreeMap::<String, CriterionSpec>::deserialize(deserializer)?;
+    if criteria.is_empty() {
+        return Err(serde::de::Error::custom(
+            "must hold at least one criterion, e.g. {\"eroded_mass_kg\": {\"above\": 2e-6}}, \
+             or be left out for no life analysis",
+        ));
+    }
+    Ok(criteria)
 }
 
 /// A failure criterion on one metric: exactly one of `above` or `below`.

@@ -636,6 +636,8 @@ fn failure_criteria_are_validated() {
         (json!({"e1": {"above": 1, "below": 0}}), "/failure/e1"),
         (json!({"e1": {}}), "/failure/e1"),
         (json!({"e1": {"over": 1}}), "/failure/e1/over"),
+        // No criterion asks for no life analysis while looking as though it asked for one.
+        (json!({}), "/failure"),
     ] {
         let found = pointers(json!({"failure": failure}));
         assert_eq!(

@@ -239,7 +239,11 @@ fn job_fields() -> Vec<(&'static str, &'static str, Value)> {
             json!({"minItems": 1, "uniqueItems": true, "items": names}),
         ),
         ("JobSpec", "limits", json!({"propertyNames": names})),
-        ("JobSpec", "failure", json!({"propertyNames": names})),
+        (
+            "JobSpec",
+            "failure",
+            json!({"propertyNames": names, "minProperties": 1}),
+        ),
         (
             "PrecisionSpec",
             "metric",
