@@ -96,6 +96,13 @@ const KERNEL_SCALE: f64 = 2.0;
 /// The most failing samples of the pilot's last level that importance samples are drawn around.
 const MAX_KERNELS: usize = 50;
 
+/// The coefficient of variation at which importance sampling's first batches plan how many more
+/// reach `target_cov` (or `target_cov` itself, where larger); those batches alone are averaged.
+/// Stopping where the running mean's own cov first met the target read high, since a mean that
+/// happens high has a low cov: an outside probe's 400 seeds at 1e-11 read 1.015 +- 0.004 of the
+/// truth (runs that stopped a batch sooner 1.058, a batch later 0.97), where a fixed number of
+/// batches read 1.0004 +- 0.0013. The planning batches cost about a batch more.
+const PLANNING_COV: f64 = 0.3;
 /// The fewest importance samples whose weighted mean stands as an estimate: one batch. A budget
 /// that leaves fewer after the pilot run gets the pilot's estimate.
 const MIN_IMPORTANCE_SAMPLES: u64 = SAMPLES_PER_LEVEL as u64;
@@ -758,7 +765,8 @@ struct Descent {
     proposal: Option<Vec<f64>>,
 }
 
-/// Importance sampling's weighted sums so far.
+/// Importance sampling's weighted sums so far: of its planning batches until they have planned
+/// ([`Weighing::planned`]), then of the batches they planned, afresh.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct Weighing {
     centre: Vec<f64>,
@@ -767,6 +775,9 @@ struct Weighing {
     samples: u64,
     batch: u64,
     design_point: Vec<f64>,
+    /// The batch (counted from the first) at which the weighing ends, once planned.
+    #[serde(default)]
+    planned: Option<u64>,
 }
 
 /// Crude Monte Carlo's counts so far.
@@ -1207,6 +1218,7 @@ impl Estimator {
                 sum2: 0.0,
                 samples: 0,
                 batch: 0,
+                planned: None,
                 design_point: pilot
                     .design_point
                     .clone()
@@ -1330,10 +1342,23 @@ impl Estimator {
         }
         w.samples += batch.ys.len() as u64;
         w.batch += 1;
-        let (mean, se) = weighted_mean(w.sum, w.sum2, w.samples);
-        let spent = self.done >= self.budget.max_evaluations;
-        if (w.sum > 0.0 && se / mean <= self.budget.target_cov) || spent {
+        if self.done >= self.budget.max_evaluations {
             return Some(self.weighed(w));
+        }
+        match w.planned {
+            Some(end) if w.batch >= end => return Some(self.weighed(w)),
+            Some(_) => {}
+            None => {
+                let (mean, se) = weighted_mean(w.sum, w.sum2, w.samples);
+                let cov = se / mean;
+                if w.sum > 0.0 && cov <= self.budget.target_cov.max(PLANNING_COV) {
+                    let needed = w.samples as f64 * (cov / self.budget.target_cov).powi(2);
+                    let batches = (needed / SAMPLES_PER_LEVEL as f64).ceil().max(1.0);
+                    // At most the budget's batches: the cast saturates, the budget ends the rest.
+                    w.planned = Some(w.batch.saturating_add(batches as u64));
+                    (w.sum, w.sum2, w.samples) = (0.0, 0.0, 0);
+                }
+            }
         }
         self.stage = Stage::Mixture(Box::new(w), kernels);
         None
@@ -1763,6 +1788,35 @@ mod tests {
         let (covered, cov) = coverage(Method::Importance, 2, 4.753, budget, 100);
         assert!((0.88..=0.99).contains(&covered), "{covered}");
         assert!(cov <= 0.1 + 1e-12, "{cov}");
+    }
+
+    /// Importance sampling's mean over many seeds is the truth: stopping where the running mean's
+    /// own cov first met the target read high (a mean that happens high has a low cov): over
+    /// these 600 seeds (one input, 1e-12) 1.021 +- 0.0035 of the truth, where the batches planned
+    /// by the first ones, averaged afresh, read 1.004 +- 0.0038.
+    #[test]
+    fn importance_sampling_is_not_high_for_stopping_at_its_target() {
+        let (state, beta) = (Linear::new(1), 7.034_483_825);
+        let truth = standard_normal_cdf(-beta);
+        let budget = Budget {
+            max_evaluations: 200_000,
+            target_cov: 0.1,
+        };
+        let seeds = 600;
+        let ratios: Vec<f64> = (0..seeds)
+            .into_par_iter()
+            .map(|seed| {
+                let e = Method::Importance
+                    .estimate(&state, beta, budget, seed, &Silent)
+                    .unwrap();
+                e.probability / truth
+            })
+            .collect();
+        let mean = ratios.iter().sum::<f64>() / seeds as f64;
+        let sd =
+            (ratios.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (seeds - 1) as f64).sqrt();
+        let se = sd / (seeds as f64).sqrt();
+        assert!((mean - 1.0).abs() < 3.0 * se, "{mean} +- {se}");
     }
 
     /// Importance sampling of `P(Y > beta) = truth` over seeds 0-99 (budget 20,000, cov 0.1): at
