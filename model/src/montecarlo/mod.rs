@@ -359,8 +359,18 @@ pub fn run_job_on(
     let rare_event = rare::estimate(job, observer)?;
     let mut result = summarize_job(job, &tally, started.elapsed().as_secs_f64());
     check_in_range(&result)?;
-    result.rare_event = rare_event;
+    result.put_rare_event(job, rare_event);
     Ok(result)
+}
+
+impl JobResult {
+    /// The rare event's report put in, with the warning where its budget ended it short of its
+    /// target ([`rare::short_of_target`]).
+    pub fn put_rare_event(&mut self, job: &Job, report: Option<RareEventReport>) {
+        let short = report.as_ref().and_then(|r| rare::short_of_target(job, r));
+        self.diagnostics.extend(short);
+        self.rare_event = report;
+    }
 }
 
 /// Whether the job's precision target is met by what `tally` holds (never, without a target).

@@ -353,6 +353,42 @@ fn deep_tails_are_covered_over_200_seeds() {
     }
 }
 
+/// A budget that ends the estimate short of its target says so in the Result, at
+/// `/rare_event/max_evaluations`; one that lets it meet the target says nothing.
+#[test]
+fn a_budget_that_ends_the_estimate_short_of_its_target_is_named() {
+    let t = threshold_at("total_bounce_s", 1, Z_1E4);
+    for (method, budget, short) in [
+        ("subset", 6000, true),
+        ("crude", 20_000, true),
+        ("subset", 200_000, false),
+        ("importance", 200_000, false),
+    ] {
+        let rare = json!({"metric": "total_bounce_s", "above": t, "method": method,
+                          "max_evaluations": budget});
+        let result = run_on(1, &rare_job("total_bounce_s", 1, "operation", rare, 7));
+        let report = result.rare_event.as_ref().expect("a rare event");
+        let warned: Vec<_> = result
+            .diagnostics
+            .iter()
+            .filter(|d| d.pointer == "/rare_event/max_evaluations")
+            .collect();
+        assert_eq!(!warned.is_empty(), short, "{method} {budget}: {report:?}");
+        assert_eq!(
+            report.cov.is_some_and(|cov| cov > 0.1),
+            short,
+            "{method} {budget}"
+        );
+        if short {
+            assert!(
+                warned[0].detail.contains("target_cov 0.1"),
+                "{}",
+                warned[0].detail
+            );
+        }
+    }
+}
+
 #[test]
 fn a_rare_event_job_gives_the_same_bits_on_one_thread_and_two() {
     let job = rare_job(

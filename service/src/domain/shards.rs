@@ -626,7 +626,7 @@ fn result(
 ) -> Result<Merged, MergeError> {
     let mut result = summarize_job(job, &tally, wall_s);
     check_in_range(&result)?;
-    result.rare_event = report;
+    result.put_rare_event(job, report);
     Ok(Merged::Result {
         result: Box::new(result),
         groups: RunGroups::new(job, tally),
