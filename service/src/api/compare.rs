@@ -262,6 +262,7 @@ mod tests {
         );
         assert_eq!(b_lives(None).unwrap(), DEFAULT_B_LIVES.to_vec());
         assert_eq!(b_lives(Some("0.05")).unwrap(), vec![0.05]);
+        assert_eq!(b_lives(Some("0.1,0.05,0.1")).unwrap(), vec![0.1, 0.05]);
         let many = vec!["mean"; 21].join(",");
         let error = statistics(Some(&many)).unwrap_err().to_string();
         assert!(error.contains("at most 20"), "{error}");

@@ -53,8 +53,9 @@ impl AfterRunQuery {
 }
 
 /// The comma-separated items of `parameter`, each read by `read` (an absent parameter has none),
-/// at most [`MAX_ITEMS`] of them; the error names the parameter, the item and its rule.
-pub fn items<T>(
+/// at most [`MAX_ITEMS`] of them, each once in the order first given (`b_lives=0.1,0.1` was
+/// answered twice); the error names the parameter, the item and its rule.
+pub fn items<T: PartialEq>(
     parameter: &'static str,
     text: Option<&str>,
     read: fn(&str) -> Result<T, String>,
@@ -70,10 +71,14 @@ pub fn items<T>(
             items.len()
         )));
     }
-    items
-        .into_iter()
-        .map(|item| read(item).map_err(|rule| bad(format!("`{}`: {rule}", shown(item)))))
-        .collect()
+    let mut read_once = Vec::with_capacity(items.len());
+    for item in items {
+        let value = read(item).map_err(|rule| bad(format!("`{}`: {rule}", shown(item))))?;
+        if !read_once.contains(&value) {
+            read_once.push(value);
+        }
+    }
+    Ok(read_once)
 }
 
 /// A level: a number strictly between 0 and 1.
