@@ -233,14 +233,19 @@ impl<'de> serde::Deserialize<'de> for Store {
                 "a store's keys end at {end}, beyond {KEY_END}"
             )));
         }
+        let wide = counts.len() > DENSE_UP_TO as usize;
         let mut store = Store::Dense(Dense {
             offset,
             counts: Counts::U64(counts),
         });
-        let values = store
-            .buckets()
-            .fold(0u64, |sum, (_, count)| sum.saturating_add(count));
-        store.settle(values);
+        // Only a range wider than any dense store spans whatever it holds may turn sparse: the
+        // common store is read in one pass, as before there was a sparse form.
+        if wide {
+            let values = store
+                .buckets()
+                .fold(0u64, |sum, (_, count)| sum.saturating_add(count));
+            store.settle(values);
+        }
         if let Store::Dense(dense) = &mut store {
             dense.narrow();
         }
