@@ -247,7 +247,7 @@ pub fn run_group(
     );
     let plan = Plan::new(job, Kernel::active());
     let devices = batch.group_devices(group);
-    let strata = plan.batch_strata(
+    let strata = plan.group_strata(
         batch.index,
         batch.size,
         devices.start - batch.first..devices.end - batch.first,
@@ -255,7 +255,7 @@ pub fn run_group(
     let chunk = Chunk {
         first: batch.first,
         size: batch.size,
-        strata: strata.as_ref(),
+        strata: strata.as_deref(),
     };
     let total = (devices.end - devices.start) * job.spec().operations;
     plan.run_chunk(&chunk, group, observer, &AtomicU64::new(0), total)
@@ -477,6 +477,15 @@ mod tests {
                     assert_eq!(kept.of(k, device).1, 100);
                 }
             }
+            // A group run alone takes the batch's whole strata, drawn once for all its groups.
+            let shared = plan
+                .group_strata(batch.index, batch.size, local.clone())
+                .expect("stratified");
+            assert_eq!(shared.permutations, whole.permutations);
+            let again = plan
+                .group_strata(batch.index, batch.size, local)
+                .expect("stratified");
+            assert!(std::sync::Arc::ptr_eq(&shared, &again), "group {group}");
         }
     }
 
