@@ -22,6 +22,7 @@ pub mod arc;
 pub mod calibration;
 pub mod elementary;
 pub mod error;
+pub mod feistel;
 pub mod impact;
 pub mod lanes;
 pub mod life;

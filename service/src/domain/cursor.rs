@@ -5,6 +5,7 @@
 //! the database's migration): a keyed permutation of 96 bits, the number and 32 zero bits, so that
 //! a cursor this server did not give opens to nothing (but for one in 2^32).
 
+use bouncewear_model::feistel;
 use sha2::{Digest, Sha256};
 
 /// Rounds of the Feistel network: four make a strong pseudorandom permutation (Luby and
@@ -12,7 +13,6 @@ use sha2::{Digest, Sha256};
 const ROUNDS: u8 = 8;
 /// Bits in each half of the block.
 const HALF_BITS: u32 = 48;
-const HALF_MASK: u64 = (1 << HALF_BITS) - 1;
 /// Hex digits of a cursor: 96 bits.
 const DIGITS: usize = 24;
 
@@ -48,11 +48,8 @@ impl CursorKey {
     pub fn seal(&self, seq: i64) -> String {
         // The block: the number's 63 bits, then 32 zero bits that opening checks.
         let block = u128::from(u64::try_from(seq).unwrap_or(0)) << 32;
-        let (mut left, mut right) = split(block);
-        for round in 0..ROUNDS {
-            (left, right) = (right, left ^ self.round(round, right));
-        }
-        format!("{:0width$x}", join(left, right), width = DIGITS)
+        let sealed = feistel::encrypt(block, HALF_BITS, ROUNDS, |r, half| self.round(r, half));
+        format!("{sealed:0width$x}", width = DIGITS)
     }
 
     /// The row a cursor [`Self::seal`] gave stands after; `None` for anything else.
@@ -62,11 +59,7 @@ impl CursorKey {
                 .bytes()
                 .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b));
         let block = digits.then(|| u128::from_str_radix(cursor, 16).ok())??;
-        let (mut left, mut right) = split(block);
-        for round in (0..ROUNDS).rev() {
-            (left, right) = (right ^ self.round(round, left), left);
-        }
-        let block = join(left, right);
+        let block = feistel::decrypt(block, HALF_BITS, ROUNDS, |r, half| self.round(r, half));
         let sealed_zeros = block & u128::from(u32::MAX) == 0;
         let seq = i64::try_from(block >> 32).ok()?;
         (sealed_zeros && seq > 0).then_some(seq)
@@ -83,18 +76,6 @@ impl CursorKey {
         bytes[..6].copy_from_slice(&digest[..6]);
         u64::from_le_bytes(bytes)
     }
-}
-
-fn split(block: u128) -> (u64, u64) {
-    // Both halves fit 48 bits: the casts keep exactly the bits masked.
-    (
-        (block >> HALF_BITS) as u64 & HALF_MASK,
-        block as u64 & HALF_MASK,
-    )
-}
-
-fn join(left: u64, right: u64) -> u128 {
-    (u128::from(left) << HALF_BITS) | u128::from(right)
 }
 
 #[cfg(test)]

@@ -156,18 +156,19 @@ impl<'a> Entries<'a> {
     }
 }
 
-/// The Latin hypercube strata of some of a batch's devices ([`super::plan::Plan::lhs_strata`]): of
-/// each device-level scatter entry, the stratum of every device from `first` on (counted from the
-/// batch's first device), among the batch's `size`.
+/// The Latin hypercube strata of a batch's devices ([`super::plan::Plan::lhs_strata`]): of each
+/// device-level scatter entry, a keyed permutation of the batch's devices, evaluated at each device
+/// as it draws, so that neither a batch nor any group of it holds or draws more than its own.
 pub(super) struct Strata {
-    pub(super) size: u32,
-    pub(super) first: usize,
-    pub(super) permutations: Vec<Vec<u32>>,
+    pub(super) permutations: Vec<Permutation>,
 }
 
 impl Strata {
     /// The stratum of entry `k` for device `local` of the batch, and the number of strata.
     pub(super) fn of(&self, k: usize, local: usize) -> (u32, u32) {
-        (self.permutations[k][local - self.first], self.size)
+        let permutation = &self.permutations[k];
+        let stratum = permutation.apply(local as u64);
+        // Both below 2^32: a batch under LHS has fewer devices (`Plan::lhs_strata`).
+        (stratum as u32, permutation.size() as u32)
     }
 }

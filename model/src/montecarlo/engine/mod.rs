@@ -22,12 +22,12 @@ use super::kernel::{Kernel, LaneWork};
 use super::lives::{DeviceLife, GroupLives};
 use super::metric::{DeviceMetric, Metric, OperationMetric};
 use super::sensitivity::{LaneCells, SensitivityPlan, SensitivityStats};
+use crate::feistel::Permutation;
 use crate::lanes::{Mask, Real};
 use crate::operation::{Conditions, Needs, Operation, Outcome, Outcomes, Setup};
 use crate::scenario::Scenario;
 use crate::stats::{Accumulator, LaneSums, tails};
 use crate::wear::{DeviceWear, WearLaw};
-use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -247,15 +247,11 @@ pub fn run_group(
     );
     let plan = Plan::new(job, Kernel::active());
     let devices = batch.group_devices(group);
-    let strata = plan.group_strata(
-        batch.index,
-        batch.size,
-        devices.start - batch.first..devices.end - batch.first,
-    );
+    let strata = plan.batch_strata(batch.index, batch.size);
     let chunk = Chunk {
         first: batch.first,
         size: batch.size,
-        strata: strata.as_deref(),
+        strata: strata.as_ref(),
     };
     let total = (devices.end - devices.start) * job.spec().operations;
     plan.run_chunk(&chunk, group, observer, &AtomicU64::new(0), total)
@@ -266,7 +262,7 @@ pub fn run_group(
 /// what an analysis of the inputs, or a test of the sampler, reads.
 pub fn batch_draws(job: &Job, batch: Batch) -> Vec<Vec<f64>> {
     let plan = Plan::new(job, Kernel::SCALAR);
-    let strata = plan.batch_strata(batch.index, batch.size, 0..batch.size);
+    let strata = plan.batch_strata(batch.index, batch.size);
     draws_of(&plan, batch, |device| device, strata.as_ref())
 }
 
@@ -440,12 +436,13 @@ mod tests {
         }
     }
 
-    /// A group's LHS strata are its devices' share of the batch's permutations, each entry's
-    /// drawn whole from the same stream: what a group run alone keeps of them.
+    /// A batch's LHS strata give each device-level entry each of the batch's strata once, the
+    /// entries and the batches in other orders, the same whenever they are asked for (a group
+    /// run alone asks for its own devices' only).
     #[test]
-    fn a_groups_strata_are_its_share_of_the_batchs_permutations() {
+    fn lhs_strata_fill_each_stratum_once_in_orders_of_their_own() {
         let job = Job::from_json(
-            r#"{"devices": 100, "operations": 2, "seed": 9, "sampler": "lhs",
+            r#"{"devices": 1000, "operations": 2, "seed": 9, "sampler": "lhs",
                 "scatter": [
                   {"parameter": "contact_radius_m", "per": "device",
                    "distribution": {"kind": "normal", "mean": 7.7e-3, "sd": 1e-3, "min": 1e-3}},
@@ -457,36 +454,36 @@ mod tests {
         )
         .unwrap();
         let plan = Plan::new(&job, Kernel::SCALAR);
-        let batch = Batch::of(&job, 0).expect("a first batch");
-        let whole = plan.lhs_strata(batch.index, batch.size, 0..batch.size);
-        assert_eq!(whole.permutations.len(), 2, "the device-level entries");
-        for group in 0..batch.groups() {
-            let devices = batch.group_devices(group);
-            let local = devices.start - batch.first..devices.end - batch.first;
-            let kept = plan.lhs_strata(batch.index, batch.size, local.clone());
-            let range = local.start as usize..local.end as usize;
-            for (k, (mine, all)) in kept
-                .permutations
-                .iter()
-                .zip(&whole.permutations)
-                .enumerate()
-            {
-                assert_eq!(mine.as_slice(), &all[range.clone()], "group {group}");
-                for device in range.clone() {
-                    assert_eq!(kept.of(k, device), whole.of(k, device));
-                    assert_eq!(kept.of(k, device).1, 100);
-                }
-            }
-            // A group run alone takes the batch's whole strata, drawn once for all its groups.
-            let shared = plan
-                .group_strata(batch.index, batch.size, local.clone())
-                .expect("stratified");
-            assert_eq!(shared.permutations, whole.permutations);
-            let again = plan
-                .group_strata(batch.index, batch.size, local)
-                .expect("stratified");
-            assert!(std::sync::Arc::ptr_eq(&shared, &again), "group {group}");
+        let strata_of = |batch: u64, size: u64| {
+            let strata = plan.batch_strata(batch, size).expect("stratified");
+            assert_eq!(strata.permutations.len(), 2, "the device-level entries");
+            (0..2)
+                .map(|k| {
+                    (0..size as usize)
+                        .map(|device| {
+                            let (stratum, of) = strata.of(k, device);
+                            assert_eq!(u64::from(of), size);
+                            stratum
+                        })
+                        .collect::<Vec<u32>>()
+                })
+                .collect::<Vec<_>>()
+        };
+        let first = strata_of(0, 1000);
+        for order in &first {
+            let mut sorted = order.clone();
+            sorted.sort_unstable();
+            assert!(sorted.iter().copied().eq(0..1000), "each stratum once");
         }
+        assert_ne!(first[0], first[1], "entries in orders of their own");
+        assert_eq!(first, strata_of(0, 1000), "the same when asked again");
+        assert_ne!(first, strata_of(1, 1000), "another batch, other orders");
+        // An odd size, whose permutation walks its cycles back into the batch.
+        let odd = strata_of(3, 37);
+        assert!(
+            odd.iter()
+                .all(|o| o.len() == 37 && o.iter().all(|&s| s < 37))
+        );
     }
 
     /// A run continued from the batches an earlier one ran is the run of them all, to the bit,

@@ -2,7 +2,6 @@
 //! that run in parallel, each group's devices in index order.
 
 use super::*;
-use std::sync::{Arc, Mutex, PoisonError};
 
 /// The job worked out for the hot loop.
 pub(super) struct Plan<'a> {
@@ -187,95 +186,36 @@ impl<'a> Plan<'a> {
     }
 }
 
-/// The most bytes of a batch's LHS permutations that a process keeps for the batch's groups
-/// ([`Plan::group_strata`]): 1.6e7 devices' strata of four-byte indices, e.g. 1e7 devices with
-/// five stratified parameters (200 MB, kept until another batch's replace them).
-pub(super) const SHARED_STRATA_BYTES: u64 = 256 << 20;
-
-/// All a batch's LHS strata are drawn from: the job's seed, the batch, its size and the number
-/// of stratified entries.
-type StrataKey = (u64, u64, u64, usize);
-
-/// The whole batch's strata a process drew last for a group run alone, by what they are drawn
-/// from.
-pub(super) static SHARED_STRATA: Mutex<Option<(StrataKey, Arc<Strata>)>> = Mutex::new(None);
-
 impl<'a> Plan<'a> {
-    /// The LHS strata of the devices `keep` (counted from the batch's first) of batch `batch` of
-    /// `size` devices: one permutation of the batch per device-level parameter, from the batch's
-    /// own stream, each drawn whole and cut to `keep` before the next is drawn, so that a group
-    /// run alone holds its own devices' strata and one permutation at a time (a batch of 1e8
-    /// devices with five such parameters: 0.4 GB while it draws, where the five whole took 2 GB
-    /// in every group).
-    pub(super) fn lhs_strata(&self, batch: u64, size: u64, keep: Range<u64>) -> Strata {
+    /// The LHS strata of batch `batch` of `size` devices: of each device-level parameter, a keyed
+    /// permutation of the batch's devices ([`Permutation`]) whose keys come from the batch's own
+    /// stream, evaluated device by device as each draws. Nothing is held per device, so a group
+    /// run alone (on a server, a shard) computes its own devices' strata and no other's: every
+    /// group of a batch of 1e7 devices drew the five permutations of all 1e7 with Fisher and
+    /// Yates's shuffle before, 2 GB of them at 1e8 devices.
+    ///
+    /// # Panics
+    /// If the batch holds 2^32 devices or more (a job holds at most 1e8).
+    pub(super) fn lhs_strata(&self, batch: u64, size: u64) -> Strata {
         let mut rng = ChaCha8Rng::seed_from_u64(self.job.seed());
         rng.set_stream(LHS_STREAM_BASE | batch);
-        let size = u32::try_from(size).expect("an LHS batch has fewer than 2^32 devices");
-        let kept = usize::try_from(keep.start).expect("batch fits in memory")
-            ..usize::try_from(keep.end).expect("batch fits in memory");
+        assert!(size < 1 << 32, "an LHS batch has fewer than 2^32 devices");
         let permutations = self
             .device_scatter
             .scatter
             .iter()
             .map(|_| {
-                let mut permutation: Vec<u32> = (0..size).collect();
-                permutation.shuffle(&mut rng);
-                if kept.len() == permutation.len() {
-                    permutation
-                } else {
-                    permutation[kept.clone()].to_vec()
-                }
+                let keys = std::array::from_fn(|_| (rng.random::<u64>(), rng.random::<u64>()));
+                Permutation::new(size, keys)
             })
             .collect();
-        Strata {
-            size,
-            first: kept.start,
-            permutations,
-        }
+        Strata { permutations }
     }
 
-    /// Whether the job's device-level draws are stratified (Latin hypercube).
-    fn stratified(&self) -> bool {
-        self.job.spec().sampler == SamplerKind::Lhs && !self.device_scatter.is_empty()
-    }
-
-    /// The LHS strata of the devices `keep` of batch `batch` of `size` devices
-    /// ([`Plan::lhs_strata`]), when the job samples that way.
-    pub(super) fn batch_strata(&self, batch: u64, size: u64, keep: Range<u64>) -> Option<Strata> {
-        self.stratified()
-            .then(|| self.lhs_strata(batch, size, keep))
-    }
-
-    /// The LHS strata group `keep` of batch `batch` of `size` devices runs alone with, when the
-    /// job samples that way: the batch's whole permutations where they take at most
-    /// [`SHARED_STRATA_BYTES`], drawn once and shared with the batch's other groups that this
-    /// process runs ([`SHARED_STRATA`]); a larger batch's group draws them and keeps its share.
-    /// Every group drew the whole batch's before: a server's job of 1e7 devices of one operation
-    /// and five such parameters took about 35 s of CPU where `bouncewear run` takes 11 s.
-    pub(super) fn group_strata(
-        &self,
-        batch: u64,
-        size: u64,
-        keep: Range<u64>,
-    ) -> Option<Arc<Strata>> {
-        if !self.stratified() {
-            return None;
-        }
-        let entries = self.device_scatter.len();
-        let bytes = size.saturating_mul(entries as u64).saturating_mul(4);
-        if bytes > SHARED_STRATA_BYTES {
-            return Some(Arc::new(self.lhs_strata(batch, size, keep)));
-        }
-        let key = (self.job.seed(), batch, size, entries);
-        let mut shared = SHARED_STRATA.lock().unwrap_or_else(PoisonError::into_inner);
-        if let Some((held, strata)) = shared.as_ref()
-            && *held == key
-        {
-            return Some(Arc::clone(strata));
-        }
-        let strata = Arc::new(self.lhs_strata(batch, size, 0..size));
-        *shared = Some((key, Arc::clone(&strata)));
-        Some(strata)
+    /// The LHS strata of batch `batch` ([`Plan::lhs_strata`]), when the job samples that way.
+    pub(super) fn batch_strata(&self, batch: u64, size: u64) -> Option<Strata> {
+        (self.job.spec().sampler == SamplerKind::Lhs && !self.device_scatter.is_empty())
+            .then(|| self.lhs_strata(batch, size))
     }
 
     /// Runs devices `first..first + size` as batch `batch`, in parallel: each group alone, or a
@@ -289,7 +229,7 @@ impl<'a> Plan<'a> {
         done: &AtomicU64,
         total: u64,
     ) -> Result<Vec<GroupStats>, Cancelled> {
-        let strata = self.batch_strata(batch, size, 0..size);
+        let strata = self.batch_strata(batch, size);
         let chunk = Chunk {
             first,
             size,
