@@ -505,6 +505,42 @@ await step("select cumulative_arc_energy_j for the sensitivity", async () => {
 await step("#sensitivity-bin gives the Result's reason", () =>
   page.waitForFunction((reason) => document.querySelector("#sensitivity-bin").textContent.includes(reason), tightReason),
 );
+// The Result's warnings are listed: here, Sobol' indices over fewer than 256 devices.
+await step("#warnings lists the Result's warning at /devices", () =>
+  page.waitForFunction(() => document.querySelector("#warnings-section:not([hidden])") &&
+    document.querySelector("#warnings").textContent.includes("/devices")),
+);
+
+// Thresholds given as a list get a column each; one device shows no interval as if it bounded
+// anything, and says why among the warnings; a name's bidirectional override is not written.
+const listedJob = await step("submit a job of one device with listed thresholds", () =>
+  call("POST", "/v1/jobs", {
+    name: "One \u202edevice",
+    devices: 1,
+    operations: 20,
+    seed: 3,
+    limits: { e1: [{ above: 0.45 }, { below: 0.38 }] },
+  }),
+);
+await step(`the listed job ${listedJob.id} succeeds`, () => succeeds(listedJob.id));
+await step(`open ${base}/jobs/${listedJob.id}#metric=e1`, () =>
+  page.goto(`${base}/jobs/${listedJob.id}#metric=e1`, { waitUntil: "load" }),
+);
+await step("the bins table heads a column per listed threshold", () =>
+  page.waitForFunction(() => {
+    const heads = [...document.querySelectorAll("#bins-table th")].map((h) => h.textContent);
+    return heads.includes("P(above 0.45)") && heads.includes("P(below 0.38)");
+  }),
+);
+await step("one device: said among the warnings, its intervals not shown", () =>
+  page.waitForFunction(() =>
+    document.querySelector("#warnings").textContent.includes("one device") &&
+    document.querySelector("#devices-table").textContent.includes("– (one device)") &&
+    !/\[[^\]]*\]/.test(document.querySelector("#devices-table").textContent)),
+);
+if ((await page.textContent("#job-name")) !== "One device") {
+  await fail(`the job's name is written with its override: ${JSON.stringify(await page.textContent("#job-name"))}`);
+}
 
 // A job deleted while its page is open says so (the page looks every 15 s once the job ended).
 await step(`open ${base}/jobs/${outsideJob.id}`, () => page.goto(`${base}/jobs/${outsideJob.id}`, { waitUntil: "load" }));

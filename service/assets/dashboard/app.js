@@ -49,13 +49,16 @@
     try {
       return JSON.parse(text);
     } catch (_) {
-      return text ? { detail: text.slice(0, 300) } : null;
+      // Not the server's problem document (a proxy's error page, say): its markup says nothing
+      // readable, so the status stands alone.
+      const markup = /^\s*</.test(text) || /html/i.test(response.headers.get("content-type") || "");
+      return text && !markup ? { detail: text.slice(0, 300) } : null;
     }
   }
 
   async function failed(response) {
     const problem = await problemOf(response);
-    let fallback = "HTTP " + response.status;
+    let fallback = "HTTP " + response.status + (response.statusText ? " " + response.statusText : "");
     if (response.status === 401) fallback = "This server needs an API key: enter it at the top right.";
     const error = new ApiError(response.status, problem, fallback);
     if (response.status === 401) {
@@ -108,19 +111,27 @@
 
   const $ = (selector, root) => (root || document).querySelector(selector);
 
+  // Bidirectional embeddings, overrides and isolates (U+202A-U+202E, U+2066-U+2069) in a name
+  // turn the text after them around (a schedule's run read its own timestamp backwards): the
+  // page writes text without them, as the plots do.
+  const BIDI_CONTROLS = /[\u202A-\u202E\u2066-\u2069]/g;
+  function plain(text) {
+    return String(text).replace(BIDI_CONTROLS, "");
+  }
+
   /** `el("td", {class: "num"}, "text", child, ...)`. */
   function el(tag, attrs, ...children) {
     const node = document.createElement(tag);
     for (const [name, value] of Object.entries(attrs || {})) {
       if (value === undefined || value === null || value === false) continue;
       if (name === "class") node.className = value;
-      else if (name === "text") node.textContent = value;
+      else if (name === "text") node.textContent = plain(value);
       else if (name.startsWith("on") && typeof value === "function") node.addEventListener(name.slice(2), value);
-      else node.setAttribute(name, value === true ? "" : value);
+      else node.setAttribute(name, value === true ? "" : plain(value));
     }
     for (const child of children.flat()) {
       if (child === undefined || child === null || child === false) continue;
-      node.append(child instanceof Node ? child : document.createTextNode(String(child)));
+      node.append(child instanceof Node ? child : document.createTextNode(plain(child)));
     }
     return node;
   }
@@ -132,7 +143,7 @@
   function setAlert(node, message) {
     if (!node) return;
     node.replaceChildren();
-    if (message) node.append(message instanceof Node ? message : document.createTextNode(message));
+    if (message) node.append(message instanceof Node ? message : document.createTextNode(plain(message)));
     show(node, Boolean(message));
   }
 
@@ -142,7 +153,14 @@
     if (typeof value !== "number" || !Number.isFinite(value)) return "–";
     if (value === 0) return "0";
     const abs = Math.abs(value);
-    if (abs >= 1e-3 && abs < 1e6) return String(Number(value.toPrecision(d)));
+    if (abs >= 1e-3 && abs < 1e6) {
+      // A value near 1 but not 1 (a probability of 0.99999) keeps the digits that tell it from 1.
+      let shown = Number(value.toPrecision(d));
+      for (let more = d + 1; Math.abs(shown) === 1 && shown !== value && more <= 15; more++) {
+        shown = Number(value.toPrecision(more));
+      }
+      return String(shown);
+    }
     return value.toExponential(d - 1).replace(/\.?0+e/, "e");
   }
 
@@ -517,7 +535,7 @@
       const bar = progressBar(job, false);
       const statusCell = el("td", {}, badge(job.status));
       const row = el("tr", { "data-job-id": job.id, "data-status": job.status },
-        el("td", {}, job.name || el("span", { class: "muted" }, "(unnamed)")),
+        el("td", { class: "name" }, job.name || el("span", { class: "muted" }, "(unnamed)")),
         el("td", { class: "nowrap" }, el("a", { href: "/jobs/" + encodeURIComponent(job.id), class: "mono" }, job.id)),
         statusCell,
         el("td", {}, bar),
@@ -608,11 +626,17 @@
       schedulePoll();
     }
 
+    // The latest load of the first page: the answer of one asked for before it is dropped (the
+    // list loads at once and again when the event stream opens, in either order).
+    let listing = 0;
+
     /** The first page (or, `more`, the next one), and further pages until `atLeast` rows show. */
     async function loadJobs(more, atLeast) {
       const page = (after) => getJson("/v1/jobs?limit=50" + (after ? "&cursor=" + encodeURIComponent(after) : ""));
+      const generation = more ? listing : ++listing;
       try {
         let list = await page(more ? cursor : null);
+        if (generation !== listing) return;
         if (!more) {
           rows.clear();
           offPage.clear();
@@ -623,12 +647,14 @@
         cursor = list.next_cursor || null;
         while (cursor && rows.size < (atLeast || 0)) {
           list = await page(cursor);
+          if (generation !== listing) return;
           addRows(list.jobs || [], false);
           cursor = list.next_cursor || null;
         }
         show($("#jobs-more"), Boolean(cursor));
         setAlert($("#jobs-error"), null);
       } catch (error) {
+        if (generation !== listing) return;
         setAlert($("#jobs-error"), "Could not load the jobs: " + error.message);
         if (!more) {
           rows.clear();
@@ -696,7 +722,11 @@
       } catch (error) {
         setAlert(errors, problemView(error));
       } finally {
+        // Disabled while it was sent, the button lost the focus to the page: a keyboard user
+        // would tab through every job to come back.
+        const refocus = document.activeElement === document.body;
         button.disabled = false;
+        if (refocus) button.focus();
         $("#submit-state").textContent = "";
       }
     });
@@ -814,6 +844,8 @@
       return card;
     }
 
+    // The list at once, not only once the event stream answers (a proxy may hold a stream back).
+    loadJobs(false);
     followAll();
     loadSchedules();
   }
@@ -858,7 +890,7 @@
     function render(resource) {
       job = Object.assign({}, job || {}, resource);
       if (job.name) {
-        $("#job-name").textContent = job.name;
+        $("#job-name").textContent = plain(job.name);
         document.title = "bouncewear · " + job.name;
       } else {
         $("#job-name").textContent = "Job";
@@ -1038,6 +1070,11 @@
         return;
       }
       show($("#result"), true);
+      const job = result.job || {};
+      // One device is one group: no spread between groups to measure, so every interval is its
+      // point (the contract), and none is shown as if it bounded anything.
+      pointIntervals = (typeof job.devices_run === "number" ? job.devices_run : job.devices) === 1;
+      renderWarnings(result);
       renderOperations(result);
       renderLife(result);
       renderSensitivity(result);
@@ -1076,23 +1113,68 @@
       showMetric();
     }
 
+    // The job ran one device: its intervals are points and are not shown (see loadResult).
+    let pointIntervals = false;
+
+    function interval(ci) {
+      return pointIntervals ? "– (one device)" : fmtInterval(ci);
+    }
+
+    /** The Result's warnings (`diagnostics`), each with the field of the job it concerns. */
+    function renderWarnings(result) {
+      const warnings = Array.isArray(result.diagnostics) ? result.diagnostics.slice() : [];
+      if (pointIntervals) {
+        warnings.push({ pointer: "/devices", detail: "one device: there is no spread between devices to " +
+          "measure, so no interval is shown and no quantile is bounded; run two devices or more for intervals" });
+      }
+      show($("#warnings-section"), warnings.length > 0);
+      $("#warnings").replaceChildren(...warnings.map((w) =>
+        el("li", {}, el("code", {}, w.pointer || "(job)"), ": ", w.detail || "")));
+    }
+
+    /**
+     * A quantile's value; where the data cannot bound its level it is marked, with the reason on
+     * hover, and `marked` is told, so that the table's note can say what the mark means.
+     */
+    function quantileCell(summary, key, marked) {
+      const quantile = summary.quantiles && summary.quantiles[key];
+      if (!quantile) return el("td", { class: "num" }, "–");
+      if (typeof quantile.reason !== "string") return el("td", { class: "num" }, fmt(quantile.value));
+      marked();
+      return el("td", { class: "num unbounded", title: quantile.reason }, fmt(quantile.value) + " *");
+    }
+
+    function showUnboundedNote(node, shown) {
+      node.textContent = shown ? "* The data cannot bound this quantile's level (hover over it for why): " +
+        "its value is the sample's, and a decision should not rest on it." : "";
+      show(node, shown);
+    }
+
     function renderBins(bins) {
-      const limited = bins.some((b) => b.exceedance);
-      const head = el("tr", {},
-        ["operations", "n", "mean", "p05", "p50", "p95", "max"].map((h, i) => el("th", { class: i ? "num" : "" }, h)),
-        limited ? el("th", { class: "num" }, "P(above limit)") : null);
-      const q = (b, k) => (b.quantiles && b.quantiles[k] ? b.quantiles[k].value : undefined);
+      // A number as the limit (`exceedance`), or a list of thresholds above or below
+      // (`exceedances`, one column each in the list's order).
+      const single = bins.find((b) => b.exceedance);
+      const listed = ((bins.find((b) => Array.isArray(b.exceedances)) || {}).exceedances || [])
+        .map((t) => (typeof t.above === "number" ? "above " + fmt(t.above) : "below " + fmt(t.below)));
+      const heads = ["operations", "n", "mean", "p05", "p50", "p95", "max",
+        ...(single ? ["P(above " + fmt(single.exceedance.limit) + ")"] : []),
+        ...listed.map((h) => "P(" + h + ")")];
+      const head = el("tr", {}, heads.map((h, i) => el("th", { class: i ? "num" : "" }, h)));
+      const probability = (e) => el("td", { class: "num" }, e ? fmt(e.probability) + " " + interval(e.ci95) : "–");
+      let unbounded = false;
+      const marked = () => { unbounded = true; };
       const rowsHtml = bins.map((b) => el("tr", {},
         el("td", {}, opRange(b)),
         el("td", { class: "num" }, fmtCount(b.n)),
         el("td", { class: "num" }, fmt(b.mean)),
-        el("td", { class: "num" }, fmt(q(b, "p05"))),
-        el("td", { class: "num" }, fmt(q(b, "p50"))),
-        el("td", { class: "num" }, fmt(q(b, "p95"))),
+        quantileCell(b, "p05", marked),
+        quantileCell(b, "p50", marked),
+        quantileCell(b, "p95", marked),
         el("td", { class: "num" }, fmt(b.max)),
-        limited ? el("td", { class: "num" }, b.exceedance
-          ? fmt(b.exceedance.probability, 3) + " " + fmtInterval(b.exceedance.ci95) : "–") : null));
+        single ? probability(b.exceedance) : null,
+        listed.map((_, i) => probability((b.exceedances || [])[i]))));
       $("#bins-table").replaceChildren(el("thead", {}, head), el("tbody", {}, rowsHtml));
+      showUnboundedNote($("#bins-note"), unbounded);
     }
 
     function renderLife(result) {
@@ -1212,9 +1294,12 @@
       const where = typeof last.op_start === "number" && typeof last.op_end === "number"
         ? "Last bin, operations " + opRange(last)
         : "Over the devices at the end of the test";
-      $("#sensitivity-bin").textContent = where +
+      // The reason says itself what it is about (the sums' rounding, every index unknown, one
+      // device): it is quoted as it stands.
+      const reason = typeof last.reason === "string" && last.reason ? " Note: " + last.reason + "." : "";
+      $("#sensitivity-bin").textContent = plain(where +
         (typeof last.r_squared === "number" ? "; the regression explains R² = " + fmt(last.r_squared, 3) + " of the variance." : ".") +
-        (typeof last.reason === "string" ? " The Sobol' intervals are wider than the devices' spread alone: " + last.reason + "." : "");
+        reason);
       const weight = (p) => {
         const v = sobol ? (p.total || {}).value : Math.abs(p.src);
         return typeof v === "number" && Number.isFinite(v) ? v : -Infinity;
@@ -1222,7 +1307,7 @@
       entries.sort(([, a], [, b]) => (weight(b) - weight(a)) || 0);
       const index = (e) => [
         el("td", { class: "num" }, e ? fmt(e.value, 3) : "–"),
-        el("td", { class: "num" }, e ? fmtInterval(e.ci95) : "–"),
+        el("td", { class: "num" }, e ? interval(e.ci95) : "–"),
       ];
       const heads = sobol
         ? ["parameter", "per", "first-order", "95 % interval", "total", "95 % interval"]
@@ -1243,7 +1328,8 @@
         table.replaceChildren(el("tbody", {}, el("tr", {}, el("td", { class: "muted" }, "No device metrics in this result."))));
         return;
       }
-      const q = (s, k) => (s.quantiles && s.quantiles[k] ? s.quantiles[k].value : undefined);
+      let unbounded = false;
+      const marked = () => { unbounded = true; };
       table.replaceChildren(
         el("thead", {}, el("tr", {}, ["metric", "mean", "mean 95 % CI", "p05", "p50", "p95"].map((h, i) => el("th", { class: i ? "num" : "" }, h)))),
         el("tbody", {}, names.map((name) => {
@@ -1251,11 +1337,12 @@
           return el("tr", {},
             el("td", { class: "mono" }, name),
             el("td", { class: "num" }, fmt(s.mean)),
-            el("td", { class: "num" }, fmtInterval(s.mean_ci95)),
-            el("td", { class: "num" }, fmt(q(s, "p05"))),
-            el("td", { class: "num" }, fmt(q(s, "p50"))),
-            el("td", { class: "num" }, fmt(q(s, "p95"))));
+            el("td", { class: "num" }, interval(s.mean_ci95)),
+            quantileCell(s, "p05", marked),
+            quantileCell(s, "p50", marked),
+            quantileCell(s, "p95", marked));
         })));
+      showUnboundedNote($("#devices-note"), unbounded);
     }
 
     // Comparing this job (design a) with another succeeded one (design b), linkable as
@@ -1372,8 +1459,10 @@
     function renderRun(result) {
       const j = result.job || {};
       const t = result.timing || {};
+      // With a precision target `devices` is a batch's size; `devices_run` the devices it took.
+      const ran = typeof j.devices_run === "number" ? j.devices_run : j.devices;
       const facts = [
-        ["devices", fmtCount(j.devices)],
+        ["devices", fmtCount(ran) + (ran !== j.devices ? " (batches of " + fmtCount(j.devices) + ")" : "")],
         ["operations", fmtCount(j.operations)],
         ["bin", fmtCount(j.bin_operations) + " ops"],
         ["fidelity", j.fidelity || "–"],

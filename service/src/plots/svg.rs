@@ -107,6 +107,16 @@ pub(super) fn wrap(s: &str, width: usize) -> Vec<String> {
     lines
 }
 
+/// Characters a plot leaves out of its text: controls, the two non-characters XML forbids (a
+/// name holding U+FFFF made a plot no parser reads, found from outside), and bidirectional
+/// embeddings, overrides and isolates (a schedule named with U+202E drew its trend's title
+/// backwards, found from outside).
+fn unwritten(c: char) -> bool {
+    c.is_control()
+        || matches!(c, '\u{fffe}' | '\u{ffff}')
+        || matches!(c, '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}')
+}
+
 /// Escapes text and attribute values.
 pub(super) fn esc(s: &str) -> String {
     let mut out = String::with_capacity(s.len());
@@ -117,9 +127,7 @@ pub(super) fn esc(s: &str) -> String {
             '>' => out.push_str("&gt;"),
             '"' => out.push_str("&quot;"),
             '\'' => out.push_str("&#39;"),
-            // Nor the two non-characters XML forbids: a name holding U+FFFF made a plot no
-            // parser reads (found from outside).
-            c if c.is_control() || matches!(c, '\u{fffe}' | '\u{ffff}') => {}
+            c if unwritten(c) => {}
             c => out.push(c),
         }
     }
@@ -347,6 +355,10 @@ mod tests {
         assert_eq!(
             esc("a\u{ffff}b\u{fffe}<&>\"'\u{7}\u{fffd}"),
             "ab&lt;&amp;&gt;&quot;&#39;\u{fffd}"
+        );
+        assert_eq!(
+            esc("Nightly \u{202e}RTL\u{2066}x\u{2069}\u{200f}"),
+            "Nightly RTLx\u{200f}"
         );
     }
 }
