@@ -162,6 +162,7 @@ pub(super) const MUTED_SMALL: Style = Style {
 
 pub(super) struct Svg {
     pub(super) out: String,
+    width: f64,
 }
 
 impl Svg {
@@ -178,16 +179,20 @@ impl Svg {
             out,
             r##"<rect x="0" y="0" width="{w}" height="{h}" fill="#ffffff"/>"##
         );
-        Svg { out }
+        Svg { out, width }
     }
 
+    /// The plot's title, cut with an ellipsis to the plot's width (a schedule's name of 200
+    /// characters ran off its trend); the whole title is the document's `<title>`.
     pub(super) fn title(&mut self, text: &str, x: f64, y: f64) {
+        const SIZE: f64 = 13.0;
+        let room = ((self.width - x - 8.0) / text_width("m", SIZE)).max(1.0) as usize;
         self.text(
             x,
             y,
-            text,
+            &truncate(text, room),
             Style {
-                size: 13.0,
+                size: SIZE,
                 anchor: "start",
                 bold: true,
                 ..LABEL

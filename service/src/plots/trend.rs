@@ -187,6 +187,32 @@ mod tests {
         assert!(!svg.contains("rotate(-45"));
     }
 
+    /// A name of 200 characters without a space is cut to the plot's width, with an ellipsis;
+    /// the document's `<title>` keeps it whole.
+    #[test]
+    fn a_long_title_is_cut_to_the_plots_width() {
+        let name = "W".repeat(200);
+        let svg = trend_svg(&name, "run", "p95 total_bounce_s", &[night(0, 0.01, false)]);
+        check(&svg);
+        assert!(svg.contains(&format!("<title>{name}</title>")));
+        let shown = svg
+            .split('>')
+            .find_map(|part| part.strip_suffix("\u{2026}</text"))
+            .expect("the title cut with an ellipsis");
+        let width = svg
+            .split("width=\"")
+            .nth(1)
+            .and_then(|rest| rest.split('"').next())
+            .and_then(|w| w.parse::<f64>().ok())
+            .expect("the plot's width");
+        let room = crate::plots::svg::text_width(&format!("{shown}\u{2026}"), 13.0);
+        assert!(
+            shown.len() > 20 && room < width,
+            "{} characters in {width} px",
+            shown.len()
+        );
+    }
+
     #[test]
     fn trend_of_many_nights_rotates_and_thins() {
         let points: Vec<TrendPoint> = (0..120)
