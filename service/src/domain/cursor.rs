@@ -5,14 +5,18 @@
 //! the database's migration): a keyed permutation of 96 bits, the number and 32 zero bits, so that
 //! a cursor this server did not give opens to nothing (but for one in 2^32).
 
-use bouncewear_model::feistel;
+use bouncewear_model::feistel::{self, Halves};
 use sha2::{Digest, Sha256};
 
 /// Rounds of the Feistel network: four make a strong pseudorandom permutation (Luby and
-/// Rackoff); the rest is margin, at a hash a round.
+/// Rackoff); the rest is margin, at a hash a round. Even, with equal halves: the classic form
+/// that swaps the halves every round, as cursors were sealed before it was shared.
 const ROUNDS: u8 = 8;
-/// Bits in each half of the block.
-const HALF_BITS: u32 = 48;
+/// The block's two halves of 48 bits.
+const HALVES: Halves = Halves {
+    left: 48,
+    right: 48,
+};
 /// Hex digits of a cursor: 96 bits.
 const DIGITS: usize = 24;
 
@@ -48,7 +52,7 @@ impl CursorKey {
     pub fn seal(&self, seq: i64) -> String {
         // The block: the number's 63 bits, then 32 zero bits that opening checks.
         let block = u128::from(u64::try_from(seq).unwrap_or(0)) << 32;
-        let sealed = feistel::encrypt(block, HALF_BITS, ROUNDS, |r, half| self.round(r, half));
+        let sealed = feistel::encrypt(block, HALVES, ROUNDS, |r, half| self.round(r, half));
         format!("{sealed:0width$x}", width = DIGITS)
     }
 
@@ -59,7 +63,7 @@ impl CursorKey {
                 .bytes()
                 .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b));
         let block = digits.then(|| u128::from_str_radix(cursor, 16).ok())??;
-        let block = feistel::decrypt(block, HALF_BITS, ROUNDS, |r, half| self.round(r, half));
+        let block = feistel::decrypt(block, HALVES, ROUNDS, |r, half| self.round(r, half));
         let sealed_zeros = block & u128::from(u32::MAX) == 0;
         let seq = i64::try_from(block >> 32).ok()?;
         (sealed_zeros && seq > 0).then_some(seq)

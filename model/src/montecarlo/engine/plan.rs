@@ -205,7 +205,7 @@ impl<'a> Plan<'a> {
             .scatter
             .iter()
             .map(|_| {
-                let keys = std::array::from_fn(|_| (rng.random::<u64>(), rng.random::<u64>()));
+                let keys = std::array::from_fn(|_| rng.random::<u64>());
                 Permutation::new(size, keys)
             })
             .collect();
