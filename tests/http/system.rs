@@ -94,6 +94,14 @@ fn the_dashboards_files_are_revalidated_and_every_answer_forbids_framing() {
             Some("no-referrer"),
             "{path}"
         );
+        let policy = answer.header("content-security-policy").expect(path);
+        for rule in [
+            "default-src 'none'",
+            "script-src 'self';",
+            "frame-ancestors 'none'",
+        ] {
+            assert!(policy.contains(rule), "{path}: {policy}");
+        }
     }
 }
 

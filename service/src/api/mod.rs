@@ -139,7 +139,12 @@ pub fn router(state: AppState) -> axum::Router {
         .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
         .layer(axum::middleware::map_request(usable_request_id))
         // Every answer, pages and API alike: no content sniffed into another type, no page framed
-        // by another site (a "Run now" clicked through a frame), no job id sent on as a referrer.
+        // by another site (a "Run now" clicked through a frame), no job id sent on as a referrer,
+        // and nothing run or loaded but this server's own scripts, styles and data.
+        .layer(SetResponseHeaderLayer::if_not_present(
+            header::CONTENT_SECURITY_POLICY,
+            header::HeaderValue::from_static(CONTENT_SECURITY_POLICY),
+        ))
         .layer(SetResponseHeaderLayer::if_not_present(
             header::X_CONTENT_TYPE_OPTIONS,
             header::HeaderValue::from_static("nosniff"),
@@ -153,6 +158,15 @@ pub fn router(state: AppState) -> axum::Router {
             header::HeaderValue::from_static("no-referrer"),
         ))
 }
+
+/// What a page (or a plot opened alone) may run and load: this server's own scripts, and styles,
+/// images, fonts and requests from it; no plugin, no `<base>`, forms posted here only, framed by
+/// no one. Styles may be inline (the plots' attributes, RapiDoc's shadow DOM); scripts may not. A
+/// defence in depth: the dashboard writes every user's text as text, and an outside probe ran no
+/// script from any name, path, fragment or query; this keeps it so should a page ever slip.
+const CONTENT_SECURITY_POLICY: &str = "default-src 'none'; script-src 'self'; \
+    style-src 'self' 'unsafe-inline'; img-src 'self' data:; font-src 'self'; connect-src 'self'; \
+    base-uri 'none'; form-action 'self'; frame-ancestors 'none'";
 
 /// Refuses, before any handler runs, what a browser sends on another site's behalf to a server
 /// without keys (found from outside): a name other than a loopback one (a web page that made its
