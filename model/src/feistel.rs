@@ -17,7 +17,7 @@ pub struct Halves {
 
 impl Halves {
     /// Two halves of `bits / 2` bits each.
-    pub fn equal(bits: u32) -> Self {
+    pub const fn equal(bits: u32) -> Self {
         Self {
             left: bits / 2,
             right: bits / 2,

@@ -13,10 +13,7 @@ use sha2::{Digest, Sha256};
 /// that swaps the halves every round, as cursors were sealed before it was shared.
 const ROUNDS: u8 = 8;
 /// The block's two halves of 48 bits.
-const HALVES: Halves = Halves {
-    left: 48,
-    right: 48,
-};
+const HALVES: Halves = Halves::equal(96);
 /// Hex digits of a cursor: 96 bits.
 const DIGITS: usize = 24;
 

@@ -156,7 +156,7 @@ impl<'a> Entries<'a> {
     }
 }
 
-/// The Latin hypercube strata of a batch's devices ([`super::plan::Plan::lhs_strata`]): of each
+/// The Latin hypercube strata of a batch's devices ([`super::plan::Plan::batch_strata`]): of each
 /// device-level scatter entry, a keyed permutation of the batch's devices, evaluated at each device
 /// as it draws, so that neither a batch nor any group of it holds or draws more than its own.
 pub(super) struct Strata {
@@ -168,7 +168,7 @@ impl Strata {
     pub(super) fn of(&self, k: usize, local: usize) -> (u32, u32) {
         let permutation = &self.permutations[k];
         let stratum = permutation.apply(local as u64);
-        // Both below 2^32: a batch under LHS has fewer devices (`Plan::lhs_strata`).
+        // Both below 2^32: a batch under LHS has fewer devices (`Plan::batch_strata`).
         (stratum as u32, permutation.size() as u32)
     }
 }

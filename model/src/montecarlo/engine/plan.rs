@@ -187,35 +187,29 @@ impl<'a> Plan<'a> {
 }
 
 impl<'a> Plan<'a> {
-    /// The LHS strata of batch `batch` of `size` devices: of each device-level parameter, a keyed
-    /// permutation of the batch's devices ([`Permutation`]) whose keys come from the batch's own
-    /// stream, evaluated device by device as each draws. Nothing is held per device, so a group
-    /// run alone (on a server, a shard) computes its own devices' strata and no other's: every
-    /// group of a batch of 1e7 devices drew the five permutations of all 1e7 with Fisher and
-    /// Yates's shuffle before, 2 GB of them at 1e8 devices.
+    /// The LHS strata of batch `batch` of `size` devices, when the job samples that way: of each
+    /// device-level parameter, a keyed permutation of the batch's devices ([`Permutation`]) whose
+    /// keys come from the batch's own stream, evaluated device by device as each draws. Nothing
+    /// is held per device, so a group run alone (on a server, a shard) computes its own devices'
+    /// strata and no other's: every group of a batch of 1e7 devices drew the five permutations of
+    /// all 1e7 with Fisher and Yates's shuffle before, 2 GB of them at 1e8 devices.
     ///
     /// # Panics
     /// If the batch holds 2^32 devices or more (a job holds at most 1e8).
-    pub(super) fn lhs_strata(&self, batch: u64, size: u64) -> Strata {
+    pub(super) fn batch_strata(&self, batch: u64, size: u64) -> Option<Strata> {
+        if self.job.spec().sampler != SamplerKind::Lhs || self.device_scatter.is_empty() {
+            return None;
+        }
+        assert!(size < 1 << 32, "an LHS batch has fewer than 2^32 devices");
         let mut rng = ChaCha8Rng::seed_from_u64(self.job.seed());
         rng.set_stream(LHS_STREAM_BASE | batch);
-        assert!(size < 1 << 32, "an LHS batch has fewer than 2^32 devices");
         let permutations = self
             .device_scatter
             .scatter
             .iter()
-            .map(|_| {
-                let keys = std::array::from_fn(|_| rng.random::<u64>());
-                Permutation::new(size, keys)
-            })
+            .map(|_| Permutation::new(size, std::array::from_fn(|_| rng.random::<u64>())))
             .collect();
-        Strata { permutations }
-    }
-
-    /// The LHS strata of batch `batch` ([`Plan::lhs_strata`]), when the job samples that way.
-    pub(super) fn batch_strata(&self, batch: u64, size: u64) -> Option<Strata> {
-        (self.job.spec().sampler == SamplerKind::Lhs && !self.device_scatter.is_empty())
-            .then(|| self.lhs_strata(batch, size))
+        Some(Strata { permutations })
     }
 
     /// Runs devices `first..first + size` as batch `batch`, in parallel: each group alone, or a
